@@ -1,0 +1,57 @@
+#pragma once
+// Internal interface between the engine (engine.cpp: bounds, frame, plan, id mapping) and its
+// backends. A backend runs the stages from packing to the narrow phase; it returns contacts whose
+// id_a/id_b are *local* body indices (a < b), sorted, with points in the world frame.
+#include <cstdint>
+
+#include "core/grid.hpp"
+#include "engine.hpp"
+
+namespace cg::detail {
+
+template <class Real>
+struct DetectJob {
+  BodiesView bodies;  // host, world frame, ascending ids
+  GridPlan plan;
+  GridParams<Real> grid;
+  Fields fields = Fields::basic;
+};
+
+template <class Real>
+GridParams<Real> grid_params(const GridPlan& plan) {
+  GridParams<Real> g{};
+  g.inv_cell = static_cast<Real>(1.0 / plan.frame.cell_size);
+  for (int k = 0; k < 3; ++k) {
+    g.base[k] = plan.base[k];
+    g.dims[k] = plan.dims[k];
+    g.half[k] = plan.half[k];
+  }
+  g.half_bits = plan.half_bits;
+  return g;
+}
+
+// Bits needed to hold values 0 … n-1 (0 for n <= 1).
+inline int bits_for(std::uint64_t n) {
+  int b = 0;
+  while (b < 64 && (n - 1) >> b) ++b;
+  return n <= 1 ? 0 : b;
+}
+
+// The CPU backend (kernels/host/): OpenMP threads, the oracle for the CUDA backend.
+struct HostBackend {
+  int threads = 0;
+};
+
+template <class Real>
+void run_stages(HostBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out,
+                StageTimes& times, EngineStats& stats);
+
+// The CUDA backend (kernels/cuda/): owns persistent device buffers; defined only in CUDA builds.
+class CudaBackend;
+std::unique_ptr<CudaBackend> make_cuda_backend(int device);  // throws CudaError without CUDA
+template <class Real>
+void run_stages(CudaBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out,
+                StageTimes& times, EngineStats& stats);
+void destroy(CudaBackend* backend);
+
+}  // namespace cg::detail

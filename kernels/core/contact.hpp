@@ -1,0 +1,73 @@
+#pragma once
+// Narrow phase for sphere pairs, exactly as CONTRACT §3 (Bullet's btSphereSphereCollisionAlgorithm
+// semantics), shared by both backends. All points are in the engine's local frame.
+#include <limits>
+
+#include "core/config.hpp"
+#include "core/vec3.hpp"
+
+#if !defined(__CUDA_ARCH__)
+#include <cmath>
+#endif
+
+namespace cg {
+
+template <class Real>
+CG_HD Real cg_sqrt(Real v) {
+#if defined(__CUDA_ARCH__)
+  return ::sqrt(v);  // IEEE correctly rounded (nvcc -prec-sqrt=true, the default)
+#else
+  return std::sqrt(v);
+#endif
+}
+
+// Contact test: d <= ra + rb (touching counts), evaluated without a square root.
+template <class Real>
+CG_HD bool spheres_touch(const Sphere<Real>& a, const Sphere<Real>& b) {
+  Real dx = a.x - b.x, dy = a.y - b.y, dz = a.z - b.z;
+  Real s = a.r + b.r;
+  return dx * dx + dy * dy + dz * dz <= s * s;
+}
+
+template <class Real>
+struct ContactGeometry {
+  Vec3<Real> position_on_a, position_on_b, normal_on_b;  // local frame; normal from B to A
+  Real distance;                                          // negative when overlapping
+};
+
+template <class Real>
+CG_HD ContactGeometry<Real> sphere_sphere_contact(const Sphere<Real>& a, const Sphere<Real>& b) {
+  Vec3<Real> d = a.centre() - b.centre();
+  Real len = cg_sqrt(dot(d, d));
+  Vec3<Real> n;
+  if (len > std::numeric_limits<Real>::epsilon()) {
+    n = (Real(1) / len) * d;
+  } else {
+    n = {Real(1), Real(0), Real(0)};  // coincident centres: Bullet's choice
+  }
+  ContactGeometry<Real> c;
+  c.normal_on_b = n;
+  c.distance = len - (a.r + b.r);
+  c.position_on_b = b.centre() + b.r * n;
+  c.position_on_a = a.centre() - a.r * n;
+  return c;
+}
+
+// Bullet's btPlaneSpace1: the tangent basis (lateralFrictionDir1/2) of a unit normal.
+template <class Real>
+CG_HD void plane_space(Vec3<Real> n, Vec3<Real>& dir1, Vec3<Real>& dir2) {
+  const Real sqrt_half = Real(0.7071067811865475244);
+  if ((n.z < 0 ? -n.z : n.z) > sqrt_half) {
+    Real a = n.y * n.y + n.z * n.z;
+    Real k = Real(1) / cg_sqrt(a);
+    dir1 = {Real(0), -n.z * k, n.y * k};
+    dir2 = {a * k, -n.x * dir1.z, n.x * dir1.y};
+  } else {
+    Real a = n.x * n.x + n.y * n.y;
+    Real k = Real(1) / cg_sqrt(a);
+    dir1 = {-n.y * k, n.x * k, Real(0)};
+    dir2 = {-n.z * dir1.y, n.z * dir1.x, a * k};
+  }
+}
+
+}  // namespace cg

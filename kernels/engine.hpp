@@ -1,0 +1,146 @@
+#pragma once
+// The contactgrid engine: Le Grand's uniform-grid broad phase + exact narrow phase on one rank.
+// g++-safe public header: no CUDA types. Backends (CPU, CUDA) are selected at run time; both run the
+// same stages over the same host/device math in kernels/core/.
+//
+// Data flow of one detect() call:
+//   bounds (double) → frame (origin, cell size) → grid plan (dims, key width)
+//   → pack (world double → local Real) → cell entries (home + phantom, control bits)
+//   → radix sort by cell key → pair count → scan → pair fill → sort pairs by (a, b)
+//   → narrow phase (requested fields) → contacts in world frame, sorted by (id_a, id_b)
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/vec3.hpp"
+#include "errors.hpp"
+
+namespace cg {
+
+enum class Backend { cpu, cuda, automatic };
+enum class Fields { basic, full };
+enum class Precision { fp32, fp64 };
+
+const char* to_string(Backend b);
+const char* to_string(Fields f);
+const char* to_string(Precision p);
+
+// True when a CUDA device is usable in this process (false in builds without CUDA).
+bool cuda_available();
+
+struct StageTime {
+  std::string name;
+  double seconds;
+};
+using StageTimes = std::vector<StageTime>;
+
+// Contacts as CONTRACT §2: sorted by (id_a, id_b), id_a < id_b, world frame.
+template <class Real>
+struct Contacts {
+  std::vector<std::int64_t> id_a, id_b;
+  std::vector<Vec3<Real>> position_on_a, position_on_b, normal_on_b;
+  std::vector<Real> distance;
+  bool full = false;  // the four optional datasets below are filled
+  std::vector<Vec3<Real>> local_point_a, local_point_b, lateral_friction_dir1, lateral_friction_dir2;
+
+  std::size_t size() const { return id_a.size(); }
+  void resize(std::size_t k, bool with_full);
+};
+
+// The bodies handed to the engine: bounding spheres in the world frame (host memory).
+// Invariant: ids strictly ascending (so local index order == id order).
+struct BodiesView {
+  std::span<const Vec3<double>> position;
+  std::span<const double> radius;
+  std::span<const std::int64_t> id;       // empty: ids are 0 … n-1
+  std::span<const std::uint8_t> report;   // empty: all pairs; else pair (a<b) reported iff report[a]
+  std::size_t size() const { return radius.size(); }
+};
+
+// Axis-aligned bounds of the bounding spheres' boxes, and the largest radius.
+struct Bounds {
+  Vec3<double> lo{0, 0, 0}, hi{0, 0, 0};
+  double r_max = 0;
+  std::size_t count = 0;
+  void merge(const Bounds& o);
+};
+
+// Validates every body (finite centre, finite radius > 0) and returns the bounds.
+// Throws InputError naming the first bad body by id.
+Bounds compute_bounds(const BodiesView& bodies);
+
+// The shared frame of a run: local origin (double) and cell edge. Every rank of an MPI run uses the
+// same frame, so every rank computes bit-identical local coordinates and contact data.
+struct Frame {
+  Vec3<double> origin{0, 0, 0};
+  double cell_size = 0;
+};
+
+// Smallest valid cell edge for these bounds: 2·r_max plus a margin that covers the rounding of
+// c ± r in the local frame, so a body never spans more than two cells per axis.
+double min_cell_size(const Bounds& b, Precision p);
+
+// Frame for the bounds; requested_cell_size 0 picks min_cell_size(). Throws UsageError if the
+// requested size is too small, InputError if the grid cannot be encoded (see GridPlan).
+Frame make_frame(const Bounds& b, double requested_cell_size, Precision p);
+
+// The grid of one detect() call: cells covering the bodies' bounds in the shared frame.
+// Cell keys use 32 bits when the grid has < 2^32 cells, else 64 bits (< 2^63 cells); beyond that,
+// or beyond 2^22 cells per axis in fp32 (2^40 in fp64), plan_grid() throws InputError.
+struct GridPlan {
+  Frame frame;
+  std::uint32_t base[3] = {0, 0, 0};  // cell coordinate (even) of the grid's first cell in the frame
+  std::uint32_t dims[3] = {1, 1, 1};
+  std::uint32_t half[3] = {1, 1, 1};
+  int half_bits = 0;
+  int key_bits = 3;
+  bool key64 = false;
+  std::uint64_t cell_count() const { return std::uint64_t(dims[0]) * dims[1] * dims[2]; }
+};
+GridPlan plan_grid(const Bounds& local, const Frame& frame, Precision p);
+
+struct EngineOptions {
+  Backend backend = Backend::automatic;
+  Fields fields = Fields::basic;
+  double cell_size = 0;  // 0: smallest valid
+  int threads = 0;       // CPU backend threads; 0: all hardware threads
+  int device = -1;       // CUDA device; -1: current
+};
+
+// Counters of one run (for tests and the summary).
+struct EngineStats {
+  std::uint64_t bodies = 0, entries = 0, pair_tests = 0, contacts = 0;
+  int key_bits = 0;
+  std::uint64_t peak_device_bytes = 0;
+};
+
+template <class Real>
+class Engine {
+ public:
+  explicit Engine(EngineOptions options);
+  ~Engine();
+  Engine(Engine&&) noexcept;
+  Engine& operator=(Engine&&) noexcept;
+
+  // All contacts among `bodies`. `frame`: the shared frame of a multi-rank run; absent, the engine
+  // builds one from the bodies' bounds and options.cell_size.
+  Contacts<Real> detect(const BodiesView& bodies, std::optional<Frame> frame = std::nullopt);
+
+  Backend backend() const;  // the resolved backend (never automatic)
+  const StageTimes& times() const;
+  const EngineStats& stats() const;
+  const EngineOptions& options() const;
+
+  struct Impl;
+
+ private:
+  std::unique_ptr<Impl> m_impl;
+};
+
+extern template class Engine<float>;
+extern template class Engine<double>;
+
+}  // namespace cg

@@ -1,0 +1,45 @@
+#pragma once
+// Typed exceptions used across the project; main() maps them to documented exit codes:
+// 0 ok, 1 validation FAIL, 2 usage, 3 input, 4 CUDA, 5 MPI, 6 I/O, 7 resources (memory), 8 internal.
+#include <stdexcept>
+#include <string>
+
+namespace cg {
+
+class Error : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+  virtual int exit_code() const { return 8; }
+};
+class UsageError : public Error {
+ public:
+  using Error::Error;
+  int exit_code() const override { return 2; }
+};
+class InputError : public Error {  // bad scene data: names the file, dataset and row
+ public:
+  using Error::Error;
+  int exit_code() const override { return 3; }
+};
+class CudaError : public Error {
+ public:
+  using Error::Error;
+  int exit_code() const override { return 4; }
+};
+class MpiError : public Error {
+ public:
+  using Error::Error;
+  int exit_code() const override { return 5; }
+};
+class IoError : public Error {  // cannot read/write a file (not a data problem)
+ public:
+  using Error::Error;
+  int exit_code() const override { return 6; }
+};
+class ResourceError : public Error {  // not enough (device) memory: says how much is needed
+ public:
+  using Error::Error;
+  int exit_code() const override { return 7; }
+};
+
+}  // namespace cg
