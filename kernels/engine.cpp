@@ -1,0 +1,254 @@
+// The engine's host side: validation and bounds, the shared frame, the grid plan, backend choice,
+// and the mapping of local body indices back to global ids. The stages themselves live in the
+// backends (kernels/host/, kernels/cuda/).
+#include "engine.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "backend.hpp"
+
+namespace cg {
+
+const char* to_string(Backend b) {
+  switch (b) {
+    case Backend::cpu: return "cpu";
+    case Backend::cuda: return "cuda";
+    case Backend::automatic: return "auto";
+  }
+  return "?";
+}
+const char* to_string(Fields f) { return f == Fields::full ? "full" : "basic"; }
+const char* to_string(Precision p) { return p == Precision::fp32 ? "fp32" : "fp64"; }
+
+template <class Real>
+void Contacts<Real>::resize(std::size_t k, bool with_full) {
+  full = with_full;
+  id_a.resize(k);
+  id_b.resize(k);
+  position_on_a.resize(k);
+  position_on_b.resize(k);
+  normal_on_b.resize(k);
+  distance.resize(k);
+  const std::size_t kf = with_full ? k : 0;
+  local_point_a.resize(kf);
+  local_point_b.resize(kf);
+  lateral_friction_dir1.resize(kf);
+  lateral_friction_dir2.resize(kf);
+}
+template struct Contacts<float>;
+template struct Contacts<double>;
+
+void Bounds::merge(const Bounds& o) {
+  if (o.count == 0) return;
+  if (count == 0) {
+    *this = o;
+    return;
+  }
+  lo = {std::min(lo.x, o.lo.x), std::min(lo.y, o.lo.y), std::min(lo.z, o.lo.z)};
+  hi = {std::max(hi.x, o.hi.x), std::max(hi.y, o.hi.y), std::max(hi.z, o.hi.z)};
+  r_max = std::max(r_max, o.r_max);
+  count += o.count;
+}
+
+Bounds compute_bounds(const BodiesView& bodies) {
+  const std::size_t n = bodies.size();
+  if (bodies.position.size() != n)
+    throw InputError("bodies: " + std::to_string(bodies.position.size()) + " positions but " +
+                     std::to_string(n) + " radii");
+  if (!bodies.id.empty() && bodies.id.size() != n) throw InputError("bodies: id array has the wrong size");
+  if (!bodies.report.empty() && bodies.report.size() != n)
+    throw InputError("bodies: report mask has the wrong size");
+  Bounds b;
+  b.count = n;
+  if (n == 0) return b;
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  b.lo = {inf, inf, inf};
+  b.hi = {-inf, -inf, -inf};
+  auto id_of = [&](std::size_t i) { return bodies.id.empty() ? std::int64_t(i) : bodies.id[i]; };
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3<double> p = bodies.position[i];
+    const double r = bodies.radius[i];
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
+      std::ostringstream m;
+      m << "body " << id_of(i) << ": centre (" << p.x << ", " << p.y << ", " << p.z << ") is not finite";
+      throw InputError(m.str());
+    }
+    if (!(r > 0) || !std::isfinite(r)) {
+      std::ostringstream m;
+      m << "body " << id_of(i) << ": radius " << r << " is not a finite value > 0";
+      throw InputError(m.str());
+    }
+    if (i > 0 && !bodies.id.empty() && !(bodies.id[i] > bodies.id[i - 1]))
+      throw InputError("bodies: ids are not strictly ascending at index " + std::to_string(i));
+    b.lo = {std::min(b.lo.x, p.x - r), std::min(b.lo.y, p.y - r), std::min(b.lo.z, p.z - r)};
+    b.hi = {std::max(b.hi.x, p.x + r), std::max(b.hi.y, p.y + r), std::max(b.hi.z, p.z + r)};
+    b.r_max = std::max(b.r_max, r);
+  }
+  return b;
+}
+
+namespace {
+double real_epsilon(Precision p) {
+  return p == Precision::fp32 ? double(std::numeric_limits<float>::epsilon())
+                              : std::numeric_limits<double>::epsilon();
+}
+double max_extent(const Bounds& b) {
+  return std::max({b.hi.x - b.lo.x, b.hi.y - b.lo.y, b.hi.z - b.lo.z});
+}
+}  // namespace
+
+double min_cell_size(const Bounds& b, Precision p) {
+  // c ± r is computed in Real in the local frame, where |c| <= extent: each of the two bounds and the
+  // product by 1/cell carries a few ulps of rounding. 16 ulps of (extent + 2 r_max) covers them all,
+  // so a body never spans three cells along an axis.
+  const double eps = real_epsilon(p);
+  const double d = 2.0 * b.r_max;
+  return d * (1.0 + 16 * eps) + 16 * eps * (max_extent(b) + d);
+}
+
+Frame make_frame(const Bounds& b, double requested_cell_size, Precision p) {
+  if (b.count == 0) throw InputError("scene has no bodies");
+  Frame f;
+  f.origin = b.lo;
+  const double need = min_cell_size(b, p);
+  if (requested_cell_size == 0) {
+    f.cell_size = need;
+  } else {
+    if (!(requested_cell_size > 0) || !std::isfinite(requested_cell_size))
+      throw UsageError("--cell-size must be a finite value > 0");
+    if (requested_cell_size < need) {
+      std::ostringstream m;
+      m.precision(17);
+      m << "--cell-size " << requested_cell_size << " is smaller than the largest bounding diameter "
+        << 2 * b.r_max << " plus its rounding margin (" << need << ")";
+      throw UsageError(m.str());
+    }
+    f.cell_size = requested_cell_size;
+  }
+  return f;
+}
+
+GridPlan plan_grid(const Bounds& local, const Frame& frame, Precision p) {
+  GridPlan g;
+  g.frame = frame;
+  if (local.count == 0) return g;
+  // Per axis, the frame cell coordinates the local bodies can produce, with one cell of slack for
+  // rounding on each side; base rounded down to even so cell parity (type) is the frame's.
+  const double lim = p == Precision::fp32 ? double(1u << 22) : double(1u << 31) - 4;
+  const double lo[3] = {local.lo.x - frame.origin.x, local.lo.y - frame.origin.y, local.lo.z - frame.origin.z};
+  const double hi[3] = {local.hi.x - frame.origin.x, local.hi.y - frame.origin.y, local.hi.z - frame.origin.z};
+  for (int k = 0; k < 3; ++k) {
+    const double c_hi = std::floor(hi[k] / frame.cell_size) + 1;
+    if (!(c_hi < lim)) {
+      std::ostringstream m;
+      m << "the scene spans " << c_hi << " cells of edge " << frame.cell_size << " along axis "
+        << "xyz"[k] << ", more than the " << lim << " that " << to_string(p)
+        << " local coordinates resolve; use --precision fp64 or a larger --cell-size";
+      throw InputError(m.str());
+    }
+    double c_lo = std::max(0.0, std::floor(lo[k] / frame.cell_size) - 1);
+    auto base = static_cast<std::uint32_t>(c_lo) & ~1u;
+    g.base[k] = base;
+    g.dims[k] = static_cast<std::uint32_t>(c_hi) - base + 1;
+    g.half[k] = (g.dims[k] + 1) / 2;
+  }
+  const long double cells = (long double)g.half[0] * g.half[1] * g.half[2];
+  if (cells > (long double)(std::uint64_t(1) << 60)) {
+    std::ostringstream m;
+    m << "the grid needs " << double(cells) * 8 << " cells (" << g.dims[0] << " x " << g.dims[1]
+      << " x " << g.dims[2] << "), more than a 64-bit cell key encodes; use a larger --cell-size";
+    throw InputError(m.str());
+  }
+  g.half_bits = detail::bits_for(std::uint64_t(g.half[0]) * g.half[1] * g.half[2]);
+  g.key_bits = g.half_bits + 3;
+  g.key64 = g.key_bits > 32;
+  return g;
+}
+
+#if !defined(CONTACTGRID_HAVE_CUDA)
+bool cuda_available() { return false; }
+namespace detail {
+class CudaBackend {};
+std::unique_ptr<CudaBackend> make_cuda_backend(int) {
+  throw CudaError("this contactgrid was built without CUDA (rebuild with nvcc present)");
+}
+template <class Real>
+void run_stages(CudaBackend&, const DetectJob<Real>&, Contacts<Real>&, StageTimes&, EngineStats&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+void destroy(CudaBackend* b) { delete b; }
+}  // namespace detail
+#endif
+
+template <class Real>
+struct Engine<Real>::Impl {
+  EngineOptions options;
+  Backend resolved = Backend::cpu;
+  detail::HostBackend host;
+  detail::CudaBackend* cuda = nullptr;
+  StageTimes times;
+  EngineStats stats;
+  ~Impl() { detail::destroy(cuda); }
+};
+
+template <class Real>
+Engine<Real>::Engine(EngineOptions options) : m_impl(std::make_unique<Impl>()) {
+  m_impl->options = options;
+  m_impl->host.threads = options.threads;
+  if (options.threads < 0) throw UsageError("--threads must be >= 0");
+  Backend b = options.backend;
+  if (b == Backend::automatic) b = cuda_available() ? Backend::cuda : Backend::cpu;
+  if (b == Backend::cuda) m_impl->cuda = detail::make_cuda_backend(options.device).release();
+  m_impl->resolved = b;
+}
+template <class Real> Engine<Real>::~Engine() = default;
+template <class Real> Engine<Real>::Engine(Engine&&) noexcept = default;
+template <class Real> Engine<Real>& Engine<Real>::operator=(Engine&&) noexcept = default;
+template <class Real> Backend Engine<Real>::backend() const { return m_impl->resolved; }
+template <class Real> const StageTimes& Engine<Real>::times() const { return m_impl->times; }
+template <class Real> const EngineStats& Engine<Real>::stats() const { return m_impl->stats; }
+template <class Real> const EngineOptions& Engine<Real>::options() const { return m_impl->options; }
+
+template <class Real>
+Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Frame> frame) {
+  using clock = std::chrono::steady_clock;
+  constexpr Precision prec = sizeof(Real) == 4 ? Precision::fp32 : Precision::fp64;
+  Impl& s = *m_impl;
+  s.times.clear();
+  s.stats = EngineStats{};
+  Contacts<Real> out;
+  auto t0 = clock::now();
+  const Bounds b = compute_bounds(bodies);
+  s.stats.bodies = b.count;
+  if (b.count == 0) return out;
+  const Frame f = frame ? *frame : make_frame(b, s.options.cell_size, prec);
+  if (frame && f.cell_size < 2 * b.r_max) throw UsageError("frame cell size is smaller than the largest diameter");
+  detail::DetectJob<Real> job{bodies, plan_grid(b, f, prec), {}, s.options.fields};
+  job.grid = detail::grid_params<Real>(job.plan);
+  s.stats.key_bits = job.plan.key_bits;
+  s.times.push_back({"plan", std::chrono::duration<double>(clock::now() - t0).count()});
+
+  if (s.resolved == Backend::cuda)
+    detail::run_stages(*s.cuda, job, out, s.times, s.stats);
+  else
+    detail::run_stages(s.host, job, out, s.times, s.stats);
+
+  // Local indices → global ids (monotone, so the (id_a, id_b) order is kept).
+  if (!bodies.id.empty()) {
+    for (std::size_t k = 0; k < out.size(); ++k) {
+      out.id_a[k] = bodies.id[static_cast<std::size_t>(out.id_a[k])];
+      out.id_b[k] = bodies.id[static_cast<std::size_t>(out.id_b[k])];
+    }
+  }
+  s.stats.contacts = out.size();
+  return out;
+}
+
+template class Engine<float>;
+template class Engine<double>;
+
+}  // namespace cg

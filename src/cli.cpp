@@ -1,0 +1,98 @@
+// Command-line parsing. Every option is validated here, before any file is read or any rank talks.
+#include "cli.hpp"
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+
+#include <map>
+
+#include "pipeline.hpp"
+
+namespace cg {
+namespace {
+
+const std::map<std::string, Backend> k_backends{
+    {"cpu", Backend::cpu}, {"cuda", Backend::cuda}, {"auto", Backend::automatic}};
+const std::map<std::string, Precision> k_precisions{{"fp32", Precision::fp32}, {"fp64", Precision::fp64}};
+const std::map<std::string, Fields> k_fields{{"basic", Fields::basic}, {"full", Fields::full}};
+
+}  // namespace
+
+int run_cli(int argc, char** argv) {
+  CLI::App app{"contactgrid: every touching or overlapping pair of spheres, with Bullet's contact data.\n"
+               "Le Grand's uniform grid on a CPU or CUDA backend; MPI slabs under mpirun."};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "contactgrid 0.1.0");
+
+  // generate
+  GenerateOptions gen;
+  std::string gen_out;
+  bool gen_quiet = false;
+  std::vector<double> offset;
+  auto* g = app.add_subcommand("generate", "Make a seeded, reproducible scene (CONTRACT §1 HDF5)");
+  g->add_option("output", gen_out, "Scene file to write (.h5)")->required();
+  g->add_option("--kind", gen.kind, "uniform | polydisperse")
+      ->check(CLI::IsMember({"uniform", "polydisperse"}))
+      ->capture_default_str();
+  g->add_option("-n,--count", gen.count, "Number of spheres, 1 … 2^28")
+      ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1) << 28))
+      ->capture_default_str();
+  g->add_option("--seed", gen.seed, "Random seed")->capture_default_str();
+  g->add_option("--rlow", gen.radius_low, "Smallest radius Rlow (length units)")->capture_default_str();
+  g->add_option("--rhigh", gen.radius_high, "Largest radius Rhigh (length units)")->capture_default_str();
+  g->add_option("--contacts-per-body", gen.contacts_per_body,
+                "Target mean contacts per sphere; sets the box edge (course: 0.4)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  g->add_option("--offset", offset, "Translate the scene by (x, y, z)")->expected(3);
+  g->add_flag("-q,--quiet", gen_quiet, "No summary");
+
+  // detect
+  DetectCommand det;
+  auto* d = app.add_subcommand("detect", "Every contact of a scene (CONTRACT §2/§3), sorted by (id_a, id_b)");
+  d->add_option("scene", det.input, "Scene file (.h5)")->required()->check(CLI::ExistingFile);
+  d->add_option("-o,--output", det.output, "Contacts file to write (.h5)")->required();
+  d->add_option("--backend", det.backend, "cpu | cuda | auto (cuda when a GPU is present)")
+      ->transform(CLI::CheckedTransformer(k_backends))
+      ->default_str("auto");
+  d->add_option("--precision", det.precision, "fp32 | fp64: real type of the whole pipeline and output")
+      ->transform(CLI::CheckedTransformer(k_precisions))
+      ->default_str("fp64");
+  d->add_option("--fields", det.fields, "basic | full (adds local points and friction directions)")
+      ->transform(CLI::CheckedTransformer(k_fields))
+      ->default_str("basic");
+  d->add_option("--cell-size", det.cell_size,
+                "Grid cell edge (length units); default: largest diameter + rounding margin")
+      ->check(CLI::NonNegativeNumber);
+  d->add_option("--csv", det.csv, "Also write the contacts as CSV (for small results)");
+  d->add_option("--threads", det.threads, "CPU backend threads (0: all cores)")->check(CLI::NonNegativeNumber);
+  d->add_option("--axis", det.axis, "MPI slab axis: auto (largest extent) | x | y | z")
+      ->check(CLI::IsMember({"auto", "x", "y", "z"}))
+      ->capture_default_str();
+  d->add_option("--balance", det.balance, "MPI slab bounds: count (equal bodies) | width (equal widths)")
+      ->check(CLI::IsMember({"count", "width"}))
+      ->capture_default_str();
+  d->add_flag("-q,--quiet", det.quiet, "No summary");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    app.exit(e);
+    return 2;
+  }
+
+  if (g->parsed()) {
+    if (!offset.empty()) gen.offset = {offset[0], offset[1], offset[2]};
+    return run_generate(gen_out, gen, gen_quiet);
+  }
+  if (d->parsed()) return run_detect(det);
+  return 2;
+}
+
+}  // namespace cg

@@ -1,0 +1,7 @@
+#pragma once
+// The contactgrid command line (CLI11): generate, detect, validate, bench.
+namespace cg {
+// Parses argv and runs the command. Returns the exit code; throws cg::Error for the caller (main)
+// to turn into a message and its exit code.
+int run_cli(int argc, char** argv);
+}  // namespace cg

@@ -1,0 +1,36 @@
+#pragma once
+// The commands of the contactgrid executable, as functions (the CLI parses, these run).
+// pipeline.cpp is the only place that sequences the stages of a run:
+//   read scene → (MPI: slabs, redistribute, halo) → engine → (MPI: gather, merge) → write → summary
+#include <cstdint>
+#include <string>
+
+#include "engine.hpp"
+#include "generate.hpp"
+
+namespace cg {
+
+struct DetectCommand {
+  std::string input;
+  std::string output;
+  std::string csv;  // optional text copy
+  Backend backend = Backend::automatic;
+  Precision precision = Precision::fp64;
+  Fields fields = Fields::basic;
+  double cell_size = 0;
+  int threads = 0;
+  std::string axis = "auto";       // MPI slab axis: auto | x | y | z
+  std::string balance = "count";   // MPI slab balance: count | width
+  bool quiet = false;
+};
+
+// Runs one detection; returns the process exit code (0).
+int run_detect(const DetectCommand& cmd);
+
+int run_generate(const std::string& path, const GenerateOptions& options, bool quiet);
+
+// Writes contacts as CSV (header + one row per contact), to a temporary name then renamed.
+template <class Real>
+void write_contacts_csv(const std::string& path, const Contacts<Real>& contacts);
+
+}  // namespace cg

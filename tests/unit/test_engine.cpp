@@ -1,0 +1,271 @@
+// The engine against the exact reference (tests/reference.hpp) on random and adversarial scenes, in
+// both precisions and on both backends (CUDA cases skip without a GPU).
+//
+// Borderline band (CONTRACT §3): a pair whose exact |distance| is below
+//   tol = 16 · eps(Real) · (largest local coordinate + 2 · r_max)
+// may be decided either way (local coordinates are rounded to Real once); every other decision must
+// equal the reference, and contact values must agree within tolerances of the same order.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+
+#include "backends.hpp"
+#include "core/grid.hpp"
+#include "engine.hpp"
+#include "reference.hpp"
+#include "scenes.hpp"
+
+namespace cg::test {
+namespace {
+
+template <class T>
+class EngineTest : public ::testing::Test {
+ protected:
+  using Real = typename T::Real;
+  void SetUp() override { CG_SKIP_WITHOUT_BACKEND(T); }
+
+  Contacts<Real> run(const Spheres& s, Fields fields = Fields::basic, double cell = 0) {
+    EngineOptions o;
+    o.backend = T::backend;
+    o.fields = fields;
+    o.cell_size = cell;
+    Engine<Real> e(o);
+    Contacts<Real> c = e.detect(BodiesView{s.p, s.r, {}, {}});
+    m_stats = e.stats();
+    return c;
+  }
+
+  static long double tolerance(const Spheres& s) {
+    double ext = 0, rmax = 0;
+    Vec3<double> lo{1e300, 1e300, 1e300};
+    for (std::size_t i = 0; i < s.r.size(); ++i) {
+      lo = {std::min(lo.x, s.p[i].x - s.r[i]), std::min(lo.y, s.p[i].y - s.r[i]), std::min(lo.z, s.p[i].z - s.r[i])};
+      rmax = std::max(rmax, s.r[i]);
+    }
+    for (std::size_t i = 0; i < s.r.size(); ++i)
+      ext = std::max({ext, s.p[i].x - lo.x + s.r[i], s.p[i].y - lo.y + s.r[i], s.p[i].z - lo.z + s.r[i]});
+    return 16.0L * std::numeric_limits<Real>::epsilon() * (ext + 2 * rmax);
+  }
+
+  // Same pairs as the reference outside the borderline band; values close to the reference.
+  void expect_matches_reference(const Spheres& s, const Contacts<Real>& c) {
+    const long double tol = tolerance(s);
+    const auto ref = reference_contacts(s.p, s.r, tol);
+    // sorted, unique, a < b
+    for (std::size_t k = 0; k < c.size(); ++k) {
+      ASSERT_LT(c.id_a[k], c.id_b[k]) << s.name << " row " << k;
+      if (k) {
+        ASSERT_TRUE(c.id_a[k - 1] < c.id_a[k] || (c.id_a[k - 1] == c.id_a[k] && c.id_b[k - 1] < c.id_b[k]))
+            << s.name << ": not sorted/unique at row " << k;
+      }
+    }
+    std::map<std::pair<std::int64_t, std::int64_t>, std::size_t> mine;
+    for (std::size_t k = 0; k < c.size(); ++k) mine[{c.id_a[k], c.id_b[k]}] = k;
+    std::size_t matched = 0;
+    for (const auto& r : ref) {
+      auto it = mine.find({r.a, r.b});
+      if (it == mine.end()) {
+        EXPECT_GT(r.distance, -tol) << s.name << ": missed pair (" << r.a << ", " << r.b << ") distance "
+                                    << double(r.distance);
+        continue;
+      }
+      ++matched;
+      const std::size_t k = it->second;
+      const long double vt = tol * 8 + 4 * std::numeric_limits<Real>::epsilon();
+      EXPECT_NEAR(double(c.distance[k]), double(r.distance), double(vt)) << s.name << " pair " << r.a << "," << r.b;
+      if (std::fabs(double(r.pa[0] - r.pb[0])) + std::fabs(double(r.distance)) > 0 &&
+          std::sqrt(double((r.pa[0] - r.pb[0]) * (r.pa[0] - r.pb[0]))) >= 0) {
+        // normals are ill-defined for (nearly) coincident centres: compare only well-separated ones
+        const double d = double(r.distance) + s.r[r.a] + s.r[r.b];
+        if (d > 1e3 * double(tol)) {
+          const Vec3<Real> n = c.normal_on_b[k];
+          const double rel = double(vt) / d * 4;
+          EXPECT_NEAR(double(n.x), double(r.n[0]), rel) << s.name;
+          EXPECT_NEAR(double(n.y), double(r.n[1]), rel) << s.name;
+          EXPECT_NEAR(double(n.z), double(r.n[2]), rel) << s.name;
+          const double pt = double(vt) * 4 + 4 * std::numeric_limits<Real>::epsilon() *
+                                                 std::max({1.0, std::fabs(s.p[r.a].x), std::fabs(s.p[r.a].y),
+                                                           std::fabs(s.p[r.a].z)}) +
+                            rel * (s.r[r.a] + s.r[r.b]);
+          EXPECT_NEAR(double(c.position_on_b[k].x), double(r.pb[0]), pt) << s.name;
+          EXPECT_NEAR(double(c.position_on_a[k].y), double(r.pa[1]), pt) << s.name;
+        }
+      }
+    }
+    // extra pairs must be borderline: d <= ra + rb + tol was searched above with slack
+    EXPECT_EQ(matched, c.size()) << s.name << ": the engine reported pairs beyond the borderline band";
+  }
+
+  EngineStats m_stats;
+};
+TYPED_TEST_SUITE(EngineTest, AllConfigs, ConfigNames);
+
+TYPED_TEST(EngineTest, RandomUniformManySizes) {
+  std::uint64_t seed = 11;
+  for (std::size_t n : {1u, 2u, 3u, 17u, 100u, 1000u, 5000u, 20000u}) {
+    auto s = random_spheres(n, 0.5, 1.0, seed++);
+    this->expect_matches_reference(s, this->run(s));
+  }
+}
+
+TYPED_TEST(EngineTest, RadiusRatios) {
+  this->expect_matches_reference(random_spheres(4000, 0.1, 1.0, 21), this->run(random_spheres(4000, 0.1, 1.0, 21)));
+  auto s = random_spheres(3000, 0.001, 1.0, 22, /*log_radii=*/true);
+  this->expect_matches_reference(s, this->run(s));
+}
+
+TYPED_TEST(EngineTest, Clustered) {
+  auto s = clustered(3000, 31);
+  this->expect_matches_reference(s, this->run(s));
+}
+
+TYPED_TEST(EngineTest, AllInOneCell) {
+  auto s = one_cell(300, 41);
+  auto c = this->run(s);
+  EXPECT_EQ(c.size(), 300u * 299u / 2);  // every pair overlaps
+  this->expect_matches_reference(s, c);
+}
+
+TYPED_TEST(EngineTest, OnCellBoundaries) {
+  auto s = on_boundaries(51);
+  this->expect_matches_reference(s, this->run(s, Fields::basic, 2.0));
+  this->expect_matches_reference(s, this->run(s, Fields::basic, 1.0 + 1e-3));
+}
+
+TYPED_TEST(EngineTest, CoincidentCentres) {
+  auto s = coincident(61);
+  auto c = this->run(s, Fields::full);
+  this->expect_matches_reference(s, c);
+  std::size_t exact = 0;
+  for (std::size_t k = 0; k < c.size(); ++k) {
+    const auto a = c.id_a[k], b = c.id_b[k];
+    if (s.p[a] == s.p[b]) {
+      ++exact;
+      EXPECT_EQ(c.normal_on_b[k].x, 1);
+      EXPECT_EQ(c.normal_on_b[k].y, 0);
+      EXPECT_EQ(c.normal_on_b[k].z, 0);
+      EXPECT_EQ(c.lateral_friction_dir1[k].y, 1);
+      EXPECT_EQ(c.lateral_friction_dir2[k].z, 1);
+      // containment: distance = -(ra + rb)
+      EXPECT_NEAR(double(c.distance[k]), -(s.r[a] + s.r[b]), 1e-6);
+    }
+  }
+  EXPECT_EQ(exact, 50u);
+}
+
+TYPED_TEST(EngineTest, ExactlyTangentPairsAreContacts) {
+  auto s = tangent(71);
+  auto c = this->run(s);
+  this->expect_matches_reference(s, c);
+  std::size_t found = 0;
+  for (std::size_t k = 0; k < c.size(); ++k)
+    if (c.id_b[k] == c.id_a[k] + 1 && c.id_a[k] % 2 == 0) {
+      ++found;
+      EXPECT_EQ(c.distance[k], 0) << "pair " << c.id_a[k];
+    }
+  EXPECT_EQ(found, 200u);  // every built pair touches exactly
+}
+
+TYPED_TEST(EngineTest, TranslationFarFromOriginGivesSameContacts) {
+  auto s = random_spheres(5000, 0.5, 1.0, 81);
+  auto t = s.translated({1e6, -1e6, 1e6});
+  auto c0 = this->run(s), c1 = this->run(t);
+  ASSERT_EQ(c0.size(), c1.size());
+  for (std::size_t k = 0; k < c0.size(); ++k) {
+    ASSERT_EQ(c0.id_a[k], c1.id_a[k]);
+    ASSERT_EQ(c0.id_b[k], c1.id_b[k]);
+    // same local coordinates up to the rounding of (world - origin): same normals and distances
+    EXPECT_NEAR(double(c0.distance[k]), double(c1.distance[k]), 1e-5);
+    EXPECT_NEAR(double(c0.normal_on_b[k].x), double(c1.normal_on_b[k].x), 1e-3);
+    EXPECT_NEAR(double(c0.position_on_b[k].x) + 1e6, double(c1.position_on_b[k].x), 0.07);
+  }
+  this->expect_matches_reference(t, c1);
+}
+
+TYPED_TEST(EngineTest, FullFieldsFollowTheContract) {
+  auto s = random_spheres(2000, 0.5, 1.0, 91);
+  auto basic = this->run(s, Fields::basic);
+  auto c = this->run(s, Fields::full);
+  EXPECT_FALSE(basic.full);
+  EXPECT_TRUE(basic.local_point_a.empty());
+  ASSERT_TRUE(c.full);
+  ASSERT_EQ(c.size(), basic.size());
+  using R = typename TypeParam::Real;
+  const double eps = sizeof(R) == 4 ? 2e-5 : 1e-12;
+  for (std::size_t k = 0; k < c.size(); ++k) {
+    const auto n = c.normal_on_b[k], d1 = c.lateral_friction_dir1[k], d2 = c.lateral_friction_dir2[k];
+    EXPECT_NEAR(double(dot(n, n)), 1, eps);
+    EXPECT_NEAR(double(dot(d1, d1)), 1, eps);
+    EXPECT_NEAR(double(dot(n, d1)), 0, eps);
+    const auto x = cross(n, d1);
+    EXPECT_NEAR(double(x.x), double(d2.x), eps);
+    EXPECT_NEAR(double(x.y), double(d2.y), eps);
+    EXPECT_NEAR(double(x.z), double(d2.z), eps);
+    // local points: -ra·n and rb·n for spheres
+    EXPECT_NEAR(double(c.local_point_a[k].x), -s.r[c.id_a[k]] * double(n.x), 1e-4);
+    EXPECT_NEAR(double(c.local_point_b[k].y), s.r[c.id_b[k]] * double(n.y), 1e-4);
+    // position_on_a = position_on_b + n · distance
+    EXPECT_NEAR(double(c.position_on_a[k].z), double(c.position_on_b[k].z) + double(n.z * c.distance[k]), 1e-4);
+    EXPECT_EQ(c.distance[k], basic.distance[k]);
+  }
+}
+
+TYPED_TEST(EngineTest, ReportMaskAndIds) {
+  auto s = random_spheres(3000, 0.5, 1.0, 101);
+  auto all = this->run(s);
+  std::vector<std::int64_t> ids(s.r.size());
+  std::vector<std::uint8_t> report(s.r.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    ids[i] = std::int64_t(10 + 3 * i);
+    report[i] = (i % 3) != 0;
+  }
+  EngineOptions o;
+  o.backend = TypeParam::backend;
+  Engine<typename TypeParam::Real> e(o);
+  auto c = e.detect(BodiesView{s.p, s.r, ids, report});
+  std::size_t expect = 0;
+  for (std::size_t k = 0; k < all.size(); ++k)
+    if (all.id_a[k] % 3 != 0) {
+      ASSERT_LT(expect, c.size());
+      EXPECT_EQ(c.id_a[expect], 10 + 3 * all.id_a[k]);
+      EXPECT_EQ(c.id_b[expect], 10 + 3 * all.id_b[k]);
+      EXPECT_EQ(c.distance[expect], all.distance[k]);
+      ++expect;
+    }
+  EXPECT_EQ(expect, c.size());
+}
+
+TYPED_TEST(EngineTest, BadBodiesAreNamed) {
+  Spheres s;
+  s.add(0, 0, 0, 1);
+  s.add(1, std::nan(""), 0, 1);
+  EXPECT_THROW(
+      {
+        try {
+          this->run(s);
+        } catch (const InputError& e) {
+          EXPECT_NE(std::string(e.what()).find("body 1"), std::string::npos) << e.what();
+          throw;
+        }
+      },
+      InputError);
+  Spheres z;
+  z.add(0, 0, 0, 1);
+  z.add(1, 0, 0, 0);
+  EXPECT_THROW(this->run(z), InputError);
+  Spheres small;
+  small.add(0, 0, 0, 1);
+  EXPECT_THROW(this->run(small, Fields::basic, 1.0), UsageError);  // cell smaller than the diameter
+}
+
+TYPED_TEST(EngineTest, EmptyInput) {
+  Spheres s;
+  auto c = this->run(s);
+  EXPECT_EQ(c.size(), 0u);
+}
+
+}  // namespace
+}  // namespace cg::test
