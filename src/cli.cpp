@@ -50,7 +50,7 @@ int run_cli(int argc, char** argv) {
   // detect
   DetectCommand det;
   auto* d = app.add_subcommand("detect", "Every contact of a scene (CONTRACT §2/§3), sorted by (id_a, id_b)");
-  d->add_option("scene", det.input, "Scene file (.h5)")->required()->check(CLI::ExistingFile);
+  d->add_option("scene", det.input, "Scene file (.h5)")->required();  // existence is checked by the reader (exit 3, names the file)
   d->add_option("-o,--output", det.output, "Contacts file to write (.h5)")->required();
   d->add_option("--backend", det.backend, "cpu | cuda | auto (cuda when a GPU is present)")
       ->transform(CLI::CheckedTransformer(k_backends))

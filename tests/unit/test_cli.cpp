@@ -1,0 +1,167 @@
+// End-to-end tests of the contactgrid executable: exit codes, messages and the no-partial-output rule.
+// Exit codes (README): 0 ok, 1 validation FAIL, 2 usage, 3 bad input, 4 CUDA, 5 MPI, 6 I/O.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "engine.hpp"
+#include "hdf5_io.hpp"
+
+namespace fs = std::filesystem;
+
+namespace cg::test {
+namespace {
+
+struct Result {
+  int code;
+  std::string output;  // stdout + stderr
+};
+
+Result run(const std::string& args) {
+  const std::string cmd = std::string(CG_BINARY) + " " + args + " 2>&1";
+  Result r{-1, {}};
+  FILE* p = popen(cmd.c_str(), "r");
+  if (!p) return r;
+  char buf[4096];
+  while (fgets(buf, sizeof buf, p)) r.output += buf;
+  const int status = pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    m_dir = fs::temp_directory_path() /
+            ("cg_cli_" + std::to_string(::getpid()) + "_" +
+             ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(m_dir);
+    fs::create_directories(m_dir);
+  }
+  void TearDown() override { fs::remove_all(m_dir); }
+  std::string path(const std::string& name) const { return (m_dir / name).string(); }
+
+  // A detect run that must fail with `code`, a message containing every `needle`, and no output.
+  void expect_detect_fails(const std::string& scene, int code, std::initializer_list<std::string> needles,
+                           const std::string& extra = "") {
+    const std::string out = path("out.h5");
+    Result r = run("detect " + scene + " -o " + out + " " + extra);
+    EXPECT_EQ(r.code, code) << r.output;
+    for (const auto& n : needles) EXPECT_NE(r.output.find(n), std::string::npos) << "missing '" << n << "' in: " << r.output;
+    EXPECT_FALSE(fs::exists(out)) << "a failed run left an output file";
+    for (const auto& e : fs::directory_iterator(m_dir))
+      EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << "temporary left: " << e.path();
+  }
+
+  Scene small_scene(std::size_t n = 10) const {
+    Scene s;
+    for (std::size_t i = 0; i < n; ++i) {
+      s.sphere_position.push_back({double(i) * 0.9, 0.25 * double(i % 3), 0});
+      s.sphere_radius.push_back(0.5);
+    }
+    return s;
+  }
+  fs::path m_dir;
+};
+
+TEST_F(Cli, GenerateDetectRoundTrip) {
+  Result g = run("generate " + path("s.h5") + " --count 3000 --seed 7 -q");
+  ASSERT_EQ(g.code, 0) << g.output;
+  Result d = run("detect " + path("s.h5") + " -o " + path("c.h5") + " --backend cpu --csv " + path("c.csv"));
+  ASSERT_EQ(d.code, 0) << d.output;
+  EXPECT_NE(d.output.find("3000 bodies"), std::string::npos) << d.output;
+  EXPECT_NE(d.output.find("sort"), std::string::npos) << "per-stage times in the summary: " << d.output;
+  ContactFile c = read_contacts(path("c.h5"));
+  EXPECT_GT(c.contacts.size(), 3000u / 5);
+  EXPECT_EQ(c.precision, "fp64");
+  std::ifstream csv(path("c.csv"));
+  std::size_t lines = 0;
+  for (std::string l; std::getline(csv, l);) ++lines;
+  EXPECT_EQ(lines, c.contacts.size() + 1);
+  // fp32 and full fields
+  Result f = run("detect " + path("s.h5") + " -o " + path("c32.h5") + " --backend cpu --precision fp32 --fields full -q");
+  ASSERT_EQ(f.code, 0) << f.output;
+  ContactFile c32 = read_contacts(path("c32.h5"));
+  EXPECT_EQ(c32.precision, "fp32");
+  EXPECT_TRUE(c32.contacts.full);
+  EXPECT_EQ(c32.contacts.size(), c.contacts.size());
+}
+
+TEST_F(Cli, UsageErrorsExitTwo) {
+  write_scene(path("s.h5"), small_scene());
+  EXPECT_EQ(run("detect " + path("s.h5") + " -o " + path("o.h5") + " --backend gpu").code, 2);
+  EXPECT_EQ(run("detect " + path("s.h5") + " -o " + path("o.h5") + " --precision fp16").code, 2);
+  EXPECT_EQ(run("detect " + path("s.h5")).code, 2);  // no output
+  EXPECT_EQ(run("generate " + path("g.h5") + " --count 0").code, 2);
+  EXPECT_EQ(run("bogus").code, 2);
+  expect_detect_fails(path("s.h5"), 2, {"--cell-size"}, "--cell-size 0.5");  // smaller than the diameter
+}
+
+TEST_F(Cli, MissingFile) { expect_detect_fails(path("nope.h5"), 3, {"nope.h5"}); }
+
+TEST_F(Cli, NotAnHdf5File) {
+  std::ofstream(path("text.h5")) << "this is not HDF5\n";
+  expect_detect_fails(path("text.h5"), 3, {"text.h5"});
+}
+
+TEST_F(Cli, TruncatedFile) {
+  write_scene(path("s.h5"), small_scene(5000));
+  fs::resize_file(path("s.h5"), fs::file_size(path("s.h5")) / 2);
+  expect_detect_fails(path("s.h5"), 3, {"s.h5"});
+}
+
+TEST_F(Cli, NoBodies) {
+  write_scene(path("empty.h5"), Scene{});
+  expect_detect_fails(path("empty.h5"), 3, {"empty.h5"});
+}
+
+TEST_F(Cli, NanCentreNamesDatasetAndRow) {
+  Scene s = small_scene();
+  s.sphere_position[6].y = std::nan("");
+  write_scene(path("nan.h5"), s);
+  expect_detect_fails(path("nan.h5"), 3, {"nan.h5", "/spheres/position", "6"});
+}
+
+TEST_F(Cli, InfiniteCentre) {
+  Scene s = small_scene();
+  s.sphere_position[2].z = INFINITY;
+  write_scene(path("inf.h5"), s);
+  expect_detect_fails(path("inf.h5"), 3, {"inf.h5", "/spheres/position", "2"});
+}
+
+TEST_F(Cli, NonPositiveRadius) {
+  Scene s = small_scene();
+  s.sphere_radius[4] = 0;
+  write_scene(path("r0.h5"), s);
+  expect_detect_fails(path("r0.h5"), 3, {"r0.h5", "/spheres/radius", "4"});
+}
+
+TEST_F(Cli, RadiusOutsidePromisedBounds) {
+  Scene s = small_scene();
+  s.radius_low = 0.4;
+  s.radius_high = 0.6;
+  s.sphere_radius[8] = 0.7;
+  write_scene(path("rb.h5"), s);
+  expect_detect_fails(path("rb.h5"), 3, {"rb.h5", "/spheres/radius", "8"});
+}
+
+TEST_F(Cli, UnwritableOutputIsAnIoError) {
+  write_scene(path("s.h5"), small_scene());
+  Result r = run("detect " + path("s.h5") + " -o " + path("no/such/dir/out.h5"));
+  EXPECT_EQ(r.code, 6) << r.output;
+  EXPECT_FALSE(fs::exists(path("no")));
+}
+
+TEST_F(Cli, CudaBackendWithoutGpuIsAClearError) {
+  if (cuda_available()) GTEST_SKIP() << "a GPU is present";
+  write_scene(path("s.h5"), small_scene());
+  expect_detect_fails(path("s.h5"), 4, {"CUDA"}, "--backend cuda");
+}
+
+}  // namespace
+}  // namespace cg::test
