@@ -62,17 +62,21 @@ Scene pile_scene(std::uint64_t seed, std::size_t n) {
   return s;
 }
 
-// A lattice of touching spheres (spacing exactly 2r, so d == ra + rb: touching counts), many bodies
-// sharing each coordinate: quantile cuts fall exactly on bodies' centres, many bodies lie exactly on
-// cuts. Plus coincident centres (normal (1, 0, 0)).
-Scene lattice_scene(std::uint64_t seed, int side) {
+// A lattice of touching spheres (spacing exactly 2r = 2·r_max = the exact ghost width, so
+// d == ra + rb: touching counts), many bodies sharing each coordinate: quantile cuts fall exactly on
+// bodies' centres, many bodies lie exactly on cuts. Plus coincident centres (normal (1, 0, 0)).
+// `mirrored`: ids decrease along every axis, so the smaller id of a pair across a cut is the body ON
+// the cut (upper slab) and its partner lies a full 2·r_max below: it must reach it as a ghost.
+Scene lattice_scene(std::uint64_t seed, int side, bool mirrored) {
   std::mt19937_64 rng(seed);
   Scene s;
   for (int i = 0; i < side; ++i) {
     for (int j = 0; j < side; ++j) {
       for (int k = 0; k < side; ++k) {
         if (rng() % 7 == 0) continue;  // holes, so ids do not follow the lattice
-        s.sphere_position.push_back({1.0 * i, 1.0 * j, 1.0 * k});
+        const int m = side - 1;
+        s.sphere_position.push_back(mirrored ? Vec3<double>{1.0 * (m - i), 1.0 * (m - j), 1.0 * (m - k)}
+                                             : Vec3<double>{1.0 * i, 1.0 * j, 1.0 * k});
         s.sphere_radius.push_back(0.5);
       }
     }
@@ -210,13 +214,43 @@ TEST(DistributedDetect, PileInTheBottomTenthEqualsSingleRank) {
 }
 
 TEST(DistributedDetect, BodiesExactlyOnSlabBoundariesEqualsSingleRank) {
-  for (int axis : {-1, 0, 2}) {
-    DistributedOptions o = base_options();
-    o.axis = axis;
-    const std::size_t k = check_both_precisions("lattice_" + std::to_string(axis), lattice_scene(107, 9), o);
-    if (session().rank() == 0) {
-      EXPECT_GT(k, 1000u);
+  for (bool mirrored : {false, true}) {
+    for (int axis : {-1, 0, 2}) {
+      DistributedOptions o = base_options();
+      o.axis = axis;
+      const std::string name = std::string(mirrored ? "mirrored_" : "lattice_") + std::to_string(axis);
+      const std::size_t k = check_both_precisions(name, lattice_scene(107, 9, mirrored), o);
+      if (session().rank() == 0) {
+        EXPECT_GT(k, 1000u);
+      }
     }
+  }
+}
+
+// Far from the frame origin, fp32 local coordinates round to ~1e-3: pairs whose exact centre distance
+// 1.0002 exceeds ra + rb = 1 = 2·r_max touch in fp32. The ghost width's rounding margin must cover
+// them (the body with the smaller id is the upper one, so the lower one must come as a ghost).
+Scene rounding_scene() {
+  Scene s;
+  s.sphere_position.push_back({-1.0e4, 0, 0});  // puts the frame origin far away
+  s.sphere_radius.push_back(0.5);
+  for (int k = 0; k < 300; ++k) {
+    const double x = 10.0 * k + 0.37 * (k % 7);
+    s.sphere_position.push_back({x + 1.0002, 0, 0});
+    s.sphere_radius.push_back(0.5);
+    s.sphere_position.push_back({x, 0, 0});
+    s.sphere_radius.push_back(0.5);
+  }
+  return s;
+}
+
+TEST(DistributedDetect, Fp32RoundingAcrossCutsEqualsSingleRank) {
+  const Scene scene = rounding_scene();
+  const std::string path = write_shared("rounding", scene);
+  check_equal_to_single_rank<double>(path, scene, base_options(), "rounding");
+  const std::size_t k = check_equal_to_single_rank<float>(path, scene, base_options(), "rounding");
+  if (session().rank() == 0) {
+    EXPECT_GT(k, 100u);  // the fp32 run does see these pairs in contact
   }
 }
 
