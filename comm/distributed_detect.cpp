@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <exception>
 #include <limits>
 #include <numeric>
@@ -451,10 +452,13 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
       runs = {};
       result.contacts = std::move(merged.contacts);
       result.duplicates_removed = merged.duplicates_removed;
+      const std::string line = "merge: " + std::to_string(result.contacts.size()) + " contacts from " +
+                               std::to_string(ranks) + " rank(s), " + std::to_string(merged.duplicates_removed) +
+                               " duplicate(s) removed (expected 0)";
       if (options.log) {
-        options.log("merge: " + std::to_string(result.contacts.size()) + " contacts from " +
-                    std::to_string(ranks) + " rank(s), " + std::to_string(merged.duplicates_removed) +
-                    " duplicate(s) removed (expected 0)");
+        options.log(line);
+      } else if (merged.duplicates_removed > 0) {  // a warning nobody asked for must still be seen
+        std::fprintf(stderr, "%swarning: %s\n", session.prefix().c_str(), line.c_str());
       }
     });
     times[5] = seconds_since(t0);

@@ -43,7 +43,8 @@ struct DistributedOptions {
   Balance balance = Balance::count;
   std::uint64_t max_sample = 1u << 20;          // quantile sample size (all bodies when N <= it)
   std::uint64_t max_message_bytes = 1u << 30;   // per-round gather size (tests make it tiny)
-  // Info lines (rank 0 only), e.g. the duplicate count; none when empty.
+  // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
+  // printed to stderr as a warning only if duplicates were removed.
   std::function<void(const std::string&)> log;
 };
 

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <numbers>
 #include <random>
 #include <string>
 #include <vector>
@@ -39,7 +40,7 @@ Scene random_scene(std::uint64_t seed, std::size_t n, Vec3<double> lo, Vec3<doub
 
 // Edge of a cube holding n spheres of mean radius r with about 0.4 contacts per body.
 double box_edge(std::size_t n, double r) {
-  return std::cbrt(static_cast<double>(n) * (4.0 / 3.0) * M_PI * std::pow(2 * r, 3) / 0.8);
+  return std::cbrt(static_cast<double>(n) * (4.0 / 3.0) * std::numbers::pi * std::pow(2 * r, 3) / 0.8);
 }
 
 Scene uniform_scene(std::uint64_t seed, std::size_t n) {
