@@ -1,0 +1,80 @@
+#pragma once
+// Contact detection over the ranks of a Session: the MPI slab decomposition wrapped around the
+// single-rank Engine. g++-safe public header (no <mpi.h>).
+//
+// Pipeline (each stage's time is reported as the maximum over ranks):
+//   read          rank r reads rows [N·r/P, N·(r+1)/P) of /spheres (serial HDF5, independent reads);
+//                 global bounds by an all-gather of the ranks' Bounds, folded with Bounds::merge in
+//                 rank order; the frame = make_frame(global bounds) — the frame a single-rank run
+//                 builds — so every rank computes bit-identical local coordinates and contact data.
+//   redistribute  slab axis (largest extent unless forced); cuts from the quantiles of a regular
+//                 sample of centre coordinates gathered to every rank (balance = count) or equal widths
+//                 (balance = width): identical on all ranks; every body to its owner (Alltoall counts,
+//                 Alltoallv records).
+//   halo          ghost plan (decomposition/make_halo_plan, ghost width = 2·r_max + rounding margin);
+//                 counts by Alltoall, then every Irecv posted, every Isend, one Waitall.
+//   detect        owned + ghosts sorted by global id; report mask = owned; Engine<Real>::detect with
+//                 the shared frame. The owner of the smaller id reports a pair, so each contact is
+//                 found by exactly one rank.
+//   gather        counts, then each field with MPI_Gatherv to rank 0, in rounds of at most
+//                 max_message_bytes (so no count or displacement exceeds 2^31).
+//   merge         rank 0: k-way merge of the P sorted runs by (id_a, id_b), exact duplicates removed
+//                 and counted (expected 0).
+// With one rank (laptop mode or np 1) the same code path runs with no neighbours.
+//
+// Errors: options are validated before any communication. An error in a stage on any rank (bad
+// input, I/O, CUDA, memory) is agreed on at the end of the stage (Session::agree): every rank throws
+// the same exception, "[rank r/N] <stage>: <cause>". A failing MPI call (CommFailure) leaves other
+// ranks possibly waiting, so it ends the job with Session::abort (exit code 5).
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "engine.hpp"
+#include "session.hpp"
+#include "slab_decomposition.hpp"
+
+namespace cg {
+
+struct DistributedOptions {
+  EngineOptions engine;           // backend, fields, cell_size (0: smallest valid), threads, device
+  int axis = -1;                  // slab axis: 0 x, 1 y, 2 z, -1 largest extent (parse_axis)
+  Balance balance = Balance::count;
+  std::uint64_t max_sample = 1u << 20;          // quantile sample size (all bodies when N <= it)
+  std::uint64_t max_message_bytes = 1u << 30;   // per-round gather size (tests make it tiny)
+  // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
+  // printed to stderr as a warning only if duplicates were removed.
+  std::function<void(const std::string&)> log;
+};
+
+// Throws UsageError naming the bad option. Called by distributed_detect before any communication.
+void validate(const DistributedOptions& options);
+
+template <class Real>
+struct DistributedResult {
+  Contacts<Real> contacts;               // rank 0: all contacts, CONTRACT §2 order; empty elsewhere
+  StageTimes times;                      // read, redistribute, halo, detect, gather, merge (max, s)
+  std::uint64_t duplicates_removed = 0;  // rank 0 (expected 0)
+  std::uint64_t bodies = 0;              // global body count
+  std::uint64_t ghosts = 0;              // ghosts held, summed over ranks
+  std::uint64_t owned_min = 0, owned_max = 0;  // owned bodies per rank: balance of the slabs
+  double cell_size = 0;                  // the frame's cell edge
+  Frame frame;                           // the shared frame
+  int ranks = 1;
+  int axis = 0;                          // the slab axis used
+  std::vector<double> cuts;              // the P-1 slab cuts
+  Backend backend = Backend::cpu;        // the engine's resolved backend (this rank)
+};
+
+// Collective over `session`: every rank calls it with the same arguments. See the file comment.
+template <class Real>
+DistributedResult<Real> distributed_detect(Session& session, const std::string& scene_path,
+                                           const DistributedOptions& options);
+
+extern template DistributedResult<float> distributed_detect<float>(Session&, const std::string&,
+                                                                   const DistributedOptions&);
+extern template DistributedResult<double> distributed_detect<double>(Session&, const std::string&,
+                                                                     const DistributedOptions&);
+
+}  // namespace cg

@@ -1,0 +1,161 @@
+#include "slab_decomposition.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+namespace cg {
+
+const char* to_string(Balance b) {
+  switch (b) {
+    case Balance::count: return "count";
+    case Balance::width: return "width";
+  }
+  return "?";
+}
+
+Balance parse_balance(const std::string& text) {
+  if (text == "count") return Balance::count;
+  if (text == "width") return Balance::width;
+  throw UsageError("--balance: '" + text + "' is not one of count, width");
+}
+
+int parse_axis(const std::string& text) {
+  if (text == "x") return 0;
+  if (text == "y") return 1;
+  if (text == "z") return 2;
+  if (text == "auto") return -1;
+  throw UsageError("--axis: '" + text + "' is not one of x, y, z, auto");
+}
+
+const char* axis_name(int axis) {
+  switch (axis) {
+    case 0: return "x";
+    case 1: return "y";
+    case 2: return "z";
+    default: return "auto";
+  }
+}
+
+static double component(const Vec3<double>& v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
+
+int choose_axis(const Bounds& global, int forced) {
+  if (forced >= 0) {
+    if (forced > 2) throw UsageError("slab axis " + std::to_string(forced) + " is not 0, 1 or 2");
+    return forced;
+  }
+  int best = 0;
+  double best_extent = component(global.hi, 0) - component(global.lo, 0);
+  for (int k = 1; k < 3; ++k) {
+    double e = component(global.hi, k) - component(global.lo, k);
+    if (e > best_extent) {
+      best = k;
+      best_extent = e;
+    }
+  }
+  return best;
+}
+
+double ghost_width(double r_max, double extent, double epsilon) {
+  // A pair reported by the engine satisfies |d|^2 <= (ra + rb)^2 in Real on local coordinates that
+  // each carry an absolute error <= epsilon·extent; the squares and sums add a few relative epsilon.
+  // 16 epsilon (relative and absolute) is a comfortable bound of both.
+  return 2.0 * r_max * (1.0 + 16.0 * epsilon) + 16.0 * epsilon * std::abs(extent);
+}
+
+SlabDecomposition::SlabDecomposition(int axis, std::vector<double> cuts) : m_axis(axis), m_cuts(std::move(cuts)) {
+  if (axis < 0 || axis > 2) throw UsageError("slab axis " + std::to_string(axis) + " is not 0, 1 or 2");
+  for (std::size_t i = 0; i < m_cuts.size(); ++i) {
+    if (!std::isfinite(m_cuts[i])) throw InputError("slab cut " + std::to_string(i + 1) + " is not finite");
+    if (i > 0 && m_cuts[i] < m_cuts[i - 1]) {
+      throw InputError("slab cuts are not sorted at cut " + std::to_string(i + 1));
+    }
+  }
+}
+
+SlabDecomposition SlabDecomposition::from_sorted_sample(int axis, std::span<const double> sorted_sample,
+                                                        int ranks) {
+  if (ranks < 1) throw UsageError("slab decomposition needs at least one rank");
+  std::vector<double> cuts(static_cast<std::size_t>(ranks - 1), 0.0);
+  const std::size_t s = sorted_sample.size();
+  if (s > 0) {
+    for (int r = 1; r < ranks; ++r) {
+      // floor(r·S/P): r < 2^31 and S < 2^33 (the sample is held in memory), so r·S < 2^64.
+      std::size_t i = static_cast<std::size_t>(std::uint64_t(r) * std::uint64_t(s) / std::uint64_t(ranks));
+      cuts[static_cast<std::size_t>(r - 1)] = sorted_sample[std::min(i, s - 1)];
+    }
+  }
+  return SlabDecomposition(axis, std::move(cuts));
+}
+
+SlabDecomposition SlabDecomposition::equal_width(int axis, double lo, double hi, int ranks) {
+  if (ranks < 1) throw UsageError("slab decomposition needs at least one rank");
+  if (!(std::isfinite(lo) && std::isfinite(hi) && lo <= hi)) {
+    throw InputError("equal-width slabs need finite bounds lo <= hi");
+  }
+  std::vector<double> cuts(static_cast<std::size_t>(ranks - 1));
+  for (int r = 1; r < ranks; ++r) {
+    double t = static_cast<double>(r) / ranks;
+    cuts[static_cast<std::size_t>(r - 1)] = std::min(hi, std::max(lo, lo + t * (hi - lo)));
+  }
+  return SlabDecomposition(axis, std::move(cuts));
+}
+
+double SlabDecomposition::lower(int rank) const {
+  return rank == 0 ? -std::numeric_limits<double>::infinity() : m_cuts[static_cast<std::size_t>(rank - 1)];
+}
+
+double SlabDecomposition::upper(int rank) const {
+  return rank == ranks() - 1 ? std::numeric_limits<double>::infinity()
+                             : m_cuts[static_cast<std::size_t>(rank)];
+}
+
+int SlabDecomposition::owner(double x) const {
+  return static_cast<int>(std::upper_bound(m_cuts.begin(), m_cuts.end(), x) - m_cuts.begin());
+}
+
+// Count -> exclusive scan -> fill, with each destination's indices in ascending order.
+template <class Destinations>
+static ExportPlan build_plan(int ranks, std::size_t n, Destinations&& for_each_destination) {
+  ExportPlan plan;
+  plan.offsets.assign(static_cast<std::size_t>(ranks) + 1, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    for_each_destination(i, [&](int r) { ++plan.offsets[static_cast<std::size_t>(r) + 1]; });
+  }
+  for (int r = 0; r < ranks; ++r) plan.offsets[r + 1] += plan.offsets[r];
+  plan.indices.resize(plan.offsets.back());
+  std::vector<std::size_t> next(plan.offsets.begin(), plan.offsets.end() - 1);
+  for (std::size_t i = 0; i < n; ++i) {
+    for_each_destination(i, [&](int r) { plan.indices[next[static_cast<std::size_t>(r)]++] = i; });
+  }
+  return plan;
+}
+
+ExportPlan make_owner_plan(const SlabDecomposition& slabs, std::span<const double> coordinate) {
+  return build_plan(slabs.ranks(), coordinate.size(), [&](std::size_t i, auto&& emit) {
+    emit(slabs.owner(coordinate[i]));
+  });
+}
+
+ExportPlan make_halo_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
+                          double ghost_width) {
+  if (self < 0 || self >= slabs.ranks()) {
+    throw UsageError("halo plan: rank " + std::to_string(self) + " is not in [0, " +
+                     std::to_string(slabs.ranks()) + ")");
+  }
+  if (!(ghost_width >= 0) || !std::isfinite(ghost_width)) {
+    throw InputError("halo plan: ghost width is not a finite value >= 0");
+  }
+  for (std::size_t i = 0; i < coordinate.size(); ++i) {
+    if (slabs.owner(coordinate[i]) != self) {
+      throw InputError("halo plan: body " + std::to_string(i) + " at " + std::to_string(coordinate[i]) +
+                       " is not owned by rank " + std::to_string(self));
+    }
+  }
+  return build_plan(slabs.ranks(), coordinate.size(), [&](std::size_t i, auto&& emit) {
+    slabs.for_each_ghost_rank(coordinate[i], ghost_width, emit);
+  });
+}
+
+}  // namespace cg

@@ -1,0 +1,151 @@
+#pragma once
+// Slab decomposition of space for the MPI run: pure geometry, no MPI, no CUDA (unit-tested with g++).
+//
+// Words used once and for all (as in Cabana's halo):
+//   owner   the single rank whose slab holds a body's centre coordinate along the slab axis;
+//   export  the bodies a rank sends to another rank (to their owner, or as ghosts);
+//   import  the bodies a rank receives;
+//   ghost   a body held by a rank that does not own it, so that the rank can test its owned bodies
+//           against it.
+//
+// Slabs along axis k, P ranks, P-1 interior cuts c_1 <= c_2 <= ... <= c_{P-1}:
+//
+//         rank 0        rank 1        rank 2             rank P-1
+//     (-inf ..... c_1)[c_1 ..... c_2)[c_2 ..... c_3) ... [c_{P-1} ..... +inf)
+//
+// Slabs are half-open; a centre exactly on a cut belongs to the UPPER slab (owner = number of cuts
+// <= x). Equal cuts give empty slabs [c, c) that own nothing.
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "engine.hpp"
+
+namespace cg {
+
+enum class Balance {
+  count,  // cuts at quantiles of the centre coordinate: about the same number of bodies per rank
+  width,  // cuts at equal widths over the global bounds
+};
+const char* to_string(Balance b);
+Balance parse_balance(const std::string& text);  // "count" | "width"; UsageError otherwise
+
+// "x" | "y" | "z" -> 0, 1, 2; "auto" -> -1. UsageError otherwise.
+int parse_axis(const std::string& text);
+const char* axis_name(int axis);  // "x", "y", "z", "auto"
+
+// The slab axis of a run: `forced` (0, 1, 2) if >= 0, else the axis of largest extent of the global
+// bounds (ties: the lowest axis).
+int choose_axis(const Bounds& global, int forced);
+
+// Largest centre distance (along any axis) at which the engine can report two bodies in contact,
+// as used for the ghost width: 2·r_max, plus a margin for the rounding of the local coordinates
+// Real(world - origin) and of the contact test in a precision of machine epsilon `epsilon`;
+// `extent` bounds |world - origin| of every centre.
+double ghost_width(double r_max, double extent, double epsilon);
+
+// The slabs of a run.
+//
+// Invariants: cuts().size() == ranks() - 1; cuts are finite and non-decreasing; every finite
+// coordinate has exactly one owner (half-open slabs, a coordinate on a cut goes to the upper slab);
+// slab r is [lower(r), upper(r)) with lower(0) = -inf and upper(P-1) = +inf.
+class SlabDecomposition {
+ public:
+  // Interior cuts (P-1 values, finite, non-decreasing; InputError otherwise) along `axis`.
+  SlabDecomposition(int axis, std::vector<double> cuts);
+
+  // One slab (a single rank) owning everything.
+  static SlabDecomposition single(int axis) { return SlabDecomposition(axis, {}); }
+
+  // balance = count: cuts at the quantiles of a sorted sample of centre coordinates. Cut r
+  // (1 <= r < P) is sample[floor(r·S/P)], so with the full set of centres as the sample every
+  // slab owns floor or ceil of N/P bodies (up to ties). An empty sample gives all cuts at 0.
+  static SlabDecomposition from_sorted_sample(int axis, std::span<const double> sorted_sample,
+                                              int ranks);
+
+  // balance = width: P slabs of equal width between lo and hi (the outer two still extend to ±inf).
+  static SlabDecomposition equal_width(int axis, double lo, double hi, int ranks);
+
+  int axis() const { return m_axis; }
+  int ranks() const { return static_cast<int>(m_cuts.size()) + 1; }
+  const std::vector<double>& cuts() const { return m_cuts; }
+  double lower(int rank) const;  // -inf for rank 0
+  double upper(int rank) const;  // +inf for rank P-1
+  bool empty(int rank) const { return !(lower(rank) < upper(rank)); }
+
+  // The owner of a centre coordinate x along the axis (x finite).
+  int owner(double x) const;
+
+  // Ranks r != owner(x) with a non-empty slab within distance w of x, ascending:
+  // lower(r) <= x + w and x - w <= upper(r)  (the closed slab within w of x).
+  // Calls f(r) for each. x + w and x - w are rounded, but rounding is monotone, so for any double
+  // y with |x - y| <= w exactly, the slab holding y is always included.
+  template <class F>
+  void for_each_ghost_rank(double x, double w, F&& f) const;
+
+ private:
+  int m_axis = 0;
+  std::vector<double> m_cuts;
+};
+
+// Who exports what to whom, as compressed rows: the local indices sent to rank r are
+// indices[offsets[r] .. offsets[r+1]), ascending. offsets.size() == ranks + 1.
+struct ExportPlan {
+  std::vector<std::size_t> offsets;
+  std::vector<std::size_t> indices;
+  std::size_t count(int rank) const { return offsets[rank + 1] - offsets[rank]; }
+  std::span<const std::size_t> to(int rank) const {
+    return {indices.data() + offsets[rank], count(rank)};
+  }
+  std::size_t total() const { return indices.size(); }
+};
+
+// Redistribution: every body goes to its owner (including this rank itself: bodies this rank owns
+// appear in to(self)). `coordinate[i]` is body i's centre coordinate along the slab axis.
+ExportPlan make_owner_plan(const SlabDecomposition& slabs, std::span<const double> coordinate);
+
+// Halo plan of the bodies a rank owns (all bodies in `coordinate` must be owned by `self`; InputError
+// otherwise): each goes as a ghost to every OTHER rank whose non-empty slab lies within `ghost_width`
+// of its centre coordinate — not only to the neighbours: slabs thinner than the ghost width make a
+// body a ghost further away. to(self) is always empty.
+//
+// Invariant (what the MPI run relies on): with ghost_width >= the largest centre distance of a
+// contacting pair (see ghost_width()), for every contacting pair (i, j) with i < j the owner of i
+// holds j, owned or as a ghost. Hence the owner of the smaller id reports the pair (report mask =
+// owned) and every contact is found exactly once.
+ExportPlan make_halo_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
+                          double ghost_width);
+
+// ---- inline ---------------------------------------------------------------------------------------
+
+template <class F>
+void SlabDecomposition::for_each_ghost_rank(double x, double w, F&& f) const {
+  // First rank with upper(r) >= x - w: the number of cuts < x - w. Last rank with lower(r) <= x + w:
+  // the number of cuts <= x + w.
+  const double below = x - w, above = x + w;
+  int first = 0, last = 0;
+  {
+    std::size_t lo = 0, hi = m_cuts.size();
+    while (lo < hi) {  // lower_bound(below)
+      std::size_t mid = (lo + hi) / 2;
+      if (m_cuts[mid] < below) lo = mid + 1; else hi = mid;
+    }
+    first = static_cast<int>(lo);
+  }
+  {
+    std::size_t lo = 0, hi = m_cuts.size();
+    while (lo < hi) {  // upper_bound(above)
+      std::size_t mid = (lo + hi) / 2;
+      if (m_cuts[mid] <= above) lo = mid + 1; else hi = mid;
+    }
+    last = static_cast<int>(lo);
+  }
+  const int self = owner(x);
+  for (int r = first; r <= last; ++r) {
+    if (r != self && !empty(r)) f(r);
+  }
+}
+
+}  // namespace cg
