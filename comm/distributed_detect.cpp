@@ -16,6 +16,12 @@
 
 namespace cg {
 
+namespace {
+// The engine's stage names (both backends), in pipeline order.
+const std::vector<std::string> k_engine_stages{"plan", "pack", "entries", "sort", "pairs", "order", "narrow",
+                                               "download"};
+}  // namespace
+
 void validate(const DistributedOptions& options) {
   const EngineOptions& e = options.engine;
   if (options.axis < -1 || options.axis > 2) {
@@ -242,7 +248,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   const bool full = options.engine.fields == Fields::full;
   DistributedResult<Real> result;
   result.ranks = ranks;
-  std::vector<double> times(6, 0.0);  // read, redistribute, halo, detect, gather, merge
+  std::vector<double> times(6 + k_engine_stages.size(), 0.0);  // read … merge, then detect.<stage>
 
   // ---- options: everything checked before the first communication -------------------------------
   std::optional<Engine<Real>> engine;
@@ -414,6 +420,16 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     });
     result.backend = engine->backend();
     times[3] = seconds_since(t0);
+    if (n_owned > 0) {
+      // the engine's own stages, reported as "detect.<stage>" (max over ranks, like every time)
+      for (const StageTime& st : engine->times())
+        for (std::size_t k = 0; k < k_engine_stages.size(); ++k)
+          if (st.name == k_engine_stages[k]) times[6 + k] = st.seconds;
+      result.stats = engine->stats();
+    }
+    result.stats.entries = session.sum(result.stats.entries);
+    result.stats.pair_tests = session.sum(result.stats.pair_tests);
+    result.stats.key_bits = int(session.max(double(result.stats.key_bits)));
 
     const std::vector<std::uint64_t> owned_all = comm.allgather<std::uint64_t>(n_owned);
     result.owned_min = *std::min_element(owned_all.begin(), owned_all.end());
@@ -467,7 +483,12 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
 
   comm.allreduce_max(times);
   const char* names[6] = {"read", "redistribute", "halo", "detect", "gather", "merge"};
-  for (int s = 0; s < 6; ++s) result.times.push_back({names[s], times[static_cast<std::size_t>(s)]});
+  for (int s = 0; s < 6; ++s) {
+    result.times.push_back({names[s], times[static_cast<std::size_t>(s)]});
+    if (s == 3)
+      for (std::size_t k = 0; k < k_engine_stages.size(); ++k)
+        if (times[6 + k] > 0) result.times.push_back({std::string("detect.") + k_engine_stages[k], times[6 + k]});
+  }
   return result;
 }
 

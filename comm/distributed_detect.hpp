@@ -65,6 +65,7 @@ struct DistributedResult {
   int axis = 0;                          // the slab axis used
   std::vector<double> cuts;              // the P-1 slab cuts
   Backend backend = Backend::cpu;        // the engine's resolved backend (this rank)
+  EngineStats stats;                     // entries and pair tests summed over ranks
 };
 
 // Collective over `session`: every rank calls it with the same arguments. See the file comment.

@@ -171,6 +171,7 @@ GridPlan plan_grid(const Bounds& local, const Frame& frame, Precision p) {
 
 #if !defined(CONTACTGRID_HAVE_CUDA)
 bool cuda_available() { return false; }
+int cuda_device_count() { return 0; }
 namespace detail {
 class CudaBackend {};
 std::unique_ptr<CudaBackend> make_cuda_backend(int) {

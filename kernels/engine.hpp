@@ -30,6 +30,8 @@ const char* to_string(Precision p);
 
 // True when a CUDA device is usable in this process (false in builds without CUDA).
 bool cuda_available();
+// Number of usable CUDA devices (0 in builds without CUDA or without a GPU).
+int cuda_device_count();
 
 struct StageTime {
   std::string name;

@@ -7,6 +7,7 @@
 #include <map>
 
 #include "pipeline.hpp"
+#include "session.hpp"
 
 namespace cg {
 namespace {
@@ -18,7 +19,7 @@ const std::map<std::string, Fields> k_fields{{"basic", Fields::basic}, {"full", 
 
 }  // namespace
 
-int run_cli(int argc, char** argv) {
+int run_cli(int argc, char** argv, Session& session) {
   CLI::App app{"contactgrid: every touching or overlapping pair of spheres, with Bullet's contact data.\n"
                "Le Grand's uniform grid on a CPU or CUDA backend; MPI slabs under mpirun."};
   app.require_subcommand(1);
@@ -88,10 +89,11 @@ int run_cli(int argc, char** argv) {
   }
 
   if (g->parsed()) {
+    if (session.rank() != 0) return 0;  // one writer
     if (!offset.empty()) gen.offset = {offset[0], offset[1], offset[2]};
     return run_generate(gen_out, gen, gen_quiet);
   }
-  if (d->parsed()) return run_detect(det);
+  if (d->parsed()) return run_detect(det, session);
   return 2;
 }
 

@@ -3,5 +3,6 @@
 namespace cg {
 // Parses argv and runs the command. Returns the exit code; throws cg::Error for the caller (main)
 // to turn into a message and its exit code.
-int run_cli(int argc, char** argv);
+class Session;
+int run_cli(int argc, char** argv, Session& session);
 }  // namespace cg

@@ -6,12 +6,19 @@
 
 #include "cli.hpp"
 #include "errors.hpp"
+#include "session.hpp"
 
 int main(int argc, char** argv) {
+  int rank = 0;
   try {
-    return cg::run_cli(argc, argv);
+    // Under mpirun this initialises MPI (every rank runs the same command line); otherwise it is a
+    // one-rank session and MPI is never touched.
+    cg::Session session(&argc, &argv);
+    rank = session.rank();
+    return cg::run_cli(argc, argv, session);
   } catch (const cg::Error& e) {
-    std::fprintf(stderr, "contactgrid: error: %s\n", e.what());
+    // Errors of a distributed run are agreed on by every rank: rank 0 prints the one message.
+    if (rank == 0) std::fprintf(stderr, "contactgrid: error: %s\n", e.what());
     return e.exit_code();
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "contactgrid: error: out of host memory\n");

@@ -9,7 +9,10 @@
 #include <fstream>
 #include <unistd.h>
 
+#include "distributed_detect.hpp"
 #include "hdf5_io.hpp"
+#include "session.hpp"
+#include "slab_decomposition.hpp"
 
 namespace cg {
 namespace {
@@ -19,65 +22,72 @@ double seconds_since(clock_type::time_point t) {
   return std::chrono::duration<double>(clock_type::now() - t).count();
 }
 
-void print_summary(const RunInfo& info, std::uint64_t contacts, const EngineStats& stats) {
-  fmt::print("contactgrid detect: {} bodies, {} contacts ({:.3f} per body), {} ranks, backend {}, {}\n",
+template <class Real>
+void print_summary(const RunInfo& info, std::uint64_t contacts, const DistributedResult<Real>& r) {
+  fmt::print("contactgrid detect: {} bodies, {} contacts ({:.3f} per body), {} rank(s), backend {}, {}\n",
              info.bodies, contacts, info.bodies ? double(contacts) / double(info.bodies) : 0.0, info.ranks,
              info.backend, info.precision);
-  fmt::print("  cell size {:.6g}, {}-bit cell keys, {} (cell, body) entries, {} pair tests\n", info.cell_size,
-             stats.key_bits, stats.entries, stats.pair_tests);
+  fmt::print("  cell size {:.6g}", info.cell_size);
+  if (r.ranks > 1)
+    fmt::print(", slab axis {}, owned bodies per rank {} … {}, ghosts {}, duplicates removed {}", "xyz"[r.axis],
+               r.owned_min, r.owned_max, r.ghosts, r.duplicates_removed);
+  fmt::print("\n  {}-bit cell keys, {} (cell, body) entries, {} pair tests; times: maximum over ranks\n",
+             r.stats.key_bits, r.stats.entries, r.stats.pair_tests);
   double total = 0;
-  for (const auto& t : info.times) total += t.seconds;
-  fmt::print("  {:<12} {:>12}\n", "stage", "seconds");
-  for (const auto& t : info.times) fmt::print("  {:<12} {:>12.6f}\n", t.name, t.seconds);
-  fmt::print("  {:<12} {:>12.6f}\n", "total", total);
+  fmt::print("  {:<16} {:>12}\n", "stage", "seconds");
+  for (const auto& t : info.times) {
+    const bool sub = t.name.rfind("detect.", 0) == 0;  // the engine's stages, inside "detect"
+    if (!sub) total += t.seconds;
+    fmt::print("  {:<16} {:>12.6f}\n", sub ? "  " + t.name.substr(7) : t.name, t.seconds);
+  }
+  fmt::print("  {:<16} {:>12.6f}\n", "total", total);
 }
 
 template <class Real>
-int detect_single(const DetectCommand& cmd) {
-  RunInfo info;
-  info.input = cmd.input;
-  info.precision = to_string(cmd.precision);
-  auto t = clock_type::now();
-  const Scene scene = read_scene(cmd.input);
-  const double t_read = seconds_since(t);
-  if (scene.ellipsoid_count() > 0)
-    throw InputError(cmd.input + ": /ellipsoids: ellipsoids are not supported by this version yet");
+int detect(const DetectCommand& cmd, Session& session) {
+  DistributedOptions o;
+  o.engine.backend = cmd.backend;
+  o.engine.fields = cmd.fields;
+  o.engine.cell_size = cmd.cell_size;
+  o.engine.threads = cmd.threads;
+  if (cmd.backend != Backend::cpu) o.engine.device = session.device_for(cuda_device_count());
+  o.axis = parse_axis(cmd.axis);
+  o.balance = parse_balance(cmd.balance);
+  if (!cmd.quiet && session.rank() == 0) o.log = [](const std::string& line) { fmt::print("{}\n", line); };
 
-  EngineOptions eo;
-  eo.backend = cmd.backend;
-  eo.fields = cmd.fields;
-  eo.cell_size = cmd.cell_size;
-  eo.threads = cmd.threads;
-  Engine<Real> engine(eo);
-  BodiesView bodies{scene.sphere_position, scene.sphere_radius, {}, {}};
-  Contacts<Real> contacts;
-  try {
-    contacts = engine.detect(bodies);
-  } catch (const InputError& e) {
-    throw InputError(cmd.input + ": /spheres: " + e.what());
+  // read → slabs → redistribute → halo → engine → gather → merge (comm/distributed_detect.cpp;
+  // with one rank: read → engine)
+  DistributedResult<Real> r = distributed_detect<Real>(session, cmd.input, o);
+
+  RunInfo info;
+  info.bodies = r.bodies;
+  info.precision = to_string(cmd.precision);
+  info.backend = to_string(r.backend);
+  info.ranks = r.ranks;
+  info.cell_size = r.cell_size;
+  info.input = cmd.input;
+  info.times = r.times;
+  std::exception_ptr error;
+  if (session.rank() == 0) {
+    try {
+      auto t = clock_type::now();
+      write_contacts(cmd.output, r.contacts, info);
+      if (!cmd.csv.empty()) write_contacts_csv(cmd.csv, r.contacts);
+      info.times.push_back({"write", seconds_since(t)});
+    } catch (...) {
+      error = std::current_exception();
+    }
   }
-  info.bodies = scene.size();
-  info.backend = to_string(engine.backend());
-  info.times.push_back({"read", t_read});
-  for (const auto& st : engine.times()) info.times.push_back(st);
-  {
-    const Bounds b = compute_bounds(bodies);
-    info.cell_size = cmd.cell_size > 0 ? cmd.cell_size
-                                       : min_cell_size(b, sizeof(Real) == 4 ? Precision::fp32 : Precision::fp64);
-  }
-  t = clock_type::now();
-  write_contacts(cmd.output, contacts, info);
-  if (!cmd.csv.empty()) write_contacts_csv(cmd.csv, contacts);
-  info.times.push_back({"write", seconds_since(t)});
-  if (!cmd.quiet) print_summary(info, contacts.size(), engine.stats());
+  session.agree(error, "write");
+  if (!cmd.quiet && session.rank() == 0) print_summary(info, r.contacts.size(), r);
   return 0;
 }
 
 }  // namespace
 
-int run_detect(const DetectCommand& cmd) {
+int run_detect(const DetectCommand& cmd, Session& session) {
   if (cmd.output.empty()) throw UsageError("detect: -o/--output is required");
-  return cmd.precision == Precision::fp32 ? detect_single<float>(cmd) : detect_single<double>(cmd);
+  return cmd.precision == Precision::fp32 ? detect<float>(cmd, session) : detect<double>(cmd, session);
 }
 
 int run_generate(const std::string& path, const GenerateOptions& options, bool quiet) {

@@ -10,6 +10,8 @@
 
 namespace cg {
 
+class Session;  // comm/session.hpp: the MPI session (one rank in laptop mode)
+
 struct DetectCommand {
   std::string input;
   std::string output;
@@ -24,8 +26,9 @@ struct DetectCommand {
   bool quiet = false;
 };
 
-// Runs one detection; returns the process exit code (0).
-int run_detect(const DetectCommand& cmd);
+// Runs one detection over all ranks of `session`; returns the process exit code (0). Output and the
+// summary come from rank 0. Errors are agreed on by all ranks and thrown on every rank.
+int run_detect(const DetectCommand& cmd, Session& session);
 
 int run_generate(const std::string& path, const GenerateOptions& options, bool quiet);
 
