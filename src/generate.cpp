@@ -1,1 +1,465 @@
-// placeholder: being written
+// generate.cpp: seeded scene generators and the density model that sizes their box.
+//
+// Randomness: a counter-based generator. Value (seed, body i, stream s) = splitmix64 finalizer of
+// (key(seed) XOR splitmix64(16·i + s)); a bijection of the counter for a fixed seed. So body i does
+// not depend on chunking, threads or entry point, and generate_scene == generate_scene_file.
+//
+// Density model: two bodies with centres independent and uniform in a cube of edge L touch iff
+// |c1 - c2| <= r1 + r2, which has probability P((r1 + r2)/L), P the distance CDF of two uniform points
+// of the unit cube. P(t) = 4π/3·t³ − 3π/2·t⁴ + 8/5·t⁵ − 1/6·t⁶ is exact for t <= 1; for 1 < t < √3
+// we use the exact integral P(t) = 8∫∫(1−u)(1−v)F(min(1, √(t²−u²−v²)₊)) du dv, F(a) = a − a²/2,
+// whose inner integral has a closed form and whose outer one is done by Gauss–Legendre (tabulated
+// once, linear interpolation, error < 1e-7); P = 1 from √3 on. So P is continuous and monotone and
+// the box edge is well defined even for tiny n (where t > 1 matters). E[P((r1+r2)/L)] over the
+// radius law is a 128×128-node composite Gauss–Legendre quadrature in the law's uniform variable.
+// The edge solves (n−1)/2 · E[P] = c by bisection in log L (E decreases in L).
+#include "generate.hpp"
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cmath>
+#include <mutex>
+#include <numbers>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include "errors.hpp"
+#include "hdf5_io.hpp"
+
+namespace cg {
+namespace {
+
+constexpr const char* kSoftwareVersion = "0.1.0";
+constexpr std::size_t kWriteChunk = std::size_t(1) << 20;  // bodies per streamed block
+
+// ---- counter-based random numbers -----------------------------------------------------------
+
+constexpr std::uint64_t mix64(std::uint64_t z) {
+  z += 0x9e3779b97f4a7c15ull;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  return z ^ (z >> 31);
+}
+
+// Streams of one body (at most 16).
+enum Stream : unsigned { kX = 0, kY = 1, kZ = 2, kRadius = 3, kGauss0 = 4, kGauss1 = 5, kGauss2 = 6,
+                         kGauss3 = 7, kAxisA = 8, kAxisB = 9, kAxisC = 10, kQuat0 = 11, kQuat1 = 12,
+                         kQuat2 = 13, kCluster = 14 };
+
+class CounterRng {
+ public:
+  explicit CounterRng(std::uint64_t seed) : m_key(mix64(seed ^ 0x6a09e667f3bcc909ull)) {}
+  // Uniform in [0, 1), 53 bits.
+  double unit(std::uint64_t index, unsigned stream) const {
+    std::uint64_t bits = mix64(m_key ^ mix64(index * 16 + stream));
+    return static_cast<double>(bits >> 11) * 0x1.0p-53;
+  }
+  // Standard normal (Box–Muller on two streams).
+  double normal(std::uint64_t index, unsigned stream_a, unsigned stream_b) const {
+    double u1 = 1.0 - unit(index, stream_a);  // (0, 1]
+    double u2 = unit(index, stream_b);
+    return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * std::numbers::pi * u2);
+  }
+
+ private:
+  std::uint64_t m_key;
+};
+
+// ---- quadrature --------------------------------------------------------------------------------
+
+struct Rule {
+  std::vector<double> x, w;  // nodes and weights on [0, 1]
+};
+
+// m-point Gauss–Legendre on [0, 1] (Newton on the Legendre polynomial).
+Rule gauss_legendre(int m) {
+  Rule rule;
+  rule.x.resize(m);
+  rule.w.resize(m);
+  for (int i = 0; i < (m + 1) / 2; ++i) {
+    double z = std::cos(std::numbers::pi * (i + 0.75) / (m + 0.5));
+    double dp = 0;
+    for (int iteration = 0; iteration < 100; ++iteration) {
+      double p0 = 1, p1 = 0;
+      for (int j = 1; j <= m; ++j) {
+        double p2 = p1;
+        p1 = p0;
+        p0 = ((2.0 * j - 1) * z * p1 - (j - 1.0) * p2) / j;
+      }
+      dp = m * (z * p0 - p1) / (z * z - 1);
+      double dz = p0 / dp;
+      z -= dz;
+      if (std::abs(dz) < 1e-16) break;
+    }
+    double weight = 2 / ((1 - z * z) * dp * dp);
+    rule.x[i] = 0.5 * (1 - z);
+    rule.x[m - 1 - i] = 0.5 * (1 + z);
+    rule.w[i] = rule.w[m - 1 - i] = 0.5 * weight;
+  }
+  return rule;
+}
+
+const Rule& rule64() {
+  static const Rule rule = gauss_legendre(64);
+  return rule;
+}
+
+// ∫_0^1 (1−x)·F(min(1, √(s − x²)₊)) dx in closed form (F(a) = a − a²/2).
+double inner_integral(double s) {
+  if (s <= 0) return 0;
+  double x1 = std::clamp(std::sqrt(std::max(0.0, s - 1)), 0.0, 1.0);  // a = 1 up to here
+  double x2 = std::clamp(std::sqrt(s), 0.0, 1.0);                      // a = 0 from here
+  double root_s = std::sqrt(s);
+  auto antiderivative = [&](double x) {  // of (1−x)(√(s−x²) − (s−x²)/2)
+    double q = std::max(0.0, (root_s - x) * (root_s + x));  // s − x², exactly 0 at x = √s
+    double a = 0.5 * (x * std::sqrt(q) + s * std::asin(std::min(1.0, x / root_s)));
+    double b = -q * std::sqrt(q) / 3;
+    double c = 0.5 * (s * x - x * x * x / 3 - s * x * x / 2 + x * x * x * x / 4);
+    return a - b - c;
+  };
+  double flat = 0.5 * (x1 - x1 * x1 / 2);
+  return flat + (antiderivative(x2) - antiderivative(x1));
+}
+
+// ∫_a^b f by 64-point Gauss–Legendre after x = a + (b−a)·τ²(3−2τ), which smooths the square-root
+// behaviour of the integrand at the pieces' ends.
+template <class F>
+double smooth_integral(double a, double b, F f) {
+  if (!(b > a)) return 0;
+  const Rule& r = rule64();
+  double sum = 0;
+  for (std::size_t k = 0; k < r.x.size(); ++k) {
+    double tau = r.x[k];
+    double phi = tau * tau * (3 - 2 * tau), dphi = 6 * tau * (1 - tau);
+    sum += r.w[k] * dphi * f(a + (b - a) * phi);
+  }
+  return sum * (b - a);
+}
+
+double cdf_polynomial(double t) {
+  using std::numbers::pi;
+  double t3 = t * t * t;
+  return t3 * (4 * pi / 3 + t * (-1.5 * pi + t * (8.0 / 5 + t * (-1.0 / 6))));
+}
+
+constexpr int kTableIntervals = 2048;
+
+const std::vector<double>& cdf_table() {  // P on [1, √3], kTableIntervals + 1 points
+  static const std::vector<double> table = [] {
+    std::vector<double> values(kTableIntervals + 1);
+    const double lo = 1, hi = std::sqrt(3.0);
+    for (int i = 0; i <= kTableIntervals; ++i) {
+      values[i] = detail::cube_distance_cdf_integral(lo + (hi - lo) * i / kTableIntervals);
+    }
+    values[kTableIntervals] = 1;
+    for (int i = 1; i <= kTableIntervals; ++i) values[i] = std::max(values[i], values[i - 1]);  // monotone
+    return values;
+  }();
+  return table;
+}
+
+// Radius quadrature: nodes r_k with weights (sum 1) for the law on [r_low, r_high].
+struct RadiusNodes {
+  std::vector<double> r, w;
+};
+
+RadiusNodes radius_nodes(RadiusLaw law, double r_low, double r_high) {
+  constexpr int kPanels = 16, kPerPanel = 8;
+  static const Rule rule = gauss_legendre(kPerPanel);
+  RadiusNodes nodes;
+  double log_ratio = std::log(r_high / r_low);
+  for (int p = 0; p < kPanels; ++p) {
+    for (int k = 0; k < kPerPanel; ++k) {
+      double v = (p + rule.x[k]) / kPanels;
+      double r = law == RadiusLaw::uniform ? r_low + (r_high - r_low) * v : r_low * std::exp(v * log_ratio);
+      nodes.r.push_back(std::clamp(r, r_low, r_high));
+      nodes.w.push_back(rule.w[k] / kPanels);
+    }
+  }
+  return nodes;
+}
+
+double expected_contact(const RadiusNodes& nodes, double edge) {
+  double sum = 0;
+  for (std::size_t i = 0; i < nodes.r.size(); ++i) {
+    double row = 0;
+    for (std::size_t j = 0; j < nodes.r.size(); ++j) row += nodes.w[j] * cube_distance_cdf((nodes.r[i] + nodes.r[j]) / edge);
+    sum += nodes.w[i] * row;
+  }
+  return sum;
+}
+
+void check_radius_law(double r_low, double r_high) {
+  if (!(std::isfinite(r_low) && std::isfinite(r_high) && r_low > 0 && r_low <= r_high)) {
+    throw UsageError(fmt::format("radii must satisfy 0 < radius_low <= radius_high (got {} and {})", r_low, r_high));
+  }
+}
+
+// ---- bodies ------------------------------------------------------------------------------------
+
+// Everything that defines body i of a generated scene.
+struct BodyLaw {
+  CounterRng rng;
+  bool log_uniform = false;
+  double edge = 1, r_low = 0.5, r_high = 1, log_ratio = 0;
+  Vec3<double> offset{0, 0, 0};
+
+  double coordinate(std::uint64_t i, unsigned stream, double origin) const {
+    double x = std::min(edge * rng.unit(i, stream), std::nextafter(edge, 0.0));  // in [0, L)
+    return origin + x;
+  }
+  void body(std::uint64_t i, Vec3<double>& centre, double& radius) const {
+    centre = {coordinate(i, kX, offset.x), coordinate(i, kY, offset.y), coordinate(i, kZ, offset.z)};
+    double u = rng.unit(i, kRadius);
+    double r = log_uniform ? r_low * std::exp(u * log_ratio) : r_low + (r_high - r_low) * u;
+    radius = std::clamp(r, r_low, r_high);
+  }
+};
+
+BodyLaw body_law(const GenerateOptions& o, double edge) {
+  BodyLaw law{CounterRng(o.seed)};
+  law.log_uniform = o.kind == "polydisperse";
+  law.edge = edge;
+  law.r_low = o.radius_low;
+  law.r_high = o.radius_high;
+  law.log_ratio = std::log(o.radius_high / o.radius_low);
+  law.offset = o.offset;
+  return law;
+}
+
+Attributes generator_attributes(const GenerateOptions& o, double edge) {
+  Attributes a;
+  a["generator"] = o.kind;
+  a["count"] = static_cast<std::int64_t>(o.count);
+  a["seed"] = std::bit_cast<std::int64_t>(o.seed);  // seeds >= 2^63 read back negative: bit-cast
+  a["contacts_per_body"] = o.contacts_per_body;
+  a["box_edge"] = edge;
+  a["offset_x"] = o.offset.x;
+  a["offset_y"] = o.offset.y;
+  a["offset_z"] = o.offset.z;
+  a["software_version"] = std::string(kSoftwareVersion);
+  return a;
+}
+
+// Unit quaternion (w, x, y, z), uniform on SO(3) (Shoemake), from three uniforms.
+std::array<double, 4> random_quaternion(const CounterRng& rng, std::uint64_t i) {
+  double u1 = rng.unit(i, kQuat0), u2 = rng.unit(i, kQuat1), u3 = rng.unit(i, kQuat2);
+  double a = std::sqrt(1 - u1), b = std::sqrt(u1), tau = 2 * std::numbers::pi;
+  std::array<double, 4> q{a * std::sin(tau * u2), a * std::cos(tau * u2), b * std::sin(tau * u3),
+                          b * std::cos(tau * u3)};
+  double norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  for (double& c : q) c /= norm;
+  return q;
+}
+
+}  // namespace
+
+// ---- density model -------------------------------------------------------------------------------
+
+double detail::cube_distance_cdf_integral(double t) {
+  if (!(t > 0)) return 0;
+  double t2 = t * t;
+  std::vector<double> cuts{0.0, 1.0};
+  for (double c : {t2 - 2, t2 - 1, t2}) {
+    if (c > 0 && std::sqrt(c) < 1) cuts.push_back(std::sqrt(c));
+  }
+  std::sort(cuts.begin(), cuts.end());
+  double sum = 0;
+  for (std::size_t k = 0; k + 1 < cuts.size(); ++k) {
+    sum += smooth_integral(cuts[k], cuts[k + 1], [&](double u) { return (1 - u) * inner_integral(t2 - u * u); });
+  }
+  return std::min(1.0, 8 * sum);
+}
+
+double cube_distance_cdf(double t) {
+  if (!(t > 0)) return 0;  // also NaN
+  if (t <= 1) return std::min(cdf_polynomial(t), cdf_table()[0]);
+  if (t >= std::sqrt(3.0)) return 1;
+  const std::vector<double>& table = cdf_table();
+  double position = (t - 1) / (std::sqrt(3.0) - 1) * kTableIntervals;
+  int i = std::min(static_cast<int>(position), kTableIntervals - 1);
+  double f = position - i;
+  return table[i] + f * (table[i + 1] - table[i]);
+}
+
+double expected_pair_contact(double edge, RadiusLaw law, double r_low, double r_high) {
+  check_radius_law(r_low, r_high);
+  if (!(edge > 0)) throw UsageError(fmt::format("box edge must be > 0 (got {})", edge));
+  return expected_contact(radius_nodes(law, r_low, r_high), edge);
+}
+
+double box_edge(std::uint64_t n, RadiusLaw law, double r_low, double r_high, double contacts_per_body) {
+  check_radius_law(r_low, r_high);
+  if (n == 0) throw UsageError("box edge: body count must be >= 1");
+  if (!(std::isfinite(contacts_per_body) && contacts_per_body > 0))
+    throw UsageError(fmt::format("contacts per body must be a finite number > 0 (got {})", contacts_per_body));
+
+  const RadiusNodes nodes = radius_nodes(law, r_low, r_high);
+  const double pairs_per_body = 0.5 * static_cast<double>(n - 1);
+  auto excess = [&](double edge) { return pairs_per_body * expected_contact(nodes, edge) - contacts_per_body; };
+
+  double lo = 2 * r_low / std::sqrt(3.0);  // every pair in contact at this edge and below
+  if (excess(lo) <= 0) return lo;
+
+  double s3 = 0;  // E[(r1 + r2)^3]: the small-t asymptote E[P] ≈ 4π/3·E[s³]/L³ gives the scale
+  for (std::size_t i = 0; i < nodes.r.size(); ++i)
+    for (std::size_t j = 0; j < nodes.r.size(); ++j) s3 += nodes.w[i] * nodes.w[j] * std::pow(nodes.r[i] + nodes.r[j], 3);
+  double hi = std::max(2 * lo, 2 * std::cbrt(pairs_per_body * 4 * std::numbers::pi / 3 * s3 / contacts_per_body));
+  for (int k = 0; k < 200 && excess(hi) > 0; ++k) hi *= 2;
+
+  for (int k = 0; k < 200 && hi > lo * (1 + 1e-15); ++k) {
+    double mid = std::sqrt(lo * hi);
+    if (mid <= lo || mid >= hi) break;
+    (excess(mid) > 0 ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+double uniform_box_edge(std::uint64_t n, double r_low, double r_high, double contacts_per_body) {
+  return box_edge(n, RadiusLaw::uniform, r_low, r_high, contacts_per_body);
+}
+
+double polydisperse_box_edge(std::uint64_t n, double r_low, double r_high, double contacts_per_body) {
+  return box_edge(n, RadiusLaw::log_uniform, r_low, r_high, contacts_per_body);
+}
+
+void validate_generate_options(const GenerateOptions& o) {
+  if (o.kind != "uniform" && o.kind != "polydisperse")
+    throw UsageError(fmt::format("generator kind must be uniform or polydisperse (got \"{}\")", o.kind));
+  if (o.count < 1 || o.count > kMaxGenerateCount)
+    throw UsageError(fmt::format("body count must be in [1, 2^28 = {}] (got {})", kMaxGenerateCount, o.count));
+  check_radius_law(o.radius_low, o.radius_high);
+  if (o.kind == "polydisperse" && o.radius_high / o.radius_low > kMaxPolydisperseRatio) {
+    throw UsageError(fmt::format("polydisperse radius ratio {} / {} = {} exceeds {}", o.radius_high, o.radius_low,
+                                 o.radius_high / o.radius_low, kMaxPolydisperseRatio));
+  }
+  if (!(std::isfinite(o.contacts_per_body) && o.contacts_per_body > 0))
+    throw UsageError(fmt::format("contacts per body must be a finite number > 0 (got {})", o.contacts_per_body));
+  if (!(std::isfinite(o.offset.x) && std::isfinite(o.offset.y) && std::isfinite(o.offset.z)))
+    throw UsageError("offset must be finite");
+}
+
+double scene_box_edge(const GenerateOptions& o) {
+  validate_generate_options(o);
+  RadiusLaw law = o.kind == "polydisperse" ? RadiusLaw::log_uniform : RadiusLaw::uniform;
+  return box_edge(o.count, law, o.radius_low, o.radius_high, o.contacts_per_body);
+}
+
+// ---- generators ------------------------------------------------------------------------------------
+
+Scene generate_scene(const GenerateOptions& options) {
+  const double edge = scene_box_edge(options);
+  const BodyLaw law = body_law(options, edge);
+  Scene scene;
+  scene.sphere_position.resize(options.count);
+  scene.sphere_radius.resize(options.count);
+  for (std::uint64_t i = 0; i < options.count; ++i) law.body(i, scene.sphere_position[i], scene.sphere_radius[i]);
+  scene.radius_low = options.radius_low;
+  scene.radius_high = options.radius_high;
+  scene.attributes = generator_attributes(options, edge);
+  return scene;
+}
+
+void generate_scene_file(const std::string& path, const GenerateOptions& options) {
+  const double edge = scene_box_edge(options);
+  const BodyLaw law = body_law(options, edge);
+  SceneFileHeader header;
+  header.spheres = options.count;
+  header.radius_low = options.radius_low;
+  header.radius_high = options.radius_high;
+  header.attributes = generator_attributes(options, edge);
+  SceneFileWriter writer(path, header);
+  const std::size_t block = std::min<std::size_t>(kWriteChunk, options.count);
+  std::vector<Vec3<double>> position(block);
+  std::vector<double> radius(block);
+  for (std::uint64_t first = 0; first < options.count; first += block) {
+    std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(block, options.count - first));
+    for (std::size_t k = 0; k < n; ++k) law.body(first + k, position[k], radius[k]);
+    writer.write_spheres(first, std::span(position).first(n), std::span(radius).first(n));
+  }
+  writer.commit();
+}
+
+// ---- builders for tests ------------------------------------------------------------------------------
+
+Scene make_clustered_scene(std::uint64_t n, std::uint64_t seed, int clusters) {
+  if (clusters < 1) throw UsageError(fmt::format("clustered scene: clusters must be >= 1 (got {})", clusters));
+  const CounterRng rng(seed);
+  const std::uint64_t k = std::min<std::uint64_t>(static_cast<std::uint64_t>(clusters), std::max<std::uint64_t>(n, 1));
+  const double per_cluster = std::ceil(static_cast<double>(n) / static_cast<double>(k));
+  const double sigma = std::max(1.0, std::cbrt(per_cluster / 12));
+  const double spread = 8 * sigma * std::cbrt(static_cast<double>(k));
+  std::vector<Vec3<double>> centres(k);
+  for (std::uint64_t c = 0; c < k; ++c) {  // cluster centres: indices past the bodies' own
+    std::uint64_t index = (std::uint64_t(1) << 59) + c;
+    centres[c] = {spread * rng.unit(index, kX), spread * rng.unit(index, kY), spread * rng.unit(index, kZ)};
+  }
+  Scene scene;
+  scene.sphere_position.resize(n);
+  scene.sphere_radius.resize(n);
+  for (std::uint64_t i = 0; i < n; ++i) {
+    const Vec3<double>& c = centres[i % k];
+    scene.sphere_position[i] = {c.x + sigma * rng.normal(i, kGauss0, kGauss1),
+                                c.y + sigma * rng.normal(i, kGauss2, kGauss3),
+                                c.z + sigma * rng.normal(i, kX, kY)};
+    scene.sphere_radius[i] = std::min(1.0, 0.5 + 0.5 * rng.unit(i, kRadius));
+  }
+  scene.radius_low = 0.5;
+  scene.radius_high = 1.0;
+  scene.attributes["generator"] = std::string("clustered");
+  scene.attributes["count"] = static_cast<std::int64_t>(n);
+  scene.attributes["seed"] = std::bit_cast<std::int64_t>(seed);
+  scene.attributes["clusters"] = static_cast<std::int64_t>(k);
+  scene.attributes["sigma"] = sigma;
+  scene.attributes["software_version"] = std::string(kSoftwareVersion);
+  return scene;
+}
+
+Scene make_lattice_scene(std::uint32_t nx, std::uint32_t ny, std::uint32_t nz, double spacing, double radius,
+                         Vec3<double> origin) {
+  if (!(std::isfinite(spacing) && std::isfinite(radius) && radius > 0))
+    throw UsageError(fmt::format("lattice scene: need finite spacing and radius > 0 (got {}, {})", spacing, radius));
+  Scene scene;
+  const std::size_t n = std::size_t(nx) * ny * nz;
+  scene.sphere_position.reserve(n);
+  scene.sphere_radius.assign(n, radius);
+  for (std::uint32_t k = 0; k < nz; ++k)
+    for (std::uint32_t j = 0; j < ny; ++j)
+      for (std::uint32_t i = 0; i < nx; ++i)
+        scene.sphere_position.push_back({origin.x + spacing * i, origin.y + spacing * j, origin.z + spacing * k});
+  scene.radius_low = radius;
+  scene.radius_high = radius;
+  scene.attributes["generator"] = std::string("lattice");
+  scene.attributes["spacing"] = spacing;
+  scene.attributes["software_version"] = std::string(kSoftwareVersion);
+  return scene;
+}
+
+Scene make_ellipsoid_scene(std::uint64_t spheres, std::uint64_t ellipsoids, std::uint64_t seed) {
+  const CounterRng rng(seed);
+  const std::uint64_t n = spheres + ellipsoids;
+  const double edge = n == 0 ? 1.0 : box_edge(n, RadiusLaw::uniform, 0.5, 1.0, 0.4);
+  auto coordinate = [&](std::uint64_t i, unsigned stream) { return std::min(edge * rng.unit(i, stream), std::nextafter(edge, 0.0)); };
+  Scene scene;
+  for (std::uint64_t i = 0; i < spheres; ++i) {
+    scene.sphere_position.push_back({coordinate(i, kX), coordinate(i, kY), coordinate(i, kZ)});
+    scene.sphere_radius.push_back(std::min(1.0, 0.5 + 0.5 * rng.unit(i, kRadius)));
+  }
+  for (std::uint64_t i = spheres; i < n; ++i) {  // body id i
+    scene.ellipsoid_position.push_back({coordinate(i, kX), coordinate(i, kY), coordinate(i, kZ)});
+    auto axis = [&](unsigned stream) { return std::min(1.0, 0.25 + 0.75 * rng.unit(i, stream)); };
+    scene.ellipsoid_semi_axes.push_back({axis(kAxisA), axis(kAxisB), axis(kAxisC)});
+    scene.ellipsoid_orientation.push_back(random_quaternion(rng, i));
+  }
+  scene.radius_low = 0.25;
+  scene.radius_high = 1.0;
+  scene.attributes["generator"] = std::string("ellipsoids");
+  scene.attributes["seed"] = std::bit_cast<std::int64_t>(seed);
+  scene.attributes["box_edge"] = edge;
+  scene.attributes["software_version"] = std::string(kSoftwareVersion);
+  return scene;
+}
+
+}  // namespace cg
