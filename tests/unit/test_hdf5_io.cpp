@@ -1,0 +1,754 @@
+// Unit tests of the HDF5 layer (src/hdf5_io.cpp): scene and contact round trips, and one test per
+// kind of bad input, each checking the exception type and that the message names the file, the
+// dataset and the row. Every test works in its own temporary directory, removed afterwards.
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "hdf5_io.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using cg::AttrValue;
+using cg::Contacts;
+using cg::InputError;
+using cg::IoError;
+using cg::RawType;
+using cg::Scene;
+using cg::Vec3;
+
+#define EXPECT_CONTAINS(text, part)                                                           \
+  EXPECT_NE(std::string(text).find(part), std::string::npos)                                  \
+      << "message \"" << (text) << "\" does not contain \"" << (part) << "\""
+
+// Runs f, expects exactly an exception of type E, returns its message ("" otherwise).
+template <class E, class F>
+std::string error_of(F&& f) {
+  try {
+    f();
+  } catch (const E& e) {
+    return e.what();
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "wrong exception type: " << e.what();
+    return "";
+  }
+  ADD_FAILURE() << "no exception thrown";
+  return "";
+}
+
+std::vector<unsigned char> file_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+class Hdf5Io : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    m_dir = fs::temp_directory_path() /
+            ("cg_hdf5_io_" + std::to_string(::getpid()) + "_" + info->name());
+    fs::remove_all(m_dir);
+    fs::create_directories(m_dir);
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(m_dir, ec);
+  }
+  std::string path(const std::string& name) const { return (m_dir / name).string(); }
+  std::vector<std::string> entries() const {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(m_dir)) names.push_back(e.path().filename().string());
+    return names;
+  }
+
+  fs::path m_dir;
+};
+
+Scene sphere_scene(std::size_t n) {
+  Scene s;
+  for (std::size_t i = 0; i < n; ++i) {
+    s.sphere_position.push_back({1.5 * i, -0.25 * i, 1e6 + 0.1 * i});
+    s.sphere_radius.push_back(0.5 + 0.001 * i);
+  }
+  return s;
+}
+
+Scene mixed_scene() {
+  Scene s = sphere_scene(6);
+  for (int i = 0; i < 4; ++i) {
+    s.ellipsoid_position.push_back({10.0 + i, 20.0, -3.0 * i});
+    s.ellipsoid_semi_axes.push_back({0.5, 0.75, 1.0 - 0.1 * i});
+    double a = 0.3 * i;
+    s.ellipsoid_orientation.push_back({std::cos(a), 0.0, std::sin(a), 0.0});
+  }
+  s.radius_low = 0.25;
+  s.radius_high = 2.0;
+  s.attributes["generator"] = std::string("test");
+  s.attributes["count"] = std::int64_t{10};
+  s.attributes["seed"] = std::int64_t{-5};
+  s.attributes["box_edge"] = 12.5;
+  return s;
+}
+
+void expect_same_scene(const Scene& a, const Scene& b) {
+  ASSERT_EQ(a.sphere_count(), b.sphere_count());
+  ASSERT_EQ(a.ellipsoid_count(), b.ellipsoid_count());
+  for (std::size_t i = 0; i < a.sphere_count(); ++i) {
+    EXPECT_TRUE(a.sphere_position[i] == b.sphere_position[i]) << "sphere " << i;
+    EXPECT_EQ(a.sphere_radius[i], b.sphere_radius[i]) << "sphere " << i;
+  }
+  for (std::size_t i = 0; i < a.ellipsoid_count(); ++i) {
+    EXPECT_TRUE(a.ellipsoid_position[i] == b.ellipsoid_position[i]) << "ellipsoid " << i;
+    EXPECT_TRUE(a.ellipsoid_semi_axes[i] == b.ellipsoid_semi_axes[i]) << "ellipsoid " << i;
+    EXPECT_EQ(a.ellipsoid_orientation[i], b.ellipsoid_orientation[i]) << "ellipsoid " << i;
+  }
+  EXPECT_EQ(a.radius_low, b.radius_low);
+  EXPECT_EQ(a.radius_high, b.radius_high);
+  EXPECT_EQ(a.attributes, b.attributes);
+}
+
+template <class Real>
+Contacts<Real> sample_contacts(std::size_t k, bool full) {
+  Contacts<Real> c;
+  c.full = full;
+  for (std::size_t i = 0; i < k; ++i) {
+    Real f = static_cast<Real>(i);
+    c.id_a.push_back(static_cast<std::int64_t>(i));
+    c.id_b.push_back(static_cast<std::int64_t>(i + 1 + (std::int64_t(1) << 33)));
+    c.position_on_a.push_back({f, f + Real(0.1), -f});
+    c.position_on_b.push_back({f + Real(0.2), f, Real(1) / (f + 1)});
+    c.normal_on_b.push_back({Real(1), Real(0), Real(0)});
+    c.distance.push_back(-Real(0.01) * f);
+    if (full) {
+      c.local_point_a.push_back({Real(0.5), f, Real(0)});
+      c.local_point_b.push_back({-Real(0.5), Real(0), f});
+      c.lateral_friction_dir1.push_back({Real(0), Real(1), Real(0)});
+      c.lateral_friction_dir2.push_back({Real(0), Real(0), Real(1)});
+    }
+  }
+  return c;
+}
+
+cg::RunInfo sample_info(const char* precision) {
+  cg::RunInfo info;
+  info.bodies = 1234;
+  info.precision = precision;
+  info.backend = "cpu";
+  info.ranks = 3;
+  info.cell_size = 2.5;
+  info.input = "scene.h5";
+  info.times = {{"bounds", 0.25}, {"sort", 1.5}, {"narrow", 0.125}};
+  return info;
+}
+
+template <class Real>
+void expect_same_vec(const std::vector<Vec3<Real>>& a, const std::vector<Vec3<double>>& b) {
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(double(a[i].x), b[i].x);
+    EXPECT_EQ(double(a[i].y), b[i].y);
+    EXPECT_EQ(double(a[i].z), b[i].z);
+  }
+}
+
+template <class Real>
+void contacts_round_trip(const std::string& file, std::size_t k, bool full) {
+  const bool fp32 = std::is_same_v<Real, float>;
+  Contacts<Real> c = sample_contacts<Real>(k, full);
+  cg::write_contacts(file, c, sample_info(fp32 ? "fp32" : "fp64"));
+  cg::ContactFile back = cg::read_contacts(file);
+  EXPECT_EQ(back.precision, fp32 ? "fp32" : "fp64");
+  EXPECT_EQ(back.contacts.full, full);
+  EXPECT_EQ(back.contacts.id_a, c.id_a);
+  EXPECT_EQ(back.contacts.id_b, c.id_b);
+  expect_same_vec(c.position_on_a, back.contacts.position_on_a);
+  expect_same_vec(c.position_on_b, back.contacts.position_on_b);
+  expect_same_vec(c.normal_on_b, back.contacts.normal_on_b);
+  ASSERT_EQ(back.contacts.distance.size(), k);
+  for (std::size_t i = 0; i < k; ++i) EXPECT_EQ(double(c.distance[i]), back.contacts.distance[i]);
+  if (full) {
+    expect_same_vec(c.local_point_a, back.contacts.local_point_a);
+    expect_same_vec(c.local_point_b, back.contacts.local_point_b);
+    expect_same_vec(c.lateral_friction_dir1, back.contacts.lateral_friction_dir1);
+    expect_same_vec(c.lateral_friction_dir2, back.contacts.lateral_friction_dir2);
+  }
+  const std::string real = fp32 ? "float32" : "float64";
+  const std::uint64_t rows = k;
+  auto expect_dataset = [&](const std::string& name, const std::string& type, std::vector<std::uint64_t> dims) {
+    auto info = cg::inspect_dataset(file, name);
+    ASSERT_TRUE(info.has_value()) << name;
+    EXPECT_EQ(info->type, type) << name;
+    EXPECT_EQ(info->dims, dims) << name;
+  };
+  expect_dataset("/contacts/id_a", "int64", {rows});
+  expect_dataset("/contacts/id_b", "int64", {rows});
+  expect_dataset("/contacts/position_on_a", real, {rows, 3});
+  expect_dataset("/contacts/position_on_b", real, {rows, 3});
+  expect_dataset("/contacts/normal_on_b", real, {rows, 3});
+  expect_dataset("/contacts/distance", real, {rows});
+  for (const char* name : {"/contacts/local_point_a", "/contacts/local_point_b", "/contacts/lateral_friction_dir1",
+                           "/contacts/lateral_friction_dir2"}) {
+    if (full) expect_dataset(name, real, {rows, 3});
+    else EXPECT_FALSE(cg::inspect_dataset(file, name).has_value()) << name;
+  }
+}
+
+// Writes /spheres with n rows through the raw helper (float64 unless told).
+void write_raw_spheres(const std::string& file, const std::vector<double>& position, const std::vector<double>& radius,
+                       RawType type = RawType::float64) {
+  cg::write_raw_dataset(file, "/spheres/position", type, {position.size() / 3, 3}, position);
+  cg::write_raw_dataset(file, "/spheres/radius", type, {radius.size()}, radius);
+}
+
+// ---- round trips ------------------------------------------------------------------------------------
+
+TEST_F(Hdf5Io, SceneRoundTripSpheres) {
+  Scene s = sphere_scene(100);
+  cg::write_scene(path("s.h5"), s);
+  Scene back = cg::read_scene(path("s.h5"));
+  expect_same_scene(s, back);
+  EXPECT_EQ(back.source, path("s.h5"));
+  EXPECT_EQ(entries(), std::vector<std::string>{"s.h5"});  // no temporary left
+  auto info = cg::inspect_dataset(path("s.h5"), "/spheres/position");
+  ASSERT_TRUE(info.has_value());
+  EXPECT_EQ(info->type, "float64");
+  EXPECT_EQ(info->dims, (std::vector<std::uint64_t>{100, 3}));
+}
+
+TEST_F(Hdf5Io, SceneRoundTripEllipsoidsBoundsAndAttributes) {
+  Scene s = mixed_scene();
+  cg::write_scene(path("m.h5"), s);
+  Scene back = cg::read_scene(path("m.h5"));
+  expect_same_scene(s, back);
+  EXPECT_EQ(back.attributes.count("radius_low"), 0u);
+  EXPECT_EQ(std::get<std::string>(back.attributes.at("generator")), "test");
+  EXPECT_EQ(std::get<std::int64_t>(back.attributes.at("seed")), -5);
+  EXPECT_EQ(std::get<double>(back.attributes.at("box_edge")), 12.5);
+}
+
+TEST_F(Hdf5Io, SceneWithoutBoundsHasNoBounds) {
+  cg::write_scene(path("s.h5"), sphere_scene(3));
+  Scene back = cg::read_scene(path("s.h5"));
+  EXPECT_FALSE(back.radius_low.has_value());
+  EXPECT_FALSE(back.radius_high.has_value());
+  EXPECT_TRUE(back.attributes.empty());
+}
+
+TEST_F(Hdf5Io, EllipsoidOnlyScene) {
+  Scene s = mixed_scene();
+  s.sphere_position.clear();
+  s.sphere_radius.clear();
+  cg::write_scene(path("e.h5"), s);
+  Scene back = cg::read_scene(path("e.h5"));
+  expect_same_scene(s, back);
+  EXPECT_FALSE(cg::inspect_dataset(path("e.h5"), "/spheres/position").has_value());
+}
+
+TEST_F(Hdf5Io, SceneShape) {
+  cg::write_scene(path("m.h5"), mixed_scene());
+  cg::SceneShape shape = cg::read_scene_shape(path("m.h5"));
+  EXPECT_EQ(shape.spheres, 6u);
+  EXPECT_EQ(shape.ellipsoids, 4u);
+}
+
+TEST_F(Hdf5Io, SceneRowsUseGlobalBodyIds) {
+  Scene s = mixed_scene();
+  cg::write_scene(path("m.h5"), s);
+  Scene part = cg::read_scene_rows(path("m.h5"), 4, 4);  // spheres 4, 5 and ellipsoids 0, 1
+  ASSERT_EQ(part.sphere_count(), 2u);
+  ASSERT_EQ(part.ellipsoid_count(), 2u);
+  EXPECT_TRUE(part.sphere_position[0] == s.sphere_position[4]);
+  EXPECT_EQ(part.sphere_radius[1], s.sphere_radius[5]);
+  EXPECT_TRUE(part.ellipsoid_semi_axes[1] == s.ellipsoid_semi_axes[1]);
+  EXPECT_EQ(part.radius_high, 2.0);
+  EXPECT_EQ(std::get<std::string>(part.attributes.at("generator")), "test");
+
+  Scene spheres = cg::read_scene_rows(path("m.h5"), 1, 2);
+  ASSERT_EQ(spheres.sphere_count(), 2u);
+  EXPECT_EQ(spheres.ellipsoid_count(), 0u);
+  EXPECT_EQ(spheres.sphere_radius[0], s.sphere_radius[1]);
+
+  Scene ellipsoids = cg::read_scene_rows(path("m.h5"), 9, 1);
+  EXPECT_EQ(ellipsoids.sphere_count(), 0u);
+  ASSERT_EQ(ellipsoids.ellipsoid_count(), 1u);
+  EXPECT_EQ(ellipsoids.ellipsoid_orientation[0], s.ellipsoid_orientation[3]);
+
+  EXPECT_EQ(cg::read_scene_rows(path("m.h5"), 10, 0).size(), 0u);
+}
+
+TEST_F(Hdf5Io, SceneRowsOutOfRangeIsUsageError) {
+  cg::write_scene(path("m.h5"), mixed_scene());
+  std::string msg = error_of<cg::UsageError>([&] { cg::read_scene_rows(path("m.h5"), 8, 3); });
+  EXPECT_CONTAINS(msg, path("m.h5"));
+}
+
+TEST_F(Hdf5Io, SceneRowsNameTheFileRow) {
+  Scene s = sphere_scene(20);
+  s.sphere_radius[13] = -2;
+  cg::write_scene(path("s.h5"), s);
+  EXPECT_EQ(cg::read_scene_rows(path("s.h5"), 0, 13).size(), 13u);  // the bad row is not read
+  std::string msg = error_of<InputError>([&] { cg::read_scene_rows(path("s.h5"), 10, 5); });
+  EXPECT_EQ(msg, path("s.h5") + ": /spheres/radius row 13: radius -2 is not > 0");
+}
+
+TEST_F(Hdf5Io, Float32SceneIsConvertedToDouble) {
+  std::vector<double> position{0.1, 0.2, 0.3, 1e7 + 0.5, -2.25, 3.0};
+  std::vector<double> radius{0.7, 0.9};
+  write_raw_spheres(path("f.h5"), position, radius, RawType::float32);
+  EXPECT_EQ(cg::inspect_dataset(path("f.h5"), "/spheres/position")->type, "float32");
+  Scene s = cg::read_scene(path("f.h5"));
+  ASSERT_EQ(s.sphere_count(), 2u);
+  EXPECT_EQ(s.sphere_position[0].x, double(0.1f));
+  EXPECT_EQ(s.sphere_position[1].x, double(float(1e7 + 0.5)));
+  EXPECT_EQ(s.sphere_position[1].y, -2.25);
+  EXPECT_EQ(s.sphere_radius[0], double(0.7f));
+}
+
+TEST_F(Hdf5Io, MixedFloat32AndFloat64Datasets) {
+  cg::write_raw_dataset(path("f.h5"), "/spheres/position", RawType::float64, {1, 3}, std::vector<double>{0.1, 0, 0});
+  cg::write_raw_dataset(path("f.h5"), "/spheres/radius", RawType::float32, {1}, std::vector<double>{0.1});
+  Scene s = cg::read_scene(path("f.h5"));
+  EXPECT_EQ(s.sphere_position[0].x, 0.1);
+  EXPECT_EQ(s.sphere_radius[0], double(0.1f));
+}
+
+TEST_F(Hdf5Io, IntegerBoundAttributesAreAccepted) {
+  write_raw_spheres(path("s.h5"), {0, 0, 0}, {1.5});
+  cg::write_raw_attribute(path("s.h5"), "radius_low", AttrValue{std::int64_t{1}});
+  cg::write_raw_attribute(path("s.h5"), "radius_high", AttrValue{std::int64_t{2}});
+  Scene s = cg::read_scene(path("s.h5"));
+  EXPECT_EQ(s.radius_low, 1.0);
+  EXPECT_EQ(s.radius_high, 2.0);
+}
+
+TEST_F(Hdf5Io, ContactsRoundTripFp64Basic) { contacts_round_trip<double>(path("c.h5"), 17, false); }
+TEST_F(Hdf5Io, ContactsRoundTripFp32Basic) { contacts_round_trip<float>(path("c.h5"), 17, false); }
+TEST_F(Hdf5Io, ContactsRoundTripFp64Full) { contacts_round_trip<double>(path("c.h5"), 17, true); }
+TEST_F(Hdf5Io, ContactsRoundTripFp32Full) { contacts_round_trip<float>(path("c.h5"), 17, true); }
+TEST_F(Hdf5Io, ContactsEmptyFp64Basic) { contacts_round_trip<double>(path("c.h5"), 0, false); }
+TEST_F(Hdf5Io, ContactsEmptyFp32Basic) { contacts_round_trip<float>(path("c.h5"), 0, false); }
+TEST_F(Hdf5Io, ContactsEmptyFp64Full) { contacts_round_trip<double>(path("c.h5"), 0, true); }
+TEST_F(Hdf5Io, ContactsEmptyFp32Full) { contacts_round_trip<float>(path("c.h5"), 0, true); }
+
+TEST_F(Hdf5Io, ContactFileRootAttributes) {
+  cg::RunInfo info = sample_info("fp64");
+  info.times.push_back({"sort", 0.5});  // a stage named twice adds up
+  cg::write_contacts(path("c.h5"), sample_contacts<double>(5, false), info);
+  cg::ContactFile back = cg::read_contacts(path("c.h5"));
+  const cg::Attributes& a = back.attributes;
+  EXPECT_EQ(std::get<std::string>(a.at("precision")), "fp64");
+  EXPECT_EQ(std::get<std::string>(a.at("backend")), "cpu");
+  EXPECT_EQ(std::get<std::int64_t>(a.at("ranks")), 3);
+  EXPECT_EQ(std::get<std::int64_t>(a.at("bodies")), 1234);
+  EXPECT_EQ(std::get<std::int64_t>(a.at("contacts")), 5);
+  EXPECT_EQ(std::get<double>(a.at("cell_size")), 2.5);
+  EXPECT_EQ(std::get<std::string>(a.at("software_version")), "0.1.0");
+  EXPECT_EQ(std::get<std::string>(a.at("input")), "scene.h5");
+  EXPECT_EQ(std::get<double>(a.at("time_bounds")), 0.25);
+  EXPECT_EQ(std::get<double>(a.at("time_sort")), 2.0);
+  EXPECT_EQ(std::get<double>(a.at("time_narrow")), 0.125);
+}
+
+TEST_F(Hdf5Io, ContactFilesAreByteIdentical) {
+  for (const char* name : {"a.h5", "b.h5"})
+    cg::write_contacts(path(name), sample_contacts<float>(1000, true), sample_info("fp32"));
+  EXPECT_EQ(file_bytes(path("a.h5")), file_bytes(path("b.h5")));
+  cg::RunInfo other = sample_info("fp32");
+  other.times = {{"bounds", 9.0}};
+  other.input = "elsewhere.h5";
+  cg::write_contacts(path("c.h5"), sample_contacts<float>(1000, true), other);
+  for (const char* name : {"id_a", "id_b", "position_on_a", "normal_on_b", "distance", "lateral_friction_dir2"}) {
+    std::string dataset = std::string("/contacts/") + name;
+    EXPECT_EQ(cg::read_dataset_bytes(path("a.h5"), dataset), cg::read_dataset_bytes(path("c.h5"), dataset)) << name;
+  }
+  EXPECT_EQ(cg::read_dataset_bytes(path("a.h5"), "/contacts/distance").size(), 1000 * sizeof(float));
+}
+
+TEST_F(Hdf5Io, ContactsReplaceAnExistingFile) {
+  { std::ofstream(path("c.h5")) << "old"; }
+  cg::write_contacts(path("c.h5"), sample_contacts<double>(3, false), sample_info(""));
+  EXPECT_EQ(cg::read_contacts(path("c.h5")).contacts.size(), 3u);
+  EXPECT_EQ(entries(), std::vector<std::string>{"c.h5"});
+}
+
+TEST_F(Hdf5Io, WriteContactsIntoMissingDirectoryThrowsIoError) {
+  std::string file = path("missing/c.h5");
+  std::string msg = error_of<IoError>([&] { cg::write_contacts(file, sample_contacts<double>(3, false), sample_info("fp64")); });
+  EXPECT_CONTAINS(msg, file);
+  EXPECT_FALSE(fs::exists(file));
+  EXPECT_FALSE(fs::exists(path("missing")));
+  EXPECT_TRUE(entries().empty());
+}
+
+TEST_F(Hdf5Io, FailedRenameRemovesTheTemporary) {
+  fs::create_directories(path("c.h5/inside"));  // a non-empty directory: rename over it fails
+  std::string msg = error_of<IoError>([&] { cg::write_contacts(path("c.h5"), sample_contacts<float>(3, true), sample_info("fp32")); });
+  EXPECT_CONTAINS(msg, path("c.h5"));
+  EXPECT_EQ(entries(), std::vector<std::string>{"c.h5"});
+  EXPECT_TRUE(fs::is_directory(path("c.h5")));
+}
+
+TEST_F(Hdf5Io, WriteSceneIntoMissingDirectoryThrowsIoError) {
+  std::string file = path("missing/s.h5");
+  std::string msg = error_of<IoError>([&] { cg::write_scene(file, sphere_scene(3)); });
+  EXPECT_CONTAINS(msg, file);
+  EXPECT_TRUE(entries().empty());
+}
+
+TEST_F(Hdf5Io, SceneWriterWithoutCommitLeavesNothing) {
+  {
+    cg::SceneFileHeader header;
+    header.spheres = 2;
+    cg::SceneFileWriter writer(path("s.h5"), header);
+    std::vector<Vec3<double>> p{{0, 0, 0}};
+    std::vector<double> r{1};
+    writer.write_spheres(0, p, r);
+  }
+  EXPECT_TRUE(entries().empty());
+}
+
+TEST_F(Hdf5Io, ContactsPrecisionMismatchIsRejected) {
+  EXPECT_THROW(cg::write_contacts(path("c.h5"), sample_contacts<float>(2, false), sample_info("fp64")), cg::Error);
+  EXPECT_TRUE(entries().empty());
+}
+
+TEST_F(Hdf5Io, ReadContactsOfASceneFile) {
+  cg::write_scene(path("s.h5"), sphere_scene(2));
+  std::string msg = error_of<InputError>([&] { cg::read_contacts(path("s.h5")); });
+  EXPECT_CONTAINS(msg, path("s.h5"));
+  EXPECT_CONTAINS(msg, "precision");
+}
+
+TEST_F(Hdf5Io, ReadContactsWithMisshapedDataset) {
+  cg::write_raw_attribute(path("c.h5"), "precision", AttrValue{std::string("fp64")});
+  cg::write_raw_dataset(path("c.h5"), "/contacts/id_a", RawType::int64, {2}, std::vector<double>{0, 1});
+  cg::write_raw_dataset(path("c.h5"), "/contacts/id_b", RawType::int64, {2}, std::vector<double>{1, 2});
+  cg::write_raw_dataset(path("c.h5"), "/contacts/position_on_a", RawType::float64, {2, 2}, std::vector<double>(4));
+  std::string msg = error_of<InputError>([&] { cg::read_contacts(path("c.h5")); });
+  EXPECT_CONTAINS(msg, path("c.h5"));
+  EXPECT_CONTAINS(msg, "/contacts/position_on_a");
+  EXPECT_CONTAINS(msg, "(2, 2)");
+}
+
+// ---- bad input: the file ---------------------------------------------------------------------------
+
+TEST_F(Hdf5Io, MissingFile) {
+  std::string file = path("nope.h5");
+  std::string msg = error_of<InputError>([&] { cg::read_scene(file); });
+  EXPECT_CONTAINS(msg, file);
+  EXPECT_CONTAINS(msg, "no such file");
+  EXPECT_CONTAINS(error_of<InputError>([&] { cg::read_scene_shape(file); }), file);
+  EXPECT_CONTAINS(error_of<InputError>([&] { cg::read_contacts(file); }), file);
+}
+
+TEST_F(Hdf5Io, DirectoryInsteadOfFile) {
+  std::string msg = error_of<InputError>([&] { cg::read_scene(m_dir.string()); });
+  EXPECT_CONTAINS(msg, m_dir.string());
+}
+
+TEST_F(Hdf5Io, NotAnHdf5File) {
+  { std::ofstream(path("text.h5")) << "x y z r\n1 2 3 0.5\n"; }
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("text.h5")); });
+  EXPECT_CONTAINS(msg, path("text.h5"));
+  EXPECT_CONTAINS(msg, "not an HDF5 file");
+}
+
+TEST_F(Hdf5Io, EmptyFileIsNotHdf5) {
+  { std::ofstream out(path("empty.h5")); }
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("empty.h5")); });
+  EXPECT_CONTAINS(msg, path("empty.h5"));
+}
+
+TEST_F(Hdf5Io, TruncatedFile) {
+  cg::write_scene(path("t.h5"), sphere_scene(1000));
+  fs::resize_file(path("t.h5"), fs::file_size(path("t.h5")) / 2);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("t.h5")); });
+  EXPECT_CONTAINS(msg, path("t.h5"));
+  EXPECT_CONTAINS(error_of<InputError>([&] { cg::read_scene_shape(path("t.h5")); }), path("t.h5"));
+}
+
+TEST_F(Hdf5Io, TruncatedInsideTheHeader) {
+  cg::write_scene(path("t.h5"), sphere_scene(1000));
+  fs::resize_file(path("t.h5"), 40);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("t.h5")); });
+  EXPECT_CONTAINS(msg, path("t.h5"));
+}
+
+TEST_F(Hdf5Io, TruncatedContactFile) {
+  cg::write_contacts(path("c.h5"), sample_contacts<double>(1000, true), sample_info("fp64"));
+  fs::resize_file(path("c.h5"), fs::file_size(path("c.h5")) - 1000);
+  std::string msg = error_of<InputError>([&] { cg::read_contacts(path("c.h5")); });
+  EXPECT_CONTAINS(msg, path("c.h5"));
+}
+
+// ---- bad input: datasets ----------------------------------------------------------------------------
+
+TEST_F(Hdf5Io, MissingRadiusDataset) {
+  cg::write_raw_dataset(path("s.h5"), "/spheres/position", RawType::float64, {1, 3}, std::vector<double>{0, 0, 0});
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_CONTAINS(msg, path("s.h5"));
+  EXPECT_CONTAINS(msg, "/spheres/radius");
+  EXPECT_CONTAINS(msg, "missing");
+}
+
+TEST_F(Hdf5Io, MissingPositionDataset) {
+  cg::write_raw_dataset(path("s.h5"), "/spheres/radius", RawType::float64, {1}, std::vector<double>{1});
+  std::string msg = error_of<InputError>([&] { cg::read_scene_shape(path("s.h5")); });
+  EXPECT_CONTAINS(msg, path("s.h5"));
+  EXPECT_CONTAINS(msg, "/spheres/position");
+}
+
+TEST_F(Hdf5Io, MissingOrientationDataset) {
+  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/position", RawType::float64, {1, 3}, std::vector<double>(3));
+  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/semi_axes", RawType::float64, {1, 3}, std::vector<double>(3, 1.0));
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("e.h5")); });
+  EXPECT_CONTAINS(msg, path("e.h5"));
+  EXPECT_CONTAINS(msg, "/ellipsoids/orientation");
+}
+
+TEST_F(Hdf5Io, GroupThatIsADataset) {
+  cg::write_raw_dataset(path("s.h5"), "/spheres", RawType::float64, {1}, std::vector<double>{1});
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_CONTAINS(msg, path("s.h5"));
+  EXPECT_CONTAINS(msg, "/spheres");
+}
+
+TEST_F(Hdf5Io, PositionWithTwoColumns) {
+  cg::write_raw_dataset(path("s.h5"), "/spheres/position", RawType::float64, {5, 2}, std::vector<double>(10));
+  cg::write_raw_dataset(path("s.h5"), "/spheres/radius", RawType::float64, {5}, std::vector<double>(5, 1.0));
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_CONTAINS(msg, path("s.h5"));
+  EXPECT_CONTAINS(msg, "/spheres/position");
+  EXPECT_CONTAINS(msg, "(5, 2)");
+}
+
+TEST_F(Hdf5Io, PositionOfRankOne) {
+  cg::write_raw_dataset(path("s.h5"), "/spheres/position", RawType::float64, {15}, std::vector<double>(15));
+  cg::write_raw_dataset(path("s.h5"), "/spheres/radius", RawType::float64, {5}, std::vector<double>(5, 1.0));
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_CONTAINS(msg, path("s.h5"));
+  EXPECT_CONTAINS(msg, "/spheres/position");
+  EXPECT_CONTAINS(msg, "(15)");
+}
+
+TEST_F(Hdf5Io, RadiusOfRankTwo) {
+  cg::write_raw_dataset(path("s.h5"), "/spheres/position", RawType::float64, {5, 3}, std::vector<double>(15));
+  cg::write_raw_dataset(path("s.h5"), "/spheres/radius", RawType::float64, {5, 1}, std::vector<double>(5, 1.0));
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_CONTAINS(msg, "/spheres/radius");
+  EXPECT_CONTAINS(msg, "(5, 1)");
+}
+
+TEST_F(Hdf5Io, OrientationWithThreeColumns) {
+  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/position", RawType::float64, {2, 3}, std::vector<double>(6));
+  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/semi_axes", RawType::float64, {2, 3}, std::vector<double>(6, 1.0));
+  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/orientation", RawType::float64, {2, 3}, std::vector<double>(6, 1.0));
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("e.h5")); });
+  EXPECT_CONTAINS(msg, path("e.h5"));
+  EXPECT_CONTAINS(msg, "/ellipsoids/orientation");
+  EXPECT_CONTAINS(msg, "(2, 3)");
+}
+
+TEST_F(Hdf5Io, MismatchedRowCounts) {
+  write_raw_spheres(path("s.h5"), std::vector<double>(30), std::vector<double>(9, 1.0));
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_CONTAINS(msg, path("s.h5"));
+  EXPECT_CONTAINS(msg, "/spheres/radius");
+  EXPECT_CONTAINS(msg, "/spheres/position");
+}
+
+TEST_F(Hdf5Io, Int32PositionIsRejected) {
+  write_raw_spheres(path("s.h5"), std::vector<double>(6), std::vector<double>(2, 1.0), RawType::int32);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_CONTAINS(msg, path("s.h5"));
+  EXPECT_CONTAINS(msg, "/spheres/position");
+  EXPECT_CONTAINS(msg, "32-bit integer");
+}
+
+TEST_F(Hdf5Io, Int64RadiusIsRejected) {
+  cg::write_raw_dataset(path("s.h5"), "/spheres/position", RawType::float64, {2, 3}, std::vector<double>(6));
+  cg::write_raw_dataset(path("s.h5"), "/spheres/radius", RawType::int64, {2}, std::vector<double>(2, 1.0));
+  std::string msg = error_of<InputError>([&] { cg::read_scene_shape(path("s.h5")); });
+  EXPECT_CONTAINS(msg, "/spheres/radius");
+  EXPECT_CONTAINS(msg, "64-bit integer");
+}
+
+TEST_F(Hdf5Io, ZeroBodies) {
+  write_raw_spheres(path("s.h5"), {}, {});
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_CONTAINS(msg, path("s.h5"));
+  EXPECT_CONTAINS(msg, "scene has no bodies");
+  EXPECT_CONTAINS(error_of<InputError>([&] { cg::read_scene_shape(path("s.h5")); }), "scene has no bodies");
+}
+
+TEST_F(Hdf5Io, FileWithoutGroupsHasNoBodies) {
+  cg::write_raw_attribute(path("s.h5"), "note", AttrValue{std::string("nothing here")});
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_EQ(msg, path("s.h5") + ": scene has no bodies");
+}
+
+TEST_F(Hdf5Io, EmptySceneWrittenIsRejectedOnRead) {
+  cg::write_scene(path("s.h5"), Scene{});
+  EXPECT_CONTAINS(error_of<InputError>([&] { cg::read_scene(path("s.h5")); }), "scene has no bodies");
+}
+
+// ---- bad input: values ----------------------------------------------------------------------------
+
+TEST_F(Hdf5Io, NaNPosition) {
+  Scene s = sphere_scene(10);
+  s.sphere_position[3].y = std::numeric_limits<double>::quiet_NaN();
+  cg::write_scene(path("s.h5"), s);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_EQ(msg, path("s.h5") + ": /spheres/position row 3: value nan is not finite");
+}
+
+TEST_F(Hdf5Io, InfRadius) {
+  Scene s = sphere_scene(10);
+  s.sphere_radius[8] = std::numeric_limits<double>::infinity();
+  cg::write_scene(path("s.h5"), s);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_EQ(msg, path("s.h5") + ": /spheres/radius row 8: value inf is not finite");
+}
+
+TEST_F(Hdf5Io, NegativeInfPositionInFloat32) {
+  std::vector<double> position(12, 1.0);
+  position[7] = -std::numeric_limits<double>::infinity();  // row 2
+  write_raw_spheres(path("f.h5"), position, std::vector<double>(4, 1.0), RawType::float32);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("f.h5")); });
+  EXPECT_EQ(msg, path("f.h5") + ": /spheres/position row 2: value -inf is not finite");
+}
+
+TEST_F(Hdf5Io, NegativeRadius) {
+  Scene s = sphere_scene(20);
+  s.sphere_radius[17] = -1;
+  cg::write_scene(path("s.h5"), s);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_EQ(msg, path("s.h5") + ": /spheres/radius row 17: radius -1 is not > 0");
+}
+
+TEST_F(Hdf5Io, ZeroRadius) {
+  Scene s = sphere_scene(5);
+  s.sphere_radius[0] = 0;
+  cg::write_scene(path("s.h5"), s);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_EQ(msg, path("s.h5") + ": /spheres/radius row 0: radius 0 is not > 0");
+}
+
+TEST_F(Hdf5Io, RadiusAboveRadiusHigh) {
+  Scene s = sphere_scene(10);
+  s.radius_low = 0.5;
+  s.radius_high = 1.0;
+  s.sphere_radius[6] = 1.25;
+  cg::write_scene(path("s.h5"), s);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_EQ(msg, path("s.h5") + ": /spheres/radius row 6: radius 1.25 is outside [radius_low, radius_high] = [0.5, 1]");
+}
+
+TEST_F(Hdf5Io, RadiusBelowRadiusLow) {
+  Scene s = sphere_scene(10);
+  s.radius_low = 0.5;
+  s.sphere_radius[4] = 0.25;
+  cg::write_scene(path("s.h5"), s);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_CONTAINS(msg, path("s.h5"));
+  EXPECT_CONTAINS(msg, "/spheres/radius row 4");
+  EXPECT_CONTAINS(msg, "radius 0.25 is outside");
+}
+
+TEST_F(Hdf5Io, RadiusEqualToTheBoundsIsAccepted) {
+  Scene s = sphere_scene(2);
+  s.sphere_radius = {0.5, 1.0};
+  s.radius_low = 0.5;
+  s.radius_high = 1.0;
+  cg::write_scene(path("s.h5"), s);
+  EXPECT_EQ(cg::read_scene(path("s.h5")).size(), 2u);
+}
+
+TEST_F(Hdf5Io, EllipsoidBoundingRadiusOutsideBounds) {
+  Scene s = mixed_scene();
+  s.ellipsoid_semi_axes[2] = {0.5, 2.5, 0.5};  // bounding radius 2.5 > radius_high 2
+  cg::write_scene(path("m.h5"), s);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("m.h5")); });
+  EXPECT_EQ(msg, path("m.h5") +
+                     ": /ellipsoids/semi_axes row 2: bounding radius 2.5 is outside [radius_low, radius_high] = [0.25, 2]");
+}
+
+TEST_F(Hdf5Io, NonPositiveSemiAxis) {
+  Scene s = mixed_scene();
+  s.ellipsoid_semi_axes[1].z = 0;
+  cg::write_scene(path("m.h5"), s);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("m.h5")); });
+  EXPECT_EQ(msg, path("m.h5") + ": /ellipsoids/semi_axes row 1: semi-axis 0 is not > 0");
+}
+
+TEST_F(Hdf5Io, NonUnitQuaternion) {
+  Scene s = mixed_scene();
+  s.ellipsoid_orientation[3] = {1, 0, 0, 1e-2};  // norm 1.00005
+  cg::write_scene(path("m.h5"), s);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("m.h5")); });
+  EXPECT_CONTAINS(msg, path("m.h5") + ": /ellipsoids/orientation row 3: quaternion (1, 0, 0, 0.01)");
+  EXPECT_CONTAINS(msg, "not 1");
+}
+
+TEST_F(Hdf5Io, QuaternionWithinToleranceIsAccepted) {
+  Scene s = mixed_scene();
+  s.ellipsoid_orientation[0] = {1 + 5e-7, 0, 0, 0};
+  cg::write_scene(path("m.h5"), s);
+  EXPECT_EQ(cg::read_scene(path("m.h5")).ellipsoid_count(), 4u);
+}
+
+TEST_F(Hdf5Io, NaNQuaternion) {
+  Scene s = mixed_scene();
+  s.ellipsoid_orientation[1][2] = std::numeric_limits<double>::quiet_NaN();
+  cg::write_scene(path("m.h5"), s);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("m.h5")); });
+  EXPECT_EQ(msg, path("m.h5") + ": /ellipsoids/orientation row 1: value nan is not finite");
+}
+
+TEST_F(Hdf5Io, FirstBadRowIsReported) {
+  Scene s = sphere_scene(10);
+  s.sphere_position[5].x = std::numeric_limits<double>::quiet_NaN();
+  s.sphere_radius[3] = -4;
+  s.sphere_radius[7] = 0;
+  cg::write_scene(path("s.h5"), s);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_EQ(msg, path("s.h5") + ": /spheres/radius row 3: radius -4 is not > 0");
+}
+
+TEST_F(Hdf5Io, BadRowBeyondTheFirstReadChunk) {
+  const std::size_t n = (std::size_t(1) << 20) + 5000;
+  Scene s;
+  s.sphere_position.assign(n, Vec3<double>{1, 2, 3});
+  s.sphere_radius.assign(n, 0.5);
+  s.sphere_radius[n - 7] = -0.5;
+  cg::write_scene(path("big.h5"), s);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("big.h5")); });
+  EXPECT_EQ(msg, path("big.h5") + ": /spheres/radius row " + std::to_string(n - 7) + ": radius -0.5 is not > 0");
+}
+
+TEST_F(Hdf5Io, StringRadiusBoundIsRejected) {
+  write_raw_spheres(path("s.h5"), {0, 0, 0}, {1});
+  cg::write_raw_attribute(path("s.h5"), "radius_high", AttrValue{std::string("big")});
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_CONTAINS(msg, path("s.h5"));
+  EXPECT_CONTAINS(msg, "radius_high");
+}
+
+TEST_F(Hdf5Io, InvertedRadiusBoundsAreRejected) {
+  write_raw_spheres(path("s.h5"), {0, 0, 0}, {1});
+  cg::write_raw_attribute(path("s.h5"), "radius_low", AttrValue{2.0});
+  cg::write_raw_attribute(path("s.h5"), "radius_high", AttrValue{1.0});
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_CONTAINS(msg, "radius_low = 2 > radius_high = 1");
+}
+
+}  // namespace
