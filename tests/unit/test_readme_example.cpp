@@ -29,7 +29,7 @@ std::size_t count_contacts_example() {
 TEST(Readme, LibraryExampleRuns) { EXPECT_EQ(count_contacts_example(), 1u); }
 
 TEST(Readme, LibraryExampleIsInTheReadme) {
-  std::ifstream self(__FILE__), readme(std::string(CG_TEST_DATA_DIR) + "/../../README.md");
+  std::ifstream self(__FILE__), readme(std::string(CG_SOURCE_DIR) + "/README.md");
   ASSERT_TRUE(self && readme);
   std::stringstream a, b;
   a << self.rdbuf();
