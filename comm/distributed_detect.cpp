@@ -333,7 +333,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     std::vector<double> coordinate(position.size());
     for (std::size_t i = 0; i < position.size(); ++i) coordinate[i] = component(position[i], axis);
     std::vector<double> sample;
-    if (options.balance == Balance::count) {
+    if (options.balance == Balance::count && ranks > 1) {
       // A regular sample by global row: every stride-th body (all of them when N <= max_sample).
       const std::uint64_t stride = std::max<std::uint64_t>(1, (n_global + options.max_sample - 1) / options.max_sample);
       for (std::size_t i = 0; i < coordinate.size(); ++i) {
@@ -344,7 +344,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     ExportPlan plan;
     std::vector<BodyRecord> send;
     local_stage(session, "redistribute", [&] {
-      if (options.balance == Balance::count) {
+      if (options.balance == Balance::count && ranks > 1) {
         std::sort(sample.begin(), sample.end());
         slabs = SlabDecomposition::from_sorted_sample(axis, sample, ranks);
       } else {
@@ -397,7 +397,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
       auto record = [&](std::size_t k) -> const BodyRecord& {
         return k < owned.size() ? owned[k] : ghosts[k - owned.size()];
       };
-      std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return record(a).id < record(b).id; });
+      auto by_id = [&](std::size_t a, std::size_t b) { return record(a).id < record(b).id; };
+      if (!std::is_sorted(order.begin(), order.end(), by_id)) std::sort(order.begin(), order.end(), by_id);
       std::vector<Vec3<double>> p(n);
       std::vector<double> r(n);
       std::vector<std::int64_t> ids(n);

@@ -98,24 +98,30 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
   timer.lap("sort");
 
   // pairs: count → scan → fill. Entry e tests the later entries f of its cell; within a cell the
-  // bodies ascend (stable sort of entries made in body order), so body[e] < body[f].
+  // bodies ascend (stable sort of entries made in body order), so body[e] < body[f]. The spheres and
+  // control bytes are first gathered into entry order, so both passes below read memory in sequence.
+  std::vector<Sphere<Real>> entry_sphere(n_entries);
+  std::vector<std::uint8_t> entry_ctrl(n_entries);
+#pragma omp parallel for num_threads(nt) schedule(static)
+  for (std::size_t e = 0; e < n_entries; ++e) {
+    entry_sphere[e] = spheres[body[e]];
+    entry_ctrl[e] = ctrl[body[e]];
+  }
   const bool all = job.bodies.report.empty();
   const std::uint8_t* report = job.bodies.report.data();
   const int half_bits = g.half_bits;
   auto for_each_contact = [&](std::size_t e, auto&& emit) {
     const Key k = keys[e];
-    const std::uint32_t type = key_type(k, half_bits);
     const std::uint32_t a = body[e];
-    if (!all && !report[a]) {
-      // still count the tests for the statistics? no: an unreported body's pairs are not ours
-      return std::uint64_t(0);
-    }
+    if (!all && !report[a]) return std::uint64_t(0);  // pairs (a, b > a) belong to a's owner
+    const std::uint32_t type = key_type(k, half_bits);
+    const Sphere<Real> sa = entry_sphere[e];
+    const std::uint8_t ca = entry_ctrl[e];
     std::uint64_t tests = 0;
     for (std::size_t f = e + 1; f < n_entries && keys[f] == k; ++f) {
-      const std::uint32_t b = body[f];
-      if (!test_in_cell(ctrl[a], ctrl[b], type)) continue;
+      if (!test_in_cell(ca, entry_ctrl[f], type)) continue;
       ++tests;
-      if (spheres_touch(spheres[a], spheres[b])) emit(a, b);
+      if (spheres_touch(sa, entry_sphere[f])) emit(a, body[f]);
     }
     return tests;
   };
