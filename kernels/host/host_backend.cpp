@@ -26,6 +26,9 @@ namespace {
 
 using clock_type = std::chrono::steady_clock;
 
+// Below this many items a loop runs on the calling thread: waking a team costs more than it saves.
+constexpr std::size_t k_parallel_min = 32768;
+
 class StageTimer {
  public:
   explicit StageTimer(StageTimes& times) : m_times(times), m_t(clock_type::now()) {}
@@ -67,7 +70,7 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
   std::vector<BodyCells> cells(n);
   std::vector<std::uint8_t> ctrl(n);
   std::vector<std::uint32_t> count(n);
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
     const Vec3<double> p = job.bodies.position[i];
     Sphere<Real> s{static_cast<Real>(p.x - origin.x), static_cast<Real>(p.y - origin.y),
@@ -84,7 +87,7 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
   const std::uint64_t n_entries = exclusive_scan_inplace(count, offset);
   std::vector<Key> keys(n_entries);
   std::vector<std::uint32_t> body(n_entries);
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
     for (std::uint32_t m = 0; m < count[i]; ++m) {
       keys[offset[i] + m] = body_cell_key<Key>(cells[i], m, g);
@@ -102,7 +105,7 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
   // control bytes are first gathered into entry order, so both passes below read memory in sequence.
   std::vector<Sphere<Real>> entry_sphere(n_entries);
   std::vector<std::uint8_t> entry_ctrl(n_entries);
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(static) if (n_entries > k_parallel_min)
   for (std::size_t e = 0; e < n_entries; ++e) {
     entry_sphere[e] = spheres[body[e]];
     entry_ctrl[e] = ctrl[body[e]];
@@ -127,7 +130,7 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
   };
   std::vector<std::uint32_t> pair_count(n_entries);
   std::uint64_t tests_total = 0;
-#pragma omp parallel for num_threads(nt) schedule(dynamic, 4096) reduction(+ : tests_total)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 4096) reduction(+ : tests_total) if (n_entries > k_parallel_min)
   for (std::size_t e = 0; e < n_entries; ++e) {
     std::uint32_t c = 0;
     tests_total += for_each_contact(e, [&](std::uint32_t, std::uint32_t) { ++c; });
@@ -137,7 +140,7 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
   const std::uint64_t n_pairs = exclusive_scan_inplace(pair_count, pair_offset);
   const int id_bits = std::max(1, bits_for(n));
   std::vector<std::uint64_t> pairs(n_pairs);
-#pragma omp parallel for num_threads(nt) schedule(dynamic, 4096)
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 4096) if (n_entries > k_parallel_min)
   for (std::size_t e = 0; e < n_entries; ++e) {
     std::uint64_t w = pair_offset[e];
     for_each_contact(e, [&](std::uint32_t a, std::uint32_t b) {
@@ -158,7 +161,7 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
     return Vec3<Real>{static_cast<Real>(origin.x + double(v.x)), static_cast<Real>(origin.y + double(v.y)),
                       static_cast<Real>(origin.z + double(v.z))};
   };
-#pragma omp parallel for num_threads(nt) schedule(static)
+#pragma omp parallel for num_threads(nt) schedule(static) if (n_pairs > k_parallel_min)
   for (std::size_t k = 0; k < n_pairs; ++k) {
     const std::uint32_t a = static_cast<std::uint32_t>(pairs[k] >> id_bits);
     const std::uint32_t b = static_cast<std::uint32_t>(pairs[k] & id_mask);

@@ -23,7 +23,7 @@ void radix_sort(std::vector<Key>& keys, std::vector<Value>& values, int bits, in
   const std::size_t buckets = std::size_t(1) << width;
   const Key mask = Key(buckets - 1);
   int nt = threads > 0 ? threads : omp_get_max_threads();
-  nt = int(std::max<std::size_t>(1, std::min<std::size_t>(nt, n / 65536 + 1)));
+  nt = int(std::max<std::size_t>(1, std::min<std::size_t>(nt, n / 262144 + 1)));
 
   std::vector<Key> k2(n);
   std::vector<Value> v2;
