@@ -18,17 +18,20 @@ names = "'Bullet (double), from scratch' 'Bullet (double), warm step' 'contactgr
 array slope[4]
 array icept[4]
 array npts[4]
+have = ""   # the series with at least one point, e.g. "1 3"
 
 # Least squares of log10(t) on log10(N), accumulated while "plotting" into a throw-away table, so
 # that a series without points gives npts = 0 instead of a fit error.
 do for [i=1:4] {
   c = int(word(cols, i))
-  sx = 0; sy = 0; sxx = 0; sxy = 0; nn = 0
+  sx = 0; sy = 0; sxx = 0; sxy = 0; nn = 0; nall = 0
   set table $discard
-  plot csv every ::1 using (($1 >= nmin && valid(c) && column(c) > 0) ? \
+  plot csv every ::1 using ((valid(c) && column(c) > 0) ? (nall = nall + 1) : 0, \
+      ($1 >= nmin && valid(c) && column(c) > 0) ? \
       (lx = log10($1), ly = log10(column(c)), sx = sx + lx, sy = sy + ly, sxx = sxx + lx*lx, \
        sxy = sxy + lx*ly, nn = nn + 1) : 0):(0) with table
   unset table
+  if (nall > 0) { have = have . sprintf(" %d", i) }
   npts[i] = nn
   den = nn*sxx - sx*sx
   slope[i] = (nn >= 2 && den != 0) ? (nn*sxy - sx*sy)/den : NaN
@@ -44,6 +47,8 @@ set xlabel 'N (spheres)'
 set ylabel 'time per detection (s)'
 set style data linespoints
 
+if (words(have) == 0) { print "plot_bench.gp: ".csv." has no timings"; exit }
+
 do for [t in "png svg"] {
   if (t eq "png") {
     set terminal pngcairo size 1000,700 enhanced font ",11"
@@ -53,7 +58,8 @@ do for [t in "png svg"] {
   set output sprintf("%s_time.%s", out, t)
   set title 'Contact detection time against N (uniform spheres)'
   unset logscale
-  plot for [i=1:4] csv every ::1 using 1:(column(int(word(cols, i)))) title word(names, i)
+  plot for [k=1:words(have)] csv every ::1 using 1:(column(int(word(cols, int(word(have, k)))))) \
+       title word(names, int(word(have, k)))
 
   set output sprintf("%s_loglog.%s", out, t)
   set title 'Contact detection time against N, log-log, least-squares slopes for N >= 2^{14}'
@@ -61,8 +67,9 @@ do for [t in "png svg"] {
   set logscale y 10
   set format x '2^{%L}'
   set sample 200
-  plot for [i=1:4] csv every ::1 using 1:(column(int(word(cols, i)))) title label(i) lc i pt 7, \
-       for [i=1:4] fitline(i, x) notitle with lines dt 2 lc i
+  plot for [k=1:words(have)] csv every ::1 using 1:(column(int(word(cols, int(word(have, k)))))) \
+         title label(int(word(have, k))) lc int(word(have, k)) pt 7, \
+       for [k=1:words(have)] fitline(int(word(have, k)), x) notitle with lines dt 2 lc int(word(have, k))
   set format x '%g'
 }
 set output
