@@ -1,0 +1,186 @@
+// The Bullet side of the oracle (see bullet_oracle.hpp). This one source is compiled once per Bullet
+// flavour: against double Bullet into cg_validate, and against float Bullet, with
+// CG_BULLET_ORACLE_MAIN defined, into the executable `contactgrid-bullet-float`. Nothing here may
+// depend on which flavour it is, except through btScalar.
+//
+// Invariants: bodies are added in id order (so Bullet's body A, the first added, is the smaller id);
+// one performDiscreteCollisionDetection() gives the contacts; the world is torn down in O(pairs + n)
+// (Bullet's own teardown removes each proxy by scanning every pair: O(n · pairs), minutes at 2^20).
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include <btBulletCollisionCommon.h>
+
+#include "bullet_oracle.hpp"
+#include "errors.hpp"
+
+namespace cg::bullet_native {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+btVector3 to_bt(const Vec3<double>& v) {
+  return btVector3(btScalar(v.x), btScalar(v.y), btScalar(v.z));
+}
+Vec3<double> from_bt(const btVector3& v) { return {double(v.x()), double(v.y()), double(v.z())}; }
+
+// Removes every overlapping pair (releasing its algorithm and manifold) in one pass, so that the
+// world's destructor finds an empty pair cache and destroys each proxy in O(log n).
+struct RemoveAllPairs : btOverlapCallback {
+  bool processOverlap(btBroadphasePair&) override { return true; }
+};
+
+// One Bullet collision world over the spheres. Members are declared in destruction-safe order:
+// shapes and objects outlive the world that points at them.
+class BulletWorld {
+ public:
+  explicit BulletWorld(const OracleSpheres& s)
+      : m_dispatcher(&m_config), m_world(&m_dispatcher, &m_broadphase, &m_config) {
+    const std::size_t n = s.size();
+    m_shapes.reserve(n);
+    m_objects.reserve(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      m_shapes.push_back(std::make_unique<btSphereShape>(btScalar(s.radius[i])));
+      m_objects.push_back(std::make_unique<btCollisionObject>());
+      btTransform t;
+      t.setIdentity();
+      t.setOrigin(to_bt(s.position[i]));
+      m_objects.back()->setWorldTransform(t);
+      m_objects.back()->setCollisionShape(m_shapes.back().get());
+      m_world.addCollisionObject(m_objects.back().get());  // world array index == i
+    }
+  }
+  ~BulletWorld() {
+    RemoveAllPairs remove_all;
+    m_broadphase.getOverlappingPairCache()->processAllOverlappingPairs(&remove_all, &m_dispatcher);
+  }
+  BulletWorld(const BulletWorld&) = delete;
+  BulletWorld& operator=(const BulletWorld&) = delete;
+
+  void detect() { m_world.performDiscreteCollisionDetection(); }
+
+  void move_all(const OracleSpheres& s) {
+    for (std::size_t i = 0; i < m_objects.size(); ++i) {
+      btTransform& t = m_objects[i]->getWorldTransform();
+      t.setOrigin(to_bt(s.position[i] + warm_step_displacement(i, s.radius[i])));
+    }
+  }
+
+  // Deepest manifold point of every pair with distance <= 0, as (id_a < id_b), sorted.
+  Contacts<double> contacts(const OracleSpheres& s) {
+    struct Row {
+      std::int64_t a, b;
+      Vec3<double> pa, pb, n;
+      double d;
+    };
+    std::vector<Row> rows;
+    const int manifolds = m_dispatcher.getNumManifolds();
+    rows.reserve(std::size_t(manifolds));
+    for (int m = 0; m < manifolds; ++m) {
+      const btPersistentManifold* pm = m_dispatcher.getManifoldByIndexInternal(m);
+      int best = -1;
+      for (int c = 0; c < pm->getNumContacts(); ++c) {
+        const btManifoldPoint& p = pm->getContactPoint(c);
+        if (p.getDistance() <= btScalar(0) &&
+            (best < 0 || p.getDistance() < pm->getContactPoint(best).getDistance()))
+          best = c;
+      }
+      if (best < 0) continue;
+      const btManifoldPoint& p = pm->getContactPoint(best);
+      Row r{s.id[std::size_t(pm->getBody0()->getWorldArrayIndex())],
+            s.id[std::size_t(pm->getBody1()->getWorldArrayIndex())],
+            from_bt(p.getPositionWorldOnA()),
+            from_bt(p.getPositionWorldOnB()),
+            from_bt(p.m_normalWorldOnB),
+            double(p.getDistance())};
+      if (r.a > r.b) {  // express the contact with A = the smaller id
+        std::swap(r.a, r.b);
+        std::swap(r.pa, r.pb);
+        r.n = -r.n;
+      }
+      rows.push_back(r);
+    }
+    std::sort(rows.begin(), rows.end(),
+              [](const Row& x, const Row& y) { return x.a != y.a ? x.a < y.a : x.b < y.b; });
+    Contacts<double> out;
+    for (const Row& r : rows) {
+      out.id_a.push_back(r.a);
+      out.id_b.push_back(r.b);
+      out.position_on_a.push_back(r.pa);
+      out.position_on_b.push_back(r.pb);
+      out.normal_on_b.push_back(r.n);
+      out.distance.push_back(r.d);
+    }
+    return out;
+  }
+
+ private:
+  std::vector<std::unique_ptr<btSphereShape>> m_shapes;
+  std::vector<std::unique_ptr<btCollisionObject>> m_objects;
+  btDefaultCollisionConfiguration m_config;
+  btCollisionDispatcher m_dispatcher;
+  btDbvtBroadphase m_broadphase;
+  btCollisionWorld m_world;
+};
+
+}  // namespace
+
+OracleResult collide(const OracleSpheres& spheres, bool warm_step) {
+  for (std::size_t i = 1; i < spheres.size(); ++i)
+    if (spheres.id[i - 1] >= spheres.id[i])
+      throw InputError("Bullet oracle: body ids must be strictly ascending (row " +
+                       std::to_string(i) + ")");
+  OracleResult result;
+  result.scalar_bytes = int(sizeof(btScalar));
+  const auto t0 = Clock::now();
+  BulletWorld world(spheres);
+  world.detect();
+  result.scratch_seconds = seconds_since(t0);
+  result.contacts = world.contacts(spheres);
+  if (warm_step) {
+    const auto t1 = Clock::now();
+    world.move_all(spheres);
+    world.detect();
+    result.warm_seconds = seconds_since(t1);
+  }
+  return result;
+}
+
+}  // namespace cg::bullet_native
+
+#ifdef CG_BULLET_ORACLE_MAIN
+// contactgrid-bullet-float INPUT OUTPUT: runs this binary's Bullet on INPUT, writes OUTPUT.
+// Exit codes as errors.hpp: 0 ok, 2 usage, 3 input, 6 I/O, 8 internal.
+int main(int argc, char** argv) {
+  if (argc != 3) {
+    std::fprintf(stderr,
+                 "usage: %s INPUT OUTPUT\n"
+                 "Runs Bullet (%s precision) on the spheres of INPUT (contactgrid's oracle exchange\n"
+                 "format, see src/bullet_oracle.hpp) and writes the contacts to OUTPUT.\n"
+                 "Started by `contactgrid validate --bullet float`; not meant to be run by hand.\n",
+                 argv[0], sizeof(btScalar) == 8 ? "double" : "single");
+    return 2;
+  }
+  try {
+    bool warm = false;
+    const cg::OracleSpheres spheres = cg::read_oracle_input(argv[1], warm);
+    cg::write_oracle_output(argv[2], cg::bullet_native::collide(spheres, warm));
+    return 0;
+  } catch (const cg::Error& e) {
+    std::fprintf(stderr, "%s: %s\n", argv[0], e.what());
+    return e.exit_code();
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: internal error: %s\n", argv[0], e.what());
+    return 8;
+  }
+}
+#endif

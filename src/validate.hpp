@@ -1,0 +1,110 @@
+#pragma once
+// `contactgrid validate`: compares a contact set with Bullet on the same scene (CONTRACT §4).
+//
+// Comparison: pairs are matched by (id_a, id_b). A pair found by one side only is "missing" (only
+// Bullet found it) or "extra" (only the contacts given found it) unless it is borderline: its exact
+// signed distance (recomputed from the scene in long double) is within the band
+//     band = max(tol(contacts precision), tol(Bullet precision)),  scale = mean sphere radius,
+//     tol(fp64 contacts) = max(1e-9·scale, 16·eps64·extent)   extent: largest edge of the scene box
+//     tol(fp32 contacts) = max(1e-4·scale, 16·eps32·extent)   (the engine computes in a local frame)
+//     tol(double Bullet) = max(1e-9·scale, 16·eps64·magnitude) magnitude: largest |world coordinate|
+//     tol(float Bullet)  = 1e-4·scale  (float Bullet works in world coordinates; far from the origin
+//                                       it is simply wrong, and that must show, not be excused)
+// where either decision is correct. For matched pairs: position error = max(|Δposition_on_a|,
+// |Δposition_on_b|), normal angle in degrees, |Δdistance|.
+// PASS iff the contacts obey CONTRACT §2 (id_a < id_b, sorted, each pair once, ids in range), no pair
+// is missing or extra outside the band, every position error <= pos_eps and every angle <= angle_deg.
+// The distance error is reported, not judged (it is bounded by the position errors).
+//
+// Sampling (sample = K > 0): the centres' box is cut into a lattice of cells holding about
+// bodies_per_box sphere centres each, and K distinct cells are drawn at random (seeded): disjoint
+// sub-boxes, so no pair is counted twice. Bullet runs on the spheres within the box grown by
+// 2·r_max, and only pairs whose two centres lie inside the box itself are compared. The report gives
+// the fraction of the contacts checked. A scene smaller than one box is checked whole.
+//
+// Ellipsoids: Bullet has no ellipsoid shape, so contacts involving an ellipsoid are not checked; the
+// report says how many were skipped and the checked fraction excludes them.
+#include <cstdint>
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+#include "engine.hpp"
+#include "scene.hpp"
+
+namespace cg {
+
+struct ValidateOptions {
+  double pos_eps = 0.1;                  // --pos-eps: absolute, world units
+  double angle_deg = 10.0;               // --angle-deg
+  Precision bullet = Precision::fp64;    // --bullet double|float
+  std::uint64_t sample = 0;              // --sample K: K random sub-boxes; 0 = whole scene
+  std::uint64_t seed = 1;                // --seed: picks the sub-boxes
+  std::uint64_t bodies_per_box = 4000;   // target sphere count of one sub-box
+  Precision contacts_precision = Precision::fp64;  // precision the contacts were computed in
+                                                   // (validate_files takes it from the file)
+  std::size_t max_offenders = 8;         // listed per kind in the report
+};
+
+// "double" | "float" (also "fp64" | "fp32") -> Precision; UsageError otherwise.
+Precision parse_bullet_precision(const std::string& name);
+
+struct ValidateOffender {
+  enum class Kind { missing, extra, position, angle, distance };
+  Kind kind;
+  std::int64_t id_a = 0, id_b = 0;
+  double value = 0;             // position error, angle (deg), distance error, or |exact distance|
+  double exact_distance = 0;    // recomputed from the scene in long double
+  double contacts_distance = 0; // NaN when the contacts lack the pair
+  double bullet_distance = 0;   // NaN when Bullet lacks the pair
+};
+const char* to_string(ValidateOffender::Kind k);
+
+struct ValidateReport {
+  bool pass = false;
+  std::vector<std::string> failures;  // one line per failed criterion or contract violation
+  std::vector<std::string> notes;     // skipped ellipsoids, sampling fallbacks, …
+
+  // What was compared.
+  Precision bullet = Precision::fp64;
+  std::uint64_t sample_boxes = 0;     // 0: whole scene
+  std::uint64_t contacts = 0;         // rows of the contacts given
+  std::uint64_t checked = 0;          // of which compared with Bullet
+  std::uint64_t bullet_contacts = 0;  // Bullet's contacts in the compared region(s)
+  std::uint64_t matched = 0;
+  std::uint64_t missing = 0, extra = 0;                        // outside the band
+  std::uint64_t borderline_missing = 0, borderline_extra = 0;  // inside the band (accepted)
+  std::uint64_t skipped_ellipsoid = 0;                         // contacts with an ellipsoid
+
+  // Contract violations of the contacts given (CONTRACT §2).
+  std::uint64_t bad_id_order = 0, unsorted = 0, duplicates = 0, bad_ids = 0, non_finite = 0;
+
+  // Geometry of the matched pairs.
+  double max_position_error = 0, max_angle_deg = 0, max_distance_error = 0;
+
+  // Criteria used.
+  double pos_eps = 0, angle_deg = 0, band = 0, scale = 0;
+  double bullet_seconds = 0;
+
+  std::vector<ValidateOffender> offenders;  // worst first within each kind
+
+  double checked_fraction() const {
+    const std::uint64_t checkable = contacts - skipped_ellipsoid;
+    return checkable ? double(checked) / double(checkable) : 1.0;
+  }
+  // "validate: PASS|FAIL …" followed by the statistics, the failures and the worst offenders.
+  std::string text() const;
+};
+
+// Compares `contacts` (any order: violations are reported, and the comparison still runs on the
+// contacts put in canonical form) with Bullet on `scene`. Throws InputError when the contact arrays
+// have inconsistent lengths, UsageError for bad options, IoError when float Bullet cannot be run.
+ValidateReport validate(const Scene& scene, const Contacts<double>& contacts,
+                        const ValidateOptions& options);
+
+// read_scene + read_contacts (src/hdf5_io.hpp), then validate(); contacts_precision is taken from the
+// contact file's `precision` attribute.
+ValidateReport validate_files(const std::string& scene_path, const std::string& contacts_path,
+                              ValidateOptions options);
+
+}  // namespace cg
