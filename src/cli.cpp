@@ -7,6 +7,10 @@
 #include <map>
 
 #include "pipeline.hpp"
+#if defined(CONTACTGRID_HAVE_BULLET)
+#include "bench.hpp"
+#include "validate.hpp"
+#endif
 #include "session.hpp"
 
 namespace cg {
@@ -75,6 +79,47 @@ int run_cli(int argc, char** argv, Session& session) {
       ->capture_default_str();
   d->add_flag("-q,--quiet", det.quiet, "No summary");
 
+#if defined(CONTACTGRID_HAVE_BULLET)
+  // validate
+  std::string val_scene, val_contacts, val_bullet = "double";
+  ValidateOptions val;
+  auto* v = app.add_subcommand("validate", "Compare a contacts file with Bullet 3.24 (CONTRACT §4); PASS exits 0, FAIL 1");
+  v->add_option("scene", val_scene, "Scene file (.h5)")->required();
+  v->add_option("contacts", val_contacts, "Contacts file (.h5) written by detect")->required();
+  v->add_option("--pos-eps", val.pos_eps, "Largest position error allowed (absolute, length units)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  v->add_option("--angle-deg", val.angle_deg, "Largest angle between normals allowed (degrees)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  v->add_option("--bullet-precision", val_bullet,
+                "double (default) | float: Bullet build to compare with; float Bullet is wrong far from the "
+                "origin and for nearly coincident centres")
+      ->check(CLI::IsMember({"double", "float"}))
+      ->capture_default_str();
+  v->add_option("--sample", val.sample, "Validate K random sub-boxes instead of the whole scene (large scenes)");
+  v->add_option("--seed", val.seed, "Seed of the sub-box choice")->capture_default_str();
+
+  // bench
+  BenchOptions bench;
+  std::vector<std::string> bench_backends;
+  bool bench_no_plot = false;
+  auto* b = app.add_subcommand("bench", "Timing study: engine vs Bullet for N = 2^lo … 2^hi (table, CSV, plots)");
+  b->add_option("--lo", bench.lo, "First N = 2^lo")->capture_default_str();
+  b->add_option("--bullet-hi", bench.bullet_hi, "Bullet runs while N <= 2^bullet-hi")->capture_default_str();
+  b->add_option("--engine-hi", bench.engine_hi, "The engine runs while N <= 2^engine-hi")->capture_default_str();
+  b->add_option("--repetitions", bench.repetitions, "Engine time = median of this many warm runs")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  b->add_option("--backend", bench_backends, "cpu | cuda (repeatable; default: cpu, and cuda when present)")
+      ->check(CLI::IsMember({"cpu", "cuda"}));
+  b->add_option("--threads", bench.threads, "CPU backend threads (0: all cores)");
+  b->add_option("--seed", bench.seed, "Scene seed")->capture_default_str();
+  b->add_option("--csv", bench.csv, "CSV output")->capture_default_str();
+  b->add_option("--plot-prefix", bench.plot_prefix, "Plot file prefix (PNG and SVG); default: the CSV name");
+  b->add_flag("--no-plot", bench_no_plot, "Do not run gnuplot");
+#endif
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -94,6 +139,22 @@ int run_cli(int argc, char** argv, Session& session) {
     return run_generate(gen_out, gen, gen_quiet);
   }
   if (d->parsed()) return run_detect(det, session);
+#if defined(CONTACTGRID_HAVE_BULLET)
+  if (v->parsed()) {
+    if (session.rank() != 0) return 0;
+    val.bullet = parse_bullet_precision(val_bullet);
+    const ValidateReport report = validate_files(val_scene, val_contacts, val);
+    fmt::print("{}", report.text());
+    return report.pass ? 0 : 1;
+  }
+  if (b->parsed()) {
+    if (session.rank() != 0) return 0;
+    for (const auto& name : bench_backends) bench.backends.push_back(name == "cuda" ? Backend::cuda : Backend::cpu);
+    bench.plot = !bench_no_plot;
+    run_bench(bench);
+    return 0;
+  }
+#endif
   return 2;
 }
 

@@ -92,6 +92,30 @@ TEST_F(Cli, GenerateDetectRoundTrip) {
   EXPECT_EQ(c32.contacts.size(), c.contacts.size());
 }
 
+TEST_F(Cli, ValidatePassesAndFails) {
+  ASSERT_EQ(run("generate " + path("s.h5") + " --count 2000 --seed 3 -q").code, 0);
+  ASSERT_EQ(run("detect " + path("s.h5") + " -o " + path("c.h5") + " --backend cpu -q").code, 0);
+  Result ok = run("validate " + path("s.h5") + " " + path("c.h5"));
+  EXPECT_EQ(ok.code, 0) << ok.output;
+  EXPECT_NE(ok.output.find("PASS"), std::string::npos) << ok.output;
+  // the same contacts against a different scene: FAIL, exit 1
+  ASSERT_EQ(run("generate " + path("t.h5") + " --count 2000 --seed 4 -q").code, 0);
+  Result bad = run("validate " + path("t.h5") + " " + path("c.h5"));
+  EXPECT_EQ(bad.code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("FAIL"), std::string::npos) << bad.output;
+}
+
+TEST_F(Cli, BenchWritesTheTable) {
+  Result r = run("bench --lo 8 --bullet-hi 9 --engine-hi 10 --repetitions 1 --backend cpu --no-plot --csv " +
+                 path("b.csv"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(fs::exists(path("b.csv")));
+  std::ifstream csv(path("b.csv"));
+  std::size_t lines = 0;
+  for (std::string l; std::getline(csv, l);) ++lines;
+  EXPECT_EQ(lines, 4u) << "header + N = 2^8, 2^9, 2^10";
+}
+
 TEST_F(Cli, UsageErrorsExitTwo) {
   write_scene(path("s.h5"), small_scene());
   EXPECT_EQ(run("detect " + path("s.h5") + " -o " + path("o.h5") + " --backend gpu").code, 2);
