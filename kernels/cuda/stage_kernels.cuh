@@ -1,0 +1,274 @@
+#pragma once
+// The CUDA kernels of the Le Grand stages. Each mirrors one loop of kernels/host/host_backend.cpp and
+// calls the same CG_HD functions of kernels/core/ in the same order, so every decision and every
+// value is bit-identical to the CPU backend (no FMA contraction: --fmad=false; IEEE sqrt and div).
+//
+// Thread mapping: one thread per body (pack, fill_entries), per sorted entry (count_pairs,
+// fill_pairs) or per pair (narrow); blocks of kBlock threads, no grid-stride loop in the
+// count → fill pairs, so that a block's count kernel and fill kernel see the same items and the
+// fill places its items with a block-wide exclusive scan plus the block's scanned total.
+#include <cub/block/block_reduce.cuh>
+#include <cub/block/block_scan.cuh>
+
+#include <cstdint>
+
+#include "core/contact.hpp"
+#include "core/grid.hpp"
+#include "engine.hpp"
+
+namespace cg::cuda {
+
+constexpr int kBlock = 256;
+
+// DEVICE counters of one call; zeroed (cudaMemsetAsync) before the first kernel that adds to them.
+struct Counters {
+  unsigned long long entries;  // sum of entry counts (pack)
+  unsigned long long pairs;    // contacting pairs (count_pairs)
+  unsigned long long tests;    // sphere tests made (count_pairs)
+  unsigned long long bad;      // n - i of the first invalid body i (atomicMax), 0: none
+};
+
+// Per-block partial bounds (device_bounds).
+struct BoundsPartial {
+  double lo[3], hi[3], r_max;
+};
+
+// Pointers of the contact arrays in DEVICE memory; the `full` four are null for Fields::basic.
+template <class Real>
+struct ContactPtrs {
+  std::int64_t *id_a, *id_b;
+  Vec3<Real> *position_on_a, *position_on_b, *normal_on_b;
+  Real* distance;
+  Vec3<Real> *local_point_a, *local_point_b, *dir1, *dir2;
+};
+
+__device__ __forceinline__ bool body_is_bad(double x, double y, double z, double r) {
+  return !isfinite(x) || !isfinite(y) || !isfinite(z) || !(r > 0) || !isfinite(r);
+}
+
+// Bounds of the bodies' boxes (p ± r, as compute_bounds) and r_max, one partial per block
+// (grid-stride). Records the first invalid body in c->bad. min/max are exact: same bits as the host.
+__global__ void bounds_partial_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
+                                      std::uint64_t n, BoundsPartial* __restrict__ partial,
+                                      Counters* __restrict__ c) {
+  __shared__ double sh[7][kBlock];
+  double acc[7] = {INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY, 0.0};
+  for (std::uint64_t i = std::uint64_t(blockIdx.x) * kBlock + threadIdx.x; i < n;
+       i += std::uint64_t(gridDim.x) * kBlock) {
+    const double p[3] = {pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]};
+    const double r = rad[i];
+    if (body_is_bad(p[0], p[1], p[2], r)) atomicMax(&c->bad, static_cast<unsigned long long>(n - i));
+    for (int k = 0; k < 3; ++k) {
+      const double lo = p[k] - r, hi = p[k] + r;
+      acc[k] = lo < acc[k] ? lo : acc[k];
+      acc[3 + k] = hi > acc[3 + k] ? hi : acc[3 + k];
+    }
+    acc[6] = r > acc[6] ? r : acc[6];
+  }
+  for (int v = 0; v < 7; ++v) sh[v][threadIdx.x] = acc[v];
+  __syncthreads();
+  for (int s = kBlock / 2; s > 0; s >>= 1) {
+    if (int(threadIdx.x) < s) {
+      for (int v = 0; v < 3; ++v) {
+        const double o = sh[v][threadIdx.x + s];
+        sh[v][threadIdx.x] = o < sh[v][threadIdx.x] ? o : sh[v][threadIdx.x];
+      }
+      for (int v = 3; v < 7; ++v) {
+        const double o = sh[v][threadIdx.x + s];
+        sh[v][threadIdx.x] = o > sh[v][threadIdx.x] ? o : sh[v][threadIdx.x];
+      }
+    }
+    __syncthreads();
+  }
+  if (threadIdx.x == 0) {
+    for (int k = 0; k < 3; ++k) {
+      partial[blockIdx.x].lo[k] = sh[k][0];
+      partial[blockIdx.x].hi[k] = sh[3 + k][0];
+    }
+    partial[blockIdx.x].r_max = sh[6][0];
+  }
+}
+
+// One thread folds the (few hundred) partials into partial[0].
+__global__ void bounds_final_kernel(BoundsPartial* partial, int count) {
+  if (threadIdx.x != 0 || blockIdx.x != 0) return;
+  BoundsPartial b = partial[0];
+  for (int j = 1; j < count; ++j) {
+    const BoundsPartial o = partial[j];
+    for (int k = 0; k < 3; ++k) {
+      b.lo[k] = o.lo[k] < b.lo[k] ? o.lo[k] : b.lo[k];
+      b.hi[k] = o.hi[k] > b.hi[k] ? o.hi[k] : b.hi[k];
+    }
+    b.r_max = o.r_max > b.r_max ? o.r_max : b.r_max;
+  }
+  partial[0] = b;
+}
+
+// pack: world (double) → local Real sphere `Real(p - origin)`, control byte, and per block the sum of
+// the entry counts (block_entries[blockIdx.x]; total added to c->entries). Invalid bodies → c->bad.
+template <class Real>
+__global__ void __launch_bounds__(kBlock) pack_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
+                                                      std::uint32_t n, Vec3<double> origin, GridParams<Real> g,
+                                                      Sphere<Real>* __restrict__ spheres,
+                                                      std::uint8_t* __restrict__ ctrl,
+                                                      std::uint32_t* __restrict__ block_entries,
+                                                      Counters* __restrict__ c) {
+  using Reduce = cub::BlockReduce<std::uint32_t, kBlock>;
+  __shared__ typename Reduce::TempStorage tmp;
+  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+  std::uint32_t count = 0;
+  if (i < n) {
+    const std::uint64_t i3 = 3 * std::uint64_t(i);
+    const double px = pos[i3], py = pos[i3 + 1], pz = pos[i3 + 2], r = rad[i];
+    if (body_is_bad(px, py, pz, r)) atomicMax(&c->bad, static_cast<unsigned long long>(n - i));
+    const Sphere<Real> s{static_cast<Real>(px - origin.x), static_cast<Real>(py - origin.y),
+                         static_cast<Real>(pz - origin.z), static_cast<Real>(r)};
+    spheres[i] = s;
+    const BodyCells bc = body_cells(s, g);
+    ctrl[i] = control_bits(bc);
+    count = entry_count(bc);
+  }
+  const std::uint32_t total = Reduce(tmp).Sum(count);
+  if (threadIdx.x == 0) {
+    block_entries[blockIdx.x] = total;
+    atomicAdd(&c->entries, static_cast<unsigned long long>(total));
+  }
+}
+
+// entries: (cell key, body) in body order; body i's entries start at its block's scanned total plus
+// its exclusive rank in the block (same block layout as pack_kernel).
+template <class Real, class Key>
+__global__ void __launch_bounds__(kBlock) fill_entries_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n,
+                                                              GridParams<Real> g,
+                                                              const std::uint32_t* __restrict__ block_offset,
+                                                              Key* __restrict__ keys, std::uint32_t* __restrict__ body) {
+  using Scan = cub::BlockScan<std::uint32_t, kBlock>;
+  __shared__ typename Scan::TempStorage tmp;
+  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+  BodyCells bc{};
+  std::uint32_t count = 0;
+  if (i < n) {
+    bc = body_cells(spheres[i], g);  // the same Real sphere and function as pack: the same cells
+    count = entry_count(bc);
+  }
+  std::uint32_t rank;
+  Scan(tmp).ExclusiveSum(count, rank);
+  if (i < n) {
+    const std::uint32_t o = block_offset[blockIdx.x] + rank;
+    for (std::uint32_t m = 0; m < count; ++m) {
+      keys[o + m] = body_cell_key<Key>(bc, m, g);
+      body[o + m] = i;
+    }
+  }
+}
+
+// The host's for_each_contact for sorted entry e: tests against the later entries of its cell.
+template <class Real, class Key, class Emit>
+__device__ __forceinline__ std::uint32_t for_each_contact(std::uint32_t e, const Key* __restrict__ keys,
+                                                          const std::uint32_t* __restrict__ body,
+                                                          std::uint32_t n_entries,
+                                                          const std::uint8_t* __restrict__ ctrl,
+                                                          const Sphere<Real>* __restrict__ spheres,
+                                                          int half_bits, Emit&& emit) {
+  const Key k = keys[e];
+  const std::uint32_t type = key_type(k, half_bits);
+  const std::uint32_t a = body[e];
+  const std::uint8_t ca = ctrl[a];
+  const Sphere<Real> sa = spheres[a];
+  std::uint32_t tests = 0;
+  for (std::uint32_t f = e + 1; f < n_entries && keys[f] == k; ++f) {
+    const std::uint32_t b = body[f];
+    if (!test_in_cell(ca, ctrl[b], type)) continue;
+    ++tests;
+    if (spheres_touch(sa, spheres[b])) emit(a, b);
+  }
+  return tests;
+}
+
+// pairs, count: count[e] = contacting pairs of entry e (0 when report[a] is 0); per block the sum
+// (block_pairs); totals of pairs and tests added to c.
+template <class Real, class Key>
+__global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
+                                                             std::uint32_t n_entries,
+                                                             const std::uint8_t* __restrict__ ctrl,
+                                                             const Sphere<Real>* __restrict__ spheres,
+                                                             const std::uint8_t* __restrict__ report, int half_bits,
+                                                             std::uint32_t* __restrict__ count,
+                                                             std::uint32_t* __restrict__ block_pairs,
+                                                             Counters* __restrict__ c) {
+  using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
+  __shared__ typename Reduce::TempStorage tmp;
+  const std::uint32_t e = blockIdx.x * kBlock + threadIdx.x;
+  unsigned long long pairs = 0, tests = 0;
+  if (e < n_entries) {
+    if (!report || report[body[e]]) {
+      std::uint32_t found = 0;
+      tests = for_each_contact(e, keys, body, n_entries, ctrl, spheres, half_bits,
+                               [&](std::uint32_t, std::uint32_t) { ++found; });
+      pairs = found;
+    }
+    count[e] = static_cast<std::uint32_t>(pairs);
+  }
+  const unsigned long long block_sum = Reduce(tmp).Sum(pairs);
+  __syncthreads();  // tmp is reused
+  const unsigned long long block_tests = Reduce(tmp).Sum(tests);
+  if (threadIdx.x == 0) {
+    // Truncation is harmless: the host rejects totals >= 2^31 before block_pairs is used.
+    block_pairs[blockIdx.x] = static_cast<std::uint32_t>(block_sum);
+    atomicAdd(&c->pairs, block_sum);
+    atomicAdd(&c->tests, block_tests);
+  }
+}
+
+// pairs, fill: u64 pair keys a << id_bits | b at the block's scanned total + the entry's rank.
+template <class Real, class Key>
+__global__ void __launch_bounds__(kBlock) fill_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
+                                                            std::uint32_t n_entries,
+                                                            const std::uint8_t* __restrict__ ctrl,
+                                                            const Sphere<Real>* __restrict__ spheres, int half_bits,
+                                                            const std::uint32_t* __restrict__ count,
+                                                            const std::uint32_t* __restrict__ block_offset, int id_bits,
+                                                            std::uint64_t* __restrict__ pairs) {
+  using Scan = cub::BlockScan<std::uint32_t, kBlock>;
+  __shared__ typename Scan::TempStorage tmp;
+  const std::uint32_t e = blockIdx.x * kBlock + threadIdx.x;
+  const std::uint32_t mine = e < n_entries ? count[e] : 0u;
+  std::uint32_t rank;
+  Scan(tmp).ExclusiveSum(mine, rank);
+  if (mine == 0) return;
+  std::uint64_t* w = pairs + block_offset[blockIdx.x] + rank;
+  for_each_contact(e, keys, body, n_entries, ctrl, spheres, half_bits, [&](std::uint32_t a, std::uint32_t b) {
+    *w++ = (std::uint64_t(a) << id_bits) | b;
+  });
+}
+
+// narrow: contact data of each sorted pair, world frame as the host: Real(double(origin) + double(v)).
+template <class Real>
+__global__ void __launch_bounds__(kBlock) narrow_kernel(const std::uint64_t* __restrict__ pairs, std::uint32_t n_pairs,
+                                                        int id_bits, const Sphere<Real>* __restrict__ spheres,
+                                                        Vec3<double> origin, ContactPtrs<Real> out, bool full) {
+  const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
+  if (k >= n_pairs) return;
+  const std::uint64_t id_mask = (std::uint64_t(1) << id_bits) - 1;
+  const std::uint32_t a = static_cast<std::uint32_t>(pairs[k] >> id_bits);
+  const std::uint32_t b = static_cast<std::uint32_t>(pairs[k] & id_mask);
+  const Sphere<Real> sa = spheres[a], sb = spheres[b];
+  const ContactGeometry<Real> c = sphere_sphere_contact(sa, sb);
+  auto world = [&](Vec3<Real> v) {
+    return Vec3<Real>{static_cast<Real>(origin.x + double(v.x)), static_cast<Real>(origin.y + double(v.y)),
+                      static_cast<Real>(origin.z + double(v.z))};
+  };
+  out.id_a[k] = a;
+  out.id_b[k] = b;
+  out.position_on_a[k] = world(c.position_on_a);
+  out.position_on_b[k] = world(c.position_on_b);
+  out.normal_on_b[k] = c.normal_on_b;
+  out.distance[k] = c.distance;
+  if (full) {
+    out.local_point_a[k] = c.position_on_a - sa.centre();
+    out.local_point_b[k] = c.position_on_b - sb.centre();
+    plane_space(c.normal_on_b, out.dir1[k], out.dir2[k]);
+  }
+}
+
+}  // namespace cg::cuda
