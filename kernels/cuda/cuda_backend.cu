@@ -9,7 +9,8 @@
 //
 // Stages (event-timed on the stream; names as the host's plus "upload" and "download"):
 //   upload    host-array path only: positions, radii, report mask → device
-//   pack      world double → local Real spheres, control bytes, per-block entry totals
+//   pack      world double → local Real spheres; renumber the bodies by 4x4x4-cell block (a short
+//             radix sort, for locality of the pair stage only); control bytes, per-block entry totals
 //   entries   scan of the block totals → fill (cell key, body) in body order
 //   sort      cub::DeviceRadixSort::SortPairs over bits [0, key_bits)
 //   pairs     count per sorted entry → scan of block totals → fill u64 pair keys
@@ -124,7 +125,7 @@ class CudaBackend {
   }
   std::uint64_t held_bytes() const {
     std::uint64_t s = 0;
-    for (const Bytes* b : {&m_pos, &m_rad, &m_report, &m_spheres, &m_ctrl, &m_body_blocks, &m_entry_blocks,
+    for (const Bytes* b : {&m_pos, &m_rad, &m_report, &m_spheres, &m_cell_spheres, &m_perm, &m_ctrl, &m_body_blocks, &m_entry_blocks,
                            &m_keys[0], &m_keys[1], &m_bodies[0], &m_bodies[1], &m_pairs[0], &m_pairs[1], &m_out,
                            &m_temp, &m_counters, &m_partials})
       s += b->bytes();
@@ -167,7 +168,7 @@ class CudaBackend {
   std::uint64_t m_allocations = 0;
   // Workspace (DEVICE): input copies (host path), packed spheres, control bytes, block totals and
   // offsets, entries (double-buffered keys and bodies), pairs (double-buffered), contacts, CUB temp.
-  Bytes m_pos, m_rad, m_report, m_spheres, m_ctrl, m_body_blocks, m_entry_blocks;
+  Bytes m_pos, m_rad, m_report, m_spheres, m_cell_spheres, m_perm, m_ctrl, m_body_blocks, m_entry_blocks;
   Bytes m_keys[2], m_bodies[2], m_pairs[2], m_out, m_temp, m_counters, m_partials;
   PinnedBuffer m_h_counters, m_h_staging;  // pinned HOST staging
 
@@ -232,14 +233,31 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
     return cub::DeviceScan::ExclusiveSum(t, b, static_cast<std::uint32_t*>(nullptr),
                                          static_cast<std::uint32_t*>(nullptr), int(nb), st);
   });
+  // Renumbering sort of the bodies by 4x4x4-cell block (locality only; see home_block_key), over the
+  // bits of the block index. Its four arrays are the entry buffers, not yet live.
+  const std::uint64_t blocks3 = ((std::uint64_t(g.dims[0]) + 3) / 4) * ((std::uint64_t(g.dims[1]) + 3) / 4) *
+                                ((std::uint64_t(g.dims[2]) + 3) / 4);
+  const int home_bits = std::max(1, bits_for(blocks3));
+  cub::DoubleBuffer<Key> home_key(nullptr, nullptr);
+  cub::DoubleBuffer<std::uint32_t> home_index(nullptr, nullptr);
+  auto sort_home = [&](void* t, std::size_t& b) {
+    return cub::DeviceRadixSort::SortPairs(t, b, home_key, home_index, int(n), 0, home_bits, st);
+  };
+  if (n64 >= (std::uint64_t(1) << 31)) throw ResourceError("more than 2^31 - 1 bodies on one GPU; use more MPI ranks");
   reserve({{&m_pos, device_in ? 0 : n64 * sizeof(Vec3<double>)},
            {&m_rad, device_in ? 0 : n64 * sizeof(double)},
            {&m_report, device_in || job.bodies.report.empty() ? 0 : n64},
            {&m_spheres, n64 * sizeof(Sphere<Real>)},
+           {&m_cell_spheres, n64 * sizeof(Sphere<Real>)},
+           {&m_perm, n64 * sizeof(std::uint32_t)},
            {&m_ctrl, n64},
+           {&m_keys[0], n64 * sizeof(Key)},
+           {&m_keys[1], n64 * sizeof(Key)},
+           {&m_bodies[0], n64 * sizeof(std::uint32_t)},
+           {&m_bodies[1], n64 * sizeof(std::uint32_t)},
            {&m_body_blocks, 2 * std::size_t(nb) * sizeof(std::uint32_t)},
            {&m_counters, sizeof(Counters)},
-           {&m_temp, scan_nb_temp}},
+           {&m_temp, std::max(scan_nb_temp, temp_bytes(sort_home))}},
           "pack");
   m_h_counters.reserve(sizeof(Counters));
   CG_CUDA_CHECK(cudaEventRecord(m_events[0], st));
@@ -266,15 +284,24 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   }
 
   // ---- pack -------------------------------------------------------------------------------------
-  Sphere<Real>* d_spheres = m_spheres.span_as<Sphere<Real>>(n).data();
-  std::uint8_t* d_ctrl = m_ctrl.span_as<std::uint8_t>(n).data();
+  Sphere<Real>* d_spheres = m_spheres.span_as<Sphere<Real>>(n).data();  // input order
+  Sphere<Real>* d_cell_spheres = m_cell_spheres.span_as<Sphere<Real>>(n).data();  // cell order
+  std::uint32_t* d_perm = m_perm.span_as<std::uint32_t>(n).data();  // cell order → input index
+  std::uint8_t* d_ctrl = m_ctrl.span_as<std::uint8_t>(n).data();    // cell order
   std::uint32_t* d_body_totals = m_body_blocks.span_as<std::uint32_t>(2 * nb).data();
   std::uint32_t* d_body_offsets = d_body_totals + nb;
   Counters* d_counters = m_counters.span_as<Counters>(1).data();
   CG_CUDA_CHECK(cudaMemsetAsync(d_counters, 0, sizeof(Counters), st));
-  cuda::pack_kernel<Real><<<nb, kBlock, 0, st>>>(d_pos, d_rad, n, origin, g, d_spheres, d_ctrl, d_body_totals,
-                                                 d_counters);
+  home_key = cub::DoubleBuffer<Key>(m_keys[0].span_as<Key>(n).data(), m_keys[1].span_as<Key>(n).data());
+  home_index = cub::DoubleBuffer<std::uint32_t>(m_bodies[0].span_as<std::uint32_t>(n).data(),
+                                                m_bodies[1].span_as<std::uint32_t>(n).data());
+  cuda::pack_kernel<Real, Key><<<nb, kBlock, 0, st>>>(d_pos, d_rad, n, origin, g, d_spheres, home_key.Current(),
+                                                      home_index.Current(), d_counters);
   CG_CUDA_CHECK_LAUNCH("pack");
+  run_cub(sort_home);
+  cuda::reorder_kernel<Real><<<nb, kBlock, 0, st>>>(d_spheres, n, g, home_index.Current(), d_cell_spheres, d_ctrl,
+                                                    d_perm, d_body_totals, d_counters);
+  CG_CUDA_CHECK_LAUNCH("reorder");
   mark(1);
   run_cub([&](void* t, std::size_t& b) {
     return cub::DeviceScan::ExclusiveSum(t, b, d_body_totals, d_body_offsets, int(nb), st);
@@ -316,7 +343,7 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   keys = cub::DoubleBuffer<Key>(m_keys[0].span_as<Key>(ne).data(), m_keys[1].span_as<Key>(ne).data());
   body = cub::DoubleBuffer<std::uint32_t>(m_bodies[0].span_as<std::uint32_t>(ne).data(),
                                           m_bodies[1].span_as<std::uint32_t>(ne).data());
-  cuda::fill_entries_kernel<Real, Key><<<nb, kBlock, 0, st>>>(d_spheres, n, g, d_body_offsets, keys.Current(),
+  cuda::fill_entries_kernel<Real, Key><<<nb, kBlock, 0, st>>>(d_cell_spheres, n, g, d_body_offsets, keys.Current(),
                                                               body.Current());
   CG_CUDA_CHECK_LAUNCH("fill_entries");
   mark(2);
@@ -332,8 +359,9 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   auto* d_pair_count = reinterpret_cast<std::uint32_t*>(keys.Alternate());
   std::uint32_t* d_entry_totals = m_entry_blocks.span_as<std::uint32_t>(2 * neb).data();
   std::uint32_t* d_entry_offsets = d_entry_totals + neb;
-  cuda::count_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(d_keys, d_body, ne, d_ctrl, d_spheres, d_report,
-                                                              g.half_bits, d_pair_count, d_entry_totals, d_counters);
+  cuda::count_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(d_keys, d_body, ne, d_ctrl, d_cell_spheres, d_perm,
+                                                              d_report, g.half_bits, d_pair_count, d_entry_totals,
+                                                              d_counters);
   CG_CUDA_CHECK_LAUNCH("count_pairs");
   CG_CUDA_CHECK(cudaMemcpyAsync(h_counters, d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, st));
   CG_CUDA_CHECK(cudaStreamSynchronize(st));  // host needs the pairs total
@@ -368,9 +396,9 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
                                            m_pairs[1].span_as<std::uint64_t>(np).data());
   run_cub(scan_entry_blocks);
   if (np > 0) {
-    cuda::fill_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(d_keys, d_body, ne, d_ctrl, d_spheres, g.half_bits,
-                                                               d_pair_count, d_entry_offsets, id_bits,
-                                                               pairs.Current());
+    cuda::fill_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(d_keys, d_body, ne, d_ctrl, d_cell_spheres, d_perm,
+                                                               d_report, g.half_bits, d_pair_count, d_entry_offsets,
+                                                               id_bits, pairs.Current());
     CG_CUDA_CHECK_LAUNCH("fill_pairs");
   }
   mark(4);

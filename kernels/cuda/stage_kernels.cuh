@@ -104,28 +104,56 @@ __global__ void bounds_final_kernel(BoundsPartial* partial, int count) {
   partial[0] = b;
 }
 
-// pack: world (double) → local Real sphere `Real(p - origin)`, control byte, and per block the sum of
-// the entry counts (block_entries[blockIdx.x]; total added to c->entries). Invalid bodies → c->bad.
-template <class Real>
+// Locality key of a body: linear index of the 4x4x4-cell block holding its lowest cell. Sorting
+// the bodies by it renumbers them so that the bodies of neighbouring cells have nearby indices (the
+// pair stage then reads spheres and control bytes coherently). It changes no result: decisions are
+// symmetric in the two bodies, and pairs are emitted and sorted by their original indices.
+template <class Key, class Real>
+__device__ __forceinline__ Key home_block_key(const BodyCells& bc, const GridParams<Real>& g) {
+  const Key bx = (Key(g.dims[0]) + 3) >> 2, by = (Key(g.dims[1]) + 3) >> 2;
+  return Key(bc.lo[0] >> 2) + bx * (Key(bc.lo[1] >> 2) + by * Key(bc.lo[2] >> 2));
+}
+
+// pack: world (double) → local Real sphere `Real(p - origin)` in input order, and the (locality key,
+// index) pairs of the renumbering sort. Invalid bodies → c->bad.
+template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock) pack_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
                                                       std::uint32_t n, Vec3<double> origin, GridParams<Real> g,
                                                       Sphere<Real>* __restrict__ spheres,
-                                                      std::uint8_t* __restrict__ ctrl,
-                                                      std::uint32_t* __restrict__ block_entries,
+                                                      Key* __restrict__ home_key, std::uint32_t* __restrict__ home_index,
                                                       Counters* __restrict__ c) {
+  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+  if (i >= n) return;
+  const std::uint64_t i3 = 3 * std::uint64_t(i);
+  const double px = pos[i3], py = pos[i3 + 1], pz = pos[i3 + 2], r = rad[i];
+  if (body_is_bad(px, py, pz, r)) atomicMax(&c->bad, static_cast<unsigned long long>(n - i));
+  const Sphere<Real> s{static_cast<Real>(px - origin.x), static_cast<Real>(py - origin.y),
+                       static_cast<Real>(pz - origin.z), static_cast<Real>(r)};
+  spheres[i] = s;
+  home_key[i] = home_block_key<Key>(body_cells(s, g), g);
+  home_index[i] = i;
+}
+
+// reorder: cell-ordered copy of the spheres (body j = input body perm[j]), control bytes, and per
+// block the sum of the entry counts (block_entries[blockIdx.x]; total added to c->entries).
+template <class Real>
+__global__ void __launch_bounds__(kBlock) reorder_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n,
+                                                         GridParams<Real> g, const std::uint32_t* __restrict__ sorted_index,
+                                                         Sphere<Real>* __restrict__ cell_spheres,
+                                                         std::uint8_t* __restrict__ ctrl, std::uint32_t* __restrict__ perm,
+                                                         std::uint32_t* __restrict__ block_entries,
+                                                         Counters* __restrict__ c) {
   using Reduce = cub::BlockReduce<std::uint32_t, kBlock>;
   __shared__ typename Reduce::TempStorage tmp;
-  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+  const std::uint32_t j = blockIdx.x * kBlock + threadIdx.x;
   std::uint32_t count = 0;
-  if (i < n) {
-    const std::uint64_t i3 = 3 * std::uint64_t(i);
-    const double px = pos[i3], py = pos[i3 + 1], pz = pos[i3 + 2], r = rad[i];
-    if (body_is_bad(px, py, pz, r)) atomicMax(&c->bad, static_cast<unsigned long long>(n - i));
-    const Sphere<Real> s{static_cast<Real>(px - origin.x), static_cast<Real>(py - origin.y),
-                         static_cast<Real>(pz - origin.z), static_cast<Real>(r)};
-    spheres[i] = s;
+  if (j < n) {
+    const std::uint32_t i = sorted_index[j];
+    const Sphere<Real> s = spheres[i];
+    cell_spheres[j] = s;
+    perm[j] = i;
     const BodyCells bc = body_cells(s, g);
-    ctrl[i] = control_bits(bc);
+    ctrl[j] = control_bits(bc);
     count = entry_count(bc);
   }
   const std::uint32_t total = Reduce(tmp).Sum(count);
@@ -135,8 +163,9 @@ __global__ void __launch_bounds__(kBlock) pack_kernel(const double* __restrict__
   }
 }
 
-// entries: (cell key, body) in body order; body i's entries start at its block's scanned total plus
-// its exclusive rank in the block (same block layout as pack_kernel).
+// entries: (cell key, body) of the cell-ordered bodies, body-ascending; body j's entries start at
+// its block's scanned total plus its exclusive rank in the block (same block layout as
+// reorder_kernel). Staged in shared memory so that the block writes its entries coalesced.
 template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock) fill_entries_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n,
                                                               GridParams<Real> g,
@@ -144,74 +173,132 @@ __global__ void __launch_bounds__(kBlock) fill_entries_kernel(const Sphere<Real>
                                                               Key* __restrict__ keys, std::uint32_t* __restrict__ body) {
   using Scan = cub::BlockScan<std::uint32_t, kBlock>;
   __shared__ typename Scan::TempStorage tmp;
+  __shared__ Key s_keys[8 * kBlock];
+  __shared__ std::uint32_t s_body[8 * kBlock];
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
   BodyCells bc{};
   std::uint32_t count = 0;
   if (i < n) {
-    bc = body_cells(spheres[i], g);  // the same Real sphere and function as pack: the same cells
+    bc = body_cells(spheres[i], g);  // the same Real sphere and function as reorder: the same cells
     count = entry_count(bc);
   }
-  std::uint32_t rank;
-  Scan(tmp).ExclusiveSum(count, rank);
-  if (i < n) {
-    const std::uint32_t o = block_offset[blockIdx.x] + rank;
-    for (std::uint32_t m = 0; m < count; ++m) {
-      keys[o + m] = body_cell_key<Key>(bc, m, g);
-      body[o + m] = i;
-    }
+  std::uint32_t rank, total;
+  Scan(tmp).ExclusiveSum(count, rank, total);
+  for (std::uint32_t m = 0; m < count; ++m) {
+    s_keys[rank + m] = body_cell_key<Key>(bc, m, g);
+    s_body[rank + m] = i;
+  }
+  __syncthreads();
+  const std::uint64_t base = block_offset[blockIdx.x];
+  for (std::uint32_t t = threadIdx.x; t < total; t += kBlock) {
+    keys[base + t] = s_keys[t];
+    body[base + t] = s_body[t];
   }
 }
 
-// The host's for_each_contact for sorted entry e: tests against the later entries of its cell.
+// The host's for_each_contact for sorted entry e: tests against the later entries f >= f0 of its cell
+// (f0 = e + 1 for the whole walk). Bodies are cell-ordered indices; perm maps them to input indices.
+// The host visits a pair (a, b) of input indices a < b from a's entry and skips it when report[a] is
+// 0; here the entry order within a cell follows the cell order, so the mask is read for the smaller
+// input index of the two. Both tests are symmetric in the two bodies (bit for bit), so the decisions
+// are the host's.
+template <class Real>
+struct EntryBody {  // what a visit needs of the first body of a pair
+  std::uint32_t a, type, pa;
+  std::uint8_t ca;
+  Sphere<Real> sa;
+};
+
+template <class Real, class Emit>
+__device__ __forceinline__ void visit(const EntryBody<Real>& x, std::uint32_t b, std::uint8_t cb,
+                                      const Sphere<Real>& sb, std::uint32_t pb, const std::uint8_t* report,
+                                      std::uint32_t& tests, Emit& emit) {
+  if (report && !report[x.pa < pb ? x.pa : pb]) return;
+  if (!test_in_cell(x.ca, cb, x.type)) return;
+  ++tests;
+  if (spheres_touch(x.sa, sb)) emit(x.a, b);
+}
+
 template <class Real, class Key, class Emit>
-__device__ __forceinline__ std::uint32_t for_each_contact(std::uint32_t e, const Key* __restrict__ keys,
+__device__ __forceinline__ std::uint32_t walk_from_memory(std::uint32_t f0, Key k, const EntryBody<Real>& x,
+                                                          const Key* __restrict__ keys,
                                                           const std::uint32_t* __restrict__ body,
                                                           std::uint32_t n_entries,
                                                           const std::uint8_t* __restrict__ ctrl,
                                                           const Sphere<Real>* __restrict__ spheres,
-                                                          int half_bits, Emit&& emit) {
-  const Key k = keys[e];
-  const std::uint32_t type = key_type(k, half_bits);
-  const std::uint32_t a = body[e];
-  const std::uint8_t ca = ctrl[a];
-  const Sphere<Real> sa = spheres[a];
+                                                          const std::uint32_t* __restrict__ perm,
+                                                          const std::uint8_t* __restrict__ report, Emit&& emit) {
   std::uint32_t tests = 0;
-  for (std::uint32_t f = e + 1; f < n_entries && keys[f] == k; ++f) {
+  for (std::uint32_t f = f0; f < n_entries && keys[f] == k; ++f) {
     const std::uint32_t b = body[f];
-    if (!test_in_cell(ca, ctrl[b], type)) continue;
-    ++tests;
-    if (spheres_touch(sa, spheres[b])) emit(a, b);
+    visit(x, b, ctrl[b], spheres[b], report ? perm[b] : 0u, report, tests, emit);
   }
   return tests;
 }
 
-// pairs, count: count[e] = contacting pairs of entry e (0 when report[a] is 0); per block the sum
-// (block_pairs); totals of pairs and tests added to c.
+template <class Real>
+__device__ __forceinline__ Sphere<Real> shfl_down_sphere(const Sphere<Real>& s, int j) {
+  constexpr unsigned full = 0xFFFFFFFFu;
+  return {__shfl_down_sync(full, s.x, j), __shfl_down_sync(full, s.y, j), __shfl_down_sync(full, s.z, j),
+          __shfl_down_sync(full, s.r, j)};
+}
+
+// pairs, count: count[e] = contacting (reported) pairs of entry e; per block the sum (block_pairs);
+// totals of pairs and tests added to c. Each thread loads its own entry's key, body, control byte and
+// sphere once; the later entries of its cell that lie in the same warp come from the other lanes'
+// registers (shuffles), only cells that cross the warp's end are walked from memory.
 template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
                                                              std::uint32_t n_entries,
                                                              const std::uint8_t* __restrict__ ctrl,
                                                              const Sphere<Real>* __restrict__ spheres,
+                                                             const std::uint32_t* __restrict__ perm,
                                                              const std::uint8_t* __restrict__ report, int half_bits,
                                                              std::uint32_t* __restrict__ count,
                                                              std::uint32_t* __restrict__ block_pairs,
                                                              Counters* __restrict__ c) {
   using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
   __shared__ typename Reduce::TempStorage tmp;
+  constexpr unsigned full = 0xFFFFFFFFu;
   const std::uint32_t e = blockIdx.x * kBlock + threadIdx.x;
-  unsigned long long pairs = 0, tests = 0;
-  if (e < n_entries) {
-    if (!report || report[body[e]]) {
-      std::uint32_t found = 0;
-      tests = for_each_contact(e, keys, body, n_entries, ctrl, spheres, half_bits,
-                               [&](std::uint32_t, std::uint32_t) { ++found; });
-      pairs = found;
+  const std::uint32_t lane = threadIdx.x & 31u;
+  const bool valid = e < n_entries;
+  const Key k = valid ? keys[e] : Key(0);
+  EntryBody<Real> x{};
+  x.a = valid ? body[e] : 0u;
+  x.type = key_type(k, half_bits);
+  x.ca = valid ? ctrl[x.a] : std::uint8_t(0);
+  x.sa = valid ? spheres[x.a] : Sphere<Real>{};
+  x.pa = valid && report ? perm[x.a] : 0u;
+  std::uint32_t found = 0, tests = 0;
+  auto count_one = [&](std::uint32_t, std::uint32_t) { ++found; };
+  bool active = valid;
+  bool spill = false;  // the cell goes on past the warp's last lane: walk the rest from memory
+  for (std::uint32_t j = 1; j < 32; ++j) {
+    if (!__any_sync(full, active)) break;
+    const Key kb = __shfl_down_sync(full, k, j);
+    const std::uint32_t b = __shfl_down_sync(full, x.a, j);
+    const std::uint32_t cb = __shfl_down_sync(full, std::uint32_t(x.ca), j);
+    const std::uint32_t pb = __shfl_down_sync(full, x.pa, j);
+    const Sphere<Real> sb = shfl_down_sphere(x.sa, int(j));
+    if (!active) continue;
+    if (lane + j >= 32) {
+      active = false;
+      spill = true;
+      continue;
     }
-    count[e] = static_cast<std::uint32_t>(pairs);
+    if (e + j >= n_entries || kb != k) {
+      active = false;
+      continue;
+    }
+    visit(x, b, std::uint8_t(cb), sb, pb, report, tests, count_one);
   }
-  const unsigned long long block_sum = Reduce(tmp).Sum(pairs);
+  if (active) spill = true;  // lane 0 ran through the whole warp
+  if (spill) tests += walk_from_memory(e + (32 - lane), k, x, keys, body, n_entries, ctrl, spheres, perm, report, count_one);
+  if (valid) count[e] = found;
+  const unsigned long long block_sum = Reduce(tmp).Sum(static_cast<unsigned long long>(found));
   __syncthreads();  // tmp is reused
-  const unsigned long long block_tests = Reduce(tmp).Sum(tests);
+  const unsigned long long block_tests = Reduce(tmp).Sum(static_cast<unsigned long long>(tests));
   if (threadIdx.x == 0) {
     // Truncation is harmless: the host rejects totals >= 2^31 before block_pairs is used.
     block_pairs[blockIdx.x] = static_cast<std::uint32_t>(block_sum);
@@ -220,12 +307,14 @@ __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restri
   }
 }
 
-// pairs, fill: u64 pair keys a << id_bits | b at the block's scanned total + the entry's rank.
+// pairs, fill: u64 pair keys a << id_bits | b (input indices, a < b) at the block's scanned total + the entry's rank.
 template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock) fill_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
                                                             std::uint32_t n_entries,
                                                             const std::uint8_t* __restrict__ ctrl,
-                                                            const Sphere<Real>* __restrict__ spheres, int half_bits,
+                                                            const Sphere<Real>* __restrict__ spheres,
+                                                            const std::uint32_t* __restrict__ perm,
+                                                            const std::uint8_t* __restrict__ report, int half_bits,
                                                             const std::uint32_t* __restrict__ count,
                                                             const std::uint32_t* __restrict__ block_offset, int id_bits,
                                                             std::uint64_t* __restrict__ pairs) {
@@ -237,9 +326,18 @@ __global__ void __launch_bounds__(kBlock) fill_pairs_kernel(const Key* __restric
   Scan(tmp).ExclusiveSum(mine, rank);
   if (mine == 0) return;
   std::uint64_t* w = pairs + block_offset[blockIdx.x] + rank;
-  for_each_contact(e, keys, body, n_entries, ctrl, spheres, half_bits, [&](std::uint32_t a, std::uint32_t b) {
-    *w++ = (std::uint64_t(a) << id_bits) | b;
-  });
+  const Key k = keys[e];
+  EntryBody<Real> x;
+  x.a = body[e];
+  x.type = key_type(k, half_bits);
+  x.ca = ctrl[x.a];
+  x.sa = spheres[x.a];
+  x.pa = report ? perm[x.a] : 0u;
+  walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
+                   [&](std::uint32_t a, std::uint32_t b) {
+                     const std::uint32_t pa = perm[a], pb = perm[b];  // input indices, a < b as the host
+                     *w++ = pa < pb ? (std::uint64_t(pa) << id_bits) | pb : (std::uint64_t(pb) << id_bits) | pa;
+                   });
 }
 
 // narrow: contact data of each sorted pair, world frame as the host: Real(double(origin) + double(v)).
