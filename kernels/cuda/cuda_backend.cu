@@ -64,7 +64,7 @@ using Bytes = DeviceBuffer<std::byte>;
 namespace {
 constexpr const char* kStageNames[] = {"upload", "pack", "entries", "sort", "pairs", "order", "narrow", "download"};
 constexpr int kStages = 8;
-constexpr int kBoundsBlocks = 512;  // partials of device_bounds
+constexpr int kBoundsBlocks = 512;  // partials of device_bounds (<= cuda::kBoundsFold)
 std::uint32_t blocks_for(std::uint64_t n) { return static_cast<std::uint32_t>((n + kBlock - 1) / kBlock); }
 std::size_t align16(std::size_t b) { return (b + 15) & ~std::size_t(15); }
 }  // namespace
@@ -187,7 +187,7 @@ Bounds CudaBackend::bounds(const DeviceBodiesView& v) {
   CG_CUDA_CHECK(cudaMemsetAsync(d_counters, 0, sizeof(Counters), m_stream));
   cuda::bounds_partial_kernel<<<grid, kBlock, 0, m_stream>>>(v.position, v.radius, v.count, d_partials, d_counters);
   CG_CUDA_CHECK_LAUNCH("bounds_partial");
-  cuda::bounds_final_kernel<<<1, 32, 0, m_stream>>>(d_partials, grid);
+  cuda::bounds_final_kernel<<<1, cuda::kBoundsFold, 0, m_stream>>>(d_partials, grid);
   CG_CUDA_CHECK_LAUNCH("bounds_final");
   std::byte* h = m_h_counters.data();
   CG_CUDA_CHECK(cudaMemcpyAsync(h, d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, m_stream));
@@ -355,7 +355,7 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   // ---- pairs: count -----------------------------------------------------------------------------
   const Key* d_keys = keys.Current();
   const std::uint32_t* d_body = body.Current();
-  // The alternate key buffer is dead after the sort: it holds the per-entry pair counts (u32).
+  // The alternate key buffer is dead after the sort: it holds the per-entry contact masks (u32).
   auto* d_pair_count = reinterpret_cast<std::uint32_t*>(keys.Alternate());
   std::uint32_t* d_entry_totals = m_entry_blocks.span_as<std::uint32_t>(2 * neb).data();
   std::uint32_t* d_entry_offsets = d_entry_totals + neb;

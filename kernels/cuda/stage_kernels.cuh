@@ -89,19 +89,45 @@ __global__ void bounds_partial_kernel(const double* __restrict__ pos, const doub
   }
 }
 
-// One thread folds the (few hundred) partials into partial[0].
-__global__ void bounds_final_kernel(BoundsPartial* partial, int count) {
-  if (threadIdx.x != 0 || blockIdx.x != 0) return;
-  BoundsPartial b = partial[0];
-  for (int j = 1; j < count; ++j) {
-    const BoundsPartial o = partial[j];
+// One block of kBoundsFold threads folds the partials (count <= kBoundsFold) into partial[0].
+constexpr int kBoundsFold = 512;
+__global__ void __launch_bounds__(kBoundsFold) bounds_final_kernel(BoundsPartial* partial, int count) {
+  __shared__ double sh[7][kBoundsFold];
+  const int t = threadIdx.x;
+  if (t < count) {
     for (int k = 0; k < 3; ++k) {
-      b.lo[k] = o.lo[k] < b.lo[k] ? o.lo[k] : b.lo[k];
-      b.hi[k] = o.hi[k] > b.hi[k] ? o.hi[k] : b.hi[k];
+      sh[k][t] = partial[t].lo[k];
+      sh[3 + k][t] = partial[t].hi[k];
     }
-    b.r_max = o.r_max > b.r_max ? o.r_max : b.r_max;
+    sh[6][t] = partial[t].r_max;
+  } else {
+    for (int k = 0; k < 3; ++k) {
+      sh[k][t] = INFINITY;
+      sh[3 + k][t] = -INFINITY;
+    }
+    sh[6][t] = 0.0;
   }
-  partial[0] = b;
+  __syncthreads();
+  for (int s = kBoundsFold / 2; s > 0; s >>= 1) {
+    if (t < s) {
+      for (int v = 0; v < 3; ++v) {
+        const double o = sh[v][t + s];
+        sh[v][t] = o < sh[v][t] ? o : sh[v][t];
+      }
+      for (int v = 3; v < 7; ++v) {
+        const double o = sh[v][t + s];
+        sh[v][t] = o > sh[v][t] ? o : sh[v][t];
+      }
+    }
+    __syncthreads();
+  }
+  if (t == 0) {
+    for (int k = 0; k < 3; ++k) {
+      partial[0].lo[k] = sh[k][0];
+      partial[0].hi[k] = sh[3 + k][0];
+    }
+    partial[0].r_max = sh[6][0];
+  }
 }
 
 // Locality key of a body: linear index of the 4x4x4-cell block holding its lowest cell. Sorting
@@ -243,10 +269,12 @@ __device__ __forceinline__ Sphere<Real> shfl_down_sphere(const Sphere<Real>& s, 
           __shfl_down_sync(full, s.r, j)};
 }
 
-// pairs, count: count[e] = contacting (reported) pairs of entry e; per block the sum (block_pairs);
-// totals of pairs and tests added to c. Each thread loads its own entry's key, body, control byte and
-// sphere once; the later entries of its cell that lie in the same warp come from the other lanes'
-// registers (shuffles), only cells that cross the warp's end are walked from memory.
+// pairs, count: per block the number of contacting (reported) pairs (block_pairs); totals of pairs
+// and tests added to c; per entry e a contact mask: bit j (1..31) set when entry e + j (same warp)
+// is a contact of e, bit 0 set when contacts lie past the warp's end (fill_pairs then walks e's cell
+// from memory). Each thread loads its own entry's key, body, control byte and sphere once; the later
+// entries of its cell within the warp come from the other lanes' registers (shuffles); only cells that
+// cross the warp's end are walked from memory.
 template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
                                                              std::uint32_t n_entries,
@@ -254,7 +282,7 @@ __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restri
                                                              const Sphere<Real>* __restrict__ spheres,
                                                              const std::uint32_t* __restrict__ perm,
                                                              const std::uint8_t* __restrict__ report, int half_bits,
-                                                             std::uint32_t* __restrict__ count,
+                                                             std::uint32_t* __restrict__ mask,
                                                              std::uint32_t* __restrict__ block_pairs,
                                                              Counters* __restrict__ c) {
   using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
@@ -270,11 +298,15 @@ __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restri
   x.ca = valid ? ctrl[x.a] : std::uint8_t(0);
   x.sa = valid ? spheres[x.a] : Sphere<Real>{};
   x.pa = valid && report ? perm[x.a] : 0u;
-  std::uint32_t found = 0, tests = 0;
+  std::uint32_t found = 0, tests = 0, bits = 0, j = 1;
   auto count_one = [&](std::uint32_t, std::uint32_t) { ++found; };
+  auto mark_one = [&](std::uint32_t, std::uint32_t) {
+    ++found;
+    bits |= 1u << j;
+  };
   bool active = valid;
   bool spill = false;  // the cell goes on past the warp's last lane: walk the rest from memory
-  for (std::uint32_t j = 1; j < 32; ++j) {
+  for (; j < 32; ++j) {
     if (!__any_sync(full, active)) break;
     const Key kb = __shfl_down_sync(full, k, j);
     const std::uint32_t b = __shfl_down_sync(full, x.a, j);
@@ -291,11 +323,15 @@ __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restri
       active = false;
       continue;
     }
-    visit(x, b, std::uint8_t(cb), sb, pb, report, tests, count_one);
+    visit(x, b, std::uint8_t(cb), sb, pb, report, tests, mark_one);
   }
   if (active) spill = true;  // lane 0 ran through the whole warp
-  if (spill) tests += walk_from_memory(e + (32 - lane), k, x, keys, body, n_entries, ctrl, spheres, perm, report, count_one);
-  if (valid) count[e] = found;
+  if (spill) {
+    const std::uint32_t before = found;
+    tests += walk_from_memory(e + (32 - lane), k, x, keys, body, n_entries, ctrl, spheres, perm, report, count_one);
+    if (found != before) bits |= 1u;
+  }
+  if (valid) mask[e] = bits;
   const unsigned long long block_sum = Reduce(tmp).Sum(static_cast<unsigned long long>(found));
   __syncthreads();  // tmp is reused
   const unsigned long long block_tests = Reduce(tmp).Sum(static_cast<unsigned long long>(tests));
@@ -307,7 +343,9 @@ __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restri
   }
 }
 
-// pairs, fill: u64 pair keys a << id_bits | b (input indices, a < b) at the block's scanned total + the entry's rank.
+// pairs, fill: u64 pair keys a << id_bits | b (input indices, a < b) at the block's scanned total +
+// the entry's rank, from the contact masks of count_pairs_kernel (entries flagged in bit 0: the cell
+// is walked from memory again, counting then emitting).
 template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock) fill_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
                                                             std::uint32_t n_entries,
@@ -315,29 +353,42 @@ __global__ void __launch_bounds__(kBlock) fill_pairs_kernel(const Key* __restric
                                                             const Sphere<Real>* __restrict__ spheres,
                                                             const std::uint32_t* __restrict__ perm,
                                                             const std::uint8_t* __restrict__ report, int half_bits,
-                                                            const std::uint32_t* __restrict__ count,
+                                                            const std::uint32_t* __restrict__ mask,
                                                             const std::uint32_t* __restrict__ block_offset, int id_bits,
                                                             std::uint64_t* __restrict__ pairs) {
   using Scan = cub::BlockScan<std::uint32_t, kBlock>;
   __shared__ typename Scan::TempStorage tmp;
   const std::uint32_t e = blockIdx.x * kBlock + threadIdx.x;
-  const std::uint32_t mine = e < n_entries ? count[e] : 0u;
+  const std::uint32_t bits = e < n_entries ? mask[e] : 0u;
+  EntryBody<Real> x{};
+  Key k{};
+  std::uint32_t mine = 0;
+  if (bits & 1u) {  // slow path: contacts past the warp's end
+    k = keys[e];
+    x.a = body[e];
+    x.type = key_type(k, half_bits);
+    x.ca = ctrl[x.a];
+    x.sa = spheres[x.a];
+    x.pa = report ? perm[x.a] : 0u;
+    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
+                     [&](std::uint32_t, std::uint32_t) { ++mine; });
+  } else {
+    mine = __popc(bits);
+  }
   std::uint32_t rank;
   Scan(tmp).ExclusiveSum(mine, rank);
   if (mine == 0) return;
   std::uint64_t* w = pairs + block_offset[blockIdx.x] + rank;
-  const Key k = keys[e];
-  EntryBody<Real> x;
-  x.a = body[e];
-  x.type = key_type(k, half_bits);
-  x.ca = ctrl[x.a];
-  x.sa = spheres[x.a];
-  x.pa = report ? perm[x.a] : 0u;
-  walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
-                   [&](std::uint32_t a, std::uint32_t b) {
-                     const std::uint32_t pa = perm[a], pb = perm[b];  // input indices, a < b as the host
-                     *w++ = pa < pb ? (std::uint64_t(pa) << id_bits) | pb : (std::uint64_t(pb) << id_bits) | pa;
-                   });
+  auto emit = [&](std::uint32_t a, std::uint32_t b) {
+    const std::uint32_t pa = perm[a], pb = perm[b];  // input indices, a < b as the host
+    *w++ = pa < pb ? (std::uint64_t(pa) << id_bits) | pb : (std::uint64_t(pb) << id_bits) | pa;
+  };
+  if (bits & 1u) {
+    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, emit);
+  } else {
+    const std::uint32_t a = body[e];
+    for (std::uint32_t m = bits; m != 0; m &= m - 1) emit(a, body[e + __ffs(m) - 1]);
+  }
 }
 
 // narrow: contact data of each sorted pair, world frame as the host: Real(double(origin) + double(v)).
