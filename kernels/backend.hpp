@@ -15,6 +15,11 @@ struct DetectJob {
   GridPlan plan;
   GridParams<Real> grid;
   Fields fields = Fields::basic;
+  // CUDA only. device_bodies set: read the bodies from DEVICE memory (bodies is then empty).
+  // device_out set: leave the contacts on the device and describe them there (out stays empty).
+  const DeviceBodiesView* device_bodies = nullptr;
+  DeviceContactsView<Real>* device_out = nullptr;
+  std::size_t body_count() const { return device_bodies ? device_bodies->count : bodies.size(); }
 };
 
 template <class Real>
@@ -53,5 +58,14 @@ template <class Real>
 void run_stages(CudaBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out,
                 StageTimes& times, EngineStats& stats);
 void destroy(CudaBackend* backend);
+// Validation and bounds of DEVICE bodies (same results and InputError texts as compute_bounds).
+Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies);
 
 }  // namespace cg::detail
+
+// unique_ptr<CudaBackend> works where CudaBackend is incomplete (engine.cpp): it deletes through
+// destroy(), defined with the complete type in the CUDA backend (or engine.cpp's fallback).
+template <>
+struct std::default_delete<cg::detail::CudaBackend> {
+  void operator()(cg::detail::CudaBackend* p) const { cg::detail::destroy(p); }
+};

@@ -182,6 +182,9 @@ void run_stages(CudaBackend&, const DetectJob<Real>&, Contacts<Real>&, StageTime
   throw CudaError("this contactgrid was built without CUDA");
 }
 void destroy(CudaBackend* b) { delete b; }
+Bounds device_bounds(CudaBackend&, const DeviceBodiesView&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
 }  // namespace detail
 #endif
 
@@ -214,10 +217,24 @@ template <class Real> const StageTimes& Engine<Real>::times() const { return m_i
 template <class Real> const EngineStats& Engine<Real>::stats() const { return m_impl->stats; }
 template <class Real> const EngineOptions& Engine<Real>::options() const { return m_impl->options; }
 
+namespace {
+// Frame and grid plan of one call from the bodies' bounds; pushes the "plan" stage time.
+template <class Real>
+detail::DetectJob<Real> plan_job(const Bounds& b, std::optional<Frame> frame, const EngineOptions& options,
+                                 EngineStats& stats) {
+  constexpr Precision prec = sizeof(Real) == 4 ? Precision::fp32 : Precision::fp64;
+  const Frame f = frame ? *frame : make_frame(b, options.cell_size, prec);
+  if (frame && f.cell_size < 2 * b.r_max) throw UsageError("frame cell size is smaller than the largest diameter");
+  detail::DetectJob<Real> job{{}, plan_grid(b, f, prec), {}, options.fields};
+  job.grid = detail::grid_params<Real>(job.plan);
+  stats.key_bits = job.plan.key_bits;
+  return job;
+}
+}  // namespace
+
 template <class Real>
 Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Frame> frame) {
   using clock = std::chrono::steady_clock;
-  constexpr Precision prec = sizeof(Real) == 4 ? Precision::fp32 : Precision::fp64;
   Impl& s = *m_impl;
   s.times.clear();
   s.stats = EngineStats{};
@@ -226,11 +243,8 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
   const Bounds b = compute_bounds(bodies);
   s.stats.bodies = b.count;
   if (b.count == 0) return out;
-  const Frame f = frame ? *frame : make_frame(b, s.options.cell_size, prec);
-  if (frame && f.cell_size < 2 * b.r_max) throw UsageError("frame cell size is smaller than the largest diameter");
-  detail::DetectJob<Real> job{bodies, plan_grid(b, f, prec), {}, s.options.fields};
-  job.grid = detail::grid_params<Real>(job.plan);
-  s.stats.key_bits = job.plan.key_bits;
+  detail::DetectJob<Real> job = plan_job<Real>(b, frame, s.options, s.stats);
+  job.bodies = bodies;
   s.times.push_back({"plan", std::chrono::duration<double>(clock::now() - t0).count()});
 
   if (s.resolved == Backend::cuda)
@@ -247,6 +261,45 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
   }
   s.stats.contacts = out.size();
   return out;
+}
+
+// Device-array path: bounds on the device, the same plan, the same CUDA stages. `device_out` set:
+// contacts stay on the device; else they are downloaded into `out`.
+template <class Real>
+static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesView& bodies,
+                             std::optional<Frame> frame, Contacts<Real>& out, DeviceContactsView<Real>* device_out) {
+  using clock = std::chrono::steady_clock;
+  s.times.clear();
+  s.stats = EngineStats{};
+  if (s.resolved != Backend::cuda) throw UsageError("detect_device needs the CUDA backend");
+  if (bodies.count > 0 && (!bodies.position || !bodies.radius))
+    throw UsageError("detect_device: null position or radius pointer");
+  auto t0 = clock::now();
+  const Bounds b = detail::device_bounds(*s.cuda, bodies);
+  s.stats.bodies = b.count;
+  if (b.count == 0) return;
+  detail::DetectJob<Real> job = plan_job<Real>(b, frame, s.options, s.stats);
+  job.device_bodies = &bodies;
+  job.device_out = device_out;
+  s.times.push_back({"plan", std::chrono::duration<double>(clock::now() - t0).count()});
+  detail::run_stages(*s.cuda, job, out, s.times, s.stats);
+  s.stats.contacts = device_out ? device_out->count : out.size();
+}
+
+template <class Real>
+Contacts<Real> Engine<Real>::detect_device(const DeviceBodiesView& bodies, std::optional<Frame> frame) {
+  Contacts<Real> out;
+  detect_on_device<Real>(*m_impl, bodies, frame, out, nullptr);
+  return out;
+}
+
+template <class Real>
+DeviceContactsView<Real> Engine<Real>::detect_device_resident(const DeviceBodiesView& bodies,
+                                                              std::optional<Frame> frame) {
+  Contacts<Real> unused;
+  DeviceContactsView<Real> view;
+  detect_on_device<Real>(*m_impl, bodies, frame, unused, &view);
+  return view;
 }
 
 template class Engine<float>;

@@ -104,6 +104,38 @@ struct GridPlan {
 };
 GridPlan plan_grid(const Bounds& local, const Frame& frame, Precision p);
 
+// Bodies already in CUDA DEVICE memory, for simulations that keep their state on the GPU and call
+// the engine every step (Engine::detect_device*). Pointers are device pointers on the engine's device
+// (EngineOptions::device); the engine only reads them. Body i has id i (local indices).
+// Synchronisation: the arrays must be complete when detect_device* is called. Work queued on the
+// legacy default stream is ordered before the engine's (blocking) stream; work on a caller's
+// non-blocking stream must be synchronised by the caller (cudaStreamSynchronize) first.
+struct DeviceBodiesView {
+  const double* position = nullptr;      // DEVICE, 3·count doubles: x, y, z of body i at 3i … 3i+2
+  const double* radius = nullptr;        // DEVICE, count doubles
+  const std::uint8_t* report = nullptr;  // DEVICE, count bytes, or null: all pairs (as BodiesView)
+  std::size_t count = 0;
+};
+
+// Contacts left in DEVICE memory, owned by the engine: valid until the engine's next detect call or
+// its destruction. Same rows and order as Contacts (sorted by (id_a, id_b)); ids are local indices.
+// The four `full` arrays are null unless the engine runs with Fields::full.
+template <class Real>
+struct DeviceContactsView {
+  std::size_t count = 0;
+  bool full = false;
+  const std::int64_t* id_a = nullptr;
+  const std::int64_t* id_b = nullptr;
+  const Vec3<Real>* position_on_a = nullptr;
+  const Vec3<Real>* position_on_b = nullptr;
+  const Vec3<Real>* normal_on_b = nullptr;
+  const Real* distance = nullptr;
+  const Vec3<Real>* local_point_a = nullptr;
+  const Vec3<Real>* local_point_b = nullptr;
+  const Vec3<Real>* lateral_friction_dir1 = nullptr;
+  const Vec3<Real>* lateral_friction_dir2 = nullptr;
+};
+
 struct EngineOptions {
   Backend backend = Backend::automatic;
   Fields fields = Fields::basic;
@@ -116,7 +148,8 @@ struct EngineOptions {
 struct EngineStats {
   std::uint64_t bodies = 0, entries = 0, pair_tests = 0, contacts = 0;
   int key_bits = 0;
-  std::uint64_t peak_device_bytes = 0;
+  std::uint64_t peak_device_bytes = 0;   // CUDA: device workspace held after the call (never shrinks)
+  std::uint64_t device_allocations = 0;  // CUDA: cudaMalloc calls made by this call (0 once warm)
 };
 
 template <class Real>
@@ -130,6 +163,23 @@ class Engine {
   // All contacts among `bodies`. `frame`: the shared frame of a multi-rank run; absent, the engine
   // builds one from the bodies' bounds and options.cell_size.
   Contacts<Real> detect(const BodiesView& bodies, std::optional<Frame> frame = std::nullopt);
+
+  // The same detection for bodies already on the GPU (CUDA backend only, else UsageError). Bounds and
+  // validation run on the device (same InputError texts as compute_bounds); results are bit-identical
+  // to detect() on the same values. Returns when the results are complete. Example, once per step:
+  //
+  //   cg::Engine<double> engine({.backend = cg::Backend::cuda});   // persistent device workspace
+  //   double *d_pos, *d_rad;                                        // 3n and n doubles, cudaMalloc'd
+  //   ...                                                           // the simulation updates them
+  //   cg::DeviceBodiesView bodies{.position = d_pos, .radius = d_rad, .count = n};
+  //   cg::Contacts<double> c = engine.detect_device(bodies);        // host contacts, ids 0 … n-1
+  //   cg::DeviceContactsView<double> dc = engine.detect_device_resident(bodies);  // stays on GPU
+  //   my_solver_kernel<<<...>>>(dc.count, dc.id_a, dc.id_b, dc.normal_on_b, dc.distance);
+  //
+  // detect_device() = detect_device_resident() + one download (stage "download").
+  Contacts<Real> detect_device(const DeviceBodiesView& bodies, std::optional<Frame> frame = std::nullopt);
+  DeviceContactsView<Real> detect_device_resident(const DeviceBodiesView& bodies,
+                                                  std::optional<Frame> frame = std::nullopt);
 
   Backend backend() const;  // the resolved backend (never automatic)
   const StageTimes& times() const;

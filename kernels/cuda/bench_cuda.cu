@@ -1,0 +1,230 @@
+// contactgrid_cuda_bench: the CUDA engine on uniform random spheres, device-resident input, warm.
+// For N = 2^min … 2^max (step 2 by default), both precisions: per-stage medians (CUDA events), the
+// total wall time of Engine::detect_device_resident (bounds + plan + stages + host syncs; L2 flushed
+// before every run), spheres/s, contacts and entries per sphere, device workspace per sphere, and the
+// ratio of the sort stage and of the total to the CUB sort floor measured here for the same number
+// of (cell, body) entries and key bits (SortPairs u32 key + u32 value, L2 flushed, median).
+// Transfers are reported apart: upload = input (positions + radii) H2D from pageable host memory,
+// download = the engine's "download" stage (contacts → host vectors).
+//
+// Scene: radii U[0.5, 1], centres U[0, L)^3 with L = 2.65·N^(1/3), from a seeded splitmix64.
+// usage: contactgrid_cuda_bench [min_log2=16] [max_log2=26] [step=2] [runs=20]
+#include <cub/device/device_radix_sort.cuh>
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "cuda/device_buffer.cuh"
+#include "engine.hpp"
+
+namespace {
+
+using cg::cuda::DeviceBuffer;
+
+constexpr std::size_t kFlushBytes = std::size_t(256) << 20;
+
+std::uint64_t splitmix64(std::uint64_t& s) {
+  std::uint64_t x = (s += 0x9E3779B97F4A7C15ull);
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+double unit(std::uint64_t& s) { return double(splitmix64(s) >> 11) * 0x1.0p-53; }
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const std::size_t m = v.size() / 2;
+  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
+}
+
+struct Flusher {
+  DeviceBuffer<std::byte> buf;
+  int tick = 0;
+  Flusher() { buf.reserve(kFlushBytes, false); }
+  void operator()() {  // evicts L2 (50 MiB) before a timed run; not timed
+    CG_CUDA_CHECK(cudaMemsetAsync(buf.data(), ++tick & 0xFF, kFlushBytes));
+    CG_CUDA_CHECK(cudaDeviceSynchronize());
+  }
+};
+
+__global__ void random_keys(std::uint32_t* k, std::uint32_t* v, std::uint32_t n, std::uint32_t mask, std::uint64_t seed) {
+  const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  std::uint64_t x = seed ^ (std::uint64_t(i) * 0xD1B54A32D192ED03ull);
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  k[i] = std::uint32_t(x ^ (x >> 31)) & mask;
+  v[i] = i;
+}
+
+// Median time (ms) of cub::DeviceRadixSort::SortPairs (DoubleBuffer, u32 + u32) over `bits` bits of
+// `n` random keys; L2 flushed before each run.
+double sort_floor_ms(std::uint32_t n, int bits, int runs, Flusher& flush) {
+  DeviceBuffer<std::uint32_t> k[2], v[2];
+  for (int j = 0; j < 2; ++j) {
+    k[j].reserve(n, false);
+    v[j].reserve(n, false);
+  }
+  const std::uint32_t mask = bits >= 32 ? 0xFFFFFFFFu : ((1u << bits) - 1);
+  cub::DoubleBuffer<std::uint32_t> dk(k[0].data(), k[1].data()), dv(v[0].data(), v[1].data());
+  std::size_t temp_bytes = 0;
+  CG_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, dk, dv, int(n), 0, bits));
+  DeviceBuffer<std::byte> temp;
+  temp.reserve(temp_bytes, false);
+  cudaEvent_t e0, e1;
+  CG_CUDA_CHECK(cudaEventCreate(&e0));
+  CG_CUDA_CHECK(cudaEventCreate(&e1));
+  std::vector<double> t;
+  for (int r = 0; r < runs + 3; ++r) {
+    random_keys<<<(n + 255) / 256, 256>>>(dk.Current(), dv.Current(), n, mask, 77 + r);
+    CG_CUDA_CHECK(cudaGetLastError());
+    flush();
+    CG_CUDA_CHECK(cudaEventRecord(e0));
+    CG_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp.data(), temp_bytes, dk, dv, int(n), 0, bits));
+    CG_CUDA_CHECK(cudaEventRecord(e1));
+    CG_CUDA_CHECK(cudaEventSynchronize(e1));
+    float ms = 0;
+    CG_CUDA_CHECK(cudaEventElapsedTime(&ms, e0, e1));
+    if (r >= 3) t.push_back(ms);
+  }
+  cudaEventDestroy(e0);
+  cudaEventDestroy(e1);
+  return median(t);
+}
+
+struct Row {
+  int log2n;
+  const char* prec;
+  std::uint64_t n, entries, contacts;
+  int key_bits;
+  std::map<std::string, double> stage_ms;
+  double gpu_sum_ms, total_ms, floor_ms, upload_ms, download_ms, bytes_per_sphere, bytes_no_contacts;
+};
+
+template <class Real>
+Row bench(int log2n, std::uint64_t n, const double* d_pos, const double* d_rad, double upload_ms, int runs,
+          Flusher& flush) {
+  Row row{};
+  row.log2n = log2n;
+  row.prec = sizeof(Real) == 4 ? "fp32" : "fp64";
+  row.n = n;
+  row.upload_ms = upload_ms;
+  const cg::DeviceBodiesView bodies{d_pos, d_rad, nullptr, n};
+  {
+    cg::Engine<Real> engine({.backend = cg::Backend::cuda});
+    for (int w = 0; w < 3; ++w) engine.detect_device_resident(bodies);
+    std::map<std::string, std::vector<double>> stages;
+    std::vector<double> total, gpu_sum;
+    for (int r = 0; r < runs; ++r) {
+      flush();
+      const auto t0 = std::chrono::steady_clock::now();
+      const cg::DeviceContactsView<Real> c = engine.detect_device_resident(bodies);
+      const auto t1 = std::chrono::steady_clock::now();
+      total.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+      double sum = 0;
+      for (const auto& s : engine.times()) {
+        stages[s.name].push_back(s.seconds * 1e3);
+        if (s.name != "plan") sum += s.seconds * 1e3;
+      }
+      gpu_sum.push_back(sum);
+      row.contacts = c.count;
+      if (engine.stats().device_allocations != 0) std::fprintf(stderr, "warning: a warm run allocated\n");
+    }
+    for (auto& [name, v] : stages) row.stage_ms[name] = median(v);
+    row.total_ms = median(total);
+    row.gpu_sum_ms = median(gpu_sum);
+    row.entries = engine.stats().entries;
+    row.key_bits = engine.stats().key_bits;
+    row.bytes_per_sphere = double(engine.stats().peak_device_bytes) / double(n);
+    // download: contacts to host vectors (stage "download" of detect_device), median of 3
+    std::vector<double> dl;
+    for (int r = 0; r < 3; ++r) {
+      const cg::Contacts<Real> h = engine.detect_device(bodies);
+      for (const auto& s : engine.times())
+        if (s.name == "download") dl.push_back(s.seconds * 1e3);
+      if (h.size() != row.contacts) std::fprintf(stderr, "error: detect_device and resident disagree\n");
+    }
+    row.download_ms = median(dl);
+    // without the contact output buffer (basic fields: 2 ids + 3 Vec3 + distance per contact)
+    row.bytes_no_contacts = (double(engine.stats().peak_device_bytes) -
+                             double(row.contacts) * (16.0 + 10.0 * sizeof(Real))) / double(n);
+  }
+  row.floor_ms = row.key_bits <= 32 ? sort_floor_ms(static_cast<std::uint32_t>(row.entries), row.key_bits, runs, flush)
+                                    : 0.0;
+  return row;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) try {
+  const int lo = argc > 1 ? std::atoi(argv[1]) : 16;
+  const int hi = argc > 2 ? std::atoi(argv[2]) : 26;
+  const int step = argc > 3 ? std::atoi(argv[3]) : 2;
+  const int runs = argc > 4 ? std::atoi(argv[4]) : 20;
+  cudaDeviceProp prop{};
+  CG_CUDA_CHECK(cudaGetDeviceProperties(&prop, 0));
+  std::printf("# contactgrid_cuda_bench on %s (%d SMs, %.1f GiB), median of %d warm runs, L2 flushed\n", prop.name,
+              prop.multiProcessorCount, prop.totalGlobalMem / double(1 << 30), runs);
+  Flusher flush;
+  std::vector<Row> rows;
+  for (int p = lo; p <= hi; p += step) {
+    const std::uint64_t n = std::uint64_t(1) << p;
+    std::vector<double> pos(3 * n), rad(n);
+    std::uint64_t seed = 0x5EED0000ull + p;
+    const double L = 2.65 * std::cbrt(double(n));
+    for (std::uint64_t i = 0; i < n; ++i) {
+      pos[3 * i] = unit(seed) * L;
+      pos[3 * i + 1] = unit(seed) * L;
+      pos[3 * i + 2] = unit(seed) * L;
+      rad[i] = 0.5 + 0.5 * unit(seed);
+    }
+    DeviceBuffer<double> d_pos, d_rad;
+    d_pos.reserve(3 * n, false);
+    d_rad.reserve(n, false);
+    std::vector<double> up;
+    for (int r = 0; r < 3; ++r) {
+      const auto t0 = std::chrono::steady_clock::now();
+      CG_CUDA_CHECK(cudaMemcpy(d_pos.data(), pos.data(), 3 * n * sizeof(double), cudaMemcpyHostToDevice));
+      CG_CUDA_CHECK(cudaMemcpy(d_rad.data(), rad.data(), n * sizeof(double), cudaMemcpyHostToDevice));
+      up.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    }
+    const double upload_ms = median(up);
+    rows.push_back(bench<float>(p, n, d_pos.data(), d_rad.data(), upload_ms, runs, flush));
+    rows.push_back(bench<double>(p, n, d_pos.data(), d_rad.data(), upload_ms, runs, flush));
+    std::fprintf(stderr, "done 2^%d\n", p);
+  }
+  std::printf(
+      "\n| N | prec | entries/N | key bits | pack | entries | sort | pairs | order | narrow | GPU sum | total | "
+      "Mspheres/s | contacts/N | workspace B/N | excl. contacts B/N | sort floor | sort/floor | total/floor | upload | download |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  for (const Row& r : rows) {
+    auto st = [&](const char* s) {
+      auto it = r.stage_ms.find(s);
+      return it == r.stage_ms.end() ? 0.0 : it->second;
+    };
+    std::printf(
+        "| 2^%d | %s | %.2f | %d | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.0f | %.3f | %.1f | %.1f | "
+        "%.3f | %.2f | %.2f | %.2f | %.2f |\n",
+        r.log2n, r.prec, double(r.entries) / double(r.n), r.key_bits, st("pack"), st("entries"), st("sort"),
+        st("pairs"), st("order"), st("narrow"), r.gpu_sum_ms, r.total_ms, double(r.n) / (r.total_ms * 1e-3) / 1e6,
+        double(r.contacts) / double(r.n), r.bytes_per_sphere, r.bytes_no_contacts, r.floor_ms,
+        r.floor_ms > 0 ? st("sort") / r.floor_ms : 0.0, r.floor_ms > 0 ? r.total_ms / r.floor_ms : 0.0,
+        r.upload_ms, r.download_ms);
+  }
+  std::printf("\nAll times in ms. workspace B/N = device bytes held by the engine / N, including the contact "
+              "output buffer, excluding the caller's input arrays (32 B/N). total = wall time of "
+              "detect_device_resident (device bounds, plan, stages, 3 host syncs).\n");
+  return 0;
+} catch (const std::exception& e) {
+  std::fprintf(stderr, "contactgrid_cuda_bench: %s\n", e.what());
+  return 1;
+}

@@ -1,0 +1,522 @@
+// The CUDA backend: Le Grand's stages on one GPU, the same stages, math and order as the CPU backend
+// (kernels/host/host_backend.cpp), so that results are bit-identical to it.
+//
+// One stream, owned by the backend (blocking: ordered after work on the legacy default stream).
+// A persistent workspace of device buffers grows geometrically and never shrinks: a caller that
+// detects many frames allocates nothing after the first (EngineStats::device_allocations).
+// The host synchronises twice per call, where it needs a count: after pack (entries total, bad-data
+// status) and after the pair count (pairs total); and once at the end.
+//
+// Stages (event-timed on the stream; names as the host's plus "upload" and "download"):
+//   upload    host-array path only: positions, radii, report mask → device
+//   pack      world double → local Real spheres; renumber the bodies by 4x4x4-cell block (a short
+//             radix sort, for locality of the pair stage only); control bytes, per-block entry totals
+//   entries   scan of the block totals → fill (cell key, body) in body order
+//   sort      cub::DeviceRadixSort::SortPairs over bits [0, key_bits)
+//   pairs     count per sorted entry → scan of block totals → fill u64 pair keys
+//   order     cub::DeviceRadixSort::SortKeys over bits [0, 2·id_bits)
+//   narrow    contact data of the requested fields, world frame
+//   download  contacts → pinned staging → Contacts<Real> (unless they stay on the device)
+#include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_scan.cuh>
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <sstream>
+
+#include "backend.hpp"
+#include "cuda/device_buffer.cuh"
+#include "cuda/stage_kernels.cuh"
+
+namespace cg {
+
+namespace cuda {
+void throw_cuda_error(cudaError_t e, const char* call, const char* file, int line) {
+  std::ostringstream m;
+  m << file << ":" << line << ": " << call << ": " << cudaGetErrorString(e);
+  throw CudaError(m.str());
+}
+}  // namespace cuda
+
+bool cuda_available() {
+  static const bool available = [] {
+    int n = 0;
+    if (cudaGetDeviceCount(&n) != cudaSuccess) {
+      cudaGetLastError();  // clear the sticky-free error state of the failed query
+      return false;
+    }
+    return n > 0;
+  }();
+  return available;
+}
+
+namespace detail {
+
+using cuda::BoundsPartial;
+using cuda::ContactPtrs;
+using cuda::Counters;
+using cuda::DeviceBuffer;
+using cuda::kBlock;
+using cuda::PinnedBuffer;
+using Bytes = DeviceBuffer<std::byte>;
+
+namespace {
+constexpr const char* kStageNames[] = {"upload", "pack", "entries", "sort", "pairs", "order", "narrow", "download"};
+constexpr int kStages = 8;
+constexpr int kBoundsBlocks = 512;  // partials of device_bounds (<= cuda::kBoundsFold)
+std::uint32_t blocks_for(std::uint64_t n) { return static_cast<std::uint32_t>((n + kBlock - 1) / kBlock); }
+std::size_t align16(std::size_t b) { return (b + 15) & ~std::size_t(15); }
+}  // namespace
+
+class CudaBackend {
+ public:
+  explicit CudaBackend(int device) {
+    if (device < 0) CG_CUDA_CHECK(cudaGetDevice(&device));
+    m_device = device;
+    CG_CUDA_CHECK(cudaSetDevice(m_device));
+    CG_CUDA_CHECK(cudaStreamCreate(&m_stream));
+    for (auto& e : m_events) CG_CUDA_CHECK(cudaEventCreate(&e));
+  }
+  ~CudaBackend() {
+    cudaSetDevice(m_device);
+    if (m_stream) cudaStreamSynchronize(m_stream);
+    for (auto& e : m_events)
+      if (e) cudaEventDestroy(e);
+    if (m_stream) cudaStreamDestroy(m_stream);
+  }
+  CudaBackend(const CudaBackend&) = delete;
+  CudaBackend& operator=(const CudaBackend&) = delete;
+
+  struct Request {
+    Bytes* buffer;
+    std::size_t bytes;
+  };
+  // Grows the buffers of `reqs` (contents discarded) after checking that the growth fits in the
+  // device's free memory: geometric growth where it fits, exact sizes where only those fit, else
+  // ResourceError naming the bytes needed and available. Synchronises the device when it allocates.
+  void reserve(std::initializer_list<Request> reqs, const char* what) {
+    std::size_t grow_geo = 0, grow_exact = 0;
+    for (const Request& r : reqs) {
+      grow_geo += r.buffer->capacity_for(r.bytes, true) - r.buffer->capacity();
+      grow_exact += r.buffer->capacity_for(r.bytes, false) - r.buffer->capacity();
+    }
+    if (grow_exact == 0) return;
+    std::size_t free_b = 0, total_b = 0;
+    CG_CUDA_CHECK(cudaMemGetInfo(&free_b, &total_b));
+    const std::size_t margin = std::size_t(64) << 20;  // CUDA context, launch and allocator slack
+    // Buffers that grow free their old storage first, so their current capacity is available too.
+    std::size_t reclaim = 0;
+    for (const Request& r : reqs)
+      if (r.bytes > r.buffer->capacity()) reclaim += r.buffer->capacity();
+    const std::size_t avail = free_b + reclaim > margin ? free_b + reclaim - margin : 0;
+    bool geometric = true;
+    if (grow_geo + reclaim > avail) geometric = false;
+    if (grow_exact + reclaim > avail) {
+      std::ostringstream m;
+      m << "device memory: the " << what << " stage needs " << grow_exact << " more bytes (workspace "
+        << held_bytes() + grow_exact << " bytes in all) but only " << free_b << " of " << total_b
+        << " bytes are free on CUDA device " << m_device
+        << "; use fewer bodies per rank (more MPI ranks) or a smaller scene";
+      throw ResourceError(m.str());
+    }
+    for (const Request& r : reqs)
+      if (r.buffer->reserve(r.bytes, geometric)) ++m_allocations;
+  }
+  std::uint64_t held_bytes() const {
+    std::uint64_t s = 0;
+    for (const Bytes* b : {&m_pos, &m_rad, &m_report, &m_spheres, &m_cell_spheres, &m_perm, &m_ctrl, &m_body_blocks, &m_entry_blocks,
+                           &m_keys[0], &m_keys[1], &m_bodies[0], &m_bodies[1], &m_pairs[0], &m_pairs[1], &m_out,
+                           &m_temp, &m_counters, &m_partials})
+      s += b->bytes();
+    return s;
+  }
+
+  // CUB two-phase call: `call(temp, bytes)` is queried with temp == nullptr, then run with m_temp
+  // (which the caller reserved through temp_bytes() before; asserted here).
+  template <class F>
+  std::size_t temp_bytes(F&& call) {
+    std::size_t bytes = 0;
+    CG_CUDA_CHECK(call(nullptr, bytes));
+    return bytes;
+  }
+  template <class F>
+  void run_cub(F&& call) {
+    std::size_t bytes = 0;
+    CG_CUDA_CHECK(call(nullptr, bytes));
+    if (bytes > m_temp.bytes()) throw Error("internal: CUB temp storage not reserved");
+    CG_CUDA_CHECK(call(m_temp.data(), bytes));
+  }
+
+  template <class Real, class Key>
+  void run(const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times, EngineStats& stats);
+  Bounds bounds(const DeviceBodiesView& v);
+
+  // The first invalid body (index i of n, read back from the device): throws compute_bounds' text.
+  [[noreturn]] void throw_bad_body(const double* d_pos, const double* d_rad, std::uint64_t i, std::int64_t id) {
+    Vec3<double> p{};
+    double r = 0;
+    CG_CUDA_CHECK(cudaMemcpy(&p, d_pos + 3 * i, sizeof(p), cudaMemcpyDeviceToHost));
+    CG_CUDA_CHECK(cudaMemcpy(&r, d_rad + i, sizeof(r), cudaMemcpyDeviceToHost));
+    compute_bounds(BodiesView{{&p, 1}, {&r, 1}, {&id, 1}, {}});  // throws InputError naming `id`
+    throw Error("internal: the device flagged body " + std::to_string(id) + " but it is valid");
+  }
+
+  int m_device = 0;
+  cudaStream_t m_stream = nullptr;
+  cudaEvent_t m_events[kStages + 1] = {};
+  std::uint64_t m_allocations = 0;
+  // Workspace (DEVICE): input copies (host path), packed spheres, control bytes, block totals and
+  // offsets, entries (double-buffered keys and bodies), pairs (double-buffered), contacts, CUB temp.
+  Bytes m_pos, m_rad, m_report, m_spheres, m_cell_spheres, m_perm, m_ctrl, m_body_blocks, m_entry_blocks;
+  Bytes m_keys[2], m_bodies[2], m_pairs[2], m_out, m_temp, m_counters, m_partials;
+  PinnedBuffer m_h_counters, m_h_staging;  // pinned HOST staging
+
+};
+
+Bounds CudaBackend::bounds(const DeviceBodiesView& v) {
+  Bounds b;
+  b.count = v.count;
+  if (v.count == 0) return b;
+  CG_CUDA_CHECK(cudaSetDevice(m_device));
+  reserve({{&m_partials, kBoundsBlocks * sizeof(BoundsPartial)}, {&m_counters, sizeof(Counters)}}, "bounds");
+  m_h_counters.reserve(sizeof(Counters) + sizeof(BoundsPartial));
+  auto* d_partials = m_partials.span_as<BoundsPartial>(kBoundsBlocks).data();
+  auto* d_counters = m_counters.span_as<Counters>(1).data();
+  const int grid = static_cast<int>(std::min<std::uint64_t>(kBoundsBlocks, blocks_for(v.count)));
+  CG_CUDA_CHECK(cudaMemsetAsync(d_counters, 0, sizeof(Counters), m_stream));
+  cuda::bounds_partial_kernel<<<grid, kBlock, 0, m_stream>>>(v.position, v.radius, v.count, d_partials, d_counters);
+  CG_CUDA_CHECK_LAUNCH("bounds_partial");
+  cuda::bounds_final_kernel<<<1, cuda::kBoundsFold, 0, m_stream>>>(d_partials, grid);
+  CG_CUDA_CHECK_LAUNCH("bounds_final");
+  std::byte* h = m_h_counters.data();
+  CG_CUDA_CHECK(cudaMemcpyAsync(h, d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, m_stream));
+  CG_CUDA_CHECK(cudaMemcpyAsync(h + sizeof(Counters), d_partials, sizeof(BoundsPartial), cudaMemcpyDeviceToHost,
+                                m_stream));
+  CG_CUDA_CHECK(cudaStreamSynchronize(m_stream));
+  Counters c;
+  BoundsPartial p;
+  std::memcpy(&c, h, sizeof(c));
+  std::memcpy(&p, h + sizeof(Counters), sizeof(p));
+  if (c.bad) {
+    const std::uint64_t i = v.count - c.bad;
+    throw_bad_body(v.position, v.radius, i, static_cast<std::int64_t>(i));
+  }
+  b.lo = {p.lo[0], p.lo[1], p.lo[2]};
+  b.hi = {p.hi[0], p.hi[1], p.hi[2]};
+  b.r_max = p.r_max;
+  return b;
+}
+
+template <class Real, class Key>
+void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times, EngineStats& stats) {
+  using clock_type = std::chrono::steady_clock;
+  CG_CUDA_CHECK(cudaSetDevice(m_device));
+  m_allocations = 0;
+  const std::uint64_t n64 = job.body_count();
+  if (n64 >= (std::uint64_t(1) << 32)) throw InputError("more than 2^32 - 1 bodies on one rank; use more MPI ranks");
+  const auto n = static_cast<std::uint32_t>(n64);
+  const GridParams<Real> g = job.grid;
+  const Vec3<double> origin = job.plan.frame.origin;
+  const bool device_in = job.device_bodies != nullptr;
+  const bool full = job.fields == Fields::full;
+  cudaStream_t st = m_stream;
+  bool recorded[kStages] = {};
+  auto mark = [&](int stage) {
+    CG_CUDA_CHECK(cudaEventRecord(m_events[stage + 1], st));
+    recorded[stage] = true;
+  };
+
+  // ---- upload (host-array path) -----------------------------------------------------------------
+  const std::uint32_t nb = blocks_for(n);
+  const std::size_t scan_nb_temp = temp_bytes([&](void* t, std::size_t& b) {
+    return cub::DeviceScan::ExclusiveSum(t, b, static_cast<std::uint32_t*>(nullptr),
+                                         static_cast<std::uint32_t*>(nullptr), int(nb), st);
+  });
+  // Renumbering sort of the bodies by 4x4x4-cell block (locality only; see home_block_key), over the
+  // bits of the block index. Its four arrays are the entry buffers, not yet live.
+  const std::uint64_t blocks3 = ((std::uint64_t(g.dims[0]) + 3) / 4) * ((std::uint64_t(g.dims[1]) + 3) / 4) *
+                                ((std::uint64_t(g.dims[2]) + 3) / 4);
+  const int home_bits = std::max(1, bits_for(blocks3));
+  cub::DoubleBuffer<Key> home_key(nullptr, nullptr);
+  cub::DoubleBuffer<std::uint32_t> home_index(nullptr, nullptr);
+  auto sort_home = [&](void* t, std::size_t& b) {
+    return cub::DeviceRadixSort::SortPairs(t, b, home_key, home_index, int(n), 0, home_bits, st);
+  };
+  if (n64 >= (std::uint64_t(1) << 31)) throw ResourceError("more than 2^31 - 1 bodies on one GPU; use more MPI ranks");
+  reserve({{&m_pos, device_in ? 0 : n64 * sizeof(Vec3<double>)},
+           {&m_rad, device_in ? 0 : n64 * sizeof(double)},
+           {&m_report, device_in || job.bodies.report.empty() ? 0 : n64},
+           {&m_spheres, n64 * sizeof(Sphere<Real>)},
+           {&m_cell_spheres, n64 * sizeof(Sphere<Real>)},
+           {&m_perm, n64 * sizeof(std::uint32_t)},
+           {&m_ctrl, n64},
+           {&m_keys[0], n64 * sizeof(Key)},
+           {&m_keys[1], n64 * sizeof(Key)},
+           {&m_bodies[0], n64 * sizeof(std::uint32_t)},
+           {&m_bodies[1], n64 * sizeof(std::uint32_t)},
+           {&m_body_blocks, 2 * std::size_t(nb) * sizeof(std::uint32_t)},
+           {&m_counters, sizeof(Counters)},
+           {&m_temp, std::max(scan_nb_temp, temp_bytes(sort_home))}},
+          "pack");
+  m_h_counters.reserve(sizeof(Counters));
+  CG_CUDA_CHECK(cudaEventRecord(m_events[0], st));
+  const double* d_pos;
+  const double* d_rad;
+  const std::uint8_t* d_report;
+  if (device_in) {
+    d_pos = job.device_bodies->position;
+    d_rad = job.device_bodies->radius;
+    d_report = job.device_bodies->report;
+  } else {
+    CG_CUDA_CHECK(cudaMemcpyAsync(m_pos.data(), job.bodies.position.data(), n64 * sizeof(Vec3<double>),
+                                  cudaMemcpyHostToDevice, st));
+    CG_CUDA_CHECK(cudaMemcpyAsync(m_rad.data(), job.bodies.radius.data(), n64 * sizeof(double),
+                                  cudaMemcpyHostToDevice, st));
+    d_pos = reinterpret_cast<const double*>(m_pos.data());
+    d_rad = reinterpret_cast<const double*>(m_rad.data());
+    d_report = nullptr;
+    if (!job.bodies.report.empty()) {
+      CG_CUDA_CHECK(cudaMemcpyAsync(m_report.data(), job.bodies.report.data(), n64, cudaMemcpyHostToDevice, st));
+      d_report = reinterpret_cast<const std::uint8_t*>(m_report.data());
+    }
+    mark(0);
+  }
+
+  // ---- pack -------------------------------------------------------------------------------------
+  Sphere<Real>* d_spheres = m_spheres.span_as<Sphere<Real>>(n).data();  // input order
+  Sphere<Real>* d_cell_spheres = m_cell_spheres.span_as<Sphere<Real>>(n).data();  // cell order
+  std::uint32_t* d_perm = m_perm.span_as<std::uint32_t>(n).data();  // cell order → input index
+  std::uint8_t* d_ctrl = m_ctrl.span_as<std::uint8_t>(n).data();    // cell order
+  std::uint32_t* d_body_totals = m_body_blocks.span_as<std::uint32_t>(2 * nb).data();
+  std::uint32_t* d_body_offsets = d_body_totals + nb;
+  Counters* d_counters = m_counters.span_as<Counters>(1).data();
+  CG_CUDA_CHECK(cudaMemsetAsync(d_counters, 0, sizeof(Counters), st));
+  home_key = cub::DoubleBuffer<Key>(m_keys[0].span_as<Key>(n).data(), m_keys[1].span_as<Key>(n).data());
+  home_index = cub::DoubleBuffer<std::uint32_t>(m_bodies[0].span_as<std::uint32_t>(n).data(),
+                                                m_bodies[1].span_as<std::uint32_t>(n).data());
+  cuda::pack_kernel<Real, Key><<<nb, kBlock, 0, st>>>(d_pos, d_rad, n, origin, g, d_spheres, home_key.Current(),
+                                                      home_index.Current(), d_counters);
+  CG_CUDA_CHECK_LAUNCH("pack");
+  run_cub(sort_home);
+  cuda::reorder_kernel<Real><<<nb, kBlock, 0, st>>>(d_spheres, n, g, home_index.Current(), d_cell_spheres, d_ctrl,
+                                                    d_perm, d_body_totals, d_counters);
+  CG_CUDA_CHECK_LAUNCH("reorder");
+  mark(1);
+  run_cub([&](void* t, std::size_t& b) {
+    return cub::DeviceScan::ExclusiveSum(t, b, d_body_totals, d_body_offsets, int(nb), st);
+  });
+  auto* h_counters = reinterpret_cast<Counters*>(m_h_counters.data());
+  CG_CUDA_CHECK(cudaMemcpyAsync(h_counters, d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, st));
+  CG_CUDA_CHECK(cudaStreamSynchronize(st));  // host needs the entries total and the status
+  if (h_counters->bad) {
+    const std::uint64_t i = n64 - h_counters->bad;
+    const std::int64_t id = !device_in && !job.bodies.id.empty() ? job.bodies.id[i] : std::int64_t(i);
+    throw_bad_body(d_pos, d_rad, i, id);
+  }
+  const std::uint64_t n_entries = h_counters->entries;
+  stats.entries = n_entries;
+  if (n_entries >= (std::uint64_t(1) << 31)) {
+    std::ostringstream m;
+    m << n_entries << " (cell, body) entries exceed the 2^31 - 1 items one CUB sort handles; "
+      << "use fewer bodies per rank (more MPI ranks)";
+    throw ResourceError(m.str());
+  }
+  const auto ne = static_cast<std::uint32_t>(n_entries);
+  const std::uint32_t neb = blocks_for(ne);
+
+  // ---- entries ----------------------------------------------------------------------------------
+  cub::DoubleBuffer<Key> keys(nullptr, nullptr);
+  cub::DoubleBuffer<std::uint32_t> body(nullptr, nullptr);
+  const int key_bits = job.plan.key_bits;
+  auto sort_entries = [&](void* t, std::size_t& b) {
+    return cub::DeviceRadixSort::SortPairs(t, b, keys, body, int(ne), 0, key_bits, st);
+  };
+  const std::size_t sort_temp = temp_bytes(sort_entries);
+  reserve({{&m_keys[0], ne * sizeof(Key)},
+           {&m_keys[1], ne * sizeof(Key)},
+           {&m_bodies[0], ne * sizeof(std::uint32_t)},
+           {&m_bodies[1], ne * sizeof(std::uint32_t)},
+           {&m_entry_blocks, 2 * std::size_t(neb) * sizeof(std::uint32_t)},
+           {&m_temp, sort_temp}},
+          "entries");
+  keys = cub::DoubleBuffer<Key>(m_keys[0].span_as<Key>(ne).data(), m_keys[1].span_as<Key>(ne).data());
+  body = cub::DoubleBuffer<std::uint32_t>(m_bodies[0].span_as<std::uint32_t>(ne).data(),
+                                          m_bodies[1].span_as<std::uint32_t>(ne).data());
+  cuda::fill_entries_kernel<Real, Key><<<nb, kBlock, 0, st>>>(d_cell_spheres, n, g, d_body_offsets, keys.Current(),
+                                                              body.Current());
+  CG_CUDA_CHECK_LAUNCH("fill_entries");
+  mark(2);
+
+  // ---- sort -------------------------------------------------------------------------------------
+  run_cub(sort_entries);
+  mark(3);
+
+  // ---- pairs: count -----------------------------------------------------------------------------
+  const Key* d_keys = keys.Current();
+  const std::uint32_t* d_body = body.Current();
+  // The alternate key buffer is dead after the sort: it holds the per-entry contact masks (u32).
+  auto* d_pair_count = reinterpret_cast<std::uint32_t*>(keys.Alternate());
+  std::uint32_t* d_entry_totals = m_entry_blocks.span_as<std::uint32_t>(2 * neb).data();
+  std::uint32_t* d_entry_offsets = d_entry_totals + neb;
+  cuda::count_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(d_keys, d_body, ne, d_ctrl, d_cell_spheres, d_perm,
+                                                              d_report, g.half_bits, d_pair_count, d_entry_totals,
+                                                              d_counters);
+  CG_CUDA_CHECK_LAUNCH("count_pairs");
+  CG_CUDA_CHECK(cudaMemcpyAsync(h_counters, d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, st));
+  CG_CUDA_CHECK(cudaStreamSynchronize(st));  // host needs the pairs total
+  const std::uint64_t n_pairs = h_counters->pairs;
+  stats.pair_tests = h_counters->tests;
+  if (n_pairs >= (std::uint64_t(1) << 31)) {
+    std::ostringstream m;
+    m << n_pairs << " contacting pairs exceed the 2^31 - 1 items one CUB sort handles; use more MPI ranks";
+    throw ResourceError(m.str());
+  }
+  const auto np = static_cast<std::uint32_t>(n_pairs);
+
+  // ---- pairs: scan → fill -----------------------------------------------------------------------
+  const int id_bits = std::max(1, bits_for(n64));
+  cub::DoubleBuffer<std::uint64_t> pairs(nullptr, nullptr);
+  auto sort_pairs = [&](void* t, std::size_t& b) {
+    return cub::DeviceRadixSort::SortKeys(t, b, pairs, int(np), 0, 2 * id_bits, st);
+  };
+  auto scan_entry_blocks = [&](void* t, std::size_t& b) {
+    return cub::DeviceScan::ExclusiveSum(t, b, d_entry_totals, d_entry_offsets, int(neb), st);
+  };
+  const std::size_t v3 = align16(np * sizeof(Vec3<Real>));
+  const std::size_t ids = align16(np * sizeof(std::int64_t));
+  const std::size_t reals = align16(np * sizeof(Real));
+  const std::size_t out_bytes = 2 * ids + 3 * v3 + reals + (full ? 4 * v3 : 0);
+  reserve({{&m_pairs[0], np * sizeof(std::uint64_t)},
+           {&m_pairs[1], np * sizeof(std::uint64_t)},
+           {&m_out, out_bytes},
+           {&m_temp, std::max(temp_bytes(sort_pairs), temp_bytes(scan_entry_blocks))}},
+          "pairs");
+  pairs = cub::DoubleBuffer<std::uint64_t>(m_pairs[0].span_as<std::uint64_t>(np).data(),
+                                           m_pairs[1].span_as<std::uint64_t>(np).data());
+  run_cub(scan_entry_blocks);
+  if (np > 0) {
+    cuda::fill_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(d_keys, d_body, ne, d_ctrl, d_cell_spheres, d_perm,
+                                                               d_report, g.half_bits, d_pair_count, d_entry_offsets,
+                                                               id_bits, pairs.Current());
+    CG_CUDA_CHECK_LAUNCH("fill_pairs");
+  }
+  mark(4);
+
+  // ---- order ------------------------------------------------------------------------------------
+  if (np > 1) run_cub(sort_pairs);
+  mark(5);
+
+  // ---- narrow -----------------------------------------------------------------------------------
+  std::byte* o = m_out.data();
+  std::size_t at = 0;
+  auto take = [&](std::size_t bytes) {
+    std::byte* p = o + at;
+    at += bytes;
+    return p;
+  };
+  ContactPtrs<Real> cp{};
+  cp.id_a = reinterpret_cast<std::int64_t*>(take(ids));
+  cp.id_b = reinterpret_cast<std::int64_t*>(take(ids));
+  cp.position_on_a = reinterpret_cast<Vec3<Real>*>(take(v3));
+  cp.position_on_b = reinterpret_cast<Vec3<Real>*>(take(v3));
+  cp.normal_on_b = reinterpret_cast<Vec3<Real>*>(take(v3));
+  cp.distance = reinterpret_cast<Real*>(take(reals));
+  if (full) {
+    cp.local_point_a = reinterpret_cast<Vec3<Real>*>(take(v3));
+    cp.local_point_b = reinterpret_cast<Vec3<Real>*>(take(v3));
+    cp.dir1 = reinterpret_cast<Vec3<Real>*>(take(v3));
+    cp.dir2 = reinterpret_cast<Vec3<Real>*>(take(v3));
+  }
+  if (np > 0) {
+    cuda::narrow_kernel<Real><<<blocks_for(np), kBlock, 0, st>>>(pairs.Current(), np, id_bits, d_spheres, origin,
+                                                                 cp, full);
+    CG_CUDA_CHECK_LAUNCH("narrow");
+  }
+  mark(6);
+
+  // ---- download ---------------------------------------------------------------------------------
+  double host_copy_s = 0;
+  if (job.device_out) {
+    DeviceContactsView<Real>& v = *job.device_out;
+    v = DeviceContactsView<Real>{};
+    v.count = np;
+    v.full = full;
+    v.id_a = cp.id_a;
+    v.id_b = cp.id_b;
+    v.position_on_a = cp.position_on_a;
+    v.position_on_b = cp.position_on_b;
+    v.normal_on_b = cp.normal_on_b;
+    v.distance = cp.distance;
+    if (full) {
+      v.local_point_a = cp.local_point_a;
+      v.local_point_b = cp.local_point_b;
+      v.lateral_friction_dir1 = cp.dir1;
+      v.lateral_friction_dir2 = cp.dir2;
+    }
+    CG_CUDA_CHECK(cudaStreamSynchronize(st));
+  } else {
+    m_h_staging.reserve(std::max<std::size_t>(at, 1));
+    if (at > 0) CG_CUDA_CHECK(cudaMemcpyAsync(m_h_staging.data(), o, at, cudaMemcpyDeviceToHost, st));
+    mark(7);
+    CG_CUDA_CHECK(cudaStreamSynchronize(st));
+    const auto t0 = clock_type::now();
+    out.resize(np, full);
+    const std::byte* h = m_h_staging.data();
+    auto from = [&](const void* d_ptr) { return h + (static_cast<const std::byte*>(d_ptr) - o); };
+    auto copy = [&](auto& vec, const void* d_ptr) {
+      if (np) std::memcpy(vec.data(), from(d_ptr), vec.size() * sizeof(vec[0]));
+    };
+    copy(out.id_a, cp.id_a);
+    copy(out.id_b, cp.id_b);
+    copy(out.position_on_a, cp.position_on_a);
+    copy(out.position_on_b, cp.position_on_b);
+    copy(out.normal_on_b, cp.normal_on_b);
+    copy(out.distance, cp.distance);
+    if (full) {
+      copy(out.local_point_a, cp.local_point_a);
+      copy(out.local_point_b, cp.local_point_b);
+      copy(out.lateral_friction_dir1, cp.dir1);
+      copy(out.lateral_friction_dir2, cp.dir2);
+    }
+    host_copy_s = std::chrono::duration<double>(clock_type::now() - t0).count();
+  }
+
+  // Stage times from the events (all complete: the stream was synchronised above).
+  cudaEvent_t prev = m_events[0];
+  for (int s = 0; s < kStages; ++s) {
+    if (!recorded[s]) continue;
+    float ms = 0;
+    CG_CUDA_CHECK(cudaEventElapsedTime(&ms, prev, m_events[s + 1]));
+    double sec = ms * 1e-3;
+    if (s == 7) sec += host_copy_s;
+    times.push_back({kStageNames[s], sec});
+    prev = m_events[s + 1];
+  }
+  stats.peak_device_bytes = held_bytes();
+  stats.device_allocations = m_allocations;
+}
+
+std::unique_ptr<CudaBackend> make_cuda_backend(int device) {
+  if (!cuda_available()) throw CudaError("no CUDA device is available to this process");
+  return std::make_unique<CudaBackend>(device);
+}
+
+void destroy(CudaBackend* backend) { delete backend; }
+
+Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies) { return backend.bounds(bodies); }
+
+template <class Real>
+void run_stages(CudaBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times,
+                EngineStats& stats) {
+  if (job.plan.key64)
+    backend.run<Real, std::uint64_t>(job, out, times, stats);
+  else
+    backend.run<Real, std::uint32_t>(job, out, times, stats);
+}
+
+template void run_stages(CudaBackend&, const DetectJob<float>&, Contacts<float>&, StageTimes&, EngineStats&);
+template void run_stages(CudaBackend&, const DetectJob<double>&, Contacts<double>&, StageTimes&, EngineStats&);
+
+}  // namespace detail
+}  // namespace cg

@@ -1,0 +1,423 @@
+#pragma once
+// The CUDA kernels of the Le Grand stages. Each mirrors one loop of kernels/host/host_backend.cpp and
+// calls the same CG_HD functions of kernels/core/ in the same order, so every decision and every
+// value is bit-identical to the CPU backend (no FMA contraction: --fmad=false; IEEE sqrt and div).
+//
+// Thread mapping: one thread per body (pack, fill_entries), per sorted entry (count_pairs,
+// fill_pairs) or per pair (narrow); blocks of kBlock threads, no grid-stride loop in the
+// count → fill pairs, so that a block's count kernel and fill kernel see the same items and the
+// fill places its items with a block-wide exclusive scan plus the block's scanned total.
+#include <cub/block/block_reduce.cuh>
+#include <cub/block/block_scan.cuh>
+
+#include <cstdint>
+
+#include "core/contact.hpp"
+#include "core/grid.hpp"
+#include "engine.hpp"
+
+namespace cg::cuda {
+
+constexpr int kBlock = 256;
+
+// DEVICE counters of one call; zeroed (cudaMemsetAsync) before the first kernel that adds to them.
+struct Counters {
+  unsigned long long entries;  // sum of entry counts (pack)
+  unsigned long long pairs;    // contacting pairs (count_pairs)
+  unsigned long long tests;    // sphere tests made (count_pairs)
+  unsigned long long bad;      // n - i of the first invalid body i (atomicMax), 0: none
+};
+
+// Per-block partial bounds (device_bounds).
+struct BoundsPartial {
+  double lo[3], hi[3], r_max;
+};
+
+// Pointers of the contact arrays in DEVICE memory; the `full` four are null for Fields::basic.
+template <class Real>
+struct ContactPtrs {
+  std::int64_t *id_a, *id_b;
+  Vec3<Real> *position_on_a, *position_on_b, *normal_on_b;
+  Real* distance;
+  Vec3<Real> *local_point_a, *local_point_b, *dir1, *dir2;
+};
+
+__device__ __forceinline__ bool body_is_bad(double x, double y, double z, double r) {
+  return !isfinite(x) || !isfinite(y) || !isfinite(z) || !(r > 0) || !isfinite(r);
+}
+
+// Bounds of the bodies' boxes (p ± r, as compute_bounds) and r_max, one partial per block
+// (grid-stride). Records the first invalid body in c->bad. min/max are exact: same bits as the host.
+__global__ void bounds_partial_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
+                                      std::uint64_t n, BoundsPartial* __restrict__ partial,
+                                      Counters* __restrict__ c) {
+  __shared__ double sh[7][kBlock];
+  double acc[7] = {INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY, 0.0};
+  for (std::uint64_t i = std::uint64_t(blockIdx.x) * kBlock + threadIdx.x; i < n;
+       i += std::uint64_t(gridDim.x) * kBlock) {
+    const double p[3] = {pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]};
+    const double r = rad[i];
+    if (body_is_bad(p[0], p[1], p[2], r)) atomicMax(&c->bad, static_cast<unsigned long long>(n - i));
+    for (int k = 0; k < 3; ++k) {
+      const double lo = p[k] - r, hi = p[k] + r;
+      acc[k] = lo < acc[k] ? lo : acc[k];
+      acc[3 + k] = hi > acc[3 + k] ? hi : acc[3 + k];
+    }
+    acc[6] = r > acc[6] ? r : acc[6];
+  }
+  for (int v = 0; v < 7; ++v) sh[v][threadIdx.x] = acc[v];
+  __syncthreads();
+  for (int s = kBlock / 2; s > 0; s >>= 1) {
+    if (int(threadIdx.x) < s) {
+      for (int v = 0; v < 3; ++v) {
+        const double o = sh[v][threadIdx.x + s];
+        sh[v][threadIdx.x] = o < sh[v][threadIdx.x] ? o : sh[v][threadIdx.x];
+      }
+      for (int v = 3; v < 7; ++v) {
+        const double o = sh[v][threadIdx.x + s];
+        sh[v][threadIdx.x] = o > sh[v][threadIdx.x] ? o : sh[v][threadIdx.x];
+      }
+    }
+    __syncthreads();
+  }
+  if (threadIdx.x == 0) {
+    for (int k = 0; k < 3; ++k) {
+      partial[blockIdx.x].lo[k] = sh[k][0];
+      partial[blockIdx.x].hi[k] = sh[3 + k][0];
+    }
+    partial[blockIdx.x].r_max = sh[6][0];
+  }
+}
+
+// One block of kBoundsFold threads folds the partials (count <= kBoundsFold) into partial[0].
+constexpr int kBoundsFold = 512;
+__global__ void __launch_bounds__(kBoundsFold) bounds_final_kernel(BoundsPartial* partial, int count) {
+  __shared__ double sh[7][kBoundsFold];
+  const int t = threadIdx.x;
+  if (t < count) {
+    for (int k = 0; k < 3; ++k) {
+      sh[k][t] = partial[t].lo[k];
+      sh[3 + k][t] = partial[t].hi[k];
+    }
+    sh[6][t] = partial[t].r_max;
+  } else {
+    for (int k = 0; k < 3; ++k) {
+      sh[k][t] = INFINITY;
+      sh[3 + k][t] = -INFINITY;
+    }
+    sh[6][t] = 0.0;
+  }
+  __syncthreads();
+  for (int s = kBoundsFold / 2; s > 0; s >>= 1) {
+    if (t < s) {
+      for (int v = 0; v < 3; ++v) {
+        const double o = sh[v][t + s];
+        sh[v][t] = o < sh[v][t] ? o : sh[v][t];
+      }
+      for (int v = 3; v < 7; ++v) {
+        const double o = sh[v][t + s];
+        sh[v][t] = o > sh[v][t] ? o : sh[v][t];
+      }
+    }
+    __syncthreads();
+  }
+  if (t == 0) {
+    for (int k = 0; k < 3; ++k) {
+      partial[0].lo[k] = sh[k][0];
+      partial[0].hi[k] = sh[3 + k][0];
+    }
+    partial[0].r_max = sh[6][0];
+  }
+}
+
+// Locality key of a body: linear index of the 4x4x4-cell block holding its lowest cell. Sorting
+// the bodies by it renumbers them so that the bodies of neighbouring cells have nearby indices (the
+// pair stage then reads spheres and control bytes coherently). It changes no result: decisions are
+// symmetric in the two bodies, and pairs are emitted and sorted by their original indices.
+template <class Key, class Real>
+__device__ __forceinline__ Key home_block_key(const BodyCells& bc, const GridParams<Real>& g) {
+  const Key bx = (Key(g.dims[0]) + 3) >> 2, by = (Key(g.dims[1]) + 3) >> 2;
+  return Key(bc.lo[0] >> 2) + bx * (Key(bc.lo[1] >> 2) + by * Key(bc.lo[2] >> 2));
+}
+
+// pack: world (double) → local Real sphere `Real(p - origin)` in input order, and the (locality key,
+// index) pairs of the renumbering sort. Invalid bodies → c->bad.
+template <class Real, class Key>
+__global__ void __launch_bounds__(kBlock) pack_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
+                                                      std::uint32_t n, Vec3<double> origin, GridParams<Real> g,
+                                                      Sphere<Real>* __restrict__ spheres,
+                                                      Key* __restrict__ home_key, std::uint32_t* __restrict__ home_index,
+                                                      Counters* __restrict__ c) {
+  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+  if (i >= n) return;
+  const std::uint64_t i3 = 3 * std::uint64_t(i);
+  const double px = pos[i3], py = pos[i3 + 1], pz = pos[i3 + 2], r = rad[i];
+  if (body_is_bad(px, py, pz, r)) atomicMax(&c->bad, static_cast<unsigned long long>(n - i));
+  const Sphere<Real> s{static_cast<Real>(px - origin.x), static_cast<Real>(py - origin.y),
+                       static_cast<Real>(pz - origin.z), static_cast<Real>(r)};
+  spheres[i] = s;
+  home_key[i] = home_block_key<Key>(body_cells(s, g), g);
+  home_index[i] = i;
+}
+
+// reorder: cell-ordered copy of the spheres (body j = input body perm[j]), control bytes, and per
+// block the sum of the entry counts (block_entries[blockIdx.x]; total added to c->entries).
+template <class Real>
+__global__ void __launch_bounds__(kBlock) reorder_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n,
+                                                         GridParams<Real> g, const std::uint32_t* __restrict__ sorted_index,
+                                                         Sphere<Real>* __restrict__ cell_spheres,
+                                                         std::uint8_t* __restrict__ ctrl, std::uint32_t* __restrict__ perm,
+                                                         std::uint32_t* __restrict__ block_entries,
+                                                         Counters* __restrict__ c) {
+  using Reduce = cub::BlockReduce<std::uint32_t, kBlock>;
+  __shared__ typename Reduce::TempStorage tmp;
+  const std::uint32_t j = blockIdx.x * kBlock + threadIdx.x;
+  std::uint32_t count = 0;
+  if (j < n) {
+    const std::uint32_t i = sorted_index[j];
+    const Sphere<Real> s = spheres[i];
+    cell_spheres[j] = s;
+    perm[j] = i;
+    const BodyCells bc = body_cells(s, g);
+    ctrl[j] = control_bits(bc);
+    count = entry_count(bc);
+  }
+  const std::uint32_t total = Reduce(tmp).Sum(count);
+  if (threadIdx.x == 0) {
+    block_entries[blockIdx.x] = total;
+    atomicAdd(&c->entries, static_cast<unsigned long long>(total));
+  }
+}
+
+// entries: (cell key, body) of the cell-ordered bodies, body-ascending; body j's entries start at
+// its block's scanned total plus its exclusive rank in the block (same block layout as
+// reorder_kernel). Staged in shared memory so that the block writes its entries coalesced.
+template <class Real, class Key>
+__global__ void __launch_bounds__(kBlock) fill_entries_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n,
+                                                              GridParams<Real> g,
+                                                              const std::uint32_t* __restrict__ block_offset,
+                                                              Key* __restrict__ keys, std::uint32_t* __restrict__ body) {
+  using Scan = cub::BlockScan<std::uint32_t, kBlock>;
+  __shared__ typename Scan::TempStorage tmp;
+  __shared__ Key s_keys[8 * kBlock];
+  __shared__ std::uint32_t s_body[8 * kBlock];
+  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+  BodyCells bc{};
+  std::uint32_t count = 0;
+  if (i < n) {
+    bc = body_cells(spheres[i], g);  // the same Real sphere and function as reorder: the same cells
+    count = entry_count(bc);
+  }
+  std::uint32_t rank, total;
+  Scan(tmp).ExclusiveSum(count, rank, total);
+  for (std::uint32_t m = 0; m < count; ++m) {
+    s_keys[rank + m] = body_cell_key<Key>(bc, m, g);
+    s_body[rank + m] = i;
+  }
+  __syncthreads();
+  const std::uint64_t base = block_offset[blockIdx.x];
+  for (std::uint32_t t = threadIdx.x; t < total; t += kBlock) {
+    keys[base + t] = s_keys[t];
+    body[base + t] = s_body[t];
+  }
+}
+
+// The host's for_each_contact for sorted entry e: tests against the later entries f >= f0 of its cell
+// (f0 = e + 1 for the whole walk). Bodies are cell-ordered indices; perm maps them to input indices.
+// The host visits a pair (a, b) of input indices a < b from a's entry and skips it when report[a] is
+// 0; here the entry order within a cell follows the cell order, so the mask is read for the smaller
+// input index of the two. Both tests are symmetric in the two bodies (bit for bit), so the decisions
+// are the host's.
+template <class Real>
+struct EntryBody {  // what a visit needs of the first body of a pair
+  std::uint32_t a, type, pa;
+  std::uint8_t ca;
+  Sphere<Real> sa;
+};
+
+template <class Real, class Emit>
+__device__ __forceinline__ void visit(const EntryBody<Real>& x, std::uint32_t b, std::uint8_t cb,
+                                      const Sphere<Real>& sb, std::uint32_t pb, const std::uint8_t* report,
+                                      std::uint32_t& tests, Emit& emit) {
+  if (report && !report[x.pa < pb ? x.pa : pb]) return;
+  if (!test_in_cell(x.ca, cb, x.type)) return;
+  ++tests;
+  if (spheres_touch(x.sa, sb)) emit(x.a, b);
+}
+
+template <class Real, class Key, class Emit>
+__device__ __forceinline__ std::uint32_t walk_from_memory(std::uint32_t f0, Key k, const EntryBody<Real>& x,
+                                                          const Key* __restrict__ keys,
+                                                          const std::uint32_t* __restrict__ body,
+                                                          std::uint32_t n_entries,
+                                                          const std::uint8_t* __restrict__ ctrl,
+                                                          const Sphere<Real>* __restrict__ spheres,
+                                                          const std::uint32_t* __restrict__ perm,
+                                                          const std::uint8_t* __restrict__ report, Emit&& emit) {
+  std::uint32_t tests = 0;
+  for (std::uint32_t f = f0; f < n_entries && keys[f] == k; ++f) {
+    const std::uint32_t b = body[f];
+    visit(x, b, ctrl[b], spheres[b], report ? perm[b] : 0u, report, tests, emit);
+  }
+  return tests;
+}
+
+template <class Real>
+__device__ __forceinline__ Sphere<Real> shfl_down_sphere(const Sphere<Real>& s, int j) {
+  constexpr unsigned full = 0xFFFFFFFFu;
+  return {__shfl_down_sync(full, s.x, j), __shfl_down_sync(full, s.y, j), __shfl_down_sync(full, s.z, j),
+          __shfl_down_sync(full, s.r, j)};
+}
+
+// pairs, count: per block the number of contacting (reported) pairs (block_pairs); totals of pairs
+// and tests added to c; per entry e a contact mask: bit j (1..31) set when entry e + j (same warp)
+// is a contact of e, bit 0 set when contacts lie past the warp's end (fill_pairs then walks e's cell
+// from memory). Each thread loads its own entry's key, body, control byte and sphere once; the later
+// entries of its cell within the warp come from the other lanes' registers (shuffles); only cells that
+// cross the warp's end are walked from memory.
+template <class Real, class Key>
+__global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
+                                                             std::uint32_t n_entries,
+                                                             const std::uint8_t* __restrict__ ctrl,
+                                                             const Sphere<Real>* __restrict__ spheres,
+                                                             const std::uint32_t* __restrict__ perm,
+                                                             const std::uint8_t* __restrict__ report, int half_bits,
+                                                             std::uint32_t* __restrict__ mask,
+                                                             std::uint32_t* __restrict__ block_pairs,
+                                                             Counters* __restrict__ c) {
+  using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
+  __shared__ typename Reduce::TempStorage tmp;
+  constexpr unsigned full = 0xFFFFFFFFu;
+  const std::uint32_t e = blockIdx.x * kBlock + threadIdx.x;
+  const std::uint32_t lane = threadIdx.x & 31u;
+  const bool valid = e < n_entries;
+  const Key k = valid ? keys[e] : Key(0);
+  EntryBody<Real> x{};
+  x.a = valid ? body[e] : 0u;
+  x.type = key_type(k, half_bits);
+  x.ca = valid ? ctrl[x.a] : std::uint8_t(0);
+  x.sa = valid ? spheres[x.a] : Sphere<Real>{};
+  x.pa = valid && report ? perm[x.a] : 0u;
+  std::uint32_t found = 0, tests = 0, bits = 0, j = 1;
+  auto count_one = [&](std::uint32_t, std::uint32_t) { ++found; };
+  auto mark_one = [&](std::uint32_t, std::uint32_t) {
+    ++found;
+    bits |= 1u << j;
+  };
+  bool active = valid;
+  bool spill = false;  // the cell goes on past the warp's last lane: walk the rest from memory
+  for (; j < 32; ++j) {
+    if (!__any_sync(full, active)) break;
+    const Key kb = __shfl_down_sync(full, k, j);
+    const std::uint32_t b = __shfl_down_sync(full, x.a, j);
+    const std::uint32_t cb = __shfl_down_sync(full, std::uint32_t(x.ca), j);
+    const std::uint32_t pb = __shfl_down_sync(full, x.pa, j);
+    const Sphere<Real> sb = shfl_down_sphere(x.sa, int(j));
+    if (!active) continue;
+    if (lane + j >= 32) {
+      active = false;
+      spill = true;
+      continue;
+    }
+    if (e + j >= n_entries || kb != k) {
+      active = false;
+      continue;
+    }
+    visit(x, b, std::uint8_t(cb), sb, pb, report, tests, mark_one);
+  }
+  if (active) spill = true;  // lane 0 ran through the whole warp
+  if (spill) {
+    const std::uint32_t before = found;
+    tests += walk_from_memory(e + (32 - lane), k, x, keys, body, n_entries, ctrl, spheres, perm, report, count_one);
+    if (found != before) bits |= 1u;
+  }
+  if (valid) mask[e] = bits;
+  const unsigned long long block_sum = Reduce(tmp).Sum(static_cast<unsigned long long>(found));
+  __syncthreads();  // tmp is reused
+  const unsigned long long block_tests = Reduce(tmp).Sum(static_cast<unsigned long long>(tests));
+  if (threadIdx.x == 0) {
+    // Truncation is harmless: the host rejects totals >= 2^31 before block_pairs is used.
+    block_pairs[blockIdx.x] = static_cast<std::uint32_t>(block_sum);
+    atomicAdd(&c->pairs, block_sum);
+    atomicAdd(&c->tests, block_tests);
+  }
+}
+
+// pairs, fill: u64 pair keys a << id_bits | b (input indices, a < b) at the block's scanned total +
+// the entry's rank, from the contact masks of count_pairs_kernel (entries flagged in bit 0: the cell
+// is walked from memory again, counting then emitting).
+template <class Real, class Key>
+__global__ void __launch_bounds__(kBlock) fill_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
+                                                            std::uint32_t n_entries,
+                                                            const std::uint8_t* __restrict__ ctrl,
+                                                            const Sphere<Real>* __restrict__ spheres,
+                                                            const std::uint32_t* __restrict__ perm,
+                                                            const std::uint8_t* __restrict__ report, int half_bits,
+                                                            const std::uint32_t* __restrict__ mask,
+                                                            const std::uint32_t* __restrict__ block_offset, int id_bits,
+                                                            std::uint64_t* __restrict__ pairs) {
+  using Scan = cub::BlockScan<std::uint32_t, kBlock>;
+  __shared__ typename Scan::TempStorage tmp;
+  const std::uint32_t e = blockIdx.x * kBlock + threadIdx.x;
+  const std::uint32_t bits = e < n_entries ? mask[e] : 0u;
+  EntryBody<Real> x{};
+  Key k{};
+  std::uint32_t mine = 0;
+  if (bits & 1u) {  // slow path: contacts past the warp's end
+    k = keys[e];
+    x.a = body[e];
+    x.type = key_type(k, half_bits);
+    x.ca = ctrl[x.a];
+    x.sa = spheres[x.a];
+    x.pa = report ? perm[x.a] : 0u;
+    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
+                     [&](std::uint32_t, std::uint32_t) { ++mine; });
+  } else {
+    mine = __popc(bits);
+  }
+  std::uint32_t rank;
+  Scan(tmp).ExclusiveSum(mine, rank);
+  if (mine == 0) return;
+  std::uint64_t* w = pairs + block_offset[blockIdx.x] + rank;
+  auto emit = [&](std::uint32_t a, std::uint32_t b) {
+    const std::uint32_t pa = perm[a], pb = perm[b];  // input indices, a < b as the host
+    *w++ = pa < pb ? (std::uint64_t(pa) << id_bits) | pb : (std::uint64_t(pb) << id_bits) | pa;
+  };
+  if (bits & 1u) {
+    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, emit);
+  } else {
+    const std::uint32_t a = body[e];
+    for (std::uint32_t m = bits; m != 0; m &= m - 1) emit(a, body[e + __ffs(m) - 1]);
+  }
+}
+
+// narrow: contact data of each sorted pair, world frame as the host: Real(double(origin) + double(v)).
+template <class Real>
+__global__ void __launch_bounds__(kBlock) narrow_kernel(const std::uint64_t* __restrict__ pairs, std::uint32_t n_pairs,
+                                                        int id_bits, const Sphere<Real>* __restrict__ spheres,
+                                                        Vec3<double> origin, ContactPtrs<Real> out, bool full) {
+  const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
+  if (k >= n_pairs) return;
+  const std::uint64_t id_mask = (std::uint64_t(1) << id_bits) - 1;
+  const std::uint32_t a = static_cast<std::uint32_t>(pairs[k] >> id_bits);
+  const std::uint32_t b = static_cast<std::uint32_t>(pairs[k] & id_mask);
+  const Sphere<Real> sa = spheres[a], sb = spheres[b];
+  const ContactGeometry<Real> c = sphere_sphere_contact(sa, sb);
+  auto world = [&](Vec3<Real> v) {
+    return Vec3<Real>{static_cast<Real>(origin.x + double(v.x)), static_cast<Real>(origin.y + double(v.y)),
+                      static_cast<Real>(origin.z + double(v.z))};
+  };
+  out.id_a[k] = a;
+  out.id_b[k] = b;
+  out.position_on_a[k] = world(c.position_on_a);
+  out.position_on_b[k] = world(c.position_on_b);
+  out.normal_on_b[k] = c.normal_on_b;
+  out.distance[k] = c.distance;
+  if (full) {
+    out.local_point_a[k] = c.position_on_a - sa.centre();
+    out.local_point_b[k] = c.position_on_b - sb.centre();
+    plane_space(c.normal_on_b, out.dir1[k], out.dir2[k]);
+  }
+}
+
+}  // namespace cg::cuda

@@ -1,0 +1,268 @@
+// The CUDA backend against its oracle, the CPU backend: every field of every contact bit-identical
+// (fp64 and fp32), on random and adversarial scenes; the persistent workspace; the device-array API
+// (the example of engine.hpp, compiled and run here). Every case skips, visibly, without a GPU.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "engine.hpp"
+#include "scenes.hpp"
+
+#if defined(CONTACTGRID_HAVE_CUDA)
+#include <cuda_runtime.h>
+#endif
+
+namespace cg::test {
+namespace {
+
+#define CG_SKIP_WITHOUT_CUDA()                                                  \
+  do {                                                                          \
+    if (!::cg::cuda_available())                                                \
+      GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";     \
+  } while (0)
+
+template <class T>
+bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
+template <class Real>
+void expect_identical(const Contacts<Real>& cpu, const Contacts<Real>& gpu, const std::string& what) {
+  ASSERT_EQ(cpu.size(), gpu.size()) << what;
+  ASSERT_EQ(cpu.full, gpu.full) << what;
+  EXPECT_TRUE(same_bits(cpu.id_a, gpu.id_a)) << what << ": id_a";
+  EXPECT_TRUE(same_bits(cpu.id_b, gpu.id_b)) << what << ": id_b";
+  EXPECT_TRUE(same_bits(cpu.position_on_a, gpu.position_on_a)) << what << ": position_on_a";
+  EXPECT_TRUE(same_bits(cpu.position_on_b, gpu.position_on_b)) << what << ": position_on_b";
+  EXPECT_TRUE(same_bits(cpu.normal_on_b, gpu.normal_on_b)) << what << ": normal_on_b";
+  EXPECT_TRUE(same_bits(cpu.distance, gpu.distance)) << what << ": distance";
+  EXPECT_TRUE(same_bits(cpu.local_point_a, gpu.local_point_a)) << what << ": local_point_a";
+  EXPECT_TRUE(same_bits(cpu.local_point_b, gpu.local_point_b)) << what << ": local_point_b";
+  EXPECT_TRUE(same_bits(cpu.lateral_friction_dir1, gpu.lateral_friction_dir1)) << what << ": dir1";
+  EXPECT_TRUE(same_bits(cpu.lateral_friction_dir2, gpu.lateral_friction_dir2)) << what << ": dir2";
+}
+
+template <class Real>
+class CudaBackendTest : public ::testing::Test {
+ protected:
+  void SetUp() override { CG_SKIP_WITHOUT_CUDA(); }
+
+  void compare(const Spheres& s, Fields fields, double cell = 0, std::span<const std::int64_t> ids = {},
+               std::span<const std::uint8_t> report = {}) {
+    EngineOptions o;
+    o.fields = fields;
+    o.cell_size = cell;
+    o.backend = Backend::cpu;
+    Engine<Real> cpu(o);
+    o.backend = Backend::cuda;
+    Engine<Real> gpu(o);
+    const BodiesView v{s.p, s.r, ids, report};
+    const Contacts<Real> a = cpu.detect(v);
+    const Contacts<Real> b = gpu.detect(v);
+    expect_identical(a, b, s.name + " " + to_string(fields));
+    EXPECT_EQ(cpu.stats().entries, gpu.stats().entries) << s.name;
+    EXPECT_EQ(cpu.stats().pair_tests, gpu.stats().pair_tests) << s.name;
+    EXPECT_GT(gpu.stats().peak_device_bytes, 0u);
+  }
+};
+using Reals = ::testing::Types<double, float>;
+struct RealNames {
+  template <class T>
+  static std::string GetName(int) {
+    return sizeof(T) == 4 ? "fp32" : "fp64";
+  }
+};
+TYPED_TEST_SUITE(CudaBackendTest, Reals, RealNames);
+
+TYPED_TEST(CudaBackendTest, BitIdenticalToCpuOnScenes) {
+  std::uint64_t seed = 1001;
+  for (std::size_t n : {1u, 2u, 5u, 100u, 3000u, 60000u}) this->compare(random_spheres(n, 0.5, 1.0, seed++), Fields::basic);
+  this->compare(random_spheres(20000, 0.001, 1.0, 1011, true), Fields::full);
+  this->compare(clustered(4000, 1012), Fields::full);
+  this->compare(one_cell(400, 1013), Fields::full);
+  this->compare(on_boundaries(1014), Fields::full, 2.0);
+  this->compare(on_boundaries(1015), Fields::basic, 1.0 + 1e-3);
+  this->compare(coincident(1016), Fields::full);
+  this->compare(tangent(1017), Fields::full);
+  this->compare(random_spheres(5000, 0.5, 1.0, 1018).translated({1e6, -1e6, 1e6}), Fields::full);
+}
+
+TYPED_TEST(CudaBackendTest, BitIdenticalWithIdsAndReportMask) {
+  auto s = random_spheres(8000, 0.5, 1.0, 1021);
+  std::vector<std::int64_t> ids(s.r.size());
+  std::vector<std::uint8_t> report(s.r.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    ids[i] = std::int64_t(7 + 5 * i);
+    report[i] = (i % 4) != 1;
+  }
+  this->compare(s, Fields::full, 0, ids, report);
+}
+
+TYPED_TEST(CudaBackendTest, LargeKeys64BitGrid) {
+  // A sparse scene wide enough that the grid needs > 2^32 cells: 64-bit cell keys on both backends.
+  Spheres s;
+  s.name = "sparse wide";
+  std::mt19937_64 rng(1031);
+  std::uniform_real_distribution<double> u(0, 1);
+  const double span = sizeof(TypeParam) == 4 ? 3.0e6 : 4.0e6;  // fp32: < 2^22 cells per axis
+  for (int i = 0; i < 3000; ++i) {
+    const double x = u(rng) * span, y = u(rng) * span, z = u(rng) * span;
+    s.add(x, y, z, 0.5 + 0.5 * u(rng));
+    s.add(x + 1.2, y, z + 0.3, 0.5 + 0.5 * u(rng));  // a partner so that there are contacts
+  }
+  this->compare(s, Fields::full);
+}
+
+TYPED_TEST(CudaBackendTest, WorkspaceIsReusedAcrossFrames) {
+  EngineOptions o;
+  o.backend = Backend::cuda;
+  Engine<TypeParam> e(o);
+  auto s = random_spheres(20000, 0.5, 1.0, 1041);
+  const BodiesView v{s.p, s.r, {}, {}};
+  auto first = e.detect(v);
+  EXPECT_GT(e.stats().device_allocations, 0u);
+  const auto held = e.stats().peak_device_bytes;
+  for (int frame = 0; frame < 3; ++frame) {
+    auto again = e.detect(v);
+    EXPECT_EQ(e.stats().device_allocations, 0u) << "frame " << frame;
+    EXPECT_EQ(e.stats().peak_device_bytes, held);
+    expect_identical(first, again, "frame " + std::to_string(frame));
+  }
+  auto small = random_spheres(500, 0.5, 1.0, 1042);
+  e.detect(BodiesView{small.p, small.r, {}, {}});
+  EXPECT_EQ(e.stats().device_allocations, 0u) << "a smaller frame must fit the workspace";
+  std::vector<std::string> names;
+  for (const auto& t : e.times()) names.push_back(t.name);
+  const std::vector<std::string> expect{"plan", "upload", "pack", "entries", "sort", "pairs", "order", "narrow", "download"};
+  EXPECT_EQ(names, expect);
+}
+
+#if defined(CONTACTGRID_HAVE_CUDA)
+// Device copies of a scene's positions (3n doubles) and radii, freed at scope exit.
+struct DeviceScene {
+  double* d_pos = nullptr;
+  double* d_rad = nullptr;
+  std::uint8_t* d_report = nullptr;
+  explicit DeviceScene(const Spheres& s, std::span<const std::uint8_t> report = {}) {
+    const std::size_t n = s.r.size();
+    EXPECT_EQ(cudaMalloc(&d_pos, 3 * n * sizeof(double)), cudaSuccess);
+    EXPECT_EQ(cudaMalloc(&d_rad, n * sizeof(double)), cudaSuccess);
+    EXPECT_EQ(cudaMemcpy(d_pos, s.p.data(), 3 * n * sizeof(double), cudaMemcpyHostToDevice), cudaSuccess);
+    EXPECT_EQ(cudaMemcpy(d_rad, s.r.data(), n * sizeof(double), cudaMemcpyHostToDevice), cudaSuccess);
+    if (!report.empty()) {
+      EXPECT_EQ(cudaMalloc(&d_report, n), cudaSuccess);
+      EXPECT_EQ(cudaMemcpy(d_report, report.data(), n, cudaMemcpyHostToDevice), cudaSuccess);
+    }
+  }
+  ~DeviceScene() {
+    cudaFree(d_pos);
+    cudaFree(d_rad);
+    cudaFree(d_report);
+  }
+};
+
+template <class T>
+std::vector<T> to_host(const T* d, std::size_t n) {
+  std::vector<T> h(n);
+  if (n) {
+    EXPECT_EQ(cudaMemcpy(h.data(), d, n * sizeof(T), cudaMemcpyDeviceToHost), cudaSuccess);
+  }
+  return h;
+}
+
+// The example of engine.hpp (Engine::detect_device), as a simulation would call it every step.
+TYPED_TEST(CudaBackendTest, DeviceArrayApiExample) {
+  using Real = TypeParam;
+  auto s = random_spheres(30000, 0.5, 1.0, 1051);
+  const std::size_t n = s.r.size();
+  DeviceScene scene(s);
+  double* d_pos = scene.d_pos;
+  double* d_rad = scene.d_rad;
+
+  cg::Engine<Real> engine({.backend = cg::Backend::cuda, .fields = cg::Fields::full});
+  cg::DeviceBodiesView bodies{.position = d_pos, .radius = d_rad, .count = n};
+  cg::Contacts<Real> c = engine.detect_device(bodies);
+  cg::DeviceContactsView<Real> dc = engine.detect_device_resident(bodies);
+  EXPECT_EQ(engine.stats().device_allocations, 0u) << "second step allocated";
+
+  // Same bits as the host-array path, and as the CPU backend.
+  Engine<Real> cpu({.backend = Backend::cpu, .fields = Fields::full});
+  const Contacts<Real> ref = cpu.detect(BodiesView{s.p, s.r, {}, {}});
+  expect_identical(ref, c, "detect_device");
+  ASSERT_EQ(dc.count, ref.size());
+  ASSERT_TRUE(dc.full);
+  Contacts<Real> back;
+  back.full = true;
+  back.id_a = to_host(dc.id_a, dc.count);
+  back.id_b = to_host(dc.id_b, dc.count);
+  back.position_on_a = to_host(dc.position_on_a, dc.count);
+  back.position_on_b = to_host(dc.position_on_b, dc.count);
+  back.normal_on_b = to_host(dc.normal_on_b, dc.count);
+  back.distance = to_host(dc.distance, dc.count);
+  back.local_point_a = to_host(dc.local_point_a, dc.count);
+  back.local_point_b = to_host(dc.local_point_b, dc.count);
+  back.lateral_friction_dir1 = to_host(dc.lateral_friction_dir1, dc.count);
+  back.lateral_friction_dir2 = to_host(dc.lateral_friction_dir2, dc.count);
+  expect_identical(ref, back, "detect_device_resident");
+  std::vector<std::string> names;
+  for (const auto& t : engine.times()) names.push_back(t.name);
+  const std::vector<std::string> expect{"plan", "pack", "entries", "sort", "pairs", "order", "narrow"};
+  EXPECT_EQ(names, expect);
+}
+
+TYPED_TEST(CudaBackendTest, DeviceArrayApiReportMaskAndFrame) {
+  auto s = random_spheres(10000, 0.5, 1.0, 1061);
+  std::vector<std::uint8_t> report(s.r.size());
+  for (std::size_t i = 0; i < report.size(); ++i) report[i] = (i % 3) == 0;
+  DeviceScene scene(s, report);
+  const Frame frame{{-5, -6, -7}, 2.5};
+  Engine<TypeParam> gpu({.backend = Backend::cuda});
+  Engine<TypeParam> cpu({.backend = Backend::cpu});
+  auto c = gpu.detect_device({scene.d_pos, scene.d_rad, scene.d_report, s.r.size()}, frame);
+  auto ref = cpu.detect(BodiesView{s.p, s.r, {}, report}, frame);
+  expect_identical(ref, c, "report mask + frame");
+  EXPECT_EQ(gpu.stats().pair_tests, cpu.stats().pair_tests);
+}
+
+TYPED_TEST(CudaBackendTest, DeviceArrayApiNamesBadBodies) {
+  Spheres s;
+  s.add(0, 0, 0, 1);
+  s.add(1, std::nan(""), 0, 1);
+  s.add(2, 0, 0, 1);
+  s.add(3, 0, 0, -1);
+  Engine<TypeParam> e({.backend = Backend::cuda});
+  DeviceScene scene(s);
+  const DeviceBodiesView v{scene.d_pos, scene.d_rad, nullptr, s.r.size()};
+  std::string device_text, host_text;
+  try {
+    e.detect_device(v);
+  } catch (const InputError& x) {
+    device_text = x.what();
+  }
+  try {
+    compute_bounds(BodiesView{s.p, s.r, {}, {}});
+  } catch (const InputError& x) {
+    host_text = x.what();
+  }
+  EXPECT_NE(device_text.find("body 1"), std::string::npos) << device_text;
+  EXPECT_EQ(device_text, host_text);
+  Spheres r;
+  r.add(0, 0, 0, 1);
+  r.add(1, 0, 0, 0);
+  DeviceScene rs(r);
+  EXPECT_THROW(e.detect_device({rs.d_pos, rs.d_rad, nullptr, 2}), InputError);
+  // empty input: no contacts, no error
+  EXPECT_EQ(e.detect_device({rs.d_pos, rs.d_rad, nullptr, 0}).size(), 0u);
+}
+#endif
+
+TEST(CudaBackendApi, DeviceApiNeedsCudaBackend) {
+  Engine<double> e({.backend = Backend::cpu});
+  EXPECT_THROW(e.detect_device({}), UsageError);
+}
+
+}  // namespace
+}  // namespace cg::test
