@@ -39,17 +39,19 @@ void throw_cuda_error(cudaError_t e, const char* call, const char* file, int lin
 }
 }  // namespace cuda
 
-bool cuda_available() {
-  static const bool available = [] {
+int cuda_device_count() {
+  static const int count = [] {
     int n = 0;
     if (cudaGetDeviceCount(&n) != cudaSuccess) {
-      cudaGetLastError();  // clear the sticky-free error state of the failed query
-      return false;
+      cudaGetLastError();  // clear the error state of the failed query
+      return 0;
     }
-    return n > 0;
+    return n;
   }();
-  return available;
+  return count;
 }
+
+bool cuda_available() { return cuda_device_count() > 0; }
 
 namespace detail {
 
