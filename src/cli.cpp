@@ -79,6 +79,12 @@ int run_cli(int argc, char** argv, Session& session) {
       ->capture_default_str();
   d->add_flag("-q,--quiet", det.quiet, "No summary");
 
+  // compare
+  std::string cmp_a, cmp_b;
+  auto* c = app.add_subcommand("compare", "Are the /contacts datasets of two contact files byte-identical? (0 yes, 1 no)");
+  c->add_option("a", cmp_a, "Contacts file")->required();
+  c->add_option("b", cmp_b, "Contacts file")->required();
+
 #if defined(CONTACTGRID_HAVE_BULLET)
   // validate
   std::string val_scene, val_contacts, val_bullet = "double";
@@ -139,6 +145,7 @@ int run_cli(int argc, char** argv, Session& session) {
     return run_generate(gen_out, gen, gen_quiet);
   }
   if (d->parsed()) return run_detect(det, session);
+  if (c->parsed()) return session.rank() == 0 ? run_compare(cmp_a, cmp_b) : 0;
 #if defined(CONTACTGRID_HAVE_BULLET)
   if (v->parsed()) {
     if (session.rank() != 0) return 0;

@@ -30,6 +30,10 @@ struct DetectCommand {
 // summary come from rank 0. Errors are agreed on by all ranks and thrown on every rank.
 int run_detect(const DetectCommand& cmd, Session& session);
 
+// Compares the /contacts datasets of two contact files byte for byte (what `mpirun -np P` must
+// reproduce from the single-rank run). Returns 0 when identical, 1 otherwise (and says where).
+int run_compare(const std::string& a, const std::string& b);
+
 int run_generate(const std::string& path, const GenerateOptions& options, bool quiet);
 
 // Writes contacts as CSV (header + one row per contact), to a temporary name then renamed.

@@ -90,6 +90,12 @@ TEST_F(Cli, GenerateDetectRoundTrip) {
   EXPECT_EQ(c32.precision, "fp32");
   EXPECT_TRUE(c32.contacts.full);
   EXPECT_EQ(c32.contacts.size(), c.contacts.size());
+  // compare: the same run twice is byte-identical; fp64 and fp32 are not
+  ASSERT_EQ(run("detect " + path("s.h5") + " -o " + path("c2.h5") + " --backend cpu --threads 1 -q").code, 0);
+  Result same = run("compare " + path("c.h5") + " " + path("c2.h5"));
+  EXPECT_EQ(same.code, 0) << same.output;
+  EXPECT_NE(same.output.find("IDENTICAL"), std::string::npos) << same.output;
+  EXPECT_EQ(run("compare " + path("c.h5") + " " + path("c32.h5")).code, 1);
 }
 
 TEST_F(Cli, ValidatePassesAndFails) {
