@@ -7,7 +7,8 @@
 //   entries   exclusive scan of entry counts → fill (cell key, body) entries in body order
 //   sort      stable radix sort of the entries by cell key over plan.key_bits bits
 //   pairs     per entry: tests against later entries of its cell (cells of type 0 first: Le Grand's
-//             8 passes), count → scan → fill of contacting pairs (a < b, local indices)
+//             8 passes); contacting pairs (a < b, local indices) collected per chunk of entries,
+//             then chunk sizes → scan → fill
 //   order     radix sort of the pairs by (a, b)
 //   narrow    contact data for each pair, in the requested fields, world frame
 #include <omp.h>
@@ -94,6 +95,9 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
       body[offset[i] + m] = static_cast<std::uint32_t>(i);
     }
   }
+  cells = {};
+  count = {};
+  offset = {};
   stats.entries = n_entries;
   timer.lap("entries");
 
@@ -128,25 +132,32 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
     }
     return tests;
   };
-  std::vector<std::uint32_t> pair_count(n_entries);
-  std::uint64_t tests_total = 0;
-#pragma omp parallel for num_threads(nt) schedule(dynamic, 4096) reduction(+ : tests_total) if (n_entries > k_parallel_min)
-  for (std::size_t e = 0; e < n_entries; ++e) {
-    std::uint32_t c = 0;
-    tests_total += for_each_contact(e, [&](std::uint32_t, std::uint32_t) { ++c; });
-    pair_count[e] = c;
-  }
-  std::vector<std::uint64_t> pair_offset;
-  const std::uint64_t n_pairs = exclusive_scan_inplace(pair_count, pair_offset);
+  // count → scan → fill at the granularity of fixed chunks of entries: each chunk collects its pairs
+  // once (no second walk of the cells), the chunk sizes are scanned, the chunks copied in order. The
+  // chunking depends only on the entry count, so the pair array is the same for any thread count.
   const int id_bits = std::max(1, bits_for(n));
-  std::vector<std::uint64_t> pairs(n_pairs);
-#pragma omp parallel for num_threads(nt) schedule(dynamic, 4096) if (n_entries > k_parallel_min)
-  for (std::size_t e = 0; e < n_entries; ++e) {
-    std::uint64_t w = pair_offset[e];
-    for_each_contact(e, [&](std::uint32_t a, std::uint32_t b) {
-      pairs[w++] = (std::uint64_t(a) << id_bits) | b;
-    });
+  const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(256, n_entries / 16384));
+  std::vector<std::vector<std::uint64_t>> chunk_pairs(n_chunks);
+  std::uint64_t tests_total = 0;
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 1) reduction(+ : tests_total) if (n_chunks > 1)
+  for (std::size_t c = 0; c < n_chunks; ++c) {
+    std::vector<std::uint64_t>& mine = chunk_pairs[c];
+    for (std::size_t e = n_entries * c / n_chunks, end = n_entries * (c + 1) / n_chunks; e < end; ++e)
+      tests_total += for_each_contact(e, [&](std::uint32_t a, std::uint32_t b) {
+        mine.push_back((std::uint64_t(a) << id_bits) | b);
+      });
   }
+  std::vector<std::uint64_t> chunk_size(n_chunks), chunk_offset;
+  for (std::size_t c = 0; c < n_chunks; ++c) chunk_size[c] = chunk_pairs[c].size();
+  const std::uint64_t n_pairs = exclusive_scan_inplace(chunk_size, chunk_offset);
+  std::vector<std::uint64_t> pairs(n_pairs);
+#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
+  for (std::size_t c = 0; c < n_chunks; ++c) {
+    std::copy(chunk_pairs[c].begin(), chunk_pairs[c].end(), pairs.begin() + std::ptrdiff_t(chunk_offset[c]));
+    chunk_pairs[c] = {};
+  }
+  entry_sphere = {};
+  entry_ctrl = {};
   stats.pair_tests = tests_total;
   timer.lap("pairs");
 
