@@ -13,7 +13,8 @@
 //             radix sort, for locality of the pair stage only); control bytes, per-block entry totals
 //   entries   scan of the block totals → fill (cell key, body) in body order
 //   sort      cub::DeviceRadixSort::SortPairs over bits [0, key_bits)
-//   pairs     count per sorted entry (block-staged walk) → scan of block totals → fill (a, b) u32 pairs
+//   pairs     count per sorted entry (block-staged walk) and direct write of the (a, b) u32 pairs at a
+//             block-aggregated atomic cursor; when they overflow the space there: scan → fill
 //   order     cub::DeviceRadixSort::SortPairs by a over bits [0, id_bits), then each run of equal a
 //             sorted by b (sort_runs_kernel): the (a, b) order
 //   narrow    contact data of the requested fields, world frame
@@ -363,9 +364,14 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   auto* d_pair_count = reinterpret_cast<std::uint32_t*>(keys.Alternate());
   std::uint32_t* d_entry_totals = m_entry_blocks.span_as<std::uint32_t>(2 * neb).data();
   std::uint32_t* d_entry_offsets = d_entry_totals + neb;
+  // Direct write of the pairs into the alternate entry-body buffer, dead after the sort: as four u32
+  // arrays (a, b, and the sort's second copies) of cap = ne / 4 pairs each.
+  const std::uint64_t direct_cap = ne / 4;
+  std::uint32_t* d_direct = body.Alternate();
   cuda::count_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(d_keys, d_body, ne, d_ctrl, d_cell_spheres, d_perm,
                                                               d_report, g.half_bits, d_pair_count, d_entry_totals,
-                                                              d_counters);
+                                                              d_counters, d_direct, d_direct + direct_cap,
+                                                              direct_cap);
   CG_CUDA_CHECK_LAUNCH("count_pairs");
   CG_CUDA_CHECK(cudaMemcpyAsync(h_counters, d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, st));
   CG_CUDA_CHECK(cudaStreamSynchronize(st));  // host needs the pairs total
@@ -378,15 +384,16 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   }
   const auto np = static_cast<std::uint32_t>(n_pairs);
 
-  // ---- pairs: scan → fill -----------------------------------------------------------------------
-  // Pairs as (a, b) u32 arrays, double-buffered (16 B a pair): in the alternate entry-body buffer,
-  // dead after the sort, when they fit there (4 pairs an entry), else in m_pairs.
+  // ---- pairs: (scan → fill) ---------------------------------------------------------------------
+  // Pairs as (a, b) u32 arrays, double-buffered (16 B a pair). When they fit in the alternate entry
+  // body buffer (np <= ne / 4), the count kernel has already written them there; else they are
+  // placed in m_pairs by the scan of the block totals → fill_pairs (from the contact masks).
   const int id_bits = std::max(1, bits_for(n64));
   cub::DoubleBuffer<std::uint32_t> pair_a(nullptr, nullptr), pair_b(nullptr, nullptr);
   auto sort_pairs = [&](void* t, std::size_t& b) {
     return cub::DeviceRadixSort::SortPairs(t, b, pair_a, pair_b, int(np), 0, id_bits, st);
   };
-  const bool pairs_in_entries = 4 * std::uint64_t(np) <= ne;
+  const bool pairs_in_entries = n_pairs <= direct_cap;
   auto scan_entry_blocks = [&](void* t, std::size_t& b) {
     return cub::DeviceScan::ExclusiveSum(t, b, d_entry_totals, d_entry_offsets, int(neb), st);
   };
@@ -398,12 +405,13 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
            {&m_out, out_bytes},
            {&m_temp, std::max(temp_bytes(sort_pairs), temp_bytes(scan_entry_blocks))}},
           "pairs");
+  const std::size_t stride = pairs_in_entries ? std::size_t(direct_cap) : std::size_t(np);
   std::uint32_t* d_pair_store =
-      pairs_in_entries ? body.Alternate() : m_pairs.span_as<std::uint32_t>(4 * std::size_t(np)).data();
-  pair_a = cub::DoubleBuffer<std::uint32_t>(d_pair_store, d_pair_store + 2 * std::size_t(np));
-  pair_b = cub::DoubleBuffer<std::uint32_t>(d_pair_store + std::size_t(np), d_pair_store + 3 * std::size_t(np));
-  run_cub(scan_entry_blocks);
-  if (np > 0) {
+      pairs_in_entries ? d_direct : m_pairs.span_as<std::uint32_t>(4 * std::size_t(np)).data();
+  pair_a = cub::DoubleBuffer<std::uint32_t>(d_pair_store, d_pair_store + 2 * stride);
+  pair_b = cub::DoubleBuffer<std::uint32_t>(d_pair_store + stride, d_pair_store + 3 * stride);
+  if (!pairs_in_entries && np > 0) {
+    run_cub(scan_entry_blocks);
     cuda::fill_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(d_keys, d_body, ne, d_ctrl, d_cell_spheres, d_perm,
                                                                d_report, g.half_bits, d_pair_count, d_entry_offsets,
                                                                pair_a.Current(), pair_b.Current());

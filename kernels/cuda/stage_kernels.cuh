@@ -269,6 +269,11 @@ __device__ __forceinline__ std::uint32_t walk_from_memory(std::uint32_t f0, Key 
 // report mask is given) in shared memory once; each thread then walks only its own cell's later
 // entries there (a few shared loads per step, no warp-wide shuffles: the walk is issue-light), and
 // walks from memory only a cell that goes on past the block or past e + 31.
+// Direct write: the block takes the range [base, base + block total) of the pair cursor c->pairs (one
+// atomicAdd) and, when the range ends at or below `cap`, writes its pairs (pair_a[w], pair_b[w]) of
+// input indices, a < b, there, each thread at base + its exclusive rank (same walk, emitting). When
+// the cursor ends above cap, the host discards those writes and runs the scan → fill_pairs path
+// from the masks instead. The pairs' order is the blocks' arrival order; the order stage sorts them.
 template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
                                                              std::uint32_t n_entries,
@@ -278,10 +283,19 @@ __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restri
                                                              const std::uint8_t* __restrict__ report, int half_bits,
                                                              std::uint32_t* __restrict__ mask,
                                                              std::uint32_t* __restrict__ block_pairs,
-                                                             Counters* __restrict__ c) {
+                                                             Counters* __restrict__ c,
+                                                             std::uint32_t* __restrict__ pair_a,
+                                                             std::uint32_t* __restrict__ pair_b,
+                                                             unsigned long long cap) {
   using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
-  __shared__ typename Reduce::TempStorage tmp;
+  using Scan = cub::BlockScan<unsigned long long, kBlock>;
+  __shared__ union {
+    typename Reduce::TempStorage reduce;
+    typename Scan::TempStorage scan;
+  } tmp;
+  __shared__ unsigned long long s_base;
   __shared__ Key s_key[kBlock];
+  __shared__ std::uint32_t s_body[kBlock];
   __shared__ Sphere<Real> s_sphere[kBlock];
   __shared__ std::uint32_t s_perm[kBlock];
   __shared__ std::uint8_t s_ctrl[kBlock];
@@ -300,6 +314,7 @@ __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restri
     x.sa = spheres[x.a];
     x.pa = report ? perm[x.a] : 0u;
     s_key[t] = k;
+    s_body[t] = x.a;
     s_sphere[t] = x.sa;
     s_ctrl[t] = x.ca;
     s_perm[t] = x.pa;
@@ -322,14 +337,30 @@ __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restri
     }
     mask[e] = bits;
   }
-  const unsigned long long block_sum = Reduce(tmp).Sum(static_cast<unsigned long long>(found));
+  unsigned long long rank, block_sum;
+  Scan(tmp.scan).ExclusiveSum(static_cast<unsigned long long>(found), rank, block_sum);
   __syncthreads();  // tmp is reused
-  const unsigned long long block_tests = Reduce(tmp).Sum(static_cast<unsigned long long>(tests));
+  const unsigned long long block_tests = Reduce(tmp.reduce).Sum(static_cast<unsigned long long>(tests));
   if (threadIdx.x == 0) {
     // Truncation is harmless: the host rejects totals >= 2^31 before block_pairs is used.
     block_pairs[blockIdx.x] = static_cast<std::uint32_t>(block_sum);
-    atomicAdd(&c->pairs, block_sum);
+    s_base = block_sum ? atomicAdd(&c->pairs, block_sum) : 0ull;
     atomicAdd(&c->tests, block_tests);
+  }
+  __syncthreads();
+  if (found == 0 || s_base + block_sum > cap) return;
+  unsigned long long w = s_base + rank;
+  const std::uint32_t pa = report ? x.pa : perm[x.a];
+  auto emit = [&](std::uint32_t, std::uint32_t b) {
+    const std::uint32_t pb = perm[b];  // input indices, a < b as the host
+    pair_a[w] = pa < pb ? pa : pb;
+    pair_b[w] = pa < pb ? pb : pa;
+    ++w;
+  };
+  if (bits & 1u) {
+    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, emit);
+  } else {
+    for (std::uint32_t m = bits; m != 0; m &= m - 1) emit(x.a, s_body[t + __ffs(m) - 1]);
   }
 }
 
