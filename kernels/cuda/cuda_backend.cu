@@ -13,8 +13,10 @@
 //             radix sort, for locality of the pair stage only); control bytes, per-block entry totals
 //   entries   scan of the block totals → fill (cell key, body) in body order
 //   sort      cub::DeviceRadixSort::SortPairs over bits [0, key_bits)
-//   pairs     count per sorted entry → scan of block totals → fill u64 pair keys
-//   order     cub::DeviceRadixSort::SortKeys over bits [0, 2·id_bits)
+//   pairs     count per sorted entry (block-staged walk) and direct write of the (a, b) u32 pairs at a
+//             block-aggregated atomic cursor; when they overflow the space there: scan → fill
+//   order     cub::DeviceRadixSort::SortPairs by a over bits [0, id_bits), then each run of equal a
+//             sorted by b (sort_runs_kernel): the (a, b) order
 //   narrow    contact data of the requested fields, world frame
 //   download  contacts → pinned staging → Contacts<Real> (unless they stay on the device)
 #include <cub/device/device_radix_sort.cuh>
@@ -128,7 +130,7 @@ class CudaBackend {
   std::uint64_t held_bytes() const {
     std::uint64_t s = 0;
     for (const Bytes* b : {&m_pos, &m_rad, &m_report, &m_spheres, &m_cell_spheres, &m_perm, &m_ctrl, &m_body_blocks, &m_entry_blocks,
-                           &m_keys[0], &m_keys[1], &m_bodies[0], &m_bodies[1], &m_pairs[0], &m_pairs[1], &m_out,
+                           &m_keys[0], &m_keys[1], &m_bodies[0], &m_bodies[1], &m_pairs, &m_out,
                            &m_temp, &m_counters, &m_partials})
       s += b->bytes();
     return s;
@@ -169,9 +171,10 @@ class CudaBackend {
   cudaEvent_t m_events[kStages + 1] = {};
   std::uint64_t m_allocations = 0;
   // Workspace (DEVICE): input copies (host path), packed spheres, control bytes, block totals and
-  // offsets, entries (double-buffered keys and bodies), pairs (double-buffered), contacts, CUB temp.
+  // offsets, entries (double-buffered keys and bodies), pairs (only when they do not fit in the dead
+  // alternate entry-body buffer), contacts, CUB temp.
   Bytes m_pos, m_rad, m_report, m_spheres, m_cell_spheres, m_perm, m_ctrl, m_body_blocks, m_entry_blocks;
-  Bytes m_keys[2], m_bodies[2], m_pairs[2], m_out, m_temp, m_counters, m_partials;
+  Bytes m_keys[2], m_bodies[2], m_pairs, m_out, m_temp, m_counters, m_partials;
   PinnedBuffer m_h_counters, m_h_staging;  // pinned HOST staging
 
 };
@@ -361,9 +364,14 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   auto* d_pair_count = reinterpret_cast<std::uint32_t*>(keys.Alternate());
   std::uint32_t* d_entry_totals = m_entry_blocks.span_as<std::uint32_t>(2 * neb).data();
   std::uint32_t* d_entry_offsets = d_entry_totals + neb;
+  // Direct write of the pairs into the alternate entry-body buffer, dead after the sort: as four u32
+  // arrays (a, b, and the sort's second copies) of cap = ne / 4 pairs each.
+  const std::uint64_t direct_cap = ne / 4;
+  std::uint32_t* d_direct = body.Alternate();
   cuda::count_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(d_keys, d_body, ne, d_ctrl, d_cell_spheres, d_perm,
                                                               d_report, g.half_bits, d_pair_count, d_entry_totals,
-                                                              d_counters);
+                                                              d_counters, d_direct, d_direct + direct_cap,
+                                                              direct_cap);
   CG_CUDA_CHECK_LAUNCH("count_pairs");
   CG_CUDA_CHECK(cudaMemcpyAsync(h_counters, d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, st));
   CG_CUDA_CHECK(cudaStreamSynchronize(st));  // host needs the pairs total
@@ -376,12 +384,16 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   }
   const auto np = static_cast<std::uint32_t>(n_pairs);
 
-  // ---- pairs: scan → fill -----------------------------------------------------------------------
+  // ---- pairs: (scan → fill) ---------------------------------------------------------------------
+  // Pairs as (a, b) u32 arrays, double-buffered (16 B a pair). When they fit in the alternate entry
+  // body buffer (np <= ne / 4), the count kernel has already written them there; else they are
+  // placed in m_pairs by the scan of the block totals → fill_pairs (from the contact masks).
   const int id_bits = std::max(1, bits_for(n64));
-  cub::DoubleBuffer<std::uint64_t> pairs(nullptr, nullptr);
+  cub::DoubleBuffer<std::uint32_t> pair_a(nullptr, nullptr), pair_b(nullptr, nullptr);
   auto sort_pairs = [&](void* t, std::size_t& b) {
-    return cub::DeviceRadixSort::SortKeys(t, b, pairs, int(np), 0, 2 * id_bits, st);
+    return cub::DeviceRadixSort::SortPairs(t, b, pair_a, pair_b, int(np), 0, id_bits, st);
   };
+  const bool pairs_in_entries = n_pairs <= direct_cap;
   auto scan_entry_blocks = [&](void* t, std::size_t& b) {
     return cub::DeviceScan::ExclusiveSum(t, b, d_entry_totals, d_entry_offsets, int(neb), st);
   };
@@ -389,24 +401,30 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   const std::size_t ids = align16(np * sizeof(std::int64_t));
   const std::size_t reals = align16(np * sizeof(Real));
   const std::size_t out_bytes = 2 * ids + 3 * v3 + reals + (full ? 4 * v3 : 0);
-  reserve({{&m_pairs[0], np * sizeof(std::uint64_t)},
-           {&m_pairs[1], np * sizeof(std::uint64_t)},
+  reserve({{&m_pairs, pairs_in_entries ? 0 : 4 * std::size_t(np) * sizeof(std::uint32_t)},
            {&m_out, out_bytes},
            {&m_temp, std::max(temp_bytes(sort_pairs), temp_bytes(scan_entry_blocks))}},
           "pairs");
-  pairs = cub::DoubleBuffer<std::uint64_t>(m_pairs[0].span_as<std::uint64_t>(np).data(),
-                                           m_pairs[1].span_as<std::uint64_t>(np).data());
-  run_cub(scan_entry_blocks);
-  if (np > 0) {
+  const std::size_t stride = pairs_in_entries ? std::size_t(direct_cap) : std::size_t(np);
+  std::uint32_t* d_pair_store =
+      pairs_in_entries ? d_direct : m_pairs.span_as<std::uint32_t>(4 * std::size_t(np)).data();
+  pair_a = cub::DoubleBuffer<std::uint32_t>(d_pair_store, d_pair_store + 2 * stride);
+  pair_b = cub::DoubleBuffer<std::uint32_t>(d_pair_store + stride, d_pair_store + 3 * stride);
+  if (!pairs_in_entries && np > 0) {
+    run_cub(scan_entry_blocks);
     cuda::fill_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(d_keys, d_body, ne, d_ctrl, d_cell_spheres, d_perm,
                                                                d_report, g.half_bits, d_pair_count, d_entry_offsets,
-                                                               id_bits, pairs.Current());
+                                                               pair_a.Current(), pair_b.Current());
     CG_CUDA_CHECK_LAUNCH("fill_pairs");
   }
   mark(4);
 
   // ---- order ------------------------------------------------------------------------------------
-  if (np > 1) run_cub(sort_pairs);
+  if (np > 1) {
+    run_cub(sort_pairs);
+    cuda::sort_runs_kernel<<<blocks_for(np), kBlock, 0, st>>>(pair_a.Current(), pair_b.Current(), np);
+    CG_CUDA_CHECK_LAUNCH("sort_runs");
+  }
   mark(5);
 
   // ---- narrow -----------------------------------------------------------------------------------
@@ -431,7 +449,7 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
     cp.dir2 = reinterpret_cast<Vec3<Real>*>(take(v3));
   }
   if (np > 0) {
-    cuda::narrow_kernel<Real><<<blocks_for(np), kBlock, 0, st>>>(pairs.Current(), np, id_bits, d_spheres, origin,
+    cuda::narrow_kernel<Real><<<blocks_for(np), kBlock, 0, st>>>(pair_a.Current(), pair_b.Current(), np, d_spheres, origin,
                                                                  cp, full);
     CG_CUDA_CHECK_LAUNCH("narrow");
   }

@@ -262,19 +262,18 @@ __device__ __forceinline__ std::uint32_t walk_from_memory(std::uint32_t f0, Key 
   return tests;
 }
 
-template <class Real>
-__device__ __forceinline__ Sphere<Real> shfl_down_sphere(const Sphere<Real>& s, int j) {
-  constexpr unsigned full = 0xFFFFFFFFu;
-  return {__shfl_down_sync(full, s.x, j), __shfl_down_sync(full, s.y, j), __shfl_down_sync(full, s.z, j),
-          __shfl_down_sync(full, s.r, j)};
-}
-
 // pairs, count: per block the number of contacting (reported) pairs (block_pairs); totals of pairs
-// and tests added to c; per entry e a contact mask: bit j (1..31) set when entry e + j (same warp)
-// is a contact of e, bit 0 set when contacts lie past the warp's end (fill_pairs then walks e's cell
-// from memory). Each thread loads its own entry's key, body, control byte and sphere once; the later
-// entries of its cell within the warp come from the other lanes' registers (shuffles); only cells that
-// cross the warp's end are walked from memory.
+// and tests added to c; per entry e a contact mask: bit j (1..31) set when entry e + j is a contact
+// of e, bit 0 set when contacts lie past e + 31 or past the block's last entry (fill_pairs then walks
+// e's cell from memory). The block stages its entries (key, control byte, sphere, input index when a
+// report mask is given) in shared memory once; each thread then walks only its own cell's later
+// entries there (a few shared loads per step, no warp-wide shuffles: the walk is issue-light), and
+// walks from memory only a cell that goes on past the block or past e + 31.
+// Direct write: the block takes the range [base, base + block total) of the pair cursor c->pairs (one
+// atomicAdd) and, when the range ends at or below `cap`, writes its pairs (pair_a[w], pair_b[w]) of
+// input indices, a < b, there, each thread at base + its exclusive rank (same walk, emitting). When
+// the cursor ends above cap, the host discards those writes and runs the scan → fill_pairs path
+// from the masks instead. The pairs' order is the blocks' arrival order; the order stage sorts them.
 template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
                                                              std::uint32_t n_entries,
@@ -284,66 +283,88 @@ __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restri
                                                              const std::uint8_t* __restrict__ report, int half_bits,
                                                              std::uint32_t* __restrict__ mask,
                                                              std::uint32_t* __restrict__ block_pairs,
-                                                             Counters* __restrict__ c) {
+                                                             Counters* __restrict__ c,
+                                                             std::uint32_t* __restrict__ pair_a,
+                                                             std::uint32_t* __restrict__ pair_b,
+                                                             unsigned long long cap) {
   using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
-  __shared__ typename Reduce::TempStorage tmp;
-  constexpr unsigned full = 0xFFFFFFFFu;
-  const std::uint32_t e = blockIdx.x * kBlock + threadIdx.x;
-  const std::uint32_t lane = threadIdx.x & 31u;
+  using Scan = cub::BlockScan<unsigned long long, kBlock>;
+  __shared__ union {
+    typename Reduce::TempStorage reduce;
+    typename Scan::TempStorage scan;
+  } tmp;
+  __shared__ unsigned long long s_base;
+  __shared__ Key s_key[kBlock];
+  __shared__ std::uint32_t s_body[kBlock];
+  __shared__ Sphere<Real> s_sphere[kBlock];
+  __shared__ std::uint32_t s_perm[kBlock];
+  __shared__ std::uint8_t s_ctrl[kBlock];
+  const std::uint32_t base = blockIdx.x * kBlock;
+  const std::uint32_t t = threadIdx.x;
+  const std::uint32_t e = base + t;
   const bool valid = e < n_entries;
-  const Key k = valid ? keys[e] : Key(0);
+  const std::uint32_t end = n_entries - base < kBlock ? n_entries - base : kBlock;  // staged entries
+  Key k{};
   EntryBody<Real> x{};
-  x.a = valid ? body[e] : 0u;
-  x.type = key_type(k, half_bits);
-  x.ca = valid ? ctrl[x.a] : std::uint8_t(0);
-  x.sa = valid ? spheres[x.a] : Sphere<Real>{};
-  x.pa = valid && report ? perm[x.a] : 0u;
-  std::uint32_t found = 0, tests = 0, bits = 0, j = 1;
-  auto count_one = [&](std::uint32_t, std::uint32_t) { ++found; };
-  auto mark_one = [&](std::uint32_t, std::uint32_t) {
-    ++found;
-    bits |= 1u << j;
-  };
-  bool active = valid;
-  bool spill = false;  // the cell goes on past the warp's last lane: walk the rest from memory
-  for (; j < 32; ++j) {
-    if (!__any_sync(full, active)) break;
-    const Key kb = __shfl_down_sync(full, k, j);
-    const std::uint32_t b = __shfl_down_sync(full, x.a, j);
-    const std::uint32_t cb = __shfl_down_sync(full, std::uint32_t(x.ca), j);
-    const std::uint32_t pb = __shfl_down_sync(full, x.pa, j);
-    const Sphere<Real> sb = shfl_down_sphere(x.sa, int(j));
-    if (!active) continue;
-    if (lane + j >= 32) {
-      active = false;
-      spill = true;
-      continue;
-    }
-    if (e + j >= n_entries || kb != k) {
-      active = false;
-      continue;
-    }
-    visit(x, b, std::uint8_t(cb), sb, pb, report, tests, mark_one);
+  if (valid) {
+    k = keys[e];
+    x.a = body[e];
+    x.type = key_type(k, half_bits);
+    x.ca = ctrl[x.a];
+    x.sa = spheres[x.a];
+    x.pa = report ? perm[x.a] : 0u;
+    s_key[t] = k;
+    s_body[t] = x.a;
+    s_sphere[t] = x.sa;
+    s_ctrl[t] = x.ca;
+    s_perm[t] = x.pa;
   }
-  if (active) spill = true;  // lane 0 ran through the whole warp
-  if (spill) {
-    const std::uint32_t before = found;
-    tests += walk_from_memory(e + (32 - lane), k, x, keys, body, n_entries, ctrl, spheres, perm, report, count_one);
-    if (found != before) bits |= 1u;
+  __syncthreads();
+  std::uint32_t found = 0, tests = 0, bits = 0;
+  if (valid) {
+    const std::uint32_t lim = end < t + 32 ? end : t + 32;  // staged entries e + 1 .. e + 31
+    std::uint32_t f = t + 1;
+    auto mark_one = [&](std::uint32_t, std::uint32_t) {
+      ++found;
+      bits |= 1u << (f - t);
+    };
+    for (; f < lim && s_key[f] == k; ++f) visit(x, 0u, s_ctrl[f], s_sphere[f], s_perm[f], report, tests, mark_one);
+    if (f == lim) {  // the cell may go on past the staged window: walk the rest from memory
+      const std::uint32_t before = found;
+      tests += walk_from_memory(base + f, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
+                                [&](std::uint32_t, std::uint32_t) { ++found; });
+      if (found != before) bits |= 1u;
+    }
+    mask[e] = bits;
   }
-  if (valid) mask[e] = bits;
-  const unsigned long long block_sum = Reduce(tmp).Sum(static_cast<unsigned long long>(found));
+  unsigned long long rank, block_sum;
+  Scan(tmp.scan).ExclusiveSum(static_cast<unsigned long long>(found), rank, block_sum);
   __syncthreads();  // tmp is reused
-  const unsigned long long block_tests = Reduce(tmp).Sum(static_cast<unsigned long long>(tests));
+  const unsigned long long block_tests = Reduce(tmp.reduce).Sum(static_cast<unsigned long long>(tests));
   if (threadIdx.x == 0) {
     // Truncation is harmless: the host rejects totals >= 2^31 before block_pairs is used.
     block_pairs[blockIdx.x] = static_cast<std::uint32_t>(block_sum);
-    atomicAdd(&c->pairs, block_sum);
+    s_base = block_sum ? atomicAdd(&c->pairs, block_sum) : 0ull;
     atomicAdd(&c->tests, block_tests);
+  }
+  __syncthreads();
+  if (found == 0 || s_base + block_sum > cap) return;
+  unsigned long long w = s_base + rank;
+  const std::uint32_t pa = report ? x.pa : perm[x.a];
+  auto emit = [&](std::uint32_t, std::uint32_t b) {
+    const std::uint32_t pb = perm[b];  // input indices, a < b as the host
+    pair_a[w] = pa < pb ? pa : pb;
+    pair_b[w] = pa < pb ? pb : pa;
+    ++w;
+  };
+  if (bits & 1u) {
+    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, emit);
+  } else {
+    for (std::uint32_t m = bits; m != 0; m &= m - 1) emit(x.a, s_body[t + __ffs(m) - 1]);
   }
 }
 
-// pairs, fill: u64 pair keys a << id_bits | b (input indices, a < b) at the block's scanned total +
+// pairs, fill: pairs (pair_a[w], pair_b[w]) of input indices, a < b, at w = the block's scanned total +
 // the entry's rank, from the contact masks of count_pairs_kernel (entries flagged in bit 0: the cell
 // is walked from memory again, counting then emitting).
 template <class Real, class Key>
@@ -354,8 +375,9 @@ __global__ void __launch_bounds__(kBlock) fill_pairs_kernel(const Key* __restric
                                                             const std::uint32_t* __restrict__ perm,
                                                             const std::uint8_t* __restrict__ report, int half_bits,
                                                             const std::uint32_t* __restrict__ mask,
-                                                            const std::uint32_t* __restrict__ block_offset, int id_bits,
-                                                            std::uint64_t* __restrict__ pairs) {
+                                                            const std::uint32_t* __restrict__ block_offset,
+                                                            std::uint32_t* __restrict__ pair_a,
+                                                            std::uint32_t* __restrict__ pair_b) {
   using Scan = cub::BlockScan<std::uint32_t, kBlock>;
   __shared__ typename Scan::TempStorage tmp;
   const std::uint32_t e = blockIdx.x * kBlock + threadIdx.x;
@@ -378,10 +400,12 @@ __global__ void __launch_bounds__(kBlock) fill_pairs_kernel(const Key* __restric
   std::uint32_t rank;
   Scan(tmp).ExclusiveSum(mine, rank);
   if (mine == 0) return;
-  std::uint64_t* w = pairs + block_offset[blockIdx.x] + rank;
+  std::uint32_t w = block_offset[blockIdx.x] + rank;
   auto emit = [&](std::uint32_t a, std::uint32_t b) {
     const std::uint32_t pa = perm[a], pb = perm[b];  // input indices, a < b as the host
-    *w++ = pa < pb ? (std::uint64_t(pa) << id_bits) | pb : (std::uint64_t(pb) << id_bits) | pa;
+    pair_a[w] = pa < pb ? pa : pb;
+    pair_b[w] = pa < pb ? pb : pa;
+    ++w;
   };
   if (bits & 1u) {
     walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, emit);
@@ -391,16 +415,34 @@ __global__ void __launch_bounds__(kBlock) fill_pairs_kernel(const Key* __restric
   }
 }
 
+// order, second step: the pairs are sorted by a (stable radix sort of (a, b) by a); each run of equal
+// a is put in b order here by its first thread (insertion sort; runs are a body's contacts, short).
+// Pairs are distinct, so the result is the (a, b) order of the host's sort of a << id_bits | b.
+__global__ void __launch_bounds__(kBlock) sort_runs_kernel(const std::uint32_t* __restrict__ pair_a,
+                                                           std::uint32_t* __restrict__ pair_b, std::uint32_t n_pairs) {
+  const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
+  if (k >= n_pairs) return;
+  const std::uint32_t a = pair_a[k];
+  if (k > 0 && pair_a[k - 1] == a) return;  // not the first of its run
+  std::uint32_t end = k + 1;
+  while (end < n_pairs && pair_a[end] == a) ++end;
+  for (std::uint32_t i = k + 1; i < end; ++i) {
+    const std::uint32_t v = pair_b[i];
+    std::uint32_t j = i;
+    for (; j > k && pair_b[j - 1] > v; --j) pair_b[j] = pair_b[j - 1];
+    pair_b[j] = v;
+  }
+}
+
 // narrow: contact data of each sorted pair, world frame as the host: Real(double(origin) + double(v)).
 template <class Real>
-__global__ void __launch_bounds__(kBlock) narrow_kernel(const std::uint64_t* __restrict__ pairs, std::uint32_t n_pairs,
-                                                        int id_bits, const Sphere<Real>* __restrict__ spheres,
+__global__ void __launch_bounds__(kBlock) narrow_kernel(const std::uint32_t* __restrict__ pair_a,
+                                                        const std::uint32_t* __restrict__ pair_b, std::uint32_t n_pairs,
+                                                        const Sphere<Real>* __restrict__ spheres,
                                                         Vec3<double> origin, ContactPtrs<Real> out, bool full) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   if (k >= n_pairs) return;
-  const std::uint64_t id_mask = (std::uint64_t(1) << id_bits) - 1;
-  const std::uint32_t a = static_cast<std::uint32_t>(pairs[k] >> id_bits);
-  const std::uint32_t b = static_cast<std::uint32_t>(pairs[k] & id_mask);
+  const std::uint32_t a = pair_a[k], b = pair_b[k];
   const Sphere<Real> sa = spheres[a], sb = spheres[b];
   const ContactGeometry<Real> c = sphere_sphere_contact(sa, sb);
   auto world = [&](Vec3<Real> v) {
