@@ -25,6 +25,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cstring>
+#include <cstdlib>
 #include <sstream>
 
 #include "backend.hpp"
@@ -108,6 +109,12 @@ class CudaBackend {
     if (grow_exact == 0) return;
     std::size_t free_b = 0, total_b = 0;
     CG_CUDA_CHECK(cudaMemGetInfo(&free_b, &total_b));
+    // CONTACTGRID_DEVICE_MEMORY_LIMIT (bytes) caps the engine's workspace: a smaller GPU, or a GPU
+    // shared with a simulation, can be imitated (and the out-of-memory path tested).
+    if (const char* cap = std::getenv("CONTACTGRID_DEVICE_MEMORY_LIMIT")) {
+      const std::size_t limit = std::strtoull(cap, nullptr, 10), held = held_bytes();
+      free_b = std::min(free_b, limit > held ? limit - held : std::size_t(0));
+    }
     const std::size_t margin = std::size_t(64) << 20;  // CUDA context, launch and allocator slack
     // Buffers that grow free their old storage first, so their current capacity is available too.
     std::size_t reclaim = 0;

@@ -266,3 +266,29 @@ TEST(CudaBackendApi, DeviceApiNeedsCudaBackend) {
 
 }  // namespace
 }  // namespace cg::test
+
+namespace cg::test {
+namespace {
+
+// A scene larger than the device memory it may use: a ResourceError saying how many bytes are
+// needed, no crash; with the cap lifted the same engine object works again.
+TEST(CudaBackendMemory, TooLargeForTheDeviceIsAClearError) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  auto s = random_spheres(std::size_t(1) << 20, 0.5, 1.0, 1071);
+  Engine<float> engine({.backend = Backend::cuda});
+  ::setenv("CONTACTGRID_DEVICE_MEMORY_LIMIT", std::to_string(std::size_t(70) << 20).c_str(), 1);
+  try {
+    engine.detect(BodiesView{s.p, s.r, {}, {}});
+    ADD_FAILURE() << "no ResourceError with a 70 MiB device cap";
+  } catch (const ResourceError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("needs"), std::string::npos) << m;
+    EXPECT_NE(m.find("bytes"), std::string::npos) << m;
+  }
+  ::unsetenv("CONTACTGRID_DEVICE_MEMORY_LIMIT");
+  Engine<float> cpu({.backend = Backend::cpu});
+  EXPECT_EQ(engine.detect(BodiesView{s.p, s.r, {}, {}}).size(), cpu.detect(BodiesView{s.p, s.r, {}, {}}).size());
+}
+
+}  // namespace
+}  // namespace cg::test
