@@ -8,6 +8,9 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <vector>
+
+#include <omp.h>
 
 #include "backend.hpp"
 
@@ -69,7 +72,40 @@ Bounds compute_bounds(const BodiesView& bodies) {
   b.lo = {inf, inf, inf};
   b.hi = {-inf, -inf, -inf};
   auto id_of = [&](std::size_t i) { return bodies.id.empty() ? std::int64_t(i) : bodies.id[i]; };
-  for (std::size_t i = 0; i < n; ++i) {
+  auto bad = [&](std::size_t i) {
+    const Vec3<double> p = bodies.position[i];
+    const double r = bodies.radius[i];
+    return !std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || !(r > 0) || !std::isfinite(r) ||
+           (i > 0 && !bodies.id.empty() && !(bodies.id[i] > bodies.id[i - 1]));
+  };
+  // Parallel: per chunk the bounds (min / max are exact, so the fold order does not matter: every
+  // lower bound p - r and upper bound p + r of a valid body is a +0 or a non-zero value) and the first
+  // bad body; the smallest bad index over the chunks is reported, as a sequential scan would.
+  const int threads = n < (std::size_t(1) << 15) ? 1 : omp_get_max_threads();
+  std::vector<Bounds> part(static_cast<std::size_t>(threads), b);
+  std::vector<std::size_t> first_bad(static_cast<std::size_t>(threads), n);
+#pragma omp parallel for num_threads(threads) schedule(static, 1) if (threads > 1)
+  for (int t = 0; t < threads; ++t) {
+    const std::size_t begin = n * std::size_t(t) / std::size_t(threads), end = n * std::size_t(t + 1) / std::size_t(threads);
+    Vec3<double> lo = b.lo, hi = b.hi;
+    double r_max = 0;
+    for (std::size_t i = begin; i < end; ++i) {
+      if (bad(i)) {
+        first_bad[static_cast<std::size_t>(t)] = i;
+        break;
+      }
+      const Vec3<double> p = bodies.position[i];
+      const double r = bodies.radius[i];
+      lo = {std::min(lo.x, p.x - r), std::min(lo.y, p.y - r), std::min(lo.z, p.z - r)};
+      hi = {std::max(hi.x, p.x + r), std::max(hi.y, p.y + r), std::max(hi.z, p.z + r)};
+      r_max = std::max(r_max, r);
+    }
+    part[static_cast<std::size_t>(t)].lo = lo;
+    part[static_cast<std::size_t>(t)].hi = hi;
+    part[static_cast<std::size_t>(t)].r_max = r_max;
+  }
+  const std::size_t i = *std::min_element(first_bad.begin(), first_bad.end());
+  if (i < n) {
     const Vec3<double> p = bodies.position[i];
     const double r = bodies.radius[i];
     if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
@@ -82,11 +118,12 @@ Bounds compute_bounds(const BodiesView& bodies) {
       m << "body " << id_of(i) << ": radius " << r << " is not a finite value > 0";
       throw InputError(m.str());
     }
-    if (i > 0 && !bodies.id.empty() && !(bodies.id[i] > bodies.id[i - 1]))
-      throw InputError("bodies: ids are not strictly ascending at index " + std::to_string(i));
-    b.lo = {std::min(b.lo.x, p.x - r), std::min(b.lo.y, p.y - r), std::min(b.lo.z, p.z - r)};
-    b.hi = {std::max(b.hi.x, p.x + r), std::max(b.hi.y, p.y + r), std::max(b.hi.z, p.z + r)};
-    b.r_max = std::max(b.r_max, r);
+    throw InputError("bodies: ids are not strictly ascending at index " + std::to_string(i));
+  }
+  for (const Bounds& q : part) {
+    b.lo = {std::min(b.lo.x, q.lo.x), std::min(b.lo.y, q.lo.y), std::min(b.lo.z, q.lo.z)};
+    b.hi = {std::max(b.hi.x, q.hi.x), std::max(b.hi.y, q.hi.y), std::max(b.hi.z, q.hi.z)};
+    b.r_max = std::max(b.r_max, q.r_max);
   }
   return b;
 }
@@ -254,9 +291,15 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
 
   // Local indices → global ids (monotone, so the (id_a, id_b) order is kept).
   if (!bodies.id.empty()) {
-    for (std::size_t k = 0; k < out.size(); ++k) {
-      out.id_a[k] = bodies.id[static_cast<std::size_t>(out.id_a[k])];
-      out.id_b[k] = bodies.id[static_cast<std::size_t>(out.id_b[k])];
+    const std::size_t k_n = out.size();
+    const std::int64_t* id = bodies.id.data();
+    std::int64_t* a = out.id_a.data();
+    std::int64_t* b2 = out.id_b.data();
+    const int nt = s.options.threads > 0 ? s.options.threads : omp_get_max_threads();
+#pragma omp parallel for num_threads(nt) schedule(static) if (k_n > (std::size_t(1) << 15))
+    for (std::size_t k = 0; k < k_n; ++k) {
+      a[k] = id[static_cast<std::size_t>(a[k])];
+      b2[k] = id[static_cast<std::size_t>(b2[k])];
     }
   }
   s.stats.contacts = out.size();
