@@ -1,25 +1,31 @@
 #include "distributed_detect.hpp"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <exception>
 #include <limits>
+#include <new>
 #include <numeric>
 #include <optional>
+#include <queue>
+#include <tuple>
 #include <type_traits>
+#include <utility>
 
-#include "contact_merge.hpp"
 #include "hdf5_io.hpp"
 #include "mpi_detail.hpp"
 
 namespace cg {
 
 namespace {
-// The engine's stage names (both backends), in pipeline order.
-const std::vector<std::string> k_engine_stages{"plan", "pack", "entries", "sort", "pairs", "order", "narrow",
-                                               "download"};
+// The engine's stage names (both backends), in pipeline order ("upload": CUDA only).
+const std::vector<std::string> k_engine_stages{"plan", "upload", "pack", "entries", "sort", "pairs", "order",
+                                               "narrow", "download"};
 }  // namespace
 
 void validate(const DistributedOptions& options) {
@@ -42,8 +48,77 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
+
 double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// An array of n trivially copyable T, NOT value-initialised: receive buffers and the engine's input
+// are overwritten entirely, so the zero-fill pass of std::vector would be a wasted sweep of memory
+// (and its single-threaded first touch). Move-only.
+template <class T>
+class Buffer {
+  static_assert(std::is_trivially_copyable_v<T> && std::is_trivially_destructible_v<T>);
+
+ public:
+  Buffer() = default;
+  explicit Buffer(std::size_t n) : m_n(n) {
+    if (n > 0) m_p = static_cast<T*>(::operator new(n * sizeof(T), std::align_val_t(alignof(T))));
+  }
+  ~Buffer() { release(); }
+  Buffer(Buffer&& o) noexcept : m_p(std::exchange(o.m_p, nullptr)), m_n(std::exchange(o.m_n, 0)) {}
+  Buffer& operator=(Buffer&& o) noexcept {
+    if (this != &o) {
+      release();
+      m_p = std::exchange(o.m_p, nullptr);
+      m_n = std::exchange(o.m_n, 0);
+    }
+    return *this;
+  }
+  T* data() { return m_p; }
+  const T* data() const { return m_p; }
+  std::size_t size() const { return m_n; }
+  T& operator[](std::size_t i) { return m_p[i]; }
+  const T& operator[](std::size_t i) const { return m_p[i]; }
+  std::span<const T> span() const { return {m_p, m_n}; }
+
+ private:
+  void release() {
+    if (m_p) ::operator delete(m_p, std::align_val_t(alignof(T)));
+    m_p = nullptr;
+    m_n = 0;
+  }
+  T* m_p = nullptr;
+  std::size_t m_n = 0;
+};
+
+// Host threads of the comm loops: the engine's --threads (0: all).
+int host_threads(const DistributedOptions& o) { return o.engine.threads > 0 ? o.engine.threads : omp_get_max_threads(); }
+
+// Static split of [0, n) into `parts` contiguous chunks (deterministic, whatever the team size).
+struct Chunks {
+  std::size_t n;
+  int parts;
+  Chunks(std::size_t n_, int threads) : n(n_), parts(n_ < (std::size_t(1) << 14) ? 1 : std::max(1, threads)) {}
+  std::size_t begin(int t) const { return static_cast<std::size_t>((std::uint64_t)n * t / parts); }
+  std::size_t end(int t) const { return begin(t + 1); }
+};
+
+// Smallest i in [0, n) with bad(i), or n. Parallel; the answer does not depend on the threads.
+template <class Bad>
+std::size_t first_bad(std::size_t n, int threads, Bad&& bad) {
+  const Chunks c(n, threads);
+  std::vector<std::size_t> found(static_cast<std::size_t>(c.parts), n);
+#pragma omp parallel for num_threads(threads) schedule(static, 1) if (c.parts > 1)
+  for (int t = 0; t < c.parts; ++t) {
+    for (std::size_t i = c.begin(t), e = c.end(t); i < e; ++i) {
+      if (bad(i)) {
+        found[static_cast<std::size_t>(t)] = i;
+        break;
+      }
+    }
+  }
+  return *std::min_element(found.begin(), found.end());
 }
 
 // One body in flight between ranks. General over body kinds: a global id and a bounding sphere
@@ -54,6 +129,125 @@ struct BodyRecord {
   std::int64_t id;
 };
 static_assert(std::is_trivially_copyable_v<BodyRecord>);
+
+// Bodies 0 … n-1 grouped by destination rank, in one pass of counting and one of filling (per-thread
+// counts → scan → fill, no index list): `dest(i, emit)` calls emit(r) for each destination rank of
+// body i, `make(i)` is its record. Within a destination, bodies keep ascending i (the order of the
+// sequential count → scan → fill of decomposition/build_plan). counts[r]: the records for rank r.
+template <class Dest, class Make>
+Buffer<BodyRecord> route(std::size_t n, int ranks, int threads, std::vector<std::uint64_t>& counts, Dest&& dest,
+                         Make&& make) {
+  const std::size_t p = static_cast<std::size_t>(ranks);
+  const Chunks c(n, threads);
+  const std::size_t parts = static_cast<std::size_t>(c.parts);
+  std::vector<std::uint64_t> at(parts * p, 0);  // per chunk and rank: count, then first slot
+#pragma omp parallel for num_threads(threads) schedule(static, 1) if (c.parts > 1)
+  for (int t = 0; t < c.parts; ++t) {
+    std::uint64_t* mine = at.data() + static_cast<std::size_t>(t) * p;
+    for (std::size_t i = c.begin(t), e = c.end(t); i < e; ++i) dest(i, [&](int r) { ++mine[r]; });
+  }
+  counts.assign(p, 0);
+  std::uint64_t total = 0;
+  for (std::size_t r = 0; r < p; ++r) {
+    for (std::size_t t = 0; t < parts; ++t) {
+      const std::uint64_t k = at[t * p + r];
+      at[t * p + r] = total;
+      total += k;
+      counts[r] += k;
+    }
+  }
+  Buffer<BodyRecord> out(total);
+#pragma omp parallel for num_threads(threads) schedule(static, 1) if (c.parts > 1)
+  for (int t = 0; t < c.parts; ++t) {
+    std::uint64_t* next = at.data() + static_cast<std::size_t>(t) * p;
+    for (std::size_t i = c.begin(t), e = c.end(t); i < e; ++i) dest(i, [&](int r) { out[next[r]++] = make(i); });
+  }
+  return out;
+}
+
+// The engine's input in id order: positions, radii, ids, report mask (1: owned).
+struct EngineInput {
+  Buffer<Vec3<double>> position;
+  Buffer<double> radius;
+  Buffer<std::int64_t> id;
+  Buffer<std::uint8_t> report;
+};
+
+// Owned bodies (ascending id: they arrive grouped by source rank, each source sends a subsequence of
+// its contiguous row range) and ghosts (grouped by source rank, each group ascending) merged by id
+// straight into the engine's arrays: the ghost groups k-way merged (a few, small), then a parallel
+// two-way merge with the owned run (owned split into chunks, the ghost run split by binary search).
+// Throws if an id is held twice or the order is broken (internal errors).
+EngineInput merge_by_id(const Buffer<BodyRecord>& owned, const Buffer<BodyRecord>& ghosts,
+                        const std::vector<std::uint64_t>& ghost_counts, int threads) {
+  // ghost groups → one ascending run
+  Buffer<BodyRecord> g(ghosts.size());
+  {
+    using Head = std::pair<std::int64_t, std::size_t>;  // (id, group)
+    std::priority_queue<Head, std::vector<Head>, std::greater<Head>> heap;
+    std::vector<std::uint64_t> next, end;
+    std::uint64_t at = 0;
+    for (std::uint64_t k : ghost_counts) {
+      if (k > 0) {
+        heap.emplace(ghosts[at].id, next.size());
+        next.push_back(at);
+        end.push_back(at + k);
+      }
+      at += k;
+    }
+    std::size_t w = 0;
+    while (!heap.empty()) {
+      const std::size_t r = heap.top().second;
+      heap.pop();
+      g[w++] = ghosts[next[r]++];
+      if (next[r] < end[r]) heap.emplace(ghosts[next[r]].id, r);
+    }
+  }
+  const std::size_t no = owned.size(), ng = g.size(), n = no + ng;
+  EngineInput in{Buffer<Vec3<double>>(n), Buffer<double>(n), Buffer<std::int64_t>(n), Buffer<std::uint8_t>(n)};
+  auto ghost_split = [&](std::size_t a) -> std::size_t {  // ghosts before owned[a]
+    if (a == 0) return 0;
+    if (a == no) return ng;
+    const std::int64_t id = owned[a].id;
+    return static_cast<std::size_t>(
+        std::lower_bound(g.data(), g.data() + ng, id, [](const BodyRecord& b, std::int64_t v) { return b.id < v; }) -
+        g.data());
+  };
+  const Chunks c(std::max(no, ng), threads);
+#pragma omp parallel for num_threads(threads) schedule(static, 1) if (c.parts > 1)
+  for (int t = 0; t < c.parts; ++t) {
+    std::size_t a = static_cast<std::size_t>((std::uint64_t)no * t / c.parts);
+    const std::size_t a_end = static_cast<std::size_t>((std::uint64_t)no * (t + 1) / c.parts);
+    std::size_t b = ghost_split(a);
+    const std::size_t b_end = t + 1 == c.parts ? ng : ghost_split(a_end);
+    std::size_t k = a + b;
+    auto put = [&](const BodyRecord& x, std::uint8_t mine) {
+      in.position[k] = x.position;
+      in.radius[k] = x.radius;
+      in.id[k] = x.id;
+      in.report[k] = mine;
+      ++k;
+    };
+    while (a < a_end && b < b_end) {
+      if (g[b].id < owned[a].id) {
+        put(g[b++], 0);
+      } else {
+        put(owned[a++], 1);
+      }
+    }
+    while (a < a_end) put(owned[a++], 1);
+    while (b < b_end) put(g[b++], 0);
+  }
+  const std::int64_t* id = in.id.data();
+  const std::size_t k = first_bad(n > 0 ? n - 1 : 0, threads, [&](std::size_t i) { return !(id[i + 1] > id[i]); });
+  if (k + 1 < n) {
+    if (id[k + 1] == id[k]) {
+      throw Error("body " + std::to_string(id[k]) + " is held twice (owned and ghost): internal error");
+    }
+    throw Error("bodies are not in id order at " + std::to_string(k + 1) + ": internal error");
+  }
+  return in;
+}
 
 // Bounds of one rank, as exchanged (count 0: the rank read no body and is skipped).
 struct BoundsRecord {
@@ -66,6 +260,7 @@ static_assert(std::is_trivially_copyable_v<BoundsRecord>);
 double component(const Vec3<double>& v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
 
 constexpr int k_halo_tag = 7301;
+constexpr int k_gather_tag = 7400;  // + field index
 
 // The collectives of distributed_detect over the session's communicator. In laptop mode (no MPI)
 // they are the one-rank identities, so one rank runs the same code path with no neighbours.
@@ -111,11 +306,12 @@ class Comm {
     return recv;
   }
 
-  // `send` grouped by destination rank (send_counts), result grouped by source rank.
+  // `send` grouped by destination rank (send_counts), result grouped by source rank. One rank:
+  // the send buffer itself (moved, no copy).
   template <class T>
-  std::vector<T> alltoallv(const std::vector<T>& send, const std::vector<std::uint64_t>& send_counts,
-                           const std::vector<std::uint64_t>& recv_counts) const {
-    if (!m_s.mpi) return send;
+  Buffer<T> alltoallv(Buffer<T>&& send, const std::vector<std::uint64_t>& send_counts,
+                      const std::vector<std::uint64_t>& recv_counts) const {
+    if (!m_s.mpi || m_s.size == 1) return std::move(send);
     const std::size_t p = send_counts.size();
     std::vector<int> sc(p), sd(p), rc(p), rd(p);
     std::uint64_t st = 0, rt = 0;
@@ -127,7 +323,7 @@ class Comm {
       st += send_counts[r];
       rt += recv_counts[r];
     }
-    std::vector<T> recv(rt);
+    Buffer<T> recv(rt);
     detail::RecordType type(sizeof(T));
     CG_MPI(MPI_Alltoallv(send.data(), sc.data(), sd.data(), type.get(), recv.data(), rc.data(), rd.data(),
                          type.get(), m_s.comm));
@@ -137,17 +333,16 @@ class Comm {
   // Point-to-point exchange (the halo): every Irecv posted, then every Isend, then one Waitall.
   // Only ranks with a non-zero count take part; this rank's own part (none for a halo) is copied.
   template <class T>
-  std::vector<T> exchange(const std::vector<T>& send, const std::vector<std::uint64_t>& send_counts,
-                          const std::vector<std::uint64_t>& recv_counts) const {
+  Buffer<T> exchange(const Buffer<T>& send, const std::vector<std::uint64_t>& send_counts,
+                     const std::vector<std::uint64_t>& recv_counts) const {
     const std::size_t p = send_counts.size(), me = static_cast<std::size_t>(m_s.rank);
     std::vector<std::uint64_t> sd(p + 1, 0), rd(p + 1, 0);
     for (std::size_t r = 0; r < p; ++r) {
       sd[r + 1] = sd[r] + send_counts[r];
       rd[r + 1] = rd[r] + recv_counts[r];
     }
-    std::vector<T> recv(rd[p]);
-    std::copy_n(send.begin() + static_cast<std::ptrdiff_t>(sd[me]), send_counts[me],
-                recv.begin() + static_cast<std::ptrdiff_t>(rd[me]));
+    Buffer<T> recv(rd[p]);
+    if (send_counts[me] > 0) std::memcpy(recv.data() + rd[me], send.data() + sd[me], send_counts[me] * sizeof(T));
     if (!m_s.mpi) return recv;
     detail::RecordType type(sizeof(T));
     std::vector<MPI_Request> requests;
@@ -169,53 +364,36 @@ class Comm {
     return recv;
   }
 
-  // Rank 0 receives every rank's `local` (counts[r] elements on rank r, known to all ranks) as one
-  // vector per rank; other ranks get an empty result. MPI_Gatherv in rounds of at most max_bytes
-  // (capped to 2^31 - 1) in all, so no byte count or displacement overflows an int.
+  // Rank 0 receives rank r's `n` elements (counts[r], known to all ranks) at `into[r]` (r >= 1; rank
+  // 0's own part stays where it is): straight into the final arrays, no staging buffer, no
+  // displacement limit. Point-to-point in messages of at most max_bytes (capped to 2^31 - 1): every
+  // Irecv posted, then one Waitall (non-root ranks send their messages in order, blocking).
   template <class T>
-  std::vector<std::vector<T>> gather_to_root(const std::vector<T>& local, const std::vector<std::uint64_t>& counts,
-                                             std::uint64_t max_bytes) const {
+  void gather_to_root(const T* local, const std::vector<std::uint64_t>& counts, const std::vector<T*>& into,
+                      std::uint64_t max_bytes, int tag) const {
     static_assert(std::is_trivially_copyable_v<T>);
-    if (!m_s.mpi) return {local};
-    const std::size_t p = counts.size();
-    const bool root = m_s.rank == 0;
-    std::vector<std::vector<T>> out(root ? p : 0);
-    if (root) {
-      for (std::size_t r = 0; r < p; ++r) out[r].reserve(counts[r]);
-    }
+    if (!m_s.mpi || m_s.size == 1) return;
     const std::uint64_t budget = std::min<std::uint64_t>(max_bytes, static_cast<std::uint64_t>(INT_MAX));
-    const std::uint64_t chunk = std::max<std::uint64_t>(1, budget / p / sizeof(T));  // elements per rank
-    const std::uint64_t most = *std::max_element(counts.begin(), counts.end());
-    const std::uint64_t rounds = (most + chunk - 1) / chunk;
-    std::vector<int> rc(p), rd(p);
-    std::vector<T> buffer;
-    for (std::uint64_t round = 0; round < rounds; ++round) {
-      auto part = [&](std::size_t r) {
-        std::uint64_t begin = std::min(counts[r], round * chunk);
-        return std::min(counts[r], begin + chunk) - begin;
-      };
-      const std::uint64_t begin = std::min<std::uint64_t>(local.size(), round * chunk);
-      const std::uint64_t mine = part(static_cast<std::size_t>(m_s.rank));
-      std::uint64_t total = 0;
-      if (root) {
-        for (std::size_t r = 0; r < p; ++r) {
-          rc[r] = detail::to_mpi_count(part(r) * sizeof(T), "gather byte count");
-          rd[r] = detail::to_mpi_count(total * sizeof(T), "gather byte displacement");
-          total += part(r);
+    const std::uint64_t chunk = std::max<std::uint64_t>(1, budget / sizeof(T));  // elements per message
+    detail::RecordType type(sizeof(T));
+    if (m_s.rank == 0) {
+      std::vector<MPI_Request> requests;
+      for (std::size_t r = 1; r < counts.size(); ++r) {
+        for (std::uint64_t at = 0; at < counts[r]; at += chunk) {
+          requests.emplace_back();
+          CG_MPI(MPI_Irecv(into[r] + at, static_cast<int>(std::min(chunk, counts[r] - at)), type.get(),
+                           static_cast<int>(r), tag, m_s.comm, &requests.back()));
         }
-        buffer.resize(total);
       }
-      CG_MPI(MPI_Gatherv(local.data() + begin, detail::to_mpi_count(mine * sizeof(T), "gather byte count"),
-                         MPI_BYTE, root ? buffer.data() : nullptr, rc.data(), rd.data(), MPI_BYTE, 0,
-                         m_s.comm));
-      if (root) {
-        for (std::size_t r = 0; r < p; ++r) {
-          const T* first = buffer.data() + rd[r] / static_cast<int>(sizeof(T));
-          out[r].insert(out[r].end(), first, first + part(r));
-        }
+      if (!requests.empty()) {
+        CG_MPI(MPI_Waitall(static_cast<int>(requests.size()), requests.data(), MPI_STATUSES_IGNORE));
+      }
+    } else {
+      const std::uint64_t n = counts[static_cast<std::size_t>(m_s.rank)];
+      for (std::uint64_t at = 0; at < n; at += chunk) {
+        CG_MPI(MPI_Send(local + at, static_cast<int>(std::min(chunk, n - at)), type.get(), 0, tag, m_s.comm));
       }
     }
-    return out;
   }
 
   void allreduce_max(std::vector<double>& values) const {
@@ -227,6 +405,114 @@ class Comm {
  private:
   const Session::Impl& m_s;
 };
+
+// One rank's contacts as gathered at rank 0: its own Contacts (rank 0) or receive buffers.
+template <class Real>
+struct ContactRun {
+  std::size_t n = 0;
+  const std::int64_t *id_a = nullptr, *id_b = nullptr;
+  const Real* distance = nullptr;
+  const Vec3<Real>* vec[7] = {};  // position_on_a, position_on_b, normal_on_b, then the four full fields
+};
+
+// The ten fields of a Contacts, in one order for gather and merge.
+template <class Real>
+std::vector<Vec3<Real>>* vec_field(Contacts<Real>& c, int f) {
+  std::vector<Vec3<Real>>* v[7] = {&c.position_on_a, &c.position_on_b, &c.normal_on_b, &c.local_point_a,
+                                   &c.local_point_b, &c.lateral_friction_dir1, &c.lateral_friction_dir2};
+  return v[f];
+}
+
+// k-way merge of the sorted runs by (id_a, id_b) straight into `out` (sized to the total; shrunk by
+// the duplicates): ties between runs in run (rank) order, a row equal to the previous output row
+// dropped and counted — the result of decomposition/merge_contact_runs, in parallel: the key range
+// is split at keys of the largest run (every run cut at the same keys by binary search, so equal
+// keys stay in one part and the parts concatenate in order); each part is merged by one thread
+// into its place. Runs must be sorted (checked, in parallel; Error naming the run otherwise).
+template <class Real>
+std::uint64_t merge_runs(const std::vector<ContactRun<Real>>& runs, Contacts<Real>& out, bool full, int threads) {
+  using Key = std::pair<std::int64_t, std::int64_t>;
+  const std::size_t p = runs.size();
+  auto key = [&](std::size_t r, std::size_t k) { return Key{runs[r].id_a[k], runs[r].id_b[k]}; };
+  for (std::size_t r = 0; r < p; ++r) {
+    const std::size_t bad = first_bad(runs[r].n > 0 ? runs[r].n - 1 : 0, threads,
+                                      [&](std::size_t k) { return key(r, k) > key(r, k + 1); });
+    if (bad + 1 < runs[r].n) {
+      throw Error("contact run " + std::to_string(r) + ": not sorted by (id_a, id_b) at row " +
+                  std::to_string(bad + 1));
+    }
+  }
+  const int nvec = full ? 7 : 3;
+  std::size_t total = 0, largest = 0;
+  for (std::size_t r = 0; r < p; ++r) {
+    total += runs[r].n;
+    if (runs[r].n > runs[largest].n) largest = r;
+  }
+  const Chunks c(total, threads);
+  const std::size_t parts = static_cast<std::size_t>(c.parts);
+  // cut[j * p + r]: first row of run r in part j (j = 0 … parts)
+  std::vector<std::size_t> cut((parts + 1) * p, 0);
+  for (std::size_t r = 0; r < p; ++r) cut[parts * p + r] = runs[r].n;
+  for (std::size_t j = 1; j < parts; ++j) {
+    const Key split = key(largest, runs[largest].n * j / parts);
+    for (std::size_t r = 0; r < p; ++r) {
+      std::size_t lo = 0, hi = runs[r].n;  // lower_bound(split)
+      while (lo < hi) {
+        const std::size_t mid = (lo + hi) / 2;
+        if (key(r, mid) < split) lo = mid + 1; else hi = mid;
+      }
+      cut[j * p + r] = lo;
+    }
+  }
+  std::vector<std::size_t> start(parts + 1, 0), written(parts, 0);
+  for (std::size_t j = 0; j <= parts; ++j)
+    for (std::size_t r = 0; r < p; ++r) start[j] += cut[j * p + r];
+  Vec3<Real>* dst[7] = {};
+  for (int f = 0; f < nvec; ++f) dst[f] = vec_field(out, f)->data();
+  std::int64_t* da = out.id_a.data();
+  std::int64_t* db = out.id_b.data();
+  Real* dd = out.distance.data();
+#pragma omp parallel for num_threads(threads) schedule(static, 1) if (parts > 1)
+  for (std::size_t j = 0; j < parts; ++j) {
+    using Head = std::tuple<std::int64_t, std::int64_t, std::size_t>;  // (id_a, id_b, run)
+    std::priority_queue<Head, std::vector<Head>, std::greater<Head>> heap;
+    std::vector<std::size_t> next(p), end(p);
+    for (std::size_t r = 0; r < p; ++r) {
+      next[r] = cut[j * p + r];
+      end[r] = cut[(j + 1) * p + r];
+      if (next[r] < end[r]) heap.emplace(runs[r].id_a[next[r]], runs[r].id_b[next[r]], r);
+    }
+    std::size_t w = start[j];
+    while (!heap.empty()) {
+      const auto [a, b, r] = heap.top();
+      heap.pop();
+      const std::size_t k = next[r]++;
+      if (!(w > start[j] && da[w - 1] == a && db[w - 1] == b)) {
+        const ContactRun<Real>& in = runs[r];
+        da[w] = a;
+        db[w] = b;
+        dd[w] = in.distance[k];
+        for (int f = 0; f < nvec; ++f) dst[f][w] = in.vec[f][k];
+        ++w;
+      }
+      if (next[r] < end[r]) heap.emplace(runs[r].id_a[next[r]], runs[r].id_b[next[r]], r);
+    }
+    written[j] = w - start[j];
+  }
+  // Duplicates (expected none) leave gaps at the ends of parts: close them, in order.
+  std::size_t w = 0;
+  for (std::size_t j = 0; j < parts; ++j) {
+    if (w != start[j]) {
+      std::memmove(da + w, da + start[j], written[j] * sizeof(*da));
+      std::memmove(db + w, db + start[j], written[j] * sizeof(*db));
+      std::memmove(dd + w, dd + start[j], written[j] * sizeof(*dd));
+      for (int f = 0; f < nvec; ++f) std::memmove(dst[f] + w, dst[f] + start[j], written[j] * sizeof(Vec3<Real>));
+    }
+    w += written[j];
+  }
+  if (w != total) out.resize(w, full);
+  return total - w;
+}
 
 // Runs the local part of a stage; afterwards every rank agrees on whether any rank failed.
 template <class F>
@@ -263,7 +549,6 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   std::uint64_t n_global = 0, first = 0;
   std::vector<Vec3<double>> position;
   std::vector<double> radius;
-  std::vector<std::int64_t> id;
   BoundsRecord mine{};
   local_stage(session, "read", [&] {
     const SceneShape shape = read_scene_shape(path);
@@ -283,9 +568,16 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
       }
       position = std::move(rows.sphere_position);
       radius = std::move(rows.sphere_radius);
-      id.resize(count);
-      std::iota(id.begin(), id.end(), static_cast<std::int64_t>(first));
-      const Bounds b = compute_bounds(BodiesView{position, radius, id, {}});
+      // Bounds (and validation) without an id array: the reader has validated every row already, so
+      // compute_bounds finds nothing; if it ever does, it runs again with the global ids, for its message.
+      Bounds b;
+      try {
+        b = compute_bounds(BodiesView{position, radius, {}, {}});
+      } catch (const InputError&) {
+        std::vector<std::int64_t> id(count);
+        std::iota(id.begin(), id.end(), static_cast<std::int64_t>(first));
+        b = compute_bounds(BodiesView{position, radius, id, {}});
+      }
       mine = {b.lo, b.hi, b.r_max, count};
     }
   });
@@ -327,159 +619,212 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   times[0] = seconds_since(t0);
 
   // ---- redistribute: slab cuts identical on all ranks, every body to its owner -------------------
+  // One rank owns everything: no plan, no exchange, no halo, no gather, no merge; the vectors move
+  // through (the engine gets the rows as read, ids 0 … N-1 implied, all pairs reported).
+  const bool alone = ranks == 1;
+  const int threads = host_threads(options);
   t0 = Clock::now();
   std::optional<SlabDecomposition> slabs;
+  Buffer<BodyRecord> owned;
   {
-    std::vector<double> coordinate(position.size());
-    for (std::size_t i = 0; i < position.size(); ++i) coordinate[i] = component(position[i], axis);
     std::vector<double> sample;
-    if (options.balance == Balance::count && ranks > 1) {
+    if (options.balance == Balance::count && !alone) {
       // A regular sample by global row: every stride-th body (all of them when N <= max_sample).
       const std::uint64_t stride = std::max<std::uint64_t>(1, (n_global + options.max_sample - 1) / options.max_sample);
-      for (std::size_t i = 0; i < coordinate.size(); ++i) {
-        if ((first + i) % stride == 0) sample.push_back(coordinate[i]);
+      for (std::size_t i = static_cast<std::size_t>((stride - first % stride) % stride); i < position.size();
+           i += stride) {
+        sample.push_back(component(position[i], axis));
       }
       sample = comm.allgatherv(sample);
     }
-    ExportPlan plan;
-    std::vector<BodyRecord> send;
+    Buffer<BodyRecord> send;
+    std::vector<std::uint64_t> send_counts(static_cast<std::size_t>(ranks), 0);
     local_stage(session, "redistribute", [&] {
-      if (options.balance == Balance::count && ranks > 1) {
-        std::sort(sample.begin(), sample.end());
+      if (options.balance == Balance::count && !alone) {
+        // from_sorted_sample reads only the P-1 quantile positions floor(r·S/P): put the right order
+        // statistic at each (successive selections on the remaining upper part) instead of sorting.
+        const std::size_t n_s = sample.size();
+        if (ranks > 64) {
+          std::sort(sample.begin(), sample.end());
+        } else {
+          std::size_t from = 0;
+          for (int r = 1; r < ranks && n_s > 0; ++r) {
+            const std::size_t q = std::min<std::size_t>(
+                n_s - 1, static_cast<std::size_t>(std::uint64_t(r) * std::uint64_t(n_s) / std::uint64_t(ranks)));
+            if (q < from) continue;  // already in place (equal quantile positions)
+            std::nth_element(sample.begin() + static_cast<std::ptrdiff_t>(from),
+                             sample.begin() + static_cast<std::ptrdiff_t>(q), sample.end());
+            from = q + 1;
+          }
+        }
         slabs = SlabDecomposition::from_sorted_sample(axis, sample, ranks);
       } else {
         slabs = SlabDecomposition::equal_width(axis, component(global.lo, axis), component(global.hi, axis), ranks);
       }
-      plan = make_owner_plan(*slabs, coordinate);
-      send.resize(plan.total());
-      for (std::size_t k = 0; k < plan.total(); ++k) {
-        const std::size_t i = plan.indices[k];
-        send[k] = {position[i], radius[i], id[i]};
-      }
+      if (alone) return;
+      const SlabDecomposition& s = *slabs;
+      send = route(
+          position.size(), ranks, threads, send_counts,
+          [&](std::size_t i, auto&& emit) { emit(s.owner(component(position[i], axis))); },
+          [&](std::size_t i) {
+            return BodyRecord{position[i], radius[i], static_cast<std::int64_t>(first + i)};
+          });
     });
-    position = {};
-    radius = {};
-    id = {};
-    std::vector<std::uint64_t> send_counts(static_cast<std::size_t>(ranks));
-    for (int r = 0; r < ranks; ++r) send_counts[static_cast<std::size_t>(r)] = plan.count(r);
-    const std::vector<std::uint64_t> recv_counts = comm.alltoall_counts(send_counts);
-    std::vector<BodyRecord> owned = comm.alltoallv(send, send_counts, recv_counts);
+    if (!alone) {
+      position = {};
+      radius = {};
+      const std::vector<std::uint64_t> recv_counts = comm.alltoall_counts(send_counts);
+      owned = comm.alltoallv(std::move(send), send_counts, recv_counts);
+    }
     result.cuts = slabs->cuts();
-    times[1] = seconds_since(t0);
-
-    // ---- halo: ghosts to every rank whose slab is within the ghost width ---------------------------
-    t0 = Clock::now();
-    ExportPlan halo;
-    std::vector<BodyRecord> ghost_send;
-    local_stage(session, "halo", [&] {
-      std::vector<double> owned_coordinate(owned.size());
-      for (std::size_t i = 0; i < owned.size(); ++i) owned_coordinate[i] = component(owned[i].position, axis);
-      halo = make_halo_plan(*slabs, me, owned_coordinate, width);
-      ghost_send.resize(halo.total());
-      for (std::size_t k = 0; k < halo.total(); ++k) ghost_send[k] = owned[halo.indices[k]];
-    });
-    std::vector<std::uint64_t> ghost_counts(static_cast<std::size_t>(ranks));
-    for (int r = 0; r < ranks; ++r) ghost_counts[static_cast<std::size_t>(r)] = halo.count(r);
-    const std::vector<std::uint64_t> ghost_recv_counts = comm.alltoall_counts(ghost_counts);
-    std::vector<BodyRecord> ghosts = comm.exchange(ghost_send, ghost_counts, ghost_recv_counts);
-    ghost_send = {};
-    times[2] = seconds_since(t0);
-
-    // ---- detect: owned + ghosts in id order, the owner of the smaller id reports ------------------
-    t0 = Clock::now();
-    Contacts<Real> local;
-    local.full = full;
-    const std::uint64_t n_owned = owned.size(), n_ghosts = ghosts.size();
-    local_stage(session, "detect", [&] {
-      const std::size_t n = owned.size() + ghosts.size();
-      std::vector<std::size_t> order(n);
-      std::iota(order.begin(), order.end(), std::size_t{0});
-      auto record = [&](std::size_t k) -> const BodyRecord& {
-        return k < owned.size() ? owned[k] : ghosts[k - owned.size()];
-      };
-      auto by_id = [&](std::size_t a, std::size_t b) { return record(a).id < record(b).id; };
-      if (!std::is_sorted(order.begin(), order.end(), by_id)) std::sort(order.begin(), order.end(), by_id);
-      std::vector<Vec3<double>> p(n);
-      std::vector<double> r(n);
-      std::vector<std::int64_t> ids(n);
-      std::vector<std::uint8_t> report(n);
-      for (std::size_t k = 0; k < n; ++k) {
-        const BodyRecord& b = record(order[k]);
-        p[k] = b.position;
-        r[k] = b.radius;
-        ids[k] = b.id;
-        report[k] = order[k] < owned.size() ? 1 : 0;
-        if (k > 0 && ids[k] == ids[k - 1]) {
-          throw Error("body " + std::to_string(ids[k]) + " is held twice (owned and ghost): internal error");
-        }
-      }
-      owned = {};
-      ghosts = {};
-      if (n_owned > 0) {  // a rank that owns nothing reports nothing
-        local = engine->detect(BodiesView{p, r, ids, report}, frame);
-      }
-    });
-    result.backend = engine->backend();
-    times[3] = seconds_since(t0);
-    if (n_owned > 0) {
-      // the engine's own stages, reported as "detect.<stage>" (max over ranks, like every time)
-      for (const StageTime& st : engine->times())
-        for (std::size_t k = 0; k < k_engine_stages.size(); ++k)
-          if (st.name == k_engine_stages[k]) times[6 + k] = st.seconds;
-      result.stats = engine->stats();
-    }
-    result.stats.entries = session.sum(result.stats.entries);
-    result.stats.pair_tests = session.sum(result.stats.pair_tests);
-    result.stats.key_bits = int(session.max(double(result.stats.key_bits)));
-
-    const std::vector<std::uint64_t> owned_all = comm.allgather<std::uint64_t>(n_owned);
-    result.owned_min = *std::min_element(owned_all.begin(), owned_all.end());
-    result.owned_max = *std::max_element(owned_all.begin(), owned_all.end());
-    result.ghosts = session.sum(n_ghosts);
-
-    // ---- gather: each field to rank 0, in bounded rounds ---------------------------------------------
-    t0 = Clock::now();
-    const std::vector<std::uint64_t> counts = comm.allgather<std::uint64_t>(local.size());
-    std::vector<Contacts<Real>> runs(me == 0 ? static_cast<std::size_t>(ranks) : 0);
-    auto gather = [&](auto member) {
-      auto parts = comm.gather_to_root(local.*member, counts, options.max_message_bytes);
-      (local.*member) = {};
-      for (std::size_t r = 0; r < parts.size(); ++r) runs[r].*member = std::move(parts[r]);
-    };
-    gather(&Contacts<Real>::id_a);
-    gather(&Contacts<Real>::id_b);
-    gather(&Contacts<Real>::position_on_a);
-    gather(&Contacts<Real>::position_on_b);
-    gather(&Contacts<Real>::normal_on_b);
-    gather(&Contacts<Real>::distance);
-    if (full) {
-      gather(&Contacts<Real>::local_point_a);
-      gather(&Contacts<Real>::local_point_b);
-      gather(&Contacts<Real>::lateral_friction_dir1);
-      gather(&Contacts<Real>::lateral_friction_dir2);
-    }
-    for (Contacts<Real>& run : runs) run.full = full;
-    times[4] = seconds_since(t0);
-
-    // ---- merge (rank 0): k-way merge of the sorted runs, duplicates removed and counted -----------
-    t0 = Clock::now();
-    local_stage(session, "merge", [&] {
-      if (me != 0) return;
-      MergedContacts<Real> merged = merge_contact_runs<Real>(runs, full);
-      runs = {};
-      result.contacts = std::move(merged.contacts);
-      result.duplicates_removed = merged.duplicates_removed;
-      const std::string line = "merge: " + std::to_string(result.contacts.size()) + " contacts from " +
-                               std::to_string(ranks) + " rank(s), " + std::to_string(merged.duplicates_removed) +
-                               " duplicate(s) removed (expected 0)";
-      if (options.log) {
-        options.log(line);
-      } else if (merged.duplicates_removed > 0) {  // a warning nobody asked for must still be seen
-        std::fprintf(stderr, "%swarning: %s\n", session.prefix().c_str(), line.c_str());
-      }
-    });
-    times[5] = seconds_since(t0);
   }
+  times[1] = seconds_since(t0);
+
+  // ---- halo: ghosts to every rank whose slab is within the ghost width ---------------------------
+  t0 = Clock::now();
+  Buffer<BodyRecord> ghosts;
+  std::vector<std::uint64_t> ghost_recv_counts(static_cast<std::size_t>(ranks), 0);
+  if (!alone) {
+    Buffer<BodyRecord> ghost_send;
+    std::vector<std::uint64_t> ghost_counts(static_cast<std::size_t>(ranks), 0);
+    local_stage(session, "halo", [&] {
+      const SlabDecomposition& s = *slabs;
+      if (!(width >= 0) || !std::isfinite(width)) throw InputError("halo plan: ghost width is not a finite value >= 0");
+      const std::size_t bad = first_bad(owned.size(), threads, [&](std::size_t i) {
+        return s.owner(component(owned[i].position, axis)) != me;
+      });
+      if (bad < owned.size()) {
+        throw InputError("halo plan: body " + std::to_string(bad) + " at " +
+                         std::to_string(component(owned[bad].position, axis)) + " is not owned by rank " +
+                         std::to_string(me));
+      }
+      ghost_send = route(
+          owned.size(), ranks, threads, ghost_counts,
+          [&](std::size_t i, auto&& emit) { s.for_each_ghost_rank(component(owned[i].position, axis), width, emit); },
+          [&](std::size_t i) { return owned[i]; });
+    });
+    ghost_recv_counts = comm.alltoall_counts(ghost_counts);
+    ghosts = comm.exchange(ghost_send, ghost_counts, ghost_recv_counts);
+  }
+  times[2] = seconds_since(t0);
+
+  // ---- detect: owned + ghosts in id order, the owner of the smaller id reports ------------------
+  t0 = Clock::now();
+  Contacts<Real> local;
+  local.full = full;
+  const std::uint64_t n_owned = alone ? position.size() : owned.size(), n_ghosts = ghosts.size();
+  local_stage(session, "detect", [&] {
+    if (alone) {
+      local = engine->detect(BodiesView{position, radius, {}, {}}, frame);
+      position = {};
+      radius = {};
+      return;
+    }
+    EngineInput in = merge_by_id(owned, ghosts, ghost_recv_counts, threads);
+    owned = {};
+    ghosts = {};
+    if (n_owned > 0) {  // a rank that owns nothing reports nothing
+      local = engine->detect(BodiesView{in.position.span(), in.radius.span(), in.id.span(), in.report.span()}, frame);
+    }
+  });
+  result.backend = engine->backend();
+  times[3] = seconds_since(t0);
+  if (n_owned > 0) {
+    // the engine's own stages, reported as "detect.<stage>" (max over ranks, like every time)
+    for (const StageTime& st : engine->times())
+      for (std::size_t k = 0; k < k_engine_stages.size(); ++k)
+        if (st.name == k_engine_stages[k]) times[6 + k] = st.seconds;
+    result.stats = engine->stats();
+  }
+  result.stats.entries = session.sum(result.stats.entries);
+  result.stats.pair_tests = session.sum(result.stats.pair_tests);
+  result.stats.key_bits = int(session.max(double(result.stats.key_bits)));
+
+  const std::vector<std::uint64_t> owned_all = comm.allgather<std::uint64_t>(n_owned);
+  result.owned_min = *std::min_element(owned_all.begin(), owned_all.end());
+  result.owned_max = *std::max_element(owned_all.begin(), owned_all.end());
+  result.ghosts = session.sum(n_ghosts);
+
+  // ---- gather: each field to rank 0, straight into per-rank receive buffers ---------------------
+  t0 = Clock::now();
+  const std::vector<std::uint64_t> counts = alone ? std::vector<std::uint64_t>{local.size()}
+                                                  : comm.allgather<std::uint64_t>(local.size());
+  const std::size_t p = counts.size();
+  std::vector<ContactRun<Real>> runs;
+  // rank 0's received fields: ids (2), distance, and up to 7 vector fields per rank
+  std::vector<Buffer<std::int64_t>> recv_a, recv_b;
+  std::vector<Buffer<Real>> recv_d;
+  std::vector<std::vector<Buffer<Vec3<Real>>>> recv_v;
+  const int nvec = full ? 7 : 3;
+  if (!alone) {
+    const bool root = me == 0;
+    if (root) {
+      runs.resize(p);
+      recv_a.resize(p);
+      recv_b.resize(p);
+      recv_d.resize(p);
+      recv_v.resize(p);
+      ContactRun<Real>& own = runs[0];
+      own.n = local.size();
+      own.id_a = local.id_a.data();
+      own.id_b = local.id_b.data();
+      own.distance = local.distance.data();
+      for (int f = 0; f < nvec; ++f) own.vec[f] = vec_field(local, f)->data();
+      for (std::size_t r = 1; r < p; ++r) {
+        const std::size_t n = counts[r];
+        recv_a[r] = Buffer<std::int64_t>(n);
+        recv_b[r] = Buffer<std::int64_t>(n);
+        recv_d[r] = Buffer<Real>(n);
+        for (int f = 0; f < nvec; ++f) recv_v[r].emplace_back(n);
+        runs[r].n = n;
+        runs[r].id_a = recv_a[r].data();
+        runs[r].id_b = recv_b[r].data();
+        runs[r].distance = recv_d[r].data();
+        for (int f = 0; f < nvec; ++f) runs[r].vec[f] = recv_v[r][static_cast<std::size_t>(f)].data();
+      }
+    }
+    auto targets = [&](auto& buffers) {
+      using B = typename std::decay_t<decltype(buffers)>::value_type;
+      std::vector<std::decay_t<decltype(std::declval<B&>().data())>> t(root ? p : 0, nullptr);
+      for (std::size_t r = 1; root && r < p; ++r) t[r] = buffers[r].data();
+      return t;
+    };
+    comm.gather_to_root(local.id_a.data(), counts, targets(recv_a), options.max_message_bytes, k_gather_tag + 0);
+    comm.gather_to_root(local.id_b.data(), counts, targets(recv_b), options.max_message_bytes, k_gather_tag + 1);
+    comm.gather_to_root(local.distance.data(), counts, targets(recv_d), options.max_message_bytes, k_gather_tag + 2);
+    for (int f = 0; f < nvec; ++f) {
+      std::vector<Vec3<Real>*> t(root ? p : 0, nullptr);
+      for (std::size_t r = 1; root && r < p; ++r) t[r] = recv_v[r][static_cast<std::size_t>(f)].data();
+      comm.gather_to_root(vec_field(local, f)->data(), counts, t, options.max_message_bytes, k_gather_tag + 3 + f);
+    }
+    if (!root) local = Contacts<Real>{};
+  }
+  times[4] = seconds_since(t0);
+
+  // ---- merge (rank 0): k-way merge of the sorted runs, duplicates removed and counted -----------
+  t0 = Clock::now();
+  local_stage(session, "merge", [&] {
+    if (me != 0) return;
+    if (alone) {
+      result.contacts = std::move(local);  // one sorted run: nothing to merge
+    } else {
+      std::uint64_t total = 0;
+      for (std::uint64_t k : counts) total += k;
+      result.contacts.resize(total, full);
+      result.duplicates_removed = merge_runs<Real>(runs, result.contacts, full, threads);
+      runs.clear();
+      local = Contacts<Real>{};
+    }
+    const std::string line = "merge: " + std::to_string(result.contacts.size()) + " contacts from " +
+                             std::to_string(ranks) + " rank(s), " + std::to_string(result.duplicates_removed) +
+                             " duplicate(s) removed (expected 0)";
+    if (options.log) {
+      options.log(line);
+    } else if (result.duplicates_removed > 0) {  // a warning nobody asked for must still be seen
+      std::fprintf(stderr, "%swarning: %s\n", session.prefix().c_str(), line.c_str());
+    }
+  });
+  times[5] = seconds_since(t0);
   result.contacts.full = full;
 
   comm.allreduce_max(times);

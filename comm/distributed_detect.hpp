@@ -9,18 +9,26 @@
 //                 builds — so every rank computes bit-identical local coordinates and contact data.
 //   redistribute  slab axis (largest extent unless forced); cuts from the quantiles of a regular
 //                 sample of centre coordinates gathered to every rank (balance = count) or equal widths
-//                 (balance = width): identical on all ranks; every body to its owner (Alltoall counts,
-//                 Alltoallv records).
-//   halo          ghost plan (decomposition/make_halo_plan, ghost width = 2·r_max + rounding margin);
+//                 (balance = width): identical on all ranks (the P-1 quantiles are selected, not the
+//                 sample sorted); every body to its owner (Alltoall counts, Alltoallv records packed
+//                 by destination in one parallel count → scan → fill, no index list).
+//   halo          ghost plan (SlabDecomposition::for_each_ghost_rank, ghost width = 2·r_max + rounding
+//                 margin; the same plan as decomposition/make_halo_plan, packed in parallel);
 //                 counts by Alltoall, then every Irecv posted, every Isend, one Waitall.
-//   detect        owned + ghosts sorted by global id; report mask = owned; Engine<Real>::detect with
-//                 the shared frame. The owner of the smaller id reports a pair, so each contact is
+//   detect        owned + ghosts in global id order (owned bodies arrive in id order, grouped by
+//                 source rank; the ghost groups are merged, then merged with them in parallel straight
+//                 into the engine's arrays); report mask = owned; Engine<Real>::detect with the
+//                 shared frame. The owner of the smaller id reports a pair, so each contact is
 //                 found by exactly one rank.
-//   gather        counts, then each field with MPI_Gatherv to rank 0, in rounds of at most
-//                 max_message_bytes (so no count or displacement exceeds 2^31).
+//   gather        counts, then each field to rank 0 point to point, straight into one receive array
+//                 per rank and field (rank 0's own run stays in place), in messages of at most
+//                 max_message_bytes (so no count exceeds 2^31).
 //   merge         rank 0: k-way merge of the P sorted runs by (id_a, id_b), exact duplicates removed
-//                 and counted (expected 0).
-// With one rank (laptop mode or np 1) the same code path runs with no neighbours.
+//                 and counted (expected 0) — the result of decomposition/merge_contact_runs, computed
+//                 in parallel over key ranges straight into the result.
+// With one rank (laptop mode or np 1) nothing is exchanged or copied: the rows as read go to the
+// engine (ids implied, all pairs reported) and its contacts are the result; the stages are still
+// reported (redistribute, halo, gather and merge take no time).
 //
 // Errors: options are validated before any communication. An error in a stage on any rank (bad
 // input, I/O, CUDA, memory) is agreed on at the end of the stage (Session::agree): every rank throws
