@@ -14,6 +14,7 @@
 #include "hdf5_io.hpp"
 
 #include <hdf5.h>
+#include <omp.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -22,6 +23,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <mutex>
 #include <type_traits>
 #include <utility>
@@ -562,7 +564,25 @@ void read_spheres(const SceneSource& s, hsize_t first, hsize_t count, Scene& out
     double* radius = out.sphere_radius.data() + done;
     read_rows(s.where, s.sphere_position, first + done, n, H5T_NATIVE_DOUBLE, position);
     read_rows(s.where, s.sphere_radius, first + done, n, H5T_NATIVE_DOUBLE, radius);
-    for (hsize_t i = 0; i < n; ++i) {
+    // Validation in parallel: the first bad row of the chunk (smallest index, whatever the threads),
+    // then the sequential checks from there, which name it exactly as before.
+    hsize_t from = n;
+    {
+      const double lo = s.radius_low ? *s.radius_low : -std::numeric_limits<double>::infinity();
+      const double hi = s.radius_high ? *s.radius_high : std::numeric_limits<double>::infinity();
+      const int threads = n < 65536 ? 1 : omp_get_max_threads();
+#pragma omp parallel for num_threads(threads) reduction(min : from) schedule(static) if (threads > 1)
+      for (hsize_t i = 0; i < n; ++i) {
+        const Vec3<double> p = position[i];
+        const double r = radius[i];
+        if (!(std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) && std::isfinite(r) && r > 0 &&
+              !(r < lo) && !(r > hi)) &&
+            i < from) {
+          from = i;
+        }
+      }
+    }
+    for (hsize_t i = from; i < n; ++i) {
       hsize_t row = first + done + i;
       check_finite(s, s.sphere_position, row, &position[i].x, 3);
       check_finite(s, s.sphere_radius, row, &radius[i], 1);
