@@ -2,6 +2,7 @@
 // Internal interface between the engine (engine.cpp: bounds, frame, plan, id mapping) and its
 // backends. A backend runs the stages from packing to the narrow phase; it returns contacts whose
 // id_a/id_b are *local* body indices (a < b), sorted, with points in the world frame.
+#include <cstddef>
 #include <cstdint>
 
 #include "core/grid.hpp"
@@ -34,6 +35,15 @@ GridParams<Real> grid_params(const GridPlan& plan) {
   g.half_bits = plan.half_bits;
   return g;
 }
+
+// Host copies of several (dst, src, bytes) blocks, split into equal pieces over OpenMP threads
+// (defined in engine.cpp, an OpenMP translation unit, so the CUDA backend's host code can use it).
+struct CopyBlock {
+  void* dst;
+  const void* src;
+  std::size_t bytes;
+};
+void parallel_copy(const CopyBlock* blocks, std::size_t count, int threads);
 
 // Bits needed to hold values 0 … n-1 (0 for n <= 1).
 inline int bits_for(std::uint64_t n) {

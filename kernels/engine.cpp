@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <sstream>
 #include <vector>
@@ -205,6 +206,30 @@ GridPlan plan_grid(const Bounds& local, const Frame& frame, Precision p) {
   g.key64 = g.key_bits > 32;
   return g;
 }
+
+namespace detail {
+void parallel_copy(const CopyBlock* blocks, std::size_t count, int threads) {
+  std::size_t total = 0;
+  for (std::size_t b = 0; b < count; ++b) total += blocks[b].bytes;
+  const int nt = total < (std::size_t(1) << 22) ? 1 : (threads > 0 ? threads : omp_get_max_threads());
+  // piece t covers bytes [total·t/nt, total·(t+1)/nt) of the blocks laid end to end
+#pragma omp parallel for num_threads(nt) schedule(static, 1) if (nt > 1)
+  for (int t = 0; t < nt; ++t) {
+    std::size_t lo = total * std::size_t(t) / std::size_t(nt), hi = total * std::size_t(t + 1) / std::size_t(nt);
+    std::size_t at = 0;
+    for (std::size_t b = 0; b < count && lo < hi; ++b) {
+      const std::size_t end = at + blocks[b].bytes;
+      if (lo < end) {
+        const std::size_t from = lo - at, to = std::min(hi, end) - at;
+        std::memcpy(static_cast<std::byte*>(blocks[b].dst) + from, static_cast<const std::byte*>(blocks[b].src) + from,
+                    to - from);
+        lo = at + to;
+      }
+      at = end;
+    }
+  }
+}
+}  // namespace detail
 
 #if !defined(CONTACTGRID_HAVE_CUDA)
 bool cuda_available() { return false; }
