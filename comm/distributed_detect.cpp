@@ -17,6 +17,7 @@
 #include <type_traits>
 #include <utility>
 
+#include "contact_merge.hpp"
 #include "hdf5_io.hpp"
 #include "mpi_detail.hpp"
 
@@ -406,114 +407,6 @@ class Comm {
   const Session::Impl& m_s;
 };
 
-// One rank's contacts as gathered at rank 0: its own Contacts (rank 0) or receive buffers.
-template <class Real>
-struct ContactRun {
-  std::size_t n = 0;
-  const std::int64_t *id_a = nullptr, *id_b = nullptr;
-  const Real* distance = nullptr;
-  const Vec3<Real>* vec[7] = {};  // position_on_a, position_on_b, normal_on_b, then the four full fields
-};
-
-// The ten fields of a Contacts, in one order for gather and merge.
-template <class Real>
-std::vector<Vec3<Real>>* vec_field(Contacts<Real>& c, int f) {
-  std::vector<Vec3<Real>>* v[7] = {&c.position_on_a, &c.position_on_b, &c.normal_on_b, &c.local_point_a,
-                                   &c.local_point_b, &c.lateral_friction_dir1, &c.lateral_friction_dir2};
-  return v[f];
-}
-
-// k-way merge of the sorted runs by (id_a, id_b) straight into `out` (sized to the total; shrunk by
-// the duplicates): ties between runs in run (rank) order, a row equal to the previous output row
-// dropped and counted — the result of decomposition/merge_contact_runs, in parallel: the key range
-// is split at keys of the largest run (every run cut at the same keys by binary search, so equal
-// keys stay in one part and the parts concatenate in order); each part is merged by one thread
-// into its place. Runs must be sorted (checked, in parallel; Error naming the run otherwise).
-template <class Real>
-std::uint64_t merge_runs(const std::vector<ContactRun<Real>>& runs, Contacts<Real>& out, bool full, int threads) {
-  using Key = std::pair<std::int64_t, std::int64_t>;
-  const std::size_t p = runs.size();
-  auto key = [&](std::size_t r, std::size_t k) { return Key{runs[r].id_a[k], runs[r].id_b[k]}; };
-  for (std::size_t r = 0; r < p; ++r) {
-    const std::size_t bad = first_bad(runs[r].n > 0 ? runs[r].n - 1 : 0, threads,
-                                      [&](std::size_t k) { return key(r, k) > key(r, k + 1); });
-    if (bad + 1 < runs[r].n) {
-      throw Error("contact run " + std::to_string(r) + ": not sorted by (id_a, id_b) at row " +
-                  std::to_string(bad + 1));
-    }
-  }
-  const int nvec = full ? 7 : 3;
-  std::size_t total = 0, largest = 0;
-  for (std::size_t r = 0; r < p; ++r) {
-    total += runs[r].n;
-    if (runs[r].n > runs[largest].n) largest = r;
-  }
-  const Chunks c(total, threads);
-  const std::size_t parts = static_cast<std::size_t>(c.parts);
-  // cut[j * p + r]: first row of run r in part j (j = 0 … parts)
-  std::vector<std::size_t> cut((parts + 1) * p, 0);
-  for (std::size_t r = 0; r < p; ++r) cut[parts * p + r] = runs[r].n;
-  for (std::size_t j = 1; j < parts; ++j) {
-    const Key split = key(largest, runs[largest].n * j / parts);
-    for (std::size_t r = 0; r < p; ++r) {
-      std::size_t lo = 0, hi = runs[r].n;  // lower_bound(split)
-      while (lo < hi) {
-        const std::size_t mid = (lo + hi) / 2;
-        if (key(r, mid) < split) lo = mid + 1; else hi = mid;
-      }
-      cut[j * p + r] = lo;
-    }
-  }
-  std::vector<std::size_t> start(parts + 1, 0), written(parts, 0);
-  for (std::size_t j = 0; j <= parts; ++j)
-    for (std::size_t r = 0; r < p; ++r) start[j] += cut[j * p + r];
-  Vec3<Real>* dst[7] = {};
-  for (int f = 0; f < nvec; ++f) dst[f] = vec_field(out, f)->data();
-  std::int64_t* da = out.id_a.data();
-  std::int64_t* db = out.id_b.data();
-  Real* dd = out.distance.data();
-#pragma omp parallel for num_threads(threads) schedule(static, 1) if (parts > 1)
-  for (std::size_t j = 0; j < parts; ++j) {
-    using Head = std::tuple<std::int64_t, std::int64_t, std::size_t>;  // (id_a, id_b, run)
-    std::priority_queue<Head, std::vector<Head>, std::greater<Head>> heap;
-    std::vector<std::size_t> next(p), end(p);
-    for (std::size_t r = 0; r < p; ++r) {
-      next[r] = cut[j * p + r];
-      end[r] = cut[(j + 1) * p + r];
-      if (next[r] < end[r]) heap.emplace(runs[r].id_a[next[r]], runs[r].id_b[next[r]], r);
-    }
-    std::size_t w = start[j];
-    while (!heap.empty()) {
-      const auto [a, b, r] = heap.top();
-      heap.pop();
-      const std::size_t k = next[r]++;
-      if (!(w > start[j] && da[w - 1] == a && db[w - 1] == b)) {
-        const ContactRun<Real>& in = runs[r];
-        da[w] = a;
-        db[w] = b;
-        dd[w] = in.distance[k];
-        for (int f = 0; f < nvec; ++f) dst[f][w] = in.vec[f][k];
-        ++w;
-      }
-      if (next[r] < end[r]) heap.emplace(runs[r].id_a[next[r]], runs[r].id_b[next[r]], r);
-    }
-    written[j] = w - start[j];
-  }
-  // Duplicates (expected none) leave gaps at the ends of parts: close them, in order.
-  std::size_t w = 0;
-  for (std::size_t j = 0; j < parts; ++j) {
-    if (w != start[j]) {
-      std::memmove(da + w, da + start[j], written[j] * sizeof(*da));
-      std::memmove(db + w, db + start[j], written[j] * sizeof(*db));
-      std::memmove(dd + w, dd + start[j], written[j] * sizeof(*dd));
-      for (int f = 0; f < nvec; ++f) std::memmove(dst[f] + w, dst[f] + start[j], written[j] * sizeof(Vec3<Real>));
-    }
-    w += written[j];
-  }
-  if (w != total) out.resize(w, full);
-  return total - w;
-}
-
 // Runs the local part of a stage; afterwards every rank agrees on whether any rank failed.
 template <class F>
 void local_stage(const Session& session, const char* stage, F&& work) {
@@ -750,7 +643,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   const std::vector<std::uint64_t> counts = alone ? std::vector<std::uint64_t>{local.size()}
                                                   : comm.allgather<std::uint64_t>(local.size());
   const std::size_t p = counts.size();
-  std::vector<ContactRun<Real>> runs;
+  std::vector<ContactRunView<Real>> runs;
   // rank 0's received fields: ids (2), distance, and up to 7 vector fields per rank
   std::vector<Buffer<std::int64_t>> recv_a, recv_b;
   std::vector<Buffer<Real>> recv_d;
@@ -764,12 +657,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
       recv_b.resize(p);
       recv_d.resize(p);
       recv_v.resize(p);
-      ContactRun<Real>& own = runs[0];
-      own.n = local.size();
-      own.id_a = local.id_a.data();
-      own.id_b = local.id_b.data();
-      own.distance = local.distance.data();
-      for (int f = 0; f < nvec; ++f) own.vec[f] = vec_field(local, f)->data();
+      runs[0] = contact_run_view(local, full);  // rank 0's own run stays in place
       for (std::size_t r = 1; r < p; ++r) {
         const std::size_t n = counts[r];
         recv_a[r] = Buffer<std::int64_t>(n);
@@ -783,9 +671,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
         for (int f = 0; f < nvec; ++f) runs[r].vec[f] = recv_v[r][static_cast<std::size_t>(f)].data();
       }
     }
-    auto targets = [&](auto& buffers) {
-      using B = typename std::decay_t<decltype(buffers)>::value_type;
-      std::vector<std::decay_t<decltype(std::declval<B&>().data())>> t(root ? p : 0, nullptr);
+    auto targets = [&](auto& buffers) {  // where rank r's part of a field lands on rank 0 (r >= 1)
+      std::vector<decltype(buffers[0].data())> t(root ? p : 0, nullptr);
       for (std::size_t r = 1; root && r < p; ++r) t[r] = buffers[r].data();
       return t;
     };
@@ -795,7 +682,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     for (int f = 0; f < nvec; ++f) {
       std::vector<Vec3<Real>*> t(root ? p : 0, nullptr);
       for (std::size_t r = 1; root && r < p; ++r) t[r] = recv_v[r][static_cast<std::size_t>(f)].data();
-      comm.gather_to_root(vec_field(local, f)->data(), counts, t, options.max_message_bytes, k_gather_tag + 3 + f);
+      comm.gather_to_root(contact_vec_field(local, f)->data(), counts, t, options.max_message_bytes, k_gather_tag + 3 + f);
     }
     if (!root) local = Contacts<Real>{};
   }
@@ -811,7 +698,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
       std::uint64_t total = 0;
       for (std::uint64_t k : counts) total += k;
       result.contacts.resize(total, full);
-      result.duplicates_removed = merge_runs<Real>(runs, result.contacts, full, threads);
+      const int parts = total < (std::uint64_t(1) << 15) ? 1 : 4 * threads;  // a few per thread: balance
+      result.duplicates_removed = merge_contact_runs_into<Real>(runs, result.contacts, full, parts, threads);
       runs.clear();
       local = Contacts<Real>{};
     }

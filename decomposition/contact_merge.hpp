@@ -6,12 +6,15 @@
 // not a full sort. Ties between runs are taken in run (rank) order, so the result is deterministic.
 // Rows whose (id_a, id_b) equals the previous output row are dropped and counted: with ownership of
 // pairs (the owner of the smaller id reports) there are none; the count is the safety net's report.
+#include <algorithm>
 #include <cstdint>
+#include <cstring>
 #include <functional>
 #include <queue>
 #include <span>
 #include <string>
 #include <tuple>
+#include <utility>
 #include <vector>
 
 #include "engine.hpp"
@@ -106,6 +109,138 @@ MergedContacts<Real> merge_contact_runs(std::span<const Contacts<Real>> runs, bo
     if (next[r] < runs[r].size()) heap.emplace(runs[r].id_a[next[r]], runs[r].id_b[next[r]], r);
   }
   return result;
+}
+
+// ---- the same merge, in parallel, from views, into a presized result -----------------------------
+
+// One run's fields, read-only: a Contacts (contact_run_view) or receive buffers. vec[0 … 6]:
+// position_on_a, position_on_b, normal_on_b, local_point_a, local_point_b, lateral_friction_dir1,
+// lateral_friction_dir2 (the last four only with full fields).
+template <class Real>
+struct ContactRunView {
+  std::size_t n = 0;
+  const std::int64_t* id_a = nullptr;
+  const std::int64_t* id_b = nullptr;
+  const Real* distance = nullptr;
+  const Vec3<Real>* vec[7] = {};
+};
+
+// The vector fields of a Contacts in ContactRunView::vec order.
+template <class Real>
+std::vector<Vec3<Real>>* contact_vec_field(Contacts<Real>& c, int f) {
+  std::vector<Vec3<Real>>* v[7] = {&c.position_on_a, &c.position_on_b, &c.normal_on_b, &c.local_point_a,
+                                   &c.local_point_b, &c.lateral_friction_dir1, &c.lateral_friction_dir2};
+  return v[f];
+}
+
+template <class Real>
+ContactRunView<Real> contact_run_view(Contacts<Real>& c, bool full) {
+  ContactRunView<Real> v;
+  v.n = c.size();
+  v.id_a = c.id_a.data();
+  v.id_b = c.id_b.data();
+  v.distance = c.distance.data();
+  for (int f = 0; f < (full ? 7 : 3); ++f) v.vec[f] = contact_vec_field(c, f)->data();
+  return v;
+}
+
+// The rows of merge_contact_runs (same order, same duplicates dropped and counted; returned), written
+// straight into `out`, whose fields must be sized to the total of the runs (they are shrunk by the
+// duplicates). The key range is cut into `parts` at keys of the largest run, every run cut at the same
+// keys by binary search — so equal keys stay in one part and the parts concatenate in order — and the
+// parts are merged independently (by `threads` OpenMP threads where compiled with OpenMP). The result
+// does not depend on `parts` or `threads`. Runs must be sorted by (id_a, id_b): Error naming the run
+// and row otherwise (as merge_contact_runs).
+template <class Real>
+std::uint64_t merge_contact_runs_into(const std::vector<ContactRunView<Real>>& runs, Contacts<Real>& out, bool full,
+                                      int parts_wanted, int threads) {
+  using Key = std::pair<std::int64_t, std::int64_t>;
+  (void)threads;  // used by the OpenMP pragmas only
+  const std::size_t p = runs.size();
+  auto key = [&](std::size_t r, std::size_t k) { return Key{runs[r].id_a[k], runs[r].id_b[k]}; };
+  for (std::size_t r = 0; r < p; ++r) {
+    const std::size_t n = runs[r].n;
+    std::size_t bad = n;  // first row k >= 1 out of order
+#pragma omp parallel for num_threads(threads) reduction(min : bad) schedule(static) if (n > (std::size_t(1) << 15))
+    for (std::size_t k = 1; k < n; ++k) {
+      if (k < bad && key(r, k - 1) > key(r, k)) bad = k;
+    }
+    if (bad < n) {
+      throw Error("contact run " + std::to_string(r) + ": not sorted by (id_a, id_b) at row " + std::to_string(bad));
+    }
+  }
+  const int nvec = full ? 7 : 3;
+  std::size_t total = 0, largest = 0;
+  for (std::size_t r = 0; r < p; ++r) {
+    total += runs[r].n;
+    if (runs[r].n > runs[largest].n) largest = r;
+  }
+  if (out.size() != total || out.distance.size() != total || (full && out.local_point_a.size() != total))
+    throw Error("merge_contact_runs_into: the result is not sized to the runs");
+  const std::size_t parts = p == 0 ? 1 : static_cast<std::size_t>(std::max(1, parts_wanted));
+  // cut[j * p + r]: first row of run r in part j (j = 0 … parts)
+  std::vector<std::size_t> cut((parts + 1) * p, 0);
+  for (std::size_t r = 0; r < p; ++r) cut[parts * p + r] = runs[r].n;
+  for (std::size_t j = 1; j < parts; ++j) {
+    if (runs[largest].n == 0) break;
+    const Key split = key(largest, runs[largest].n * j / parts);
+    for (std::size_t r = 0; r < p; ++r) {
+      std::size_t lo = 0, hi = runs[r].n;  // lower_bound(split)
+      while (lo < hi) {
+        const std::size_t mid = (lo + hi) / 2;
+        if (key(r, mid) < split) lo = mid + 1; else hi = mid;
+      }
+      cut[j * p + r] = lo;
+    }
+  }
+  std::vector<std::size_t> start(parts + 1, 0), written(parts, 0);
+  for (std::size_t j = 0; j <= parts; ++j)
+    for (std::size_t r = 0; r < p; ++r) start[j] += cut[j * p + r];
+  Vec3<Real>* dst[7] = {};
+  for (int f = 0; f < nvec; ++f) dst[f] = contact_vec_field(out, f)->data();
+  std::int64_t* da = out.id_a.data();
+  std::int64_t* db = out.id_b.data();
+  Real* dd = out.distance.data();
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (parts > 1)
+  for (std::size_t j = 0; j < parts; ++j) {
+    using Head = std::tuple<std::int64_t, std::int64_t, std::size_t>;  // (id_a, id_b, run)
+    std::priority_queue<Head, std::vector<Head>, std::greater<Head>> heap;
+    std::vector<std::size_t> next(p), end(p);
+    for (std::size_t r = 0; r < p; ++r) {
+      next[r] = cut[j * p + r];
+      end[r] = cut[(j + 1) * p + r];
+      if (next[r] < end[r]) heap.emplace(runs[r].id_a[next[r]], runs[r].id_b[next[r]], r);
+    }
+    std::size_t w = start[j];
+    while (!heap.empty()) {
+      const auto [a, b, r] = heap.top();
+      heap.pop();
+      const std::size_t k = next[r]++;
+      if (!(w > start[j] && da[w - 1] == a && db[w - 1] == b)) {
+        const ContactRunView<Real>& in = runs[r];
+        da[w] = a;
+        db[w] = b;
+        dd[w] = in.distance[k];
+        for (int f = 0; f < nvec; ++f) dst[f][w] = in.vec[f][k];
+        ++w;
+      }
+      if (next[r] < end[r]) heap.emplace(runs[r].id_a[next[r]], runs[r].id_b[next[r]], r);
+    }
+    written[j] = w - start[j];
+  }
+  // Duplicates (expected none) leave gaps at the ends of parts: close them, in order.
+  std::size_t w = 0;
+  for (std::size_t j = 0; j < parts; ++j) {
+    if (w != start[j] && written[j] > 0) {
+      std::memmove(da + w, da + start[j], written[j] * sizeof(*da));
+      std::memmove(db + w, db + start[j], written[j] * sizeof(*db));
+      std::memmove(dd + w, dd + start[j], written[j] * sizeof(*dd));
+      for (int f = 0; f < nvec; ++f) std::memmove(dst[f] + w, dst[f] + start[j], written[j] * sizeof(Vec3<Real>));
+    }
+    w += written[j];
+  }
+  if (w != total) out.resize(w, full);
+  return total - w;
 }
 
 }  // namespace cg

@@ -1,6 +1,9 @@
 // Unit tests of decomposition/contact_merge.hpp: the k-way merge of the ranks' sorted contact runs.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <random>
+#include <string>
 #include <vector>
 
 #include "contact_merge.hpp"
@@ -79,6 +82,74 @@ TEST(ContactMerge, RejectsUnsortedOrRaggedRuns) {
   EXPECT_THROW(merge_contact_runs<double>(ragged, false), Error);
   std::vector<Contacts<double>> not_full = {run_of({{0, 1}}, false)};
   EXPECT_THROW(merge_contact_runs<double>(not_full, true), Error);
+}
+
+// The parallel form (views in, presized result) gives merge_contact_runs's rows and duplicate count
+// for any number of parts and threads, duplicates across runs and parts included.
+TEST(ContactMerge, IntoEqualsTheSequentialMergeForAnyParts) {
+  std::mt19937 rng(7);
+  for (bool full : {false, true}) {
+    for (int trial = 0; trial < 20; ++trial) {
+      const int p = 1 + trial % 5;
+      std::vector<Contacts<double>> runs;
+      for (int r = 0; r < p; ++r) {
+        std::vector<std::pair<int, int>> rows;
+        const int n = static_cast<int>(rng() % 200);
+        for (int k = 0; k < n; ++k) {
+          const int a = static_cast<int>(rng() % 40);
+          rows.emplace_back(a, a + 1 + static_cast<int>(rng() % 5));  // few keys: many duplicates
+        }
+        std::sort(rows.begin(), rows.end());
+        runs.push_back(run_of(rows, full));
+        for (std::size_t k = 0; k < runs.back().size(); ++k) runs.back().distance[k] += r;  // traces the run
+      }
+      const MergedContacts<double> want = merge_contact_runs<double>(runs, full);
+      std::vector<ContactRunView<double>> views;
+      std::size_t total = 0;
+      for (Contacts<double>& c : runs) {
+        views.push_back(contact_run_view(c, full));
+        total += c.size();
+      }
+      for (int parts : {1, 2, 3, 8, 64}) {
+        for (int threads : {1, 3}) {
+          Contacts<double> got;
+          got.resize(total, full);
+          const std::uint64_t dups = merge_contact_runs_into<double>(views, got, full, parts, threads);
+          EXPECT_EQ(dups, want.duplicates_removed) << parts;
+          ASSERT_EQ(got.size(), want.contacts.size()) << parts;
+          EXPECT_EQ(got.id_a, want.contacts.id_a);
+          EXPECT_EQ(got.id_b, want.contacts.id_b);
+          EXPECT_EQ(got.distance, want.contacts.distance);
+          for (std::size_t k = 0; k < got.size(); ++k) {
+            EXPECT_EQ(got.position_on_a[k], want.contacts.position_on_a[k]);
+            EXPECT_EQ(got.normal_on_b[k], want.contacts.normal_on_b[k]);
+            if (full) {
+              EXPECT_EQ(got.lateral_friction_dir2[k], want.contacts.lateral_friction_dir2[k]);
+            }
+          }
+          EXPECT_EQ(got.local_point_b.size(), full ? got.size() : 0u);
+        }
+      }
+    }
+  }
+}
+
+TEST(ContactMerge, IntoRejectsUnsortedRunsAndAWronglySizedResult) {
+  std::vector<Contacts<double>> runs = {run_of({{0, 1}}, false), run_of({{2, 3}, {0, 1}}, false)};
+  std::vector<ContactRunView<double>> views = {contact_run_view(runs[0], false), contact_run_view(runs[1], false)};
+  Contacts<double> out;
+  out.resize(3, false);
+  try {
+    merge_contact_runs_into<double>(views, out, false, 2, 1);
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("contact run 1: not sorted by (id_a, id_b) at row 1"), std::string::npos)
+        << e.what();
+  }
+  runs[1] = run_of({{0, 1}, {2, 3}}, false);
+  views[1] = contact_run_view(runs[1], false);
+  out.resize(2, false);
+  EXPECT_THROW(merge_contact_runs_into<double>(views, out, false, 2, 1), Error);
 }
 
 }  // namespace
