@@ -203,28 +203,45 @@ std::uint64_t merge_contact_runs_into(const std::vector<ContactRunView<Real>>& r
   Real* dd = out.distance.data();
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (parts > 1)
   for (std::size_t j = 0; j < parts; ++j) {
-    using Head = std::tuple<std::int64_t, std::int64_t, std::size_t>;  // (id_a, id_b, run)
-    std::priority_queue<Head, std::vector<Head>, std::greater<Head>> heap;
     std::vector<std::size_t> next(p), end(p);
     for (std::size_t r = 0; r < p; ++r) {
       next[r] = cut[j * p + r];
       end[r] = cut[(j + 1) * p + r];
-      if (next[r] < end[r]) heap.emplace(runs[r].id_a[next[r]], runs[r].id_b[next[r]], r);
     }
     std::size_t w = start[j];
-    while (!heap.empty()) {
-      const auto [a, b, r] = heap.top();
-      heap.pop();
+    auto take = [&](std::size_t r) {  // the head of run r to the output (unless a duplicate)
       const std::size_t k = next[r]++;
-      if (!(w > start[j] && da[w - 1] == a && db[w - 1] == b)) {
-        const ContactRunView<Real>& in = runs[r];
-        da[w] = a;
-        db[w] = b;
-        dd[w] = in.distance[k];
-        for (int f = 0; f < nvec; ++f) dst[f][w] = in.vec[f][k];
-        ++w;
+      const ContactRunView<Real>& in = runs[r];
+      const std::int64_t a = in.id_a[k], b = in.id_b[k];
+      if (w > start[j] && da[w - 1] == a && db[w - 1] == b) return;
+      da[w] = a;
+      db[w] = b;
+      dd[w] = in.distance[k];
+      for (int f = 0; f < nvec; ++f) dst[f][w] = in.vec[f][k];
+      ++w;
+    };
+    if (p <= 8) {
+      // few runs: the smallest head by a linear scan (ties: the lowest run, as the heap's (key, run))
+      for (;;) {
+        std::size_t best = p;
+        for (std::size_t r = 0; r < p; ++r) {
+          if (next[r] < end[r] && (best == p || key(r, next[r]) < key(best, next[best]))) best = r;
+        }
+        if (best == p) break;
+        take(best);
       }
-      if (next[r] < end[r]) heap.emplace(runs[r].id_a[next[r]], runs[r].id_b[next[r]], r);
+    } else {
+      using Head = std::tuple<std::int64_t, std::int64_t, std::size_t>;  // (id_a, id_b, run)
+      std::priority_queue<Head, std::vector<Head>, std::greater<Head>> heap;
+      for (std::size_t r = 0; r < p; ++r) {
+        if (next[r] < end[r]) heap.emplace(runs[r].id_a[next[r]], runs[r].id_b[next[r]], r);
+      }
+      while (!heap.empty()) {
+        const std::size_t r = std::get<2>(heap.top());
+        heap.pop();
+        take(r);
+        if (next[r] < end[r]) heap.emplace(runs[r].id_a[next[r]], runs[r].id_b[next[r]], r);
+      }
     }
     written[j] = w - start[j];
   }
