@@ -489,6 +489,7 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
     mark(7);
     // The result vectors are sized (zero-filled, first touch of their pages) while the transfer runs.
     const auto t0 = clock_type::now();
+    reserve_contacts(out, np, full);
     out.resize(np, full);
     CG_CUDA_CHECK(cudaStreamSynchronize(st));
     const auto t1 = clock_type::now();
