@@ -46,7 +46,8 @@
 namespace cg {
 
 struct DistributedOptions {
-  EngineOptions engine;           // backend, fields, cell_size (0: smallest valid), threads, device
+  EngineOptions engine;           // backend, fields, cell_size (0: smallest valid), threads (also the
+                                  // pipeline's host loops; 0: all), device
   int axis = -1;                  // slab axis: 0 x, 1 y, 2 z, -1 largest extent (parse_axis)
   Balance balance = Balance::count;
   std::uint64_t max_sample = 1u << 20;          // quantile sample size (all bodies when N <= it)

@@ -6,6 +6,8 @@
 // not a full sort. Ties between runs are taken in run (rank) order, so the result is deterministic.
 // Rows whose (id_a, id_b) equals the previous output row are dropped and counted: with ownership of
 // pairs (the owner of the smaller id reports) there are none; the count is the safety net's report.
+// merge_contact_runs_into (below) computes the same rows in parallel, from views of the runs into a
+// presized result: the MPI run uses it; merge_contact_runs is its sequential reference.
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
