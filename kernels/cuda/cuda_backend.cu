@@ -19,6 +19,9 @@
 //             sorted by b (sort_runs_kernel): the (a, b) order
 //   narrow    contact data of the requested fields, world frame
 //   download  contacts → pinned staging → Contacts<Real> (unless they stay on the device)
+// Opt-in type-pass path (CONTACTGRID_CUDA_TYPE_PASSES=1, for memory-bound scenes): entries, sort and
+// pairs run as Le Grand's 8 passes by cell type, each over <= n entries keyed by super-cell; the
+// stage times are those of the passes summed.
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
 
@@ -70,16 +73,15 @@ namespace {
 constexpr const char* kStageNames[] = {"upload", "pack", "entries", "sort", "pairs", "order", "narrow", "download"};
 constexpr int kStages = 8;
 constexpr int kPassEvents = 1 + 3 * 8;
-// Le Grand's 8 passes by cell type (one sort of <= n entries per type) from this many bodies up; the
-// single sort of all entries below (8x the launches cost more than the radix pass they can save).
-// CONTACTGRID_CUDA_TYPE_PASSES=0 / 1 forces the single sort / the type passes (tests, benchmarks).
-constexpr std::uint64_t kTypePassMinBodies = std::uint64_t(1) << 22;
-bool use_type_passes(std::uint64_t n) {
-  if (const char* v = std::getenv("CONTACTGRID_CUDA_TYPE_PASSES")) {
-    if (v[0] == '0') return false;
-    if (v[0] == '1') return true;
-  }
-  return n >= kTypePassMinBodies;
+// Le Grand's 8 passes by cell type (one sort of <= n entries per type): opt-in, for scenes bound by
+// device memory. Measured on an H200 (kernels/cuda/BENCH.md, h-cudaperf2): 65 instead of 125 B/sphere
+// (fp32, excl. contacts) but slower at every size measured (2^24 fp32: 7.55 vs 6.86 ms; 2^20: 0.99 vs
+// 0.59 ms: 8 compaction fills and 8 sorts cost more than the radix pass they save), so the single sort
+// of all entries is the default. CONTACTGRID_CUDA_TYPE_PASSES=1 selects the type passes, =0 (or
+// unset) the single sort.
+bool use_type_passes(std::uint64_t) {
+  const char* v = std::getenv("CONTACTGRID_CUDA_TYPE_PASSES");
+  return v && v[0] == '1';
 }
 constexpr int kBoundsBlocks = 512;  // partials of device_bounds (<= cuda::kBoundsFold)
 std::uint32_t blocks_for(std::uint64_t n) { return static_cast<std::uint32_t>((n + kBlock - 1) / kBlock); }
