@@ -507,21 +507,18 @@ __global__ void __launch_bounds__(kBlock) narrow_kernel(const std::uint32_t* __r
   if (k >= n_pairs) return;
   const std::uint32_t a = pair_a[k], b = pair_b[k];
   const Sphere<Real> sa = spheres[a], sb = spheres[b];
-  const ContactGeometry<Real> c = sphere_sphere_contact(sa, sb);
-  auto world = [&](Vec3<Real> v) {
-    return Vec3<Real>{static_cast<Real>(origin.x + double(v.x)), static_cast<Real>(origin.y + double(v.y)),
-                      static_cast<Real>(origin.z + double(v.z))};
-  };
+  const ContactRow<Real> row = sphere_contact_row(sa, sb, origin, full);  // core/contact.hpp
   out.id_a[k] = a;
   out.id_b[k] = b;
-  out.position_on_a[k] = world(c.position_on_a);
-  out.position_on_b[k] = world(c.position_on_b);
-  out.normal_on_b[k] = c.normal_on_b;
-  out.distance[k] = c.distance;
+  out.position_on_a[k] = row.position_on_a;
+  out.position_on_b[k] = row.position_on_b;
+  out.normal_on_b[k] = row.normal_on_b;
+  out.distance[k] = row.distance;
   if (full) {
-    out.local_point_a[k] = c.position_on_a - sa.centre();
-    out.local_point_b[k] = c.position_on_b - sb.centre();
-    plane_space(c.normal_on_b, out.dir1[k], out.dir2[k]);
+    out.local_point_a[k] = row.local_point_a;
+    out.local_point_b[k] = row.local_point_b;
+    out.dir1[k] = row.lateral_friction_dir1;
+    out.dir2[k] = row.lateral_friction_dir2;
   }
 }
 
