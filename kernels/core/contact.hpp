@@ -70,4 +70,37 @@ CG_HD void plane_space(Vec3<Real> n, Vec3<Real>& dir1, Vec3<Real>& dir2) {
   }
 }
 
+// A local-frame point back in the world frame: origin (double) + local, rounded once to Real.
+template <class Real>
+CG_HD Vec3<Real> to_world(const Vec3<double>& origin, const Vec3<Real>& local) {
+  return {static_cast<Real>(origin.x + double(local.x)), static_cast<Real>(origin.y + double(local.y)),
+          static_cast<Real>(origin.z + double(local.z))};
+}
+
+// One row of the contact output (CONTRACT §2), world frame. The `full` members are computed only when
+// asked for (Fields::full): local points (R = identity for spheres) and Bullet's friction directions.
+template <class Real>
+struct ContactRow {
+  Vec3<Real> position_on_a, position_on_b, normal_on_b;
+  Real distance;
+  Vec3<Real> local_point_a, local_point_b, lateral_friction_dir1, lateral_friction_dir2;
+};
+
+template <class Real>
+CG_HD ContactRow<Real> sphere_contact_row(const Sphere<Real>& a, const Sphere<Real>& b, const Vec3<double>& origin,
+                                          bool full) {
+  const ContactGeometry<Real> c = sphere_sphere_contact(a, b);
+  ContactRow<Real> row{};
+  row.position_on_a = to_world(origin, c.position_on_a);
+  row.position_on_b = to_world(origin, c.position_on_b);
+  row.normal_on_b = c.normal_on_b;
+  row.distance = c.distance;
+  if (full) {
+    row.local_point_a = c.position_on_a - a.centre();
+    row.local_point_b = c.position_on_b - b.centre();
+    plane_space(c.normal_on_b, row.lateral_friction_dir1, row.lateral_friction_dir2);
+  }
+  return row;
+}
+
 }  // namespace cg

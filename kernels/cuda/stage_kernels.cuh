@@ -26,6 +26,7 @@ struct Counters {
   unsigned long long pairs;    // contacting pairs (count_pairs)
   unsigned long long tests;    // sphere tests made (count_pairs)
   unsigned long long bad;      // n - i of the first invalid body i (atomicMax), 0: none
+  unsigned long long type_entries[8];  // entries per cell type (reorder, type-pass path only)
 };
 
 // Per-block partial bounds (device_bounds).
@@ -160,32 +161,93 @@ __global__ void __launch_bounds__(kBlock) pack_kernel(const double* __restrict__
   home_index[i] = i;
 }
 
+// True when a body with control byte `ctrl` overlaps a cell of type `type` (at most one: along each
+// axis the cell is lo when its parity is the type's, else lo + 1, which needs the spill).
+__host__ __device__ __forceinline__ bool has_type(std::uint32_t ctrl, std::uint32_t type) {
+  return ((type ^ ctrl) & ~(ctrl >> 3) & 7u) == 0u;
+}
+
 // reorder: cell-ordered copy of the spheres (body j = input body perm[j]), control bytes, and per
 // block the sum of the entry counts (block_entries[blockIdx.x]; total added to c->entries).
-template <class Real>
+// Type-pass path (base != nullptr): also the super-cell index of the body's lowest even cell
+// (cell_key of lo & ~1, type bits 0) and per block the number of bodies having a cell of each
+// type (type_blocks[t * gridDim.x + blockIdx.x]; totals added to c->type_entries[t]).
+template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock) reorder_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n,
                                                          GridParams<Real> g, const std::uint32_t* __restrict__ sorted_index,
                                                          Sphere<Real>* __restrict__ cell_spheres,
                                                          std::uint8_t* __restrict__ ctrl, std::uint32_t* __restrict__ perm,
                                                          std::uint32_t* __restrict__ block_entries,
-                                                         Counters* __restrict__ c) {
+                                                         Counters* __restrict__ c, Key* __restrict__ base,
+                                                         std::uint32_t* __restrict__ type_blocks) {
   using Reduce = cub::BlockReduce<std::uint32_t, kBlock>;
   __shared__ typename Reduce::TempStorage tmp;
+  __shared__ std::uint32_t s_types[8];
   const std::uint32_t j = blockIdx.x * kBlock + threadIdx.x;
-  std::uint32_t count = 0;
+  if (base && threadIdx.x < 8) s_types[threadIdx.x] = 0;
+  std::uint32_t count = 0, cb = 0;
+  bool live = false;
   if (j < n) {
     const std::uint32_t i = sorted_index[j];
     const Sphere<Real> s = spheres[i];
     cell_spheres[j] = s;
     perm[j] = i;
     const BodyCells bc = body_cells(s, g);
-    ctrl[j] = control_bits(bc);
+    cb = control_bits(bc);
+    ctrl[j] = static_cast<std::uint8_t>(cb);
     count = entry_count(bc);
+    live = true;
+    if (base) base[j] = cell_key<Key>(bc.lo[0] & ~1u, bc.lo[1] & ~1u, bc.lo[2] & ~1u, g);
   }
   const std::uint32_t total = Reduce(tmp).Sum(count);
+  if (base) {
+    __syncthreads();  // s_types zeroed
+    if (live)
+      for (std::uint32_t t = 0; t < 8; ++t)
+        if (has_type(cb, t)) atomicAdd(&s_types[t], 1u);
+    __syncthreads();
+    if (threadIdx.x < 8) {
+      type_blocks[threadIdx.x * gridDim.x + blockIdx.x] = s_types[threadIdx.x];
+      atomicAdd(&c->type_entries[threadIdx.x], static_cast<unsigned long long>(s_types[threadIdx.x]));
+    }
+  }
   if (threadIdx.x == 0) {
     block_entries[blockIdx.x] = total;
     atomicAdd(&c->entries, static_cast<unsigned long long>(total));
+  }
+}
+
+// entries of one cell type (type-pass path): (super-cell index, body) of the cell-ordered bodies that
+// overlap a cell of type `type`, body-ascending, at block_offset[blockIdx.x] - start + the body's rank
+// among its block's such bodies (same block layout as reorder_kernel). The key is the lin part of
+// cell_key (type bits dropped): base + one super-cell step along each axis where lo is odd and the
+// type's parity even (the cell lo + 1 then starts the next super-cell).
+template <class Key>
+__global__ void __launch_bounds__(kBlock) fill_type_entries_kernel(const std::uint8_t* __restrict__ ctrl,
+                                                                   const Key* __restrict__ base, std::uint32_t n,
+                                                                   std::uint32_t type, Key step_y, Key step_z,
+                                                                   const std::uint32_t* __restrict__ block_offset,
+                                                                   std::uint32_t start, Key* __restrict__ keys,
+                                                                   std::uint32_t* __restrict__ body) {
+  using Scan = cub::BlockScan<std::uint32_t, kBlock>;
+  __shared__ typename Scan::TempStorage tmp;
+  const std::uint32_t j = blockIdx.x * kBlock + threadIdx.x;
+  std::uint32_t has = 0;
+  Key key{};
+  if (j < n) {
+    const std::uint32_t cb = ctrl[j];
+    if (has_type(cb, type)) {
+      has = 1;
+      const std::uint32_t d = cb & ~type & 7u;
+      key = base[j] + Key(d & 1u) + ((d & 2u) ? step_y : Key(0)) + ((d & 4u) ? step_z : Key(0));
+    }
+  }
+  std::uint32_t rank;
+  Scan(tmp).ExclusiveSum(has, rank);
+  if (has) {
+    const std::uint32_t w = block_offset[blockIdx.x] - start + rank;
+    keys[w] = key;
+    body[w] = j;
   }
 }
 
@@ -281,6 +343,7 @@ __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restri
                                                              const Sphere<Real>* __restrict__ spheres,
                                                              const std::uint32_t* __restrict__ perm,
                                                              const std::uint8_t* __restrict__ report, int half_bits,
+                                                             std::uint32_t pass_type,
                                                              std::uint32_t* __restrict__ mask,
                                                              std::uint32_t* __restrict__ block_pairs,
                                                              Counters* __restrict__ c,
@@ -309,7 +372,7 @@ __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restri
   if (valid) {
     k = keys[e];
     x.a = body[e];
-    x.type = key_type(k, half_bits);
+    x.type = key_type(k, half_bits) | pass_type;  // type-pass path: keys hold no type bits
     x.ca = ctrl[x.a];
     x.sa = spheres[x.a];
     x.pa = report ? perm[x.a] : 0u;
@@ -444,21 +507,18 @@ __global__ void __launch_bounds__(kBlock) narrow_kernel(const std::uint32_t* __r
   if (k >= n_pairs) return;
   const std::uint32_t a = pair_a[k], b = pair_b[k];
   const Sphere<Real> sa = spheres[a], sb = spheres[b];
-  const ContactGeometry<Real> c = sphere_sphere_contact(sa, sb);
-  auto world = [&](Vec3<Real> v) {
-    return Vec3<Real>{static_cast<Real>(origin.x + double(v.x)), static_cast<Real>(origin.y + double(v.y)),
-                      static_cast<Real>(origin.z + double(v.z))};
-  };
+  const ContactRow<Real> row = sphere_contact_row(sa, sb, origin, full);  // core/contact.hpp
   out.id_a[k] = a;
   out.id_b[k] = b;
-  out.position_on_a[k] = world(c.position_on_a);
-  out.position_on_b[k] = world(c.position_on_b);
-  out.normal_on_b[k] = c.normal_on_b;
-  out.distance[k] = c.distance;
+  out.position_on_a[k] = row.position_on_a;
+  out.position_on_b[k] = row.position_on_b;
+  out.normal_on_b[k] = row.normal_on_b;
+  out.distance[k] = row.distance;
   if (full) {
-    out.local_point_a[k] = c.position_on_a - sa.centre();
-    out.local_point_b[k] = c.position_on_b - sb.centre();
-    plane_space(c.normal_on_b, out.dir1[k], out.dir2[k]);
+    out.local_point_a[k] = row.local_point_a;
+    out.local_point_b[k] = row.local_point_b;
+    out.dir1[k] = row.lateral_friction_dir1;
+    out.dir2[k] = row.lateral_friction_dir2;
   }
 }
 

@@ -168,25 +168,22 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
   const bool full = job.fields == Fields::full;
   out.resize(n_pairs, full);
   const std::uint64_t id_mask = (std::uint64_t(1) << id_bits) - 1;
-  auto world = [&](Vec3<Real> v) {
-    return Vec3<Real>{static_cast<Real>(origin.x + double(v.x)), static_cast<Real>(origin.y + double(v.y)),
-                      static_cast<Real>(origin.z + double(v.z))};
-  };
 #pragma omp parallel for num_threads(nt) schedule(static) if (n_pairs > k_parallel_min)
   for (std::size_t k = 0; k < n_pairs; ++k) {
     const std::uint32_t a = static_cast<std::uint32_t>(pairs[k] >> id_bits);
     const std::uint32_t b = static_cast<std::uint32_t>(pairs[k] & id_mask);
-    const ContactGeometry<Real> c = sphere_sphere_contact(spheres[a], spheres[b]);
+    const ContactRow<Real> row = sphere_contact_row(spheres[a], spheres[b], origin, full);
     out.id_a[k] = a;
     out.id_b[k] = b;
-    out.position_on_a[k] = world(c.position_on_a);
-    out.position_on_b[k] = world(c.position_on_b);
-    out.normal_on_b[k] = c.normal_on_b;
-    out.distance[k] = c.distance;
+    out.position_on_a[k] = row.position_on_a;
+    out.position_on_b[k] = row.position_on_b;
+    out.normal_on_b[k] = row.normal_on_b;
+    out.distance[k] = row.distance;
     if (full) {
-      out.local_point_a[k] = c.position_on_a - spheres[a].centre();
-      out.local_point_b[k] = c.position_on_b - spheres[b].centre();
-      plane_space(c.normal_on_b, out.lateral_friction_dir1[k], out.lateral_friction_dir2[k]);
+      out.local_point_a[k] = row.local_point_a;
+      out.local_point_b[k] = row.local_point_b;
+      out.lateral_friction_dir1[k] = row.lateral_friction_dir1;
+      out.lateral_friction_dir2[k] = row.lateral_friction_dir2;
     }
   }
   timer.lap("narrow");
