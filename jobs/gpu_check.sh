@@ -45,12 +45,12 @@ if [ "$WHAT" != single ] && [ "$NGPU" -ge 2 ]; then
   {
     for e in 24 25 26; do "$CG" generate "$W/m$e.h5" -n $((1 << e)) --seed $e -q; done
     "$CG" detect "$W/m24.h5" -o "$W/m24.np1.h5" --backend cuda --precision fp64 -q
-    mpirun -np 2 "$CG" detect "$W/m24.h5" -o "$W/m24.np2.h5" --backend cuda --precision fp64 -q
+    mpirun --bind-to none -np 2 "$CG" detect "$W/m24.h5" -o "$W/m24.np2.h5" --backend cuda --precision fp64 -q
     echo "compare np1/np2 fp64 cuda:"; "$CG" compare "$W/m24.np1.h5" "$W/m24.np2.h5"
     for e in 24 25 26; do
       for np in 1 2; do
         echo "=== N=2^$e np=$np (cuda, fp32)"
-        mpirun -np $np "$CG" detect "$W/m$e.h5" -o "$W/out.h5" --backend cuda --precision fp32
+        mpirun --bind-to none -np $np "$CG" detect "$W/m$e.h5" -o "$W/out.h5" --backend cuda --precision fp32
       done
     done
   } >"$OUT/mpi.log" 2>&1
