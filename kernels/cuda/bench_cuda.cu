@@ -27,6 +27,9 @@
 
 namespace {
 
+// Cell edge of every run (--cell-size of the CLI); 0: the engine's default (largest diameter).
+double g_cell_size = 0.0;
+
 using cg::cuda::DeviceBuffer;
 
 constexpr std::size_t kFlushBytes = std::size_t(256) << 20;
@@ -120,7 +123,7 @@ Row bench(int log2n, std::uint64_t n, const double* d_pos, const double* d_rad, 
   row.upload_ms = upload_ms;
   const cg::DeviceBodiesView bodies{d_pos, d_rad, nullptr, n};
   {
-    cg::Engine<Real> engine({.backend = cg::Backend::cuda});
+    cg::Engine<Real> engine({.backend = cg::Backend::cuda, .cell_size = g_cell_size});
     for (int w = 0; w < 3; ++w) engine.detect_device_resident(bodies);
     std::map<std::string, std::vector<double>> stages;
     std::vector<double> total, gpu_sum;
@@ -166,14 +169,16 @@ Row bench(int log2n, std::uint64_t n, const double* d_pos, const double* d_rad, 
 }  // namespace
 
 int main(int argc, char** argv) try {
+  // usage: contactgrid_cuda_bench [lo 16] [hi 26] [step 2] [runs 20] [cell size, 0 = largest diameter]
+  g_cell_size = argc > 5 ? std::atof(argv[5]) : 0.0;
   const int lo = argc > 1 ? std::atoi(argv[1]) : 16;
   const int hi = argc > 2 ? std::atoi(argv[2]) : 26;
   const int step = argc > 3 ? std::atoi(argv[3]) : 2;
   const int runs = argc > 4 ? std::atoi(argv[4]) : 20;
   cudaDeviceProp prop{};
   CG_CUDA_CHECK(cudaGetDeviceProperties(&prop, 0));
-  std::printf("# contactgrid_cuda_bench on %s (%d SMs, %.1f GiB), median of %d warm runs, L2 flushed\n", prop.name,
-              prop.multiProcessorCount, prop.totalGlobalMem / double(1 << 30), runs);
+  std::printf("# contactgrid_cuda_bench on %s (%d SMs, %.1f GiB), median of %d warm runs, L2 flushed, cell size %g\n",
+              prop.name, prop.multiProcessorCount, prop.totalGlobalMem / double(1 << 30), runs, g_cell_size);
   Flusher flush;
   std::vector<Row> rows;
   for (int p = lo; p <= hi; p += step) {
