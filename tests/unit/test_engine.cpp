@@ -238,6 +238,24 @@ TYPED_TEST(EngineTest, ReportMaskAndIds) {
   EXPECT_EQ(expect, c.size());
 }
 
+// The cell edge is a speed knob only: the contacts (every bit) do not depend on it, because the broad
+// phase is conservative and the narrow phase works in the frame's coordinates.
+TYPED_TEST(EngineTest, CellSizeChangesSpeedNotContacts) {
+  auto s = random_spheres(8000, 0.5, 1.0, 111);
+  const auto ref = this->run(s, Fields::full);
+  for (double cell : {2.5, 3.0, 5.0, 9.0}) {
+    const auto c = this->run(s, Fields::full, cell);
+    ASSERT_EQ(c.size(), ref.size()) << "cell " << cell;
+    for (std::size_t k = 0; k < c.size(); ++k) {
+      ASSERT_EQ(c.id_a[k], ref.id_a[k]);
+      ASSERT_EQ(c.id_b[k], ref.id_b[k]);
+      ASSERT_EQ(c.distance[k], ref.distance[k]);
+      ASSERT_TRUE(c.position_on_a[k] == ref.position_on_a[k] && c.normal_on_b[k] == ref.normal_on_b[k] &&
+                  c.lateral_friction_dir2[k] == ref.lateral_friction_dir2[k]);
+    }
+  }
+}
+
 TYPED_TEST(EngineTest, BadBodiesAreNamed) {
   Spheres s;
   s.add(0, 0, 0, 1);
