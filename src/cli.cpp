@@ -43,7 +43,11 @@ int run_cli(int argc, char** argv, Session& session) {
       ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1) << 28))
       ->capture_default_str();
   g->add_option("--seed", gen.seed, "Random seed")->capture_default_str();
-  g->add_option("--rlow", gen.radius_low, "Smallest radius Rlow (length units)")->capture_default_str();
+  double gen_ratio = 10;
+  auto* rlow_opt = g->add_option("--rlow", gen.radius_low, "Smallest radius Rlow (length units)")->capture_default_str();
+  g->add_option("--ratio", gen_ratio, "polydisperse: Rhigh / Rlow when --rlow is not given (up to 1000)")
+      ->check(CLI::Range(1.0, 1000.0))
+      ->capture_default_str();
   g->add_option("--rhigh", gen.radius_high, "Largest radius Rhigh (length units)")->capture_default_str();
   g->add_option("--contacts-per-body", gen.contacts_per_body,
                 "Target mean contacts per sphere; sets the box edge (course: 0.4)")
@@ -142,6 +146,7 @@ int run_cli(int argc, char** argv, Session& session) {
   if (g->parsed()) {
     if (session.rank() != 0) return 0;  // one writer
     if (!offset.empty()) gen.offset = {offset[0], offset[1], offset[2]};
+    if (gen.kind == "polydisperse" && rlow_opt->count() == 0) gen.radius_low = gen.radius_high / gen_ratio;
     return run_generate(gen_out, gen, gen_quiet);
   }
   if (d->parsed()) return run_detect(det, session);

@@ -2,6 +2,7 @@
 // Exit codes (README): 0 ok, 1 validation FAIL, 2 usage, 3 bad input, 4 CUDA, 5 MPI, 6 I/O.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -96,6 +97,16 @@ TEST_F(Cli, GenerateDetectRoundTrip) {
   EXPECT_EQ(same.code, 0) << same.output;
   EXPECT_NE(same.output.find("IDENTICAL"), std::string::npos) << same.output;
   EXPECT_EQ(run("compare " + path("c.h5") + " " + path("c32.h5")).code, 1);
+}
+
+TEST_F(Cli, PolydisperseUsesTheRatio) {
+  ASSERT_EQ(run("generate " + path("p.h5") + " --kind polydisperse -n 5000 --ratio 100 -q").code, 0);
+  const Scene s = read_scene(path("p.h5"));
+  const auto [lo, hi] = std::minmax_element(s.sphere_radius.begin(), s.sphere_radius.end());
+  EXPECT_GE(*lo, 0.01);
+  EXPECT_LE(*hi, 1.0);
+  EXPECT_GT(*hi / *lo, 50) << "log-uniform over a ratio of 100";
+  EXPECT_EQ(run("generate " + path("q.h5") + " --kind polydisperse -n 10 --ratio 5000").code, 2);
 }
 
 TEST_F(Cli, ValidatePassesAndFails) {
