@@ -27,8 +27,8 @@ namespace cg {
 
 namespace {
 // The engine's stage names (both backends), in pipeline order ("upload": CUDA only).
-const std::vector<std::string> k_engine_stages{"plan", "upload", "pack", "entries", "sort", "pairs", "order",
-                                               "narrow", "download"};
+const std::vector<std::string> k_engine_stages{"plan",  "upload", "pack",   "entries", "sort",
+                                               "pairs", "order",  "narrow", "download"};
 }  // namespace
 
 void validate(const DistributedOptions& options) {
@@ -50,7 +50,6 @@ void validate(const DistributedOptions& options) {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
 
 double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
@@ -108,13 +107,16 @@ class Buffer {
 };
 
 // Host threads of the comm loops: the engine's --threads (0: all).
-int host_threads(const DistributedOptions& o) { return o.engine.threads > 0 ? o.engine.threads : omp_get_max_threads(); }
+int host_threads(const DistributedOptions& o) {
+  return o.engine.threads > 0 ? o.engine.threads : omp_get_max_threads();
+}
 
 // Static split of [0, n) into `parts` contiguous chunks (deterministic, whatever the team size).
 struct Chunks {
   std::size_t n;
   int parts;
-  Chunks(std::size_t n_, int threads) : n(n_), parts(n_ < (std::size_t(1) << 14) ? 1 : std::max(1, threads)) {}
+  Chunks(std::size_t n_, int threads)
+      : n(n_), parts(n_ < (std::size_t(1) << 14) ? 1 : std::max(1, threads)) {}
   std::size_t begin(int t) const { return static_cast<std::size_t>((std::uint64_t)n * t / parts); }
   std::size_t end(int t) const { return begin(t + 1); }
 };
@@ -150,8 +152,8 @@ static_assert(std::is_trivially_copyable_v<BodyRecord>);
 // body i, `make(i)` is its record. Within a destination, bodies keep ascending i (the order of the
 // sequential count → scan → fill of decomposition/build_plan). counts[r]: the records for rank r.
 template <class Dest, class Make>
-Buffer<BodyRecord> route(std::size_t n, int ranks, int threads, std::vector<std::uint64_t>& counts, Dest&& dest,
-                         Make&& make) {
+Buffer<BodyRecord> route(std::size_t n, int ranks, int threads, std::vector<std::uint64_t>& counts,
+                         Dest&& dest, Make&& make) {
   const std::size_t p = static_cast<std::size_t>(ranks);
   const Chunks c(n, threads);
   const std::size_t parts = static_cast<std::size_t>(c.parts);
@@ -175,7 +177,8 @@ Buffer<BodyRecord> route(std::size_t n, int ranks, int threads, std::vector<std:
 #pragma omp parallel for num_threads(threads) schedule(static, 1) if (c.parts > 1)
   for (int t = 0; t < c.parts; ++t) {
     std::uint64_t* next = at.data() + static_cast<std::size_t>(t) * p;
-    for (std::size_t i = c.begin(t), e = c.end(t); i < e; ++i) dest(i, [&](int r) { out[next[r]++] = make(i); });
+    for (std::size_t i = c.begin(t), e = c.end(t); i < e; ++i)
+      dest(i, [&](int r) { out[next[r]++] = make(i); });
   }
   return out;
 }
@@ -219,13 +222,15 @@ EngineInput merge_by_id(const Buffer<BodyRecord>& owned, const Buffer<BodyRecord
     }
   }
   const std::size_t no = owned.size(), ng = g.size(), n = no + ng;
-  EngineInput in{Buffer<Vec3<double>>(n), Buffer<double>(n), Buffer<std::int64_t>(n), Buffer<std::uint8_t>(n)};
+  EngineInput in{Buffer<Vec3<double>>(n), Buffer<double>(n), Buffer<std::int64_t>(n),
+                 Buffer<std::uint8_t>(n)};
   auto ghost_split = [&](std::size_t a) -> std::size_t {  // ghosts before owned[a]
     if (a == 0) return 0;
     if (a == no) return ng;
     const std::int64_t id = owned[a].id;
     return static_cast<std::size_t>(
-        std::lower_bound(g.data(), g.data() + ng, id, [](const BodyRecord& b, std::int64_t v) { return b.id < v; }) -
+        std::lower_bound(g.data(), g.data() + ng, id,
+                         [](const BodyRecord& b, std::int64_t v) { return b.id < v; }) -
         g.data());
   };
   const Chunks c(std::max(no, ng), threads);
@@ -254,7 +259,8 @@ EngineInput merge_by_id(const Buffer<BodyRecord>& owned, const Buffer<BodyRecord
     while (b < b_end) put(g[b++], 0);
   }
   const std::int64_t* id = in.id.data();
-  const std::size_t k = first_bad(n > 0 ? n - 1 : 0, threads, [&](std::size_t i) { return !(id[i + 1] > id[i]); });
+  const std::size_t k =
+      first_bad(n > 0 ? n - 1 : 0, threads, [&](std::size_t i) { return !(id[i + 1] > id[i]); });
   if (k + 1 < n) {
     if (id[k + 1] == id[k]) {
       throw Error("body " + std::to_string(id[k]) + " is held twice (owned and ghost): internal error");
@@ -357,7 +363,8 @@ class Comm {
       rd[r + 1] = rd[r] + recv_counts[r];
     }
     Buffer<T> recv(rd[p]);
-    if (send_counts[me] > 0) std::memcpy(recv.data() + rd[me], send.data() + sd[me], send_counts[me] * sizeof(T));
+    if (send_counts[me] > 0)
+      std::memcpy(recv.data() + rd[me], send.data() + sd[me], send_counts[me] * sizeof(T));
     if (!m_s.mpi) return recv;
     detail::RecordType type(sizeof(T));
     std::vector<MPI_Request> requests;
@@ -465,7 +472,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     if (shape.spheres == 0) throw InputError(path + ": the scene has no bodies");
     n_global = shape.spheres;
     first = n_global * static_cast<std::uint64_t>(me) / static_cast<std::uint64_t>(ranks);
-    const std::uint64_t last = n_global * static_cast<std::uint64_t>(me + 1) / static_cast<std::uint64_t>(ranks);
+    const std::uint64_t last =
+        n_global * static_cast<std::uint64_t>(me + 1) / static_cast<std::uint64_t>(ranks);
     const std::uint64_t count = last - first;
     if (count > 0) {
       Scene rows = read_scene_rows(path, first, count);
@@ -515,7 +523,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     double extent = 0;
     for (int k = 0; k < 3; ++k) {
       double o = component(frame.origin, k);
-      extent = std::max({extent, std::abs(component(global.hi, k) - o), std::abs(component(global.lo, k) - o)});
+      extent =
+          std::max({extent, std::abs(component(global.hi, k) - o), std::abs(component(global.lo, k) - o)});
     }
     width = ghost_width(global.r_max, extent, std::numeric_limits<Real>::epsilon());
   });
@@ -537,7 +546,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     std::vector<double> sample;
     if (options.balance == Balance::count && !alone) {
       // A regular sample by global row: every stride-th body (all of them when N <= max_sample).
-      const std::uint64_t stride = std::max<std::uint64_t>(1, (n_global + options.max_sample - 1) / options.max_sample);
+      const std::uint64_t stride =
+          std::max<std::uint64_t>(1, (n_global + options.max_sample - 1) / options.max_sample);
       for (std::size_t i = static_cast<std::size_t>((stride - first % stride) % stride); i < position.size();
            i += stride) {
         sample.push_back(component(position[i], axis));
@@ -557,7 +567,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
           std::size_t from = 0;
           for (int r = 1; r < ranks && n_s > 0; ++r) {
             const std::size_t q = std::min<std::size_t>(
-                n_s - 1, static_cast<std::size_t>(std::uint64_t(r) * std::uint64_t(n_s) / std::uint64_t(ranks)));
+                n_s - 1,
+                static_cast<std::size_t>(std::uint64_t(r) * std::uint64_t(n_s) / std::uint64_t(ranks)));
             if (q < from) continue;  // already in place (equal quantile positions)
             std::nth_element(sample.begin() + static_cast<std::ptrdiff_t>(from),
                              sample.begin() + static_cast<std::ptrdiff_t>(q), sample.end());
@@ -566,7 +577,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
         }
         slabs = SlabDecomposition::from_sorted_sample(axis, sample, ranks);
       } else {
-        slabs = SlabDecomposition::equal_width(axis, component(global.lo, axis), component(global.hi, axis), ranks);
+        slabs = SlabDecomposition::equal_width(axis, component(global.lo, axis), component(global.hi, axis),
+                                               ranks);
       }
       if (alone) return;
       const SlabDecomposition& s = *slabs;
@@ -596,7 +608,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     std::vector<std::uint64_t> ghost_counts(static_cast<std::size_t>(ranks), 0);
     local_stage(session, "halo", [&] {
       const SlabDecomposition& s = *slabs;
-      if (!(width >= 0) || !std::isfinite(width)) throw InputError("halo plan: ghost width is not a finite value >= 0");
+      if (!(width >= 0) || !std::isfinite(width))
+        throw InputError("halo plan: ghost width is not a finite value >= 0");
       const std::size_t bad = first_bad(owned.size(), threads, [&](std::size_t i) {
         return s.owner(component(owned[i].position, axis)) != me;
       });
@@ -607,7 +620,9 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
       }
       ghost_send = route(
           owned.size(), ranks, threads, ghost_counts,
-          [&](std::size_t i, auto&& emit) { s.for_each_ghost_rank(component(owned[i].position, axis), width, emit); },
+          [&](std::size_t i, auto&& emit) {
+            s.for_each_ghost_rank(component(owned[i].position, axis), width, emit);
+          },
           [&](std::size_t i) { return owned[i]; });
     });
     ghost_recv_counts = comm.alltoall_counts(ghost_counts);
@@ -631,7 +646,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     owned = {};
     ghosts = {};
     if (n_owned > 0) {  // a rank that owns nothing reports nothing
-      local = engine->detect(BodiesView{in.position.span(), in.radius.span(), in.id.span(), in.report.span()}, frame);
+      local = engine->detect(BodiesView{in.position.span(), in.radius.span(), in.id.span(), in.report.span()},
+                             frame);
     }
   });
   result.backend = engine->backend();
@@ -654,8 +670,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
 
   // ---- gather: each field to rank 0, straight into per-rank receive buffers ---------------------
   t0 = Clock::now();
-  const std::vector<std::uint64_t> counts = alone ? std::vector<std::uint64_t>{local.size()}
-                                                  : comm.allgather<std::uint64_t>(local.size());
+  const std::vector<std::uint64_t> counts =
+      alone ? std::vector<std::uint64_t>{local.size()} : comm.allgather<std::uint64_t>(local.size());
   const std::size_t p = counts.size();
   std::vector<ContactRunView<Real>> runs;
   // rank 0's received fields: ids (2), distance, and up to 7 vector fields per rank
@@ -690,13 +706,17 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
       for (std::size_t r = 1; root && r < p; ++r) t[r] = buffers[r].data();
       return t;
     };
-    comm.gather_to_root(local.id_a.data(), counts, targets(recv_a), options.max_message_bytes, k_gather_tag + 0);
-    comm.gather_to_root(local.id_b.data(), counts, targets(recv_b), options.max_message_bytes, k_gather_tag + 1);
-    comm.gather_to_root(local.distance.data(), counts, targets(recv_d), options.max_message_bytes, k_gather_tag + 2);
+    comm.gather_to_root(local.id_a.data(), counts, targets(recv_a), options.max_message_bytes,
+                        k_gather_tag + 0);
+    comm.gather_to_root(local.id_b.data(), counts, targets(recv_b), options.max_message_bytes,
+                        k_gather_tag + 1);
+    comm.gather_to_root(local.distance.data(), counts, targets(recv_d), options.max_message_bytes,
+                        k_gather_tag + 2);
     for (int f = 0; f < nvec; ++f) {
       std::vector<Vec3<Real>*> t(root ? p : 0, nullptr);
       for (std::size_t r = 1; root && r < p; ++r) t[r] = recv_v[r][static_cast<std::size_t>(f)].data();
-      comm.gather_to_root(contact_vec_field(local, f)->data(), counts, t, options.max_message_bytes, k_gather_tag + 3 + f);
+      comm.gather_to_root(contact_vec_field(local, f)->data(), counts, t, options.max_message_bytes,
+                          k_gather_tag + 3 + f);
     }
     if (!root) local = Contacts<Real>{};
   }
@@ -719,8 +739,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
       local = Contacts<Real>{};
     }
     const std::string line = "merge: " + std::to_string(result.contacts.size()) + " contacts from " +
-                             std::to_string(ranks) + " rank(s), " + std::to_string(result.duplicates_removed) +
-                             " duplicate(s) removed (expected 0)";
+                             std::to_string(ranks) + " rank(s), " +
+                             std::to_string(result.duplicates_removed) + " duplicate(s) removed (expected 0)";
     if (options.log) {
       options.log(line);
     } else if (result.duplicates_removed > 0) {  // a warning nobody asked for must still be seen
@@ -736,7 +756,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     result.times.push_back({names[s], times[static_cast<std::size_t>(s)]});
     if (s == 3)
       for (std::size_t k = 0; k < k_engine_stages.size(); ++k)
-        if (times[6 + k] > 0) result.times.push_back({std::string("detect.") + k_engine_stages[k], times[6 + k]});
+        if (times[6 + k] > 0)
+          result.times.push_back({std::string("detect.") + k_engine_stages[k], times[6 + k]});
   }
   return result;
 }

@@ -46,12 +46,12 @@
 namespace cg {
 
 struct DistributedOptions {
-  EngineOptions engine;           // backend, fields, cell_size (0: smallest valid), threads (also the
-                                  // pipeline's host loops; 0: all), device
-  int axis = -1;                  // slab axis: 0 x, 1 y, 2 z, -1 largest extent (parse_axis)
+  EngineOptions engine;  // backend, fields, cell_size (0: smallest valid), threads (also the
+                         // pipeline's host loops; 0: all), device
+  int axis = -1;         // slab axis: 0 x, 1 y, 2 z, -1 largest extent (parse_axis)
   Balance balance = Balance::count;
-  std::uint64_t max_sample = 1u << 20;          // quantile sample size (all bodies when N <= it)
-  std::uint64_t max_message_bytes = 1u << 30;   // per-round gather size (tests make it tiny)
+  std::uint64_t max_sample = 1u << 20;         // quantile sample size (all bodies when N <= it)
+  std::uint64_t max_message_bytes = 1u << 30;  // per-round gather size (tests make it tiny)
   // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
   // printed to stderr as a warning only if duplicates were removed.
   std::function<void(const std::string&)> log;
@@ -62,19 +62,19 @@ void validate(const DistributedOptions& options);
 
 template <class Real>
 struct DistributedResult {
-  Contacts<Real> contacts;               // rank 0: all contacts, CONTRACT §2 order; empty elsewhere
-  StageTimes times;                      // read, redistribute, halo, detect, gather, merge (max, s)
-  std::uint64_t duplicates_removed = 0;  // rank 0 (expected 0)
-  std::uint64_t bodies = 0;              // global body count
-  std::uint64_t ghosts = 0;              // ghosts held, summed over ranks
+  Contacts<Real> contacts;                     // rank 0: all contacts, CONTRACT §2 order; empty elsewhere
+  StageTimes times;                            // read, redistribute, halo, detect, gather, merge (max, s)
+  std::uint64_t duplicates_removed = 0;        // rank 0 (expected 0)
+  std::uint64_t bodies = 0;                    // global body count
+  std::uint64_t ghosts = 0;                    // ghosts held, summed over ranks
   std::uint64_t owned_min = 0, owned_max = 0;  // owned bodies per rank: balance of the slabs
-  double cell_size = 0;                  // the frame's cell edge
-  Frame frame;                           // the shared frame
+  double cell_size = 0;                        // the frame's cell edge
+  Frame frame;                                 // the shared frame
   int ranks = 1;
-  int axis = 0;                          // the slab axis used
-  std::vector<double> cuts;              // the P-1 slab cuts
-  Backend backend = Backend::cpu;        // the engine's resolved backend (this rank)
-  EngineStats stats;                     // entries and pair tests summed over ranks
+  int axis = 0;                    // the slab axis used
+  std::vector<double> cuts;        // the P-1 slab cuts
+  Backend backend = Backend::cpu;  // the engine's resolved backend (this rank)
+  EngineStats stats;               // entries and pair tests summed over ranks
 };
 
 // Collective over `session`: every rank calls it with the same arguments. See the file comment.

@@ -14,8 +14,8 @@
 namespace cg {
 
 struct Session::Impl {
-  bool mpi = false;       // MPI mode (MPI_Init_thread called by us or before us)
-  bool finalize = false;  // we initialised MPI, so we finalise it
+  bool mpi = false;               // MPI mode (MPI_Init_thread called by us or before us)
+  bool finalize = false;          // we initialised MPI, so we finalise it
   MPI_Comm comm = MPI_COMM_NULL;  // duplicate of MPI_COMM_WORLD, MPI_ERRORS_RETURN
   int rank = 0, size = 1, local_rank = 0, local_size = 1;
 };

@@ -35,13 +35,20 @@ bool launched_by_mpi() {
 
 [[noreturn]] void throw_by_exit_code(int exit_code, const std::string& message) {
   switch (exit_code) {
-    case 2: throw UsageError(message);
-    case 3: throw InputError(message);
-    case 4: throw CudaError(message);
-    case 5: throw MpiError(message);
-    case 6: throw IoError(message);
-    case 7: throw ResourceError(message);
-    default: throw Error(message);
+    case 2:
+      throw UsageError(message);
+    case 3:
+      throw InputError(message);
+    case 4:
+      throw CudaError(message);
+    case 5:
+      throw MpiError(message);
+    case 6:
+      throw IoError(message);
+    case 7:
+      throw ResourceError(message);
+    default:
+      throw Error(message);
   }
 }
 
@@ -137,8 +144,8 @@ void Session::agree(std::exception_ptr error, const std::string& stage) const {
   std::string text(static_cast<std::size_t>(header[1]), '\0');
   if (s.rank == first) text = what;
   if (!text.empty()) {
-    CG_MPI(MPI_Bcast(text.data(), detail::to_mpi_count(text.size(), "error message"), MPI_CHAR, first,
-                     s.comm));
+    CG_MPI(
+        MPI_Bcast(text.data(), detail::to_mpi_count(text.size(), "error message"), MPI_CHAR, first, s.comm));
   }
   throw_by_exit_code(static_cast<int>(header[0]), "[rank " + std::to_string(first) + "/" +
                                                       std::to_string(s.size) + "] " + stage + ": " + text);

@@ -65,8 +65,8 @@ class Session {
   // Throws CommFailure if the agreement itself cannot be communicated.
   void agree(std::exception_ptr error, const std::string& stage) const;
   std::string broadcast(const std::string& text, int root = 0) const;
-  bool all(bool value) const;                    // logical and over ranks
-  double max(double value) const;                // maximum over ranks
+  bool all(bool value) const;      // logical and over ranks
+  double max(double value) const;  // maximum over ranks
   unsigned long long sum(unsigned long long value) const;
 
   struct Impl;  // defined in comm/mpi_detail.hpp

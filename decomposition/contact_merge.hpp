@@ -130,8 +130,9 @@ struct ContactRunView {
 // The vector fields of a Contacts in ContactRunView::vec order.
 template <class Real>
 std::vector<Vec3<Real>>* contact_vec_field(Contacts<Real>& c, int f) {
-  std::vector<Vec3<Real>>* v[7] = {&c.position_on_a, &c.position_on_b, &c.normal_on_b, &c.local_point_a,
-                                   &c.local_point_b, &c.lateral_friction_dir1, &c.lateral_friction_dir2};
+  std::vector<Vec3<Real>>* v[7] = {&c.position_on_a,        &c.position_on_b, &c.normal_on_b,
+                                   &c.local_point_a,        &c.local_point_b, &c.lateral_friction_dir1,
+                                   &c.lateral_friction_dir2};
   return v[f];
 }
 
@@ -154,8 +155,8 @@ ContactRunView<Real> contact_run_view(Contacts<Real>& c, bool full) {
 // does not depend on `parts` or `threads`. Runs must be sorted by (id_a, id_b): Error naming the run
 // and row otherwise (as merge_contact_runs).
 template <class Real>
-std::uint64_t merge_contact_runs_into(const std::vector<ContactRunView<Real>>& runs, Contacts<Real>& out, bool full,
-                                      int parts_wanted, int threads) {
+std::uint64_t merge_contact_runs_into(const std::vector<ContactRunView<Real>>& runs, Contacts<Real>& out,
+                                      bool full, int parts_wanted, int threads) {
   using Key = std::pair<std::int64_t, std::int64_t>;
   (void)threads;  // used by the OpenMP pragmas only
   const std::size_t p = runs.size();
@@ -163,12 +164,15 @@ std::uint64_t merge_contact_runs_into(const std::vector<ContactRunView<Real>>& r
   for (std::size_t r = 0; r < p; ++r) {
     const std::size_t n = runs[r].n;
     std::size_t bad = n;  // first row k >= 1 out of order
-#pragma omp parallel for num_threads(threads) reduction(min : bad) schedule(static) if (n > (std::size_t(1) << 15))
+#pragma omp parallel for num_threads(threads) reduction(min    \
+                                                        : bad) \
+    schedule(static) if (n > (std::size_t(1) << 15))
     for (std::size_t k = 1; k < n; ++k) {
       if (k < bad && key(r, k - 1) > key(r, k)) bad = k;
     }
     if (bad < n) {
-      throw Error("contact run " + std::to_string(r) + ": not sorted by (id_a, id_b) at row " + std::to_string(bad));
+      throw Error("contact run " + std::to_string(r) + ": not sorted by (id_a, id_b) at row " +
+                  std::to_string(bad));
     }
   }
   const int nvec = full ? 7 : 3;
@@ -190,7 +194,10 @@ std::uint64_t merge_contact_runs_into(const std::vector<ContactRunView<Real>>& r
       std::size_t lo = 0, hi = runs[r].n;  // lower_bound(split)
       while (lo < hi) {
         const std::size_t mid = (lo + hi) / 2;
-        if (key(r, mid) < split) lo = mid + 1; else hi = mid;
+        if (key(r, mid) < split)
+          lo = mid + 1;
+        else
+          hi = mid;
       }
       cut[j * p + r] = lo;
     }
@@ -254,7 +261,8 @@ std::uint64_t merge_contact_runs_into(const std::vector<ContactRunView<Real>>& r
       std::memmove(da + w, da + start[j], written[j] * sizeof(*da));
       std::memmove(db + w, db + start[j], written[j] * sizeof(*db));
       std::memmove(dd + w, dd + start[j], written[j] * sizeof(*dd));
-      for (int f = 0; f < nvec; ++f) std::memmove(dst[f] + w, dst[f] + start[j], written[j] * sizeof(Vec3<Real>));
+      for (int f = 0; f < nvec; ++f)
+        std::memmove(dst[f] + w, dst[f] + start[j], written[j] * sizeof(Vec3<Real>));
     }
     w += written[j];
   }

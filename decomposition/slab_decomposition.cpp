@@ -9,8 +9,10 @@ namespace cg {
 
 const char* to_string(Balance b) {
   switch (b) {
-    case Balance::count: return "count";
-    case Balance::width: return "width";
+    case Balance::count:
+      return "count";
+    case Balance::width:
+      return "width";
   }
   return "?";
 }
@@ -31,10 +33,14 @@ int parse_axis(const std::string& text) {
 
 const char* axis_name(int axis) {
   switch (axis) {
-    case 0: return "x";
-    case 1: return "y";
-    case 2: return "z";
-    default: return "auto";
+    case 0:
+      return "x";
+    case 1:
+      return "y";
+    case 2:
+      return "z";
+    default:
+      return "auto";
   }
 }
 
@@ -64,7 +70,8 @@ double ghost_width(double r_max, double extent, double epsilon) {
   return 2.0 * r_max * (1.0 + 16.0 * epsilon) + 16.0 * epsilon * std::abs(extent);
 }
 
-SlabDecomposition::SlabDecomposition(int axis, std::vector<double> cuts) : m_axis(axis), m_cuts(std::move(cuts)) {
+SlabDecomposition::SlabDecomposition(int axis, std::vector<double> cuts)
+    : m_axis(axis), m_cuts(std::move(cuts)) {
   if (axis < 0 || axis > 2) throw UsageError("slab axis " + std::to_string(axis) + " is not 0, 1 or 2");
   for (std::size_t i = 0; i < m_cuts.size(); ++i) {
     if (!std::isfinite(m_cuts[i])) throw InputError("slab cut " + std::to_string(i + 1) + " is not finite");
@@ -133,9 +140,8 @@ static ExportPlan build_plan(int ranks, std::size_t n, Destinations&& for_each_d
 }
 
 ExportPlan make_owner_plan(const SlabDecomposition& slabs, std::span<const double> coordinate) {
-  return build_plan(slabs.ranks(), coordinate.size(), [&](std::size_t i, auto&& emit) {
-    emit(slabs.owner(coordinate[i]));
-  });
+  return build_plan(slabs.ranks(), coordinate.size(),
+                    [&](std::size_t i, auto&& emit) { emit(slabs.owner(coordinate[i])); });
 }
 
 ExportPlan make_halo_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,

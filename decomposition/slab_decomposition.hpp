@@ -62,8 +62,7 @@ class SlabDecomposition {
   // balance = count: cuts at the quantiles of a sorted sample of centre coordinates. Cut r
   // (1 <= r < P) is sample[floor(r·S/P)], so with the full set of centres as the sample every
   // slab owns floor or ceil of N/P bodies (up to ties). An empty sample gives all cuts at 0.
-  static SlabDecomposition from_sorted_sample(int axis, std::span<const double> sorted_sample,
-                                              int ranks);
+  static SlabDecomposition from_sorted_sample(int axis, std::span<const double> sorted_sample, int ranks);
 
   // balance = width: P slabs of equal width between lo and hi (the outer two still extend to ±inf).
   static SlabDecomposition equal_width(int axis, double lo, double hi, int ranks);
@@ -96,9 +95,7 @@ struct ExportPlan {
   std::vector<std::size_t> offsets;
   std::vector<std::size_t> indices;
   std::size_t count(int rank) const { return offsets[rank + 1] - offsets[rank]; }
-  std::span<const std::size_t> to(int rank) const {
-    return {indices.data() + offsets[rank], count(rank)};
-  }
+  std::span<const std::size_t> to(int rank) const { return {indices.data() + offsets[rank], count(rank)}; }
   std::size_t total() const { return indices.size(); }
 };
 
@@ -130,7 +127,10 @@ void SlabDecomposition::for_each_ghost_rank(double x, double w, F&& f) const {
     std::size_t lo = 0, hi = m_cuts.size();
     while (lo < hi) {  // lower_bound(below)
       std::size_t mid = (lo + hi) / 2;
-      if (m_cuts[mid] < below) lo = mid + 1; else hi = mid;
+      if (m_cuts[mid] < below)
+        lo = mid + 1;
+      else
+        hi = mid;
     }
     first = static_cast<int>(lo);
   }
@@ -138,7 +138,10 @@ void SlabDecomposition::for_each_ghost_rank(double x, double w, F&& f) const {
     std::size_t lo = 0, hi = m_cuts.size();
     while (lo < hi) {  // upper_bound(above)
       std::size_t mid = (lo + hi) / 2;
-      if (m_cuts[mid] <= above) lo = mid + 1; else hi = mid;
+      if (m_cuts[mid] <= above)
+        lo = mid + 1;
+      else
+        hi = mid;
     }
     last = static_cast<int>(lo);
   }

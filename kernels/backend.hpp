@@ -64,15 +64,15 @@ struct HostBackend {
 };
 
 template <class Real>
-void run_stages(HostBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out,
-                StageTimes& times, EngineStats& stats);
+void run_stages(HostBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times,
+                EngineStats& stats);
 
 // The CUDA backend (kernels/cuda/): owns persistent device buffers; defined only in CUDA builds.
 class CudaBackend;
 std::unique_ptr<CudaBackend> make_cuda_backend(int device);  // throws CudaError without CUDA
 template <class Real>
-void run_stages(CudaBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out,
-                StageTimes& times, EngineStats& stats);
+void run_stages(CudaBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times,
+                EngineStats& stats);
 void destroy(CudaBackend* backend);
 // Validation and bounds of DEVICE bodies (same results and InputError texts as compute_bounds).
 Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies);

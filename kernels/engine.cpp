@@ -3,6 +3,9 @@
 // backends (kernels/host/, kernels/cuda/).
 #include "engine.hpp"
 
+#include <omp.h>
+#include <sys/mman.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -11,18 +14,18 @@
 #include <sstream>
 #include <vector>
 
-#include <omp.h>
-#include <sys/mman.h>
-
 #include "backend.hpp"
 
 namespace cg {
 
 const char* to_string(Backend b) {
   switch (b) {
-    case Backend::cpu: return "cpu";
-    case Backend::cuda: return "cuda";
-    case Backend::automatic: return "auto";
+    case Backend::cpu:
+      return "cpu";
+    case Backend::cuda:
+      return "cuda";
+    case Backend::automatic:
+      return "auto";
   }
   return "?";
 }
@@ -77,8 +80,8 @@ Bounds compute_bounds(const BodiesView& bodies) {
   auto bad = [&](std::size_t i) {
     const Vec3<double> p = bodies.position[i];
     const double r = bodies.radius[i];
-    return !std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || !(r > 0) || !std::isfinite(r) ||
-           (i > 0 && !bodies.id.empty() && !(bodies.id[i] > bodies.id[i - 1]));
+    return !std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z) || !(r > 0) ||
+           !std::isfinite(r) || (i > 0 && !bodies.id.empty() && !(bodies.id[i] > bodies.id[i - 1]));
   };
   // Parallel: per chunk the bounds (min / max are exact, so the fold order does not matter: every
   // lower bound p - r and upper bound p + r of a valid body is a +0 or a non-zero value) and the first
@@ -88,7 +91,8 @@ Bounds compute_bounds(const BodiesView& bodies) {
   std::vector<std::size_t> first_bad(static_cast<std::size_t>(threads), n);
 #pragma omp parallel for num_threads(threads) schedule(static, 1) if (threads > 1)
   for (int t = 0; t < threads; ++t) {
-    const std::size_t begin = n * std::size_t(t) / std::size_t(threads), end = n * std::size_t(t + 1) / std::size_t(threads);
+    const std::size_t begin = n * std::size_t(t) / std::size_t(threads),
+                      end = n * std::size_t(t + 1) / std::size_t(threads);
     Vec3<double> lo = b.lo, hi = b.hi;
     double r_max = 0;
     for (std::size_t i = begin; i < end; ++i) {
@@ -135,9 +139,7 @@ double real_epsilon(Precision p) {
   return p == Precision::fp32 ? double(std::numeric_limits<float>::epsilon())
                               : std::numeric_limits<double>::epsilon();
 }
-double max_extent(const Bounds& b) {
-  return std::max({b.hi.x - b.lo.x, b.hi.y - b.lo.y, b.hi.z - b.lo.z});
-}
+double max_extent(const Bounds& b) { return std::max({b.hi.x - b.lo.x, b.hi.y - b.lo.y, b.hi.z - b.lo.z}); }
 }  // namespace
 
 double min_cell_size(const Bounds& b, Precision p) {
@@ -178,8 +180,10 @@ GridPlan plan_grid(const Bounds& local, const Frame& frame, Precision p) {
   // Per axis, the frame cell coordinates the local bodies can produce, with one cell of slack for
   // rounding on each side; base rounded down to even so cell parity (type) is the frame's.
   const double lim = p == Precision::fp32 ? double(1u << 22) : double(1u << 31) - 4;
-  const double lo[3] = {local.lo.x - frame.origin.x, local.lo.y - frame.origin.y, local.lo.z - frame.origin.z};
-  const double hi[3] = {local.hi.x - frame.origin.x, local.hi.y - frame.origin.y, local.hi.z - frame.origin.z};
+  const double lo[3] = {local.lo.x - frame.origin.x, local.lo.y - frame.origin.y,
+                        local.lo.z - frame.origin.z};
+  const double hi[3] = {local.hi.x - frame.origin.x, local.hi.y - frame.origin.y,
+                        local.hi.z - frame.origin.z};
   for (int k = 0; k < 3; ++k) {
     const double c_hi = std::floor(hi[k] / frame.cell_size) + 1;
     if (!(c_hi < lim)) {
@@ -198,8 +202,8 @@ GridPlan plan_grid(const Bounds& local, const Frame& frame, Precision p) {
   const long double cells = (long double)g.half[0] * g.half[1] * g.half[2];
   if (cells > (long double)(std::uint64_t(1) << 60)) {
     std::ostringstream m;
-    m << "the grid needs " << double(cells) * 8 << " cells (" << g.dims[0] << " x " << g.dims[1]
-      << " x " << g.dims[2] << "), more than a 64-bit cell key encodes; use a larger --cell-size";
+    m << "the grid needs " << double(cells) * 8 << " cells (" << g.dims[0] << " x " << g.dims[1] << " x "
+      << g.dims[2] << "), more than a 64-bit cell key encodes; use a larger --cell-size";
     throw InputError(m.str());
   }
   g.half_bits = detail::bits_for(std::uint64_t(g.half[0]) * g.half[1] * g.half[2]);
@@ -216,14 +220,15 @@ void parallel_copy(const CopyBlock* blocks, std::size_t count, int threads) {
   // piece t covers bytes [total·t/nt, total·(t+1)/nt) of the blocks laid end to end
 #pragma omp parallel for num_threads(nt) schedule(static, 1) if (nt > 1)
   for (int t = 0; t < nt; ++t) {
-    std::size_t lo = total * std::size_t(t) / std::size_t(nt), hi = total * std::size_t(t + 1) / std::size_t(nt);
+    std::size_t lo = total * std::size_t(t) / std::size_t(nt),
+                hi = total * std::size_t(t + 1) / std::size_t(nt);
     std::size_t at = 0;
     for (std::size_t b = 0; b < count && lo < hi; ++b) {
       const std::size_t end = at + blocks[b].bytes;
       if (lo < end) {
         const std::size_t from = lo - at, to = std::min(hi, end) - at;
-        std::memcpy(static_cast<std::byte*>(blocks[b].dst) + from, static_cast<const std::byte*>(blocks[b].src) + from,
-                    to - from);
+        std::memcpy(static_cast<std::byte*>(blocks[b].dst) + from,
+                    static_cast<const std::byte*>(blocks[b].src) + from, to - from);
         lo = at + to;
       }
       at = end;
@@ -303,13 +308,28 @@ Engine<Real>::Engine(EngineOptions options) : m_impl(std::make_unique<Impl>()) {
   if (b == Backend::cuda) m_impl->cuda = detail::make_cuda_backend(options.device).release();
   m_impl->resolved = b;
 }
-template <class Real> Engine<Real>::~Engine() = default;
-template <class Real> Engine<Real>::Engine(Engine&&) noexcept = default;
-template <class Real> Engine<Real>& Engine<Real>::operator=(Engine&&) noexcept = default;
-template <class Real> Backend Engine<Real>::backend() const { return m_impl->resolved; }
-template <class Real> const StageTimes& Engine<Real>::times() const { return m_impl->times; }
-template <class Real> const EngineStats& Engine<Real>::stats() const { return m_impl->stats; }
-template <class Real> const EngineOptions& Engine<Real>::options() const { return m_impl->options; }
+template <class Real>
+Engine<Real>::~Engine() = default;
+template <class Real>
+Engine<Real>::Engine(Engine&&) noexcept = default;
+template <class Real>
+Engine<Real>& Engine<Real>::operator=(Engine&&) noexcept = default;
+template <class Real>
+Backend Engine<Real>::backend() const {
+  return m_impl->resolved;
+}
+template <class Real>
+const StageTimes& Engine<Real>::times() const {
+  return m_impl->times;
+}
+template <class Real>
+const EngineStats& Engine<Real>::stats() const {
+  return m_impl->stats;
+}
+template <class Real>
+const EngineOptions& Engine<Real>::options() const {
+  return m_impl->options;
+}
 
 namespace {
 // Frame and grid plan of one call from the bodies' bounds; pushes the "plan" stage time.
@@ -318,7 +338,8 @@ detail::DetectJob<Real> plan_job(const Bounds& b, std::optional<Frame> frame, co
                                  EngineStats& stats) {
   constexpr Precision prec = sizeof(Real) == 4 ? Precision::fp32 : Precision::fp64;
   const Frame f = frame ? *frame : make_frame(b, options.cell_size, prec);
-  if (frame && f.cell_size < 2 * b.r_max) throw UsageError("frame cell size is smaller than the largest diameter");
+  if (frame && f.cell_size < 2 * b.r_max)
+    throw UsageError("frame cell size is smaller than the largest diameter");
   detail::DetectJob<Real> job{{}, plan_grid(b, f, prec), {}, options.fields};
   job.grid = detail::grid_params<Real>(job.plan);
   stats.key_bits = job.plan.key_bits;
@@ -367,7 +388,8 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
 // contacts stay on the device; else they are downloaded into `out`.
 template <class Real>
 static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesView& bodies,
-                             std::optional<Frame> frame, Contacts<Real>& out, DeviceContactsView<Real>* device_out) {
+                             std::optional<Frame> frame, Contacts<Real>& out,
+                             DeviceContactsView<Real>* device_out) {
   using clock = std::chrono::steady_clock;
   s.times.clear();
   s.stats = EngineStats{};

@@ -57,8 +57,8 @@ struct Contacts {
 struct BodiesView {
   std::span<const Vec3<double>> position;
   std::span<const double> radius;
-  std::span<const std::int64_t> id;       // empty: ids are 0 … n-1
-  std::span<const std::uint8_t> report;   // empty: all pairs; else pair (a<b) reported iff report[a]
+  std::span<const std::int64_t> id;      // empty: ids are 0 … n-1
+  std::span<const std::uint8_t> report;  // empty: all pairs; else pair (a<b) reported iff report[a]
   std::size_t size() const { return radius.size(); }
 };
 

@@ -3,6 +3,9 @@
 // Invariants: every row's scene is generated from (seed + log2 N) alone, so a row can be re-run by
 // itself; the CSV is written to "<csv>.tmp.<pid>" and renamed (as every output of contactgrid);
 // the plot is a separate step that can be re-run by hand from the CSV.
+#include "bench.hpp"
+
+#include <fmt/format.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -18,9 +21,6 @@
 #include <limits>
 #include <ostream>
 
-#include <fmt/format.h>
-
-#include "bench.hpp"
 #include "bullet_oracle.hpp"
 #include "errors.hpp"
 #include "generate.hpp"
@@ -49,7 +49,8 @@ std::string find_on_path(const std::string& name) {
   std::string p = path;
   for (std::size_t start = 0; start <= p.size();) {
     const std::size_t end = std::min(p.find(':', start), p.size());
-    const fs::path cand = fs::path(p.substr(start, end - start).empty() ? "." : p.substr(start, end - start)) / name;
+    const fs::path cand =
+        fs::path(p.substr(start, end - start).empty() ? "." : p.substr(start, end - start)) / name;
     if (::access(cand.c_str(), X_OK) == 0) return cand.string();
     start = end + 1;
   }
@@ -93,21 +94,24 @@ std::vector<std::string> csv_lines(const BenchResult& r) {
       "n,log2n,contacts,bullet_contacts,agree,bullet_scratch_s,bullet_warm_s,engine_cpu_s,engine_cuda_s,"
       "speedup_cpu_vs_scratch,speedup_cpu_vs_warm,speedup_cuda_vs_scratch,speedup_cuda_vs_warm");
   for (const BenchRow& row : r.rows) {
-    auto eng = [&](Backend b) { auto it = row.engine_s.find(b); return it == row.engine_s.end() ? -1.0 : it->second; };
+    auto eng = [&](Backend b) {
+      auto it = row.engine_s.find(b);
+      return it == row.engine_s.end() ? -1.0 : it->second;
+    };
     auto speedup = [&](Backend b, double bullet) {
       const double e = eng(b);
       return e > 0 && bullet >= 0 ? bullet / e : -1.0;
     };
-    lines.push_back(fmt::format(
-        "{},{},{},{},{},{},{},{},{},{},{},{},{}", row.n, int(std::lround(std::log2(double(row.n)))),
-        row.contacts >= 0 ? std::to_string(row.contacts) : "",
-        row.bullet_contacts >= 0 ? std::to_string(row.bullet_contacts) : "",
-        row.compared ? (row.agree ? "yes" : "no") : "", field(row.bullet_scratch_s), field(row.bullet_warm_s),
-        field(eng(Backend::cpu)), field(eng(Backend::cuda)),
-        field(speedup(Backend::cpu, row.bullet_scratch_s), "{:.4g}"),
-        field(speedup(Backend::cpu, row.bullet_warm_s), "{:.4g}"),
-        field(speedup(Backend::cuda, row.bullet_scratch_s), "{:.4g}"),
-        field(speedup(Backend::cuda, row.bullet_warm_s), "{:.4g}")));
+    lines.push_back(fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{}", row.n,
+                                int(std::lround(std::log2(double(row.n)))),
+                                row.contacts >= 0 ? std::to_string(row.contacts) : "",
+                                row.bullet_contacts >= 0 ? std::to_string(row.bullet_contacts) : "",
+                                row.compared ? (row.agree ? "yes" : "no") : "", field(row.bullet_scratch_s),
+                                field(row.bullet_warm_s), field(eng(Backend::cpu)), field(eng(Backend::cuda)),
+                                field(speedup(Backend::cpu, row.bullet_scratch_s), "{:.4g}"),
+                                field(speedup(Backend::cpu, row.bullet_warm_s), "{:.4g}"),
+                                field(speedup(Backend::cuda, row.bullet_scratch_s), "{:.4g}"),
+                                field(speedup(Backend::cuda, row.bullet_warm_s), "{:.4g}")));
   }
   return lines;
 }
@@ -133,12 +137,15 @@ void write_csv(const std::string& path, const std::vector<std::string>& lines) {
 }
 
 void print_table(const BenchResult& r, const std::vector<Backend>& backends, std::ostream& out) {
-  std::string head = fmt::format("{:>10} {:>10} {:>12} {:>12}", "N", "contacts", "Bullet scr s", "Bullet warm s");
+  std::string head =
+      fmt::format("{:>10} {:>10} {:>12} {:>12}", "N", "contacts", "Bullet scr s", "Bullet warm s");
   for (Backend b : backends)
     head += fmt::format(" {:>12} {:>9} {:>9}", fmt::format("{} s", to_string(b)), "x scratch", "x warm");
   head += fmt::format(" {:>6}", "agree");
   out << head << '\n';
-  auto num = [](double v, const char* f) { return v >= 0 ? fmt::format(fmt::runtime(f), v) : std::string("-"); };
+  auto num = [](double v, const char* f) {
+    return v >= 0 ? fmt::format(fmt::runtime(f), v) : std::string("-");
+  };
   for (const BenchRow& row : r.rows) {
     std::string line = fmt::format("{:>10} {:>10} {:>12} {:>12}", row.n,
                                    row.contacts >= 0 ? row.contacts : row.bullet_contacts,
@@ -194,8 +201,10 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
   }
   BenchResult result;
   const int hi = std::max(o.bullet_hi, o.engine_hi);
-  out << fmt::format("bench: N = 2^{} … 2^{} (Bullet double to 2^{}, engine to 2^{}), {} repetitions, "
-                     "seed {}\n", o.lo, hi, o.bullet_hi, o.engine_hi, o.repetitions, o.seed);
+  out << fmt::format(
+      "bench: N = 2^{} … 2^{} (Bullet double to 2^{}, engine to 2^{}), {} repetitions, "
+      "seed {}\n",
+      o.lo, hi, o.bullet_hi, o.engine_hi, o.repetitions, o.seed);
   for (int e = o.lo; e <= hi; ++e) {
     BenchRow row;
     row.n = std::uint64_t(1) << e;
@@ -245,7 +254,8 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
     for (const auto& [b, c] : row.engine_contacts) counts.push_back(c);
     if (row.bullet_contacts >= 0) counts.push_back(row.bullet_contacts);
     row.compared = counts.size() >= 2;
-    row.agree = row.compared && std::all_of(counts.begin(), counts.end(), [&](auto c) { return c == counts[0]; });
+    row.agree =
+        row.compared && std::all_of(counts.begin(), counts.end(), [&](auto c) { return c == counts[0]; });
     result.rows.push_back(row);
     out << fmt::format("  N = 2^{}: done", e);
     if (row.bullet_scratch_s >= 0) out << fmt::format(" (Bullet {:.3g} s)", row.bullet_scratch_s);
@@ -282,7 +292,8 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
     std::string prefix = o.plot_prefix;
     if (prefix.empty()) {
       prefix = o.csv;
-      if (prefix.size() > 4 && prefix.compare(prefix.size() - 4, 4, ".csv") == 0) prefix.resize(prefix.size() - 4);
+      if (prefix.size() > 4 && prefix.compare(prefix.size() - 4, 4, ".csv") == 0)
+        prefix.resize(prefix.size() - 4);
     }
     const std::string script = bench_plot_script(o);
     const std::string gnuplot = find_on_path("gnuplot");
@@ -291,9 +302,11 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
       out << "plot: jobs/plot_bench.gp not found (set CONTACTGRID_PLOT_SCRIPT); run by hand:\n"
           << "  gnuplot -e \"" << vars << "\" jobs/plot_bench.gp\n";
     } else if (gnuplot.empty()) {
-      out << "plot: gnuplot is not on PATH; to plot later:\n  gnuplot -e \"" << vars << "\" " << script << '\n';
+      out << "plot: gnuplot is not on PATH; to plot later:\n  gnuplot -e \"" << vars << "\" " << script
+          << '\n';
     } else if (int rc = run_program({gnuplot, "-e", vars, script}); rc != 0) {
-      out << "plot: gnuplot failed (status " << rc << "); command: gnuplot -e \"" << vars << "\" " << script << '\n';
+      out << "plot: gnuplot failed (status " << rc << "); command: gnuplot -e \"" << vars << "\" " << script
+          << '\n';
     } else {
       result.plotted = true;
       out << fmt::format("plot: {0}_time.png/.svg, {0}_loglog.png/.svg\n", prefix);

@@ -27,19 +27,19 @@
 namespace cg {
 
 struct BenchOptions {
-  int lo = 10;                        // --lo: first N = 2^lo
-  int bullet_hi = 20;                 // --bullet-hi: Bullet runs while N <= 2^bullet_hi (< lo: never)
-  int engine_hi = 22;                 // --engine-hi: engine runs while N <= 2^engine_hi
-  int repetitions = 5;                // --repetitions: engine timings are the median of this many
-  std::vector<Backend> backends;      // --backend cpu|cuda (repeatable); empty: cpu, + cuda if available
-  int threads = 0;                    // --threads: CPU backend threads (0: all)
-  std::uint64_t seed = 1;             // --seed: scene generator seed (scene i uses seed + log2 N)
+  int lo = 10;                    // --lo: first N = 2^lo
+  int bullet_hi = 20;             // --bullet-hi: Bullet runs while N <= 2^bullet_hi (< lo: never)
+  int engine_hi = 22;             // --engine-hi: engine runs while N <= 2^engine_hi
+  int repetitions = 5;            // --repetitions: engine timings are the median of this many
+  std::vector<Backend> backends;  // --backend cpu|cuda (repeatable); empty: cpu, + cuda if available
+  int threads = 0;                // --threads: CPU backend threads (0: all)
+  std::uint64_t seed = 1;         // --seed: scene generator seed (scene i uses seed + log2 N)
   double radius_low = 0.5, radius_high = 1.0;  // --radius-low / --radius-high
-  double contacts_per_body = 0.4;     // --contacts-per-body
-  std::string csv = "bench.csv";      // --csv
-  bool plot = true;                   // --no-plot turns it off
-  std::string plot_prefix;            // --plot-prefix: PNG/SVG names; default: csv without ".csv"
-  std::string plot_script;            // --plot-script; default: see bench_plot_script()
+  double contacts_per_body = 0.4;              // --contacts-per-body
+  std::string csv = "bench.csv";               // --csv
+  bool plot = true;                            // --no-plot turns it off
+  std::string plot_prefix;                     // --plot-prefix: PNG/SVG names; default: csv without ".csv"
+  std::string plot_script;                     // --plot-script; default: see bench_plot_script()
 };
 
 struct BenchRow {
@@ -47,9 +47,9 @@ struct BenchRow {
   std::int64_t contacts = -1;         // engine (first backend run); -1: not run
   std::int64_t bullet_contacts = -1;  // -1: Bullet not run
   double bullet_scratch_s = -1, bullet_warm_s = -1;
-  std::map<Backend, double> engine_s;           // median seconds per backend run
+  std::map<Backend, double> engine_s;  // median seconds per backend run
   std::map<Backend, std::int64_t> engine_contacts;
-  bool compared = false, agree = false;         // compared: at least two counts were measured
+  bool compared = false, agree = false;  // compared: at least two counts were measured
 };
 
 struct BenchResult {

@@ -26,7 +26,8 @@ struct FileCloser {
 
 class BinaryFile {
  public:
-  BinaryFile(const std::string& path, const char* mode) : m_path(path), m_file(std::fopen(path.c_str(), mode)) {
+  BinaryFile(const std::string& path, const char* mode)
+      : m_path(path), m_file(std::fopen(path.c_str(), mode)) {
     if (!m_file) throw IoError("oracle exchange: cannot open " + path);
   }
   void write(const void* data, std::size_t bytes) {
@@ -38,7 +39,9 @@ class BinaryFile {
       throw IoError("oracle exchange: " + m_path + " is truncated");
   }
   template <class T>
-  void put(const T& v) { write(&v, sizeof v); }
+  void put(const T& v) {
+    write(&v, sizeof v);
+  }
   template <class T>
   T get() {
     T v;
@@ -51,8 +54,7 @@ class BinaryFile {
     if (std::memcmp(m, magic, 8) != 0) throw IoError("oracle exchange: " + m_path + " has a bad header");
   }
   void expect_end() {
-    if (std::fgetc(m_file.get()) != EOF)
-      throw IoError("oracle exchange: " + m_path + " has trailing data");
+    if (std::fgetc(m_file.get()) != EOF) throw IoError("oracle exchange: " + m_path + " has trailing data");
   }
   void close() {
     if (std::fclose(m_file.release()) != 0) throw IoError("oracle exchange: cannot write " + m_path);

@@ -6,6 +6,10 @@
 // Invariants: bodies are added in id order (so Bullet's body A, the first added, is the smaller id);
 // one performDiscreteCollisionDetection() gives the contacts; the world is torn down in O(pairs + n)
 // (Bullet's own teardown removes each proxy by scanning every pair: O(n · pairs), minutes at 2^20).
+#include "bullet_oracle.hpp"
+
+#include <btBulletCollisionCommon.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -14,9 +18,6 @@
 #include <string>
 #include <vector>
 
-#include <btBulletCollisionCommon.h>
-
-#include "bullet_oracle.hpp"
 #include "errors.hpp"
 
 namespace cg::bullet_native {
@@ -28,9 +29,7 @@ double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-btVector3 to_bt(const Vec3<double>& v) {
-  return btVector3(btScalar(v.x), btScalar(v.y), btScalar(v.z));
-}
+btVector3 to_bt(const Vec3<double>& v) { return btVector3(btScalar(v.x), btScalar(v.y), btScalar(v.z)); }
 Vec3<double> from_bt(const btVector3& v) { return {double(v.x()), double(v.y()), double(v.z())}; }
 
 // Removes every overlapping pair (releasing its algorithm and manifold) in one pass, so that the
@@ -137,8 +136,7 @@ class BulletWorld {
 OracleResult collide(const OracleSpheres& spheres, bool warm_step) {
   for (std::size_t i = 1; i < spheres.size(); ++i)
     if (spheres.id[i - 1] >= spheres.id[i])
-      throw InputError("Bullet oracle: body ids must be strictly ascending (row " +
-                       std::to_string(i) + ")");
+      throw InputError("Bullet oracle: body ids must be strictly ascending (row " + std::to_string(i) + ")");
   OracleResult result;
   result.scalar_bytes = int(sizeof(btScalar));
   const auto t0 = Clock::now();

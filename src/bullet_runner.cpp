@@ -75,8 +75,7 @@ OracleResult run_float_executable(const OracleSpheres& spheres, bool warm_step) 
   while (::waitpid(pid, &status, 0) < 0) {
     if (errno != EINTR) throw IoError("waiting for " + exe + ": " + std::strerror(errno));
   }
-  if (WIFSIGNALED(status))
-    throw IoError(exe + " was killed by signal " + std::to_string(WTERMSIG(status)));
+  if (WIFSIGNALED(status)) throw IoError(exe + " was killed by signal " + std::to_string(WTERMSIG(status)));
   if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
     throw IoError(exe + " failed with exit status " + std::to_string(WEXITSTATUS(status)) +
                   " (its message is above)");

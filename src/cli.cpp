@@ -1,9 +1,9 @@
 // Command-line parsing. Every option is validated here, before any file is read or any rank talks.
 #include "cli.hpp"
 
-#include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
+#include <CLI/CLI.hpp>
 #include <map>
 
 #include "pipeline.hpp"
@@ -24,8 +24,9 @@ const std::map<std::string, Fields> k_fields{{"basic", Fields::basic}, {"full", 
 }  // namespace
 
 int run_cli(int argc, char** argv, Session& session) {
-  CLI::App app{"contactgrid: every touching or overlapping pair of spheres, with Bullet's contact data.\n"
-               "Le Grand's uniform grid on a CPU or CUDA backend; MPI slabs under mpirun."};
+  CLI::App app{
+      "contactgrid: every touching or overlapping pair of spheres, with Bullet's contact data.\n"
+      "Le Grand's uniform grid on a CPU or CUDA backend; MPI slabs under mpirun."};
   app.require_subcommand(1);
   app.set_version_flag("--version", "contactgrid 0.1.0");
 
@@ -44,7 +45,8 @@ int run_cli(int argc, char** argv, Session& session) {
       ->capture_default_str();
   g->add_option("--seed", gen.seed, "Random seed")->capture_default_str();
   double gen_ratio = 10;
-  auto* rlow_opt = g->add_option("--rlow", gen.radius_low, "Smallest radius Rlow (length units)")->capture_default_str();
+  auto* rlow_opt =
+      g->add_option("--rlow", gen.radius_low, "Smallest radius Rlow (length units)")->capture_default_str();
   g->add_option("--ratio", gen_ratio, "polydisperse: Rhigh / Rlow when --rlow is not given (up to 1000)")
       ->check(CLI::Range(1.0, 1000.0))
       ->capture_default_str();
@@ -59,7 +61,8 @@ int run_cli(int argc, char** argv, Session& session) {
   // detect
   DetectCommand det;
   auto* d = app.add_subcommand("detect", "Every contact of a scene (CONTRACT §2/§3), sorted by (id_a, id_b)");
-  d->add_option("scene", det.input, "Scene file (.h5)")->required();  // existence is checked by the reader (exit 3, names the file)
+  d->add_option("scene", det.input, "Scene file (.h5)")
+      ->required();  // existence is checked by the reader (exit 3, names the file)
   d->add_option("-o,--output", det.output, "Contacts file to write (.h5)")->required();
   d->add_option("--backend", det.backend, "cpu | cuda | auto (cuda when a GPU is present)")
       ->transform(CLI::CheckedTransformer(k_backends))
@@ -74,7 +77,8 @@ int run_cli(int argc, char** argv, Session& session) {
                 "Grid cell edge (length units); default: largest diameter + rounding margin")
       ->check(CLI::NonNegativeNumber);
   d->add_option("--csv", det.csv, "Also write the contacts as CSV (for small results)");
-  d->add_option("--threads", det.threads, "CPU backend threads (0: all cores)")->check(CLI::NonNegativeNumber);
+  d->add_option("--threads", det.threads, "CPU backend threads (0: all cores)")
+      ->check(CLI::NonNegativeNumber);
   d->add_option("--axis", det.axis, "MPI slab axis: auto (largest extent) | x | y | z")
       ->check(CLI::IsMember({"auto", "x", "y", "z"}))
       ->capture_default_str();
@@ -85,7 +89,8 @@ int run_cli(int argc, char** argv, Session& session) {
 
   // compare
   std::string cmp_a, cmp_b;
-  auto* c = app.add_subcommand("compare", "Are the /contacts datasets of two contact files byte-identical? (0 yes, 1 no)");
+  auto* c = app.add_subcommand(
+      "compare", "Are the /contacts datasets of two contact files byte-identical? (0 yes, 1 no)");
   c->add_option("a", cmp_a, "Contacts file")->required();
   c->add_option("b", cmp_b, "Contacts file")->required();
 
@@ -93,7 +98,8 @@ int run_cli(int argc, char** argv, Session& session) {
   // validate
   std::string val_scene, val_contacts, val_bullet = "double";
   ValidateOptions val;
-  auto* v = app.add_subcommand("validate", "Compare a contacts file with Bullet 3.24 (CONTRACT §4); PASS exits 0, FAIL 1");
+  auto* v = app.add_subcommand(
+      "validate", "Compare a contacts file with Bullet 3.24 (CONTRACT §4); PASS exits 0, FAIL 1");
   v->add_option("scene", val_scene, "Scene file (.h5)")->required();
   v->add_option("contacts", val_contacts, "Contacts file (.h5) written by detect")->required();
   v->add_option("--pos-eps", val.pos_eps, "Largest position error allowed (absolute, length units)")
@@ -107,17 +113,20 @@ int run_cli(int argc, char** argv, Session& session) {
                 "origin and for nearly coincident centres")
       ->check(CLI::IsMember({"double", "float"}))
       ->capture_default_str();
-  v->add_option("--sample", val.sample, "Validate K random sub-boxes instead of the whole scene (large scenes)");
+  v->add_option("--sample", val.sample,
+                "Validate K random sub-boxes instead of the whole scene (large scenes)");
   v->add_option("--seed", val.seed, "Seed of the sub-box choice")->capture_default_str();
 
   // bench
   BenchOptions bench;
   std::vector<std::string> bench_backends;
   bool bench_no_plot = false;
-  auto* b = app.add_subcommand("bench", "Timing study: engine vs Bullet for N = 2^lo … 2^hi (table, CSV, plots)");
+  auto* b =
+      app.add_subcommand("bench", "Timing study: engine vs Bullet for N = 2^lo … 2^hi (table, CSV, plots)");
   b->add_option("--lo", bench.lo, "First N = 2^lo")->capture_default_str();
   b->add_option("--bullet-hi", bench.bullet_hi, "Bullet runs while N <= 2^bullet-hi")->capture_default_str();
-  b->add_option("--engine-hi", bench.engine_hi, "The engine runs while N <= 2^engine-hi")->capture_default_str();
+  b->add_option("--engine-hi", bench.engine_hi, "The engine runs while N <= 2^engine-hi")
+      ->capture_default_str();
   b->add_option("--repetitions", bench.repetitions, "Engine time = median of this many warm runs")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
@@ -161,7 +170,8 @@ int run_cli(int argc, char** argv, Session& session) {
   }
   if (b->parsed()) {
     if (session.rank() != 0) return 0;
-    for (const auto& name : bench_backends) bench.backends.push_back(name == "cuda" ? Backend::cuda : Backend::cpu);
+    for (const auto& name : bench_backends)
+      bench.backends.push_back(name == "cuda" ? Backend::cuda : Backend::cpu);
     bench.plot = !bench_no_plot;
     run_bench(bench);
     return 0;

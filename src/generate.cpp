@@ -15,6 +15,8 @@
 // The edge solves (n−1)/2 · E[P] = c by bisection in log L (E decreases in L).
 #include "generate.hpp"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <array>
 #include <bit>
@@ -22,8 +24,6 @@
 #include <mutex>
 #include <numbers>
 #include <vector>
-
-#include <fmt/format.h>
 
 #include "errors.hpp"
 #include "hdf5_io.hpp"
@@ -44,9 +44,23 @@ constexpr std::uint64_t mix64(std::uint64_t z) {
 }
 
 // Streams of one body (at most 16).
-enum Stream : unsigned { kX = 0, kY = 1, kZ = 2, kRadius = 3, kGauss0 = 4, kGauss1 = 5, kGauss2 = 6,
-                         kGauss3 = 7, kAxisA = 8, kAxisB = 9, kAxisC = 10, kQuat0 = 11, kQuat1 = 12,
-                         kQuat2 = 13, kCluster = 14 };
+enum Stream : unsigned {
+  kX = 0,
+  kY = 1,
+  kZ = 2,
+  kRadius = 3,
+  kGauss0 = 4,
+  kGauss1 = 5,
+  kGauss2 = 6,
+  kGauss3 = 7,
+  kAxisA = 8,
+  kAxisB = 9,
+  kAxisC = 10,
+  kQuat0 = 11,
+  kQuat1 = 12,
+  kQuat2 = 13,
+  kCluster = 14
+};
 
 class CounterRng {
  public:
@@ -110,9 +124,9 @@ const Rule& rule64() {
 double inner_integral(double s) {
   if (s <= 0) return 0;
   double x1 = std::clamp(std::sqrt(std::max(0.0, s - 1)), 0.0, 1.0);  // a = 1 up to here
-  double x2 = std::clamp(std::sqrt(s), 0.0, 1.0);                      // a = 0 from here
+  double x2 = std::clamp(std::sqrt(s), 0.0, 1.0);                     // a = 0 from here
   double root_s = std::sqrt(s);
-  auto antiderivative = [&](double x) {  // of (1−x)(√(s−x²) − (s−x²)/2)
+  auto antiderivative = [&](double x) {                     // of (1−x)(√(s−x²) − (s−x²)/2)
     double q = std::max(0.0, (root_s - x) * (root_s + x));  // s − x², exactly 0 at x = √s
     double a = 0.5 * (x * std::sqrt(q) + s * std::asin(std::min(1.0, x / root_s)));
     double b = -q * std::sqrt(q) / 3;
@@ -185,7 +199,8 @@ double expected_contact(const RadiusNodes& nodes, double edge) {
   double sum = 0;
   for (std::size_t i = 0; i < nodes.r.size(); ++i) {
     double row = 0;
-    for (std::size_t j = 0; j < nodes.r.size(); ++j) row += nodes.w[j] * cube_distance_cdf((nodes.r[i] + nodes.r[j]) / edge);
+    for (std::size_t j = 0; j < nodes.r.size(); ++j)
+      row += nodes.w[j] * cube_distance_cdf((nodes.r[i] + nodes.r[j]) / edge);
     sum += nodes.w[i] * row;
   }
   return sum;
@@ -193,7 +208,8 @@ double expected_contact(const RadiusNodes& nodes, double edge) {
 
 void check_radius_law(double r_low, double r_high) {
   if (!(std::isfinite(r_low) && std::isfinite(r_high) && r_low > 0 && r_low <= r_high)) {
-    throw UsageError(fmt::format("radii must satisfy 0 < radius_low <= radius_high (got {} and {})", r_low, r_high));
+    throw UsageError(
+        fmt::format("radii must satisfy 0 < radius_low <= radius_high (got {} and {})", r_low, r_high));
   }
 }
 
@@ -268,7 +284,8 @@ double detail::cube_distance_cdf_integral(double t) {
   std::sort(cuts.begin(), cuts.end());
   double sum = 0;
   for (std::size_t k = 0; k + 1 < cuts.size(); ++k) {
-    sum += smooth_integral(cuts[k], cuts[k + 1], [&](double u) { return (1 - u) * inner_integral(t2 - u * u); });
+    sum +=
+        smooth_integral(cuts[k], cuts[k + 1], [&](double u) { return (1 - u) * inner_integral(t2 - u * u); });
   }
   return std::min(1.0, 8 * sum);
 }
@@ -294,19 +311,24 @@ double box_edge(std::uint64_t n, RadiusLaw law, double r_low, double r_high, dou
   check_radius_law(r_low, r_high);
   if (n == 0) throw UsageError("box edge: body count must be >= 1");
   if (!(std::isfinite(contacts_per_body) && contacts_per_body > 0))
-    throw UsageError(fmt::format("contacts per body must be a finite number > 0 (got {})", contacts_per_body));
+    throw UsageError(
+        fmt::format("contacts per body must be a finite number > 0 (got {})", contacts_per_body));
 
   const RadiusNodes nodes = radius_nodes(law, r_low, r_high);
   const double pairs_per_body = 0.5 * static_cast<double>(n - 1);
-  auto excess = [&](double edge) { return pairs_per_body * expected_contact(nodes, edge) - contacts_per_body; };
+  auto excess = [&](double edge) {
+    return pairs_per_body * expected_contact(nodes, edge) - contacts_per_body;
+  };
 
   double lo = 2 * r_low / std::sqrt(3.0);  // every pair in contact at this edge and below
   if (excess(lo) <= 0) return lo;
 
   double s3 = 0;  // E[(r1 + r2)^3]: the small-t asymptote E[P] ≈ 4π/3·E[s³]/L³ gives the scale
   for (std::size_t i = 0; i < nodes.r.size(); ++i)
-    for (std::size_t j = 0; j < nodes.r.size(); ++j) s3 += nodes.w[i] * nodes.w[j] * std::pow(nodes.r[i] + nodes.r[j], 3);
-  double hi = std::max(2 * lo, 2 * std::cbrt(pairs_per_body * 4 * std::numbers::pi / 3 * s3 / contacts_per_body));
+    for (std::size_t j = 0; j < nodes.r.size(); ++j)
+      s3 += nodes.w[i] * nodes.w[j] * std::pow(nodes.r[i] + nodes.r[j], 3);
+  double hi =
+      std::max(2 * lo, 2 * std::cbrt(pairs_per_body * 4 * std::numbers::pi / 3 * s3 / contacts_per_body));
   for (int k = 0; k < 200 && excess(hi) > 0; ++k) hi *= 2;
 
   for (int k = 0; k < 200 && hi > lo * (1 + 1e-15); ++k) {
@@ -329,14 +351,16 @@ void validate_generate_options(const GenerateOptions& o) {
   if (o.kind != "uniform" && o.kind != "polydisperse")
     throw UsageError(fmt::format("generator kind must be uniform or polydisperse (got \"{}\")", o.kind));
   if (o.count < 1 || o.count > kMaxGenerateCount)
-    throw UsageError(fmt::format("body count must be in [1, 2^28 = {}] (got {})", kMaxGenerateCount, o.count));
+    throw UsageError(
+        fmt::format("body count must be in [1, 2^28 = {}] (got {})", kMaxGenerateCount, o.count));
   check_radius_law(o.radius_low, o.radius_high);
   if (o.kind == "polydisperse" && o.radius_high / o.radius_low > kMaxPolydisperseRatio) {
-    throw UsageError(fmt::format("polydisperse radius ratio {} / {} = {} exceeds {}", o.radius_high, o.radius_low,
-                                 o.radius_high / o.radius_low, kMaxPolydisperseRatio));
+    throw UsageError(fmt::format("polydisperse radius ratio {} / {} = {} exceeds {}", o.radius_high,
+                                 o.radius_low, o.radius_high / o.radius_low, kMaxPolydisperseRatio));
   }
   if (!(std::isfinite(o.contacts_per_body) && o.contacts_per_body > 0))
-    throw UsageError(fmt::format("contacts per body must be a finite number > 0 (got {})", o.contacts_per_body));
+    throw UsageError(
+        fmt::format("contacts per body must be a finite number > 0 (got {})", o.contacts_per_body));
   if (!(std::isfinite(o.offset.x) && std::isfinite(o.offset.y) && std::isfinite(o.offset.z)))
     throw UsageError("offset must be finite");
 }
@@ -355,7 +379,8 @@ Scene generate_scene(const GenerateOptions& options) {
   Scene scene;
   scene.sphere_position.resize(options.count);
   scene.sphere_radius.resize(options.count);
-  for (std::uint64_t i = 0; i < options.count; ++i) law.body(i, scene.sphere_position[i], scene.sphere_radius[i]);
+  for (std::uint64_t i = 0; i < options.count; ++i)
+    law.body(i, scene.sphere_position[i], scene.sphere_radius[i]);
   scene.radius_low = options.radius_low;
   scene.radius_high = options.radius_high;
   scene.attributes = generator_attributes(options, edge);
@@ -385,9 +410,11 @@ void generate_scene_file(const std::string& path, const GenerateOptions& options
 // ---- builders for tests ------------------------------------------------------------------------------
 
 Scene make_clustered_scene(std::uint64_t n, std::uint64_t seed, int clusters) {
-  if (clusters < 1) throw UsageError(fmt::format("clustered scene: clusters must be >= 1 (got {})", clusters));
+  if (clusters < 1)
+    throw UsageError(fmt::format("clustered scene: clusters must be >= 1 (got {})", clusters));
   const CounterRng rng(seed);
-  const std::uint64_t k = std::min<std::uint64_t>(static_cast<std::uint64_t>(clusters), std::max<std::uint64_t>(n, 1));
+  const std::uint64_t k =
+      std::min<std::uint64_t>(static_cast<std::uint64_t>(clusters), std::max<std::uint64_t>(n, 1));
   const double per_cluster = std::ceil(static_cast<double>(n) / static_cast<double>(k));
   const double sigma = std::max(1.0, std::cbrt(per_cluster / 12));
   const double spread = 8 * sigma * std::cbrt(static_cast<double>(k));
@@ -420,7 +447,8 @@ Scene make_clustered_scene(std::uint64_t n, std::uint64_t seed, int clusters) {
 Scene make_lattice_scene(std::uint32_t nx, std::uint32_t ny, std::uint32_t nz, double spacing, double radius,
                          Vec3<double> origin) {
   if (!(std::isfinite(spacing) && std::isfinite(radius) && radius > 0))
-    throw UsageError(fmt::format("lattice scene: need finite spacing and radius > 0 (got {}, {})", spacing, radius));
+    throw UsageError(
+        fmt::format("lattice scene: need finite spacing and radius > 0 (got {}, {})", spacing, radius));
   Scene scene;
   const std::size_t n = std::size_t(nx) * ny * nz;
   scene.sphere_position.reserve(n);
@@ -428,7 +456,8 @@ Scene make_lattice_scene(std::uint32_t nx, std::uint32_t ny, std::uint32_t nz, d
   for (std::uint32_t k = 0; k < nz; ++k)
     for (std::uint32_t j = 0; j < ny; ++j)
       for (std::uint32_t i = 0; i < nx; ++i)
-        scene.sphere_position.push_back({origin.x + spacing * i, origin.y + spacing * j, origin.z + spacing * k});
+        scene.sphere_position.push_back(
+            {origin.x + spacing * i, origin.y + spacing * j, origin.z + spacing * k});
   scene.radius_low = radius;
   scene.radius_high = radius;
   scene.attributes["generator"] = std::string("lattice");
@@ -441,7 +470,9 @@ Scene make_ellipsoid_scene(std::uint64_t spheres, std::uint64_t ellipsoids, std:
   const CounterRng rng(seed);
   const std::uint64_t n = spheres + ellipsoids;
   const double edge = n == 0 ? 1.0 : box_edge(n, RadiusLaw::uniform, 0.5, 1.0, 0.4);
-  auto coordinate = [&](std::uint64_t i, unsigned stream) { return std::min(edge * rng.unit(i, stream), std::nextafter(edge, 0.0)); };
+  auto coordinate = [&](std::uint64_t i, unsigned stream) {
+    return std::min(edge * rng.unit(i, stream), std::nextafter(edge, 0.0));
+  };
   Scene scene;
   for (std::uint64_t i = 0; i < spheres; ++i) {
     scene.sphere_position.push_back({coordinate(i, kX), coordinate(i, kY), coordinate(i, kZ)});

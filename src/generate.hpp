@@ -11,13 +11,13 @@
 namespace cg {
 
 struct GenerateOptions {
-  std::string kind = "uniform";      // uniform | polydisperse
-  std::uint64_t count = 1024;        // N, 1 … 2^28
+  std::string kind = "uniform";  // uniform | polydisperse
+  std::uint64_t count = 1024;    // N, 1 … 2^28
   std::uint64_t seed = 1;
-  double radius_low = 0.5;           // Rlow
-  double radius_high = 1.0;          // Rhigh (polydisperse: default Rlow·1000 … see --ratio)
-  double contacts_per_body = 0.4;    // target density (course: 0.4)
-  Vec3<double> offset{0, 0, 0};      // translation of the whole scene (far-from-origin tests)
+  double radius_low = 0.5;         // Rlow
+  double radius_high = 1.0;        // Rhigh (polydisperse: default Rlow·1000 … see --ratio)
+  double contacts_per_body = 0.4;  // target density (course: 0.4)
+  Vec3<double> offset{0, 0, 0};    // translation of the whole scene (far-from-origin tests)
 };
 
 inline constexpr std::uint64_t kMaxGenerateCount = std::uint64_t(1) << 28;

@@ -13,6 +13,7 @@
 //   order, so equal content gives byte-identical files.
 #include "hdf5_io.hpp"
 
+#include <fmt/format.h>
 #include <hdf5.h>
 #include <omp.h>
 #include <sys/mman.h>
@@ -28,8 +29,6 @@
 #include <mutex>
 #include <type_traits>
 #include <utility>
-
-#include <fmt/format.h>
 
 namespace cg {
 
@@ -146,8 +145,8 @@ void check(herr_t status, const Where& where, const std::string& what) {
 }
 
 Handle make_space(const Where& where, const std::vector<hsize_t>& dims) {
-  return checked(H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr), H5Sclose,
-                 where, "cannot create a dataspace");
+  return checked(H5Screate_simple(static_cast<int>(dims.size()), dims.data(), nullptr), H5Sclose, where,
+                 "cannot create a dataspace");
 }
 Handle scalar_space(const Where& where) {
   return checked(H5Screate(H5S_SCALAR), H5Sclose, where, "cannot create a dataspace");
@@ -168,14 +167,22 @@ std::string shape_text(const std::vector<hsize_t>& dims) {
 std::string type_text(hid_t type) {
   std::size_t bits = H5Tget_size(type) * 8;
   switch (H5Tget_class(type)) {
-    case H5T_INTEGER: return fmt::format("{}-bit integer", bits);
-    case H5T_FLOAT: return fmt::format("{}-bit float", bits);
-    case H5T_STRING: return "string";
-    case H5T_COMPOUND: return "compound";
-    case H5T_ENUM: return "enum";
-    case H5T_ARRAY: return "array";
-    case H5T_VLEN: return "variable-length sequence";
-    default: return "unsupported type";
+    case H5T_INTEGER:
+      return fmt::format("{}-bit integer", bits);
+    case H5T_FLOAT:
+      return fmt::format("{}-bit float", bits);
+    case H5T_STRING:
+      return "string";
+    case H5T_COMPOUND:
+      return "compound";
+    case H5T_ENUM:
+      return "enum";
+    case H5T_ARRAY:
+      return "array";
+    case H5T_VLEN:
+      return "variable-length sequence";
+    default:
+      return "unsupported type";
   }
 }
 
@@ -229,8 +236,7 @@ struct Dataset {
 
 enum class Element { real, integer };
 
-Dataset open_dataset(const Where& where, hid_t file, const std::string& name, hsize_t cols,
-                     Element element) {
+Dataset open_dataset(const Where& where, hid_t file, const std::string& name, hsize_t cols, Element element) {
   if (!path_exists(where, file, name)) where.bad(fmt::format("{}: missing dataset", name));
   if (object_type(where, file, name) != H5I_DATASET) where.bad(fmt::format("{} is not a dataset", name));
   Dataset d;
@@ -263,7 +269,8 @@ Dataset open_dataset(const Where& where, hid_t file, const std::string& name, hs
 }
 
 // Rows [first, first + count) of d into out (count·max(cols,1) values of mem_type).
-void read_rows(const Where& where, const Dataset& d, hsize_t first, hsize_t count, hid_t mem_type, void* out) {
+void read_rows(const Where& where, const Dataset& d, hsize_t first, hsize_t count, hid_t mem_type,
+               void* out) {
   if (count == 0) return;
   std::string what = fmt::format("{}: cannot read rows {} to {}", d.name, first, first + count - 1);
   Handle file_space = checked(H5Dget_space(d.id), H5Sclose, where, what);
@@ -272,8 +279,8 @@ void read_rows(const Where& where, const Dataset& d, hsize_t first, hsize_t coun
     start.push_back(0);
     extent.push_back(d.cols);
   }
-  check(H5Sselect_hyperslab(file_space, H5S_SELECT_SET, start.data(), nullptr, extent.data(), nullptr),
-        where, what);
+  check(H5Sselect_hyperslab(file_space, H5S_SELECT_SET, start.data(), nullptr, extent.data(), nullptr), where,
+        what);
   Handle mem_space = make_space(where, extent);
   check(H5Dread(d.id, mem_type, mem_space, file_space, H5P_DEFAULT, out), where, what);
 }
@@ -440,8 +447,8 @@ void write_rows(const Where& where, hid_t dataset, const std::string& name, hsiz
     start.push_back(0);
     extent.push_back(cols);
   }
-  check(H5Sselect_hyperslab(file_space, H5S_SELECT_SET, start.data(), nullptr, extent.data(), nullptr),
-        where, what);
+  check(H5Sselect_hyperslab(file_space, H5S_SELECT_SET, start.data(), nullptr, extent.data(), nullptr), where,
+        what);
   Handle mem_space = make_space(where, extent);
   check(H5Dwrite(dataset, mem_type, mem_space, file_space, H5P_DEFAULT, data), where, what);
 }
@@ -471,7 +478,8 @@ void write_whole(const Where& where, hid_t file, const std::string& name, const 
   write_rows(where, dataset, name, 0, values.size(), 0, TypeOf<T>::memory(), values.data());
 }
 template <class T>
-void write_whole(const Where& where, hid_t file, const std::string& name, const std::vector<Vec3<T>>& values) {
+void write_whole(const Where& where, hid_t file, const std::string& name,
+                 const std::vector<Vec3<T>>& values) {
   Handle dataset = create_dataset(where, file, name, TypeOf<T>::file(), {values.size(), 3});
   write_rows(where, dataset, name, 0, values.size(), 3, TypeOf<T>::memory(), values.data());
 }
@@ -501,9 +509,12 @@ std::optional<double> radius_bound(const Where& where, Attributes& attributes, c
   auto it = attributes.find(name);
   if (it == attributes.end()) return std::nullopt;
   double value = 0;
-  if (const auto* d = std::get_if<double>(&it->second)) value = *d;
-  else if (const auto* i = std::get_if<std::int64_t>(&it->second)) value = static_cast<double>(*i);
-  else where.bad(fmt::format("root attribute {} is a string; expected a number", name));
+  if (const auto* d = std::get_if<double>(&it->second))
+    value = *d;
+  else if (const auto* i = std::get_if<std::int64_t>(&it->second))
+    value = static_cast<double>(*i);
+  else
+    where.bad(fmt::format("root attribute {} is a string; expected a number", name));
   if (!std::isfinite(value) || value < 0)
     where.bad(fmt::format("root attribute {} = {} is not a finite number >= 0", name, value));
   attributes.erase(it);
@@ -720,14 +731,15 @@ SceneFileWriter::~SceneFileWriter() {
 }
 
 namespace {
-void check_block(const Where& where, const char* group, std::size_t first, std::size_t rows, std::size_t total,
-                 std::initializer_list<std::size_t> sizes) {
+void check_block(const Where& where, const char* group, std::size_t first, std::size_t rows,
+                 std::size_t total, std::initializer_list<std::size_t> sizes) {
   for (std::size_t size : sizes) {
-    if (size != rows) throw Error(fmt::format("{}: {}: a block's arrays differ in length", where.file(), group));
+    if (size != rows)
+      throw Error(fmt::format("{}: {}: a block's arrays differ in length", where.file(), group));
   }
   if (first > total || rows > total - first) {
-    throw Error(fmt::format("{}: {}: rows [{}, {}) outside the {} rows of the file", where.file(), group, first,
-                            first + rows, total));
+    throw Error(fmt::format("{}: {}: rows [{}, {}) outside the {} rows of the file", where.file(), group,
+                            first, first + rows, total));
   }
 }
 }  // namespace
@@ -806,7 +818,8 @@ void write_scene(const std::string& path, const Scene& scene) {
   header.attributes = scene.attributes;
   SceneFileWriter writer(path, header);
   writer.write_spheres(0, scene.sphere_position, scene.sphere_radius);
-  writer.write_ellipsoids(0, scene.ellipsoid_position, scene.ellipsoid_semi_axes, scene.ellipsoid_orientation);
+  writer.write_ellipsoids(0, scene.ellipsoid_position, scene.ellipsoid_semi_axes,
+                          scene.ellipsoid_orientation);
   writer.commit();
 }
 
@@ -908,7 +921,8 @@ ContactFile read_contacts(const std::string& path) {
   int present = 0;
   for (const char* name : optional) present += path_exists(where, file, name) ? 1 : 0;
   if (present != 0 && present != 4)
-    where.bad("/contacts: the optional datasets (local points, friction directions) must be all present or none");
+    where.bad(
+        "/contacts: the optional datasets (local points, friction directions) must be all present or none");
   c.full = present == 4;
   if (c.full) {
     read_real(optional[0], 3, c.local_point_a);
@@ -939,13 +953,22 @@ void write_raw_dataset(const std::string& path, const std::string& dataset, RawT
   std::uint64_t product = 1;
   for (std::uint64_t d : dims) product *= d;
   if (product != values.size())
-    throw Error(fmt::format("{}: {}: {} values for shape of {} elements", path, dataset, values.size(), product));
+    throw Error(
+        fmt::format("{}: {}: {} values for shape of {} elements", path, dataset, values.size(), product));
   hid_t file_type = H5T_IEEE_F64LE;
   switch (type) {
-    case RawType::float64: file_type = H5T_IEEE_F64LE; break;
-    case RawType::float32: file_type = H5T_IEEE_F32LE; break;
-    case RawType::int32: file_type = H5T_STD_I32LE; break;
-    case RawType::int64: file_type = H5T_STD_I64LE; break;
+    case RawType::float64:
+      file_type = H5T_IEEE_F64LE;
+      break;
+    case RawType::float32:
+      file_type = H5T_IEEE_F32LE;
+      break;
+    case RawType::int32:
+      file_type = H5T_STD_I32LE;
+      break;
+    case RawType::int64:
+      file_type = H5T_STD_I64LE;
+      break;
   }
   Handle file = open_or_create(where);
   {
@@ -967,7 +990,8 @@ void write_raw_attribute(const std::string& path, const std::string& name, const
     Handle root = checked(H5Gopen2(file, "/", H5P_DEFAULT), H5Gclose, where, "cannot open the root group");
     htri_t exists = H5Aexists(root, name.c_str());
     if (exists < 0) where.fail(fmt::format("cannot look up root attribute {}", name));
-    if (exists > 0) check(H5Adelete(root, name.c_str()), where, fmt::format("cannot replace root attribute {}", name));
+    if (exists > 0)
+      check(H5Adelete(root, name.c_str()), where, fmt::format("cannot replace root attribute {}", name));
     write_attribute(where, root, name, value);
   }
   file.close(where, "cannot close (flush) the file");
@@ -978,7 +1002,8 @@ std::optional<DatasetInfo> inspect_dataset(const std::string& path, const std::s
   Where where(path, false);
   Handle file = open_file_for_reading(where);
   if (!path_exists(where, file, dataset)) return std::nullopt;
-  if (object_type(where, file, dataset) != H5I_DATASET) where.bad(fmt::format("{} is not a dataset", dataset));
+  if (object_type(where, file, dataset) != H5I_DATASET)
+    where.bad(fmt::format("{} is not a dataset", dataset));
   Handle d = checked(H5Dopen2(file, dataset.c_str(), H5P_DEFAULT), H5Dclose, where,
                      fmt::format("{}: cannot open the dataset", dataset));
   Handle type = checked(H5Dget_type(d), H5Tclose, where, fmt::format("{}: cannot read the type", dataset));
@@ -986,9 +1011,15 @@ std::optional<DatasetInfo> inspect_dataset(const std::string& path, const std::s
   DatasetInfo info;
   std::size_t bits = H5Tget_size(type) * 8;
   switch (H5Tget_class(type)) {
-    case H5T_FLOAT: info.type = fmt::format("float{}", bits); break;
-    case H5T_INTEGER: info.type = fmt::format("{}int{}", H5Tget_sign(type) == H5T_SGN_NONE ? "u" : "", bits); break;
-    default: info.type = "other"; break;
+    case H5T_FLOAT:
+      info.type = fmt::format("float{}", bits);
+      break;
+    case H5T_INTEGER:
+      info.type = fmt::format("{}int{}", H5Tget_sign(type) == H5T_SGN_NONE ? "u" : "", bits);
+      break;
+    default:
+      info.type = "other";
+      break;
   }
   int rank = H5Sget_simple_extent_ndims(space);
   if (rank < 0) where.fail(fmt::format("{}: cannot read the shape", dataset));
@@ -1012,7 +1043,8 @@ std::vector<unsigned char> read_dataset_bytes(const std::string& path, const std
   if (points < 0) where.fail(fmt::format("{}: cannot read the shape", dataset));
   std::vector<unsigned char> bytes(static_cast<std::size_t>(points) * H5Tget_size(type));
   if (!bytes.empty())
-    check(H5Dread(d, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, bytes.data()), where, fmt::format("{}: cannot read", dataset));
+    check(H5Dread(d, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, bytes.data()), where,
+          fmt::format("{}: cannot read", dataset));
   return bytes;
 }
 

@@ -81,7 +81,7 @@ struct RunInfo {
   std::string backend;    // "cpu" | "cuda"
   int ranks = 1;
   double cell_size = 0;
-  std::string input;      // input file name
+  std::string input;  // input file name
   StageTimes times;
 };
 

@@ -2,12 +2,12 @@
 #include "pipeline.hpp"
 
 #include <fmt/format.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <unistd.h>
 
 #include "distributed_detect.hpp"
 #include "hdf5_io.hpp"
@@ -29,8 +29,8 @@ void print_summary(const RunInfo& info, std::uint64_t contacts, const Distribute
              info.backend, info.precision);
   fmt::print("  cell size {:.6g}", info.cell_size);
   if (r.ranks > 1)
-    fmt::print(", slab axis {}, owned bodies per rank {} … {}, ghosts {}, duplicates removed {}", "xyz"[r.axis],
-               r.owned_min, r.owned_max, r.ghosts, r.duplicates_removed);
+    fmt::print(", slab axis {}, owned bodies per rank {} … {}, ghosts {}, duplicates removed {}",
+               "xyz"[r.axis], r.owned_min, r.owned_max, r.ghosts, r.duplicates_removed);
   fmt::print("\n  {}-bit cell keys, {} (cell, body) entries, {} pair tests; times: maximum over ranks\n",
              r.stats.key_bits, r.stats.entries, r.stats.pair_tests);
   double total = 0;
@@ -91,9 +91,9 @@ int run_detect(const DetectCommand& cmd, Session& session) {
 }
 
 int run_compare(const std::string& a, const std::string& b) {
-  static const char* const k_datasets[] = {"id_a", "id_b", "position_on_a", "position_on_b", "normal_on_b",
-                                           "distance", "local_point_a", "local_point_b",
-                                           "lateral_friction_dir1", "lateral_friction_dir2"};
+  static const char* const k_datasets[] = {
+      "id_a",     "id_b",          "position_on_a", "position_on_b",         "normal_on_b",
+      "distance", "local_point_a", "local_point_b", "lateral_friction_dir1", "lateral_friction_dir2"};
   int differ = 0;
   for (const char* name : k_datasets) {
     const std::string ds = std::string("/contacts/") + name;
@@ -125,8 +125,8 @@ int run_generate(const std::string& path, const GenerateOptions& options, bool q
   auto t = clock_type::now();
   generate_scene_file(path, options);
   if (!quiet)
-    fmt::print("contactgrid generate: {} {} bodies (seed {}) -> {} in {:.3f} s\n", options.count, options.kind,
-               options.seed, path, seconds_since(t));
+    fmt::print("contactgrid generate: {} {} bodies (seed {}) -> {} in {:.3f} s\n", options.count,
+               options.kind, options.seed, path, seconds_since(t));
   return 0;
 }
 
@@ -136,12 +136,13 @@ void write_contacts_csv(const std::string& path, const Contacts<Real>& c) {
   {
     std::FILE* f = std::fopen(tmp.c_str(), "w");
     if (!f) throw IoError(path + ": cannot open for writing");
-    fmt::print(f, "id_a,id_b,position_on_a_x,position_on_a_y,position_on_a_z,position_on_b_x,position_on_b_y,"
-                  "position_on_b_z,normal_on_b_x,normal_on_b_y,normal_on_b_z,distance\n");
+    fmt::print(f,
+               "id_a,id_b,position_on_a_x,position_on_a_y,position_on_a_z,position_on_b_x,position_on_b_y,"
+               "position_on_b_z,normal_on_b_x,normal_on_b_y,normal_on_b_z,distance\n");
     for (std::size_t k = 0; k < c.size(); ++k) {
       const auto &pa = c.position_on_a[k], &pb = c.position_on_b[k], &n = c.normal_on_b[k];
-      fmt::print(f, "{},{},{},{},{},{},{},{},{},{},{},{}\n", c.id_a[k], c.id_b[k], pa.x, pa.y, pa.z, pb.x, pb.y,
-                 pb.z, n.x, n.y, n.z, c.distance[k]);
+      fmt::print(f, "{},{},{},{},{},{},{},{},{},{},{},{}\n", c.id_a[k], c.id_b[k], pa.x, pa.y, pa.z, pb.x,
+                 pb.y, pb.z, n.x, n.y, n.z, c.distance[k]);
     }
     if (std::fclose(f) != 0) {
       std::filesystem::remove(tmp);

@@ -21,8 +21,8 @@ struct DetectCommand {
   Fields fields = Fields::basic;
   double cell_size = 0;
   int threads = 0;
-  std::string axis = "auto";       // MPI slab axis: auto | x | y | z
-  std::string balance = "count";   // MPI slab balance: count | width
+  std::string axis = "auto";      // MPI slab axis: auto | x | y | z
+  std::string balance = "count";  // MPI slab balance: count | width
   bool quiet = false;
 };
 

@@ -23,8 +23,8 @@ struct Scene {
   std::vector<Vec3<double>> ellipsoid_position;
   std::vector<Vec3<double>> ellipsoid_semi_axes;
   std::vector<std::array<double, 4>> ellipsoid_orientation;  // (w, x, y, z)
-  std::optional<double> radius_low, radius_high;  // as promised by the file's root attributes
-  Attributes attributes;                           // other root attributes (generator parameters)
+  std::optional<double> radius_low, radius_high;             // as promised by the file's root attributes
+  Attributes attributes;                                     // other root attributes (generator parameters)
 
   std::size_t sphere_count() const { return sphere_radius.size(); }
   std::size_t ellipsoid_count() const { return ellipsoid_semi_axes.size(); }

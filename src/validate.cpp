@@ -8,6 +8,10 @@
 // Invariants: both lists handed to the merge are sorted by (id_a, id_b) with each pair once; every
 // pair found by one side only is classified with its exact distance from the scene, never with the
 // value either side computed.
+#include "validate.hpp"
+
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -15,12 +19,9 @@
 #include <random>
 #include <utility>
 
-#include <fmt/format.h>
-
 #include "bullet_oracle.hpp"
 #include "errors.hpp"
 #include "hdf5_io.hpp"
-#include "validate.hpp"
 
 namespace cg {
 namespace {
@@ -91,7 +92,10 @@ class ContactIndex {
     std::size_t lo = 0, hi = size();
     while (lo < hi) {
       const std::size_t mid = lo + (hi - lo) / 2;
-      if (key(mid).first < id) lo = mid + 1; else hi = mid;
+      if (key(mid).first < id)
+        lo = mid + 1;
+      else
+        hi = mid;
     }
     return lo;
   }
@@ -123,9 +127,8 @@ class Offenders {
 
  private:
   void trim(std::vector<ValidateOffender>& v) const {
-    std::stable_sort(v.begin(), v.end(), [](const ValidateOffender& x, const ValidateOffender& y) {
-      return x.value > y.value;
-    });
+    std::stable_sort(v.begin(), v.end(),
+                     [](const ValidateOffender& x, const ValidateOffender& y) { return x.value > y.value; });
     if (v.size() > m_limit) v.resize(m_limit);
   }
   std::size_t m_limit;
@@ -154,10 +157,14 @@ SceneStats scene_stats(const Scene& s) {
   for (std::size_t i = 0; i < n; ++i) {
     const Vec3<double> c = s.sphere_position[i];
     const double r = s.sphere_radius[i];
-    st.centres.lo = {std::min(st.centres.lo.x, c.x), std::min(st.centres.lo.y, c.y), std::min(st.centres.lo.z, c.z)};
-    st.centres.hi = {std::max(st.centres.hi.x, c.x), std::max(st.centres.hi.y, c.y), std::max(st.centres.hi.z, c.z)};
-    body_box.lo = {std::min(body_box.lo.x, c.x - r), std::min(body_box.lo.y, c.y - r), std::min(body_box.lo.z, c.z - r)};
-    body_box.hi = {std::max(body_box.hi.x, c.x + r), std::max(body_box.hi.y, c.y + r), std::max(body_box.hi.z, c.z + r)};
+    st.centres.lo = {std::min(st.centres.lo.x, c.x), std::min(st.centres.lo.y, c.y),
+                     std::min(st.centres.lo.z, c.z)};
+    st.centres.hi = {std::max(st.centres.hi.x, c.x), std::max(st.centres.hi.y, c.y),
+                     std::max(st.centres.hi.z, c.z)};
+    body_box.lo = {std::min(body_box.lo.x, c.x - r), std::min(body_box.lo.y, c.y - r),
+                   std::min(body_box.lo.z, c.z - r)};
+    body_box.hi = {std::max(body_box.hi.x, c.x + r), std::max(body_box.hi.y, c.y + r),
+                   std::max(body_box.hi.z, c.z + r)};
     st.r_max = std::max(st.r_max, r);
     sum += r;
     st.magnitude = std::max({st.magnitude, std::abs(c.x), std::abs(c.y), std::abs(c.z)});
@@ -187,8 +194,8 @@ double exact_distance(const Scene& s, std::int64_t a, std::int64_t b) {
 
 // Compares one region: `mine` are positions in the ContactIndex (sorted by key), `ref` Bullet's.
 void compare_region(const Scene& scene, const ContactIndex& index, const std::vector<std::size_t>& mine,
-                    const Contacts<double>& ref, const std::vector<std::size_t>& ref_rows,
-                    double band, ValidateReport& rep, Offenders& off) {
+                    const Contacts<double>& ref, const std::vector<std::size_t>& ref_rows, double band,
+                    ValidateReport& rep, Offenders& off) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::size_t i = 0, j = 0;
   auto one_sided = [&](Key k, bool only_mine, double side_distance) {
@@ -198,16 +205,15 @@ void compare_region(const Scene& scene, const ContactIndex& index, const std::ve
       return;
     }
     ++(only_mine ? rep.extra : rep.missing);
-    off.add({only_mine ? ValidateOffender::Kind::extra : ValidateOffender::Kind::missing, k.first,
-             k.second, std::abs(ed), ed, only_mine ? side_distance : nan,
-             only_mine ? nan : side_distance});
+    off.add({only_mine ? ValidateOffender::Kind::extra : ValidateOffender::Kind::missing, k.first, k.second,
+             std::abs(ed), ed, only_mine ? side_distance : nan, only_mine ? nan : side_distance});
   };
   rep.checked += mine.size();
   rep.bullet_contacts += ref_rows.size();
   while (i < mine.size() || j < ref_rows.size()) {
     const Key km = i < mine.size() ? index.key(mine[i]) : Key{INT64_MAX, INT64_MAX};
-    const Key kr = j < ref_rows.size() ? Key{ref.id_a[ref_rows[j]], ref.id_b[ref_rows[j]]}
-                                       : Key{INT64_MAX, INT64_MAX};
+    const Key kr =
+        j < ref_rows.size() ? Key{ref.id_a[ref_rows[j]], ref.id_b[ref_rows[j]]} : Key{INT64_MAX, INT64_MAX};
     if (km < kr) {
       one_sided(km, true, index.geometry(mine[i]).d);
       ++i;
@@ -305,7 +311,8 @@ std::vector<Box> pick_boxes(const SceneStats& st, std::size_t spheres, const Val
   const Vec3<double> e = st.centres.hi - st.centres.lo;
   const double floor = 2 * st.r_max;  // a box thinner than a contact is meaningless
   const double ex = std::max(e.x, floor), ey = std::max(e.y, floor), ez = std::max(e.z, floor);
-  const double edge = std::max(std::cbrt(ex * ey * ez * double(o.bodies_per_box) / double(spheres)), 4 * st.r_max);
+  const double edge =
+      std::max(std::cbrt(ex * ey * ez * double(o.bodies_per_box) / double(spheres)), 4 * st.r_max);
   auto cells = [&](double span) { return std::max<std::uint64_t>(1, std::uint64_t(span / edge)); };
   const std::uint64_t mx = cells(e.x), my = cells(e.y), mz = cells(e.z);
   const std::uint64_t total = mx * my * mz;
@@ -346,11 +353,16 @@ std::vector<Box> pick_boxes(const SceneStats& st, std::size_t spheres, const Val
 
 const char* to_string(ValidateOffender::Kind k) {
   switch (k) {
-    case ValidateOffender::Kind::missing: return "missing";
-    case ValidateOffender::Kind::extra: return "extra";
-    case ValidateOffender::Kind::position: return "position";
-    case ValidateOffender::Kind::angle: return "angle";
-    case ValidateOffender::Kind::distance: return "distance";
+    case ValidateOffender::Kind::missing:
+      return "missing";
+    case ValidateOffender::Kind::extra:
+      return "extra";
+    case ValidateOffender::Kind::position:
+      return "position";
+    case ValidateOffender::Kind::angle:
+      return "angle";
+    case ValidateOffender::Kind::distance:
+      return "distance";
   }
   return "?";
 }
@@ -377,8 +389,8 @@ ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, co
   const std::int64_t bodies = std::int64_t(scene.size());
   const SceneStats st = scene_stats(scene);
   rep.scale = st.r_mean;
-  const double bullet_tol = o.bullet == Precision::fp64 ? tolerance(Precision::fp64, st.r_mean, st.magnitude)
-                                                        : 1e-4 * st.r_mean;
+  const double bullet_tol =
+      o.bullet == Precision::fp64 ? tolerance(Precision::fp64, st.r_mean, st.magnitude) : 1e-4 * st.r_mean;
   rep.band = std::max(tolerance(o.contacts_precision, st.r_mean, st.extent), bullet_tol);
 
   const bool canonical = check_contract(contacts, bodies, rep);
@@ -393,8 +405,10 @@ ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, co
     return true;
   });
   if (rep.skipped_ellipsoid)
-    rep.notes.push_back(fmt::format("{} contacts involve ellipsoids and are not checked (Bullet has no "
-                                    "ellipsoid shape)", rep.skipped_ellipsoid));
+    rep.notes.push_back(
+        fmt::format("{} contacts involve ellipsoids and are not checked (Bullet has no "
+                    "ellipsoid shape)",
+                    rep.skipped_ellipsoid));
 
   Offenders off(o.max_offenders);
   const std::vector<Box> boxes = pick_boxes(st, std::size_t(spheres), o, rep);
@@ -414,7 +428,8 @@ ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, co
   } else {
     const double margin = 2 * st.r_max;
     for (const Box& box : boxes) {
-      const Box outer{box.lo - Vec3<double>{margin, margin, margin}, box.hi + Vec3<double>{margin, margin, margin}};
+      const Box outer{box.lo - Vec3<double>{margin, margin, margin},
+                      box.hi + Vec3<double>{margin, margin, margin}};
       OracleSpheres sub;
       std::vector<std::int64_t> inside;  // ids with centres inside the box itself, ascending
       for (std::int64_t i = 0; i < spheres; ++i) {
@@ -441,11 +456,15 @@ ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, co
   rep.offenders = off.take();
 
   if (rep.missing)
-    rep.failures.push_back(fmt::format("missing: {} pairs Bullet found are not in the contacts (outside "
-                                       "the borderline band ±{:.3g})", rep.missing, rep.band));
+    rep.failures.push_back(
+        fmt::format("missing: {} pairs Bullet found are not in the contacts (outside "
+                    "the borderline band ±{:.3g})",
+                    rep.missing, rep.band));
   if (rep.extra)
-    rep.failures.push_back(fmt::format("extra: {} pairs in the contacts Bullet did not find (outside the "
-                                       "borderline band ±{:.3g})", rep.extra, rep.band));
+    rep.failures.push_back(
+        fmt::format("extra: {} pairs in the contacts Bullet did not find (outside the "
+                    "borderline band ±{:.3g})",
+                    rep.extra, rep.band));
   if (rep.max_position_error > o.pos_eps)
     rep.failures.push_back(fmt::format("position: largest position error {:.3g} > --pos-eps {:.3g}",
                                        rep.max_position_error, o.pos_eps));
@@ -459,16 +478,19 @@ ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, co
 std::string ValidateReport::text() const {
   std::string s;
   const char* flavour = bullet == Precision::fp64 ? "double" : "float";
-  s += fmt::format("validate: {} (Bullet {}, {})\n", pass ? "PASS" : "FAIL", flavour,
-                   sample_boxes ? fmt::format("{} sampled sub-boxes", sample_boxes) : std::string("whole scene"));
+  s += fmt::format(
+      "validate: {} (Bullet {}, {})\n", pass ? "PASS" : "FAIL", flavour,
+      sample_boxes ? fmt::format("{} sampled sub-boxes", sample_boxes) : std::string("whole scene"));
   s += fmt::format("  contacts: {} given, {} checked ({:.2f}% of the checkable), Bullet {}, matched {}\n",
                    contacts, checked, 100 * checked_fraction(), bullet_contacts, matched);
-  s += fmt::format("  only Bullet (missing): {}   only contacts (extra): {}   borderline accepted: {} + {} "
-                   "(band ±{:.3g}, scale {:.3g})\n",
-                   missing, extra, borderline_missing, borderline_extra, band, scale);
-  s += fmt::format("  max position error {:.3g} (limit {:.3g})   max normal angle {:.3g}° (limit {:.3g}°)   "
-                   "max distance error {:.3g}\n",
-                   max_position_error, pos_eps, max_angle_deg, angle_deg, max_distance_error);
+  s += fmt::format(
+      "  only Bullet (missing): {}   only contacts (extra): {}   borderline accepted: {} + {} "
+      "(band ±{:.3g}, scale {:.3g})\n",
+      missing, extra, borderline_missing, borderline_extra, band, scale);
+  s += fmt::format(
+      "  max position error {:.3g} (limit {:.3g})   max normal angle {:.3g}° (limit {:.3g}°)   "
+      "max distance error {:.3g}\n",
+      max_position_error, pos_eps, max_angle_deg, angle_deg, max_distance_error);
   s += fmt::format("  Bullet time {:.3f} s\n", bullet_seconds);
   for (const auto& f : failures) s += "  FAIL " + f + "\n";
   for (const auto& n : notes) s += "  note: " + n + "\n";
@@ -476,10 +498,11 @@ std::string ValidateReport::text() const {
     s += "  worst offenders:\n";
     for (const auto& o : offenders) {
       auto dist = [](double d) { return std::isnan(d) ? std::string("-") : fmt::format("{:.6g}", d); };
-      s += fmt::format("    {:<8} ({}, {})  value {:.4g}  exact distance {:.6g} ({})  contacts {}  Bullet {}\n",
-                       cg::to_string(o.kind), o.id_a, o.id_b, o.value, o.exact_distance,
-                       o.exact_distance <= 0 ? "contact" : "no contact", dist(o.contacts_distance),
-                       dist(o.bullet_distance));
+      s += fmt::format(
+          "    {:<8} ({}, {})  value {:.4g}  exact distance {:.6g} ({})  contacts {}  Bullet {}\n",
+          cg::to_string(o.kind), o.id_a, o.id_b, o.value, o.exact_distance,
+          o.exact_distance <= 0 ? "contact" : "no contact", dist(o.contacts_distance),
+          dist(o.bullet_distance));
     }
   }
   return s;
@@ -489,12 +512,16 @@ ValidateReport validate_files(const std::string& scene_path, const std::string& 
                               ValidateOptions options) {
   const Scene scene = read_scene(scene_path);
   const ContactFile file = read_contacts(contacts_path);
-  if (file.precision == "fp32") options.contacts_precision = Precision::fp32;
-  else if (file.precision == "fp64" || file.precision.empty()) options.contacts_precision = Precision::fp64;
-  else throw InputError(contacts_path + ": unknown precision attribute '" + file.precision + "'");
+  if (file.precision == "fp32")
+    options.contacts_precision = Precision::fp32;
+  else if (file.precision == "fp64" || file.precision.empty())
+    options.contacts_precision = Precision::fp64;
+  else
+    throw InputError(contacts_path + ": unknown precision attribute '" + file.precision + "'");
   ValidateReport rep = validate(scene, file.contacts, options);
   rep.notes.insert(rep.notes.begin(), "scene " + scene_path + ", contacts " + contacts_path + " (" +
-                                          std::string(file.precision.empty() ? "fp64" : file.precision) + ")");
+                                          std::string(file.precision.empty() ? "fp64" : file.precision) +
+                                          ")");
   return rep;
 }
 

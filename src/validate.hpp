@@ -35,15 +35,15 @@
 namespace cg {
 
 struct ValidateOptions {
-  double pos_eps = 0.1;                  // --pos-eps: absolute, world units
-  double angle_deg = 10.0;               // --angle-deg
-  Precision bullet = Precision::fp64;    // --bullet double|float
-  std::uint64_t sample = 0;              // --sample K: K random sub-boxes; 0 = whole scene
-  std::uint64_t seed = 1;                // --seed: picks the sub-boxes
-  std::uint64_t bodies_per_box = 4000;   // target sphere count of one sub-box
+  double pos_eps = 0.1;                            // --pos-eps: absolute, world units
+  double angle_deg = 10.0;                         // --angle-deg
+  Precision bullet = Precision::fp64;              // --bullet double|float
+  std::uint64_t sample = 0;                        // --sample K: K random sub-boxes; 0 = whole scene
+  std::uint64_t seed = 1;                          // --seed: picks the sub-boxes
+  std::uint64_t bodies_per_box = 4000;             // target sphere count of one sub-box
   Precision contacts_precision = Precision::fp64;  // precision the contacts were computed in
                                                    // (validate_files takes it from the file)
-  std::size_t max_offenders = 8;         // listed per kind in the report
+  std::size_t max_offenders = 8;                   // listed per kind in the report
 };
 
 // "double" | "float" (also "fp64" | "fp32") -> Precision; UsageError otherwise.
@@ -53,10 +53,10 @@ struct ValidateOffender {
   enum class Kind { missing, extra, position, angle, distance };
   Kind kind;
   std::int64_t id_a = 0, id_b = 0;
-  double value = 0;             // position error, angle (deg), distance error, or |exact distance|
-  double exact_distance = 0;    // recomputed from the scene in long double
-  double contacts_distance = 0; // NaN when the contacts lack the pair
-  double bullet_distance = 0;   // NaN when Bullet lacks the pair
+  double value = 0;              // position error, angle (deg), distance error, or |exact distance|
+  double exact_distance = 0;     // recomputed from the scene in long double
+  double contacts_distance = 0;  // NaN when the contacts lack the pair
+  double bullet_distance = 0;    // NaN when Bullet lacks the pair
 };
 const char* to_string(ValidateOffender::Kind k);
 
@@ -99,8 +99,7 @@ struct ValidateReport {
 // Compares `contacts` (any order: violations are reported, and the comparison still runs on the
 // contacts put in canonical form) with Bullet on `scene`. Throws InputError when the contact arrays
 // have inconsistent lengths, UsageError for bad options, IoError when float Bullet cannot be run.
-ValidateReport validate(const Scene& scene, const Contacts<double>& contacts,
-                        const ValidateOptions& options);
+ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, const ValidateOptions& options);
 
 // read_scene + read_contacts (src/hdf5_io.hpp), then validate(); contacts_precision is taken from the
 // contact file's `precision` attribute.

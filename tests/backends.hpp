@@ -22,10 +22,10 @@ struct ConfigNames {
   }
 };
 
-#define CG_SKIP_WITHOUT_BACKEND(cfg)                                                       \
-  do {                                                                                     \
-    if ((cfg::backend) == ::cg::Backend::cuda && !::cg::cuda_available())                  \
-      GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";                 \
+#define CG_SKIP_WITHOUT_BACKEND(cfg)                                       \
+  do {                                                                     \
+    if ((cfg::backend) == ::cg::Backend::cuda && !::cg::cuda_available())  \
+      GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped"; \
   } while (0)
 
 }  // namespace cg::test

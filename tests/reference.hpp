@@ -64,9 +64,8 @@ inline std::vector<RefContact> reference_contacts(std::span<const Vec3<double>> 
       out.push_back(c);
     }
   }
-  std::sort(out.begin(), out.end(), [](const RefContact& x, const RefContact& y) {
-    return x.a != y.a ? x.a < y.a : x.b < y.b;
-  });
+  std::sort(out.begin(), out.end(),
+            [](const RefContact& x, const RefContact& y) { return x.a != y.a ? x.a < y.a : x.b < y.b; });
   return out;
 }
 

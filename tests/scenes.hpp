@@ -28,7 +28,8 @@ struct Spheres {
 
 // Radii uniform in [rl, rh] (or log-uniform when `log_radii`), centres uniform in a cube whose edge
 // gives about 0.4 contacts per sphere.
-inline Spheres random_spheres(std::size_t n, double rl, double rh, std::uint64_t seed, bool log_radii = false) {
+inline Spheres random_spheres(std::size_t n, double rl, double rh, std::uint64_t seed,
+                              bool log_radii = false) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(0, 1);
   Spheres s;

@@ -32,7 +32,7 @@ CG_HD bool spheres_touch(const Sphere<Real>& a, const Sphere<Real>& b) {
 template <class Real>
 struct ContactGeometry {
   Vec3<Real> position_on_a, position_on_b, normal_on_b;  // local frame; normal from B to A
-  Real distance;                                          // negative when overlapping
+  Real distance;                                         // negative when overlapping
 };
 
 template <class Real>
@@ -87,8 +87,8 @@ struct ContactRow {
 };
 
 template <class Real>
-CG_HD ContactRow<Real> sphere_contact_row(const Sphere<Real>& a, const Sphere<Real>& b, const Vec3<double>& origin,
-                                          bool full) {
+CG_HD ContactRow<Real> sphere_contact_row(const Sphere<Real>& a, const Sphere<Real>& b,
+                                          const Vec3<double>& origin, bool full) {
   const ContactGeometry<Real> c = sphere_sphere_contact(a, b);
   ContactRow<Real> row{};
   row.position_on_a = to_world(origin, c.position_on_a);

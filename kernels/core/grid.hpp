@@ -35,7 +35,7 @@ struct GridParams {
   std::uint32_t base[3];  // frame cell coordinate of this grid's first cell (even: parity is global)
   std::uint32_t dims[3];  // cells per axis
   std::uint32_t half[3];  // ceil(dims / 2): super-cells (2x2x2 blocks) per axis
-  int half_bits;        // bits of the super-cell index; key bits = half_bits + 3
+  int half_bits;          // bits of the super-cell index; key bits = half_bits + 3
 };
 
 // The cells one body overlaps: lowest cell coordinates and, per axis, whether it spans two cells.
@@ -106,8 +106,8 @@ CG_HD Key body_cell_key(const BodyCells& bc, std::uint32_t m, const GridParams<R
 // True when the pair of bodies with control bytes ci, cj, both present in a cell of type `type`,
 // is tested in that cell (the common cell of smallest type). See the file comment.
 CG_HD bool test_in_cell(std::uint8_t ci, std::uint8_t cj, std::uint32_t type) {
-  std::uint32_t two_common = ~(std::uint32_t(ci) ^ std::uint32_t(cj)) & (std::uint32_t(ci) >> 3) &
-                             (std::uint32_t(cj) >> 3) & 7u;
+  std::uint32_t two_common =
+      ~(std::uint32_t(ci) ^ std::uint32_t(cj)) & (std::uint32_t(ci) >> 3) & (std::uint32_t(cj) >> 3) & 7u;
   return (two_common & type) == 0u;
 }
 

@@ -10,17 +10,37 @@ struct Vec3 {
   Real x, y, z;
 };
 
-template <class R> CG_HD Vec3<R> operator+(Vec3<R> a, Vec3<R> b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
-template <class R> CG_HD Vec3<R> operator-(Vec3<R> a, Vec3<R> b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
-template <class R> CG_HD Vec3<R> operator-(Vec3<R> a) { return {-a.x, -a.y, -a.z}; }
-template <class R> CG_HD Vec3<R> operator*(R s, Vec3<R> a) { return {s * a.x, s * a.y, s * a.z}; }
-template <class R> CG_HD R dot(Vec3<R> a, Vec3<R> b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-template <class R> CG_HD Vec3<R> cross(Vec3<R> a, Vec3<R> b) {
+template <class R>
+CG_HD Vec3<R> operator+(Vec3<R> a, Vec3<R> b) {
+  return {a.x + b.x, a.y + b.y, a.z + b.z};
+}
+template <class R>
+CG_HD Vec3<R> operator-(Vec3<R> a, Vec3<R> b) {
+  return {a.x - b.x, a.y - b.y, a.z - b.z};
+}
+template <class R>
+CG_HD Vec3<R> operator-(Vec3<R> a) {
+  return {-a.x, -a.y, -a.z};
+}
+template <class R>
+CG_HD Vec3<R> operator*(R s, Vec3<R> a) {
+  return {s * a.x, s * a.y, s * a.z};
+}
+template <class R>
+CG_HD R dot(Vec3<R> a, Vec3<R> b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+template <class R>
+CG_HD Vec3<R> cross(Vec3<R> a, Vec3<R> b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
-template <class R> CG_HD bool operator==(Vec3<R> a, Vec3<R> b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+template <class R>
+CG_HD bool operator==(Vec3<R> a, Vec3<R> b) {
+  return a.x == b.x && a.y == b.y && a.z == b.z;
+}
 
-template <class To, class From> CG_HD Vec3<To> vec_cast(Vec3<From> v) {
+template <class To, class From>
+CG_HD Vec3<To> vec_cast(Vec3<From> v) {
   return {static_cast<To>(v.x), static_cast<To>(v.y), static_cast<To>(v.z)};
 }
 

@@ -9,7 +9,6 @@
 //
 // Scene: radii U[0.5, 1], centres U[0, L)^3 with L = 2.65·N^(1/3), from a seeded splitmix64.
 // usage: contactgrid_cuda_bench [min_log2=16] [max_log2=26] [step=2] [runs=20]
-#include <cub/device/device_radix_sort.cuh>
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -17,6 +16,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cub/device/device_radix_sort.cuh>
 #include <functional>
 #include <map>
 #include <string>
@@ -59,7 +59,8 @@ struct Flusher {
   }
 };
 
-__global__ void random_keys(std::uint32_t* k, std::uint32_t* v, std::uint32_t n, std::uint32_t mask, std::uint64_t seed) {
+__global__ void random_keys(std::uint32_t* k, std::uint32_t* v, std::uint32_t n, std::uint32_t mask,
+                            std::uint64_t seed) {
   const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= n) return;
   std::uint64_t x = seed ^ (std::uint64_t(i) * 0xD1B54A32D192ED03ull);
@@ -158,11 +159,13 @@ Row bench(int log2n, std::uint64_t n, const double* d_pos, const double* d_rad, 
     }
     row.download_ms = median(dl);
     // without the contact output buffer (basic fields: 2 ids + 3 Vec3 + distance per contact)
-    row.bytes_no_contacts = (double(engine.stats().peak_device_bytes) -
-                             double(row.contacts) * (16.0 + 10.0 * sizeof(Real))) / double(n);
+    row.bytes_no_contacts =
+        (double(engine.stats().peak_device_bytes) - double(row.contacts) * (16.0 + 10.0 * sizeof(Real))) /
+        double(n);
   }
-  row.floor_ms = row.key_bits <= 32 ? sort_floor_ms(static_cast<std::uint32_t>(row.entries), row.key_bits, runs, flush)
-                                    : 0.0;
+  row.floor_ms = row.key_bits <= 32
+                     ? sort_floor_ms(static_cast<std::uint32_t>(row.entries), row.key_bits, runs, flush)
+                     : 0.0;
   return row;
 }
 
@@ -177,8 +180,9 @@ int main(int argc, char** argv) try {
   const int runs = argc > 4 ? std::atoi(argv[4]) : 20;
   cudaDeviceProp prop{};
   CG_CUDA_CHECK(cudaGetDeviceProperties(&prop, 0));
-  std::printf("# contactgrid_cuda_bench on %s (%d SMs, %.1f GiB), median of %d warm runs, L2 flushed, cell size %g\n",
-              prop.name, prop.multiProcessorCount, prop.totalGlobalMem / double(1 << 30), runs, g_cell_size);
+  std::printf(
+      "# contactgrid_cuda_bench on %s (%d SMs, %.1f GiB), median of %d warm runs, L2 flushed, cell size %g\n",
+      prop.name, prop.multiProcessorCount, prop.totalGlobalMem / double(1 << 30), runs, g_cell_size);
   Flusher flush;
   std::vector<Row> rows;
   for (int p = lo; p <= hi; p += step) {
@@ -208,8 +212,10 @@ int main(int argc, char** argv) try {
     std::fprintf(stderr, "done 2^%d\n", p);
   }
   std::printf(
-      "\n| N | prec | entries/N | key bits | pack | entries | sort | pairs | order | narrow | GPU sum | total | "
-      "Mspheres/s | contacts/N | workspace B/N | excl. contacts B/N | sort floor | sort/floor | total/floor | upload | download |\n");
+      "\n| N | prec | entries/N | key bits | pack | entries | sort | pairs | order | narrow | GPU sum | "
+      "total | "
+      "Mspheres/s | contacts/N | workspace B/N | excl. contacts B/N | sort floor | sort/floor | total/floor "
+      "| upload | download |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const Row& r : rows) {
     auto st = [&](const char* s) {
@@ -217,17 +223,19 @@ int main(int argc, char** argv) try {
       return it == r.stage_ms.end() ? 0.0 : it->second;
     };
     std::printf(
-        "| 2^%d | %s | %.2f | %d | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.0f | %.3f | %.1f | %.1f | "
+        "| 2^%d | %s | %.2f | %d | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.0f | %.3f | "
+        "%.1f | %.1f | "
         "%.3f | %.2f | %.2f | %.2f | %.2f |\n",
         r.log2n, r.prec, double(r.entries) / double(r.n), r.key_bits, st("pack"), st("entries"), st("sort"),
-        st("pairs"), st("order"), st("narrow"), r.gpu_sum_ms, r.total_ms, double(r.n) / (r.total_ms * 1e-3) / 1e6,
-        double(r.contacts) / double(r.n), r.bytes_per_sphere, r.bytes_no_contacts, r.floor_ms,
-        r.floor_ms > 0 ? st("sort") / r.floor_ms : 0.0, r.floor_ms > 0 ? r.total_ms / r.floor_ms : 0.0,
-        r.upload_ms, r.download_ms);
+        st("pairs"), st("order"), st("narrow"), r.gpu_sum_ms, r.total_ms,
+        double(r.n) / (r.total_ms * 1e-3) / 1e6, double(r.contacts) / double(r.n), r.bytes_per_sphere,
+        r.bytes_no_contacts, r.floor_ms, r.floor_ms > 0 ? st("sort") / r.floor_ms : 0.0,
+        r.floor_ms > 0 ? r.total_ms / r.floor_ms : 0.0, r.upload_ms, r.download_ms);
   }
-  std::printf("\nAll times in ms. workspace B/N = device bytes held by the engine / N, including the contact "
-              "output buffer, excluding the caller's input arrays (32 B/N). total = wall time of "
-              "detect_device_resident (device bounds, plan, stages, 3 host syncs).\n");
+  std::printf(
+      "\nAll times in ms. workspace B/N = device bytes held by the engine / N, including the contact "
+      "output buffer, excluding the caller's input arrays (32 B/N). total = wall time of "
+      "detect_device_resident (device bounds, plan, stages, 3 host syncs).\n");
   return 0;
 } catch (const std::exception& e) {
   std::fprintf(stderr, "contactgrid_cuda_bench: %s\n", e.what());

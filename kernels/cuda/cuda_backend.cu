@@ -23,13 +23,12 @@
 // Opt-in type-pass path (CONTACTGRID_CUDA_TYPE_PASSES=1, for memory-bound scenes): entries, sort and
 // pairs run as Le Grand's 8 passes by cell type, each over <= n entries keyed by super-cell; the
 // stage times are those of the passes summed.
-#include <cub/device/device_radix_sort.cuh>
-#include <cub/device/device_scan.cuh>
-
 #include <algorithm>
 #include <chrono>
-#include <cstring>
 #include <cstdlib>
+#include <cstring>
+#include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_scan.cuh>
 #include <sstream>
 
 #include "backend.hpp"
@@ -71,7 +70,8 @@ using cuda::PinnedBuffer;
 using Bytes = DeviceBuffer<std::byte>;
 
 namespace {
-constexpr const char* kStageNames[] = {"upload", "pack", "entries", "sort", "pairs", "order", "narrow", "download"};
+constexpr const char* kStageNames[] = {"upload", "pack",  "entries", "sort",
+                                       "pairs",  "order", "narrow",  "download"};
 constexpr int kStages = 8;
 constexpr int kPassEvents = 1 + 3 * 8;
 // Le Grand's 8 passes by cell type (one sort of <= n entries per type): opt-in, for scenes bound by
@@ -154,9 +154,9 @@ class CudaBackend {
   }
   std::uint64_t held_bytes() const {
     std::uint64_t s = 0;
-    for (const Bytes* b : {&m_pos, &m_rad, &m_report, &m_spheres, &m_cell_spheres, &m_perm, &m_ctrl, &m_body_blocks, &m_entry_blocks,
-                           &m_keys[0], &m_keys[1], &m_bodies[0], &m_bodies[1], &m_pairs, &m_out,
-                           &m_temp, &m_counters, &m_partials, &m_base})
+    for (const Bytes* b : {&m_pos, &m_rad, &m_report, &m_spheres, &m_cell_spheres, &m_perm, &m_ctrl,
+                           &m_body_blocks, &m_entry_blocks, &m_keys[0], &m_keys[1], &m_bodies[0],
+                           &m_bodies[1], &m_pairs, &m_out, &m_temp, &m_counters, &m_partials, &m_base})
       s += b->bytes();
     return s;
   }
@@ -182,7 +182,8 @@ class CudaBackend {
   Bounds bounds(const DeviceBodiesView& v);
 
   // The first invalid body (index i of n, read back from the device): throws compute_bounds' text.
-  [[noreturn]] void throw_bad_body(const double* d_pos, const double* d_rad, std::uint64_t i, std::int64_t id) {
+  [[noreturn]] void throw_bad_body(const double* d_pos, const double* d_rad, std::uint64_t i,
+                                   std::int64_t id) {
     Vec3<double> p{};
     double r = 0;
     CG_CUDA_CHECK(cudaMemcpy(&p, d_pos + 3 * i, sizeof(p), cudaMemcpyDeviceToHost));
@@ -203,7 +204,6 @@ class CudaBackend {
   Bytes m_keys[2], m_bodies[2], m_pairs, m_out, m_temp, m_counters, m_partials;
   Bytes m_base;  // type-pass path: per body the super-cell index of its lowest even cell
   PinnedBuffer m_h_counters, m_h_staging;  // pinned HOST staging
-
 };
 
 Bounds CudaBackend::bounds(const DeviceBodiesView& v) {
@@ -217,14 +217,15 @@ Bounds CudaBackend::bounds(const DeviceBodiesView& v) {
   auto* d_counters = m_counters.span_as<Counters>(1).data();
   const int grid = static_cast<int>(std::min<std::uint64_t>(kBoundsBlocks, blocks_for(v.count)));
   CG_CUDA_CHECK(cudaMemsetAsync(d_counters, 0, sizeof(Counters), m_stream));
-  cuda::bounds_partial_kernel<<<grid, kBlock, 0, m_stream>>>(v.position, v.radius, v.count, d_partials, d_counters);
+  cuda::bounds_partial_kernel<<<grid, kBlock, 0, m_stream>>>(v.position, v.radius, v.count, d_partials,
+                                                             d_counters);
   CG_CUDA_CHECK_LAUNCH("bounds_partial");
   cuda::bounds_final_kernel<<<1, cuda::kBoundsFold, 0, m_stream>>>(d_partials, grid);
   CG_CUDA_CHECK_LAUNCH("bounds_final");
   std::byte* h = m_h_counters.data();
   CG_CUDA_CHECK(cudaMemcpyAsync(h, d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, m_stream));
-  CG_CUDA_CHECK(cudaMemcpyAsync(h + sizeof(Counters), d_partials, sizeof(BoundsPartial), cudaMemcpyDeviceToHost,
-                                m_stream));
+  CG_CUDA_CHECK(cudaMemcpyAsync(h + sizeof(Counters), d_partials, sizeof(BoundsPartial),
+                                cudaMemcpyDeviceToHost, m_stream));
   CG_CUDA_CHECK(cudaStreamSynchronize(m_stream));
   Counters c;
   BoundsPartial p;
@@ -241,12 +242,14 @@ Bounds CudaBackend::bounds(const DeviceBodiesView& v) {
 }
 
 template <class Real, class Key>
-void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times, EngineStats& stats) {
+void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times,
+                      EngineStats& stats) {
   using clock_type = std::chrono::steady_clock;
   CG_CUDA_CHECK(cudaSetDevice(m_device));
   m_allocations = 0;
   const std::uint64_t n64 = job.body_count();
-  if (n64 >= (std::uint64_t(1) << 32)) throw InputError("more than 2^32 - 1 bodies on one rank; use more MPI ranks");
+  if (n64 >= (std::uint64_t(1) << 32))
+    throw InputError("more than 2^32 - 1 bodies on one rank; use more MPI ranks");
   const auto n = static_cast<std::uint32_t>(n64);
   const GridParams<Real> g = job.grid;
   const Vec3<double> origin = job.plan.frame.origin;
@@ -270,7 +273,8 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   const std::size_t body_block_words = type_passes ? 17 * std::size_t(nb) : 2 * std::size_t(nb);
   const std::size_t scan_nb_temp = temp_bytes([&](void* t, std::size_t& b) {
     return cub::DeviceScan::ExclusiveSum(t, b, static_cast<std::uint32_t*>(nullptr),
-                                         static_cast<std::uint32_t*>(nullptr), int(type_passes ? 8 * nb : nb), st);
+                                         static_cast<std::uint32_t*>(nullptr), int(type_passes ? 8 * nb : nb),
+                                         st);
   });
   // Renumbering sort of the bodies by 4x4x4-cell block (locality only; see home_block_key), over the
   // bits of the block index. Its four arrays are the entry buffers, not yet live.
@@ -282,7 +286,8 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   auto sort_home = [&](void* t, std::size_t& b) {
     return cub::DeviceRadixSort::SortPairs(t, b, home_key, home_index, int(n), 0, home_bits, st);
   };
-  if (n64 >= (std::uint64_t(1) << 31)) throw ResourceError("more than 2^31 - 1 bodies on one GPU; use more MPI ranks");
+  if (n64 >= (std::uint64_t(1) << 31))
+    throw ResourceError("more than 2^31 - 1 bodies on one GPU; use more MPI ranks");
   reserve({{&m_pos, device_in ? 0 : n64 * sizeof(Vec3<double>)},
            {&m_rad, device_in ? 0 : n64 * sizeof(double)},
            {&m_report, device_in || job.bodies.report.empty() ? 0 : n64},
@@ -317,14 +322,15 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
     d_rad = reinterpret_cast<const double*>(m_rad.data());
     d_report = nullptr;
     if (!job.bodies.report.empty()) {
-      CG_CUDA_CHECK(cudaMemcpyAsync(m_report.data(), job.bodies.report.data(), n64, cudaMemcpyHostToDevice, st));
+      CG_CUDA_CHECK(
+          cudaMemcpyAsync(m_report.data(), job.bodies.report.data(), n64, cudaMemcpyHostToDevice, st));
       d_report = reinterpret_cast<const std::uint8_t*>(m_report.data());
     }
     mark(0);
   }
 
   // ---- pack -------------------------------------------------------------------------------------
-  Sphere<Real>* d_spheres = m_spheres.span_as<Sphere<Real>>(n).data();  // input order
+  Sphere<Real>* d_spheres = m_spheres.span_as<Sphere<Real>>(n).data();            // input order
   Sphere<Real>* d_cell_spheres = m_cell_spheres.span_as<Sphere<Real>>(n).data();  // cell order
   std::uint32_t* d_perm = m_perm.span_as<std::uint32_t>(n).data();  // cell order → input index
   std::uint8_t* d_ctrl = m_ctrl.span_as<std::uint8_t>(n).data();    // cell order
@@ -338,16 +344,16 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   home_key = cub::DoubleBuffer<Key>(m_keys[0].span_as<Key>(n).data(), m_keys[1].span_as<Key>(n).data());
   home_index = cub::DoubleBuffer<std::uint32_t>(m_bodies[0].span_as<std::uint32_t>(n).data(),
                                                 m_bodies[1].span_as<std::uint32_t>(n).data());
-  cuda::pack_kernel<Real, Key><<<nb, kBlock, 0, st>>>(d_pos, d_rad, n, origin, g, d_spheres, home_key.Current(),
-                                                      home_index.Current(), d_counters);
+  cuda::pack_kernel<Real, Key><<<nb, kBlock, 0, st>>>(d_pos, d_rad, n, origin, g, d_spheres,
+                                                      home_key.Current(), home_index.Current(), d_counters);
   CG_CUDA_CHECK_LAUNCH("pack");
   // CONTACTGRID_CUDA_RENUMBER=0 skips the renumbering sort (measurement knob): reorder then reads the
   // identity written by pack, the bodies keep their input order (no result changes, see home_block_key).
   const char* renumber_env = std::getenv("CONTACTGRID_CUDA_RENUMBER");
   if (!(renumber_env && renumber_env[0] == '0')) run_cub(sort_home);
-  cuda::reorder_kernel<Real, Key><<<nb, kBlock, 0, st>>>(d_spheres, n, g, home_index.Current(), d_cell_spheres,
-                                                         d_ctrl, d_perm, d_body_totals, d_counters, d_base,
-                                                         type_passes ? d_type_totals : nullptr);
+  cuda::reorder_kernel<Real, Key>
+      <<<nb, kBlock, 0, st>>>(d_spheres, n, g, home_index.Current(), d_cell_spheres, d_ctrl, d_perm,
+                              d_body_totals, d_counters, d_base, type_passes ? d_type_totals : nullptr);
   CG_CUDA_CHECK_LAUNCH("reorder");
   mark(1);
   if (type_passes) {
@@ -399,188 +405,186 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   };
 
   if (!type_passes) {
-  const auto ne = static_cast<std::uint32_t>(n_entries);
-  const std::uint32_t neb = blocks_for(ne);
+    const auto ne = static_cast<std::uint32_t>(n_entries);
+    const std::uint32_t neb = blocks_for(ne);
 
-  // ---- entries ----------------------------------------------------------------------------------
-  cub::DoubleBuffer<Key> keys(nullptr, nullptr);
-  cub::DoubleBuffer<std::uint32_t> body(nullptr, nullptr);
-  const int key_bits = job.plan.key_bits;
-  auto sort_entries = [&](void* t, std::size_t& b) {
-    return cub::DeviceRadixSort::SortPairs(t, b, keys, body, int(ne), 0, key_bits, st);
-  };
-  const std::size_t sort_temp = temp_bytes(sort_entries);
-  reserve({{&m_keys[0], ne * sizeof(Key)},
-           {&m_keys[1], ne * sizeof(Key)},
-           {&m_bodies[0], ne * sizeof(std::uint32_t)},
-           {&m_bodies[1], ne * sizeof(std::uint32_t)},
-           {&m_entry_blocks, 2 * std::size_t(neb) * sizeof(std::uint32_t)},
-           {&m_temp, sort_temp}},
-          "entries");
-  keys = cub::DoubleBuffer<Key>(m_keys[0].span_as<Key>(ne).data(), m_keys[1].span_as<Key>(ne).data());
-  body = cub::DoubleBuffer<std::uint32_t>(m_bodies[0].span_as<std::uint32_t>(ne).data(),
-                                          m_bodies[1].span_as<std::uint32_t>(ne).data());
-  cuda::fill_entries_kernel<Real, Key><<<nb, kBlock, 0, st>>>(d_cell_spheres, n, g, d_body_offsets, keys.Current(),
-                                                              body.Current());
-  CG_CUDA_CHECK_LAUNCH("fill_entries");
-  mark(2);
+    // ---- entries ----------------------------------------------------------------------------------
+    cub::DoubleBuffer<Key> keys(nullptr, nullptr);
+    cub::DoubleBuffer<std::uint32_t> body(nullptr, nullptr);
+    const int key_bits = job.plan.key_bits;
+    auto sort_entries = [&](void* t, std::size_t& b) {
+      return cub::DeviceRadixSort::SortPairs(t, b, keys, body, int(ne), 0, key_bits, st);
+    };
+    const std::size_t sort_temp = temp_bytes(sort_entries);
+    reserve({{&m_keys[0], ne * sizeof(Key)},
+             {&m_keys[1], ne * sizeof(Key)},
+             {&m_bodies[0], ne * sizeof(std::uint32_t)},
+             {&m_bodies[1], ne * sizeof(std::uint32_t)},
+             {&m_entry_blocks, 2 * std::size_t(neb) * sizeof(std::uint32_t)},
+             {&m_temp, sort_temp}},
+            "entries");
+    keys = cub::DoubleBuffer<Key>(m_keys[0].span_as<Key>(ne).data(), m_keys[1].span_as<Key>(ne).data());
+    body = cub::DoubleBuffer<std::uint32_t>(m_bodies[0].span_as<std::uint32_t>(ne).data(),
+                                            m_bodies[1].span_as<std::uint32_t>(ne).data());
+    cuda::fill_entries_kernel<Real, Key>
+        <<<nb, kBlock, 0, st>>>(d_cell_spheres, n, g, d_body_offsets, keys.Current(), body.Current());
+    CG_CUDA_CHECK_LAUNCH("fill_entries");
+    mark(2);
 
-  // ---- sort -------------------------------------------------------------------------------------
-  run_cub(sort_entries);
-  mark(3);
+    // ---- sort -------------------------------------------------------------------------------------
+    run_cub(sort_entries);
+    mark(3);
 
-  // ---- pairs: count -----------------------------------------------------------------------------
-  const Key* d_keys = keys.Current();
-  const std::uint32_t* d_body = body.Current();
-  // The alternate key buffer is dead after the sort: it holds the per-entry contact masks (u32).
-  auto* d_pair_count = reinterpret_cast<std::uint32_t*>(keys.Alternate());
-  std::uint32_t* d_entry_totals = m_entry_blocks.span_as<std::uint32_t>(2 * neb).data();
-  std::uint32_t* d_entry_offsets = d_entry_totals + neb;
-  // Direct write of the pairs into the alternate entry-body buffer, dead after the sort: as four u32
-  // arrays (a, b, and the sort's second copies) of cap = ne / 4 pairs each.
-  const std::uint64_t direct_cap = ne / 4;
-  std::uint32_t* d_direct = body.Alternate();
-  cuda::count_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(d_keys, d_body, ne, d_ctrl, d_cell_spheres, d_perm,
-                                                              d_report, g.half_bits, 0u, d_pair_count,
-                                                              d_entry_totals, d_counters, d_direct,
-                                                              d_direct + direct_cap, direct_cap);
-  CG_CUDA_CHECK_LAUNCH("count_pairs");
-  CG_CUDA_CHECK(cudaMemcpyAsync(h_counters, d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, st));
-  CG_CUDA_CHECK(cudaStreamSynchronize(st));  // host needs the pairs total
-  const std::uint64_t n_pairs = h_counters->pairs;
-  stats.pair_tests = h_counters->tests;
-  check_pairs(n_pairs);
-  np = static_cast<std::uint32_t>(n_pairs);
-
-  // ---- pairs: (scan → fill) ---------------------------------------------------------------------
-  // Pairs as (a, b) u32 arrays, double-buffered (16 B a pair). When they fit in the alternate entry
-  // body buffer (np <= ne / 4), the count kernel has already written them there; else they are
-  // placed in m_pairs by the scan of the block totals → fill_pairs (from the contact masks).
-  const bool pairs_in_entries = n_pairs <= direct_cap;
-  auto scan_entry_blocks = [&](void* t, std::size_t& b) {
-    return cub::DeviceScan::ExclusiveSum(t, b, d_entry_totals, d_entry_offsets, int(neb), st);
-  };
-  reserve({{&m_pairs, pairs_in_entries ? 0 : 4 * std::size_t(np) * sizeof(std::uint32_t)},
-           {&m_out, out_bytes_for(np)},
-           {&m_temp, std::max(temp_bytes(sort_pairs), temp_bytes(scan_entry_blocks))}},
-          "pairs");
-  const std::size_t stride = pairs_in_entries ? std::size_t(direct_cap) : std::size_t(np);
-  std::uint32_t* d_pair_store =
-      pairs_in_entries ? d_direct : m_pairs.span_as<std::uint32_t>(4 * std::size_t(np)).data();
-  pair_a = cub::DoubleBuffer<std::uint32_t>(d_pair_store, d_pair_store + 2 * stride);
-  pair_b = cub::DoubleBuffer<std::uint32_t>(d_pair_store + stride, d_pair_store + 3 * stride);
-  if (!pairs_in_entries && np > 0) {
-    run_cub(scan_entry_blocks);
-    cuda::fill_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(d_keys, d_body, ne, d_ctrl, d_cell_spheres, d_perm,
-                                                               d_report, g.half_bits, d_pair_count, d_entry_offsets,
-                                                               pair_a.Current(), pair_b.Current());
-    CG_CUDA_CHECK_LAUNCH("fill_pairs");
-  }
-  mark(4);
-  } else {
-  // ---- type passes: entries, sort, pairs of each cell type in turn ------------------------------
-  // Le Grand's 8 passes: each body has at most one entry of a given cell type, so pass t holds
-  // n_t <= n entries, keyed by the super-cell index alone (half_bits bits: a radix pass fewer than
-  // key_bits where that crosses a digit), in the same four entry buffers as the renumbering sort.
-  // Pass t: fill (compaction of the bodies having a type-t cell) → sort → count_pairs with the
-  // pass's type (the exactly-once rule unchanged: test_in_cell with type t). All passes write their
-  // pairs at the one cursor c->pairs into m_pairs (cap pairs); when the total exceeds cap, m_pairs
-  // grows to the total and the passes run again (counters reset), writing them all.
-  std::uint32_t n_max = 0;
-  std::uint64_t start[8];
-  for (std::uint64_t t = 0, s = 0; t < 8; ++t) {
-    start[t] = s;  // used modulo 2^32, as the u32 scan of the block totals
-    s += type_entries[t];
-    n_max = std::max(n_max, static_cast<std::uint32_t>(type_entries[t]));
-  }
-  const std::uint32_t neb_max = blocks_for(n_max);
-  cub::DoubleBuffer<Key> keys(nullptr, nullptr);
-  cub::DoubleBuffer<std::uint32_t> body(nullptr, nullptr);
-  std::uint32_t n_sort = n_max;
-  auto sort_entries = [&](void* t, std::size_t& b) {
-    return cub::DeviceRadixSort::SortPairs(t, b, keys, body, int(n_sort), 0, g.half_bits, st);
-  };
-  std::uint64_t cap = std::max<std::uint64_t>(n64 / 2, m_pairs.bytes() / (4 * sizeof(std::uint32_t)));
-  reserve({{&m_entry_blocks, std::size_t(neb_max) * sizeof(std::uint32_t)},
-           {&m_pairs, 4 * std::size_t(cap) * sizeof(std::uint32_t)},
-           {&m_temp, temp_bytes(sort_entries)}},
-          "entries");
-  std::uint32_t* d_entry_totals = m_entry_blocks.span_as<std::uint32_t>(neb_max).data();
-  const Key step_y = Key(g.half[0]), step_z = Key(g.half[0]) * Key(g.half[1]);
-  double pass_ms[3] = {0, 0, 0};  // entries, sort, pairs
-  auto run_passes = [&](std::uint32_t* store, std::uint64_t cap_pairs) {
-    CG_CUDA_CHECK(cudaEventRecord(m_pass_events[0], st));
-    for (std::uint32_t t = 0; t < 8; ++t) {
-      const auto nt = static_cast<std::uint32_t>(type_entries[t]);
-      cudaEvent_t* ev = m_pass_events + 1 + 3 * t;
-      keys = cub::DoubleBuffer<Key>(m_keys[0].span_as<Key>(n).data(), m_keys[1].span_as<Key>(n).data());
-      body = cub::DoubleBuffer<std::uint32_t>(m_bodies[0].span_as<std::uint32_t>(n).data(),
-                                              m_bodies[1].span_as<std::uint32_t>(n).data());
-      if (nt > 0) {
-        cuda::fill_type_entries_kernel<Key><<<nb, kBlock, 0, st>>>(d_ctrl, d_base, n, t, step_y, step_z,
-                                                                   d_type_offsets + std::size_t(t) * nb,
-                                                                   static_cast<std::uint32_t>(start[t]),
-                                                                   keys.Current(), body.Current());
-        CG_CUDA_CHECK_LAUNCH("fill_type_entries");
-      }
-      CG_CUDA_CHECK(cudaEventRecord(ev[0], st));
-      if (nt > 1 && g.half_bits > 0) {
-        n_sort = nt;
-        run_cub(sort_entries);
-      }
-      CG_CUDA_CHECK(cudaEventRecord(ev[1], st));
-      if (nt > 0) {
-        cuda::count_pairs_kernel<Real, Key><<<blocks_for(nt), kBlock, 0, st>>>(
-            keys.Current(), body.Current(), nt, d_ctrl, d_cell_spheres, d_perm, d_report, g.half_bits, t,
-            reinterpret_cast<std::uint32_t*>(keys.Alternate()), d_entry_totals, d_counters, store,
-            store + cap_pairs, cap_pairs);
-        CG_CUDA_CHECK_LAUNCH("count_pairs");
-      }
-      CG_CUDA_CHECK(cudaEventRecord(ev[2], st));
-    }
+    // ---- pairs: count -----------------------------------------------------------------------------
+    const Key* d_keys = keys.Current();
+    const std::uint32_t* d_body = body.Current();
+    // The alternate key buffer is dead after the sort: it holds the per-entry contact masks (u32).
+    auto* d_pair_count = reinterpret_cast<std::uint32_t*>(keys.Alternate());
+    std::uint32_t* d_entry_totals = m_entry_blocks.span_as<std::uint32_t>(2 * neb).data();
+    std::uint32_t* d_entry_offsets = d_entry_totals + neb;
+    // Direct write of the pairs into the alternate entry-body buffer, dead after the sort: as four u32
+    // arrays (a, b, and the sort's second copies) of cap = ne / 4 pairs each.
+    const std::uint64_t direct_cap = ne / 4;
+    std::uint32_t* d_direct = body.Alternate();
+    cuda::count_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(
+        d_keys, d_body, ne, d_ctrl, d_cell_spheres, d_perm, d_report, g.half_bits, 0u, d_pair_count,
+        d_entry_totals, d_counters, d_direct, d_direct + direct_cap, direct_cap);
+    CG_CUDA_CHECK_LAUNCH("count_pairs");
     CG_CUDA_CHECK(cudaMemcpyAsync(h_counters, d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, st));
     CG_CUDA_CHECK(cudaStreamSynchronize(st));  // host needs the pairs total
-    cudaEvent_t prev = m_pass_events[0];
-    for (int t = 0; t < 8; ++t)
-      for (int s = 0; s < 3; ++s) {
-        float ms = 0;
-        CG_CUDA_CHECK(cudaEventElapsedTime(&ms, prev, m_pass_events[1 + 3 * t + s]));
-        pass_ms[s] += ms;
-        prev = m_pass_events[1 + 3 * t + s];
+    const std::uint64_t n_pairs = h_counters->pairs;
+    stats.pair_tests = h_counters->tests;
+    check_pairs(n_pairs);
+    np = static_cast<std::uint32_t>(n_pairs);
+
+    // ---- pairs: (scan → fill) ---------------------------------------------------------------------
+    // Pairs as (a, b) u32 arrays, double-buffered (16 B a pair). When they fit in the alternate entry
+    // body buffer (np <= ne / 4), the count kernel has already written them there; else they are
+    // placed in m_pairs by the scan of the block totals → fill_pairs (from the contact masks).
+    const bool pairs_in_entries = n_pairs <= direct_cap;
+    auto scan_entry_blocks = [&](void* t, std::size_t& b) {
+      return cub::DeviceScan::ExclusiveSum(t, b, d_entry_totals, d_entry_offsets, int(neb), st);
+    };
+    reserve({{&m_pairs, pairs_in_entries ? 0 : 4 * std::size_t(np) * sizeof(std::uint32_t)},
+             {&m_out, out_bytes_for(np)},
+             {&m_temp, std::max(temp_bytes(sort_pairs), temp_bytes(scan_entry_blocks))}},
+            "pairs");
+    const std::size_t stride = pairs_in_entries ? std::size_t(direct_cap) : std::size_t(np);
+    std::uint32_t* d_pair_store =
+        pairs_in_entries ? d_direct : m_pairs.span_as<std::uint32_t>(4 * std::size_t(np)).data();
+    pair_a = cub::DoubleBuffer<std::uint32_t>(d_pair_store, d_pair_store + 2 * stride);
+    pair_b = cub::DoubleBuffer<std::uint32_t>(d_pair_store + stride, d_pair_store + 3 * stride);
+    if (!pairs_in_entries && np > 0) {
+      run_cub(scan_entry_blocks);
+      cuda::fill_pairs_kernel<Real, Key>
+          <<<neb, kBlock, 0, st>>>(d_keys, d_body, ne, d_ctrl, d_cell_spheres, d_perm, d_report, g.half_bits,
+                                   d_pair_count, d_entry_offsets, pair_a.Current(), pair_b.Current());
+      CG_CUDA_CHECK_LAUNCH("fill_pairs");
+    }
+    mark(4);
+  } else {
+    // ---- type passes: entries, sort, pairs of each cell type in turn ------------------------------
+    // Le Grand's 8 passes: each body has at most one entry of a given cell type, so pass t holds
+    // n_t <= n entries, keyed by the super-cell index alone (half_bits bits: a radix pass fewer than
+    // key_bits where that crosses a digit), in the same four entry buffers as the renumbering sort.
+    // Pass t: fill (compaction of the bodies having a type-t cell) → sort → count_pairs with the
+    // pass's type (the exactly-once rule unchanged: test_in_cell with type t). All passes write their
+    // pairs at the one cursor c->pairs into m_pairs (cap pairs); when the total exceeds cap, m_pairs
+    // grows to the total and the passes run again (counters reset), writing them all.
+    std::uint32_t n_max = 0;
+    std::uint64_t start[8];
+    for (std::uint64_t t = 0, s = 0; t < 8; ++t) {
+      start[t] = s;  // used modulo 2^32, as the u32 scan of the block totals
+      s += type_entries[t];
+      n_max = std::max(n_max, static_cast<std::uint32_t>(type_entries[t]));
+    }
+    const std::uint32_t neb_max = blocks_for(n_max);
+    cub::DoubleBuffer<Key> keys(nullptr, nullptr);
+    cub::DoubleBuffer<std::uint32_t> body(nullptr, nullptr);
+    std::uint32_t n_sort = n_max;
+    auto sort_entries = [&](void* t, std::size_t& b) {
+      return cub::DeviceRadixSort::SortPairs(t, b, keys, body, int(n_sort), 0, g.half_bits, st);
+    };
+    std::uint64_t cap = std::max<std::uint64_t>(n64 / 2, m_pairs.bytes() / (4 * sizeof(std::uint32_t)));
+    reserve({{&m_entry_blocks, std::size_t(neb_max) * sizeof(std::uint32_t)},
+             {&m_pairs, 4 * std::size_t(cap) * sizeof(std::uint32_t)},
+             {&m_temp, temp_bytes(sort_entries)}},
+            "entries");
+    std::uint32_t* d_entry_totals = m_entry_blocks.span_as<std::uint32_t>(neb_max).data();
+    const Key step_y = Key(g.half[0]), step_z = Key(g.half[0]) * Key(g.half[1]);
+    double pass_ms[3] = {0, 0, 0};  // entries, sort, pairs
+    auto run_passes = [&](std::uint32_t* store, std::uint64_t cap_pairs) {
+      CG_CUDA_CHECK(cudaEventRecord(m_pass_events[0], st));
+      for (std::uint32_t t = 0; t < 8; ++t) {
+        const auto nt = static_cast<std::uint32_t>(type_entries[t]);
+        cudaEvent_t* ev = m_pass_events + 1 + 3 * t;
+        keys = cub::DoubleBuffer<Key>(m_keys[0].span_as<Key>(n).data(), m_keys[1].span_as<Key>(n).data());
+        body = cub::DoubleBuffer<std::uint32_t>(m_bodies[0].span_as<std::uint32_t>(n).data(),
+                                                m_bodies[1].span_as<std::uint32_t>(n).data());
+        if (nt > 0) {
+          cuda::fill_type_entries_kernel<Key><<<nb, kBlock, 0, st>>>(
+              d_ctrl, d_base, n, t, step_y, step_z, d_type_offsets + std::size_t(t) * nb,
+              static_cast<std::uint32_t>(start[t]), keys.Current(), body.Current());
+          CG_CUDA_CHECK_LAUNCH("fill_type_entries");
+        }
+        CG_CUDA_CHECK(cudaEventRecord(ev[0], st));
+        if (nt > 1 && g.half_bits > 0) {
+          n_sort = nt;
+          run_cub(sort_entries);
+        }
+        CG_CUDA_CHECK(cudaEventRecord(ev[1], st));
+        if (nt > 0) {
+          cuda::count_pairs_kernel<Real, Key><<<blocks_for(nt), kBlock, 0, st>>>(
+              keys.Current(), body.Current(), nt, d_ctrl, d_cell_spheres, d_perm, d_report, g.half_bits, t,
+              reinterpret_cast<std::uint32_t*>(keys.Alternate()), d_entry_totals, d_counters, store,
+              store + cap_pairs, cap_pairs);
+          CG_CUDA_CHECK_LAUNCH("count_pairs");
+        }
+        CG_CUDA_CHECK(cudaEventRecord(ev[2], st));
       }
-  };
-  std::uint32_t* d_pair_store = m_pairs.span_as<std::uint32_t>(4 * std::size_t(cap)).data();
-  run_passes(d_pair_store, cap);
-  {
-    float ms = 0;  // the scan and the host sync after pack, as in the single-sort path's entries stage
-    CG_CUDA_CHECK(cudaEventElapsedTime(&ms, m_events[2], m_pass_events[0]));
-    pass_ms[0] += ms;
-  }
-  if (h_counters->pairs > cap) {
-    check_pairs(h_counters->pairs);
-    cap = h_counters->pairs;
-    reserve({{&m_pairs, 4 * std::size_t(cap) * sizeof(std::uint32_t)}}, "pairs");
-    cap = std::max<std::uint64_t>(cap, m_pairs.bytes() / (4 * sizeof(std::uint32_t)));
-    d_pair_store = m_pairs.span_as<std::uint32_t>(4 * std::size_t(cap)).data();
-    CG_CUDA_CHECK(cudaMemsetAsync(d_counters, 0, sizeof(Counters), st));  // pairs and tests again
+      CG_CUDA_CHECK(cudaMemcpyAsync(h_counters, d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, st));
+      CG_CUDA_CHECK(cudaStreamSynchronize(st));  // host needs the pairs total
+      cudaEvent_t prev = m_pass_events[0];
+      for (int t = 0; t < 8; ++t)
+        for (int s = 0; s < 3; ++s) {
+          float ms = 0;
+          CG_CUDA_CHECK(cudaEventElapsedTime(&ms, prev, m_pass_events[1 + 3 * t + s]));
+          pass_ms[s] += ms;
+          prev = m_pass_events[1 + 3 * t + s];
+        }
+    };
+    std::uint32_t* d_pair_store = m_pairs.span_as<std::uint32_t>(4 * std::size_t(cap)).data();
     run_passes(d_pair_store, cap);
-  }
-  const std::uint64_t n_pairs = h_counters->pairs;
-  stats.pair_tests = h_counters->tests;
-  check_pairs(n_pairs);
-  np = static_cast<std::uint32_t>(n_pairs);
-  reserve({{&m_out, out_bytes_for(np)}, {&m_temp, temp_bytes(sort_pairs)}}, "pairs");
-  pair_a = cub::DoubleBuffer<std::uint32_t>(d_pair_store, d_pair_store + 2 * cap);
-  pair_b = cub::DoubleBuffer<std::uint32_t>(d_pair_store + cap, d_pair_store + 3 * cap);
-  // Stage times: the passes' fill / sort / count times, summed (marks 2 and 3 only close the chain).
-  mark(2);
-  mark(3);
-  mark(4);
-  for (int s = 0; s < 3; ++s) {
-    has_override[2 + s] = true;
-    override_ms[2 + s] = pass_ms[s];
-  }
-  override_tail = true;  // + the host sync after the last pass (to mark 4), added to pairs below
+    {
+      float ms = 0;  // the scan and the host sync after pack, as in the single-sort path's entries stage
+      CG_CUDA_CHECK(cudaEventElapsedTime(&ms, m_events[2], m_pass_events[0]));
+      pass_ms[0] += ms;
+    }
+    if (h_counters->pairs > cap) {
+      check_pairs(h_counters->pairs);
+      cap = h_counters->pairs;
+      reserve({{&m_pairs, 4 * std::size_t(cap) * sizeof(std::uint32_t)}}, "pairs");
+      cap = std::max<std::uint64_t>(cap, m_pairs.bytes() / (4 * sizeof(std::uint32_t)));
+      d_pair_store = m_pairs.span_as<std::uint32_t>(4 * std::size_t(cap)).data();
+      CG_CUDA_CHECK(cudaMemsetAsync(d_counters, 0, sizeof(Counters), st));  // pairs and tests again
+      run_passes(d_pair_store, cap);
+    }
+    const std::uint64_t n_pairs = h_counters->pairs;
+    stats.pair_tests = h_counters->tests;
+    check_pairs(n_pairs);
+    np = static_cast<std::uint32_t>(n_pairs);
+    reserve({{&m_out, out_bytes_for(np)}, {&m_temp, temp_bytes(sort_pairs)}}, "pairs");
+    pair_a = cub::DoubleBuffer<std::uint32_t>(d_pair_store, d_pair_store + 2 * cap);
+    pair_b = cub::DoubleBuffer<std::uint32_t>(d_pair_store + cap, d_pair_store + 3 * cap);
+    // Stage times: the passes' fill / sort / count times, summed (marks 2 and 3 only close the chain).
+    mark(2);
+    mark(3);
+    mark(4);
+    for (int s = 0; s < 3; ++s) {
+      has_override[2 + s] = true;
+      override_ms[2 + s] = pass_ms[s];
+    }
+    override_tail = true;  // + the host sync after the last pass (to mark 4), added to pairs below
   }
 
   // ---- order ------------------------------------------------------------------------------------
@@ -616,8 +620,8 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
     cp.dir2 = reinterpret_cast<Vec3<Real>*>(take(v3));
   }
   if (np > 0) {
-    cuda::narrow_kernel<Real><<<blocks_for(np), kBlock, 0, st>>>(pair_a.Current(), pair_b.Current(), np, d_spheres, origin,
-                                                                 cp, full);
+    cuda::narrow_kernel<Real><<<blocks_for(np), kBlock, 0, st>>>(pair_a.Current(), pair_b.Current(), np,
+                                                                 d_spheres, origin, cp, full);
     CG_CUDA_CHECK_LAUNCH("narrow");
   }
   mark(6);
@@ -720,7 +724,8 @@ void run_stages(CudaBackend& backend, const DetectJob<Real>& job, Contacts<Real>
 }
 
 template void run_stages(CudaBackend&, const DetectJob<float>&, Contacts<float>&, StageTimes&, EngineStats&);
-template void run_stages(CudaBackend&, const DetectJob<double>&, Contacts<double>&, StageTimes&, EngineStats&);
+template void run_stages(CudaBackend&, const DetectJob<double>&, Contacts<double>&, StageTimes&,
+                         EngineStats&);
 
 }  // namespace detail
 }  // namespace cg

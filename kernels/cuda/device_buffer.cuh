@@ -15,9 +15,9 @@ namespace cg::cuda {
 // Throws cg::CudaError "file:line: call: <cudaGetErrorString>" when `e` is not cudaSuccess.
 [[noreturn]] void throw_cuda_error(cudaError_t e, const char* call, const char* file, int line);
 
-#define CG_CUDA_CHECK(call)                                                             \
-  do {                                                                                  \
-    const cudaError_t cg_err_ = (call);                                                 \
+#define CG_CUDA_CHECK(call)                                                                       \
+  do {                                                                                            \
+    const cudaError_t cg_err_ = (call);                                                           \
     if (cg_err_ != cudaSuccess) ::cg::cuda::throw_cuda_error(cg_err_, #call, __FILE__, __LINE__); \
   } while (0)
 

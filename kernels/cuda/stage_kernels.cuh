@@ -7,10 +7,9 @@
 // fill_pairs) or per pair (narrow); blocks of kBlock threads, no grid-stride loop in the
 // count → fill pairs, so that a block's count kernel and fill kernel see the same items and the
 // fill places its items with a block-wide exclusive scan plus the block's scanned total.
+#include <cstdint>
 #include <cub/block/block_reduce.cuh>
 #include <cub/block/block_scan.cuh>
-
-#include <cstdint>
 
 #include "core/contact.hpp"
 #include "core/grid.hpp"
@@ -22,10 +21,10 @@ constexpr int kBlock = 256;
 
 // DEVICE counters of one call; zeroed (cudaMemsetAsync) before the first kernel that adds to them.
 struct Counters {
-  unsigned long long entries;  // sum of entry counts (pack)
-  unsigned long long pairs;    // contacting pairs (count_pairs)
-  unsigned long long tests;    // sphere tests made (count_pairs)
-  unsigned long long bad;      // n - i of the first invalid body i (atomicMax), 0: none
+  unsigned long long entries;          // sum of entry counts (pack)
+  unsigned long long pairs;            // contacting pairs (count_pairs)
+  unsigned long long tests;            // sphere tests made (count_pairs)
+  unsigned long long bad;              // n - i of the first invalid body i (atomicMax), 0: none
   unsigned long long type_entries[8];  // entries per cell type (reorder, type-pass path only)
 };
 
@@ -38,9 +37,9 @@ struct BoundsPartial {
 template <class Real>
 struct ContactPtrs {
   std::int64_t *id_a, *id_b;
-  Vec3<Real> *position_on_a, *position_on_b, *normal_on_b;
+  Vec3<Real>*position_on_a, *position_on_b, *normal_on_b;
   Real* distance;
-  Vec3<Real> *local_point_a, *local_point_b, *dir1, *dir2;
+  Vec3<Real>*local_point_a, *local_point_b, *dir1, *dir2;
 };
 
 __device__ __forceinline__ bool body_is_bad(double x, double y, double z, double r) {
@@ -144,11 +143,11 @@ __device__ __forceinline__ Key home_block_key(const BodyCells& bc, const GridPar
 // pack: world (double) → local Real sphere `Real(p - origin)` in input order, and the (locality key,
 // index) pairs of the renumbering sort. Invalid bodies → c->bad.
 template <class Real, class Key>
-__global__ void __launch_bounds__(kBlock) pack_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
-                                                      std::uint32_t n, Vec3<double> origin, GridParams<Real> g,
-                                                      Sphere<Real>* __restrict__ spheres,
-                                                      Key* __restrict__ home_key, std::uint32_t* __restrict__ home_index,
-                                                      Counters* __restrict__ c) {
+__global__ void __launch_bounds__(kBlock)
+    pack_kernel(const double* __restrict__ pos, const double* __restrict__ rad, std::uint32_t n,
+                Vec3<double> origin, GridParams<Real> g, Sphere<Real>* __restrict__ spheres,
+                Key* __restrict__ home_key, std::uint32_t* __restrict__ home_index,
+                Counters* __restrict__ c) {
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
   if (i >= n) return;
   const std::uint64_t i3 = 3 * std::uint64_t(i);
@@ -173,13 +172,12 @@ __host__ __device__ __forceinline__ bool has_type(std::uint32_t ctrl, std::uint3
 // (cell_key of lo & ~1, type bits 0) and per block the number of bodies having a cell of each
 // type (type_blocks[t * gridDim.x + blockIdx.x]; totals added to c->type_entries[t]).
 template <class Real, class Key>
-__global__ void __launch_bounds__(kBlock) reorder_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n,
-                                                         GridParams<Real> g, const std::uint32_t* __restrict__ sorted_index,
-                                                         Sphere<Real>* __restrict__ cell_spheres,
-                                                         std::uint8_t* __restrict__ ctrl, std::uint32_t* __restrict__ perm,
-                                                         std::uint32_t* __restrict__ block_entries,
-                                                         Counters* __restrict__ c, Key* __restrict__ base,
-                                                         std::uint32_t* __restrict__ type_blocks) {
+__global__ void __launch_bounds__(kBlock)
+    reorder_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n, GridParams<Real> g,
+                   const std::uint32_t* __restrict__ sorted_index, Sphere<Real>* __restrict__ cell_spheres,
+                   std::uint8_t* __restrict__ ctrl, std::uint32_t* __restrict__ perm,
+                   std::uint32_t* __restrict__ block_entries, Counters* __restrict__ c,
+                   Key* __restrict__ base, std::uint32_t* __restrict__ type_blocks) {
   using Reduce = cub::BlockReduce<std::uint32_t, kBlock>;
   __shared__ typename Reduce::TempStorage tmp;
   __shared__ std::uint32_t s_types[8];
@@ -223,12 +221,11 @@ __global__ void __launch_bounds__(kBlock) reorder_kernel(const Sphere<Real>* __r
 // cell_key (type bits dropped): base + one super-cell step along each axis where lo is odd and the
 // type's parity even (the cell lo + 1 then starts the next super-cell).
 template <class Key>
-__global__ void __launch_bounds__(kBlock) fill_type_entries_kernel(const std::uint8_t* __restrict__ ctrl,
-                                                                   const Key* __restrict__ base, std::uint32_t n,
-                                                                   std::uint32_t type, Key step_y, Key step_z,
-                                                                   const std::uint32_t* __restrict__ block_offset,
-                                                                   std::uint32_t start, Key* __restrict__ keys,
-                                                                   std::uint32_t* __restrict__ body) {
+__global__ void __launch_bounds__(kBlock)
+    fill_type_entries_kernel(const std::uint8_t* __restrict__ ctrl, const Key* __restrict__ base,
+                             std::uint32_t n, std::uint32_t type, Key step_y, Key step_z,
+                             const std::uint32_t* __restrict__ block_offset, std::uint32_t start,
+                             Key* __restrict__ keys, std::uint32_t* __restrict__ body) {
   using Scan = cub::BlockScan<std::uint32_t, kBlock>;
   __shared__ typename Scan::TempStorage tmp;
   const std::uint32_t j = blockIdx.x * kBlock + threadIdx.x;
@@ -255,10 +252,10 @@ __global__ void __launch_bounds__(kBlock) fill_type_entries_kernel(const std::ui
 // its block's scanned total plus its exclusive rank in the block (same block layout as
 // reorder_kernel). Staged in shared memory so that the block writes its entries coalesced.
 template <class Real, class Key>
-__global__ void __launch_bounds__(kBlock) fill_entries_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n,
-                                                              GridParams<Real> g,
-                                                              const std::uint32_t* __restrict__ block_offset,
-                                                              Key* __restrict__ keys, std::uint32_t* __restrict__ body) {
+__global__ void __launch_bounds__(kBlock)
+    fill_entries_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n, GridParams<Real> g,
+                        const std::uint32_t* __restrict__ block_offset, Key* __restrict__ keys,
+                        std::uint32_t* __restrict__ body) {
   using Scan = cub::BlockScan<std::uint32_t, kBlock>;
   __shared__ typename Scan::TempStorage tmp;
   __shared__ Key s_keys[8 * kBlock];
@@ -308,14 +305,11 @@ __device__ __forceinline__ void visit(const EntryBody<Real>& x, std::uint32_t b,
 }
 
 template <class Real, class Key, class Emit>
-__device__ __forceinline__ std::uint32_t walk_from_memory(std::uint32_t f0, Key k, const EntryBody<Real>& x,
-                                                          const Key* __restrict__ keys,
-                                                          const std::uint32_t* __restrict__ body,
-                                                          std::uint32_t n_entries,
-                                                          const std::uint8_t* __restrict__ ctrl,
-                                                          const Sphere<Real>* __restrict__ spheres,
-                                                          const std::uint32_t* __restrict__ perm,
-                                                          const std::uint8_t* __restrict__ report, Emit&& emit) {
+__device__ __forceinline__ std::uint32_t walk_from_memory(
+    std::uint32_t f0, Key k, const EntryBody<Real>& x, const Key* __restrict__ keys,
+    const std::uint32_t* __restrict__ body, std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
+    const Sphere<Real>* __restrict__ spheres, const std::uint32_t* __restrict__ perm,
+    const std::uint8_t* __restrict__ report, Emit&& emit) {
   std::uint32_t tests = 0;
   for (std::uint32_t f = f0; f < n_entries && keys[f] == k; ++f) {
     const std::uint32_t b = body[f];
@@ -337,19 +331,14 @@ __device__ __forceinline__ std::uint32_t walk_from_memory(std::uint32_t f0, Key 
 // the cursor ends above cap, the host discards those writes and runs the scan → fill_pairs path
 // from the masks instead. The pairs' order is the blocks' arrival order; the order stage sorts them.
 template <class Real, class Key>
-__global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
-                                                             std::uint32_t n_entries,
-                                                             const std::uint8_t* __restrict__ ctrl,
-                                                             const Sphere<Real>* __restrict__ spheres,
-                                                             const std::uint32_t* __restrict__ perm,
-                                                             const std::uint8_t* __restrict__ report, int half_bits,
-                                                             std::uint32_t pass_type,
-                                                             std::uint32_t* __restrict__ mask,
-                                                             std::uint32_t* __restrict__ block_pairs,
-                                                             Counters* __restrict__ c,
-                                                             std::uint32_t* __restrict__ pair_a,
-                                                             std::uint32_t* __restrict__ pair_b,
-                                                             unsigned long long cap) {
+__global__ void __launch_bounds__(kBlock)
+    count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
+                       std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
+                       const Sphere<Real>* __restrict__ spheres, const std::uint32_t* __restrict__ perm,
+                       const std::uint8_t* __restrict__ report, int half_bits, std::uint32_t pass_type,
+                       std::uint32_t* __restrict__ mask, std::uint32_t* __restrict__ block_pairs,
+                       Counters* __restrict__ c, std::uint32_t* __restrict__ pair_a,
+                       std::uint32_t* __restrict__ pair_b, unsigned long long cap) {
   using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
   using Scan = cub::BlockScan<unsigned long long, kBlock>;
   __shared__ union {
@@ -391,7 +380,8 @@ __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restri
       ++found;
       bits |= 1u << (f - t);
     };
-    for (; f < lim && s_key[f] == k; ++f) visit(x, 0u, s_ctrl[f], s_sphere[f], s_perm[f], report, tests, mark_one);
+    for (; f < lim && s_key[f] == k; ++f)
+      visit(x, 0u, s_ctrl[f], s_sphere[f], s_perm[f], report, tests, mark_one);
     if (f == lim) {  // the cell may go on past the staged window: walk the rest from memory
       const std::uint32_t before = found;
       tests += walk_from_memory(base + f, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
@@ -431,16 +421,13 @@ __global__ void __launch_bounds__(kBlock) count_pairs_kernel(const Key* __restri
 // the entry's rank, from the contact masks of count_pairs_kernel (entries flagged in bit 0: the cell
 // is walked from memory again, counting then emitting).
 template <class Real, class Key>
-__global__ void __launch_bounds__(kBlock) fill_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
-                                                            std::uint32_t n_entries,
-                                                            const std::uint8_t* __restrict__ ctrl,
-                                                            const Sphere<Real>* __restrict__ spheres,
-                                                            const std::uint32_t* __restrict__ perm,
-                                                            const std::uint8_t* __restrict__ report, int half_bits,
-                                                            const std::uint32_t* __restrict__ mask,
-                                                            const std::uint32_t* __restrict__ block_offset,
-                                                            std::uint32_t* __restrict__ pair_a,
-                                                            std::uint32_t* __restrict__ pair_b) {
+__global__ void __launch_bounds__(kBlock)
+    fill_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
+                      std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
+                      const Sphere<Real>* __restrict__ spheres, const std::uint32_t* __restrict__ perm,
+                      const std::uint8_t* __restrict__ report, int half_bits,
+                      const std::uint32_t* __restrict__ mask, const std::uint32_t* __restrict__ block_offset,
+                      std::uint32_t* __restrict__ pair_a, std::uint32_t* __restrict__ pair_b) {
   using Scan = cub::BlockScan<std::uint32_t, kBlock>;
   __shared__ typename Scan::TempStorage tmp;
   const std::uint32_t e = blockIdx.x * kBlock + threadIdx.x;
@@ -481,8 +468,9 @@ __global__ void __launch_bounds__(kBlock) fill_pairs_kernel(const Key* __restric
 // order, second step: the pairs are sorted by a (stable radix sort of (a, b) by a); each run of equal
 // a is put in b order here by its first thread (insertion sort; runs are a body's contacts, short).
 // Pairs are distinct, so the result is the (a, b) order of the host's sort of a << id_bits | b.
-__global__ void __launch_bounds__(kBlock) sort_runs_kernel(const std::uint32_t* __restrict__ pair_a,
-                                                           std::uint32_t* __restrict__ pair_b, std::uint32_t n_pairs) {
+__global__ void __launch_bounds__(kBlock)
+    sort_runs_kernel(const std::uint32_t* __restrict__ pair_a, std::uint32_t* __restrict__ pair_b,
+                     std::uint32_t n_pairs) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   if (k >= n_pairs) return;
   const std::uint32_t a = pair_a[k];
@@ -499,10 +487,10 @@ __global__ void __launch_bounds__(kBlock) sort_runs_kernel(const std::uint32_t* 
 
 // narrow: contact data of each sorted pair, world frame as the host: Real(double(origin) + double(v)).
 template <class Real>
-__global__ void __launch_bounds__(kBlock) narrow_kernel(const std::uint32_t* __restrict__ pair_a,
-                                                        const std::uint32_t* __restrict__ pair_b, std::uint32_t n_pairs,
-                                                        const Sphere<Real>* __restrict__ spheres,
-                                                        Vec3<double> origin, ContactPtrs<Real> out, bool full) {
+__global__ void __launch_bounds__(kBlock)
+    narrow_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
+                  std::uint32_t n_pairs, const Sphere<Real>* __restrict__ spheres, Vec3<double> origin,
+                  ContactPtrs<Real> out, bool full) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   if (k >= n_pairs) return;
   const std::uint32_t a = pair_a[k], b = pair_b[k];

@@ -143,9 +143,8 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
   for (std::size_t c = 0; c < n_chunks; ++c) {
     std::vector<std::uint64_t>& mine = chunk_pairs[c];
     for (std::size_t e = n_entries * c / n_chunks, end = n_entries * (c + 1) / n_chunks; e < end; ++e)
-      tests_total += for_each_contact(e, [&](std::uint32_t a, std::uint32_t b) {
-        mine.push_back((std::uint64_t(a) << id_bits) | b);
-      });
+      tests_total += for_each_contact(
+          e, [&](std::uint32_t a, std::uint32_t b) { mine.push_back((std::uint64_t(a) << id_bits) | b); });
   }
   std::vector<std::uint64_t> chunk_size(n_chunks), chunk_offset;
   for (std::size_t c = 0; c < n_chunks; ++c) chunk_size[c] = chunk_pairs[c].size();
@@ -203,6 +202,7 @@ void run_stages(HostBackend& backend, const DetectJob<Real>& job, Contacts<Real>
 }
 
 template void run_stages(HostBackend&, const DetectJob<float>&, Contacts<float>&, StageTimes&, EngineStats&);
-template void run_stages(HostBackend&, const DetectJob<double>&, Contacts<double>&, StageTimes&, EngineStats&);
+template void run_stages(HostBackend&, const DetectJob<double>&, Contacts<double>&, StageTimes&,
+                         EngineStats&);
 
 }  // namespace cg::detail

@@ -4,6 +4,8 @@
 //
 // Every test is collective: all ranks run it; comparisons happen on rank 0 after the last collective
 // (so a failed assertion never leaves a rank behind in a collective).
+#include "distributed_detect.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -14,7 +16,6 @@
 #include <string>
 #include <vector>
 
-#include "distributed_detect.hpp"
 #include "hdf5_io.hpp"
 #include "mpi/mpi_test_env.hpp"
 
@@ -33,7 +34,8 @@ Scene random_scene(std::uint64_t seed, std::size_t n, Vec3<double> lo, Vec3<doub
   for (std::size_t i = 0; i < n; ++i) {
     s.sphere_position.push_back({ux(rng), uy(rng), uz(rng)});
     const double t = u01(rng);
-    s.sphere_radius.push_back(log_radius ? r_low * std::pow(r_high / r_low, t) : r_low + t * (r_high - r_low));
+    s.sphere_radius.push_back(log_radius ? r_low * std::pow(r_high / r_low, t)
+                                         : r_low + t * (r_high - r_low));
   }
   return s;
 }
@@ -151,8 +153,8 @@ DistributedOptions base_options(Fields fields = Fields::full) {
 
 // The distributed run equals the single-rank engine on the whole scene, bit for bit.
 template <class Real>
-std::size_t check_equal_to_single_rank(const std::string& path, const Scene& scene, const DistributedOptions& options,
-                                       const std::string& what) {
+std::size_t check_equal_to_single_rank(const std::string& path, const Scene& scene,
+                                       const DistributedOptions& options, const std::string& what) {
   DistributedResult<Real> got = distributed_detect<Real>(session(), path, options);
   const std::string label = what + (std::is_same_v<Real, float> ? " fp32" : " fp64") + " at " +
                             std::to_string(session().size()) + " rank(s)";
@@ -163,7 +165,8 @@ std::size_t check_equal_to_single_rank(const std::string& path, const Scene& sce
     std::vector<std::string> top;
     for (const auto& t : got.times)
       if (t.name.rfind("detect.", 0) != 0) top.push_back(t.name);
-    EXPECT_EQ(top, (std::vector<std::string>{"read", "redistribute", "halo", "detect", "gather", "merge"})) << label;
+    EXPECT_EQ(top, (std::vector<std::string>{"read", "redistribute", "halo", "detect", "gather", "merge"}))
+        << label;
   }
   if (session().rank() != 0) {
     EXPECT_EQ(got.contacts.size(), 0u) << label << ": contacts on a rank other than 0";
@@ -172,10 +175,11 @@ std::size_t check_equal_to_single_rank(const std::string& path, const Scene& sce
   EXPECT_EQ(got.duplicates_removed, 0u) << label;
   Engine<Real> engine(options.engine);
   const Contacts<Real> want = engine.detect(BodiesView{scene.sphere_position, scene.sphere_radius, {}, {}});
-  EXPECT_EQ(got.cell_size, make_frame(compute_bounds(BodiesView{scene.sphere_position, scene.sphere_radius, {}, {}}),
-                                      options.engine.cell_size,
-                                      std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64)
-                               .cell_size)
+  EXPECT_EQ(
+      got.cell_size,
+      make_frame(compute_bounds(BodiesView{scene.sphere_position, scene.sphere_radius, {}, {}}),
+                 options.engine.cell_size, std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64)
+          .cell_size)
       << label;
   expect_identical(got.contacts, want, label);
   return want.size();
@@ -327,8 +331,9 @@ TEST(DistributedDetect, CountBalanceGivesEvenOwnership) {
 // ---- errors: every rank ends with the same exception ------------------------------------------------
 
 TEST(DistributedDetect, MissingFileIsAnInputErrorOnEveryRank) {
-  EXPECT_THROW(distributed_detect<double>(session(), testing::shared_temp_dir() + "/missing.h5", base_options()),
-               InputError);
+  EXPECT_THROW(
+      distributed_detect<double>(session(), testing::shared_temp_dir() + "/missing.h5", base_options()),
+      InputError);
 }
 
 TEST(DistributedDetect, BadRowReadByTheLastRankIsReportedByEveryRank) {
@@ -343,7 +348,8 @@ TEST(DistributedDetect, BadRowReadByTheLastRankIsReportedByEveryRank) {
     message = e.what();
   }
   if (session().uses_mpi()) {
-    const std::string who = "[rank " + std::to_string(session().size() - 1) + "/" + std::to_string(session().size()) + "]";
+    const std::string who =
+        "[rank " + std::to_string(session().size() - 1) + "/" + std::to_string(session().size()) + "]";
     EXPECT_NE(message.find(who), std::string::npos) << message;
     EXPECT_NE(message.find("read"), std::string::npos) << message;
   }
@@ -392,8 +398,8 @@ TEST(Session, AgreeRethrowsTheLowestFailingRanksError) {
     ADD_FAILURE() << "no error";
   } catch (const IoError& x) {
     if (s.uses_mpi()) {
-      EXPECT_EQ(std::string(x.what()),
-                "[rank " + std::to_string(s.size() - 1) + "/" + std::to_string(s.size()) + "] write: disk full");
+      EXPECT_EQ(std::string(x.what()), "[rank " + std::to_string(s.size() - 1) + "/" +
+                                           std::to_string(s.size()) + "] write: disk full");
     }
   }
 }

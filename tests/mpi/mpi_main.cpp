@@ -23,8 +23,8 @@ class RankFailurePrinter : public ::testing::EmptyTestEventListener {
   explicit RankFailurePrinter(std::string prefix) : m_prefix(std::move(prefix)) {}
   void OnTestPartResult(const ::testing::TestPartResult& r) override {
     if (!r.failed()) return;
-    std::fprintf(stderr, "%s%s:%d: %s\n", m_prefix.c_str(), r.file_name() ? r.file_name() : "?", r.line_number(),
-                 r.summary());
+    std::fprintf(stderr, "%s%s:%d: %s\n", m_prefix.c_str(), r.file_name() ? r.file_name() : "?",
+                 r.line_number(), r.summary());
   }
 
  private:

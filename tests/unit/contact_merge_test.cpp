@@ -1,12 +1,12 @@
 // Unit tests of decomposition/contact_merge.hpp: the k-way merge of the ranks' sorted contact runs.
+#include "contact_merge.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <random>
 #include <string>
 #include <vector>
-
-#include "contact_merge.hpp"
 
 namespace cg {
 namespace {
@@ -58,8 +58,8 @@ TEST(ContactMerge, MergesSortedRunsInKeyOrder) {
 }
 
 TEST(ContactMerge, RemovesAndCountsDuplicatesKeepingTheLowestRunsRow) {
-  std::vector<Contacts<double>> runs = {run_of({{0, 1}, {2, 3}}, false), run_of({{0, 1}, {2, 3}, {4, 5}}, false),
-                                        run_of({{2, 3}}, false)};
+  std::vector<Contacts<double>> runs = {run_of({{0, 1}, {2, 3}}, false),
+                                        run_of({{0, 1}, {2, 3}, {4, 5}}, false), run_of({{2, 3}}, false)};
   runs[1].distance[0] = 99.0;  // the copy of rank 1 differs: rank 0's row is kept
   MergedContacts<double> m = merge_contact_runs<double>(runs, false);
   EXPECT_EQ(m.duplicates_removed, 3u);
@@ -136,14 +136,16 @@ TEST(ContactMerge, IntoEqualsTheSequentialMergeForAnyParts) {
 
 TEST(ContactMerge, IntoRejectsUnsortedRunsAndAWronglySizedResult) {
   std::vector<Contacts<double>> runs = {run_of({{0, 1}}, false), run_of({{2, 3}, {0, 1}}, false)};
-  std::vector<ContactRunView<double>> views = {contact_run_view(runs[0], false), contact_run_view(runs[1], false)};
+  std::vector<ContactRunView<double>> views = {contact_run_view(runs[0], false),
+                                               contact_run_view(runs[1], false)};
   Contacts<double> out;
   out.resize(3, false);
   try {
     merge_contact_runs_into<double>(views, out, false, 2, 1);
     ADD_FAILURE() << "no error";
   } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("contact run 1: not sorted by (id_a, id_b) at row 1"), std::string::npos)
+    EXPECT_NE(std::string(e.what()).find("contact run 1: not sorted by (id_a, id_b) at row 1"),
+              std::string::npos)
         << e.what();
   }
   runs[1] = run_of({{0, 1}, {2, 3}}, false);

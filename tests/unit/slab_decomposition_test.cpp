@@ -1,5 +1,7 @@
 // Unit tests of decomposition/: slab cuts, ownership, halo plan. Pure geometry, no MPI.
 // Pictures: slabs along the slab axis, "|" an interior cut, "[" a closed end, "(" an open one.
+#include "slab_decomposition.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -7,8 +9,6 @@
 #include <limits>
 #include <random>
 #include <vector>
-
-#include "slab_decomposition.hpp"
 
 namespace cg {
 namespace {
@@ -219,7 +219,8 @@ TEST(HaloPlan, OwnerOfEveryCloseBodyHoldsTheOther) {
       ExportPlan halo = make_halo_plan(s, r, xr, w);
       EXPECT_EQ(halo.count(r), 0u);
       for (int q = 0; q < ranks; ++q) {
-        for (std::size_t k : halo.to(q)) holds[static_cast<std::size_t>(q)][owned[static_cast<std::size_t>(r)][k]] = true;
+        for (std::size_t k : halo.to(q))
+          holds[static_cast<std::size_t>(q)][owned[static_cast<std::size_t>(r)][k]] = true;
       }
     }
     for (std::size_t i = 0; i < x.size(); ++i) {

@@ -38,9 +38,8 @@ Result run(const std::string& args) {
 class Cli : public ::testing::Test {
  protected:
   void SetUp() override {
-    m_dir = fs::temp_directory_path() /
-            ("cg_cli_" + std::to_string(::getpid()) + "_" +
-             ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    m_dir = fs::temp_directory_path() / ("cg_cli_" + std::to_string(::getpid()) + "_" +
+                                         ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(m_dir);
     fs::create_directories(m_dir);
   }
@@ -53,10 +52,12 @@ class Cli : public ::testing::Test {
     const std::string out = path("out.h5");
     Result r = run("detect " + scene + " -o " + out + " " + extra);
     EXPECT_EQ(r.code, code) << r.output;
-    for (const auto& n : needles) EXPECT_NE(r.output.find(n), std::string::npos) << "missing '" << n << "' in: " << r.output;
+    for (const auto& n : needles)
+      EXPECT_NE(r.output.find(n), std::string::npos) << "missing '" << n << "' in: " << r.output;
     EXPECT_FALSE(fs::exists(out)) << "a failed run left an output file";
     for (const auto& e : fs::directory_iterator(m_dir))
-      EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << "temporary left: " << e.path();
+      EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos)
+          << "temporary left: " << e.path();
   }
 
   Scene small_scene(std::size_t n = 10) const {
@@ -85,7 +86,8 @@ TEST_F(Cli, GenerateDetectRoundTrip) {
   for (std::string l; std::getline(csv, l);) ++lines;
   EXPECT_EQ(lines, c.contacts.size() + 1);
   // fp32 and full fields
-  Result f = run("detect " + path("s.h5") + " -o " + path("c32.h5") + " --backend cpu --precision fp32 --fields full -q");
+  Result f = run("detect " + path("s.h5") + " -o " + path("c32.h5") +
+                 " --backend cpu --precision fp32 --fields full -q");
   ASSERT_EQ(f.code, 0) << f.output;
   ContactFile c32 = read_contacts(path("c32.h5"));
   EXPECT_EQ(c32.precision, "fp32");

@@ -30,7 +30,8 @@ void check_exactly_once(const Spheres& s, double cell) {
     Sphere<Real> sp{Real(s.p[i].x - f.origin.x), Real(s.p[i].y - f.origin.y), Real(s.p[i].z - f.origin.z),
                     Real(s.r[i])};
     bc[i] = body_cells(sp, g);
-    for (std::uint32_t m = 0; m < entry_count(bc[i]); ++m) cells[body_cell_key<std::uint64_t>(bc[i], m, g)].push_back(i);
+    for (std::uint32_t m = 0; m < entry_count(bc[i]); ++m)
+      cells[body_cell_key<std::uint64_t>(bc[i], m, g)].push_back(i);
   }
   std::map<std::pair<std::uint32_t, std::uint32_t>, int> tested;
   for (auto& [key, members] : cells) {
@@ -47,14 +48,16 @@ void check_exactly_once(const Spheres& s, double cell) {
     for (std::uint32_t j = i + 1; j < s.r.size(); ++j) {
       bool ov = true;
       for (int k = 0; k < 3; ++k) {
-        const auto hi_i = bc[i].lo[k] + ((bc[i].spill >> k) & 1), hi_j = bc[j].lo[k] + ((bc[j].spill >> k) & 1);
+        const auto hi_i = bc[i].lo[k] + ((bc[i].spill >> k) & 1),
+                   hi_j = bc[j].lo[k] + ((bc[j].spill >> k) & 1);
         ov = ov && bc[i].lo[k] <= hi_j && bc[j].lo[k] <= hi_i;
       }
       if (!ov) continue;
       ++overlapping;
       auto it = tested.find({i, j});
       ASSERT_NE(it, tested.end()) << s.name << ": pair " << i << "," << j << " never tested";
-      EXPECT_EQ(it->second, 1) << s.name << ": pair " << i << "," << j << " tested " << it->second << " times";
+      EXPECT_EQ(it->second, 1) << s.name << ": pair " << i << "," << j << " tested " << it->second
+                               << " times";
     }
   EXPECT_EQ(overlapping, tested.size()) << s.name << ": tests of pairs whose cells do not overlap";
 }
@@ -87,7 +90,7 @@ TEST(ExactlyOnce, PhantomOnlyCellHoldsContact) {
   }
   g.half_bits = 6;
   Sphere<double> a{4.1, 3.4, 1.0, 0.5}, b{3.4, 4.1, 1.0, 0.5};  // homes (2,1,0) and (1,2,0)
-  ASSERT_TRUE(spheres_touch(a, b));                            // d = 0.99 <= 1
+  ASSERT_TRUE(spheres_touch(a, b));                             // d = 0.99 <= 1
   BodyCells ca = body_cells(a, g), cb = body_cells(b, g);
   // the only common cell is (1,1,0): home to neither
   EXPECT_EQ(ca.lo[0], 1u);
@@ -190,7 +193,8 @@ TEST(Contact, SphereSphereFollowsTheContract) {
   EXPECT_EQ(e.normal_on_b.y, 0);
   EXPECT_EQ(e.distance, -1.5f);
   EXPECT_TRUE(spheres_touch(Sphere<double>{0, 0, 0, 0.5}, Sphere<double>{1, 0, 0, 0.5}));  // touching counts
-  EXPECT_FALSE(spheres_touch(Sphere<double>{0, 0, 0, 0.5}, Sphere<double>{std::nextafter(1.0, 2.0), 0, 0, 0.5}));
+  EXPECT_FALSE(
+      spheres_touch(Sphere<double>{0, 0, 0, 0.5}, Sphere<double>{std::nextafter(1.0, 2.0), 0, 0, 0.5}));
 }
 
 TEST(Contact, PlaneSpaceIsBulletsBtPlaneSpace1) {

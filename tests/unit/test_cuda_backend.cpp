@@ -18,10 +18,9 @@
 namespace cg::test {
 namespace {
 
-#define CG_SKIP_WITHOUT_CUDA()                                                  \
-  do {                                                                          \
-    if (!::cg::cuda_available())                                                \
-      GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";     \
+#define CG_SKIP_WITHOUT_CUDA()                                                                        \
+  do {                                                                                                \
+    if (!::cg::cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped"; \
   } while (0)
 
 template <class T>
@@ -79,7 +78,8 @@ TYPED_TEST_SUITE(CudaBackendTest, Reals, RealNames);
 
 TYPED_TEST(CudaBackendTest, BitIdenticalToCpuOnScenes) {
   std::uint64_t seed = 1001;
-  for (std::size_t n : {1u, 2u, 5u, 100u, 3000u, 60000u}) this->compare(random_spheres(n, 0.5, 1.0, seed++), Fields::basic);
+  for (std::size_t n : {1u, 2u, 5u, 100u, 3000u, 60000u})
+    this->compare(random_spheres(n, 0.5, 1.0, seed++), Fields::basic);
   this->compare(random_spheres(20000, 0.001, 1.0, 1011, true), Fields::full);
   this->compare(clustered(4000, 1012), Fields::full);
   this->compare(one_cell(400, 1013), Fields::full);
@@ -136,7 +136,8 @@ TYPED_TEST(CudaBackendTest, WorkspaceIsReusedAcrossFrames) {
   EXPECT_EQ(e.stats().device_allocations, 0u) << "a smaller frame must fit the workspace";
   std::vector<std::string> names;
   for (const auto& t : e.times()) names.push_back(t.name);
-  const std::vector<std::string> expect{"plan", "upload", "pack", "entries", "sort", "pairs", "order", "narrow", "download"};
+  const std::vector<std::string> expect{"plan",  "upload", "pack",   "entries", "sort",
+                                        "pairs", "order",  "narrow", "download"};
   EXPECT_EQ(names, expect);
 }
 
@@ -287,7 +288,8 @@ TEST(CudaBackendMemory, TooLargeForTheDeviceIsAClearError) {
   }
   ::unsetenv("CONTACTGRID_DEVICE_MEMORY_LIMIT");
   Engine<float> cpu({.backend = Backend::cpu});
-  EXPECT_EQ(engine.detect(BodiesView{s.p, s.r, {}, {}}).size(), cpu.detect(BodiesView{s.p, s.r, {}, {}}).size());
+  EXPECT_EQ(engine.detect(BodiesView{s.p, s.r, {}, {}}).size(),
+            cpu.detect(BodiesView{s.p, s.r, {}, {}}).size());
 }
 
 }  // namespace

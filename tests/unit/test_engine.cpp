@@ -42,7 +42,8 @@ class EngineTest : public ::testing::Test {
     double ext = 0, rmax = 0;
     Vec3<double> lo{1e300, 1e300, 1e300};
     for (std::size_t i = 0; i < s.r.size(); ++i) {
-      lo = {std::min(lo.x, s.p[i].x - s.r[i]), std::min(lo.y, s.p[i].y - s.r[i]), std::min(lo.z, s.p[i].z - s.r[i])};
+      lo = {std::min(lo.x, s.p[i].x - s.r[i]), std::min(lo.y, s.p[i].y - s.r[i]),
+            std::min(lo.z, s.p[i].z - s.r[i])};
       rmax = std::max(rmax, s.r[i]);
     }
     for (std::size_t i = 0; i < s.r.size(); ++i)
@@ -75,7 +76,8 @@ class EngineTest : public ::testing::Test {
       ++matched;
       const std::size_t k = it->second;
       const long double vt = tol * 8 + 4 * std::numeric_limits<Real>::epsilon();
-      EXPECT_NEAR(double(c.distance[k]), double(r.distance), double(vt)) << s.name << " pair " << r.a << "," << r.b;
+      EXPECT_NEAR(double(c.distance[k]), double(r.distance), double(vt))
+          << s.name << " pair " << r.a << "," << r.b;
       if (std::fabs(double(r.pa[0] - r.pb[0])) + std::fabs(double(r.distance)) > 0 &&
           std::sqrt(double((r.pa[0] - r.pb[0]) * (r.pa[0] - r.pb[0]))) >= 0) {
         // normals are ill-defined for (nearly) coincident centres: compare only well-separated ones
@@ -86,10 +88,11 @@ class EngineTest : public ::testing::Test {
           EXPECT_NEAR(double(n.x), double(r.n[0]), rel) << s.name;
           EXPECT_NEAR(double(n.y), double(r.n[1]), rel) << s.name;
           EXPECT_NEAR(double(n.z), double(r.n[2]), rel) << s.name;
-          const double pt = double(vt) * 4 + 4 * std::numeric_limits<Real>::epsilon() *
-                                                 std::max({1.0, std::fabs(s.p[r.a].x), std::fabs(s.p[r.a].y),
-                                                           std::fabs(s.p[r.a].z)}) +
-                            rel * (s.r[r.a] + s.r[r.b]);
+          const double pt =
+              double(vt) * 4 +
+              4 * std::numeric_limits<Real>::epsilon() *
+                  std::max({1.0, std::fabs(s.p[r.a].x), std::fabs(s.p[r.a].y), std::fabs(s.p[r.a].z)}) +
+              rel * (s.r[r.a] + s.r[r.b]);
           EXPECT_NEAR(double(c.position_on_b[k].x), double(r.pb[0]), pt) << s.name;
           EXPECT_NEAR(double(c.position_on_a[k].y), double(r.pa[1]), pt) << s.name;
         }
@@ -112,7 +115,8 @@ TYPED_TEST(EngineTest, RandomUniformManySizes) {
 }
 
 TYPED_TEST(EngineTest, RadiusRatios) {
-  this->expect_matches_reference(random_spheres(4000, 0.1, 1.0, 21), this->run(random_spheres(4000, 0.1, 1.0, 21)));
+  this->expect_matches_reference(random_spheres(4000, 0.1, 1.0, 21),
+                                 this->run(random_spheres(4000, 0.1, 1.0, 21)));
   auto s = random_spheres(3000, 0.001, 1.0, 22, /*log_radii=*/true);
   this->expect_matches_reference(s, this->run(s));
 }
@@ -208,7 +212,8 @@ TYPED_TEST(EngineTest, FullFieldsFollowTheContract) {
     EXPECT_NEAR(double(c.local_point_a[k].x), -s.r[c.id_a[k]] * double(n.x), 1e-4);
     EXPECT_NEAR(double(c.local_point_b[k].y), s.r[c.id_b[k]] * double(n.y), 1e-4);
     // position_on_a = position_on_b + n · distance
-    EXPECT_NEAR(double(c.position_on_a[k].z), double(c.position_on_b[k].z) + double(n.z * c.distance[k]), 1e-4);
+    EXPECT_NEAR(double(c.position_on_a[k].z), double(c.position_on_b[k].z) + double(n.z * c.distance[k]),
+                1e-4);
     EXPECT_EQ(c.distance[k], basic.distance[k]);
   }
 }

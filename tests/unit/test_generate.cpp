@@ -1,6 +1,7 @@
 // Unit tests of the scene generators (src/generate.cpp): the density model (P(t), box edges against
 // independent closed forms and Monte Carlo), determinism and chunk independence, the achieved
 // density, the polydisperse radius law, option validation and the test-scene builders.
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -13,8 +14,6 @@
 #include <string>
 #include <utility>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "generate.hpp"
 #include "hdf5_io.hpp"
@@ -105,7 +104,8 @@ TEST_F(Generate, CubeDistanceCdfPolynomialMatchesTheIntegral) {
     double poly = cg::cube_distance_cdf(t);
     EXPECT_NEAR(poly, cg::detail::cube_distance_cdf_integral(t), 1e-9) << "t = " << t;
   }
-  EXPECT_NEAR(cg::cube_distance_cdf(1.0), 4 * std::numbers::pi / 3 - 1.5 * std::numbers::pi + 1.6 - 1.0 / 6, 1e-15);
+  EXPECT_NEAR(cg::cube_distance_cdf(1.0), 4 * std::numbers::pi / 3 - 1.5 * std::numbers::pi + 1.6 - 1.0 / 6,
+              1e-15);
 }
 
 TEST_F(Generate, CubeDistanceCdfIsContinuousAndMonotone) {
@@ -174,11 +174,13 @@ TEST_F(Generate, PolydisperseBoxEdgeMatchesTheClosedForm) {
 }
 
 TEST_F(Generate, SmallCountsHaveSensibleEdges) {
-  EXPECT_DOUBLE_EQ(cg::uniform_box_edge(1, 0.5, 1.0, 0.4), 1.0 / std::sqrt(3.0));  // every pair (none) touches
+  EXPECT_DOUBLE_EQ(cg::uniform_box_edge(1, 0.5, 1.0, 0.4),
+                   1.0 / std::sqrt(3.0));  // every pair (none) touches
   for (std::uint64_t n : {2, 3, 5}) {
     double edge = cg::uniform_box_edge(n, 0.5, 1.0, 0.4);
     EXPECT_GT(edge, 0);
-    double pairs = 0.5 * double(n) * double(n - 1) * cg::expected_pair_contact(edge, cg::RadiusLaw::uniform, 0.5, 1.0);
+    double pairs =
+        0.5 * double(n) * double(n - 1) * cg::expected_pair_contact(edge, cg::RadiusLaw::uniform, 0.5, 1.0);
     EXPECT_NEAR(pairs / double(n), 0.4, 1e-9) << "n = " << n;
   }
 }
@@ -217,7 +219,8 @@ TEST_F(Generate, InMemoryIsDeterministic) {
   o.seed = 8;
   Scene b = cg::generate_scene(o);
   std::size_t same = 0;
-  for (std::size_t i = 0; i < a.sphere_count(); ++i) same += a.sphere_position[i] == b.sphere_position[i] ? 1 : 0;
+  for (std::size_t i = 0; i < a.sphere_count(); ++i)
+    same += a.sphere_position[i] == b.sphere_position[i] ? 1 : 0;
   EXPECT_EQ(same, 0u);
 }
 
@@ -316,11 +319,13 @@ TEST_F(Generate, PolydisperseRadiiRespectBoundsAndRatio) {
   auto [lo, hi] = std::minmax_element(s.sphere_radius.begin(), s.sphere_radius.end());
   EXPECT_GE(*lo, 0.002);
   EXPECT_LE(*hi, 2.0);
-  EXPECT_GT(*hi / *lo, 900);  // the whole range is used
+  EXPECT_GT(*hi / *lo, 900);               // the whole range is used
   double median = std::sqrt(0.002 * 2.0);  // log-uniform: half the radii below the geometric mean
-  double below = double(std::count_if(s.sphere_radius.begin(), s.sphere_radius.end(), [&](double r) { return r < median; }));
+  double below = double(
+      std::count_if(s.sphere_radius.begin(), s.sphere_radius.end(), [&](double r) { return r < median; }));
   EXPECT_NEAR(below / double(o.count), 0.5, 0.01);
-  double decade = double(std::count_if(s.sphere_radius.begin(), s.sphere_radius.end(), [&](double r) { return r < 0.02; }));
+  double decade = double(
+      std::count_if(s.sphere_radius.begin(), s.sphere_radius.end(), [&](double r) { return r < 0.02; }));
   EXPECT_NEAR(decade / double(o.count), 1.0 / 3, 0.01);  // one decade of three
 }
 
@@ -328,7 +333,8 @@ TEST_F(Generate, PolydisperseRejectsBadRadii) {
   GenerateOptions o;
   o.kind = "polydisperse";
   o.count = 10;
-  for (auto [low, high] : {std::pair{0.001, 1.5}, std::pair{0.0, 1.0}, std::pair{-1.0, 1.0}, std::pair{2.0, 1.0}}) {
+  for (auto [low, high] :
+       {std::pair{0.001, 1.5}, std::pair{0.0, 1.0}, std::pair{-1.0, 1.0}, std::pair{2.0, 1.0}}) {
     o.radius_low = low;
     o.radius_high = high;
     EXPECT_THROW(cg::generate_scene(o), cg::UsageError) << low << " " << high;

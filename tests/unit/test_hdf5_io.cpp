@@ -1,6 +1,7 @@
 // Unit tests of the HDF5 layer (src/hdf5_io.cpp): scene and contact round trips, and one test per
 // kind of bad input, each checking the exception type and that the message names the file, the
 // dataset and the row. Every test works in its own temporary directory, removed afterwards.
+#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <cmath>
@@ -10,8 +11,6 @@
 #include <limits>
 #include <string>
 #include <vector>
-
-#include <gtest/gtest.h>
 
 #include "hdf5_io.hpp"
 
@@ -26,8 +25,8 @@ using cg::RawType;
 using cg::Scene;
 using cg::Vec3;
 
-#define EXPECT_CONTAINS(text, part)                                                           \
-  EXPECT_NE(std::string(text).find(part), std::string::npos)                                  \
+#define EXPECT_CONTAINS(text, part)                          \
+  EXPECT_NE(std::string(text).find(part), std::string::npos) \
       << "message \"" << (text) << "\" does not contain \"" << (part) << "\""
 
 // Runs f, expects exactly an exception of type E, returns its message ("" otherwise).
@@ -54,8 +53,7 @@ class Hdf5Io : public ::testing::Test {
  protected:
   void SetUp() override {
     const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    m_dir = fs::temp_directory_path() /
-            ("cg_hdf5_io_" + std::to_string(::getpid()) + "_" + info->name());
+    m_dir = fs::temp_directory_path() / ("cg_hdf5_io_" + std::to_string(::getpid()) + "_" + info->name());
     fs::remove_all(m_dir);
     fs::create_directories(m_dir);
   }
@@ -183,7 +181,8 @@ void contacts_round_trip(const std::string& file, std::size_t k, bool full) {
   }
   const std::string real = fp32 ? "float32" : "float64";
   const std::uint64_t rows = k;
-  auto expect_dataset = [&](const std::string& name, const std::string& type, std::vector<std::uint64_t> dims) {
+  auto expect_dataset = [&](const std::string& name, const std::string& type,
+                            std::vector<std::uint64_t> dims) {
     auto info = cg::inspect_dataset(file, name);
     ASSERT_TRUE(info.has_value()) << name;
     EXPECT_EQ(info->type, type) << name;
@@ -195,16 +194,18 @@ void contacts_round_trip(const std::string& file, std::size_t k, bool full) {
   expect_dataset("/contacts/position_on_b", real, {rows, 3});
   expect_dataset("/contacts/normal_on_b", real, {rows, 3});
   expect_dataset("/contacts/distance", real, {rows});
-  for (const char* name : {"/contacts/local_point_a", "/contacts/local_point_b", "/contacts/lateral_friction_dir1",
-                           "/contacts/lateral_friction_dir2"}) {
-    if (full) expect_dataset(name, real, {rows, 3});
-    else EXPECT_FALSE(cg::inspect_dataset(file, name).has_value()) << name;
+  for (const char* name : {"/contacts/local_point_a", "/contacts/local_point_b",
+                           "/contacts/lateral_friction_dir1", "/contacts/lateral_friction_dir2"}) {
+    if (full)
+      expect_dataset(name, real, {rows, 3});
+    else
+      EXPECT_FALSE(cg::inspect_dataset(file, name).has_value()) << name;
   }
 }
 
 // Writes /spheres with n rows through the raw helper (float64 unless told).
-void write_raw_spheres(const std::string& file, const std::vector<double>& position, const std::vector<double>& radius,
-                       RawType type = RawType::float64) {
+void write_raw_spheres(const std::string& file, const std::vector<double>& position,
+                       const std::vector<double>& radius, RawType type = RawType::float64) {
   cg::write_raw_dataset(file, "/spheres/position", type, {position.size() / 3, 3}, position);
   cg::write_raw_dataset(file, "/spheres/radius", type, {radius.size()}, radius);
 }
@@ -314,7 +315,8 @@ TEST_F(Hdf5Io, Float32SceneIsConvertedToDouble) {
 }
 
 TEST_F(Hdf5Io, MixedFloat32AndFloat64Datasets) {
-  cg::write_raw_dataset(path("f.h5"), "/spheres/position", RawType::float64, {1, 3}, std::vector<double>{0.1, 0, 0});
+  cg::write_raw_dataset(path("f.h5"), "/spheres/position", RawType::float64, {1, 3},
+                        std::vector<double>{0.1, 0, 0});
   cg::write_raw_dataset(path("f.h5"), "/spheres/radius", RawType::float32, {1}, std::vector<double>{0.1});
   Scene s = cg::read_scene(path("f.h5"));
   EXPECT_EQ(s.sphere_position[0].x, 0.1);
@@ -366,9 +368,11 @@ TEST_F(Hdf5Io, ContactFilesAreByteIdentical) {
   other.times = {{"bounds", 9.0}};
   other.input = "elsewhere.h5";
   cg::write_contacts(path("c.h5"), sample_contacts<float>(1000, true), other);
-  for (const char* name : {"id_a", "id_b", "position_on_a", "normal_on_b", "distance", "lateral_friction_dir2"}) {
+  for (const char* name :
+       {"id_a", "id_b", "position_on_a", "normal_on_b", "distance", "lateral_friction_dir2"}) {
     std::string dataset = std::string("/contacts/") + name;
-    EXPECT_EQ(cg::read_dataset_bytes(path("a.h5"), dataset), cg::read_dataset_bytes(path("c.h5"), dataset)) << name;
+    EXPECT_EQ(cg::read_dataset_bytes(path("a.h5"), dataset), cg::read_dataset_bytes(path("c.h5"), dataset))
+        << name;
   }
   EXPECT_EQ(cg::read_dataset_bytes(path("a.h5"), "/contacts/distance").size(), 1000 * sizeof(float));
 }
@@ -382,7 +386,8 @@ TEST_F(Hdf5Io, ContactsReplaceAnExistingFile) {
 
 TEST_F(Hdf5Io, WriteContactsIntoMissingDirectoryThrowsIoError) {
   std::string file = path("missing/c.h5");
-  std::string msg = error_of<IoError>([&] { cg::write_contacts(file, sample_contacts<double>(3, false), sample_info("fp64")); });
+  std::string msg = error_of<IoError>(
+      [&] { cg::write_contacts(file, sample_contacts<double>(3, false), sample_info("fp64")); });
   EXPECT_CONTAINS(msg, file);
   EXPECT_FALSE(fs::exists(file));
   EXPECT_FALSE(fs::exists(path("missing")));
@@ -391,7 +396,8 @@ TEST_F(Hdf5Io, WriteContactsIntoMissingDirectoryThrowsIoError) {
 
 TEST_F(Hdf5Io, FailedRenameRemovesTheTemporary) {
   fs::create_directories(path("c.h5/inside"));  // a non-empty directory: rename over it fails
-  std::string msg = error_of<IoError>([&] { cg::write_contacts(path("c.h5"), sample_contacts<float>(3, true), sample_info("fp32")); });
+  std::string msg = error_of<IoError>(
+      [&] { cg::write_contacts(path("c.h5"), sample_contacts<float>(3, true), sample_info("fp32")); });
   EXPECT_CONTAINS(msg, path("c.h5"));
   EXPECT_EQ(entries(), std::vector<std::string>{"c.h5"});
   EXPECT_TRUE(fs::is_directory(path("c.h5")));
@@ -417,7 +423,8 @@ TEST_F(Hdf5Io, SceneWriterWithoutCommitLeavesNothing) {
 }
 
 TEST_F(Hdf5Io, ContactsPrecisionMismatchIsRejected) {
-  EXPECT_THROW(cg::write_contacts(path("c.h5"), sample_contacts<float>(2, false), sample_info("fp64")), cg::Error);
+  EXPECT_THROW(cg::write_contacts(path("c.h5"), sample_contacts<float>(2, false), sample_info("fp64")),
+               cg::Error);
   EXPECT_TRUE(entries().empty());
 }
 
@@ -432,7 +439,8 @@ TEST_F(Hdf5Io, ReadContactsWithMisshapedDataset) {
   cg::write_raw_attribute(path("c.h5"), "precision", AttrValue{std::string("fp64")});
   cg::write_raw_dataset(path("c.h5"), "/contacts/id_a", RawType::int64, {2}, std::vector<double>{0, 1});
   cg::write_raw_dataset(path("c.h5"), "/contacts/id_b", RawType::int64, {2}, std::vector<double>{1, 2});
-  cg::write_raw_dataset(path("c.h5"), "/contacts/position_on_a", RawType::float64, {2, 2}, std::vector<double>(4));
+  cg::write_raw_dataset(path("c.h5"), "/contacts/position_on_a", RawType::float64, {2, 2},
+                        std::vector<double>(4));
   std::string msg = error_of<InputError>([&] { cg::read_contacts(path("c.h5")); });
   EXPECT_CONTAINS(msg, path("c.h5"));
   EXPECT_CONTAINS(msg, "/contacts/position_on_a");
@@ -493,7 +501,8 @@ TEST_F(Hdf5Io, TruncatedContactFile) {
 // ---- bad input: datasets ----------------------------------------------------------------------------
 
 TEST_F(Hdf5Io, MissingRadiusDataset) {
-  cg::write_raw_dataset(path("s.h5"), "/spheres/position", RawType::float64, {1, 3}, std::vector<double>{0, 0, 0});
+  cg::write_raw_dataset(path("s.h5"), "/spheres/position", RawType::float64, {1, 3},
+                        std::vector<double>{0, 0, 0});
   std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
   EXPECT_CONTAINS(msg, path("s.h5"));
   EXPECT_CONTAINS(msg, "/spheres/radius");
@@ -508,8 +517,10 @@ TEST_F(Hdf5Io, MissingPositionDataset) {
 }
 
 TEST_F(Hdf5Io, MissingOrientationDataset) {
-  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/position", RawType::float64, {1, 3}, std::vector<double>(3));
-  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/semi_axes", RawType::float64, {1, 3}, std::vector<double>(3, 1.0));
+  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/position", RawType::float64, {1, 3},
+                        std::vector<double>(3));
+  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/semi_axes", RawType::float64, {1, 3},
+                        std::vector<double>(3, 1.0));
   std::string msg = error_of<InputError>([&] { cg::read_scene(path("e.h5")); });
   EXPECT_CONTAINS(msg, path("e.h5"));
   EXPECT_CONTAINS(msg, "/ellipsoids/orientation");
@@ -542,16 +553,20 @@ TEST_F(Hdf5Io, PositionOfRankOne) {
 
 TEST_F(Hdf5Io, RadiusOfRankTwo) {
   cg::write_raw_dataset(path("s.h5"), "/spheres/position", RawType::float64, {5, 3}, std::vector<double>(15));
-  cg::write_raw_dataset(path("s.h5"), "/spheres/radius", RawType::float64, {5, 1}, std::vector<double>(5, 1.0));
+  cg::write_raw_dataset(path("s.h5"), "/spheres/radius", RawType::float64, {5, 1},
+                        std::vector<double>(5, 1.0));
   std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
   EXPECT_CONTAINS(msg, "/spheres/radius");
   EXPECT_CONTAINS(msg, "(5, 1)");
 }
 
 TEST_F(Hdf5Io, OrientationWithThreeColumns) {
-  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/position", RawType::float64, {2, 3}, std::vector<double>(6));
-  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/semi_axes", RawType::float64, {2, 3}, std::vector<double>(6, 1.0));
-  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/orientation", RawType::float64, {2, 3}, std::vector<double>(6, 1.0));
+  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/position", RawType::float64, {2, 3},
+                        std::vector<double>(6));
+  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/semi_axes", RawType::float64, {2, 3},
+                        std::vector<double>(6, 1.0));
+  cg::write_raw_dataset(path("e.h5"), "/ellipsoids/orientation", RawType::float64, {2, 3},
+                        std::vector<double>(6, 1.0));
   std::string msg = error_of<InputError>([&] { cg::read_scene(path("e.h5")); });
   EXPECT_CONTAINS(msg, path("e.h5"));
   EXPECT_CONTAINS(msg, "/ellipsoids/orientation");
@@ -650,7 +665,8 @@ TEST_F(Hdf5Io, RadiusAboveRadiusHigh) {
   s.sphere_radius[6] = 1.25;
   cg::write_scene(path("s.h5"), s);
   std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
-  EXPECT_EQ(msg, path("s.h5") + ": /spheres/radius row 6: radius 1.25 is outside [radius_low, radius_high] = [0.5, 1]");
+  EXPECT_EQ(msg, path("s.h5") +
+                     ": /spheres/radius row 6: radius 1.25 is outside [radius_low, radius_high] = [0.5, 1]");
 }
 
 TEST_F(Hdf5Io, RadiusBelowRadiusLow) {
@@ -679,7 +695,8 @@ TEST_F(Hdf5Io, EllipsoidBoundingRadiusOutsideBounds) {
   cg::write_scene(path("m.h5"), s);
   std::string msg = error_of<InputError>([&] { cg::read_scene(path("m.h5")); });
   EXPECT_EQ(msg, path("m.h5") +
-                     ": /ellipsoids/semi_axes row 2: bounding radius 2.5 is outside [radius_low, radius_high] = [0.25, 2]");
+                     ": /ellipsoids/semi_axes row 2: bounding radius 2.5 is outside [radius_low, "
+                     "radius_high] = [0.25, 2]");
 }
 
 TEST_F(Hdf5Io, NonPositiveSemiAxis) {
@@ -732,7 +749,8 @@ TEST_F(Hdf5Io, BadRowBeyondTheFirstReadChunk) {
   s.sphere_radius[n - 7] = -0.5;
   cg::write_scene(path("big.h5"), s);
   std::string msg = error_of<InputError>([&] { cg::read_scene(path("big.h5")); });
-  EXPECT_EQ(msg, path("big.h5") + ": /spheres/radius row " + std::to_string(n - 7) + ": radius -0.5 is not > 0");
+  EXPECT_EQ(msg,
+            path("big.h5") + ": /spheres/radius row " + std::to_string(n - 7) + ": radius -0.5 is not > 0");
 }
 
 TEST_F(Hdf5Io, StringRadiusBoundIsRejected) {

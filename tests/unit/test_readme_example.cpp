@@ -37,5 +37,6 @@ TEST(Readme, LibraryExampleIsInTheReadme) {
   const std::string src = a.str();
   const auto begin = src.find("// EXAMPLE-BEGIN\n") + 17, end = src.find("// EXAMPLE-END");
   const std::string example = src.substr(begin, end - begin);
-  EXPECT_NE(b.str().find(example), std::string::npos) << "README.md does not contain the example of " << __FILE__;
+  EXPECT_NE(b.str().find(example), std::string::npos)
+      << "README.md does not contain the example of " << __FILE__;
 }

@@ -1,5 +1,7 @@
 // Tests of `contactgrid bench` (src/bench.hpp) on tiny N: the CSV has the documented columns, one
 // row per N, contact counts that agree with Bullet; and the log-log slope fit.
+#include "bench.hpp"
+
 #include <gtest/gtest.h>
 #include <unistd.h>
 
@@ -9,8 +11,6 @@
 #include <sstream>
 #include <string>
 #include <vector>
-
-#include "bench.hpp"
 
 namespace cg {
 namespace {
@@ -44,10 +44,19 @@ TEST(Bench, TinyRunWritesCsvWithExpectedColumns) {
   std::ifstream f(o.csv);
   std::string line;
   ASSERT_TRUE(std::getline(f, line));
-  const std::vector<std::string> expected{
-      "n", "log2n", "contacts", "bullet_contacts", "agree", "bullet_scratch_s", "bullet_warm_s",
-      "engine_cpu_s", "engine_cuda_s", "speedup_cpu_vs_scratch", "speedup_cpu_vs_warm",
-      "speedup_cuda_vs_scratch", "speedup_cuda_vs_warm"};
+  const std::vector<std::string> expected{"n",
+                                          "log2n",
+                                          "contacts",
+                                          "bullet_contacts",
+                                          "agree",
+                                          "bullet_scratch_s",
+                                          "bullet_warm_s",
+                                          "engine_cpu_s",
+                                          "engine_cuda_s",
+                                          "speedup_cpu_vs_scratch",
+                                          "speedup_cpu_vs_warm",
+                                          "speedup_cuda_vs_scratch",
+                                          "speedup_cuda_vs_warm"};
   EXPECT_EQ(split(line), expected);
   int rows = 0;
   while (std::getline(f, line)) {
@@ -74,7 +83,8 @@ TEST(Bench, TinyRunWritesCsvWithExpectedColumns) {
 
 TEST(Bench, LogLogSlope) {
   std::vector<double> x, y;
-  for (int e = 10; e <= 20; ++e) x.push_back(std::ldexp(1.0, e)), y.push_back(3e-7 * std::pow(x.back(), 1.25));
+  for (int e = 10; e <= 20; ++e)
+    x.push_back(std::ldexp(1.0, e)), y.push_back(3e-7 * std::pow(x.back(), 1.25));
   EXPECT_NEAR(loglog_slope(x, y, std::ldexp(1.0, 14)), 1.25, 1e-12);
   EXPECT_TRUE(std::isnan(loglog_slope(x, y, std::ldexp(1.0, 20))));  // one point only
 }

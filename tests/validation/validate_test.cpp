@@ -1,13 +1,14 @@
 // Tests of `contactgrid validate` (src/validate.hpp) and of the Bullet oracle it stands on.
 // Contacts are built by brute force with the CONTRACT §3 formulas (validation_helpers.hpp), never by
 // the engine, then corrupted one way at a time; each corruption must FAIL for its own reason.
+#include "validate.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <string>
 
 #include "bullet_oracle.hpp"
-#include "validate.hpp"
 #include "validation/validation_helpers.hpp"
 
 namespace cg {
@@ -77,13 +78,13 @@ TEST_F(ValidateTest, AddedContactFailsExtra) {
   std::int64_t a = -1, b = -1;
   for (std::int64_t j = 1; j < std::int64_t(scene.sphere_count()) && a < 0; ++j) {
     const Vec3<double> d = scene.sphere_position[0] - scene.sphere_position[std::size_t(j)];
-    if (std::sqrt(dot(d, d)) - scene.sphere_radius[0] - scene.sphere_radius[std::size_t(j)] > 0.5) a = 0, b = j;
+    if (std::sqrt(dot(d, d)) - scene.sphere_radius[0] - scene.sphere_radius[std::size_t(j)] > 0.5)
+      a = 0, b = j;
   }
   ASSERT_GE(a, 0);
   testing::push_contact(exact, scene, a, b);
   std::size_t pos = 0;
-  while (pos + 1 < exact.size() &&
-         std::pair(exact.id_a[pos], exact.id_b[pos]) < std::pair(a, b)) ++pos;
+  while (pos + 1 < exact.size() && std::pair(exact.id_a[pos], exact.id_b[pos]) < std::pair(a, b)) ++pos;
   testing::move_last_to(exact, pos);
   const ValidateReport r = validate(scene, exact, options);
   EXPECT_FALSE(r.pass);
@@ -180,9 +181,7 @@ TEST(BulletOracle, ConventionsAndIdOrder) {
   }
 }
 
-TEST(BulletOracle, FloatExecutableIsFound) {
-  EXPECT_FALSE(bullet_float_executable().empty());
-}
+TEST(BulletOracle, FloatExecutableIsFound) { EXPECT_FALSE(bullet_float_executable().empty()); }
 
 // Why double Bullet is the default: far from the origin float Bullet rounds every centre to 1/16
 // (ulp of 1e6 in float), so it misses and invents contacts and turns normals; double Bullet agrees
