@@ -1,3 +1,5 @@
+// The MPI session (see session.hpp): laptop mode without a launcher, otherwise a duplicated
+// communicator with MPI_ERRORS_RETURN and every call checked.
 #include <cstdio>
 #include <cstdlib>
 #include <new>

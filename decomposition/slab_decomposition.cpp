@@ -1,3 +1,5 @@
+// Slab geometry (see slab_decomposition.hpp): axis choice, cuts by quantiles or widths, owner and
+// halo plans. Pure: no MPI, no CUDA.
 #include "slab_decomposition.hpp"
 
 #include <algorithm>
