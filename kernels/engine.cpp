@@ -4,7 +4,6 @@
 #include "engine.hpp"
 
 #include <omp.h>
-#include <sys/mman.h>
 
 #include <algorithm>
 #include <chrono>
@@ -15,6 +14,7 @@
 #include <vector>
 
 #include "backend.hpp"
+#include "host/huge_pages.hpp"
 
 namespace cg {
 
@@ -236,32 +236,19 @@ void parallel_copy(const CopyBlock* blocks, std::size_t count, int threads) {
   }
 }
 
-namespace {
-template <class T>
-void reserve_huge(std::vector<T>& v, std::size_t n) {
-  v.reserve(n);
-#if defined(MADV_HUGEPAGE)
-  constexpr std::uintptr_t huge = std::uintptr_t(2) << 20;
-  const auto lo = (reinterpret_cast<std::uintptr_t>(v.data() + v.size()) + huge - 1) & ~(huge - 1);
-  const auto hi = reinterpret_cast<std::uintptr_t>(v.data() + v.capacity()) & ~(huge - 1);
-  if (hi > lo) ::madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
-#endif
-}
-}  // namespace
-
 template <class Real>
 void reserve_contacts(Contacts<Real>& c, std::size_t n, bool full) {
-  reserve_huge(c.id_a, n);
-  reserve_huge(c.id_b, n);
-  reserve_huge(c.position_on_a, n);
-  reserve_huge(c.position_on_b, n);
-  reserve_huge(c.normal_on_b, n);
-  reserve_huge(c.distance, n);
+  detail::reserve_huge(c.id_a, n);
+  detail::reserve_huge(c.id_b, n);
+  detail::reserve_huge(c.position_on_a, n);
+  detail::reserve_huge(c.position_on_b, n);
+  detail::reserve_huge(c.normal_on_b, n);
+  detail::reserve_huge(c.distance, n);
   if (full) {
-    reserve_huge(c.local_point_a, n);
-    reserve_huge(c.local_point_b, n);
-    reserve_huge(c.lateral_friction_dir1, n);
-    reserve_huge(c.lateral_friction_dir2, n);
+    detail::reserve_huge(c.local_point_a, n);
+    detail::reserve_huge(c.local_point_b, n);
+    detail::reserve_huge(c.lateral_friction_dir1, n);
+    detail::reserve_huge(c.lateral_friction_dir2, n);
   }
 }
 template void reserve_contacts(Contacts<float>&, std::size_t, bool);

@@ -16,7 +16,6 @@
 #include <fmt/format.h>
 #include <hdf5.h>
 #include <omp.h>
-#include <sys/mman.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -29,6 +28,8 @@
 #include <mutex>
 #include <type_traits>
 #include <utility>
+
+#include "host/huge_pages.hpp"
 
 namespace cg {
 
@@ -566,23 +567,12 @@ void check_bounds(const SceneSource& s, const Dataset& d, hsize_t row, double r,
   }
 }
 
-// Reads and validates sphere rows [first, first + count) into out (appended), chunk by chunk.
-// Reserves n elements and offers the untouched storage to transparent huge pages (madvise, where
-// the kernel has them): the resize that follows then takes few page faults.
-template <class T>
-void reserve_huge(std::vector<T>& v, std::size_t n) {
-  v.reserve(n);
-#if defined(MADV_HUGEPAGE)
-  constexpr std::uintptr_t huge = std::uintptr_t(2) << 20;
-  const auto lo = (reinterpret_cast<std::uintptr_t>(v.data() + v.size()) + huge - 1) & ~(huge - 1);
-  const auto hi = reinterpret_cast<std::uintptr_t>(v.data() + v.capacity()) & ~(huge - 1);
-  if (hi > lo) ::madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
-#endif
-}
+// Reads and validates sphere rows [first, first + count) into out (appended), chunk by chunk, into
+// storage reserved with detail::reserve_huge (few page faults for the resize that follows).
 
 void read_spheres(const SceneSource& s, hsize_t first, hsize_t count, Scene& out) {
-  reserve_huge(out.sphere_position, count);
-  reserve_huge(out.sphere_radius, count);
+  detail::reserve_huge(out.sphere_position, count);
+  detail::reserve_huge(out.sphere_radius, count);
   out.sphere_position.resize(count);
   out.sphere_radius.resize(count);
   for (hsize_t done = 0; done < count; done += kReadChunkRows) {

@@ -12,6 +12,7 @@
 
 #include "engine.hpp"
 #include "hdf5_io.hpp"
+#include "temp_dir.hpp"
 
 namespace fs = std::filesystem;
 
@@ -35,17 +36,8 @@ Result run(const std::string& args) {
   return r;
 }
 
-class Cli : public ::testing::Test {
+class Cli : public TempDirTest {
  protected:
-  void SetUp() override {
-    m_dir = fs::temp_directory_path() / ("cg_cli_" + std::to_string(::getpid()) + "_" +
-                                         ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(m_dir);
-    fs::create_directories(m_dir);
-  }
-  void TearDown() override { fs::remove_all(m_dir); }
-  std::string path(const std::string& name) const { return (m_dir / name).string(); }
-
   // A detect run that must fail with `code`, a message containing every `needle`, and no output.
   void expect_detect_fails(const std::string& scene, int code, std::initializer_list<std::string> needles,
                            const std::string& extra = "") {
@@ -55,9 +47,8 @@ class Cli : public ::testing::Test {
     for (const auto& n : needles)
       EXPECT_NE(r.output.find(n), std::string::npos) << "missing '" << n << "' in: " << r.output;
     EXPECT_FALSE(fs::exists(out)) << "a failed run left an output file";
-    for (const auto& e : fs::directory_iterator(m_dir))
-      EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos)
-          << "temporary left: " << e.path();
+    for (const auto& name : entries())
+      EXPECT_EQ(name.find(".tmp"), std::string::npos) << "temporary left: " << name;
   }
 
   Scene small_scene(std::size_t n = 10) const {
@@ -68,7 +59,6 @@ class Cli : public ::testing::Test {
     }
     return s;
   }
-  fs::path m_dir;
 };
 
 TEST_F(Cli, GenerateDetectRoundTrip) {

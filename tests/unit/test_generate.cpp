@@ -17,6 +17,7 @@
 
 #include "generate.hpp"
 #include "hdf5_io.hpp"
+#include "temp_dir.hpp"
 
 namespace {
 
@@ -24,22 +25,9 @@ namespace fs = std::filesystem;
 using cg::GenerateOptions;
 using cg::Scene;
 
-class Generate : public ::testing::Test {
+class Generate : public cg::test::TempDirTest {
  protected:
-  void SetUp() override {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    m_dir = fs::temp_directory_path() / ("cg_generate_" + std::to_string(::getpid()) + "_" + info->name());
-    fs::remove_all(m_dir);
-    fs::create_directories(m_dir);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(m_dir, ec);
-  }
-  std::string path(const std::string& name) const { return (m_dir / name).string(); }
-  bool empty_dir() const { return fs::directory_iterator(m_dir) == fs::directory_iterator(); }
-
-  fs::path m_dir;
+  bool empty_dir() const { return entries().empty(); }
 };
 
 std::vector<unsigned char> file_bytes(const std::string& path) {

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "hdf5_io.hpp"
+#include "temp_dir.hpp"
 
 namespace {
 
@@ -49,27 +50,7 @@ std::vector<unsigned char> file_bytes(const std::string& path) {
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
-class Hdf5Io : public ::testing::Test {
- protected:
-  void SetUp() override {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    m_dir = fs::temp_directory_path() / ("cg_hdf5_io_" + std::to_string(::getpid()) + "_" + info->name());
-    fs::remove_all(m_dir);
-    fs::create_directories(m_dir);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(m_dir, ec);
-  }
-  std::string path(const std::string& name) const { return (m_dir / name).string(); }
-  std::vector<std::string> entries() const {
-    std::vector<std::string> names;
-    for (const auto& e : fs::directory_iterator(m_dir)) names.push_back(e.path().filename().string());
-    return names;
-  }
-
-  fs::path m_dir;
-};
+class Hdf5Io : public cg::test::TempDirTest {};
 
 Scene sphere_scene(std::size_t n) {
   Scene s;
