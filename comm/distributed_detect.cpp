@@ -43,7 +43,7 @@ void validate(const DistributedOptions& options) {
     throw UsageError("--balance: not one of count, width");
   }
   if (!std::isfinite(e.cell_size) || e.cell_size < 0) {
-    throw UsageError("--cell-size: must be a finite length >= 0 (0: smallest valid)");
+    throw UsageError("--cell-size: must be a finite length >= 0 (0: chosen by cell_choice)");
   }
   if (e.threads < 0) throw UsageError("--threads: must be >= 0 (0: all hardware threads)");
   if (options.max_sample < 1) throw UsageError("max_sample: must be >= 1");
@@ -278,6 +278,7 @@ struct BoundsRecord {
   Vec3<double> lo, hi;
   double r_max;
   std::uint64_t count;
+  double r_sum[3];  // radius moments (the tuned cell size)
 };
 static_assert(std::is_trivially_copyable_v<BoundsRecord>);
 
@@ -496,7 +497,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
         std::iota(id.begin(), id.end(), static_cast<std::int64_t>(first));
         b = compute_bounds(BodiesView{position, radius, id, {}});
       }
-      mine = {b.lo, b.hi, b.r_max, count};
+      mine = {b.lo, b.hi, b.r_max, count, {b.r_sum[0], b.r_sum[1], b.r_sum[2]}};
     }
   });
   Bounds global;
@@ -509,6 +510,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
       b.hi = r.hi;
       b.r_max = r.r_max;
       b.count = r.count;
+      for (int k = 0; k < 3; ++k) b.r_sum[k] = r.r_sum[k];
       if (any) {
         global.merge(b);
       } else {
@@ -521,7 +523,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   int axis = 0;
   double width = 0;
   local_stage(session, "frame", [&] {
-    frame = make_frame(global, options.engine.cell_size, precision);
+    frame = make_frame(global, options.engine.cell_size, precision, options.engine.cell_choice);
     axis = choose_axis(global, options.axis);
     double extent = 0;
     for (int k = 0; k < 3; ++k) {

@@ -67,6 +67,7 @@ struct Bounds {
   Vec3<double> lo{0, 0, 0}, hi{0, 0, 0};
   double r_max = 0;
   std::size_t count = 0;
+  double r_sum[3] = {0, 0, 0};  // Σ r, Σ r², Σ r³: the radius moments of the cell-size model
   void merge(const Bounds& o);
 };
 
@@ -85,9 +86,28 @@ struct Frame {
 // c ± r in the local frame, so a body never spans more than two cells per axis.
 double min_cell_size(const Bounds& b, Precision p);
 
-// Frame for the bounds; requested_cell_size 0 picks min_cell_size(). Throws UsageError if the
+// How the cell edge is chosen when none is requested (EngineOptions::cell_size = 0).
+enum class CellChoice {
+  tuned,     // tuned_cell_size(): the edge that minimises the modelled cost of the sort and pair stages
+  smallest,  // min_cell_size(): the largest diameter + rounding margin (Le Grand's choice)
+};
+
+// The cell edge in [1, 3] × min_cell_size() that minimises a cost model of the stages that depend on
+// it, per body: e + kPairWeight · N · e² / cells, where e = E[(1 + 2r/c)³] is the expected number of
+// (cell, body) entries per body (exact for uniformly placed centres, from the radius moments),
+// N · e² / cells twice the expected pair-walk steps per body (Poisson occupancy of the cells that
+// cover the bounds), and kPairWeight the measured cost of a walk step relative to one entry
+// (sort + fill). Larger cells mean fewer entries to sort but more pairs to walk: dilute scenes of
+// similar radii gain ~2× larger cells, dense or strongly polydisperse ones keep the smallest. Only
+// speed depends on the choice: contacts are the same for every valid cell edge.
+double tuned_cell_size(const Bounds& b, Precision p);
+inline constexpr double kPairWeight =
+    0.03;  // fit: H100, 2^24 uniform spheres, fp32, cells 3–6 (BENCHMARKS §3)
+
+// Frame for the bounds; requested_cell_size 0 picks the cell by `choice`. Throws UsageError if the
 // requested size is too small, InputError if the grid cannot be encoded (see GridPlan).
-Frame make_frame(const Bounds& b, double requested_cell_size, Precision p);
+Frame make_frame(const Bounds& b, double requested_cell_size, Precision p,
+                 CellChoice choice = CellChoice::tuned);
 
 // The grid of one detect() call: cells covering the bodies' bounds in the shared frame.
 // Cell keys use 32 bits when the grid has < 2^32 cells, else 64 bits (< 2^63 cells); beyond that,
@@ -139,15 +159,17 @@ struct DeviceContactsView {
 struct EngineOptions {
   Backend backend = Backend::automatic;
   Fields fields = Fields::basic;
-  double cell_size = 0;  // 0: smallest valid
-  int threads = 0;       // CPU backend threads; 0: all hardware threads
-  int device = -1;       // CUDA device; -1: current
+  double cell_size = 0;                        // 0: chosen by cell_choice
+  CellChoice cell_choice = CellChoice::tuned;  // how, when cell_size is 0
+  int threads = 0;                             // CPU backend threads; 0: all hardware threads
+  int device = -1;                             // CUDA device; -1: current
 };
 
 // Counters of one run (for tests and the summary).
 struct EngineStats {
   std::uint64_t bodies = 0, entries = 0, pair_tests = 0, contacts = 0;
   int key_bits = 0;
+  double cell_size = 0;                  // the cell edge used
   std::uint64_t peak_device_bytes = 0;   // CUDA: device workspace held after the call (never shrinks)
   std::uint64_t device_allocations = 0;  // CUDA: cudaMalloc calls made by this call (0 once warm)
 };

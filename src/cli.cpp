@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <CLI/CLI.hpp>
+#include <cmath>
 #include <map>
 
 #include "pipeline.hpp"
@@ -73,9 +74,28 @@ int run_cli(int argc, char** argv, Session& session) {
   d->add_option("--fields", det.fields, "basic | full (adds local points and friction directions)")
       ->transform(CLI::CheckedTransformer(k_fields))
       ->default_str("basic");
-  d->add_option("--cell-size", det.cell_size,
-                "Grid cell edge (length units); default: largest diameter + rounding margin")
-      ->check(CLI::NonNegativeNumber);
+  d->add_option_function<std::string>(
+       "--cell-size",
+       [&det](const std::string& v) {
+         if (v == "auto" || v == "min") {
+           det.cell_size = 0;
+           det.cell_choice = v == "auto" ? CellChoice::tuned : CellChoice::smallest;
+           return;
+         }
+         std::size_t used = 0;
+         double x = 0;
+         try {
+           x = std::stod(v, &used);
+         } catch (const std::exception&) {
+           used = 0;
+         }
+         if (used != v.size() || !(x > 0) || !std::isfinite(x))
+           throw CLI::ValidationError("--cell-size", "'" + v + "' is not auto, min or a length > 0");
+         det.cell_size = x;
+       },
+       "Grid cell edge: auto (the edge a cost model of the sort and pair stages picks, 1-3x the "
+       "smallest), min (the largest diameter + rounding margin, Le Grand's choice) or a length")
+      ->default_str("auto");
   d->add_option("--csv", det.csv, "Also write the contacts as CSV (for small results)");
   d->add_option("--threads", det.threads, "CPU backend threads (0: all cores)")
       ->check(CLI::NonNegativeNumber);

@@ -49,6 +49,7 @@ int detect(const DetectCommand& cmd, Session& session) {
   o.engine.backend = cmd.backend;
   o.engine.fields = cmd.fields;
   o.engine.cell_size = cmd.cell_size;
+  o.engine.cell_choice = cmd.cell_choice;
   o.engine.threads = cmd.threads;
   if (cmd.backend != Backend::cpu) o.engine.device = session.device_for(cuda_device_count());
   o.axis = parse_axis(cmd.axis);

@@ -19,7 +19,8 @@ struct DetectCommand {
   Backend backend = Backend::automatic;
   Precision precision = Precision::fp64;
   Fields fields = Fields::basic;
-  double cell_size = 0;
+  double cell_size = 0;                        // 0: chosen by cell_choice
+  CellChoice cell_choice = CellChoice::tuned;  // --cell-size auto | min
   int threads = 0;
   std::string axis = "auto";      // MPI slab axis: auto | x | y | z
   std::string balance = "count";  // MPI slab balance: count | width

@@ -27,8 +27,9 @@
 
 namespace {
 
-// Cell edge of every run (--cell-size of the CLI); 0: the engine's default (largest diameter).
+// Cell edge of every run (--cell-size of the CLI): 0 and g_cell_choice (auto: tuned, min: smallest).
 double g_cell_size = 0.0;
+cg::CellChoice g_cell_choice = cg::CellChoice::tuned;
 
 using cg::cuda::DeviceBuffer;
 
@@ -110,6 +111,7 @@ struct Row {
   const char* prec;
   std::uint64_t n, entries, contacts;
   int key_bits;
+  double cell;
   std::map<std::string, double> stage_ms;
   double gpu_sum_ms, total_ms, floor_ms, upload_ms, download_ms, bytes_per_sphere, bytes_no_contacts;
 };
@@ -124,7 +126,8 @@ Row bench(int log2n, std::uint64_t n, const double* d_pos, const double* d_rad, 
   row.upload_ms = upload_ms;
   const cg::DeviceBodiesView bodies{d_pos, d_rad, nullptr, n};
   {
-    cg::Engine<Real> engine({.backend = cg::Backend::cuda, .cell_size = g_cell_size});
+    cg::Engine<Real> engine(
+        {.backend = cg::Backend::cuda, .cell_size = g_cell_size, .cell_choice = g_cell_choice});
     for (int w = 0; w < 3; ++w) engine.detect_device_resident(bodies);
     std::map<std::string, std::vector<double>> stages;
     std::vector<double> total, gpu_sum;
@@ -148,6 +151,7 @@ Row bench(int log2n, std::uint64_t n, const double* d_pos, const double* d_rad, 
     row.gpu_sum_ms = median(gpu_sum);
     row.entries = engine.stats().entries;
     row.key_bits = engine.stats().key_bits;
+    row.cell = engine.stats().cell_size;
     row.bytes_per_sphere = double(engine.stats().peak_device_bytes) / double(n);
     // download: contacts to host vectors (stage "download" of detect_device), median of 3
     std::vector<double> dl;
@@ -172,8 +176,12 @@ Row bench(int log2n, std::uint64_t n, const double* d_pos, const double* d_rad, 
 }  // namespace
 
 int main(int argc, char** argv) try {
-  // usage: contactgrid_cuda_bench [lo 16] [hi 26] [step 2] [runs 20] [cell size, 0 = largest diameter]
-  g_cell_size = argc > 5 ? std::atof(argv[5]) : 0.0;
+  // usage: contactgrid_cuda_bench [lo 16] [hi 26] [step 2] [runs 20] [cell: auto | min | edge]
+  const std::string cell = argc > 5 ? argv[5] : "auto";
+  if (cell == "min")
+    g_cell_choice = cg::CellChoice::smallest;
+  else if (cell != "auto")
+    g_cell_size = std::atof(cell.c_str());
   const int lo = argc > 1 ? std::atoi(argv[1]) : 16;
   const int hi = argc > 2 ? std::atoi(argv[2]) : 26;
   const int step = argc > 3 ? std::atoi(argv[3]) : 2;
@@ -181,8 +189,8 @@ int main(int argc, char** argv) try {
   cudaDeviceProp prop{};
   CG_CUDA_CHECK(cudaGetDeviceProperties(&prop, 0));
   std::printf(
-      "# contactgrid_cuda_bench on %s (%d SMs, %.1f GiB), median of %d warm runs, L2 flushed, cell size %g\n",
-      prop.name, prop.multiProcessorCount, prop.totalGlobalMem / double(1 << 30), runs, g_cell_size);
+      "# contactgrid_cuda_bench on %s (%d SMs, %.1f GiB), median of %d warm runs, L2 flushed, cell %s\n",
+      prop.name, prop.multiProcessorCount, prop.totalGlobalMem / double(1 << 30), runs, cell.c_str());
   Flusher flush;
   std::vector<Row> rows;
   for (int p = lo; p <= hi; p += step) {
@@ -212,22 +220,24 @@ int main(int argc, char** argv) try {
     std::fprintf(stderr, "done 2^%d\n", p);
   }
   std::printf(
-      "\n| N | prec | entries/N | key bits | pack | entries | sort | pairs | order | narrow | GPU sum | "
+      "\n| N | prec | cell | entries/N | key bits | pack | entries | sort | pairs | order | narrow | GPU sum "
+      "| "
       "total | "
       "Mspheres/s | contacts/N | workspace B/N | excl. contacts B/N | sort floor | sort/floor | total/floor "
       "| upload | download |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const Row& r : rows) {
     auto st = [&](const char* s) {
       auto it = r.stage_ms.find(s);
       return it == r.stage_ms.end() ? 0.0 : it->second;
     };
     std::printf(
-        "| 2^%d | %s | %.2f | %d | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.0f | %.3f | "
+        "| 2^%d | %s | %.3g | %.2f | %d | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.0f | "
+        "%.3f | "
         "%.1f | %.1f | "
         "%.3f | %.2f | %.2f | %.2f | %.2f |\n",
-        r.log2n, r.prec, double(r.entries) / double(r.n), r.key_bits, st("pack"), st("entries"), st("sort"),
-        st("pairs"), st("order"), st("narrow"), r.gpu_sum_ms, r.total_ms,
+        r.log2n, r.prec, r.cell, double(r.entries) / double(r.n), r.key_bits, st("pack"), st("entries"),
+        st("sort"), st("pairs"), st("order"), st("narrow"), r.gpu_sum_ms, r.total_ms,
         double(r.n) / (r.total_ms * 1e-3) / 1e6, double(r.contacts) / double(r.n), r.bytes_per_sphere,
         r.bytes_no_contacts, r.floor_ms, r.floor_ms > 0 ? st("sort") / r.floor_ms : 0.0,
         r.floor_ms > 0 ? r.total_ms / r.floor_ms : 0.0, r.upload_ms, r.download_ms);

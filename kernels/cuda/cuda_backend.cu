@@ -9,14 +9,15 @@
 //
 // Stages (event-timed on the stream; names as the host's plus "upload" and "download"):
 //   upload    host-array path only: positions, radii, report mask → device
-//   pack      world double → local Real spheres; renumber the bodies by 4x4x4-cell block (a short
-//             radix sort, for locality of the pair stage only); control bytes, per-block entry totals
+//   pack      world double → local Real spheres; renumber the bodies by z layer of cells (a one-pass
+//             radix sort, for locality of the pair stage only, when the spheres outgrow the L2); control
+//             bytes, per-block entry totals
 //   entries   scan of the block totals → fill (cell key, body) in body order
 //   sort      cub::DeviceRadixSort::SortPairs over bits [0, key_bits)
 //   pairs     count per sorted entry (block-staged walk) and direct write of the (a, b) u32 pairs at a
 //             block-aggregated atomic cursor; when they overflow the space there: scan → fill
-//   order     cub::DeviceRadixSort::SortPairs by a over bits [0, id_bits), then each run of equal a
-//             sorted by b (sort_runs_kernel): the (a, b) order
+//   order     pairs grouped by a (counting sort when its counters fit in L2, else a radix sort by
+//             a), then each run of equal a sorted by b (sort_runs_kernel): the (a, b) order
 //   narrow    contact data of the requested fields, world frame
 //   download  contacts → pinned staging → Contacts<Real> (unless they stay on the device); the
 //             result vectors are sized while the transfer runs, the copy runs on all host threads
@@ -30,6 +31,7 @@
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
 #include <sstream>
+#include <string_view>
 
 #include "backend.hpp"
 #include "cuda/device_buffer.cuh"
@@ -96,6 +98,9 @@ class CudaBackend {
     m_device = device;
     CG_CUDA_CHECK(cudaSetDevice(m_device));
     CG_CUDA_CHECK(cudaStreamCreate(&m_stream));
+    int l2 = 0;
+    CG_CUDA_CHECK(cudaDeviceGetAttribute(&l2, cudaDevAttrL2CacheSize, m_device));
+    m_l2_bytes = static_cast<std::size_t>(l2);
     for (auto& e : m_events) CG_CUDA_CHECK(cudaEventCreate(&e));
     for (auto& e : m_pass_events) CG_CUDA_CHECK(cudaEventCreate(&e));
   }
@@ -195,6 +200,7 @@ class CudaBackend {
   int m_device = 0;
   cudaStream_t m_stream = nullptr;
   cudaEvent_t m_events[kStages + 1] = {};
+  std::size_t m_l2_bytes = 0;                   // the device's L2 cache
   cudaEvent_t m_pass_events[kPassEvents] = {};  // type-pass path: start, then per pass fill/sort/count ends
   std::uint64_t m_allocations = 0;
   // Workspace (DEVICE): input copies (host path), packed spheres, control bytes, block totals and
@@ -238,6 +244,7 @@ Bounds CudaBackend::bounds(const DeviceBodiesView& v) {
   b.lo = {p.lo[0], p.lo[1], p.lo[2]};
   b.hi = {p.hi[0], p.hi[1], p.hi[2]};
   b.r_max = p.r_max;
+  for (int k = 0; k < 3; ++k) b.r_sum[k] = p.r_sum[k];
   return b;
 }
 
@@ -276,11 +283,11 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
                                          static_cast<std::uint32_t*>(nullptr), int(type_passes ? 8 * nb : nb),
                                          st);
   });
-  // Renumbering sort of the bodies by 4x4x4-cell block (locality only; see home_block_key), over the
-  // bits of the block index. Its four arrays are the entry buffers, not yet live.
-  const std::uint64_t blocks3 = ((std::uint64_t(g.dims[0]) + 3) / 4) * ((std::uint64_t(g.dims[1]) + 3) / 4) *
-                                ((std::uint64_t(g.dims[2]) + 3) / 4);
-  const int home_bits = std::max(1, bits_for(blocks3));
+  // Renumbering sort of the bodies by z layer of cells (locality only; see home_layer_key): at most
+  // 8 key bits, one radix pass. Its four arrays are the entry buffers, not yet live.
+  const int z_bits = std::max(1, bits_for(std::uint64_t(g.dims[2])));
+  const int layer_shift = std::max(0, z_bits - 8);
+  const int home_bits = z_bits - layer_shift;
   cub::DoubleBuffer<Key> home_key(nullptr, nullptr);
   cub::DoubleBuffer<std::uint32_t> home_index(nullptr, nullptr);
   auto sort_home = [&](void* t, std::size_t& b) {
@@ -344,13 +351,18 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   home_key = cub::DoubleBuffer<Key>(m_keys[0].span_as<Key>(n).data(), m_keys[1].span_as<Key>(n).data());
   home_index = cub::DoubleBuffer<std::uint32_t>(m_bodies[0].span_as<std::uint32_t>(n).data(),
                                                 m_bodies[1].span_as<std::uint32_t>(n).data());
-  cuda::pack_kernel<Real, Key><<<nb, kBlock, 0, st>>>(d_pos, d_rad, n, origin, g, d_spheres,
+  cuda::pack_kernel<Real, Key><<<nb, kBlock, 0, st>>>(d_pos, d_rad, n, origin, g, d_spheres, layer_shift,
                                                       home_key.Current(), home_index.Current(), d_counters);
   CG_CUDA_CHECK_LAUNCH("pack");
-  // CONTACTGRID_CUDA_RENUMBER=0 skips the renumbering sort (measurement knob): reorder then reads the
-  // identity written by pack, the bodies keep their input order (no result changes, see home_block_key).
+  // The renumbering pays only when the spheres do not stay in L2 anyway (the pair stage's gathers hit
+  // it either way): when they outgrow the L2. CONTACTGRID_CUDA_RENUMBER=0 / 1 forces it off / on
+  // (measurement knob). Without it, reorder reads the identity written by pack: the bodies keep their
+  // input order (no result changes, see home_layer_key).
   const char* renumber_env = std::getenv("CONTACTGRID_CUDA_RENUMBER");
-  if (!(renumber_env && renumber_env[0] == '0')) run_cub(sort_home);
+  const bool renumber = renumber_env && (renumber_env[0] == '0' || renumber_env[0] == '1')
+                            ? renumber_env[0] == '1'
+                            : n64 * sizeof(Sphere<Real>) > m_l2_bytes;
+  if (renumber) run_cub(sort_home);
   cuda::reorder_kernel<Real, Key>
       <<<nb, kBlock, 0, st>>>(d_spheres, n, g, home_index.Current(), d_cell_spheres, d_ctrl, d_perm,
                               d_body_totals, d_counters, d_base, type_passes ? d_type_totals : nullptr);
@@ -384,12 +396,29 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   std::uint64_t type_entries[8];
   std::copy(h_counters->type_entries, h_counters->type_entries + 8, type_entries);
 
-  const int id_bits = std::max(1, bits_for(n64));
   cub::DoubleBuffer<std::uint32_t> pair_a(nullptr, nullptr), pair_b(nullptr, nullptr);
   std::uint32_t np = 0;
+  // order: the pairs grouped by a, then each run of equal a sorted by b. Grouped by a counting sort
+  // over the bodies (count → scan → scatter; the two dead key buffers of the entry sort hold the
+  // counts and the offsets) while those counters stay in half the L2 (2^20 bodies: 0.055 vs 0.076 ms
+  // on an H100), else by a radix sort of (a, b) by a (the counters' random atomics in DRAM cost 5×
+  // the sort at 2^24: 1.5 vs 0.32 ms).
+  // CONTACTGRID_CUDA_ORDER=radix / counting forces one (measurement and test knob).
+  const char* order_env = std::getenv("CONTACTGRID_CUDA_ORDER");
+  const bool counting_order = order_env && std::string_view(order_env) == "radix" ? false
+                              : order_env && std::string_view(order_env) == "counting"
+                                  ? true
+                                  : n64 * sizeof(std::uint32_t) <= m_l2_bytes / 2;
+  const int id_bits = std::max(1, bits_for(n64));
   auto sort_pairs = [&](void* t, std::size_t& b) {
     return cub::DeviceRadixSort::SortPairs(t, b, pair_a, pair_b, int(np), 0, id_bits, st);
   };
+  std::uint32_t* d_a_count = nullptr;
+  std::uint32_t* d_a_offset = nullptr;
+  auto scan_a_counts = [&](void* t, std::size_t& b) {
+    return cub::DeviceScan::ExclusiveSum(t, b, d_a_count, d_a_offset, int(n), st);
+  };
+  auto order_temp = [&] { return counting_order ? temp_bytes(scan_a_counts) : temp_bytes(sort_pairs); };
   auto check_pairs = [&](std::uint64_t n_pairs) {
     if (n_pairs >= (std::uint64_t(1) << 31)) {
       std::ostringstream m;
@@ -467,7 +496,7 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
     };
     reserve({{&m_pairs, pairs_in_entries ? 0 : 4 * std::size_t(np) * sizeof(std::uint32_t)},
              {&m_out, out_bytes_for(np)},
-             {&m_temp, std::max(temp_bytes(sort_pairs), temp_bytes(scan_entry_blocks))}},
+             {&m_temp, std::max(order_temp(), temp_bytes(scan_entry_blocks))}},
             "pairs");
     const std::size_t stride = pairs_in_entries ? std::size_t(direct_cap) : std::size_t(np);
     std::uint32_t* d_pair_store =
@@ -573,7 +602,7 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
     stats.pair_tests = h_counters->tests;
     check_pairs(n_pairs);
     np = static_cast<std::uint32_t>(n_pairs);
-    reserve({{&m_out, out_bytes_for(np)}, {&m_temp, temp_bytes(sort_pairs)}}, "pairs");
+    reserve({{&m_out, out_bytes_for(np)}, {&m_temp, order_temp()}}, "pairs");
     pair_a = cub::DoubleBuffer<std::uint32_t>(d_pair_store, d_pair_store + 2 * cap);
     pair_b = cub::DoubleBuffer<std::uint32_t>(d_pair_store + cap, d_pair_store + 3 * cap);
     // Stage times: the passes' fill / sort / count times, summed (marks 2 and 3 only close the chain).
@@ -588,8 +617,22 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
   }
 
   // ---- order ------------------------------------------------------------------------------------
-  if (np > 1) {
+  if (np > 1 && !counting_order) {
     run_cub(sort_pairs);
+  } else if (np > 1) {
+    d_a_count = m_keys[0].span_as<std::uint32_t>(n).data();  // n <= entries: the buffers hold n u32
+    d_a_offset = m_keys[1].span_as<std::uint32_t>(n).data();
+    CG_CUDA_CHECK(cudaMemsetAsync(d_a_count, 0, n64 * sizeof(std::uint32_t), st));
+    cuda::count_a_kernel<<<blocks_for(np), kBlock, 0, st>>>(pair_a.Current(), np, d_a_count);
+    CG_CUDA_CHECK_LAUNCH("count_a");
+    run_cub(scan_a_counts);
+    cuda::scatter_a_kernel<<<blocks_for(np), kBlock, 0, st>>>(
+        pair_a.Current(), pair_b.Current(), np, d_a_offset, pair_a.Alternate(), pair_b.Alternate());
+    CG_CUDA_CHECK_LAUNCH("scatter_a");
+    pair_a.selector ^= 1;
+    pair_b.selector ^= 1;
+  }
+  if (np > 1) {
     cuda::sort_runs_kernel<<<blocks_for(np), kBlock, 0, st>>>(pair_a.Current(), pair_b.Current(), np);
     CG_CUDA_CHECK_LAUNCH("sort_runs");
   }

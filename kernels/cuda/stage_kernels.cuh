@@ -18,6 +18,11 @@
 namespace cg::cuda {
 
 constexpr int kBlock = 256;
+constexpr int kStaged = kBlock + 32;  // count_pairs: a block's entries and the halo of its windows
+#ifndef CG_PAIRS_MIN_BLOCKS
+#define CG_PAIRS_MIN_BLOCKS 1
+#endif
+constexpr int kPairsMinBlocks = CG_PAIRS_MIN_BLOCKS;  // count_pairs: resident blocks asked of ptxas
 
 // DEVICE counters of one call; zeroed (cudaMemsetAsync) before the first kernel that adds to them.
 struct Counters {
@@ -28,10 +33,18 @@ struct Counters {
   unsigned long long type_entries[8];  // entries per cell type (reorder, type-pass path only)
 };
 
-// Per-block partial bounds (device_bounds).
+// Per-block partial bounds (device_bounds): box, r_max and the radius moments Σ r, Σ r², Σ r³.
 struct BoundsPartial {
-  double lo[3], hi[3], r_max;
+  double lo[3], hi[3], r_max, r_sum[3];
 };
+constexpr int kBoundsValues = 10;  // lo[3], hi[3], r_max: min/max; r_sum[3]: sums
+
+// Folds value v of b into a (min for 0–2, max for 3–6, sum for 7–9).
+__device__ __forceinline__ double fold_bound(int v, double a, double b) {
+  if (v < 3) return b < a ? b : a;
+  if (v < 7) return b > a ? b : a;
+  return a + b;
+}
 
 // Pointers of the contact arrays in DEVICE memory; the `full` four are null for Fields::basic.
 template <class Real>
@@ -46,13 +59,15 @@ __device__ __forceinline__ bool body_is_bad(double x, double y, double z, double
   return !isfinite(x) || !isfinite(y) || !isfinite(z) || !(r > 0) || !isfinite(r);
 }
 
-// Bounds of the bodies' boxes (p ± r, as compute_bounds) and r_max, one partial per block
-// (grid-stride). Records the first invalid body in c->bad. min/max are exact: same bits as the host.
+// Bounds of the bodies' boxes (p ± r, as compute_bounds), r_max and the radius moments, one partial
+// per block (grid-stride). Records the first invalid body in c->bad. min/max are exact: same bits as
+// the host; the moments (used only to choose the cell edge) are summed in a fixed order.
 __global__ void bounds_partial_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
                                       std::uint64_t n, BoundsPartial* __restrict__ partial,
                                       Counters* __restrict__ c) {
-  __shared__ double sh[7][kBlock];
-  double acc[7] = {INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY, 0.0};
+  __shared__ double sh[kBoundsValues][kBlock];
+  double acc[kBoundsValues] = {INFINITY,  INFINITY, INFINITY, -INFINITY, -INFINITY,
+                               -INFINITY, 0.0,      0.0,      0.0,       0.0};
   for (std::uint64_t i = std::uint64_t(blockIdx.x) * kBlock + threadIdx.x; i < n;
        i += std::uint64_t(gridDim.x) * kBlock) {
     const double p[3] = {pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]};
@@ -64,26 +79,23 @@ __global__ void bounds_partial_kernel(const double* __restrict__ pos, const doub
       acc[3 + k] = hi > acc[3 + k] ? hi : acc[3 + k];
     }
     acc[6] = r > acc[6] ? r : acc[6];
+    acc[7] += r;
+    acc[8] += r * r;
+    acc[9] += r * r * r;
   }
-  for (int v = 0; v < 7; ++v) sh[v][threadIdx.x] = acc[v];
+  for (int v = 0; v < kBoundsValues; ++v) sh[v][threadIdx.x] = acc[v];
   __syncthreads();
   for (int s = kBlock / 2; s > 0; s >>= 1) {
-    if (int(threadIdx.x) < s) {
-      for (int v = 0; v < 3; ++v) {
-        const double o = sh[v][threadIdx.x + s];
-        sh[v][threadIdx.x] = o < sh[v][threadIdx.x] ? o : sh[v][threadIdx.x];
-      }
-      for (int v = 3; v < 7; ++v) {
-        const double o = sh[v][threadIdx.x + s];
-        sh[v][threadIdx.x] = o > sh[v][threadIdx.x] ? o : sh[v][threadIdx.x];
-      }
-    }
+    if (int(threadIdx.x) < s)
+      for (int v = 0; v < kBoundsValues; ++v)
+        sh[v][threadIdx.x] = fold_bound(v, sh[v][threadIdx.x], sh[v][threadIdx.x + s]);
     __syncthreads();
   }
   if (threadIdx.x == 0) {
     for (int k = 0; k < 3; ++k) {
       partial[blockIdx.x].lo[k] = sh[k][0];
       partial[blockIdx.x].hi[k] = sh[3 + k][0];
+      partial[blockIdx.x].r_sum[k] = sh[7 + k][0];
     }
     partial[blockIdx.x].r_max = sh[6][0];
   }
@@ -92,52 +104,49 @@ __global__ void bounds_partial_kernel(const double* __restrict__ pos, const doub
 // One block of kBoundsFold threads folds the partials (count <= kBoundsFold) into partial[0].
 constexpr int kBoundsFold = 512;
 __global__ void __launch_bounds__(kBoundsFold) bounds_final_kernel(BoundsPartial* partial, int count) {
-  __shared__ double sh[7][kBoundsFold];
+  __shared__ double sh[kBoundsValues][kBoundsFold];
   const int t = threadIdx.x;
   if (t < count) {
     for (int k = 0; k < 3; ++k) {
       sh[k][t] = partial[t].lo[k];
       sh[3 + k][t] = partial[t].hi[k];
+      sh[7 + k][t] = partial[t].r_sum[k];
     }
     sh[6][t] = partial[t].r_max;
   } else {
     for (int k = 0; k < 3; ++k) {
       sh[k][t] = INFINITY;
       sh[3 + k][t] = -INFINITY;
+      sh[7 + k][t] = 0.0;
     }
     sh[6][t] = 0.0;
   }
   __syncthreads();
   for (int s = kBoundsFold / 2; s > 0; s >>= 1) {
-    if (t < s) {
-      for (int v = 0; v < 3; ++v) {
-        const double o = sh[v][t + s];
-        sh[v][t] = o < sh[v][t] ? o : sh[v][t];
-      }
-      for (int v = 3; v < 7; ++v) {
-        const double o = sh[v][t + s];
-        sh[v][t] = o > sh[v][t] ? o : sh[v][t];
-      }
-    }
+    if (t < s)
+      for (int v = 0; v < kBoundsValues; ++v) sh[v][t] = fold_bound(v, sh[v][t], sh[v][t + s]);
     __syncthreads();
   }
   if (t == 0) {
     for (int k = 0; k < 3; ++k) {
       partial[0].lo[k] = sh[k][0];
       partial[0].hi[k] = sh[3 + k][0];
+      partial[0].r_sum[k] = sh[7 + k][0];
     }
     partial[0].r_max = sh[6][0];
   }
 }
 
-// Locality key of a body: linear index of the 4x4x4-cell block holding its lowest cell. Sorting
-// the bodies by it renumbers them so that the bodies of neighbouring cells have nearby indices (the
-// pair stage then reads spheres and control bytes coherently). It changes no result: decisions are
-// symmetric in the two bodies, and pairs are emitted and sorted by their original indices.
-template <class Key, class Real>
-__device__ __forceinline__ Key home_block_key(const BodyCells& bc, const GridParams<Real>& g) {
-  const Key bx = (Key(g.dims[0]) + 3) >> 2, by = (Key(g.dims[1]) + 3) >> 2;
-  return Key(bc.lo[0] >> 2) + bx * (Key(bc.lo[1] >> 2) + by * Key(bc.lo[2] >> 2));
+// Locality key of a body: the layer of cells along z (the slowest axis of the cell key) holding its
+// lowest cell, coarsened by `shift` to at most 256 layers so that the renumbering sort is one radix
+// pass. The pair stage walks the cells in key order, z slowest, so the bodies it reads at any moment
+// lie in a few consecutive layers, a few MiB that stay in L2 (the order within a layer does not
+// matter then; a 4x4x4-cell block key measured the same pair stage for a two-pass sort). It
+// changes no result: decisions are symmetric in the two bodies, and pairs are emitted and sorted by
+// their original indices.
+template <class Key>
+__device__ __forceinline__ Key home_layer_key(const BodyCells& bc, int shift) {
+  return Key(bc.lo[2] >> shift);
 }
 
 // pack: world (double) → local Real sphere `Real(p - origin)` in input order, and the (locality key,
@@ -145,7 +154,7 @@ __device__ __forceinline__ Key home_block_key(const BodyCells& bc, const GridPar
 template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock)
     pack_kernel(const double* __restrict__ pos, const double* __restrict__ rad, std::uint32_t n,
-                Vec3<double> origin, GridParams<Real> g, Sphere<Real>* __restrict__ spheres,
+                Vec3<double> origin, GridParams<Real> g, Sphere<Real>* __restrict__ spheres, int layer_shift,
                 Key* __restrict__ home_key, std::uint32_t* __restrict__ home_index,
                 Counters* __restrict__ c) {
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
@@ -156,7 +165,7 @@ __global__ void __launch_bounds__(kBlock)
   const Sphere<Real> s{static_cast<Real>(px - origin.x), static_cast<Real>(py - origin.y),
                        static_cast<Real>(pz - origin.z), static_cast<Real>(r)};
   spheres[i] = s;
-  home_key[i] = home_block_key<Key>(body_cells(s, g), g);
+  home_key[i] = home_layer_key<Key>(body_cells(s, g), layer_shift);
   home_index[i] = i;
 }
 
@@ -321,17 +330,20 @@ __device__ __forceinline__ std::uint32_t walk_from_memory(
 // pairs, count: per block the number of contacting (reported) pairs (block_pairs); totals of pairs
 // and tests added to c; per entry e a contact mask: bit j (1..31) set when entry e + j is a contact
 // of e, bit 0 set when contacts lie past e + 31 or past the block's last entry (fill_pairs then walks
-// e's cell from memory). The block stages its entries (key, control byte, sphere, input index when a
-// report mask is given) in shared memory once; each thread then walks only its own cell's later
-// entries there (a few shared loads per step, no warp-wide shuffles: the walk is issue-light), and
-// walks from memory only a cell that goes on past the block or past e + 31.
+// e's cell from memory). The block stages its entries and a halo of the next 32 (key, control byte,
+// sphere, input index when a report mask is given) in shared memory once; each thread then walks
+// only its own cell's later entries there (a few shared loads per step, no warp-wide shuffles: the
+// walk is issue-light), and walks from memory only a cell that goes on past e + 31 (or past the
+// last entry). Without the halo, the cell that straddles the block's end was walked from memory by
+// up to a cell's worth of threads, a chain of dependent global loads that kept the whole block
+// resident (the block's tail).
 // Direct write: the block takes the range [base, base + block total) of the pair cursor c->pairs (one
 // atomicAdd) and, when the range ends at or below `cap`, writes its pairs (pair_a[w], pair_b[w]) of
 // input indices, a < b, there, each thread at base + its exclusive rank (same walk, emitting). When
 // the cursor ends above cap, the host discards those writes and runs the scan → fill_pairs path
 // from the masks instead. The pairs' order is the blocks' arrival order; the order stage sorts them.
 template <class Real, class Key>
-__global__ void __launch_bounds__(kBlock)
+__global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
     count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
                        std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
                        const Sphere<Real>* __restrict__ spheres, const std::uint32_t* __restrict__ perm,
@@ -346,16 +358,16 @@ __global__ void __launch_bounds__(kBlock)
     typename Scan::TempStorage scan;
   } tmp;
   __shared__ unsigned long long s_base;
-  __shared__ Key s_key[kBlock];
-  __shared__ std::uint32_t s_body[kBlock];
-  __shared__ Sphere<Real> s_sphere[kBlock];
-  __shared__ std::uint32_t s_perm[kBlock];
-  __shared__ std::uint8_t s_ctrl[kBlock];
+  __shared__ Key s_key[kStaged];
+  __shared__ std::uint32_t s_body[kStaged];
+  __shared__ Sphere<Real> s_sphere[kStaged];
+  __shared__ std::uint32_t s_perm[kStaged];
+  __shared__ std::uint8_t s_ctrl[kStaged];
   const std::uint32_t base = blockIdx.x * kBlock;
   const std::uint32_t t = threadIdx.x;
   const std::uint32_t e = base + t;
   const bool valid = e < n_entries;
-  const std::uint32_t end = n_entries - base < kBlock ? n_entries - base : kBlock;  // staged entries
+  const std::uint32_t end = n_entries - base < kStaged ? n_entries - base : kStaged;  // staged entries
   Key k{};
   EntryBody<Real> x{};
   if (valid) {
@@ -370,6 +382,14 @@ __global__ void __launch_bounds__(kBlock)
     s_sphere[t] = x.sa;
     s_ctrl[t] = x.ca;
     s_perm[t] = x.pa;
+  }
+  if (t + kBlock < end) {  // the halo: the next block's first entries
+    const std::uint32_t h = t + kBlock, b = body[base + h];
+    s_key[h] = keys[base + h];
+    s_body[h] = b;
+    s_sphere[h] = spheres[b];
+    s_ctrl[h] = ctrl[b];
+    s_perm[h] = report ? perm[b] : 0u;
   }
   __syncthreads();
   std::uint32_t found = 0, tests = 0, bits = 0;
@@ -465,9 +485,30 @@ __global__ void __launch_bounds__(kBlock)
   }
 }
 
-// order, second step: the pairs are sorted by a (stable radix sort of (a, b) by a); each run of equal
-// a is put in b order here by its first thread (insertion sort; runs are a body's contacts, short).
-// Pairs are distinct, so the result is the (a, b) order of the host's sort of a << id_bits | b.
+// order, first step: a counting sort by a. count_a: count[a] of each pair (count zeroed); after an
+// exclusive scan of the counts into offset, scatter_a writes each pair at offset[a]++ (grouped by a,
+// in any order within a group).
+__global__ void __launch_bounds__(kBlock)
+    count_a_kernel(const std::uint32_t* __restrict__ pair_a, std::uint32_t n_pairs, std::uint32_t* count) {
+  const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
+  if (k < n_pairs) atomicAdd(&count[pair_a[k]], 1u);
+}
+
+__global__ void __launch_bounds__(kBlock)
+    scatter_a_kernel(const std::uint32_t* __restrict__ a_in, const std::uint32_t* __restrict__ b_in,
+                     std::uint32_t n_pairs, std::uint32_t* offset, std::uint32_t* __restrict__ a_out,
+                     std::uint32_t* __restrict__ b_out) {
+  const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
+  if (k >= n_pairs) return;
+  const std::uint32_t a = a_in[k];
+  const std::uint32_t w = atomicAdd(&offset[a], 1u);
+  a_out[w] = a;
+  b_out[w] = b_in[k];
+}
+
+// order, second step: each run of equal a is put in b order by its first thread (insertion sort;
+// runs are a body's contacts, short). Pairs are distinct, so the result is the (a, b) order of the
+// host's sort of a << id_bits | b, whatever the order within the runs before.
 __global__ void __launch_bounds__(kBlock)
     sort_runs_kernel(const std::uint32_t* __restrict__ pair_a, std::uint32_t* __restrict__ pair_b,
                      std::uint32_t n_pairs) {

@@ -54,6 +54,7 @@ class CudaBackendTest : public ::testing::Test {
     EngineOptions o;
     o.fields = fields;
     o.cell_size = cell;
+    o.cell_choice = CellChoice::smallest;  // the scenes' adversarial geometry is drawn for it
     o.backend = Backend::cpu;
     Engine<Real> cpu(o);
     o.backend = Backend::cuda;
@@ -88,6 +89,37 @@ TYPED_TEST(CudaBackendTest, BitIdenticalToCpuOnScenes) {
   this->compare(coincident(1016), Fields::full);
   this->compare(tangent(1017), Fields::full);
   this->compare(random_spheres(5000, 0.5, 1.0, 1018).translated({1e6, -1e6, 1e6}), Fields::full);
+}
+
+// The backend's alternative paths, forced through their knobs (each is otherwise chosen by the scene
+// size against the L2 or opted into): the same bits as the CPU on dense, sparse and masked scenes.
+TYPED_TEST(CudaBackendTest, EveryPathIsBitIdentical) {
+  struct Knob {
+    const char *name, *value;
+  };
+  struct Unset {  // the knob is removed even when an assertion fails
+    const char* name;
+    ~Unset() { ::unsetenv(name); }
+  };
+  auto masked = random_spheres(6000, 0.5, 1.0, 1031);
+  std::vector<std::int64_t> ids(masked.r.size());
+  std::vector<std::uint8_t> report(masked.r.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    ids[i] = std::int64_t(3 * i + 1);
+    report[i] = (i % 3) != 0;
+  }
+  for (const Knob& k : {Knob{"CONTACTGRID_CUDA_TYPE_PASSES", "1"}, Knob{"CONTACTGRID_CUDA_RENUMBER", "0"},
+                        Knob{"CONTACTGRID_CUDA_RENUMBER", "1"}, Knob{"CONTACTGRID_CUDA_ORDER", "radix"},
+                        Knob{"CONTACTGRID_CUDA_ORDER", "counting"}}) {
+    SCOPED_TRACE(std::string(k.name) + "=" + k.value);
+    ::setenv(k.name, k.value, 1);
+    Unset unset{k.name};
+    this->compare(random_spheres(30000, 0.5, 1.0, 1032), Fields::full);
+    this->compare(random_spheres(8000, 0.01, 1.0, 1033, true), Fields::basic);
+    this->compare(clustered(3000, 1034), Fields::basic);
+    this->compare(one_cell(300, 1035), Fields::full);
+    this->compare(masked, Fields::full, 0, ids, report);
+  }
 }
 
 TYPED_TEST(CudaBackendTest, BitIdenticalWithIdsAndReportMask) {

@@ -27,11 +27,14 @@ class EngineTest : public ::testing::Test {
   using Real = typename T::Real;
   void SetUp() override { CG_SKIP_WITHOUT_BACKEND(T); }
 
-  Contacts<Real> run(const Spheres& s, Fields fields = Fields::basic, double cell = 0) {
+  // cell 0: the smallest cell (the scenes' adversarial geometry is drawn for it); tuned: the default.
+  Contacts<Real> run(const Spheres& s, Fields fields = Fields::basic, double cell = 0,
+                     CellChoice choice = CellChoice::smallest) {
     EngineOptions o;
     o.backend = T::backend;
     o.fields = fields;
     o.cell_size = cell;
+    o.cell_choice = choice;
     Engine<Real> e(o);
     Contacts<Real> c = e.detect(BodiesView{s.p, s.r, {}, {}});
     m_stats = e.stats();
@@ -119,6 +122,14 @@ TYPED_TEST(EngineTest, RadiusRatios) {
                                  this->run(random_spheres(4000, 0.1, 1.0, 21)));
   auto s = random_spheres(3000, 0.001, 1.0, 22, /*log_radii=*/true);
   this->expect_matches_reference(s, this->run(s));
+}
+
+// The default cell (tuned_cell_size) on scenes of different density and radius laws.
+TYPED_TEST(EngineTest, TunedCellMatchesReference) {
+  for (const Spheres& s :
+       {random_spheres(20000, 0.5, 1.0, 61), random_spheres(4000, 0.1, 1.0, 62),
+        random_spheres(3000, 0.001, 1.0, 63, true), clustered(3000, 64), one_cell(200, 65)})
+    this->expect_matches_reference(s, this->run(s, Fields::basic, 0, CellChoice::tuned));
 }
 
 TYPED_TEST(EngineTest, Clustered) {
@@ -248,8 +259,9 @@ TYPED_TEST(EngineTest, ReportMaskAndIds) {
 TYPED_TEST(EngineTest, CellSizeChangesSpeedNotContacts) {
   auto s = random_spheres(8000, 0.5, 1.0, 111);
   const auto ref = this->run(s, Fields::full);
-  for (double cell : {2.5, 3.0, 5.0, 9.0}) {
-    const auto c = this->run(s, Fields::full, cell);
+  for (double cell : {-1.0, 2.5, 3.0, 5.0, 9.0}) {  // -1: the tuned default
+    const auto c =
+        cell < 0 ? this->run(s, Fields::full, 0, CellChoice::tuned) : this->run(s, Fields::full, cell);
     ASSERT_EQ(c.size(), ref.size()) << "cell " << cell;
     for (std::size_t k = 0; k < c.size(); ++k) {
       ASSERT_EQ(c.id_a[k], ref.id_a[k]);
