@@ -1,6 +1,7 @@
 // Distributed detection (see distributed_detect.hpp): read own rows → shared frame → slabs →
 // redistribute to owners → ghost exchange → engine on owned + ghosts (the owner of the smaller id
-// reports) → point-to-point gather to rank 0 → parallel k-way merge by (id_a, id_b).
+// reports) → contacts exchanged by id_a range (or gathered to rank 0) → parallel k-way merge by
+// (id_a, id_b).
 #include "distributed_detect.hpp"
 
 #include <omp.h>
