@@ -110,9 +110,13 @@ class Buffer {
   std::size_t m_align = alignof(T);
 };
 
-// Host threads of the comm loops: the engine's --threads (0: all).
-int host_threads(const DistributedOptions& o) {
-  return o.engine.threads > 0 ? o.engine.threads : omp_get_max_threads();
+// Host threads of this rank (its comm loops and its engine): the engine's --threads, or when 0 an
+// equal share of the node's hardware threads among the ranks on the node. Each rank taking every
+// core (the old default) oversubscribed a node P times under `mpirun --bind-to none`: P OpenMP teams
+// of one thread per core, whose barriers wait for descheduled threads.
+int host_threads(const DistributedOptions& o, const Session& s) {
+  if (o.engine.threads > 0) return o.engine.threads;
+  return std::max(1, omp_get_max_threads() / std::max(1, s.local_size()));
 }
 
 // Static split of [0, n) into `parts` contiguous chunks (deterministic, whatever the team size).
@@ -719,10 +723,14 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
 
   // ---- options: everything checked before the first communication -------------------------------
   std::optional<Engine<Real>> engine;
+  const int threads = host_threads(options, session);
+  result.threads = threads;
   local_stage(session, "options", [&] {
     validate(options);
     if (path.empty()) throw UsageError("no scene file given");
-    engine.emplace(options.engine);
+    EngineOptions engine_options = options.engine;
+    engine_options.threads = threads;
+    engine.emplace(engine_options);
   });
 
   // ---- read: own contiguous row range, global bounds, shared frame --------------------------------
@@ -805,7 +813,6 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   // One rank owns everything: no plan, no exchange, no halo, no gather, no merge; the vectors move
   // through (the engine gets the rows as read, ids 0 … N-1 implied, all pairs reported).
   const bool alone = ranks == 1;
-  const int threads = host_threads(options);
   t0 = Clock::now();
   std::optional<SlabDecomposition> slabs;
   Buffer<BodyRecord> owned;

@@ -68,7 +68,8 @@ enum class ContactOutput {
 
 struct DistributedOptions {
   EngineOptions engine;  // backend, fields, cell_size (0: smallest valid), threads (also the
-                         // pipeline's host loops; 0: all), device
+                         // pipeline's host loops; 0: the hardware threads shared equally among
+                         // the ranks on the node), device
   int axis = -1;         // slab axis: 0 x, 1 y, 2 z, -1 largest extent (parse_axis)
   Balance balance = Balance::count;
   std::uint64_t max_sample = 1u << 20;         // quantile sample size (all bodies when N <= it)
@@ -102,6 +103,7 @@ struct DistributedResult {
   int axis = 0;                    // the slab axis used
   std::vector<double> cuts;        // the P-1 slab cuts
   Backend backend = Backend::cpu;  // the engine's resolved backend (this rank)
+  int threads = 1;                 // host threads of this rank (engine and host loops)
   EngineStats stats;               // entries and pair tests summed over ranks
 };
 

@@ -72,8 +72,7 @@ int detect(const DetectCommand& cmd, Session& session) {
   info.input = cmd.input;
   info.times = r.times;
   // every rank writes its rows of the one file (comm/distributed_write.hpp); adds the "write" time
-  write_contacts_distributed(session, cmd.output, r.contacts, r.first_row, r.total_contacts, info,
-                             cmd.threads);
+  write_contacts_distributed(session, cmd.output, r.contacts, r.first_row, r.total_contacts, info, r.threads);
   if (!cmd.csv.empty()) {
     std::exception_ptr error;
     if (session.rank() == 0) {
