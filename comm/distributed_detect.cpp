@@ -1,6 +1,7 @@
 // Distributed detection (see distributed_detect.hpp): read own rows → shared frame → slabs →
 // redistribute to owners → ghost exchange → engine on owned + ghosts (the owner of the smaller id
-// reports) → point-to-point gather to rank 0 → parallel k-way merge by (id_a, id_b).
+// reports) → contacts exchanged by id_a range (or gathered to rank 0) → parallel k-way merge by
+// (id_a, id_b).
 #include "distributed_detect.hpp"
 
 #include <omp.h>
@@ -109,9 +110,13 @@ class Buffer {
   std::size_t m_align = alignof(T);
 };
 
-// Host threads of the comm loops: the engine's --threads (0: all).
-int host_threads(const DistributedOptions& o) {
-  return o.engine.threads > 0 ? o.engine.threads : omp_get_max_threads();
+// Host threads of this rank (its comm loops and its engine): the engine's --threads, or when 0 an
+// equal share of the node's hardware threads among the ranks on the node. Each rank taking every
+// core (the old default) oversubscribed a node P times under `mpirun --bind-to none`: P OpenMP teams
+// of one thread per core, whose barriers wait for descheduled threads.
+int host_threads(const DistributedOptions& o, const Session& s) {
+  if (o.engine.threads > 0) return o.engine.threads;
+  return std::max(1, omp_get_max_threads() / std::max(1, s.local_size()));
 }
 
 // Static split of [0, n) into `parts` contiguous chunks (deterministic, whatever the team size).
@@ -285,7 +290,8 @@ static_assert(std::is_trivially_copyable_v<BoundsRecord>);
 double component(const Vec3<double>& v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
 
 constexpr int k_halo_tag = 7301;
-constexpr int k_gather_tag = 7400;  // + field index
+constexpr int k_gather_tag = 7400;    // + field index
+constexpr int k_exchange_tag = 7500;  // + field index
 
 // The collectives of distributed_detect over the session's communicator. In laptop mode (no MPI)
 // they are the one-rank identities, so one rank runs the same code path with no neighbours.
@@ -422,6 +428,57 @@ class Comm {
     }
   }
 
+  // One field of a contact exchange: the rows this rank sends (rows [split[d], split[d + 1]) go to
+  // rank d) and where rank r's rows land here (into[r], r != this rank; this rank's own part is not
+  // copied).
+  struct RowField {
+    const unsigned char* send = nullptr;
+    std::vector<unsigned char*> into;
+    std::size_t row_bytes = 0;
+  };
+
+  // Every field's rows to their destinations: every Irecv posted (per field, source and message),
+  // then every Isend (destinations from the next rank on, so the ranks do not all start with rank
+  // 0), one Waitall. Messages hold whole rows, at most max_bytes (capped to 2^31 - 1 bytes), sent as
+  // MPI_BYTE; a tag per field (MPI keeps the order of messages of one tag and pair).
+  void exchange_rows(const std::vector<RowField>& fields, const std::vector<std::uint64_t>& split,
+                     const std::vector<std::uint64_t>& recv_counts, std::uint64_t max_bytes, int tag) const {
+    if (!m_s.mpi || m_s.size == 1) return;
+    const std::uint64_t budget = std::min<std::uint64_t>(max_bytes, static_cast<std::uint64_t>(INT_MAX));
+    const std::size_t p = recv_counts.size(), me = static_cast<std::size_t>(m_s.rank);
+    std::vector<MPI_Request> requests;
+    for (std::size_t f = 0; f < fields.size(); ++f) {
+      const RowField& field = fields[f];
+      const std::uint64_t chunk = std::max<std::uint64_t>(1, budget / field.row_bytes);  // rows per message
+      for (std::size_t r = 0; r < p; ++r) {
+        if (r == me) continue;
+        for (std::uint64_t at = 0; at < recv_counts[r]; at += chunk) {
+          requests.emplace_back();
+          CG_MPI(MPI_Irecv(field.into[r] + at * field.row_bytes,
+                           static_cast<int>(std::min(chunk, recv_counts[r] - at) * field.row_bytes), MPI_BYTE,
+                           static_cast<int>(r), tag + static_cast<int>(f), m_s.comm, &requests.back()));
+        }
+      }
+    }
+    for (std::size_t f = 0; f < fields.size(); ++f) {
+      const RowField& field = fields[f];
+      const std::uint64_t chunk = std::max<std::uint64_t>(1, budget / field.row_bytes);
+      for (std::size_t k = 1; k < p; ++k) {
+        const std::size_t d = (me + k) % p;
+        const std::uint64_t n = split[d + 1] - split[d];
+        for (std::uint64_t at = 0; at < n; at += chunk) {
+          requests.emplace_back();
+          CG_MPI(MPI_Isend(field.send + (split[d] + at) * field.row_bytes,
+                           static_cast<int>(std::min(chunk, n - at) * field.row_bytes), MPI_BYTE,
+                           static_cast<int>(d), tag + static_cast<int>(f), m_s.comm, &requests.back()));
+        }
+      }
+    }
+    if (!requests.empty()) {
+      CG_MPI(MPI_Waitall(static_cast<int>(requests.size()), requests.data(), MPI_STATUSES_IGNORE));
+    }
+  }
+
   void allreduce_max(std::vector<double>& values) const {
     if (!m_s.mpi) return;
     CG_MPI(MPI_Allreduce(MPI_IN_PLACE, values.data(), static_cast<int>(values.size()), MPI_DOUBLE, MPI_MAX,
@@ -444,6 +501,217 @@ void local_stage(const Session& session, const char* stage, F&& work) {
   session.agree(error, stage);
 }
 
+// root mode: the ranks' contacts gathered to rank 0 and merged there (see the file comment).
+template <class Real>
+void gather_and_merge(const Session& session, const Comm& comm, Contacts<Real>& local,
+                      const DistributedOptions& options, int threads, DistributedResult<Real>& result,
+                      std::vector<double>& times) {
+  const int ranks = comm.size(), me = comm.rank();
+  const bool alone = ranks == 1, full = options.engine.fields == Fields::full;
+  // ---- gather: each field to rank 0, straight into per-rank receive buffers ---------------------
+  auto t0 = Clock::now();
+  const std::vector<std::uint64_t> counts =
+      alone ? std::vector<std::uint64_t>{local.size()} : comm.allgather<std::uint64_t>(local.size());
+  const std::size_t p = counts.size();
+  std::vector<ContactRunView<Real>> runs;
+  // rank 0's received fields: ids (2), distance, and up to 7 vector fields per rank
+  std::vector<Buffer<std::int64_t>> recv_a, recv_b;
+  std::vector<Buffer<Real>> recv_d;
+  std::vector<std::vector<Buffer<Vec3<Real>>>> recv_v;
+  const int nvec = full ? 7 : 3;
+  if (!alone) {
+    const bool root = me == 0;
+    if (root) {
+      runs.resize(p);
+      recv_a.resize(p);
+      recv_b.resize(p);
+      recv_d.resize(p);
+      recv_v.resize(p);
+      runs[0] = contact_run_view(local, full);  // rank 0's own run stays in place
+      for (std::size_t r = 1; r < p; ++r) {
+        const std::size_t n = counts[r];
+        recv_a[r] = Buffer<std::int64_t>(n);
+        recv_b[r] = Buffer<std::int64_t>(n);
+        recv_d[r] = Buffer<Real>(n);
+        for (int f = 0; f < nvec; ++f) recv_v[r].emplace_back(n);
+        runs[r].n = n;
+        runs[r].id_a = recv_a[r].data();
+        runs[r].id_b = recv_b[r].data();
+        runs[r].distance = recv_d[r].data();
+        for (int f = 0; f < nvec; ++f) runs[r].vec[f] = recv_v[r][static_cast<std::size_t>(f)].data();
+      }
+    }
+    auto targets = [&](auto& buffers) {  // where rank r's part of a field lands on rank 0 (r >= 1)
+      std::vector<decltype(buffers[0].data())> t(root ? p : 0, nullptr);
+      for (std::size_t r = 1; root && r < p; ++r) t[r] = buffers[r].data();
+      return t;
+    };
+    comm.gather_to_root(local.id_a.data(), counts, targets(recv_a), options.max_message_bytes,
+                        k_gather_tag + 0);
+    comm.gather_to_root(local.id_b.data(), counts, targets(recv_b), options.max_message_bytes,
+                        k_gather_tag + 1);
+    comm.gather_to_root(local.distance.data(), counts, targets(recv_d), options.max_message_bytes,
+                        k_gather_tag + 2);
+    for (int f = 0; f < nvec; ++f) {
+      std::vector<Vec3<Real>*> t(root ? p : 0, nullptr);
+      for (std::size_t r = 1; root && r < p; ++r) t[r] = recv_v[r][static_cast<std::size_t>(f)].data();
+      comm.gather_to_root(contact_vec_field(local, f)->data(), counts, t, options.max_message_bytes,
+                          k_gather_tag + 3 + f);
+    }
+    if (!root) local = Contacts<Real>{};
+  }
+  times[4] = seconds_since(t0);
+
+  // ---- merge (rank 0): k-way merge of the sorted runs, duplicates removed and counted -----------
+  t0 = Clock::now();
+  local_stage(session, "merge", [&] {
+    if (me != 0) return;
+    if (alone) {
+      result.contacts = std::move(local);  // one sorted run: nothing to merge
+    } else {
+      std::uint64_t total = 0;
+      for (std::uint64_t k : counts) total += k;
+      detail::reserve_contacts(result.contacts, total, full);
+      result.contacts.resize(total, full);
+      const int parts = total < (std::uint64_t(1) << 15) ? 1 : 4 * threads;  // a few per thread: balance
+      result.duplicates_removed = merge_contact_runs_into<Real>(runs, result.contacts, full, parts, threads);
+      runs.clear();
+      local = Contacts<Real>{};
+    }
+    const std::string line = "merge: " + std::to_string(result.contacts.size()) + " contacts from " +
+                             std::to_string(ranks) + " rank(s), " +
+                             std::to_string(result.duplicates_removed) + " duplicate(s) removed (expected 0)";
+    if (options.log) {
+      options.log(line);
+    } else if (result.duplicates_removed > 0) {  // a warning nobody asked for must still be seen
+      std::fprintf(stderr, "%swarning: %s\n", session.prefix().c_str(), line.c_str());
+    }
+  });
+  times[5] = seconds_since(t0);
+  result.total_contacts = session.sum(me == 0 ? result.contacts.size() : 0);
+  result.first_row = me == 0 ? 0 : result.total_contacts;
+  result.id_begin = me == 0 ? 0 : result.bodies;
+  result.id_end = result.bodies;
+}
+
+// id_ranges mode: every rank ends with the merged contacts of its id_a range (see the file comment).
+template <class Real>
+void exchange_and_merge(const Session& session, const Comm& comm, Contacts<Real>& local,
+                        std::uint64_t n_global, const DistributedOptions& options, int threads,
+                        DistributedResult<Real>& result, std::vector<double>& times) {
+  const int ranks = comm.size(), me = comm.rank();
+  const std::size_t p = static_cast<std::size_t>(ranks), mine = static_cast<std::size_t>(me);
+  const bool full = options.engine.fields == Fields::full;
+  const int nvec = full ? 7 : 3;
+  // the id_a range of rank d: the rows it read
+  auto id_begin = [&](std::size_t d) { return n_global * d / p; };
+  result.id_begin = id_begin(mine);
+  result.id_end = id_begin(mine + 1);
+
+  // ---- exchange: each destination's slice of every field, straight from the arrays --------------
+  auto t0 = Clock::now();
+  std::vector<std::uint64_t> split(p + 1, 0), send_counts(p, 0);
+  local_stage(session, "exchange", [&] {
+    // sorted by (id_a, id_b), so rank d's rows are one sub-range
+    split[p] = local.size();
+    for (std::size_t d = 1; d < p; ++d) {
+      const auto at =
+          std::lower_bound(local.id_a.begin(), local.id_a.end(), static_cast<std::int64_t>(id_begin(d)));
+      split[d] = static_cast<std::uint64_t>(at - local.id_a.begin());
+    }
+    for (std::size_t d = 0; d < p; ++d) send_counts[d] = split[d + 1] - split[d];
+  });
+  const std::vector<std::uint64_t> recv_counts = comm.alltoall_counts(send_counts);
+  std::vector<ContactRunView<Real>> runs(p);
+  std::vector<Buffer<std::int64_t>> recv_a(p), recv_b(p);
+  std::vector<Buffer<Real>> recv_d(p);
+  std::vector<std::vector<Buffer<Vec3<Real>>>> recv_v(p);
+  std::vector<Comm::RowField> fields(3 + static_cast<std::size_t>(nvec));
+  local_stage(session, "exchange", [&] {
+    for (std::size_t r = 0; r < p; ++r) {
+      if (r == mine) {  // this rank's own part stays where it is
+        const std::uint64_t at = split[mine];
+        ContactRunView<Real>& v = runs[r];
+        v.n = send_counts[mine];
+        v.id_a = local.id_a.data() + at;
+        v.id_b = local.id_b.data() + at;
+        v.distance = local.distance.data() + at;
+        for (int f = 0; f < nvec; ++f) v.vec[f] = contact_vec_field(local, f)->data() + at;
+        continue;
+      }
+      const std::size_t n = recv_counts[r];
+      recv_a[r] = Buffer<std::int64_t>(n);
+      recv_b[r] = Buffer<std::int64_t>(n);
+      recv_d[r] = Buffer<Real>(n);
+      for (int f = 0; f < nvec; ++f) recv_v[r].emplace_back(n);
+      runs[r].n = n;
+      runs[r].id_a = recv_a[r].data();
+      runs[r].id_b = recv_b[r].data();
+      runs[r].distance = recv_d[r].data();
+      for (int f = 0; f < nvec; ++f) runs[r].vec[f] = recv_v[r][static_cast<std::size_t>(f)].data();
+    }
+    auto bytes = [](auto* ptr) { return reinterpret_cast<unsigned char*>(ptr); };
+    auto cbytes = [](const auto* ptr) { return reinterpret_cast<const unsigned char*>(ptr); };
+    for (auto& field : fields) field.into.assign(p, nullptr);
+    fields[0].send = cbytes(local.id_a.data());
+    fields[0].row_bytes = sizeof(std::int64_t);
+    fields[1].send = cbytes(local.id_b.data());
+    fields[1].row_bytes = sizeof(std::int64_t);
+    fields[2].send = cbytes(local.distance.data());
+    fields[2].row_bytes = sizeof(Real);
+    for (int f = 0; f < nvec; ++f) {
+      fields[3 + static_cast<std::size_t>(f)].send = cbytes(contact_vec_field(local, f)->data());
+      fields[3 + static_cast<std::size_t>(f)].row_bytes = sizeof(Vec3<Real>);
+    }
+    for (std::size_t r = 0; r < p; ++r) {
+      if (r == mine) continue;
+      fields[0].into[r] = bytes(recv_a[r].data());
+      fields[1].into[r] = bytes(recv_b[r].data());
+      fields[2].into[r] = bytes(recv_d[r].data());
+      for (int f = 0; f < nvec; ++f)
+        fields[3 + static_cast<std::size_t>(f)].into[r] =
+            bytes(recv_v[r][static_cast<std::size_t>(f)].data());
+    }
+  });
+  comm.exchange_rows(fields, split, recv_counts, options.max_message_bytes, k_exchange_tag);
+  times[4] = seconds_since(t0);
+
+  // ---- merge: the P sorted runs of this rank's id range, duplicates removed and counted ----------
+  t0 = Clock::now();
+  std::uint64_t duplicates = 0;
+  local_stage(session, "merge", [&] {
+    if (p == 1) {
+      result.contacts = std::move(local);  // one sorted run: nothing to merge
+      return;
+    }
+    std::uint64_t total = 0;
+    for (std::uint64_t k : recv_counts) total += k;
+    Contacts<Real> merged;
+    detail::reserve_contacts(merged, total, full);
+    merged.resize(total, full);
+    const int parts = total < (std::uint64_t(1) << 15) ? 1 : 4 * threads;  // a few per thread: balance
+    duplicates = merge_contact_runs_into<Real>(runs, merged, full, parts, threads);
+    runs.clear();
+    local = Contacts<Real>{};
+    result.contacts = std::move(merged);
+  });
+  times[5] = seconds_since(t0);
+  result.duplicates_removed = session.sum(duplicates);
+  const std::vector<std::uint64_t> counts = comm.allgather<std::uint64_t>(result.contacts.size());
+  result.first_row = std::accumulate(counts.begin(), counts.begin() + me, std::uint64_t{0});
+  result.total_contacts = std::accumulate(counts.begin(), counts.end(), std::uint64_t{0});
+  const std::string line = "merge: " + std::to_string(result.total_contacts) + " contacts in " +
+                           std::to_string(ranks) + " id range(s), " +
+                           std::to_string(result.duplicates_removed) + " duplicate(s) removed (expected 0)";
+  if (me == 0) {
+    if (options.log) {
+      options.log(line);
+    } else if (result.duplicates_removed > 0) {  // a warning nobody asked for must still be seen
+      std::fprintf(stderr, "%swarning: %s\n", session.prefix().c_str(), line.c_str());
+    }
+  }
+}
+
 template <class Real>
 DistributedResult<Real> run(Session& session, const std::string& path, const DistributedOptions& options) {
   constexpr Precision precision = std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64;
@@ -456,10 +724,14 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
 
   // ---- options: everything checked before the first communication -------------------------------
   std::optional<Engine<Real>> engine;
+  const int threads = host_threads(options, session);
+  result.threads = threads;
   local_stage(session, "options", [&] {
     validate(options);
     if (path.empty()) throw UsageError("no scene file given");
-    engine.emplace(options.engine);
+    EngineOptions engine_options = options.engine;
+    engine_options.threads = threads;
+    engine.emplace(engine_options);
   });
 
   // ---- read: own contiguous row range, global bounds, shared frame --------------------------------
@@ -543,7 +815,6 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   // One rank owns everything: no plan, no exchange, no halo, no gather, no merge; the vectors move
   // through (the engine gets the rows as read, ids 0 … N-1 implied, all pairs reported).
   const bool alone = ranks == 1;
-  const int threads = host_threads(options);
   t0 = Clock::now();
   std::optional<SlabDecomposition> slabs;
   Buffer<BodyRecord> owned;
@@ -673,90 +944,17 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   result.owned_max = *std::max_element(owned_all.begin(), owned_all.end());
   result.ghosts = session.sum(n_ghosts);
 
-  // ---- gather: each field to rank 0, straight into per-rank receive buffers ---------------------
-  t0 = Clock::now();
-  const std::vector<std::uint64_t> counts =
-      alone ? std::vector<std::uint64_t>{local.size()} : comm.allgather<std::uint64_t>(local.size());
-  const std::size_t p = counts.size();
-  std::vector<ContactRunView<Real>> runs;
-  // rank 0's received fields: ids (2), distance, and up to 7 vector fields per rank
-  std::vector<Buffer<std::int64_t>> recv_a, recv_b;
-  std::vector<Buffer<Real>> recv_d;
-  std::vector<std::vector<Buffer<Vec3<Real>>>> recv_v;
-  const int nvec = full ? 7 : 3;
-  if (!alone) {
-    const bool root = me == 0;
-    if (root) {
-      runs.resize(p);
-      recv_a.resize(p);
-      recv_b.resize(p);
-      recv_d.resize(p);
-      recv_v.resize(p);
-      runs[0] = contact_run_view(local, full);  // rank 0's own run stays in place
-      for (std::size_t r = 1; r < p; ++r) {
-        const std::size_t n = counts[r];
-        recv_a[r] = Buffer<std::int64_t>(n);
-        recv_b[r] = Buffer<std::int64_t>(n);
-        recv_d[r] = Buffer<Real>(n);
-        for (int f = 0; f < nvec; ++f) recv_v[r].emplace_back(n);
-        runs[r].n = n;
-        runs[r].id_a = recv_a[r].data();
-        runs[r].id_b = recv_b[r].data();
-        runs[r].distance = recv_d[r].data();
-        for (int f = 0; f < nvec; ++f) runs[r].vec[f] = recv_v[r][static_cast<std::size_t>(f)].data();
-      }
-    }
-    auto targets = [&](auto& buffers) {  // where rank r's part of a field lands on rank 0 (r >= 1)
-      std::vector<decltype(buffers[0].data())> t(root ? p : 0, nullptr);
-      for (std::size_t r = 1; root && r < p; ++r) t[r] = buffers[r].data();
-      return t;
-    };
-    comm.gather_to_root(local.id_a.data(), counts, targets(recv_a), options.max_message_bytes,
-                        k_gather_tag + 0);
-    comm.gather_to_root(local.id_b.data(), counts, targets(recv_b), options.max_message_bytes,
-                        k_gather_tag + 1);
-    comm.gather_to_root(local.distance.data(), counts, targets(recv_d), options.max_message_bytes,
-                        k_gather_tag + 2);
-    for (int f = 0; f < nvec; ++f) {
-      std::vector<Vec3<Real>*> t(root ? p : 0, nullptr);
-      for (std::size_t r = 1; root && r < p; ++r) t[r] = recv_v[r][static_cast<std::size_t>(f)].data();
-      comm.gather_to_root(contact_vec_field(local, f)->data(), counts, t, options.max_message_bytes,
-                          k_gather_tag + 3 + f);
-    }
-    if (!root) local = Contacts<Real>{};
+  if (options.output == ContactOutput::root) {
+    gather_and_merge(session, comm, local, options, threads, result, times);
+  } else {
+    exchange_and_merge(session, comm, local, n_global, options, threads, result, times);
   }
-  times[4] = seconds_since(t0);
-
-  // ---- merge (rank 0): k-way merge of the sorted runs, duplicates removed and counted -----------
-  t0 = Clock::now();
-  local_stage(session, "merge", [&] {
-    if (me != 0) return;
-    if (alone) {
-      result.contacts = std::move(local);  // one sorted run: nothing to merge
-    } else {
-      std::uint64_t total = 0;
-      for (std::uint64_t k : counts) total += k;
-      detail::reserve_contacts(result.contacts, total, full);
-      result.contacts.resize(total, full);
-      const int parts = total < (std::uint64_t(1) << 15) ? 1 : 4 * threads;  // a few per thread: balance
-      result.duplicates_removed = merge_contact_runs_into<Real>(runs, result.contacts, full, parts, threads);
-      runs.clear();
-      local = Contacts<Real>{};
-    }
-    const std::string line = "merge: " + std::to_string(result.contacts.size()) + " contacts from " +
-                             std::to_string(ranks) + " rank(s), " +
-                             std::to_string(result.duplicates_removed) + " duplicate(s) removed (expected 0)";
-    if (options.log) {
-      options.log(line);
-    } else if (result.duplicates_removed > 0) {  // a warning nobody asked for must still be seen
-      std::fprintf(stderr, "%swarning: %s\n", session.prefix().c_str(), line.c_str());
-    }
-  });
-  times[5] = seconds_since(t0);
   result.contacts.full = full;
 
   comm.allreduce_max(times);
-  const char* names[6] = {"read", "redistribute", "halo", "detect", "gather", "merge"};
+  const char* names[6] = {
+      "read", "redistribute", "halo", "detect", options.output == ContactOutput::root ? "gather" : "exchange",
+      "merge"};
   for (int s = 0; s < 6; ++s) {
     result.times.push_back({names[s], times[static_cast<std::size_t>(s)]});
     if (s == 3)

@@ -20,6 +20,21 @@
 //                 into the engine's arrays); report mask = owned; Engine<Real>::detect with the
 //                 shared frame. The owner of the smaller id reports a pair, so each contact is
 //                 found by exactly one rank.
+// Then the contacts, in one of two modes (DistributedOptions::output):
+//  ContactOutput::id_ranges (the CLI's detect): no rank holds them all.
+//   exchange      rank r is responsible for the output rows with id_a in [N·r/P, N·(r+1)/P) (the
+//                 rows it read: known before detection). A rank's contacts are sorted by
+//                 (id_a, id_b), so its part for each destination is one sub-range (binary search):
+//                 counts by Alltoall, then every field's slice sent straight from the arrays (every
+//                 Irecv posted, every Isend, one Waitall; messages of at most max_message_bytes, so
+//                 no count exceeds 2^31), into one receive array per source and field (the rank's
+//                 own part stays in place).
+//   merge         every rank: k-way merge of its P received runs by (id_a, id_b), duplicates removed
+//                 (summed over ranks: expected 0); an all-gather of the merged counts gives each
+//                 rank its first output row and the total K. Rank r's rows are rows
+//                 [first_row, first_row + size) of the single-rank result; comm/distributed_write
+//                 writes them into one file at once.
+//  ContactOutput::root (tests, library users who want everything in one place):
 //   gather        counts, then each field to rank 0 point to point, straight into one receive array
 //                 per rank and field (rank 0's own run stays in place), in messages of at most
 //                 max_message_bytes (so no count exceeds 2^31).
@@ -28,7 +43,7 @@
 //                 in parallel over key ranges straight into the result.
 // With one rank (laptop mode or np 1) nothing is exchanged or copied: the rows as read go to the
 // engine (ids implied, all pairs reported) and its contacts are the result; the stages are still
-// reported (redistribute, halo, gather and merge take no time).
+// reported (redistribute, halo, exchange/gather and merge take no time).
 //
 // Errors: options are validated before any communication. An error in a stage on any rank (bad
 // input, I/O, CUDA, memory) is agreed on at the end of the stage (Session::agree): every rank throws
@@ -45,13 +60,21 @@
 
 namespace cg {
 
+// Where the contacts end up (see the file comment).
+enum class ContactOutput {
+  root,       // all on rank 0 (gather + merge there); stages ... gather, merge
+  id_ranges,  // each rank: the rows with id_a in its range [N·r/P, N·(r+1)/P); stages ... exchange, merge
+};
+
 struct DistributedOptions {
   EngineOptions engine;  // backend, fields, cell_size (0: smallest valid), threads (also the
-                         // pipeline's host loops; 0: all), device
+                         // pipeline's host loops; 0: the hardware threads shared equally among
+                         // the ranks on the node), device
   int axis = -1;         // slab axis: 0 x, 1 y, 2 z, -1 largest extent (parse_axis)
   Balance balance = Balance::count;
   std::uint64_t max_sample = 1u << 20;         // quantile sample size (all bodies when N <= it)
-  std::uint64_t max_message_bytes = 1u << 30;  // per-round gather size (tests make it tiny)
+  std::uint64_t max_message_bytes = 1u << 30;  // per-message gather/exchange size (tests make it tiny)
+  ContactOutput output = ContactOutput::root;
   // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
   // printed to stderr as a warning only if duplicates were removed.
   std::function<void(const std::string&)> log;
@@ -62,9 +85,15 @@ void validate(const DistributedOptions& options);
 
 template <class Real>
 struct DistributedResult {
-  Contacts<Real> contacts;                     // rank 0: all contacts, CONTRACT §2 order; empty elsewhere
-  StageTimes times;                            // read, redistribute, halo, detect, gather, merge (max, s)
-  std::uint64_t duplicates_removed = 0;        // rank 0 (expected 0)
+  // root: rank 0 holds all contacts in CONTRACT §2 order, the others none. id_ranges: this rank's
+  // rows [first_row, first_row + contacts.size()) of that order: every contact with id_a in
+  // [id_begin, id_end).
+  Contacts<Real> contacts;
+  std::uint64_t first_row = 0;             // root: 0 on rank 0, total_contacts elsewhere
+  std::uint64_t total_contacts = 0;        // K, on every rank
+  std::uint64_t id_begin = 0, id_end = 0;  // root: [0, N) on rank 0, [N, N) elsewhere
+  StageTimes times;  // read, redistribute, halo, detect, gather|exchange, merge (max over ranks, s)
+  std::uint64_t duplicates_removed = 0;        // root: rank 0; id_ranges: summed, every rank (expected 0)
   std::uint64_t bodies = 0;                    // global body count
   std::uint64_t ghosts = 0;                    // ghosts held, summed over ranks
   std::uint64_t owned_min = 0, owned_max = 0;  // owned bodies per rank: balance of the slabs
@@ -74,6 +103,7 @@ struct DistributedResult {
   int axis = 0;                    // the slab axis used
   std::vector<double> cuts;        // the P-1 slab cuts
   Backend backend = Backend::cpu;  // the engine's resolved backend (this rank)
+  int threads = 1;                 // host threads of this rank (engine and host loops)
   EngineStats stats;               // entries and pair tests summed over ranks
 };
 

@@ -10,6 +10,7 @@
 #include <fstream>
 
 #include "distributed_detect.hpp"
+#include "distributed_write.hpp"
 #include "hdf5_io.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
@@ -55,9 +56,12 @@ int detect(const DetectCommand& cmd, Session& session) {
   o.axis = parse_axis(cmd.axis);
   o.balance = parse_balance(cmd.balance);
   if (!cmd.quiet && session.rank() == 0) o.log = [](const std::string& line) { fmt::print("{}\n", line); };
+  // Each rank keeps the contacts of its id_a range and writes them into the one output file. A CSV
+  // copy is written by rank 0 alone, so then everything is gathered there instead.
+  o.output = cmd.csv.empty() ? ContactOutput::id_ranges : ContactOutput::root;
 
-  // read → slabs → redistribute → halo → engine → gather → merge (comm/distributed_detect.cpp;
-  // with one rank: read → engine)
+  // read → slabs → redistribute → halo → engine → exchange by id_a range → merge
+  // (comm/distributed_detect.cpp; with one rank: read → engine)
   DistributedResult<Real> r = distributed_detect<Real>(session, cmd.input, o);
 
   RunInfo info;
@@ -68,19 +72,22 @@ int detect(const DetectCommand& cmd, Session& session) {
   info.cell_size = r.cell_size;
   info.input = cmd.input;
   info.times = r.times;
-  std::exception_ptr error;
-  if (session.rank() == 0) {
-    try {
-      auto t = clock_type::now();
-      write_contacts(cmd.output, r.contacts, info);
-      if (!cmd.csv.empty()) write_contacts_csv(cmd.csv, r.contacts);
-      info.times.push_back({"write", seconds_since(t)});
-    } catch (...) {
-      error = std::current_exception();
+  // every rank writes its rows of the one file (comm/distributed_write.hpp); adds the "write" time
+  write_contacts_distributed(session, cmd.output, r.contacts, r.first_row, r.total_contacts, info, r.threads);
+  if (!cmd.csv.empty()) {
+    std::exception_ptr error;
+    if (session.rank() == 0) {
+      try {
+        auto t = clock_type::now();
+        write_contacts_csv(cmd.csv, r.contacts);
+        info.times.push_back({"csv", seconds_since(t)});
+      } catch (...) {
+        error = std::current_exception();
+      }
     }
+    session.agree(error, "csv");
   }
-  session.agree(error, "write");
-  if (!cmd.quiet && session.rank() == 0) print_summary(info, r.contacts.size(), r);
+  if (!cmd.quiet && session.rank() == 0) print_summary(info, r.total_contacts, r);
   return 0;
 }
 

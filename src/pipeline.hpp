@@ -1,7 +1,8 @@
 #pragma once
 // The commands of the contactgrid executable, as functions (the CLI parses, these run).
 // pipeline.cpp is the only place that sequences the stages of a run:
-//   read scene → (MPI: slabs, redistribute, halo) → engine → (MPI: gather, merge) → write → summary
+//   read scene → (MPI: slabs, redistribute, halo) → engine → (MPI: exchange by id_a range, merge)
+//   → write (every rank its rows of one file) → summary
 #include <cstdint>
 #include <string>
 
@@ -27,8 +28,9 @@ struct DetectCommand {
   bool quiet = false;
 };
 
-// Runs one detection over all ranks of `session`; returns the process exit code (0). Output and the
-// summary come from rank 0. Errors are agreed on by all ranks and thrown on every rank.
+// Runs one detection over all ranks of `session`; returns the process exit code (0). Every rank writes
+// its rows of the output file; the summary comes from rank 0. Errors are agreed on by all ranks and
+// thrown on every rank.
 int run_detect(const DetectCommand& cmd, Session& session);
 
 // Compares the /contacts datasets of two contact files byte for byte (what `mpirun -np P` must

@@ -1,0 +1,331 @@
+// The parallel output path under MPI: distributed_detect's id_ranges mode (each rank keeps the
+// contacts whose id_a lies in its range [N·r/P, N·(r+1)/P), merged, with its first row and K) and
+// write_contacts_distributed (every rank writes its rows of one file). Against the single-rank
+// Engine::detect on the whole scene, computed on every rank (the scenes are small): each rank's rows
+// must be exactly rows [first_row, first_row + n) of it, bit for bit, and the slices must tile it.
+//
+// Every test is collective: all ranks run it, and only EXPECTs (never ASSERTs) come before the last
+// collective, so a failed check never leaves a rank behind.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <numbers>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "distributed_detect.hpp"
+#include "distributed_write.hpp"
+#include "hdf5_io.hpp"
+#include "mpi/mpi_test_env.hpp"
+
+namespace cg {
+namespace {
+
+using testing::session;
+
+Scene random_scene(std::uint64_t seed, std::size_t n, double edge, double r_low, double r_high) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0, edge), u01(0, 1);
+  Scene s;
+  for (std::size_t i = 0; i < n; ++i) {
+    s.sphere_position.push_back({u(rng), u(rng), u(rng)});
+    s.sphere_radius.push_back(r_low + u01(rng) * (r_high - r_low));
+  }
+  return s;
+}
+
+// About 0.4 contacts per body, radii in [0.5, 1].
+Scene uniform_scene(std::uint64_t seed, std::size_t n) {
+  const double edge =
+      std::cbrt(static_cast<double>(n) * (4.0 / 3.0) * std::numbers::pi * std::pow(1.5, 3) / 0.8);
+  return random_scene(seed, n, edge, 0.5, 1.0);
+}
+
+// Contacts only among the first `touching` bodies (a tight cluster); the rest are far apart. With
+// N / P > touching, every rank but 0 has an id range without contacts.
+Scene cluster_scene(std::uint64_t seed, std::size_t n, std::size_t touching) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0, 1);
+  Scene s;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (i < touching) {
+      s.sphere_position.push_back({u(rng), u(rng), u(rng)});
+    } else {
+      s.sphere_position.push_back({10.0 + 5.0 * static_cast<double>(i), 3.0 * u(rng), 3.0 * u(rng)});
+    }
+    s.sphere_radius.push_back(1.0);
+  }
+  return s;
+}
+
+std::string shared_path(const std::string& name) { return testing::shared_temp_dir() + "/" + name; }
+
+std::string write_shared(const std::string& name, const Scene& scene) {
+  const std::string path = shared_path(name + ".h5");
+  std::exception_ptr error;
+  if (session().rank() == 0) {
+    try {
+      write_scene(path, scene);
+    } catch (...) {
+      error = std::current_exception();
+    }
+  }
+  session().agree(error, "write_scene");
+  return path;
+}
+
+DistributedOptions range_options(Fields fields = Fields::full) {
+  DistributedOptions o;
+  o.engine.backend = Backend::cpu;
+  o.engine.fields = fields;
+  o.engine.threads = 1;  // the test machines are shared: one thread per rank
+  o.output = ContactOutput::id_ranges;
+  return o;
+}
+
+template <class T>
+bool same_rows(const std::vector<T>& got, const std::vector<T>& want, std::size_t first) {
+  if (got.empty()) return true;
+  return first + got.size() <= want.size() &&
+         std::memcmp(got.data(), want.data() + first, got.size() * sizeof(T)) == 0;
+}
+
+// This rank's slice is rows [first_row, first_row + n) of `want`, bit for bit.
+template <class Real>
+void expect_rows_of(const Contacts<Real>& got, std::uint64_t first, const Contacts<Real>& want,
+                    const std::string& what) {
+  EXPECT_EQ(got.full, want.full) << what;
+  EXPECT_LE(first + got.size(), want.size()) << what;
+  EXPECT_TRUE(same_rows(got.id_a, want.id_a, first)) << what << ": id_a";
+  EXPECT_TRUE(same_rows(got.id_b, want.id_b, first)) << what << ": id_b";
+  EXPECT_TRUE(same_rows(got.position_on_a, want.position_on_a, first)) << what << ": position_on_a";
+  EXPECT_TRUE(same_rows(got.position_on_b, want.position_on_b, first)) << what << ": position_on_b";
+  EXPECT_TRUE(same_rows(got.normal_on_b, want.normal_on_b, first)) << what << ": normal_on_b";
+  EXPECT_TRUE(same_rows(got.distance, want.distance, first)) << what << ": distance";
+  EXPECT_TRUE(same_rows(got.local_point_a, want.local_point_a, first)) << what << ": local_point_a";
+  EXPECT_TRUE(same_rows(got.local_point_b, want.local_point_b, first)) << what << ": local_point_b";
+  EXPECT_TRUE(same_rows(got.lateral_friction_dir1, want.lateral_friction_dir1, first)) << what << ": dir1";
+  EXPECT_TRUE(same_rows(got.lateral_friction_dir2, want.lateral_friction_dir2, first)) << what << ": dir2";
+}
+
+// Runs id_ranges mode and checks this rank's range, order, rows, first row and K; returns the result.
+template <class Real>
+DistributedResult<Real> check_ranges(const std::string& path, const Scene& scene,
+                                     const DistributedOptions& options, const std::string& name) {
+  DistributedResult<Real> got = distributed_detect<Real>(session(), path, options);
+  const unsigned long long held = session().sum(got.contacts.size());  // collective: before any check
+  const std::string label = name + (std::is_same_v<Real, float> ? " fp32" : " fp64") + " at rank " +
+                            std::to_string(session().rank()) + "/" + std::to_string(session().size());
+  const std::uint64_t n = scene.size(), p = static_cast<std::uint64_t>(session().size()),
+                      r = static_cast<std::uint64_t>(session().rank());
+  EXPECT_EQ(got.id_begin, n * r / p) << label;
+  EXPECT_EQ(got.id_end, n * (r + 1) / p) << label;
+  for (std::size_t k = 0; k < got.contacts.size(); ++k) {
+    const std::int64_t a = got.contacts.id_a[k];
+    if (a < static_cast<std::int64_t>(got.id_begin) || a >= static_cast<std::int64_t>(got.id_end)) {
+      ADD_FAILURE() << label << ": row " << k << " has id_a " << a << " outside the rank's range";
+      break;
+    }
+  }
+  std::vector<std::string> top;
+  for (const auto& t : got.times)
+    if (t.name.rfind("detect.", 0) != 0) top.push_back(t.name);
+  EXPECT_EQ(top, (std::vector<std::string>{"read", "redistribute", "halo", "detect", "exchange", "merge"}))
+      << label;
+  EXPECT_EQ(got.duplicates_removed, 0u) << label;
+  Engine<Real> engine(options.engine);
+  const Contacts<Real> want = engine.detect(BodiesView{scene.sphere_position, scene.sphere_radius, {}, {}});
+  EXPECT_EQ(got.total_contacts, want.size()) << label;
+  EXPECT_EQ(held, want.size()) << label << ": the slices do not add up to K";
+  // first row: the contacts of every smaller id_a
+  std::uint64_t first = 0;
+  while (first < want.size() && want.id_a[first] < static_cast<std::int64_t>(got.id_begin)) ++first;
+  EXPECT_EQ(got.first_row, first) << label;
+  expect_rows_of(got.contacts, got.first_row, want, label);
+  return got;
+}
+
+template <class F>
+void both_precisions(F&& f) {
+  f(double{});
+  f(float{});
+}
+
+TEST(DistributedOutput, EachRankGetsItsIdRangeAndTogetherTheSingleRankResult) {
+  const Scene scene = uniform_scene(201, 3000);
+  const std::string path = write_shared("ranges_uniform", scene);
+  both_precisions([&](auto real) {
+    using Real = decltype(real);
+    check_ranges<Real>(path, scene, range_options(), "uniform");
+    check_ranges<Real>(path, scene, range_options(Fields::basic), "uniform basic");
+    DistributedOptions o = range_options();
+    o.axis = 2;
+    o.balance = Balance::width;
+    check_ranges<Real>(path, scene, o, "uniform z width");
+  });
+}
+
+TEST(DistributedOutput, TinyMessagesGiveTheSameRows) {
+  const Scene scene = uniform_scene(202, 1500);
+  const std::string path = write_shared("ranges_tiny", scene);
+  DistributedOptions o = range_options();
+  o.max_message_bytes = 64;  // many messages of a few rows per field and peer
+  both_precisions([&](auto real) { check_ranges<decltype(real)>(path, scene, o, "tiny messages"); });
+}
+
+TEST(DistributedOutput, RanksWithoutContacts) {
+  const Scene scene = cluster_scene(203, 400, 12);  // contacts among bodies 0 … 11 only
+  const std::string path = write_shared("ranges_cluster", scene);
+  both_precisions([&](auto real) {
+    using Real = decltype(real);
+    DistributedResult<Real> r = check_ranges<Real>(path, scene, range_options(), "cluster");
+    EXPECT_GT(r.total_contacts, 10u);
+    if (session().rank() > 0) {
+      EXPECT_EQ(r.contacts.size(), 0u);
+      EXPECT_EQ(r.first_row, r.total_contacts);
+    }
+  });
+}
+
+TEST(DistributedOutput, MoreRanksThanBodies) {
+  Scene s;
+  s.sphere_position = {{0, 0, 0}, {1.5, 0, 0}, {3.0, 0.1, 0}};
+  s.sphere_radius = {1.0, 0.8, 0.9};
+  const std::string path = write_shared("ranges_three", s);
+  both_precisions([&](auto real) {
+    DistributedResult<decltype(real)> r = check_ranges<decltype(real)>(path, s, range_options(), "three");
+    EXPECT_EQ(r.total_contacts, 2u);
+  });
+}
+
+// ---- one file written by every rank ------------------------------------------------------------------
+
+std::vector<std::string> leftovers(const std::string& prefix) {
+  std::vector<std::string> found;
+  for (const auto& e : std::filesystem::directory_iterator(testing::shared_temp_dir())) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind(prefix, 0) == 0) found.push_back(name);
+  }
+  return found;
+}
+
+const char* const k_datasets[] = {
+    "id_a",     "id_b",          "position_on_a", "position_on_b",         "normal_on_b",
+    "distance", "local_point_a", "local_point_b", "lateral_friction_dir1", "lateral_friction_dir2"};
+
+// The file every rank writes (id_ranges slices, and the root mode's everything-on-rank-0) has the
+// dataset bytes of the single-rank writer.
+template <class Real>
+void write_and_compare(const std::string& name, const Scene& scene) {
+  const std::string path = write_shared(name, scene);
+  const DistributedOptions ranges = range_options();
+  DistributedOptions root = ranges;
+  root.output = ContactOutput::root;
+  DistributedResult<Real> a = distributed_detect<Real>(session(), path, ranges);
+  DistributedResult<Real> b = distributed_detect<Real>(session(), path, root);
+  RunInfo info;
+  info.bodies = scene.size();
+  info.ranks = session().size();
+  info.times = a.times;
+  const std::string out_a = shared_path(name + ".ranges.out.h5"), out_b = shared_path(name + ".root.out.h5"),
+                    out_1 = shared_path(name + ".one.out.h5");
+  write_contacts_distributed(session(), out_a, a.contacts, a.first_row, a.total_contacts, info, 2);
+  RunInfo info_b = info;
+  write_contacts_distributed(session(), out_b, b.contacts, b.first_row, b.total_contacts, info_b);
+  std::exception_ptr error;
+  if (session().rank() == 0) {
+    try {
+      Engine<Real> engine(ranges.engine);
+      RunInfo one = info;
+      write_contacts(out_1, engine.detect(BodiesView{scene.sphere_position, scene.sphere_radius, {}, {}}),
+                     one);
+    } catch (...) {
+      error = std::current_exception();
+    }
+  }
+  session().agree(error, "reference");
+  session().barrier();
+  EXPECT_EQ(info.times.back().name, "write");
+  if (session().rank() == 0) {
+    for (const char* d : k_datasets) {
+      const std::string ds = std::string("/contacts/") + d;
+      EXPECT_EQ(read_dataset_bytes(out_a, ds), read_dataset_bytes(out_1, ds)) << name << " " << ds;
+      EXPECT_EQ(read_dataset_bytes(out_b, ds), read_dataset_bytes(out_1, ds)) << name << " " << ds;
+    }
+    const ContactFile f = read_contacts(out_a);
+    EXPECT_EQ(std::get<std::int64_t>(f.attributes.at("contacts")),
+              static_cast<std::int64_t>(a.total_contacts));
+    EXPECT_EQ(std::get<std::int64_t>(f.attributes.at("ranks")), session().size());
+    EXPECT_TRUE(f.attributes.count("time_write"));
+    EXPECT_TRUE(f.attributes.count("time_exchange"));
+    EXPECT_EQ(leftovers(name + ".ranges.out.h5.tmp").size(), 0u);
+  }
+  session().barrier();
+}
+
+TEST(DistributedOutput, EveryRankWritesItsRowsOfOneFile) {
+  write_and_compare<double>("write_uniform", uniform_scene(204, 2500));
+  write_and_compare<float>("write_uniform32", uniform_scene(205, 2500));
+  write_and_compare<double>("write_cluster", cluster_scene(206, 300, 9));
+  Scene none;  // no contacts at all: K = 0
+  none.sphere_position = {{0, 0, 0}, {10, 0, 0}};
+  none.sphere_radius = {1, 1};
+  write_and_compare<double>("write_none", none);
+}
+
+// A failure on the last rank in the row phase (its slice's fields differ in length: rejected by
+// write_contact_rows after the file was created) is every rank's IoError-or-Error, and leaves neither
+// the output nor the temporary.
+TEST(DistributedOutput, FailedRowPhaseLeavesNoFile) {
+  const Scene scene = uniform_scene(207, 800);
+  const std::string path = write_shared("fail_rows", scene);
+  DistributedResult<double> r = distributed_detect<double>(session(), path, range_options());
+  Contacts<double> slice = r.contacts;
+  const bool last = session().rank() == session().size() - 1;
+  if (last) slice.distance.push_back(0.0);  // one field longer than the others
+  RunInfo info;
+  const std::string out = shared_path("fail_rows.out.h5");
+  std::string message;
+  try {
+    // the slice's size (id_a) still tiles [0, K): only the row phase notices
+    write_contacts_distributed(session(), out, slice, r.first_row, r.total_contacts, info);
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    message = e.what();
+  }
+  session().barrier();
+  EXPECT_NE(message.find("write"), std::string::npos) << message;
+  EXPECT_NE(message.find("differ in length"), std::string::npos) << message;
+  EXPECT_FALSE(std::filesystem::exists(out));
+  EXPECT_EQ(leftovers("fail_rows.out.h5").size(), 0u);
+}
+
+TEST(DistributedOutput, RowsThatDoNotTileAreRefusedBeforeCreating) {
+  const Scene scene = uniform_scene(208, 800);
+  const std::string path = write_shared("fail_tile", scene);
+  DistributedResult<float> r = distributed_detect<float>(session(), path, range_options());
+  RunInfo info;
+  const std::string out = shared_path("fail_tile.out.h5");
+  EXPECT_THROW(
+      write_contacts_distributed(session(), out, r.contacts, r.first_row, r.total_contacts + 1, info), Error);
+  session().barrier();
+  EXPECT_EQ(leftovers("fail_tile.out.h5").size(), 0u);
+}
+
+TEST(DistributedOutput, UnwritableOutputIsAnIoErrorOnEveryRank) {
+  const Scene scene = uniform_scene(209, 300);
+  const std::string path = write_shared("fail_dir", scene);
+  DistributedResult<double> r = distributed_detect<double>(session(), path, range_options());
+  RunInfo info;
+  const std::string out = shared_path("no/such/dir/out.h5");
+  EXPECT_THROW(write_contacts_distributed(session(), out, r.contacts, r.first_row, r.total_contacts, info),
+               IoError);
+  session().barrier();
+  EXPECT_FALSE(std::filesystem::exists(shared_path("no")));
+}
+
+}  // namespace
+}  // namespace cg
