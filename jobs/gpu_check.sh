@@ -54,6 +54,6 @@ if [ "$WHAT" != single ] && [ "$NGPU" -ge 2 ]; then
       done
     done
   } >"$OUT/mpi.log" 2>&1
-  grep -E 'IDENTICAL|DIFFERENT|===|detect:|^  (read|redistribute|halo|detect|gather|merge|write|total) ' "$OUT/mpi.log" | head -80
+  grep -E 'IDENTICAL|DIFFERENT|===|detect:|^  (read|redistribute|halo|detect|exchange|merge|write|total) |^    (upload|download) ' "$OUT/mpi.log" | head -120
 fi
 log "done"
