@@ -29,7 +29,7 @@ int run_cli(int argc, char** argv, Session& session) {
       "contactgrid: every touching or overlapping pair of spheres, with Bullet's contact data.\n"
       "Le Grand's uniform grid on a CPU or CUDA backend; MPI slabs under mpirun."};
   app.require_subcommand(1);
-  app.set_version_flag("--version", "contactgrid 0.1.0");
+  app.set_version_flag("--version", "contactgrid " CONTACTGRID_VERSION);
 
   // generate
   GenerateOptions gen;

@@ -31,7 +31,7 @@
 namespace cg {
 namespace {
 
-constexpr const char* kSoftwareVersion = "0.1.0";
+constexpr const char* kSoftwareVersion = CONTACTGRID_VERSION;
 constexpr std::size_t kWriteChunk = std::size_t(1) << 20;  // bodies per streamed block
 
 // ---- counter-based random numbers -----------------------------------------------------------

@@ -45,7 +45,7 @@ namespace {
 
 constexpr hsize_t kReadChunkRows = hsize_t(1) << 20;  // rows validated per read
 constexpr double kQuaternionTolerance = 1e-6;
-constexpr const char* kSoftwareVersion = "0.1.0";
+constexpr const char* kSoftwareVersion = CONTACTGRID_VERSION;
 
 // ---- library access --------------------------------------------------------------------------
 

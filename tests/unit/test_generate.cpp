@@ -253,7 +253,7 @@ TEST_F(Generate, RecordsOptionsAsAttributes) {
   EXPECT_EQ(std::get<double>(a.at("offset_x")), 1);
   EXPECT_EQ(std::get<double>(a.at("offset_y")), 2);
   EXPECT_EQ(std::get<double>(a.at("offset_z")), 3);
-  EXPECT_EQ(std::get<std::string>(a.at("software_version")), "0.1.0");
+  EXPECT_EQ(std::get<std::string>(a.at("software_version")), CONTACTGRID_VERSION);
   EXPECT_EQ(s.radius_low, 0.5);
   EXPECT_EQ(s.radius_high, 1.0);
 }

@@ -335,7 +335,7 @@ TEST_F(Hdf5Io, ContactFileRootAttributes) {
   EXPECT_EQ(std::get<std::int64_t>(a.at("bodies")), 1234);
   EXPECT_EQ(std::get<std::int64_t>(a.at("contacts")), 5);
   EXPECT_EQ(std::get<double>(a.at("cell_size")), 2.5);
-  EXPECT_EQ(std::get<std::string>(a.at("software_version")), "0.1.0");
+  EXPECT_EQ(std::get<std::string>(a.at("software_version")), CONTACTGRID_VERSION);
   EXPECT_EQ(std::get<std::string>(a.at("input")), "scene.h5");
   EXPECT_EQ(std::get<double>(a.at("time_bounds")), 0.25);
   EXPECT_EQ(std::get<double>(a.at("time_sort")), 2.0);
