@@ -737,8 +737,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   // ---- read: own contiguous row range, global bounds, shared frame --------------------------------
   auto t0 = Clock::now();
   std::uint64_t n_global = 0, first = 0;
-  std::vector<Vec3<double>> position;
-  std::vector<double> radius;
+  HostVector<Vec3<double>> position;
+  HostVector<double> radius;
   BoundsRecord mine{};
   local_stage(session, "read", [&] {
     const SceneShape shape = read_scene_shape(path);

@@ -129,10 +129,10 @@ struct ContactRunView {
 
 // The vector fields of a Contacts in ContactRunView::vec order.
 template <class Real>
-std::vector<Vec3<Real>>* contact_vec_field(Contacts<Real>& c, int f) {
-  std::vector<Vec3<Real>>* v[7] = {&c.position_on_a,        &c.position_on_b, &c.normal_on_b,
-                                   &c.local_point_a,        &c.local_point_b, &c.lateral_friction_dir1,
-                                   &c.lateral_friction_dir2};
+HostVector<Vec3<Real>>* contact_vec_field(Contacts<Real>& c, int f) {
+  HostVector<Vec3<Real>>* v[7] = {&c.position_on_a,        &c.position_on_b, &c.normal_on_b,
+                                  &c.local_point_a,        &c.local_point_b, &c.lateral_friction_dir1,
+                                  &c.lateral_friction_dir2};
   return v[f];
 }
 

@@ -17,6 +17,7 @@
 
 #include "core/vec3.hpp"
 #include "errors.hpp"
+#include "host/huge_pages.hpp"
 
 namespace cg {
 
@@ -42,11 +43,13 @@ using StageTimes = std::vector<StageTime>;
 // Contacts as CONTRACT §2: sorted by (id_a, id_b), id_a < id_b, world frame.
 template <class Real>
 struct Contacts {
-  std::vector<std::int64_t> id_a, id_b;
-  std::vector<Vec3<Real>> position_on_a, position_on_b, normal_on_b;
-  std::vector<Real> distance;
+  // HostVector: a resize leaves new elements uninitialised (no zero sweep of gigabytes before the
+  // engine or a receive overwrites them) and large arrays sit on huge pages.
+  HostVector<std::int64_t> id_a, id_b;
+  HostVector<Vec3<Real>> position_on_a, position_on_b, normal_on_b;
+  HostVector<Real> distance;
   bool full = false;  // the four optional datasets below are filled
-  std::vector<Vec3<Real>> local_point_a, local_point_b, lateral_friction_dir1, lateral_friction_dir2;
+  HostVector<Vec3<Real>> local_point_a, local_point_b, lateral_friction_dir1, lateral_friction_dir2;
 
   std::size_t size() const { return id_a.size(); }
   void resize(std::size_t k, bool with_full);

@@ -241,8 +241,8 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
     }
     if (e <= o.bullet_hi) {
       OracleSpheres s;
-      s.position = scene.sphere_position;
-      s.radius = scene.sphere_radius;
+      s.position.assign(scene.sphere_position.begin(), scene.sphere_position.end());
+      s.radius.assign(scene.sphere_radius.begin(), scene.sphere_radius.end());
       s.id.resize(scene.sphere_count());
       for (std::size_t i = 0; i < s.id.size(); ++i) s.id[i] = std::int64_t(i);
       const OracleResult br = bullet_collide(s, Precision::fp64, /*warm_step=*/true);

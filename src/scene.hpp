@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/vec3.hpp"
+#include "host/huge_pages.hpp"
 
 namespace cg {
 
@@ -17,9 +18,9 @@ using Attributes = std::map<std::string, AttrValue>;
 
 // A scene in memory. Body ids: spheres 0 … N-1, ellipsoids N … N+M-1, in file order.
 struct Scene {
-  std::string source;  // file it came from ("" if generated in memory)
-  std::vector<Vec3<double>> sphere_position;
-  std::vector<double> sphere_radius;
+  std::string source;                        // file it came from ("" if generated in memory)
+  HostVector<Vec3<double>> sphere_position;  // (no zero sweep before the reader overwrites them)
+  HostVector<double> sphere_radius;
   std::vector<Vec3<double>> ellipsoid_position;
   std::vector<Vec3<double>> ellipsoid_semi_axes;
   std::vector<std::array<double, 4>> ellipsoid_orientation;  // (w, x, y, z)

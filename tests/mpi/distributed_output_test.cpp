@@ -87,7 +87,7 @@ DistributedOptions range_options(Fields fields = Fields::full) {
 }
 
 template <class T>
-bool same_rows(const std::vector<T>& got, const std::vector<T>& want, std::size_t first) {
+bool same_rows(const HostVector<T>& got, const HostVector<T>& want, std::size_t first) {
   if (got.empty()) return true;
   return first + got.size() <= want.size() &&
          std::memcmp(got.data(), want.data() + first, got.size() * sizeof(T)) == 0;

@@ -41,7 +41,7 @@ TEST(ContactMerge, MergesSortedRunsInKeyOrder) {
     EXPECT_EQ(m.duplicates_removed, 0u);
     ASSERT_EQ(m.contacts.size(), 7u);
     EXPECT_EQ(m.contacts.full, full);
-    const std::vector<std::int64_t> a = {0, 0, 0, 1, 3, 7, 7}, b = {1, 2, 5, 2, 4, 8, 9};
+    const HostVector<std::int64_t> a = {0, 0, 0, 1, 3, 7, 7}, b = {1, 2, 5, 2, 4, 8, 9};
     EXPECT_EQ(m.contacts.id_a, a);
     EXPECT_EQ(m.contacts.id_b, b);
     for (std::size_t k = 0; k < a.size(); ++k) {
@@ -63,7 +63,7 @@ TEST(ContactMerge, RemovesAndCountsDuplicatesKeepingTheLowestRunsRow) {
   runs[1].distance[0] = 99.0;  // the copy of rank 1 differs: rank 0's row is kept
   MergedContacts<double> m = merge_contact_runs<double>(runs, false);
   EXPECT_EQ(m.duplicates_removed, 3u);
-  EXPECT_EQ(m.contacts.id_a, (std::vector<std::int64_t>{0, 2, 4}));
+  EXPECT_EQ(m.contacts.id_a, (HostVector<std::int64_t>{0, 2, 4}));
   EXPECT_EQ(m.contacts.distance[0], -1.0);
 }
 

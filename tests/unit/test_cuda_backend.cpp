@@ -24,7 +24,7 @@ namespace {
   } while (0)
 
 template <class T>
-bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
+bool same_bits(const HostVector<T>& a, const HostVector<T>& b) {
   return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
 }
 
@@ -198,8 +198,8 @@ struct DeviceScene {
 };
 
 template <class T>
-std::vector<T> to_host(const T* d, std::size_t n) {
-  std::vector<T> h(n);
+HostVector<T> to_host(const T* d, std::size_t n) {
+  HostVector<T> h(n);
   if (n) {
     EXPECT_EQ(cudaMemcpy(h.data(), d, n * sizeof(T), cudaMemcpyDeviceToHost), cudaSuccess);
   }

@@ -131,7 +131,7 @@ cg::RunInfo sample_info(const char* precision) {
 }
 
 template <class Real>
-void expect_same_vec(const std::vector<Vec3<Real>>& a, const std::vector<Vec3<double>>& b) {
+void expect_same_vec(const cg::HostVector<Vec3<Real>>& a, const cg::HostVector<Vec3<double>>& b) {
   ASSERT_EQ(a.size(), b.size());
   for (std::size_t i = 0; i < a.size(); ++i) {
     EXPECT_EQ(double(a[i].x), b[i].x);
