@@ -21,6 +21,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <bit>
 #include <cerrno>
 #include <cmath>
@@ -288,6 +289,60 @@ void read_rows(const Where& where, const Dataset& d, hsize_t first, hsize_t coun
         what);
   Handle mem_space = make_space(where, extent);
   check(H5Dread(d.id, mem_type, mem_space, file_space, H5P_DEFAULT, out), where, what);
+}
+
+// The same rows as read_rows into float64 memory, read straight from the file with pread on all
+// threads when the dataset is stored as plain bytes of that type: contiguous layout (no chunks, no
+// filters, no external file), IEEE float64 little-endian, allocated. HDF5's own read runs on one thread
+// (3 times slower than the page cache at 2^26 rows on the GPU host); anything else goes through it.
+void read_rows_f64(const Where& where, const Dataset& d, hsize_t first, hsize_t count, double* out) {
+  if (count == 0) return;
+  static_assert(std::endian::native == std::endian::little, "direct reads assume a little-endian host");
+  bool direct = false;
+  haddr_t base = HADDR_UNDEF;
+  {
+    Handle dcpl(H5Dget_create_plist(d.id), H5Pclose);
+    Handle type(H5Dget_type(d.id), H5Tclose);
+    direct = dcpl.get() >= 0 && type.get() >= 0 && H5Pget_layout(dcpl) == H5D_CONTIGUOUS &&
+             H5Pget_external_count(dcpl) == 0 && H5Tequal(type, H5T_IEEE_F64LE) > 0;
+    if (direct) base = H5Dget_offset(d.id);
+    if (base == HADDR_UNDEF) direct = false;
+  }
+  if (!direct) {
+    read_rows(where, d, first, count, H5T_NATIVE_DOUBLE, out);
+    return;
+  }
+  const std::uint64_t row_bytes = 8 * std::max<hsize_t>(d.cols, 1);
+  const std::uint64_t offset = std::uint64_t(base) + std::uint64_t(first) * row_bytes;
+  const std::uint64_t bytes = std::uint64_t(count) * row_bytes;
+  const int fd = ::open(where.file().c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) where.bad(fmt::format("{}: cannot open for reading: {}", d.name, std::strerror(errno)));
+  constexpr std::uint64_t kBlock = std::uint64_t(4) << 20;
+  const auto blocks = static_cast<std::int64_t>((bytes + kBlock - 1) / kBlock);
+  std::atomic<int> error{0};
+  const int threads = blocks > 1 ? omp_get_max_threads() : 1;
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (threads > 1)
+  for (std::int64_t b = 0; b < blocks; ++b) {
+    const std::uint64_t at = std::uint64_t(b) * kBlock, len = std::min(kBlock, bytes - at);
+    auto* dst = reinterpret_cast<unsigned char*>(out) + at;
+    std::uint64_t done = 0;
+    while (done < len && error.load(std::memory_order_relaxed) == 0) {
+      const ssize_t r = ::pread(fd, dst + done, len - done, static_cast<off_t>(offset + at + done));
+      if (r < 0 && errno == EINTR) continue;
+      if (r <= 0) {
+        int expected = 0;
+        error.compare_exchange_strong(expected, r < 0 ? errno : EIO);  // 0 bytes: the file is truncated
+        break;
+      }
+      done += static_cast<std::uint64_t>(r);
+    }
+  }
+  ::close(fd);
+  if (const int e = error.load()) {
+    where.bad(
+        fmt::format("{}: cannot read rows {} to {}: {}", d.name, first, first + count - 1,
+                    e == EIO ? "the file ends before the dataset does (truncated?)" : std::strerror(e)));
+  }
 }
 
 // ---- attributes ------------------------------------------------------------------------------
@@ -583,8 +638,8 @@ void read_spheres(const SceneSource& s, hsize_t first, hsize_t count, Scene& out
     hsize_t n = std::min(kReadChunkRows, count - done);
     Vec3<double>* position = out.sphere_position.data() + done;
     double* radius = out.sphere_radius.data() + done;
-    read_rows(s.where, s.sphere_position, first + done, n, H5T_NATIVE_DOUBLE, position);
-    read_rows(s.where, s.sphere_radius, first + done, n, H5T_NATIVE_DOUBLE, radius);
+    read_rows_f64(s.where, s.sphere_position, first + done, n, &position->x);
+    read_rows_f64(s.where, s.sphere_radius, first + done, n, radius);
     // Validation in parallel: the first bad row of the chunk (smallest index, whatever the threads),
     // then the sequential checks from there, which name it exactly as before.
     hsize_t from = n;
