@@ -199,6 +199,59 @@ struct EngineInput {
   Buffer<std::uint8_t> report;
 };
 
+double component(const Vec3<double>& v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
+
+// Every-row read: rank `me`'s engine input straight from all N rows (row = id): its owned bodies
+// (report 1) and every other body within the ghost width of its slab (report 0), ascending id — the
+// bodies that redistribution and the halo exchange bring, by the same owner() and
+// for_each_ghost_rank() tests, without moving any. Parallel count → scan → fill.
+EngineInput select_owned_and_ghosts(std::span<const Vec3<double>> position, std::span<const double> radius,
+                                    const SlabDecomposition& s, int axis, double width, int me, int threads,
+                                    std::uint64_t& n_owned, std::uint64_t& n_ghosts) {
+  const std::size_t n = position.size();
+  // 0: not held here, 1: ghost, 2: owned
+  auto held = [&](std::size_t i) {
+    const double x = component(position[i], axis);
+    if (s.owner(x) == me) return 2;
+    int h = 0;
+    s.for_each_ghost_rank(x, width, [&](int r) { h |= r == me; });
+    return h;
+  };
+  const Chunks c(n, threads);
+  std::vector<std::uint64_t> at(static_cast<std::size_t>(c.parts) + 1, 0), owned(at.size(), 0);
+#pragma omp parallel for num_threads(threads) schedule(static, 1) if (c.parts > 1)
+  for (int t = 0; t < c.parts; ++t) {
+    std::uint64_t k = 0, o = 0;
+    for (std::size_t i = c.begin(t), e = c.end(t); i < e; ++i) {
+      const int h = held(i);
+      k += h != 0;
+      o += h == 2;
+    }
+    at[static_cast<std::size_t>(t) + 1] = k;
+    owned[static_cast<std::size_t>(t) + 1] = o;
+  }
+  for (std::size_t t = 1; t < at.size(); ++t) at[t] += at[t - 1], owned[t] += owned[t - 1];
+  const std::uint64_t total = at.back();
+  n_owned = owned.back();
+  n_ghosts = total - n_owned;
+  EngineInput in{Buffer<Vec3<double>>(total), Buffer<double>(total), Buffer<std::int64_t>(total),
+                 Buffer<std::uint8_t>(total)};
+#pragma omp parallel for num_threads(threads) schedule(static, 1) if (c.parts > 1)
+  for (int t = 0; t < c.parts; ++t) {
+    std::uint64_t w = at[static_cast<std::size_t>(t)];
+    for (std::size_t i = c.begin(t), e = c.end(t); i < e; ++i) {
+      const int h = held(i);
+      if (h == 0) continue;
+      in.position[w] = position[i];
+      in.radius[w] = radius[i];
+      in.id[w] = static_cast<std::int64_t>(i);
+      in.report[w] = h == 2;
+      ++w;
+    }
+  }
+  return in;
+}
+
 // Owned bodies (ascending id: they arrive grouped by source rank, each source sends a subsequence of
 // its contiguous row range) and ghosts (grouped by source rank, each group ascending) merged by id
 // straight into the engine's arrays: the ghost groups k-way merged (a few, small), then a parallel
@@ -286,8 +339,6 @@ struct BoundsRecord {
   double r_sum[3];  // radius moments (the tuned cell size)
 };
 static_assert(std::is_trivially_copyable_v<BoundsRecord>);
-
-double component(const Vec3<double>& v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
 
 constexpr int k_halo_tag = 7301;
 constexpr int k_gather_tag = 7400;    // + field index
@@ -734,9 +785,15 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     engine.emplace(engine_options);
   });
 
-  // ---- read: own contiguous row range, global bounds, shared frame --------------------------------
+  // ---- read: rows, global bounds, shared frame ----------------------------------------------------
+  // Rank r's partition is rows [N·r/P, N·(r+1)/P): its bounds and sample rows (so the frame and the
+  // cuts are the same in both read modes). own_rows: it reads only those; every_row: all N rows.
+  const bool every_row =
+      ranks > 1 && (options.read == SceneRead::every_row ||
+                    (options.read == SceneRead::automatic && session.local_size() == ranks));
+  result.read = every_row ? SceneRead::every_row : SceneRead::own_rows;
   auto t0 = Clock::now();
-  std::uint64_t n_global = 0, first = 0;
+  std::uint64_t n_global = 0, first = 0, part_first = 0, part_count = 0;  // first: row of position[0]
   HostVector<Vec3<double>> position;
   HostVector<double> radius;
   BoundsRecord mine{};
@@ -747,10 +804,11 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     }
     if (shape.spheres == 0) throw InputError(path + ": the scene has no bodies");
     n_global = shape.spheres;
-    first = n_global * static_cast<std::uint64_t>(me) / static_cast<std::uint64_t>(ranks);
-    const std::uint64_t last =
-        n_global * static_cast<std::uint64_t>(me + 1) / static_cast<std::uint64_t>(ranks);
-    const std::uint64_t count = last - first;
+    part_first = n_global * static_cast<std::uint64_t>(me) / static_cast<std::uint64_t>(ranks);
+    part_count =
+        n_global * static_cast<std::uint64_t>(me + 1) / static_cast<std::uint64_t>(ranks) - part_first;
+    first = every_row ? 0 : part_first;
+    const std::uint64_t count = every_row ? n_global : part_count;
     if (count > 0) {
       Scene rows = read_scene_rows(path, first, count);
       if (rows.sphere_position.size() != count || rows.sphere_radius.size() != count) {
@@ -759,17 +817,21 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
       }
       position = std::move(rows.sphere_position);
       radius = std::move(rows.sphere_radius);
+    }
+    if (part_count > 0) {
       // Bounds (and validation) without an id array: the reader has validated every row already, so
       // compute_bounds finds nothing; if it ever does, it runs again with the global ids, for its message.
+      const std::span<const Vec3<double>> p(position.data() + (part_first - first), part_count);
+      const std::span<const double> r(radius.data() + (part_first - first), part_count);
       Bounds b;
       try {
-        b = compute_bounds(BodiesView{position, radius, {}, {}});
+        b = compute_bounds(BodiesView{p, r, {}, {}});
       } catch (const InputError&) {
-        std::vector<std::int64_t> id(count);
-        std::iota(id.begin(), id.end(), static_cast<std::int64_t>(first));
-        b = compute_bounds(BodiesView{position, radius, id, {}});
+        std::vector<std::int64_t> id(part_count);
+        std::iota(id.begin(), id.end(), static_cast<std::int64_t>(part_first));
+        b = compute_bounds(BodiesView{p, r, id, {}});
       }
-      mine = {b.lo, b.hi, b.r_max, count, {b.r_sum[0], b.r_sum[1], b.r_sum[2]}};
+      mine = {b.lo, b.hi, b.r_max, part_count, {b.r_sum[0], b.r_sum[1], b.r_sum[2]}};
     }
   });
   Bounds global;
@@ -818,15 +880,17 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   t0 = Clock::now();
   std::optional<SlabDecomposition> slabs;
   Buffer<BodyRecord> owned;
+  EngineInput selected;  // every_row: owned and ghosts, selected from all rows
+  std::uint64_t n_selected_owned = 0, n_selected_ghosts = 0;
   {
     std::vector<double> sample;
     if (options.balance == Balance::count && !alone) {
       // A regular sample by global row: every stride-th body (all of them when N <= max_sample).
       const std::uint64_t stride =
           std::max<std::uint64_t>(1, (n_global + options.max_sample - 1) / options.max_sample);
-      for (std::size_t i = static_cast<std::size_t>((stride - first % stride) % stride); i < position.size();
-           i += stride) {
-        sample.push_back(component(position[i], axis));
+      for (std::uint64_t g = part_first + (stride - part_first % stride) % stride;
+           g < part_first + part_count; g += stride) {
+        sample.push_back(component(position[static_cast<std::size_t>(g - first)], axis));
       }
       sample = comm.allgatherv(sample);
     }
@@ -858,6 +922,11 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
       }
       if (alone) return;
       const SlabDecomposition& s = *slabs;
+      if (every_row) {
+        selected = select_owned_and_ghosts(position, radius, s, axis, width, me, threads, n_selected_owned,
+                                           n_selected_ghosts);
+        return;
+      }
       send = route(
           position.size(), ranks, threads, send_counts,
           [&](std::size_t i, auto&& emit) { emit(s.owner(component(position[i], axis))); },
@@ -868,6 +937,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     if (!alone) {
       position = {};
       radius = {};
+    }
+    if (!alone && !every_row) {
       const std::vector<std::uint64_t> recv_counts = comm.alltoall_counts(send_counts);
       owned = comm.alltoallv(std::move(send), send_counts, recv_counts);
     }
@@ -879,7 +950,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   t0 = Clock::now();
   Buffer<BodyRecord> ghosts;
   std::vector<std::uint64_t> ghost_recv_counts(static_cast<std::size_t>(ranks), 0);
-  if (!alone) {
+  if (!alone && !every_row) {
     Buffer<BodyRecord> ghost_send;
     std::vector<std::uint64_t> ghost_counts(static_cast<std::size_t>(ranks), 0);
     local_stage(session, "halo", [&] {
@@ -910,7 +981,10 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   t0 = Clock::now();
   Contacts<Real> local;
   local.full = full;
-  const std::uint64_t n_owned = alone ? position.size() : owned.size(), n_ghosts = ghosts.size();
+  const std::uint64_t n_owned = alone       ? position.size()
+                                : every_row ? n_selected_owned
+                                            : owned.size(),
+                      n_ghosts = every_row ? n_selected_ghosts : ghosts.size();
   local_stage(session, "detect", [&] {
     if (alone) {
       local = engine->detect(BodiesView{position, radius, {}, {}}, frame);
@@ -918,7 +992,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
       radius = {};
       return;
     }
-    EngineInput in = merge_by_id(owned, ghosts, ghost_recv_counts, threads);
+    EngineInput in = every_row ? std::move(selected) : merge_by_id(owned, ghosts, ghost_recv_counts, threads);
     owned = {};
     ghosts = {};
     if (n_owned > 0) {  // a rank that owns nothing reports nothing

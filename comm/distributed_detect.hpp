@@ -3,10 +3,16 @@
 // single-rank Engine. g++-safe public header (no <mpi.h>).
 //
 // Pipeline (each stage's time is reported as the maximum over ranks):
-//   read          rank r reads rows [N·r/P, N·(r+1)/P) of /spheres (serial HDF5, independent reads);
-//                 global bounds by an all-gather of the ranks' Bounds, folded with Bounds::merge in
-//                 rank order; the frame = make_frame(global bounds) — the frame a single-rank run
-//                 builds — so every rank computes bit-identical local coordinates and contact data.
+//   read          rank r's partition is rows [N·r/P, N·(r+1)/P) of /spheres; it reads only those
+//                 (SceneRead::own_rows) or every row (SceneRead::every_row, the default when all
+//                 ranks share one node: one page cache, so N rows read P times cost memory bandwidth,
+//                 not disk, and no body has to move between ranks). Global bounds by an all-gather of
+//                 the partitions' Bounds, folded with Bounds::merge in rank order; the frame =
+//                 make_frame(global bounds) — the frame a single-rank run builds — so every rank
+//                 computes bit-identical local coordinates and contact data.
+//   every_row     redistribute = each rank selects, in one parallel pass over all rows, its owned
+//                 bodies and the others within the ghost width of its slab (the same owner() and
+//                 for_each_ghost_rank() tests as below), already in id order; halo takes no time.
 //   redistribute  slab axis (largest extent unless forced); cuts from the quantiles of a regular
 //                 sample of centre coordinates gathered to every rank (balance = count) or equal widths
 //                 (balance = width): identical on all ranks (the P-1 quantiles are selected, not the
@@ -66,6 +72,13 @@ enum class ContactOutput {
   id_ranges,  // each rank: the rows with id_a in its range [N·r/P, N·(r+1)/P); stages ... exchange, merge
 };
 
+// How the ranks get their bodies (see the file comment).
+enum class SceneRead {
+  automatic,  // every_row when all ranks share one node (one page cache), else own_rows
+  own_rows,   // rank r reads rows [N·r/P, N·(r+1)/P); bodies move to their owners, ghosts by halo exchange
+  every_row,  // every rank reads all rows and keeps its owned bodies and its ghosts: no body moves
+};
+
 struct DistributedOptions {
   EngineOptions engine;  // backend, fields, cell_size (0: smallest valid), threads (also the
                          // pipeline's host loops; 0: the hardware threads shared equally among
@@ -75,6 +88,7 @@ struct DistributedOptions {
   std::uint64_t max_sample = 1u << 20;         // quantile sample size (all bodies when N <= it)
   std::uint64_t max_message_bytes = 1u << 30;  // per-message gather/exchange size (tests make it tiny)
   ContactOutput output = ContactOutput::root;
+  SceneRead read = SceneRead::automatic;
   // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
   // printed to stderr as a warning only if duplicates were removed.
   std::function<void(const std::string&)> log;
@@ -100,11 +114,12 @@ struct DistributedResult {
   double cell_size = 0;                        // the frame's cell edge
   Frame frame;                                 // the shared frame
   int ranks = 1;
-  int axis = 0;                    // the slab axis used
-  std::vector<double> cuts;        // the P-1 slab cuts
-  Backend backend = Backend::cpu;  // the engine's resolved backend (this rank)
-  int threads = 1;                 // host threads of this rank (engine and host loops)
-  EngineStats stats;               // entries and pair tests summed over ranks
+  SceneRead read = SceneRead::own_rows;  // the read mode used (never automatic)
+  int axis = 0;                          // the slab axis used
+  std::vector<double> cuts;              // the P-1 slab cuts
+  Backend backend = Backend::cpu;        // the engine's resolved backend (this rank)
+  int threads = 1;                       // host threads of this rank (engine and host loops)
+  EngineStats stats;                     // entries and pair tests summed over ranks
 };
 
 // Collective over `session`: every rank calls it with the same arguments. See the file comment.

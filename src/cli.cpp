@@ -105,6 +105,11 @@ int run_cli(int argc, char** argv, Session& session) {
   d->add_option("--balance", det.balance, "MPI slab bounds: count (equal bodies) | width (equal widths)")
       ->check(CLI::IsMember({"count", "width"}))
       ->capture_default_str();
+  d->add_option("--read", det.read,
+                "MPI scene read: auto (all when every rank is on one node) | own (each rank its rows, "
+                "bodies then move to their owners) | all (every rank reads every row and keeps its own)")
+      ->check(CLI::IsMember({"auto", "own", "all"}))
+      ->capture_default_str();
   d->add_flag("-q,--quiet", det.quiet, "No summary");
 
   // compare

@@ -30,8 +30,9 @@ void print_summary(const RunInfo& info, std::uint64_t contacts, const Distribute
              info.backend, info.precision);
   fmt::print("  cell size {:.6g}", info.cell_size);
   if (r.ranks > 1)
-    fmt::print(", slab axis {}, owned bodies per rank {} … {}, ghosts {}, duplicates removed {}",
-               "xyz"[r.axis], r.owned_min, r.owned_max, r.ghosts, r.duplicates_removed);
+    fmt::print(", read {}, slab axis {}, owned bodies per rank {} … {}, ghosts {}, duplicates removed {}",
+               r.read == SceneRead::every_row ? "all rows per rank" : "own rows", "xyz"[r.axis], r.owned_min,
+               r.owned_max, r.ghosts, r.duplicates_removed);
   fmt::print("\n  {}-bit cell keys, {} (cell, body) entries, {} pair tests; times: maximum over ranks\n",
              r.stats.key_bits, r.stats.entries, r.stats.pair_tests);
   double total = 0;
@@ -55,13 +56,16 @@ int detect(const DetectCommand& cmd, Session& session) {
   if (cmd.backend != Backend::cpu) o.engine.device = session.device_for(cuda_device_count());
   o.axis = parse_axis(cmd.axis);
   o.balance = parse_balance(cmd.balance);
+  o.read = cmd.read == "own"   ? SceneRead::own_rows
+           : cmd.read == "all" ? SceneRead::every_row
+                               : SceneRead::automatic;
   if (!cmd.quiet && session.rank() == 0) o.log = [](const std::string& line) { fmt::print("{}\n", line); };
   // Each rank keeps the contacts of its id_a range and writes them into the one output file. A CSV
   // copy is written by rank 0 alone, so then everything is gathered there instead.
   o.output = cmd.csv.empty() ? ContactOutput::id_ranges : ContactOutput::root;
 
-  // read → slabs → redistribute → halo → engine → exchange by id_a range → merge
-  // (comm/distributed_detect.cpp; with one rank: read → engine)
+  // read → slabs → redistribute (or, reading every row, select) → halo → engine → exchange by id_a
+  // range → merge (comm/distributed_detect.cpp; with one rank: read → engine)
   DistributedResult<Real> r = distributed_detect<Real>(session, cmd.input, o);
 
   RunInfo info;

@@ -25,6 +25,7 @@ struct DetectCommand {
   int threads = 0;
   std::string axis = "auto";      // MPI slab axis: auto | x | y | z
   std::string balance = "count";  // MPI slab balance: count | width
+  std::string read = "auto";      // MPI scene read: auto | own | all
   bool quiet = false;
 };
 

@@ -160,6 +160,8 @@ std::size_t check_equal_to_single_rank(const std::string& path, const Scene& sce
                             std::to_string(session().size()) + " rank(s)";
   EXPECT_EQ(got.bodies, scene.size()) << label;
   EXPECT_EQ(got.ranks, session().size()) << label;
+  if (session().size() > 1 && options.read != SceneRead::automatic)
+    EXPECT_EQ(got.read, options.read) << label;
   EXPECT_EQ(got.cuts.size(), static_cast<std::size_t>(session().size() - 1)) << label;
   {  // the six top-level stages in order, then (inside "detect") the engine's own stages
     std::vector<std::string> top;
@@ -185,11 +187,18 @@ std::size_t check_equal_to_single_rank(const std::string& path, const Scene& sce
   return want.size();
 }
 
+// Both precisions, and both read modes: own rows + redistribution + halo, and every row + selection.
 std::size_t check_both_precisions(const std::string& name, const Scene& scene,
                                   const DistributedOptions& options = base_options()) {
   const std::string path = write_shared(name, scene);
-  std::size_t k = check_equal_to_single_rank<double>(path, scene, options, name);
-  check_equal_to_single_rank<float>(path, scene, options, name);
+  std::size_t k = 0;
+  for (SceneRead read : {SceneRead::own_rows, SceneRead::every_row}) {
+    DistributedOptions o = options;
+    o.read = read;
+    const std::string what = name + (read == SceneRead::own_rows ? " (own rows)" : " (every row)");
+    k = check_equal_to_single_rank<double>(path, scene, o, what);
+    check_equal_to_single_rank<float>(path, scene, o, what);
+  }
   return k;
 }
 
@@ -336,22 +345,30 @@ TEST(DistributedDetect, MissingFileIsAnInputErrorOnEveryRank) {
       InputError);
 }
 
-TEST(DistributedDetect, BadRowReadByTheLastRankIsReportedByEveryRank) {
+// Own rows: only the last rank reads the bad row, and every rank reports its error. Every row: each
+// rank finds it; the lowest failing rank's message (rank 0) is the one every rank reports.
+TEST(DistributedDetect, BadRowIsReportedByEveryRank) {
   Scene s = uniform_scene(115, 100);
-  s.sphere_radius.back() = -1.0;  // row 99: read by the last rank
+  s.sphere_radius.back() = -1.0;  // row 99: in the last rank's partition
   const std::string path = write_shared("bad_radius", s);
-  std::string message;
-  try {
-    distributed_detect<double>(session(), path, base_options());
-    ADD_FAILURE() << "no error";
-  } catch (const InputError& e) {
-    message = e.what();
-  }
-  if (session().uses_mpi()) {
-    const std::string who =
-        "[rank " + std::to_string(session().size() - 1) + "/" + std::to_string(session().size()) + "]";
-    EXPECT_NE(message.find(who), std::string::npos) << message;
-    EXPECT_NE(message.find("read"), std::string::npos) << message;
+  for (SceneRead read : {SceneRead::own_rows, SceneRead::every_row}) {
+    DistributedOptions o = base_options();
+    o.read = read;
+    std::string message;
+    try {
+      distributed_detect<double>(session(), path, o);
+      ADD_FAILURE() << "no error";
+    } catch (const InputError& e) {
+      message = e.what();
+    }
+    EXPECT_NE(message.find("row 99"), std::string::npos) << message;
+    if (session().uses_mpi()) {
+      const int failing = read == SceneRead::own_rows || session().size() == 1 ? session().size() - 1 : 0;
+      const std::string who =
+          "[rank " + std::to_string(failing) + "/" + std::to_string(session().size()) + "]";
+      EXPECT_NE(message.find(who), std::string::npos) << message;
+      EXPECT_NE(message.find("read"), std::string::npos) << message;
+    }
   }
 }
 
