@@ -77,7 +77,8 @@ class Buffer {
     m_align = bytes >= 2 * k_huge ? k_huge : alignof(T);
     m_p = static_cast<T*>(::operator new(bytes, std::align_val_t(m_align)));
 #if defined(MADV_HUGEPAGE)
-    if (m_align == k_huge) ::madvise(static_cast<void*>(m_p), bytes / k_huge * k_huge, MADV_HUGEPAGE);
+    if (m_align == k_huge && detail::huge_pages_wanted())
+      ::madvise(static_cast<void*>(m_p), bytes / k_huge * k_huge, MADV_HUGEPAGE);
 #endif
   }
   ~Buffer() { release(); }
@@ -788,9 +789,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   // ---- read: rows, global bounds, shared frame ----------------------------------------------------
   // Rank r's partition is rows [N·r/P, N·(r+1)/P): its bounds and sample rows (so the frame and the
   // cuts are the same in both read modes). own_rows: it reads only those; every_row: all N rows.
-  const bool every_row =
-      ranks > 1 && (options.read == SceneRead::every_row ||
-                    (options.read == SceneRead::automatic && session.local_size() == ranks));
+  const bool every_row = ranks > 1 && options.read == SceneRead::every_row;
   result.read = every_row ? SceneRead::every_row : SceneRead::own_rows;
   auto t0 = Clock::now();
   std::uint64_t n_global = 0, first = 0, part_first = 0, part_count = 0;  // first: row of position[0]

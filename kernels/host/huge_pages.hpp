@@ -10,11 +10,23 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
 #include <new>
 #include <utility>
 #include <vector>
 
 namespace cg {
+namespace detail {
+// CONTACTGRID_HUGE_PAGES=0 turns the madvise hint off (measurement knob: the kernel's compaction for
+// huge pages can cost more than the page faults it saves when several processes allocate at once).
+inline bool huge_pages_wanted() {
+  static const bool wanted = [] {
+    const char* v = std::getenv("CONTACTGRID_HUGE_PAGES");
+    return !(v && v[0] == '0');
+  }();
+  return wanted;
+}
+}  // namespace detail
 
 template <class T>
 struct HostAllocator {
@@ -32,7 +44,8 @@ struct HostAllocator {
     const std::size_t bytes = n * sizeof(T);
     void* p = ::operator new(bytes, std::align_val_t(alignment(bytes)));
 #if defined(MADV_HUGEPAGE)
-    if (bytes >= 2 * k_huge) ::madvise(p, bytes / k_huge * k_huge, MADV_HUGEPAGE);
+    if (bytes >= 2 * k_huge && detail::huge_pages_wanted())
+      ::madvise(p, bytes / k_huge * k_huge, MADV_HUGEPAGE);
 #endif
     return static_cast<T*>(p);
   }
@@ -65,7 +78,7 @@ void reserve_huge(std::vector<T, A>& v, std::size_t n) {
   constexpr std::uintptr_t huge = std::uintptr_t(2) << 20;
   const auto lo = (reinterpret_cast<std::uintptr_t>(v.data() + v.size()) + huge - 1) & ~(huge - 1);
   const auto hi = reinterpret_cast<std::uintptr_t>(v.data() + v.capacity()) & ~(huge - 1);
-  if (hi > lo) ::madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
+  if (hi > lo && huge_pages_wanted()) ::madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
 #endif
 }
 
