@@ -117,8 +117,24 @@ class Buffer {
 // of one thread per core, whose barriers wait for descheduled threads.
 int host_threads(const DistributedOptions& o, const Session& s) {
   if (o.engine.threads > 0) return o.engine.threads;
-  return std::max(1, omp_get_max_threads() / std::max(1, s.local_size()));
+  static const int node_threads = omp_get_max_threads();  // before any run set the default (below)
+  return std::max(1, node_threads / std::max(1, s.local_size()));
 }
+
+// For one run, this rank's share is also OpenMP's default team size, so that every parallel loop
+// that asks omp_get_max_threads() (the scene reader, compute_bounds, the CUDA download's copy, ...)
+// takes the share too. Without it, two ranks on a 32-thread node ran 32-thread loops each, and their
+// spinning barriers made the np 2 read 4x slower than np 1's (2^26 on the 2-GPU host).
+class DefaultTeam {
+ public:
+  explicit DefaultTeam(int threads) : m_saved(omp_get_max_threads()) { omp_set_num_threads(threads); }
+  ~DefaultTeam() { omp_set_num_threads(m_saved); }
+  DefaultTeam(const DefaultTeam&) = delete;
+  DefaultTeam& operator=(const DefaultTeam&) = delete;
+
+ private:
+  int m_saved;
+};
 
 // Static split of [0, n) into `parts` contiguous chunks (deterministic, whatever the team size).
 struct Chunks {
@@ -777,6 +793,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   // ---- options: everything checked before the first communication -------------------------------
   std::optional<Engine<Real>> engine;
   const int threads = host_threads(options, session);
+  const DefaultTeam team(threads);
   result.threads = threads;
   local_stage(session, "options", [&] {
     validate(options);
@@ -789,7 +806,9 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   // ---- read: rows, global bounds, shared frame ----------------------------------------------------
   // Rank r's partition is rows [N·r/P, N·(r+1)/P): its bounds and sample rows (so the frame and the
   // cuts are the same in both read modes). own_rows: it reads only those; every_row: all N rows.
-  const bool every_row = ranks > 1 && options.read == SceneRead::every_row;
+  const bool every_row =
+      ranks > 1 && (options.read == SceneRead::every_row ||
+                    (options.read == SceneRead::automatic && session.local_size() == ranks));
   result.read = every_row ? SceneRead::every_row : SceneRead::own_rows;
   auto t0 = Clock::now();
   std::uint64_t n_global = 0, first = 0, part_first = 0, part_count = 0;  // first: row of position[0]

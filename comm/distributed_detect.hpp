@@ -4,10 +4,10 @@
 //
 // Pipeline (each stage's time is reported as the maximum over ranks):
 //   read          rank r's partition is rows [N·r/P, N·(r+1)/P) of /spheres; it reads only those
-//                 (SceneRead::own_rows, the default) or every row (SceneRead::every_row: for ranks
-//                 that share one page cache, N rows read P times cost memory bandwidth, not disk, and
-//                 no body moves between ranks; on the 2-GPU test host it was no faster, see
-//                 BENCHMARKS.md §4). Global bounds by an all-gather of
+//                 (SceneRead::own_rows) or every row (SceneRead::every_row, the default when all
+//                 ranks share one node: one page cache, so N rows read P times cost memory bandwidth,
+//                 not disk, and no body moves between ranks; 2^26 on 2 GPUs of one host: 2.25–2.40 s
+//                 against 2.59–3.08 s, BENCHMARKS.md §4). Global bounds by an all-gather of
 //                 the partitions' Bounds, folded with Bounds::merge in rank order; the frame =
 //                 make_frame(global bounds) — the frame a single-rank run builds — so every rank
 //                 computes bit-identical local coordinates and contact data.
@@ -75,6 +75,7 @@ enum class ContactOutput {
 
 // How the ranks get their bodies (see the file comment).
 enum class SceneRead {
+  automatic,  // every_row when all ranks share one node (one page cache), else own_rows
   own_rows,   // rank r reads rows [N·r/P, N·(r+1)/P); bodies move to their owners, ghosts by halo exchange
   every_row,  // every rank reads all rows and keeps its owned bodies and its ghosts: no body moves
 };
@@ -88,7 +89,7 @@ struct DistributedOptions {
   std::uint64_t max_sample = 1u << 20;         // quantile sample size (all bodies when N <= it)
   std::uint64_t max_message_bytes = 1u << 30;  // per-message gather/exchange size (tests make it tiny)
   ContactOutput output = ContactOutput::root;
-  SceneRead read = SceneRead::own_rows;
+  SceneRead read = SceneRead::automatic;
   // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
   // printed to stderr as a warning only if duplicates were removed.
   std::function<void(const std::string&)> log;
@@ -114,7 +115,7 @@ struct DistributedResult {
   double cell_size = 0;                        // the frame's cell edge
   Frame frame;                                 // the shared frame
   int ranks = 1;
-  SceneRead read = SceneRead::own_rows;  // the read mode used
+  SceneRead read = SceneRead::own_rows;  // the read mode used (never automatic)
   int axis = 0;                          // the slab axis used
   std::vector<double> cuts;              // the P-1 slab cuts
   Backend backend = Backend::cpu;        // the engine's resolved backend (this rank)

@@ -106,9 +106,10 @@ int run_cli(int argc, char** argv, Session& session) {
       ->check(CLI::IsMember({"count", "width"}))
       ->capture_default_str();
   d->add_option("--read", det.read,
-                "MPI scene read: own (each rank its rows, bodies then move to their owners) | all (every "
-                "rank reads every row and keeps its own bodies and ghosts: no body moves)")
-      ->check(CLI::IsMember({"own", "all"}))
+                "MPI scene read: auto (all when every rank is on one node, else own) | own (each rank its "
+                "rows, bodies then move to their owners) | all (every rank reads every row and keeps its "
+                "own bodies and ghosts: no body moves)")
+      ->check(CLI::IsMember({"auto", "own", "all"}))
       ->capture_default_str();
   d->add_flag("-q,--quiet", det.quiet, "No summary");
 

@@ -56,7 +56,9 @@ int detect(const DetectCommand& cmd, Session& session) {
   if (cmd.backend != Backend::cpu) o.engine.device = session.device_for(cuda_device_count());
   o.axis = parse_axis(cmd.axis);
   o.balance = parse_balance(cmd.balance);
-  o.read = cmd.read == "all" ? SceneRead::every_row : SceneRead::own_rows;
+  o.read = cmd.read == "all"   ? SceneRead::every_row
+           : cmd.read == "own" ? SceneRead::own_rows
+                               : SceneRead::automatic;
   if (!cmd.quiet && session.rank() == 0) o.log = [](const std::string& line) { fmt::print("{}\n", line); };
   // Each rank keeps the contacts of its id_a range and writes them into the one output file. A CSV
   // copy is written by rank 0 alone, so then everything is gathered there instead.

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # End to end: `mpirun -np P contactgrid detect` writes the same /contacts bytes as the one-rank run,
 # for P = 2, 3, 4 (and 8 oversubscribed), on a uniform and a polydisperse scene, fp64 and fp32, with
-# the default read (each rank its own rows) and, at P = 3, every rank reading every row.
+# the default read (every rank reads every row: all ranks are on one node) and, at P = 3, each rank
+# reading its own rows.
 # Usage: mpi_identical.sh CONTACTGRID MPIEXEC WORKDIR
 set -euo pipefail
 CG=$1; MPIEXEC=$2; W=$3
@@ -18,8 +19,8 @@ for scene in u p; do
       "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.$np.h5"
     done
     "$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/$scene.h5" \
-      -o "$W/$scene.$prec.all.h5" --backend cpu --precision $prec --fields full --threads 1 --read all -q
-    "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.all.h5"
+      -o "$W/$scene.$prec.own.h5" --backend cpu --precision $prec --fields full --threads 1 --read own -q
+    "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.own.h5"
   done
 done
 # an error on one rank ends the whole job with one message and no output
