@@ -690,37 +690,92 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
     }
     CG_CUDA_CHECK(cudaStreamSynchronize(st));
   } else {
-    m_h_staging.reserve(std::max<std::size_t>(at, 1));
-    if (at > 0) CG_CUDA_CHECK(cudaMemcpyAsync(m_h_staging.data(), o, at, cudaMemcpyDeviceToHost, st));
-    mark(7);
-    // The result vectors are sized (zero-filled, first touch of their pages) while the transfer runs.
-    const auto t0 = clock_type::now();
-    reserve_contacts(out, np, full);
-    out.resize(np, full);
-    CG_CUDA_CHECK(cudaStreamSynchronize(st));
-    const auto t1 = clock_type::now();
-    const std::byte* h = m_h_staging.data();
-    auto from = [&](const void* d_ptr) { return h + (static_cast<const std::byte*>(d_ptr) - o); };
-    std::vector<CopyBlock> blocks;
-    auto copy = [&](auto& vec, const void* d_ptr) {
-      if (np) blocks.push_back({vec.data(), from(d_ptr), vec.size() * sizeof(vec[0])});
-    };
-    copy(out.id_a, cp.id_a);
-    copy(out.id_b, cp.id_b);
-    copy(out.position_on_a, cp.position_on_a);
-    copy(out.position_on_b, cp.position_on_b);
-    copy(out.normal_on_b, cp.normal_on_b);
-    copy(out.distance, cp.distance);
-    if (full) {
-      copy(out.local_point_a, cp.local_point_a);
-      copy(out.local_point_b, cp.local_point_b);
-      copy(out.lateral_friction_dir1, cp.dir1);
-      copy(out.lateral_friction_dir2, cp.dir2);
+    // Large results go straight into the result vectors, page-locked in place (cudaHostRegister:
+    // that is their first touch); small ones, and any range the driver will not register, through
+    // the pinned staging buffer and a parallel host copy. At 2^26 contacts the staged path paid a
+    // first touch of the staging buffer and another of the vectors. CONTACTGRID_CUDA_DOWNLOAD=staged /
+    // registered forces one (measurement and test knob).
+    const char* dl_env = std::getenv("CONTACTGRID_CUDA_DOWNLOAD");
+    const bool want_registered = dl_env && std::string_view(dl_env) == "registered" ? true
+                                 : dl_env && std::string_view(dl_env) == "staged"
+                                     ? false
+                                     : at >= (std::size_t(64) << 20);
+    bool registered = false;
+    if (want_registered && np > 0) {
+      const auto t0 = clock_type::now();
+      reserve_contacts(out, np, full);
+      out.resize(np, full);
+      std::vector<std::pair<void*, const void*>> fields;  // (host, device)
+      std::vector<std::size_t> sizes;
+      auto field = [&](auto& vec, const void* d_ptr) {
+        fields.push_back({vec.data(), d_ptr});
+        sizes.push_back(vec.size() * sizeof(vec[0]));
+      };
+      field(out.id_a, cp.id_a);
+      field(out.id_b, cp.id_b);
+      field(out.position_on_a, cp.position_on_a);
+      field(out.position_on_b, cp.position_on_b);
+      field(out.normal_on_b, cp.normal_on_b);
+      field(out.distance, cp.distance);
+      if (full) {
+        field(out.local_point_a, cp.local_point_a);
+        field(out.local_point_b, cp.local_point_b);
+        field(out.lateral_friction_dir1, cp.dir1);
+        field(out.lateral_friction_dir2, cp.dir2);
+      }
+      std::size_t locked = 0;
+      for (; locked < fields.size(); ++locked)
+        if (cudaHostRegister(fields[locked].first, sizes[locked], cudaHostRegisterDefault) != cudaSuccess)
+          break;
+      registered = locked == fields.size();
+      if (registered) {
+        const auto t1 = clock_type::now();
+        for (std::size_t f = 0; f < fields.size(); ++f)
+          CG_CUDA_CHECK(
+              cudaMemcpyAsync(fields[f].first, fields[f].second, sizes[f], cudaMemcpyDeviceToHost, st));
+        mark(7);
+        CG_CUDA_CHECK(cudaStreamSynchronize(st));
+        host_sizing_s = std::chrono::duration<double>(t1 - t0).count();  // registering, before the copy
+      } else {
+        (void)cudaGetLastError();  // clear the refusal; the staged path below does the download
+      }
+      const auto t2 = clock_type::now();
+      for (std::size_t f = 0; f < locked; ++f) CG_CUDA_CHECK(cudaHostUnregister(fields[f].first));
+      host_copy_s = std::chrono::duration<double>(clock_type::now() - t2).count();  // unregistering
     }
-    parallel_copy(blocks.data(), blocks.size(), 0);  // pinned staging → result vectors, all host threads
-    const auto t2 = clock_type::now();
-    host_sizing_s = std::chrono::duration<double>(t1 - t0).count();
-    host_copy_s = std::chrono::duration<double>(t2 - t1).count();
+    if (!registered) {
+      m_h_staging.reserve(std::max<std::size_t>(at, 1));
+      if (at > 0) CG_CUDA_CHECK(cudaMemcpyAsync(m_h_staging.data(), o, at, cudaMemcpyDeviceToHost, st));
+      mark(7);
+      // The result vectors are sized (no fill: HostVector) while the transfer runs.
+      const auto t0 = clock_type::now();
+      reserve_contacts(out, np, full);
+      out.resize(np, full);
+      CG_CUDA_CHECK(cudaStreamSynchronize(st));
+      const auto t1 = clock_type::now();
+      const std::byte* h = m_h_staging.data();
+      auto from = [&](const void* d_ptr) { return h + (static_cast<const std::byte*>(d_ptr) - o); };
+      std::vector<CopyBlock> blocks;
+      auto copy = [&](auto& vec, const void* d_ptr) {
+        if (np) blocks.push_back({vec.data(), from(d_ptr), vec.size() * sizeof(vec[0])});
+      };
+      copy(out.id_a, cp.id_a);
+      copy(out.id_b, cp.id_b);
+      copy(out.position_on_a, cp.position_on_a);
+      copy(out.position_on_b, cp.position_on_b);
+      copy(out.normal_on_b, cp.normal_on_b);
+      copy(out.distance, cp.distance);
+      if (full) {
+        copy(out.local_point_a, cp.local_point_a);
+        copy(out.local_point_b, cp.local_point_b);
+        copy(out.lateral_friction_dir1, cp.dir1);
+        copy(out.lateral_friction_dir2, cp.dir2);
+      }
+      parallel_copy(blocks.data(), blocks.size(), 0);  // pinned staging → result vectors, all host threads
+      const auto t2 = clock_type::now();
+      host_sizing_s = std::chrono::duration<double>(t1 - t0).count();
+      host_copy_s = std::chrono::duration<double>(t2 - t1).count();
+    }
   }
 
   // Stage times from the events (all complete: the stream was synchronised above).
@@ -739,7 +794,9 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
       }
       sec = o * 1e-3;
     }
-    // The sizing overlapped the transfer: the stage is the longer of the two, plus the copy.
+    // Staged: the sizing overlapped the transfer, so the stage is the longer of the two, plus the copy.
+    // Registered: the events span registering + transfer (the copies were queued after it), plus
+    // the unregistering.
     if (s == 7) sec = std::max(sec, host_sizing_s) + host_copy_s;
     times.push_back({kStageNames[s], sec});
     prev = m_events[s + 1];

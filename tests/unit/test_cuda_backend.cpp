@@ -108,9 +108,11 @@ TYPED_TEST(CudaBackendTest, EveryPathIsBitIdentical) {
     ids[i] = std::int64_t(3 * i + 1);
     report[i] = (i % 3) != 0;
   }
-  for (const Knob& k : {Knob{"CONTACTGRID_CUDA_TYPE_PASSES", "1"}, Knob{"CONTACTGRID_CUDA_RENUMBER", "0"},
-                        Knob{"CONTACTGRID_CUDA_RENUMBER", "1"}, Knob{"CONTACTGRID_CUDA_ORDER", "radix"},
-                        Knob{"CONTACTGRID_CUDA_ORDER", "counting"}}) {
+  for (const Knob& k :
+       {Knob{"CONTACTGRID_CUDA_TYPE_PASSES", "1"}, Knob{"CONTACTGRID_CUDA_RENUMBER", "0"},
+        Knob{"CONTACTGRID_CUDA_RENUMBER", "1"}, Knob{"CONTACTGRID_CUDA_ORDER", "radix"},
+        Knob{"CONTACTGRID_CUDA_ORDER", "counting"}, Knob{"CONTACTGRID_CUDA_DOWNLOAD", "registered"},
+        Knob{"CONTACTGRID_CUDA_DOWNLOAD", "staged"}}) {
     SCOPED_TRACE(std::string(k.name) + "=" + k.value);
     ::setenv(k.name, k.value, 1);
     Unset unset{k.name};
