@@ -111,6 +111,11 @@ int run_cli(int argc, char** argv, Session& session) {
                 "own bodies and ghosts: no body moves)")
       ->check(CLI::IsMember({"auto", "own", "all"}))
       ->capture_default_str();
+  d->add_option("--write", det.write,
+                "MPI output: gather (rank 0 gathers, deduplicates and writes the sorted contacts) | ranks "
+                "(each rank merges the contacts of its id_a range and writes them into the same file)")
+      ->check(CLI::IsMember({"gather", "ranks"}))
+      ->capture_default_str();
   d->add_flag("-q,--quiet", det.quiet, "No summary");
 
   // compare

@@ -60,12 +60,13 @@ int detect(const DetectCommand& cmd, Session& session) {
            : cmd.read == "own" ? SceneRead::own_rows
                                : SceneRead::automatic;
   if (!cmd.quiet && session.rank() == 0) o.log = [](const std::string& line) { fmt::print("{}\n", line); };
-  // Each rank keeps the contacts of its id_a range and writes them into the one output file. A CSV
-  // copy is written by rank 0 alone, so then everything is gathered there instead.
-  o.output = cmd.csv.empty() ? ContactOutput::id_ranges : ContactOutput::root;
+  // The design card's shape by default: rank 0 gathers, deduplicates and writes the sorted contacts
+  // (--write gather). --write ranks: each rank keeps the contacts of its id_a range and writes them
+  // into the one output file. A CSV copy is written by rank 0 alone, so it always gathers.
+  o.output = cmd.write == "ranks" && cmd.csv.empty() ? ContactOutput::id_ranges : ContactOutput::root;
 
-  // read → slabs → redistribute (or, reading every row, select) → halo → engine → exchange by id_a
-  // range → merge (comm/distributed_detect.cpp; with one rank: read → engine)
+  // read → slabs → redistribute (or, reading every row, select) → halo → engine → gather to rank 0
+  // (or exchange by id_a range) → merge (comm/distributed_detect.cpp; with one rank: read → engine)
   DistributedResult<Real> r = distributed_detect<Real>(session, cmd.input, o);
 
   RunInfo info;

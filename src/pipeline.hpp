@@ -26,12 +26,13 @@ struct DetectCommand {
   std::string axis = "auto";      // MPI slab axis: auto | x | y | z
   std::string balance = "count";  // MPI slab balance: count | width
   std::string read = "auto";      // MPI scene read: auto | own | all
+  std::string write = "gather";   // MPI output: gather (rank 0 merges, writes) | ranks (each its id_a range)
   bool quiet = false;
 };
 
-// Runs one detection over all ranks of `session`; returns the process exit code (0). Every rank writes
-// its rows of the output file; the summary comes from rank 0. Errors are agreed on by all ranks and
-// thrown on every rank.
+// Runs one detection over all ranks of `session`; returns the process exit code (0). Rank 0 writes the
+// output file (--write ranks: every rank writes its rows of it); the summary comes from rank 0. Errors are
+// agreed on by all ranks and thrown on every rank.
 int run_detect(const DetectCommand& cmd, Session& session);
 
 // Compares the /contacts datasets of two contact files byte for byte (what `mpirun -np P` must

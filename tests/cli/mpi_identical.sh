@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # End to end: `mpirun -np P contactgrid detect` writes the same /contacts bytes as the one-rank run,
 # for P = 2, 3, 4 (and 8 oversubscribed), on a uniform and a polydisperse scene, fp64 and fp32, with
-# the default read (every rank reads every row: all ranks are on one node) and, at P = 3, each rank
-# reading its own rows.
+# the defaults (every rank reads every row, all ranks being on one node; rank 0 gathers and writes)
+# and, at P = 3, each rank reading its own rows and each rank writing its id_a range.
 # Usage: mpi_identical.sh CONTACTGRID MPIEXEC WORKDIR
 set -euo pipefail
 CG=$1; MPIEXEC=$2; W=$3
@@ -21,6 +21,9 @@ for scene in u p; do
     "$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/$scene.h5" \
       -o "$W/$scene.$prec.own.h5" --backend cpu --precision $prec --fields full --threads 1 --read own -q
     "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.own.h5"
+    "$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/$scene.h5" \
+      -o "$W/$scene.$prec.ranks.h5" --backend cpu --precision $prec --fields full --threads 1 --write ranks -q
+    "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.ranks.h5"
   done
 done
 # an error on one rank ends the whole job with one message and no output
