@@ -570,6 +570,24 @@ void local_stage(const Session& session, const char* stage, F&& work) {
 }
 
 // root mode: the ranks' contacts gathered to rank 0 and merged there (see the file comment).
+// Receive storage for one run of n contacts (ids, distance and nvec vector fields) and its view.
+template <class Real>
+ContactRunView<Real> receive_run(std::size_t n, int nvec, Buffer<std::int64_t>& id_a,
+                                 Buffer<std::int64_t>& id_b, Buffer<Real>& distance,
+                                 std::vector<Buffer<Vec3<Real>>>& vec) {
+  id_a = Buffer<std::int64_t>(n);
+  id_b = Buffer<std::int64_t>(n);
+  distance = Buffer<Real>(n);
+  for (int f = 0; f < nvec; ++f) vec.emplace_back(n);
+  ContactRunView<Real> run;
+  run.n = n;
+  run.id_a = id_a.data();
+  run.id_b = id_b.data();
+  run.distance = distance.data();
+  for (int f = 0; f < nvec; ++f) run.vec[f] = vec[static_cast<std::size_t>(f)].data();
+  return run;
+}
+
 template <class Real>
 void gather_and_merge(const Session& session, const Comm& comm, Contacts<Real>& local,
                       const DistributedOptions& options, int threads, DistributedResult<Real>& result,
@@ -597,16 +615,7 @@ void gather_and_merge(const Session& session, const Comm& comm, Contacts<Real>& 
       recv_v.resize(p);
       runs[0] = contact_run_view(local, full);  // rank 0's own run stays in place
       for (std::size_t r = 1; r < p; ++r) {
-        const std::size_t n = counts[r];
-        recv_a[r] = Buffer<std::int64_t>(n);
-        recv_b[r] = Buffer<std::int64_t>(n);
-        recv_d[r] = Buffer<Real>(n);
-        for (int f = 0; f < nvec; ++f) recv_v[r].emplace_back(n);
-        runs[r].n = n;
-        runs[r].id_a = recv_a[r].data();
-        runs[r].id_b = recv_b[r].data();
-        runs[r].distance = recv_d[r].data();
-        for (int f = 0; f < nvec; ++f) runs[r].vec[f] = recv_v[r][static_cast<std::size_t>(f)].data();
+        runs[r] = receive_run(counts[r], nvec, recv_a[r], recv_b[r], recv_d[r], recv_v[r]);
       }
     }
     auto targets = [&](auto& buffers) {  // where rank r's part of a field lands on rank 0 (r >= 1)
@@ -707,16 +716,7 @@ void exchange_and_merge(const Session& session, const Comm& comm, Contacts<Real>
         for (int f = 0; f < nvec; ++f) v.vec[f] = contact_vec_field(local, f)->data() + at;
         continue;
       }
-      const std::size_t n = recv_counts[r];
-      recv_a[r] = Buffer<std::int64_t>(n);
-      recv_b[r] = Buffer<std::int64_t>(n);
-      recv_d[r] = Buffer<Real>(n);
-      for (int f = 0; f < nvec; ++f) recv_v[r].emplace_back(n);
-      runs[r].n = n;
-      runs[r].id_a = recv_a[r].data();
-      runs[r].id_b = recv_b[r].data();
-      runs[r].distance = recv_d[r].data();
-      for (int f = 0; f < nvec; ++f) runs[r].vec[f] = recv_v[r][static_cast<std::size_t>(f)].data();
+      runs[r] = receive_run(recv_counts[r], nvec, recv_a[r], recv_b[r], recv_d[r], recv_v[r]);
     }
     auto bytes = [](auto* ptr) { return reinterpret_cast<unsigned char*>(ptr); };
     auto cbytes = [](const auto* ptr) { return reinterpret_cast<const unsigned char*>(ptr); };

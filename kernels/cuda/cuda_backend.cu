@@ -92,6 +92,24 @@ std::uint32_t blocks_for(std::uint64_t n) { return static_cast<std::uint32_t>((n
 std::size_t align16(std::size_t b) { return (b + 15) & ~std::size_t(15); }
 }  // namespace
 
+// f(host vector, device array) for each contact field the run produces (the four `full` ones only
+// with Fields::full), in the order of the device layout.
+template <class Real, class F>
+void for_each_field(Contacts<Real>& out, const ContactPtrs<Real>& cp, bool full, F&& f) {
+  f(out.id_a, cp.id_a);
+  f(out.id_b, cp.id_b);
+  f(out.position_on_a, cp.position_on_a);
+  f(out.position_on_b, cp.position_on_b);
+  f(out.normal_on_b, cp.normal_on_b);
+  f(out.distance, cp.distance);
+  if (full) {
+    f(out.local_point_a, cp.local_point_a);
+    f(out.local_point_b, cp.local_point_b);
+    f(out.lateral_friction_dir1, cp.dir1);
+    f(out.lateral_friction_dir2, cp.dir2);
+  }
+}
+
 class CudaBackend {
  public:
   explicit CudaBackend(int device) {
@@ -729,22 +747,10 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
       out.resize(np, full);
       std::vector<std::pair<void*, const void*>> fields;  // (host, device)
       std::vector<std::size_t> sizes;
-      auto field = [&](auto& vec, const void* d_ptr) {
+      for_each_field(out, cp, full, [&](auto& vec, const void* d_ptr) {
         fields.push_back({vec.data(), d_ptr});
         sizes.push_back(vec.size() * sizeof(vec[0]));
-      };
-      field(out.id_a, cp.id_a);
-      field(out.id_b, cp.id_b);
-      field(out.position_on_a, cp.position_on_a);
-      field(out.position_on_b, cp.position_on_b);
-      field(out.normal_on_b, cp.normal_on_b);
-      field(out.distance, cp.distance);
-      if (full) {
-        field(out.local_point_a, cp.local_point_a);
-        field(out.local_point_b, cp.local_point_b);
-        field(out.lateral_friction_dir1, cp.dir1);
-        field(out.lateral_friction_dir2, cp.dir2);
-      }
+      });
       std::size_t locked = 0;
       for (; locked < fields.size(); ++locked)
         if (cudaHostRegister(fields[locked].first, sizes[locked], cudaHostRegisterDefault) != cudaSuccess)
@@ -778,21 +784,9 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
       const std::byte* h = m_h_staging.data();
       auto from = [&](const void* d_ptr) { return h + (static_cast<const std::byte*>(d_ptr) - o); };
       std::vector<CopyBlock> blocks;
-      auto copy = [&](auto& vec, const void* d_ptr) {
+      for_each_field(out, cp, full, [&](auto& vec, const void* d_ptr) {
         if (np) blocks.push_back({vec.data(), from(d_ptr), vec.size() * sizeof(vec[0])});
-      };
-      copy(out.id_a, cp.id_a);
-      copy(out.id_b, cp.id_b);
-      copy(out.position_on_a, cp.position_on_a);
-      copy(out.position_on_b, cp.position_on_b);
-      copy(out.normal_on_b, cp.normal_on_b);
-      copy(out.distance, cp.distance);
-      if (full) {
-        copy(out.local_point_a, cp.local_point_a);
-        copy(out.local_point_b, cp.local_point_b);
-        copy(out.lateral_friction_dir1, cp.dir1);
-        copy(out.lateral_friction_dir2, cp.dir2);
-      }
+      });
       parallel_copy(blocks.data(), blocks.size(), 0);  // pinned staging → result vectors, all host threads
       const auto t2 = clock_type::now();
       host_sizing_s = std::chrono::duration<double>(t1 - t0).count();
