@@ -6,7 +6,7 @@
 //   read          rank r's partition is rows [N·r/P, N·(r+1)/P) of /spheres; it reads only those
 //                 (SceneRead::own_rows) or every row (SceneRead::every_row, the default when all
 //                 ranks share one node: one page cache, so N rows read P times cost memory bandwidth,
-//                 not disk, and no body moves between ranks; 2^26 on 2 GPUs of one host: 2.25–2.40 s
+//                 not disk, and no body moves between ranks; 2^26 on 2 GPUs of one host, 962ecd7: 2.25–2.40 s
 //                 against 2.59–3.08 s, BENCHMARKS.md §4). Global bounds by an all-gather of
 //                 the partitions' Bounds, folded with Bounds::merge in rank order; the frame =
 //                 make_frame(global bounds) — the frame a single-rank run builds — so every rank
