@@ -81,7 +81,7 @@ enum class SceneRead {
 };
 
 struct DistributedOptions {
-  EngineOptions engine;  // backend, fields, cell_size (0: smallest valid), threads (also the
+  EngineOptions engine;  // backend, fields, cell_size and cell_choice, threads (also the
                          // pipeline's host loops; 0: the hardware threads shared equally among
                          // the ranks on the node), device
   int axis = -1;         // slab axis: 0 x, 1 y, 2 z, -1 largest extent (parse_axis)
