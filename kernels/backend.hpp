@@ -45,9 +45,8 @@ struct CopyBlock {
 };
 void parallel_copy(const CopyBlock* blocks, std::size_t count, int threads);
 
-// Reserves n rows in every field of `c` (the four optional ones when `full`) and offers the untouched
-// storage of large fields to transparent huge pages (madvise; where the kernel has them), so the
-// zero-fill of the resize that follows takes few page faults. Contents and sizes are unchanged.
+// Reserves n rows in every field of `c` (the four optional ones when `full`): one allocation each,
+// on huge pages when large (HostAllocator). Contents and sizes are unchanged.
 template <class Real>
 void reserve_contacts(Contacts<Real>& c, std::size_t n, bool full);
 

@@ -267,17 +267,17 @@ void parallel_copy(const CopyBlock* blocks, std::size_t count, int threads) {
 
 template <class Real>
 void reserve_contacts(Contacts<Real>& c, std::size_t n, bool full) {
-  detail::reserve_huge(c.id_a, n);
-  detail::reserve_huge(c.id_b, n);
-  detail::reserve_huge(c.position_on_a, n);
-  detail::reserve_huge(c.position_on_b, n);
-  detail::reserve_huge(c.normal_on_b, n);
-  detail::reserve_huge(c.distance, n);
+  c.id_a.reserve(n);
+  c.id_b.reserve(n);
+  c.position_on_a.reserve(n);
+  c.position_on_b.reserve(n);
+  c.normal_on_b.reserve(n);
+  c.distance.reserve(n);
   if (full) {
-    detail::reserve_huge(c.local_point_a, n);
-    detail::reserve_huge(c.local_point_b, n);
-    detail::reserve_huge(c.lateral_friction_dir1, n);
-    detail::reserve_huge(c.lateral_friction_dir2, n);
+    c.local_point_a.reserve(n);
+    c.local_point_b.reserve(n);
+    c.lateral_friction_dir1.reserve(n);
+    c.lateral_friction_dir2.reserve(n);
   }
 }
 template void reserve_contacts(Contacts<float>&, std::size_t, bool);

@@ -627,11 +627,9 @@ void check_bounds(const SceneSource& s, const Dataset& d, hsize_t row, double r,
 }
 
 // Reads and validates sphere rows [first, first + count) into out (appended), chunk by chunk, into
-// storage reserved with detail::reserve_huge (few page faults for the resize that follows).
+// HostVector storage (no zero sweep; huge pages for the first touch by the reader).
 
 void read_spheres(const SceneSource& s, hsize_t first, hsize_t count, Scene& out) {
-  detail::reserve_huge(out.sphere_position, count);
-  detail::reserve_huge(out.sphere_radius, count);
   out.sphere_position.resize(count);
   out.sphere_radius.resize(count);
   for (hsize_t done = 0; done < count; done += kReadChunkRows) {
@@ -881,17 +879,6 @@ static_assert(std::endian::native == std::endian::little,
 static_assert(sizeof(std::int64_t) == 8 && sizeof(double) == 8 && sizeof(float) == 4);
 
 namespace {
-
-constexpr const char* kContactDatasets[] = {"/contacts/id_a",
-                                            "/contacts/id_b",
-                                            "/contacts/position_on_a",
-                                            "/contacts/position_on_b",
-                                            "/contacts/normal_on_b",
-                                            "/contacts/distance",
-                                            "/contacts/local_point_a",
-                                            "/contacts/local_point_b",
-                                            "/contacts/lateral_friction_dir1",
-                                            "/contacts/lateral_friction_dir2"};
 
 // Dataset k of kContactDatasets: columns (0: rank 1) and whether it holds ids.
 hsize_t contact_columns(std::size_t k) { return (k == 0 || k == 1 || k == 5) ? 0 : 3; }

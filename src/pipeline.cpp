@@ -104,12 +104,9 @@ int run_detect(const DetectCommand& cmd, Session& session) {
 }
 
 int run_compare(const std::string& a, const std::string& b) {
-  static const char* const k_datasets[] = {
-      "id_a",     "id_b",          "position_on_a", "position_on_b",         "normal_on_b",
-      "distance", "local_point_a", "local_point_b", "lateral_friction_dir1", "lateral_friction_dir2"};
   int differ = 0;
-  for (const char* name : k_datasets) {
-    const std::string ds = std::string("/contacts/") + name;
+  for (const char* name : kContactDatasets) {
+    const std::string ds = name;
     const auto ia = inspect_dataset(a, ds), ib = inspect_dataset(b, ds);
     if (!ia && !ib) continue;
     if (!ia || !ib) {

@@ -4,7 +4,6 @@
 //   (the writer that follows — a parallel copy, a file read — is the first touch, in parallel where it
 //   runs in parallel), and storage of 4 MiB or more is 2 MiB-aligned and offered to transparent huge
 //   pages (madvise, where the kernel has them), so that first touch takes few page faults.
-// - reserve_huge: the same hint for a std::vector that is reserved, then resized or appended to.
 #include <sys/mman.h>
 
 #include <algorithm>
@@ -69,18 +68,4 @@ struct HostAllocator {
 template <class T>
 using HostVector = std::vector<T, HostAllocator<T>>;
 
-namespace detail {
-
-template <class T, class A>
-void reserve_huge(std::vector<T, A>& v, std::size_t n) {
-  v.reserve(n);
-#if defined(MADV_HUGEPAGE)
-  constexpr std::uintptr_t huge = std::uintptr_t(2) << 20;
-  const auto lo = (reinterpret_cast<std::uintptr_t>(v.data() + v.size()) + huge - 1) & ~(huge - 1);
-  const auto hi = reinterpret_cast<std::uintptr_t>(v.data() + v.capacity()) & ~(huge - 1);
-  if (hi > lo && huge_pages_wanted()) ::madvise(reinterpret_cast<void*>(lo), hi - lo, MADV_HUGEPAGE);
-#endif
-}
-
-}  // namespace detail
 }  // namespace cg

@@ -23,6 +23,7 @@ namespace cg {
 namespace {
 
 using testing::session;
+using testing::write_shared;
 
 // ---- scenes (seeded, fresh per test) -----------------------------------------------------------------
 
@@ -107,21 +108,6 @@ Scene thin_scene(std::uint64_t seed, std::size_t n) {
 
 // ---- checks ----------------------------------------------------------------------------------------
 
-std::string write_shared(const std::string& name, const Scene& scene) {
-  const std::string path = testing::shared_temp_dir() + "/" + name + ".h5";
-  std::exception_ptr error;
-  if (session().rank() == 0) {
-    try {
-      write_scene(path, scene);
-    } catch (...) {
-      error = std::current_exception();
-    }
-  }
-  session().agree(error, "write_scene");
-  session().barrier();
-  return path;
-}
-
 template <class T>
 bool same_bits(const HostVector<T>& a, const HostVector<T>& b) {
   return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
@@ -160,10 +146,9 @@ std::size_t check_equal_to_single_rank(const std::string& path, const Scene& sce
                             std::to_string(session().size()) + " rank(s)";
   EXPECT_EQ(got.bodies, scene.size()) << label;
   EXPECT_EQ(got.ranks, session().size()) << label;
-  if (session().size() > 1 && options.read != SceneRead::automatic)
-    EXPECT_EQ(got.read, options.read) << label;
-  if (session().size() > 1 && options.read == SceneRead::automatic)  // the test ranks share one node
-    EXPECT_EQ(got.read, SceneRead::every_row) << label;
+  if (session().size() > 1) {  // automatic: every row, since the test ranks share one node
+    EXPECT_EQ(got.read, options.read == SceneRead::automatic ? SceneRead::every_row : options.read) << label;
+  }
   EXPECT_EQ(got.cuts.size(), static_cast<std::size_t>(session().size() - 1)) << label;
   {  // the six top-level stages in order, then (inside "detect") the engine's own stages
     std::vector<std::string> top;

@@ -25,6 +25,8 @@ namespace cg {
 namespace {
 
 using testing::session;
+using testing::shared_path;
+using testing::write_shared;
 
 Scene random_scene(std::uint64_t seed, std::size_t n, double edge, double r_low, double r_high) {
   std::mt19937_64 rng(seed);
@@ -59,22 +61,6 @@ Scene cluster_scene(std::uint64_t seed, std::size_t n, std::size_t touching) {
     s.sphere_radius.push_back(1.0);
   }
   return s;
-}
-
-std::string shared_path(const std::string& name) { return testing::shared_temp_dir() + "/" + name; }
-
-std::string write_shared(const std::string& name, const Scene& scene) {
-  const std::string path = shared_path(name + ".h5");
-  std::exception_ptr error;
-  if (session().rank() == 0) {
-    try {
-      write_scene(path, scene);
-    } catch (...) {
-      error = std::current_exception();
-    }
-  }
-  session().agree(error, "write_scene");
-  return path;
 }
 
 DistributedOptions range_options(Fields fields = Fields::full) {

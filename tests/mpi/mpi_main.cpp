@@ -6,9 +6,11 @@
 
 #include <cstdio>
 #include <cstdlib>
+#include <exception>
 #include <filesystem>
 #include <iostream>
 
+#include "hdf5_io.hpp"
 #include "mpi/mpi_test_env.hpp"
 
 namespace cg::testing {
@@ -35,6 +37,22 @@ class RankFailurePrinter : public ::testing::EmptyTestEventListener {
 
 Session& session() { return *g_session; }
 const std::string& shared_temp_dir() { return g_temp_dir; }
+
+std::string shared_path(const std::string& name) { return g_temp_dir + "/" + name; }
+
+std::string write_shared(const std::string& name, const Scene& scene) {
+  const std::string path = shared_path(name + ".h5");
+  std::exception_ptr error;
+  if (session().rank() == 0) {
+    try {
+      write_scene(path, scene);
+    } catch (...) {
+      error = std::current_exception();
+    }
+  }
+  session().agree(error, "write_scene");
+  return path;
+}
 
 }  // namespace cg::testing
 
