@@ -133,6 +133,16 @@ TEST_F(Cli, UsageErrorsExitTwo) {
   EXPECT_EQ(run("generate " + path("g.h5") + " --count 0").code, 2);
   EXPECT_EQ(run("bogus").code, 2);
   expect_detect_fails(path("s.h5"), 2, {"--cell-size"}, "--cell-size 0.5");  // smaller than the diameter
+  // --cell-size takes auto, min or a length > 0; --read and --write their words
+  expect_detect_fails(path("s.h5"), 2, {"--cell-size", "'wide' is not auto, min or a length > 0"},
+                      "--cell-size wide");
+  expect_detect_fails(path("s.h5"), 2, {"--cell-size", "'0' is not auto, min or a length > 0"},
+                      "--cell-size 0");
+  expect_detect_fails(path("s.h5"), 2, {"--cell-size"}, "--cell-size 3x");
+  expect_detect_fails(path("s.h5"), 2, {"--read"}, "--read some");
+  expect_detect_fails(path("s.h5"), 2, {"--write"}, "--write rank0");
+  EXPECT_EQ(run("detect " + path("s.h5") + " -o " + path("min.h5") + " --cell-size min -q").code, 0);
+  EXPECT_EQ(run("detect " + path("s.h5") + " -o " + path("auto.h5") + " --cell-size auto -q").code, 0);
 }
 
 TEST_F(Cli, MissingFile) { expect_detect_fails(path("nope.h5"), 3, {"nope.h5"}); }
