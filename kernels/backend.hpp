@@ -38,6 +38,8 @@ GridParams<Real> grid_params(const GridPlan& plan) {
 
 // Host copies of several (dst, src, bytes) blocks, split into equal pieces over OpenMP threads
 // (defined in engine.cpp, an OpenMP translation unit, so the CUDA backend's host code can use it).
+// A block with src == nullptr has one byte of each 4 KiB page of dst zeroed: the first touch of
+// fresh memory spread over the threads (before cudaHostRegister, which faults pages on one thread).
 struct CopyBlock {
   void* dst;
   const void* src;

@@ -256,8 +256,12 @@ void parallel_copy(const CopyBlock* blocks, std::size_t count, int threads) {
       const std::size_t end = at + blocks[b].bytes;
       if (lo < end) {
         const std::size_t from = lo - at, to = std::min(hi, end) - at;
-        std::memcpy(static_cast<std::byte*>(blocks[b].dst) + from,
-                    static_cast<const std::byte*>(blocks[b].src) + from, to - from);
+        auto* dst = static_cast<std::byte*>(blocks[b].dst);
+        if (blocks[b].src) {
+          std::memcpy(dst + from, static_cast<const std::byte*>(blocks[b].src) + from, to - from);
+        } else {
+          for (std::size_t k = from; k < to; k = (k / 4096 + 1) * 4096) dst[k] = std::byte{0};
+        }
         lo = at + to;
       }
       at = end;

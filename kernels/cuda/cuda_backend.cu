@@ -751,6 +751,12 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
         fields.push_back({vec.data(), d_ptr});
         sizes.push_back(vec.size() * sizeof(vec[0]));
       });
+      // First touch on every host thread: registering faults the pages in on one thread (1.5 GB on
+      // the 2×H200 host: touch 0.05 s on 32 threads, then register 0.06 s and copy 0.03 s; the
+      // download of 2^26 contacts took 0.36–0.41 s without it).
+      std::vector<CopyBlock> touch;
+      for (std::size_t f = 0; f < fields.size(); ++f) touch.push_back({fields[f].first, nullptr, sizes[f]});
+      parallel_copy(touch.data(), touch.size(), 0);
       std::size_t locked = 0;
       for (; locked < fields.size(); ++locked)
         if (cudaHostRegister(fields[locked].first, sizes[locked], cudaHostRegisterDefault) != cudaSuccess)
