@@ -17,7 +17,6 @@
 #include <fmt/format.h>
 #include <hdf5.h>
 #include <omp.h>
-#include <sys/mman.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -27,13 +26,11 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <limits>
 #include <mutex>
 #include <optional>
-#include <string_view>
 #include <type_traits>
 #include <utility>
 
@@ -636,7 +633,8 @@ void read_spheres(const SceneSource& s, hsize_t first, hsize_t count, Scene& out
   out.sphere_position.resize(count);
   out.sphere_radius.resize(count);
   // kReadChunkRows per thread: a chunk of 2^20 rows is only 6 + 2 blocks of 4 MiB for read_rows_f64,
-  // so chunks of that size left most of a large team idle.
+  // so chunks of that size left most of a large team idle (2^26 rows on the 2×H200 host, 32 threads:
+  // read stage 0.32 → 0.10 s).
   const hsize_t chunk_rows = kReadChunkRows * static_cast<hsize_t>(std::max(1, omp_get_max_threads()));
   for (hsize_t done = 0; done < count; done += chunk_rows) {
     hsize_t n = std::min(chunk_rows, count - done);
@@ -1023,72 +1021,6 @@ ContactFileLayout create_contact_file(const std::string& path, std::uint64_t row
   return layout;
 }
 
-// How write_contact_rows puts rows into the file. Buffered writes to one file are serialised by
-// the kernel (ext4's inode lock): on the 2×H200 host 1.5 GB of pwrite took 0.36–0.39 s with 1, 4, 16
-// or 32 threads, and two processes writing halves of one file 0.34–0.36 s; stores into a shared
-// mapping of the same (allocated) range are not: 0.14 s with 16 threads (0.22 s with 32, 0.52 s into
-// a sparse range). So a large slice is allocated (fallocate: a full disk is an IoError here, never a
-// SIGBUS later) and copied into a mapping of the pages it covers alone; its partial first and last
-// pages, which it may share with another slice (another process, perhaps another node), are
-// pwritten, so no page is ever stored to by two writers. A file system without fallocate or a
-// shared mapping gets pwrite. CONTACTGRID_WRITE=pwrite / mapped forces one (measurement and test
-// knob; mapped still falls back where refused).
-constexpr std::uint64_t kMappedFrom = std::uint64_t(64) << 20;  // bytes of a slice
-constexpr int kMappedWriters = 16;                              // threads storing into the mapping
-
-// Adds the pieces of a mapped write (through `add`) and records the mappings; false (nothing
-// mapped, nothing added) when the slice is small or the file system refuses.
-template <class Add>
-bool map_contact_rows(const ContactFileLayout& layout, int fd, std::uint64_t first_row, std::uint64_t n,
-                      const std::array<const unsigned char*, 10>& src,
-                      std::vector<std::pair<void*, std::size_t>>& maps, Add&& add) {
-  const char* env = std::getenv("CONTACTGRID_WRITE");
-  const std::string_view knob = env ? env : "";
-  std::uint64_t total = 0;
-  for (const ContactFileLayout::Dataset& d : layout.datasets) total += n * d.row_bytes;
-  if (knob == "pwrite" || (knob != "mapped" && total < kMappedFrom) || n == 0) return false;
-  const std::uint64_t page = static_cast<std::uint64_t>(::sysconf(_SC_PAGESIZE));
-  for (std::size_t k = 0; k < layout.datasets.size(); ++k) {
-    const ContactFileLayout::Dataset& d = layout.datasets[k];
-    const std::uint64_t lo = d.offset + first_row * d.row_bytes, bytes = n * d.row_bytes;
-    if (::fallocate(fd, 0, static_cast<off_t>(lo), static_cast<off_t>(bytes)) != 0) {
-      const int e = errno;
-      if (e == ENOSPC || e == EDQUOT || e == EFBIG || e == EIO)
-        throw IoError(fmt::format("{}: {}: cannot allocate rows {} to {} (in {}): {}", layout.path, d.name,
-                                  first_row, first_row + n - 1, layout.temp, std::strerror(e)));
-      return false;  // not supported here (EOPNOTSUPP, ENODEV, ...): pwrite
-    }
-  }
-  for (std::size_t k = 0; k < layout.datasets.size(); ++k) {
-    const ContactFileLayout::Dataset& d = layout.datasets[k];
-    const std::uint64_t lo = d.offset + first_row * d.row_bytes, hi = lo + n * d.row_bytes;
-    const std::uint64_t a = (lo + page - 1) / page * page, b = hi / page * page;
-    if (b <= a) continue;
-    void* m = ::mmap(nullptr, b - a, PROT_READ | PROT_WRITE, MAP_SHARED, fd, static_cast<off_t>(a));
-    if (m == MAP_FAILED) {
-      for (const auto& [p, len] : maps) ::munmap(p, len);
-      maps.clear();
-      return false;
-    }
-    maps.push_back({m, b - a});
-  }
-  std::size_t next_map = 0;
-  for (std::size_t k = 0; k < layout.datasets.size(); ++k) {
-    const ContactFileLayout::Dataset& d = layout.datasets[k];
-    const std::uint64_t lo = d.offset + first_row * d.row_bytes, hi = lo + n * d.row_bytes;
-    const std::uint64_t a = (lo + page - 1) / page * page, b = hi / page * page;
-    if (b <= a) {
-      add(k, src[k], nullptr, lo, hi - lo);
-      continue;
-    }
-    auto* base = static_cast<unsigned char*>(maps[next_map++].first);
-    add(k, src[k], nullptr, lo, a - lo);            // shared first page
-    add(k, src[k] + (a - lo), base, a, b - a);      // pages of this slice alone
-    add(k, src[k] + (b - lo), nullptr, b, hi - b);  // shared last page
-  }
-  return true;
-}
-
 template <class Real>
 void write_contact_rows(const ContactFileLayout& layout, std::uint64_t first_row, const Contacts<Real>& c,
                         int threads) {
@@ -1106,54 +1038,41 @@ void write_contact_rows(const ContactFileLayout& layout, std::uint64_t first_row
                             layout.path, first_row, n, layout.rows));
   if (n == 0) return;
 
+  // Blocks of at most 4 MiB (whole rows), over every dataset, written by a team of threads.
+  struct Block {
+    std::size_t dataset;
+    const unsigned char* src;
+    std::uint64_t offset, bytes, row;
+  };
   const std::array<const unsigned char*, 10> src = contact_sources(c);
-  const int fd = ::open(layout.temp.c_str(), O_RDWR | O_CLOEXEC);
+  std::vector<Block> blocks;
+  for (std::size_t k = 0; k < layout.datasets.size(); ++k) {
+    const ContactFileLayout::Dataset& d = layout.datasets[k];
+    const std::uint64_t rows_per_block = std::max<std::uint64_t>(1, (std::uint64_t(4) << 20) / d.row_bytes);
+    for (std::uint64_t r = 0; r < n; r += rows_per_block) {
+      const std::uint64_t m = std::min(rows_per_block, n - r);
+      blocks.push_back({k, src[k] + r * d.row_bytes, d.offset + (first_row + r) * d.row_bytes,
+                        m * d.row_bytes, first_row + r});
+    }
+  }
+  const int fd = ::open(layout.temp.c_str(), O_WRONLY | O_CLOEXEC);
   if (fd < 0) {
     const int e = errno;
     throw IoError(
         fmt::format("{}: cannot open {} for writing: {}", layout.path, layout.temp, std::strerror(e)));
   }
-  // Pieces of at most 4 MiB (whole rows, except at the page edges of a mapping), over every dataset,
-  // written by a team of threads: into a mapping of the file (dst) or by pwrite (at offset).
-  struct Piece {
-    std::size_t dataset;
-    const unsigned char* src;
-    unsigned char* dst;  // null: pwrite
-    std::uint64_t offset, bytes;
-  };
-  std::vector<Piece> pieces;
-  auto add = [&](std::size_t k, const unsigned char* from, unsigned char* dst, std::uint64_t offset,
-                 std::uint64_t bytes) {
-    constexpr std::uint64_t kPiece = std::uint64_t(4) << 20;
-    const std::uint64_t step =
-        std::max<std::uint64_t>(1, kPiece / layout.datasets[k].row_bytes) * layout.datasets[k].row_bytes;
-    for (std::uint64_t at = 0; at < bytes; at += step)
-      pieces.push_back({k, from + at, dst ? dst + at : nullptr, offset + at, std::min(step, bytes - at)});
-  };
-  std::vector<std::pair<void*, std::size_t>> maps;
-  const bool mapped = map_contact_rows(layout, fd, first_row, n, src, maps, add);
-  if (!mapped) {
-    for (std::size_t k = 0; k < layout.datasets.size(); ++k) {
-      const ContactFileLayout::Dataset& d = layout.datasets[k];
-      add(k, src[k], nullptr, d.offset + first_row * d.row_bytes, n * d.row_bytes);
-    }
-  }
   std::mutex failed_mutex;
-  std::optional<std::pair<std::size_t, int>> failed;  // (piece, errno) of the first failed piece
-  const int team = std::min(threads > 0 ? threads : omp_get_max_threads(), mapped ? kMappedWriters : 1 << 20);
-  const std::ptrdiff_t np = static_cast<std::ptrdiff_t>(pieces.size());
-#pragma omp parallel for num_threads(team) schedule(dynamic, 1) if (np > 1)
-  for (std::ptrdiff_t b = 0; b < np; ++b) {
-    const Piece& piece = pieces[static_cast<std::size_t>(b)];
-    if (piece.dst) {
-      std::memcpy(piece.dst, piece.src, piece.bytes);
-      continue;
-    }
+  std::optional<std::pair<std::size_t, int>> failed;  // (block, errno) of the first failed block
+  const int team = threads > 0 ? threads : omp_get_max_threads();
+  const std::ptrdiff_t nb = static_cast<std::ptrdiff_t>(blocks.size());
+#pragma omp parallel for num_threads(team) schedule(dynamic, 1) if (nb > 1)
+  for (std::ptrdiff_t b = 0; b < nb; ++b) {
+    const Block& block = blocks[static_cast<std::size_t>(b)];
     std::uint64_t done = 0;
     int error = 0;
-    while (done < piece.bytes) {
+    while (done < block.bytes) {
       const ssize_t w =
-          ::pwrite(fd, piece.src + done, piece.bytes - done, static_cast<off_t>(piece.offset + done));
+          ::pwrite(fd, block.src + done, block.bytes - done, static_cast<off_t>(block.offset + done));
       if (w < 0 && errno == EINTR) continue;
       if (w <= 0) {
         error = w < 0 ? errno : ENOSPC;  // no progress: treat as a full device
@@ -1167,15 +1086,13 @@ void write_contact_rows(const ContactFileLayout& layout, std::uint64_t first_row
         failed.emplace(static_cast<std::size_t>(b), error);
     }
   }
-  for (const auto& [p, len] : maps) ::munmap(p, len);
   const int closed = ::close(fd);
   const int close_error = errno;
   if (failed) {
-    const Piece& piece = pieces[failed->first];
-    const ContactFileLayout::Dataset& d = layout.datasets[piece.dataset];
-    const std::uint64_t row = (piece.offset - d.offset) / d.row_bytes;
-    throw IoError(fmt::format("{}: {}: cannot write rows {} to {} (into {}): {}", layout.path, d.name, row,
-                              (piece.offset + piece.bytes - 1 - d.offset) / d.row_bytes, layout.temp,
+    const Block& block = blocks[failed->first];
+    const ContactFileLayout::Dataset& d = layout.datasets[block.dataset];
+    throw IoError(fmt::format("{}: {}: cannot write rows {} to {} (into {}): {}", layout.path, d.name,
+                              block.row, block.row + block.bytes / d.row_bytes - 1, layout.temp,
                               std::strerror(failed->second)));
   }
   if (closed != 0) {

@@ -461,22 +461,12 @@ Contacts<Real> slice_of(const Contacts<Real>& c, std::size_t from, std::size_t n
 // Uneven slices (one row, empty, large, ...) written in a scrambled order with varying thread counts,
 // through the layout's text form (as another process receives it): the file reads back as the
 // contacts, and its datasets are byte for byte those of the one-call writer.
-// `writer`: the CONTACTGRID_WRITE knob for the phased writes (the one-call file is always pwritten).
 template <class Real>
-void phased_round_trip(const std::string& dir, std::size_t k, bool full, const char* writer = nullptr) {
+void phased_round_trip(const std::string& dir, std::size_t k, bool full) {
   const bool fp32 = std::is_same_v<Real, float>;
   const Contacts<Real> c = sample_contacts<Real>(k, full);
   const std::string file = dir + "/phased.h5", whole = dir + "/whole.h5";
-  ::setenv("CONTACTGRID_WRITE", "pwrite", 1);
   cg::write_contacts(whole, c, sample_info(fp32 ? "fp32" : "fp64"), 1);
-  if (writer) {
-    ::setenv("CONTACTGRID_WRITE", writer, 1);
-  } else {
-    ::unsetenv("CONTACTGRID_WRITE");
-  }
-  struct Unset {
-    ~Unset() { ::unsetenv("CONTACTGRID_WRITE"); }
-  } unset;
   const cg::ContactFileLayout layout =
       cg::create_contact_file(file, k, fp32 ? cg::Precision::fp32 : cg::Precision::fp64, full);
   const cg::ContactFileLayout remote = cg::ContactFileLayout::from_text(layout.to_text());
@@ -527,35 +517,6 @@ TEST_F(Hdf5Io, PhasedContactsEmptyFp32Full) { phased_round_trip<float>(m_dir.str
 // several threads at once.
 TEST_F(Hdf5Io, PhasedContactsManyBlocksManyThreads) {
   phased_round_trip<double>(m_dir.string(), 300000, true);
-}
-
-// The mapped writer (forced: these slices are below its automatic size): slices that share their
-// first or last page with another slice (pwritten there) or lie within one page, in fp32 and fp64,
-// give the same bytes as pwrite.
-TEST_F(Hdf5Io, PhasedContactsMappedWriterIsByteIdentical) {
-  phased_round_trip<double>(m_dir.string(), 300000, true, "mapped");
-  phased_round_trip<float>(m_dir.string(), 300000, false, "mapped");
-  phased_round_trip<float>(m_dir.string(), 1000, true, "mapped");
-  phased_round_trip<double>(m_dir.string(), 1, false, "mapped");
-}
-
-// One slice of 1.3 million fp32 rows (over 64 MiB: mapped without the knob) with 3 threads: the
-// datasets are byte for byte those of the pwrite writer.
-TEST_F(Hdf5Io, LargeContactSliceIsWrittenMapped) {
-  const std::size_t k = 1300000;
-  const Contacts<float> c = sample_contacts<float>(k, false);
-  ::setenv("CONTACTGRID_WRITE", "pwrite", 1);
-  cg::write_contacts(path("pwrite.h5"), c, sample_info("fp32"), 3);
-  ::unsetenv("CONTACTGRID_WRITE");
-  const cg::ContactFileLayout layout = cg::create_contact_file(path("c.h5"), k, cg::Precision::fp32, false);
-  cg::write_contact_rows(layout, 0, c, 3);
-  cg::commit_contact_file(layout, sample_info("fp32"));
-  for (std::size_t d = 0; d < 6; ++d) {
-    EXPECT_EQ(cg::read_dataset_bytes(path("c.h5"), k_contact_datasets[d]),
-              cg::read_dataset_bytes(path("pwrite.h5"), k_contact_datasets[d]))
-        << k_contact_datasets[d];
-  }
-  EXPECT_EQ(cg::read_contacts(path("c.h5")).contacts.id_b, c.id_b);
 }
 
 TEST_F(Hdf5Io, ContactFileLayoutTextRoundTrip) {
