@@ -75,6 +75,11 @@ template <class Real>
 void run_stages(CudaBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times,
                 EngineStats& stats);
 void destroy(CudaBackend* backend);
+// Resident bodies of Engine::set_resident (DEVICE rows kept between calls).
+void resident_upload(CudaBackend& backend, const BodiesView& bodies);
+DeviceBodiesView resident_view(const CudaBackend& backend);
+void resident_copy(CudaBackend& backend, std::size_t first, std::size_t count, Vec3<double>* position,
+                   double* radius, bool to_device);
 // Validation and bounds of DEVICE bodies (same results and InputError texts as compute_bounds).
 Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies);
 

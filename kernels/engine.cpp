@@ -304,6 +304,15 @@ void destroy(CudaBackend* b) { delete b; }
 Bounds device_bounds(CudaBackend&, const DeviceBodiesView&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
+void resident_upload(CudaBackend&, const BodiesView&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+DeviceBodiesView resident_view(const CudaBackend&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+void resident_copy(CudaBackend&, std::size_t, std::size_t, Vec3<double>*, double*, bool) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
 }  // namespace detail
 #endif
 
@@ -315,6 +324,12 @@ struct Engine<Real>::Impl {
   detail::CudaBackend* cuda = nullptr;
   StageTimes times;
   EngineStats stats;
+  // resident bodies of the CPU backend (CUDA keeps them in the backend) and their last contacts
+  HostVector<Vec3<double>> resident_position;
+  HostVector<double> resident_radius;
+  HostVector<std::uint8_t> resident_report;
+  std::size_t resident_rows = 0;
+  Contacts<Real> resident_contacts;
   ~Impl() { detail::destroy(cuda); }
 };
 
@@ -427,6 +442,86 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
   s.times.push_back({"plan", std::chrono::duration<double>(clock::now() - t0).count()});
   detail::run_stages(*s.cuda, job, out, s.times, s.stats);
   s.stats.contacts = device_out ? device_out->count : out.size();
+}
+
+template <class Real>
+void Engine<Real>::set_resident(const BodiesView& b) {
+  Impl& s = *m_impl;
+  if (!b.id.empty()) throw UsageError("set_resident: ids are implied (row i is body i)");
+  if (b.position.size() != b.size() || (!b.report.empty() && b.report.size() != b.size()))
+    throw UsageError("set_resident: the arrays differ in length");
+  s.resident_rows = b.size();
+  s.resident_contacts = Contacts<Real>{};
+  if (s.resolved == Backend::cuda) {
+    detail::resident_upload(*s.cuda, b);
+    return;
+  }
+  s.resident_position.assign(b.position.begin(), b.position.end());
+  s.resident_radius.assign(b.radius.begin(), b.radius.end());
+  s.resident_report.assign(b.report.begin(), b.report.end());
+}
+
+template <class Real>
+std::size_t Engine<Real>::resident_size() const {
+  return m_impl->resident_rows;
+}
+
+namespace {
+void check_rows(std::size_t first, std::size_t count, std::size_t rows, const char* what) {
+  if (first > rows || count > rows - first)
+    throw UsageError(std::string(what) + ": rows " + std::to_string(first) + " + " + std::to_string(count) +
+                     " are outside the " + std::to_string(rows) + " resident rows");
+}
+}  // namespace
+
+template <class Real>
+void Engine<Real>::read_resident(std::size_t first, std::size_t count, Vec3<double>* position,
+                                 double* radius) {
+  Impl& s = *m_impl;
+  check_rows(first, count, s.resident_rows, "read_resident");
+  if (count == 0) return;
+  if (s.resolved == Backend::cuda) {
+    detail::resident_copy(*s.cuda, first, count, position, radius, false);
+    return;
+  }
+  std::copy_n(s.resident_position.data() + first, count, position);
+  std::copy_n(s.resident_radius.data() + first, count, radius);
+}
+
+template <class Real>
+void Engine<Real>::write_resident(std::size_t first, std::size_t count, const Vec3<double>* position,
+                                  const double* radius) {
+  Impl& s = *m_impl;
+  check_rows(first, count, s.resident_rows, "write_resident");
+  if (count == 0) return;
+  if (s.resolved == Backend::cuda) {
+    detail::resident_copy(*s.cuda, first, count, const_cast<Vec3<double>*>(position),
+                          const_cast<double*>(radius), true);
+    return;
+  }
+  std::copy_n(position, count, s.resident_position.data() + first);
+  std::copy_n(radius, count, s.resident_radius.data() + first);
+}
+
+template <class Real>
+std::size_t Engine<Real>::detect_resident(std::optional<Frame> frame) {
+  Impl& s = *m_impl;
+  if (s.resolved == Backend::cuda) {
+    const DeviceBodiesView v = detail::resident_view(*s.cuda);
+    return detect_device_resident(v, frame).count;
+  }
+  const std::size_t n = s.resident_rows;
+  s.resident_contacts = detect(BodiesView{{s.resident_position.data(), n},
+                                          {s.resident_radius.data(), n},
+                                          {},
+                                          {s.resident_report.data(), s.resident_report.size()}},
+                               frame);
+  return s.resident_contacts.size();
+}
+
+template <class Real>
+const Contacts<Real>& Engine<Real>::resident_contacts() const {
+  return m_impl->resident_contacts;
 }
 
 template <class Real>

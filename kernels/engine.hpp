@@ -206,6 +206,21 @@ class Engine {
   DeviceContactsView<Real> detect_device_resident(const DeviceBodiesView& bodies,
                                                   std::optional<Frame> frame = std::nullopt);
 
+  // Resident bodies: a simulation's state kept where the backend computes (host memory for the CPU
+  // backend, DEVICE memory for CUDA) between detect calls, refreshed in row ranges (a halo exchange)
+  // without moving the rest. set_resident copies `bodies` (ids implied: row i is body i; report as in
+  // BodiesView); read_resident / write_resident copy the positions and radii of rows
+  // [first, first + count) out and in (UsageError outside the rows); detect_resident detects among the
+  // resident rows and keeps the contacts where they were computed (CUDA: as detect_device_resident;
+  // CPU: resident_contacts()), returning their number.
+  void set_resident(const BodiesView& bodies);
+  std::size_t resident_size() const;
+  void read_resident(std::size_t first, std::size_t count, Vec3<double>* position, double* radius);
+  void write_resident(std::size_t first, std::size_t count, const Vec3<double>* position,
+                      const double* radius);
+  std::size_t detect_resident(std::optional<Frame> frame = std::nullopt);
+  const Contacts<Real>& resident_contacts() const;  // CPU backend: the last detect_resident's contacts
+
   Backend backend() const;  // the resolved backend (never automatic)
   const StageTimes& times() const;
   const EngineStats& stats() const;

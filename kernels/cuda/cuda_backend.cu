@@ -178,9 +178,11 @@ class CudaBackend {
   }
   std::uint64_t held_bytes() const {
     std::uint64_t s = 0;
-    for (const Bytes* b : {&m_pos, &m_rad, &m_report, &m_spheres, &m_cell_spheres, &m_perm, &m_ctrl,
-                           &m_body_blocks, &m_entry_blocks, &m_keys[0], &m_keys[1], &m_bodies[0],
-                           &m_bodies[1], &m_pairs, &m_out, &m_temp, &m_counters, &m_partials, &m_base})
+    for (const Bytes* b :
+         {&m_pos,       &m_rad,         &m_report,       &m_spheres,   &m_cell_spheres, &m_perm,
+          &m_ctrl,      &m_body_blocks, &m_entry_blocks, &m_keys[0],   &m_keys[1],      &m_bodies[0],
+          &m_bodies[1], &m_pairs,       &m_out,          &m_temp,      &m_counters,     &m_partials,
+          &m_base,      &m_res_pos,     &m_res_rad,      &m_res_report})
       s += b->bytes();
     return s;
   }
@@ -228,6 +230,9 @@ class CudaBackend {
   Bytes m_pos, m_rad, m_report, m_spheres, m_cell_spheres, m_perm, m_ctrl, m_body_blocks, m_entry_blocks;
   Bytes m_keys[2], m_bodies[2], m_pairs, m_out, m_temp, m_counters, m_partials;
   Bytes m_base;  // type-pass path: per body the super-cell index of its lowest even cell
+  Bytes m_res_pos, m_res_rad, m_res_report;  // resident bodies (Engine::set_resident)
+  std::size_t m_res_count = 0;
+  bool m_res_reported = false;             // resident report mask present
   PinnedBuffer m_h_counters, m_h_staging;  // pinned HOST staging
 };
 
@@ -835,6 +840,52 @@ std::unique_ptr<CudaBackend> make_cuda_backend(int device) {
 void destroy(CudaBackend* backend) { delete backend; }
 
 Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies) { return backend.bounds(bodies); }
+
+void resident_upload(CudaBackend& b, const BodiesView& bodies) {
+  const std::size_t n = bodies.size();
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  b.reserve({{&b.m_res_pos, n * sizeof(Vec3<double>)},
+             {&b.m_res_rad, n * sizeof(double)},
+             {&b.m_res_report, bodies.report.empty() ? 0 : n}},
+            "resident bodies");
+  b.m_res_count = n;
+  b.m_res_reported = !bodies.report.empty();
+  if (n == 0) return;
+  CG_CUDA_CHECK(cudaMemcpyAsync(b.m_res_pos.data(), bodies.position.data(), n * sizeof(Vec3<double>),
+                                cudaMemcpyHostToDevice, b.m_stream));
+  CG_CUDA_CHECK(cudaMemcpyAsync(b.m_res_rad.data(), bodies.radius.data(), n * sizeof(double),
+                                cudaMemcpyHostToDevice, b.m_stream));
+  if (!bodies.report.empty())
+    CG_CUDA_CHECK(
+        cudaMemcpyAsync(b.m_res_report.data(), bodies.report.data(), n, cudaMemcpyHostToDevice, b.m_stream));
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+}
+
+DeviceBodiesView resident_view(const CudaBackend& b) {
+  DeviceBodiesView v;
+  v.position = reinterpret_cast<const double*>(b.m_res_pos.data());
+  v.radius = reinterpret_cast<const double*>(b.m_res_rad.data());
+  v.report = b.m_res_reported ? reinterpret_cast<const std::uint8_t*>(b.m_res_report.data()) : nullptr;
+  v.count = b.m_res_count;
+  return v;
+}
+
+// Rows [first, first + count) of positions and radii between the resident DEVICE arrays and host
+// memory (pageable: a halo is a thin layer of the rows).
+void resident_copy(CudaBackend& b, std::size_t first, std::size_t count, Vec3<double>* position,
+                   double* radius, bool to_device) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  auto* d_pos = reinterpret_cast<Vec3<double>*>(b.m_res_pos.data()) + first;
+  auto* d_rad = reinterpret_cast<double*>(b.m_res_rad.data()) + first;
+  const auto kind = to_device ? cudaMemcpyHostToDevice : cudaMemcpyDeviceToHost;
+  CG_CUDA_CHECK(cudaMemcpyAsync(to_device ? static_cast<void*>(d_pos) : position,
+                                to_device ? static_cast<const void*>(position) : d_pos,
+                                count * sizeof(Vec3<double>), kind, b.m_stream));
+  CG_CUDA_CHECK(cudaMemcpyAsync(to_device ? static_cast<void*>(d_rad) : radius,
+                                to_device ? static_cast<const void*>(radius) : d_rad, count * sizeof(double),
+                                kind, b.m_stream));
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+}
 
 template <class Real>
 void run_stages(CudaBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times,

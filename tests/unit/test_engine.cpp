@@ -254,6 +254,49 @@ TYPED_TEST(EngineTest, ReportMaskAndIds) {
   EXPECT_EQ(expect, c.size());
 }
 
+// Resident bodies: detect_resident = detect() on the same rows (report mask kept), also after a
+// range of rows was rewritten in place (a halo refresh); read_resident returns what was written;
+// ranges outside the rows are UsageErrors.
+TYPED_TEST(EngineTest, ResidentBodiesRefreshInRanges) {
+  using Real = typename TypeParam::Real;
+  auto s = random_spheres(4000, 0.5, 1.0, 107);
+  std::vector<std::uint8_t> report(s.r.size());
+  for (std::size_t i = 0; i < report.size(); ++i) report[i] = (i % 4) != 1;
+  EngineOptions o;
+  o.backend = TypeParam::backend;
+  Engine<Real> e(o), plain(o);
+  e.set_resident(BodiesView{s.p, s.r, {}, report});
+  EXPECT_EQ(e.resident_size(), s.r.size());
+  auto expect_same = [&] {
+    const Contacts<Real> c = plain.detect(BodiesView{s.p, s.r, {}, report});
+    ASSERT_GT(c.size(), 0u);
+    EXPECT_EQ(e.detect_resident(), c.size());
+    if (TypeParam::backend == Backend::cpu) {
+      EXPECT_EQ(e.resident_contacts().id_a, c.id_a);
+      EXPECT_EQ(e.resident_contacts().id_b, c.id_b);
+      EXPECT_EQ(e.resident_contacts().distance, c.distance);
+    }
+  };
+  expect_same();
+  // rows 1000 … 1999 move (and shrink) on the host and are written back; the rest stay resident
+  std::vector<Vec3<double>> p(1000);
+  std::vector<double> r(1000);
+  for (std::size_t i = 0; i < 1000; ++i) {
+    s.p[1000 + i] = {s.p[1000 + i].x + 0.37, s.p[1000 + i].y, s.p[1000 + i].z - 0.21};
+    s.r[1000 + i] *= 0.9;
+  }
+  e.write_resident(1000, 1000, s.p.data() + 1000, s.r.data() + 1000);
+  e.read_resident(1000, 1000, p.data(), r.data());
+  for (std::size_t i = 0; i < 1000; ++i) {
+    ASSERT_TRUE(p[i] == s.p[1000 + i]) << i;
+    ASSERT_EQ(r[i], s.r[1000 + i]) << i;
+  }
+  expect_same();
+  EXPECT_THROW(e.write_resident(3999, 2, p.data(), r.data()), UsageError);
+  EXPECT_THROW(e.read_resident(4001, 0, p.data(), r.data()), UsageError);
+  e.read_resident(4000, 0, p.data(), r.data());  // empty range at the end: fine
+}
+
 // The cell edge is a speed knob only: the contacts (every bit) do not depend on it, because the broad
 // phase is conservative and the narrow phase works in the frame's coordinates.
 TYPED_TEST(EngineTest, CellSizeChangesSpeedNotContacts) {
