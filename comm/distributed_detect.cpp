@@ -49,6 +49,7 @@ void validate(const DistributedOptions& options) {
   if (e.threads < 0) throw UsageError("--threads: must be >= 0 (0: all hardware threads)");
   if (options.max_sample < 1) throw UsageError("max_sample: must be >= 1");
   if (options.max_message_bytes < 64) throw UsageError("max_message_bytes: must be >= 64");
+  if (options.resident_steps < 0) throw UsageError("--steps: must be >= 0");
 }
 
 namespace {
@@ -780,6 +781,210 @@ void exchange_and_merge(const Session& session, const Comm& comm, Contacts<Real>
   }
 }
 
+// ---- resident steps (see the header comment) ------------------------------------------------------
+// An order-free fingerprint of a contact set: the sum over its pairs (splitmix64 of the two ids).
+std::uint64_t pair_hash(std::int64_t a, std::int64_t b) {
+  std::uint64_t x = static_cast<std::uint64_t>(a) * 0x9E3779B97F4A7C15ull ^ static_cast<std::uint64_t>(b);
+  x ^= x >> 30;
+  x *= 0xBF58476D1CE4E5B9ull;
+  x ^= x >> 27;
+  x *= 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
+// One rank's rows for the steps and where its halo ranges lie.
+struct StepLayout {
+  std::vector<std::uint64_t> send_counts, recv_counts;  // per rank, fixed for every step
+  std::size_t lower_ghosts = 0;  // rows [0, lower_ghosts): ghosts from lower ranks, by source
+  std::size_t owned = 0;         // rows [lower_ghosts, +owned): owned, [down only][both][up only][interior]
+  std::size_t down = 0,
+              up = 0;    // owned rows sent to lower ranks: the first `down`; to higher: [sent - up, sent)
+  std::size_t sent = 0;  // owned rows sent anywhere: the first `sent`
+};
+
+template <class Real>
+StepStats resident_steps(Session& session, const Comm& comm, Engine<Real>& engine, const Frame& frame,
+                         const SlabDecomposition* slabs, int axis, double width,
+                         std::span<const Vec3<double>> position, std::span<const double> radius,
+                         std::span<const std::int64_t> id, std::span<const std::uint8_t> report, int steps,
+                         std::uint64_t expected, std::uint64_t expected_hash, int threads) {
+  StepStats st;
+  st.steps = steps;
+  const int ranks = session.size(), me = session.rank();
+  const std::size_t p = static_cast<std::size_t>(ranks), n = radius.size();
+  const auto t0 = Clock::now();
+  StepLayout l;
+  l.send_counts.assign(p, 0);
+  l.recv_counts.assign(p, 0);
+  Buffer<Vec3<double>> rows_p;
+  Buffer<double> rows_r;
+  Buffer<std::uint8_t> rows_report;
+  Buffer<std::int64_t> rows_id;  // global ids of the rows (one rank: implied)
+  if (!slabs) {                  // one rank: every row resident as read, all pairs, no halo
+    local_stage(session, "steps", [&] { engine.set_resident(BodiesView{position, radius, {}, {}}); });
+  } else {
+    // owned rows by group (0 down only, 1 both ways, 2 up only, 3 interior), each ascending
+    std::vector<std::size_t> owned_rows;
+    local_stage(session, "steps", [&] {
+      Buffer<std::uint8_t> cls(n);
+      std::vector<char> need(p, 0);
+#pragma omp parallel num_threads(threads)
+      {
+        std::vector<char> mine(p, 0);
+#pragma omp for schedule(static)
+        for (std::size_t i = 0; i < n; ++i) {
+          if (!report[i]) {
+            cls[i] = 4;  // a ghost of the file run
+            continue;
+          }
+          bool down = false, up = false;
+          slabs->for_each_ghost_rank(component(position[i], axis), width, [&](int q) {
+            mine[static_cast<std::size_t>(q)] = 1;
+            (q < me ? down : up) = true;
+          });
+          cls[i] = down && up ? 1 : down ? 0 : up ? 2 : 3;
+        }
+#pragma omp critical
+        for (std::size_t q = 0; q < p; ++q) need[q] |= mine[q];
+      }
+      std::size_t count[5] = {0, 0, 0, 0, 0};
+      for (std::size_t i = 0; i < n; ++i) ++count[cls[i]];
+      std::size_t at[4] = {0, count[0], count[0] + count[1], count[0] + count[1] + count[2]};
+      owned_rows.resize(at[3] + count[3]);
+      for (std::size_t i = 0; i < n; ++i)
+        if (cls[i] < 4) owned_rows[at[cls[i]]++] = i;
+      l.owned = owned_rows.size();
+      l.down = count[0] + count[1];
+      l.up = count[1] + count[2];
+      l.sent = count[0] + count[1] + count[2];
+      for (std::size_t q = 0; q < p; ++q)
+        if (need[q]) l.send_counts[q] = static_cast<int>(q) < me ? l.down : l.up;
+    });
+    l.recv_counts = comm.alltoall_counts(l.send_counts);
+    for (std::size_t q = 0; q < static_cast<std::size_t>(me); ++q) l.lower_ghosts += l.recv_counts[q];
+    // the first exchange carries the ghosts' records; later steps refresh the same rows
+    Buffer<BodyRecord> send;
+    local_stage(session, "steps", [&] {
+      std::uint64_t total = 0;
+      for (std::uint64_t c : l.send_counts) total += c;
+      send = Buffer<BodyRecord>(total);
+      std::size_t w = 0;
+      for (std::size_t q = 0; q < p; ++q) {
+        const std::size_t from = static_cast<int>(q) < me ? 0 : l.sent - l.up;
+        for (std::size_t k = from; k < from + l.send_counts[q]; ++k) {
+          const std::size_t i = owned_rows[k];
+          send[w++] = BodyRecord{position[i], radius[i], id[i]};
+        }
+      }
+    });
+    const Buffer<BodyRecord> got = comm.exchange(send, l.send_counts, l.recv_counts);
+    local_stage(session, "steps", [&] {
+      const std::size_t total = l.owned + got.size();
+      rows_p = Buffer<Vec3<double>>(total);
+      rows_r = Buffer<double>(total);
+      rows_report = Buffer<std::uint8_t>(total);
+      rows_id = Buffer<std::int64_t>(total);
+#pragma omp parallel for num_threads(threads) schedule(static)
+      for (std::size_t k = 0; k < total; ++k) {
+        const bool ghost = k < l.lower_ghosts || k >= l.lower_ghosts + l.owned;
+        if (ghost) {
+          const std::size_t g = k < l.lower_ghosts ? k : k - l.owned;
+          rows_p[k] = got[g].position;
+          rows_r[k] = got[g].radius;
+          rows_id[k] = got[g].id;
+        } else {
+          const std::size_t i = owned_rows[k - l.lower_ghosts];
+          rows_p[k] = position[i];
+          rows_r[k] = radius[i];
+          rows_id[k] = id[i];
+        }
+        rows_report[k] = ghost ? 0 : 1;
+      }
+      engine.set_resident(BodiesView{rows_p.span(), rows_r.span(), {}, rows_report.span()});
+    });
+    st.halo_rows = got.size();
+  }
+  st.setup = session.max(seconds_since(t0));
+  st.halo_rows = session.sum(st.halo_rows);
+
+  // Each step: halo (the sent owned rows out of the engine → records by destination → MPI → the ghost
+  // rows into the engine), then detect. Maximum over ranks per step, median over the steps.
+  std::uint64_t total_send = 0;
+  for (std::uint64_t c : l.send_counts) total_send += c;
+  Buffer<Vec3<double>> out_p(l.sent);
+  Buffer<double> out_r(l.sent);
+  Buffer<BodyRecord> send(total_send);
+  std::vector<double> times(2 * static_cast<std::size_t>(steps), 0);
+  std::vector<std::uint64_t> found(static_cast<std::size_t>(steps), 0);
+  for (std::size_t k = 0; k < static_cast<std::size_t>(steps); ++k) {
+    const auto h0 = Clock::now();
+    if (slabs) {
+      local_stage(session, "steps", [&] {
+        engine.read_resident(l.lower_ghosts, l.sent, out_p.data(), out_r.data());
+        std::size_t w = 0;
+        for (std::size_t q = 0; q < p; ++q) {
+          const std::size_t from = static_cast<int>(q) < me ? 0 : l.sent - l.up;
+          for (std::size_t j = from; j < from + l.send_counts[q]; ++j)
+            send[w++] = BodyRecord{out_p[j], out_r[j], 0};
+        }
+      });
+      const Buffer<BodyRecord> got = comm.exchange(send, l.send_counts, l.recv_counts);
+      local_stage(session, "steps", [&] {
+        const std::size_t upper = l.lower_ghosts + l.owned;  // first row of the upper ghosts
+        for (std::size_t g = 0; g < got.size(); ++g) {
+          const std::size_t row = g < l.lower_ghosts ? g : g + l.owned;
+          rows_p[row] = got[g].position;
+          rows_r[row] = got[g].radius;
+        }
+        engine.write_resident(0, l.lower_ghosts, rows_p.data(), rows_r.data());
+        engine.write_resident(upper, rows_r.size() - upper, rows_p.data() + upper, rows_r.data() + upper);
+      });
+    }
+    times[2 * k] = seconds_since(h0);
+    const auto d0 = Clock::now();
+    local_stage(session, "steps", [&] { found[k] = engine.detect_resident(frame); });
+    times[2 * k + 1] = seconds_since(d0);
+  }
+  comm.allreduce_max(times);
+  // The CPU backend's contacts are at hand: the pairs of the last step (as global ids) hash to the
+  // run's (an order-free sum), so a missed pair and a duplicate cannot cancel out in the count.
+  const bool on_host = engine.backend() == Backend::cpu;
+  std::uint64_t hash = 0;
+  if (on_host && steps > 0) {
+    const Contacts<Real>& c = engine.resident_contacts();
+    for (std::size_t k = 0; k < c.size(); ++k) {
+      const auto a = static_cast<std::size_t>(c.id_a[k]), b = static_cast<std::size_t>(c.id_b[k]);
+      const std::int64_t ia = slabs ? rows_id[a] : std::int64_t(a), ib = slabs ? rows_id[b] : std::int64_t(b);
+      hash += pair_hash(std::min(ia, ib), std::max(ia, ib));
+    }
+  }
+  hash = session.sum(hash);
+  for (std::size_t k = 0; k < static_cast<std::size_t>(steps); ++k) {
+    st.contacts = session.sum(found[k]);
+    local_stage(session, "steps", [&] {
+      if (st.contacts != expected && me == 0)
+        throw Error("resident step " + std::to_string(k) + ": " + std::to_string(st.contacts) +
+                    " contacts over the ranks, the run found " + std::to_string(expected) +
+                    ": internal error");
+      if (on_host && k + 1 == static_cast<std::size_t>(steps) && hash != expected_hash && me == 0)
+        throw Error("resident steps: the last step's pairs differ from the run's: internal error");
+    });
+  }
+  auto median = [&](int which) {
+    std::vector<double> v;
+    for (std::size_t k = 0; k < static_cast<std::size_t>(steps); ++k)
+      v.push_back(which == 0   ? times[2 * k]
+                  : which == 1 ? times[2 * k + 1]
+                               : times[2 * k] + times[2 * k + 1]);
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  st.halo = median(0);
+  st.detect = median(1);
+  st.step = median(2);
+  return st;
+}
+
 template <class Real>
 DistributedResult<Real> run(Session& session, const std::string& path, const DistributedOptions& options) {
   constexpr Precision precision = std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64;
@@ -1003,14 +1208,18 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
                                 : every_row ? n_selected_owned
                                             : owned.size(),
                       n_ghosts = every_row ? n_selected_ghosts : ghosts.size();
+  const bool keep = options.resident_steps > 0;  // the input stays for the resident steps
+  EngineInput in;
   local_stage(session, "detect", [&] {
     if (alone) {
       local = engine->detect(BodiesView{position, radius, {}, {}}, frame);
-      position = {};
-      radius = {};
+      if (!keep) {
+        position = {};
+        radius = {};
+      }
       return;
     }
-    EngineInput in = every_row ? std::move(selected) : merge_by_id(owned, ghosts, ghost_recv_counts, threads);
+    in = every_row ? std::move(selected) : merge_by_id(owned, ghosts, ghost_recv_counts, threads);
     owned = {};
     ghosts = {};
     if (n_owned > 0) {  // a rank that owns nothing reports nothing
@@ -1042,6 +1251,20 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     exchange_and_merge(session, comm, local, n_global, options, threads, result, times);
   }
   result.contacts.full = full;
+
+  if (keep) {
+    const std::span<const Vec3<double>> p =
+        alone ? std::span<const Vec3<double>>(position) : in.position.span();
+    const std::span<const double> r = alone ? std::span<const double>(radius) : in.radius.span();
+    const std::span<const std::uint8_t> report = alone ? std::span<const std::uint8_t>() : in.report.span();
+    const std::span<const std::int64_t> id = alone ? std::span<const std::int64_t>() : in.id.span();
+    std::uint64_t hash = 0;
+    for (std::size_t k = 0; k < result.contacts.size(); ++k)
+      hash += pair_hash(result.contacts.id_a[k], result.contacts.id_b[k]);
+    result.steps =
+        resident_steps(session, comm, *engine, frame, alone ? nullptr : &*slabs, axis, width, p, r, id,
+                       report, options.resident_steps, result.total_contacts, session.sum(hash), threads);
+  }
 
   comm.allreduce_max(times);
   const char* names[6] = {

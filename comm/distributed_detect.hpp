@@ -52,6 +52,21 @@
 // engine (ids implied, all pairs reported) and its contacts are the result; the stages are still
 // reported (redistribute, halo, exchange/gather and merge take no time).
 //
+// Resident steps (DistributedOptions::resident_steps, after the above): what a simulation that keeps
+// its bodies on the GPUs pays per step for the same decomposition. Each rank's bodies go into its
+// engine once (Engine::set_resident: its GPU); every step refreshes the ghosts through the host
+// (device → host, MPI, host → device: Debian's Open MPI is not CUDA-aware) and detects again, the
+// contacts staying where they were computed. Rows are laid out so that each halo message is one
+// contiguous range at both ends: [ghosts from lower ranks][owned][ghosts from higher ranks], owned
+// ordered [sent down only][sent both ways][sent up only][interior], each group in ascending id. A
+// body's place in that order is (owner rank, row among its owner's owned rows) on every rank, so
+// "the first of a pair in that order reports it" (report mask = owned) finds each contact exactly
+// once, as the owner of the smaller id does above; every step checks that the contacts summed over
+// ranks equal K. A rank sends its whole downward set to every lower rank that needs any of it (and
+// its upward set likewise): with slabs thinner than the ghost width that is a superset of the ghosts,
+// which changes no contact. Bodies do not move between steps (no migration), so the step is the
+// "everything recomputed, halo refreshed" cost.
+//
 // Errors: options are validated before any communication. An error in a stage on any rank (bad
 // input, I/O, CUDA, memory) is agreed on at the end of the stage (Session::agree): every rank throws
 // the same exception, "[rank r/N] <stage>: <cause>". A failing MPI call (CommFailure) leaves other
@@ -90,6 +105,7 @@ struct DistributedOptions {
   std::uint64_t max_message_bytes = 1u << 30;  // per-message gather/exchange size (tests make it tiny)
   ContactOutput output = ContactOutput::root;
   SceneRead read = SceneRead::automatic;
+  int resident_steps = 0;  // > 0: then that many resident steps (see the file comment)
   // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
   // printed to stderr as a warning only if duplicates were removed.
   std::function<void(const std::string&)> log;
@@ -97,6 +113,16 @@ struct DistributedOptions {
 
 // Throws UsageError naming the bad option. Called by distributed_detect before any communication.
 void validate(const DistributedOptions& options);
+
+// Resident steps (DistributedOptions::resident_steps): per step the maximum over ranks, then the
+// median over the steps.
+struct StepStats {
+  int steps = 0;
+  std::uint64_t contacts = 0;   // per step, summed over ranks (checked equal to the file's K)
+  std::uint64_t halo_rows = 0;  // ghost rows refreshed per step, summed over ranks
+  double setup = 0;             // layout, first exchange, upload (once, max over ranks)
+  double halo = 0, detect = 0, step = 0;
+};
 
 template <class Real>
 struct DistributedResult {
@@ -121,6 +147,7 @@ struct DistributedResult {
   Backend backend = Backend::cpu;        // the engine's resolved backend (this rank)
   int threads = 1;                       // host threads of this rank (engine and host loops)
   EngineStats stats;                     // entries and pair tests summed over ranks
+  StepStats steps;                       // resident steps (steps == 0: none ran)
 };
 
 // Collective over `session`: every rank calls it with the same arguments. See the file comment.

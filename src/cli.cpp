@@ -116,6 +116,11 @@ int run_cli(int argc, char** argv, Session& session) {
                 "(each rank merges the contacts of its id_a range and writes them into the same file)")
       ->check(CLI::IsMember({"gather", "ranks"}))
       ->capture_default_str();
+  d->add_option("--steps", det.steps,
+                "Then measure N resident steps: each rank keeps its bodies on its GPU (or in memory), "
+                "refreshes its ghosts through MPI and detects again, contacts left in place (checked "
+                "against the file's count); prints the median step")
+      ->check(CLI::NonNegativeNumber);
   d->add_flag("-q,--quiet", det.quiet, "No summary");
 
   // compare

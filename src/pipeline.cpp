@@ -43,6 +43,16 @@ void print_summary(const RunInfo& info, std::uint64_t contacts, const Distribute
     fmt::print("  {:<16} {:>12.6f}\n", sub ? "  " + t.name.substr(7) : t.name, t.seconds);
   }
   fmt::print("  {:<16} {:>12.6f}\n", "total", total);
+  if (r.steps.steps > 0) {
+    const StepStats& s = r.steps;
+    fmt::print(
+        "resident steps: {} (bodies kept in each rank's engine), {} contacts per step (= the file's), {} "
+        "ghost "
+        "rows refreshed per step; setup {:.6f} s; per step, median of the maxima over ranks:\n",
+        s.steps, s.contacts, s.halo_rows, s.setup);
+    fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "halo", s.halo, "detect",
+               s.detect, "step", s.step);
+  }
 }
 
 template <class Real>
@@ -64,6 +74,7 @@ int detect(const DetectCommand& cmd, Session& session) {
   // (--write gather). --write ranks: each rank keeps the contacts of its id_a range and writes them
   // into the one output file. A CSV copy is written by rank 0 alone, so it always gathers.
   o.output = cmd.write == "ranks" && cmd.csv.empty() ? ContactOutput::id_ranges : ContactOutput::root;
+  o.resident_steps = cmd.steps;
 
   // read → slabs → redistribute (or, reading every row, select) → halo → engine → gather to rank 0
   // (or exchange by id_a range) → merge (comm/distributed_detect.cpp; with one rank: read → engine)

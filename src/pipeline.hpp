@@ -27,6 +27,7 @@ struct DetectCommand {
   std::string balance = "count";  // MPI slab balance: count | width
   std::string read = "auto";      // MPI scene read: auto | own | all
   std::string write = "gather";   // MPI output: gather (rank 0 merges, writes) | ranks (each its id_a range)
+  int steps = 0;                  // resident steps after the run (a simulation's per-step cost)
   bool quiet = false;
 };
 

@@ -150,6 +150,10 @@ std::size_t check_equal_to_single_rank(const std::string& path, const Scene& sce
     EXPECT_EQ(got.read, options.read == SceneRead::automatic ? SceneRead::every_row : options.read) << label;
   }
   EXPECT_EQ(got.cuts.size(), static_cast<std::size_t>(session().size() - 1)) << label;
+  // resident steps: every step found the run's contacts (counted, and on the CPU backend the pairs
+  // themselves, by an order-free hash; a difference throws inside the run)
+  EXPECT_EQ(got.steps.steps, options.resident_steps) << label;
+  if (options.resident_steps > 0) EXPECT_EQ(got.steps.contacts, got.total_contacts) << label;
   {  // the six top-level stages in order, then (inside "detect") the engine's own stages
     std::vector<std::string> top;
     for (const auto& t : got.times)
@@ -174,7 +178,8 @@ std::size_t check_equal_to_single_rank(const std::string& path, const Scene& sce
   return want.size();
 }
 
-// Both precisions, and both read modes: own rows + redistribution + halo, and every row + selection.
+// Both precisions, and both read modes: own rows + redistribution + halo, and every row + selection;
+// then two resident steps (with own rows: the halo layout from redistributed bodies).
 std::size_t check_both_precisions(const std::string& name, const Scene& scene,
                                   const DistributedOptions& options = base_options()) {
   const std::string path = write_shared(name, scene);
@@ -182,6 +187,7 @@ std::size_t check_both_precisions(const std::string& name, const Scene& scene,
   for (SceneRead read : {SceneRead::own_rows, SceneRead::every_row}) {
     DistributedOptions o = options;
     o.read = read;
+    o.resident_steps = read == SceneRead::own_rows ? 2 : 1;
     const std::string what = name + (read == SceneRead::own_rows ? " (own rows)" : " (every row)");
     k = check_equal_to_single_rank<double>(path, scene, o, what);
     check_equal_to_single_rank<float>(path, scene, o, what);
