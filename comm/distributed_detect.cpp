@@ -914,7 +914,28 @@ StepStats resident_steps(Session& session, const Comm& comm, Engine<Real>& engin
   Buffer<Vec3<double>> out_p(l.sent);
   Buffer<double> out_r(l.sent);
   Buffer<BodyRecord> send(total_send);
-  std::vector<double> times(2 * static_cast<std::size_t>(steps), 0);
+  // the host ends of the halo copies page-locked once (CUDA), for every step
+  struct Pin {
+    Engine<Real>& engine;
+    void* p;
+    bool pinned;
+    Pin(Engine<Real>& e, void* ptr, std::size_t bytes) : engine(e), p(ptr), pinned(e.pin_host(ptr, bytes)) {}
+    ~Pin() {
+      if (pinned) engine.unpin_host(p);
+    }
+  };
+  std::optional<Pin> pins[4];
+  if (slabs) {
+    local_stage(session, "steps", [&] {
+      pins[0].emplace(engine, out_p.data(), out_p.size() * sizeof(Vec3<double>));
+      pins[1].emplace(engine, out_r.data(), out_r.size() * sizeof(double));
+      pins[2].emplace(engine, rows_p.data(), rows_p.size() * sizeof(Vec3<double>));
+      pins[3].emplace(engine, rows_r.data(), rows_r.size() * sizeof(double));
+    });
+  }
+  const std::size_t n_stages = k_engine_stages.size();
+  std::vector<double> times(2 * static_cast<std::size_t>(steps), 0),
+      stage_times(n_stages * static_cast<std::size_t>(steps), 0);
   std::vector<std::uint64_t> found(static_cast<std::size_t>(steps), 0);
   for (std::size_t k = 0; k < static_cast<std::size_t>(steps); ++k) {
     const auto h0 = Clock::now();
@@ -944,8 +965,19 @@ StepStats resident_steps(Session& session, const Comm& comm, Engine<Real>& engin
     const auto d0 = Clock::now();
     local_stage(session, "steps", [&] { found[k] = engine.detect_resident(frame); });
     times[2 * k + 1] = seconds_since(d0);
+    for (const StageTime& t : engine.times())
+      for (std::size_t j = 0; j < n_stages; ++j)
+        if (t.name == k_engine_stages[j]) stage_times[k * n_stages + j] = t.seconds;
   }
   comm.allreduce_max(times);
+  comm.allreduce_max(stage_times);
+  for (std::size_t j = 0; j < n_stages && steps > 0; ++j) {
+    std::vector<double> v;
+    for (std::size_t k = 0; k < static_cast<std::size_t>(steps); ++k)
+      v.push_back(stage_times[k * n_stages + j]);
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    if (v[v.size() / 2] > 0) st.stages.push_back({k_engine_stages[j], v[v.size() / 2]});
+  }
   // The CPU backend's contacts are at hand: the pairs of the last step (as global ids) hash to the
   // run's (an order-free sum), so a missed pair and a duplicate cannot cancel out in the count.
   const bool on_host = engine.backend() == Backend::cpu;

@@ -122,6 +122,7 @@ struct StepStats {
   std::uint64_t halo_rows = 0;  // ghost rows refreshed per step, summed over ranks
   double setup = 0;             // layout, first exchange, upload (once, max over ranks)
   double halo = 0, detect = 0, step = 0;
+  StageTimes stages;  // the engine's stages inside detect (each: median over steps of the max over ranks)
 };
 
 template <class Real>

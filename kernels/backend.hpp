@@ -78,6 +78,8 @@ void destroy(CudaBackend* backend);
 // Resident bodies of Engine::set_resident (DEVICE rows kept between calls).
 void resident_upload(CudaBackend& backend, const BodiesView& bodies);
 DeviceBodiesView resident_view(const CudaBackend& backend);
+bool pin_host(CudaBackend& backend, void* p, std::size_t bytes);
+void unpin_host(CudaBackend& backend, void* p);
 void resident_copy(CudaBackend& backend, std::size_t first, std::size_t count, Vec3<double>* position,
                    double* radius, bool to_device);
 // Validation and bounds of DEVICE bodies (same results and InputError texts as compute_bounds).

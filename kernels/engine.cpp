@@ -304,6 +304,10 @@ void destroy(CudaBackend* b) { delete b; }
 Bounds device_bounds(CudaBackend&, const DeviceBodiesView&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
+bool pin_host(CudaBackend&, void*, std::size_t) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+void unpin_host(CudaBackend&, void*) { throw CudaError("this contactgrid was built without CUDA"); }
 void resident_upload(CudaBackend&, const BodiesView&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
@@ -522,6 +526,16 @@ std::size_t Engine<Real>::detect_resident(std::optional<Frame> frame) {
 template <class Real>
 const Contacts<Real>& Engine<Real>::resident_contacts() const {
   return m_impl->resident_contacts;
+}
+
+template <class Real>
+bool Engine<Real>::pin_host(void* p, std::size_t bytes) {
+  return m_impl->resolved == Backend::cuda && p && bytes > 0 && detail::pin_host(*m_impl->cuda, p, bytes);
+}
+
+template <class Real>
+void Engine<Real>::unpin_host(void* p) {
+  if (m_impl->resolved == Backend::cuda && p) detail::unpin_host(*m_impl->cuda, p);
 }
 
 template <class Real>

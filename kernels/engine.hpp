@@ -220,6 +220,11 @@ class Engine {
                       const double* radius);
   std::size_t detect_resident(std::optional<Frame> frame = std::nullopt);
   const Contacts<Real>& resident_contacts() const;  // CPU backend: the last detect_resident's contacts
+  // Page-locks host memory that read_resident / write_resident use again and again (CUDA:
+  // cudaHostRegister, so the copies run at the link's speed; CPU: nothing to do). false when the
+  // driver refuses (the copies stay pageable). unpin_host before that memory is freed.
+  bool pin_host(void* p, std::size_t bytes);
+  void unpin_host(void* p);
 
   Backend backend() const;  // the resolved backend (never automatic)
   const StageTimes& times() const;

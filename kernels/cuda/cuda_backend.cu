@@ -408,9 +408,9 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
                             ? renumber_env[0] == '1'
                             : n64 * sizeof(Sphere<Real>) > m_l2_bytes;
   if (renumber) run_cub(sort_home);
-  cuda::reorder_kernel<Real, Key>
-      <<<nb, kBlock, 0, st>>>(d_spheres, n, g, home_index.Current(), d_cell_spheres, d_ctrl, d_perm,
-                              d_body_totals, d_counters, d_base, type_passes ? d_type_totals : nullptr);
+  cuda::reorder_kernel<Real, Key><<<nb, kBlock, 0, st>>>(
+      d_spheres, n, g, home_index.Current(), d_cell_spheres, d_ctrl, d_perm, d_body_totals, d_counters,
+      d_base, type_passes ? d_type_totals : nullptr, d_report);
   CG_CUDA_CHECK_LAUNCH("reorder");
   mark(1);
   if (type_passes) {
@@ -859,6 +859,18 @@ void resident_upload(CudaBackend& b, const BodiesView& bodies) {
     CG_CUDA_CHECK(
         cudaMemcpyAsync(b.m_res_report.data(), bodies.report.data(), n, cudaMemcpyHostToDevice, b.m_stream));
   CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+}
+
+bool pin_host(CudaBackend& b, void* p, std::size_t bytes) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  if (cudaHostRegister(p, bytes, cudaHostRegisterDefault) == cudaSuccess) return true;
+  (void)cudaGetLastError();  // refused: the copies stay pageable
+  return false;
+}
+
+void unpin_host(CudaBackend& b, void* p) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  CG_CUDA_CHECK(cudaHostUnregister(p));
 }
 
 DeviceBodiesView resident_view(const CudaBackend& b) {
