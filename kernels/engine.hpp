@@ -57,11 +57,17 @@ struct Contacts {
 
 // The bodies handed to the engine: bounding spheres in the world frame (host memory).
 // Invariant: ids strictly ascending (so local index order == id order).
+// A report mask byte per body (BodiesView::report, DeviceBodiesView::report): a pair (a < b) is
+// reported iff report[a] has kReportedBit (the owner of the smaller id reports) and not both
+// report[a] and report[b] have kPairedBit (their pairs were found elsewhere: a rank's boundary bodies
+// against its ghosts, after its owned bodies were detected alone).
+constexpr std::uint8_t kReportedBit = 1, kPairedBit = 2;
+
 struct BodiesView {
   std::span<const Vec3<double>> position;
   std::span<const double> radius;
   std::span<const std::int64_t> id;      // empty: ids are 0 … n-1
-  std::span<const std::uint8_t> report;  // empty: all pairs; else pair (a<b) reported iff report[a]
+  std::span<const std::uint8_t> report;  // empty: all pairs; else see kReportedBit, kPairedBit
   std::size_t size() const { return radius.size(); }
 };
 

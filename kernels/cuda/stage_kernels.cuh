@@ -24,6 +24,7 @@ constexpr int kStaged = kBlock + 32;  // count_pairs: a block's entries and the 
 // random read of the mask by input index per visit (at 2^26 on 2 H200 ranks the pairs stage took
 // 5.5 ms per rank instead of about half of the single rank's 6.5 ms).
 constexpr std::uint32_t kReportBit = 0x40u;
+constexpr std::uint32_t kPairedCtrlBit = 0x80u;  // the mask's kPairedBit, likewise
 #ifndef CG_PAIRS_MIN_BLOCKS
 #define CG_PAIRS_MIN_BLOCKS 6
 #endif
@@ -209,7 +210,8 @@ __global__ void __launch_bounds__(kBlock)
     cell_spheres[j] = s;
     perm[j] = i;
     const BodyCells bc = body_cells(s, g);
-    cb = control_bits(bc) | (report && report[i] ? kReportBit : 0u);
+    const std::uint32_t m = report ? report[i] : 0u;
+    cb = control_bits(bc) | ((m & kReportedBit) ? kReportBit : 0u) | ((m & kPairedBit) ? kPairedCtrlBit : 0u);
     ctrl[j] = static_cast<std::uint8_t>(cb);
     count = entry_count(bc);
     live = true;
@@ -316,8 +318,8 @@ template <class Real, class Emit>
 __device__ __forceinline__ void visit(const EntryBody<Real>& x, std::uint32_t b, std::uint8_t cb,
                                       const Sphere<Real>& sb, std::uint32_t pb, const std::uint8_t* report,
                                       std::uint32_t& tests, Emit& emit) {
-  if (report && !((x.pa < pb ? x.ca : cb) & kReportBit))
-    return;  // the report flag of the smaller input index
+  // the report flag of the smaller input index; no pair of two bodies paired elsewhere
+  if (report && (!((x.pa < pb ? x.ca : cb) & kReportBit) || (x.ca & cb & kPairedCtrlBit))) return;
   if (!test_in_cell(x.ca, cb, x.type)) return;
   ++tests;
   if (spheres_touch(x.sa, sb)) emit(x.a, b);

@@ -120,12 +120,14 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
   auto for_each_contact = [&](std::size_t e, auto&& emit) {
     const Key k = keys[e];
     const std::uint32_t a = body[e];
-    if (!all && !report[a]) return std::uint64_t(0);  // pairs (a, b > a) belong to a's owner
+    if (!all && !(report[a] & kReportedBit)) return std::uint64_t(0);  // pairs (a, b > a) belong to a's owner
     const std::uint32_t type = key_type(k, half_bits);
     const Sphere<Real> sa = entry_sphere[e];
     const std::uint8_t ca = entry_ctrl[e];
     std::uint64_t tests = 0;
+    const std::uint8_t pa = all ? 0 : report[a];
     for (std::size_t f = e + 1; f < n_entries && keys[f] == k; ++f) {
+      if ((pa & kPairedBit) && (report[body[f]] & kPairedBit)) continue;  // both paired elsewhere
       if (!test_in_cell(ca, entry_ctrl[f], type)) continue;
       ++tests;
       if (spheres_touch(sa, entry_sphere[f])) emit(a, body[f]);

@@ -106,7 +106,7 @@ TYPED_TEST(CudaBackendTest, EveryPathIsBitIdentical) {
   std::vector<std::uint8_t> report(masked.r.size());
   for (std::size_t i = 0; i < ids.size(); ++i) {
     ids[i] = std::int64_t(3 * i + 1);
-    report[i] = (i % 3) != 0;
+    report[i] = static_cast<std::uint8_t>(((i % 3) != 0 ? kReportedBit : 0) | (i % 5 < 2 ? kPairedBit : 0));
   }
   for (const Knob& k :
        {Knob{"CONTACTGRID_CUDA_TYPE_PASSES", "1"}, Knob{"CONTACTGRID_CUDA_RENUMBER", "0"},

@@ -254,6 +254,35 @@ TYPED_TEST(EngineTest, ReportMaskAndIds) {
   EXPECT_EQ(expect, c.size());
 }
 
+// The mask's two bits: a pair (a < b) is reported iff a has kReportedBit and not both have kPairedBit.
+TYPED_TEST(EngineTest, PairedBitSkipsPairsFoundElsewhere) {
+  auto s = random_spheres(5000, 0.5, 1.0, 113);
+  const auto all = this->run(s);
+  std::vector<std::uint8_t> report(s.r.size());
+  for (std::size_t i = 0; i < report.size(); ++i) report[i] = static_cast<std::uint8_t>((i * 7 + i / 5) % 4);
+  EngineOptions o;
+  o.backend = TypeParam::backend;
+  Engine<typename TypeParam::Real> e(o);
+  const auto c = e.detect(BodiesView{s.p, s.r, {}, report});
+  std::size_t expect = 0, skipped = 0;
+  for (std::size_t k = 0; k < all.size(); ++k) {
+    const std::uint8_t ra = report[static_cast<std::size_t>(all.id_a[k])],
+                       rb = report[static_cast<std::size_t>(all.id_b[k])];
+    if (!(ra & kReportedBit)) continue;
+    if ((ra & kPairedBit) && (rb & kPairedBit)) {
+      ++skipped;
+      continue;
+    }
+    ASSERT_LT(expect, c.size());
+    EXPECT_EQ(c.id_a[expect], all.id_a[k]);
+    EXPECT_EQ(c.id_b[expect], all.id_b[k]);
+    EXPECT_EQ(c.distance[expect], all.distance[k]);
+    ++expect;
+  }
+  EXPECT_EQ(expect, c.size());
+  EXPECT_GT(skipped, 100u);  // the scene exercises the rule
+}
+
 // Resident bodies: detect_resident = detect() on the same rows (report mask kept), also after a
 // range of rows was rewritten in place (a halo refresh); read_resident returns what was written;
 // ranges outside the rows are UsageErrors.
