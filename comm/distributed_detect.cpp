@@ -18,6 +18,7 @@
 #include <numeric>
 #include <optional>
 #include <queue>
+#include <thread>
 #include <tuple>
 #include <type_traits>
 #include <utility>
@@ -795,12 +796,31 @@ std::uint64_t pair_hash(std::int64_t a, std::int64_t b) {
 // One rank's rows for the steps and where its halo ranges lie.
 struct StepLayout {
   std::vector<std::uint64_t> send_counts, recv_counts;  // per rank, fixed for every step
-  std::size_t lower_ghosts = 0;  // rows [0, lower_ghosts): ghosts from lower ranks, by source
-  std::size_t owned = 0;         // rows [lower_ghosts, +owned): owned, [down only][both][up only][interior]
-  std::size_t down = 0,
-              up = 0;    // owned rows sent to lower ranks: the first `down`; to higher: [sent - up, sent)
-  std::size_t sent = 0;  // owned rows sent anywhere: the first `sent`
+  std::size_t owned = 0;         // owned rows: [down only][both ways][up only][interior] (engine A)
+  std::size_t down = 0, up = 0;  // owned rows sent to lower ranks: the first `down`; up: [sent - up, sent)
+  std::size_t sent = 0;          // owned rows sent anywhere: the first `sent` (the boundary)
+  std::size_t lower_ghosts = 0;  // boundary rows (engine B): [lower ghosts][the `sent` owned][upper ghosts]
 };
+
+// Page-locked host memory for an engine's copies (released before the memory is).
+template <class Real>
+struct Pin {
+  Engine<Real>& engine;
+  void* p;
+  bool pinned;
+  Pin(Engine<Real>& e, void* ptr, std::size_t bytes) : engine(e), p(ptr), pinned(e.pin_host(ptr, bytes)) {}
+  ~Pin() {
+    if (pinned) engine.unpin_host(p);
+  }
+  Pin(const Pin&) = delete;
+  Pin& operator=(const Pin&) = delete;
+};
+
+double median_of(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+  return v[v.size() / 2];
+}
 
 template <class Real>
 StepStats resident_steps(Session& session, const Comm& comm, Engine<Real>& engine, const Frame& frame,
@@ -811,20 +831,22 @@ StepStats resident_steps(Session& session, const Comm& comm, Engine<Real>& engin
   StepStats st;
   st.steps = steps;
   const int ranks = session.size(), me = session.rank();
-  const std::size_t p = static_cast<std::size_t>(ranks), n = radius.size();
+  const std::size_t p = static_cast<std::size_t>(ranks), n = radius.size(),
+                    n_steps = static_cast<std::size_t>(steps);
   const auto t0 = Clock::now();
   StepLayout l;
   l.send_counts.assign(p, 0);
   l.recv_counts.assign(p, 0);
-  Buffer<Vec3<double>> rows_p;
-  Buffer<double> rows_r;
-  Buffer<std::uint8_t> rows_report;
-  Buffer<std::int64_t> rows_id;  // global ids of the rows (one rank: implied)
-  if (!slabs) {                  // one rank: every row resident as read, all pairs, no halo
+  Buffer<std::int64_t> owned_id;  // engine A's rows → global id
+  Buffer<Vec3<double>> b_p;       // engine B's rows, host side (page-locked)
+  Buffer<double> b_r;
+  Buffer<std::int64_t> b_id;
+  std::optional<Engine<Real>> boundary;  // engine B
+  std::optional<Pin<Real>> pin_p, pin_r;
+  if (!slabs) {  // one rank: every row resident as read, all pairs, no halo
     local_stage(session, "steps", [&] { engine.set_resident(BodiesView{position, radius, {}, {}}); });
   } else {
-    // owned rows by group (0 down only, 1 both ways, 2 up only, 3 interior), each ascending
-    std::vector<std::size_t> owned_rows;
+    std::vector<std::size_t> owned_rows;  // input rows of engine A's rows
     local_stage(session, "steps", [&] {
       Buffer<std::uint8_t> cls(n);
       std::vector<char> need(p, 0);
@@ -859,10 +881,21 @@ StepStats resident_steps(Session& session, const Comm& comm, Engine<Real>& engin
       l.sent = count[0] + count[1] + count[2];
       for (std::size_t q = 0; q < p; ++q)
         if (need[q]) l.send_counts[q] = static_cast<int>(q) < me ? l.down : l.up;
+      // engine A: the owned rows, all their pairs
+      Buffer<Vec3<double>> a_p(l.owned);
+      Buffer<double> a_r(l.owned);
+      owned_id = Buffer<std::int64_t>(l.owned);
+#pragma omp parallel for num_threads(threads) schedule(static)
+      for (std::size_t k = 0; k < l.owned; ++k) {
+        a_p[k] = position[owned_rows[k]];
+        a_r[k] = radius[owned_rows[k]];
+        owned_id[k] = id[owned_rows[k]];
+      }
+      engine.set_resident(BodiesView{a_p.span(), a_r.span(), {}, {}});
     });
     l.recv_counts = comm.alltoall_counts(l.send_counts);
     for (std::size_t q = 0; q < static_cast<std::size_t>(me); ++q) l.lower_ghosts += l.recv_counts[q];
-    // the first exchange carries the ghosts' records; later steps refresh the same rows
+    // the first exchange carries the ghosts' records (ids too); later steps refresh their rows
     Buffer<BodyRecord> send;
     local_stage(session, "steps", [&] {
       std::uint64_t total = 0;
@@ -879,141 +912,153 @@ StepStats resident_steps(Session& session, const Comm& comm, Engine<Real>& engin
     });
     const Buffer<BodyRecord> got = comm.exchange(send, l.send_counts, l.recv_counts);
     local_stage(session, "steps", [&] {
-      const std::size_t total = l.owned + got.size();
-      rows_p = Buffer<Vec3<double>>(total);
-      rows_r = Buffer<double>(total);
-      rows_report = Buffer<std::uint8_t>(total);
-      rows_id = Buffer<std::int64_t>(total);
-#pragma omp parallel for num_threads(threads) schedule(static)
+      // engine B: [lower ghosts][boundary owned rows][upper ghosts]; the owned ones are paired with
+      // each other by engine A already
+      const std::size_t total = l.sent + got.size();
+      b_p = Buffer<Vec3<double>>(total);
+      b_r = Buffer<double>(total);
+      b_id = Buffer<std::int64_t>(total);
+      Buffer<std::uint8_t> mask(total);
       for (std::size_t k = 0; k < total; ++k) {
-        const bool ghost = k < l.lower_ghosts || k >= l.lower_ghosts + l.owned;
+        const bool ghost = k < l.lower_ghosts || k >= l.lower_ghosts + l.sent;
         if (ghost) {
-          const std::size_t g = k < l.lower_ghosts ? k : k - l.owned;
-          rows_p[k] = got[g].position;
-          rows_r[k] = got[g].radius;
-          rows_id[k] = got[g].id;
+          const BodyRecord& g = got[k < l.lower_ghosts ? k : k - l.sent];
+          b_p[k] = g.position;
+          b_r[k] = g.radius;
+          b_id[k] = g.id;
         } else {
           const std::size_t i = owned_rows[k - l.lower_ghosts];
-          rows_p[k] = position[i];
-          rows_r[k] = radius[i];
-          rows_id[k] = id[i];
+          b_p[k] = position[i];
+          b_r[k] = radius[i];
+          b_id[k] = id[i];
         }
-        rows_report[k] = ghost ? 0 : 1;
+        mask[k] = ghost ? 0 : kReportedBit | kPairedBit;
       }
-      engine.set_resident(BodiesView{rows_p.span(), rows_r.span(), {}, rows_report.span()});
+      boundary.emplace(engine.options());
+      boundary->set_resident(BodiesView{b_p.span(), b_r.span(), {}, mask.span()});
+      pin_p.emplace(engine, b_p.data(), b_p.size() * sizeof(Vec3<double>));
+      pin_r.emplace(engine, b_r.data(), b_r.size() * sizeof(double));
     });
     st.halo_rows = got.size();
   }
   st.setup = session.max(seconds_since(t0));
   st.halo_rows = session.sum(st.halo_rows);
 
-  // Each step: halo (the sent owned rows out of the engine → records by destination → MPI → the ghost
-  // rows into the engine), then detect. Maximum over ranks per step, median over the steps.
+  // Each step: the boundary owned rows out of engine A; A detects its owned rows (another thread)
+  // while this thread exchanges the halo (MPI only here) and writes engine B's rows, then B detects.
+  // Per step (max over ranks): halo, interior (A), boundary (B), step (wall); medians reported.
   std::uint64_t total_send = 0;
   for (std::uint64_t c : l.send_counts) total_send += c;
-  Buffer<Vec3<double>> out_p(l.sent);
-  Buffer<double> out_r(l.sent);
   Buffer<BodyRecord> send(total_send);
-  // the host ends of the halo copies page-locked once (CUDA), for every step
-  struct Pin {
-    Engine<Real>& engine;
-    void* p;
-    bool pinned;
-    Pin(Engine<Real>& e, void* ptr, std::size_t bytes) : engine(e), p(ptr), pinned(e.pin_host(ptr, bytes)) {}
-    ~Pin() {
-      if (pinned) engine.unpin_host(p);
-    }
-  };
-  std::optional<Pin> pins[4];
-  if (slabs) {
-    local_stage(session, "steps", [&] {
-      pins[0].emplace(engine, out_p.data(), out_p.size() * sizeof(Vec3<double>));
-      pins[1].emplace(engine, out_r.data(), out_r.size() * sizeof(double));
-      pins[2].emplace(engine, rows_p.data(), rows_p.size() * sizeof(Vec3<double>));
-      pins[3].emplace(engine, rows_r.data(), rows_r.size() * sizeof(double));
-    });
-  }
   const std::size_t n_stages = k_engine_stages.size();
-  std::vector<double> times(2 * static_cast<std::size_t>(steps), 0),
-      stage_times(n_stages * static_cast<std::size_t>(steps), 0);
-  std::vector<std::uint64_t> found(static_cast<std::size_t>(steps), 0);
-  for (std::size_t k = 0; k < static_cast<std::size_t>(steps); ++k) {
-    const auto h0 = Clock::now();
-    if (slabs) {
-      local_stage(session, "steps", [&] {
-        engine.read_resident(l.lower_ghosts, l.sent, out_p.data(), out_r.data());
+  std::vector<double> times(4 * n_steps, 0), stage_times(n_stages * n_steps, 0);
+  std::vector<std::uint64_t> found(n_steps, 0);
+  const std::size_t mid = l.lower_ghosts;  // B's boundary owned rows start here
+  for (std::size_t k = 0; k < n_steps; ++k) {
+    const auto s0 = Clock::now();
+    std::exception_ptr error, interior_error;
+    std::uint64_t found_a = 0, found_b = 0;
+    double t_interior = 0;
+    std::thread interior;
+    auto detect_interior = [&] {
+      const auto i0 = Clock::now();
+      try {
+        found_a = engine.detect_resident(frame);
+      } catch (...) {
+        interior_error = std::current_exception();
+      }
+      t_interior = seconds_since(i0);
+    };
+    try {
+      if (slabs) {
+        engine.read_resident(0, l.sent, b_p.data() + mid, b_r.data() + mid);
+        interior = std::thread(detect_interior);
         std::size_t w = 0;
         for (std::size_t q = 0; q < p; ++q) {
-          const std::size_t from = static_cast<int>(q) < me ? 0 : l.sent - l.up;
+          const std::size_t from = mid + (static_cast<int>(q) < me ? 0 : l.sent - l.up);
           for (std::size_t j = from; j < from + l.send_counts[q]; ++j)
-            send[w++] = BodyRecord{out_p[j], out_r[j], 0};
+            send[w++] = BodyRecord{b_p[j], b_r[j], 0};
         }
-      });
-      const Buffer<BodyRecord> got = comm.exchange(send, l.send_counts, l.recv_counts);
-      local_stage(session, "steps", [&] {
-        const std::size_t upper = l.lower_ghosts + l.owned;  // first row of the upper ghosts
-        for (std::size_t g = 0; g < got.size(); ++g) {
-          const std::size_t row = g < l.lower_ghosts ? g : g + l.owned;
-          rows_p[row] = got[g].position;
-          rows_r[row] = got[g].radius;
-        }
-        engine.write_resident(0, l.lower_ghosts, rows_p.data(), rows_r.data());
-        engine.write_resident(upper, rows_r.size() - upper, rows_p.data() + upper, rows_r.data() + upper);
-      });
+      } else {
+        detect_interior();
+      }
+    } catch (...) {
+      error = std::current_exception();
     }
-    times[2 * k] = seconds_since(h0);
-    const auto d0 = Clock::now();
-    local_stage(session, "steps", [&] { found[k] = engine.detect_resident(frame); });
-    times[2 * k + 1] = seconds_since(d0);
+    double t_halo = 0, t_boundary = 0;
+    if (slabs) {
+      const Buffer<BodyRecord> got = comm.exchange(send, l.send_counts, l.recv_counts);  // every rank
+      try {
+        if (!error) {
+          for (std::size_t g = 0; g < got.size(); ++g) {
+            const std::size_t row = g < mid ? g : g + l.sent;
+            b_p[row] = got[g].position;
+            b_r[row] = got[g].radius;
+          }
+          boundary->write_resident(0, b_r.size(), b_p.data(), b_r.data());
+          t_halo = seconds_since(s0);
+          const auto b0 = Clock::now();
+          found_b = boundary->detect_resident(frame);
+          t_boundary = seconds_since(b0);
+        }
+      } catch (...) {
+        if (!error) error = std::current_exception();
+      }
+    }
+    if (interior.joinable()) interior.join();
+    if (!error) error = interior_error;
+    session.agree(error, "steps");
+    times[4 * k] = t_halo;
+    times[4 * k + 1] = t_interior;
+    times[4 * k + 2] = t_boundary;
+    times[4 * k + 3] = seconds_since(s0);
+    found[k] = found_a + found_b;
     for (const StageTime& t : engine.times())
       for (std::size_t j = 0; j < n_stages; ++j)
         if (t.name == k_engine_stages[j]) stage_times[k * n_stages + j] = t.seconds;
   }
   comm.allreduce_max(times);
   comm.allreduce_max(stage_times);
-  for (std::size_t j = 0; j < n_stages && steps > 0; ++j) {
-    std::vector<double> v;
-    for (std::size_t k = 0; k < static_cast<std::size_t>(steps); ++k)
-      v.push_back(stage_times[k * n_stages + j]);
-    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-    if (v[v.size() / 2] > 0) st.stages.push_back({k_engine_stages[j], v[v.size() / 2]});
-  }
+
   // The CPU backend's contacts are at hand: the pairs of the last step (as global ids) hash to the
   // run's (an order-free sum), so a missed pair and a duplicate cannot cancel out in the count.
   const bool on_host = engine.backend() == Backend::cpu;
   std::uint64_t hash = 0;
   if (on_host && steps > 0) {
-    const Contacts<Real>& c = engine.resident_contacts();
-    for (std::size_t k = 0; k < c.size(); ++k) {
-      const auto a = static_cast<std::size_t>(c.id_a[k]), b = static_cast<std::size_t>(c.id_b[k]);
-      const std::int64_t ia = slabs ? rows_id[a] : std::int64_t(a), ib = slabs ? rows_id[b] : std::int64_t(b);
-      hash += pair_hash(std::min(ia, ib), std::max(ia, ib));
-    }
+    auto add = [&](const Contacts<Real>& c, const std::int64_t* ids) {
+      for (std::size_t k = 0; k < c.size(); ++k) {
+        const std::int64_t a = ids ? ids[c.id_a[k]] : c.id_a[k], b = ids ? ids[c.id_b[k]] : c.id_b[k];
+        hash += pair_hash(std::min(a, b), std::max(a, b));
+      }
+    };
+    add(engine.resident_contacts(), slabs ? owned_id.data() : nullptr);
+    if (boundary) add(boundary->resident_contacts(), b_id.data());
   }
   hash = session.sum(hash);
-  for (std::size_t k = 0; k < static_cast<std::size_t>(steps); ++k) {
+  for (std::size_t k = 0; k < n_steps; ++k) {
     st.contacts = session.sum(found[k]);
     local_stage(session, "steps", [&] {
       if (st.contacts != expected && me == 0)
         throw Error("resident step " + std::to_string(k) + ": " + std::to_string(st.contacts) +
                     " contacts over the ranks, the run found " + std::to_string(expected) +
                     ": internal error");
-      if (on_host && k + 1 == static_cast<std::size_t>(steps) && hash != expected_hash && me == 0)
+      if (on_host && k + 1 == n_steps && hash != expected_hash && me == 0)
         throw Error("resident steps: the last step's pairs differ from the run's: internal error");
     });
   }
-  auto median = [&](int which) {
-    std::vector<double> v;
-    for (std::size_t k = 0; k < static_cast<std::size_t>(steps); ++k)
-      v.push_back(which == 0   ? times[2 * k]
-                  : which == 1 ? times[2 * k + 1]
-                               : times[2 * k] + times[2 * k + 1]);
-    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-    return v[v.size() / 2];
-  };
-  st.halo = median(0);
-  st.detect = median(1);
-  st.step = median(2);
+  std::vector<double> v[4];
+  for (std::size_t k = 0; k < n_steps; ++k)
+    for (int j = 0; j < 4; ++j) v[j].push_back(times[4 * k + static_cast<std::size_t>(j)]);
+  st.halo = median_of(v[0]);
+  st.interior = median_of(v[1]);
+  st.boundary = median_of(v[2]);
+  st.step = median_of(v[3]);
+  for (std::size_t j = 0; j < n_stages && steps > 0; ++j) {
+    std::vector<double> w;
+    for (std::size_t k = 0; k < n_steps; ++k) w.push_back(stage_times[k * n_stages + j]);
+    const double m = median_of(w);
+    if (m > 0) st.stages.push_back({k_engine_stages[j], m});
+  }
   return st;
 }
 

@@ -53,19 +53,21 @@
 // reported (redistribute, halo, exchange/gather and merge take no time).
 //
 // Resident steps (DistributedOptions::resident_steps, after the above): what a simulation that keeps
-// its bodies on the GPUs pays per step for the same decomposition. Each rank's bodies go into its
-// engine once (Engine::set_resident: its GPU); every step refreshes the ghosts through the host
-// (device → host, MPI, host → device: Debian's Open MPI is not CUDA-aware) and detects again, the
-// contacts staying where they were computed. Rows are laid out so that each halo message is one
-// contiguous range at both ends: [ghosts from lower ranks][owned][ghosts from higher ranks], owned
-// ordered [sent down only][sent both ways][sent up only][interior], each group in ascending id. A
-// body's place in that order is (owner rank, row among its owner's owned rows) on every rank, so
-// "the first of a pair in that order reports it" (report mask = owned) finds each contact exactly
-// once, as the owner of the smaller id does above; every step checks that the contacts summed over
-// ranks equal K. A rank sends its whole downward set to every lower rank that needs any of it (and
-// its upward set likewise): with slabs thinner than the ghost width that is a superset of the ghosts,
-// which changes no contact. Bodies do not move between steps (no migration), so the step is the
-// "everything recomputed, halo refreshed" cost.
+// its bodies on the GPUs pays per step for the same decomposition. Each rank keeps its owned bodies
+// in its engine (A: Engine::set_resident, its GPU), ordered [sent down only][sent both ways][sent up
+// only][interior], so that every halo message is one contiguous range, and a second engine (B)
+// holds [ghosts from lower ranks][the boundary owned bodies (those sent anywhere)][ghosts from higher
+// ranks]. A step: the boundary rows come out of A (device → host); A detects all pairs of the owned
+// bodies on a second thread while this thread exchanges the halo (host-staged: Debian's Open MPI is
+// not CUDA-aware) and writes B's rows (host → device); then B detects its pairs with the report
+// mask "first of the pair in (owner rank, row) order is owned" and kPairedBit on the boundary owned
+// bodies (their mutual pairs are A's). An interior body is farther than the ghost width from every
+// other slab, so it touches no ghost: A + B find every contact of the rank exactly once. Every step
+// checks that the contacts summed over ranks equal K (on the CPU backend also the pairs, by an
+// order-free hash). A rank sends its whole downward set to every lower rank that needs any of it
+// (upward likewise): with slabs thinner than the ghost width a superset of the ghosts, which changes
+// no contact. Bodies do not move between steps (no migration), so a step is the "everything
+// recomputed, halo refreshed" cost; contacts stay where they were computed.
 //
 // Errors: options are validated before any communication. An error in a stage on any rank (bad
 // input, I/O, CUDA, memory) is agreed on at the end of the stage (Session::agree): every rank throws
@@ -121,8 +123,11 @@ struct StepStats {
   std::uint64_t contacts = 0;   // per step, summed over ranks (checked equal to the file's K)
   std::uint64_t halo_rows = 0;  // ghost rows refreshed per step, summed over ranks
   double setup = 0;             // layout, first exchange, upload (once, max over ranks)
-  double halo = 0, detect = 0, step = 0;
-  StageTimes stages;  // the engine's stages inside detect (each: median over steps of the max over ranks)
+  double halo = 0;              // ghost refresh: boundary rows out of the GPU, MPI, ghost rows into it
+  double interior = 0;          // the owned bodies alone (all their pairs), overlapping the halo
+  double boundary = 0;          // the boundary owned bodies against the ghosts, after the halo
+  double step = 0;              // wall time of a step
+  StageTimes stages;            // the engine's stages of the interior detection
 };
 
 template <class Real>

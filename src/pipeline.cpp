@@ -50,9 +50,9 @@ void print_summary(const RunInfo& info, std::uint64_t contacts, const Distribute
         "ghost "
         "rows refreshed per step; setup {:.6f} s; per step, median of the maxima over ranks:\n",
         s.steps, s.contacts, s.halo_rows, s.setup);
-    fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "halo", s.halo, "detect", s.detect);
+    fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "halo", s.halo, "interior", s.interior);
     for (const StageTime& t : s.stages) fmt::print("    {:<14} {:>12.6f}\n", t.name, t.seconds);
-    fmt::print("  {:<16} {:>12.6f}\n", "step", s.step);
+    fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "boundary", s.boundary, "step", s.step);
   }
 }
 
