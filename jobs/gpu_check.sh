@@ -49,11 +49,12 @@ if [ "$WHAT" != single ] && [ "$NGPU" -ge 2 ]; then
     echo "compare np1/np2 fp64 cuda:"; "$CG" compare "$W/m24.np1.h5" "$W/m24.np2.h5"
     for e in 24 25 26; do
       for np in 1 2; do
-        echo "=== N=2^$e np=$np (cuda, fp32)"
-        mpirun --bind-to none -np $np "$CG" detect "$W/m$e.h5" -o "$W/out.h5" --backend cuda --precision fp32
+        echo "=== N=2^$e np=$np (cuda, fp32; then 30 resident steps)"
+        mpirun --bind-to none -np $np "$CG" detect "$W/m$e.h5" -o "$W/out.h5" --backend cuda --precision fp32 \
+          --steps 30
       done
     done
   } >"$OUT/mpi.log" 2>&1
-  grep -E 'IDENTICAL|DIFFERENT|===|detect:|^  (read|redistribute|halo|detect|exchange|merge|write|total) |^    (upload|download) ' "$OUT/mpi.log" | head -120
+  grep -E 'IDENTICAL|DIFFERENT|===|detect:|^  (read|redistribute|halo|detect|gather|exchange|merge|write|total|interior|boundary|step) |^    (upload|download) |^resident' "$OUT/mpi.log" | head -160
 fi
 log "done"

@@ -141,8 +141,15 @@ TEST_F(Cli, UsageErrorsExitTwo) {
   expect_detect_fails(path("s.h5"), 2, {"--cell-size"}, "--cell-size 3x");
   expect_detect_fails(path("s.h5"), 2, {"--read"}, "--read some");
   expect_detect_fails(path("s.h5"), 2, {"--write"}, "--write rank0");
+  expect_detect_fails(path("s.h5"), 2, {"--steps"}, "--steps -1");
+  expect_detect_fails(path("s.h5"), 2, {"--steps"}, "--steps many");
   EXPECT_EQ(run("detect " + path("s.h5") + " -o " + path("min.h5") + " --cell-size min -q").code, 0);
   EXPECT_EQ(run("detect " + path("s.h5") + " -o " + path("auto.h5") + " --cell-size auto -q").code, 0);
+  // resident steps after the run: the summary says how many and that every one found the file's contacts
+  const auto steps = run("detect " + path("s.h5") + " -o " + path("steps.h5") + " --backend cpu --steps 3");
+  EXPECT_EQ(steps.code, 0) << steps.output;
+  EXPECT_NE(steps.output.find("resident steps: 3 "), std::string::npos) << steps.output;
+  EXPECT_NE(steps.output.find("contacts per step (= the file's)"), std::string::npos) << steps.output;
 }
 
 TEST_F(Cli, MissingFile) { expect_detect_fails(path("nope.h5"), 3, {"nope.h5"}); }
