@@ -287,17 +287,17 @@ TYPED_TEST(EngineTest, PairedBitSkipsPairsFoundElsewhere) {
 // range of rows was rewritten in place (a halo refresh); read_resident returns what was written;
 // ranges outside the rows are UsageErrors.
 TYPED_TEST(EngineTest, ResidentBodiesRefreshInRanges) {
-  using Real = typename TypeParam::Real;
+  using R = typename TypeParam::Real;
   auto s = random_spheres(4000, 0.5, 1.0, 107);
   std::vector<std::uint8_t> report(s.r.size());
   for (std::size_t i = 0; i < report.size(); ++i) report[i] = (i % 4) != 1;
   EngineOptions o;
   o.backend = TypeParam::backend;
-  Engine<Real> e(o), plain(o);
+  Engine<R> e(o), plain(o);
   e.set_resident(BodiesView{s.p, s.r, {}, report});
   EXPECT_EQ(e.resident_size(), s.r.size());
   auto expect_same = [&] {
-    const Contacts<Real> c = plain.detect(BodiesView{s.p, s.r, {}, report});
+    const Contacts<R> c = plain.detect(BodiesView{s.p, s.r, {}, report});
     ASSERT_GT(c.size(), 0u);
     EXPECT_EQ(e.detect_resident(), c.size());
     if (TypeParam::backend == Backend::cpu) {
