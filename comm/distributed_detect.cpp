@@ -1020,11 +1020,10 @@ StepStats resident_steps(Session& session, const Comm& comm, Engine<Real>& engin
   comm.allreduce_max(times);
   comm.allreduce_max(stage_times);
 
-  // The CPU backend's contacts are at hand: the pairs of the last step (as global ids) hash to the
+  // The pairs of the last step (as global ids; CUDA: downloaded now, after the timing) hash to the
   // run's (an order-free sum), so a missed pair and a duplicate cannot cancel out in the count.
-  const bool on_host = engine.backend() == Backend::cpu;
   std::uint64_t hash = 0;
-  if (on_host && steps > 0) {
+  if (steps > 0) {
     auto add = [&](const Contacts<Real>& c, const std::int64_t* ids) {
       for (std::size_t k = 0; k < c.size(); ++k) {
         const std::int64_t a = ids ? ids[c.id_a[k]] : c.id_a[k], b = ids ? ids[c.id_b[k]] : c.id_b[k];
@@ -1042,7 +1041,7 @@ StepStats resident_steps(Session& session, const Comm& comm, Engine<Real>& engin
         throw Error("resident step " + std::to_string(k) + ": " + std::to_string(st.contacts) +
                     " contacts over the ranks, the run found " + std::to_string(expected) +
                     ": internal error");
-      if (on_host && k + 1 == n_steps && hash != expected_hash && me == 0)
+      if (k + 1 == n_steps && hash != expected_hash && me == 0)
         throw Error("resident steps: the last step's pairs differ from the run's: internal error");
     });
   }

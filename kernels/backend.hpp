@@ -78,6 +78,9 @@ void destroy(CudaBackend* backend);
 // Resident bodies of Engine::set_resident (DEVICE rows kept between calls).
 void resident_upload(CudaBackend& backend, const BodiesView& bodies);
 DeviceBodiesView resident_view(const CudaBackend& backend);
+// The contacts of a DeviceContactsView copied into `out` (sized here).
+template <class Real>
+void download_contacts(CudaBackend& backend, const DeviceContactsView<Real>& view, Contacts<Real>& out);
 bool pin_host(CudaBackend& backend, void* p, std::size_t bytes);
 void unpin_host(CudaBackend& backend, void* p);
 void resident_copy(CudaBackend& backend, std::size_t first, std::size_t count, Vec3<double>* position,

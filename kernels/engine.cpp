@@ -304,6 +304,12 @@ void destroy(CudaBackend* b) { delete b; }
 Bounds device_bounds(CudaBackend&, const DeviceBodiesView&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
+template <class Real>
+void download_contacts(CudaBackend&, const DeviceContactsView<Real>&, Contacts<Real>&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+template void download_contacts(CudaBackend&, const DeviceContactsView<float>&, Contacts<float>&);
+template void download_contacts(CudaBackend&, const DeviceContactsView<double>&, Contacts<double>&);
 bool pin_host(CudaBackend&, void*, std::size_t) {
   throw CudaError("this contactgrid was built without CUDA");
 }
@@ -334,6 +340,7 @@ struct Engine<Real>::Impl {
   HostVector<std::uint8_t> resident_report;
   std::size_t resident_rows = 0;
   Contacts<Real> resident_contacts;
+  std::optional<DeviceContactsView<Real>> resident_on_device;  // CUDA: not yet downloaded
   ~Impl() { detail::destroy(cuda); }
 };
 
@@ -456,6 +463,7 @@ void Engine<Real>::set_resident(const BodiesView& b) {
     throw UsageError("set_resident: the arrays differ in length");
   s.resident_rows = b.size();
   s.resident_contacts = Contacts<Real>{};
+  s.resident_on_device.reset();
   if (s.resolved == Backend::cuda) {
     detail::resident_upload(*s.cuda, b);
     return;
@@ -512,7 +520,9 @@ std::size_t Engine<Real>::detect_resident(std::optional<Frame> frame) {
   Impl& s = *m_impl;
   if (s.resolved == Backend::cuda) {
     const DeviceBodiesView v = detail::resident_view(*s.cuda);
-    return detect_device_resident(v, frame).count;
+    s.resident_contacts = Contacts<Real>{};
+    s.resident_on_device = detect_device_resident(v, frame);
+    return s.resident_on_device->count;
   }
   const std::size_t n = s.resident_rows;
   s.resident_contacts = detect(BodiesView{{s.resident_position.data(), n},
@@ -524,8 +534,13 @@ std::size_t Engine<Real>::detect_resident(std::optional<Frame> frame) {
 }
 
 template <class Real>
-const Contacts<Real>& Engine<Real>::resident_contacts() const {
-  return m_impl->resident_contacts;
+const Contacts<Real>& Engine<Real>::resident_contacts() {
+  Impl& s = *m_impl;
+  if (s.resident_on_device) {  // CUDA: downloaded on the first request after the detection
+    detail::download_contacts(*s.cuda, *s.resident_on_device, s.resident_contacts);
+    s.resident_on_device.reset();
+  }
+  return s.resident_contacts;
 }
 
 template <class Real>

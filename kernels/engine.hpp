@@ -217,15 +217,16 @@ class Engine {
   // without moving the rest. set_resident copies `bodies` (ids implied: row i is body i; report as in
   // BodiesView); read_resident / write_resident copy the positions and radii of rows
   // [first, first + count) out and in (UsageError outside the rows); detect_resident detects among the
-  // resident rows and keeps the contacts where they were computed (CUDA: as detect_device_resident;
-  // CPU: resident_contacts()), returning their number.
+  // resident rows and keeps the contacts where they were computed (CUDA: as detect_device_resident),
+  // returning their number; resident_contacts() gives them in host memory (CUDA: downloaded on the
+  // first request after the detection; ids are row indices).
   void set_resident(const BodiesView& bodies);
   std::size_t resident_size() const;
   void read_resident(std::size_t first, std::size_t count, Vec3<double>* position, double* radius);
   void write_resident(std::size_t first, std::size_t count, const Vec3<double>* position,
                       const double* radius);
   std::size_t detect_resident(std::optional<Frame> frame = std::nullopt);
-  const Contacts<Real>& resident_contacts() const;  // CPU backend: the last detect_resident's contacts
+  const Contacts<Real>& resident_contacts();
   // Page-locks host memory that read_resident / write_resident use again and again (CUDA:
   // cudaHostRegister, so the copies run at the link's speed; CPU: nothing to do). false when the
   // driver refuses (the copies stay pageable). unpin_host before that memory is freed.

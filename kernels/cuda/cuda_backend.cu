@@ -861,6 +861,32 @@ void resident_upload(CudaBackend& b, const BodiesView& bodies) {
   CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
 }
 
+template <class Real>
+void download_contacts(CudaBackend& b, const DeviceContactsView<Real>& v, Contacts<Real>& out) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  out = Contacts<Real>{};
+  reserve_contacts(out, v.count, v.full);
+  out.resize(v.count, v.full);
+  if (v.count == 0) return;
+  const ContactPtrs<Real> cp{const_cast<std::int64_t*>(v.id_a),
+                             const_cast<std::int64_t*>(v.id_b),
+                             const_cast<Vec3<Real>*>(v.position_on_a),
+                             const_cast<Vec3<Real>*>(v.position_on_b),
+                             const_cast<Vec3<Real>*>(v.normal_on_b),
+                             const_cast<Real*>(v.distance),
+                             const_cast<Vec3<Real>*>(v.local_point_a),
+                             const_cast<Vec3<Real>*>(v.local_point_b),
+                             const_cast<Vec3<Real>*>(v.lateral_friction_dir1),
+                             const_cast<Vec3<Real>*>(v.lateral_friction_dir2)};
+  for_each_field(out, cp, v.full, [&](auto& vec, const void* d_ptr) {
+    CG_CUDA_CHECK(
+        cudaMemcpyAsync(vec.data(), d_ptr, vec.size() * sizeof(vec[0]), cudaMemcpyDeviceToHost, b.m_stream));
+  });
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+}
+template void download_contacts(CudaBackend&, const DeviceContactsView<float>&, Contacts<float>&);
+template void download_contacts(CudaBackend&, const DeviceContactsView<double>&, Contacts<double>&);
+
 bool pin_host(CudaBackend& b, void* p, std::size_t bytes) {
   CG_CUDA_CHECK(cudaSetDevice(b.m_device));
   if (cudaHostRegister(p, bytes, cudaHostRegisterDefault) == cudaSuccess) return true;

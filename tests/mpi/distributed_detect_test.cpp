@@ -153,7 +153,9 @@ std::size_t check_equal_to_single_rank(const std::string& path, const Scene& sce
   // resident steps: every step found the run's contacts (counted, and on the CPU backend the pairs
   // themselves, by an order-free hash; a difference throws inside the run)
   EXPECT_EQ(got.steps.steps, options.resident_steps) << label;
-  if (options.resident_steps > 0) EXPECT_EQ(got.steps.contacts, got.total_contacts) << label;
+  if (options.resident_steps > 0) {
+    EXPECT_EQ(got.steps.contacts, got.total_contacts) << label;
+  }
   {  // the six top-level stages in order, then (inside "detect") the engine's own stages
     std::vector<std::string> top;
     for (const auto& t : got.times)
