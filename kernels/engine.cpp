@@ -341,6 +341,11 @@ struct Engine<Real>::Impl {
   std::size_t resident_rows = 0;
   Contacts<Real> resident_contacts;
   std::optional<DeviceContactsView<Real>> resident_on_device;  // CUDA: not yet downloaded
+  bool resident_overwritten = false;  // CUDA: a later detection reused the workspace first
+  void forget_resident_view() {       // before any detection: the view's storage is reused
+    if (resident_on_device) resident_overwritten = true;
+    resident_on_device.reset();
+  }
   ~Impl() { detail::destroy(cuda); }
 };
 
@@ -398,6 +403,7 @@ template <class Real>
 Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Frame> frame) {
   using clock = std::chrono::steady_clock;
   Impl& s = *m_impl;
+  s.forget_resident_view();
   s.times.clear();
   s.stats = EngineStats{};
   Contacts<Real> out;
@@ -438,6 +444,7 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
                              std::optional<Frame> frame, Contacts<Real>& out,
                              DeviceContactsView<Real>* device_out) {
   using clock = std::chrono::steady_clock;
+  s.forget_resident_view();
   s.times.clear();
   s.stats = EngineStats{};
   if (s.resolved != Backend::cuda) throw UsageError("detect_device needs the CUDA backend");
@@ -464,6 +471,7 @@ void Engine<Real>::set_resident(const BodiesView& b) {
   s.resident_rows = b.size();
   s.resident_contacts = Contacts<Real>{};
   s.resident_on_device.reset();
+  s.resident_overwritten = false;
   if (s.resolved == Backend::cuda) {
     detail::resident_upload(*s.cuda, b);
     return;
@@ -521,8 +529,10 @@ std::size_t Engine<Real>::detect_resident(std::optional<Frame> frame) {
   if (s.resolved == Backend::cuda) {
     const DeviceBodiesView v = detail::resident_view(*s.cuda);
     s.resident_contacts = Contacts<Real>{};
-    s.resident_on_device = detect_device_resident(v, frame);
-    return s.resident_on_device->count;
+    const DeviceContactsView<Real> view = detect_device_resident(v, frame);
+    s.resident_on_device = view;
+    s.resident_overwritten = false;
+    return view.count;
   }
   const std::size_t n = s.resident_rows;
   s.resident_contacts = detect(BodiesView{{s.resident_position.data(), n},
@@ -536,6 +546,9 @@ std::size_t Engine<Real>::detect_resident(std::optional<Frame> frame) {
 template <class Real>
 const Contacts<Real>& Engine<Real>::resident_contacts() {
   Impl& s = *m_impl;
+  if (s.resident_overwritten)
+    throw UsageError(
+        "resident_contacts: another detection reused the device workspace since detect_resident");
   if (s.resident_on_device) {  // CUDA: downloaded on the first request after the detection
     detail::download_contacts(*s.cuda, *s.resident_on_device, s.resident_contacts);
     s.resident_on_device.reset();

@@ -218,8 +218,9 @@ class Engine {
   // BodiesView); read_resident / write_resident copy the positions and radii of rows
   // [first, first + count) out and in (UsageError outside the rows); detect_resident detects among the
   // resident rows and keeps the contacts where they were computed (CUDA: as detect_device_resident),
-  // returning their number; resident_contacts() gives them in host memory (CUDA: downloaded on the
-  // first request after the detection; ids are row indices).
+  // returning their number; resident_contacts() gives them in host memory (ids are row indices;
+  // CUDA: downloaded on the first request, which must come before the engine's next detection,
+  // else UsageError).
   void set_resident(const BodiesView& bodies);
   std::size_t resident_size() const;
   void read_resident(std::size_t first, std::size_t count, Vec3<double>* position, double* radius);

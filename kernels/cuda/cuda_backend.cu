@@ -909,7 +909,7 @@ DeviceBodiesView resident_view(const CudaBackend& b) {
 }
 
 // Rows [first, first + count) of positions and radii between the resident DEVICE arrays and host
-// memory (pageable: a halo is a thin layer of the rows).
+// memory (page-locked when the caller pinned it: Engine::pin_host).
 void resident_copy(CudaBackend& b, std::size_t first, std::size_t count, Vec3<double>* position,
                    double* radius, bool to_device) {
   CG_CUDA_CHECK(cudaSetDevice(b.m_device));

@@ -321,6 +321,14 @@ TYPED_TEST(EngineTest, ResidentBodiesRefreshInRanges) {
     ASSERT_EQ(r[i], s.r[1000 + i]) << i;
   }
   expect_same();
+  // after another detection the CUDA workspace holding the resident contacts is gone: refused, not stale
+  e.detect_resident();
+  e.detect(BodiesView{s.p, s.r, {}, {}});
+  if (TypeParam::backend == Backend::cuda) {
+    EXPECT_THROW(e.resident_contacts(), UsageError);
+  } else {
+    EXPECT_GT(e.resident_contacts().size(), 0u);
+  }
   EXPECT_THROW(e.write_resident(3999, 2, p.data(), r.data()), UsageError);
   EXPECT_THROW(e.read_resident(4001, 0, p.data(), r.data()), UsageError);
   e.read_resident(4000, 0, p.data(), r.data());  // empty range at the end: fine
