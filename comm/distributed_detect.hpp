@@ -64,10 +64,10 @@
 // bodies (their mutual pairs are A's). An interior body is farther than the ghost width from every
 // other slab, so it touches no ghost: A + B find every contact of the rank exactly once. Every step
 // checks that the contacts summed over ranks equal K, and the last step's pairs the run's (an
-// order-free hash; CUDA: downloaded after the timing). A rank sends its whole downward set to every lower rank that needs any of it
-// (upward likewise): with slabs thinner than the ghost width a superset of the ghosts, which changes
-// no contact. Bodies do not move between steps (no migration), so a step is the "everything
-// recomputed, halo refreshed" cost; contacts stay where they were computed.
+// order-free hash; CUDA: downloaded after the timing). A rank sends its whole downward set to every lower
+// rank that needs any of it (upward likewise): with slabs thinner than the ghost width a superset of the
+// ghosts, which changes no contact. Bodies do not move between steps (no migration), so a step is the
+// "everything recomputed, halo refreshed" cost; contacts stay where they were computed.
 //
 // Errors: options are validated before any communication. An error in a stage on any rank (bad
 // input, I/O, CUDA, memory) is agreed on at the end of the stage (Session::agree): every rank throws
