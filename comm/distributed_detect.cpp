@@ -650,7 +650,6 @@ void gather_and_merge(const Session& session, const Comm& comm, Contacts<Real>& 
     } else {
       std::uint64_t total = 0;
       for (std::uint64_t k : counts) total += k;
-      detail::reserve_contacts(result.contacts, total, full);
       result.contacts.resize(total, full);
       const int parts = total < (std::uint64_t(1) << 15) ? 1 : 4 * threads;  // a few per thread: balance
       result.duplicates_removed = merge_contact_runs_into<Real>(runs, result.contacts, full, parts, threads);
@@ -757,7 +756,6 @@ void exchange_and_merge(const Session& session, const Comm& comm, Contacts<Real>
     std::uint64_t total = 0;
     for (std::uint64_t k : recv_counts) total += k;
     Contacts<Real> merged;
-    detail::reserve_contacts(merged, total, full);
     merged.resize(total, full);
     const int parts = total < (std::uint64_t(1) << 15) ? 1 : 4 * threads;  // a few per thread: balance
     duplicates = merge_contact_runs_into<Real>(runs, merged, full, parts, threads);

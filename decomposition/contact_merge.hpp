@@ -79,18 +79,7 @@ MergedContacts<Real> merge_contact_runs(std::span<const Contacts<Real>> runs, bo
     detail::check_contact_run(runs[r], r, full);
     total += runs[r].size();
   }
-  out.id_a.reserve(total);
-  out.id_b.reserve(total);
-  out.position_on_a.reserve(total);
-  out.position_on_b.reserve(total);
-  out.normal_on_b.reserve(total);
-  out.distance.reserve(total);
-  if (full) {
-    out.local_point_a.reserve(total);
-    out.local_point_b.reserve(total);
-    out.lateral_friction_dir1.reserve(total);
-    out.lateral_friction_dir2.reserve(total);
-  }
+  out.reserve(total, full);
 
   using Head = std::tuple<std::int64_t, std::int64_t, std::size_t>;  // (id_a, id_b, run)
   std::priority_queue<Head, std::vector<Head>, std::greater<Head>> heap;

@@ -47,11 +47,6 @@ struct CopyBlock {
 };
 void parallel_copy(const CopyBlock* blocks, std::size_t count, int threads);
 
-// Reserves n rows in every field of `c` (the four optional ones when `full`): one allocation each,
-// on huge pages when large (HostAllocator). Contents and sizes are unchanged.
-template <class Real>
-void reserve_contacts(Contacts<Real>& c, std::size_t n, bool full);
-
 // Bits needed to hold values 0 … n-1 (0 for n <= 1).
 inline int bits_for(std::uint64_t n) {
   int b = 0;

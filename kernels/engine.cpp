@@ -33,7 +33,24 @@ const char* to_string(Fields f) { return f == Fields::full ? "full" : "basic"; }
 const char* to_string(Precision p) { return p == Precision::fp32 ? "fp32" : "fp64"; }
 
 template <class Real>
+void Contacts<Real>::reserve(std::size_t k, bool with_full) {
+  id_a.reserve(k);
+  id_b.reserve(k);
+  position_on_a.reserve(k);
+  position_on_b.reserve(k);
+  normal_on_b.reserve(k);
+  distance.reserve(k);
+  if (with_full) {
+    local_point_a.reserve(k);
+    local_point_b.reserve(k);
+    lateral_friction_dir1.reserve(k);
+    lateral_friction_dir2.reserve(k);
+  }
+}
+
+template <class Real>
 void Contacts<Real>::resize(std::size_t k, bool with_full) {
+  reserve(k, with_full);  // exact: growing by resize alone may over-allocate a non-empty vector
   full = with_full;
   id_a.resize(k);
   id_b.resize(k);
@@ -269,23 +286,6 @@ void parallel_copy(const CopyBlock* blocks, std::size_t count, int threads) {
   }
 }
 
-template <class Real>
-void reserve_contacts(Contacts<Real>& c, std::size_t n, bool full) {
-  c.id_a.reserve(n);
-  c.id_b.reserve(n);
-  c.position_on_a.reserve(n);
-  c.position_on_b.reserve(n);
-  c.normal_on_b.reserve(n);
-  c.distance.reserve(n);
-  if (full) {
-    c.local_point_a.reserve(n);
-    c.local_point_b.reserve(n);
-    c.lateral_friction_dir1.reserve(n);
-    c.lateral_friction_dir2.reserve(n);
-  }
-}
-template void reserve_contacts(Contacts<float>&, std::size_t, bool);
-template void reserve_contacts(Contacts<double>&, std::size_t, bool);
 }  // namespace detail
 
 #if !defined(CONTACTGRID_HAVE_CUDA)

@@ -52,7 +52,9 @@ struct Contacts {
   HostVector<Vec3<Real>> local_point_a, local_point_b, lateral_friction_dir1, lateral_friction_dir2;
 
   std::size_t size() const { return id_a.size(); }
-  void resize(std::size_t k, bool with_full);
+  void reserve(std::size_t k,
+               bool with_full);  // room for k rows in every field (the optional ones when with_full)
+  void resize(std::size_t k, bool with_full);  // k rows, each field allocated exactly once (reserve first)
 };
 
 // The bodies handed to the engine: bounding spheres in the world frame (host memory).

@@ -748,7 +748,6 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
     bool registered = false;
     if (want_registered && np > 0) {
       const auto t0 = clock_type::now();
-      reserve_contacts(out, np, full);
       out.resize(np, full);
       std::vector<std::pair<void*, const void*>> fields;  // (host, device)
       std::vector<std::size_t> sizes;
@@ -788,7 +787,6 @@ void CudaBackend::run(const DetectJob<Real>& job, Contacts<Real>& out, StageTime
       mark(7);
       // The result vectors are sized (no fill: HostVector) while the transfer runs.
       const auto t0 = clock_type::now();
-      reserve_contacts(out, np, full);
       out.resize(np, full);
       CG_CUDA_CHECK(cudaStreamSynchronize(st));
       const auto t1 = clock_type::now();
@@ -865,7 +863,6 @@ template <class Real>
 void download_contacts(CudaBackend& b, const DeviceContactsView<Real>& v, Contacts<Real>& out) {
   CG_CUDA_CHECK(cudaSetDevice(b.m_device));
   out = Contacts<Real>{};
-  reserve_contacts(out, v.count, v.full);
   out.resize(v.count, v.full);
   if (v.count == 0) return;
   const ContactPtrs<Real> cp{const_cast<std::int64_t*>(v.id_a),

@@ -426,17 +426,6 @@ TEST_F(Hdf5Io, ContactsPrecisionMismatchIsRejected) {
 
 // ---- the phased contact writer (create, rows by pwrite from anywhere, commit) --------------------------
 
-const char* const k_contact_datasets[] = {"/contacts/id_a",
-                                          "/contacts/id_b",
-                                          "/contacts/position_on_a",
-                                          "/contacts/position_on_b",
-                                          "/contacts/normal_on_b",
-                                          "/contacts/distance",
-                                          "/contacts/local_point_a",
-                                          "/contacts/local_point_b",
-                                          "/contacts/lateral_friction_dir1",
-                                          "/contacts/lateral_friction_dir2"};
-
 // Rows [from, from + n) of c.
 template <class Real>
 Contacts<Real> slice_of(const Contacts<Real>& c, std::size_t from, std::size_t n) {
@@ -494,11 +483,11 @@ void phased_round_trip(const std::string& dir, std::size_t k, bool full) {
   if (full) expect_same_vec(c.lateral_friction_dir2, back.contacts.lateral_friction_dir2);
   EXPECT_EQ(std::get<std::int64_t>(back.attributes.at("contacts")), static_cast<std::int64_t>(k));
   for (std::size_t d = 0; d < (full ? 10u : 6u); ++d) {
-    EXPECT_EQ(cg::inspect_dataset(file, k_contact_datasets[d])->dims,
-              cg::inspect_dataset(whole, k_contact_datasets[d])->dims);
-    EXPECT_EQ(cg::read_dataset_bytes(file, k_contact_datasets[d]),
-              cg::read_dataset_bytes(whole, k_contact_datasets[d]))
-        << k_contact_datasets[d];
+    EXPECT_EQ(cg::inspect_dataset(file, cg::kContactDatasets[d])->dims,
+              cg::inspect_dataset(whole, cg::kContactDatasets[d])->dims);
+    EXPECT_EQ(cg::read_dataset_bytes(file, cg::kContactDatasets[d]),
+              cg::read_dataset_bytes(whole, cg::kContactDatasets[d]))
+        << cg::kContactDatasets[d];
   }
   if (!full) {
     EXPECT_FALSE(cg::inspect_dataset(file, "/contacts/local_point_a").has_value());
