@@ -6,6 +6,7 @@
 #include <cstdint>
 
 #include "core/grid.hpp"
+#include "core/narrow.hpp"
 #include "engine.hpp"
 
 namespace cg::detail {
@@ -57,6 +58,9 @@ inline int bits_for(std::uint64_t n) {
 // The CPU backend (kernels/host/): OpenMP threads, the oracle for the CUDA backend.
 struct HostBackend {
   int threads = 0;
+  // The pair stage's filter: spheres_touch (default; narrow then writes one row per candidate) or
+  // cells (every pair the cell rule assigns: narrow rejects the non-touching ones; same contacts).
+  CandidateFilter candidates = CandidateFilter::spheres_touch;
 };
 
 template <class Real>

@@ -1,0 +1,76 @@
+// Host stage narrow: narrow_decide() on the ordered candidates; rows of the accepted ones (see
+// stages.hpp). Count → scan → fill when the candidate filter may reject, else one row per candidate.
+#include <algorithm>
+
+#include "host/stages.hpp"
+
+namespace cg::detail::host {
+namespace {
+
+template <class Real>
+void write_row(Contacts<Real>& out, std::size_t k, std::uint32_t a, std::uint32_t b,
+               const ContactRow<Real>& row, bool full) {
+  out.id_a[k] = a;
+  out.id_b[k] = b;
+  out.position_on_a[k] = row.position_on_a;
+  out.position_on_b[k] = row.position_on_b;
+  out.normal_on_b[k] = row.normal_on_b;
+  out.distance[k] = row.distance;
+  if (full) {
+    out.local_point_a[k] = row.local_point_a;
+    out.local_point_b[k] = row.local_point_b;
+    out.lateral_friction_dir1[k] = row.lateral_friction_dir1;
+    out.lateral_friction_dir2[k] = row.lateral_friction_dir2;
+  }
+}
+
+}  // namespace
+
+template <class Real>
+void narrow(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres, const Vec3<double>& origin,
+            Fields fields, int nt, Contacts<Real>& out) {
+  const bool full = fields == Fields::full;
+  const std::size_t n_cand = c.size();
+  if (!narrow_may_reject(c.filter)) {  // every candidate is a contact: no scan
+    out.resize(n_cand, full);
+#pragma omp parallel for num_threads(nt) schedule(static) if (n_cand > k_parallel_min)
+    for (std::size_t k = 0; k < n_cand; ++k) {
+      const std::uint32_t a = c.a(k), b = c.b(k);
+      write_row(out, k, a, b, narrow_decide(spheres[a], spheres[b], origin, full).row, full);
+    }
+    return;
+  }
+  // count: an accept flag per candidate and the accepted total per fixed chunk of candidates (the
+  // chunking depends only on the candidate count: the rows are the same for any thread count)
+  const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(256, n_cand / 16384));
+  std::vector<std::uint64_t> chunk_count(n_chunks, 0), chunk_offset;
+  std::vector<std::uint8_t> accept(n_cand);
+#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
+  for (std::size_t ch = 0; ch < n_chunks; ++ch) {
+    std::uint64_t count = 0;
+    for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
+      accept[k] = narrow_decide(spheres[c.a(k)], spheres[c.b(k)], origin, false).contact;
+      count += accept[k];
+    }
+    chunk_count[ch] = count;
+  }
+  // scan → fill
+  const std::uint64_t n_rows = exclusive_scan(chunk_count, chunk_offset);
+  out.resize(n_rows, full);
+#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
+  for (std::size_t ch = 0; ch < n_chunks; ++ch) {
+    std::size_t w = chunk_offset[ch];
+    for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
+      if (!accept[k]) continue;
+      const std::uint32_t a = c.a(k), b = c.b(k);
+      write_row(out, w++, a, b, narrow_decide(spheres[a], spheres[b], origin, full).row, full);
+    }
+  }
+}
+
+template void narrow(const CandidatePairs&, const std::vector<Sphere<float>>&, const Vec3<double>&, Fields,
+                     int, Contacts<float>&);
+template void narrow(const CandidatePairs&, const std::vector<Sphere<double>>&, const Vec3<double>&, Fields,
+                     int, Contacts<double>&);
+
+}  // namespace cg::detail::host

@@ -1,0 +1,32 @@
+// Host stage pack: world (double) → local frame Real spheres; per body its cells, control byte and
+// entry count (see stages.hpp).
+#include "host/stages.hpp"
+
+namespace cg::detail::host {
+
+template <class Real>
+void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams<Real>& g, int threads,
+          PackedBodies<Real>& out) {
+  const std::size_t n = bodies.size();
+  out.spheres.resize(n);
+  out.cells.resize(n);
+  out.ctrl.resize(n);
+  out.count.resize(n);
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3<double> p = bodies.position[i];
+    Sphere<Real> s{static_cast<Real>(p.x - origin.x), static_cast<Real>(p.y - origin.y),
+                   static_cast<Real>(p.z - origin.z), static_cast<Real>(bodies.radius[i])};
+    out.spheres[i] = s;
+    out.cells[i] = body_cells(s, g);
+    out.ctrl[i] = control_bits(out.cells[i]);
+    out.count[i] = entry_count(out.cells[i]);
+  }
+}
+
+template void pack(const BodiesView&, const Vec3<double>&, const GridParams<float>&, int,
+                   PackedBodies<float>&);
+template void pack(const BodiesView&, const Vec3<double>&, const GridParams<double>&, int,
+                   PackedBodies<double>&);
+
+}  // namespace cg::detail::host

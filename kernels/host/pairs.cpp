@@ -1,0 +1,101 @@
+// Host stage pairs: the candidate pairs of the sorted entries (see stages.hpp).
+#include <algorithm>
+
+#include "backend.hpp"
+#include "host/stages.hpp"
+
+namespace cg::detail::host {
+namespace {
+
+// Entry e tests the later entries f of its cell; within a cell the bodies ascend (stable sort of
+// entries made in body order), so body[e] < body[f]. `touch_only`: only pairs passing spheres_touch
+// are emitted (CandidateFilter::spheres_touch), else every pair the cell rule assigns to e.
+template <bool touch_only, class Real, class Key, class Emit>
+std::uint64_t walk_entry(std::size_t e, const Entries<Key>& en, const Sphere<Real>* entry_sphere,
+                         const std::uint8_t* entry_ctrl, const std::uint8_t* report, int half_bits,
+                         Emit&& emit) {
+  const std::size_t n_entries = en.size();
+  const Key k = en.keys[e];
+  const std::uint32_t a = en.body[e];
+  if (report && !(report[a] & kReportedBit)) return 0;  // pairs (a, b > a) belong to a's owner
+  const std::uint32_t type = key_type(k, half_bits);
+  const Sphere<Real> sa = entry_sphere[e];
+  const std::uint8_t ca = entry_ctrl[e];
+  std::uint64_t tests = 0;
+  const std::uint8_t pa = report ? report[a] : 0;
+  for (std::size_t f = e + 1; f < n_entries && en.keys[f] == k; ++f) {
+    if ((pa & kPairedBit) && (report[en.body[f]] & kPairedBit)) continue;  // both paired elsewhere
+    if (!test_in_cell(ca, entry_ctrl[f], type)) continue;
+    ++tests;
+    if (!touch_only || spheres_touch(sa, entry_sphere[f])) emit(a, en.body[f]);
+  }
+  return tests;
+}
+
+template <bool touch_only, class Real, class Key>
+std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const std::uint8_t* report,
+                      int half_bits, int nt, CandidatePairs& out) {
+  const std::size_t n_entries = en.size();
+  // The spheres and control bytes are first gathered into entry order, so the walk reads memory in
+  // sequence.
+  std::vector<Sphere<Real>> entry_sphere(n_entries);
+  std::vector<std::uint8_t> entry_ctrl(n_entries);
+#pragma omp parallel for num_threads(nt) schedule(static) if (n_entries > k_parallel_min)
+  for (std::size_t e = 0; e < n_entries; ++e) {
+    entry_sphere[e] = p.spheres[en.body[e]];
+    entry_ctrl[e] = p.ctrl[en.body[e]];
+  }
+  // count → scan → fill at the granularity of fixed chunks of entries: each chunk collects its pairs
+  // once (no second walk of the cells), the chunk sizes are scanned, the chunks copied in order. The
+  // chunking depends only on the entry count, so the pair array is the same for any thread count.
+  const int id_bits = out.id_bits;
+  const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(256, n_entries / 16384));
+  std::vector<std::vector<std::uint64_t>> chunk_pairs(n_chunks);
+  std::uint64_t tests_total = 0;
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 1) reduction(+ : tests_total) if (n_chunks > 1)
+  for (std::size_t c = 0; c < n_chunks; ++c) {
+    std::vector<std::uint64_t>& mine = chunk_pairs[c];
+    for (std::size_t e = n_entries * c / n_chunks, end = n_entries * (c + 1) / n_chunks; e < end; ++e)
+      tests_total += walk_entry<touch_only>(
+          e, en, entry_sphere.data(), entry_ctrl.data(), report, half_bits,
+          [&](std::uint32_t a, std::uint32_t b) { mine.push_back((std::uint64_t(a) << id_bits) | b); });
+  }
+  std::vector<std::uint64_t> chunk_size(n_chunks), chunk_offset;
+  for (std::size_t c = 0; c < n_chunks; ++c) chunk_size[c] = chunk_pairs[c].size();
+  const std::uint64_t n_pairs = exclusive_scan(chunk_size, chunk_offset);
+  out.ab.resize(n_pairs);
+#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
+  for (std::size_t c = 0; c < n_chunks; ++c) {
+    std::copy(chunk_pairs[c].begin(), chunk_pairs[c].end(), out.ab.begin() + std::ptrdiff_t(chunk_offset[c]));
+    chunk_pairs[c] = {};
+  }
+  return tests_total;
+}
+
+}  // namespace
+
+template <class Real, class Key>
+std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p,
+                              std::span<const std::uint8_t> report, int half_bits, CandidateFilter filter,
+                              int threads, CandidatePairs& out) {
+  out.id_bits = std::max(1, bits_for(p.spheres.size()));
+  out.filter = filter;
+  const std::uint8_t* r = report.empty() ? nullptr : report.data();
+  return filter == CandidateFilter::spheres_touch ? collect<true>(e, p, r, half_bits, threads, out)
+                                                  : collect<false>(e, p, r, half_bits, threads, out);
+}
+
+template std::uint64_t find_candidates(const Entries<std::uint32_t>&, const PackedBodies<float>&,
+                                       std::span<const std::uint8_t>, int, CandidateFilter, int,
+                                       CandidatePairs&);
+template std::uint64_t find_candidates(const Entries<std::uint64_t>&, const PackedBodies<float>&,
+                                       std::span<const std::uint8_t>, int, CandidateFilter, int,
+                                       CandidatePairs&);
+template std::uint64_t find_candidates(const Entries<std::uint32_t>&, const PackedBodies<double>&,
+                                       std::span<const std::uint8_t>, int, CandidateFilter, int,
+                                       CandidatePairs&);
+template std::uint64_t find_candidates(const Entries<std::uint64_t>&, const PackedBodies<double>&,
+                                       std::span<const std::uint8_t>, int, CandidateFilter, int,
+                                       CandidatePairs&);
+
+}  // namespace cg::detail::host

@@ -1,0 +1,96 @@
+#pragma once
+// The CPU backend's stages, one file each (pack.cpp, entries.cpp, sort.cpp, pairs.cpp, order.cpp,
+// narrow.cpp), sequenced by host_backend.cpp. All memory is HOST memory; `threads` OpenMP threads
+// (> 0). Every decision and value comes from the CG_HD functions of kernels/core/, in the order the
+// CUDA kernels use, so this backend is the oracle of the CUDA one.
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "core/grid.hpp"
+#include "core/narrow.hpp"
+#include "engine.hpp"
+
+namespace cg::detail::host {
+
+// Below this many items a loop runs on the calling thread: waking a team costs more than it saves.
+constexpr std::size_t k_parallel_min = 32768;
+
+// Exclusive scan of `counts` into `offsets` (size + 1 values, the last the total); returns the total.
+template <class T, class Acc>
+Acc exclusive_scan(const std::vector<T>& counts, std::vector<Acc>& offsets) {
+  offsets.resize(counts.size() + 1);
+  Acc sum = 0;
+  for (std::size_t i = 0; i < counts.size(); ++i) {
+    offsets[i] = sum;
+    sum += counts[i];
+  }
+  offsets[counts.size()] = sum;
+  return sum;
+}
+
+// pack's output, per body in input order.
+template <class Real>
+struct PackedBodies {
+  std::vector<Sphere<Real>> spheres;  // local frame: Real(world - origin)
+  std::vector<BodyCells> cells;       // freed by fill_entries
+  std::vector<std::uint8_t> ctrl;     // control_bits
+  std::vector<std::uint32_t> count;   // entry_count; freed by fill_entries
+};
+
+// (cell key, body) entries; body-ascending after fill_entries, key-ascending (stable) after sort.
+template <class Key>
+struct Entries {
+  std::vector<Key> keys;
+  std::vector<std::uint32_t> body;
+  std::size_t size() const { return keys.size(); }
+};
+
+// Candidate pairs of local indices a < b, packed as a << id_bits | b: a plain (a, b) array, ascending
+// after order_candidates (so a list can be kept across calls and handed to narrow again).
+struct CandidatePairs {
+  std::vector<std::uint64_t> ab;
+  int id_bits = 1;
+  CandidateFilter filter = CandidateFilter::spheres_touch;  // how the pair stage filtered them
+  std::size_t size() const { return ab.size(); }
+  std::uint32_t a(std::size_t k) const { return static_cast<std::uint32_t>(ab[k] >> id_bits); }
+  std::uint32_t b(std::size_t k) const {
+    return static_cast<std::uint32_t>(ab[k] & ((std::uint64_t(1) << id_bits) - 1));
+  }
+};
+
+// pack: world (double) → local Real spheres; per body its cells, control byte and entry count.
+template <class Real>
+void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams<Real>& g, int threads,
+          PackedBodies<Real>& out);
+
+// entries: exclusive scan of the entry counts → fill (cell key, body) in body order. Returns the
+// number of entries; frees p.cells and p.count.
+template <class Real, class Key>
+std::uint64_t fill_entries(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, Entries<Key>& out);
+
+// sort: stable radix sort of the entries by cell key over key_bits bits.
+template <class Key>
+void sort_entries(Entries<Key>& e, int key_bits, int threads);
+
+// pairs: per sorted entry, the later entries of its cell that the cell rule (test_in_cell) and the
+// report mask assign to it; those passing `filter` become candidates (chunks of entries collect
+// their pairs, chunk sizes → scan → fill: the same array for any thread count). Returns the number
+// of pairs tested (EngineStats::pair_tests).
+template <class Real, class Key>
+std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p,
+                              std::span<const std::uint8_t> report, int half_bits, CandidateFilter filter,
+                              int threads, CandidatePairs& out);
+
+// order: radix sort of the candidates by (a, b).
+void order_candidates(CandidatePairs& c, int threads);
+
+// narrow: narrow_decide() on every candidate; contact rows of the requested fields, world frame,
+// in candidate order. When the filter may reject (narrow_may_reject): count → scan → fill (accept
+// flags, exclusive scan of chunk counts, fill of the accepted rows); else one row per candidate.
+template <class Real>
+void narrow(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres, const Vec3<double>& origin,
+            Fields fields, int threads, Contacts<Real>& out);
+
+}  // namespace cg::detail::host

@@ -1,0 +1,56 @@
+#pragma once
+// Typed ids of the stages of one detection, shared by both backends (g++-safe). The public timing
+// table (StageTimes: {name, seconds} in stage order) is written from these ids only, so the names and
+// their order are stated once, here.
+#include <chrono>
+
+#include "engine.hpp"
+
+namespace cg::detail {
+
+// In pipeline order. upload and download: CUDA backend only (the host reads and writes in place).
+enum class Stage : int { upload, pack, entries, sort, pairs, order, narrow, download };
+inline constexpr int kStageCount = 8;
+
+constexpr const char* name(Stage s) {
+  switch (s) {
+    case Stage::upload:
+      return "upload";
+    case Stage::pack:
+      return "pack";
+    case Stage::entries:
+      return "entries";
+    case Stage::sort:
+      return "sort";
+    case Stage::pairs:
+      return "pairs";
+    case Stage::order:
+      return "order";
+    case Stage::narrow:
+      return "narrow";
+    case Stage::download:
+      return "download";
+  }
+  return "?";
+}
+
+constexpr int index(Stage s) { return static_cast<int>(s); }
+constexpr Stage stage_at(int i) { return static_cast<Stage>(i); }
+
+// Wall-clock laps of the host backend: lap(s) appends {name(s), seconds since the previous lap}.
+class HostStageTimer {
+ public:
+  using clock_type = std::chrono::steady_clock;
+  explicit HostStageTimer(StageTimes& times) : m_times(times), m_t(clock_type::now()) {}
+  void lap(Stage s) {
+    const auto now = clock_type::now();
+    m_times.push_back({name(s), std::chrono::duration<double>(now - m_t).count()});
+    m_t = now;
+  }
+
+ private:
+  StageTimes& m_times;
+  clock_type::time_point m_t;
+};
+
+}  // namespace cg::detail

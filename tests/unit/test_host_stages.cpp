@@ -1,0 +1,129 @@
+// The CPU backend's stages one by one (kernels/host/stages.hpp), and the candidate / narrow cut: a
+// pair stage with the loose cell filter hands narrow candidates that are not contacts; narrow must
+// reject exactly those (count → scan → fill) and give the same contacts, bit for bit.
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+#include "backend.hpp"
+#include "host/stages.hpp"
+#include "scenes.hpp"
+
+namespace cg::test {
+namespace {
+
+template <class Real>
+detail::DetectJob<Real> make_job(const Spheres& s, Fields fields, std::span<const std::uint8_t> report = {}) {
+  constexpr Precision prec = sizeof(Real) == 4 ? Precision::fp32 : Precision::fp64;
+  const BodiesView v{s.p, s.r, {}, report};
+  const Bounds b = compute_bounds(v);
+  const Frame f = make_frame(b, 0, prec, CellChoice::tuned);
+  detail::DetectJob<Real> job{v, plan_grid(b, f, prec), {}, fields};
+  job.grid = detail::grid_params<Real>(job.plan);
+  return job;
+}
+
+template <class T>
+bool same_bits(const HostVector<T>& a, const HostVector<T>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
+template <class Real>
+void expect_same(const Contacts<Real>& a, const Contacts<Real>& b) {
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_TRUE(same_bits(a.id_a, b.id_a));
+  EXPECT_TRUE(same_bits(a.id_b, b.id_b));
+  EXPECT_TRUE(same_bits(a.position_on_a, b.position_on_a));
+  EXPECT_TRUE(same_bits(a.position_on_b, b.position_on_b));
+  EXPECT_TRUE(same_bits(a.normal_on_b, b.normal_on_b));
+  EXPECT_TRUE(same_bits(a.distance, b.distance));
+  EXPECT_TRUE(same_bits(a.local_point_a, b.local_point_a));
+  EXPECT_TRUE(same_bits(a.lateral_friction_dir2, b.lateral_friction_dir2));
+}
+
+template <class Real>
+class HostStagesTest : public ::testing::Test {};
+using Reals = ::testing::Types<float, double>;
+TYPED_TEST_SUITE(HostStagesTest, Reals);
+
+// The cell filter proposes non-contacts; narrow rejects them and the contacts are the default's.
+TYPED_TEST(HostStagesTest, NarrowRejectsLooseCandidates) {
+  using Real = TypeParam;
+  for (int threads : {1, 3}) {
+    for (const Spheres& s :
+         {random_spheres(20000, 0.5, 1.0, 2101), random_spheres(5000, 0.01, 1.0, 2102, true),
+          clustered(3000, 2103), tangent(2104)}) {
+      SCOPED_TRACE(s.name + " threads " + std::to_string(threads));
+      const detail::DetectJob<Real> job = make_job<Real>(s, Fields::full);
+      detail::HostBackend exact{threads};
+      detail::HostBackend loose{threads, CandidateFilter::cells};
+      Contacts<Real> a, b;
+      StageTimes ta, tb;
+      EngineStats sa, sb;
+      detail::run_stages(exact, job, a, ta, sa);
+      detail::run_stages(loose, job, b, tb, sb);
+      expect_same(a, b);
+      EXPECT_EQ(sa.pair_tests, sb.pair_tests);
+      EXPECT_GT(a.size(), 0u);
+      ASSERT_EQ(ta.size(), tb.size());
+      for (std::size_t i = 0; i < ta.size(); ++i) EXPECT_EQ(ta[i].name, tb[i].name);
+    }
+  }
+}
+
+// The stages by hand: the loose candidates include non-contacts (so the rejecting path has work),
+// every exact candidate is among them, and narrow keeps exactly the exact ones.
+TYPED_TEST(HostStagesTest, StagesByHand) {
+  using Real = TypeParam;
+  const Spheres s = random_spheres(6000, 0.5, 1.0, 2111);
+  const detail::DetectJob<Real> job = make_job<Real>(s, Fields::basic);
+  const int nt = 2;
+  detail::host::PackedBodies<Real> bodies;
+  detail::host::pack(job.bodies, job.plan.frame.origin, job.grid, nt, bodies);
+  ASSERT_EQ(bodies.spheres.size(), s.r.size());
+  detail::host::Entries<std::uint64_t> entries;
+  const std::uint64_t n_entries = detail::host::fill_entries(bodies, job.grid, nt, entries);
+  EXPECT_GE(n_entries, s.r.size());
+  EXPECT_EQ(entries.size(), n_entries);
+  detail::host::sort_entries(entries, job.plan.key_bits, nt);
+  for (std::size_t e = 1; e < entries.size(); ++e) ASSERT_LE(entries.keys[e - 1], entries.keys[e]);
+
+  detail::host::CandidatePairs exact, loose;
+  const auto t_exact = detail::host::find_candidates(entries, bodies, {}, job.grid.half_bits,
+                                                     CandidateFilter::spheres_touch, nt, exact);
+  const auto t_loose = detail::host::find_candidates(entries, bodies, {}, job.grid.half_bits,
+                                                     CandidateFilter::cells, nt, loose);
+  EXPECT_EQ(t_exact, t_loose);
+  EXPECT_EQ(loose.size(), t_loose);  // every tested pair is a loose candidate
+  EXPECT_GT(loose.size(), exact.size()) << "the cell filter must propose non-contacts";
+  detail::host::order_candidates(exact, nt);
+  detail::host::order_candidates(loose, nt);
+  for (std::size_t k = 1; k < loose.size(); ++k) ASSERT_LT(loose.ab[k - 1], loose.ab[k]);
+  for (std::size_t k = 0; k < loose.size(); ++k) ASSERT_LT(loose.a(k), loose.b(k));
+
+  Contacts<Real> from_exact, from_loose;
+  detail::host::narrow(exact, bodies.spheres, job.plan.frame.origin, Fields::basic, nt, from_exact);
+  detail::host::narrow(loose, bodies.spheres, job.plan.frame.origin, Fields::basic, nt, from_loose);
+  ASSERT_EQ(from_exact.size(), exact.size());
+  expect_same(from_exact, from_loose);
+  for (std::size_t k = 0; k < exact.size(); ++k) {
+    ASSERT_EQ(from_exact.id_a[k], exact.a(k));
+    ASSERT_EQ(from_exact.id_b[k], exact.b(k));
+  }
+}
+
+// narrow_decide on its own: touching counts, a gap is rejected, the row is the sphere row.
+TEST(NarrowDecide, TouchingAcceptedGapRejected) {
+  const Sphere<double> a{0, 0, 0, 1}, touching{2, 0, 0, 1}, apart{2.5, 0, 0, 1};
+  const Vec3<double> origin{10, 0, 0};
+  const auto yes = narrow_decide(a, touching, origin, true);
+  EXPECT_TRUE(yes.contact);
+  EXPECT_EQ(yes.row.distance, 0.0);
+  EXPECT_EQ(yes.row.position_on_a.x, 11.0);
+  EXPECT_FALSE(narrow_decide(a, apart, origin, true).contact);
+  EXPECT_FALSE(narrow_may_reject(CandidateFilter::spheres_touch));
+  EXPECT_TRUE(narrow_may_reject(CandidateFilter::cells));
+}
+
+}  // namespace
+}  // namespace cg::test
