@@ -1,0 +1,70 @@
+#pragma once
+// What the CUDA stages share: block size, control-byte flags, the DEVICE counters of a call, the
+// contact array pointers, and small host helpers. Each stage's kernels mirror one loop of the CPU
+// backend (kernels/host/) and call the same CG_HD functions of kernels/core/ in the same order, so
+// every decision and every value is bit-identical to it (no FMA contraction: --fmad=false; IEEE sqrt
+// and div).
+//
+// Thread mapping: one thread per body (pack, fill_entries), per sorted entry (count_pairs,
+// fill_pairs) or per pair (narrow); blocks of kBlock threads, no grid-stride loop in the
+// count → fill pairs, so that a block's count kernel and fill kernel see the same items and the
+// fill places its items with a block-wide exclusive scan plus the block's scanned total.
+#include <cstdint>
+#include <cub/block/block_reduce.cuh>
+#include <cub/block/block_scan.cuh>
+
+#include "core/contact.hpp"
+#include "core/grid.hpp"
+#include "engine.hpp"
+
+namespace cg::cuda {
+
+constexpr int kBlock = 256;
+constexpr int kStaged = kBlock + 32;  // count_pairs: a block's entries and the halo of its windows
+// Bit 6 of a body's control byte (bits 0-5: control_bits) is its report flag when a report mask is
+// given: the pair walk then reads the flag with the control byte it already holds, instead of a
+// random read of the mask by input index per visit (at 2^26 on 2 H200 ranks the pairs stage took
+// 5.5 ms per rank instead of about half of the single rank's 6.5 ms).
+constexpr std::uint32_t kReportBit = 0x40u;
+constexpr std::uint32_t kPairedCtrlBit = 0x80u;  // the mask's kPairedBit, likewise
+#ifndef CG_PAIRS_MIN_BLOCKS
+#define CG_PAIRS_MIN_BLOCKS 6
+#endif
+// count_pairs: resident blocks per SM asked of ptxas (6: at most 40 registers, 75 % occupancy, a few
+// bytes of spill; measured on the H100 at 2^24: pairs 1.84 -> 1.67 ms fp32, 2.41 -> 2.11 ms fp64).
+constexpr int kPairsMinBlocks = CG_PAIRS_MIN_BLOCKS;
+
+// DEVICE counters of one call; zeroed (cudaMemsetAsync) before the first kernel that adds to them.
+struct Counters {
+  unsigned long long entries;          // sum of entry counts (pack)
+  unsigned long long pairs;            // contacting pairs (count_pairs)
+  unsigned long long tests;            // sphere tests made (count_pairs)
+  unsigned long long bad;              // n - i of the first invalid body i (atomicMax), 0: none
+  unsigned long long type_entries[8];  // entries per cell type (reorder, type-pass path only)
+};
+
+// Pointers of the contact arrays in DEVICE memory; the `full` four are null for Fields::basic.
+template <class Real>
+struct ContactPtrs {
+  std::int64_t *id_a, *id_b;
+  Vec3<Real>*position_on_a, *position_on_b, *normal_on_b;
+  Real* distance;
+  Vec3<Real>*local_point_a, *local_point_b, *dir1, *dir2;
+};
+
+__device__ __forceinline__ bool body_is_bad(double x, double y, double z, double r) {
+  return !isfinite(x) || !isfinite(y) || !isfinite(z) || !(r > 0) || !isfinite(r);
+}
+
+// True when a body with control byte `ctrl` overlaps a cell of type `type` (at most one: along each
+// axis the cell is lo when its parity is the type's, else lo + 1, which needs the spill).
+__host__ __device__ __forceinline__ bool has_type(std::uint32_t ctrl, std::uint32_t type) {
+  return ((type ^ ctrl) & ~(ctrl >> 3) & 7u) == 0u;
+}
+
+inline std::uint32_t blocks_for(std::uint64_t n) {
+  return static_cast<std::uint32_t>((n + kBlock - 1) / kBlock);
+}
+inline std::size_t align16(std::size_t b) { return (b + 15) & ~std::size_t(15); }
+
+}  // namespace cg::cuda

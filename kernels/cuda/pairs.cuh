@@ -1,0 +1,266 @@
+#pragma once
+// CUDA stage pairs: the candidate pairs of the sorted entries, (a, b) u32 arrays of input indices
+// a < b. count_pairs counts per sorted entry (block-staged walk) and writes the pairs directly at a
+// block-aggregated atomic cursor into the dead alternate entry-body buffer; when they overflow the
+// space there: scan of the block totals → fill_pairs into ws.pairs. The candidate filter is
+// spheres_touch (every candidate is a contact: the narrow stage needs no compaction).
+#include <cub/device/device_scan.cuh>
+
+#include "cuda/common.cuh"
+#include "cuda/run_state.cuh"
+
+namespace cg::cuda {
+
+// The host's for_each_contact for sorted entry e: tests against the later entries f >= f0 of its cell
+// (f0 = e + 1 for the whole walk). Bodies are cell-ordered indices; perm maps them to input indices.
+// The host visits a pair (a, b) of input indices a < b from a's entry and skips it when report[a] is
+// 0; here the entry order within a cell follows the cell order, so the report flag of the smaller
+// input index of the two decides (kReportBit of its control byte, set by reorder from the mask). Both tests
+// are symmetric in the two bodies (bit for bit), so the decisions are the host's.
+template <class Real>
+struct EntryBody {  // what a visit needs of the first body of a pair
+  std::uint32_t a, type, pa;
+  std::uint8_t ca;
+  Sphere<Real> sa;
+};
+
+template <class Real, class Emit>
+__device__ __forceinline__ void visit(const EntryBody<Real>& x, std::uint32_t b, std::uint8_t cb,
+                                      const Sphere<Real>& sb, std::uint32_t pb, const std::uint8_t* report,
+                                      std::uint32_t& tests, Emit& emit) {
+  // the report flag of the smaller input index; no pair of two bodies paired elsewhere
+  if (report && (!((x.pa < pb ? x.ca : cb) & kReportBit) || (x.ca & cb & kPairedCtrlBit))) return;
+  if (!test_in_cell(x.ca, cb, x.type)) return;
+  ++tests;
+  if (spheres_touch(x.sa, sb)) emit(x.a, b);
+}
+
+template <class Real, class Key, class Emit>
+__device__ __forceinline__ std::uint32_t walk_from_memory(
+    std::uint32_t f0, Key k, const EntryBody<Real>& x, const Key* __restrict__ keys,
+    const std::uint32_t* __restrict__ body, std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
+    const Sphere<Real>* __restrict__ spheres, const std::uint32_t* __restrict__ perm,
+    const std::uint8_t* __restrict__ report, Emit&& emit) {
+  std::uint32_t tests = 0;
+  for (std::uint32_t f = f0; f < n_entries && keys[f] == k; ++f) {
+    const std::uint32_t b = body[f];
+    visit(x, b, ctrl[b], spheres[b], report ? perm[b] : 0u, report, tests, emit);
+  }
+  return tests;
+}
+
+// pairs, count: per block the number of contacting (reported) pairs (block_pairs); totals of pairs
+// and tests added to c; per entry e a contact mask: bit j (1..31) set when entry e + j is a contact
+// of e, bit 0 set when contacts lie past e + 31 or past the block's last entry (fill_pairs then walks
+// e's cell from memory). The block stages its entries and a halo of the next 32 (key, control byte,
+// sphere, input index when a report mask is given) in shared memory once; each thread then walks
+// only its own cell's later entries there (a few shared loads per step, no warp-wide shuffles: the
+// walk is issue-light), and walks from memory only a cell that goes on past e + 31 (or past the
+// last entry). Without the halo, the cell that straddles the block's end was walked from memory by
+// up to a cell's worth of threads, a chain of dependent global loads that kept the whole block
+// resident (the block's tail).
+// Direct write: the block takes the range [base, base + block total) of the pair cursor c->pairs (one
+// atomicAdd) and, when the range ends at or below `cap`, writes its pairs (pair_a[w], pair_b[w]) of
+// input indices, a < b, there, each thread at base + its exclusive rank (same walk, emitting). When
+// the cursor ends above cap, the host discards those writes and runs the scan → fill_pairs path
+// from the masks instead. The pairs' order is the blocks' arrival order; the order stage sorts them.
+template <class Real, class Key>
+__global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
+    count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
+                       std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
+                       const Sphere<Real>* __restrict__ spheres, const std::uint32_t* __restrict__ perm,
+                       const std::uint8_t* __restrict__ report, int half_bits, std::uint32_t pass_type,
+                       std::uint32_t* __restrict__ mask, std::uint32_t* __restrict__ block_pairs,
+                       Counters* __restrict__ c, std::uint32_t* __restrict__ pair_a,
+                       std::uint32_t* __restrict__ pair_b, unsigned long long cap) {
+  using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
+  using Scan = cub::BlockScan<unsigned long long, kBlock>;
+  __shared__ union {
+    typename Reduce::TempStorage reduce;
+    typename Scan::TempStorage scan;
+  } tmp;
+  __shared__ unsigned long long s_base;
+  __shared__ Key s_key[kStaged];
+  __shared__ std::uint32_t s_body[kStaged];
+  __shared__ Sphere<Real> s_sphere[kStaged];
+  __shared__ std::uint32_t s_perm[kStaged];
+  __shared__ std::uint8_t s_ctrl[kStaged];
+  const std::uint32_t base = blockIdx.x * kBlock;
+  const std::uint32_t t = threadIdx.x;
+  const std::uint32_t e = base + t;
+  const bool valid = e < n_entries;
+  const std::uint32_t end = n_entries - base < kStaged ? n_entries - base : kStaged;  // staged entries
+  Key k{};
+  EntryBody<Real> x{};
+  if (valid) {
+    k = keys[e];
+    x.a = body[e];
+    x.type = key_type(k, half_bits) | pass_type;  // type-pass path: keys hold no type bits
+    x.ca = ctrl[x.a];
+    x.sa = spheres[x.a];
+    x.pa = report ? perm[x.a] : 0u;
+    s_key[t] = k;
+    s_body[t] = x.a;
+    s_sphere[t] = x.sa;
+    s_ctrl[t] = x.ca;
+    s_perm[t] = x.pa;
+  }
+  if (t + kBlock < end) {  // the halo: the next block's first entries
+    const std::uint32_t h = t + kBlock, b = body[base + h];
+    s_key[h] = keys[base + h];
+    s_body[h] = b;
+    s_sphere[h] = spheres[b];
+    s_ctrl[h] = ctrl[b];
+    s_perm[h] = report ? perm[b] : 0u;
+  }
+  __syncthreads();
+  std::uint32_t found = 0, tests = 0, bits = 0;
+  if (valid) {
+    const std::uint32_t lim = end < t + 32 ? end : t + 32;  // staged entries e + 1 .. e + 31
+    std::uint32_t f = t + 1;
+    auto mark_one = [&](std::uint32_t, std::uint32_t) {
+      ++found;
+      bits |= 1u << (f - t);
+    };
+    for (; f < lim && s_key[f] == k; ++f)
+      visit(x, 0u, s_ctrl[f], s_sphere[f], s_perm[f], report, tests, mark_one);
+    if (f == lim) {  // the cell may go on past the staged window: walk the rest from memory
+      const std::uint32_t before = found;
+      tests += walk_from_memory(base + f, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
+                                [&](std::uint32_t, std::uint32_t) { ++found; });
+      if (found != before) bits |= 1u;
+    }
+    mask[e] = bits;
+  }
+  unsigned long long rank, block_sum;
+  Scan(tmp.scan).ExclusiveSum(static_cast<unsigned long long>(found), rank, block_sum);
+  __syncthreads();  // tmp is reused
+  const unsigned long long block_tests = Reduce(tmp.reduce).Sum(static_cast<unsigned long long>(tests));
+  if (threadIdx.x == 0) {
+    // Truncation is harmless: the host rejects totals >= 2^31 before block_pairs is used.
+    block_pairs[blockIdx.x] = static_cast<std::uint32_t>(block_sum);
+    s_base = block_sum ? atomicAdd(&c->pairs, block_sum) : 0ull;
+    atomicAdd(&c->tests, block_tests);
+  }
+  __syncthreads();
+  if (found == 0 || s_base + block_sum > cap) return;
+  unsigned long long w = s_base + rank;
+  const std::uint32_t pa = report ? x.pa : perm[x.a];
+  auto emit = [&](std::uint32_t, std::uint32_t b) {
+    const std::uint32_t pb = perm[b];  // input indices, a < b as the host
+    pair_a[w] = pa < pb ? pa : pb;
+    pair_b[w] = pa < pb ? pb : pa;
+    ++w;
+  };
+  if (bits & 1u) {
+    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, emit);
+  } else {
+    for (std::uint32_t m = bits; m != 0; m &= m - 1) emit(x.a, s_body[t + __ffs(m) - 1]);
+  }
+}
+
+// pairs, fill: pairs (pair_a[w], pair_b[w]) of input indices, a < b, at w = the block's scanned total +
+// the entry's rank, from the contact masks of count_pairs_kernel (entries flagged in bit 0: the cell
+// is walked from memory again, counting then emitting).
+template <class Real, class Key>
+__global__ void __launch_bounds__(kBlock)
+    fill_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
+                      std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
+                      const Sphere<Real>* __restrict__ spheres, const std::uint32_t* __restrict__ perm,
+                      const std::uint8_t* __restrict__ report, int half_bits,
+                      const std::uint32_t* __restrict__ mask, const std::uint32_t* __restrict__ block_offset,
+                      std::uint32_t* __restrict__ pair_a, std::uint32_t* __restrict__ pair_b) {
+  using Scan = cub::BlockScan<std::uint32_t, kBlock>;
+  __shared__ typename Scan::TempStorage tmp;
+  const std::uint32_t e = blockIdx.x * kBlock + threadIdx.x;
+  const std::uint32_t bits = e < n_entries ? mask[e] : 0u;
+  EntryBody<Real> x{};
+  Key k{};
+  std::uint32_t mine = 0;
+  if (bits & 1u) {  // slow path: contacts past the warp's end
+    k = keys[e];
+    x.a = body[e];
+    x.type = key_type(k, half_bits);
+    x.ca = ctrl[x.a];
+    x.sa = spheres[x.a];
+    x.pa = report ? perm[x.a] : 0u;
+    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
+                     [&](std::uint32_t, std::uint32_t) { ++mine; });
+  } else {
+    mine = __popc(bits);
+  }
+  std::uint32_t rank;
+  Scan(tmp).ExclusiveSum(mine, rank);
+  if (mine == 0) return;
+  std::uint32_t w = block_offset[blockIdx.x] + rank;
+  auto emit = [&](std::uint32_t a, std::uint32_t b) {
+    const std::uint32_t pa = perm[a], pb = perm[b];  // input indices, a < b as the host
+    pair_a[w] = pa < pb ? pa : pb;
+    pair_b[w] = pa < pb ? pb : pa;
+    ++w;
+  };
+  if (bits & 1u) {
+    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, emit);
+  } else {
+    const std::uint32_t a = body[e];
+    for (std::uint32_t m = bits; m != 0; m &= m - 1) emit(a, body[e + __ffs(m) - 1]);
+  }
+}
+
+}  // namespace cg::cuda
+
+namespace cg::detail {
+
+template <class Real, class Key>
+void pairs_stage(RunState<Real, Key>& r) {
+  using cuda::kBlock;
+  Workspace& ws = r.ws;
+  cudaStream_t st = r.st;
+  const auto ne = static_cast<std::uint32_t>(r.n_entries);
+  const std::uint32_t neb = cuda::blocks_for(ne);
+  // ---- count (and direct write) ----
+  const Key* d_keys = r.keys.Current();
+  const std::uint32_t* d_body = r.body.Current();
+  std::uint32_t* d_pair_count = Workspace::pair_masks(r.keys);
+  std::uint32_t* d_entry_totals = ws.entry_blocks.span_as<std::uint32_t>(2 * neb).data();
+  std::uint32_t* d_entry_offsets = d_entry_totals + neb;
+  // Direct write of the pairs as four u32 arrays (a, b, and the order sort's second copies) of
+  // cap = ne / 4 pairs each.
+  const std::uint64_t direct_cap = ne / 4;
+  std::uint32_t* d_direct = Workspace::direct_pairs(r.body);
+  cuda::count_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(
+      d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.d_perm, r.d_report, r.g.half_bits, 0u, d_pair_count,
+      d_entry_totals, r.d_counters, d_direct, d_direct + direct_cap, direct_cap);
+  CG_CUDA_CHECK_LAUNCH("count_pairs");
+  r.read_counters();  // host needs the pairs total
+  const std::uint64_t n_pairs = r.h_counters->pairs;
+  r.stats.pair_tests = r.h_counters->tests;
+  check_pairs(n_pairs);
+  r.np = static_cast<std::uint32_t>(n_pairs);
+
+  // ---- (scan → fill) ----
+  // Pairs as (a, b) u32 arrays, double-buffered (16 B a pair). When they fit in the alternate entry
+  // body buffer (np <= ne / 4), the count kernel has already written them there; else they are
+  // placed in ws.pairs by the scan of the block totals → fill_pairs (from the contact masks).
+  const bool pairs_in_entries = n_pairs <= direct_cap;
+  ws.reserve({{&ws.pairs, pairs_in_entries ? 0 : 4 * std::size_t(r.np) * sizeof(std::uint32_t)},
+              {&ws.out, r.out_bytes_for(r.np)}},
+             "pairs");
+  const std::size_t stride = pairs_in_entries ? std::size_t(direct_cap) : std::size_t(r.np);
+  std::uint32_t* d_pair_store =
+      pairs_in_entries ? d_direct : ws.pairs.span_as<std::uint32_t>(4 * std::size_t(r.np)).data();
+  r.pair_a = cub::DoubleBuffer<std::uint32_t>(d_pair_store, d_pair_store + 2 * stride);
+  r.pair_b = cub::DoubleBuffer<std::uint32_t>(d_pair_store + stride, d_pair_store + 3 * stride);
+  if (!pairs_in_entries && r.np > 0) {
+    cub_run(ws, "pairs", [&](void* t, std::size_t& b) {
+      return cub::DeviceScan::ExclusiveSum(t, b, d_entry_totals, d_entry_offsets, int(neb), st);
+    });
+    cuda::fill_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(
+        d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.d_perm, r.d_report, r.g.half_bits, d_pair_count,
+        d_entry_offsets, r.pair_a.Current(), r.pair_b.Current());
+    CG_CUDA_CHECK_LAUNCH("fill_pairs");
+  }
+  r.events.mark(Stage::pairs, st);
+}
+
+}  // namespace cg::detail

@@ -1,0 +1,85 @@
+#pragma once
+// The state one CUDA detection hands from stage to stage: the call's sizes and knobs, the DEVICE
+// pointers each stage produces (views of the workspace, see workspace.cuh) and the host's copies of
+// the counters. Built by CudaBackend::run (cuda_backend.cu), which calls the stages in order.
+#include <sstream>
+
+#include "backend.hpp"
+#include "cuda/common.cuh"
+#include "cuda/stage_events.cuh"
+#include "cuda/tuning.hpp"
+#include "cuda/workspace.cuh"
+
+namespace cg::detail {
+
+template <class Real, class Key>
+struct RunState {
+  // the call
+  const DetectJob<Real>& job;
+  Workspace& ws;
+  const Tuning& tuning;
+  StageEvents& events;
+  cudaStream_t st;
+  std::size_t l2_bytes;        // the device's L2 cache
+  cuda::Counters* h_counters;  // pinned HOST copy of the counters
+  EngineStats& stats;
+  // sizes
+  std::uint64_t n64 = 0;
+  std::uint32_t n = 0, nb = 0;  // bodies, blocks of bodies
+  GridParams<Real> g{};
+  Vec3<double> origin{};
+  bool device_in = false, full = false, type_passes = false;
+  std::size_t body_block_words = 0;
+  // upload: the bodies (DEVICE)
+  const double* d_pos = nullptr;
+  const double* d_rad = nullptr;
+  const std::uint8_t* d_report = nullptr;
+  // pack
+  Sphere<Real>* d_spheres = nullptr;       // input order
+  Sphere<Real>* d_cell_spheres = nullptr;  // cell order
+  std::uint32_t* d_perm = nullptr;         // cell order → input index
+  std::uint8_t* d_ctrl = nullptr;          // cell order
+  std::uint32_t* d_body_totals = nullptr;
+  std::uint32_t* d_body_offsets = nullptr;  // single-sort path
+  std::uint32_t* d_type_totals = nullptr;   // type-pass path: [8][nb] totals, then offsets
+  std::uint32_t* d_type_offsets = nullptr;
+  Key* d_base = nullptr;
+  cuda::Counters* d_counters = nullptr;
+  std::uint64_t n_entries = 0;
+  std::uint64_t type_entries[8] = {};
+  // entries, sort
+  cub::DoubleBuffer<Key> keys{nullptr, nullptr};
+  cub::DoubleBuffer<std::uint32_t> body{nullptr, nullptr};
+  // pairs: the candidate pairs (input indices a < b), in (a, b) order after the order stage
+  cub::DoubleBuffer<std::uint32_t> pair_a{nullptr, nullptr}, pair_b{nullptr, nullptr};
+  std::uint32_t np = 0;
+  CandidateFilter filter = CandidateFilter::spheres_touch;  // count_pairs applies spheres_touch
+  // narrow: the contact rows (DEVICE) and their bytes from ws.out.data()
+  cuda::ContactPtrs<Real> cp{};
+  std::size_t out_bytes = 0;
+  std::uint32_t n_rows = 0;
+
+  // Bytes of the contact rows of `pairs` pairs (the layout of narrow_stage).
+  std::size_t out_bytes_for(std::uint64_t pairs) const {
+    const std::size_t v3 = cuda::align16(pairs * sizeof(Vec3<Real>)),
+                      ids = cuda::align16(pairs * sizeof(std::int64_t)),
+                      reals = cuda::align16(pairs * sizeof(Real));
+    return 2 * ids + 3 * v3 + reals + (full ? 4 * v3 : 0);
+  }
+  // The counters copied to h_counters (synchronises the stream).
+  void read_counters() {
+    CG_CUDA_CHECK(
+        cudaMemcpyAsync(h_counters, d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, st));
+    CG_CUDA_CHECK(cudaStreamSynchronize(st));
+  }
+};
+
+inline void check_pairs(std::uint64_t n_pairs) {
+  if (n_pairs >= (std::uint64_t(1) << 31)) {
+    std::ostringstream m;
+    m << n_pairs << " contacting pairs exceed the 2^31 - 1 items one CUB sort handles; use more MPI ranks";
+    throw ResourceError(m.str());
+  }
+}
+
+}  // namespace cg::detail

@@ -1,0 +1,92 @@
+#pragma once
+// The CUDA backend's stage timer: CUDA events on the stream, one per typed stage (stage.hpp). A stage's
+// time is the span from the previous recorded stage's event to its own. The type-pass path replaces
+// the entries, sort and pairs times by the sums over its passes (set_time), the pairs time plus the
+// tail from the last pass to the pairs event (add_tail).
+#include <algorithm>
+
+#include "cuda/device_buffer.cuh"
+#include "stage.hpp"
+
+namespace cg::detail {
+
+class StageEvents {
+ public:
+  static constexpr int kPassEvents = 1 + 3 * 8;  // type passes: start, then per pass fill/sort/count ends
+
+  StageEvents() = default;
+  // Creates the events on the current device (called once the backend has set its device).
+  void create() {
+    for (auto& e : m_events) CG_CUDA_CHECK(cudaEventCreate(&e));
+    for (auto& e : m_pass) CG_CUDA_CHECK(cudaEventCreate(&e));
+  }
+  ~StageEvents() {
+    for (auto& e : m_events)
+      if (e) cudaEventDestroy(e);
+    for (auto& e : m_pass)
+      if (e) cudaEventDestroy(e);
+  }
+  StageEvents(const StageEvents&) = delete;
+  StageEvents& operator=(const StageEvents&) = delete;
+
+  // The start of a call (before the first stage).
+  void start(cudaStream_t st) {
+    std::fill(std::begin(m_recorded), std::end(m_recorded), false);
+    std::fill(std::begin(m_override), std::end(m_override), false);
+    m_tail = false;
+    CG_CUDA_CHECK(cudaEventRecord(m_events[0], st));
+  }
+  cudaEvent_t start_event() const { return m_events[0]; }
+  // The end of stage s.
+  void mark(Stage s, cudaStream_t st) {
+    CG_CUDA_CHECK(cudaEventRecord(m_events[index(s) + 1], st));
+    m_recorded[index(s)] = true;
+  }
+  cudaEvent_t end_event(Stage s) const { return m_events[index(s) + 1]; }
+  cudaEvent_t pass_event(int i) const { return m_pass[i]; }
+  // Stage s takes `ms` instead of its event span (type passes).
+  void set_time(Stage s, double ms) {
+    m_override[index(s)] = true;
+    m_override_ms[index(s)] = ms;
+  }
+  // Stage s's set time also gets the span from the last pass event to its end event.
+  void add_tail(Stage s) {
+    m_tail = true;
+    m_tail_stage = s;
+  }
+
+  // Appends the recorded stages to `times` (all events complete: the stream was synchronised).
+  // download: the larger of its span and `download_overlap_s`, plus `download_extra_s` (host work).
+  void collect(StageTimes& times, double download_overlap_s, double download_extra_s) const {
+    cudaEvent_t prev = m_events[0];
+    for (int i = 0; i < kStageCount; ++i) {
+      if (!m_recorded[i]) continue;
+      float ms = 0;
+      CG_CUDA_CHECK(cudaEventElapsedTime(&ms, prev, m_events[i + 1]));
+      double sec = ms * 1e-3;
+      if (m_override[i]) {
+        double o = m_override_ms[i];
+        if (m_tail && i == index(m_tail_stage)) {
+          float tail = 0;
+          CG_CUDA_CHECK(cudaEventElapsedTime(&tail, m_pass[kPassEvents - 1], m_events[i + 1]));
+          o += tail;
+        }
+        sec = o * 1e-3;
+      }
+      if (i == index(Stage::download)) sec = std::max(sec, download_overlap_s) + download_extra_s;
+      times.push_back({name(stage_at(i)), sec});
+      prev = m_events[i + 1];
+    }
+  }
+
+ private:
+  cudaEvent_t m_events[kStageCount + 1] = {};
+  cudaEvent_t m_pass[kPassEvents] = {};
+  bool m_recorded[kStageCount] = {};
+  bool m_override[kStageCount] = {};
+  double m_override_ms[kStageCount] = {};
+  bool m_tail = false;
+  Stage m_tail_stage = Stage::pairs;
+};
+
+}  // namespace cg::detail

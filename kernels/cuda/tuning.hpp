@@ -1,0 +1,70 @@
+#pragma once
+// The CUDA backend's tuning knobs, read from the environment in one place (read_tuning()). They
+// choose among paths that give the same results (measurement and test knobs) or cap the device
+// memory the workspace may use. The backend reads them at construction and again at the start of each
+// call (CudaBackend::refresh_tuning), so a knob set between two calls on one engine takes effect, as
+// before the knobs were gathered here. g++-safe.
+#include <cstddef>
+#include <cstdint>
+#include <cstdlib>
+#include <optional>
+#include <string_view>
+
+namespace cg::detail {
+
+enum class Forced { automatic, off, on };
+
+struct Tuning {
+  // CONTACTGRID_CUDA_TYPE_PASSES=1: Le Grand's 8 passes by cell type (opt-in; =0 or unset: the single
+  // sort of all entries). Measured on an H200 (kernels/cuda/BENCH.md, h-cudaperf2): 65 instead of 125
+  // B/sphere (fp32, excl. contacts) but slower at every size measured (2^24 fp32: 7.55 vs 6.86 ms;
+  // 2^20: 0.99 vs 0.59 ms: 8 compaction fills and 8 sorts cost more than the radix pass they save).
+  bool type_passes = false;
+  // CONTACTGRID_DEVICE_MEMORY_LIMIT (bytes) caps the engine's workspace: a smaller GPU, or a GPU
+  // shared with a simulation, can be imitated (and the out-of-memory path tested).
+  std::optional<std::size_t> memory_limit;
+  // CONTACTGRID_CUDA_UPLOAD=registered / pageable: page-lock the host input arrays for the upload
+  // always / never (automatic: from 64 MiB an array).
+  Forced upload_registered = Forced::automatic;
+  // CONTACTGRID_CUDA_RENUMBER=1 / 0: the renumbering of the bodies by z layer on / off (automatic:
+  // when the spheres outgrow the L2).
+  Forced renumber = Forced::automatic;
+  // CONTACTGRID_CUDA_ORDER=counting / radix: group the pairs by a with a counting sort / a radix sort
+  // (automatic: counting while its counters fit in half the L2).
+  Forced counting_order = Forced::automatic;
+  // CONTACTGRID_CUDA_DOWNLOAD=registered / staged: contacts straight into page-locked result vectors /
+  // through the pinned staging buffer (automatic: registered from 64 MiB of contacts).
+  Forced download_registered = Forced::automatic;
+};
+
+// `on` / `off` when the variable equals one of the two spellings, else automatic.
+inline Forced forced(const char* variable, std::string_view on, std::string_view off) {
+  const char* v = std::getenv(variable);
+  if (!v) return Forced::automatic;
+  if (std::string_view(v) == on) return Forced::on;
+  if (std::string_view(v) == off) return Forced::off;
+  return Forced::automatic;
+}
+
+// The answer of a knob: forced, or `automatic_choice`.
+inline bool tuned(Forced f, bool automatic_choice) {
+  return f == Forced::automatic ? automatic_choice : f == Forced::on;
+}
+
+inline Tuning read_tuning() {
+  Tuning t;
+  const char* passes = std::getenv("CONTACTGRID_CUDA_TYPE_PASSES");
+  t.type_passes = passes && passes[0] == '1';
+  if (const char* cap = std::getenv("CONTACTGRID_DEVICE_MEMORY_LIMIT"))
+    t.memory_limit = std::strtoull(cap, nullptr, 10);
+  t.upload_registered = forced("CONTACTGRID_CUDA_UPLOAD", "registered", "pageable");
+  // only the first character counts, as before: "1..." on, "0..." off
+  const char* renumber = std::getenv("CONTACTGRID_CUDA_RENUMBER");
+  if (renumber && (renumber[0] == '0' || renumber[0] == '1'))
+    t.renumber = renumber[0] == '1' ? Forced::on : Forced::off;
+  t.counting_order = forced("CONTACTGRID_CUDA_ORDER", "counting", "radix");
+  t.download_registered = forced("CONTACTGRID_CUDA_DOWNLOAD", "registered", "staged");
+  return t;
+}
+
+}  // namespace cg::detail

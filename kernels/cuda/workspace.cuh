@@ -1,0 +1,153 @@
+#pragma once
+// The CUDA backend's persistent DEVICE workspace: named buffers that grow geometrically and never
+// shrink (a caller that detects many frames allocates nothing after the first), the memory check of
+// their growth, and the named views of the buffers that a later stage reuses once an earlier one is
+// done with them.
+//
+// Buffers and who uses them (n bodies, ne entries, nb = blocks of n, neb = blocks of ne, np pairs):
+//   pos, rad, report       upload → pack       host-array path: the input copied to the device
+//   spheres                pack → narrow       Real spheres in input order
+//   cell_spheres, perm,    pack → pairs        spheres, input index and control byte in cell order
+//   ctrl
+//   body_blocks            pack → entries      per block of bodies: entry totals, their scan (2 nb);
+//                                              type passes: entry totals, [8][nb] type totals, scan
+//   base                   pack → pairs        type passes: super-cell index per body
+//   keys[2], bodies[2]     entries → pairs     the entries, double-buffered for the CUB sort
+//   entry_blocks           pairs               per block of entries: pair totals and their scan
+//   pairs                  pairs → narrow      candidate pairs when they are not in the entries'
+//                                              dead buffer (see below); type passes: always
+//   out                    narrow → download   the contact rows (ContactPtrs, 16-byte aligned fields)
+//   temp                   any CUB call        CUB temporary storage (cub_run)
+//   counters, partials     every stage         Counters of the call; bounds partials
+//   res_pos, res_rad,      between calls       resident bodies (Engine::set_resident)
+//   res_report
+//
+// Aliases (a buffer seen under another name once its first use is dead):
+//   view                 storage                  when
+//   home_keys()          keys[0], keys[1]         pack: the renumbering sort's keys (before entries)
+//   home_index()         bodies[0], bodies[1]     pack: the renumbering sort's values
+//   pair_masks(keys)     keys.Alternate()         pairs: a contact mask per entry (after the sort)
+//   direct_pairs(body)   body.Alternate()         pairs: 4 u32 arrays of ne / 4 candidate pairs
+//                                                 (a, b, and the order sort's second copies)
+//   a_counts(), a_offsets()  keys[0], keys[1]     order (counting): per body pair count and offset
+// Contents do not survive a call, except the resident bodies and the contact rows of the last call
+// (DeviceContactsView, valid until the next detection).
+#include <cub/util_type.cuh>
+#include <initializer_list>
+#include <optional>
+#include <sstream>
+
+#include "cuda/common.cuh"
+#include "cuda/device_buffer.cuh"
+
+namespace cg::detail {
+
+using Bytes = cuda::DeviceBuffer<std::byte>;
+
+struct Workspace {
+  Bytes pos, rad, report;
+  Bytes spheres, cell_spheres, perm, ctrl, body_blocks, base;
+  Bytes keys[2], bodies[2];
+  Bytes entry_blocks, pairs, out, temp, counters, partials;
+  Bytes res_pos, res_rad, res_report;
+  std::size_t res_count = 0;
+  bool res_reported = false;  // resident report mask present
+
+  int device = 0;                           // for messages
+  std::optional<std::size_t> memory_limit;  // Tuning::memory_limit
+  std::uint64_t allocations = 0;            // cudaMalloc calls since the counter was reset
+
+  std::uint64_t held_bytes() const {
+    std::uint64_t s = 0;
+    for (const Bytes* b :
+         {&pos,  &rad,      &report,   &spheres,   &cell_spheres, &perm,         &ctrl,  &body_blocks,
+          &base, &keys[0],  &keys[1],  &bodies[0], &bodies[1],    &entry_blocks, &pairs, &out,
+          &temp, &counters, &partials, &res_pos,   &res_rad,      &res_report})
+      s += b->bytes();
+    return s;
+  }
+
+  struct Request {
+    Bytes* buffer;
+    std::size_t bytes;
+  };
+  // Grows the buffers of `reqs` (contents discarded) after checking that the growth fits in the
+  // device's free memory: geometric growth where it fits, exact sizes where only those fit, else
+  // ResourceError naming the bytes needed and available. Synchronises the device when it allocates.
+  void reserve(std::initializer_list<Request> reqs, const char* what) {
+    std::size_t grow_geo = 0, grow_exact = 0;
+    for (const Request& r : reqs) {
+      grow_geo += r.buffer->capacity_for(r.bytes, true) - r.buffer->capacity();
+      grow_exact += r.buffer->capacity_for(r.bytes, false) - r.buffer->capacity();
+    }
+    if (grow_exact == 0) return;
+    std::size_t free_b = 0, total_b = 0;
+    CG_CUDA_CHECK(cudaMemGetInfo(&free_b, &total_b));
+    if (memory_limit) {
+      const std::size_t limit = *memory_limit, held = held_bytes();
+      free_b = std::min(free_b, limit > held ? limit - held : std::size_t(0));
+    }
+    const std::size_t margin = std::size_t(64) << 20;  // CUDA context, launch and allocator slack
+    // Buffers that grow free their old storage first, so their current capacity is available too.
+    std::size_t reclaim = 0;
+    for (const Request& r : reqs)
+      if (r.bytes > r.buffer->capacity()) reclaim += r.buffer->capacity();
+    const std::size_t avail = free_b + reclaim > margin ? free_b + reclaim - margin : 0;
+    bool geometric = true;
+    if (grow_geo + reclaim > avail) geometric = false;
+    if (grow_exact + reclaim > avail) {
+      std::ostringstream m;
+      m << "device memory: the " << what << " stage needs " << grow_exact << " more bytes (workspace "
+        << held_bytes() + grow_exact << " bytes in all) but only " << free_b << " of " << total_b
+        << " bytes are free on CUDA device " << device
+        << "; use fewer bodies per rank (more MPI ranks) or a smaller scene";
+      throw ResourceError(m.str());
+    }
+    for (const Request& r : reqs)
+      if (r.buffer->reserve(r.bytes, geometric)) ++allocations;
+  }
+
+  // ---- named views (see the alias table above) ----
+  template <class Key>
+  cub::DoubleBuffer<Key> home_keys(std::size_t n) {
+    return {keys[0].span_as<Key>(n).data(), keys[1].span_as<Key>(n).data()};
+  }
+  cub::DoubleBuffer<std::uint32_t> home_index(std::size_t n) {
+    return {bodies[0].span_as<std::uint32_t>(n).data(), bodies[1].span_as<std::uint32_t>(n).data()};
+  }
+  template <class Key>
+  cub::DoubleBuffer<Key> entry_keys(std::size_t ne) {
+    return {keys[0].span_as<Key>(ne).data(), keys[1].span_as<Key>(ne).data()};
+  }
+  cub::DoubleBuffer<std::uint32_t> entry_bodies(std::size_t ne) {
+    return {bodies[0].span_as<std::uint32_t>(ne).data(), bodies[1].span_as<std::uint32_t>(ne).data()};
+  }
+  template <class Key>
+  static std::uint32_t* pair_masks(cub::DoubleBuffer<Key> sorted_keys) {
+    return reinterpret_cast<std::uint32_t*>(sorted_keys.Alternate());
+  }
+  static std::uint32_t* direct_pairs(cub::DoubleBuffer<std::uint32_t> sorted_bodies) {
+    return sorted_bodies.Alternate();
+  }
+  std::uint32_t* a_counts(std::size_t n) { return keys[0].span_as<std::uint32_t>(n).data(); }
+  std::uint32_t* a_offsets(std::size_t n) { return keys[1].span_as<std::uint32_t>(n).data(); }
+};
+
+// CUB's two-phase calls, wrapped once: `call(temp, bytes)` is queried with temp == nullptr, the
+// workspace's temp grows to the answer (memory-checked as `what`), then the call runs. The radix sorts
+// stay CUB's (cub::DeviceRadixSort over begin_bit..end_bit with double buffers): measured faster than
+// the alternatives for the entry and pair sorts (kernels/cuda/BENCH.md).
+template <class F>
+std::size_t cub_temp_bytes(F&& call) {
+  std::size_t bytes = 0;
+  CG_CUDA_CHECK(call(nullptr, bytes));
+  return bytes;
+}
+template <class F>
+void cub_run(Workspace& ws, const char* what, F&& call) {
+  std::size_t bytes = cub_temp_bytes(call);
+  ws.reserve({{&ws.temp, bytes}}, what);
+  CG_CUDA_CHECK(call(ws.temp.data(), bytes));
+}
+
+}  // namespace cg::detail
