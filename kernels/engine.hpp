@@ -15,19 +15,19 @@
 #include <string>
 #include <vector>
 
+#include "bodies.hpp"
+#include "contacts.hpp"
 #include "core/vec3.hpp"
 #include "errors.hpp"
-#include "host/huge_pages.hpp"
+#include "grid_plan.hpp"
 
 namespace cg {
 
 enum class Backend { cpu, cuda, automatic };
 enum class Fields { basic, full };
-enum class Precision { fp32, fp64 };
 
 const char* to_string(Backend b);
 const char* to_string(Fields f);
-const char* to_string(Precision p);
 
 // True when a CUDA device is usable in this process (false in builds without CUDA).
 bool cuda_available();
@@ -39,133 +39,6 @@ struct StageTime {
   double seconds;
 };
 using StageTimes = std::vector<StageTime>;
-
-// Contacts as CONTRACT §2: sorted by (id_a, id_b), id_a < id_b, world frame.
-template <class Real>
-struct Contacts {
-  // HostVector: a resize leaves new elements uninitialised (no zero sweep of gigabytes before the
-  // engine or a receive overwrites them) and large arrays sit on huge pages.
-  HostVector<std::int64_t> id_a, id_b;
-  HostVector<Vec3<Real>> position_on_a, position_on_b, normal_on_b;
-  HostVector<Real> distance;
-  bool full = false;  // the four optional datasets below are filled
-  HostVector<Vec3<Real>> local_point_a, local_point_b, lateral_friction_dir1, lateral_friction_dir2;
-
-  std::size_t size() const { return id_a.size(); }
-  void reserve(std::size_t k,
-               bool with_full);  // room for k rows in every field (the optional ones when with_full)
-  void resize(std::size_t k, bool with_full);  // k rows, each field allocated exactly once (reserve first)
-};
-
-// The bodies handed to the engine: bounding spheres in the world frame (host memory).
-// Invariant: ids strictly ascending (so local index order == id order).
-// A report mask byte per body (BodiesView::report, DeviceBodiesView::report): a pair (a < b) is
-// reported iff report[a] has kReportedBit (the owner of the smaller id reports) and not both
-// report[a] and report[b] have kPairedBit (their pairs were found elsewhere: a rank's boundary bodies
-// against its ghosts, after its owned bodies were detected alone).
-constexpr std::uint8_t kReportedBit = 1, kPairedBit = 2;
-
-struct BodiesView {
-  std::span<const Vec3<double>> position;
-  std::span<const double> radius;
-  std::span<const std::int64_t> id;      // empty: ids are 0 … n-1
-  std::span<const std::uint8_t> report;  // empty: all pairs; else see kReportedBit, kPairedBit
-  std::size_t size() const { return radius.size(); }
-};
-
-// Axis-aligned bounds of the bounding spheres' boxes, and the largest radius.
-struct Bounds {
-  Vec3<double> lo{0, 0, 0}, hi{0, 0, 0};
-  double r_max = 0;
-  std::size_t count = 0;
-  double r_sum[3] = {0, 0, 0};  // Σ r, Σ r², Σ r³: the radius moments of the cell-size model
-  void merge(const Bounds& o);
-};
-
-// Validates every body (finite centre, finite radius > 0) and returns the bounds.
-// Throws InputError naming the first bad body by id.
-Bounds compute_bounds(const BodiesView& bodies);
-
-// The shared frame of a run: local origin (double) and cell edge. Every rank of an MPI run uses the
-// same frame, so every rank computes bit-identical local coordinates and contact data.
-struct Frame {
-  Vec3<double> origin{0, 0, 0};
-  double cell_size = 0;
-};
-
-// Smallest valid cell edge for these bounds: 2·r_max plus a margin that covers the rounding of
-// c ± r in the local frame, so a body never spans more than two cells per axis.
-double min_cell_size(const Bounds& b, Precision p);
-
-// How the cell edge is chosen when none is requested (EngineOptions::cell_size = 0).
-enum class CellChoice {
-  tuned,     // tuned_cell_size(): the edge that minimises the modelled cost of the sort and pair stages
-  smallest,  // min_cell_size(): the largest diameter + rounding margin (Le Grand's choice)
-};
-
-// The cell edge in [1, 3] × min_cell_size() that minimises a cost model of the stages that depend on
-// it, per body: e + kPairWeight · N · e² / cells, where e = E[(1 + 2r/c)³] is the expected number of
-// (cell, body) entries per body (exact for uniformly placed centres, from the radius moments),
-// N · e² / cells twice the expected pair-walk steps per body (Poisson occupancy of the cells that
-// cover the bounds), and kPairWeight the measured cost of a walk step relative to one entry
-// (sort + fill). Larger cells mean fewer entries to sort but more pairs to walk: dilute scenes of
-// similar radii gain ~2× larger cells, dense or strongly polydisperse ones keep the smallest. Only
-// speed depends on the choice: contacts are the same for every valid cell edge.
-double tuned_cell_size(const Bounds& b, Precision p);
-inline constexpr double kPairWeight =
-    0.03;  // fit: H100, 2^24 uniform spheres, fp32, cells 3–6 (BENCHMARKS §3)
-
-// Frame for the bounds; requested_cell_size 0 picks the cell by `choice`. Throws UsageError if the
-// requested size is too small, InputError if the grid cannot be encoded (see GridPlan).
-Frame make_frame(const Bounds& b, double requested_cell_size, Precision p,
-                 CellChoice choice = CellChoice::tuned);
-
-// The grid of one detect() call: cells covering the bodies' bounds in the shared frame.
-// Cell keys use 32 bits when the grid has < 2^32 cells, else 64 bits (< 2^63 cells); beyond that,
-// or beyond 2^22 cells per axis in fp32 (2^40 in fp64), plan_grid() throws InputError.
-struct GridPlan {
-  Frame frame;
-  std::uint32_t base[3] = {0, 0, 0};  // cell coordinate (even) of the grid's first cell in the frame
-  std::uint32_t dims[3] = {1, 1, 1};
-  std::uint32_t half[3] = {1, 1, 1};
-  int half_bits = 0;
-  int key_bits = 3;
-  bool key64 = false;
-  std::uint64_t cell_count() const { return std::uint64_t(dims[0]) * dims[1] * dims[2]; }
-};
-GridPlan plan_grid(const Bounds& local, const Frame& frame, Precision p);
-
-// Bodies already in CUDA DEVICE memory, for simulations that keep their state on the GPU and call
-// the engine every step (Engine::detect_device*). Pointers are device pointers on the engine's device
-// (EngineOptions::device); the engine only reads them. Body i has id i (local indices).
-// Synchronisation: the arrays must be complete when detect_device* is called. Work queued on the
-// legacy default stream is ordered before the engine's (blocking) stream; work on a caller's
-// non-blocking stream must be synchronised by the caller (cudaStreamSynchronize) first.
-struct DeviceBodiesView {
-  const double* position = nullptr;      // DEVICE, 3·count doubles: x, y, z of body i at 3i … 3i+2
-  const double* radius = nullptr;        // DEVICE, count doubles
-  const std::uint8_t* report = nullptr;  // DEVICE, count bytes, or null: all pairs (as BodiesView)
-  std::size_t count = 0;
-};
-
-// Contacts left in DEVICE memory, owned by the engine: valid until the engine's next detect call or
-// its destruction. Same rows and order as Contacts (sorted by (id_a, id_b)); ids are local indices.
-// The four `full` arrays are null unless the engine runs with Fields::full.
-template <class Real>
-struct DeviceContactsView {
-  std::size_t count = 0;
-  bool full = false;
-  const std::int64_t* id_a = nullptr;
-  const std::int64_t* id_b = nullptr;
-  const Vec3<Real>* position_on_a = nullptr;
-  const Vec3<Real>* position_on_b = nullptr;
-  const Vec3<Real>* normal_on_b = nullptr;
-  const Real* distance = nullptr;
-  const Vec3<Real>* local_point_a = nullptr;
-  const Vec3<Real>* local_point_b = nullptr;
-  const Vec3<Real>* lateral_friction_dir1 = nullptr;
-  const Vec3<Real>* lateral_friction_dir2 = nullptr;
-};
 
 struct EngineOptions {
   Backend backend = Backend::automatic;
