@@ -52,6 +52,8 @@ struct EngineOptions {
 // Counters of one run (for tests and the summary).
 struct EngineStats {
   std::uint64_t bodies = 0, entries = 0, pair_tests = 0, contacts = 0;
+  std::uint64_t candidates =
+      0;  // candidate pairs the narrow phase decided (>= contacts; = with the default filter)
   int key_bits = 0;
   double cell_size = 0;                  // the cell edge used
   std::uint64_t peak_device_bytes = 0;   // CUDA: device workspace held after the call (never shrinks)

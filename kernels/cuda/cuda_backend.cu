@@ -123,6 +123,7 @@ class CudaBackend {
     r.device_in = job.device_bodies != nullptr;
     r.full = job.fields == Fields::full;
     r.type_passes = m_tuning.type_passes;
+    r.filter = m_tuning.candidates;
 
     reserve_pack(r);
     m_events.start(m_stream);

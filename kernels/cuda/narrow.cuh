@@ -1,10 +1,14 @@
 #pragma once
 // CUDA stage narrow: narrow_decide() (kernels/core/narrow.hpp) on each ordered candidate pair and the
 // contact rows of the requested fields, world frame, laid out in ws.out (16-byte aligned fields).
-// The pair stage's filter here is spheres_touch, so every candidate is a contact
-// (narrow_may_reject() false) and each candidate's row is written at its own index: no scan. A
-// rejecting filter (an ellipsoid broad phase, a candidate list kept across calls) needs the
-// count → scan → fill of the CPU backend's narrow (kernels/host/narrow.cpp), not yet on the GPU.
+// With the default filter (spheres_touch) every candidate is a contact (narrow_may_reject() false):
+// each candidate's row is written at its own index, no scan. A filter that may reject (cells, forced
+// by Tuning::candidates; later an ellipsoid broad phase or a candidate list kept across calls) takes
+// count → scan → fill as the CPU backend's narrow: an accept flag per candidate, an exclusive scan,
+// the host reads the row count (one more synchronisation), the accepted rows written compacted.
+// Flags and offsets live in the candidates' dead alternate buffers (pair_a / pair_b .Alternate()).
+#include <cub/device/device_scan.cuh>
+
 #include "core/narrow.hpp"
 #include "cuda/common.cuh"
 #include "cuda/run_state.cuh"
@@ -33,6 +37,43 @@ __global__ void __launch_bounds__(kBlock)
     out.local_point_b[k] = row.local_point_b;
     out.dir1[k] = row.lateral_friction_dir1;
     out.dir2[k] = row.lateral_friction_dir2;
+  }
+}
+
+// narrow, rejecting path, count: accept[k] = 1 when candidate k is a contact.
+template <class Real>
+__global__ void __launch_bounds__(kBlock)
+    narrow_accept_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
+                         std::uint32_t n_pairs, const Sphere<Real>* __restrict__ spheres, Vec3<double> origin,
+                         std::uint32_t* __restrict__ accept) {
+  const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
+  if (k >= n_pairs) return;
+  accept[k] = narrow_decide(spheres[pair_a[k]], spheres[pair_b[k]], origin, false).contact ? 1u : 0u;
+}
+
+// narrow, rejecting path, fill: the row of each accepted candidate k at offset[k] (exclusive scan of
+// accept): the accepted rows in candidate order.
+template <class Real>
+__global__ void __launch_bounds__(kBlock)
+    narrow_fill_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
+                       std::uint32_t n_pairs, const Sphere<Real>* __restrict__ spheres, Vec3<double> origin,
+                       const std::uint32_t* __restrict__ accept, const std::uint32_t* __restrict__ offset,
+                       ContactPtrs<Real> out, bool full) {
+  const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
+  if (k >= n_pairs || !accept[k]) return;
+  const std::uint32_t a = pair_a[k], b = pair_b[k], w = offset[k];
+  const ContactRow<Real> row = narrow_decide(spheres[a], spheres[b], origin, full).row;
+  out.id_a[w] = a;
+  out.id_b[w] = b;
+  out.position_on_a[w] = row.position_on_a;
+  out.position_on_b[w] = row.position_on_b;
+  out.normal_on_b[w] = row.normal_on_b;
+  out.distance[w] = row.distance;
+  if (full) {
+    out.local_point_a[w] = row.local_point_a;
+    out.local_point_b[w] = row.local_point_b;
+    out.dir1[w] = row.lateral_friction_dir1;
+    out.dir2[w] = row.lateral_friction_dir2;
   }
 }
 
@@ -68,9 +109,42 @@ std::size_t layout_contacts(std::byte* o, std::size_t rows, bool full, cuda::Con
   return at;
 }
 
+// The rejecting path: count → scan → fill (see the file comment).
+template <class Real, class Key>
+void narrow_compact(RunState<Real, Key>& r) {
+  using cuda::blocks_for;
+  using cuda::kBlock;
+  cudaStream_t st = r.st;
+  const std::uint32_t np = r.np;
+  std::uint32_t* d_accept = r.pair_a.Alternate();  // dead after the order stage: >= np u32 each
+  std::uint32_t* d_offset = r.pair_b.Alternate();
+  cuda::narrow_accept_kernel<Real><<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(),
+                                                                      np, r.d_spheres, r.origin, d_accept);
+  CG_CUDA_CHECK_LAUNCH("narrow_accept");
+  cub_run(r.ws, "narrow", [&](void* t, std::size_t& b) {
+    return cub::DeviceScan::ExclusiveSum(t, b, d_accept, d_offset, int(np), st);
+  });
+  std::uint32_t last[2] = {0, 0};  // offset and flag of the last candidate: the row count
+  CG_CUDA_CHECK(
+      cudaMemcpyAsync(&last[0], d_offset + np - 1, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, st));
+  CG_CUDA_CHECK(
+      cudaMemcpyAsync(&last[1], d_accept + np - 1, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, st));
+  CG_CUDA_CHECK(cudaStreamSynchronize(st));
+  r.n_rows = last[0] + last[1];
+  r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.full, r.cp);  // n_rows <= np: ws.out holds them
+  cuda::narrow_fill_kernel<Real><<<blocks_for(np), kBlock, 0, st>>>(
+      r.pair_a.Current(), r.pair_b.Current(), np, r.d_spheres, r.origin, d_accept, d_offset, r.cp, r.full);
+  CG_CUDA_CHECK_LAUNCH("narrow_fill");
+}
+
 template <class Real, class Key>
 void narrow_stage(RunState<Real, Key>& r) {
-  if (narrow_may_reject(r.filter)) throw Error("internal: the CUDA narrow stage has no rejecting path yet");
+  r.stats.candidates = r.np;
+  if (narrow_may_reject(r.filter) && r.np > 0) {
+    narrow_compact(r);
+    r.events.mark(Stage::narrow, r.st);
+    return;
+  }
   r.n_rows = r.np;
   r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.full, r.cp);
   if (r.np > 0) {

@@ -3,7 +3,8 @@
 // a < b. count_pairs counts per sorted entry (block-staged walk) and writes the pairs directly at a
 // block-aggregated atomic cursor into the dead alternate entry-body buffer; when they overflow the
 // space there: scan of the block totals → fill_pairs into ws.pairs. The candidate filter is
-// spheres_touch (every candidate is a contact: the narrow stage needs no compaction).
+// spheres_touch (every candidate is a contact: the narrow stage needs no compaction), or, forced by
+// Tuning::candidates, the cell rule alone (CandidateFilter::cells: the narrow stage rejects).
 #include <cub/device/device_scan.cuh>
 
 #include "cuda/common.cuh"
@@ -24,7 +25,9 @@ struct EntryBody {  // what a visit needs of the first body of a pair
   Sphere<Real> sa;
 };
 
-template <class Real, class Emit>
+// kTouch: the candidate filter is spheres_touch (CandidateFilter::spheres_touch, the default); else
+// every pair the cell rule assigns is a candidate (CandidateFilter::cells: narrow rejects).
+template <bool kTouch, class Real, class Emit>
 __device__ __forceinline__ void visit(const EntryBody<Real>& x, std::uint32_t b, std::uint8_t cb,
                                       const Sphere<Real>& sb, std::uint32_t pb, const std::uint8_t* report,
                                       std::uint32_t& tests, Emit& emit) {
@@ -32,10 +35,10 @@ __device__ __forceinline__ void visit(const EntryBody<Real>& x, std::uint32_t b,
   if (report && (!((x.pa < pb ? x.ca : cb) & kReportBit) || (x.ca & cb & kPairedCtrlBit))) return;
   if (!test_in_cell(x.ca, cb, x.type)) return;
   ++tests;
-  if (spheres_touch(x.sa, sb)) emit(x.a, b);
+  if (!kTouch || spheres_touch(x.sa, sb)) emit(x.a, b);
 }
 
-template <class Real, class Key, class Emit>
+template <bool kTouch, class Real, class Key, class Emit>
 __device__ __forceinline__ std::uint32_t walk_from_memory(
     std::uint32_t f0, Key k, const EntryBody<Real>& x, const Key* __restrict__ keys,
     const std::uint32_t* __restrict__ body, std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
@@ -44,7 +47,7 @@ __device__ __forceinline__ std::uint32_t walk_from_memory(
   std::uint32_t tests = 0;
   for (std::uint32_t f = f0; f < n_entries && keys[f] == k; ++f) {
     const std::uint32_t b = body[f];
-    visit(x, b, ctrl[b], spheres[b], report ? perm[b] : 0u, report, tests, emit);
+    visit<kTouch>(x, b, ctrl[b], spheres[b], report ? perm[b] : 0u, report, tests, emit);
   }
   return tests;
 }
@@ -64,7 +67,7 @@ __device__ __forceinline__ std::uint32_t walk_from_memory(
 // input indices, a < b, there, each thread at base + its exclusive rank (same walk, emitting). When
 // the cursor ends above cap, the host discards those writes and runs the scan → fill_pairs path
 // from the masks instead. The pairs' order is the blocks' arrival order; the order stage sorts them.
-template <class Real, class Key>
+template <class Real, class Key, bool kTouch = true>
 __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
     count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
                        std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
@@ -123,11 +126,11 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
       bits |= 1u << (f - t);
     };
     for (; f < lim && s_key[f] == k; ++f)
-      visit(x, 0u, s_ctrl[f], s_sphere[f], s_perm[f], report, tests, mark_one);
+      visit<kTouch>(x, 0u, s_ctrl[f], s_sphere[f], s_perm[f], report, tests, mark_one);
     if (f == lim) {  // the cell may go on past the staged window: walk the rest from memory
       const std::uint32_t before = found;
-      tests += walk_from_memory(base + f, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
-                                [&](std::uint32_t, std::uint32_t) { ++found; });
+      tests += walk_from_memory<kTouch>(base + f, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
+                                        [&](std::uint32_t, std::uint32_t) { ++found; });
       if (found != before) bits |= 1u;
     }
     mask[e] = bits;
@@ -153,7 +156,7 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
     ++w;
   };
   if (bits & 1u) {
-    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, emit);
+    walk_from_memory<kTouch>(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, emit);
   } else {
     for (std::uint32_t m = bits; m != 0; m &= m - 1) emit(x.a, s_body[t + __ffs(m) - 1]);
   }
@@ -162,7 +165,7 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
 // pairs, fill: pairs (pair_a[w], pair_b[w]) of input indices, a < b, at w = the block's scanned total +
 // the entry's rank, from the contact masks of count_pairs_kernel (entries flagged in bit 0: the cell
 // is walked from memory again, counting then emitting).
-template <class Real, class Key>
+template <class Real, class Key, bool kTouch = true>
 __global__ void __launch_bounds__(kBlock)
     fill_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
                       std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
@@ -184,8 +187,8 @@ __global__ void __launch_bounds__(kBlock)
     x.ca = ctrl[x.a];
     x.sa = spheres[x.a];
     x.pa = report ? perm[x.a] : 0u;
-    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
-                     [&](std::uint32_t, std::uint32_t) { ++mine; });
+    walk_from_memory<kTouch>(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
+                             [&](std::uint32_t, std::uint32_t) { ++mine; });
   } else {
     mine = __popc(bits);
   }
@@ -200,7 +203,7 @@ __global__ void __launch_bounds__(kBlock)
     ++w;
   };
   if (bits & 1u) {
-    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, emit);
+    walk_from_memory<kTouch>(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, emit);
   } else {
     const std::uint32_t a = body[e];
     for (std::uint32_t m = bits; m != 0; m &= m - 1) emit(a, body[e + __ffs(m) - 1]);
@@ -210,6 +213,24 @@ __global__ void __launch_bounds__(kBlock)
 }  // namespace cg::cuda
 
 namespace cg::detail {
+
+// count_pairs_kernel / fill_pairs_kernel instantiated for the call's candidate filter.
+template <class Real, class Key, class... Args>
+void launch_count_pairs(CandidateFilter filter, std::uint32_t blocks, cudaStream_t st, Args... args) {
+  if (filter == CandidateFilter::spheres_touch)
+    cuda::count_pairs_kernel<Real, Key, true><<<blocks, cuda::kBlock, 0, st>>>(args...);
+  else
+    cuda::count_pairs_kernel<Real, Key, false><<<blocks, cuda::kBlock, 0, st>>>(args...);
+  CG_CUDA_CHECK_LAUNCH("count_pairs");
+}
+template <class Real, class Key, class... Args>
+void launch_fill_pairs(CandidateFilter filter, std::uint32_t blocks, cudaStream_t st, Args... args) {
+  if (filter == CandidateFilter::spheres_touch)
+    cuda::fill_pairs_kernel<Real, Key, true><<<blocks, cuda::kBlock, 0, st>>>(args...);
+  else
+    cuda::fill_pairs_kernel<Real, Key, false><<<blocks, cuda::kBlock, 0, st>>>(args...);
+  CG_CUDA_CHECK_LAUNCH("fill_pairs");
+}
 
 template <class Real, class Key>
 void pairs_stage(RunState<Real, Key>& r) {
@@ -228,10 +249,9 @@ void pairs_stage(RunState<Real, Key>& r) {
   // cap = ne / 4 pairs each.
   const std::uint64_t direct_cap = ne / 4;
   std::uint32_t* d_direct = Workspace::direct_pairs(r.body);
-  cuda::count_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(
-      d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.d_perm, r.d_report, r.g.half_bits, 0u, d_pair_count,
-      d_entry_totals, r.d_counters, d_direct, d_direct + direct_cap, direct_cap);
-  CG_CUDA_CHECK_LAUNCH("count_pairs");
+  launch_count_pairs<Real, Key>(r.filter, neb, st, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.d_perm,
+                                r.d_report, r.g.half_bits, 0u, d_pair_count, d_entry_totals, r.d_counters,
+                                d_direct, d_direct + direct_cap, direct_cap);
   r.read_counters();  // host needs the pairs total
   const std::uint64_t n_pairs = r.h_counters->pairs;
   r.stats.pair_tests = r.h_counters->tests;
@@ -255,10 +275,9 @@ void pairs_stage(RunState<Real, Key>& r) {
     cub_run(ws, "pairs", [&](void* t, std::size_t& b) {
       return cub::DeviceScan::ExclusiveSum(t, b, d_entry_totals, d_entry_offsets, int(neb), st);
     });
-    cuda::fill_pairs_kernel<Real, Key><<<neb, kBlock, 0, st>>>(
-        d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.d_perm, r.d_report, r.g.half_bits, d_pair_count,
-        d_entry_offsets, r.pair_a.Current(), r.pair_b.Current());
-    CG_CUDA_CHECK_LAUNCH("fill_pairs");
+    launch_fill_pairs<Real, Key>(r.filter, neb, st, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.d_perm,
+                                 r.d_report, r.g.half_bits, d_pair_count, d_entry_offsets, r.pair_a.Current(),
+                                 r.pair_b.Current());
   }
   r.events.mark(Stage::pairs, st);
 }

@@ -53,8 +53,9 @@ struct RunState {
   // pairs: the candidate pairs (input indices a < b), in (a, b) order after the order stage
   cub::DoubleBuffer<std::uint32_t> pair_a{nullptr, nullptr}, pair_b{nullptr, nullptr};
   std::uint32_t np = 0;
-  CandidateFilter filter = CandidateFilter::spheres_touch;  // count_pairs applies spheres_touch
-  // narrow: the contact rows (DEVICE) and their bytes from ws.out.data()
+  CandidateFilter filter = CandidateFilter::spheres_touch;  // Tuning::candidates
+  // narrow: the contact rows (DEVICE; n_rows <= np, the accepted candidates) and their bytes from
+  // ws.out.data()
   cuda::ContactPtrs<Real> cp{};
   std::size_t out_bytes = 0;
   std::uint32_t n_rows = 0;

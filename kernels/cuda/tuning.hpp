@@ -10,6 +10,8 @@
 #include <optional>
 #include <string_view>
 
+#include "core/narrow.hpp"
+
 namespace cg::detail {
 
 enum class Forced { automatic, off, on };
@@ -35,6 +37,10 @@ struct Tuning {
   // CONTACTGRID_CUDA_DOWNLOAD=registered / staged: contacts straight into page-locked result vectors /
   // through the pinned staging buffer (automatic: registered from 64 MiB of contacts).
   Forced download_registered = Forced::automatic;
+  // CONTACTGRID_CUDA_CANDIDATES=cells: the pair stage proposes every pair the cell rule assigns and
+  // the narrow stage rejects the non-touching ones (count → scan → fill): the same contacts, slower;
+  // a test knob for the rejecting path (default: spheres_touch, no compaction).
+  CandidateFilter candidates = CandidateFilter::spheres_touch;
 };
 
 // `on` / `off` when the variable equals one of the two spellings, else automatic.
@@ -64,6 +70,8 @@ inline Tuning read_tuning() {
     t.renumber = renumber[0] == '1' ? Forced::on : Forced::off;
   t.counting_order = forced("CONTACTGRID_CUDA_ORDER", "counting", "radix");
   t.download_registered = forced("CONTACTGRID_CUDA_DOWNLOAD", "registered", "staged");
+  if (forced("CONTACTGRID_CUDA_CANDIDATES", "cells", "spheres") == Forced::on)
+    t.candidates = CandidateFilter::cells;
   return t;
 }
 

@@ -40,6 +40,7 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
   host::CandidatePairs candidates;
   stats.pair_tests = host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits,
                                            be.candidates, nt, candidates);
+  stats.candidates = candidates.size();
   entries = {};
   timer.lap(Stage::pairs);
 

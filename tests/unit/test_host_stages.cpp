@@ -64,10 +64,34 @@ TYPED_TEST(HostStagesTest, NarrowRejectsLooseCandidates) {
       detail::run_stages(loose, job, b, tb, sb);
       expect_same(a, b);
       EXPECT_EQ(sa.pair_tests, sb.pair_tests);
+      EXPECT_EQ(sa.candidates, a.size());
+      EXPECT_GT(sb.candidates, b.size()) << "the cell filter must propose non-contacts";
       EXPECT_GT(a.size(), 0u);
       ASSERT_EQ(ta.size(), tb.size());
       for (std::size_t i = 0; i < ta.size(); ++i) EXPECT_EQ(ta[i].name, tb[i].name);
     }
+  }
+}
+
+// The same with a report mask (the masked scene of test_cuda_narrow.cpp).
+TYPED_TEST(HostStagesTest, NarrowRejectsLooseCandidatesWithReportMask) {
+  using Real = TypeParam;
+  const Spheres s = random_spheres(6000, 0.5, 1.0, 2201);
+  std::vector<std::uint8_t> report(s.r.size());
+  for (std::size_t i = 0; i < report.size(); ++i)
+    report[i] = static_cast<std::uint8_t>(((i % 3) != 0 ? kReportedBit : 0) | (i % 5 < 2 ? kPairedBit : 0));
+  for (Fields fields : {Fields::basic, Fields::full}) {
+    const detail::DetectJob<Real> job = make_job<Real>(s, fields, report);
+    detail::HostBackend exact{2};
+    detail::HostBackend loose{2, CandidateFilter::cells};
+    Contacts<Real> a, b;
+    StageTimes ta, tb;
+    EngineStats sa, sb;
+    detail::run_stages(exact, job, a, ta, sa);
+    detail::run_stages(loose, job, b, tb, sb);
+    expect_same(a, b);
+    EXPECT_GT(a.size(), 0u);
+    EXPECT_GT(sb.candidates, b.size());
   }
 }
 
