@@ -15,6 +15,7 @@
 
 #include "backend.hpp"
 #include "host/huge_pages.hpp"
+#include "stage.hpp"
 
 namespace cg {
 
@@ -186,7 +187,8 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
   if (b.count == 0) return out;
   detail::DetectJob<Real> job = plan_job<Real>(b, frame, s.options, s.stats);
   job.bodies = bodies;
-  s.times.push_back({"plan", std::chrono::duration<double>(clock::now() - t0).count()});
+  s.times.push_back(
+      {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
 
   if (s.resolved == Backend::cuda)
     detail::run_stages(*s.cuda, job, out, s.times, s.stats);
@@ -230,7 +232,8 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
   detail::DetectJob<Real> job = plan_job<Real>(b, frame, s.options, s.stats);
   job.device_bodies = &bodies;
   job.device_out = device_out;
-  s.times.push_back({"plan", std::chrono::duration<double>(clock::now() - t0).count()});
+  s.times.push_back(
+      {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
   detail::run_stages(*s.cuda, job, out, s.times, s.stats);
   s.stats.contacts = device_out ? device_out->count : out.size();
 }

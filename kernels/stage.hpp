@@ -8,12 +8,15 @@
 
 namespace cg::detail {
 
-// In pipeline order. upload and download: CUDA backend only (the host reads and writes in place).
-enum class Stage : int { upload, pack, entries, sort, pairs, order, narrow, download };
-inline constexpr int kStageCount = 8;
+// In pipeline order. plan: the engine's (bounds, frame, grid plan; engine.cpp); upload and download:
+// CUDA backend only (the host reads and writes in place).
+enum class Stage : int { plan, upload, pack, entries, sort, pairs, order, narrow, download };
+inline constexpr int kStageCount = 9;
 
 constexpr const char* name(Stage s) {
   switch (s) {
+    case Stage::plan:
+      return "plan";
     case Stage::upload:
       return "upload";
     case Stage::pack:
