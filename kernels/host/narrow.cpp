@@ -55,7 +55,7 @@ void narrow(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres, c
     chunk_count[ch] = count;
   }
   // scan → fill
-  const std::uint64_t n_rows = exclusive_scan(chunk_count, chunk_offset);
+  const std::uint64_t n_rows = exclusive_scan_into(chunk_count, chunk_offset);
   out.resize(n_rows, full);
 #pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
   for (std::size_t ch = 0; ch < n_chunks; ++ch) {

@@ -62,7 +62,7 @@ std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const
   }
   std::vector<std::uint64_t> chunk_size(n_chunks), chunk_offset;
   for (std::size_t c = 0; c < n_chunks; ++c) chunk_size[c] = chunk_pairs[c].size();
-  const std::uint64_t n_pairs = exclusive_scan(chunk_size, chunk_offset);
+  const std::uint64_t n_pairs = exclusive_scan_into(chunk_size, chunk_offset);
   out.ab.resize(n_pairs);
 #pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
   for (std::size_t c = 0; c < n_chunks; ++c) {

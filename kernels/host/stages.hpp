@@ -19,7 +19,7 @@ constexpr std::size_t k_parallel_min = 32768;
 
 // Exclusive scan of `counts` into `offsets` (size + 1 values, the last the total); returns the total.
 template <class T, class Acc>
-Acc exclusive_scan(const std::vector<T>& counts, std::vector<Acc>& offsets) {
+Acc exclusive_scan_into(const std::vector<T>& counts, std::vector<Acc>& offsets) {
   offsets.resize(counts.size() + 1);
   Acc sum = 0;
   for (std::size_t i = 0; i < counts.size(); ++i) {
