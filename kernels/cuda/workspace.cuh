@@ -30,6 +30,8 @@
 //   direct_pairs(body)   body.Alternate()         pairs: 4 u32 arrays of ne / 4 candidate pairs
 //                                                 (a, b, and the order sort's second copies)
 //   a_counts(), a_offsets()  keys[0], keys[1]     order (counting): per body pair count and offset
+//   (narrow.cuh)         pair_a / pair_b          narrow (rejecting filter): accept flags and their
+//                        .Alternate()             scan, in the candidates' dead second copies
 // Contents do not survive a call, except the resident bodies and the contact rows of the last call
 // (DeviceContactsView, valid until the next detection).
 #include <cub/util_type.cuh>
