@@ -1,5 +1,5 @@
-// Slab geometry (see slab_decomposition.hpp): axis choice, cuts by quantiles or widths, owner and
-// halo plans. Pure: no MPI, no CUDA.
+// Slab geometry (see slab_decomposition.hpp): axis choice, cuts by quantiles or widths, owner.
+// Pure: no MPI, no CUDA.
 #include "slab_decomposition.hpp"
 
 #include <algorithm>
@@ -45,8 +45,6 @@ const char* axis_name(int axis) {
       return "auto";
   }
 }
-
-static double component(const Vec3<double>& v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
 
 int choose_axis(const Bounds& global, int forced) {
   if (forced >= 0) {
@@ -122,48 +120,6 @@ double SlabDecomposition::upper(int rank) const {
 
 int SlabDecomposition::owner(double x) const {
   return static_cast<int>(std::upper_bound(m_cuts.begin(), m_cuts.end(), x) - m_cuts.begin());
-}
-
-// Count -> exclusive scan -> fill, with each destination's indices in ascending order.
-template <class Destinations>
-static ExportPlan build_plan(int ranks, std::size_t n, Destinations&& for_each_destination) {
-  ExportPlan plan;
-  plan.offsets.assign(static_cast<std::size_t>(ranks) + 1, 0);
-  for (std::size_t i = 0; i < n; ++i) {
-    for_each_destination(i, [&](int r) { ++plan.offsets[static_cast<std::size_t>(r) + 1]; });
-  }
-  for (int r = 0; r < ranks; ++r) plan.offsets[r + 1] += plan.offsets[r];
-  plan.indices.resize(plan.offsets.back());
-  std::vector<std::size_t> next(plan.offsets.begin(), plan.offsets.end() - 1);
-  for (std::size_t i = 0; i < n; ++i) {
-    for_each_destination(i, [&](int r) { plan.indices[next[static_cast<std::size_t>(r)]++] = i; });
-  }
-  return plan;
-}
-
-ExportPlan make_owner_plan(const SlabDecomposition& slabs, std::span<const double> coordinate) {
-  return build_plan(slabs.ranks(), coordinate.size(),
-                    [&](std::size_t i, auto&& emit) { emit(slabs.owner(coordinate[i])); });
-}
-
-ExportPlan make_halo_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
-                          double ghost_width) {
-  if (self < 0 || self >= slabs.ranks()) {
-    throw UsageError("halo plan: rank " + std::to_string(self) + " is not in [0, " +
-                     std::to_string(slabs.ranks()) + ")");
-  }
-  if (!(ghost_width >= 0) || !std::isfinite(ghost_width)) {
-    throw InputError("halo plan: ghost width is not a finite value >= 0");
-  }
-  for (std::size_t i = 0; i < coordinate.size(); ++i) {
-    if (slabs.owner(coordinate[i]) != self) {
-      throw InputError("halo plan: body " + std::to_string(i) + " at " + std::to_string(coordinate[i]) +
-                       " is not owned by rank " + std::to_string(self));
-    }
-  }
-  return build_plan(slabs.ranks(), coordinate.size(), [&](std::size_t i, auto&& emit) {
-    slabs.for_each_ghost_rank(coordinate[i], ghost_width, emit);
-  });
 }
 
 }  // namespace cg

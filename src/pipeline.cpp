@@ -1,26 +1,363 @@
-// Sequencing of a contactgrid run. Reads like the data flow; each stage is one call.
+// Sequencing of a contactgrid run. Reads like the data flow; each stage is one call:
+//   read → frame → slabs → distribute → exchange ghosts → detect → collect contacts → write → summary
 #include "pipeline.hpp"
 
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <numeric>
+#include <optional>
 
-#include "distributed_detect.hpp"
-#include "distributed_write.hpp"
+#include "agreed_stage.hpp"
+#include "assemble.hpp"
+#include "collectives.hpp"
+#include "contact_collect.hpp"
+#include "contact_file_shared.hpp"
+#include "distribute.hpp"
+#include "halo_exchange.hpp"
 #include "hdf5_io.hpp"
+#include "node_threads.hpp"
+#include "routing.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
 
 namespace cg {
+
+void validate(const DistributedOptions& options) {
+  const EngineOptions& e = options.engine;
+  if (options.axis < -1 || options.axis > 2) {
+    throw UsageError("--axis: " + std::to_string(options.axis) + " is not x, y, z or auto");
+  }
+  if (options.balance != Balance::count && options.balance != Balance::width) {
+    throw UsageError("--balance: not one of count, width");
+  }
+  if (!std::isfinite(e.cell_size) || e.cell_size < 0) {
+    throw UsageError("--cell-size: must be a finite length >= 0 (0: chosen by cell_choice)");
+  }
+  if (e.threads < 0) throw UsageError("--threads: must be >= 0 (0: all hardware threads)");
+  if (options.max_sample < 1) throw UsageError("max_sample: must be >= 1");
+  if (options.max_message_bytes < 64) throw UsageError("max_message_bytes: must be >= 64");
+  if (options.resident_steps < 0) throw UsageError("--steps: must be >= 0");
+}
+
 namespace {
 
 using clock_type = std::chrono::steady_clock;
 double seconds_since(clock_type::time_point t) {
   return std::chrono::duration<double>(clock_type::now() - t).count();
+}
+
+// ---- the stages of a distributed run ---------------------------------------------------------------
+
+// Rank r's partition of the scene: rows [part_first, part_first + part_count) = [N·r/P, N·(r+1)/P),
+// read alone (own rows) or with every other row (every row: rows [0, N)); its bounds.
+struct Partition {
+  std::uint64_t bodies = 0;  // N
+  std::uint64_t first = 0;   // row of position[0]
+  std::uint64_t part_first = 0, part_count = 0;
+  HostVector<Vec3<double>> position;
+  HostVector<double> radius;
+  Bounds bounds;  // of the partition's rows (count 0: none)
+};
+
+Partition read_partition(const Session& session, const std::string& path, bool every_row) {
+  Partition in;
+  agreed_stage(session, "read", [&] {
+    const SceneShape shape = read_scene_shape(path);
+    if (shape.ellipsoids > 0) {
+      throw InputError(path + ": /ellipsoids: the MPI run handles spheres only (for now)");
+    }
+    if (shape.spheres == 0) throw InputError(path + ": the scene has no bodies");
+    const std::uint64_t n = shape.spheres, me = static_cast<std::uint64_t>(session.rank()),
+                        p = static_cast<std::uint64_t>(session.size());
+    in.bodies = n;
+    in.part_first = n * me / p;
+    in.part_count = n * (me + 1) / p - in.part_first;
+    in.first = every_row ? 0 : in.part_first;
+    const std::uint64_t count = every_row ? n : in.part_count;
+    if (count > 0) {
+      Scene rows = read_scene_rows(path, in.first, count);
+      if (rows.sphere_position.size() != count || rows.sphere_radius.size() != count) {
+        throw InputError(path + ": /spheres rows " + std::to_string(in.first) + "+" + std::to_string(count) +
+                         ": read " + std::to_string(rows.sphere_radius.size()) + " rows");
+      }
+      in.position = std::move(rows.sphere_position);
+      in.radius = std::move(rows.sphere_radius);
+    }
+    if (in.part_count > 0) {
+      // Bounds (and validation) without an id array: the reader has validated every row already, so
+      // compute_bounds finds nothing; if it ever does, it runs again with the global ids, for its message.
+      const std::span<const Vec3<double>> pos(in.position.data() + (in.part_first - in.first), in.part_count);
+      const std::span<const double> rad(in.radius.data() + (in.part_first - in.first), in.part_count);
+      try {
+        in.bounds = compute_bounds(BodiesView{pos, rad, {}, {}});
+      } catch (const InputError&) {
+        std::vector<std::int64_t> id(in.part_count);
+        std::iota(id.begin(), id.end(), static_cast<std::int64_t>(in.part_first));
+        in.bounds = compute_bounds(BodiesView{pos, rad, id, {}});
+      }
+    }
+  });
+  return in;
+}
+
+// The frame every rank shares: global bounds (all-gathered), make_frame, the slab axis and the ghost
+// width (2·r_max + the rounding margin of Real).
+struct SharedFrame {
+  Bounds global;
+  Frame frame;
+  int axis = 0;
+  double width = 0;
+};
+
+template <class Real>
+SharedFrame agree_frame(const Session& session, const Bounds& mine, const DistributedOptions& options) {
+  constexpr Precision precision = std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64;
+  SharedFrame f;
+  f.global = allgather_bounds(session, mine);
+  agreed_stage(session, "frame", [&] {
+    f.frame = make_frame(f.global, options.engine.cell_size, precision, options.engine.cell_choice);
+    f.axis = choose_axis(f.global, options.axis);
+    double extent = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double o = component(f.frame.origin, k);
+      extent = std::max(
+          {extent, std::abs(component(f.global.hi, k) - o), std::abs(component(f.global.lo, k) - o)});
+    }
+    f.width = ghost_width(f.global.r_max, extent, std::numeric_limits<Real>::epsilon());
+  });
+  return f;
+}
+
+// The slab cuts, identical on all ranks: balance count, the quantiles of a regular sample of centre
+// coordinates (every stride-th global row, all of them when N <= max_sample) gathered to every rank;
+// balance width, equal widths over the global bounds. No cuts (one rank) need no sample.
+SlabDecomposition make_slabs(const Session& session, const Partition& part, const SharedFrame& f,
+                             const DistributedOptions& options) {
+  const int ranks = session.size(), axis = f.axis;
+  std::vector<double> sample;
+  const bool by_count = options.balance == Balance::count && ranks > 1;
+  if (by_count) {
+    const std::uint64_t stride =
+        std::max<std::uint64_t>(1, (part.bodies + options.max_sample - 1) / options.max_sample);
+    for (std::uint64_t g = part.part_first + (stride - part.part_first % stride) % stride;
+         g < part.part_first + part.part_count; g += stride) {
+      sample.push_back(component(part.position[static_cast<std::size_t>(g - part.first)], axis));
+    }
+    sample = allgather_values(session, sample);
+  }
+  std::optional<SlabDecomposition> slabs;
+  agreed_stage(session, "redistribute", [&] {
+    if (!by_count) {
+      slabs = SlabDecomposition::equal_width(axis, component(f.global.lo, axis), component(f.global.hi, axis),
+                                             ranks);
+      return;
+    }
+    // from_sorted_sample reads only the P-1 quantile positions floor(r·S/P): put the right order
+    // statistic at each (successive selections on the remaining upper part) instead of sorting.
+    const std::size_t n_s = sample.size();
+    if (ranks > 64) {
+      std::sort(sample.begin(), sample.end());
+    } else {
+      std::size_t from = 0;
+      for (int r = 1; r < ranks && n_s > 0; ++r) {
+        const std::size_t q = std::min<std::size_t>(
+            n_s - 1, static_cast<std::size_t>(std::uint64_t(r) * std::uint64_t(n_s) / std::uint64_t(ranks)));
+        if (q < from) continue;  // already in place (equal quantile positions)
+        std::nth_element(sample.begin() + static_cast<std::ptrdiff_t>(from),
+                         sample.begin() + static_cast<std::ptrdiff_t>(q), sample.end());
+        from = q + 1;
+      }
+    }
+    slabs = SlabDecomposition::from_sorted_sample(axis, sample, ranks);
+  });
+  return *slabs;
+}
+
+// The bodies a rank holds as the stages go: its owned records (own rows, after distribute), its
+// ghosts (after the halo exchange), then the engine's input (every row: straight from the rows).
+struct HeldBodies {
+  HostVector<BodyRecord> owned;
+  Imports<BodyRecord> ghosts;
+  EngineInput input;
+};
+
+// Every body to its owner. Every row: each rank selects its owned bodies and its ghosts from all
+// rows (no body moves); own rows: the rows routed to their owners (count → scan → fill) and sent.
+HeldBodies distribute(const Session& session, Partition&& part, const SlabDecomposition& slabs,
+                      const SharedFrame& f, bool every_row, int threads) {
+  HeldBodies held;
+  Exports<BodyRecord> exports;
+  agreed_stage(session, "redistribute", [&] {
+    if (every_row) {
+      held.input = select_owned_and_ghosts(std::move(part.position), std::move(part.radius), slabs, f.width,
+                                           session.rank(), threads);
+      return;
+    }
+    const auto& position = part.position;
+    const auto& radius = part.radius;
+    const std::uint64_t first = part.first;
+    exports = route<BodyRecord>(
+        position.size(), session.size(), threads,
+        to_owner(slabs, [&](std::size_t i) { return component(position[i], f.axis); }), [&](std::size_t i) {
+          return BodyRecord{position[i], radius[i], static_cast<std::int64_t>(first + i)};
+        });
+  });
+  part.position = {};
+  part.radius = {};
+  if (!every_row) held.owned = distribute_to_owners(session, std::move(exports));
+  return held;
+}
+
+// Ghosts to every rank whose slab is within the ghost width (own rows; every row has them already).
+void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecomposition& slabs,
+                     const SharedFrame& f, bool every_row, int threads) {
+  if (every_row) return;
+  Exports<BodyRecord> exports;
+  agreed_stage(session, "halo", [&] {
+    const auto& owned = held.owned;
+    auto x = [&](std::size_t i) { return component(owned[i].position, f.axis); };
+    check_halo_rows(slabs, session.rank(), owned.size(), x, f.width, threads);
+    exports = route<BodyRecord>(owned.size(), session.size(), threads, to_ghost_ranks(slabs, x, f.width),
+                                [&](std::size_t i) { return owned[i]; });
+  });
+  held.ghosts = exchange_ghosts(session, exports);
+}
+
+// Owned + ghosts in id order (own rows: merged by id), then the engine with the shared frame; the
+// owner of the smaller id reports a pair. A rank that owns nothing reports nothing.
+template <class Real>
+Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBodies& held,
+                            const Frame& frame, bool full, int threads) {
+  Contacts<Real> local;
+  local.full = full;
+  agreed_stage(session, "detect", [&] {
+    if (held.input.position.empty()) {  // own rows (every row: selected by distribute)
+      held.input = merge_by_id(held.owned, held.ghosts.rows, held.ghosts.counts, threads);
+    }
+    held.owned = {};
+    held.ghosts = {};
+    if (held.input.owned > 0) local = engine.detect(held.input.view(), frame);
+  });
+  return local;
+}
+
+// The contacts of every rank: gathered to rank 0 or exchanged by id_a range, then merged.
+template <class Real>
+CollectedContacts<Real> collect_contacts(const Session& session, Contacts<Real>&& local, std::uint64_t bodies,
+                                         const DistributedOptions& options, int threads) {
+  CollectOptions o;
+  o.max_message_bytes = options.max_message_bytes;
+  o.threads = threads;
+  o.log = options.log;
+  return options.output == ContactOutput::root ? gather_contacts(session, std::move(local), bodies, o)
+                                               : exchange_contacts(session, std::move(local), bodies, o);
+}
+
+// The stages read … collect, with their times (max over ranks) and the run's statistics.
+template <class Real>
+DistributedResult<Real> run(Session& session, const std::string& path, const DistributedOptions& options) {
+  const int ranks = session.size();
+  const bool full = options.engine.fields == Fields::full;
+  const std::vector<std::string>& engine_stages = engine_stage_names();
+  DistributedResult<Real> result;
+  result.ranks = ranks;
+  std::vector<double> times(6 + engine_stages.size(), 0.0);  // read … merge, then detect.<stage>
+
+  // ---- options: everything checked before the first communication -------------------------------
+  std::optional<Engine<Real>> engine;
+  const int threads = host_threads(options.engine.threads, session);
+  const DefaultTeam team(threads);
+  result.threads = threads;
+  agreed_stage(session, "options", [&] {
+    validate(options);
+    if (path.empty()) throw UsageError("no scene file given");
+    EngineOptions engine_options = options.engine;
+    engine_options.threads = threads;
+    engine.emplace(engine_options);
+  });
+  // Every row when the ranks share one node (one page cache; with one rank, the rank's rows are every row).
+  const bool every_row = options.read == SceneRead::every_row ||
+                         (options.read == SceneRead::automatic && session.local_size() == ranks);
+  result.read = every_row ? SceneRead::every_row : SceneRead::own_rows;
+
+  auto t0 = clock_type::now();
+  Partition part = read_partition(session, path, every_row);
+  const SharedFrame f = agree_frame<Real>(session, part.bounds, options);
+  result.bodies = part.bodies;
+  result.frame = f.frame;
+  result.cell_size = f.frame.cell_size;
+  result.axis = f.axis;
+  times[0] = seconds_since(t0);
+
+  t0 = clock_type::now();
+  const SlabDecomposition slabs = make_slabs(session, part, f, options);
+  result.cuts = slabs.cuts();
+  HeldBodies held = distribute(session, std::move(part), slabs, f, every_row, threads);
+  times[1] = seconds_since(t0);
+
+  t0 = clock_type::now();
+  exchange_ghosts(session, held, slabs, f, every_row, threads);
+  times[2] = seconds_since(t0);
+
+  t0 = clock_type::now();
+  Contacts<Real> local = detect_local(session, *engine, held, f.frame, full, threads);
+  result.backend = engine->backend();
+  times[3] = seconds_since(t0);
+  const std::uint64_t n_owned = held.input.owned;
+  if (n_owned > 0) {
+    // the engine's own stages, reported as "detect.<stage>" (max over ranks, like every time)
+    for (const StageTime& st : engine->times())
+      for (std::size_t k = 0; k < engine_stages.size(); ++k)
+        if (st.name == engine_stages[k]) times[6 + k] = st.seconds;
+    result.stats = engine->stats();
+  }
+  result.stats.entries = session.sum(result.stats.entries);
+  result.stats.pair_tests = session.sum(result.stats.pair_tests);
+  result.stats.key_bits = int(session.max(double(result.stats.key_bits)));
+  const std::vector<std::uint64_t> owned_all = allgather_counts(session, n_owned);
+  result.owned_min = *std::min_element(owned_all.begin(), owned_all.end());
+  result.owned_max = *std::max_element(owned_all.begin(), owned_all.end());
+  result.ghosts = session.sum(held.input.ghosts);
+  if (options.resident_steps == 0) held.input = {};  // the steps start from it
+
+  CollectedContacts<Real> c = collect_contacts(session, std::move(local), result.bodies, options, threads);
+  times[4] = c.transfer_seconds;
+  times[5] = c.merge_seconds;
+  result.contacts = std::move(c.contacts);
+  result.first_row = c.first_row;
+  result.total_contacts = c.total_contacts;
+  result.id_begin = c.id_begin;
+  result.id_end = c.id_end;
+  result.duplicates_removed = c.duplicates_removed;
+
+  if (options.resident_steps > 0) {
+    std::uint64_t hash = 0;
+    for (std::size_t k = 0; k < result.contacts.size(); ++k)
+      hash += pair_hash(result.contacts.id_a[k], result.contacts.id_b[k]);
+    result.steps = resident_steps(session, *engine, f.frame, slabs, f.width, held.input,
+                                  options.resident_steps, result.total_contacts, session.sum(hash), threads);
+  }
+
+  max_over_ranks(session, times);
+  const char* names[6] = {
+      "read", "redistribute", "halo", "detect", options.output == ContactOutput::root ? "gather" : "exchange",
+      "merge"};
+  for (int s = 0; s < 6; ++s) {
+    result.times.push_back({names[s], times[static_cast<std::size_t>(s)]});
+    if (s == 3)
+      for (std::size_t k = 0; k < engine_stages.size(); ++k)
+        if (times[6 + k] > 0)
+          result.times.push_back({std::string("detect.") + engine_stages[k], times[6 + k]});
+  }
+  return result;
 }
 
 template <class Real>
@@ -89,7 +426,7 @@ int detect(const DetectCommand& cmd, Session& session) {
   info.cell_size = r.cell_size;
   info.input = cmd.input;
   info.times = r.times;
-  // every rank writes its rows of the one file (comm/distributed_write.hpp); adds the "write" time
+  // every rank writes its rows of the one file (src/contact_file_shared.hpp); adds the "write" time
   write_contacts_distributed(session, cmd.output, r.contacts, r.first_row, r.total_contacts, info, r.threads);
   if (!cmd.csv.empty()) {
     std::exception_ptr error;
@@ -109,6 +446,22 @@ int detect(const DetectCommand& cmd, Session& session) {
 }
 
 }  // namespace
+
+template <class Real>
+DistributedResult<Real> distributed_detect(Session& session, const std::string& scene_path,
+                                           const DistributedOptions& options) {
+  try {
+    return run<Real>(session, scene_path, options);
+  } catch (const CommFailure& e) {
+    // Other ranks may be waiting in a collective this rank will never join.
+    session.abort(e.exit_code(), e.what());
+  }
+}
+
+template DistributedResult<float> distributed_detect<float>(Session&, const std::string&,
+                                                            const DistributedOptions&);
+template DistributedResult<double> distributed_detect<double>(Session&, const std::string&,
+                                                              const DistributedOptions&);
 
 int run_detect(const DetectCommand& cmd, Session& session) {
   if (cmd.output.empty()) throw UsageError("detect: -o/--output is required");

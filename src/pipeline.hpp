@@ -1,17 +1,126 @@
 #pragma once
 // The commands of the contactgrid executable, as functions (the CLI parses, these run).
 // pipeline.cpp is the only place that sequences the stages of a run:
-//   read scene → (MPI: slabs, redistribute, halo) → engine → (MPI: exchange by id_a range, merge)
-//   → write (every rank its rows of one file) → summary
+//   read → frame → slabs → distribute → exchange ghosts → detect → collect contacts → write → summary
+// (one rank: the same stages, with nothing to send).
+//
+// Pipeline (each stage's time is reported as the maximum over ranks):
+//   read          rank r's partition is rows [N·r/P, N·(r+1)/P) of /spheres; it reads only those
+//                 (SceneRead::own_rows) or every row (SceneRead::every_row, the default when all
+//                 ranks share one node: one page cache, so N rows read P times cost memory bandwidth,
+//                 not disk, and no body moves between ranks; 2^26 on 2 GPUs of one host, 962ecd7: 2.25–2.40 s
+//                 against 2.59–3.08 s, BENCHMARKS.md §4). Global bounds by an all-gather of
+//                 the partitions' Bounds, folded with Bounds::merge in rank order; the frame =
+//                 make_frame(global bounds) — the frame a single-rank run builds — so every rank
+//                 computes bit-identical local coordinates and contact data.
+//   every_row     redistribute = each rank selects, in one parallel pass over all rows, its owned
+//                 bodies and the others within the ghost width of its slab (the same owner() and
+//                 for_each_ghost_rank() tests as below), already in id order; halo takes no time.
+//   redistribute  slab axis (largest extent unless forced); cuts from the quantiles of a regular
+//                 sample of centre coordinates gathered to every rank (balance = count) or equal widths
+//                 (balance = width): identical on all ranks (the P-1 quantiles are selected, not the
+//                 sample sorted); every body to its owner (Alltoall counts, Alltoallv records packed
+//                 by destination in one parallel count → scan → fill, no index list).
+//   halo          ghost plan (SlabDecomposition::for_each_ghost_rank, ghost width = 2·r_max + rounding
+//                 margin; the same plan as decomposition/make_halo_plan, packed in parallel);
+//                 counts by Alltoall, then every Irecv posted, every Isend, one Waitall.
+//   detect        owned + ghosts in global id order (owned bodies arrive in id order, grouped by
+//                 source rank; the ghost groups are merged, then merged with them in parallel straight
+//                 into the engine's arrays); report mask = owned; Engine<Real>::detect with the
+//                 shared frame. The owner of the smaller id reports a pair, so each contact is
+//                 found by exactly one rank.
+// Then the contacts (DistributedOptions::output): gathered to rank 0 or exchanged by id_a range,
+// then merged (comm/contact_collect.hpp); rank r's rows are rows [first_row, first_row + size) of
+// the single-rank result, which src/contact_file_shared writes into one file at once.
+// With one rank nothing is exchanged or copied: every row is read, owned and moved to the engine
+// (ids implied, all pairs reported: decomposition/assemble), its contacts are the result; the stages
+// are still reported (redistribute, halo, gather and merge take next to no time).
+//
+// Errors: options are validated before any communication. An error in a stage on any rank (bad
+// input, I/O, CUDA, memory) is agreed on at the end of the stage (Session::agree): every rank throws
+// the same exception, "[rank r/N] <stage>: <cause>". A failing MPI call (CommFailure) leaves other
+// ranks possibly waiting, so it ends the job with Session::abort (exit code 5).
 #include <cstdint>
+#include <functional>
 #include <string>
+#include <vector>
 
 #include "engine.hpp"
 #include "generate.hpp"
+#include "resident_steps.hpp"
+#include "session.hpp"
+#include "slab_decomposition.hpp"
 
 namespace cg {
 
-class Session;  // comm/session.hpp: the MPI session (one rank in laptop mode)
+// Where the contacts end up (see comm/contact_collect.hpp).
+enum class ContactOutput {
+  root,       // all on rank 0 (gather + merge there); stages ... gather, merge
+  id_ranges,  // each rank: the rows with id_a in its range [N·r/P, N·(r+1)/P); stages ... exchange, merge
+};
+
+// How the ranks get their bodies (see the run comment above).
+enum class SceneRead {
+  automatic,  // every_row when all ranks share one node (one page cache), else own_rows
+  own_rows,   // rank r reads rows [N·r/P, N·(r+1)/P); bodies move to their owners, ghosts by halo exchange
+  every_row,  // every rank reads all rows and keeps its owned bodies and its ghosts: no body moves
+};
+
+struct DistributedOptions {
+  EngineOptions engine;  // backend, fields, cell_size and cell_choice, threads (also the
+                         // pipeline's host loops; 0: the hardware threads shared equally among
+                         // the ranks on the node), device
+  int axis = -1;         // slab axis: 0 x, 1 y, 2 z, -1 largest extent (parse_axis)
+  Balance balance = Balance::count;
+  std::uint64_t max_sample = 1u << 20;         // quantile sample size (all bodies when N <= it)
+  std::uint64_t max_message_bytes = 1u << 30;  // per-message gather/exchange size (tests make it tiny)
+  ContactOutput output = ContactOutput::root;
+  SceneRead read = SceneRead::automatic;
+  int resident_steps = 0;  // > 0: then that many resident steps (comm/resident_steps.hpp)
+  // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
+  // printed to stderr as a warning only if duplicates were removed.
+  std::function<void(const std::string&)> log;
+};
+
+// Throws UsageError naming the bad option. Called by distributed_detect before any communication.
+void validate(const DistributedOptions& options);
+
+template <class Real>
+struct DistributedResult {
+  // root: rank 0 holds all contacts in CONTRACT §2 order, the others none. id_ranges: this rank's
+  // rows [first_row, first_row + contacts.size()) of that order: every contact with id_a in
+  // [id_begin, id_end).
+  Contacts<Real> contacts;
+  std::uint64_t first_row = 0;             // root: 0 on rank 0, total_contacts elsewhere
+  std::uint64_t total_contacts = 0;        // K, on every rank
+  std::uint64_t id_begin = 0, id_end = 0;  // root: [0, N) on rank 0, [N, N) elsewhere
+  StageTimes times;  // read, redistribute, halo, detect, gather|exchange, merge (max over ranks, s)
+  std::uint64_t duplicates_removed = 0;        // root: rank 0; id_ranges: summed, every rank (expected 0)
+  std::uint64_t bodies = 0;                    // global body count
+  std::uint64_t ghosts = 0;                    // ghosts held, summed over ranks
+  std::uint64_t owned_min = 0, owned_max = 0;  // owned bodies per rank: balance of the slabs
+  double cell_size = 0;                        // the frame's cell edge
+  Frame frame;                                 // the shared frame
+  int ranks = 1;
+  SceneRead read = SceneRead::own_rows;  // the read mode used (never automatic)
+  int axis = 0;                          // the slab axis used
+  std::vector<double> cuts;              // the P-1 slab cuts
+  Backend backend = Backend::cpu;        // the engine's resolved backend (this rank)
+  int threads = 1;                       // host threads of this rank (engine and host loops)
+  EngineStats stats;                     // entries and pair tests summed over ranks
+  StepStats steps;                       // resident steps (steps == 0: none ran)
+};
+
+// Collective over `session`: every rank calls it with the same arguments. The stages read … collect
+// of a detect run (no file written).
+template <class Real>
+DistributedResult<Real> distributed_detect(Session& session, const std::string& scene_path,
+                                           const DistributedOptions& options);
+
+extern template DistributedResult<float> distributed_detect<float>(Session&, const std::string&,
+                                                                   const DistributedOptions&);
+extern template DistributedResult<double> distributed_detect<double>(Session&, const std::string&,
+                                                                     const DistributedOptions&);
 
 struct DetectCommand {
   std::string input;

@@ -4,8 +4,6 @@
 //
 // Every test is collective: all ranks run it; comparisons happen on rank 0 after the last collective
 // (so a failed assertion never leaves a rank behind in a collective).
-#include "distributed_detect.hpp"
-
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -18,6 +16,7 @@
 
 #include "hdf5_io.hpp"
 #include "mpi/mpi_test_env.hpp"
+#include "pipeline.hpp"
 
 namespace cg {
 namespace {

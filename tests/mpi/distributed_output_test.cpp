@@ -16,10 +16,10 @@
 #include <string>
 #include <vector>
 
-#include "distributed_detect.hpp"
-#include "distributed_write.hpp"
+#include "contact_file_shared.hpp"
 #include "hdf5_io.hpp"
 #include "mpi/mpi_test_env.hpp"
+#include "pipeline.hpp"
 
 namespace cg {
 namespace {

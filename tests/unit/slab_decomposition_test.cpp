@@ -10,6 +10,8 @@
 #include <random>
 #include <vector>
 
+#include "routing.hpp"
+
 namespace cg {
 namespace {
 
@@ -239,7 +241,7 @@ TEST(OwnerPlan, GroupsIndicesByOwnerInAscendingOrder) {
   const std::vector<double> x = {15, -1, 5, 0, 10, -3};
   ExportPlan plan = make_owner_plan(s, x);
   ASSERT_EQ(plan.offsets, (std::vector<std::size_t>{0, 2, 4, 6}));
-  EXPECT_EQ(plan.indices, (std::vector<std::size_t>{1, 5, 2, 3, 0, 4}));
+  EXPECT_EQ(plan.rows, (std::vector<std::size_t>{1, 5, 2, 3, 0, 4}));
 }
 
 TEST(SlabAxis, LargestExtentUnlessForced) {
