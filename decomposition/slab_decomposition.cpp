@@ -9,43 +9,6 @@
 
 namespace cg {
 
-const char* to_string(Balance b) {
-  switch (b) {
-    case Balance::count:
-      return "count";
-    case Balance::width:
-      return "width";
-  }
-  return "?";
-}
-
-Balance parse_balance(const std::string& text) {
-  if (text == "count") return Balance::count;
-  if (text == "width") return Balance::width;
-  throw UsageError("--balance: '" + text + "' is not one of count, width");
-}
-
-int parse_axis(const std::string& text) {
-  if (text == "x") return 0;
-  if (text == "y") return 1;
-  if (text == "z") return 2;
-  if (text == "auto") return -1;
-  throw UsageError("--axis: '" + text + "' is not one of x, y, z, auto");
-}
-
-const char* axis_name(int axis) {
-  switch (axis) {
-    case 0:
-      return "x";
-    case 1:
-      return "y";
-    case 2:
-      return "z";
-    default:
-      return "auto";
-  }
-}
-
 int choose_axis(const Bounds& global, int forced) {
   if (forced >= 0) {
     if (forced > 2) throw UsageError("slab axis " + std::to_string(forced) + " is not 0, 1 or 2");

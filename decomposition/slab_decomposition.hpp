@@ -29,12 +29,6 @@ enum class Balance {
   count,  // cuts at quantiles of the centre coordinate: about the same number of bodies per rank
   width,  // cuts at equal widths over the global bounds
 };
-const char* to_string(Balance b);
-Balance parse_balance(const std::string& text);  // "count" | "width"; UsageError otherwise
-
-// "x" | "y" | "z" -> 0, 1, 2; "auto" -> -1. UsageError otherwise.
-int parse_axis(const std::string& text);
-const char* axis_name(int axis);  // "x", "y", "z", "auto"
 
 // Coordinate k (0 x, 1 y, 2 z) of v.
 inline double component(const Vec3<double>& v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }

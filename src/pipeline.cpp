@@ -30,10 +30,46 @@
 
 namespace cg {
 
-void validate(const DistributedOptions& options) {
+const char* stage_name(Stage stage) {
+  switch (stage) {
+    case Stage::read:
+      return "read";
+    case Stage::redistribute:
+      return "redistribute";
+    case Stage::halo:
+      return "halo";
+    case Stage::detect:
+      return "detect";
+    case Stage::gather:
+      return "gather";
+    case Stage::exchange:
+      return "exchange";
+    case Stage::merge:
+      return "merge";
+    case Stage::write:
+      return "write";
+    case Stage::csv:
+      return "csv";
+  }
+  return "?";
+}
+
+std::string RunTime::name() const {
+  if (engine_stage < 0) return stage_name(stage);
+  return std::string(stage_name(stage)) + "." + engine_stage_names()[static_cast<std::size_t>(engine_stage)];
+}
+
+StageTimes file_stage_times(const RunTimes& times) {
+  StageTimes out;
+  for (const RunTime& t : times) out.push_back({t.name(), t.seconds});
+  return out;
+}
+
+void check_options(const DistributedOptions& options) {
   const EngineOptions& e = options.engine;
-  if (options.axis < -1 || options.axis > 2) {
-    throw UsageError("--axis: " + std::to_string(options.axis) + " is not x, y, z or auto");
+  const int axis = static_cast<int>(options.axis);
+  if (axis < -1 || axis > 2) {
+    throw UsageError("--axis: " + std::to_string(axis) + " is not x, y, z or auto");
   }
   if (options.balance != Balance::count && options.balance != Balance::width) {
     throw UsageError("--balance: not one of count, width");
@@ -67,7 +103,7 @@ struct Partition {
   Bounds bounds;  // of the partition's rows (count 0: none)
 };
 
-Partition read_partition(const Session& session, const std::string& path, bool every_row) {
+Partition read_partition(const Session& session, const std::string& path, bool all_rows) {
   Partition in;
   agreed_stage(session, "read", [&] {
     const SceneShape shape = read_scene_shape(path);
@@ -80,8 +116,8 @@ Partition read_partition(const Session& session, const std::string& path, bool e
     in.bodies = n;
     in.part_first = n * me / p;
     in.part_count = n * (me + 1) / p - in.part_first;
-    in.first = every_row ? 0 : in.part_first;
-    const std::uint64_t count = every_row ? n : in.part_count;
+    in.first = all_rows ? 0 : in.part_first;
+    const std::uint64_t count = all_rows ? n : in.part_count;
     if (count > 0) {
       Scene rows = read_scene_rows(path, in.first, count);
       if (rows.sphere_position.size() != count || rows.sphere_radius.size() != count) {
@@ -124,7 +160,7 @@ SharedFrame agree_frame(const Session& session, const Bounds& mine, const Distri
   f.global = allgather_bounds(session, mine);
   agreed_stage(session, "frame", [&] {
     f.frame = make_frame(f.global, options.engine.cell_size, precision, options.engine.cell_choice);
-    f.axis = choose_axis(f.global, options.axis);
+    f.axis = choose_axis(f.global, static_cast<int>(options.axis));
     double extent = 0;
     for (int k = 0; k < 3; ++k) {
       const double o = component(f.frame.origin, k);
@@ -192,11 +228,11 @@ struct HeldBodies {
 // Every body to its owner. Every row: each rank selects its owned bodies and its ghosts from all
 // rows (no body moves); own rows: the rows routed to their owners (count → scan → fill) and sent.
 HeldBodies distribute(const Session& session, Partition&& part, const SlabDecomposition& slabs,
-                      const SharedFrame& f, bool every_row, int threads) {
+                      const SharedFrame& f, bool all_rows, int threads) {
   HeldBodies held;
   Exports<BodyRecord> exports;
   agreed_stage(session, "redistribute", [&] {
-    if (every_row) {
+    if (all_rows) {
       held.input = select_owned_and_ghosts(std::move(part.position), std::move(part.radius), slabs, f.width,
                                            session.rank(), threads);
       return;
@@ -212,14 +248,14 @@ HeldBodies distribute(const Session& session, Partition&& part, const SlabDecomp
   });
   part.position = {};
   part.radius = {};
-  if (!every_row) held.owned = distribute_to_owners(session, std::move(exports));
+  if (!all_rows) held.owned = distribute_to_owners(session, std::move(exports));
   return held;
 }
 
 // Ghosts to every rank whose slab is within the ghost width (own rows; every row has them already).
 void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecomposition& slabs,
-                     const SharedFrame& f, bool every_row, int threads) {
-  if (every_row) return;
+                     const SharedFrame& f, bool all_rows, int threads) {
+  if (all_rows) return;
   Exports<BodyRecord> exports;
   agreed_stage(session, "halo", [&] {
     const auto& owned = held.owned;
@@ -257,8 +293,8 @@ CollectedContacts<Real> collect_contacts(const Session& session, Contacts<Real>&
   o.max_message_bytes = options.max_message_bytes;
   o.threads = threads;
   o.log = options.log;
-  return options.output == ContactOutput::root ? gather_contacts(session, std::move(local), bodies, o)
-                                               : exchange_contacts(session, std::move(local), bodies, o);
+  return options.output == ContactOutput::gather ? gather_contacts(session, std::move(local), bodies, o)
+                                                 : exchange_contacts(session, std::move(local), bodies, o);
 }
 
 // The stages read … collect, with their times (max over ranks) and the run's statistics.
@@ -269,7 +305,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   const std::vector<std::string>& engine_stages = engine_stage_names();
   DistributedResult<Real> result;
   result.ranks = ranks;
-  std::vector<double> times(6 + engine_stages.size(), 0.0);  // read … merge, then detect.<stage>
+  // read, redistribute, halo, detect, gather|exchange, merge, then the engine's stages inside detect
+  std::vector<double> times(6 + engine_stages.size(), 0.0);
 
   // ---- options: everything checked before the first communication -------------------------------
   std::optional<Engine<Real>> engine;
@@ -277,19 +314,19 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   const DefaultTeam team(threads);
   result.threads = threads;
   agreed_stage(session, "options", [&] {
-    validate(options);
+    check_options(options);
     if (path.empty()) throw UsageError("no scene file given");
     EngineOptions engine_options = options.engine;
     engine_options.threads = threads;
     engine.emplace(engine_options);
   });
   // Every row when the ranks share one node (one page cache; with one rank, the rank's rows are every row).
-  const bool every_row = options.read == SceneRead::every_row ||
-                         (options.read == SceneRead::automatic && session.local_size() == ranks);
-  result.read = every_row ? SceneRead::every_row : SceneRead::own_rows;
+  const bool all_rows = options.read == SceneRead::all_rows ||
+                        (options.read == SceneRead::automatic && session.local_size() == ranks);
+  result.read = all_rows ? SceneRead::all_rows : SceneRead::own_rows;
 
   auto t0 = clock_type::now();
-  Partition part = read_partition(session, path, every_row);
+  Partition part = read_partition(session, path, all_rows);
   const SharedFrame f = agree_frame<Real>(session, part.bounds, options);
   result.bodies = part.bodies;
   result.frame = f.frame;
@@ -300,11 +337,11 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   t0 = clock_type::now();
   const SlabDecomposition slabs = make_slabs(session, part, f, options);
   result.cuts = slabs.cuts();
-  HeldBodies held = distribute(session, std::move(part), slabs, f, every_row, threads);
+  HeldBodies held = distribute(session, std::move(part), slabs, f, all_rows, threads);
   times[1] = seconds_since(t0);
 
   t0 = clock_type::now();
-  exchange_ghosts(session, held, slabs, f, every_row, threads);
+  exchange_ghosts(session, held, slabs, f, all_rows, threads);
   times[2] = seconds_since(t0);
 
   t0 = clock_type::now();
@@ -347,37 +384,43 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   }
 
   max_over_ranks(session, times);
-  const char* names[6] = {
-      "read", "redistribute", "halo", "detect", options.output == ContactOutput::root ? "gather" : "exchange",
-      "merge"};
-  for (int s = 0; s < 6; ++s) {
-    result.times.push_back({names[s], times[static_cast<std::size_t>(s)]});
-    if (s == 3)
+  const Stage stages[6] = {Stage::read,
+                           Stage::redistribute,
+                           Stage::halo,
+                           Stage::detect,
+                           options.output == ContactOutput::gather ? Stage::gather : Stage::exchange,
+                           Stage::merge};
+  for (std::size_t s = 0; s < 6; ++s) {
+    result.times.push_back({stages[s], -1, times[s]});
+    if (stages[s] == Stage::detect)
       for (std::size_t k = 0; k < engine_stages.size(); ++k)
-        if (times[6 + k] > 0)
-          result.times.push_back({std::string("detect.") + engine_stages[k], times[6 + k]});
+        if (times[6 + k] > 0) result.times.push_back({Stage::detect, static_cast<int>(k), times[6 + k]});
   }
   return result;
 }
 
 template <class Real>
-void print_summary(const RunInfo& info, std::uint64_t contacts, const DistributedResult<Real>& r) {
+void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t contacts,
+                   const DistributedResult<Real>& r) {
   fmt::print("contactgrid detect: {} bodies, {} contacts ({:.3f} per body), {} rank(s), backend {}, {}\n",
              info.bodies, contacts, info.bodies ? double(contacts) / double(info.bodies) : 0.0, info.ranks,
              info.backend, info.precision);
   fmt::print("  cell size {:.6g}", info.cell_size);
   if (r.ranks > 1)
     fmt::print(", read {}, slab axis {}, owned bodies per rank {} … {}, ghosts {}, duplicates removed {}",
-               r.read == SceneRead::every_row ? "all rows per rank" : "own rows", "xyz"[r.axis], r.owned_min,
+               r.read == SceneRead::all_rows ? "all rows per rank" : "own rows", "xyz"[r.axis], r.owned_min,
                r.owned_max, r.ghosts, r.duplicates_removed);
   fmt::print("\n  {}-bit cell keys, {} (cell, body) entries, {} pair tests; times: maximum over ranks\n",
              r.stats.key_bits, r.stats.entries, r.stats.pair_tests);
   double total = 0;
   fmt::print("  {:<16} {:>12}\n", "stage", "seconds");
-  for (const auto& t : info.times) {
-    const bool sub = t.name.rfind("detect.", 0) == 0;  // the engine's stages, inside "detect"
+  for (const RunTime& t : times) {
+    const bool sub = t.engine_stage >= 0;  // the engine's stages, inside "detect"
     if (!sub) total += t.seconds;
-    fmt::print("  {:<16} {:>12.6f}\n", sub ? "  " + t.name.substr(7) : t.name, t.seconds);
+    fmt::print("  {:<16} {:>12.6f}\n",
+               sub ? "  " + engine_stage_names()[static_cast<std::size_t>(t.engine_stage)]
+                   : std::string(stage_name(t.stage)),
+               t.seconds);
   }
   fmt::print("  {:<16} {:>12.6f}\n", "total", total);
   if (r.steps.steps > 0) {
@@ -393,8 +436,7 @@ void print_summary(const RunInfo& info, std::uint64_t contacts, const Distribute
   }
 }
 
-template <class Real>
-int detect(const DetectCommand& cmd, Session& session) {
+DistributedOptions run_options(const DetectCommand& cmd, const Session& session) {
   DistributedOptions o;
   o.engine.backend = cmd.backend;
   o.engine.fields = cmd.fields;
@@ -402,46 +444,63 @@ int detect(const DetectCommand& cmd, Session& session) {
   o.engine.cell_choice = cmd.cell_choice;
   o.engine.threads = cmd.threads;
   if (cmd.backend != Backend::cpu) o.engine.device = session.device_for(cuda_device_count());
-  o.axis = parse_axis(cmd.axis);
-  o.balance = parse_balance(cmd.balance);
-  o.read = cmd.read == "all"   ? SceneRead::every_row
-           : cmd.read == "own" ? SceneRead::own_rows
-                               : SceneRead::automatic;
+  o.axis = cmd.axis;
+  o.balance = cmd.balance;
+  o.read = cmd.read;
   if (!cmd.quiet && session.rank() == 0) o.log = [](const std::string& line) { fmt::print("{}\n", line); };
   // The design card's shape by default: rank 0 gathers, deduplicates and writes the sorted contacts
   // (--write gather). --write ranks: each rank keeps the contacts of its id_a range and writes them
   // into the one output file. A CSV copy is written by rank 0 alone, so it always gathers.
-  o.output = cmd.write == "ranks" && cmd.csv.empty() ? ContactOutput::id_ranges : ContactOutput::root;
+  o.output = cmd.csv.empty() ? cmd.write : ContactOutput::gather;
   o.resident_steps = cmd.steps;
+  return o;
+}
 
-  // read → slabs → redistribute (or, reading every row, select) → halo → engine → gather to rank 0
-  // (or exchange by id_a range) → merge (comm/distributed_detect.cpp; with one rank: read → engine)
-  DistributedResult<Real> r = distributed_detect<Real>(session, cmd.input, o);
-
-  RunInfo info;
+// Every rank writes its rows of the one file (src/contact_file_shared.hpp); the file records the
+// times so far and the write's. Returns the write's time.
+template <class Real>
+RunTime write_output(Session& session, const DetectCommand& cmd, const DistributedResult<Real>& r,
+                     RunInfo& info) {
   info.bodies = r.bodies;
   info.precision = to_string(cmd.precision);
   info.backend = to_string(r.backend);
   info.ranks = r.ranks;
   info.cell_size = r.cell_size;
   info.input = cmd.input;
-  info.times = r.times;
-  // every rank writes its rows of the one file (src/contact_file_shared.hpp); adds the "write" time
-  write_contacts_distributed(session, cmd.output, r.contacts, r.first_row, r.total_contacts, info, r.threads);
-  if (!cmd.csv.empty()) {
-    std::exception_ptr error;
-    if (session.rank() == 0) {
-      try {
-        auto t = clock_type::now();
-        write_contacts_csv(cmd.csv, r.contacts);
-        info.times.push_back({"csv", seconds_since(t)});
-      } catch (...) {
-        error = std::current_exception();
-      }
+  info.times = file_stage_times(r.times);
+  const double seconds = write_contacts_distributed(session, cmd.output, r.contacts, r.first_row,
+                                                    r.total_contacts, info, r.threads);
+  return {Stage::write, -1, seconds};
+}
+
+// The CSV copy, by rank 0 (which holds every contact: --csv gathers). Returns its time (rank 0).
+template <class Real>
+RunTime write_csv(const Session& session, const std::string& path, const Contacts<Real>& contacts) {
+  std::exception_ptr error;
+  double seconds = 0;
+  if (session.rank() == 0) {
+    try {
+      auto t = clock_type::now();
+      write_contacts_csv(path, contacts);
+      seconds = seconds_since(t);
+    } catch (...) {
+      error = std::current_exception();
     }
-    session.agree(error, "csv");
   }
-  if (!cmd.quiet && session.rank() == 0) print_summary(info, r.total_contacts, r);
+  session.agree(error, "csv");
+  return {Stage::csv, -1, seconds};
+}
+
+// read → frame → slabs → distribute → exchange ghosts → detect → collect contacts (distributed_detect)
+// → write → summary
+template <class Real>
+int detect(const DetectCommand& cmd, Session& session) {
+  DistributedResult<Real> r = distributed_detect<Real>(session, cmd.input, run_options(cmd, session));
+  RunTimes times = r.times;
+  RunInfo info;
+  times.push_back(write_output(session, cmd, r, info));
+  if (!cmd.csv.empty()) times.push_back(write_csv(session, cmd.csv, r.contacts));
+  if (!cmd.quiet && session.rank() == 0) print_summary(info, times, r.total_contacts, r);
   return 0;
 }
 

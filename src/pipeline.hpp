@@ -6,14 +6,14 @@
 //
 // Pipeline (each stage's time is reported as the maximum over ranks):
 //   read          rank r's partition is rows [N·r/P, N·(r+1)/P) of /spheres; it reads only those
-//                 (SceneRead::own_rows) or every row (SceneRead::every_row, the default when all
+//                 (SceneRead::own_rows) or every row (SceneRead::all_rows, the default when all
 //                 ranks share one node: one page cache, so N rows read P times cost memory bandwidth,
 //                 not disk, and no body moves between ranks; 2^26 on 2 GPUs of one host, 962ecd7: 2.25–2.40 s
 //                 against 2.59–3.08 s, BENCHMARKS.md §4). Global bounds by an all-gather of
 //                 the partitions' Bounds, folded with Bounds::merge in rank order; the frame =
 //                 make_frame(global bounds) — the frame a single-rank run builds — so every rank
 //                 computes bit-identical local coordinates and contact data.
-//   every_row     redistribute = each rank selects, in one parallel pass over all rows, its owned
+//   all_rows      redistribute = each rank selects, in one parallel pass over all rows, its owned
 //                 bodies and the others within the ghost width of its slab (the same owner() and
 //                 for_each_ghost_rank() tests as below), already in id order; halo takes no time.
 //   redistribute  slab axis (largest extent unless forced); cuts from the quantiles of a regular
@@ -53,28 +53,51 @@
 
 namespace cg {
 
-// Where the contacts end up (see comm/contact_collect.hpp).
+// The options of a run, typed once by the CLI (the words of its options in the comments).
+
+// --axis: the slab axis (automatic: the largest extent of the global bounds).
+enum class SlabAxis : int { automatic = -1, x = 0, y = 1, z = 2 };
+
+// --write: where the contacts end up (see comm/contact_collect.hpp).
 enum class ContactOutput {
-  root,       // all on rank 0 (gather + merge there); stages ... gather, merge
-  id_ranges,  // each rank: the rows with id_a in its range [N·r/P, N·(r+1)/P); stages ... exchange, merge
+  gather,  // gather: all on rank 0 (gathered and merged there); stages ... gather, merge
+  ranks,  // ranks: each rank the rows with id_a in its range [N·r/P, N·(r+1)/P); stages ... exchange, merge
 };
 
-// How the ranks get their bodies (see the run comment above).
+// --read: how the ranks get their bodies (see the run comment above).
 enum class SceneRead {
-  automatic,  // every_row when all ranks share one node (one page cache), else own_rows
-  own_rows,   // rank r reads rows [N·r/P, N·(r+1)/P); bodies move to their owners, ghosts by halo exchange
-  every_row,  // every rank reads all rows and keeps its owned bodies and its ghosts: no body moves
+  automatic,  // auto: all_rows when all ranks share one node (one page cache), else own_rows
+  own_rows,   // own: rank r reads rows [N·r/P, N·(r+1)/P); bodies move to their owners, ghosts by halo
+              // exchange
+  all_rows,   // all: every rank reads all rows and keeps its owned bodies and its ghosts: no body moves
 };
+
+// The stages of a run, as timed (their names are the summary's and the contact file's attributes).
+enum class Stage { read, redistribute, halo, detect, gather, exchange, merge, write, csv };
+const char* stage_name(Stage stage);
+
+// One stage's time (maximum over ranks). engine_stage >= 0: the engine's own stage
+// engine_stage_names()[engine_stage], inside `detect`.
+struct RunTime {
+  Stage stage;
+  int engine_stage = -1;
+  double seconds = 0;
+  std::string name() const;  // "read", …, "detect.<engine stage>"
+};
+using RunTimes = std::vector<RunTime>;
+
+// The times as the contact file records them (src/hdf5_io: RunInfo::times).
+StageTimes file_stage_times(const RunTimes& times);
 
 struct DistributedOptions {
   EngineOptions engine;  // backend, fields, cell_size and cell_choice, threads (also the
                          // pipeline's host loops; 0: the hardware threads shared equally among
                          // the ranks on the node), device
-  int axis = -1;         // slab axis: 0 x, 1 y, 2 z, -1 largest extent (parse_axis)
+  SlabAxis axis = SlabAxis::automatic;
   Balance balance = Balance::count;
   std::uint64_t max_sample = 1u << 20;         // quantile sample size (all bodies when N <= it)
   std::uint64_t max_message_bytes = 1u << 30;  // per-message gather/exchange size (tests make it tiny)
-  ContactOutput output = ContactOutput::root;
+  ContactOutput output = ContactOutput::gather;
   SceneRead read = SceneRead::automatic;
   int resident_steps = 0;  // > 0: then that many resident steps (comm/resident_steps.hpp)
   // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
@@ -82,20 +105,22 @@ struct DistributedOptions {
   std::function<void(const std::string&)> log;
 };
 
-// Throws UsageError naming the bad option. Called by distributed_detect before any communication.
-void validate(const DistributedOptions& options);
+// Throws UsageError naming the bad option (for library callers; the CLI has typed them already).
+// Called by distributed_detect before any communication.
+void check_options(const DistributedOptions& options);
 
 template <class Real>
 struct DistributedResult {
-  // root: rank 0 holds all contacts in CONTRACT §2 order, the others none. id_ranges: this rank's
+  // gather: rank 0 holds all contacts in CONTRACT §2 order, the others none. ranks: this rank's
   // rows [first_row, first_row + contacts.size()) of that order: every contact with id_a in
   // [id_begin, id_end).
   Contacts<Real> contacts;
-  std::uint64_t first_row = 0;             // root: 0 on rank 0, total_contacts elsewhere
+  std::uint64_t first_row = 0;             // gather: 0 on rank 0, total_contacts elsewhere
   std::uint64_t total_contacts = 0;        // K, on every rank
-  std::uint64_t id_begin = 0, id_end = 0;  // root: [0, N) on rank 0, [N, N) elsewhere
-  StageTimes times;  // read, redistribute, halo, detect, gather|exchange, merge (max over ranks, s)
-  std::uint64_t duplicates_removed = 0;        // root: rank 0; id_ranges: summed, every rank (expected 0)
+  std::uint64_t id_begin = 0, id_end = 0;  // gather: [0, N) on rank 0, [N, N) elsewhere
+  RunTimes
+      times;  // read, redistribute, halo, detect (+ the engine's), gather|exchange, merge (max over ranks)
+  std::uint64_t duplicates_removed = 0;        // gather: rank 0; ranks: summed, every rank (expected 0)
   std::uint64_t bodies = 0;                    // global body count
   std::uint64_t ghosts = 0;                    // ghosts held, summed over ranks
   std::uint64_t owned_min = 0, owned_max = 0;  // owned bodies per rank: balance of the slabs
@@ -132,11 +157,11 @@ struct DetectCommand {
   double cell_size = 0;                        // 0: chosen by cell_choice
   CellChoice cell_choice = CellChoice::tuned;  // --cell-size auto | min
   int threads = 0;
-  std::string axis = "auto";      // MPI slab axis: auto | x | y | z
-  std::string balance = "count";  // MPI slab balance: count | width
-  std::string read = "auto";      // MPI scene read: auto | own | all
-  std::string write = "gather";   // MPI output: gather (rank 0 merges, writes) | ranks (each its id_a range)
-  int steps = 0;                  // resident steps after the run (a simulation's per-step cost)
+  SlabAxis axis = SlabAxis::automatic;
+  Balance balance = Balance::count;
+  SceneRead read = SceneRead::automatic;
+  ContactOutput write = ContactOutput::gather;
+  int steps = 0;  // resident steps after the run (a simulation's per-step cost)
   bool quiet = false;
 };
 

@@ -140,6 +140,12 @@ TEST_F(Cli, UsageErrorsExitTwo) {
                       "--cell-size 0");
   expect_detect_fails(path("s.h5"), 2, {"--cell-size"}, "--cell-size 3x");
   expect_detect_fails(path("s.h5"), 2, {"--read"}, "--read some");
+  expect_detect_fails(path("s.h5"), 2, {"--axis"}, "--axis w");
+  expect_detect_fails(path("s.h5"), 2, {"--balance"}, "--balance size");
+  for (const char* typed : {"--axis x --balance width --read all --write ranks", "--axis z --read own",
+                            "--axis auto --balance count --read auto --write gather"})
+    EXPECT_EQ(run("detect " + path("s.h5") + " -o " + path("typed.h5") + " " + typed + " -q").code, 0)
+        << typed;
   expect_detect_fails(path("s.h5"), 2, {"--write"}, "--write rank0");
   expect_detect_fails(path("s.h5"), 2, {"--steps"}, "--steps -1");
   expect_detect_fails(path("s.h5"), 2, {"--steps"}, "--steps many");
