@@ -297,22 +297,11 @@ CollectedContacts<Real> collect_contacts(const Session& session, Contacts<Real>&
                                                  : exchange_contacts(session, std::move(local), bodies, o);
 }
 
-// The stages read … collect, with their times (max over ranks) and the run's statistics.
+// Everything checked before the first communication; the engine built with the rank's threads.
 template <class Real>
-DistributedResult<Real> run(Session& session, const std::string& path, const DistributedOptions& options) {
-  const int ranks = session.size();
-  const bool full = options.engine.fields == Fields::full;
-  const std::vector<std::string>& engine_stages = engine_stage_names();
-  DistributedResult<Real> result;
-  result.ranks = ranks;
-  // read, redistribute, halo, detect, gather|exchange, merge, then the engine's stages inside detect
-  std::vector<double> times(6 + engine_stages.size(), 0.0);
-
-  // ---- options: everything checked before the first communication -------------------------------
+std::optional<Engine<Real>> make_engine(const Session& session, const std::string& path,
+                                        const DistributedOptions& options, int threads) {
   std::optional<Engine<Real>> engine;
-  const int threads = host_threads(options.engine.threads, session);
-  const DefaultTeam team(threads);
-  result.threads = threads;
   agreed_stage(session, "options", [&] {
     check_options(options);
     if (path.empty()) throw UsageError("no scene file given");
@@ -320,82 +309,136 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
     engine_options.threads = threads;
     engine.emplace(engine_options);
   });
-  // Every row when the ranks share one node (one page cache; with one rank, the rank's rows are every row).
-  const bool all_rows = options.read == SceneRead::all_rows ||
-                        (options.read == SceneRead::automatic && session.local_size() == ranks);
-  result.read = all_rows ? SceneRead::all_rows : SceneRead::own_rows;
+  return engine;
+}
 
-  auto t0 = clock_type::now();
-  Partition part = read_partition(session, path, all_rows);
-  const SharedFrame f = agree_frame<Real>(session, part.bounds, options);
-  result.bodies = part.bodies;
-  result.frame = f.frame;
-  result.cell_size = f.frame.cell_size;
-  result.axis = f.axis;
-  times[0] = seconds_since(t0);
-
-  t0 = clock_type::now();
-  const SlabDecomposition slabs = make_slabs(session, part, f, options);
-  result.cuts = slabs.cuts();
-  HeldBodies held = distribute(session, std::move(part), slabs, f, all_rows, threads);
-  times[1] = seconds_since(t0);
-
-  t0 = clock_type::now();
-  exchange_ghosts(session, held, slabs, f, all_rows, threads);
-  times[2] = seconds_since(t0);
-
-  t0 = clock_type::now();
-  Contacts<Real> local = detect_local(session, *engine, held, f.frame, full, threads);
-  result.backend = engine->backend();
-  times[3] = seconds_since(t0);
-  const std::uint64_t n_owned = held.input.owned;
-  if (n_owned > 0) {
-    // the engine's own stages, reported as "detect.<stage>" (max over ranks, like every time)
-    for (const StageTime& st : engine->times())
-      for (std::size_t k = 0; k < engine_stages.size(); ++k)
-        if (st.name == engine_stages[k]) times[6 + k] = st.seconds;
-    result.stats = engine->stats();
+// This rank's stage times by Stage (and the engine's stages inside detect); times() gives the
+// maximum over ranks of each, in pipeline order.
+class StageClock {
+ public:
+  void start() { m_t0 = clock_type::now(); }
+  void stop(Stage stage) { m_top[static_cast<std::size_t>(stage)] += seconds_since(m_t0); }
+  void add(Stage stage, double seconds) { m_top[static_cast<std::size_t>(stage)] += seconds; }
+  void add_engine(const StageTimes& engine_times) {
+    const std::vector<std::string>& names = engine_stage_names();
+    for (const StageTime& t : engine_times)
+      for (std::size_t k = 0; k < names.size(); ++k)
+        if (t.name == names[k]) m_engine[k] = t.seconds;
   }
+  // Collective. read, redistribute, halo, detect (then the engine's stages that took time), the
+  // contacts' transfer (gather or exchange), merge.
+  RunTimes times(const Session& session, Stage transfer) const {
+    std::vector<double> all(m_top.begin(), m_top.end());
+    all.insert(all.end(), m_engine.begin(), m_engine.end());
+    max_over_ranks(session, all);
+    RunTimes out;
+    for (Stage stage :
+         {Stage::read, Stage::redistribute, Stage::halo, Stage::detect, transfer, Stage::merge}) {
+      out.push_back({stage, -1, all[static_cast<std::size_t>(stage)]});
+      if (stage != Stage::detect) continue;
+      for (std::size_t k = 0; k < m_engine.size(); ++k)
+        if (all[k_stages + k] > 0) out.push_back({Stage::detect, static_cast<int>(k), all[k_stages + k]});
+    }
+    return out;
+  }
+
+ private:
+  static constexpr std::size_t k_stages = static_cast<std::size_t>(Stage::csv) + 1;
+  clock_type::time_point m_t0 = clock_type::now();
+  std::vector<double> m_top = std::vector<double>(k_stages, 0.0);
+  std::vector<double> m_engine = std::vector<double>(engine_stage_names().size(), 0.0);
+};
+
+// The run's statistics after detection: the engine's counts summed over ranks, the balance of the
+// slabs (owned bodies per rank) and the ghosts held. Collective.
+template <class Real>
+void record_detection(const Session& session, const Engine<Real>& engine, const EngineInput& input,
+                      DistributedResult<Real>& result) {
+  result.backend = engine.backend();
+  if (input.owned > 0) result.stats = engine.stats();
   result.stats.entries = session.sum(result.stats.entries);
   result.stats.pair_tests = session.sum(result.stats.pair_tests);
   result.stats.key_bits = int(session.max(double(result.stats.key_bits)));
-  const std::vector<std::uint64_t> owned_all = allgather_counts(session, n_owned);
-  result.owned_min = *std::min_element(owned_all.begin(), owned_all.end());
-  result.owned_max = *std::max_element(owned_all.begin(), owned_all.end());
-  result.ghosts = session.sum(held.input.ghosts);
-  if (options.resident_steps == 0) held.input = {};  // the steps start from it
+  const std::vector<std::uint64_t> owned = allgather_counts(session, input.owned);
+  result.owned_min = *std::min_element(owned.begin(), owned.end());
+  result.owned_max = *std::max_element(owned.begin(), owned.end());
+  result.ghosts = session.sum(input.ghosts);
+}
 
-  CollectedContacts<Real> c = collect_contacts(session, std::move(local), result.bodies, options, threads);
-  times[4] = c.transfer_seconds;
-  times[5] = c.merge_seconds;
+template <class Real>
+void record_contacts(CollectedContacts<Real>&& c, DistributedResult<Real>& result) {
   result.contacts = std::move(c.contacts);
   result.first_row = c.first_row;
   result.total_contacts = c.total_contacts;
   result.id_begin = c.id_begin;
   result.id_end = c.id_end;
   result.duplicates_removed = c.duplicates_removed;
+}
 
-  if (options.resident_steps > 0) {
-    std::uint64_t hash = 0;
-    for (std::size_t k = 0; k < result.contacts.size(); ++k)
-      hash += pair_hash(result.contacts.id_a[k], result.contacts.id_b[k]);
-    result.steps = resident_steps(session, *engine, f.frame, slabs, f.width, held.input,
-                                  options.resident_steps, result.total_contacts, session.sum(hash), threads);
-  }
+// The resident steps from the run's engine input, checked against the run's contacts (count and
+// an order-free hash of the pairs).
+template <class Real>
+StepStats run_resident_steps(Session& session, Engine<Real>& engine, const SharedFrame& f,
+                             const SlabDecomposition& slabs, const EngineInput& input,
+                             const DistributedResult<Real>& result, int steps, int threads) {
+  std::uint64_t hash = 0;
+  for (std::size_t k = 0; k < result.contacts.size(); ++k)
+    hash += pair_hash(result.contacts.id_a[k], result.contacts.id_b[k]);
+  return resident_steps(session, engine, f.frame, slabs, f.width, input, steps, result.total_contacts,
+                        session.sum(hash), threads);
+}
 
-  max_over_ranks(session, times);
-  const Stage stages[6] = {Stage::read,
-                           Stage::redistribute,
-                           Stage::halo,
-                           Stage::detect,
-                           options.output == ContactOutput::gather ? Stage::gather : Stage::exchange,
-                           Stage::merge};
-  for (std::size_t s = 0; s < 6; ++s) {
-    result.times.push_back({stages[s], -1, times[s]});
-    if (stages[s] == Stage::detect)
-      for (std::size_t k = 0; k < engine_stages.size(); ++k)
-        if (times[6 + k] > 0) result.times.push_back({Stage::detect, static_cast<int>(k), times[6 + k]});
-  }
+// The stages read … collect, with their times (max over ranks) and the run's statistics.
+template <class Real>
+DistributedResult<Real> run(Session& session, const std::string& path, const DistributedOptions& options) {
+  const int ranks = session.size(), threads = host_threads(options.engine.threads, session);
+  const DefaultTeam team(threads);
+  std::optional<Engine<Real>> engine = make_engine<Real>(session, path, options, threads);
+  // All rows when the ranks share one node (one page cache; one rank's own rows are all rows).
+  const bool all_rows = options.read == SceneRead::all_rows ||
+                        (options.read == SceneRead::automatic && session.local_size() == ranks);
+  DistributedResult<Real> result;
+  result.ranks = ranks;
+  result.threads = threads;
+  result.read = all_rows ? SceneRead::all_rows : SceneRead::own_rows;
+  StageClock clock;
+
+  Partition part = read_partition(session, path, all_rows);
+  const SharedFrame f = agree_frame<Real>(session, part.bounds, options);
+  clock.stop(Stage::read);
+  result.bodies = part.bodies;
+  result.frame = f.frame;
+  result.cell_size = f.frame.cell_size;
+  result.axis = f.axis;
+
+  clock.start();
+  const SlabDecomposition slabs = make_slabs(session, part, f, options);
+  HeldBodies held = distribute(session, std::move(part), slabs, f, all_rows, threads);
+  clock.stop(Stage::redistribute);
+  result.cuts = slabs.cuts();
+
+  clock.start();
+  exchange_ghosts(session, held, slabs, f, all_rows, threads);
+  clock.stop(Stage::halo);
+
+  clock.start();
+  Contacts<Real> local =
+      detect_local(session, *engine, held, f.frame, options.engine.fields == Fields::full, threads);
+  clock.stop(Stage::detect);
+  if (held.input.owned > 0) clock.add_engine(engine->times());
+  record_detection(session, *engine, held.input, result);
+  if (options.resident_steps == 0) held.input = {};  // else the steps start from it
+
+  CollectedContacts<Real> c = collect_contacts(session, std::move(local), result.bodies, options, threads);
+  const Stage transfer = options.output == ContactOutput::gather ? Stage::gather : Stage::exchange;
+  clock.add(transfer, c.transfer_seconds);
+  clock.add(Stage::merge, c.merge_seconds);
+  record_contacts(std::move(c), result);
+
+  if (options.resident_steps > 0)
+    result.steps =
+        run_resident_steps(session, *engine, f, slabs, held.input, result, options.resident_steps, threads);
+  result.times = clock.times(session, transfer);
   return result;
 }
 
