@@ -31,27 +31,10 @@
 namespace cg {
 
 const char* stage_name(Stage stage) {
-  switch (stage) {
-    case Stage::read:
-      return "read";
-    case Stage::redistribute:
-      return "redistribute";
-    case Stage::halo:
-      return "halo";
-    case Stage::detect:
-      return "detect";
-    case Stage::gather:
-      return "gather";
-    case Stage::exchange:
-      return "exchange";
-    case Stage::merge:
-      return "merge";
-    case Stage::write:
-      return "write";
-    case Stage::csv:
-      return "csv";
-  }
-  return "?";
+  static constexpr const char* names[] = {"read",     "redistribute", "halo",  "detect", "gather",
+                                          "exchange", "merge",        "write", "csv"};
+  static_assert(std::size(names) == static_cast<std::size_t>(Stage::csv) + 1);
+  return names[static_cast<std::size_t>(stage)];
 }
 
 std::string RunTime::name() const {

@@ -4,37 +4,39 @@
 //   read → frame → slabs → distribute → exchange ghosts → detect → collect contacts → write → summary
 // (one rank: the same stages, with nothing to send).
 //
-// Pipeline (each stage's time is reported as the maximum over ranks):
-//   read          rank r's partition is rows [N·r/P, N·(r+1)/P) of /spheres; it reads only those
-//                 (SceneRead::own_rows) or every row (SceneRead::all_rows, the default when all
-//                 ranks share one node: one page cache, so N rows read P times cost memory bandwidth,
-//                 not disk, and no body moves between ranks; 2^26 on 2 GPUs of one host, 962ecd7: 2.25–2.40 s
-//                 against 2.59–3.08 s, BENCHMARKS.md §4). Global bounds by an all-gather of
-//                 the partitions' Bounds, folded with Bounds::merge in rank order; the frame =
-//                 make_frame(global bounds) — the frame a single-rank run builds — so every rank
-//                 computes bit-identical local coordinates and contact data.
-//   all_rows      redistribute = each rank selects, in one parallel pass over all rows, its owned
-//                 bodies and the others within the ghost width of its slab (the same owner() and
-//                 for_each_ghost_rank() tests as below), already in id order; halo takes no time.
-//   redistribute  slab axis (largest extent unless forced); cuts from the quantiles of a regular
-//                 sample of centre coordinates gathered to every rank (balance = count) or equal widths
-//                 (balance = width): identical on all ranks (the P-1 quantiles are selected, not the
-//                 sample sorted); every body to its owner (Alltoall counts, Alltoallv records packed
-//                 by destination in one parallel count → scan → fill, no index list).
-//   halo          ghost plan (SlabDecomposition::for_each_ghost_rank, ghost width = 2·r_max + rounding
-//                 margin; the same plan as decomposition/make_halo_plan, packed in parallel);
-//                 counts by Alltoall, then every Irecv posted, every Isend, one Waitall.
-//   detect        owned + ghosts in global id order (owned bodies arrive in id order, grouped by
-//                 source rank; the ghost groups are merged, then merged with them in parallel straight
-//                 into the engine's arrays); report mask = owned; Engine<Real>::detect with the
-//                 shared frame. The owner of the smaller id reports a pair, so each contact is
-//                 found by exactly one rank.
-// Then the contacts (DistributedOptions::output): gathered to rank 0 or exchanged by id_a range,
-// then merged (comm/contact_collect.hpp); rank r's rows are rows [first_row, first_row + size) of
-// the single-rank result, which src/contact_file_shared writes into one file at once.
-// With one rank nothing is exchanged or copied: every row is read, owned and moved to the engine
-// (ids implied, all pairs reported: decomposition/assemble), its contacts are the result; the stages
-// are still reported (redistribute, halo, gather and merge take next to no time).
+// The stages of distributed_detect (pipeline.cpp), with the names their times are reported under
+// (each the maximum over ranks):
+//   read_partition    [read] rank r's partition is rows [N·r/P, N·(r+1)/P) of /spheres; it reads only
+//                     those (SceneRead::own_rows) or all rows (SceneRead::all_rows, the default when all
+//                     ranks share one node: one page cache, so N rows read P times cost memory
+//                     bandwidth, not disk, and no body moves between ranks; 2^26 on 2 GPUs of one
+//                     host, 962ecd7: 2.25–2.40 s against 2.59–3.08 s, BENCHMARKS.md §4).
+//   agree_frame       [read] global bounds by an all-gather of the partitions' Bounds, folded with
+//                     Bounds::merge in rank order; the frame = make_frame(global bounds) — the frame a
+//                     single-rank run builds — so every rank computes bit-identical local coordinates
+//                     and contact data; the slab axis (largest extent unless forced); the ghost width
+//                     (2·r_max + a rounding margin).
+//   make_slabs        [redistribute] cuts from the quantiles of a regular sample of centre
+//                     coordinates gathered to every rank (balance = count; the P-1 quantiles are
+//                     selected, not the sample sorted) or equal widths (balance = width): identical on
+//                     all ranks.
+//   distribute        [redistribute] all rows: each rank selects, in one parallel pass over all rows,
+//                     its owned bodies and its ghosts (decomposition/assemble), already in id order.
+//                     Own rows: every body to its owner (decomposition/routing: to_owner, count → scan
+//                     → fill in parallel; comm/distribute: Alltoall counts, Alltoallv records).
+//   exchange_ghosts   [halo] own rows: every owned body to each other rank within the ghost width
+//                     (routing: to_ghost_ranks, the rule of make_halo_plan; comm/halo_exchange: counts
+//                     by Alltoall, every Irecv posted, every Isend, one Waitall). All rows: nothing.
+//   detect_local      [detect] own rows: owned + ghosts merged by id (assemble: merge_by_id); report
+//                     mask = owned; Engine<Real>::detect with the shared frame. The owner of the
+//                     smaller id reports a pair, so each contact is found by exactly one rank.
+//   collect_contacts  [gather | exchange, merge] (DistributedOptions::output, comm/contact_collect):
+//                     gathered to rank 0, or exchanged by id_a range, then k-way merged; rank r's rows
+//                     are rows [first_row, first_row + size) of the single-rank result, which
+//                     src/contact_file_shared writes into one file at once.
+// One rank takes the same stages with nothing to send: reading all rows, its one slab owns every row,
+// so the rows as read are the engine's input (ids implied, all pairs reported), and its single run of
+// contacts is the result (moved, not merged).
 //
 // Errors: options are validated before any communication. An error in a stage on any rank (bad
 // input, I/O, CUDA, memory) is agreed on at the end of the stage (Session::agree): every rank throws

@@ -1,4 +1,4 @@
-// The parallel output path under MPI: distributed_detect's id_ranges mode (each rank keeps the
+// The parallel output path under MPI: distributed_detect's ContactOutput::ranks mode (each rank keeps the
 // contacts whose id_a lies in its range [N·r/P, N·(r+1)/P), merged, with its first row and K) and
 // write_contacts_distributed (every rank writes its rows of one file). Against the single-rank
 // Engine::detect on the whole scene, computed on every rank (the scenes are small): each rank's rows
@@ -97,7 +97,8 @@ void expect_rows_of(const Contacts<Real>& got, std::uint64_t first, const Contac
   EXPECT_TRUE(same_rows(got.lateral_friction_dir2, want.lateral_friction_dir2, first)) << what << ": dir2";
 }
 
-// Runs id_ranges mode and checks this rank's range, order, rows, first row and K; returns the result.
+// Runs ContactOutput::ranks mode and checks this rank's range, order, rows, first row and K; returns the
+// result.
 template <class Real>
 DistributedResult<Real> check_ranges(const std::string& path, const Scene& scene,
                                      const DistributedOptions& options, const std::string& name) {
@@ -202,8 +203,8 @@ const char* const k_datasets[] = {
     "id_a",     "id_b",          "position_on_a", "position_on_b",         "normal_on_b",
     "distance", "local_point_a", "local_point_b", "lateral_friction_dir1", "lateral_friction_dir2"};
 
-// The file every rank writes (id_ranges slices, and the root mode's everything-on-rank-0) has the
-// dataset bytes of the single-rank writer.
+// The file every rank writes (ContactOutput::ranks slices, and ContactOutput::gather's everything-on-rank-0)
+// has the dataset bytes of the single-rank writer.
 template <class Real>
 void write_and_compare(const std::string& name, const Scene& scene) {
   const std::string path = write_shared(name, scene);
