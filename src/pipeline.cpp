@@ -377,8 +377,9 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   const int ranks = session.size(), threads = host_threads(options.engine.threads, session);
   const DefaultTeam team(threads);
   std::optional<Engine<Real>> engine = make_engine<Real>(session, path, options, threads);
-  // All rows when the ranks share one node (one page cache; one rank's own rows are all rows).
-  const bool all_rows = options.read == SceneRead::all_rows ||
+  // All rows when the ranks share one node (one page cache). One rank's own rows are all rows: the
+  // two modes coincide, and all rows takes the rows as read (no records routed to itself).
+  const bool all_rows = ranks == 1 || options.read == SceneRead::all_rows ||
                         (options.read == SceneRead::automatic && session.local_size() == ranks);
   DistributedResult<Real> result;
   result.ranks = ranks;
