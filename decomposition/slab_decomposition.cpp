@@ -59,6 +59,26 @@ SlabDecomposition SlabDecomposition::from_sorted_sample(int axis, std::span<cons
   return SlabDecomposition(axis, std::move(cuts));
 }
 
+SlabDecomposition SlabDecomposition::from_sample(int axis, std::vector<double> sample, int ranks) {
+  // from_sorted_sample reads only the P-1 quantile positions floor(r·S/P): put the right order
+  // statistic at each (successive selections on the remaining upper part) instead of sorting.
+  const std::size_t n_s = sample.size();
+  if (ranks > 64) {
+    std::sort(sample.begin(), sample.end());
+  } else {
+    std::size_t from = 0;
+    for (int r = 1; r < ranks && n_s > 0; ++r) {
+      const std::size_t q = std::min<std::size_t>(
+          n_s - 1, static_cast<std::size_t>(std::uint64_t(r) * std::uint64_t(n_s) / std::uint64_t(ranks)));
+      if (q < from) continue;  // already in place (equal quantile positions)
+      std::nth_element(sample.begin() + static_cast<std::ptrdiff_t>(from),
+                       sample.begin() + static_cast<std::ptrdiff_t>(q), sample.end());
+      from = q + 1;
+    }
+  }
+  return from_sorted_sample(axis, sample, ranks);
+}
+
 SlabDecomposition SlabDecomposition::equal_width(int axis, double lo, double hi, int ranks) {
   if (ranks < 1) throw UsageError("slab decomposition needs at least one rank");
   if (!(std::isfinite(lo) && std::isfinite(hi) && lo <= hi)) {

@@ -61,6 +61,10 @@ class SlabDecomposition {
   // slab owns floor or ceil of N/P bodies (up to ties). An empty sample gives all cuts at 0.
   static SlabDecomposition from_sorted_sample(int axis, std::span<const double> sorted_sample, int ranks);
 
+  // The same cuts from an unsorted sample: only the P-1 quantile positions are put in order
+  // (successive selections on the remaining upper part; a sort above 64 ranks).
+  static SlabDecomposition from_sample(int axis, std::vector<double> sample, int ranks);
+
   // balance = width: P slabs of equal width between lo and hi (the outer two still extend to ±inf).
   static SlabDecomposition equal_width(int axis, double lo, double hi, int ranks);
 

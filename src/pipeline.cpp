@@ -157,13 +157,13 @@ SharedFrame agree_frame(const Session& session, const Bounds& mine, const Distri
 
 // The slab cuts, identical on all ranks: balance count, the quantiles of a regular sample of centre
 // coordinates (every stride-th global row, all of them when N <= max_sample) gathered to every rank;
-// balance width, equal widths over the global bounds. No cuts (one rank) need no sample.
+// balance width, equal widths over the global bounds. One rank has no cut, so it samples nothing.
 SlabDecomposition make_slabs(const Session& session, const Partition& part, const SharedFrame& f,
                              const DistributedOptions& options) {
   const int ranks = session.size(), axis = f.axis;
+  const bool by_count = options.balance == Balance::count;
   std::vector<double> sample;
-  const bool by_count = options.balance == Balance::count && ranks > 1;
-  if (by_count) {
+  if (by_count && ranks > 1) {
     const std::uint64_t stride =
         std::max<std::uint64_t>(1, (part.bodies + options.max_sample - 1) / options.max_sample);
     for (std::uint64_t g = part.part_first + (stride - part.part_first % stride) % stride;
@@ -174,28 +174,9 @@ SlabDecomposition make_slabs(const Session& session, const Partition& part, cons
   }
   std::optional<SlabDecomposition> slabs;
   agreed_stage(session, "redistribute", [&] {
-    if (!by_count) {
-      slabs = SlabDecomposition::equal_width(axis, component(f.global.lo, axis), component(f.global.hi, axis),
-                                             ranks);
-      return;
-    }
-    // from_sorted_sample reads only the P-1 quantile positions floor(r·S/P): put the right order
-    // statistic at each (successive selections on the remaining upper part) instead of sorting.
-    const std::size_t n_s = sample.size();
-    if (ranks > 64) {
-      std::sort(sample.begin(), sample.end());
-    } else {
-      std::size_t from = 0;
-      for (int r = 1; r < ranks && n_s > 0; ++r) {
-        const std::size_t q = std::min<std::size_t>(
-            n_s - 1, static_cast<std::size_t>(std::uint64_t(r) * std::uint64_t(n_s) / std::uint64_t(ranks)));
-        if (q < from) continue;  // already in place (equal quantile positions)
-        std::nth_element(sample.begin() + static_cast<std::ptrdiff_t>(from),
-                         sample.begin() + static_cast<std::ptrdiff_t>(q), sample.end());
-        from = q + 1;
-      }
-    }
-    slabs = SlabDecomposition::from_sorted_sample(axis, sample, ranks);
+    slabs = by_count ? SlabDecomposition::from_sample(axis, std::move(sample), ranks)
+                     : SlabDecomposition::equal_width(axis, component(f.global.lo, axis),
+                                                      component(f.global.hi, axis), ranks);
   });
   return *slabs;
 }

@@ -244,6 +244,24 @@ TEST(OwnerPlan, GroupsIndicesByOwnerInAscendingOrder) {
   EXPECT_EQ(plan.rows, (std::vector<std::size_t>{1, 5, 2, 3, 0, 4}));
 }
 
+// The quantile selection gives the cuts of the sorted sample, for any rank count (selection up to 64
+// ranks, a sort above), with ties and fewer samples than ranks.
+TEST(SlabDecomposition, UnsortedSampleGivesTheSortedSamplesCuts) {
+  std::mt19937_64 rng(17);
+  std::uniform_int_distribution<int> value(0, 50);  // many ties
+  for (std::size_t n : {0u, 1u, 3u, 100u, 5000u}) {
+    std::vector<double> sample(n);
+    for (double& v : sample) v = value(rng);
+    std::vector<double> sorted = sample;
+    std::sort(sorted.begin(), sorted.end());
+    for (int ranks : {1, 2, 3, 7, 64, 65, 200}) {
+      EXPECT_EQ(SlabDecomposition::from_sample(0, sample, ranks).cuts(),
+                SlabDecomposition::from_sorted_sample(0, sorted, ranks).cuts())
+          << n << " samples, " << ranks << " ranks";
+    }
+  }
+}
+
 TEST(SlabAxis, LargestExtentUnlessForced) {
   Bounds b;
   b.lo = {0, 0, 0};
