@@ -1,5 +1,5 @@
-// Slab geometry (see slab_decomposition.hpp): axis choice, cuts by quantiles or widths, owner and
-// halo plans. Pure: no MPI, no CUDA.
+// Slab geometry (see slab_decomposition.hpp): axis choice, cuts by quantiles or widths, owner.
+// Pure: no MPI, no CUDA.
 #include "slab_decomposition.hpp"
 
 #include <algorithm>
@@ -8,45 +8,6 @@
 #include <string>
 
 namespace cg {
-
-const char* to_string(Balance b) {
-  switch (b) {
-    case Balance::count:
-      return "count";
-    case Balance::width:
-      return "width";
-  }
-  return "?";
-}
-
-Balance parse_balance(const std::string& text) {
-  if (text == "count") return Balance::count;
-  if (text == "width") return Balance::width;
-  throw UsageError("--balance: '" + text + "' is not one of count, width");
-}
-
-int parse_axis(const std::string& text) {
-  if (text == "x") return 0;
-  if (text == "y") return 1;
-  if (text == "z") return 2;
-  if (text == "auto") return -1;
-  throw UsageError("--axis: '" + text + "' is not one of x, y, z, auto");
-}
-
-const char* axis_name(int axis) {
-  switch (axis) {
-    case 0:
-      return "x";
-    case 1:
-      return "y";
-    case 2:
-      return "z";
-    default:
-      return "auto";
-  }
-}
-
-static double component(const Vec3<double>& v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
 
 int choose_axis(const Bounds& global, int forced) {
   if (forced >= 0) {
@@ -98,6 +59,26 @@ SlabDecomposition SlabDecomposition::from_sorted_sample(int axis, std::span<cons
   return SlabDecomposition(axis, std::move(cuts));
 }
 
+SlabDecomposition SlabDecomposition::from_sample(int axis, std::vector<double> sample, int ranks) {
+  // from_sorted_sample reads only the P-1 quantile positions floor(r·S/P): put the right order
+  // statistic at each (successive selections on the remaining upper part) instead of sorting.
+  const std::size_t n_s = sample.size();
+  if (ranks > 64) {
+    std::sort(sample.begin(), sample.end());
+  } else {
+    std::size_t from = 0;
+    for (int r = 1; r < ranks && n_s > 0; ++r) {
+      const std::size_t q = std::min<std::size_t>(
+          n_s - 1, static_cast<std::size_t>(std::uint64_t(r) * std::uint64_t(n_s) / std::uint64_t(ranks)));
+      if (q < from) continue;  // already in place (equal quantile positions)
+      std::nth_element(sample.begin() + static_cast<std::ptrdiff_t>(from),
+                       sample.begin() + static_cast<std::ptrdiff_t>(q), sample.end());
+      from = q + 1;
+    }
+  }
+  return from_sorted_sample(axis, sample, ranks);
+}
+
 SlabDecomposition SlabDecomposition::equal_width(int axis, double lo, double hi, int ranks) {
   if (ranks < 1) throw UsageError("slab decomposition needs at least one rank");
   if (!(std::isfinite(lo) && std::isfinite(hi) && lo <= hi)) {
@@ -122,48 +103,6 @@ double SlabDecomposition::upper(int rank) const {
 
 int SlabDecomposition::owner(double x) const {
   return static_cast<int>(std::upper_bound(m_cuts.begin(), m_cuts.end(), x) - m_cuts.begin());
-}
-
-// Count -> exclusive scan -> fill, with each destination's indices in ascending order.
-template <class Destinations>
-static ExportPlan build_plan(int ranks, std::size_t n, Destinations&& for_each_destination) {
-  ExportPlan plan;
-  plan.offsets.assign(static_cast<std::size_t>(ranks) + 1, 0);
-  for (std::size_t i = 0; i < n; ++i) {
-    for_each_destination(i, [&](int r) { ++plan.offsets[static_cast<std::size_t>(r) + 1]; });
-  }
-  for (int r = 0; r < ranks; ++r) plan.offsets[r + 1] += plan.offsets[r];
-  plan.indices.resize(plan.offsets.back());
-  std::vector<std::size_t> next(plan.offsets.begin(), plan.offsets.end() - 1);
-  for (std::size_t i = 0; i < n; ++i) {
-    for_each_destination(i, [&](int r) { plan.indices[next[static_cast<std::size_t>(r)]++] = i; });
-  }
-  return plan;
-}
-
-ExportPlan make_owner_plan(const SlabDecomposition& slabs, std::span<const double> coordinate) {
-  return build_plan(slabs.ranks(), coordinate.size(),
-                    [&](std::size_t i, auto&& emit) { emit(slabs.owner(coordinate[i])); });
-}
-
-ExportPlan make_halo_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
-                          double ghost_width) {
-  if (self < 0 || self >= slabs.ranks()) {
-    throw UsageError("halo plan: rank " + std::to_string(self) + " is not in [0, " +
-                     std::to_string(slabs.ranks()) + ")");
-  }
-  if (!(ghost_width >= 0) || !std::isfinite(ghost_width)) {
-    throw InputError("halo plan: ghost width is not a finite value >= 0");
-  }
-  for (std::size_t i = 0; i < coordinate.size(); ++i) {
-    if (slabs.owner(coordinate[i]) != self) {
-      throw InputError("halo plan: body " + std::to_string(i) + " at " + std::to_string(coordinate[i]) +
-                       " is not owned by rank " + std::to_string(self));
-    }
-  }
-  return build_plan(slabs.ranks(), coordinate.size(), [&](std::size_t i, auto&& emit) {
-    slabs.for_each_ghost_rank(coordinate[i], ghost_width, emit);
-  });
 }
 
 }  // namespace cg

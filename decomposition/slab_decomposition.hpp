@@ -29,12 +29,9 @@ enum class Balance {
   count,  // cuts at quantiles of the centre coordinate: about the same number of bodies per rank
   width,  // cuts at equal widths over the global bounds
 };
-const char* to_string(Balance b);
-Balance parse_balance(const std::string& text);  // "count" | "width"; UsageError otherwise
 
-// "x" | "y" | "z" -> 0, 1, 2; "auto" -> -1. UsageError otherwise.
-int parse_axis(const std::string& text);
-const char* axis_name(int axis);  // "x", "y", "z", "auto"
+// Coordinate k (0 x, 1 y, 2 z) of v.
+inline double component(const Vec3<double>& v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
 
 // The slab axis of a run: `forced` (0, 1, 2) if >= 0, else the axis of largest extent of the global
 // bounds (ties: the lowest axis).
@@ -64,6 +61,10 @@ class SlabDecomposition {
   // slab owns floor or ceil of N/P bodies (up to ties). An empty sample gives all cuts at 0.
   static SlabDecomposition from_sorted_sample(int axis, std::span<const double> sorted_sample, int ranks);
 
+  // The same cuts from an unsorted sample: only the P-1 quantile positions are put in order
+  // (successive selections on the remaining upper part; a sort above 64 ranks).
+  static SlabDecomposition from_sample(int axis, std::vector<double> sample, int ranks);
+
   // balance = width: P slabs of equal width between lo and hi (the outer two still extend to ±inf).
   static SlabDecomposition equal_width(int axis, double lo, double hi, int ranks);
 
@@ -89,31 +90,7 @@ class SlabDecomposition {
   std::vector<double> m_cuts;
 };
 
-// Who exports what to whom, as compressed rows: the local indices sent to rank r are
-// indices[offsets[r] .. offsets[r+1]), ascending. offsets.size() == ranks + 1.
-struct ExportPlan {
-  std::vector<std::size_t> offsets;
-  std::vector<std::size_t> indices;
-  std::size_t count(int rank) const { return offsets[rank + 1] - offsets[rank]; }
-  std::span<const std::size_t> to(int rank) const { return {indices.data() + offsets[rank], count(rank)}; }
-  std::size_t total() const { return indices.size(); }
-};
-
-// Redistribution: every body goes to its owner (including this rank itself: bodies this rank owns
-// appear in to(self)). `coordinate[i]` is body i's centre coordinate along the slab axis.
-ExportPlan make_owner_plan(const SlabDecomposition& slabs, std::span<const double> coordinate);
-
-// Halo plan of the bodies a rank owns (all bodies in `coordinate` must be owned by `self`; InputError
-// otherwise): each goes as a ghost to every OTHER rank whose non-empty slab lies within `ghost_width`
-// of its centre coordinate — not only to the neighbours: slabs thinner than the ghost width make a
-// body a ghost further away. to(self) is always empty.
-//
-// Invariant (what the MPI run relies on): with ghost_width >= the largest centre distance of a
-// contacting pair (see ghost_width()), for every contacting pair (i, j) with i < j the owner of i
-// holds j, owned or as a ghost. Hence the owner of the smaller id reports the pair (report mask =
-// owned) and every contact is found exactly once.
-ExportPlan make_halo_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
-                          double ghost_width);
+// The owner and halo plans (who exports which rows to whom): decomposition/routing.hpp.
 
 // ---- inline ---------------------------------------------------------------------------------------
 

@@ -21,6 +21,13 @@ const std::map<std::string, Backend> k_backends{
     {"cpu", Backend::cpu}, {"cuda", Backend::cuda}, {"auto", Backend::automatic}};
 const std::map<std::string, Precision> k_precisions{{"fp32", Precision::fp32}, {"fp64", Precision::fp64}};
 const std::map<std::string, Fields> k_fields{{"basic", Fields::basic}, {"full", Fields::full}};
+const std::map<std::string, SlabAxis> k_axes{
+    {"auto", SlabAxis::automatic}, {"x", SlabAxis::x}, {"y", SlabAxis::y}, {"z", SlabAxis::z}};
+const std::map<std::string, Balance> k_balances{{"count", Balance::count}, {"width", Balance::width}};
+const std::map<std::string, SceneRead> k_reads{
+    {"auto", SceneRead::automatic}, {"own", SceneRead::own_rows}, {"all", SceneRead::all_rows}};
+const std::map<std::string, ContactOutput> k_writes{{"gather", ContactOutput::gather},
+                                                    {"ranks", ContactOutput::ranks}};
 
 }  // namespace
 
@@ -100,22 +107,22 @@ int run_cli(int argc, char** argv, Session& session) {
   d->add_option("--threads", det.threads, "CPU backend threads (0: all cores)")
       ->check(CLI::NonNegativeNumber);
   d->add_option("--axis", det.axis, "MPI slab axis: auto (largest extent) | x | y | z")
-      ->check(CLI::IsMember({"auto", "x", "y", "z"}))
-      ->capture_default_str();
+      ->transform(CLI::CheckedTransformer(k_axes))
+      ->default_str("auto");
   d->add_option("--balance", det.balance, "MPI slab bounds: count (equal bodies) | width (equal widths)")
-      ->check(CLI::IsMember({"count", "width"}))
-      ->capture_default_str();
+      ->transform(CLI::CheckedTransformer(k_balances))
+      ->default_str("count");
   d->add_option("--read", det.read,
                 "MPI scene read: auto (all when every rank is on one node, else own) | own (each rank its "
                 "rows, bodies then move to their owners) | all (every rank reads every row and keeps its "
                 "own bodies and ghosts: no body moves)")
-      ->check(CLI::IsMember({"auto", "own", "all"}))
-      ->capture_default_str();
+      ->transform(CLI::CheckedTransformer(k_reads))
+      ->default_str("auto");
   d->add_option("--write", det.write,
                 "MPI output: gather (rank 0 gathers, deduplicates and writes the sorted contacts) | ranks "
                 "(each rank merges the contacts of its id_a range and writes them into the same file)")
-      ->check(CLI::IsMember({"gather", "ranks"}))
-      ->capture_default_str();
+      ->transform(CLI::CheckedTransformer(k_writes))
+      ->default_str("gather");
   d->add_option("--steps", det.steps,
                 "Then measure N resident steps: each rank keeps its bodies on its GPU (or in memory), "
                 "refreshes its ghosts through MPI and detects again, contacts left in place (checked "

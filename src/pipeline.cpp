@@ -1,21 +1,71 @@
-// Sequencing of a contactgrid run. Reads like the data flow; each stage is one call.
+// Sequencing of a contactgrid run. Reads like the data flow; each stage is one call:
+//   read → frame → slabs → distribute → exchange ghosts → detect → collect contacts → write → summary
 #include "pipeline.hpp"
 
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <numeric>
+#include <optional>
 
-#include "distributed_detect.hpp"
-#include "distributed_write.hpp"
+#include "agreed_stage.hpp"
+#include "assemble.hpp"
+#include "collectives.hpp"
+#include "contact_collect.hpp"
+#include "contact_file_shared.hpp"
+#include "distribute.hpp"
+#include "halo_exchange.hpp"
 #include "hdf5_io.hpp"
+#include "node_threads.hpp"
+#include "routing.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
 
 namespace cg {
+
+const char* stage_name(Stage stage) {
+  static constexpr const char* names[] = {"read",     "redistribute", "halo",  "detect", "gather",
+                                          "exchange", "merge",        "write", "csv"};
+  static_assert(std::size(names) == static_cast<std::size_t>(Stage::csv) + 1);
+  return names[static_cast<std::size_t>(stage)];
+}
+
+std::string RunTime::name() const {
+  if (engine_stage < 0) return stage_name(stage);
+  return std::string(stage_name(stage)) + "." + engine_stage_names()[static_cast<std::size_t>(engine_stage)];
+}
+
+StageTimes file_stage_times(const RunTimes& times) {
+  StageTimes out;
+  for (const RunTime& t : times) out.push_back({t.name(), t.seconds});
+  return out;
+}
+
+void check_options(const DistributedOptions& options) {
+  const EngineOptions& e = options.engine;
+  const int axis = static_cast<int>(options.axis);
+  if (axis < -1 || axis > 2) {
+    throw UsageError("--axis: " + std::to_string(axis) + " is not x, y, z or auto");
+  }
+  if (options.balance != Balance::count && options.balance != Balance::width) {
+    throw UsageError("--balance: not one of count, width");
+  }
+  if (!std::isfinite(e.cell_size) || e.cell_size < 0) {
+    throw UsageError("--cell-size: must be a finite length >= 0 (0: chosen by cell_choice)");
+  }
+  if (e.threads < 0) throw UsageError("--threads: must be >= 0 (0: all hardware threads)");
+  if (options.max_sample < 1) throw UsageError("max_sample: must be >= 1");
+  if (options.max_message_bytes < 64) throw UsageError("max_message_bytes: must be >= 64");
+  if (options.resident_steps < 0) throw UsageError("--steps: must be >= 0");
+}
+
 namespace {
 
 using clock_type = std::chrono::steady_clock;
@@ -23,24 +73,362 @@ double seconds_since(clock_type::time_point t) {
   return std::chrono::duration<double>(clock_type::now() - t).count();
 }
 
+// ---- the stages of a distributed run ---------------------------------------------------------------
+
+// Rank r's partition of the scene: rows [part_first, part_first + part_count) = [N·r/P, N·(r+1)/P),
+// read alone (own rows) or with every other row (every row: rows [0, N)); its bounds.
+struct Partition {
+  std::uint64_t bodies = 0;  // N
+  std::uint64_t first = 0;   // row of position[0]
+  std::uint64_t part_first = 0, part_count = 0;
+  HostVector<Vec3<double>> position;
+  HostVector<double> radius;
+  Bounds bounds;  // of the partition's rows (count 0: none)
+};
+
+Partition read_partition(const Session& session, const std::string& path, bool all_rows) {
+  Partition in;
+  agreed_stage(session, "read", [&] {
+    const SceneShape shape = read_scene_shape(path);
+    if (shape.ellipsoids > 0) {
+      throw InputError(path + ": /ellipsoids: the MPI run handles spheres only (for now)");
+    }
+    if (shape.spheres == 0) throw InputError(path + ": the scene has no bodies");
+    const std::uint64_t n = shape.spheres, me = static_cast<std::uint64_t>(session.rank()),
+                        p = static_cast<std::uint64_t>(session.size());
+    in.bodies = n;
+    in.part_first = n * me / p;
+    in.part_count = n * (me + 1) / p - in.part_first;
+    in.first = all_rows ? 0 : in.part_first;
+    const std::uint64_t count = all_rows ? n : in.part_count;
+    if (count > 0) {
+      Scene rows = read_scene_rows(path, in.first, count);
+      if (rows.sphere_position.size() != count || rows.sphere_radius.size() != count) {
+        throw InputError(path + ": /spheres rows " + std::to_string(in.first) + "+" + std::to_string(count) +
+                         ": read " + std::to_string(rows.sphere_radius.size()) + " rows");
+      }
+      in.position = std::move(rows.sphere_position);
+      in.radius = std::move(rows.sphere_radius);
+    }
+    if (in.part_count > 0) {
+      // Bounds (and validation) without an id array: the reader has validated every row already, so
+      // compute_bounds finds nothing; if it ever does, it runs again with the global ids, for its message.
+      const std::span<const Vec3<double>> pos(in.position.data() + (in.part_first - in.first), in.part_count);
+      const std::span<const double> rad(in.radius.data() + (in.part_first - in.first), in.part_count);
+      try {
+        in.bounds = compute_bounds(BodiesView{pos, rad, {}, {}});
+      } catch (const InputError&) {
+        std::vector<std::int64_t> id(in.part_count);
+        std::iota(id.begin(), id.end(), static_cast<std::int64_t>(in.part_first));
+        in.bounds = compute_bounds(BodiesView{pos, rad, id, {}});
+      }
+    }
+  });
+  return in;
+}
+
+// The frame every rank shares: global bounds (all-gathered), make_frame, the slab axis and the ghost
+// width (2·r_max + the rounding margin of Real).
+struct SharedFrame {
+  Bounds global;
+  Frame frame;
+  int axis = 0;
+  double width = 0;
+};
+
 template <class Real>
-void print_summary(const RunInfo& info, std::uint64_t contacts, const DistributedResult<Real>& r) {
+SharedFrame agree_frame(const Session& session, const Bounds& mine, const DistributedOptions& options) {
+  constexpr Precision precision = std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64;
+  SharedFrame f;
+  f.global = allgather_bounds(session, mine);
+  agreed_stage(session, "frame", [&] {
+    f.frame = make_frame(f.global, options.engine.cell_size, precision, options.engine.cell_choice);
+    f.axis = choose_axis(f.global, static_cast<int>(options.axis));
+    double extent = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double o = component(f.frame.origin, k);
+      extent = std::max(
+          {extent, std::abs(component(f.global.hi, k) - o), std::abs(component(f.global.lo, k) - o)});
+    }
+    f.width = ghost_width(f.global.r_max, extent, std::numeric_limits<Real>::epsilon());
+  });
+  return f;
+}
+
+// The slab cuts, identical on all ranks: balance count, the quantiles of a regular sample of centre
+// coordinates (every stride-th global row, all of them when N <= max_sample) gathered to every rank;
+// balance width, equal widths over the global bounds. One rank has no cut, so it samples nothing.
+SlabDecomposition make_slabs(const Session& session, const Partition& part, const SharedFrame& f,
+                             const DistributedOptions& options) {
+  const int ranks = session.size(), axis = f.axis;
+  const bool by_count = options.balance == Balance::count;
+  std::vector<double> sample;
+  if (by_count && ranks > 1) {
+    const std::uint64_t stride =
+        std::max<std::uint64_t>(1, (part.bodies + options.max_sample - 1) / options.max_sample);
+    for (std::uint64_t g = part.part_first + (stride - part.part_first % stride) % stride;
+         g < part.part_first + part.part_count; g += stride) {
+      sample.push_back(component(part.position[static_cast<std::size_t>(g - part.first)], axis));
+    }
+    sample = allgather_values(session, sample);
+  }
+  std::optional<SlabDecomposition> slabs;
+  agreed_stage(session, "redistribute", [&] {
+    slabs = by_count ? SlabDecomposition::from_sample(axis, std::move(sample), ranks)
+                     : SlabDecomposition::equal_width(axis, component(f.global.lo, axis),
+                                                      component(f.global.hi, axis), ranks);
+  });
+  return *slabs;
+}
+
+// The bodies a rank holds as the stages go: its owned records (own rows, after distribute), its
+// ghosts (after the halo exchange), then the engine's input (every row: straight from the rows).
+struct HeldBodies {
+  HostVector<BodyRecord> owned;
+  Imports<BodyRecord> ghosts;
+  EngineInput input;
+};
+
+// Every body to its owner. Every row: each rank selects its owned bodies and its ghosts from all
+// rows (no body moves); own rows: the rows routed to their owners (count → scan → fill) and sent.
+HeldBodies distribute(const Session& session, Partition&& part, const SlabDecomposition& slabs,
+                      const SharedFrame& f, bool all_rows, int threads) {
+  HeldBodies held;
+  Exports<BodyRecord> exports;
+  agreed_stage(session, "redistribute", [&] {
+    if (all_rows) {
+      held.input = select_owned_and_ghosts(std::move(part.position), std::move(part.radius), slabs, f.width,
+                                           session.rank(), threads);
+      return;
+    }
+    const auto& position = part.position;
+    const auto& radius = part.radius;
+    const std::uint64_t first = part.first;
+    exports = route<BodyRecord>(
+        position.size(), session.size(), threads,
+        to_owner(slabs, [&](std::size_t i) { return component(position[i], f.axis); }), [&](std::size_t i) {
+          return BodyRecord{position[i], radius[i], static_cast<std::int64_t>(first + i)};
+        });
+  });
+  part.position = {};
+  part.radius = {};
+  if (!all_rows) held.owned = distribute_to_owners(session, std::move(exports));
+  return held;
+}
+
+// Ghosts to every rank whose slab is within the ghost width (own rows; every row has them already).
+void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecomposition& slabs,
+                     const SharedFrame& f, bool all_rows, int threads) {
+  if (all_rows) return;
+  Exports<BodyRecord> exports;
+  agreed_stage(session, "halo", [&] {
+    const auto& owned = held.owned;
+    auto x = [&](std::size_t i) { return component(owned[i].position, f.axis); };
+    check_halo_rows(slabs, session.rank(), owned.size(), x, f.width, threads);
+    exports = route<BodyRecord>(owned.size(), session.size(), threads, to_ghost_ranks(slabs, x, f.width),
+                                [&](std::size_t i) { return owned[i]; });
+  });
+  held.ghosts = exchange_ghosts(session, exports);
+}
+
+// Owned + ghosts in id order (own rows: merged by id), then the engine with the shared frame; the
+// owner of the smaller id reports a pair. A rank that owns nothing reports nothing.
+template <class Real>
+Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBodies& held,
+                            const Frame& frame, bool full, int threads) {
+  Contacts<Real> local;
+  local.full = full;
+  agreed_stage(session, "detect", [&] {
+    if (held.input.position.empty()) {  // own rows (every row: selected by distribute)
+      held.input = merge_by_id(held.owned, held.ghosts.rows, held.ghosts.counts, threads);
+    }
+    held.owned = {};
+    held.ghosts = {};
+    if (held.input.owned > 0) local = engine.detect(held.input.view(), frame);
+  });
+  return local;
+}
+
+// The contacts of every rank: gathered to rank 0 or exchanged by id_a range, then merged.
+template <class Real>
+CollectedContacts<Real> collect_contacts(const Session& session, Contacts<Real>&& local, std::uint64_t bodies,
+                                         const DistributedOptions& options, int threads) {
+  CollectOptions o;
+  o.max_message_bytes = options.max_message_bytes;
+  o.threads = threads;
+  o.log = options.log;
+  return options.output == ContactOutput::gather ? gather_contacts(session, std::move(local), bodies, o)
+                                                 : exchange_contacts(session, std::move(local), bodies, o);
+}
+
+// Everything checked before the first communication; the engine built with the rank's threads.
+template <class Real>
+std::optional<Engine<Real>> make_engine(const Session& session, const std::string& path,
+                                        const DistributedOptions& options, int threads) {
+  std::optional<Engine<Real>> engine;
+  agreed_stage(session, "options", [&] {
+    check_options(options);
+    if (path.empty()) throw UsageError("no scene file given");
+    EngineOptions engine_options = options.engine;
+    engine_options.threads = threads;
+    engine.emplace(engine_options);
+  });
+  return engine;
+}
+
+// This rank's stage times by Stage (and the engine's stages inside detect); times() gives the
+// maximum over ranks of each, in pipeline order.
+class StageClock {
+ public:
+  void start() { m_t0 = clock_type::now(); }
+  void stop(Stage stage) { m_top[static_cast<std::size_t>(stage)] += seconds_since(m_t0); }
+  void add(Stage stage, double seconds) { m_top[static_cast<std::size_t>(stage)] += seconds; }
+  void add_engine(const StageTimes& engine_times) {
+    const std::vector<std::string>& names = engine_stage_names();
+    for (const StageTime& t : engine_times)
+      for (std::size_t k = 0; k < names.size(); ++k)
+        if (t.name == names[k]) m_engine[k] = t.seconds;
+  }
+  // Collective. read, redistribute, halo, detect (then the engine's stages that took time), the
+  // contacts' transfer (gather or exchange), merge.
+  RunTimes times(const Session& session, Stage transfer) const {
+    std::vector<double> all(m_top.begin(), m_top.end());
+    all.insert(all.end(), m_engine.begin(), m_engine.end());
+    max_over_ranks(session, all);
+    RunTimes out;
+    for (Stage stage :
+         {Stage::read, Stage::redistribute, Stage::halo, Stage::detect, transfer, Stage::merge}) {
+      out.push_back({stage, -1, all[static_cast<std::size_t>(stage)]});
+      if (stage != Stage::detect) continue;
+      for (std::size_t k = 0; k < m_engine.size(); ++k)
+        if (all[k_stages + k] > 0) out.push_back({Stage::detect, static_cast<int>(k), all[k_stages + k]});
+    }
+    return out;
+  }
+
+ private:
+  static constexpr std::size_t k_stages = static_cast<std::size_t>(Stage::csv) + 1;
+  clock_type::time_point m_t0 = clock_type::now();
+  std::vector<double> m_top = std::vector<double>(k_stages, 0.0);
+  std::vector<double> m_engine = std::vector<double>(engine_stage_names().size(), 0.0);
+};
+
+// The run's statistics after detection: the engine's counts summed over ranks, the balance of the
+// slabs (owned bodies per rank) and the ghosts held. Collective.
+template <class Real>
+void record_detection(const Session& session, const Engine<Real>& engine, const EngineInput& input,
+                      DistributedResult<Real>& result) {
+  result.backend = engine.backend();
+  if (input.owned > 0) result.stats = engine.stats();
+  result.stats.entries = session.sum(result.stats.entries);
+  result.stats.pair_tests = session.sum(result.stats.pair_tests);
+  result.stats.key_bits = int(session.max(double(result.stats.key_bits)));
+  const std::vector<std::uint64_t> owned = allgather_counts(session, input.owned);
+  result.owned_min = *std::min_element(owned.begin(), owned.end());
+  result.owned_max = *std::max_element(owned.begin(), owned.end());
+  result.ghosts = session.sum(input.ghosts);
+}
+
+template <class Real>
+void record_contacts(CollectedContacts<Real>&& c, DistributedResult<Real>& result) {
+  result.contacts = std::move(c.contacts);
+  result.first_row = c.first_row;
+  result.total_contacts = c.total_contacts;
+  result.id_begin = c.id_begin;
+  result.id_end = c.id_end;
+  result.duplicates_removed = c.duplicates_removed;
+}
+
+// The resident steps from the run's engine input, checked against the run's contacts (count and
+// an order-free hash of the pairs).
+template <class Real>
+StepStats run_resident_steps(Session& session, Engine<Real>& engine, const SharedFrame& f,
+                             const SlabDecomposition& slabs, const EngineInput& input,
+                             const DistributedResult<Real>& result, int steps, int threads) {
+  std::uint64_t hash = 0;
+  for (std::size_t k = 0; k < result.contacts.size(); ++k)
+    hash += pair_hash(result.contacts.id_a[k], result.contacts.id_b[k]);
+  return resident_steps(session, engine, f.frame, slabs, f.width, input, steps, result.total_contacts,
+                        session.sum(hash), threads);
+}
+
+// The stages read … collect, with their times (max over ranks) and the run's statistics.
+template <class Real>
+DistributedResult<Real> run(Session& session, const std::string& path, const DistributedOptions& options) {
+  const int ranks = session.size(), threads = host_threads(options.engine.threads, session);
+  const DefaultTeam team(threads);
+  std::optional<Engine<Real>> engine = make_engine<Real>(session, path, options, threads);
+  // All rows when the ranks share one node (one page cache). One rank's own rows are all rows: the
+  // two modes coincide, and all rows takes the rows as read (no records routed to itself).
+  const bool all_rows = ranks == 1 || options.read == SceneRead::all_rows ||
+                        (options.read == SceneRead::automatic && session.local_size() == ranks);
+  DistributedResult<Real> result;
+  result.ranks = ranks;
+  result.threads = threads;
+  result.read = all_rows ? SceneRead::all_rows : SceneRead::own_rows;
+  StageClock clock;
+
+  Partition part = read_partition(session, path, all_rows);
+  const SharedFrame f = agree_frame<Real>(session, part.bounds, options);
+  clock.stop(Stage::read);
+  result.bodies = part.bodies;
+  result.frame = f.frame;
+  result.cell_size = f.frame.cell_size;
+  result.axis = f.axis;
+
+  clock.start();
+  const SlabDecomposition slabs = make_slabs(session, part, f, options);
+  HeldBodies held = distribute(session, std::move(part), slabs, f, all_rows, threads);
+  clock.stop(Stage::redistribute);
+  result.cuts = slabs.cuts();
+
+  clock.start();
+  exchange_ghosts(session, held, slabs, f, all_rows, threads);
+  clock.stop(Stage::halo);
+
+  clock.start();
+  Contacts<Real> local =
+      detect_local(session, *engine, held, f.frame, options.engine.fields == Fields::full, threads);
+  clock.stop(Stage::detect);
+  if (held.input.owned > 0) clock.add_engine(engine->times());
+  record_detection(session, *engine, held.input, result);
+  if (options.resident_steps == 0) held.input = {};  // else the steps start from it
+
+  CollectedContacts<Real> c = collect_contacts(session, std::move(local), result.bodies, options, threads);
+  const Stage transfer = options.output == ContactOutput::gather ? Stage::gather : Stage::exchange;
+  clock.add(transfer, c.transfer_seconds);
+  clock.add(Stage::merge, c.merge_seconds);
+  record_contacts(std::move(c), result);
+
+  if (options.resident_steps > 0)
+    result.steps =
+        run_resident_steps(session, *engine, f, slabs, held.input, result, options.resident_steps, threads);
+  result.times = clock.times(session, transfer);
+  return result;
+}
+
+template <class Real>
+void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t contacts,
+                   const DistributedResult<Real>& r) {
   fmt::print("contactgrid detect: {} bodies, {} contacts ({:.3f} per body), {} rank(s), backend {}, {}\n",
              info.bodies, contacts, info.bodies ? double(contacts) / double(info.bodies) : 0.0, info.ranks,
              info.backend, info.precision);
   fmt::print("  cell size {:.6g}", info.cell_size);
   if (r.ranks > 1)
     fmt::print(", read {}, slab axis {}, owned bodies per rank {} … {}, ghosts {}, duplicates removed {}",
-               r.read == SceneRead::every_row ? "all rows per rank" : "own rows", "xyz"[r.axis], r.owned_min,
+               r.read == SceneRead::all_rows ? "all rows per rank" : "own rows", "xyz"[r.axis], r.owned_min,
                r.owned_max, r.ghosts, r.duplicates_removed);
   fmt::print("\n  {}-bit cell keys, {} (cell, body) entries, {} pair tests; times: maximum over ranks\n",
              r.stats.key_bits, r.stats.entries, r.stats.pair_tests);
   double total = 0;
   fmt::print("  {:<16} {:>12}\n", "stage", "seconds");
-  for (const auto& t : info.times) {
-    const bool sub = t.name.rfind("detect.", 0) == 0;  // the engine's stages, inside "detect"
+  for (const RunTime& t : times) {
+    const bool sub = t.engine_stage >= 0;  // the engine's stages, inside "detect"
     if (!sub) total += t.seconds;
-    fmt::print("  {:<16} {:>12.6f}\n", sub ? "  " + t.name.substr(7) : t.name, t.seconds);
+    fmt::print("  {:<16} {:>12.6f}\n",
+               sub ? "  " + engine_stage_names()[static_cast<std::size_t>(t.engine_stage)]
+                   : std::string(stage_name(t.stage)),
+               t.seconds);
   }
   fmt::print("  {:<16} {:>12.6f}\n", "total", total);
   if (r.steps.steps > 0) {
@@ -56,8 +444,7 @@ void print_summary(const RunInfo& info, std::uint64_t contacts, const Distribute
   }
 }
 
-template <class Real>
-int detect(const DetectCommand& cmd, Session& session) {
+DistributedOptions run_options(const DetectCommand& cmd, const Session& session) {
   DistributedOptions o;
   o.engine.backend = cmd.backend;
   o.engine.fields = cmd.fields;
@@ -65,50 +452,83 @@ int detect(const DetectCommand& cmd, Session& session) {
   o.engine.cell_choice = cmd.cell_choice;
   o.engine.threads = cmd.threads;
   if (cmd.backend != Backend::cpu) o.engine.device = session.device_for(cuda_device_count());
-  o.axis = parse_axis(cmd.axis);
-  o.balance = parse_balance(cmd.balance);
-  o.read = cmd.read == "all"   ? SceneRead::every_row
-           : cmd.read == "own" ? SceneRead::own_rows
-                               : SceneRead::automatic;
+  o.axis = cmd.axis;
+  o.balance = cmd.balance;
+  o.read = cmd.read;
   if (!cmd.quiet && session.rank() == 0) o.log = [](const std::string& line) { fmt::print("{}\n", line); };
   // The design card's shape by default: rank 0 gathers, deduplicates and writes the sorted contacts
   // (--write gather). --write ranks: each rank keeps the contacts of its id_a range and writes them
   // into the one output file. A CSV copy is written by rank 0 alone, so it always gathers.
-  o.output = cmd.write == "ranks" && cmd.csv.empty() ? ContactOutput::id_ranges : ContactOutput::root;
+  o.output = cmd.csv.empty() ? cmd.write : ContactOutput::gather;
   o.resident_steps = cmd.steps;
+  return o;
+}
 
-  // read → slabs → redistribute (or, reading every row, select) → halo → engine → gather to rank 0
-  // (or exchange by id_a range) → merge (comm/distributed_detect.cpp; with one rank: read → engine)
-  DistributedResult<Real> r = distributed_detect<Real>(session, cmd.input, o);
-
-  RunInfo info;
+// Every rank writes its rows of the one file (src/contact_file_shared.hpp); the file records the
+// times so far and the write's. Returns the write's time.
+template <class Real>
+RunTime write_output(Session& session, const DetectCommand& cmd, const DistributedResult<Real>& r,
+                     RunInfo& info) {
   info.bodies = r.bodies;
   info.precision = to_string(cmd.precision);
   info.backend = to_string(r.backend);
   info.ranks = r.ranks;
   info.cell_size = r.cell_size;
   info.input = cmd.input;
-  info.times = r.times;
-  // every rank writes its rows of the one file (comm/distributed_write.hpp); adds the "write" time
-  write_contacts_distributed(session, cmd.output, r.contacts, r.first_row, r.total_contacts, info, r.threads);
-  if (!cmd.csv.empty()) {
-    std::exception_ptr error;
-    if (session.rank() == 0) {
-      try {
-        auto t = clock_type::now();
-        write_contacts_csv(cmd.csv, r.contacts);
-        info.times.push_back({"csv", seconds_since(t)});
-      } catch (...) {
-        error = std::current_exception();
-      }
+  info.times = file_stage_times(r.times);
+  const double seconds = write_contacts_distributed(session, cmd.output, r.contacts, r.first_row,
+                                                    r.total_contacts, info, r.threads);
+  return {Stage::write, -1, seconds};
+}
+
+// The CSV copy, by rank 0 (which holds every contact: --csv gathers). Returns its time (rank 0).
+template <class Real>
+RunTime write_csv(const Session& session, const std::string& path, const Contacts<Real>& contacts) {
+  std::exception_ptr error;
+  double seconds = 0;
+  if (session.rank() == 0) {
+    try {
+      auto t = clock_type::now();
+      write_contacts_csv(path, contacts);
+      seconds = seconds_since(t);
+    } catch (...) {
+      error = std::current_exception();
     }
-    session.agree(error, "csv");
   }
-  if (!cmd.quiet && session.rank() == 0) print_summary(info, r.total_contacts, r);
+  session.agree(error, "csv");
+  return {Stage::csv, -1, seconds};
+}
+
+// read → frame → slabs → distribute → exchange ghosts → detect → collect contacts (distributed_detect)
+// → write → summary
+template <class Real>
+int detect(const DetectCommand& cmd, Session& session) {
+  DistributedResult<Real> r = distributed_detect<Real>(session, cmd.input, run_options(cmd, session));
+  RunTimes times = r.times;
+  RunInfo info;
+  times.push_back(write_output(session, cmd, r, info));
+  if (!cmd.csv.empty()) times.push_back(write_csv(session, cmd.csv, r.contacts));
+  if (!cmd.quiet && session.rank() == 0) print_summary(info, times, r.total_contacts, r);
   return 0;
 }
 
 }  // namespace
+
+template <class Real>
+DistributedResult<Real> distributed_detect(Session& session, const std::string& scene_path,
+                                           const DistributedOptions& options) {
+  try {
+    return run<Real>(session, scene_path, options);
+  } catch (const CommFailure& e) {
+    // Other ranks may be waiting in a collective this rank will never join.
+    session.abort(e.exit_code(), e.what());
+  }
+}
+
+template DistributedResult<float> distributed_detect<float>(Session&, const std::string&,
+                                                            const DistributedOptions&);
+template DistributedResult<double> distributed_detect<double>(Session&, const std::string&,
+                                                              const DistributedOptions&);
 
 int run_detect(const DetectCommand& cmd, Session& session) {
   if (cmd.output.empty()) throw UsageError("detect: -o/--output is required");

@@ -1,4 +1,4 @@
-// The parallel output path under MPI: distributed_detect's id_ranges mode (each rank keeps the
+// The parallel output path under MPI: distributed_detect's ContactOutput::ranks mode (each rank keeps the
 // contacts whose id_a lies in its range [N·r/P, N·(r+1)/P), merged, with its first row and K) and
 // write_contacts_distributed (every rank writes its rows of one file). Against the single-rank
 // Engine::detect on the whole scene, computed on every rank (the scenes are small): each rank's rows
@@ -16,10 +16,10 @@
 #include <string>
 #include <vector>
 
-#include "distributed_detect.hpp"
-#include "distributed_write.hpp"
+#include "contact_file_shared.hpp"
 #include "hdf5_io.hpp"
 #include "mpi/mpi_test_env.hpp"
+#include "pipeline.hpp"
 
 namespace cg {
 namespace {
@@ -68,7 +68,7 @@ DistributedOptions range_options(Fields fields = Fields::full) {
   o.engine.backend = Backend::cpu;
   o.engine.fields = fields;
   o.engine.threads = 1;  // the test machines are shared: one thread per rank
-  o.output = ContactOutput::id_ranges;
+  o.output = ContactOutput::ranks;
   return o;
 }
 
@@ -97,7 +97,8 @@ void expect_rows_of(const Contacts<Real>& got, std::uint64_t first, const Contac
   EXPECT_TRUE(same_rows(got.lateral_friction_dir2, want.lateral_friction_dir2, first)) << what << ": dir2";
 }
 
-// Runs id_ranges mode and checks this rank's range, order, rows, first row and K; returns the result.
+// Runs ContactOutput::ranks mode and checks this rank's range, order, rows, first row and K; returns the
+// result.
 template <class Real>
 DistributedResult<Real> check_ranges(const std::string& path, const Scene& scene,
                                      const DistributedOptions& options, const std::string& name) {
@@ -118,7 +119,7 @@ DistributedResult<Real> check_ranges(const std::string& path, const Scene& scene
   }
   std::vector<std::string> top;
   for (const auto& t : got.times)
-    if (t.name.rfind("detect.", 0) != 0) top.push_back(t.name);
+    if (t.engine_stage < 0) top.push_back(t.name());
   EXPECT_EQ(top, (std::vector<std::string>{"read", "redistribute", "halo", "detect", "exchange", "merge"}))
       << label;
   EXPECT_EQ(got.duplicates_removed, 0u) << label;
@@ -148,7 +149,7 @@ TEST(DistributedOutput, EachRankGetsItsIdRangeAndTogetherTheSingleRankResult) {
     check_ranges<Real>(path, scene, range_options(), "uniform");
     check_ranges<Real>(path, scene, range_options(Fields::basic), "uniform basic");
     DistributedOptions o = range_options();
-    o.axis = 2;
+    o.axis = SlabAxis::z;
     o.balance = Balance::width;
     check_ranges<Real>(path, scene, o, "uniform z width");
   });
@@ -202,20 +203,20 @@ const char* const k_datasets[] = {
     "id_a",     "id_b",          "position_on_a", "position_on_b",         "normal_on_b",
     "distance", "local_point_a", "local_point_b", "lateral_friction_dir1", "lateral_friction_dir2"};
 
-// The file every rank writes (id_ranges slices, and the root mode's everything-on-rank-0) has the
-// dataset bytes of the single-rank writer.
+// The file every rank writes (ContactOutput::ranks slices, and ContactOutput::gather's everything-on-rank-0)
+// has the dataset bytes of the single-rank writer.
 template <class Real>
 void write_and_compare(const std::string& name, const Scene& scene) {
   const std::string path = write_shared(name, scene);
   const DistributedOptions ranges = range_options();
   DistributedOptions root = ranges;
-  root.output = ContactOutput::root;
+  root.output = ContactOutput::gather;
   DistributedResult<Real> a = distributed_detect<Real>(session(), path, ranges);
   DistributedResult<Real> b = distributed_detect<Real>(session(), path, root);
   RunInfo info;
   info.bodies = scene.size();
   info.ranks = session().size();
-  info.times = a.times;
+  info.times = file_stage_times(a.times);
   const std::string out_a = shared_path(name + ".ranges.out.h5"), out_b = shared_path(name + ".root.out.h5"),
                     out_1 = shared_path(name + ".one.out.h5");
   write_contacts_distributed(session(), out_a, a.contacts, a.first_row, a.total_contacts, info, 2);

@@ -10,6 +10,8 @@
 #include <random>
 #include <vector>
 
+#include "routing.hpp"
+
 namespace cg {
 namespace {
 
@@ -239,7 +241,25 @@ TEST(OwnerPlan, GroupsIndicesByOwnerInAscendingOrder) {
   const std::vector<double> x = {15, -1, 5, 0, 10, -3};
   ExportPlan plan = make_owner_plan(s, x);
   ASSERT_EQ(plan.offsets, (std::vector<std::size_t>{0, 2, 4, 6}));
-  EXPECT_EQ(plan.indices, (std::vector<std::size_t>{1, 5, 2, 3, 0, 4}));
+  EXPECT_EQ(plan.rows, (std::vector<std::size_t>{1, 5, 2, 3, 0, 4}));
+}
+
+// The quantile selection gives the cuts of the sorted sample, for any rank count (selection up to 64
+// ranks, a sort above), with ties and fewer samples than ranks.
+TEST(SlabDecomposition, UnsortedSampleGivesTheSortedSamplesCuts) {
+  std::mt19937_64 rng(17);
+  std::uniform_int_distribution<int> value(0, 50);  // many ties
+  for (std::size_t n : {0u, 1u, 3u, 100u, 5000u}) {
+    std::vector<double> sample(n);
+    for (double& v : sample) v = value(rng);
+    std::vector<double> sorted = sample;
+    std::sort(sorted.begin(), sorted.end());
+    for (int ranks : {1, 2, 3, 7, 64, 65, 200}) {
+      EXPECT_EQ(SlabDecomposition::from_sample(0, sample, ranks).cuts(),
+                SlabDecomposition::from_sorted_sample(0, sorted, ranks).cuts())
+          << n << " samples, " << ranks << " ranks";
+    }
+  }
 }
 
 TEST(SlabAxis, LargestExtentUnlessForced) {
@@ -250,13 +270,8 @@ TEST(SlabAxis, LargestExtentUnlessForced) {
   EXPECT_EQ(choose_axis(b, 2), 2);
   b.hi = {2, 2, 2};
   EXPECT_EQ(choose_axis(b, -1), 0);  // ties: the lowest axis
-  EXPECT_EQ(parse_axis("x"), 0);
-  EXPECT_EQ(parse_axis("z"), 2);
-  EXPECT_EQ(parse_axis("auto"), -1);
-  EXPECT_THROW(parse_axis("w"), UsageError);
-  EXPECT_EQ(parse_balance("count"), Balance::count);
-  EXPECT_EQ(parse_balance("width"), Balance::width);
-  EXPECT_THROW(parse_balance("size"), UsageError);
+  EXPECT_THROW(choose_axis(b, 3), UsageError);
+  // the words of --axis and --balance are the CLI's (tests/unit/test_cli.cpp)
 }
 
 TEST(GhostWidth, TwiceTheLargestRadiusPlusARoundingMargin) {

@@ -12,6 +12,8 @@
 
 #include "engine.hpp"
 #include "hdf5_io.hpp"
+#include "pipeline.hpp"
+#include "resident_steps.hpp"
 #include "temp_dir.hpp"
 
 namespace fs = std::filesystem;
@@ -140,6 +142,12 @@ TEST_F(Cli, UsageErrorsExitTwo) {
                       "--cell-size 0");
   expect_detect_fails(path("s.h5"), 2, {"--cell-size"}, "--cell-size 3x");
   expect_detect_fails(path("s.h5"), 2, {"--read"}, "--read some");
+  expect_detect_fails(path("s.h5"), 2, {"--axis"}, "--axis w");
+  expect_detect_fails(path("s.h5"), 2, {"--balance"}, "--balance size");
+  for (const char* typed : {"--axis x --balance width --read all --write ranks", "--axis z --read own",
+                            "--axis auto --balance count --read auto --write gather"})
+    EXPECT_EQ(run("detect " + path("s.h5") + " -o " + path("typed.h5") + " " + typed + " -q").code, 0)
+        << typed;
   expect_detect_fails(path("s.h5"), 2, {"--write"}, "--write rank0");
   expect_detect_fails(path("s.h5"), 2, {"--steps"}, "--steps -1");
   expect_detect_fails(path("s.h5"), 2, {"--steps"}, "--steps many");
@@ -150,6 +158,26 @@ TEST_F(Cli, UsageErrorsExitTwo) {
   EXPECT_EQ(steps.code, 0) << steps.output;
   EXPECT_NE(steps.output.find("resident steps: 3 "), std::string::npos) << steps.output;
   EXPECT_NE(steps.output.find("contacts per step (= the file's)"), std::string::npos) << steps.output;
+}
+
+// Stage times are typed; their names (the summary's rows, the contact file's attributes) are made once.
+TEST(StageTimes, NamesOfTheSummaryAndTheFile) {
+  const auto& engine = engine_stage_names();
+  const auto pack = std::find(engine.begin(), engine.end(), "pack") - engine.begin();
+  const RunTimes times{{Stage::read, -1, 1.0},
+                       {Stage::detect, -1, 2.0},
+                       {Stage::detect, static_cast<int>(pack), 0.5},
+                       {Stage::exchange, -1, 0.25},
+                       {Stage::write, -1, 0.125}};
+  const StageTimes file = file_stage_times(times);
+  ASSERT_EQ(file.size(), times.size());
+  const char* want[] = {"read", "detect", "detect.pack", "exchange", "write"};
+  for (std::size_t k = 0; k < file.size(); ++k) {
+    EXPECT_EQ(file[k].name, want[k]);
+    EXPECT_EQ(file[k].seconds, times[k].seconds);
+  }
+  EXPECT_STREQ(stage_name(Stage::redistribute), "redistribute");
+  EXPECT_STREQ(stage_name(Stage::csv), "csv");
 }
 
 TEST_F(Cli, MissingFile) { expect_detect_fails(path("nope.h5"), 3, {"nope.h5"}); }

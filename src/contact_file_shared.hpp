@@ -1,8 +1,9 @@
 #pragma once
-// One contact file written by every rank of a Session at once. g++-safe public header (no <mpi.h>).
+// One contact file written by every rank of a Session at once. Uses no MPI of its own: only Session's
+// collectives (agree, sum, max, broadcast of the file layout).
 //
 // Each rank holds rows [first_row, first_row + slice.size()) of the K sorted contacts (what
-// distributed_detect leaves, either mode; in id_ranges mode every rank has a share):
+// distributed_detect leaves, either mode; with ContactOutput::ranks every rank has a share):
 //   (a) rank 0 creates "<path>.tmp.<pid>" with every /contacts dataset of K rows, allocated and
 //       unwritten (src/hdf5_io: create_contact_file), and broadcasts its layout (the file's name and
 //       each dataset's offset);

@@ -1,0 +1,242 @@
+// Contacts collected from every rank (see contact_collect.hpp): gathered to rank 0, or exchanged by
+// id_a range; then the k-way merge of the sorted runs (decomposition/contact_merge.hpp).
+#include "contact_collect.hpp"
+
+#include <chrono>
+#include <cstdio>
+#include <numeric>
+
+#include "agreed_stage.hpp"
+#include "contact_merge.hpp"
+#include "transport.hpp"
+
+namespace cg {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// Receive storage for one run of n contacts (ids, distance and nvec vector fields) and its view.
+template <class Real>
+ContactRunView<Real> receive_run(std::size_t n, int nvec, HostVector<std::int64_t>& id_a,
+                                 HostVector<std::int64_t>& id_b, HostVector<Real>& distance,
+                                 std::vector<HostVector<Vec3<Real>>>& vec) {
+  id_a = HostVector<std::int64_t>(n);
+  id_b = HostVector<std::int64_t>(n);
+  distance = HostVector<Real>(n);
+  for (int f = 0; f < nvec; ++f) vec.emplace_back(n);
+  ContactRunView<Real> run;
+  run.n = n;
+  run.id_a = id_a.data();
+  run.id_b = id_b.data();
+  run.distance = distance.data();
+  for (int f = 0; f < nvec; ++f) run.vec[f] = vec[static_cast<std::size_t>(f)].data();
+  return run;
+}
+
+// The k-way merge of the sorted runs by (id_a, id_b) into `out`, exact duplicates removed; returns
+// how many (expected 0). `local` holds the runs that are views into it; it is released. A single run
+// is already merged: `local` is moved into `out`, not copied (the only run of one rank is the whole of
+// `local`: a copy of K rows saved).
+template <class Real>
+std::uint64_t merge_runs(std::vector<ContactRunView<Real>>& runs, Contacts<Real>& local, Contacts<Real>& out,
+                         int threads) {
+  const bool full = local.full;
+  if (runs.size() == 1) {
+    out = std::move(local);
+    runs.clear();
+    return 0;
+  }
+  std::uint64_t total = 0;
+  for (const ContactRunView<Real>& r : runs) total += r.n;
+  Contacts<Real> merged;
+  merged.resize(total, full);
+  const int parts = total < (std::uint64_t(1) << 15) ? 1 : 4 * threads;  // a few per thread: balance
+  const std::uint64_t duplicates = merge_contact_runs_into<Real>(runs, merged, full, parts, threads);
+  runs.clear();
+  local = Contacts<Real>{};
+  out = std::move(merged);
+  return duplicates;
+}
+
+}  // namespace
+
+template <class Real>
+CollectedContacts<Real> gather_contacts(const Session& session, Contacts<Real>&& local, std::uint64_t bodies,
+                                        const CollectOptions& options) {
+  const detail::Comm comm(session);
+  const int ranks = comm.size(), me = comm.rank(), threads = options.threads;
+  const bool full = local.full, root = me == 0;
+  CollectedContacts<Real> result;
+  // ---- gather: each field to rank 0, straight into per-rank receive buffers ---------------------
+  auto t0 = Clock::now();
+  const std::vector<std::uint64_t> counts = comm.allgather<std::uint64_t>(local.size());
+  const std::size_t p = counts.size();
+  std::vector<ContactRunView<Real>> runs;
+  // rank 0's received fields: ids (2), distance, and up to 7 vector fields per rank
+  std::vector<HostVector<std::int64_t>> recv_a, recv_b;
+  std::vector<HostVector<Real>> recv_d;
+  std::vector<std::vector<HostVector<Vec3<Real>>>> recv_v;
+  const int nvec = full ? 7 : 3;
+  if (root) {
+    runs.resize(p);
+    recv_a.resize(p);
+    recv_b.resize(p);
+    recv_d.resize(p);
+    recv_v.resize(p);
+    runs[0] = contact_run_view(local, full);  // rank 0's own run stays in place
+    for (std::size_t r = 1; r < p; ++r) {
+      runs[r] = receive_run(counts[r], nvec, recv_a[r], recv_b[r], recv_d[r], recv_v[r]);
+    }
+  }
+  auto targets = [&](auto& buffers) {  // where rank r's part of a field lands on rank 0 (r >= 1)
+    std::vector<decltype(buffers[0].data())> t(root ? p : 0, nullptr);
+    for (std::size_t r = 1; root && r < p; ++r) t[r] = buffers[r].data();
+    return t;
+  };
+  comm.gather_to_root(local.id_a.data(), counts, targets(recv_a), options.max_message_bytes,
+                      detail::k_gather_tag + 0);
+  comm.gather_to_root(local.id_b.data(), counts, targets(recv_b), options.max_message_bytes,
+                      detail::k_gather_tag + 1);
+  comm.gather_to_root(local.distance.data(), counts, targets(recv_d), options.max_message_bytes,
+                      detail::k_gather_tag + 2);
+  for (int f = 0; f < nvec; ++f) {
+    std::vector<Vec3<Real>*> t(root ? p : 0, nullptr);
+    for (std::size_t r = 1; root && r < p; ++r) t[r] = recv_v[r][static_cast<std::size_t>(f)].data();
+    comm.gather_to_root(contact_vec_field(local, f)->data(), counts, t, options.max_message_bytes,
+                        detail::k_gather_tag + 3 + f);
+  }
+  if (!root) local = Contacts<Real>{};
+  result.transfer_seconds = seconds_since(t0);
+
+  // ---- merge (rank 0): k-way merge of the sorted runs, duplicates removed and counted -----------
+  t0 = Clock::now();
+  agreed_stage(session, "merge", [&] {
+    if (!root) return;
+    result.duplicates_removed = merge_runs(runs, local, result.contacts, threads);
+    const std::string line = "merge: " + std::to_string(result.contacts.size()) + " contacts from " +
+                             std::to_string(ranks) + " rank(s), " +
+                             std::to_string(result.duplicates_removed) + " duplicate(s) removed (expected 0)";
+    if (options.log) {
+      options.log(line);
+    } else if (result.duplicates_removed > 0) {  // a warning nobody asked for must still be seen
+      std::fprintf(stderr, "%swarning: %s\n", session.prefix().c_str(), line.c_str());
+    }
+  });
+  result.merge_seconds = seconds_since(t0);
+  result.total_contacts = session.sum(me == 0 ? result.contacts.size() : 0);
+  result.first_row = me == 0 ? 0 : result.total_contacts;
+  result.id_begin = me == 0 ? 0 : bodies;
+  result.id_end = bodies;
+  result.contacts.full = full;
+  return result;
+}
+
+template <class Real>
+CollectedContacts<Real> exchange_contacts(const Session& session, Contacts<Real>&& local,
+                                          std::uint64_t n_global, const CollectOptions& options) {
+  const detail::Comm comm(session);
+  const int ranks = comm.size(), me = comm.rank(), threads = options.threads;
+  const std::size_t p = static_cast<std::size_t>(ranks), mine = static_cast<std::size_t>(me);
+  const bool full = local.full;
+  CollectedContacts<Real> result;
+  const int nvec = full ? 7 : 3;
+  // the id_a range of rank d: the rows it read
+  auto id_begin = [&](std::size_t d) { return n_global * d / p; };
+  result.id_begin = id_begin(mine);
+  result.id_end = id_begin(mine + 1);
+
+  // ---- exchange: each destination's slice of every field, straight from the arrays --------------
+  auto t0 = Clock::now();
+  std::vector<std::uint64_t> split(p + 1, 0), send_counts(p, 0);
+  agreed_stage(session, "exchange", [&] {
+    // sorted by (id_a, id_b), so rank d's rows are one sub-range
+    split[p] = local.size();
+    for (std::size_t d = 1; d < p; ++d) {
+      const auto at =
+          std::lower_bound(local.id_a.begin(), local.id_a.end(), static_cast<std::int64_t>(id_begin(d)));
+      split[d] = static_cast<std::uint64_t>(at - local.id_a.begin());
+    }
+    for (std::size_t d = 0; d < p; ++d) send_counts[d] = split[d + 1] - split[d];
+  });
+  const std::vector<std::uint64_t> recv_counts = comm.alltoall_counts(send_counts);
+  std::vector<ContactRunView<Real>> runs(p);
+  std::vector<HostVector<std::int64_t>> recv_a(p), recv_b(p);
+  std::vector<HostVector<Real>> recv_d(p);
+  std::vector<std::vector<HostVector<Vec3<Real>>>> recv_v(p);
+  std::vector<detail::Comm::RowField> fields(3 + static_cast<std::size_t>(nvec));
+  agreed_stage(session, "exchange", [&] {
+    for (std::size_t r = 0; r < p; ++r) {
+      if (r == mine) {  // this rank's own part stays where it is
+        const std::uint64_t at = split[mine];
+        ContactRunView<Real>& v = runs[r];
+        v.n = send_counts[mine];
+        v.id_a = local.id_a.data() + at;
+        v.id_b = local.id_b.data() + at;
+        v.distance = local.distance.data() + at;
+        for (int f = 0; f < nvec; ++f) v.vec[f] = contact_vec_field(local, f)->data() + at;
+        continue;
+      }
+      runs[r] = receive_run(recv_counts[r], nvec, recv_a[r], recv_b[r], recv_d[r], recv_v[r]);
+    }
+    auto bytes = [](auto* ptr) { return reinterpret_cast<unsigned char*>(ptr); };
+    auto cbytes = [](const auto* ptr) { return reinterpret_cast<const unsigned char*>(ptr); };
+    for (auto& field : fields) field.into.assign(p, nullptr);
+    fields[0].send = cbytes(local.id_a.data());
+    fields[0].row_bytes = sizeof(std::int64_t);
+    fields[1].send = cbytes(local.id_b.data());
+    fields[1].row_bytes = sizeof(std::int64_t);
+    fields[2].send = cbytes(local.distance.data());
+    fields[2].row_bytes = sizeof(Real);
+    for (int f = 0; f < nvec; ++f) {
+      fields[3 + static_cast<std::size_t>(f)].send = cbytes(contact_vec_field(local, f)->data());
+      fields[3 + static_cast<std::size_t>(f)].row_bytes = sizeof(Vec3<Real>);
+    }
+    for (std::size_t r = 0; r < p; ++r) {
+      if (r == mine) continue;
+      fields[0].into[r] = bytes(recv_a[r].data());
+      fields[1].into[r] = bytes(recv_b[r].data());
+      fields[2].into[r] = bytes(recv_d[r].data());
+      for (int f = 0; f < nvec; ++f)
+        fields[3 + static_cast<std::size_t>(f)].into[r] =
+            bytes(recv_v[r][static_cast<std::size_t>(f)].data());
+    }
+  });
+  comm.exchange_rows(fields, split, recv_counts, options.max_message_bytes, detail::k_exchange_tag);
+  result.transfer_seconds = seconds_since(t0);
+
+  // ---- merge: the P sorted runs of this rank's id range, duplicates removed and counted ----------
+  t0 = Clock::now();
+  std::uint64_t duplicates = 0;
+  agreed_stage(session, "merge", [&] { duplicates = merge_runs(runs, local, result.contacts, threads); });
+  result.merge_seconds = seconds_since(t0);
+  result.duplicates_removed = session.sum(duplicates);
+  const std::vector<std::uint64_t> counts = comm.allgather<std::uint64_t>(result.contacts.size());
+  result.first_row = std::accumulate(counts.begin(), counts.begin() + me, std::uint64_t{0});
+  result.total_contacts = std::accumulate(counts.begin(), counts.end(), std::uint64_t{0});
+  const std::string line = "merge: " + std::to_string(result.total_contacts) + " contacts in " +
+                           std::to_string(ranks) + " id range(s), " +
+                           std::to_string(result.duplicates_removed) + " duplicate(s) removed (expected 0)";
+  if (me == 0) {
+    if (options.log) {
+      options.log(line);
+    } else if (result.duplicates_removed > 0) {  // a warning nobody asked for must still be seen
+      std::fprintf(stderr, "%swarning: %s\n", session.prefix().c_str(), line.c_str());
+    }
+  }
+  result.contacts.full = full;
+  return result;
+}
+
+template CollectedContacts<float> gather_contacts(const Session&, Contacts<float>&&, std::uint64_t,
+                                                  const CollectOptions&);
+template CollectedContacts<double> gather_contacts(const Session&, Contacts<double>&&, std::uint64_t,
+                                                   const CollectOptions&);
+template CollectedContacts<float> exchange_contacts(const Session&, Contacts<float>&&, std::uint64_t,
+                                                    const CollectOptions&);
+template CollectedContacts<double> exchange_contacts(const Session&, Contacts<double>&&, std::uint64_t,
+                                                     const CollectOptions&);
+
+}  // namespace cg

@@ -1,0 +1,43 @@
+#pragma once
+// Assembly of one rank's engine input: its owned bodies and its ghosts in ascending global id, with
+// the report mask "owned" (the owner of the smaller id reports a pair). Pure host code, parallel.
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "engine.hpp"
+#include "routing.hpp"
+#include "slab_decomposition.hpp"
+
+namespace cg {
+
+// The engine's input in id order: positions, radii, ids, report mask (1: owned).
+// Empty id and report (`implied()`): the rows are bodies 0 … n-1, all owned (the engine's default).
+struct EngineInput {
+  HostVector<Vec3<double>> position;
+  HostVector<double> radius;
+  HostVector<std::int64_t> id;
+  HostVector<std::uint8_t> report;
+  std::uint64_t owned = 0, ghosts = 0;
+
+  bool implied() const { return id.empty(); }
+  BodiesView view() const { return BodiesView{position, radius, id, report}; }
+};
+
+// Every-row read: rank `me`'s engine input straight from all N rows (row = id): its owned bodies
+// (report 1) and every other body within `width` of its slab (report 0), ascending id — the bodies
+// that redistribution and the halo exchange bring, by the same to_owner and to_ghost_ranks rules,
+// without moving any. Parallel count → scan → fill. When the rank owns every row (one slab), the
+// rows as read are the input, moved, not copied (ids implied; see EngineInput).
+EngineInput select_owned_and_ghosts(HostVector<Vec3<double>>&& position, HostVector<double>&& radius,
+                                    const SlabDecomposition& slabs, double width, int me, int threads);
+
+// Owned bodies (ascending id: they arrive grouped by source rank, each source sends a subsequence of
+// its contiguous row range) and ghosts (grouped by source rank as in `ghost_counts`, each group
+// ascending) merged by id straight into the engine's arrays: the ghost groups k-way merged (a few,
+// small), then a parallel two-way merge with the owned run. Throws Error if an id is held twice or
+// the order is broken (internal errors).
+EngineInput merge_by_id(std::span<const BodyRecord> owned, std::span<const BodyRecord> ghosts,
+                        const std::vector<std::uint64_t>& ghost_counts, int threads);
+
+}  // namespace cg
