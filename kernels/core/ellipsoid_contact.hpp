@@ -199,17 +199,23 @@ CG_HD PerramWertheim<Real> perram_wertheim(const Ellipsoid<Real>& a, const Ellip
     }
     const Real d1 = (Real(1) - Real(2) * lam) * phi + w * dphi;
     const Real d2 = Real(-2) * phi + Real(2) * (Real(1) - Real(2) * lam) * dphi + w * d2phi;
+    // F is flat at λ*: an error δ in λ costs ½|F''|δ² in F, so a Newton step below √eps/10 ends it
+    // (further steps would only chase the rounding of F').
+    const Real newton = d2 < Real(0) ? -d1 / d2 : Real(0);
+    if (d2 < Real(0) && detail::cg_abs(newton) <= Real(0.1) * cg_sqrt(eps)) {
+      if (lam + newton >= lo && lam + newton <= hi) lam += newton;
+      ++it;
+      break;
+    }
     if (d1 > Real(0)) {
       lo = lam;
     } else {
       hi = lam;
     }
-    Real next = (d2 < Real(0)) ? lam - d1 / d2 : Real(0.5) * (lo + hi);
-    if (!(next > lo && next < hi)) next = Real(0.5) * (lo + hi);
-    const Real step = detail::cg_abs(next - lam);
+    Real next = lam + newton;
+    if (!(d2 < Real(0)) || !(next > lo && next < hi)) next = Real(0.5) * (lo + hi);
     lam = next;
-    // F is flat at λ*: an error δ in λ costs O(δ²) in F, so √eps in λ is already exact in F.
-    if (step <= Real(8) * cg_sqrt(eps) * Real(1e-2) || hi - lo <= Real(4) * eps) {
+    if (hi - lo <= Real(4) * eps) {
       ++it;
       break;
     }
