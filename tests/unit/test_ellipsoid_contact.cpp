@@ -123,11 +123,11 @@ struct Stats {
 template <class Real>
 struct Tol {
   static constexpr bool fp32 = std::is_same_v<Real, float>;
-  static constexpr double dist = fp32 ? 4e-6 : 1e-9;       // × s
-  static constexpr double pos = fp32 ? 2e-3 : 1e-7;        // × κ s
-  static constexpr double angle_rad = fp32 ? 2e-3 : 1e-7;  // × κ
-  static constexpr double identity = fp32 ? 2e-4 : 1e-9;   // × s
-  static constexpr double surface = fp32 ? 2e-6 : 1e-12;   // |D⁻¹ local| − 1
+  static constexpr double dist = fp32 ? 1e-6 : 1e-12;      // × s   (measured max: 1.9e-7, 4.1e-16)
+  static constexpr double pos = fp32 ? 4e-4 : 2e-10;       // × κ s (measured max: 5.9e-5, 1.3e-11)
+  static constexpr double angle_rad = fp32 ? 5e-4 : 1e-9;  // × κ   (measured max: 5.8e-5, 1.5e-10)
+  static constexpr double identity = fp32 ? 4e-5 : 2e-11;  // × s   (2 × solver tolerance)
+  static constexpr double surface = fp32 ? 1e-6 : 4e-15;   // |D⁻¹ local| − 1 (measured 2.8e-7, 6.7e-16)
 };
 
 double angle_between(Vec3<double> u, exact::V v) {
@@ -156,7 +156,10 @@ void check_self_consistency(const Body<Real>& a, const Body<Real>& b, const Elli
       double(g.position_on_a.z) - double(g.position_on_b.z) - double(g.normal_on_b.z) * double(g.distance);
   const double id = std::sqrt(ix * ix + iy * iy + iz * iz) / s;
   st.max_identity = std::max(st.max_identity, id);
-  EXPECT_LE(id, Tol<Real>::identity) << st.name << ": position_on_a ≠ position_on_b + n·distance";
+  // plus the rounding of the world coordinates themselves (the pair may sit 1e6 from the origin)
+  const double far = std::sqrt(double(dot(a.centre, a.centre))) + std::sqrt(double(dot(b.centre, b.centre)));
+  EXPECT_LE(id, Tol<Real>::identity + 8 * std::numeric_limits<Real>::epsilon() * far / s)
+      << st.name << ": position_on_a ≠ position_on_b + n·distance";
   const double nn = double(dot(g.normal_on_b, g.normal_on_b));
   EXPECT_NEAR(nn, 1.0, 8 * std::numeric_limits<Real>::epsilon());
   auto on_surface = [](Vec3<Real> local, Vec3<Real> e) {
@@ -177,7 +180,7 @@ void check_self_consistency(const Body<Real>& a, const Body<Real>& b, const Elli
 // Compares one pair with the reference; `c` is the engine's answer for (a, b).
 template <class Real>
 void check_against_reference(const Body<Real>& a, const Body<Real>& b, const EllipsoidContact<Real>& c,
-                             Stats& st, int samples = 20000) {
+                             Stats& st, int samples = 8000) {
   const exact::Pair p = reference_pair(a, b);
   const exact::Reference ref = exact::exact_contact(p, samples);
   const double s = double(scale_of(a, b));
@@ -244,7 +247,7 @@ TYPED_TEST(EllipsoidContactTest, RandomPairsAgainstReference) {
     st.name = tag<Real>("random 1:" + std::to_string(int(aspect)));
     std::mt19937_64 rng(1000 + int(aspect));
     std::uniform_real_distribution<double> u(0, 1.1);
-    const int n = aspect >= 100 ? 150 : 200;
+    const int n = aspect >= 100 ? 100 : 120;
     for (int i = 0; i < n; ++i) {
       Body<Real> b{
           {Real(0.1), Real(-0.2), Real(0.3)}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
@@ -303,7 +306,7 @@ TYPED_TEST(EllipsoidContactTest, DeepPenetration) {
     st.name = tag<Real>("deep 1:" + std::to_string(int(aspect)));
     std::mt19937_64 rng(3000 + int(aspect));
     std::uniform_real_distribution<double> u(0, 0.95);
-    for (int i = 0; i < 150; ++i) {
+    for (int i = 0; i < 100; ++i) {
       Body<Real> b{{Real(-0.5), Real(0.25), Real(1)}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
       Body<Real> a{{}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
       const Vec3<double> d = random_unit(rng);
@@ -326,7 +329,7 @@ TYPED_TEST(EllipsoidContactTest, CrossedNeedles) {
     st.name = tag<Real>("crossed needles 1:" + std::to_string(int(aspect)));
     std::mt19937_64 rng(4000 + int(aspect));
     std::uniform_real_distribution<double> u(-1, 1);
-    for (int i = 0; i < 150; ++i) {
+    for (int i = 0; i < 100; ++i) {
       const Real thin = Real(1.0 / aspect);
       const Quat<Real> base = random_quat<Real>(rng);
       // B along base·x; A along base·y, tilted by up to 15°
@@ -346,7 +349,7 @@ TYPED_TEST(EllipsoidContactTest, CrossedNeedles) {
       const Mat3<Real> rb = rotation_matrix(base);
       const Vec3<Real> off{Real(0.6 * u(rng)), Real(0.6 * u(rng)), Real(1.5 * thin * u(rng))};
       a.centre = b.centre + mul(rb, off);
-      check_against_reference(a, b, solve(a, b), st, 40000);
+      check_against_reference(a, b, solve(a, b), st, 16000);
     }
     st.print();
     EXPECT_GT(st.multi_minima, 0) << "the crossed-needle set should contain pairs with several local minima";
@@ -370,7 +373,7 @@ TYPED_TEST(EllipsoidContactTest, CoincidentCentres) {
     const Real first = n.x != 0 ? n.x : (n.y != 0 ? n.y : n.z);
     EXPECT_GT(first, Real(0)) << "canonical sign";
     // depth only: ±n are both minimisers, the reference may return either
-    const exact::Reference ref = exact::exact_contact(reference_pair(a, b), 20000);
+    const exact::Reference ref = exact::exact_contact(reference_pair(a, b), 8000);
     const double s = double(scale_of(a, b));
     const double derr = std::abs(double(c1.geometry.distance) - double(ref.distance)) / s;
     st.max_dist_err = std::max(st.max_dist_err, derr);
@@ -475,7 +478,7 @@ TYPED_TEST(EllipsoidContactTest, SphereEllipsoidMatchesGeneralPath) {
     std::mt19937_64 rng(8000 + int(aspect));
     std::uniform_real_distribution<double> u(0, 1.1), ru(0.05, 1.0);
     double max_diff = 0;
-    for (int i = 0; i < 150; ++i) {
+    for (int i = 0; i < 100; ++i) {
       const Real rho = Real(ru(rng));
       Body<Real> e{
           {Real(0.2), Real(0.4), Real(-0.6)}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
