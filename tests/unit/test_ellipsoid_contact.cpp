@@ -555,5 +555,38 @@ TYPED_TEST(EllipsoidContactTest, PerramWertheimDecision) {
       tag<Real>("perram-wertheim").c_str(), double(pw_iters) / n, pw_max, max_rel, rejected, n);
 }
 
+// Never silently wrong: with an iteration cap too small to converge (1 evaluation per start, 4 in the
+// continuation), a pair reports converged = false with `fallback` set, unless the continuation reached
+// the tolerance, in which case the answer matches the reference.
+TYPED_TEST(EllipsoidContactTest, StarvedSolverIsFlagged) {
+  using Real = TypeParam;
+  std::mt19937_64 rng(10000);
+  std::uniform_real_distribution<double> u(0, 0.8);
+  SolverSettings<Real> starved;
+  starved.max_iterations = 1;
+  int flagged = 0, converged_anyway = 0;
+  for (int i = 0; i < 40; ++i) {
+    Body<Real> b{{}, random_axes<Real>(rng, 20), random_quat<Real>(rng)};
+    Body<Real> a{{}, random_axes<Real>(rng, 20), random_quat<Real>(rng)};
+    const Vec3<double> d = random_unit(rng);
+    const double len = u(rng) * double(scale_of(a, b));
+    a.centre = {Real(len * d.x), Real(len * d.y), Real(len * d.z)};
+    const Ellipsoid<Real> ea = engine_body(a), eb = engine_body(b);
+    const EllipsoidContact<Real> c = ellipsoid_pair_contact(ea, eb, perram_wertheim(ea, eb), starved);
+    if (!c.converged) {
+      ++flagged;
+      EXPECT_TRUE(c.fallback);
+      continue;
+    }
+    ++converged_anyway;
+    const exact::Reference ref = exact::exact_contact(reference_pair(a, b), 8000);
+    EXPECT_LE(std::abs(double(c.geometry.distance) - double(ref.distance)),
+              Tol<Real>::dist * double(scale_of(a, b)));
+  }
+  std::printf("[ellipsoid] %-28s max_iterations 1: %d flagged non-converged, %d converged (checked)\n",
+              tag<Real>("starved solver").c_str(), flagged, converged_anyway);
+  EXPECT_GT(flagged, 0);
+}
+
 }  // namespace
 }  // namespace cg::test
