@@ -34,6 +34,7 @@ namespace cg::test {
 namespace {
 
 using exact::LD;
+constexpr double kPi = 3.14159265358979323846;
 
 template <class Real>
 struct Body {
@@ -216,7 +217,7 @@ void check_against_reference(const Body<Real>& a, const Body<Real>& b, const Ell
         std::max(dist3(g.position_on_a, ref.position_on_a), dist3(g.position_on_b, ref.position_on_b)) / s;
     st.max_pos_err = std::max(st.max_pos_err, pe);
     st.max_pos_err_kappa = std::max(st.max_pos_err_kappa, pe / kappa);
-    st.max_angle_deg = std::max(st.max_angle_deg, angle * 180 / M_PI);
+    st.max_angle_deg = std::max(st.max_angle_deg, angle * 180 / kPi);
     EXPECT_LE(pe, Tol<Real>::pos * kappa) << st.name << ": position error";
     EXPECT_LE(angle, Tol<Real>::angle_rad * kappa) << st.name << ": normal angle";
   }
@@ -333,10 +334,8 @@ TYPED_TEST(EllipsoidContactTest, CrossedNeedles) {
       const Real thin = Real(1.0 / aspect);
       const Quat<Real> base = random_quat<Real>(rng);
       // B along base·x; A along base·y, tilted by up to 15°
-      const double tilt = 0.26 * u(rng), c = std::cos(tilt / 2), sn = std::sin(tilt / 2);
-      const Quat<Real> zrot{Real(std::cos(M_PI / 4 + tilt / 2)), 0, 0, Real(std::sin(M_PI / 4 + tilt / 2))};
-      (void)c;
-      (void)sn;
+      const double tilt = 0.26 * u(rng);
+      const Quat<Real> zrot{Real(std::cos(kPi / 4 + tilt / 2)), 0, 0, Real(std::sin(kPi / 4 + tilt / 2))};
       auto qmul = [](Quat<Real> p, Quat<Real> q) {
         return Quat<Real>{
             p.w * q.w - p.x * q.x - p.y * q.y - p.z * q.z, p.w * q.x + p.x * q.w + p.y * q.z - p.z * q.y,
