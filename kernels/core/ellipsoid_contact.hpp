@@ -299,6 +299,7 @@ struct LocalResult {
   Real f, grad;
   int evaluations;
   bool converged;
+  bool merged;  // stopped on reaching the neighbourhood of `known`: the same minimum, not a candidate
 };
 
 // Damped Newton from n0: the 2×2 Riemannian Hessian is shifted to be positive definite (λmin ≥ δ), the
@@ -308,7 +309,8 @@ struct LocalResult {
 // beyond rounding.
 template <class Real>
 CG_HD LocalResult<Real> local_minimise(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b, Vec3<Real> r,
-                                       Vec3<Real> n0, Real scale, Real tolerance, int max_evaluations) {
+                                       Vec3<Real> n0, Real scale, Real tolerance, int max_evaluations,
+                                       const Vec3<Real>* known = nullptr) {
   const Real eps = std::numeric_limits<Real>::epsilon();
   const Real gtol = tolerance * scale;
   const Real f_noise = Real(16) * eps * (scale + cg_sqrt(dot(r, r)));
@@ -340,12 +342,17 @@ CG_HD LocalResult<Real> local_minimise(const Ellipsoid<Real>& a, const Ellipsoid
       grad = next_grad;
       converged = grad <= gtol;
       radius = cg_min(Real(2) * radius, Real(1));
+      if (known != nullptr && !converged) {
+        // Within 1e-4 rad of a minimiser already found (and converged), Newton ends there: stop.
+        const Vec3<Real> d = ev.n - *known;
+        if (dot(d, d) < Real(1e-8)) return {ev.n, ev.f, grad, evaluations, false, true};
+      }
     } else {
       radius *= Real(0.25);
       if (radius < Real(4) * eps) break;  // stalled: no representable progress
     }
   }
-  return {ev.n, ev.f, grad, evaluations, converged};
+  return {ev.n, ev.f, grad, evaluations, converged, false};
 }
 
 // Puts a start on the side of a − b (where the global minimiser lies); a zero vector is left alone.
@@ -410,9 +417,10 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
   bool have = false;
   auto consider = [&](Vec3<Real> start, int cap) {
     const detail::LocalResult<Real> res =
-        detail::local_minimise(a, b, r, detail::towards(start, r), scale, settings.tolerance, cap);
+        detail::local_minimise(a, b, r, detail::towards(start, r), scale, settings.tolerance, cap,
+                               have && best.converged ? &best.n : nullptr);
     out.iterations += res.evaluations;
-    if (!have || res.f < best.f) {
+    if (!res.merged && (!have || res.f < best.f)) {
       best = res;
       have = true;
     }
