@@ -34,7 +34,8 @@
 //
 // Coincident centres (a − b = 0 exactly): f is even and every minimiser comes in a pair ±n. The start
 // set is then (1,0,0), the axes of A, the axes of B (the PW normal does not exist); the result is made
-// canonical: the first non-zero component of n is positive. Two spheres keep n = (1, 0, 0).
+// canonical: the first non-zero component of n is positive — on every path (two spheres keep
+// n = (1, 0, 0), which satisfies it; the sphere–ellipsoid path takes the ellipsoid's smallest axis).
 //
 // All functions: host and device, no allocation, no recursion, fixed iteration caps. Points are in the
 // caller's frame (the engine's local frame: use centre differences, not 1e6-sized coordinates in fp32).
@@ -416,10 +417,16 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
   detail::LocalResult<Real> best{};
   bool have = false;
   auto consider = [&](Vec3<Real> start, int cap) {
-    const detail::LocalResult<Real> res =
+    detail::LocalResult<Real> res =
         detail::local_minimise(a, b, r, detail::towards(start, r), scale, settings.tolerance, cap,
                                have && best.converged ? &best.n : nullptr);
     out.iterations += res.evaluations;
+    if (!res.merged && dot(res.n, r) < Real(0)) {
+      // Reflection: f(−n) = f(n) + 2 n·r < f(n), so a minimum on the far side of a − b is never global;
+      // its mirror image is a better point, and Newton continues from there.
+      res = detail::local_minimise(a, b, r, -res.n, scale, settings.tolerance, cap);
+      out.iterations += res.evaluations;
+    }
     if (!res.merged && (!have || res.f < best.f)) {
       best = res;
       have = true;
@@ -593,10 +600,21 @@ CG_HD EllipsoidContact<Real> sphere_ellipsoid_contact(const Sphere<Real>& s, con
     }
     return out;
   }
-  const ClosestPoint<Real> cp = ellipsoid_closest_point(ax, mul_transpose(e.rotation, s.centre() - e.centre));
+  const Vec3<Real> rel = s.centre() - e.centre;
+  ClosestPoint<Real> cp = ellipsoid_closest_point(ax, mul_transpose(e.rotation, rel));
   out.iterations = cp.iterations;
   out.converged = cp.converged;
-  const Vec3<Real> nu = mul(e.rotation, cp.normal);  // outward normal of the ellipsoid, world
+  Vec3<Real> nu = mul(e.rotation, cp.normal);  // outward normal of the ellipsoid, world
+  if (rel.x == Real(0) && rel.y == Real(0) && rel.z == Real(0)) {
+    // Coincident centres: ±x are both closest; the canonical sign of the file comment on n.
+    const Vec3<Real> n = sphere_is_a ? nu : -nu;
+    const bool flip = n.x != Real(0) ? n.x < Real(0) : (n.y != Real(0) ? n.y < Real(0) : n.z < Real(0));
+    if (flip) {
+      cp.point = -cp.point;
+      cp.normal = -cp.normal;
+      nu = -nu;
+    }
+  }
   const Vec3<Real> on_e = e.centre + mul(e.rotation, cp.point);
   out.geometry.distance = cp.distance - s.r;
   if (sphere_is_a) {

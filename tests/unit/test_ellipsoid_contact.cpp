@@ -384,6 +384,20 @@ TYPED_TEST(EllipsoidContactTest, CoincidentCentres) {
     check_self_consistency(a, b, c1, st);
   }
   st.print();
+  // sphere–ellipsoid with coincident centres: the same canonical sign, depth ρ + smallest semi-axis
+  for (int i = 0; i < 20; ++i) {
+    Body<Real> e{{Real(0.5), Real(-1), Real(2)}, random_axes<Real>(rng, 4), random_quat<Real>(rng)};
+    const Sphere<Real> sp{e.centre.x, e.centre.y, e.centre.z, Real(0.3)};
+    for (bool sphere_is_a : {true, false}) {
+      const EllipsoidContact<Real> c = sphere_ellipsoid_contact(sp, engine_body(e), sphere_is_a);
+      const Vec3<Real> n = c.geometry.normal_on_b;
+      const Real first = n.x != 0 ? n.x : (n.y != 0 ? n.y : n.z);
+      EXPECT_GT(first, Real(0)) << "canonical sign, sphere–ellipsoid";
+      const Real emin = std::min(e.axes.x, std::min(e.axes.y, e.axes.z));
+      EXPECT_NEAR(double(c.geometry.distance), -double(Real(0.3) + emin),
+                  4 * std::numeric_limits<Real>::epsilon());
+    }
+  }
   // two spheres keep n = (1, 0, 0)
   const Ellipsoid<Real> s1 = make_ellipsoid<Real>({1, 2, 3}, {Real(0.5), Real(0.5), Real(0.5)}, {1, 0, 0, 0});
   const Ellipsoid<Real> s2 =
