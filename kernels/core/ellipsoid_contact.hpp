@@ -22,7 +22,14 @@
 //   2. ellipsoid_pair_contact(): damped Newton (Levenberg–Marquardt shift + trust radius) on the tangent
 //      plane of the unit sphere, analytic gradient and Hessian, from a fixed ordered start set: the PW
 //      normal, the centre direction, the three axes of A, the three axes of B (each signed towards
-//      a − b). The smallest f wins; on exactly equal f the earlier start wins.
+//      a − b). The smallest f wins; on exactly equal f the earlier start wins. Two cheap global moves:
+//      a local minimum with n·(a − b) < 0 is reflected (f(−n) = f(n) + 2 n·(a − b) is lower) and Newton
+//      continues from −n; and Newton runs once more from the antipode of the best (when a − b is short,
+//      minima come in near-antipodal pairs and the deeper one may be the one no start reached). A start
+//      whose iterate comes within 1e-4 rad of the converged best stops there (same minimum).
+//      Measured (tests/bench, stress runs against the exact reference): 5 starts miss global minima in
+//      deep overlaps (A's centre inside B needs B's axes), 8 starts without the two moves missed 6 of
+//      25 500 deep pairs, with them none of 61 500.
 //   3. Safety net, never silently wrong: if the best minimum disagrees with the PW sign beyond rounding
 //      (a missed global minimum), or the winning start did not converge, 13 more fixed directions are
 //      tried and a continuation runs from the best point with 4× the iteration cap; `fallback` is set,
@@ -445,6 +452,15 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
       start = s < 5 ? column(a.rotation, s - 2) : column(b.rotation, s - 5);
     }
     consider(start, settings.max_iterations);
+  }
+  // The antipode of the best: where a − b is short against the bodies, minima come in near-antipodal
+  // pairs (f(−n) = f(n) + 2 n·r) and the deeper one of a pair may be the one no start reached.
+  for (int round = 0; round < 2; ++round) {
+    const detail::LocalResult<Real> res =
+        detail::local_minimise(a, b, r, -best.n, scale, settings.tolerance, settings.max_iterations);
+    out.iterations += res.evaluations;
+    if (!(res.f < best.f)) break;
+    best = res;
   }
 
   // The safety net: the PW sign is exact (a global statement), min f must agree with it beyond rounding.

@@ -568,6 +568,62 @@ TYPED_TEST(EllipsoidContactTest, PerramWertheimDecision) {
       tag<Real>("perram-wertheim").c_str(), double(pw_iters) / n, pw_max, max_rel, rejected, n);
 }
 
+// Regression: deep-overlap pairs from stress runs against the reference (25 500 pairs) that the 8 fixed
+// starts alone missed: the first three because every start's local minimum had n·(a − b) slightly < 0
+// (the reflection step, f(−n) = f(n) + 2 n·(a − b), finds them), the last three because the global
+// minimum was the other member of a near-antipodal pair (the antipode run of the best finds them).
+TYPED_TEST(EllipsoidContactTest, ReflectionFindsTheGlobalMinimum) {
+  using Real = TypeParam;
+  struct Case {
+    double ca[3], ea[3], qa[4], eb[3], qb[4];
+  };
+  const Case cases[] = {
+      {{0.049542257354311621, 0.14817446361617703, 0.13524127485246873},
+       {0.39890412320856294, 0.1, 1},
+       {0.61743728553071586, 0.090915736755512955, 0.11927972182337954, -0.77219031022695495},
+       {0.1, 1, 0.94841511613814156},
+       {0.63802047908912074, 0.48402020116488426, 0.59883563543024076, 0.0070848335233370677}},
+      {{0.000484219599129046, 0.043074411189862709, -0.038518702578834656},
+       {0.35479756170210119, 1, 0.033333333333333333},
+       {-0.18465566757782412, -0.53103708767443802, 0.20446890012396995, -0.80130790887631542},
+       {0.033333333333333333, 1, 0.82841134966793206},
+       {-0.11978901692020688, -0.87953959017022787, -0.26293513889727227, -0.3780553047922357}},
+      {{-0.0065130036549601944, 0.0038105383137064957, -0.0095967166369569715},
+       {1, 0.033333333333333333, 0.74944884971445258},
+       {0.063627517368558956, 0.68436826300371889, 0.58700521570917941, 0.42780427342069188},
+       {1, 0.033333333333333333, 0.99070098532038287},
+       {-0.05646489502143727, 0.65540444996466629, 0.39037977588006711, -0.64409654026439223}},
+      // the antipode of the best (both minima of a near-antipodal pair have n·(a − b) ≥ 0)
+      {{-0.084109126343144436, -0.058795716452977355, 0.066277818092687513},
+       {0.1, 0.78659757859572332, 1},
+       {0.13126628149967398, 0.18293575005248197, -0.84460755576860769, 0.48573835697066636},
+       {1, 0.15171741778757208, 0.1},
+       {-0.19366645094002125, 0.33414988573635879, -0.18373323124907187, 0.90392436596069792}},
+      {{-0.071793084780539473, -0.032942741979032873, 0.085427981531328342},
+       {0.01, 1, 0.73627998821418961},
+       {-0.17444306193123776, 0.50071558519065729, -0.22773204020460522, -0.81669556063167137},
+       {0.49742891350542395, 1, 0.01},
+       {-0.46034748719661761, 0.61151979069887819, 0.61981178524950487, -0.17308115865449328}},
+      {{-0.10492550741794275, 0.41262328293926287, 0.097118498565802638},
+       {1, 0.36154376727745097, 0.01},
+       {-0.75519479931300515, -0.24227898027168746, -0.34310920299637504, 0.50324724105383178},
+       {1, 0.044398813756797779, 0.01},
+       {-0.44177014942373927, 0.43186847900398134, 0.65359029793764367, -0.43720530001670493}},
+  };
+  Stats st;
+  st.name = tag<Real>("reflection regressions");
+  for (const Case& c : cases) {
+    const Body<Real> a{{Real(c.ca[0]), Real(c.ca[1]), Real(c.ca[2])},
+                       {Real(c.ea[0]), Real(c.ea[1]), Real(c.ea[2])},
+                       {Real(c.qa[0]), Real(c.qa[1]), Real(c.qa[2]), Real(c.qa[3])}};
+    const Body<Real> b{{0, 0, 0},
+                       {Real(c.eb[0]), Real(c.eb[1]), Real(c.eb[2])},
+                       {Real(c.qb[0]), Real(c.qb[1]), Real(c.qb[2]), Real(c.qb[3])}};
+    check_against_reference(a, b, solve(a, b), st, 20000);
+  }
+  st.print();
+}
+
 // Never silently wrong: with an iteration cap too small to converge (1 evaluation per start, 4 in the
 // continuation), a pair reports converged = false with `fallback` set, unless the continuation reached
 // the tolerance, in which case the answer matches the reference.
