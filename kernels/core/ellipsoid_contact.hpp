@@ -21,15 +21,18 @@
 //      maximiser gives the normal at which the homothetically scaled bodies touch: the first start.
 //   2. ellipsoid_pair_contact(): damped Newton (Levenberg–Marquardt shift + trust radius) on the tangent
 //      plane of the unit sphere, analytic gradient and Hessian, from a fixed ordered start set: the PW
-//      normal, the centre direction, the three axes of A, the three axes of B (each signed towards
-//      a − b). The smallest f wins; on exactly equal f the earlier start wins. Two cheap global moves:
-//      a local minimum with n·(a − b) < 0 is reflected (f(−n) = f(n) + 2 n·(a − b) is lower) and Newton
-//      continues from −n; and Newton runs once more from the antipode of the best (when a − b is short,
-//      minima come in near-antipodal pairs and the deeper one may be the one no start reached). A start
-//      whose iterate comes within 1e-4 rad of the converged best stops there (same minimum).
-//      Measured (tests/bench, stress runs against the exact reference): 5 starts miss global minima in
-//      deep overlaps (A's centre inside B needs B's axes), 8 starts without the two moves missed 6 of
-//      25 500 deep pairs, with them none of 61 500.
+//      normal, the centre direction, the three axes of A, the three axes of B, the two bisectors of the
+//      thinnest axes of A and B, the common normal of their longest axes (each signed towards a − b);
+//      then from the 3 lowest of a screen of 20 directions (cube and face diagonals of both body
+//      frames, f values only). Two cheap global moves: a local minimum with n·(a − b) < 0 is reflected
+//      (f(−n) = f(n) + 2 n·(a − b) is lower) and Newton continues from −n; and Newton runs once more
+//      from the antipode of the best (when a − b is short, minima come in near-antipodal pairs). A start
+//      whose iterate comes within 1e-4 rad of the converged best stops there (same minimum). The
+//      smallest f wins; a later candidate must be lower by more than the rounding of f (ties keep the
+//      earlier start). Measured against the exact reference in stress runs of deep overlaps (a centre
+//      inside the other body, axis ratios 3–100; tests/unit regressions keep the cases): 5 axis starts
+//      miss often; the 8 axis starts alone missed 6 in 25 500; + reflection/antipode 2 in 24 000;
+//      + bisectors/common normal 1 in 24 000; + the screen none (numbers in the branch report).
 //   3. Safety net, never silently wrong: if the best minimum disagrees with the PW sign beyond rounding
 //      (a missed global minimum), or the winning start did not converge, 13 more fixed directions are
 //      tried and a continuation runs from the best point with 4× the iteration cap; `fallback` is set,
@@ -76,7 +79,8 @@ template <class Real>
 struct SolverSettings {
   Real tolerance = std::is_same_v<Real, float> ? Real(2e-5) : Real(1e-11);
   int max_iterations = 40;  // per start (trial evaluations)
-  int starts = 8;           // how many of the fixed ordered starts to use (1 … 8)
+  int starts = 11;          // how many of the fixed ordered starts to use (1 … 11)
+  int screen = 3;           // Newton runs from the lowest of 20 screened directions (0 … 4)
 };
 
 template <class Real>
@@ -114,6 +118,14 @@ CG_HD Real max_axis(Vec3<Real> e) {
 template <class Real>
 CG_HD Real min_axis(Vec3<Real> e) {
   return cg_min(e.x, cg_min(e.y, e.z));
+}
+template <class Real>
+CG_HD int min_index(Vec3<Real> e) {
+  return e.x <= e.y ? (e.x <= e.z ? 0 : 2) : (e.y <= e.z ? 1 : 2);
+}
+template <class Real>
+CG_HD int max_index(Vec3<Real> e) {
+  return e.x >= e.y ? (e.x >= e.z ? 0 : 2) : (e.y >= e.z ? 1 : 2);
 }
 template <class Real>
 CG_HD Vec3<Real> normalized(Vec3<Real> v) {
@@ -284,6 +296,13 @@ CG_HD void add_body(const Ellipsoid<Real>& e, Evaluation<Real>& ev) {
   ev.h22 += (dot(u2, u2) - g2 * g2) * inv;
 }
 
+// h(n) = |D Rᵀ n| alone.
+template <class Real>
+CG_HD Real support_value(const Ellipsoid<Real>& e, Vec3<Real> n) {
+  const Vec3<Real> w = hadamard(e.semi_axes, mul_transpose(e.rotation, n));
+  return cg_sqrt(dot(w, w));
+}
+
 template <class Real>
 CG_HD Evaluation<Real> evaluate(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b, Vec3<Real> r,
                                 Vec3<Real> n) {
@@ -421,6 +440,9 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
   out.converged = false;
   out.fallback = false;
 
+  // A later candidate wins only if lower by more than the rounding of f: ties (coincident centres,
+  // symmetric pairs) keep the earlier start on every machine.
+  const Real f_tie = Real(4) * std::numeric_limits<Real>::epsilon() * (scale + rlen);
   detail::LocalResult<Real> best{};
   bool have = false;
   auto consider = [&](Vec3<Real> start, int cap) {
@@ -434,13 +456,13 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
       res = detail::local_minimise(a, b, r, -res.n, scale, settings.tolerance, cap);
       out.iterations += res.evaluations;
     }
-    if (!res.merged && (!have || res.f < best.f)) {
+    if (!res.merged && (!have || res.f < best.f - f_tie)) {
       best = res;
       have = true;
     }
   };
   // The fixed ordered start set.
-  const int nstarts = settings.starts < 1 ? 1 : (settings.starts > 8 ? 8 : settings.starts);
+  const int nstarts = settings.starts < 1 ? 1 : (settings.starts > 11 ? 11 : settings.starts);
   for (int s = 0; s < nstarts; ++s) {
     Vec3<Real> start;
     if (s == 0) {
@@ -448,10 +470,50 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
     } else if (s == 1) {
       if (coincident) continue;  // (1,0,0) already ran
       start = (Real(1) / rlen) * r;
-    } else {
+    } else if (s < 8) {
       start = s < 5 ? column(a.rotation, s - 2) : column(b.rotation, s - 5);
+    } else if (s < 10) {  // the two bisectors of the thinnest axes of A and B
+      const Vec3<Real> ta = column(a.rotation, detail::min_index(a.semi_axes));
+      const Vec3<Real> tb = detail::towards(column(b.rotation, detail::min_index(b.semi_axes)), ta);
+      const Vec3<Real> v = s == 8 ? ta + tb : ta - tb;
+      if (dot(v, v) < Real(1e-6)) continue;
+      start = detail::normalized(v);
+    } else {  // the common normal of the longest axes (crossed needles)
+      const Vec3<Real> v = cross(column(a.rotation, detail::max_index(a.semi_axes)),
+                                 column(b.rotation, detail::max_index(b.semi_axes)));
+      if (dot(v, v) < Real(1e-6)) continue;
+      start = detail::normalized(v);
     }
     consider(start, settings.max_iterations);
+  }
+  // The screen: f (value only) at the 4 cube diagonals and 6 face diagonals of each body's frame (up
+  // to sign, put towards a − b); Newton from the `screen` lowest. These in-between directions reach
+  // basins that no axis start does (two comparable thin axes, one body's thin axis tilted by the other).
+  if (settings.screen > 0) {
+    const int keep = settings.screen > 4 ? 4 : settings.screen;
+    Real top_f[4];
+    Vec3<Real> top_n[4];
+    int count = 0;
+    for (int i = 0; i < 20; ++i) {
+      const Mat3<Real>& rot = i < 10 ? a.rotation : b.rotation;
+      const Vec3<Real> n = detail::towards(mul(rot, detail::extra_start<Real>(3 + i % 10)), r);
+      const Real fv = detail::support_value(a, n) + detail::support_value(b, n) - dot(n, r);
+      int pos = count < keep ? count : keep;
+      while (pos > 0 && fv < top_f[pos - 1]) {
+        if (pos < keep) {
+          top_f[pos] = top_f[pos - 1];
+          top_n[pos] = top_n[pos - 1];
+        }
+        --pos;
+      }
+      if (pos < keep) {
+        top_f[pos] = fv;
+        top_n[pos] = n;
+        if (count < keep) ++count;
+      }
+    }
+    out.iterations += 20 / 4;  // 20 value-only evaluations ≈ 5 full ones
+    for (int k = 0; k < count; ++k) consider(top_n[k], settings.max_iterations);
   }
   // The antipode of the best: where a − b is short against the bodies, minima come in near-antipodal
   // pairs (f(−n) = f(n) + 2 n·r) and the deeper one of a pair may be the one no start reached.
@@ -459,7 +521,7 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
     const detail::LocalResult<Real> res =
         detail::local_minimise(a, b, r, -best.n, scale, settings.tolerance, settings.max_iterations);
     out.iterations += res.evaluations;
-    if (!(res.f < best.f)) break;
+    if (!(res.f < best.f - f_tie)) break;
     best = res;
   }
 

@@ -571,8 +571,9 @@ TYPED_TEST(EllipsoidContactTest, PerramWertheimDecision) {
 // Regression: deep-overlap pairs from stress runs against the reference (25 500 pairs) that the 8 fixed
 // starts alone missed: the first three because every start's local minimum had n·(a − b) slightly < 0
 // (the reflection step, f(−n) = f(n) + 2 n·(a − b), finds them), the last three because the global
-// minimum was the other member of a near-antipodal pair (the antipode run of the best finds them).
-TYPED_TEST(EllipsoidContactTest, ReflectionFindsTheGlobalMinimum) {
+// minimum was the other member of a near-antipodal pair (the antipode run of the best finds them), the
+// last two because only a start on a bisector of the two thinnest axes reaches the global basin.
+TYPED_TEST(EllipsoidContactTest, StressRegressionsFindTheGlobalMinimum) {
   using Real = TypeParam;
   struct Case {
     double ca[3], ea[3], qa[4], eb[3], qb[4];
@@ -609,9 +610,20 @@ TYPED_TEST(EllipsoidContactTest, ReflectionFindsTheGlobalMinimum) {
        {-0.75519479931300515, -0.24227898027168746, -0.34310920299637504, 0.50324724105383178},
        {1, 0.044398813756797779, 0.01},
        {-0.44177014942373927, 0.43186847900398134, 0.65359029793764367, -0.43720530001670493}},
+      // a basin reached only from a bisector of the two thinnest axes
+      {{-0.037560377134184059, 0.0082757546250927464, -0.067666803393867797},
+       {0.58275192939414588, 1, 0.033333333333333333},
+       {-0.80319333560130446, 0.38242762229910854, 0.018271127324890876, -0.45639428705295876},
+       {1, 0.033333333333333333, 0.6866074387140858},
+       {-0.27217029700598439, 0.78872783206935249, 0.1106557007252128, 0.53998801120382811}},
+      {{-0.16424703621346728, -0.10398868594066041, -0.053995465732879118},
+       {0.033333333333333333, 1, 0.89207983420609527},
+       {-0.4512197183440379, -0.51653229081008389, -0.72679728461896631, -0.036889909169193526},
+       {1, 0.033333333333333333, 0.94147190868366704},
+       {-0.70679441763114437, 0.2642834297095179, -0.65111284570600969, -0.081535158938016772}},
   };
   Stats st;
-  st.name = tag<Real>("reflection regressions");
+  st.name = tag<Real>("stress regressions");
   for (const Case& c : cases) {
     const Body<Real> a{{Real(c.ca[0]), Real(c.ca[1]), Real(c.ca[2])},
                        {Real(c.ea[0]), Real(c.ea[1]), Real(c.ea[2])},
@@ -624,9 +636,9 @@ TYPED_TEST(EllipsoidContactTest, ReflectionFindsTheGlobalMinimum) {
   st.print();
 }
 
-// Never silently wrong: with an iteration cap too small to converge (1 evaluation per start, 4 in the
-// continuation), a pair reports converged = false with `fallback` set, unless the continuation reached
-// the tolerance, in which case the answer matches the reference.
+// Never silently wrong about convergence: with an iteration cap too small to converge (1 evaluation per
+// start, 4 in the continuation), a pair reports converged = false with `fallback` set. (Converged then
+// means a local minimum only: with starved starts it need not be the global one, and it is not checked.)
 TYPED_TEST(EllipsoidContactTest, StarvedSolverIsFlagged) {
   using Real = TypeParam;
   std::mt19937_64 rng(10000);
@@ -648,12 +660,11 @@ TYPED_TEST(EllipsoidContactTest, StarvedSolverIsFlagged) {
       continue;
     }
     ++converged_anyway;
-    const exact::Reference ref = exact::exact_contact(reference_pair(a, b), 8000);
-    EXPECT_LE(std::abs(double(c.geometry.distance) - double(ref.distance)),
-              Tol<Real>::dist * double(scale_of(a, b)));
+    EXPECT_TRUE(c.fallback);  // every start stopped unconverged, so the safety net ran
   }
-  std::printf("[ellipsoid] %-28s max_iterations 1: %d flagged non-converged, %d converged (checked)\n",
-              tag<Real>("starved solver").c_str(), flagged, converged_anyway);
+  std::printf(
+      "[ellipsoid] %-28s max_iterations 1: %d flagged non-converged, %d converged by the continuation\n",
+      tag<Real>("starved solver").c_str(), flagged, converged_anyway);
   EXPECT_GT(flagged, 0);
 }
 
