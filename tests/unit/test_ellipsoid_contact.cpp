@@ -1,19 +1,21 @@
 // Ellipsoid and sphere–ellipsoid contacts (kernels/core/ellipsoid_contact.hpp, issue #12) against the
 // exact long-double reference of tests/support/exact_ellipsoid.hpp, which shares no code with it.
 //
-// Tolerances are relative to the pair's scale s = (largest semi-axis of A) + (largest of B):
+// Tolerances are relative to the pair's scale s = (largest semi-axis of A) + (largest of B); the Tol
+// struct lists them with the measured maxima (every suite prints its own: lines starting [ellipsoid]):
 //   - distance: the engine evaluates f as a sum of norms (no cancellation beyond the final subtraction)
-//     at a point whose tangential gradient is ≤ tol·s, so its error is O(eps·s) plus O(tol²·s / curvature):
-//     double 1e-9·s, float 4e-6·s (≈ 30 ulps);
-//   - positions and normal: a support point moves with n at the rate of the body's radius of curvature, which
-//     for an axis ratio κ reaches κ × the largest semi-axis; the allowance is therefore scaled by the larger
-//     axis ratio κ of the pair: double 1e-7·κ·s, float 5e-3·κ·s·(fallback: see Needles) — measured maxima
-//     are printed for every suite (see the lines starting with [ellipsoid]);
+//     at a point whose tangential gradient is ≤ tol·s, so its error is O(eps·s) plus O(tol²·s/curvature):
+//     fp32 1e-6·s (≈ 8 ulps), fp64 1e-12·s;
+//   - positions and normal: a support point moves with n at the rate of the body's radius of curvature,
+//     which for an axis ratio κ reaches κ × the largest semi-axis, so the allowance is scaled by the
+//     larger axis ratio κ of the pair: positions fp32 4e-4·κ·s, fp64 2e-10·κ·s; normals fp32 5e-4·κ rad,
+//     fp64 1e-9·κ rad;
 //   - the identity position_on_a = position_on_b + n·distance holds to the solver tolerance: 2·tol·s
-//     plus rounding;
-//   - decision: where the reference |distance| exceeds the band (double 1e-9·s, float 4e-6·s) the engine's
-//     contact decision (distance ≤ 0) must agree with the reference and with the independent
-//     Perram–Wertheim sign.
+//     (plus the rounding of the coordinates themselves far from the origin);
+//   - points on the surfaces: |D⁻¹ local_point| = 1 to a few ulps;
+//   - decision: where the reference |distance| exceeds the distance band, the engine's decision
+//     (distance ≤ 0) must agree with the reference; the independent long-double Perram–Wertheim sign
+//     must agree with the reference minimum everywhere outside 1e-9 of F = 1.
 // Pairs whose two best local minima are within the distance tolerance of each other (two equally deep
 // exits) are "ambiguous": the distance must agree, the direction may be either; they are counted.
 #include <gtest/gtest.h>
