@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "core/ellipsoid_contact.hpp"
 #include "core/grid.hpp"
 #include "core/narrow.hpp"
 #include "engine.hpp"
@@ -21,6 +22,10 @@ struct DetectJob {
   // device_out set: leave the contacts on the device and describe them there (out stays empty).
   const DeviceBodiesView* device_bodies = nullptr;
   DeviceContactsView<Real>* device_out = nullptr;
+  // Shapes: the number of ellipsoids (0: the sphere-only path, exactly as before shapes existed) and
+  // the ellipsoid solver's settings (from EngineOptions).
+  std::size_t ellipsoids = 0;
+  SolverSettings<Real> solver{};
   std::size_t body_count() const { return device_bodies ? device_bodies->count : bodies.size(); }
 };
 
@@ -86,6 +91,9 @@ void resident_copy(CudaBackend& backend, std::size_t first, std::size_t count, V
                    double* radius, bool to_device);
 // Validation and bounds of DEVICE bodies (same results and InputError texts as compute_bounds).
 Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies);
+// The shape rows of DEVICE bodies checked as validate_shapes (same InputError texts); returns the
+// number of ellipsoids. Call after device_bounds; bodies.shape must be non-null.
+std::size_t device_validate_shapes(CudaBackend& backend, const DeviceBodiesView& bodies);
 
 }  // namespace cg::detail
 

@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <span>
 
+#include "core/quat.hpp"
+#include "core/shape.hpp"
 #include "core/vec3.hpp"
 
 namespace cg {
@@ -23,8 +25,22 @@ struct BodiesView {
   std::span<const double> radius;
   std::span<const std::int64_t> id;      // empty: ids are 0 … n-1
   std::span<const std::uint8_t> report;  // empty: all pairs; else see kReportedBit, kPairedBit
+  // Shapes (CONTRACT §1). Empty `shape`: every body is a sphere of `radius` (the sphere-only fast
+  // path). Else one row per body in each of the three (semi_axes and orientation are read for
+  // ellipsoids only: a sphere's rows may hold anything) and `radius` is the bounding radius, for an
+  // ellipsoid exactly its largest semi-axis. Layout: per-body rows (not an index into ellipsoid
+  // arrays): a body's rows move with it (distribute, halo) and the narrow stage reads them by body
+  // index with no indirection; a sphere-only scene passes nothing.
+  std::span<const Shape> shape = {};
+  std::span<const Vec3<double>> semi_axes = {};    // along the body's local x, y, z
+  std::span<const Quat<double>> orientation = {};  // unit (w, x, y, z), body → world
   std::size_t size() const { return radius.size(); }
 };
+
+// Checks the shape rows of `bodies` (sizes, then per body shape_fault(), core/shape.hpp) and returns
+// the number of ellipsoids (0 when `shape` is empty). Throws InputError naming the first bad body by
+// id. Run after compute_bounds (which checks centres and radii).
+std::size_t validate_shapes(const BodiesView& bodies);
 
 // Bodies already in CUDA DEVICE memory, for simulations that keep their state on the GPU and call
 // the engine every step (Engine::detect_device*). Pointers are device pointers on the engine's device
@@ -37,6 +53,11 @@ struct DeviceBodiesView {
   const double* radius = nullptr;        // DEVICE, count doubles
   const std::uint8_t* report = nullptr;  // DEVICE, count bytes, or null: all pairs (as BodiesView)
   std::size_t count = 0;
+  // Shapes, as BodiesView: null `shape`: all spheres; else semi_axes (3·count doubles) and
+  // orientation (4·count doubles, w x y z) of body i at 3i and 4i, read for ellipsoids only.
+  const Shape* shape = nullptr;         // DEVICE, count bytes
+  const double* semi_axes = nullptr;    // DEVICE
+  const double* orientation = nullptr;  // DEVICE
 };
 
 }  // namespace cg

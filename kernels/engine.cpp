@@ -78,6 +78,9 @@ void destroy(CudaBackend* b) { delete b; }
 Bounds device_bounds(CudaBackend&, const DeviceBodiesView&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
+std::size_t device_validate_shapes(CudaBackend&, const DeviceBodiesView&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
 template <class Real>
 void download_contacts(CudaBackend&, const DeviceContactsView<Real>&, Contacts<Real>&) {
   throw CudaError("this contactgrid was built without CUDA");
@@ -128,6 +131,9 @@ Engine<Real>::Engine(EngineOptions options) : m_impl(std::make_unique<Impl>()) {
   m_impl->options = options;
   m_impl->host.threads = options.threads;
   if (options.threads < 0) throw UsageError("--threads must be >= 0");
+  if (!(options.ellipsoid_tolerance >= 0) || !std::isfinite(options.ellipsoid_tolerance))
+    throw UsageError("ellipsoid tolerance must be finite and >= 0 (0: the default)");
+  if (options.ellipsoid_max_iterations < 0) throw UsageError("ellipsoid iteration cap must be >= 0");
   Backend b = options.backend;
   if (b == Backend::automatic) b = cuda_available() ? Backend::cuda : Backend::cpu;
   if (b == Backend::cuda) m_impl->cuda = detail::make_cuda_backend(options.device).release();
@@ -167,6 +173,8 @@ detail::DetectJob<Real> plan_job(const Bounds& b, std::optional<Frame> frame, co
     throw UsageError("frame cell size is smaller than the largest diameter");
   detail::DetectJob<Real> job{{}, plan_grid(b, f, prec), {}, options.fields};
   job.grid = detail::grid_params<Real>(job.plan);
+  if (options.ellipsoid_tolerance > 0) job.solver.tolerance = static_cast<Real>(options.ellipsoid_tolerance);
+  if (options.ellipsoid_max_iterations > 0) job.solver.max_iterations = options.ellipsoid_max_iterations;
   stats.key_bits = job.plan.key_bits;
   stats.cell_size = f.cell_size;
   return job;
@@ -183,10 +191,13 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
   Contacts<Real> out;
   auto t0 = clock::now();
   const Bounds b = compute_bounds(bodies);
+  const std::size_t ellipsoids = validate_shapes(bodies);
   s.stats.bodies = b.count;
+  s.stats.ellipsoids = ellipsoids;
   if (b.count == 0) return out;
   detail::DetectJob<Real> job = plan_job<Real>(b, frame, s.options, s.stats);
   job.bodies = bodies;
+  job.ellipsoids = ellipsoids;
   s.times.push_back(
       {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
 
@@ -226,11 +237,17 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
   if (bodies.count > 0 && (!bodies.position || !bodies.radius))
     throw UsageError("detect_device: null position or radius pointer");
   auto t0 = clock::now();
+  if (bodies.count > 0 && bodies.shape && (!bodies.semi_axes || !bodies.orientation))
+    throw UsageError("detect_device: shape kinds without semi-axes or orientation pointers");
   const Bounds b = detail::device_bounds(*s.cuda, bodies);
+  const std::size_t ellipsoids =
+      bodies.count > 0 && bodies.shape ? detail::device_validate_shapes(*s.cuda, bodies) : 0;
   s.stats.bodies = b.count;
+  s.stats.ellipsoids = ellipsoids;
   if (b.count == 0) return;
   detail::DetectJob<Real> job = plan_job<Real>(b, frame, s.options, s.stats);
   job.device_bodies = &bodies;
+  job.ellipsoids = ellipsoids;
   job.device_out = device_out;
   s.times.push_back(
       {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
@@ -242,6 +259,7 @@ template <class Real>
 void Engine<Real>::set_resident(const BodiesView& b) {
   Impl& s = *m_impl;
   if (!b.id.empty()) throw UsageError("set_resident: ids are implied (row i is body i)");
+  if (!b.shape.empty()) throw UsageError("set_resident: resident bodies are spheres only (no shape rows)");
   if (b.position.size() != b.size() || (!b.report.empty() && b.report.size() != b.size()))
     throw UsageError("set_resident: the arrays differ in length");
   s.resident_rows = b.size();

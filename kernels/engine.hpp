@@ -47,6 +47,11 @@ struct EngineOptions {
   CellChoice cell_choice = CellChoice::tuned;  // how, when cell_size is 0
   int threads = 0;                             // CPU backend threads; 0: all hardware threads
   int device = -1;                             // CUDA device; -1: current
+  // Ellipsoid narrow phase (scenes with ellipsoids only; core/ellipsoid_contact.hpp SolverSettings):
+  // Newton stops when the tangential gradient is <= tolerance × (largest semi-axis of A + of B);
+  // iteration cap per start. 0: the precision's default (fp32 2e-5, fp64 1e-11; 40 iterations).
+  double ellipsoid_tolerance = 0;
+  int ellipsoid_max_iterations = 0;
 };
 
 // Counters of one run (for tests and the summary).
@@ -58,6 +63,10 @@ struct EngineStats {
   double cell_size = 0;                  // the cell edge used
   std::uint64_t peak_device_bytes = 0;   // CUDA: device workspace held after the call (never shrinks)
   std::uint64_t device_allocations = 0;  // CUDA: cudaMalloc calls made by this call (0 once warm)
+  // Scenes with ellipsoids: how many bodies are ellipsoids; candidates whose solve needed the
+  // ellipsoid core's safety net (extra starts, `fallback`) and those whose winning minimiser still
+  // missed the tolerance (`converged` false: the row is the best minimum found, flagged here).
+  std::uint64_t ellipsoids = 0, narrow_fallbacks = 0, narrow_unconverged = 0;
 };
 
 template <class Real>

@@ -27,10 +27,16 @@ CG_HD NarrowDecision<Real> narrow_decide(const Sphere<Real>& a, const Sphere<Rea
 // How the pair stage filtered its candidates: with the sphere test itself (every candidate is a
 // contact), or by the cell rule only (every pair of bodies sharing their first common cell: a looser
 // filter, for tests of the rejecting path and for candidate lists kept across calls with a skin).
-enum class CandidateFilter { spheres_touch, cells };
+// bounding_spheres: the sphere test on the bounding spheres of bodies that are not all spheres (scenes
+// with ellipsoids): the same pair-stage filter as spheres_touch, but the narrow stage decides (the
+// shapes may not touch where their bounding spheres do).
+enum class CandidateFilter { spheres_touch, cells, bounding_spheres };
 
 // True when narrow_decide() may reject a candidate of this filter: the narrow stage then counts, scans
 // and compacts; else it writes one row per candidate (no scan).
 CG_HD constexpr bool narrow_may_reject(CandidateFilter f) { return f != CandidateFilter::spheres_touch; }
+
+// True when the pair stage keeps only candidates whose (bounding) spheres touch (spheres_touch()).
+CG_HD constexpr bool candidates_touch(CandidateFilter f) { return f != CandidateFilter::cells; }
 
 }  // namespace cg

@@ -41,6 +41,9 @@ struct Counters {
   unsigned long long tests;            // sphere tests made (count_pairs)
   unsigned long long bad;              // n - i of the first invalid body i (atomicMax), 0: none
   unsigned long long type_entries[8];  // entries per cell type (reorder, type-pass path only)
+  // shapes (cuda/shapes.cuh, narrow.cuh): n - i of the first body with bad shape rows (atomicMax),
+  // ellipsoids counted, and the ellipsoid solver's flags (narrow accept pass)
+  unsigned long long bad_shape, ellipsoids, fallbacks, unconverged;
 };
 
 // Pointers of the contact arrays in DEVICE memory; the `full` four are null for Fields::basic.

@@ -13,7 +13,9 @@
 //                  the (a, b) u32 pairs at a block-aggregated atomic cursor; on overflow scan → fill
 //   type_passes.cuh  opt-in (Tuning::type_passes): entries, sort and pairs as Le Grand's 8 passes
 //   order.cuh      candidates in (a, b) order: grouped by a (counting or radix sort), runs by b
-//   narrow.cuh     narrow_decide + contact rows of the requested fields, world frame
+//   shapes.cuh     scenes with ellipsoids: shape check (device-array API), shape upload, pack_shapes
+//   narrow.cuh     narrow_decide + contact rows of the requested fields, world frame (mixed scenes:
+//                  ShapeDecide, count → scan → fill)
 // Around them: workspace.cuh (the named DEVICE buffers, their aliases, cub_run), tuning.hpp (the
 // environment knobs, read in one place), stage_events.cuh (event timing by typed Stage).
 //
@@ -36,6 +38,7 @@
 #include "cuda/pack.cuh"
 #include "cuda/pairs.cuh"
 #include "cuda/run_state.cuh"
+#include "cuda/shapes.cuh"
 #include "cuda/sort.cuh"
 #include "cuda/stage_events.cuh"
 #include "cuda/transfer.cuh"
@@ -124,10 +127,14 @@ class CudaBackend {
     r.full = job.fields == Fields::full;
     r.type_passes = m_tuning.type_passes;
     r.filter = m_tuning.candidates;
+    // Scenes with ellipsoids: bounding-sphere candidates, the narrow stage decides (shapes.cuh).
+    if (job.ellipsoids > 0 && r.filter == CandidateFilter::spheres_touch)
+      r.filter = CandidateFilter::bounding_spheres;
 
     reserve_pack(r);
     m_events.start(m_stream);
     upload_stage(r);
+    shapes_stage(r);  // scenes with ellipsoids only
     pack_stage(r);
     scan_body_blocks(r);
     if (!r.type_passes) {
@@ -170,6 +177,11 @@ std::unique_ptr<CudaBackend> make_cuda_backend(int device) {
 void destroy(CudaBackend* backend) { delete backend; }
 
 Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies) { return backend.bounds(bodies); }
+
+std::size_t device_validate_shapes(CudaBackend& b, const DeviceBodiesView& bodies) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  return shape_check_stage(b.m_ws, b.m_h_counters, b.m_stream, bodies);
+}
 
 void resident_upload(CudaBackend& b, const BodiesView& bodies) {
   const std::size_t n = bodies.size();

@@ -10,6 +10,7 @@
 #include <cub/device/device_scan.cuh>
 
 #include "core/narrow.hpp"
+#include "core/shape_narrow.hpp"
 #include "cuda/common.cuh"
 #include "cuda/run_state.cuh"
 
@@ -40,29 +41,34 @@ __global__ void __launch_bounds__(kBlock)
   }
 }
 
-// narrow, rejecting path, count: accept[k] = 1 when candidate k is a contact.
-template <class Real>
+// narrow, rejecting path, count: accept[k] = 1 when candidate k is a contact. Decide: SphereDecide or
+// ShapeDecide (core/shape_narrow.hpp; one thread per candidate: in mixed scenes the warps diverge
+// between sphere pairs, sphere–ellipsoid root finds and ellipsoid solves, a known cost); the solver's
+// flags are added to c->fallbacks / c->unconverged.
+template <class Real, class Decide>
 __global__ void __launch_bounds__(kBlock)
     narrow_accept_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
-                         std::uint32_t n_pairs, const Sphere<Real>* __restrict__ spheres, Vec3<double> origin,
-                         std::uint32_t* __restrict__ accept) {
+                         std::uint32_t n_pairs, Decide decide, std::uint32_t* __restrict__ accept,
+                         Counters* __restrict__ c) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   if (k >= n_pairs) return;
-  accept[k] = narrow_decide(spheres[pair_a[k]], spheres[pair_b[k]], origin, false).contact ? 1u : 0u;
+  NarrowFlags flags;
+  accept[k] = decide.accept(pair_a[k], pair_b[k], flags) ? 1u : 0u;
+  if (flags.fallbacks) atomicAdd(&c->fallbacks, static_cast<unsigned long long>(flags.fallbacks));
+  if (flags.unconverged) atomicAdd(&c->unconverged, static_cast<unsigned long long>(flags.unconverged));
 }
 
 // narrow, rejecting path, fill: the row of each accepted candidate k at offset[k] (exclusive scan of
 // accept): the accepted rows in candidate order.
-template <class Real>
+template <class Real, class Decide>
 __global__ void __launch_bounds__(kBlock)
     narrow_fill_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
-                       std::uint32_t n_pairs, const Sphere<Real>* __restrict__ spheres, Vec3<double> origin,
-                       const std::uint32_t* __restrict__ accept, const std::uint32_t* __restrict__ offset,
-                       ContactPtrs<Real> out, bool full) {
+                       std::uint32_t n_pairs, Decide decide, const std::uint32_t* __restrict__ accept,
+                       const std::uint32_t* __restrict__ offset, ContactPtrs<Real> out, bool full) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   if (k >= n_pairs || !accept[k]) return;
   const std::uint32_t a = pair_a[k], b = pair_b[k], w = offset[k];
-  const ContactRow<Real> row = narrow_decide(spheres[a], spheres[b], origin, full).row;
+  const ContactRow<Real> row = decide.row(a, b, full);
   out.id_a[w] = a;
   out.id_b[w] = b;
   out.position_on_a[w] = row.position_on_a;
@@ -110,16 +116,16 @@ std::size_t layout_contacts(std::byte* o, std::size_t rows, bool full, cuda::Con
 }
 
 // The rejecting path: count → scan → fill (see the file comment).
-template <class Real, class Key>
-void narrow_compact(RunState<Real, Key>& r) {
+template <class Real, class Key, class Decide>
+void narrow_compact(RunState<Real, Key>& r, const Decide& decide) {
   using cuda::blocks_for;
   using cuda::kBlock;
   cudaStream_t st = r.st;
   const std::uint32_t np = r.np;
   std::uint32_t* d_accept = r.pair_a.Alternate();  // dead after the order stage: >= np u32 each
   std::uint32_t* d_offset = r.pair_b.Alternate();
-  cuda::narrow_accept_kernel<Real><<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(),
-                                                                      np, r.d_spheres, r.origin, d_accept);
+  cuda::narrow_accept_kernel<Real, Decide><<<blocks_for(np), kBlock, 0, st>>>(
+      r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_accept");
   cub_run(r.ws, "narrow", [&](void* t, std::size_t& b) {
     return cub::DeviceScan::ExclusiveSum(t, b, d_accept, d_offset, int(np), st);
@@ -129,11 +135,18 @@ void narrow_compact(RunState<Real, Key>& r) {
       cudaMemcpyAsync(&last[0], d_offset + np - 1, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, st));
   CG_CUDA_CHECK(
       cudaMemcpyAsync(&last[1], d_accept + np - 1, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, st));
+  if (r.d_shapes)  // the solver's flags (accept pass)
+    CG_CUDA_CHECK(
+        cudaMemcpyAsync(r.h_counters, r.d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, st));
   CG_CUDA_CHECK(cudaStreamSynchronize(st));
+  if (r.d_shapes) {
+    r.stats.narrow_fallbacks = r.h_counters->fallbacks;
+    r.stats.narrow_unconverged = r.h_counters->unconverged;
+  }
   r.n_rows = last[0] + last[1];
   r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.full, r.cp);  // n_rows <= np: ws.out holds them
-  cuda::narrow_fill_kernel<Real><<<blocks_for(np), kBlock, 0, st>>>(
-      r.pair_a.Current(), r.pair_b.Current(), np, r.d_spheres, r.origin, d_accept, d_offset, r.cp, r.full);
+  cuda::narrow_fill_kernel<Real, Decide><<<blocks_for(np), kBlock, 0, st>>>(
+      r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept, d_offset, r.cp, r.full);
   CG_CUDA_CHECK_LAUNCH("narrow_fill");
 }
 
@@ -141,7 +154,10 @@ template <class Real, class Key>
 void narrow_stage(RunState<Real, Key>& r) {
   r.stats.candidates = r.np;
   if (narrow_may_reject(r.filter) && r.np > 0) {
-    narrow_compact(r);
+    if (r.d_shapes)  // scenes with ellipsoids (r.filter is then never spheres_touch)
+      narrow_compact(r, ShapeDecide<Real>{r.d_spheres, r.d_shapes, r.origin, r.job.solver});
+    else
+      narrow_compact(r, SphereDecide<Real>{r.d_spheres, r.origin});
     r.events.mark(Stage::narrow, r.st);
     return;
   }

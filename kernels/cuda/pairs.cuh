@@ -217,7 +217,7 @@ namespace cg::detail {
 // count_pairs_kernel / fill_pairs_kernel instantiated for the call's candidate filter.
 template <class Real, class Key, class... Args>
 void launch_count_pairs(CandidateFilter filter, std::uint32_t blocks, cudaStream_t st, Args... args) {
-  if (filter == CandidateFilter::spheres_touch)
+  if (candidates_touch(filter))
     cuda::count_pairs_kernel<Real, Key, true><<<blocks, cuda::kBlock, 0, st>>>(args...);
   else
     cuda::count_pairs_kernel<Real, Key, false><<<blocks, cuda::kBlock, 0, st>>>(args...);
@@ -225,7 +225,7 @@ void launch_count_pairs(CandidateFilter filter, std::uint32_t blocks, cudaStream
 }
 template <class Real, class Key, class... Args>
 void launch_fill_pairs(CandidateFilter filter, std::uint32_t blocks, cudaStream_t st, Args... args) {
-  if (filter == CandidateFilter::spheres_touch)
+  if (candidates_touch(filter))
     cuda::fill_pairs_kernel<Real, Key, true><<<blocks, cuda::kBlock, 0, st>>>(args...);
   else
     cuda::fill_pairs_kernel<Real, Key, false><<<blocks, cuda::kBlock, 0, st>>>(args...);

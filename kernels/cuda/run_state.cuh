@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "backend.hpp"
+#include "core/shape.hpp"
 #include "cuda/common.cuh"
 #include "cuda/stage_events.cuh"
 #include "cuda/tuning.hpp"
@@ -36,6 +37,7 @@ struct RunState {
   const std::uint8_t* d_report = nullptr;
   // pack
   Sphere<Real>* d_spheres = nullptr;       // input order
+  PackedShape<Real>* d_shapes = nullptr;   // input order; scenes with ellipsoids only (shapes.cuh)
   Sphere<Real>* d_cell_spheres = nullptr;  // cell order
   std::uint32_t* d_perm = nullptr;         // cell order → input index
   std::uint8_t* d_ctrl = nullptr;          // cell order

@@ -19,6 +19,9 @@
 //   out                    narrow → download   the contact rows (ContactPtrs, 16-byte aligned fields)
 //   temp                   any CUB call        CUB temporary storage (cub_run)
 //   counters, partials     every stage         Counters of the call; bounds partials
+//   shape_kind, shape_semi, upload → pack      scenes with ellipsoids, host-array path: the shape rows
+//   shape_orient
+//   shapes                 pack → narrow       scenes with ellipsoids: PackedShape per body, input order
 //   res_pos, res_rad,      between calls       resident bodies (Engine::set_resident)
 //   res_report
 //
@@ -52,6 +55,7 @@ struct Workspace {
   Bytes keys[2], bodies[2];
   Bytes entry_blocks, pairs, out, temp, counters, partials;
   Bytes res_pos, res_rad, res_report;
+  Bytes shape_kind, shape_semi, shape_orient, shapes;
   std::size_t res_count = 0;
   bool res_reported = false;  // resident report mask present
 
@@ -62,9 +66,10 @@ struct Workspace {
   std::uint64_t held_bytes() const {
     std::uint64_t s = 0;
     for (const Bytes* b :
-         {&pos,  &rad,      &report,   &spheres,   &cell_spheres, &perm,         &ctrl,  &body_blocks,
-          &base, &keys[0],  &keys[1],  &bodies[0], &bodies[1],    &entry_blocks, &pairs, &out,
-          &temp, &counters, &partials, &res_pos,   &res_rad,      &res_report})
+         {&pos,         &rad,        &report,     &spheres,      &cell_spheres, &perm,      &ctrl,
+          &body_blocks, &base,       &keys[0],    &keys[1],      &bodies[0],    &bodies[1], &entry_blocks,
+          &pairs,       &out,        &temp,       &counters,     &partials,     &res_pos,   &res_rad,
+          &res_report,  &shape_kind, &shape_semi, &shape_orient, &shapes})
       s += b->bytes();
     return s;
   }

@@ -11,6 +11,8 @@
 //             then chunk sizes → scan → fill
 //   order     radix sort of the candidates by (a, b)
 //   narrow    narrow_decide() per candidate; contact rows in the requested fields, world frame
+//             (scenes with ellipsoids: pack also packs the shapes, the pair stage keeps bounding-sphere
+//             overlaps, and narrow dispatches on the shape pair: core/shape_narrow.hpp)
 #include <omp.h>
 
 #include "backend.hpp"
@@ -25,9 +27,16 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
                EngineStats& stats) {
   const int nt = be.threads > 0 ? be.threads : omp_get_max_threads();
   HostStageTimer timer(times);
+  // Scenes with ellipsoids: candidates are bounding-sphere overlaps (or the looser cell rule), the
+  // narrow stage decides per shape pair. Sphere-only scenes: exactly the sphere path.
+  const bool shapes = job.ellipsoids > 0;
+  const CandidateFilter filter = shapes && be.candidates == CandidateFilter::spheres_touch
+                                     ? CandidateFilter::bounding_spheres
+                                     : be.candidates;
 
   host::PackedBodies<Real> bodies;
   host::pack(job.bodies, job.plan.frame.origin, job.grid, nt, bodies);
+  if (shapes) host::pack_shapes(job.bodies, nt, bodies.shapes);
   timer.lap(Stage::pack);
 
   host::Entries<Key> entries;
@@ -38,8 +47,8 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
   timer.lap(Stage::sort);
 
   host::CandidatePairs candidates;
-  stats.pair_tests = host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits,
-                                           be.candidates, nt, candidates);
+  stats.pair_tests =
+      host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter, nt, candidates);
   stats.candidates = candidates.size();
   entries = {};
   timer.lap(Stage::pairs);
@@ -47,7 +56,11 @@ void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>
   host::order_candidates(candidates, nt);
   timer.lap(Stage::order);
 
-  host::narrow(candidates, bodies.spheres, job.plan.frame.origin, job.fields, nt, out);
+  if (shapes)
+    host::narrow_shapes(candidates, bodies.spheres, bodies.shapes, job.plan.frame.origin, job.solver,
+                        job.fields, nt, out, stats);
+  else
+    host::narrow(candidates, bodies.spheres, job.plan.frame.origin, job.fields, nt, out);
   timer.lap(Stage::narrow);
 }
 

@@ -24,6 +24,48 @@ void write_row(Contacts<Real>& out, std::size_t k, std::uint32_t a, std::uint32_
   }
 }
 
+// The rejecting path: count → scan → fill with decider `decide` (core/shape_narrow.hpp). The
+// chunking depends only on the candidate count: the rows are the same for any thread count.
+template <class Real, class Decide>
+NarrowFlags narrow_compact(const CandidatePairs& c, const Decide& decide, bool full, int nt,
+                           Contacts<Real>& out) {
+  const std::size_t n_cand = c.size();
+  // count: an accept flag per candidate and the accepted total per fixed chunk of candidates
+  const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(256, n_cand / 16384));
+  std::vector<std::uint64_t> chunk_count(n_chunks, 0), chunk_offset;
+  std::vector<NarrowFlags> chunk_flags(n_chunks);
+  std::vector<std::uint8_t> accept(n_cand);
+#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
+  for (std::size_t ch = 0; ch < n_chunks; ++ch) {
+    std::uint64_t count = 0;
+    NarrowFlags flags;
+    for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
+      accept[k] = decide.accept(c.a(k), c.b(k), flags);
+      count += accept[k];
+    }
+    chunk_count[ch] = count;
+    chunk_flags[ch] = flags;
+  }
+  // scan → fill
+  const std::uint64_t n_rows = exclusive_scan_into(chunk_count, chunk_offset);
+  out.resize(n_rows, full);
+#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
+  for (std::size_t ch = 0; ch < n_chunks; ++ch) {
+    std::size_t w = chunk_offset[ch];
+    for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
+      if (!accept[k]) continue;
+      const std::uint32_t a = c.a(k), b = c.b(k);
+      write_row(out, w++, a, b, decide.row(a, b, full), full);
+    }
+  }
+  NarrowFlags total;
+  for (const NarrowFlags& f : chunk_flags) {
+    total.fallbacks += f.fallbacks;
+    total.unconverged += f.unconverged;
+  }
+  return total;
+}
+
 }  // namespace
 
 template <class Real>
@@ -40,37 +82,30 @@ void narrow(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres, c
     }
     return;
   }
-  // count: an accept flag per candidate and the accepted total per fixed chunk of candidates (the
-  // chunking depends only on the candidate count: the rows are the same for any thread count)
-  const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(256, n_cand / 16384));
-  std::vector<std::uint64_t> chunk_count(n_chunks, 0), chunk_offset;
-  std::vector<std::uint8_t> accept(n_cand);
-#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
-  for (std::size_t ch = 0; ch < n_chunks; ++ch) {
-    std::uint64_t count = 0;
-    for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
-      accept[k] = narrow_decide(spheres[c.a(k)], spheres[c.b(k)], origin, false).contact;
-      count += accept[k];
-    }
-    chunk_count[ch] = count;
-  }
-  // scan → fill
-  const std::uint64_t n_rows = exclusive_scan_into(chunk_count, chunk_offset);
-  out.resize(n_rows, full);
-#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
-  for (std::size_t ch = 0; ch < n_chunks; ++ch) {
-    std::size_t w = chunk_offset[ch];
-    for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
-      if (!accept[k]) continue;
-      const std::uint32_t a = c.a(k), b = c.b(k);
-      write_row(out, w++, a, b, narrow_decide(spheres[a], spheres[b], origin, full).row, full);
-    }
-  }
+  narrow_compact(c, SphereDecide<Real>{spheres.data(), origin}, full, nt, out);
 }
 
 template void narrow(const CandidatePairs&, const std::vector<Sphere<float>>&, const Vec3<double>&, Fields,
                      int, Contacts<float>&);
 template void narrow(const CandidatePairs&, const std::vector<Sphere<double>>&, const Vec3<double>&, Fields,
                      int, Contacts<double>&);
+
+template <class Real>
+void narrow_shapes(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres,
+                   const std::vector<PackedShape<Real>>& shapes, const Vec3<double>& origin,
+                   const SolverSettings<Real>& settings, Fields fields, int nt, Contacts<Real>& out,
+                   EngineStats& stats) {
+  const NarrowFlags f = narrow_compact(c, ShapeDecide<Real>{spheres.data(), shapes.data(), origin, settings},
+                                       fields == Fields::full, nt, out);
+  stats.narrow_fallbacks += f.fallbacks;
+  stats.narrow_unconverged += f.unconverged;
+}
+
+template void narrow_shapes(const CandidatePairs&, const std::vector<Sphere<float>>&,
+                            const std::vector<PackedShape<float>>&, const Vec3<double>&,
+                            const SolverSettings<float>&, Fields, int, Contacts<float>&, EngineStats&);
+template void narrow_shapes(const CandidatePairs&, const std::vector<Sphere<double>>&,
+                            const std::vector<PackedShape<double>>&, const Vec3<double>&,
+                            const SolverSettings<double>&, Fields, int, Contacts<double>&, EngineStats&);
 
 }  // namespace cg::detail::host

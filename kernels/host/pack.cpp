@@ -24,6 +24,22 @@ void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams
   }
 }
 
+template <class Real>
+void pack_shapes(const BodiesView& bodies, int threads, std::vector<PackedShape<Real>>& out) {
+  const std::size_t n = bodies.size();
+  out.resize(n);
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3<double> e = bodies.semi_axes[i];
+    const Quat<double> q = bodies.orientation[i];
+    const double semi[3] = {e.x, e.y, e.z}, quat[4] = {q.w, q.x, q.y, q.z};
+    out[i] = pack_shape<Real>(static_cast<std::uint8_t>(bodies.shape[i]), semi, quat);
+  }
+}
+
+template void pack_shapes(const BodiesView&, int, std::vector<PackedShape<float>>&);
+template void pack_shapes(const BodiesView&, int, std::vector<PackedShape<double>>&);
+
 template void pack(const BodiesView&, const Vec3<double>&, const GridParams<float>&, int,
                    PackedBodies<float>&);
 template void pack(const BodiesView&, const Vec3<double>&, const GridParams<double>&, int,

@@ -81,8 +81,8 @@ std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p
   out.id_bits = std::max(1, bits_for(p.spheres.size()));
   out.filter = filter;
   const std::uint8_t* r = report.empty() ? nullptr : report.data();
-  return filter == CandidateFilter::spheres_touch ? collect<true>(e, p, r, half_bits, threads, out)
-                                                  : collect<false>(e, p, r, half_bits, threads, out);
+  return candidates_touch(filter) ? collect<true>(e, p, r, half_bits, threads, out)
+                                  : collect<false>(e, p, r, half_bits, threads, out);
 }
 
 template std::uint64_t find_candidates(const Entries<std::uint32_t>&, const PackedBodies<float>&,

@@ -10,6 +10,7 @@
 
 #include "core/grid.hpp"
 #include "core/narrow.hpp"
+#include "core/shape_narrow.hpp"
 #include "engine.hpp"
 
 namespace cg::detail::host {
@@ -33,10 +34,11 @@ Acc exclusive_scan_into(const std::vector<T>& counts, std::vector<Acc>& offsets)
 // pack's output, per body in input order.
 template <class Real>
 struct PackedBodies {
-  std::vector<Sphere<Real>> spheres;  // local frame: Real(world - origin)
-  std::vector<BodyCells> cells;       // freed by fill_entries
-  std::vector<std::uint8_t> ctrl;     // control_bits
-  std::vector<std::uint32_t> count;   // entry_count; freed by fill_entries
+  std::vector<Sphere<Real>> spheres;      // local frame: Real(world - origin)
+  std::vector<BodyCells> cells;           // freed by fill_entries
+  std::vector<std::uint8_t> ctrl;         // control_bits
+  std::vector<std::uint32_t> count;       // entry_count; freed by fill_entries
+  std::vector<PackedShape<Real>> shapes;  // scenes with ellipsoids only (pack_shapes), else empty
 };
 
 // (cell key, body) entries; body-ascending after fill_entries, key-ascending (stable) after sort.
@@ -65,6 +67,10 @@ template <class Real>
 void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams<Real>& g, int threads,
           PackedBodies<Real>& out);
 
+// pack_shapes (scenes with ellipsoids): pack_shape() of every body, input order.
+template <class Real>
+void pack_shapes(const BodiesView& bodies, int threads, std::vector<PackedShape<Real>>& out);
+
 // entries: exclusive scan of the entry counts → fill (cell key, body) in body order. Returns the
 // number of entries; frees p.cells and p.count.
 template <class Real, class Key>
@@ -92,5 +98,14 @@ void order_candidates(CandidatePairs& c, int threads);
 template <class Real>
 void narrow(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres, const Vec3<double>& origin,
             Fields fields, int threads, Contacts<Real>& out);
+
+// narrow for scenes with ellipsoids: ShapeDecide (core/shape_narrow.hpp) on every candidate, always
+// count → scan → fill (c.filter may reject); the solver's flags are added to stats.narrow_fallbacks
+// and stats.narrow_unconverged.
+template <class Real>
+void narrow_shapes(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres,
+                   const std::vector<PackedShape<Real>>& shapes, const Vec3<double>& origin,
+                   const SolverSettings<Real>& settings, Fields fields, int threads, Contacts<Real>& out,
+                   EngineStats& stats);
 
 }  // namespace cg::detail::host

@@ -1,0 +1,103 @@
+#pragma once
+// The narrow phase's deciders for the rejecting path (count → scan → fill), shared by the CPU backend
+// (host/narrow.cpp) and the CUDA kernels (cuda/narrow.cuh): the same struct, the same CG_HD calls in
+// the same order, so both backends decide and write the same bits.
+//   accept(a, b, flags)  the count pass: is candidate (a, b) a contact (and the solver's flags, counted
+//                        once per candidate into EngineStats)
+//   row(a, b, full)      the fill pass, for an accepted candidate: its row, world frame
+// SphereDecide: narrow_decide() on the bounding spheres (sphere-only scenes, looser filters).
+// ShapeDecide: scenes with ellipsoids: dispatch on the shape pair —
+//   sphere–sphere        the closed form (narrow_decide: exactly the sphere path's bits)
+//   sphere–ellipsoid     sphere_ellipsoid_contact (the sphere's `radius` is its radius)
+//   ellipsoid–ellipsoid  ellipsoid_contact (Perram–Wertheim filter, then the solve)
+// Contact iff distance <= 0 (CONTRACT §3). Local points of an ellipsoid are in its body frame,
+// R_Xᵀ(p − x); of a sphere p − x. The fill pass solves again (same inputs, same bits): a contact's
+// solve costs twice, the price of not storing a row per candidate.
+#include <cstdint>
+
+#include "core/ellipsoid_contact.hpp"
+#include "core/narrow.hpp"
+#include "core/shape.hpp"
+
+namespace cg {
+
+// Solver flags of one candidate (ellipsoid pairs only; always zero for spheres).
+struct NarrowFlags {
+  std::uint32_t fallbacks = 0, unconverged = 0;
+};
+
+template <class Real>
+struct SphereDecide {
+  const Sphere<Real>* spheres;  // local frame, by body index
+  Vec3<double> origin;
+  CG_HD bool accept(std::uint32_t a, std::uint32_t b, NarrowFlags&) const {
+    return narrow_decide(spheres[a], spheres[b], origin, false).contact;
+  }
+  CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
+    return narrow_decide(spheres[a], spheres[b], origin, full).row;
+  }
+};
+
+// The ellipsoid of body i: the centre of its bounding sphere, packed semi-axes and rotation.
+template <class Real>
+CG_HD Ellipsoid<Real> ellipsoid_of(const Sphere<Real>& s, const PackedShape<Real>& p) {
+  return {s.centre(), p.semi_axes, p.rotation};
+}
+
+// The contact of a pair with at least one ellipsoid (local frame) and whether it is one.
+template <class Real>
+CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, const PackedShape<Real>& pa,
+                              const PackedShape<Real>& pb, const SolverSettings<Real>& settings,
+                              EllipsoidContact<Real>& c) {
+  constexpr std::uint32_t sphere = static_cast<std::uint32_t>(Shape::sphere);
+  if (pa.kind == sphere) {
+    c = sphere_ellipsoid_contact(sa, ellipsoid_of(sb, pb), true);
+    return c.geometry.distance <= Real(0);
+  }
+  if (pb.kind == sphere) {
+    c = sphere_ellipsoid_contact(sb, ellipsoid_of(sa, pa), false);
+    return c.geometry.distance <= Real(0);
+  }
+  const EllipsoidPairResult<Real> r = ellipsoid_contact(ellipsoid_of(sa, pa), ellipsoid_of(sb, pb), settings);
+  c = r.contact;
+  return r.in_contact;
+}
+
+template <class Real>
+struct ShapeDecide {
+  const Sphere<Real>* spheres;      // local frame (centre, bounding radius), by body index
+  const PackedShape<Real>* shapes;  // by body index
+  Vec3<double> origin;
+  SolverSettings<Real> settings;
+
+  CG_HD bool both_spheres(std::uint32_t a, std::uint32_t b) const {
+    return shapes[a].kind == static_cast<std::uint32_t>(Shape::sphere) &&
+           shapes[b].kind == static_cast<std::uint32_t>(Shape::sphere);
+  }
+  CG_HD bool accept(std::uint32_t a, std::uint32_t b, NarrowFlags& flags) const {
+    if (both_spheres(a, b)) return narrow_decide(spheres[a], spheres[b], origin, false).contact;
+    EllipsoidContact<Real> c;
+    const bool contact = shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c);
+    flags.fallbacks += c.fallback ? 1u : 0u;
+    flags.unconverged += c.converged ? 0u : 1u;
+    return contact;
+  }
+  CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
+    if (both_spheres(a, b)) return narrow_decide(spheres[a], spheres[b], origin, full).row;
+    EllipsoidContact<Real> c;
+    shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c);
+    ContactRow<Real> row{};
+    row.position_on_a = to_world(origin, c.geometry.position_on_a);
+    row.position_on_b = to_world(origin, c.geometry.position_on_b);
+    row.normal_on_b = c.geometry.normal_on_b;
+    row.distance = c.geometry.distance;
+    if (full) {
+      row.local_point_a = c.local_point_a;
+      row.local_point_b = c.local_point_b;
+      plane_space(c.geometry.normal_on_b, row.lateral_friction_dir1, row.lateral_friction_dir2);
+    }
+    return row;
+  }
+};
+
+}  // namespace cg

@@ -1,0 +1,124 @@
+#pragma once
+// CUDA shapes (scenes with ellipsoids; sphere-only scenes run none of this): the device-array path's
+// check of the shape rows (validate_shapes' predicate, core/shape.hpp, one thread per body), the
+// upload of the host arrays' shape rows and pack_shapes (a PackedShape per body, input order, read by
+// the narrow stage's ShapeDecide). Both run inside the pack stage's timing.
+#include <algorithm>
+#include <cstring>
+#include <string>
+
+#include "core/shape.hpp"
+#include "cuda/common.cuh"
+#include "cuda/run_state.cuh"
+#include "cuda/workspace.cuh"
+
+namespace cg::cuda {
+
+// Grid-stride: c->ellipsoids += the ellipsoids; c->bad_shape = n - i of the first bad body i.
+__global__ void shape_check_kernel(const Shape* __restrict__ kind, const double* __restrict__ rad,
+                                   const double* __restrict__ semi, const double* __restrict__ orient,
+                                   std::uint64_t n, Counters* __restrict__ c) {
+  unsigned long long ellipsoids = 0;
+  for (std::uint64_t i = std::uint64_t(blockIdx.x) * kBlock + threadIdx.x; i < n;
+       i += std::uint64_t(gridDim.x) * kBlock) {
+    const std::uint8_t k = static_cast<std::uint8_t>(kind[i]);
+    ellipsoids += k == static_cast<std::uint8_t>(Shape::ellipsoid) ? 1u : 0u;
+    double norm;
+    if (shape_fault(k, rad[i], semi + 3 * i, orient + 4 * i, norm) != ShapeFault::none)
+      atomicMax(&c->bad_shape, static_cast<unsigned long long>(n - i));
+  }
+  if (ellipsoids) atomicAdd(&c->ellipsoids, ellipsoids);
+}
+
+// pack_shapes: pack_shape() of body i (input order).
+template <class Real>
+__global__ void __launch_bounds__(kBlock)
+    pack_shapes_kernel(const Shape* __restrict__ kind, const double* __restrict__ semi,
+                       const double* __restrict__ orient, std::uint32_t n,
+                       PackedShape<Real>* __restrict__ out) {
+  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+  if (i >= n) return;
+  out[i] = pack_shape<Real>(static_cast<std::uint8_t>(kind[i]), semi + 3 * std::uint64_t(i),
+                            orient + 4 * std::uint64_t(i));
+}
+
+}  // namespace cg::cuda
+
+namespace cg::detail {
+
+// Shape check of DEVICE bodies (device_validate_shapes): one kernel, one read back (synchronises).
+// A bad body's rows are copied back and validate_shapes() throws its InputError.
+inline std::size_t shape_check_stage(Workspace& ws, cuda::PinnedBuffer& h_staging, cudaStream_t st,
+                                     const DeviceBodiesView& v) {
+  using cuda::Counters;
+  ws.reserve({{&ws.counters, sizeof(Counters)}}, "bounds");
+  h_staging.reserve(sizeof(Counters));
+  auto* d_counters = ws.counters.span_as<Counters>(1).data();
+  const int grid = static_cast<int>(std::min<std::uint64_t>(512, cuda::blocks_for(v.count)));
+  CG_CUDA_CHECK(cudaMemsetAsync(d_counters, 0, sizeof(Counters), st));
+  cuda::shape_check_kernel<<<grid, cuda::kBlock, 0, st>>>(v.shape, v.radius, v.semi_axes, v.orientation,
+                                                          v.count, d_counters);
+  CG_CUDA_CHECK_LAUNCH("shape_check");
+  CG_CUDA_CHECK(cudaMemcpyAsync(h_staging.data(), d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, st));
+  CG_CUDA_CHECK(cudaStreamSynchronize(st));
+  Counters c;
+  std::memcpy(&c, h_staging.data(), sizeof(c));
+  if (c.bad_shape) {
+    const std::uint64_t i = v.count - c.bad_shape;
+    Shape kind{};
+    double r = 0, semi[3] = {}, q[4] = {};
+    CG_CUDA_CHECK(cudaMemcpy(&kind, v.shape + i, sizeof(kind), cudaMemcpyDeviceToHost));
+    CG_CUDA_CHECK(cudaMemcpy(&r, v.radius + i, sizeof(r), cudaMemcpyDeviceToHost));
+    CG_CUDA_CHECK(cudaMemcpy(semi, v.semi_axes + 3 * i, sizeof(semi), cudaMemcpyDeviceToHost));
+    CG_CUDA_CHECK(cudaMemcpy(q, v.orientation + 4 * i, sizeof(q), cudaMemcpyDeviceToHost));
+    const std::int64_t id = static_cast<std::int64_t>(i);
+    const Vec3<double> p{0, 0, 0}, e{semi[0], semi[1], semi[2]};
+    const Quat<double> o{q[0], q[1], q[2], q[3]};
+    BodiesView one{{&p, 1}, {&r, 1}, {&id, 1}, {}};
+    one.shape = {&kind, 1};
+    one.semi_axes = {&e, 1};
+    one.orientation = {&o, 1};
+    validate_shapes(one);  // throws InputError naming `id`
+    throw Error("internal: the device flagged the shape of body " + std::to_string(id) + " but it is valid");
+  }
+  return static_cast<std::size_t>(c.ellipsoids);
+}
+
+// Scenes with ellipsoids: the shape rows on the device (host-array path: uploaded) and the packed
+// shapes (r.d_shapes). Sphere-only scenes: nothing (r.d_shapes stays null).
+template <class Real, class Key>
+void shapes_stage(RunState<Real, Key>& r) {
+  if (r.job.ellipsoids == 0 || r.n == 0) return;
+  Workspace& ws = r.ws;
+  const std::uint64_t n64 = r.n64;
+  const Shape* d_kind = nullptr;
+  const double *d_semi = nullptr, *d_orient = nullptr;
+  if (r.device_in) {
+    d_kind = r.job.device_bodies->shape;
+    d_semi = r.job.device_bodies->semi_axes;
+    d_orient = r.job.device_bodies->orientation;
+    ws.reserve({{&ws.shapes, n64 * sizeof(PackedShape<Real>)}}, "pack");
+  } else {
+    ws.reserve({{&ws.shape_kind, n64 * sizeof(Shape)},
+                {&ws.shape_semi, n64 * sizeof(Vec3<double>)},
+                {&ws.shape_orient, n64 * sizeof(Quat<double>)},
+                {&ws.shapes, n64 * sizeof(PackedShape<Real>)}},
+               "pack");
+    const BodiesView& b = r.job.bodies;
+    CG_CUDA_CHECK(cudaMemcpyAsync(ws.shape_kind.data(), b.shape.data(), n64 * sizeof(Shape),
+                                  cudaMemcpyHostToDevice, r.st));
+    CG_CUDA_CHECK(cudaMemcpyAsync(ws.shape_semi.data(), b.semi_axes.data(), n64 * sizeof(Vec3<double>),
+                                  cudaMemcpyHostToDevice, r.st));
+    CG_CUDA_CHECK(cudaMemcpyAsync(ws.shape_orient.data(), b.orientation.data(), n64 * sizeof(Quat<double>),
+                                  cudaMemcpyHostToDevice, r.st));
+    d_kind = reinterpret_cast<const Shape*>(ws.shape_kind.data());
+    d_semi = reinterpret_cast<const double*>(ws.shape_semi.data());
+    d_orient = reinterpret_cast<const double*>(ws.shape_orient.data());
+  }
+  r.d_shapes = ws.shapes.span_as<PackedShape<Real>>(r.n).data();
+  cuda::pack_shapes_kernel<Real>
+      <<<cuda::blocks_for(r.n), cuda::kBlock, 0, r.st>>>(d_kind, d_semi, d_orient, r.n, r.d_shapes);
+  CG_CUDA_CHECK_LAUNCH("pack_shapes");
+}
+
+}  // namespace cg::detail
