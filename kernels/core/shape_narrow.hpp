@@ -12,7 +12,8 @@
 //   ellipsoid–ellipsoid  ellipsoid_contact (Perram–Wertheim filter, then the solve)
 // Contact iff distance <= 0 (CONTRACT §3). Local points of an ellipsoid are in its body frame,
 // R_Xᵀ(p − x); of a sphere p − x. The fill pass solves again (same inputs, same bits): a contact's
-// solve costs twice, the price of not storing a row per candidate.
+// solve costs twice on the device, the price of not storing a row per candidate (the host keeps the
+// rows of its count pass: accept_row()).
 #include <cstdint>
 
 #include "core/ellipsoid_contact.hpp"
@@ -86,6 +87,25 @@ struct ShapeDecide {
     if (both_spheres(a, b)) return narrow_decide(spheres[a], spheres[b], origin, full).row;
     EllipsoidContact<Real> c;
     shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c);
+    return row_of(c, full);
+  }
+  // accept() and row() from one solve (the host's count pass keeps the rows of its contacts: the
+  // same bits as row(), which solves again from the same inputs).
+  CG_HD bool accept_row(std::uint32_t a, std::uint32_t b, bool full, NarrowFlags& flags,
+                        ContactRow<Real>& out) const {
+    if (both_spheres(a, b)) {
+      const NarrowDecision<Real> d = narrow_decide(spheres[a], spheres[b], origin, full);
+      out = d.row;
+      return d.contact;
+    }
+    EllipsoidContact<Real> c;
+    const bool contact = shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c);
+    flags.fallbacks += c.fallback ? 1u : 0u;
+    flags.unconverged += c.converged ? 0u : 1u;
+    if (contact) out = row_of(c, full);
+    return contact;
+  }
+  CG_HD ContactRow<Real> row_of(const EllipsoidContact<Real>& c, bool full) const {
     ContactRow<Real> row{};
     row.position_on_a = to_world(origin, c.geometry.position_on_a);
     row.position_on_b = to_world(origin, c.geometry.position_on_b);

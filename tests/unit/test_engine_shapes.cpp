@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "backend.hpp"
+#include "core/shape_narrow.hpp"
 #include "engine.hpp"
 #include "support/exact_ellipsoid.hpp"
 
@@ -313,6 +314,37 @@ TYPED_TEST(EngineShapesTest, CellFilterGivesTheSameRows) {
   expect_identical(x, y, "bounding spheres vs cells");
   EXPECT_GT(sy.candidates, sx.candidates);
   EXPECT_GT(sx.candidates, x.size()) << "some bounding spheres touch where the shapes do not";
+}
+
+// The device's fill pass solves again (ShapeDecide::row); the host keeps the rows of its count pass
+// (accept_row): the same decisions and bits, and accept() agrees with both.
+TYPED_TEST(EngineShapesTest, RowOfFillPassEqualsRowOfCountPass) {
+  using Real = TypeParam;
+  const ShapeScene s = make_scene("mixed", 37, 200, 0.6, 7.0);
+  std::vector<Sphere<Real>> sph;
+  std::vector<PackedShape<Real>> packed;
+  for (std::size_t i = 0; i < s.p.size(); ++i) {
+    sph.push_back({Real(s.p[i].x - 1), Real(s.p[i].y - 2), Real(s.p[i].z - 3), Real(s.r[i])});
+    const double semi[3] = {s.axes[i].x, s.axes[i].y, s.axes[i].z},
+                 q[4] = {s.q[i].w, s.q[i].x, s.q[i].y, s.q[i].z};
+    packed.push_back(pack_shape<Real>(static_cast<std::uint8_t>(s.shape[i]), semi, q));
+  }
+  const ShapeDecide<Real> d{sph.data(), packed.data(), {1, 2, 3}, {}};
+  int contacts = 0;
+  for (std::uint32_t a = 0; a < sph.size(); ++a)
+    for (std::uint32_t b = a + 1; b < sph.size(); ++b) {
+      if (!spheres_touch(sph[a], sph[b])) continue;
+      NarrowFlags f1, f2;
+      ContactRow<Real> kept{};
+      const bool x = d.accept(a, b, f1), y = d.accept_row(a, b, true, f2, kept);
+      ASSERT_EQ(x, y) << a << "," << b;
+      EXPECT_EQ(f1.fallbacks, f2.fallbacks);
+      if (!x) continue;
+      ++contacts;
+      const ContactRow<Real> again = d.row(a, b, true);
+      EXPECT_EQ(std::memcmp(&kept, &again, sizeof(kept)), 0) << a << "," << b;
+    }
+  EXPECT_GT(contacts, 20);
 }
 
 // Bad rows → InputError whose text names the body's id.
