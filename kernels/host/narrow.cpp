@@ -24,75 +24,6 @@ void write_row(Contacts<Real>& out, std::size_t k, std::uint32_t a, std::uint32_
   }
 }
 
-// The rejecting path: count → scan → fill with decider `decide` (core/shape_narrow.hpp) over fixed
-// chunks of candidates; the rows (candidate order, chunk offsets from the scan) do not depend on the
-// chunking or the thread count. kHeavy (ShapeDecide: a candidate costs up to ~100 sphere tests, and
-// unevenly): small chunks (>= 64 candidates, up to 8192 chunks) handed out dynamically; else (spheres)
-// the sphere path's static chunks of >= 16384 candidates, up to 256.
-template <bool kHeavy, class Real, class Decide>
-NarrowFlags narrow_compact(const CandidatePairs& c, const Decide& decide, bool full, int nt,
-                           Contacts<Real>& out) {
-  const std::size_t n_cand = c.size();
-  const std::size_t n_chunks = kHeavy ? std::max<std::size_t>(1, std::min<std::size_t>(8192, n_cand / 64))
-                                      : std::max<std::size_t>(1, std::min<std::size_t>(256, n_cand / 16384));
-  std::vector<std::uint64_t> chunk_count(n_chunks, 0), chunk_offset;
-  std::vector<NarrowFlags> chunk_flags(n_chunks);
-  std::vector<std::uint8_t> accept(n_cand);
-  // count: an accept flag per candidate, the accepted total and the solver's flags per chunk
-  // kHeavy: the rows of the accepted candidates kept per chunk (one solve per contact, not two)
-  std::vector<std::vector<ContactRow<Real>>> chunk_rows(kHeavy ? n_chunks : 0);
-  auto count_chunk = [&](std::size_t ch) {
-    std::uint64_t count = 0;
-    NarrowFlags flags;
-    for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
-      if constexpr (kHeavy) {
-        ContactRow<Real> row;
-        accept[k] = decide.accept_row(c.a(k), c.b(k), full, flags, row);
-        if (accept[k]) chunk_rows[ch].push_back(row);
-      } else {
-        accept[k] = decide.accept(c.a(k), c.b(k), flags);
-      }
-      count += accept[k];
-    }
-    chunk_count[ch] = count;
-    chunk_flags[ch] = flags;
-  };
-  auto fill_chunk = [&](std::size_t ch) {
-    std::size_t w = chunk_offset[ch], i = 0;
-    for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
-      if (!accept[k]) continue;
-      const std::uint32_t a = c.a(k), b = c.b(k);
-      if constexpr (kHeavy)
-        write_row(out, w++, a, b, chunk_rows[ch][i++], full);
-      else
-        write_row(out, w++, a, b, decide.row(a, b, full), full);
-    }
-  };
-  if constexpr (kHeavy) {
-#pragma omp parallel for num_threads(nt) schedule(dynamic, 1) if (n_chunks > 1)
-    for (std::size_t ch = 0; ch < n_chunks; ++ch) count_chunk(ch);
-  } else {
-#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
-    for (std::size_t ch = 0; ch < n_chunks; ++ch) count_chunk(ch);
-  }
-  // scan → fill
-  const std::uint64_t n_rows = exclusive_scan_into(chunk_count, chunk_offset);
-  out.resize(n_rows, full);
-  if constexpr (kHeavy) {
-#pragma omp parallel for num_threads(nt) schedule(dynamic, 1) if (n_chunks > 1)
-    for (std::size_t ch = 0; ch < n_chunks; ++ch) fill_chunk(ch);
-  } else {
-#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
-    for (std::size_t ch = 0; ch < n_chunks; ++ch) fill_chunk(ch);
-  }
-  NarrowFlags total;
-  for (const NarrowFlags& f : chunk_flags) {
-    total.fallbacks += f.fallbacks;
-    total.unconverged += f.unconverged;
-  }
-  return total;
-}
-
 }  // namespace
 
 template <class Real>
@@ -109,30 +40,37 @@ void narrow(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres, c
     }
     return;
   }
-  narrow_compact<false>(c, SphereDecide<Real>{spheres.data(), origin}, full, nt, out);
+  // count: an accept flag per candidate and the accepted total per fixed chunk of candidates (the
+  // chunking depends only on the candidate count: the rows are the same for any thread count)
+  const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(256, n_cand / 16384));
+  std::vector<std::uint64_t> chunk_count(n_chunks, 0), chunk_offset;
+  std::vector<std::uint8_t> accept(n_cand);
+#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
+  for (std::size_t ch = 0; ch < n_chunks; ++ch) {
+    std::uint64_t count = 0;
+    for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
+      accept[k] = narrow_decide(spheres[c.a(k)], spheres[c.b(k)], origin, false).contact;
+      count += accept[k];
+    }
+    chunk_count[ch] = count;
+  }
+  // scan → fill
+  const std::uint64_t n_rows = exclusive_scan_into(chunk_count, chunk_offset);
+  out.resize(n_rows, full);
+#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
+  for (std::size_t ch = 0; ch < n_chunks; ++ch) {
+    std::size_t w = chunk_offset[ch];
+    for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
+      if (!accept[k]) continue;
+      const std::uint32_t a = c.a(k), b = c.b(k);
+      write_row(out, w++, a, b, narrow_decide(spheres[a], spheres[b], origin, full).row, full);
+    }
+  }
 }
 
 template void narrow(const CandidatePairs&, const std::vector<Sphere<float>>&, const Vec3<double>&, Fields,
                      int, Contacts<float>&);
 template void narrow(const CandidatePairs&, const std::vector<Sphere<double>>&, const Vec3<double>&, Fields,
                      int, Contacts<double>&);
-
-template <class Real>
-void narrow_shapes(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres,
-                   const std::vector<PackedShape<Real>>& shapes, const Vec3<double>& origin,
-                   const SolverSettings<Real>& settings, Fields fields, int nt, Contacts<Real>& out,
-                   EngineStats& stats) {
-  const NarrowFlags f = narrow_compact<true>(
-      c, ShapeDecide<Real>{spheres.data(), shapes.data(), origin, settings}, fields == Fields::full, nt, out);
-  stats.narrow_fallbacks += f.fallbacks;
-  stats.narrow_unconverged += f.unconverged;
-}
-
-template void narrow_shapes(const CandidatePairs&, const std::vector<Sphere<float>>&,
-                            const std::vector<PackedShape<float>>&, const Vec3<double>&,
-                            const SolverSettings<float>&, Fields, int, Contacts<float>&, EngineStats&);
-template void narrow_shapes(const CandidatePairs&, const std::vector<Sphere<double>>&,
-                            const std::vector<PackedShape<double>>&, const Vec3<double>&,
-                            const SolverSettings<double>&, Fields, int, Contacts<double>&, EngineStats&);
 
 }  // namespace cg::detail::host
