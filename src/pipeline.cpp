@@ -139,7 +139,7 @@ struct SharedFrame {
 
 template <class Real>
 SharedFrame agree_frame(const Session& session, const Bounds& mine, const DistributedOptions& options) {
-  constexpr Precision precision = std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64;
+  constexpr Precision precision = precision_of<Real>();
   SharedFrame f;
   f.global = allgather_bounds(session, mine);
   agreed_stage(session, "frame", [&] {
