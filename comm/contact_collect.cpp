@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstdio>
 #include <numeric>
+#include <type_traits>
 
 #include "agreed_stage.hpp"
 #include "contact_merge.hpp"
@@ -18,22 +19,13 @@ double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-// Receive storage for one run of n contacts (ids, distance and nvec vector fields) and its view.
+// Element pointers of every field of `c`, in table order (the optional ones when `full`).
 template <class Real>
-ContactRunView<Real> receive_run(std::size_t n, int nvec, HostVector<std::int64_t>& id_a,
-                                 HostVector<std::int64_t>& id_b, HostVector<Real>& distance,
-                                 std::vector<HostVector<Vec3<Real>>>& vec) {
-  id_a = HostVector<std::int64_t>(n);
-  id_b = HostVector<std::int64_t>(n);
-  distance = HostVector<Real>(n);
-  for (int f = 0; f < nvec; ++f) vec.emplace_back(n);
-  ContactRunView<Real> run;
-  run.n = n;
-  run.id_a = id_a.data();
-  run.id_b = id_b.data();
-  run.distance = distance.data();
-  for (int f = 0; f < nvec; ++f) run.vec[f] = vec[static_cast<std::size_t>(f)].data();
-  return run;
+std::vector<unsigned char*> field_bytes(Contacts<Real>& c, bool full) {
+  std::vector<unsigned char*> p;
+  for_each_contact_field(
+      c, full, [&](auto, auto& column) { p.push_back(reinterpret_cast<unsigned char*>(column.data())); });
+  return p;
 }
 
 // The k-way merge of the sorted runs by (id_a, id_b) into `out`, exact duplicates removed; returns
@@ -75,39 +67,27 @@ CollectedContacts<Real> gather_contacts(const Session& session, Contacts<Real>&&
   const std::vector<std::uint64_t> counts = comm.allgather<std::uint64_t>(local.size());
   const std::size_t p = counts.size();
   std::vector<ContactRunView<Real>> runs;
-  // rank 0's received fields: ids (2), distance, and up to 7 vector fields per rank
-  std::vector<HostVector<std::int64_t>> recv_a, recv_b;
-  std::vector<HostVector<Real>> recv_d;
-  std::vector<std::vector<HostVector<Vec3<Real>>>> recv_v;
-  const int nvec = full ? 7 : 3;
+  std::vector<Contacts<Real>> received(root ? p : 0);  // rank 0: rank r's run (r >= 1)
   if (root) {
     runs.resize(p);
-    recv_a.resize(p);
-    recv_b.resize(p);
-    recv_d.resize(p);
-    recv_v.resize(p);
     runs[0] = contact_run_view(local, full);  // rank 0's own run stays in place
     for (std::size_t r = 1; r < p; ++r) {
-      runs[r] = receive_run(counts[r], nvec, recv_a[r], recv_b[r], recv_d[r], recv_v[r]);
+      received[r].resize(counts[r], full);
+      runs[r] = contact_run_view(received[r], full);
     }
   }
-  auto targets = [&](auto& buffers) {  // where rank r's part of a field lands on rank 0 (r >= 1)
-    std::vector<decltype(buffers[0].data())> t(root ? p : 0, nullptr);
-    for (std::size_t r = 1; root && r < p; ++r) t[r] = buffers[r].data();
-    return t;
-  };
-  comm.gather_to_root(local.id_a.data(), counts, targets(recv_a), options.max_message_bytes,
-                      detail::k_gather_tag + 0);
-  comm.gather_to_root(local.id_b.data(), counts, targets(recv_b), options.max_message_bytes,
-                      detail::k_gather_tag + 1);
-  comm.gather_to_root(local.distance.data(), counts, targets(recv_d), options.max_message_bytes,
-                      detail::k_gather_tag + 2);
-  for (int f = 0; f < nvec; ++f) {
-    std::vector<Vec3<Real>*> t(root ? p : 0, nullptr);
-    for (std::size_t r = 1; root && r < p; ++r) t[r] = recv_v[r][static_cast<std::size_t>(f)].data();
-    comm.gather_to_root(contact_vec_field(local, f)->data(), counts, t, options.max_message_bytes,
-                        detail::k_gather_tag + 3 + f);
-  }
+  // each field to rank 0, one tag per field, straight into rank r's received run
+  std::vector<std::vector<unsigned char*>> into(root ? p : 0);
+  for (std::size_t r = 1; root && r < p; ++r) into[r] = field_bytes(received[r], full);
+  int f = 0;
+  for_each_contact_field(local, full, [&](auto, auto& column) {
+    using T = std::remove_reference_t<decltype(column[0])>;
+    std::vector<T*> t(root ? p : 0, nullptr);
+    for (std::size_t r = 1; root && r < p; ++r)
+      t[r] = reinterpret_cast<T*>(into[r][static_cast<std::size_t>(f)]);
+    comm.gather_to_root(column.data(), counts, t, options.max_message_bytes, detail::k_gather_tag + f);
+    ++f;
+  });
   if (!root) local = Contacts<Real>{};
   result.transfer_seconds = seconds_since(t0);
 
@@ -142,7 +122,6 @@ CollectedContacts<Real> exchange_contacts(const Session& session, Contacts<Real>
   const std::size_t p = static_cast<std::size_t>(ranks), mine = static_cast<std::size_t>(me);
   const bool full = local.full;
   CollectedContacts<Real> result;
-  const int nvec = full ? 7 : 3;
   // the id_a range of rank d: the rows it read
   auto id_begin = [&](std::size_t d) { return n_global * d / p; };
   result.id_begin = id_begin(mine);
@@ -163,45 +142,28 @@ CollectedContacts<Real> exchange_contacts(const Session& session, Contacts<Real>
   });
   const std::vector<std::uint64_t> recv_counts = comm.alltoall_counts(send_counts);
   std::vector<ContactRunView<Real>> runs(p);
-  std::vector<HostVector<std::int64_t>> recv_a(p), recv_b(p);
-  std::vector<HostVector<Real>> recv_d(p);
-  std::vector<std::vector<HostVector<Vec3<Real>>>> recv_v(p);
-  std::vector<detail::Comm::RowField> fields(3 + static_cast<std::size_t>(nvec));
+  std::vector<Contacts<Real>> received(p);  // rank r's part of this rank's id range (r != me)
+  std::vector<detail::Comm::RowField> fields;
   agreed_stage(session, "exchange", [&] {
     for (std::size_t r = 0; r < p; ++r) {
       if (r == mine) {  // this rank's own part stays where it is
-        const std::uint64_t at = split[mine];
-        ContactRunView<Real>& v = runs[r];
-        v.n = send_counts[mine];
-        v.id_a = local.id_a.data() + at;
-        v.id_b = local.id_b.data() + at;
-        v.distance = local.distance.data() + at;
-        for (int f = 0; f < nvec; ++f) v.vec[f] = contact_vec_field(local, f)->data() + at;
+        runs[r] = contact_run_view(local, full, split[mine], send_counts[mine]);
         continue;
       }
-      runs[r] = receive_run(recv_counts[r], nvec, recv_a[r], recv_b[r], recv_d[r], recv_v[r]);
+      received[r].resize(recv_counts[r], full);
+      runs[r] = contact_run_view(received[r], full);
     }
-    auto bytes = [](auto* ptr) { return reinterpret_cast<unsigned char*>(ptr); };
-    auto cbytes = [](const auto* ptr) { return reinterpret_cast<const unsigned char*>(ptr); };
-    for (auto& field : fields) field.into.assign(p, nullptr);
-    fields[0].send = cbytes(local.id_a.data());
-    fields[0].row_bytes = sizeof(std::int64_t);
-    fields[1].send = cbytes(local.id_b.data());
-    fields[1].row_bytes = sizeof(std::int64_t);
-    fields[2].send = cbytes(local.distance.data());
-    fields[2].row_bytes = sizeof(Real);
-    for (int f = 0; f < nvec; ++f) {
-      fields[3 + static_cast<std::size_t>(f)].send = cbytes(contact_vec_field(local, f)->data());
-      fields[3 + static_cast<std::size_t>(f)].row_bytes = sizeof(Vec3<Real>);
-    }
+    // one RowField per contact field, in table order: sent from `local`, received into `received`
+    for_each_contact_field(local, full, [&](auto, auto& column) {
+      detail::Comm::RowField& field = fields.emplace_back();
+      field.send = reinterpret_cast<const unsigned char*>(column.data());
+      field.row_bytes = sizeof(column[0]);
+      field.into.assign(p, nullptr);
+    });
     for (std::size_t r = 0; r < p; ++r) {
       if (r == mine) continue;
-      fields[0].into[r] = bytes(recv_a[r].data());
-      fields[1].into[r] = bytes(recv_b[r].data());
-      fields[2].into[r] = bytes(recv_d[r].data());
-      for (int f = 0; f < nvec; ++f)
-        fields[3 + static_cast<std::size_t>(f)].into[r] =
-            bytes(recv_v[r][static_cast<std::size_t>(f)].data());
+      const std::vector<unsigned char*> to = field_bytes(received[r], full);
+      for (std::size_t f = 0; f < fields.size(); ++f) fields[f].into[r] = to[f];
     }
   });
   comm.exchange_rows(fields, split, recv_counts, options.max_message_bytes, detail::k_exchange_tag);

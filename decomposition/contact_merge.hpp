@@ -33,30 +33,14 @@ namespace detail {
 
 template <class Real>
 void append_contact_row(Contacts<Real>& out, const Contacts<Real>& in, std::size_t k) {
-  out.id_a.push_back(in.id_a[k]);
-  out.id_b.push_back(in.id_b[k]);
-  out.position_on_a.push_back(in.position_on_a[k]);
-  out.position_on_b.push_back(in.position_on_b[k]);
-  out.normal_on_b.push_back(in.normal_on_b[k]);
-  out.distance.push_back(in.distance[k]);
-  if (out.full) {
-    out.local_point_a.push_back(in.local_point_a[k]);
-    out.local_point_b.push_back(in.local_point_b[k]);
-    out.lateral_friction_dir1.push_back(in.lateral_friction_dir1[k]);
-    out.lateral_friction_dir2.push_back(in.lateral_friction_dir2[k]);
-  }
+  zip_contact_fields(out, in, out.full, [k](auto, auto& to, const auto& from) { to.push_back(from[k]); });
 }
 
 template <class Real>
 void check_contact_run(const Contacts<Real>& run, std::size_t index, bool full) {
   const std::size_t n = run.id_a.size();
   const std::string name = "contact run " + std::to_string(index);
-  bool sizes = run.id_b.size() == n && run.position_on_a.size() == n && run.position_on_b.size() == n &&
-               run.normal_on_b.size() == n && run.distance.size() == n;
-  if (full) {
-    sizes = sizes && run.full && run.local_point_a.size() == n && run.local_point_b.size() == n &&
-            run.lateral_friction_dir1.size() == n && run.lateral_friction_dir2.size() == n;
-  }
+  const bool sizes = run.consistent() && (!full || run.full);
   if (!sizes) throw Error(name + ": fields of different lengths (or optional fields missing)");
   for (std::size_t k = 1; k < n; ++k) {
     if (std::tie(run.id_a[k - 1], run.id_b[k - 1]) > std::tie(run.id_a[k], run.id_b[k])) {
@@ -104,35 +88,20 @@ MergedContacts<Real> merge_contact_runs(std::span<const Contacts<Real>> runs, bo
 
 // ---- the same merge, in parallel, from views, into a presized result -----------------------------
 
-// One run's fields, read-only: a Contacts (contact_run_view) or receive buffers. vec[0 … 6]:
-// position_on_a, position_on_b, normal_on_b, local_point_a, local_point_b, lateral_friction_dir1,
-// lateral_friction_dir2 (the last four only with full fields).
+// One run's fields, read-only, in place: a Contacts (contact_run_view) or receive buffers.
 template <class Real>
-struct ContactRunView {
+struct ContactRunView : ContactColumns<Real, ConstPtr> {
   std::size_t n = 0;
-  const std::int64_t* id_a = nullptr;
-  const std::int64_t* id_b = nullptr;
-  const Real* distance = nullptr;
-  const Vec3<Real>* vec[7] = {};
 };
 
-// The vector fields of a Contacts in ContactRunView::vec order.
+// Rows [first, first + count) of `c` (count npos: to the end) as a run; the optional fields when `full`.
 template <class Real>
-HostVector<Vec3<Real>>* contact_vec_field(Contacts<Real>& c, int f) {
-  HostVector<Vec3<Real>>* v[7] = {&c.position_on_a,        &c.position_on_b, &c.normal_on_b,
-                                  &c.local_point_a,        &c.local_point_b, &c.lateral_friction_dir1,
-                                  &c.lateral_friction_dir2};
-  return v[f];
-}
-
-template <class Real>
-ContactRunView<Real> contact_run_view(Contacts<Real>& c, bool full) {
+ContactRunView<Real> contact_run_view(const Contacts<Real>& c, bool full, std::size_t first = 0,
+                                      std::size_t count = std::size_t(-1)) {
   ContactRunView<Real> v;
-  v.n = c.size();
-  v.id_a = c.id_a.data();
-  v.id_b = c.id_b.data();
-  v.distance = c.distance.data();
-  for (int f = 0; f < (full ? 7 : 3); ++f) v.vec[f] = contact_vec_field(c, f)->data();
+  v.n = count == std::size_t(-1) ? c.size() - first : count;
+  zip_contact_fields(v, c, full,
+                     [first](auto, auto*& ptr, const auto& column) { ptr = column.data() + first; });
   return v;
 }
 
@@ -164,7 +133,6 @@ std::uint64_t merge_contact_runs_into(const std::vector<ContactRunView<Real>>& r
                   std::to_string(bad));
     }
   }
-  const int nvec = full ? 7 : 3;
   std::size_t total = 0, largest = 0;
   for (std::size_t r = 0; r < p; ++r) {
     total += runs[r].n;
@@ -194,11 +162,9 @@ std::uint64_t merge_contact_runs_into(const std::vector<ContactRunView<Real>>& r
   std::vector<std::size_t> start(parts + 1, 0), written(parts, 0);
   for (std::size_t j = 0; j <= parts; ++j)
     for (std::size_t r = 0; r < p; ++r) start[j] += cut[j * p + r];
-  Vec3<Real>* dst[7] = {};
-  for (int f = 0; f < nvec; ++f) dst[f] = contact_vec_field(out, f)->data();
-  std::int64_t* da = out.id_a.data();
-  std::int64_t* db = out.id_b.data();
-  Real* dd = out.distance.data();
+  const ContactColumns<Real, Ptr> dst = columns_of(out);
+  std::int64_t* da = dst.id_a;
+  std::int64_t* db = dst.id_b;
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (parts > 1)
   for (std::size_t j = 0; j < parts; ++j) {
     std::vector<std::size_t> next(p), end(p);
@@ -212,10 +178,7 @@ std::uint64_t merge_contact_runs_into(const std::vector<ContactRunView<Real>>& r
       const ContactRunView<Real>& in = runs[r];
       const std::int64_t a = in.id_a[k], b = in.id_b[k];
       if (w > start[j] && da[w - 1] == a && db[w - 1] == b) return;
-      da[w] = a;
-      db[w] = b;
-      dd[w] = in.distance[k];
-      for (int f = 0; f < nvec; ++f) dst[f][w] = in.vec[f][k];
+      zip_contact_fields(dst, in, full, [w, k](auto, auto* to, const auto* from) { to[w] = from[k]; });
       ++w;
     };
     if (p <= 8) {
@@ -247,11 +210,9 @@ std::uint64_t merge_contact_runs_into(const std::vector<ContactRunView<Real>>& r
   std::size_t w = 0;
   for (std::size_t j = 0; j < parts; ++j) {
     if (w != start[j] && written[j] > 0) {
-      std::memmove(da + w, da + start[j], written[j] * sizeof(*da));
-      std::memmove(db + w, db + start[j], written[j] * sizeof(*db));
-      std::memmove(dd + w, dd + start[j], written[j] * sizeof(*dd));
-      for (int f = 0; f < nvec; ++f)
-        std::memmove(dst[f] + w, dst[f] + start[j], written[j] * sizeof(Vec3<Real>));
+      for_each_contact_field(dst, full, [&](auto, auto* column) {
+        std::memmove(column + w, column + start[j], written[j] * sizeof(*column));
+      });
     }
     w += written[j];
   }

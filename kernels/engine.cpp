@@ -167,7 +167,7 @@ namespace {
 template <class Real>
 detail::DetectJob<Real> plan_job(const Bounds& b, std::optional<Frame> frame, const EngineOptions& options,
                                  EngineStats& stats) {
-  constexpr Precision prec = sizeof(Real) == 4 ? Precision::fp32 : Precision::fp64;
+  constexpr Precision prec = precision_of<Real>();
   const Frame f = frame ? *frame : make_frame(b, options.cell_size, prec, options.cell_choice);
   if (frame && f.cell_size < 2 * b.r_max)
     throw UsageError("frame cell size is smaller than the largest diameter");

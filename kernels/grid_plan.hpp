@@ -4,6 +4,7 @@
 // g++-safe public header (part of engine.hpp).
 #include <cstddef>
 #include <cstdint>
+#include <type_traits>
 
 #include "bodies.hpp"
 #include "core/vec3.hpp"
@@ -12,6 +13,13 @@ namespace cg {
 
 enum class Precision { fp32, fp64 };
 const char* to_string(Precision p);
+
+// The precision mode whose real type is Real: the one conversion from the template to the enum.
+template <class Real>
+constexpr Precision precision_of() {
+  static_assert(std::is_same_v<Real, float> || std::is_same_v<Real, double>, "Real is float or double");
+  return std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64;
+}
 
 // Axis-aligned bounds of the bounding spheres' boxes, and the largest radius.
 struct Bounds {

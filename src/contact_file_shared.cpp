@@ -30,7 +30,7 @@ double write_all(Session& session, const std::string& path, const Contacts<Real>
   using Clock = std::chrono::steady_clock;
   const auto t0 = Clock::now();
   const bool root = session.rank() == 0;
-  const Precision precision = std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64;
+  constexpr Precision precision = precision_of<Real>();
   const bool full = slice.full;
 
   // The slices tile [0, K): checked before anything is created.

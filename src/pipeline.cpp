@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <limits>
 #include <numeric>
 #include <optional>
@@ -138,7 +139,7 @@ struct SharedFrame {
 
 template <class Real>
 SharedFrame agree_frame(const Session& session, const Bounds& mine, const DistributedOptions& options) {
-  constexpr Precision precision = std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64;
+  constexpr Precision precision = precision_of<Real>();
   SharedFrame f;
   f.global = allgather_bounds(session, mine);
   agreed_stage(session, "frame", [&] {
@@ -578,13 +579,26 @@ void write_contacts_csv(const std::string& path, const Contacts<Real>& c) {
   {
     std::FILE* f = std::fopen(tmp.c_str(), "w");
     if (!f) throw IoError(path + ": cannot open for writing");
-    fmt::print(f,
-               "id_a,id_b,position_on_a_x,position_on_a_y,position_on_a_z,position_on_b_x,position_on_b_y,"
-               "position_on_b_z,normal_on_b_x,normal_on_b_y,normal_on_b_z,distance\n");
+    // every field the run produced (kContactFields order); a vector field is three columns
+    std::string header;
+    for_each_contact_field(c, c.full, [&](auto index, const auto&) {
+      const ContactField& field = kContactFields[index];
+      const std::string name = field.name();
+      header += header.empty() ? "" : ",";
+      header += field.kind == FieldKind::vector ? name + "_x," + name + "_y," + name + "_z" : name;
+    });
+    fmt::print(f, "{}\n", header);
+    fmt::memory_buffer row;
     for (std::size_t k = 0; k < c.size(); ++k) {
-      const auto &pa = c.position_on_a[k], &pb = c.position_on_b[k], &n = c.normal_on_b[k];
-      fmt::print(f, "{},{},{},{},{},{},{},{},{},{},{},{}\n", c.id_a[k], c.id_b[k], pa.x, pa.y, pa.z, pb.x,
-                 pb.y, pb.z, n.x, n.y, n.z, c.distance[k]);
+      row.clear();
+      for_each_contact_field(c, c.full, [&](auto, const auto& column) {
+        if constexpr (requires { column[k].x; })
+          fmt::format_to(std::back_inserter(row), "{},{},{},", column[k].x, column[k].y, column[k].z);
+        else
+          fmt::format_to(std::back_inserter(row), "{},", column[k]);
+      });
+      row[row.size() - 1] = '\n';
+      std::fwrite(row.data(), 1, row.size(), f);
     }
     if (std::fclose(f) != 0) {
       std::filesystem::remove(tmp);

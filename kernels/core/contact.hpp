@@ -4,6 +4,7 @@
 #include <limits>
 
 #include "core/config.hpp"
+#include "core/contact_fields.hpp"
 #include "core/vec3.hpp"
 
 #if !defined(__CUDA_ARCH__)
@@ -77,15 +78,9 @@ CG_HD Vec3<Real> to_world(const Vec3<double>& origin, const Vec3<Real>& local) {
           static_cast<Real>(origin.z + double(local.z))};
 }
 
-// One row of the contact output (CONTRACT §2), world frame. The `full` members are computed only when
-// asked for (Fields::full): local points (R = identity for spheres) and Bullet's friction directions.
-template <class Real>
-struct ContactRow {
-  Vec3<Real> position_on_a, position_on_b, normal_on_b;
-  Real distance;
-  Vec3<Real> local_point_a, local_point_b, lateral_friction_dir1, lateral_friction_dir2;
-};
-
+// One row of the contact output (CONTRACT §2), world frame: ContactRow (core/contact_fields.hpp). The
+// optional members are computed only when asked for (Fields::full): local points (R = identity for
+// spheres) and Bullet's friction directions. The ids are set by the narrow stage.
 template <class Real>
 CG_HD ContactRow<Real> sphere_contact_row(const Sphere<Real>& a, const Sphere<Real>& b,
                                           const Vec3<double>& origin, bool full) {

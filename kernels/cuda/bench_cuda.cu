@@ -121,7 +121,7 @@ Row bench(int log2n, std::uint64_t n, const double* d_pos, const double* d_rad, 
           Flusher& flush) {
   Row row{};
   row.log2n = log2n;
-  row.prec = sizeof(Real) == 4 ? "fp32" : "fp64";
+  row.prec = cg::to_string(cg::precision_of<Real>());
   row.n = n;
   row.upload_ms = upload_ms;
   const cg::DeviceBodiesView bodies{d_pos, d_rad, nullptr, n};

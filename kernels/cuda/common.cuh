@@ -14,6 +14,7 @@
 #include <cub/block/block_scan.cuh>
 
 #include "core/contact.hpp"
+#include "core/contact_fields.hpp"
 #include "core/grid.hpp"
 #include "engine.hpp"
 
@@ -46,14 +47,10 @@ struct Counters {
   unsigned long long bad_shape, ellipsoids, fallbacks, unconverged;
 };
 
-// Pointers of the contact arrays in DEVICE memory; the `full` four are null for Fields::basic.
+// Pointers of the contact arrays in DEVICE memory (core/contact_fields.hpp); the optional ones are
+// null for Fields::basic.
 template <class Real>
-struct ContactPtrs {
-  std::int64_t *id_a, *id_b;
-  Vec3<Real>*position_on_a, *position_on_b, *normal_on_b;
-  Real* distance;
-  Vec3<Real>*local_point_a, *local_point_b, *dir1, *dir2;
-};
+using ContactPtrs = ContactColumns<Real, Ptr>;
 
 __device__ __forceinline__ bool body_is_bad(double x, double y, double z, double r) {
   return !isfinite(x) || !isfinite(y) || !isfinite(z) || !(r > 0) || !isfinite(r);

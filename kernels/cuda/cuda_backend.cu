@@ -28,6 +28,7 @@
 #include <cstdint>
 #include <cstring>
 #include <sstream>
+#include <type_traits>
 
 #include "backend.hpp"
 #include "cuda/bounds.cuh"
@@ -211,16 +212,10 @@ void download_contacts(CudaBackend& b, const DeviceContactsView<Real>& v, Contac
   out = Contacts<Real>{};
   out.resize(v.count, v.full);
   if (v.count == 0) return;
-  const cuda::ContactPtrs<Real> cp{const_cast<std::int64_t*>(v.id_a),
-                                   const_cast<std::int64_t*>(v.id_b),
-                                   const_cast<Vec3<Real>*>(v.position_on_a),
-                                   const_cast<Vec3<Real>*>(v.position_on_b),
-                                   const_cast<Vec3<Real>*>(v.normal_on_b),
-                                   const_cast<Real*>(v.distance),
-                                   const_cast<Vec3<Real>*>(v.local_point_a),
-                                   const_cast<Vec3<Real>*>(v.local_point_b),
-                                   const_cast<Vec3<Real>*>(v.lateral_friction_dir1),
-                                   const_cast<Vec3<Real>*>(v.lateral_friction_dir2)};
+  cuda::ContactPtrs<Real> cp;  // the view's arrays (read only here)
+  zip_contact_fields(cp, v, v.full, [](auto, auto*& ptr, auto* d_ptr) {
+    ptr = const_cast<std::remove_reference_t<decltype(ptr)>>(d_ptr);
+  });
   for_each_field(out, cp, v.full, [&](auto& vec, const void* d_ptr) {
     CG_CUDA_CHECK(
         cudaMemcpyAsync(vec.data(), d_ptr, vec.size() * sizeof(vec[0]), cudaMemcpyDeviceToHost, b.m_stream));

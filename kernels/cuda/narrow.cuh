@@ -11,6 +11,7 @@
 // scene has ellipsoids (r.d_shapes set by shapes.cuh); the host backend uses the same structs.
 // Flags and offsets live in the candidates' dead alternate buffers (pair_a / pair_b .Alternate()).
 #include <cub/device/device_scan.cuh>
+#include <type_traits>
 
 #include "core/narrow.hpp"
 #include "core/shape_narrow.hpp"
@@ -29,19 +30,10 @@ __global__ void __launch_bounds__(kBlock)
   if (k >= n_pairs) return;
   const std::uint32_t a = pair_a[k], b = pair_b[k];
   const Sphere<Real> sa = spheres[a], sb = spheres[b];
-  const ContactRow<Real> row = narrow_decide(sa, sb, origin, full).row;  // core/narrow.hpp
-  out.id_a[k] = a;
-  out.id_b[k] = b;
-  out.position_on_a[k] = row.position_on_a;
-  out.position_on_b[k] = row.position_on_b;
-  out.normal_on_b[k] = row.normal_on_b;
-  out.distance[k] = row.distance;
-  if (full) {
-    out.local_point_a[k] = row.local_point_a;
-    out.local_point_b[k] = row.local_point_b;
-    out.dir1[k] = row.lateral_friction_dir1;
-    out.dir2[k] = row.lateral_friction_dir2;
-  }
+  ContactRow<Real> row = narrow_decide(sa, sb, origin, full).row;  // core/narrow.hpp
+  row.id_a = a;
+  row.id_b = b;
+  store_row(out, k, row, full);  // core/contact_fields.hpp: the one row store
 }
 
 // narrow, rejecting path, count: accept[k] = 1 when candidate k is a contact. Decide: SphereDecide or
@@ -71,19 +63,10 @@ __global__ void __launch_bounds__(kBlock)
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   if (k >= n_pairs || !accept[k]) return;
   const std::uint32_t a = pair_a[k], b = pair_b[k], w = offset[k];
-  const ContactRow<Real> row = decide.row(a, b, full);
-  out.id_a[w] = a;
-  out.id_b[w] = b;
-  out.position_on_a[w] = row.position_on_a;
-  out.position_on_b[w] = row.position_on_b;
-  out.normal_on_b[w] = row.normal_on_b;
-  out.distance[w] = row.distance;
-  if (full) {
-    out.local_point_a[w] = row.local_point_a;
-    out.local_point_b[w] = row.local_point_b;
-    out.dir1[w] = row.lateral_friction_dir1;
-    out.dir2[w] = row.lateral_friction_dir2;
-  }
+  ContactRow<Real> row = decide.row(a, b, full);
+  row.id_a = a;
+  row.id_b = b;
+  store_row(out, w, row, full);  // core/contact_fields.hpp: the one row store
 }
 
 }  // namespace cg::cuda
@@ -103,18 +86,13 @@ std::size_t layout_contacts(std::byte* o, std::size_t rows, bool full, cuda::Con
     return p;
   };
   cp = {};
-  cp.id_a = reinterpret_cast<std::int64_t*>(take(ids));
-  cp.id_b = reinterpret_cast<std::int64_t*>(take(ids));
-  cp.position_on_a = reinterpret_cast<Vec3<Real>*>(take(v3));
-  cp.position_on_b = reinterpret_cast<Vec3<Real>*>(take(v3));
-  cp.normal_on_b = reinterpret_cast<Vec3<Real>*>(take(v3));
-  cp.distance = reinterpret_cast<Real*>(take(reals));
-  if (full) {
-    cp.local_point_a = reinterpret_cast<Vec3<Real>*>(take(v3));
-    cp.local_point_b = reinterpret_cast<Vec3<Real>*>(take(v3));
-    cp.dir1 = reinterpret_cast<Vec3<Real>*>(take(v3));
-    cp.dir2 = reinterpret_cast<Vec3<Real>*>(take(v3));
-  }
+  for_each_contact_field(cp, full, [&](auto index, auto*& column) {
+    const ContactField& f = kContactFields[index];
+    using T = std::remove_reference_t<decltype(*column)>;
+    column = reinterpret_cast<T*>(take(f.kind == FieldKind::id       ? ids
+                                       : f.kind == FieldKind::vector ? v3
+                                                                     : reals));
+  });
   return at;
 }
 

@@ -10,22 +10,12 @@
 
 namespace cg::detail {
 
-// f(host vector, device array) for each contact field the run produces (the four `full` ones only
-// with Fields::full), in the order of the device layout.
+// f(host vector, device array) for each contact field the run produces (the optional ones only
+// with Fields::full), in table order: the order of the device layout (layout_contacts).
 template <class Real, class F>
 void for_each_field(Contacts<Real>& out, const cuda::ContactPtrs<Real>& cp, bool full, F&& f) {
-  f(out.id_a, cp.id_a);
-  f(out.id_b, cp.id_b);
-  f(out.position_on_a, cp.position_on_a);
-  f(out.position_on_b, cp.position_on_b);
-  f(out.normal_on_b, cp.normal_on_b);
-  f(out.distance, cp.distance);
-  if (full) {
-    f(out.local_point_a, cp.local_point_a);
-    f(out.local_point_b, cp.local_point_b);
-    f(out.lateral_friction_dir1, cp.dir1);
-    f(out.lateral_friction_dir2, cp.dir2);
-  }
+  zip_contact_fields(out, cp, full,
+                     [&](auto, auto& vec, auto* d_ptr) { f(vec, static_cast<const void*>(d_ptr)); });
 }
 
 // upload: the DEVICE bodies of the call: the caller's arrays (device-array API), or the host arrays
@@ -98,18 +88,7 @@ DownloadHostTimes download_stage(RunState<Real, Key>& r, cuda::PinnedBuffer& h_s
     v = DeviceContactsView<Real>{};
     v.count = np;
     v.full = full;
-    v.id_a = cp.id_a;
-    v.id_b = cp.id_b;
-    v.position_on_a = cp.position_on_a;
-    v.position_on_b = cp.position_on_b;
-    v.normal_on_b = cp.normal_on_b;
-    v.distance = cp.distance;
-    if (full) {
-      v.local_point_a = cp.local_point_a;
-      v.local_point_b = cp.local_point_b;
-      v.lateral_friction_dir1 = cp.dir1;
-      v.lateral_friction_dir2 = cp.dir2;
-    }
+    zip_contact_fields(v, cp, full, [](auto, auto& view, auto* d_ptr) { view = d_ptr; });
     CG_CUDA_CHECK(cudaStreamSynchronize(st));
     return ht;
   }

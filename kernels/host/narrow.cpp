@@ -7,21 +7,13 @@
 namespace cg::detail::host {
 namespace {
 
+// Row k of `rows`: the decided pair (a, b) with its row (the one row store: store_row).
 template <class Real>
-void write_row(Contacts<Real>& out, std::size_t k, std::uint32_t a, std::uint32_t b,
-               const ContactRow<Real>& row, bool full) {
-  out.id_a[k] = a;
-  out.id_b[k] = b;
-  out.position_on_a[k] = row.position_on_a;
-  out.position_on_b[k] = row.position_on_b;
-  out.normal_on_b[k] = row.normal_on_b;
-  out.distance[k] = row.distance;
-  if (full) {
-    out.local_point_a[k] = row.local_point_a;
-    out.local_point_b[k] = row.local_point_b;
-    out.lateral_friction_dir1[k] = row.lateral_friction_dir1;
-    out.lateral_friction_dir2[k] = row.lateral_friction_dir2;
-  }
+void write_row(const ContactColumns<Real, Ptr>& rows, std::size_t k, std::uint32_t a, std::uint32_t b,
+               ContactRow<Real> row, bool full) {
+  row.id_a = a;
+  row.id_b = b;
+  store_row(rows, k, row, full);
 }
 
 }  // namespace
@@ -33,10 +25,11 @@ void narrow(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres, c
   const std::size_t n_cand = c.size();
   if (!narrow_may_reject(c.filter)) {  // every candidate is a contact: no scan
     out.resize(n_cand, full);
+    const ContactColumns<Real, Ptr> rows = columns_of(out);
 #pragma omp parallel for num_threads(nt) schedule(static) if (n_cand > k_parallel_min)
     for (std::size_t k = 0; k < n_cand; ++k) {
       const std::uint32_t a = c.a(k), b = c.b(k);
-      write_row(out, k, a, b, narrow_decide(spheres[a], spheres[b], origin, full).row, full);
+      write_row(rows, k, a, b, narrow_decide(spheres[a], spheres[b], origin, full).row, full);
     }
     return;
   }
@@ -57,13 +50,14 @@ void narrow(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres, c
   // scan → fill
   const std::uint64_t n_rows = exclusive_scan_into(chunk_count, chunk_offset);
   out.resize(n_rows, full);
+  const ContactColumns<Real, Ptr> rows = columns_of(out);
 #pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
   for (std::size_t ch = 0; ch < n_chunks; ++ch) {
     std::size_t w = chunk_offset[ch];
     for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
       if (!accept[k]) continue;
       const std::uint32_t a = c.a(k), b = c.b(k);
-      write_row(out, w++, a, b, narrow_decide(spheres[a], spheres[b], origin, full).row, full);
+      write_row(rows, w++, a, b, narrow_decide(spheres[a], spheres[b], origin, full).row, full);
     }
   }
 }

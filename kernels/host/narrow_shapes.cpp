@@ -1,30 +1,13 @@
 // Host stage narrow for scenes with ellipsoids (see stages.hpp: narrow_shapes): ShapeDecide
 // (core/shape_narrow.hpp) on every candidate, count → scan → fill. Sphere-only scenes never come here
-// (narrow.cpp). Kept apart from narrow.cpp so that the sphere path is untouched; store_row mirrors
-// narrow.cpp's write_row (the row store).
+// (narrow.cpp). Kept apart from narrow.cpp so that the sphere path is untouched; rows go through the one
+// row store (store_row, core/contact_fields.hpp).
 #include <algorithm>
 
 #include "host/stages.hpp"
 
 namespace cg::detail::host {
 namespace {
-
-template <class Real>
-void store_row(Contacts<Real>& out, std::size_t k, std::uint32_t a, std::uint32_t b,
-               const ContactRow<Real>& row, bool full) {
-  out.id_a[k] = a;
-  out.id_b[k] = b;
-  out.position_on_a[k] = row.position_on_a;
-  out.position_on_b[k] = row.position_on_b;
-  out.normal_on_b[k] = row.normal_on_b;
-  out.distance[k] = row.distance;
-  if (full) {
-    out.local_point_a[k] = row.local_point_a;
-    out.local_point_b[k] = row.local_point_b;
-    out.lateral_friction_dir1[k] = row.lateral_friction_dir1;
-    out.lateral_friction_dir2[k] = row.lateral_friction_dir2;
-  }
-}
 
 // count → scan → fill with ShapeDecide over chunks of candidates; the rows (candidate order, chunk
 // offsets from the scan) do not depend on the chunking or the thread count. A candidate costs up to
@@ -53,11 +36,15 @@ NarrowFlags narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& dec
     chunk_count[ch] = count;
     chunk_flags[ch] = flags;
   };
+  ContactColumns<Real, Ptr> rows;
   auto fill_chunk = [&](std::size_t ch) {
     std::size_t w = chunk_offset[ch], i = 0;
     for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
       if (!accept[k]) continue;
-      store_row(out, w++, c.a(k), c.b(k), chunk_rows[ch][i++], full);
+      ContactRow<Real>& row = chunk_rows[ch][i++];
+      row.id_a = c.a(k);
+      row.id_b = c.b(k);
+      store_row(rows, w++, row, full);
     }
   };
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 1) if (n_chunks > 1)
@@ -65,6 +52,7 @@ NarrowFlags narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& dec
   // scan → fill
   const std::uint64_t n_rows = exclusive_scan_into(chunk_count, chunk_offset);
   out.resize(n_rows, full);
+  rows = columns_of(out);
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 1) if (n_chunks > 1)
   for (std::size_t ch = 0; ch < n_chunks; ++ch) fill_chunk(ch);
   NarrowFlags total;

@@ -17,10 +17,12 @@
 #include "hdf5_io.hpp"
 #include "mpi/mpi_test_env.hpp"
 #include "pipeline.hpp"
+#include "support/contacts_equal.hpp"
 
 namespace cg {
 namespace {
 
+using test::compare_contacts;
 using testing::session;
 using testing::write_shared;
 
@@ -107,25 +109,11 @@ Scene thin_scene(std::uint64_t seed, std::size_t n) {
 
 // ---- checks ----------------------------------------------------------------------------------------
 
-template <class T>
-bool same_bits(const HostVector<T>& a, const HostVector<T>& b) {
-  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
-}
-
 template <class Real>
 void expect_identical(const Contacts<Real>& got, const Contacts<Real>& want, const std::string& what) {
   EXPECT_EQ(got.size(), want.size()) << what;
   EXPECT_EQ(got.full, want.full) << what;
-  EXPECT_TRUE(same_bits(got.id_a, want.id_a)) << what << ": id_a";
-  EXPECT_TRUE(same_bits(got.id_b, want.id_b)) << what << ": id_b";
-  EXPECT_TRUE(same_bits(got.position_on_a, want.position_on_a)) << what << ": position_on_a";
-  EXPECT_TRUE(same_bits(got.position_on_b, want.position_on_b)) << what << ": position_on_b";
-  EXPECT_TRUE(same_bits(got.normal_on_b, want.normal_on_b)) << what << ": normal_on_b";
-  EXPECT_TRUE(same_bits(got.distance, want.distance)) << what << ": distance";
-  EXPECT_TRUE(same_bits(got.local_point_a, want.local_point_a)) << what << ": local_point_a";
-  EXPECT_TRUE(same_bits(got.local_point_b, want.local_point_b)) << what << ": local_point_b";
-  EXPECT_TRUE(same_bits(got.lateral_friction_dir1, want.lateral_friction_dir1)) << what << ": dir1";
-  EXPECT_TRUE(same_bits(got.lateral_friction_dir2, want.lateral_friction_dir2)) << what << ": dir2";
+  EXPECT_EQ(compare_contacts(got, want), "identical") << what;
 }
 
 DistributedOptions base_options(Fields fields = Fields::full) {

@@ -20,10 +20,12 @@
 #include "hdf5_io.hpp"
 #include "mpi/mpi_test_env.hpp"
 #include "pipeline.hpp"
+#include "support/contacts_equal.hpp"
 
 namespace cg {
 namespace {
 
+using test::compare_contacts;
 using testing::session;
 using testing::shared_path;
 using testing::write_shared;
@@ -72,29 +74,13 @@ DistributedOptions range_options(Fields fields = Fields::full) {
   return o;
 }
 
-template <class T>
-bool same_rows(const HostVector<T>& got, const HostVector<T>& want, std::size_t first) {
-  if (got.empty()) return true;
-  return first + got.size() <= want.size() &&
-         std::memcmp(got.data(), want.data() + first, got.size() * sizeof(T)) == 0;
-}
-
 // This rank's slice is rows [first_row, first_row + n) of `want`, bit for bit.
 template <class Real>
 void expect_rows_of(const Contacts<Real>& got, std::uint64_t first, const Contacts<Real>& want,
                     const std::string& what) {
   EXPECT_EQ(got.full, want.full) << what;
   EXPECT_LE(first + got.size(), want.size()) << what;
-  EXPECT_TRUE(same_rows(got.id_a, want.id_a, first)) << what << ": id_a";
-  EXPECT_TRUE(same_rows(got.id_b, want.id_b, first)) << what << ": id_b";
-  EXPECT_TRUE(same_rows(got.position_on_a, want.position_on_a, first)) << what << ": position_on_a";
-  EXPECT_TRUE(same_rows(got.position_on_b, want.position_on_b, first)) << what << ": position_on_b";
-  EXPECT_TRUE(same_rows(got.normal_on_b, want.normal_on_b, first)) << what << ": normal_on_b";
-  EXPECT_TRUE(same_rows(got.distance, want.distance, first)) << what << ": distance";
-  EXPECT_TRUE(same_rows(got.local_point_a, want.local_point_a, first)) << what << ": local_point_a";
-  EXPECT_TRUE(same_rows(got.local_point_b, want.local_point_b, first)) << what << ": local_point_b";
-  EXPECT_TRUE(same_rows(got.lateral_friction_dir1, want.lateral_friction_dir1, first)) << what << ": dir1";
-  EXPECT_TRUE(same_rows(got.lateral_friction_dir2, want.lateral_friction_dir2, first)) << what << ": dir2";
+  EXPECT_EQ(compare_contacts(got, want, first), "identical") << what;
 }
 
 // Runs ContactOutput::ranks mode and checks this rank's range, order, rows, first row and K; returns the
@@ -199,10 +185,6 @@ std::vector<std::string> leftovers(const std::string& prefix) {
   return found;
 }
 
-const char* const k_datasets[] = {
-    "id_a",     "id_b",          "position_on_a", "position_on_b",         "normal_on_b",
-    "distance", "local_point_a", "local_point_b", "lateral_friction_dir1", "lateral_friction_dir2"};
-
 // The file every rank writes (ContactOutput::ranks slices, and ContactOutput::gather's everything-on-rank-0)
 // has the dataset bytes of the single-rank writer.
 template <class Real>
@@ -237,8 +219,8 @@ void write_and_compare(const std::string& name, const Scene& scene) {
   session().barrier();
   EXPECT_EQ(info.times.back().name, "write");
   if (session().rank() == 0) {
-    for (const char* d : k_datasets) {
-      const std::string ds = std::string("/contacts/") + d;
+    for (const ContactField& field : kContactFields) {
+      const std::string ds = field.path;
       EXPECT_EQ(read_dataset_bytes(out_a, ds), read_dataset_bytes(out_1, ds)) << name << " " << ds;
       EXPECT_EQ(read_dataset_bytes(out_b, ds), read_dataset_bytes(out_1, ds)) << name << " " << ds;
     }

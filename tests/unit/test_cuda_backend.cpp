@@ -10,6 +10,7 @@
 
 #include "engine.hpp"
 #include "scenes.hpp"
+#include "support/contacts_equal.hpp"
 
 #if defined(CONTACTGRID_HAVE_CUDA)
 #include <cuda_runtime.h>
@@ -23,25 +24,11 @@ namespace {
     if (!::cg::cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped"; \
   } while (0)
 
-template <class T>
-bool same_bits(const HostVector<T>& a, const HostVector<T>& b) {
-  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
-}
-
 template <class Real>
 void expect_identical(const Contacts<Real>& cpu, const Contacts<Real>& gpu, const std::string& what) {
   ASSERT_EQ(cpu.size(), gpu.size()) << what;
   ASSERT_EQ(cpu.full, gpu.full) << what;
-  EXPECT_TRUE(same_bits(cpu.id_a, gpu.id_a)) << what << ": id_a";
-  EXPECT_TRUE(same_bits(cpu.id_b, gpu.id_b)) << what << ": id_b";
-  EXPECT_TRUE(same_bits(cpu.position_on_a, gpu.position_on_a)) << what << ": position_on_a";
-  EXPECT_TRUE(same_bits(cpu.position_on_b, gpu.position_on_b)) << what << ": position_on_b";
-  EXPECT_TRUE(same_bits(cpu.normal_on_b, gpu.normal_on_b)) << what << ": normal_on_b";
-  EXPECT_TRUE(same_bits(cpu.distance, gpu.distance)) << what << ": distance";
-  EXPECT_TRUE(same_bits(cpu.local_point_a, gpu.local_point_a)) << what << ": local_point_a";
-  EXPECT_TRUE(same_bits(cpu.local_point_b, gpu.local_point_b)) << what << ": local_point_b";
-  EXPECT_TRUE(same_bits(cpu.lateral_friction_dir1, gpu.lateral_friction_dir1)) << what << ": dir1";
-  EXPECT_TRUE(same_bits(cpu.lateral_friction_dir2, gpu.lateral_friction_dir2)) << what << ": dir2";
+  EXPECT_EQ(compare_contacts(gpu, cpu), "identical") << what;
 }
 
 template <class Real>
