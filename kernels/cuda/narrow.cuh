@@ -4,9 +4,9 @@
 // With the default filter (spheres_touch) every candidate is a contact (narrow_may_reject() false):
 // each candidate's row is written at its own index, no scan. A filter that may reject (cells, forced
 // by Tuning::candidates; bounding_spheres, scenes with ellipsoids; later a candidate list kept across
-// calls) takes
-// count → scan → fill as the CPU backend's narrow: an accept flag per candidate, an exclusive scan,
-// the host reads the row count (one more synchronisation), the accepted rows written compacted.
+// calls) takes count → scan → fill as the CPU backend's narrow: an accept flag per candidate, an
+// exclusive scan, the host reads the row count (one more synchronisation), the accepted rows written
+// compacted.
 // The rejecting kernels take a decider (core/shape_narrow.hpp): SphereDecide, or ShapeDecide when the
 // scene has ellipsoids (r.d_shapes set by shapes.cuh); the host backend uses the same structs.
 // Flags and offsets live in the candidates' dead alternate buffers (pair_a / pair_b .Alternate()).
