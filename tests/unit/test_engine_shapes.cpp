@@ -343,8 +343,8 @@ TYPED_TEST(EngineShapesTest, RowOfFillPassEqualsRowOfCountPass) {
       ++contacts;
       const ContactRow<Real> again = d.row(a, b, true);
       bool same = true;  // every field, bitwise (not the struct: padding)
-      zip_contact_fields(kept, again, true, [&](auto, const auto& x, const auto& y) {
-        same = same && std::memcmp(&x, &y, sizeof(x)) == 0;
+      zip_contact_fields(kept, again, true, [&](auto, const auto& u, const auto& v) {
+        same = same && std::memcmp(&u, &v, sizeof(u)) == 0;
       });
       EXPECT_TRUE(same) << a << "," << b;
     }
