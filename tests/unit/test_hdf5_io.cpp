@@ -1,4 +1,4 @@
-// Unit tests of the HDF5 layer (src/hdf5_io.cpp): scene and contact round trips, and one test per
+// Unit tests of the HDF5 layer (src/io/): scene and contact round trips, and one test per
 // kind of bad input, each checking the exception type and that the message names the file, the
 // dataset and the row. Every test works in its own temporary directory, removed afterwards.
 #include <gtest/gtest.h>
