@@ -326,13 +326,17 @@ ContactFile read_contacts(const std::string& path) {
   Where where(path, false);
   Handle file = open_file_for_reading(where);
   ContactFile out;
-  out.attributes = read_root_attributes(where, file);
-  auto precision = out.attributes.find("precision");
-  if (precision == out.attributes.end()) where.bad("root attribute precision is missing");
-  const auto* precision_text = std::get_if<std::string>(&precision->second);
-  if (precision_text == nullptr || (*precision_text != "fp32" && *precision_text != "fp64"))
-    where.bad("root attribute precision is not \"fp32\" or \"fp64\"");
-  out.precision = *precision_text;
+  // The run record is decoded from the file's bytes (attributes.hpp); when the precision attribute
+  // is not a string we could decode, the real datasets' element type says it.
+  const RawAttributes raw = root_attributes(where, file);
+  if (!has_root_attribute(where, file, raw, "precision")) where.bad("root attribute precision is missing");
+  out.attributes = other_attributes(raw);
+  if (auto precision = out.attributes.find("precision"); precision != out.attributes.end()) {
+    const auto* precision_text = std::get_if<std::string>(&precision->second);
+    if (precision_text == nullptr || (*precision_text != "fp32" && *precision_text != "fp64"))
+      where.bad("root attribute precision is not \"fp32\" or \"fp64\"");
+    out.precision = *precision_text;
+  }
 
   if (!group_exists(where, file, "/contacts")) where.bad("/contacts: missing group");
   Dataset id_a = open_dataset(where, file, "/contacts/id_a", 0, Element::integer);
@@ -352,6 +356,11 @@ ContactFile read_contacts(const std::string& path) {
     read_rows(where, d, 0, k, H5T_NATIVE_DOUBLE, vector.data());
   };
   read_real("/contacts/position_on_a", 3, c.position_on_a);
+  if (out.precision.empty()) {
+    out.precision = open_dataset(where, file, "/contacts/position_on_a", 3, Element::real).element_size == 4
+                        ? "fp32"
+                        : "fp64";
+  }
   read_real("/contacts/position_on_b", 3, c.position_on_b);
   read_real("/contacts/normal_on_b", 3, c.normal_on_b);
   read_real("/contacts/distance", 0, c.distance);

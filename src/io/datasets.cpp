@@ -12,7 +12,11 @@
 #include <cerrno>
 #include <cstdint>
 #include <cstring>
+#include <filesystem>
+#include <limits>
 #include <vector>
+
+#include "io/attributes.hpp"
 
 namespace cg::h5 {
 
@@ -28,10 +32,13 @@ Dataset open_dataset(const Where& where, hid_t file, const std::string& name, hs
   Handle type = checked(H5Dget_type(d.id), H5Tclose, where, fmt::format("{}: cannot read the type", name));
   H5T_class_t type_class = H5Tget_class(type);
   std::size_t size = H5Tget_size(type);
-  if (element == Element::real && !(type_class == H5T_FLOAT && (size == 4 || size == 8)))
+  // (standard_number: IEEE floats and unpadded integers only; HDF5 converts other encodings bit by bit)
+  if (element == Element::real &&
+      !(type_class == H5T_FLOAT && (size == 4 || size == 8) && standard_number(type)))
     where.bad(fmt::format("{}: element type is {}; expected float64 or float32", name, type_text(type)));
-  if (element == Element::integer && type_class != H5T_INTEGER)
+  if (element == Element::integer && !(type_class == H5T_INTEGER && standard_number(type)))
     where.bad(fmt::format("{}: element type is {}; expected int64", name, type_text(type)));
+  d.element_size = size;
 
   Handle space = checked(H5Dget_space(d.id), H5Sclose, where, fmt::format("{}: cannot read the shape", name));
   int rank = H5Sget_simple_extent_ndims(space);
@@ -45,7 +52,48 @@ Dataset open_dataset(const Where& where, hid_t file, const std::string& name, hs
                           cols == 0 ? std::string("(N)") : fmt::format("(N, {})", cols)));
   }
   d.rows = dims[0];
+  check_storage(where, d.id, name, declared_bytes(where, name, dims, size));
   return d;
+}
+
+std::uint64_t declared_bytes(const Where& where, const std::string& name, const std::vector<hsize_t>& dims,
+                             std::size_t element_size) {
+  std::uint64_t bytes = element_size;
+  for (hsize_t d : dims) {
+    if (d != 0 && bytes > std::numeric_limits<std::uint64_t>::max() / d)
+      where.bad(fmt::format("{}: shape {} is too large (damaged file?)", name, shape_text(dims)));
+    bytes *= d;
+  }
+  return bytes;
+}
+
+void check_storage(const Where& where, hid_t dataset, const std::string& name, std::uint64_t declared_bytes) {
+  std::error_code ec;
+  const std::uint64_t file_bytes = std::filesystem::file_size(where.file(), ec);
+  if (ec) where.bad(fmt::format("{}: cannot get the file's size: {}", name, ec.message()));
+  Handle dcpl = checked(H5Dget_create_plist(dataset), H5Pclose, where,
+                        fmt::format("{}: cannot read the storage properties", name));
+  const int external = H5Pget_external_count(dcpl);
+  if (external != 0) where.bad(fmt::format("{}: data in external files is not read", name));
+  const H5D_layout_t layout = H5Pget_layout(dcpl);
+  if (layout == H5D_CONTIGUOUS) {
+    const haddr_t offset = H5Dget_offset(dataset);
+    if (declared_bytes > file_bytes ||
+        (offset != HADDR_UNDEF && declared_bytes > 0 && offset > file_bytes - declared_bytes)) {
+      where.bad(
+          fmt::format("{}: its {} bytes of data do not fit in the file's {} bytes (truncated or damaged?)",
+                      name, declared_bytes, file_bytes));
+    }
+    return;
+  }
+  if (layout != H5D_CHUNKED && layout != H5D_COMPACT)
+    where.bad(fmt::format("{}: storage layout {} is not read (contiguous, chunked or compact only)", name,
+                          static_cast<int>(layout)));
+  const hsize_t stored = H5Dget_storage_size(dataset);
+  if (stored > file_bytes || declared_bytes / kMaxExpansion > file_bytes) {
+    where.bad(fmt::format("{}: {} bytes of data ({} stored) for a file of {} bytes (damaged?)", name,
+                          declared_bytes, stored, file_bytes));
+  }
 }
 
 // Rows [first, first + count) of d into out (count·max(cols,1) values of mem_type).

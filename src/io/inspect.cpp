@@ -7,6 +7,7 @@
 #include <filesystem>
 
 #include "io/attributes.hpp"
+#include "io/datasets.hpp"
 #include "io/hdf5_handle.hpp"
 
 namespace cg {
@@ -119,9 +120,18 @@ std::vector<unsigned char> read_dataset_bytes(const std::string& path, const std
                      fmt::format("{}: cannot open the dataset", dataset));
   Handle type = checked(H5Dget_type(d), H5Tclose, where, fmt::format("{}: cannot read the type", dataset));
   Handle space = checked(H5Dget_space(d), H5Sclose, where, fmt::format("{}: cannot read the shape", dataset));
-  hssize_t points = H5Sget_simple_extent_npoints(space);
-  if (points < 0) where.fail(fmt::format("{}: cannot read the shape", dataset));
-  std::vector<unsigned char> bytes(static_cast<std::size_t>(points) * H5Tget_size(type));
+  // Numbers only (what CONTRACT §2 stores): other types go through conversions that read the global
+  // heap (variable-length) or references, which a damaged file can make crash.
+  if (!standard_number(type))
+    where.bad(fmt::format("{}: element type is {}; expected an integer or float", dataset, type_text(type)));
+  const int rank = H5Sget_simple_extent_ndims(space);
+  if (rank < 0) where.fail(fmt::format("{}: cannot read the shape", dataset));
+  std::vector<hsize_t> dims(static_cast<std::size_t>(rank));
+  if (rank > 0 && H5Sget_simple_extent_dims(space, dims.data(), nullptr) < 0)
+    where.fail(fmt::format("{}: cannot read the shape", dataset));
+  const std::uint64_t size = declared_bytes(where, dataset, dims, H5Tget_size(type));
+  check_storage(where, d, dataset, size);
+  std::vector<unsigned char> bytes(size);
   if (!bytes.empty())
     check(H5Dread(d, type, H5S_ALL, H5S_ALL, H5P_DEFAULT, bytes.data()), where,
           fmt::format("{}: cannot read", dataset));

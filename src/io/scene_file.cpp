@@ -43,28 +43,21 @@ struct SceneSource {
   explicit SceneSource(const std::string& path) : where(path, false) {}
 };
 
-std::optional<double> radius_bound(const Where& where, Attributes& attributes, const char* name) {
-  auto it = attributes.find(name);
-  if (it == attributes.end()) return std::nullopt;
-  double value = 0;
-  if (const auto* d = std::get_if<double>(&it->second))
-    value = *d;
-  else if (const auto* i = std::get_if<std::int64_t>(&it->second))
-    value = static_cast<double>(*i);
-  else
-    where.bad(fmt::format("root attribute {} is a string; expected a number", name));
-  if (!std::isfinite(value) || value < 0)
-    where.bad(fmt::format("root attribute {} = {} is not a finite number >= 0", name, value));
-  attributes.erase(it);
+// radius_low / radius_high (CONTRACT §1): a finite number >= 0 when present.
+std::optional<double> radius_bound(const Where& where, hid_t file, const RawAttributes& raw,
+                                   const char* name) {
+  const std::optional<double> value = number_attribute(where, file, raw, name);
+  if (value && !(std::isfinite(*value) && *value >= 0))
+    where.bad(fmt::format("root attribute {} = {} is not a finite number >= 0", name, *value));
   return value;
 }
 
 void open_scene(SceneSource& s) {
   const Where& w = s.where;
   s.file = open_file_for_reading(w);
-  s.attributes = read_root_attributes(w, s.file);
-  s.radius_low = radius_bound(w, s.attributes, "radius_low");
-  s.radius_high = radius_bound(w, s.attributes, "radius_high");
+  const RawAttributes raw = root_attributes(w, s.file);
+  s.radius_low = radius_bound(w, s.file, raw, "radius_low");
+  s.radius_high = radius_bound(w, s.file, raw, "radius_high");
   if (s.radius_low && s.radius_high && *s.radius_low > *s.radius_high) {
     w.bad(fmt::format("root attributes radius_low = {} > radius_high = {}", *s.radius_low, *s.radius_high));
   }
@@ -86,6 +79,8 @@ void open_scene(SceneSource& s) {
     s.ellipsoids = s.ellipsoid_position.rows;
   }
   if (s.spheres + s.ellipsoids == 0) w.bad("scene has no bodies");
+  // (the generator's parameters mean nothing here: only what raw_attributes decoded)
+  s.attributes = other_attributes(raw, {"radius_low", "radius_high"});
 }
 
 // Row checks; `row` is the row number in the file.
