@@ -4,10 +4,13 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+
+#include "io/raw_attributes.hpp"
 
 namespace cg::h5 {
 
@@ -97,6 +100,14 @@ bool path_exists(const Where& where, hid_t file, const std::string& path) {
   while (pos != std::string::npos) {
     pos = path.find('/', pos + 1);
     std::string prefix = path.substr(0, pos);
+    {  // the group searched for the next component must be sound (raw_attributes.hpp: damaged_group)
+      const std::string parent = prefix.substr(0, std::max<std::size_t>(1, prefix.rfind('/')));
+      Handle group = checked(H5Oopen(file, parent.c_str(), H5P_DEFAULT), H5Oclose, where,
+                             fmt::format("{}: cannot open {}", path, parent));
+      if (H5Iget_type(group) != H5I_GROUP) return false;
+      const std::string damage = damaged_group(where.file(), file, group);
+      if (!damage.empty()) where.bad(fmt::format("{}: the group {} is damaged: {}", path, parent, damage));
+    }
     htri_t exists = H5Lexists(file, prefix.c_str(), H5P_DEFAULT);
     if (exists < 0) where.fail(fmt::format("{}: cannot look up {}", path, prefix));
     if (exists == 0) return false;

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <cstring>
 #include <map>
+#include <utility>
 #include <vector>
 
 #include "io/hdf5_handle.hpp"
@@ -184,8 +185,10 @@ RawAttributes::Status parse_attribute(const std::vector<unsigned char>& m, Attri
 }
 
 // Every attribute message of the object header at `header` (absolute).
-RawAttributes::Status header_attributes(const RawFile& f, std::uint64_t base, std::uint64_t header,
-                                        unsigned version, std::vector<AttributeMessage>& out) {
+RawAttributes::Status header_attributes(
+    const RawFile& f, std::uint64_t base, std::uint64_t header, unsigned version,
+    std::vector<AttributeMessage>& out,
+    std::vector<std::pair<std::uint64_t, std::uint64_t>>* symbol_tables = nullptr) {
   using S = RawAttributes::Status;
   struct Chunk {
     std::uint64_t at, size;
@@ -242,6 +245,10 @@ RawAttributes::Status header_attributes(const RawFile& f, std::uint64_t base, st
         AttributeMessage a;
         if (const S status = parse_attribute(m, a); status != S::ok) return status;
         out.push_back(std::move(a));
+      } else if (type == 0x11 && symbol_tables != nullptr) {  // symbol table: v1 B-tree, local heap
+        std::uint64_t btree = 0, heap = 0;
+        if (!le(m, 0, 8, btree) || !le(m, 8, 8, heap)) return S::damaged;
+        symbol_tables->emplace_back(base + btree, base + heap);
       } else if (type == 0x15) {  // attribute info: dense storage when its fractal heap exists
         std::uint64_t flags = 0, heap = 0;
         if (!le(m, 1, 1, flags) || !le(m, 2 + ((flags & 1) ? 2 : 0), 8, heap)) return S::damaged;
@@ -332,6 +339,43 @@ RawAttributes raw_attributes(const std::string& path, hid_t file, hid_t object) 
     if (m.value) out.values.emplace(m.name, std::move(*m.value));
   }
   return out;
+}
+
+std::string damaged_group(const std::string& path, hid_t file, hid_t group) {
+  std::size_t sizeof_addr = 0, sizeof_size = 0;
+  {
+    Handle fcpl(H5Fget_create_plist(file), H5Pclose);
+    if (fcpl.get() < 0 || H5Pget_sizes(fcpl, &sizeof_addr, &sizeof_size) < 0)
+      return "unreadable file properties";
+  }
+  H5O_info_t info{};
+  if (H5Oget_info2(group, &info, H5O_INFO_BASIC | H5O_INFO_HDR) < 0 || info.addr == HADDR_UNDEF)
+    return "no object header";
+  if (sizeof_addr != 8 || sizeof_size != 8) return "";  // not followed (see raw_attributes)
+  hsize_t userblock = 0;
+  {
+    Handle fcpl(H5Fget_create_plist(file), H5Pclose);
+    if (fcpl.get() < 0 || H5Pget_userblock(fcpl, &userblock) < 0) return "unreadable file properties";
+  }
+  RawFile f(path);
+  std::vector<AttributeMessage> attributes;
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> tables;
+  const RawAttributes::Status status =
+      header_attributes(f, userblock, userblock + info.addr, info.hdr.version, attributes, &tables);
+  if (status == RawAttributes::Status::damaged) return "its object header overruns itself or the file";
+  std::vector<unsigned char> b;
+  for (const auto& [btree, heap] : tables) {
+    if (!f.read(btree, 8, b) || std::memcmp(b.data(), "TREE", 4) != 0)
+      return fmt::format("its symbol table's B-tree address {} holds no B-tree", btree);
+    std::uint64_t size = 0, free = 0, data = 0;
+    if (!f.read(heap, 32, b) || std::memcmp(b.data(), "HEAP", 4) != 0 || b[4] != 0 || !le(b, 8, 8, size) ||
+        !le(b, 16, 8, free) || !le(b, 24, 8, data))
+      return fmt::format("its symbol table's local heap address {} holds no local heap", heap);
+    if (size > f.size() || data + userblock > f.size() - size || (free != 1 && free >= size))
+      return fmt::format("its local heap at {} (data {} bytes at {}) lies outside the file", heap, size,
+                         data);
+  }
+  return "";
 }
 
 }  // namespace cg::h5

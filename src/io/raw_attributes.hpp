@@ -37,4 +37,11 @@ struct RawAttributes {
 // The attributes of `object` (an open group or dataset of `file`, whose path is `path`).
 RawAttributes raw_attributes(const std::string& path, hid_t file, hid_t object);
 
+// Checks the parts of a group's object header that libhdf5 1.10.8 follows without checking before a
+// link lookup in it (H5Lexists → H5G__stab_lookup → H5HL_protect segfaults on an undefined or
+// out-of-file local heap address): the symbol table message's B-tree and local heap must carry their
+// signatures, and the heap's data must lie inside the file. "" when sound (or not a symbol-table
+// group), else what is wrong.
+std::string damaged_group(const std::string& path, hid_t file, hid_t group);
+
 }  // namespace cg::h5
