@@ -1,4 +1,4 @@
-// Unit tests of the HDF5 layer (src/hdf5_io.cpp): scene and contact round trips, and one test per
+// Unit tests of the HDF5 layer (src/io/): scene and contact round trips, and one test per
 // kind of bad input, each checking the exception type and that the message names the file, the
 // dataset and the row. Every test works in its own temporary directory, removed afterwards.
 #include <gtest/gtest.h>
@@ -914,6 +914,94 @@ TEST_F(Hdf5Io, InvertedRadiusBoundsAreRejected) {
   cg::write_raw_attribute(path("s.h5"), "radius_high", AttrValue{1.0});
   std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
   EXPECT_CONTAINS(msg, "radius_low = 2 > radius_high = 1");
+}
+
+// ---- damaged files (issue #21) ----------------------------------------------------------------------
+
+namespace damaged {
+
+std::vector<char> bytes_of(const std::string& file) {
+  std::ifstream in(file, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+void put(const std::string& file, const std::vector<char>& b) {
+  std::ofstream(file, std::ios::binary | std::ios::trunc)
+      .write(b.data(), static_cast<std::streamsize>(b.size()));
+}
+// Sets the size field of the first object of the file's global heap collection ("GCOL"): the heap
+// that holds variable-length strings. HDF5 1.10.8 would copy that many bytes into the string.
+void corrupt_first_heap_object(const std::string& file) {
+  std::vector<char> b = bytes_of(file);
+  const std::string gcol = "GCOL";
+  auto it = std::search(b.begin(), b.end(), gcol.begin(), gcol.end());
+  ASSERT_NE(it, b.end());
+  const std::size_t object = static_cast<std::size_t>(it - b.begin()) + 16;  // after the collection header
+  for (int k = 0; k < 8; ++k) b[object + 8 + k] = k == 3 ? 0x7f : 0;         // size 2^31
+  put(file, b);
+}
+
+}  // namespace damaged
+
+TEST_F(Hdf5Io, DamagedStringHeapLeavesStringAttributesOutButReadsTheScene) {
+  const Scene s = mixed_scene();
+  cg::write_scene(path("s.h5"), s);
+  damaged::corrupt_first_heap_object(path("s.h5"));
+  const Scene back = cg::read_scene(path("s.h5"));
+  EXPECT_EQ(back.size(), s.size());
+  EXPECT_EQ(back.radius_high, 2.0);
+  EXPECT_EQ(back.attributes.count("generator"), 0u);  // its heap object no longer checks out
+  EXPECT_EQ(std::get<std::int64_t>(back.attributes.at("seed")), -5);
+}
+
+TEST_F(Hdf5Io, DamagedStringHeapInAContactFileTakesThePrecisionFromTheDatasets) {
+  cg::write_contacts(path("c.h5"), sample_contacts<float>(5, false), sample_info("fp32"));
+  damaged::corrupt_first_heap_object(path("c.h5"));
+  const cg::ContactFile back = cg::read_contacts(path("c.h5"));
+  EXPECT_EQ(back.precision, "fp32");
+  EXPECT_EQ(back.contacts.size(), 5u);
+}
+
+TEST_F(Hdf5Io, DatasetLargerThanTheFileIsRejectedBeforeReading) {
+  cg::write_scene(path("s.h5"), sphere_scene(1000));
+  // Cut into the last dataset's rows and make the superblock agree (its end-of-file address, bytes
+  // 40…47 of a version 0 superblock), so that HDF5 opens the file and only the rows are missing.
+  const std::uint64_t size = fs::file_size(path("s.h5")) - 4000;
+  fs::resize_file(path("s.h5"), size);
+  std::vector<char> b = damaged::bytes_of(path("s.h5"));
+  ASSERT_EQ(b[8], 0);  // superblock version 0
+  for (int k = 0; k < 8; ++k) b[40 + k] = static_cast<char>((size >> (8 * k)) & 0xff);
+  damaged::put(path("s.h5"), b);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_CONTAINS(msg, path("s.h5"));
+  EXPECT_CONTAINS(msg, "/spheres/");
+}
+
+// Every file of tests/data/damaged crashed or hung a reader once (libFuzzer, mutation test); each
+// is now an InputError (or, for a file whose damage does not touch what a reader uses, a success).
+TEST_F(Hdf5Io, DamagedRegressionFilesAreInputErrors) {
+  const fs::path dir = fs::path(CG_SOURCE_DIR) / "tests/data/damaged";
+  int files = 0;
+  for (const auto& e : fs::directory_iterator(dir)) {
+    if (e.path().extension() != ".h5") continue;
+    ++files;
+    const std::string file = e.path().string();
+    auto clean = [&](auto&& read) {
+      try {
+        read();
+      } catch (const InputError& error) {
+        EXPECT_CONTAINS(std::string(error.what()), file);
+      }
+    };
+    clean([&] { cg::read_scene(file); });
+    clean([&] { cg::read_scene_shape(file); });
+    clean([&] { cg::read_contacts(file); });
+    for (const char* ds : cg::kContactDatasets) {
+      clean([&] {
+        if (cg::inspect_dataset(file, ds)) cg::read_dataset_bytes(file, ds);
+      });
+    }
+  }
+  EXPECT_GT(files, 0);
 }
 
 }  // namespace

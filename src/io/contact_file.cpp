@@ -1,0 +1,385 @@
+// contact_file.cpp: contact files (CONTRACT §2) through the HDF5 C API and pwrite (see contact_file.hpp).
+#include "io/contact_file.hpp"
+
+#include <fcntl.h>
+#include <fmt/format.h>
+#include <hdf5.h>
+#include <omp.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <mutex>
+#include <optional>
+#include <type_traits>
+#include <utility>
+
+#include "io/attributes.hpp"
+#include "io/datasets.hpp"
+#include "io/hdf5_handle.hpp"
+
+namespace cg {
+
+using namespace h5;  // NOLINT: the io layer's own helpers
+
+static_assert(sizeof(Vec3<float>) == 3 * sizeof(float) && std::is_standard_layout_v<Vec3<float>>);
+
+namespace {
+constexpr const char* kSoftwareVersion = CONTACTGRID_VERSION;
+}  // namespace
+
+// ---- contact files, in phases ----------------------------------------------------------------------
+
+// The rows are copied to the file as they are in memory: the file types are little-endian.
+static_assert(std::endian::native == std::endian::little,
+              "contact rows are written as raw bytes into little-endian datasets: a big-endian host "
+              "needs a byte swap in write_contact_rows");
+static_assert(sizeof(std::int64_t) == 8 && sizeof(double) == 8 && sizeof(float) == 4);
+
+namespace {
+
+// Dataset k of kContactDatasets: columns (0: rank 1) and whether it holds ids.
+hsize_t contact_columns(std::size_t k) { return (k == 0 || k == 1 || k == 5) ? 0 : 3; }
+bool contact_ids(std::size_t k) { return k < 2; }
+
+// Row pointers of a Contacts in kContactDatasets order (nullptr past the fields it has).
+template <class Real>
+std::array<const unsigned char*, 10> contact_sources(const Contacts<Real>& c) {
+  auto p = [](const auto& v) { return reinterpret_cast<const unsigned char*>(v.data()); };
+  return {p(c.id_a),
+          p(c.id_b),
+          p(c.position_on_a),
+          p(c.position_on_b),
+          p(c.normal_on_b),
+          p(c.distance),
+          p(c.local_point_a),
+          p(c.local_point_b),
+          p(c.lateral_friction_dir1),
+          p(c.lateral_friction_dir2)};
+}
+
+template <class Real>
+bool consistent_lengths(const Contacts<Real>& c) {
+  const std::size_t k = c.size();
+  bool ok = c.id_b.size() == k && c.position_on_a.size() == k && c.position_on_b.size() == k &&
+            c.normal_on_b.size() == k && c.distance.size() == k;
+  if (c.full) {
+    ok = ok && c.local_point_a.size() == k && c.local_point_b.size() == k &&
+         c.lateral_friction_dir1.size() == k && c.lateral_friction_dir2.size() == k;
+  }
+  return ok;
+}
+
+}  // namespace
+
+std::string ContactFileLayout::to_text() const {
+  // One header line, one line per dataset, then the paths (each prefixed by its length: a path may
+  // hold any character).
+  std::string t = fmt::format("{} {} {} {}\n", rows, precision == Precision::fp32 ? 32 : 64, full ? 1 : 0,
+                              datasets.size());
+  for (const Dataset& d : datasets) t += fmt::format("{} {} {}\n", d.offset, d.row_bytes, d.name);
+  t += fmt::format("{}\n{}\n{}\n{}", path.size(), path, temp.size(), temp);
+  return t;
+}
+
+ContactFileLayout ContactFileLayout::from_text(const std::string& text) {
+  ContactFileLayout l;
+  std::size_t at = 0;
+  auto line = [&]() {
+    const std::size_t e = text.find('\n', at);
+    if (e == std::string::npos) throw Error("ContactFileLayout::from_text: truncated layout");
+    std::string s = text.substr(at, e - at);
+    at = e + 1;
+    return s;
+  };
+  auto counted = [&]() {
+    const std::size_t n = std::stoull(line());
+    if (at + n > text.size()) throw Error("ContactFileLayout::from_text: truncated layout");
+    std::string s = text.substr(at, n);
+    at += n;
+    return s;
+  };
+  unsigned long long rows = 0, count = 0;
+  int bits = 0, full = 0;
+  if (std::sscanf(line().c_str(), "%llu %d %d %llu", &rows, &bits, &full, &count) != 4 ||
+      (bits != 32 && bits != 64) || count > 10)
+    throw Error("ContactFileLayout::from_text: bad header");
+  l.rows = rows;
+  l.precision = bits == 32 ? Precision::fp32 : Precision::fp64;
+  l.full = full != 0;
+  for (unsigned long long k = 0; k < count; ++k) {
+    const std::string s = line();
+    unsigned long long offset = 0, row_bytes = 0;
+    int used = 0;
+    if (std::sscanf(s.c_str(), "%llu %llu %n", &offset, &row_bytes, &used) != 2)
+      throw Error("ContactFileLayout::from_text: bad dataset line");
+    l.datasets.push_back({s.substr(static_cast<std::size_t>(used)), offset, row_bytes});
+  }
+  l.path = counted();
+  if (at >= text.size() || text[at] != '\n') throw Error("ContactFileLayout::from_text: bad paths");
+  ++at;
+  l.temp = counted();
+  return l;
+}
+
+ContactFileLayout create_contact_file(const std::string& path, std::uint64_t rows, Precision precision,
+                                      bool full) {
+  LibraryLock lock;
+  ContactFileLayout layout;
+  layout.path = path;
+  layout.temp = temp_name(path);
+  layout.rows = rows;
+  layout.precision = precision;
+  layout.full = full;
+  const bool fp32 = precision == Precision::fp32;
+  const hid_t real_type = fp32 ? H5T_IEEE_F32LE : H5T_IEEE_F64LE;
+  const std::uint64_t real_bytes = fp32 ? 4 : 8;
+  Where where(path, true);
+  try {
+    Handle file = create_file(where, layout.temp);
+    create_group(where, file, "/contacts");
+    for (std::size_t k = 0; k < (full ? 10u : 6u); ++k) {
+      const hsize_t cols = contact_columns(k);
+      std::vector<hsize_t> dims{rows};
+      if (cols) dims.push_back(cols);
+      const std::string name = kContactDatasets[k];
+      Handle space = make_space(where, dims);
+      Handle dcpl = creation_properties(where, H5P_DATASET_CREATE);
+      // contiguous, allocated now (so it has a file offset), never filled (every row gets written)
+      check(H5Pset_layout(dcpl, H5D_CONTIGUOUS), where, "cannot set dataset properties");
+      check(H5Pset_alloc_time(dcpl, H5D_ALLOC_TIME_EARLY), where, "cannot set dataset properties");
+      check(H5Pset_fill_time(dcpl, H5D_FILL_TIME_NEVER), where, "cannot set dataset properties");
+      Handle dataset = checked(H5Dcreate2(file, name.c_str(), contact_ids(k) ? H5T_STD_I64LE : real_type,
+                                          space, H5P_DEFAULT, dcpl, H5P_DEFAULT),
+                               H5Dclose, where, fmt::format("{}: cannot create the dataset", name));
+      ContactFileLayout::Dataset d{name, 0, contact_ids(k) ? 8 : real_bytes * (cols ? cols : 1)};
+      if (rows > 0) {
+        const haddr_t offset = H5Dget_offset(dataset);
+        if (offset == HADDR_UNDEF) where.fail(fmt::format("{}: no file offset for the dataset's rows", name));
+        d.offset = static_cast<std::uint64_t>(offset);
+      }
+      layout.datasets.push_back(std::move(d));
+    }
+    file.close(where, "cannot close (flush) the file");
+  } catch (...) {
+    remove_quietly(layout.temp);
+    throw;
+  }
+  return layout;
+}
+
+template <class Real>
+void write_contact_rows(const ContactFileLayout& layout, std::uint64_t first_row, const Contacts<Real>& c,
+                        int threads) {
+  const std::uint64_t n = c.size();
+  const Precision precision = std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64;
+  if (!consistent_lengths(c))
+    throw Error(fmt::format("{}: write_contact_rows: the contact arrays differ in length", layout.path));
+  if (precision != layout.precision || c.full != layout.full ||
+      layout.datasets.size() != (layout.full ? 10u : 6u))
+    throw Error(fmt::format("{}: write_contact_rows: the rows ({}, {} fields) do not match the file ({}, {})",
+                            layout.path, to_string(precision), c.full ? "full" : "basic",
+                            to_string(layout.precision), layout.full ? "full" : "basic"));
+  if (first_row > layout.rows || n > layout.rows - first_row)
+    throw Error(fmt::format("{}: write_contact_rows: rows {} + {} are outside the file's {} rows",
+                            layout.path, first_row, n, layout.rows));
+  if (n == 0) return;
+
+  // Blocks of at most 4 MiB (whole rows), over every dataset, written by a team of threads.
+  struct Block {
+    std::size_t dataset;
+    const unsigned char* src;
+    std::uint64_t offset, bytes, row;
+  };
+  const std::array<const unsigned char*, 10> src = contact_sources(c);
+  std::vector<Block> blocks;
+  for (std::size_t k = 0; k < layout.datasets.size(); ++k) {
+    const ContactFileLayout::Dataset& d = layout.datasets[k];
+    const std::uint64_t rows_per_block = std::max<std::uint64_t>(1, (std::uint64_t(4) << 20) / d.row_bytes);
+    for (std::uint64_t r = 0; r < n; r += rows_per_block) {
+      const std::uint64_t m = std::min(rows_per_block, n - r);
+      blocks.push_back({k, src[k] + r * d.row_bytes, d.offset + (first_row + r) * d.row_bytes,
+                        m * d.row_bytes, first_row + r});
+    }
+  }
+  const int fd = ::open(layout.temp.c_str(), O_WRONLY | O_CLOEXEC);
+  if (fd < 0) {
+    const int e = errno;
+    throw IoError(
+        fmt::format("{}: cannot open {} for writing: {}", layout.path, layout.temp, std::strerror(e)));
+  }
+  std::mutex failed_mutex;
+  std::optional<std::pair<std::size_t, int>> failed;  // (block, errno) of the first failed block
+  const int team = threads > 0 ? threads : omp_get_max_threads();
+  const std::ptrdiff_t nb = static_cast<std::ptrdiff_t>(blocks.size());
+#pragma omp parallel for num_threads(team) schedule(dynamic, 1) if (nb > 1)
+  for (std::ptrdiff_t b = 0; b < nb; ++b) {
+    const Block& block = blocks[static_cast<std::size_t>(b)];
+    std::uint64_t done = 0;
+    int error = 0;
+    while (done < block.bytes) {
+      const ssize_t w =
+          ::pwrite(fd, block.src + done, block.bytes - done, static_cast<off_t>(block.offset + done));
+      if (w < 0 && errno == EINTR) continue;
+      if (w <= 0) {
+        error = w < 0 ? errno : ENOSPC;  // no progress: treat as a full device
+        break;
+      }
+      done += static_cast<std::uint64_t>(w);
+    }
+    if (error) {
+      std::lock_guard<std::mutex> guard(failed_mutex);
+      if (!failed || b < static_cast<std::ptrdiff_t>(failed->first))
+        failed.emplace(static_cast<std::size_t>(b), error);
+    }
+  }
+  const int closed = ::close(fd);
+  const int close_error = errno;
+  if (failed) {
+    const Block& block = blocks[failed->first];
+    const ContactFileLayout::Dataset& d = layout.datasets[block.dataset];
+    throw IoError(fmt::format("{}: {}: cannot write rows {} to {} (into {}): {}", layout.path, d.name,
+                              block.row, block.row + block.bytes / d.row_bytes - 1, layout.temp,
+                              std::strerror(failed->second)));
+  }
+  if (closed != 0) {
+    throw IoError(fmt::format("{}: cannot close {} after writing rows: {}", layout.path, layout.temp,
+                              std::strerror(close_error)));
+  }
+}
+
+template void write_contact_rows<float>(const ContactFileLayout&, std::uint64_t, const Contacts<float>&, int);
+template void write_contact_rows<double>(const ContactFileLayout&, std::uint64_t, const Contacts<double>&,
+                                         int);
+
+void commit_contact_file(const ContactFileLayout& layout, const RunInfo& info) {
+  const char* precision = to_string(layout.precision);
+  try {
+    if (!info.precision.empty() && info.precision != precision) {
+      throw Error(fmt::format("{}: write_contacts: RunInfo says precision {}, the contacts are {}",
+                              layout.path, info.precision, precision));
+    }
+    LibraryLock lock;
+    Where where(layout.path, true);
+    Handle file = checked(H5Fopen(layout.temp.c_str(), H5F_ACC_RDWR, H5P_DEFAULT), H5Fclose, where,
+                          fmt::format("cannot reopen {}", layout.temp));
+    Attributes attributes;
+    attributes["precision"] = std::string(precision);
+    attributes["backend"] = info.backend;
+    attributes["ranks"] = std::int64_t{info.ranks};
+    attributes["bodies"] = static_cast<std::int64_t>(info.bodies);
+    attributes["contacts"] = static_cast<std::int64_t>(layout.rows);
+    attributes["cell_size"] = info.cell_size;
+    attributes["software_version"] = std::string(kSoftwareVersion);
+    attributes["input"] = info.input;
+    for (const StageTime& stage : info.times) {  // a stage named twice: the times add up
+      auto [it, inserted] = attributes.try_emplace("time_" + stage.name, stage.seconds);
+      if (!inserted) it->second = std::get<double>(it->second) + stage.seconds;
+    }
+    {
+      Handle root = checked(H5Gopen2(file, "/", H5P_DEFAULT), H5Gclose, where, "cannot open the root group");
+      for (const auto& [name, value] : attributes) write_attribute(where, root, name, value);
+    }
+    file.close(where, "cannot close (flush) the file");
+    if (std::rename(layout.temp.c_str(), layout.path.c_str()) != 0) {
+      const int error = errno;
+      throw IoError(
+          fmt::format("{}: cannot rename {} over it: {}", layout.path, layout.temp, std::strerror(error)));
+    }
+  } catch (...) {
+    remove_quietly(layout.temp);
+    throw;
+  }
+}
+
+void discard_contact_file(const ContactFileLayout& layout) noexcept { remove_quietly(layout.temp); }
+
+template <class Real>
+void write_contacts(const std::string& path, const Contacts<Real>& c, const RunInfo& info, int threads) {
+  const char* precision = std::is_same_v<Real, float> ? "fp32" : "fp64";
+  if (!consistent_lengths(c))
+    throw Error(fmt::format("{}: write_contacts: the contact arrays differ in length", path));
+  if (!info.precision.empty() && info.precision != precision) {
+    throw Error(fmt::format("{}: write_contacts: RunInfo says precision {}, the contacts are {}", path,
+                            info.precision, precision));
+  }
+  const ContactFileLayout layout = create_contact_file(
+      path, c.size(), std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64, c.full);
+  try {
+    write_contact_rows(layout, 0, c, threads);
+  } catch (...) {
+    discard_contact_file(layout);
+    throw;
+  }
+  commit_contact_file(layout, info);
+}
+
+template void write_contacts<float>(const std::string&, const Contacts<float>&, const RunInfo&, int);
+template void write_contacts<double>(const std::string&, const Contacts<double>&, const RunInfo&, int);
+
+ContactFile read_contacts(const std::string& path) {
+  LibraryLock lock;
+  Where where(path, false);
+  Handle file = open_file_for_reading(where);
+  ContactFile out;
+  // The run record is decoded from the file's bytes (attributes.hpp); when the precision attribute
+  // is not a string we could decode, the real datasets' element type says it.
+  const RawAttributes raw = root_attributes(where, file);
+  if (!has_root_attribute(where, file, raw, "precision")) where.bad("root attribute precision is missing");
+  out.attributes = other_attributes(raw);
+  if (auto precision = out.attributes.find("precision"); precision != out.attributes.end()) {
+    const auto* precision_text = std::get_if<std::string>(&precision->second);
+    if (precision_text == nullptr || (*precision_text != "fp32" && *precision_text != "fp64"))
+      where.bad("root attribute precision is not \"fp32\" or \"fp64\"");
+    out.precision = *precision_text;
+  }
+
+  if (!group_exists(where, file, "/contacts")) where.bad("/contacts: missing group");
+  Dataset id_a = open_dataset(where, file, "/contacts/id_a", 0, Element::integer);
+  Dataset id_b = open_dataset(where, file, "/contacts/id_b", 0, Element::integer);
+  require_rows(where, id_b, id_a);
+  const hsize_t k = id_a.rows;
+  Contacts<double>& c = out.contacts;
+  c.id_a.resize(k);
+  c.id_b.resize(k);
+  read_rows(where, id_a, 0, k, H5T_NATIVE_INT64, c.id_a.data());
+  read_rows(where, id_b, 0, k, H5T_NATIVE_INT64, c.id_b.data());
+
+  auto read_real = [&](const char* name, hsize_t cols, auto& vector) {
+    Dataset d = open_dataset(where, file, name, cols, Element::real);
+    require_rows(where, d, id_a);
+    vector.resize(k);
+    read_rows(where, d, 0, k, H5T_NATIVE_DOUBLE, vector.data());
+  };
+  read_real("/contacts/position_on_a", 3, c.position_on_a);
+  if (out.precision.empty()) {
+    out.precision = open_dataset(where, file, "/contacts/position_on_a", 3, Element::real).element_size == 4
+                        ? "fp32"
+                        : "fp64";
+  }
+  read_real("/contacts/position_on_b", 3, c.position_on_b);
+  read_real("/contacts/normal_on_b", 3, c.normal_on_b);
+  read_real("/contacts/distance", 0, c.distance);
+
+  const char* optional[] = {"/contacts/local_point_a", "/contacts/local_point_b",
+                            "/contacts/lateral_friction_dir1", "/contacts/lateral_friction_dir2"};
+  int present = 0;
+  for (const char* name : optional) present += path_exists(where, file, name) ? 1 : 0;
+  if (present != 0 && present != 4)
+    where.bad(
+        "/contacts: the optional datasets (local points, friction directions) must be all present or none");
+  c.full = present == 4;
+  if (c.full) {
+    read_real(optional[0], 3, c.local_point_a);
+    read_real(optional[1], 3, c.local_point_b);
+    read_real(optional[2], 3, c.lateral_friction_dir1);
+    read_real(optional[3], 3, c.lateral_friction_dir2);
+  }
+  return out;
+}
+
+}  // namespace cg

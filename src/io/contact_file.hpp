@@ -1,0 +1,103 @@
+#pragma once
+// Contact files (CONTRACT §2): written whole or in phases (by many processes at once), read back.
+//
+// Writing goes to "<path>.tmp.<pid>" and is renamed over <path> only after the file is closed, so an
+// output file exists only for a successful run (IoError otherwise, temporary removed). Contact files
+// are written in phases (create, rows by plain pwrite from any number of processes and threads,
+// commit), so the ranks of an MPI run write their rows of one file at once (comm/distributed_write).
+// Reading throws InputError naming the file and the dataset.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "engine.hpp"
+#include "scene.hpp"
+
+namespace cg {
+
+// Everything recorded about a run in the contact file's root attributes (CONTRACT §2).
+struct RunInfo {
+  std::uint64_t bodies = 0;
+  std::string precision;  // "fp32" | "fp64"
+  std::string backend;    // "cpu" | "cuda"
+  int ranks = 1;
+  double cell_size = 0;
+  std::string input;  // input file name
+  StageTimes times;
+};
+
+// One process writes the whole file: the phases below with `threads` writers (0: all). Throws Error
+// for inconsistent arguments, IoError when the file cannot be written; no file left behind.
+template <class Real>
+void write_contacts(const std::string& path, const Contacts<Real>& contacts, const RunInfo& info,
+                    int threads = 0);
+
+// ---- a contact file written in phases, by one process or by many --------------------------------
+// (a) create_contact_file (one process): "<path>.tmp.<pid>" with every /contacts dataset of K rows
+//     (CONTRACT §2 types and shapes; contiguous, space allocated at creation, never filled), closed;
+//     the layout says where each dataset's rows lie in the file.
+// (b) write_contact_rows (any process that can see the file, once per row, slices in any order and
+//     of any size): plain pwrite of the rows at offset + first_row · row_bytes, by several threads.
+//     No HDF5 involved, so processes and threads write at once.
+// (c) commit_contact_file (the creating process, after every (b) has returned): the root attributes
+//     (CONTRACT §2), then the temporary is renamed over path. On a failure anywhere,
+//     discard_contact_file removes the temporary: no output appears.
+// The bytes of the datasets are the same whoever wrote which rows (and equal write_contacts').
+// Memory and file are little-endian (checked at compile time): rows are copied as they are.
+struct ContactFileLayout {
+  struct Dataset {
+    std::string name;             // "/contacts/id_a", …
+    std::uint64_t offset = 0;     // of row 0 in the file (unused when rows == 0)
+    std::uint64_t row_bytes = 0;  // 8 for ids, sizeof(Real) for distance, 3·sizeof(Real) for vectors
+  };
+  std::string path;        // the output file
+  std::string temp;        // the file being written ("<path>.tmp.<pid of the creator>")
+  std::uint64_t rows = 0;  // K
+  Precision precision = Precision::fp64;
+  bool full = false;              // the four optional datasets exist
+  std::vector<Dataset> datasets;  // id_a, id_b, position_on_a, position_on_b, normal_on_b, distance,
+                                  // then (full) local_point_a, local_point_b, dir1, dir2
+  // Text form, to hand the layout to other processes (from_text(to_text()) == *this).
+  std::string to_text() const;
+  static ContactFileLayout from_text(const std::string& text);
+};
+
+// Phase (a). IoError on failure, nothing left behind.
+ContactFileLayout create_contact_file(const std::string& path, std::uint64_t rows, Precision precision,
+                                      bool full);
+
+// Phase (b): rows [first_row, first_row + slice.size()) of every dataset from `slice` (its precision
+// and fields must match the layout; Error otherwise, before anything is written). `threads` writers
+// (0: all) in blocks of a few MiB. IoError naming the file and the dataset when a write fails.
+template <class Real>
+void write_contact_rows(const ContactFileLayout& layout, std::uint64_t first_row, const Contacts<Real>& slice,
+                        int threads = 0);
+
+// Phase (c): root attributes (contacts = layout.rows; info.precision, when given, must match), close,
+// rename over layout.path. IoError on failure, and then the temporary is removed.
+void commit_contact_file(const ContactFileLayout& layout, const RunInfo& info);
+
+// Removes the temporary (no error if it is gone). Never throws.
+void discard_contact_file(const ContactFileLayout& layout) noexcept;
+
+// Reads a contact file back in double (whatever precision it was written in).
+struct ContactFile {
+  Contacts<double> contacts;
+  std::string precision;
+  Attributes attributes;
+};
+ContactFile read_contacts(const std::string& path);
+
+// The /contacts datasets of CONTRACT §2 in file order: six always, the last four with --fields full.
+inline constexpr const char* kContactDatasets[] = {"/contacts/id_a",
+                                                   "/contacts/id_b",
+                                                   "/contacts/position_on_a",
+                                                   "/contacts/position_on_b",
+                                                   "/contacts/normal_on_b",
+                                                   "/contacts/distance",
+                                                   "/contacts/local_point_a",
+                                                   "/contacts/local_point_b",
+                                                   "/contacts/lateral_friction_dir1",
+                                                   "/contacts/lateral_friction_dir2"};
+
+}  // namespace cg
