@@ -3,15 +3,12 @@
 #include "pipeline.hpp"
 
 #include <fmt/format.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <limits>
 #include <numeric>
 #include <optional>
@@ -24,6 +21,7 @@
 #include "distribute.hpp"
 #include "halo_exchange.hpp"
 #include "hdf5_io.hpp"
+#include "io/contacts_csv.hpp"
 #include "node_threads.hpp"
 #include "routing.hpp"
 #include "session.hpp"
@@ -538,8 +536,8 @@ int run_detect(const DetectCommand& cmd, Session& session) {
 
 int run_compare(const std::string& a, const std::string& b) {
   int differ = 0;
-  for (const char* name : kContactDatasets) {
-    const std::string ds = name;
+  for (const ContactField& field : kContactFields) {
+    const std::string ds = field.path;
     const auto ia = inspect_dataset(a, ds), ib = inspect_dataset(b, ds);
     if (!ia && !ib) continue;
     if (!ia || !ib) {
@@ -572,47 +570,5 @@ int run_generate(const std::string& path, const GenerateOptions& options, bool q
                options.kind, options.seed, path, seconds_since(t));
   return 0;
 }
-
-template <class Real>
-void write_contacts_csv(const std::string& path, const Contacts<Real>& c) {
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  {
-    std::FILE* f = std::fopen(tmp.c_str(), "w");
-    if (!f) throw IoError(path + ": cannot open for writing");
-    // every field the run produced (kContactFields order); a vector field is three columns
-    std::string header;
-    for_each_contact_field(c, c.full, [&](auto index, const auto&) {
-      const ContactField& field = kContactFields[index];
-      const std::string name = field.name();
-      header += header.empty() ? "" : ",";
-      header += field.kind == FieldKind::vector ? name + "_x," + name + "_y," + name + "_z" : name;
-    });
-    fmt::print(f, "{}\n", header);
-    fmt::memory_buffer row;
-    for (std::size_t k = 0; k < c.size(); ++k) {
-      row.clear();
-      for_each_contact_field(c, c.full, [&](auto, const auto& column) {
-        if constexpr (requires { column[k].x; })
-          fmt::format_to(std::back_inserter(row), "{},{},{},", column[k].x, column[k].y, column[k].z);
-        else
-          fmt::format_to(std::back_inserter(row), "{},", column[k]);
-      });
-      row[row.size() - 1] = '\n';
-      std::fwrite(row.data(), 1, row.size(), f);
-    }
-    if (std::fclose(f) != 0) {
-      std::filesystem::remove(tmp);
-      throw IoError(path + ": write failed");
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp);
-    throw IoError(path + ": cannot rename temporary file: " + ec.message());
-  }
-}
-template void write_contacts_csv(const std::string&, const Contacts<float>&);
-template void write_contacts_csv(const std::string&, const Contacts<double>&);
 
 }  // namespace cg

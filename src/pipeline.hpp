@@ -178,8 +178,4 @@ int run_compare(const std::string& a, const std::string& b);
 
 int run_generate(const std::string& path, const GenerateOptions& options, bool quiet);
 
-// Writes contacts as CSV (header + one row per contact), to a temporary name then renamed.
-template <class Real>
-void write_contacts_csv(const std::string& path, const Contacts<Real>& contacts);
-
 }  // namespace cg

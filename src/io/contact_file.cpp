@@ -42,36 +42,10 @@ static_assert(sizeof(std::int64_t) == 8 && sizeof(double) == 8 && sizeof(float) 
 
 namespace {
 
-// Dataset k of kContactDatasets: columns (0: rank 1) and whether it holds ids.
-hsize_t contact_columns(std::size_t k) { return (k == 0 || k == 1 || k == 5) ? 0 : 3; }
-bool contact_ids(std::size_t k) { return k < 2; }
-
-// Row pointers of a Contacts in kContactDatasets order (nullptr past the fields it has).
-template <class Real>
-std::array<const unsigned char*, 10> contact_sources(const Contacts<Real>& c) {
-  auto p = [](const auto& v) { return reinterpret_cast<const unsigned char*>(v.data()); };
-  return {p(c.id_a),
-          p(c.id_b),
-          p(c.position_on_a),
-          p(c.position_on_b),
-          p(c.normal_on_b),
-          p(c.distance),
-          p(c.local_point_a),
-          p(c.local_point_b),
-          p(c.lateral_friction_dir1),
-          p(c.lateral_friction_dir2)};
-}
-
-template <class Real>
-bool consistent_lengths(const Contacts<Real>& c) {
-  const std::size_t k = c.size();
-  bool ok = c.id_b.size() == k && c.position_on_a.size() == k && c.position_on_b.size() == k &&
-            c.normal_on_b.size() == k && c.distance.size() == k;
-  if (c.full) {
-    ok = ok && c.local_point_a.size() == k && c.local_point_b.size() == k &&
-         c.lateral_friction_dir1.size() == k && c.lateral_friction_dir2.size() == k;
-  }
-  return ok;
+// Columns of a field's dataset (0: rank 1) and its HDF5 type in a file of this precision.
+hsize_t dataset_columns(const ContactField& f) { return f.kind == FieldKind::vector ? 3 : 0; }
+hid_t dataset_type(const ContactField& f, bool fp32) {
+  return f.kind == FieldKind::id ? H5T_STD_I64LE : fp32 ? H5T_IEEE_F32LE : H5T_IEEE_F64LE;
 }
 
 }  // namespace
@@ -136,27 +110,26 @@ ContactFileLayout create_contact_file(const std::string& path, std::uint64_t row
   layout.precision = precision;
   layout.full = full;
   const bool fp32 = precision == Precision::fp32;
-  const hid_t real_type = fp32 ? H5T_IEEE_F32LE : H5T_IEEE_F64LE;
-  const std::uint64_t real_bytes = fp32 ? 4 : 8;
   Where where(path, true);
   try {
     Handle file = create_file(where, layout.temp);
     create_group(where, file, "/contacts");
-    for (std::size_t k = 0; k < (full ? 10u : 6u); ++k) {
-      const hsize_t cols = contact_columns(k);
+    for (const ContactField& field : kContactFields) {
+      if (field.optional && !full) continue;
+      const hsize_t cols = dataset_columns(field);
       std::vector<hsize_t> dims{rows};
       if (cols) dims.push_back(cols);
-      const std::string name = kContactDatasets[k];
+      const std::string name = field.path;
       Handle space = make_space(where, dims);
       Handle dcpl = creation_properties(where, H5P_DATASET_CREATE);
       // contiguous, allocated now (so it has a file offset), never filled (every row gets written)
       check(H5Pset_layout(dcpl, H5D_CONTIGUOUS), where, "cannot set dataset properties");
       check(H5Pset_alloc_time(dcpl, H5D_ALLOC_TIME_EARLY), where, "cannot set dataset properties");
       check(H5Pset_fill_time(dcpl, H5D_FILL_TIME_NEVER), where, "cannot set dataset properties");
-      Handle dataset = checked(H5Dcreate2(file, name.c_str(), contact_ids(k) ? H5T_STD_I64LE : real_type,
-                                          space, H5P_DEFAULT, dcpl, H5P_DEFAULT),
+      const hid_t type = dataset_type(field, fp32);
+      Handle dataset = checked(H5Dcreate2(file, name.c_str(), type, space, H5P_DEFAULT, dcpl, H5P_DEFAULT),
                                H5Dclose, where, fmt::format("{}: cannot create the dataset", name));
-      ContactFileLayout::Dataset d{name, 0, contact_ids(k) ? 8 : real_bytes * (cols ? cols : 1)};
+      ContactFileLayout::Dataset d{name, 0, H5Tget_size(type) * (cols ? cols : 1)};
       if (rows > 0) {
         const haddr_t offset = H5Dget_offset(dataset);
         if (offset == HADDR_UNDEF) where.fail(fmt::format("{}: no file offset for the dataset's rows", name));
@@ -176,11 +149,11 @@ template <class Real>
 void write_contact_rows(const ContactFileLayout& layout, std::uint64_t first_row, const Contacts<Real>& c,
                         int threads) {
   const std::uint64_t n = c.size();
-  const Precision precision = std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64;
-  if (!consistent_lengths(c))
+  constexpr Precision precision = precision_of<Real>();
+  if (!c.consistent())
     throw Error(fmt::format("{}: write_contact_rows: the contact arrays differ in length", layout.path));
   if (precision != layout.precision || c.full != layout.full ||
-      layout.datasets.size() != (layout.full ? 10u : 6u))
+      layout.datasets.size() != (layout.full ? kContactFieldCount : kBasicContactFieldCount))
     throw Error(fmt::format("{}: write_contact_rows: the rows ({}, {} fields) do not match the file ({}, {})",
                             layout.path, to_string(precision), c.full ? "full" : "basic",
                             to_string(layout.precision), layout.full ? "full" : "basic"));
@@ -195,7 +168,10 @@ void write_contact_rows(const ContactFileLayout& layout, std::uint64_t first_row
     const unsigned char* src;
     std::uint64_t offset, bytes, row;
   };
-  const std::array<const unsigned char*, 10> src = contact_sources(c);
+  std::vector<const unsigned char*> src;  // the rows of dataset k, in layout order (kContactFields)
+  for_each_contact_field(c, c.full, [&](auto, const auto& column) {
+    src.push_back(reinterpret_cast<const unsigned char*>(column.data()));
+  });
   std::vector<Block> blocks;
   for (std::size_t k = 0; k < layout.datasets.size(); ++k) {
     const ContactFileLayout::Dataset& d = layout.datasets[k];
@@ -300,15 +276,14 @@ void discard_contact_file(const ContactFileLayout& layout) noexcept { remove_qui
 
 template <class Real>
 void write_contacts(const std::string& path, const Contacts<Real>& c, const RunInfo& info, int threads) {
-  const char* precision = std::is_same_v<Real, float> ? "fp32" : "fp64";
-  if (!consistent_lengths(c))
+  const char* precision = to_string(precision_of<Real>());
+  if (!c.consistent())
     throw Error(fmt::format("{}: write_contacts: the contact arrays differ in length", path));
   if (!info.precision.empty() && info.precision != precision) {
     throw Error(fmt::format("{}: write_contacts: RunInfo says precision {}, the contacts are {}", path,
                             info.precision, precision));
   }
-  const ContactFileLayout layout = create_contact_file(
-      path, c.size(), std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64, c.full);
+  const ContactFileLayout layout = create_contact_file(path, c.size(), precision_of<Real>(), c.full);
   try {
     write_contact_rows(layout, 0, c, threads);
   } catch (...) {
@@ -339,46 +314,33 @@ ContactFile read_contacts(const std::string& path) {
   }
 
   if (!group_exists(where, file, "/contacts")) where.bad("/contacts: missing group");
-  Dataset id_a = open_dataset(where, file, "/contacts/id_a", 0, Element::integer);
-  Dataset id_b = open_dataset(where, file, "/contacts/id_b", 0, Element::integer);
-  require_rows(where, id_b, id_a);
+  // Every field of the table: its shape and element kind checked, its rows read (reals as double).
+  // The basic fields first; the optional ones must be all present or none.
+  Dataset id_a = open_dataset(where, file, kContactFields[0].path, 0, Element::integer);  // K rows
   const hsize_t k = id_a.rows;
   Contacts<double>& c = out.contacts;
-  c.id_a.resize(k);
-  c.id_b.resize(k);
-  read_rows(where, id_a, 0, k, H5T_NATIVE_INT64, c.id_a.data());
-  read_rows(where, id_b, 0, k, H5T_NATIVE_INT64, c.id_b.data());
-
-  auto read_real = [&](const char* name, hsize_t cols, auto& vector) {
-    Dataset d = open_dataset(where, file, name, cols, Element::real);
-    require_rows(where, d, id_a);
-    vector.resize(k);
-    read_rows(where, d, 0, k, H5T_NATIVE_DOUBLE, vector.data());
+  auto read_fields = [&](bool optional) {
+    for_each_contact_field(c, optional, [&](auto index, auto& column) {
+      const ContactField& f = kContactFields[index];
+      if (f.optional != optional) return;
+      const bool ids = f.kind == FieldKind::id;
+      Dataset d =
+          open_dataset(where, file, f.path, dataset_columns(f), ids ? Element::integer : Element::real);
+      require_rows(where, d, id_a);
+      column.resize(k);
+      read_rows(where, d, 0, k, ids ? H5T_NATIVE_INT64 : H5T_NATIVE_DOUBLE, column.data());
+      if (!ids && out.precision.empty()) out.precision = d.element_size == 4 ? "fp32" : "fp64";
+    });
   };
-  read_real("/contacts/position_on_a", 3, c.position_on_a);
-  if (out.precision.empty()) {
-    out.precision = open_dataset(where, file, "/contacts/position_on_a", 3, Element::real).element_size == 4
-                        ? "fp32"
-                        : "fp64";
-  }
-  read_real("/contacts/position_on_b", 3, c.position_on_b);
-  read_real("/contacts/normal_on_b", 3, c.normal_on_b);
-  read_real("/contacts/distance", 0, c.distance);
-
-  const char* optional[] = {"/contacts/local_point_a", "/contacts/local_point_b",
-                            "/contacts/lateral_friction_dir1", "/contacts/lateral_friction_dir2"};
+  read_fields(false);
   int present = 0;
-  for (const char* name : optional) present += path_exists(where, file, name) ? 1 : 0;
-  if (present != 0 && present != 4)
+  for (const ContactField& f : kContactFields)
+    present += f.optional && path_exists(where, file, f.path) ? 1 : 0;
+  if (present != 0 && present != int(kContactFieldCount - kBasicContactFieldCount))
     where.bad(
         "/contacts: the optional datasets (local points, friction directions) must be all present or none");
-  c.full = present == 4;
-  if (c.full) {
-    read_real(optional[0], 3, c.local_point_a);
-    read_real(optional[1], 3, c.local_point_b);
-    read_real(optional[2], 3, c.lateral_friction_dir1);
-    read_real(optional[3], 3, c.lateral_friction_dir2);
-  }
+  c.full = present != 0;
+  if (c.full) read_fields(true);
   return out;
 }
 

@@ -88,16 +88,4 @@ struct ContactFile {
 };
 ContactFile read_contacts(const std::string& path);
 
-// The /contacts datasets of CONTRACT §2 in file order: six always, the last four with --fields full.
-inline constexpr const char* kContactDatasets[] = {"/contacts/id_a",
-                                                   "/contacts/id_b",
-                                                   "/contacts/position_on_a",
-                                                   "/contacts/position_on_b",
-                                                   "/contacts/normal_on_b",
-                                                   "/contacts/distance",
-                                                   "/contacts/local_point_a",
-                                                   "/contacts/local_point_b",
-                                                   "/contacts/lateral_friction_dir1",
-                                                   "/contacts/lateral_friction_dir2"};
-
 }  // namespace cg

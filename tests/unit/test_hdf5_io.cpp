@@ -483,11 +483,11 @@ void phased_round_trip(const std::string& dir, std::size_t k, bool full) {
   if (full) expect_same_vec(c.lateral_friction_dir2, back.contacts.lateral_friction_dir2);
   EXPECT_EQ(std::get<std::int64_t>(back.attributes.at("contacts")), static_cast<std::int64_t>(k));
   for (std::size_t d = 0; d < (full ? 10u : 6u); ++d) {
-    EXPECT_EQ(cg::inspect_dataset(file, cg::kContactDatasets[d])->dims,
-              cg::inspect_dataset(whole, cg::kContactDatasets[d])->dims);
-    EXPECT_EQ(cg::read_dataset_bytes(file, cg::kContactDatasets[d]),
-              cg::read_dataset_bytes(whole, cg::kContactDatasets[d]))
-        << cg::kContactDatasets[d];
+    EXPECT_EQ(cg::inspect_dataset(file, cg::kContactFields[d].path)->dims,
+              cg::inspect_dataset(whole, cg::kContactFields[d].path)->dims);
+    EXPECT_EQ(cg::read_dataset_bytes(file, cg::kContactFields[d].path),
+              cg::read_dataset_bytes(whole, cg::kContactFields[d].path))
+        << cg::kContactFields[d].path;
   }
   if (!full) {
     EXPECT_FALSE(cg::inspect_dataset(file, "/contacts/local_point_a").has_value());
@@ -995,7 +995,8 @@ TEST_F(Hdf5Io, DamagedRegressionFilesAreInputErrors) {
     clean([&] { cg::read_scene(file); });
     clean([&] { cg::read_scene_shape(file); });
     clean([&] { cg::read_contacts(file); });
-    for (const char* ds : cg::kContactDatasets) {
+    for (const cg::ContactField& field : cg::kContactFields) {
+      const std::string ds = field.path;
       clean([&] {
         if (cg::inspect_dataset(file, ds)) cg::read_dataset_bytes(file, ds);
       });
