@@ -2,7 +2,8 @@
 # End to end: `mpirun -np P contactgrid detect` writes the same /contacts bytes as the one-rank run,
 # for P = 2, 3, 4 (and 8 oversubscribed), on a uniform and a polydisperse scene, fp64 and fp32, with
 # the defaults (every rank reads every row, all ranks being on one node; rank 0 gathers and writes)
-# and, at P = 3, each rank reading its own rows and each rank writing its id_a range.
+# and, at P = 3, each rank reading its own rows and each rank writing its id_a range; then an
+# ellipsoid and a mixed scene (P = 2, 3, 4, own rows, id_a ranges) and the --steps refusal of shapes.
 # Usage: mpi_identical.sh CONTACTGRID MPIEXEC WORKDIR
 set -euo pipefail
 CG=$1; MPIEXEC=$2; W=$3
@@ -43,6 +44,9 @@ for scene in e m; do
     "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.own.h5"
   done
 done
+"$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/m.h5" -o "$W/m.ranks.h5" --backend cpu \
+  --precision fp64 --fields full --threads 1 --read own --write ranks -q
+"$CG" compare "$W/m.fp64.1.h5" "$W/m.ranks.h5"
 # the resident steps refuse shapes with a usage error (exit 2), no output
 rc=0; "$MPIEXEC" -np 2 --oversubscribe --allow-run-as-root "$CG" detect "$W/m.h5" -o "$W/steps.h5" \
   --backend cpu --steps 2 -q 2>"$W/err" || rc=$?
