@@ -5,13 +5,24 @@
 
 namespace cg {
 
-Imports<BodyRecord> exchange_ghosts(const Session& session, const Exports<BodyRecord>& exports) {
+namespace {
+template <class T>
+Imports<T> exchange_records(const Session& session, const Exports<T>& exports) {
   const detail::Comm comm(session);
   const std::vector<std::uint64_t> send_counts = exports.counts();
-  Imports<BodyRecord> in;
+  Imports<T> in;
   in.counts = comm.alltoall_counts(send_counts);
   in.rows = comm.exchange(exports.rows, send_counts, in.counts);
   return in;
+}
+}  // namespace
+
+Imports<BodyRecord> exchange_ghosts(const Session& session, const Exports<BodyRecord>& exports) {
+  return exchange_records(session, exports);
+}
+
+Imports<ShapeRecord> exchange_ghosts(const Session& session, const Exports<ShapeRecord>& exports) {
+  return exchange_records(session, exports);
 }
 
 }  // namespace cg

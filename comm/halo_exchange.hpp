@@ -21,5 +21,7 @@ struct Imports {
 // to_ghost_ranks); returns this rank's ghosts. Counts by MPI_Alltoall, then every Irecv posted,
 // every Isend, one Waitall (only ranks with something to send or receive take part).
 Imports<BodyRecord> exchange_ghosts(const Session& session, const Exports<BodyRecord>& exports);
+// The shape rows of the same ghosts (routed by the same rule: received in the same order).
+Imports<ShapeRecord> exchange_ghosts(const Session& session, const Exports<ShapeRecord>& exports);
 
 }  // namespace cg

@@ -10,7 +10,8 @@
 namespace cg {
 
 EngineInput select_owned_and_ghosts(HostVector<Vec3<double>>&& position, HostVector<double>&& radius,
-                                    const SlabDecomposition& s, double width, int me, int threads) {
+                                    const SlabDecomposition& s, double width, int me, int threads,
+                                    ShapeRows&& shapes) {
   const std::size_t n = position.size();
   const int axis = s.axis();
   EngineInput in;
@@ -20,6 +21,7 @@ EngineInput select_owned_and_ghosts(HostVector<Vec3<double>>&& position, HostVec
     in.owned = n;
     in.position = std::move(position);
     in.radius = std::move(radius);
+    in.shapes = std::move(shapes);
     return in;
   }
   // 0: not held here, 1: ghost, 2: owned
@@ -50,7 +52,14 @@ EngineInput select_owned_and_ghosts(HostVector<Vec3<double>>&& position, HostVec
   if (in.owned == n) {  // every row is owned here (so none is a ghost): the rows as read, ids implied
     in.position = std::move(position);
     in.radius = std::move(radius);
+    in.shapes = std::move(shapes);
     return in;
+  }
+  const bool with_shapes = !shapes.empty();
+  if (with_shapes) {
+    in.shapes.shape.resize(total);
+    in.shapes.semi_axes.resize(total);
+    in.shapes.orientation.resize(total);
   }
   in.position.resize(total);
   in.radius.resize(total);
@@ -66,18 +75,30 @@ EngineInput select_owned_and_ghosts(HostVector<Vec3<double>>&& position, HostVec
       in.radius[w] = radius[i];
       in.id[w] = static_cast<std::int64_t>(i);
       in.report[w] = h == 2;
+      if (with_shapes) {
+        in.shapes.shape[w] = shapes.shape[i];
+        in.shapes.semi_axes[w] = shapes.semi_axes[i];
+        in.shapes.orientation[w] = shapes.orientation[i];
+      }
       ++w;
     }
   }
   position = {};
   radius = {};
+  shapes = {};
   return in;
 }
 
 EngineInput merge_by_id(std::span<const BodyRecord> owned, std::span<const BodyRecord> ghosts,
-                        const std::vector<std::uint64_t>& ghost_counts, int threads) {
+                        const std::vector<std::uint64_t>& ghost_counts, int threads,
+                        std::span<const ShapeRecord> owned_shapes,
+                        std::span<const ShapeRecord> ghost_shapes) {
+  const bool with_shapes = !owned_shapes.empty() || !ghost_shapes.empty();
+  if (with_shapes && (owned_shapes.size() != owned.size() || ghost_shapes.size() != ghosts.size()))
+    throw Error("merge_by_id: shape rows and body records differ in count: internal error");
   // ghost groups → one ascending run
   HostVector<BodyRecord> g(ghosts.size());
+  HostVector<ShapeRecord> gs(with_shapes ? ghosts.size() : 0);
   {
     using Head = std::pair<std::int64_t, std::size_t>;  // (id, group)
     std::priority_queue<Head, std::vector<Head>, std::greater<Head>> heap;
@@ -95,6 +116,7 @@ EngineInput merge_by_id(std::span<const BodyRecord> owned, std::span<const BodyR
     while (!heap.empty()) {
       const std::size_t r = heap.top().second;
       heap.pop();
+      if (with_shapes) gs[w] = ghost_shapes[next[r]];
       g[w++] = ghosts[next[r]++];
       if (next[r] < end[r]) heap.emplace(ghosts[next[r]].id, r);
     }
@@ -107,6 +129,11 @@ EngineInput merge_by_id(std::span<const BodyRecord> owned, std::span<const BodyR
   in.radius.resize(n);
   in.id.resize(n);
   in.report.resize(n);
+  if (with_shapes) {
+    in.shapes.shape.resize(n);
+    in.shapes.semi_axes.resize(n);
+    in.shapes.orientation.resize(n);
+  }
   auto ghost_split = [&](std::size_t a) -> std::size_t {  // ghosts before owned[a]
     if (a == 0) return 0;
     if (a == no) return ng;
@@ -124,22 +151,35 @@ EngineInput merge_by_id(std::span<const BodyRecord> owned, std::span<const BodyR
     std::size_t b = ghost_split(a);
     const std::size_t b_end = t + 1 == c.parts ? ng : ghost_split(a_end);
     std::size_t k = a + b;
-    auto put = [&](const BodyRecord& x, std::uint8_t mine) {
+    auto put = [&](const BodyRecord& x, const ShapeRecord* shape, std::uint8_t mine) {
       in.position[k] = x.position;
       in.radius[k] = x.radius;
       in.id[k] = x.id;
       in.report[k] = mine;
+      if (shape) {
+        in.shapes.shape[k] = shape->shape;
+        in.shapes.semi_axes[k] = shape->semi_axes;
+        in.shapes.orientation[k] = shape->orientation;
+      }
       ++k;
+    };
+    auto put_owned = [&] {
+      put(owned[a], with_shapes ? &owned_shapes[a] : nullptr, 1);
+      ++a;
+    };
+    auto put_ghost = [&] {
+      put(g[b], with_shapes ? &gs[b] : nullptr, 0);
+      ++b;
     };
     while (a < a_end && b < b_end) {
       if (g[b].id < owned[a].id) {
-        put(g[b++], 0);
+        put_ghost();
       } else {
-        put(owned[a++], 1);
+        put_owned();
       }
     }
-    while (a < a_end) put(owned[a++], 1);
-    while (b < b_end) put(g[b++], 0);
+    while (a < a_end) put_owned();
+    while (b < b_end) put_ghost();
   }
   const std::int64_t* id = in.id.data();
   const std::size_t k =

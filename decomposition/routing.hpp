@@ -27,14 +27,23 @@
 
 namespace cg {
 
-// One body in flight between ranks: a global id and a bounding sphere (ellipsoids will add their
-// shape here). Sent as bytes (homogeneous nodes).
+// One body in flight between ranks: a global id and a bounding sphere. Sent as bytes (homogeneous
+// nodes). The shape of a body of a scene with ellipsoids travels as a ShapeRecord in a parallel
+// array, routed by the same rule (so in the same order): a sphere-only scene moves BodyRecords only.
 struct BodyRecord {
   Vec3<double> position;
   double radius;
   std::int64_t id;
 };
 static_assert(std::is_trivially_copyable_v<BodyRecord>);
+
+// A body's shape rows (BodiesView::shape, semi_axes, orientation), parallel to its BodyRecord.
+struct ShapeRecord {
+  Quat<double> orientation;
+  Vec3<double> semi_axes;
+  Shape shape;
+};
+static_assert(std::is_trivially_copyable_v<ShapeRecord>);
 
 // Static split of [0, n) into `parts` contiguous chunks (deterministic, whatever the team size):
 // one chunk below 2^14 rows, else one per thread.

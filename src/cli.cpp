@@ -45,10 +45,16 @@ int run_cli(int argc, char** argv, Session& session) {
   std::vector<double> offset;
   auto* g = app.add_subcommand("generate", "Make a seeded, reproducible scene (CONTRACT §1 HDF5)");
   g->add_option("output", gen_out, "Scene file to write (.h5)")->required();
-  g->add_option("--kind", gen.kind, "uniform | polydisperse")
-      ->check(CLI::IsMember({"uniform", "polydisperse"}))
+  g->add_option(
+       "--kind", gen.kind,
+       "uniform | polydisperse | ellipsoids (semi-axes uniform in [Rlow, Rhigh], random orientations) "
+       "| mixed (spheres then ellipsoids)")
+      ->check(CLI::IsMember({"uniform", "polydisperse", "ellipsoids", "mixed"}))
       ->capture_default_str();
-  g->add_option("-n,--count", gen.count, "Number of spheres, 1 … 2^28")
+  g->add_option("--ellipsoid-fraction", gen.ellipsoid_fraction, "mixed: share F of ellipsoids, in [0, 1]")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  g->add_option("-n,--count", gen.count, "Number of bodies, 1 … 2^28")
       ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1) << 28))
       ->capture_default_str();
   g->add_option("--seed", gen.seed, "Random seed")->capture_default_str();

@@ -187,7 +187,9 @@ RadiusNodes radius_nodes(RadiusLaw law, double r_low, double r_high) {
   for (int p = 0; p < kPanels; ++p) {
     for (int k = 0; k < kPerPanel; ++k) {
       double v = (p + rule.x[k]) / kPanels;
-      double r = law == RadiusLaw::uniform ? r_low + (r_high - r_low) * v : r_low * std::exp(v * log_ratio);
+      double r = law == RadiusLaw::uniform       ? r_low + (r_high - r_low) * v
+                 : law == RadiusLaw::log_uniform ? r_low * std::exp(v * log_ratio)
+                                                 : r_low + (r_high - r_low) * std::cbrt(v);  // max of 3
       nodes.r.push_back(std::clamp(r, r_low, r_high));
       nodes.w.push_back(rule.w[k] / kPanels);
     }
@@ -215,6 +217,9 @@ void check_radius_law(double r_low, double r_high) {
 
 // ---- bodies ------------------------------------------------------------------------------------
 
+std::array<double, 4> random_quaternion(const CounterRng& rng, std::uint64_t i);
+double box_edge_of(std::uint64_t n, const RadiusNodes& nodes, double r_low, double contacts_per_body);
+
 // Everything that defines body i of a generated scene.
 struct BodyLaw {
   CounterRng rng;
@@ -226,6 +231,8 @@ struct BodyLaw {
     double x = std::min(edge * rng.unit(i, stream), std::nextafter(edge, 0.0));  // in [0, L)
     return origin + x;
   }
+  void ellipsoid(std::uint64_t i, Vec3<double>& centre, Vec3<double>& semi_axes,
+                 std::array<double, 4>& orientation) const;
   void body(std::uint64_t i, Vec3<double>& centre, double& radius) const {
     centre = {coordinate(i, kX, offset.x), coordinate(i, kY, offset.y), coordinate(i, kZ, offset.z)};
     double u = rng.unit(i, kRadius);
@@ -245,8 +252,24 @@ BodyLaw body_law(const GenerateOptions& o, double edge) {
   return law;
 }
 
+void BodyLaw::ellipsoid(std::uint64_t i, Vec3<double>& centre, Vec3<double>& semi_axes,
+                        std::array<double, 4>& orientation) const {
+  centre = {coordinate(i, kX, offset.x), coordinate(i, kY, offset.y), coordinate(i, kZ, offset.z)};
+  auto axis = [&](unsigned stream) {
+    return std::clamp(r_low + (r_high - r_low) * rng.unit(i, stream), r_low, r_high);
+  };
+  semi_axes = {axis(kAxisA), axis(kAxisB), axis(kAxisC)};
+  orientation = random_quaternion(rng, i);
+}
+
 Attributes generator_attributes(const GenerateOptions& o, double edge) {
   Attributes a;
+  const std::uint64_t e = generated_ellipsoids(o);
+  if (o.kind == "ellipsoids" || o.kind == "mixed") {
+    a["spheres"] = static_cast<std::int64_t>(o.count - e);
+    a["ellipsoids"] = static_cast<std::int64_t>(e);
+  }
+  if (o.kind == "mixed") a["ellipsoid_fraction"] = o.ellipsoid_fraction;
   a["generator"] = o.kind;
   a["count"] = static_cast<std::int64_t>(o.count);
   a["seed"] = std::bit_cast<std::int64_t>(o.seed);  // seeds >= 2^63 read back negative: bit-cast
@@ -313,8 +336,12 @@ double box_edge(std::uint64_t n, RadiusLaw law, double r_low, double r_high, dou
   if (!(std::isfinite(contacts_per_body) && contacts_per_body > 0))
     throw UsageError(
         fmt::format("contacts per body must be a finite number > 0 (got {})", contacts_per_body));
+  return box_edge_of(n, radius_nodes(law, r_low, r_high), r_low, contacts_per_body);
+}
 
-  const RadiusNodes nodes = radius_nodes(law, r_low, r_high);
+namespace {
+// The edge for radii with the quadrature `nodes` (arguments checked by the callers).
+double box_edge_of(std::uint64_t n, const RadiusNodes& nodes, double r_low, double contacts_per_body) {
   const double pairs_per_body = 0.5 * static_cast<double>(n - 1);
   auto excess = [&](double edge) {
     return pairs_per_body * expected_contact(nodes, edge) - contacts_per_body;
@@ -338,6 +365,7 @@ double box_edge(std::uint64_t n, RadiusLaw law, double r_low, double r_high, dou
   }
   return 0.5 * (lo + hi);
 }
+}  // namespace
 
 double uniform_box_edge(std::uint64_t n, double r_low, double r_high, double contacts_per_body) {
   return box_edge(n, RadiusLaw::uniform, r_low, r_high, contacts_per_body);
@@ -347,9 +375,19 @@ double polydisperse_box_edge(std::uint64_t n, double r_low, double r_high, doubl
   return box_edge(n, RadiusLaw::log_uniform, r_low, r_high, contacts_per_body);
 }
 
+std::uint64_t generated_ellipsoids(const GenerateOptions& o) {
+  if (o.kind == "ellipsoids") return o.count;
+  if (o.kind != "mixed") return 0;
+  const double m = std::round(o.ellipsoid_fraction * static_cast<double>(o.count));
+  return std::min(o.count, static_cast<std::uint64_t>(std::max(0.0, m)));
+}
+
 void validate_generate_options(const GenerateOptions& o) {
-  if (o.kind != "uniform" && o.kind != "polydisperse")
-    throw UsageError(fmt::format("generator kind must be uniform or polydisperse (got \"{}\")", o.kind));
+  if (o.kind != "uniform" && o.kind != "polydisperse" && o.kind != "ellipsoids" && o.kind != "mixed")
+    throw UsageError(fmt::format(
+        "generator kind must be uniform, polydisperse, ellipsoids or mixed (got \"{}\")", o.kind));
+  if (o.kind == "mixed" && !(o.ellipsoid_fraction >= 0 && o.ellipsoid_fraction <= 1))
+    throw UsageError(fmt::format("ellipsoid fraction must be in [0, 1] (got {})", o.ellipsoid_fraction));
   if (o.count < 1 || o.count > kMaxGenerateCount)
     throw UsageError(
         fmt::format("body count must be in [1, 2^28 = {}] (got {})", kMaxGenerateCount, o.count));
@@ -367,7 +405,20 @@ void validate_generate_options(const GenerateOptions& o) {
 
 double scene_box_edge(const GenerateOptions& o) {
   validate_generate_options(o);
-  RadiusLaw law = o.kind == "polydisperse" ? RadiusLaw::log_uniform : RadiusLaw::uniform;
+  if (o.kind == "mixed") {  // the bounding radii: a mixture of the two laws
+    const double f = static_cast<double>(generated_ellipsoids(o)) / static_cast<double>(o.count);
+    RadiusNodes nodes = radius_nodes(RadiusLaw::uniform, o.radius_low, o.radius_high);
+    const RadiusNodes e = radius_nodes(RadiusLaw::max_of_three_uniform, o.radius_low, o.radius_high);
+    for (double& w : nodes.w) w *= 1 - f;
+    for (std::size_t k = 0; k < e.r.size(); ++k) {
+      nodes.r.push_back(e.r[k]);
+      nodes.w.push_back(f * e.w[k]);
+    }
+    return box_edge_of(o.count, nodes, o.radius_low, o.contacts_per_body);
+  }
+  RadiusLaw law = o.kind == "polydisperse" ? RadiusLaw::log_uniform
+                  : o.kind == "ellipsoids" ? RadiusLaw::max_of_three_uniform
+                                           : RadiusLaw::uniform;
   return box_edge(o.count, law, o.radius_low, o.radius_high, o.contacts_per_body);
 }
 
@@ -376,11 +427,17 @@ double scene_box_edge(const GenerateOptions& o) {
 Scene generate_scene(const GenerateOptions& options) {
   const double edge = scene_box_edge(options);
   const BodyLaw law = body_law(options, edge);
+  const std::uint64_t e = generated_ellipsoids(options), n = options.count - e;
   Scene scene;
-  scene.sphere_position.resize(options.count);
-  scene.sphere_radius.resize(options.count);
-  for (std::uint64_t i = 0; i < options.count; ++i)
-    law.body(i, scene.sphere_position[i], scene.sphere_radius[i]);
+  scene.sphere_position.resize(n);
+  scene.sphere_radius.resize(n);
+  for (std::uint64_t i = 0; i < n; ++i) law.body(i, scene.sphere_position[i], scene.sphere_radius[i]);
+  scene.ellipsoid_position.resize(e);
+  scene.ellipsoid_semi_axes.resize(e);
+  scene.ellipsoid_orientation.resize(e);
+  for (std::uint64_t j = 0; j < e; ++j)
+    law.ellipsoid(n + j, scene.ellipsoid_position[j], scene.ellipsoid_semi_axes[j],
+                  scene.ellipsoid_orientation[j]);
   scene.radius_low = options.radius_low;
   scene.radius_high = options.radius_high;
   scene.attributes = generator_attributes(options, edge);
@@ -390,19 +447,30 @@ Scene generate_scene(const GenerateOptions& options) {
 void generate_scene_file(const std::string& path, const GenerateOptions& options) {
   const double edge = scene_box_edge(options);
   const BodyLaw law = body_law(options, edge);
+  const std::uint64_t e = generated_ellipsoids(options), spheres = options.count - e;
   SceneFileHeader header;
-  header.spheres = options.count;
+  header.spheres = spheres;
+  header.ellipsoids = e;
   header.radius_low = options.radius_low;
   header.radius_high = options.radius_high;
   header.attributes = generator_attributes(options, edge);
   SceneFileWriter writer(path, header);
   const std::size_t block = std::min<std::size_t>(kWriteChunk, options.count);
   std::vector<Vec3<double>> position(block);
-  std::vector<double> radius(block);
-  for (std::uint64_t first = 0; first < options.count; first += block) {
-    std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(block, options.count - first));
+  std::vector<double> radius(spheres > 0 ? block : 0);
+  for (std::uint64_t first = 0; first < spheres; first += block) {
+    std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(block, spheres - first));
     for (std::size_t k = 0; k < n; ++k) law.body(first + k, position[k], radius[k]);
     writer.write_spheres(first, std::span(position).first(n), std::span(radius).first(n));
+  }
+  std::vector<Vec3<double>> semi_axes(e > 0 ? block : 0);
+  std::vector<std::array<double, 4>> orientation(e > 0 ? block : 0);
+  for (std::uint64_t first = 0; first < e; first += block) {  // ellipsoid j is body spheres + j
+    std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(block, e - first));
+    for (std::size_t k = 0; k < n; ++k)
+      law.ellipsoid(spheres + first + k, position[k], semi_axes[k], orientation[k]);
+    writer.write_ellipsoids(first, std::span(position).first(n), std::span(semi_axes).first(n),
+                            std::span(orientation).first(n));
   }
   writer.commit();
 }

@@ -11,14 +11,18 @@
 namespace cg {
 
 struct GenerateOptions {
-  std::string kind = "uniform";  // uniform | polydisperse
+  std::string kind = "uniform";  // uniform | polydisperse | ellipsoids | mixed
   std::uint64_t count = 1024;    // N, 1 … 2^28
   std::uint64_t seed = 1;
-  double radius_low = 0.5;         // Rlow
-  double radius_high = 1.0;        // Rhigh (polydisperse: default Rlow·1000 … see --ratio)
-  double contacts_per_body = 0.4;  // target density (course: 0.4)
-  Vec3<double> offset{0, 0, 0};    // translation of the whole scene (far-from-origin tests)
+  double radius_low = 0.5;          // Rlow
+  double radius_high = 1.0;         // Rhigh (polydisperse: default Rlow·1000 … see --ratio)
+  double contacts_per_body = 0.4;   // target density (course: 0.4)
+  Vec3<double> offset{0, 0, 0};     // translation of the whole scene (far-from-origin tests)
+  double ellipsoid_fraction = 0.5;  // mixed: share of ellipsoids, in [0, 1]
 };
+
+// How many of options.count bodies are ellipsoids: ellipsoids: all; mixed: round(F·count); else 0.
+std::uint64_t generated_ellipsoids(const GenerateOptions& options);
 
 inline constexpr std::uint64_t kMaxGenerateCount = std::uint64_t(1) << 28;
 inline constexpr double kMaxPolydisperseRatio = 1000;  // radius_high / radius_low
@@ -34,8 +38,9 @@ double uniform_box_edge(std::uint64_t n, double r_low, double r_high, double con
 // non-decreasing.
 double cube_distance_cdf(double t);
 
-// Law of the radii of a generated scene on [r_low, r_high].
-enum class RadiusLaw { uniform, log_uniform };
+// Law of the radii of a generated scene on [r_low, r_high]. max_of_three_uniform: the bounding radius
+// of an ellipsoid whose three semi-axes are uniform on [r_low, r_high].
+enum class RadiusLaw { uniform, log_uniform, max_of_three_uniform };
 
 // E[P((r1 + r2) / edge)] for independent r1, r2 with the law (Gauss–Legendre quadrature).
 double expected_pair_contact(double edge, RadiusLaw law, double r_low, double r_high);
@@ -46,7 +51,8 @@ double expected_pair_contact(double edge, RadiusLaw law, double r_low, double r_
 double box_edge(std::uint64_t n, RadiusLaw law, double r_low, double r_high, double contacts_per_body);
 double polydisperse_box_edge(std::uint64_t n, double r_low, double r_high, double contacts_per_body);
 
-// Throws UsageError unless: kind is uniform|polydisperse, count in [1, 2^28], finite radii with
+// Throws UsageError unless: kind is uniform|polydisperse|ellipsoids|mixed (mixed: ellipsoid_fraction
+// in [0, 1]), count in [1, 2^28], finite radii with
 // 0 < radius_low <= radius_high (polydisperse: ratio <= 1000), finite contacts_per_body > 0,
 // finite offset.
 void validate_generate_options(const GenerateOptions& options);
@@ -57,8 +63,12 @@ double scene_box_edge(const GenerateOptions& options);
 // ---- generators ---------------------------------------------------------------------------------
 
 // In memory (tests, small N). uniform: radii uniform in [Rlow, Rhigh]; polydisperse: log-uniform.
+// ellipsoids: every body an ellipsoid, semi-axes each uniform in [Rlow, Rhigh], orientation uniform
+// on SO(3); mixed: spheres (uniform radii) then ellipsoids (generated_ellipsoids of them); the box
+// edge from the bounding radii's law. Body id i draws from index i whatever its kind.
 // Centres uniform in [0, L)^3 + offset. radius_low/radius_high are set; attributes hold the rest
-// (generator, count, seed, contacts_per_body, box_edge, offset_x/y/z, software_version).
+// (generator, count, seed, contacts_per_body, box_edge, offset_x/y/z, software_version; with
+// ellipsoids also spheres, ellipsoids, and for mixed ellipsoid_fraction).
 Scene generate_scene(const GenerateOptions& options);
 
 // Streams the scene to an HDF5 file in chunks (any N up to 2^28 within bounded host memory),

@@ -81,19 +81,25 @@ struct Partition {
   std::uint64_t first = 0;   // row of position[0]
   std::uint64_t part_first = 0, part_count = 0;
   HostVector<Vec3<double>> position;
-  HostVector<double> radius;
+  HostVector<double> radius;  // the bounding radius
+  ShapeRows shapes;           // the scene has ellipsoids: every row's shape rows; else empty
+  bool has_shapes = false;    // the scene has ellipsoids (every rank agrees)
+  std::uint64_t ellipsoids = 0;
   Bounds bounds;  // of the partition's rows (count 0: none)
 };
 
-Partition read_partition(const Session& session, const std::string& path, bool all_rows) {
+Partition read_partition(const Session& session, const std::string& path, bool all_rows, int resident_steps) {
   Partition in;
   agreed_stage(session, "read", [&] {
     const SceneShape shape = read_scene_shape(path);
-    if (shape.ellipsoids > 0) {
-      throw InputError(path + ": /ellipsoids: the MPI run handles spheres only (for now)");
+    if (shape.spheres + shape.ellipsoids == 0) throw InputError(path + ": the scene has no bodies");
+    in.has_shapes = shape.ellipsoids > 0;
+    in.ellipsoids = shape.ellipsoids;
+    if (in.has_shapes && resident_steps > 0) {
+      throw UsageError("--steps: the resident steps handle spheres only; " + path + " has " +
+                       std::to_string(shape.ellipsoids) + " ellipsoids (run without --steps)");
     }
-    if (shape.spheres == 0) throw InputError(path + ": the scene has no bodies");
-    const std::uint64_t n = shape.spheres, me = static_cast<std::uint64_t>(session.rank()),
+    const std::uint64_t n = shape.spheres + shape.ellipsoids, me = static_cast<std::uint64_t>(session.rank()),
                         p = static_cast<std::uint64_t>(session.size());
     in.bodies = n;
     in.part_first = n * me / p;
@@ -101,13 +107,16 @@ Partition read_partition(const Session& session, const std::string& path, bool a
     in.first = all_rows ? 0 : in.part_first;
     const std::uint64_t count = all_rows ? n : in.part_count;
     if (count > 0) {
-      Scene rows = read_scene_rows(path, in.first, count);
-      if (rows.sphere_position.size() != count || rows.sphere_radius.size() != count) {
-        throw InputError(path + ": /spheres rows " + std::to_string(in.first) + "+" + std::to_string(count) +
-                         ": read " + std::to_string(rows.sphere_radius.size()) + " rows");
+      BodyRows rows = body_rows(read_scene_rows(path, in.first, count), in.has_shapes);
+      if (rows.position.size() != count || rows.radius.size() != count) {
+        throw InputError(path + ": rows " + std::to_string(in.first) + "+" + std::to_string(count) +
+                         ": read " + std::to_string(rows.radius.size()) + " rows");
       }
-      in.position = std::move(rows.sphere_position);
-      in.radius = std::move(rows.sphere_radius);
+      in.position = std::move(rows.position);
+      in.radius = std::move(rows.radius);
+      in.shapes.shape = std::move(rows.shape);
+      in.shapes.semi_axes = std::move(rows.semi_axes);
+      in.shapes.orientation = std::move(rows.orientation);
     }
     if (in.part_count > 0) {
       // Bounds (and validation) without an id array: the reader has validated every row already, so
@@ -185,6 +194,9 @@ SlabDecomposition make_slabs(const Session& session, const Partition& part, cons
 struct HeldBodies {
   HostVector<BodyRecord> owned;
   Imports<BodyRecord> ghosts;
+  HostVector<ShapeRecord> owned_shapes;  // parallel to owned / ghosts when the scene has ellipsoids
+  Imports<ShapeRecord> ghost_shapes;
+  bool has_shapes = false;
   EngineInput input;
 };
 
@@ -193,11 +205,13 @@ struct HeldBodies {
 HeldBodies distribute(const Session& session, Partition&& part, const SlabDecomposition& slabs,
                       const SharedFrame& f, bool all_rows, int threads) {
   HeldBodies held;
+  held.has_shapes = part.has_shapes;
   Exports<BodyRecord> exports;
+  Exports<ShapeRecord> shape_exports;
   agreed_stage(session, "redistribute", [&] {
     if (all_rows) {
       held.input = select_owned_and_ghosts(std::move(part.position), std::move(part.radius), slabs, f.width,
-                                           session.rank(), threads);
+                                           session.rank(), threads, std::move(part.shapes));
       return;
     }
     const auto& position = part.position;
@@ -208,10 +222,22 @@ HeldBodies distribute(const Session& session, Partition&& part, const SlabDecomp
         to_owner(slabs, [&](std::size_t i) { return component(position[i], f.axis); }), [&](std::size_t i) {
           return BodyRecord{position[i], radius[i], static_cast<std::int64_t>(first + i)};
         });
+    if (part.has_shapes) {  // the same rule, so the same order as the BodyRecords
+      const ShapeRows& s = part.shapes;
+      shape_exports = route<ShapeRecord>(
+          position.size(), session.size(), threads,
+          to_owner(slabs, [&](std::size_t i) { return component(position[i], f.axis); }), [&](std::size_t i) {
+            return ShapeRecord{s.orientation[i], s.semi_axes[i], s.shape[i]};
+          });
+    }
   });
   part.position = {};
   part.radius = {};
-  if (!all_rows) held.owned = distribute_to_owners(session, std::move(exports));
+  part.shapes = {};
+  if (!all_rows) {
+    held.owned = distribute_to_owners(session, std::move(exports));
+    if (held.has_shapes) held.owned_shapes = distribute_to_owners(session, std::move(shape_exports));
+  }
   return held;
 }
 
@@ -220,14 +246,22 @@ void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecompo
                      const SharedFrame& f, bool all_rows, int threads) {
   if (all_rows) return;
   Exports<BodyRecord> exports;
+  Exports<ShapeRecord> shape_exports;
   agreed_stage(session, "halo", [&] {
     const auto& owned = held.owned;
     auto x = [&](std::size_t i) { return component(owned[i].position, f.axis); };
     check_halo_rows(slabs, session.rank(), owned.size(), x, f.width, threads);
     exports = route<BodyRecord>(owned.size(), session.size(), threads, to_ghost_ranks(slabs, x, f.width),
                                 [&](std::size_t i) { return owned[i]; });
+    if (held.has_shapes) {  // the same rule, so the same order as the BodyRecords
+      const auto& shapes = held.owned_shapes;
+      shape_exports =
+          route<ShapeRecord>(owned.size(), session.size(), threads, to_ghost_ranks(slabs, x, f.width),
+                             [&](std::size_t i) { return shapes[i]; });
+    }
   });
   held.ghosts = exchange_ghosts(session, exports);
+  if (held.has_shapes) held.ghost_shapes = exchange_ghosts(session, shape_exports);
 }
 
 // Owned + ghosts in id order (own rows: merged by id), then the engine with the shared frame; the
@@ -239,10 +273,13 @@ Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBo
   local.full = full;
   agreed_stage(session, "detect", [&] {
     if (held.input.position.empty()) {  // own rows (every row: selected by distribute)
-      held.input = merge_by_id(held.owned, held.ghosts.rows, held.ghosts.counts, threads);
+      held.input = merge_by_id(held.owned, held.ghosts.rows, held.ghosts.counts, threads, held.owned_shapes,
+                               held.ghost_shapes.rows);
     }
     held.owned = {};
     held.ghosts = {};
+    held.owned_shapes = {};
+    held.ghost_shapes = {};
     if (held.input.owned > 0) local = engine.detect(held.input.view(), frame);
   });
   return local;
@@ -321,6 +358,9 @@ void record_detection(const Session& session, const Engine<Real>& engine, const 
   if (input.owned > 0) result.stats = engine.stats();
   result.stats.entries = session.sum(result.stats.entries);
   result.stats.pair_tests = session.sum(result.stats.pair_tests);
+  result.stats.narrow_fallbacks = session.sum(result.stats.narrow_fallbacks);
+  result.stats.narrow_unconverged = session.sum(result.stats.narrow_unconverged);
+  result.stats.ellipsoids = result.ellipsoids;  // the scene's (the engines' counts include ghosts)
   result.stats.key_bits = int(session.max(double(result.stats.key_bits)));
   const std::vector<std::uint64_t> owned = allgather_counts(session, input.owned);
   result.owned_min = *std::min_element(owned.begin(), owned.end());
@@ -367,10 +407,11 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   result.read = all_rows ? SceneRead::all_rows : SceneRead::own_rows;
   StageClock clock;
 
-  Partition part = read_partition(session, path, all_rows);
+  Partition part = read_partition(session, path, all_rows, options.resident_steps);
   const SharedFrame f = agree_frame<Real>(session, part.bounds, options);
   clock.stop(Stage::read);
   result.bodies = part.bodies;
+  result.ellipsoids = part.ellipsoids;
   result.frame = f.frame;
   result.cell_size = f.frame.cell_size;
   result.axis = f.axis;
@@ -417,6 +458,9 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
     fmt::print(", read {}, slab axis {}, owned bodies per rank {} … {}, ghosts {}, duplicates removed {}",
                r.read == SceneRead::all_rows ? "all rows per rank" : "own rows", "xyz"[r.axis], r.owned_min,
                r.owned_max, r.ghosts, r.duplicates_removed);
+  if (r.ellipsoids > 0)
+    fmt::print("\n  {} ellipsoids, {} narrow fallbacks, {} narrow solves unconverged (summed over ranks)",
+               r.ellipsoids, r.stats.narrow_fallbacks, r.stats.narrow_unconverged);
   fmt::print("\n  {}-bit cell keys, {} (cell, body) entries, {} pair tests; times: maximum over ranks\n",
              r.stats.key_bits, r.stats.entries, r.stats.pair_tests);
   double total = 0;
@@ -475,6 +519,9 @@ RunTime write_output(Session& session, const DetectCommand& cmd, const Distribut
   info.cell_size = r.cell_size;
   info.input = cmd.input;
   info.times = file_stage_times(r.times);
+  info.ellipsoids = r.ellipsoids;
+  info.narrow_fallbacks = r.stats.narrow_fallbacks;
+  info.narrow_unconverged = r.stats.narrow_unconverged;
   const double seconds = write_contacts_distributed(session, cmd.output, r.contacts, r.first_row,
                                                     r.total_contacts, info, r.threads);
   return {Stage::write, -1, seconds};

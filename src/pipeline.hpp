@@ -124,6 +124,7 @@ struct DistributedResult {
       times;  // read, redistribute, halo, detect (+ the engine's), gather|exchange, merge (max over ranks)
   std::uint64_t duplicates_removed = 0;        // gather: rank 0; ranks: summed, every rank (expected 0)
   std::uint64_t bodies = 0;                    // global body count
+  std::uint64_t ellipsoids = 0;                // of which ellipsoids (the scene's)
   std::uint64_t ghosts = 0;                    // ghosts held, summed over ranks
   std::uint64_t owned_min = 0, owned_max = 0;  // owned bodies per rank: balance of the slabs
   double cell_size = 0;                        // the frame's cell edge
@@ -134,8 +135,8 @@ struct DistributedResult {
   std::vector<double> cuts;              // the P-1 slab cuts
   Backend backend = Backend::cpu;        // the engine's resolved backend (this rank)
   int threads = 1;                       // host threads of this rank (engine and host loops)
-  EngineStats stats;                     // entries and pair tests summed over ranks
-  StepStats steps;                       // resident steps (steps == 0: none ran)
+  EngineStats stats;  // entries, pair tests, narrow_fallbacks, narrow_unconverged summed over ranks
+  StepStats steps;    // resident steps (steps == 0: none ran)
 };
 
 // Collective over `session`: every rank calls it with the same arguments. The stages read … collect

@@ -252,6 +252,11 @@ void commit_contact_file(const ContactFileLayout& layout, const RunInfo& info) {
     attributes["cell_size"] = info.cell_size;
     attributes["software_version"] = std::string(kSoftwareVersion);
     attributes["input"] = info.input;
+    if (info.ellipsoids > 0) {
+      attributes["ellipsoids"] = static_cast<std::int64_t>(info.ellipsoids);
+      attributes["narrow_fallbacks"] = static_cast<std::int64_t>(info.narrow_fallbacks);
+      attributes["narrow_unconverged"] = static_cast<std::int64_t>(info.narrow_unconverged);
+    }
     for (const StageTime& stage : info.times) {  // a stage named twice: the times add up
       auto [it, inserted] = attributes.try_emplace("time_" + stage.name, stage.seconds);
       if (!inserted) it->second = std::get<double>(it->second) + stage.seconds;

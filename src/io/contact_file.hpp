@@ -24,6 +24,9 @@ struct RunInfo {
   double cell_size = 0;
   std::string input;  // input file name
   StageTimes times;
+  // Scenes with ellipsoids (ellipsoids > 0; written as root attributes only then, so sphere-only
+  // files are unchanged): the ellipsoid count and the narrow phase's EngineStats summed over ranks.
+  std::uint64_t ellipsoids = 0, narrow_fallbacks = 0, narrow_unconverged = 0;
 };
 
 // One process writes the whole file: the phases below with `threads` writers (0: all). Throws Error

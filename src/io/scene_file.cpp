@@ -25,7 +25,7 @@ static_assert(sizeof(std::array<double, 4>) == 4 * sizeof(double));
 namespace {
 
 constexpr hsize_t kReadChunkRows = hsize_t(1) << 20;  // rows validated per read
-constexpr double kQuaternionTolerance = 1e-6;
+// (the orientation check is the engine's: cg::kQuaternionTolerance, core/shape.hpp)
 
 // ---- scene reading ---------------------------------------------------------------------------
 
@@ -319,6 +319,43 @@ Scene read_scene(const std::string& path) {
 Scene read_scene_rows(const std::string& path, std::size_t first, std::size_t count) {
   LibraryLock lock;
   return read_scene_range(path, first, count, false);
+}
+
+BodyRows body_rows(Scene&& scene, bool shapes) {
+  const std::size_t n = scene.sphere_count(), e = scene.ellipsoid_count();
+  if (e > 0 && !shapes) throw Error("body_rows: a scene with ellipsoids needs shape rows");
+  BodyRows rows;
+  if (!shapes) {
+    rows.position = std::move(scene.sphere_position);
+    rows.radius = std::move(scene.sphere_radius);
+    return rows;
+  }
+  rows.position.resize(n + e);
+  rows.radius.resize(n + e);
+  rows.shape.resize(n + e);
+  rows.semi_axes.resize(n + e);
+  rows.orientation.resize(n + e);
+  const Quat<double> identity{1, 0, 0, 0};
+  for (std::size_t i = 0; i < n; ++i) {
+    const double r = scene.sphere_radius[i];
+    rows.position[i] = scene.sphere_position[i];
+    rows.radius[i] = r;
+    rows.shape[i] = Shape::sphere;
+    rows.semi_axes[i] = {r, r, r};
+    rows.orientation[i] = identity;
+  }
+  for (std::size_t j = 0; j < e; ++j) {
+    const Vec3<double> a = scene.ellipsoid_semi_axes[j];
+    const std::array<double, 4>& q = scene.ellipsoid_orientation[j];
+    rows.position[n + j] = scene.ellipsoid_position[j];
+    rows.radius[n + j] = std::max({a.x, a.y, a.z});
+    rows.shape[n + j] = Shape::ellipsoid;
+    rows.semi_axes[n + j] = a;
+    rows.orientation[n + j] = {q[0], q[1], q[2], q[3]};
+  }
+  scene.sphere_position = {};
+  scene.sphere_radius = {};
+  return rows;
 }
 
 SceneShape read_scene_shape(const std::string& path) {

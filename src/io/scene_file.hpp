@@ -36,6 +36,21 @@ SceneShape read_scene_shape(const std::string& path);
 // [first, N) and the ellipsoids [0, first+count-N) of /ellipsoids. A range past N+M is a UsageError.
 Scene read_scene_rows(const std::string& path, std::size_t first, std::size_t count);
 
+// The engine's input rows of a scene (BodiesView), in id order: spheres 0 … N-1, then ellipsoids.
+// Without shapes (`shapes` false; only for a scene without ellipsoids) the sphere rows are moved out
+// of the scene (no copy) and the shape rows stay empty: the sphere-only path. With shapes, one row
+// per body in each: spheres Shape::sphere, semi-axes (r, r, r), identity orientation; ellipsoids
+// Shape::ellipsoid, radius = the largest semi-axis (the bounding radius, exactly as shape_fault wants).
+struct BodyRows {
+  HostVector<Vec3<double>> position;
+  HostVector<double> radius;
+  HostVector<Shape> shape;  // empty: all spheres
+  HostVector<Vec3<double>> semi_axes;
+  HostVector<Quat<double>> orientation;
+  std::size_t size() const { return radius.size(); }
+};
+BodyRows body_rows(Scene&& scene, bool shapes);
+
 // Writes float64 datasets ((N,3) / (N)), root attributes radius_low/radius_high when set and every
 // entry of scene.attributes (keys "radius_low"/"radius_high" there are ignored: the optionals rule).
 // Writing does not validate the values (tests write bad scenes on purpose). A scene without bodies

@@ -2,7 +2,8 @@
 # End to end: `mpirun -np P contactgrid detect` writes the same /contacts bytes as the one-rank run,
 # for P = 2, 3, 4 (and 8 oversubscribed), on a uniform and a polydisperse scene, fp64 and fp32, with
 # the defaults (every rank reads every row, all ranks being on one node; rank 0 gathers and writes)
-# and, at P = 3, each rank reading its own rows and each rank writing its id_a range.
+# and, at P = 3, each rank reading its own rows and each rank writing its id_a range; then an
+# ellipsoid and a mixed scene (P = 2, 3, 4, own rows, id_a ranges) and the --steps refusal of shapes.
 # Usage: mpi_identical.sh CONTACTGRID MPIEXEC WORKDIR
 set -euo pipefail
 CG=$1; MPIEXEC=$2; W=$3
@@ -26,6 +27,32 @@ for scene in u p; do
     "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.ranks.h5"
   done
 done
+# ellipsoid and mixed scenes: the shape rows move with their bodies (distribute, halo)
+"$CG" generate "$W/e.h5" -n 3000 --seed 7 --kind ellipsoids --rlow 0.3 --rhigh 1 -q
+"$CG" generate "$W/m.h5" -n 4000 --seed 8 --kind mixed --ellipsoid-fraction 0.4 --rlow 0.3 --rhigh 1 \
+  --contacts-per-body 1 -q
+for scene in e m; do
+  for prec in fp64 fp32; do
+    "$CG" detect "$W/$scene.h5" -o "$W/$scene.$prec.1.h5" --backend cpu --precision $prec --fields full -q
+    for np in 2 3 4; do
+      "$MPIEXEC" -np $np --oversubscribe --allow-run-as-root "$CG" detect "$W/$scene.h5" \
+        -o "$W/$scene.$prec.$np.h5" --backend cpu --precision $prec --fields full --threads 1 -q
+      "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.$np.h5"
+    done
+    "$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/$scene.h5" \
+      -o "$W/$scene.$prec.own.h5" --backend cpu --precision $prec --fields full --threads 1 --read own -q
+    "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.own.h5"
+  done
+done
+"$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/m.h5" -o "$W/m.ranks.h5" --backend cpu \
+  --precision fp64 --fields full --threads 1 --read own --write ranks -q
+"$CG" compare "$W/m.fp64.1.h5" "$W/m.ranks.h5"
+# the resident steps refuse shapes with a usage error (exit 2), no output
+rc=0; "$MPIEXEC" -np 2 --oversubscribe --allow-run-as-root "$CG" detect "$W/m.h5" -o "$W/steps.h5" \
+  --backend cpu --steps 2 -q 2>"$W/err" || rc=$?
+[ $rc -eq 2 ] || { echo "--steps on a mixed scene: exit $rc, expected 2"; cat "$W/err"; exit 1; }
+grep -q "spheres only" "$W/err" || { cat "$W/err"; exit 1; }
+[ ! -e "$W/steps.h5" ] || { echo "output left behind"; exit 1; }
 # an error on one rank ends the whole job with one message and no output
 if "$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/missing.h5" -o "$W/x.h5" 2>"$W/err"; then
   echo "a missing scene must fail"; exit 1
