@@ -184,11 +184,24 @@ RawAttributes::Status parse_attribute(const std::vector<unsigned char>& m, Attri
   return S::ok;
 }
 
-// Every attribute message of the object header at `header` (absolute).
-RawAttributes::Status header_attributes(
-    const RawFile& f, std::uint64_t base, std::uint64_t header, unsigned version,
-    std::vector<AttributeMessage>& out,
-    std::vector<std::pair<std::uint64_t, std::uint64_t>>* symbol_tables = nullptr) {
+// A message of an object header flagged "shared" (HDF5 File Format Specification IV.A.2, message
+// flags bit 1): its body is a reference into the shared-message table or to another object header.
+struct SharedMessage {
+  std::uint64_t type = 0;
+  std::vector<unsigned char> body;
+};
+
+// What else a header walk collects besides attributes.
+struct HeaderWalk {
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> symbol_tables;  // v1 B-tree, local heap
+  std::vector<SharedMessage> shared;
+};
+
+// Every attribute message of the object header at `header` (absolute) into `out`; with out ==
+// nullptr, attribute messages are not decoded (only the header's layout is checked).
+RawAttributes::Status header_attributes(const RawFile& f, std::uint64_t base, std::uint64_t header,
+                                        unsigned version, std::vector<AttributeMessage>* out,
+                                        HeaderWalk* walk = nullptr) {
   using S = RawAttributes::Status;
   struct Chunk {
     std::uint64_t at, size;
@@ -225,33 +238,37 @@ RawAttributes::Status header_attributes(
     }
     const std::uint64_t prefix = version == 1 ? 8 : (creation_order ? 6 : 4);
     while (pos + prefix <= data.size()) {
-      std::uint64_t type = 0, size = 0;
+      std::uint64_t type = 0, size = 0, flags = 0;
       if (version == 1) {
         le(data, pos, 2, type);
         le(data, pos + 2, 2, size);
+        le(data, pos + 4, 1, flags);
       } else {
         le(data, pos, 1, type);
         le(data, pos + 1, 2, size);
+        le(data, pos + 3, 1, flags);
       }
       pos += prefix;
       if (size > data.size() - pos) return S::damaged;
       std::vector<unsigned char> m(data.begin() + static_cast<std::ptrdiff_t>(pos),
                                    data.begin() + static_cast<std::ptrdiff_t>(pos + size));
+      if ((flags & 0x02) != 0 && walk != nullptr) walk->shared.push_back({type, m});
       if (type == 0x10) {  // continuation: offset, length
         std::uint64_t offset = 0, length = 0;
         if (!le(m, 0, 8, offset) || !le(m, 8, 8, length)) return S::damaged;
         chunks.push_back({base + offset, length});
-      } else if (type == 0x0C) {
+      } else if (type == 0x0C && out != nullptr) {
         AttributeMessage a;
         if (const S status = parse_attribute(m, a); status != S::ok) return status;
-        out.push_back(std::move(a));
-      } else if (type == 0x11 && symbol_tables != nullptr) {  // symbol table: v1 B-tree, local heap
+        out->push_back(std::move(a));
+      } else if (type == 0x11 && walk != nullptr) {  // symbol table: v1 B-tree, local heap
         std::uint64_t btree = 0, heap = 0;
         if (!le(m, 0, 8, btree) || !le(m, 8, 8, heap)) return S::damaged;
-        symbol_tables->emplace_back(base + btree, base + heap);
-      } else if (type == 0x15) {  // attribute info: dense storage when its fractal heap exists
-        std::uint64_t flags = 0, heap = 0;
-        if (!le(m, 1, 1, flags) || !le(m, 2 + ((flags & 1) ? 2 : 0), 8, heap)) return S::damaged;
+        walk->symbol_tables.emplace_back(base + btree, base + heap);
+      } else if (type == 0x15 &&
+                 out != nullptr) {  // attribute info: dense storage when its fractal heap exists
+        std::uint64_t info_flags = 0, heap = 0;
+        if (!le(m, 1, 1, info_flags) || !le(m, 2 + ((info_flags & 1) ? 2 : 0), 8, heap)) return S::damaged;
         if (heap != ~std::uint64_t(0)) return S::unsupported;
       }
       pos += size;
@@ -316,7 +333,7 @@ RawAttributes raw_attributes(const std::string& path, hid_t file, hid_t object) 
   if (out.status != S::ok) return out;
   RawFile f(path);
   std::vector<AttributeMessage> messages;
-  out.status = header_attributes(f, userblock, userblock + info.addr, info.hdr.version, messages);
+  out.status = header_attributes(f, userblock, userblock + info.addr, info.hdr.version, &messages);
   if (out.status != S::ok) return out;
   for (AttributeMessage& m : messages) {
     out.names.insert(m.name);
@@ -358,13 +375,13 @@ std::string damaged_group(const std::string& path, hid_t file, hid_t group) {
     if (fcpl.get() < 0 || H5Pget_userblock(fcpl, &userblock) < 0) return "unreadable file properties";
   }
   RawFile f(path);
+  HeaderWalk walk;
   std::vector<AttributeMessage> attributes;
-  std::vector<std::pair<std::uint64_t, std::uint64_t>> tables;
   const RawAttributes::Status status =
-      header_attributes(f, userblock, userblock + info.addr, info.hdr.version, attributes, &tables);
+      header_attributes(f, userblock, userblock + info.addr, info.hdr.version, &attributes, &walk);
   if (status == RawAttributes::Status::damaged) return "its object header overruns itself or the file";
   std::vector<unsigned char> b;
-  for (const auto& [btree, heap] : tables) {
+  for (const auto& [btree, heap] : walk.symbol_tables) {
     if (!f.read(btree, 8, b) || std::memcmp(b.data(), "TREE", 4) != 0)
       return fmt::format("its symbol table's B-tree address {} holds no B-tree", btree);
     std::uint64_t size = 0, free = 0, data = 0;
@@ -374,6 +391,77 @@ std::string damaged_group(const std::string& path, hid_t file, hid_t group) {
     if (size > f.size() || data + userblock > f.size() - size || (free != 1 && free >= size))
       return fmt::format("its local heap at {} (data {} bytes at {}) lies outside the file", heap, size,
                          data);
+    // The free list, walked as H5HL__fl_deserialize walks it (which, on a list that loops, appends
+    // blocks without end: memory grows until the process is killed): each block (offset of the
+    // next, its size) inside the data, of non-zero size; at most one block per 16 bytes of data.
+    if (free != 1) {
+      std::vector<unsigned char> heap_data;
+      if (!f.read(data + userblock, size, heap_data))
+        return fmt::format("its local heap at {} (data {} bytes at {}) lies outside the file", heap, size,
+                           data);
+      std::uint64_t block = free, blocks = 0;
+      while (block != 1) {
+        std::uint64_t next = 0, block_size = 0;
+        if (block >= size || ++blocks > size / 16 + 1 || !le(heap_data, block, 8, next) ||
+            !le(heap_data, block + 8, 8, block_size) || next == 0 || block_size > size - block)
+          return fmt::format("its local heap at {} has a damaged free list (block at {})", heap, block);
+        block = next;
+      }
+    }
+  }
+  return "";
+}
+
+std::string damaged_object(const std::string& path, hid_t file, const std::string& name) {
+  std::size_t sizeof_addr = 0, sizeof_size = 0;
+  hsize_t userblock = 0;
+  unsigned indexes = 0;
+  {
+    Handle fcpl(H5Fget_create_plist(file), H5Pclose);
+    if (fcpl.get() < 0 || H5Pget_sizes(fcpl, &sizeof_addr, &sizeof_size) < 0 ||
+        H5Pget_userblock(fcpl, &userblock) < 0 || H5Pget_shared_mesg_nindexes(fcpl, &indexes) < 0)
+      return "unreadable file properties";
+  }
+  if (sizeof_addr != 8 || sizeof_size != 8) return "";  // not followed (see raw_attributes)
+  H5L_info_t link{};
+  if (H5Lget_info(file, name.c_str(), &link, H5P_DEFAULT) < 0) return "";  // HDF5 reports it on opening
+  if (link.type != H5L_TYPE_HARD) return "";                               // resolved by HDF5
+  RawFile f(path);
+  // The header at `at` (absolute): its version from its first bytes ("OHDR": 2, else 1).
+  auto walk_header = [&](std::uint64_t at, HeaderWalk& walk) {
+    std::vector<unsigned char> b;
+    if (!f.read(at, 4, b)) return RawAttributes::Status::damaged;
+    const unsigned version = std::memcmp(b.data(), "OHDR", 4) == 0 ? 2 : 1;
+    return header_attributes(f, userblock, at, version, nullptr, &walk);
+  };
+  HeaderWalk walk;
+  if (walk_header(userblock + link.u.address, walk) == RawAttributes::Status::damaged)
+    return "its object header overruns itself or the file";
+  // A shared message (IV.A.2, "shared message" encoding): version 1 or 2, an object header's address
+  // (a committed datatype); version 3, type 1: an 8-byte id in the shared-message table (H5SM), type
+  // 2: an object header's address. libhdf5 1.10.8 takes type 1 of version 2 as a table id too (its
+  // check is an assertion, off in release builds), and looks the id up without checking that the
+  // file has a table.
+  for (const SharedMessage& m : walk.shared) {
+    std::uint64_t version = 0, type = 0, address = 0;
+    if (!le(m.body, 0, 1, version) || !le(m.body, 1, 1, type) || version < 1 || version > 3)
+      return fmt::format("its header message {} is flagged shared but cannot be decoded", m.type);
+    if (version >= 2 && type == 1) {
+      if (indexes == 0)
+        return fmt::format(
+            "its header message {} is stored in a shared-message table, which the file does not have",
+            m.type);
+      if (version == 3) continue;  // followed by HDF5
+    }
+    if ((version == 3 && type != 2) || (version == 2 && type > 2))
+      return fmt::format("its header message {} is flagged shared but cannot be decoded", m.type);
+    if (!le(m.body, version == 1 ? 16 : 2, 8, address))
+      return fmt::format("its header message {} is flagged shared but cannot be decoded", m.type);
+    // The committed object must be a header of its own, inside the file, with no shared message.
+    HeaderWalk target;
+    if (address == ~std::uint64_t(0) || address == link.u.address ||
+        walk_header(userblock + address, target) == RawAttributes::Status::damaged || !target.shared.empty())
+      return fmt::format("its header message {} refers to a damaged object header at {}", m.type, address);
   }
   return "";
 }
