@@ -986,6 +986,10 @@ TEST_F(Hdf5Io, SharedMessageWithoutTableAndLoopingHeapFreeListAreInputErrors) {
   EXPECT_CONTAINS(msg, "/contacts/id_a: damaged: its header message 5 is stored in a shared-message table");
   msg = error_of<InputError>([&] { cg::read_contacts(shared); });
   EXPECT_CONTAINS(msg, "/contacts/id_a: damaged");
+  const std::string root = (dir / "root_attribute_shared_without_table_segv.h5").string();
+  msg = error_of<InputError>([&] { cg::read_contacts(root); });
+  EXPECT_CONTAINS(msg, root);
+  EXPECT_CONTAINS(msg, "the root group's header is damaged");
   const std::string loop = (dir / "hdf5_memory_growth_hang.h5").string();
   for (const std::string& m :
        {error_of<InputError>([&] { cg::read_scene(loop); }),
