@@ -102,6 +102,7 @@ bool path_exists(const Where& where, hid_t file, const std::string& path) {
     std::string prefix = path.substr(0, pos);
     {  // the group searched for the next component must be sound (raw_attributes.hpp: damaged_group)
       const std::string parent = prefix.substr(0, std::max<std::size_t>(1, prefix.rfind('/')));
+      if (parent != "/") check_object_header(where, file, parent, path);
       Handle group = checked(H5Oopen(file, parent.c_str(), H5P_DEFAULT), H5Oclose, where,
                              fmt::format("{}: cannot open {}", path, parent));
       if (H5Iget_type(group) != H5I_GROUP) return false;
@@ -115,7 +116,15 @@ bool path_exists(const Where& where, hid_t file, const std::string& path) {
   return true;
 }
 
+void check_object_header(const Where& where, hid_t file, const std::string& path, const std::string& what) {
+  const std::string damage = damaged_object(where.file(), file, path);
+  if (damage.empty()) return;
+  if (what == path) where.bad(fmt::format("{}: damaged: {}", path, damage));
+  where.bad(fmt::format("{}: {} is damaged: {}", what, path, damage));
+}
+
 H5I_type_t object_type(const Where& where, hid_t file, const std::string& path) {
+  check_object_header(where, file, path, path);
   Handle object = checked(H5Oopen(file, path.c_str(), H5P_DEFAULT), H5Oclose, where,
                           fmt::format("{}: cannot open", path));
   return H5Iget_type(object);

@@ -112,6 +112,10 @@ std::string type_text(hid_t type);                         // "32-bit integer", 
 // True when every component of the absolute path exists as a link.
 bool path_exists(const Where& where, hid_t file, const std::string& path);
 H5I_type_t object_type(const Where& where, hid_t file, const std::string& path);
+// Before HDF5 opens the object at `path` (an existing link): InputError "<what>: damaged: …" (or
+// "<what>: <path> is damaged: …") when its header is one libhdf5 1.10.8 would crash on
+// (raw_attributes.hpp: damaged_object). object_type and path_exists call it.
+void check_object_header(const Where& where, hid_t file, const std::string& path, const std::string& what);
 // Whether a group exists (and is a group).
 bool group_exists(const Where& where, hid_t file, const std::string& path);
 // The file of `where`, read-only; InputError naming it when missing, not HDF5 or unreadable.

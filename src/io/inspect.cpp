@@ -116,6 +116,7 @@ std::vector<unsigned char> read_dataset_bytes(const std::string& path, const std
   Where where(path, false);
   Handle file = open_file_for_reading(where);
   if (!path_exists(where, file, dataset)) where.bad(fmt::format("{}: missing dataset", dataset));
+  check_object_header(where, file, dataset, dataset);
   Handle d = checked(H5Dopen2(file, dataset.c_str(), H5P_DEFAULT), H5Dclose, where,
                      fmt::format("{}: cannot open the dataset", dataset));
   Handle type = checked(H5Dget_type(d), H5Tclose, where, fmt::format("{}: cannot read the type", dataset));

@@ -128,9 +128,18 @@ std::optional<AttrValue> decode_value(const std::vector<unsigned char>& t, std::
   return std::nullopt;
 }
 
+// A message of an object header flagged "shared" (HDF5 File Format Specification IV.A.2, message
+// flags bit 1, or an attribute's datatype or dataspace flagged shared in the attribute message): its
+// body is a reference into the shared-message table or to another object header.
+struct SharedMessage {
+  std::uint64_t type = 0;
+  std::vector<unsigned char> body;
+};
+
 // Decodes an attribute message (data of `m`): ok, or damaged (its parts overrun it), or unsupported
 // (shared datatype or dataspace).
-RawAttributes::Status parse_attribute(const std::vector<unsigned char>& m, AttributeMessage& out) {
+RawAttributes::Status parse_attribute(const std::vector<unsigned char>& m, AttributeMessage& out,
+                                      std::vector<SharedMessage>* shared) {
   using S = RawAttributes::Status;
   std::uint64_t version = 0, flags = 0, name_size = 0, type_size = 0, space_size = 0;
   if (!le(m, 0, 1, version) || !le(m, 1, 1, flags) || !le(m, 2, 2, name_size) || !le(m, 4, 2, type_size) ||
@@ -140,8 +149,18 @@ RawAttributes::Status parse_attribute(const std::vector<unsigned char>& m, Attri
   std::uint64_t pos = 8;
   if (version == 3) pos = 9;  // character set encoding
   if (version < 1 || version > 3) return S::damaged;
-  if (version >= 2 && (flags & 3) != 0) return S::unsupported;  // shared datatype or dataspace
   if (name_size == 0 || pos + name_size > m.size()) return S::damaged;
+  if (version >= 2 && (flags & 3) != 0) {  // shared datatype (1) or dataspace (2): not read
+    const std::uint64_t type_at = pos + name_size, space_at = type_at + type_size;
+    if (space_at > m.size() || space_size > m.size() - space_at) return S::damaged;
+    auto body = [&](std::uint64_t at, std::uint64_t n) {
+      return std::vector<unsigned char>(m.begin() + static_cast<std::ptrdiff_t>(at),
+                                        m.begin() + static_cast<std::ptrdiff_t>(at + n));
+    };
+    if (shared != nullptr && (flags & 1) != 0) shared->push_back({0x03, body(type_at, type_size)});
+    if (shared != nullptr && (flags & 2) != 0) shared->push_back({0x01, body(space_at, space_size)});
+    return S::unsupported;
+  }
   out.name.assign(reinterpret_cast<const char*>(m.data() + pos), name_size - 1);
   if (m[pos + name_size - 1] != 0) return S::damaged;
   out.name.resize(std::strlen(out.name.c_str()));
@@ -184,11 +203,17 @@ RawAttributes::Status parse_attribute(const std::vector<unsigned char>& m, Attri
   return S::ok;
 }
 
-// Every attribute message of the object header at `header` (absolute).
-RawAttributes::Status header_attributes(
-    const RawFile& f, std::uint64_t base, std::uint64_t header, unsigned version,
-    std::vector<AttributeMessage>& out,
-    std::vector<std::pair<std::uint64_t, std::uint64_t>>* symbol_tables = nullptr) {
+// What else a header walk collects besides attributes.
+struct HeaderWalk {
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> symbol_tables;  // v1 B-tree, local heap
+  std::vector<SharedMessage> shared;
+};
+
+// Every attribute message of the object header at `header` (absolute) into `out`; with out ==
+// nullptr, attribute messages are not decoded (only the header's layout is checked).
+RawAttributes::Status header_attributes(const RawFile& f, std::uint64_t base, std::uint64_t header,
+                                        unsigned version, std::vector<AttributeMessage>* out,
+                                        HeaderWalk* walk = nullptr) {
   using S = RawAttributes::Status;
   struct Chunk {
     std::uint64_t at, size;
@@ -212,6 +237,7 @@ RawAttributes::Status header_attributes(
   } else {
     return S::damaged;
   }
+  S result = S::ok;  // unsupported parts do not end the walk: every message is seen
   for (std::size_t c = 0; c < chunks.size(); ++c) {
     if (c >= kMaxChunks) return S::damaged;
     const Chunk chunk = chunks[c];
@@ -225,39 +251,45 @@ RawAttributes::Status header_attributes(
     }
     const std::uint64_t prefix = version == 1 ? 8 : (creation_order ? 6 : 4);
     while (pos + prefix <= data.size()) {
-      std::uint64_t type = 0, size = 0;
+      std::uint64_t type = 0, size = 0, flags = 0;
       if (version == 1) {
         le(data, pos, 2, type);
         le(data, pos + 2, 2, size);
+        le(data, pos + 4, 1, flags);
       } else {
         le(data, pos, 1, type);
         le(data, pos + 1, 2, size);
+        le(data, pos + 3, 1, flags);
       }
       pos += prefix;
       if (size > data.size() - pos) return S::damaged;
       std::vector<unsigned char> m(data.begin() + static_cast<std::ptrdiff_t>(pos),
                                    data.begin() + static_cast<std::ptrdiff_t>(pos + size));
+      if ((flags & 0x02) != 0 && walk != nullptr) walk->shared.push_back({type, m});
       if (type == 0x10) {  // continuation: offset, length
         std::uint64_t offset = 0, length = 0;
         if (!le(m, 0, 8, offset) || !le(m, 8, 8, length)) return S::damaged;
         chunks.push_back({base + offset, length});
-      } else if (type == 0x0C) {
+      } else if (type == 0x0C && out != nullptr) {
         AttributeMessage a;
-        if (const S status = parse_attribute(m, a); status != S::ok) return status;
-        out.push_back(std::move(a));
-      } else if (type == 0x11 && symbol_tables != nullptr) {  // symbol table: v1 B-tree, local heap
+        const S status = parse_attribute(m, a, walk != nullptr ? &walk->shared : nullptr);
+        if (status == S::damaged) return status;
+        if (status == S::ok) out->push_back(std::move(a));
+        if (status == S::unsupported) result = status;
+      } else if (type == 0x11 && walk != nullptr) {  // symbol table: v1 B-tree, local heap
         std::uint64_t btree = 0, heap = 0;
         if (!le(m, 0, 8, btree) || !le(m, 8, 8, heap)) return S::damaged;
-        symbol_tables->emplace_back(base + btree, base + heap);
-      } else if (type == 0x15) {  // attribute info: dense storage when its fractal heap exists
-        std::uint64_t flags = 0, heap = 0;
-        if (!le(m, 1, 1, flags) || !le(m, 2 + ((flags & 1) ? 2 : 0), 8, heap)) return S::damaged;
-        if (heap != ~std::uint64_t(0)) return S::unsupported;
+        walk->symbol_tables.emplace_back(base + btree, base + heap);
+      } else if (type == 0x15 &&
+                 out != nullptr) {  // attribute info: dense storage when its fractal heap exists
+        std::uint64_t info_flags = 0, heap = 0;
+        if (!le(m, 1, 1, info_flags) || !le(m, 2 + ((info_flags & 1) ? 2 : 0), 8, heap)) return S::damaged;
+        if (heap != ~std::uint64_t(0)) result = S::unsupported;
       }
       pos += size;
     }
   }
-  return S::ok;
+  return result;
 }
 
 struct HeapObject {
@@ -292,6 +324,48 @@ bool heap_objects(const RawFile& f, std::uint64_t at, std::vector<unsigned char>
   return p == size || p + 16 > size;
 }
 
+// The header at `at` (absolute), its version from its first bytes ("OHDR": 2, else 1); attribute
+// messages are not decoded.
+RawAttributes::Status walk_header(const RawFile& f, std::uint64_t base, std::uint64_t at, HeaderWalk& walk) {
+  std::vector<unsigned char> b;
+  if (!f.read(at, 4, b)) return RawAttributes::Status::damaged;
+  const unsigned version = std::memcmp(b.data(), "OHDR", 4) == 0 ? 2 : 1;
+  return header_attributes(f, base, at, version, nullptr, &walk);
+}
+
+// What is wrong with the shared messages of the header at `self` (relative), "" when nothing.
+// A shared message (IV.A.2, "shared message" encoding): version 1 or 2, an object header's address
+// (a committed datatype); version 3, type 1: an 8-byte id in the shared-message table (H5SM), type
+// 2: an object header's address. libhdf5 1.10.8 takes type 1 of version 2 as a table id too (its
+// check is an assertion, off in release builds), and looks the id up without checking that the
+// file has a table (`indexes`: its number of indexes).
+std::string shared_damage(const RawFile& f, std::uint64_t userblock, unsigned indexes,
+                          const std::vector<SharedMessage>& shared, std::uint64_t self) {
+  for (const SharedMessage& m : shared) {
+    std::uint64_t version = 0, type = 0, address = 0;
+    if (!le(m.body, 0, 1, version) || !le(m.body, 1, 1, type) || version < 1 || version > 3)
+      return fmt::format("its header message {} is flagged shared but cannot be decoded", m.type);
+    if (version >= 2 && type == 1) {
+      if (indexes == 0)
+        return fmt::format(
+            "its header message {} is stored in a shared-message table, which the file does not have",
+            m.type);
+      if (version == 3) continue;  // followed by HDF5
+    }
+    if ((version == 3 && type != 2) || (version == 2 && type > 2))
+      return fmt::format("its header message {} is flagged shared but cannot be decoded", m.type);
+    if (!le(m.body, version == 1 ? 16 : 2, 8, address))
+      return fmt::format("its header message {} is flagged shared but cannot be decoded", m.type);
+    // The committed object must be a header of its own, inside the file, with no shared message.
+    HeaderWalk target;
+    if (address == ~std::uint64_t(0) || address == self ||
+        walk_header(f, userblock, userblock + address, target) == RawAttributes::Status::damaged ||
+        !target.shared.empty())
+      return fmt::format("its header message {} refers to a damaged object header at {}", m.type, address);
+  }
+  return "";
+}
+
 }  // namespace
 
 RawAttributes raw_attributes(const std::string& path, hid_t file, hid_t object) {
@@ -299,10 +373,11 @@ RawAttributes raw_attributes(const std::string& path, hid_t file, hid_t object) 
   RawAttributes out;
   std::size_t sizeof_addr = 0, sizeof_size = 0;
   hsize_t userblock = 0;
+  unsigned indexes = 0;
   {
     Handle fcpl(H5Fget_create_plist(file), H5Pclose);
     if (fcpl.get() < 0 || H5Pget_sizes(fcpl, &sizeof_addr, &sizeof_size) < 0 ||
-        H5Pget_userblock(fcpl, &userblock) < 0) {
+        H5Pget_userblock(fcpl, &userblock) < 0 || H5Pget_shared_mesg_nindexes(fcpl, &indexes) < 0) {
       out.status = S::damaged;
       return out;
     }
@@ -316,7 +391,11 @@ RawAttributes raw_attributes(const std::string& path, hid_t file, hid_t object) 
   if (out.status != S::ok) return out;
   RawFile f(path);
   std::vector<AttributeMessage> messages;
-  out.status = header_attributes(f, userblock, userblock + info.addr, info.hdr.version, messages);
+  HeaderWalk walk;
+  out.status = header_attributes(f, userblock, userblock + info.addr, info.hdr.version, &messages, &walk);
+  // (HDF5's own reads of an unsupported header would decode its shared messages: checked first)
+  if (out.status != S::damaged && !shared_damage(f, userblock, indexes, walk.shared, info.addr).empty())
+    out.status = S::damaged;
   if (out.status != S::ok) return out;
   for (AttributeMessage& m : messages) {
     out.names.insert(m.name);
@@ -358,13 +437,13 @@ std::string damaged_group(const std::string& path, hid_t file, hid_t group) {
     if (fcpl.get() < 0 || H5Pget_userblock(fcpl, &userblock) < 0) return "unreadable file properties";
   }
   RawFile f(path);
+  HeaderWalk walk;
   std::vector<AttributeMessage> attributes;
-  std::vector<std::pair<std::uint64_t, std::uint64_t>> tables;
   const RawAttributes::Status status =
-      header_attributes(f, userblock, userblock + info.addr, info.hdr.version, attributes, &tables);
+      header_attributes(f, userblock, userblock + info.addr, info.hdr.version, &attributes, &walk);
   if (status == RawAttributes::Status::damaged) return "its object header overruns itself or the file";
   std::vector<unsigned char> b;
-  for (const auto& [btree, heap] : tables) {
+  for (const auto& [btree, heap] : walk.symbol_tables) {
     if (!f.read(btree, 8, b) || std::memcmp(b.data(), "TREE", 4) != 0)
       return fmt::format("its symbol table's B-tree address {} holds no B-tree", btree);
     std::uint64_t size = 0, free = 0, data = 0;
@@ -374,8 +453,46 @@ std::string damaged_group(const std::string& path, hid_t file, hid_t group) {
     if (size > f.size() || data + userblock > f.size() - size || (free != 1 && free >= size))
       return fmt::format("its local heap at {} (data {} bytes at {}) lies outside the file", heap, size,
                          data);
+    // The free list, walked as H5HL__fl_deserialize walks it (which, on a list that loops, appends
+    // blocks without end: memory grows until the process is killed): each block (offset of the
+    // next, its size) inside the data, of non-zero size; at most one block per 16 bytes of data.
+    if (free != 1) {
+      std::vector<unsigned char> heap_data;
+      if (!f.read(data + userblock, size, heap_data))
+        return fmt::format("its local heap at {} (data {} bytes at {}) lies outside the file", heap, size,
+                           data);
+      std::uint64_t block = free, blocks = 0;
+      while (block != 1) {
+        std::uint64_t next = 0, block_size = 0;
+        if (block >= size || ++blocks > size / 16 + 1 || !le(heap_data, block, 8, next) ||
+            !le(heap_data, block + 8, 8, block_size) || next == 0 || block_size > size - block)
+          return fmt::format("its local heap at {} has a damaged free list (block at {})", heap, block);
+        block = next;
+      }
+    }
   }
   return "";
+}
+
+std::string damaged_object(const std::string& path, hid_t file, const std::string& name) {
+  std::size_t sizeof_addr = 0, sizeof_size = 0;
+  hsize_t userblock = 0;
+  unsigned indexes = 0;
+  {
+    Handle fcpl(H5Fget_create_plist(file), H5Pclose);
+    if (fcpl.get() < 0 || H5Pget_sizes(fcpl, &sizeof_addr, &sizeof_size) < 0 ||
+        H5Pget_userblock(fcpl, &userblock) < 0 || H5Pget_shared_mesg_nindexes(fcpl, &indexes) < 0)
+      return "unreadable file properties";
+  }
+  if (sizeof_addr != 8 || sizeof_size != 8) return "";  // not followed (see raw_attributes)
+  H5L_info_t link{};
+  if (H5Lget_info(file, name.c_str(), &link, H5P_DEFAULT) < 0) return "";  // HDF5 reports it on opening
+  if (link.type != H5L_TYPE_HARD) return "";                               // resolved by HDF5
+  RawFile f(path);
+  HeaderWalk walk;
+  if (walk_header(f, userblock, userblock + link.u.address, walk) == RawAttributes::Status::damaged)
+    return "its object header overruns itself or the file";
+  return shared_damage(f, userblock, indexes, walk.shared, link.u.address);
 }
 
 }  // namespace cg::h5

@@ -39,9 +39,18 @@ RawAttributes raw_attributes(const std::string& path, hid_t file, hid_t object);
 
 // Checks the parts of a group's object header that libhdf5 1.10.8 follows without checking before a
 // link lookup in it (H5Lexists → H5G__stab_lookup → H5HL_protect segfaults on an undefined or
-// out-of-file local heap address): the symbol table message's B-tree and local heap must carry their
-// signatures, and the heap's data must lie inside the file. "" when sound (or not a symbol-table
+// out-of-file local heap address; H5HL__fl_deserialize grows memory without end on a looping free
+// list): the symbol table message's B-tree and local heap must carry their signatures, the heap's
+// data must lie inside the file and its free list must end. "" when sound (or not a symbol-table
 // group), else what is wrong.
 std::string damaged_group(const std::string& path, hid_t file, hid_t group);
+
+// Checks the object header of `name` (a hard link of `file`, read before HDF5 opens the object):
+// the header's chunks inside the file, and every message flagged "shared" decodable and resolvable
+// (libhdf5 1.10.8's H5O_shared_decode → H5SM_get_fheap_addr reads through an undefined table
+// address, a segfault, when the file has no shared-message table; a committed message must point to
+// another sound header). "" when sound (or not followed: a soft or external link, offsets other than
+// 8 bytes), else what is wrong.
+std::string damaged_object(const std::string& path, hid_t file, const std::string& name);
 
 }  // namespace cg::h5

@@ -976,6 +976,30 @@ TEST_F(Hdf5Io, DatasetLargerThanTheFileIsRejectedBeforeReading) {
   EXPECT_CONTAINS(msg, "/spheres/");
 }
 
+// The two findings of libFuzzer run 6 (BENCHMARKS §7): refused from the file's bytes before HDF5
+// reads what crashed or hung it, with a message naming the file and the object.
+TEST_F(Hdf5Io, SharedMessageWithoutTableAndLoopingHeapFreeListAreInputErrors) {
+  const fs::path dir = fs::path(CG_SOURCE_DIR) / "tests/data/damaged";
+  const std::string shared = (dir / "shared_message_without_table_segv.h5").string();
+  std::string msg = error_of<InputError>([&] { cg::inspect_dataset(shared, "/contacts/id_a"); });
+  EXPECT_CONTAINS(msg, shared);
+  EXPECT_CONTAINS(msg, "/contacts/id_a: damaged: its header message 5 is stored in a shared-message table");
+  msg = error_of<InputError>([&] { cg::read_contacts(shared); });
+  EXPECT_CONTAINS(msg, "/contacts/id_a: damaged");
+  const std::string root = (dir / "root_attribute_shared_without_table_segv.h5").string();
+  msg = error_of<InputError>([&] { cg::read_contacts(root); });
+  EXPECT_CONTAINS(msg, root);
+  EXPECT_CONTAINS(msg, "the root group's header is damaged");
+  const std::string loop = (dir / "hdf5_memory_growth_hang.h5").string();
+  for (const std::string& m :
+       {error_of<InputError>([&] { cg::read_scene(loop); }),
+        error_of<InputError>([&] { cg::read_contacts(loop); }),
+        error_of<InputError>([&] { cg::read_dataset_bytes(loop, "/contacts/distance"); })}) {
+    EXPECT_CONTAINS(m, loop);
+    EXPECT_CONTAINS(m, "the group / is damaged: its local heap at 680 has a damaged free list");
+  }
+}
+
 // Every file of tests/data/damaged crashed or hung a reader once (libFuzzer, mutation test); each
 // is now an InputError (or, for a file whose damage does not touch what a reader uses, a success).
 TEST_F(Hdf5Io, DamagedRegressionFilesAreInputErrors) {
