@@ -11,38 +11,31 @@ rm -rf "$W"; mkdir -p "$W"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
 "$CG" generate "$W/u.h5" -n 20000 --seed 5 -q
 "$CG" generate "$W/p.h5" -n 20000 --seed 6 --kind polydisperse --rlow 0.01 --rhigh 1 -q
-for scene in u p; do
-  for prec in fp64 fp32; do
-    "$CG" detect "$W/$scene.h5" -o "$W/$scene.$prec.1.h5" --backend cpu --precision $prec --fields full -q
-    for np in 2 3 4 8; do
-      "$MPIEXEC" -np $np --oversubscribe --allow-run-as-root "$CG" detect "$W/$scene.h5" \
-        -o "$W/$scene.$prec.$np.h5" --backend cpu --precision $prec --fields full --threads 1 -q
-      "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.$np.h5"
-    done
-    "$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/$scene.h5" \
-      -o "$W/$scene.$prec.own.h5" --backend cpu --precision $prec --fields full --threads 1 --read own -q
-    "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.own.h5"
-    "$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/$scene.h5" \
-      -o "$W/$scene.$prec.ranks.h5" --backend cpu --precision $prec --fields full --threads 1 --write ranks -q
-    "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.ranks.h5"
+# SCENE PREC NP…: the one-rank file, then each NP (every rank reads every row), then np 3 reading own
+# rows and np 3 writing id_a ranges: every /contacts byte-identical to the one-rank run's.
+identical_across_ranks() {
+  local scene=$1 prec=$2; shift 2
+  local run=("$MPIEXEC" --oversubscribe --allow-run-as-root)
+  local opts=(--backend cpu --precision "$prec" --fields full --threads 1 -q)
+  "$CG" detect "$W/$scene.h5" -o "$W/$scene.$prec.1.h5" --backend cpu --precision "$prec" --fields full -q
+  for np in "$@"; do
+    "${run[@]}" -np "$np" "$CG" detect "$W/$scene.h5" -o "$W/$scene.$prec.$np.h5" "${opts[@]}"
+    "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.$np.h5"
   done
+  "${run[@]}" -np 3 "$CG" detect "$W/$scene.h5" -o "$W/$scene.$prec.own.h5" "${opts[@]}" --read own
+  "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.own.h5"
+  "${run[@]}" -np 3 "$CG" detect "$W/$scene.h5" -o "$W/$scene.$prec.ranks.h5" "${opts[@]}" --write ranks
+  "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.ranks.h5"
+}
+for scene in u p; do
+  for prec in fp64 fp32; do identical_across_ranks $scene $prec 2 3 4 8; done
 done
 # ellipsoid and mixed scenes: the shape rows move with their bodies (distribute, halo)
 "$CG" generate "$W/e.h5" -n 3000 --seed 7 --kind ellipsoids --rlow 0.3 --rhigh 1 -q
 "$CG" generate "$W/m.h5" -n 4000 --seed 8 --kind mixed --ellipsoid-fraction 0.4 --rlow 0.3 --rhigh 1 \
   --contacts-per-body 1 -q
 for scene in e m; do
-  for prec in fp64 fp32; do
-    "$CG" detect "$W/$scene.h5" -o "$W/$scene.$prec.1.h5" --backend cpu --precision $prec --fields full -q
-    for np in 2 3 4; do
-      "$MPIEXEC" -np $np --oversubscribe --allow-run-as-root "$CG" detect "$W/$scene.h5" \
-        -o "$W/$scene.$prec.$np.h5" --backend cpu --precision $prec --fields full --threads 1 -q
-      "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.$np.h5"
-    done
-    "$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/$scene.h5" \
-      -o "$W/$scene.$prec.own.h5" --backend cpu --precision $prec --fields full --threads 1 --read own -q
-    "$CG" compare "$W/$scene.$prec.1.h5" "$W/$scene.$prec.own.h5"
-  done
+  for prec in fp64 fp32; do identical_across_ranks $scene $prec 2 3 4; done
 done
 "$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/m.h5" -o "$W/m.ranks.h5" --backend cpu \
   --precision fp64 --fields full --threads 1 --read own --write ranks -q

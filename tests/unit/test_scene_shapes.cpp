@@ -34,9 +34,8 @@ Scene mixed(int spheres = 3, int ellipsoids = 4) {
   return s;
 }
 
-// The message of the InputError read_scene throws on `s` written to `file` ("" and a failure if none).
-std::string read_error(const std::string& file, const Scene& s) {
-  cg::write_scene(file, s);
+// The message of the InputError read_scene throws on `file` ("" and a failure if none).
+std::string shape_error(const std::string& file) {
   try {
     cg::read_scene(file);
   } catch (const InputError& e) {
@@ -44,6 +43,12 @@ std::string read_error(const std::string& file, const Scene& s) {
   }
   ADD_FAILURE() << "no InputError";
   return "";
+}
+
+// The same for the scene `s` written to `file`.
+std::string read_error(const std::string& file, const Scene& s) {
+  cg::write_scene(file, s);
+  return shape_error(file);
 }
 
 TEST_F(SceneShapes, NegativeSemiAxis) {
@@ -123,16 +128,6 @@ void write_raw_ellipsoids(const std::string& file, std::vector<std::uint64_t> po
   cg::write_raw_dataset(file, "/ellipsoids/position", RawType::float64, position, zeros(position));
   cg::write_raw_dataset(file, "/ellipsoids/semi_axes", RawType::float64, semi, zeros(semi));
   cg::write_raw_dataset(file, "/ellipsoids/orientation", RawType::float64, orientation, zeros(orientation));
-}
-
-std::string shape_error(const std::string& file) {
-  try {
-    cg::read_scene(file);
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "no InputError";
-  return "";
 }
 
 TEST_F(SceneShapes, SemiAxesWithTwoColumns) {
