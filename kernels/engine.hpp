@@ -67,6 +67,9 @@ struct EngineStats {
   // ellipsoid core's safety net (extra starts, `fallback`) and those whose winning minimiser still
   // missed the tolerance (`converged` false: the row is the best minimum found, flagged here).
   std::uint64_t ellipsoids = 0, narrow_fallbacks = 0, narrow_unconverged = 0;
+  // Candidates whose first start was not certified global, so the whole start set ran (the device's
+  // second narrow pass; the same count on both backends).
+  std::uint64_t narrow_hard = 0;
 };
 
 template <class Real>

@@ -55,6 +55,9 @@
 //
 // All functions: host and device, no allocation, no recursion, fixed iteration caps. Points are in the
 // caller's frame (the engine's local frame: use centre differences, not 1e6-sized coordinates in fp32).
+// The general solve returns the minimiser with the contact; contact_at_normal() rebuilds the same
+// contact from it (the device's fill pass; SolveScope::first_start lets a first pass settle the
+// certified pairs and leave the rest to a second).
 //
 // Files: ellipsoid.hpp (types, settings, 3×3 helpers), perram_wertheim.hpp (1.), ellipsoid_solve.hpp
 // (2., 3.), sphere_ellipsoid.hpp (4.); this file: the entry point for a candidate pair.
@@ -75,7 +78,8 @@ struct EllipsoidPairResult {
 
 template <class Real>
 CG_HD EllipsoidPairResult<Real> ellipsoid_contact(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b,
-                                                  const SolverSettings<Real>& settings = {}) {
+                                                  const SolverSettings<Real>& settings = {},
+                                                  SolveScope scope = SolveScope::whole) {
   const Vec3<Real> ea = a.semi_axes, eb = b.semi_axes;
   const bool sa = ea.x == ea.y && ea.y == ea.z, sb = eb.x == eb.y && eb.y == eb.z;
   EllipsoidPairResult<Real> res{};
@@ -98,7 +102,11 @@ CG_HD EllipsoidPairResult<Real> ellipsoid_contact(const Ellipsoid<Real>& a, cons
       res.in_contact = false;
       return res;
     }
-    res.contact = ellipsoid_pair_contact(a, b, pw, settings);
+    res.contact = ellipsoid_pair_contact(a, b, pw, settings, scope);
+    if (!res.contact.complete) {  // first start uncertified: no geometry yet
+      res.in_contact = false;
+      return res;
+    }
   }
   res.in_contact = res.contact.geometry.distance <= Real(0);
   return res;

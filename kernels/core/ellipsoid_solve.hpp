@@ -164,12 +164,34 @@ CG_HD Vec3<Real> extra_start(int i) {
 
 }  // namespace detail
 
+// The contact at a given normal n (from B towards A; the solve's minimiser): the support points,
+// local points, distance and positions. The solve ends with it, and the device's fill pass calls it
+// on the stored minimiser: the same bits without solving again.
+template <class Real>
+CG_HD void contact_at_normal(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b, Vec3<Real> n,
+                             EllipsoidContact<Real>& out) {
+  const Vec3<Real> r = a.centre - b.centre;
+  // Support points in the body frames: ∇h(u) = R D² Rᵀu / |D Rᵀu|; A's is taken at −n.
+  const Vec3<Real> va = detail::hadamard(a.semi_axes, mul_transpose(a.rotation, n));
+  const Vec3<Real> vb = detail::hadamard(b.semi_axes, mul_transpose(b.rotation, n));
+  const Real ha = cg_sqrt(dot(va, va)), hb = cg_sqrt(dot(vb, vb));
+  out.local_point_a = (Real(-1) / ha) * detail::hadamard(a.semi_axes, va);
+  out.local_point_b = (Real(1) / hb) * detail::hadamard(b.semi_axes, vb);
+  out.geometry.normal_on_b = n;
+  out.geometry.distance = dot(n, r) - (ha + hb);
+  out.geometry.position_on_a = a.centre + mul(a.rotation, out.local_point_a);
+  out.geometry.position_on_b = b.centre + mul(b.rotation, out.local_point_b);
+}
+
 // The general solve (no dispatch on spheres): see the file comment. `pw` is the result of
-// perram_wertheim(a, b) (the caller has it from the filter).
+// perram_wertheim(a, b) (the caller has it from the filter). SolveScope::first_start stops after the
+// first start unless it is certified (and consistent with the PW sign): `complete` false, no geometry;
+// where it is certified, the answer is the whole solve's, bit for bit.
 template <class Real>
 CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b,
                                                     const PerramWertheim<Real>& pw,
-                                                    const SolverSettings<Real>& settings = {}) {
+                                                    const SolverSettings<Real>& settings = {},
+                                                    SolveScope scope = SolveScope::whole) {
   const Vec3<Real> r = a.centre - b.centre;
   const bool coincident = r.x == Real(0) && r.y == Real(0) && r.z == Real(0);
   const Real scale = detail::max_axis(a.semi_axes) + detail::max_axis(b.semi_axes);
@@ -236,6 +258,10 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
       start = detail::normalized(v);
     }
     consider(start, settings.max_iterations);
+    if (scope == SolveScope::first_start && !certified()) {
+      out.complete = false;  // the second pass runs the whole solve
+      return out;
+    }
   }
   // The screen: f (value only) at the 4 cube diagonals and 6 face diagonals of each body's frame (up
   // to sign, put towards a − b); Newton from the `screen` lowest. These in-between directions reach
@@ -281,6 +307,10 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
   const Real f_band = Real(64) * eps * (scale + rlen) + settings.tolerance * scale;
   const bool pw_overlap = pw.value<Real(1) - pw.band, pw_apart = pw.value> Real(1) + pw.band;
   const bool inconsistent = (pw_overlap && best.f < -f_band) || (pw_apart && best.f > f_band);
+  if ((inconsistent || !best.converged) && scope == SolveScope::first_start) {
+    out.complete = false;
+    return out;
+  }
   if (inconsistent || !best.converged) {
     out.fallback = true;
     for (int i = 0; i < 13; ++i) consider(detail::extra_start<Real>(i), settings.max_iterations);
@@ -293,16 +323,7 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
     const bool flip = n.x != Real(0) ? n.x < Real(0) : (n.y != Real(0) ? n.y < Real(0) : n.z < Real(0));
     if (flip) n = -n;
   }
-  // Support points in the body frames: ∇h(u) = R D² Rᵀu / |D Rᵀu|; A's is taken at −n.
-  const Vec3<Real> va = detail::hadamard(a.semi_axes, mul_transpose(a.rotation, n));
-  const Vec3<Real> vb = detail::hadamard(b.semi_axes, mul_transpose(b.rotation, n));
-  const Real ha = cg_sqrt(dot(va, va)), hb = cg_sqrt(dot(vb, vb));
-  out.local_point_a = (Real(-1) / ha) * detail::hadamard(a.semi_axes, va);
-  out.local_point_b = (Real(1) / hb) * detail::hadamard(b.semi_axes, vb);
-  out.geometry.normal_on_b = n;
-  out.geometry.distance = dot(n, r) - (ha + hb);
-  out.geometry.position_on_a = a.centre + mul(a.rotation, out.local_point_a);
-  out.geometry.position_on_b = b.centre + mul(b.rotation, out.local_point_b);
+  contact_at_normal(a, b, n, out);
   return out;
 }
 

@@ -5,15 +5,16 @@
 //   accept(a, b, flags)  the count pass: is candidate (a, b) a contact (and the solver's flags, counted
 //                        once per candidate into EngineStats)
 //   row(a, b, full)      the fill pass, for an accepted candidate: its row, world frame
+//   ShapeDecide only: triage / solve / row_from, the two-pass count of both backends (below)
 // SphereDecide: narrow_decide() on the bounding spheres (sphere-only scenes, looser filters).
 // ShapeDecide: scenes with ellipsoids: dispatch on the shape pair —
 //   sphere–sphere        the closed form (narrow_decide: exactly the sphere path's bits)
 //   sphere–ellipsoid     sphere_ellipsoid_contact (the sphere's `radius` is its radius)
 //   ellipsoid–ellipsoid  ellipsoid_contact (Perram–Wertheim filter, then the solve)
 // Contact iff distance <= 0 (CONTRACT §3). Local points of an ellipsoid are in its body frame,
-// R_Xᵀ(p − x); of a sphere p − x. The fill pass solves again (same inputs, same bits): a contact's
-// solve costs twice on the device, the price of not storing a row per candidate (the host keeps the
-// rows of its count pass: accept_row()).
+// R_Xᵀ(p − x); of a sphere p − x. Both backends split the count pass in two (triage, then solve for
+// the hard pairs alone) and keep each general ellipsoid pair's minimiser, from which the row is
+// rebuilt (row_from()): the host at once, the device in its fill pass.
 #include <cstdint>
 
 #include "core/ellipsoid_contact.hpp"
@@ -37,6 +38,9 @@ struct SphereDecide {
   CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
     return narrow_decide(spheres[a], spheres[b], origin, full).row;
   }
+  CG_HD ContactRow<Real> row_from(std::uint32_t a, std::uint32_t b, Vec3<Real>, bool full) const {
+    return row(a, b, full);  // nothing kept: the closed form again
+  }
 };
 
 // The ellipsoid of body i: the centre of its bounding sphere, packed semi-axes and rotation.
@@ -49,7 +53,7 @@ CG_HD Ellipsoid<Real> ellipsoid_of(const Sphere<Real>& s, const PackedShape<Real
 template <class Real>
 CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, const PackedShape<Real>& pa,
                               const PackedShape<Real>& pb, const SolverSettings<Real>& settings,
-                              EllipsoidContact<Real>& c) {
+                              EllipsoidContact<Real>& c, SolveScope scope = SolveScope::whole) {
   constexpr std::uint32_t sphere = static_cast<std::uint32_t>(Shape::sphere);
   if (pa.kind == sphere) {
     c = sphere_ellipsoid_contact(sa, ellipsoid_of(sb, pb), true);
@@ -59,7 +63,8 @@ CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, co
     c = sphere_ellipsoid_contact(sb, ellipsoid_of(sa, pa), false);
     return c.geometry.distance <= Real(0);
   }
-  const EllipsoidPairResult<Real> r = ellipsoid_contact(ellipsoid_of(sa, pa), ellipsoid_of(sb, pb), settings);
+  const EllipsoidPairResult<Real> r =
+      ellipsoid_contact(ellipsoid_of(sa, pa), ellipsoid_of(sb, pb), settings, scope);
   c = r.contact;
   return r.in_contact;
 }
@@ -89,21 +94,45 @@ struct ShapeDecide {
     shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c);
     return row_of(c, full);
   }
-  // accept() and row() from one solve (the host's count pass keeps the rows of its contacts: the
-  // same bits as row(), which solves again from the same inputs).
-  CG_HD bool accept_row(std::uint32_t a, std::uint32_t b, bool full, NarrowFlags& flags,
-                        ContactRow<Real>& out) const {
-    if (both_spheres(a, b)) {
-      const NarrowDecision<Real> d = narrow_decide(spheres[a], spheres[b], origin, full);
-      out = d.row;
-      return d.contact;
-    }
+  // The device's two-pass narrow (cuda/narrow.cuh): triage settles each candidate cheaply — closed
+  // forms, the sphere–ellipsoid root find, the PW filter, the first start with its certificate — and
+  // keeps the minimiser `n` of a general ellipsoid pair; the rest (Verdict::hard) take solve(), the
+  // whole start set, in a second pass over those candidates alone; row_from() rebuilds the row from
+  // the kept minimiser (contact_at_normal: the bits of row(), without solving again).
+  enum class Verdict : std::uint32_t { reject = 0, accept = 1, hard = 2 };
+  CG_HD Verdict triage(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
+    if (both_spheres(a, b))
+      return narrow_decide(spheres[a], spheres[b], origin, false).contact ? Verdict::accept : Verdict::reject;
+    EllipsoidContact<Real> c;
+    const bool contact =
+        shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c, SolveScope::first_start);
+    if (!c.complete) return Verdict::hard;
+    flags.fallbacks += c.fallback ? 1u : 0u;
+    flags.unconverged += c.converged ? 0u : 1u;
+    n = c.geometry.normal_on_b;
+    return contact ? Verdict::accept : Verdict::reject;
+  }
+  CG_HD bool solve(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
     EllipsoidContact<Real> c;
     const bool contact = shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c);
     flags.fallbacks += c.fallback ? 1u : 0u;
     flags.unconverged += c.converged ? 0u : 1u;
-    if (contact) out = row_of(c, full);
+    n = c.geometry.normal_on_b;
     return contact;
+  }
+  // A pair of ellipsoids that takes the general solve (ellipsoid_contact: neither has equal axes).
+  CG_HD bool general_pair(std::uint32_t a, std::uint32_t b) const {
+    auto general = [](const PackedShape<Real>& p) {
+      const Vec3<Real> e = p.semi_axes;
+      return p.kind == static_cast<std::uint32_t>(Shape::ellipsoid) && !(e.x == e.y && e.y == e.z);
+    };
+    return general(shapes[a]) && general(shapes[b]);
+  }
+  CG_HD ContactRow<Real> row_from(std::uint32_t a, std::uint32_t b, Vec3<Real> n, bool full) const {
+    if (!general_pair(a, b)) return row(a, b, full);  // closed forms and root finds: cheap again
+    EllipsoidContact<Real> c{};
+    contact_at_normal(ellipsoid_of(spheres[a], shapes[a]), ellipsoid_of(spheres[b], shapes[b]), n, c);
+    return row_of(c, full);
   }
   CG_HD ContactRow<Real> row_of(const EllipsoidContact<Real>& c, bool full) const {
     ContactRow<Real> row{};

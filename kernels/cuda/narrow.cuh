@@ -11,6 +11,8 @@
 // scene has ellipsoids (r.d_shapes set by shapes.cuh); the host backend uses the same structs.
 // Flags and offsets live in the candidates' dead alternate buffers (pair_a / pair_b .Alternate()).
 #include <cub/device/device_scan.cuh>
+#include <cub/device/device_select.cuh>
+#include <thrust/iterator/counting_iterator.h>
 #include <type_traits>
 
 #include "core/narrow.hpp"
@@ -53,17 +55,62 @@ __global__ void __launch_bounds__(kBlock)
   if (flags.unconverged) atomicAdd(&c->unconverged, static_cast<unsigned long long>(flags.unconverged));
 }
 
+// narrow, shapes, first pass: ShapeDecide::triage on every candidate — verdict[k] (reject, accept,
+// hard) and the kept minimiser normal[k] of a general ellipsoid pair. Cheap and nearly uniform per
+// thread: closed forms, root finds, the PW filter, one Newton run with its certificate.
+template <class Real>
+__global__ void __launch_bounds__(kBlock)
+    narrow_triage_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
+                         std::uint32_t n_pairs, ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
+                         Vec3<Real>* __restrict__ normal, Counters* __restrict__ c) {
+  const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
+  if (k >= n_pairs) return;
+  NarrowFlags flags;
+  Vec3<Real> n{};
+  verdict[k] = static_cast<std::uint32_t>(decide.triage(pair_a[k], pair_b[k], flags, n));
+  normal[k] = n;
+  if (flags.fallbacks) atomicAdd(&c->fallbacks, static_cast<unsigned long long>(flags.fallbacks));
+  if (flags.unconverged) atomicAdd(&c->unconverged, static_cast<unsigned long long>(flags.unconverged));
+}
+
+// Selects the hard candidates (verdict 2) for the second pass.
+struct IsHard {
+  const std::uint32_t* verdict;
+  __device__ bool operator()(std::uint32_t k) const { return verdict[k] == 2u; }
+};
+
+// narrow, shapes, second pass: the whole solve for the hard candidates alone (listed in `hard`, their
+// count on the device), so every lane of a warp runs one: verdict 0 / 1 and the minimiser.
+template <class Real>
+__global__ void __launch_bounds__(kBlock)
+    narrow_hard_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
+                       const std::uint32_t* __restrict__ hard, const std::uint32_t* __restrict__ n_hard,
+                       ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
+                       Vec3<Real>* __restrict__ normal, Counters* __restrict__ c) {
+  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+  if (i >= *n_hard) return;
+  const std::uint32_t k = hard[i];
+  NarrowFlags flags;
+  Vec3<Real> n{};
+  verdict[k] = decide.solve(pair_a[k], pair_b[k], flags, n) ? 1u : 0u;
+  normal[k] = n;
+  if (flags.fallbacks) atomicAdd(&c->fallbacks, static_cast<unsigned long long>(flags.fallbacks));
+  if (flags.unconverged) atomicAdd(&c->unconverged, static_cast<unsigned long long>(flags.unconverged));
+}
+
 // narrow, rejecting path, fill: the row of each accepted candidate k at offset[k] (exclusive scan of
-// accept): the accepted rows in candidate order.
+// accept): the accepted rows in candidate order; `normal` (shapes: the kept minimisers, else null)
+// spares the ellipsoid pairs a second solve.
 template <class Real, class Decide>
 __global__ void __launch_bounds__(kBlock)
     narrow_fill_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
                        std::uint32_t n_pairs, Decide decide, const std::uint32_t* __restrict__ accept,
-                       const std::uint32_t* __restrict__ offset, ContactPtrs<Real> out, bool full) {
+                       const std::uint32_t* __restrict__ offset, const Vec3<Real>* __restrict__ normal,
+                       ContactPtrs<Real> out, bool full) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   if (k >= n_pairs || !accept[k]) return;
   const std::uint32_t a = pair_a[k], b = pair_b[k], w = offset[k];
-  ContactRow<Real> row = decide.row(a, b, full);
+  ContactRow<Real> row = decide.row_from(a, b, normal ? normal[k] : Vec3<Real>{}, full);
   row.id_a = a;
   row.id_b = b;
   store_row(out, w, row, full);  // core/contact_fields.hpp: the one row store
@@ -96,6 +143,39 @@ std::size_t layout_contacts(std::byte* o, std::size_t rows, bool full, cuda::Con
   return at;
 }
 
+// The count pass of scenes with ellipsoids, in two: triage every candidate, then the whole solve for
+// the hard ones alone (listed by cub::DeviceSelect into d_offset, dead until the scan). Returns the
+// kept minimisers (ws.normals, one per candidate).
+template <class Real, class Key>
+const Vec3<Real>* narrow_shapes_count(RunState<Real, Key>& r, const ShapeDecide<Real>& decide,
+                                      std::uint32_t* d_verdict, std::uint32_t* d_hard) {
+  using cuda::blocks_for;
+  using cuda::kBlock;
+  cudaStream_t st = r.st;
+  const std::uint32_t np = r.np;
+  r.ws.reserve({{&r.ws.normals, std::size_t(np) * sizeof(Vec3<Real>) + sizeof(std::uint32_t)}}, "narrow");
+  Vec3<Real>* d_normal = r.ws.normals.template span_as<Vec3<Real>>(np).data();
+  // the hard count after the normals (16-byte aligned: Vec3<Real> is 12 or 24 bytes)
+  auto* d_n_hard = reinterpret_cast<std::uint32_t*>(r.ws.normals.data() + std::size_t(np) * sizeof(Vec3<Real>));
+  cuda::narrow_triage_kernel<Real><<<blocks_for(np), kBlock, 0, st>>>(
+      r.pair_a.Current(), r.pair_b.Current(), np, decide, d_verdict, d_normal, r.d_counters);
+  CG_CUDA_CHECK_LAUNCH("narrow_triage");
+  cub_run(r.ws, "narrow", [&](void* t, std::size_t& b) {
+    return cub::DeviceSelect::If(t, b, thrust::counting_iterator<std::uint32_t>(0), d_hard, d_n_hard,
+                                 int(np), cuda::IsHard{d_verdict}, st);
+  });
+  std::uint32_t n_hard = 0;
+  CG_CUDA_CHECK(cudaMemcpyAsync(&n_hard, d_n_hard, sizeof(n_hard), cudaMemcpyDeviceToHost, st));
+  CG_CUDA_CHECK(cudaStreamSynchronize(st));
+  r.stats.narrow_hard = n_hard;
+  if (n_hard > 0) {
+    cuda::narrow_hard_kernel<Real><<<blocks_for(n_hard), kBlock, 0, st>>>(
+        r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, decide, d_verdict, d_normal, r.d_counters);
+    CG_CUDA_CHECK_LAUNCH("narrow_hard");
+  }
+  return d_normal;
+}
+
 // The rejecting path: count → scan → fill (see the file comment).
 template <class Real, class Key, class Decide>
 void narrow_compact(RunState<Real, Key>& r, const Decide& decide) {
@@ -105,9 +185,14 @@ void narrow_compact(RunState<Real, Key>& r, const Decide& decide) {
   const std::uint32_t np = r.np;
   std::uint32_t* d_accept = r.pair_a.Alternate();  // dead after the order stage: >= np u32 each
   std::uint32_t* d_offset = r.pair_b.Alternate();
-  cuda::narrow_accept_kernel<Real, Decide><<<blocks_for(np), kBlock, 0, st>>>(
-      r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept, r.d_counters);
-  CG_CUDA_CHECK_LAUNCH("narrow_accept");
+  const Vec3<Real>* d_normal = nullptr;
+  if constexpr (std::is_same_v<Decide, ShapeDecide<Real>>) {
+    d_normal = narrow_shapes_count(r, decide, d_accept, d_offset);
+  } else {
+    cuda::narrow_accept_kernel<Real, Decide><<<blocks_for(np), kBlock, 0, st>>>(
+        r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept, r.d_counters);
+    CG_CUDA_CHECK_LAUNCH("narrow_accept");
+  }
   cub_run(r.ws, "narrow", [&](void* t, std::size_t& b) {
     return cub::DeviceScan::ExclusiveSum(t, b, d_accept, d_offset, int(np), st);
   });
@@ -127,7 +212,7 @@ void narrow_compact(RunState<Real, Key>& r, const Decide& decide) {
   r.n_rows = last[0] + last[1];
   r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.full, r.cp);  // n_rows <= np: ws.out holds them
   cuda::narrow_fill_kernel<Real, Decide><<<blocks_for(np), kBlock, 0, st>>>(
-      r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept, d_offset, r.cp, r.full);
+      r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept, d_offset, d_normal, r.cp, r.full);
   CG_CUDA_CHECK_LAUNCH("narrow_fill");
 }
 

@@ -22,6 +22,8 @@
 //   shape_kind, shape_semi, upload → pack      scenes with ellipsoids, host-array path: the shape rows
 //   shape_orient
 //   shapes                 pack → narrow       scenes with ellipsoids: PackedShape per body, input order
+//   normals                narrow              scenes with ellipsoids: the minimiser kept per candidate
+//                                              (triage / hard pass → fill) and the hard count
 //   res_pos, res_rad,      between calls       resident bodies (Engine::set_resident)
 //   res_report
 //
@@ -33,8 +35,9 @@
 //   direct_pairs(body)   body.Alternate()         pairs: 4 u32 arrays of ne / 4 candidate pairs
 //                                                 (a, b, and the order sort's second copies)
 //   a_counts(), a_offsets()  keys[0], keys[1]     order (counting): per body pair count and offset
-//   (narrow.cuh)         pair_a / pair_b          narrow (rejecting filter): accept flags and their
-//                        .Alternate()             scan, in the candidates' dead second copies
+//   (narrow.cuh)         pair_a / pair_b          narrow (rejecting filter): accept flags (shapes: the
+//                        .Alternate()             verdicts) and their scan (shapes: first the list of
+//                                                 hard candidates), in the candidates' dead second copies
 // Contents do not survive a call, except the resident bodies and the contact rows of the last call
 // (DeviceContactsView, valid until the next detection).
 #include <cub/util_type.cuh>
@@ -55,7 +58,7 @@ struct Workspace {
   Bytes keys[2], bodies[2];
   Bytes entry_blocks, pairs, out, temp, counters, partials;
   Bytes res_pos, res_rad, res_report;
-  Bytes shape_kind, shape_semi, shape_orient, shapes;
+  Bytes shape_kind, shape_semi, shape_orient, shapes, normals;
   std::size_t res_count = 0;
   bool res_reported = false;  // resident report mask present
 
@@ -69,7 +72,7 @@ struct Workspace {
          {&pos,         &rad,        &report,     &spheres,      &cell_spheres, &perm,      &ctrl,
           &body_blocks, &base,       &keys[0],    &keys[1],      &bodies[0],    &bodies[1], &entry_blocks,
           &pairs,       &out,        &temp,       &counters,     &partials,     &res_pos,   &res_rad,
-          &res_report,  &shape_kind, &shape_semi, &shape_orient, &shapes})
+          &res_report,  &shape_kind, &shape_semi, &shape_orient, &shapes,    &normals})
       s += b->bytes();
     return s;
   }

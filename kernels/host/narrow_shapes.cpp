@@ -12,29 +12,46 @@ namespace {
 // count → scan → fill with ShapeDecide over chunks of candidates; the rows (candidate order, chunk
 // offsets from the scan) do not depend on the chunking or the thread count. A candidate costs up to
 // ~100 sphere tests, and unevenly: small chunks (>= 64 candidates, up to 8192) handed out dynamically.
-// The rows of the accepted candidates are kept per chunk by the count pass (accept_row: one solve per
-// contact; the device solves again in its fill pass, ShapeDecide::row, the same bits).
+// The rows of the accepted candidates are kept per chunk by the count pass, built as the device builds
+// them (triage, solve for the hard ones, row_from the minimiser: the same bits).
+struct NarrowCounts {
+  NarrowFlags flags;
+  std::uint64_t hard = 0;
+};
+
 template <class Real>
-NarrowFlags narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& decide, bool full, int nt,
+NarrowCounts narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& decide, bool full, int nt,
                            Contacts<Real>& out) {
   const std::size_t n_cand = c.size();
   const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(8192, n_cand / 64));
   std::vector<std::uint64_t> chunk_count(n_chunks, 0), chunk_offset;
   std::vector<NarrowFlags> chunk_flags(n_chunks);
+  std::vector<std::uint64_t> chunk_hard(n_chunks, 0);
   std::vector<std::uint8_t> accept(n_cand);
   // count: an accept flag per candidate, the accepted total and the solver's flags per chunk
   std::vector<std::vector<ContactRow<Real>>> chunk_rows(n_chunks);
   auto count_chunk = [&](std::size_t ch) {
     std::uint64_t count = 0;
     NarrowFlags flags;
+    std::uint64_t hard = 0;
     for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
-      ContactRow<Real> row;
-      accept[k] = decide.accept_row(c.a(k), c.b(k), full, flags, row);
-      if (accept[k]) chunk_rows[ch].push_back(row);
+      // the device's two passes, in one: triage, the whole solve where the first start is not
+      // certified, the row from the minimiser
+      const std::uint32_t a = c.a(k), b = c.b(k);
+      Vec3<Real> n{};
+      auto verdict = decide.triage(a, b, flags, n);
+      if (verdict == ShapeDecide<Real>::Verdict::hard) {
+        ++hard;
+        verdict = decide.solve(a, b, flags, n) ? ShapeDecide<Real>::Verdict::accept
+                                               : ShapeDecide<Real>::Verdict::reject;
+      }
+      accept[k] = verdict == ShapeDecide<Real>::Verdict::accept;
+      if (accept[k]) chunk_rows[ch].push_back(decide.row_from(a, b, n, full));
       count += accept[k];
     }
     chunk_count[ch] = count;
     chunk_flags[ch] = flags;
+    chunk_hard[ch] = hard;
   };
   ContactColumns<Real, Ptr> rows;
   auto fill_chunk = [&](std::size_t ch) {
@@ -55,10 +72,11 @@ NarrowFlags narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& dec
   rows = columns_of(out);
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 1) if (n_chunks > 1)
   for (std::size_t ch = 0; ch < n_chunks; ++ch) fill_chunk(ch);
-  NarrowFlags total;
-  for (const NarrowFlags& f : chunk_flags) {
-    total.fallbacks += f.fallbacks;
-    total.unconverged += f.unconverged;
+  NarrowCounts total;
+  for (std::size_t ch = 0; ch < n_chunks; ++ch) {
+    total.flags.fallbacks += chunk_flags[ch].fallbacks;
+    total.flags.unconverged += chunk_flags[ch].unconverged;
+    total.hard += chunk_hard[ch];
   }
   return total;
 }
@@ -70,10 +88,11 @@ void narrow_shapes(const CandidatePairs& c, const std::vector<Sphere<Real>>& sph
                    const std::vector<PackedShape<Real>>& shapes, const Vec3<double>& origin,
                    const SolverSettings<Real>& settings, Fields fields, int nt, Contacts<Real>& out,
                    EngineStats& stats) {
-  const NarrowFlags f = narrow_compact(c, ShapeDecide<Real>{spheres.data(), shapes.data(), origin, settings},
-                                       fields == Fields::full, nt, out);
-  stats.narrow_fallbacks += f.fallbacks;
-  stats.narrow_unconverged += f.unconverged;
+  const NarrowCounts f = narrow_compact(c, ShapeDecide<Real>{spheres.data(), shapes.data(), origin, settings},
+                                        fields == Fields::full, nt, out);
+  stats.narrow_fallbacks += f.flags.fallbacks;
+  stats.narrow_unconverged += f.flags.unconverged;
+  stats.narrow_hard += f.hard;
 }
 
 template void narrow_shapes(const CandidatePairs&, const std::vector<Sphere<float>>&,

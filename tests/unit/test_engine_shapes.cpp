@@ -316,10 +316,13 @@ TYPED_TEST(EngineShapesTest, CellFilterGivesTheSameRows) {
   EXPECT_GT(sx.candidates, x.size()) << "some bounding spheres touch where the shapes do not";
 }
 
-// The device's fill pass solves again (ShapeDecide::row); the host keeps the rows of its count pass
-// (accept_row): the same decisions and bits, and accept() agrees with both.
-TYPED_TEST(EngineShapesTest, RowOfFillPassEqualsRowOfCountPass) {
+// Both backends run the narrow stage of shapes as the device does: triage (first start + certificate),
+// the whole solve for the hard candidates alone, and the row rebuilt from the kept minimiser
+// (row_from). That must give the decisions, flags and bits of one whole solve per candidate (accept(),
+// row()), and the scene must exercise both passes.
+TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
   using Real = TypeParam;
+  using Verdict = typename ShapeDecide<Real>::Verdict;
   const ShapeScene s = make_scene("mixed", 37, 200, 0.6, 7.0);
   std::vector<Sphere<Real>> sph;
   std::vector<PackedShape<Real>> packed;
@@ -330,25 +333,35 @@ TYPED_TEST(EngineShapesTest, RowOfFillPassEqualsRowOfCountPass) {
     packed.push_back(pack_shape<Real>(static_cast<std::uint8_t>(s.shape[i]), semi, q));
   }
   const ShapeDecide<Real> d{sph.data(), packed.data(), {1, 2, 3}, {}};
-  int contacts = 0;
+  int contacts = 0, hard = 0, certified = 0;
   for (std::uint32_t a = 0; a < sph.size(); ++a)
     for (std::uint32_t b = a + 1; b < sph.size(); ++b) {
       if (!spheres_touch(sph[a], sph[b])) continue;
       NarrowFlags f1, f2;
-      ContactRow<Real> kept{};
-      const bool x = d.accept(a, b, f1), y = d.accept_row(a, b, true, f2, kept);
-      ASSERT_EQ(x, y) << a << "," << b;
+      const bool x = d.accept(a, b, f1);
+      Vec3<Real> n{};
+      Verdict v = d.triage(a, b, f2, n);
+      if (v == Verdict::hard) {
+        ++hard;
+        v = d.solve(a, b, f2, n) ? Verdict::accept : Verdict::reject;
+      } else if (d.general_pair(a, b) && x) {
+        ++certified;
+      }
+      ASSERT_EQ(x, v == Verdict::accept) << a << "," << b;
       EXPECT_EQ(f1.fallbacks, f2.fallbacks);
+      EXPECT_EQ(f1.unconverged, f2.unconverged);
       if (!x) continue;
       ++contacts;
-      const ContactRow<Real> again = d.row(a, b, true);
+      const ContactRow<Real> kept = d.row_from(a, b, n, true), again = d.row(a, b, true);
       bool same = true;  // every field, bitwise (not the struct: padding)
-      zip_contact_fields(kept, again, true, [&](auto, const auto& u, const auto& v) {
-        same = same && std::memcmp(&u, &v, sizeof(u)) == 0;
+      zip_contact_fields(kept, again, true, [&](auto, const auto& u, const auto& w) {
+        same = same && std::memcmp(&u, &w, sizeof(u)) == 0;
       });
       EXPECT_TRUE(same) << a << "," << b;
     }
   EXPECT_GT(contacts, 20);
+  EXPECT_GT(hard, 0) << "no candidate took the second pass";
+  EXPECT_GT(certified, 0) << "no ellipsoid contact was certified by the first start";
 }
 
 // Bad rows → InputError whose text names the body's id.
