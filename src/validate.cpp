@@ -254,25 +254,9 @@ void add_failures(ValidateReport& rep) {
 }  // namespace
 
 const char* to_string(ValidateOffender::Kind k) {
-  switch (k) {
-    case ValidateOffender::Kind::missing:
-      return "missing";
-    case ValidateOffender::Kind::extra:
-      return "extra";
-    case ValidateOffender::Kind::position:
-      return "position";
-    case ValidateOffender::Kind::angle:
-      return "angle";
-    case ValidateOffender::Kind::distance:
-      return "distance";
-    case ValidateOffender::Kind::ours_wrong:
-      return "ours wrong";
-    case ValidateOffender::Kind::bullet_wrong:
-      return "Bullet wrong";
-    case ValidateOffender::Kind::shallow_miss:
-      return "shallow Bullet miss";
-  }
-  return "?";
+  static constexpr const char* names[ValidateOffender::kinds] = {
+      "missing", "extra", "position", "angle", "distance", "ours wrong", "Bullet wrong", "shallow Bullet miss"};
+  return std::size_t(k) < ValidateOffender::kinds ? names[std::size_t(k)] : "?";
 }
 
 std::optional<Precision> parse_bullet_precision(const std::string& name) {

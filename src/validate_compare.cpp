@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 
 #include <limits>
+#include <optional>
 
 #include "contact_judge.hpp"
 #include "validate_detail.hpp"
@@ -70,12 +71,10 @@ class RegionComparison {
 
   void only_ours(Key k, const Geometry& g) {
     if (both_spheres(k)) return sphere_one_sided(k, true, g.d);
-    const ShapePair pair(m_ctx, k);
-    ++m_rep.judged;
-    const judge::Verdict v = pair.ours(g);
-    if (std::abs(v.distance) <= m_ctx.band) {
-      ++m_rep.borderline_extra;
-    } else if (!v.ok) {
+    const std::optional<judge::Verdict> verdict = one_sided_verdict(k, g, /*ours=*/true);
+    if (!verdict) return;
+    const judge::Verdict& v = *verdict;
+    if (!v.ok) {
       ++m_rep.our_errors;
       add(Kind::ours_wrong, k, std::abs(v.distance - g.d), v.distance, g.d, kNaN, "ours: " + v.reason);
     } else if (std::abs(g.d) < m_ctx.shallow_threshold) {
@@ -91,12 +90,10 @@ class RegionComparison {
 
   void only_bullet(Key k, const Geometry& g) {
     if (both_spheres(k)) return sphere_one_sided(k, false, g.d);
-    const ShapePair pair(m_ctx, k);
-    ++m_rep.judged;
-    const judge::Verdict v = pair.bullet(g);
-    if (std::abs(v.distance) <= m_ctx.band) {
-      ++m_rep.borderline_missing;
-    } else if (v.distance < 0) {  // a real contact we do not report
+    const std::optional<judge::Verdict> verdict = one_sided_verdict(k, g, /*ours=*/false);
+    if (!verdict) return;
+    const judge::Verdict& v = *verdict;
+    if (v.distance < 0) {  // a real contact we do not report
       ++m_rep.missing;
       add(Kind::missing, k, std::abs(v.distance), v.distance, kNaN, g.d,
           v.ok ? "Bullet's answer passes the conditions" : "Bullet's answer: " + v.reason);
@@ -144,6 +141,17 @@ class RegionComparison {
 
   static double finite_or_inf(double v) { return std::isfinite(v) ? v : std::numeric_limits<double>::infinity(); }
   bool both_spheres(Key k) const { return is_sphere(m_ctx.scene, k.first) && is_sphere(m_ctx.scene, k.second); }
+
+  // The verdict on the answer of the one side that reports a pair with an ellipsoid; nothing (and
+  // counted as borderline) when the judge's exact distance lies within the band.
+  std::optional<judge::Verdict> one_sided_verdict(Key k, const Geometry& g, bool ours) {
+    const ShapePair pair(m_ctx, k);
+    ++m_rep.judged;
+    judge::Verdict v = ours ? pair.ours(g) : pair.bullet(g);
+    if (std::abs(v.distance) > m_ctx.band) return v;
+    ++(ours ? m_rep.borderline_extra : m_rep.borderline_missing);
+    return std::nullopt;
+  }
 
   void add(Kind kind, Key k, double value, double exact, double ours, double bullet, std::string reason = {}) {
     m_off.add({kind, k.first, k.second, value, exact, ours, bullet, std::move(reason)});

@@ -4,11 +4,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <cstdio>
 #include <string>
 
 #include "bullet_oracle.hpp"
 #include "hdf5_io.hpp"
+#include "support/run_cli.hpp"
 #include "temp_dir.hpp"
 
 namespace cg {
@@ -59,21 +59,8 @@ TEST(BulletEllipsoid, FloatBulletNeedsTheLocalFrameFarFromTheOrigin) {
   EXPECT_NEAR(right.contacts.position_on_b[0].x - far.x, 0.9, 1e-3);  // moved back to the world
 }
 
-struct CliRun {
-  int code;
-  std::string output;
-};
-
-CliRun run(const std::string& args) {
-  CliRun r{-1, {}};
-  FILE* p = popen((std::string(CG_BINARY) + " " + args + " 2>&1").c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  while (fgets(buf, sizeof buf, p)) r.output += buf;
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using CliRun = test::CliResult;
+CliRun run(const std::string& args) { return test::run_cli(args); }
 
 class ValidateShapes : public test::TempDirTest {
  protected:
