@@ -240,7 +240,7 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
       }
     }
     if (e <= o.bullet_hi) {
-      OracleSpheres s;
+      OracleBodies s;
       s.position.assign(scene.sphere_position.begin(), scene.sphere_position.end());
       s.radius.assign(scene.sphere_radius.begin(), scene.sphere_radius.end());
       s.id.resize(scene.sphere_count());

@@ -145,22 +145,30 @@ int run_cli(int argc, char** argv, Session& session) {
 
 #if defined(CONTACTGRID_HAVE_BULLET)
   // validate
-  std::string val_scene, val_contacts, val_bullet = "double";
+  std::string val_scene, val_contacts, val_bullet = "auto";
   ValidateOptions val;
   auto* v = app.add_subcommand(
       "validate", "Compare a contacts file with Bullet 3.24 (CONTRACT §4); PASS exits 0, FAIL 1");
   v->add_option("scene", val_scene, "Scene file (.h5)")->required();
   v->add_option("contacts", val_contacts, "Contacts file (.h5) written by detect")->required();
-  v->add_option("--pos-eps", val.pos_eps, "Largest position error allowed (absolute, length units)")
+  v->add_option("--pos-eps", val.pos_eps,
+                "Largest position error allowed (length units; for pairs with an ellipsoid, times the pair's "
+                "larger bounding radius, and also the largest distance error)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   v->add_option("--angle-deg", val.angle_deg, "Largest angle between normals allowed (degrees)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  v->add_option("--bullet-precision", val_bullet,
-                "double (default) | float: Bullet build to compare with; float Bullet is wrong far from the "
-                "origin and for nearly coincident centres")
-      ->check(CLI::IsMember({"double", "float"}))
+  v->add_option("--bullet-precision,--bullet", val_bullet,
+                "auto | double | float: Bullet build to compare with; auto: float for scenes with ellipsoids "
+                "(double Bullet's EPA is degenerate on many ellipsoid pairs), double otherwise (float Bullet is "
+                "wrong far from the origin and for nearly coincident centres)")
+      ->check(CLI::IsMember({"auto", "double", "float"}))
+      ->capture_default_str();
+  v->add_option("--shallow", val.shallow_threshold,
+                "Ellipsoid pairs only we report, judged correct and shallower than this, are shallow Bullet "
+                "misses (accepted; length units; default: a quarter of Bullet's ellipsoid margin 0.04)")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   v->add_option("--sample", val.sample,
                 "Validate K random sub-boxes instead of the whole scene (large scenes)");
