@@ -14,29 +14,13 @@
 #include "hdf5_io.hpp"
 #include "pipeline.hpp"
 #include "resident_steps.hpp"
+#include "support/run_binary.hpp"
 #include "temp_dir.hpp"
 
 namespace fs = std::filesystem;
 
 namespace cg::test {
 namespace {
-
-struct Result {
-  int code;
-  std::string output;  // stdout + stderr
-};
-
-Result run(const std::string& args) {
-  const std::string cmd = std::string(CG_BINARY) + " " + args + " 2>&1";
-  Result r{-1, {}};
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  while (fgets(buf, sizeof buf, p)) r.output += buf;
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
 
 class Cli : public TempDirTest {
  protected:
