@@ -200,9 +200,21 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
       have = true;
     }
   };
+  // The certificate of globality. K = A ⊕ (−B) is smooth and strictly convex; its principal radii of
+  // curvature at a normal are the sums of A's and B's there, so all are >= rho = eA_min²/eA_max +
+  // eB_min²/eB_max (an ellipsoid's smallest radius of curvature is e_min²/e_max). A critical point n of f
+  // with value f(n) = t is a boundary point p of K with a − b = p − t·n. If a local minimum has t < 0,
+  // the pair is separated and the problem is convex: t is global. If 0 <= t < rho, a ball of radius rho
+  // rolls freely inside K (Blaschke), so inward normal segments of length < rho from distinct boundary
+  // points never meet: the global minimiser (value in [0, t]) is n itself. Half of rho leaves room for the
+  // solver's tolerance and rounding. Shallow contacts — the common case of granular packings — take one
+  // start; deep overlaps run the whole set.
+  const Real rho = detail::min_axis(a.semi_axes) * detail::min_axis(a.semi_axes) / detail::max_axis(a.semi_axes) +
+                   detail::min_axis(b.semi_axes) * detail::min_axis(b.semi_axes) / detail::max_axis(b.semi_axes);
+  auto certified = [&] { return settings.certify && have && best.converged && best.f < Real(0.5) * rho; };
   // The fixed ordered start set.
   const int nstarts = settings.starts < 1 ? 1 : (settings.starts > 11 ? 11 : settings.starts);
-  for (int s = 0; s < nstarts; ++s) {
+  for (int s = 0; s < nstarts && !certified(); ++s) {
     Vec3<Real> start;
     if (s == 0) {
       start = coincident ? Vec3<Real>{Real(1), Real(0), Real(0)} : pw.normal;
@@ -228,7 +240,7 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
   // The screen: f (value only) at the 4 cube diagonals and 6 face diagonals of each body's frame (up
   // to sign, put towards a − b); Newton from the `screen` lowest. These in-between directions reach
   // basins that no axis start does (two comparable thin axes, one body's thin axis tilted by the other).
-  if (settings.screen > 0) {
+  if (settings.screen > 0 && !certified()) {
     const int keep = settings.screen > 4 ? 4 : settings.screen;
     Real top_f[4];
     Vec3<Real> top_n[4];
@@ -256,7 +268,7 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
   }
   // The antipode of the best: where a − b is short against the bodies, minima come in near-antipodal
   // pairs (f(−n) = f(n) + 2 n·r) and the deeper one of a pair may be the one no start reached.
-  for (int round = 0; round < 2; ++round) {
+  for (int round = 0; round < 2 && !certified(); ++round) {
     const detail::LocalResult<Real> res =
         detail::local_minimise(a, b, r, -best.n, scale, settings.tolerance, settings.max_iterations);
     out.iterations += res.evaluations;

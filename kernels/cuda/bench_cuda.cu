@@ -7,8 +7,13 @@
 // Transfers are reported apart: upload = input (positions + radii) H2D from pageable host memory,
 // download = the engine's "download" stage (contacts → host vectors).
 //
-// Scene: radii U[0.5, 1], centres U[0, L)^3 with L = 2.65·N^(1/3), from a seeded splitmix64.
-// usage: contactgrid_cuda_bench [min_log2=16] [max_log2=26] [step=2] [runs=20]
+// Scene (6th argument): `spheres` (default): radii U[0.5, 1], centres U[0, L)^3 with L = 2.65·N^(1/3);
+// `ellipsoids`: semi-axes each U[0.25, 1] (aspect <= 1:4), orientations uniform on SO(3) (Shoemake),
+// bounding radius = largest semi-axis; `mixed`: every other body such an ellipsoid, the rest spheres of
+// radius U[0.5, 1]. For the shape scenes L is calibrated at 2^16 on the GPU so that contacts/N = 0.4
+// (the issue's scene; two secant steps on L^-3, printed). All from a seeded splitmix64.
+// usage: contactgrid_cuda_bench [min_log2=16] [max_log2=26] [step=2] [runs=20] [cell=auto]
+//                               [scene=spheres|ellipsoids|mixed]
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -19,6 +24,7 @@
 #include <cub/device/device_radix_sort.cuh>
 #include <functional>
 #include <map>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -106,6 +112,68 @@ double sort_floor_ms(std::uint32_t n, int bits, int runs, Flusher& flush) {
   return median(t);
 }
 
+// A bench scene in host memory, uploaded once per N (input arrays as DeviceBodiesView wants them).
+struct HostScene {
+  std::vector<double> pos, rad, semi, quat;
+  std::vector<cg::Shape> shape;  // empty: spheres only
+};
+
+enum class SceneKind { spheres, ellipsoids, mixed };
+
+HostScene make_scene(SceneKind kind, std::uint64_t n, double density_scale, std::uint64_t seed) {
+  HostScene h;
+  h.pos.resize(3 * n);
+  h.rad.resize(n);
+  if (kind != SceneKind::spheres) {
+    h.shape.assign(n, cg::Shape::sphere);
+    h.semi.assign(3 * n, 1.0);
+    h.quat.assign(4 * n, 0.0);
+  }
+  const double L = 2.65 * density_scale * std::cbrt(double(n));
+  for (std::uint64_t i = 0; i < n; ++i) {
+    for (int k = 0; k < 3; ++k) h.pos[3 * i + k] = unit(seed) * L;
+    const bool ellipsoid = kind == SceneKind::ellipsoids || (kind == SceneKind::mixed && i % 2 == 1);
+    if (!ellipsoid) {
+      h.rad[i] = 0.5 + 0.5 * unit(seed);
+      if (!h.quat.empty()) h.quat[4 * i] = 1.0;
+      continue;
+    }
+    double r = 0;
+    for (int k = 0; k < 3; ++k) r = std::max(r, h.semi[3 * i + k] = 0.25 + 0.75 * unit(seed));
+    const double u1 = unit(seed), u2 = 2 * M_PI * unit(seed), u3 = 2 * M_PI * unit(seed);
+    const double s1 = std::sqrt(1 - u1), s2 = std::sqrt(u1);
+    const double q[4] = {s2 * std::cos(u3), s1 * std::sin(u2), s1 * std::cos(u2), s2 * std::sin(u3)};
+    const double norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    for (int k = 0; k < 4; ++k) h.quat[4 * i + k] = q[k] / norm;
+    h.rad[i] = r;
+    h.shape[i] = cg::Shape::ellipsoid;
+  }
+  return h;
+}
+
+// The scene on the device (the caller's arrays of a simulation).
+struct DeviceScene {
+  DeviceBuffer<double> pos, rad, semi, quat;
+  DeviceBuffer<cg::Shape> shape;
+  double upload_ms = 0;
+  cg::DeviceBodiesView view(std::uint64_t n) const {
+    cg::DeviceBodiesView v{pos.data(), rad.data(), nullptr, n};
+    if (shape.capacity()) {
+      v.shape = shape.data();
+      v.semi_axes = semi.data();
+      v.orientation = quat.data();
+    }
+    return v;
+  }
+};
+
+template <class T>
+void upload(DeviceBuffer<T>& d, const std::vector<T>& h) {
+  if (h.empty()) return;
+  d.reserve(h.size(), false);
+  CG_CUDA_CHECK(cudaMemcpy(d.data(), h.data(), h.size() * sizeof(T), cudaMemcpyHostToDevice));
+}
+
 struct Row {
   int log2n;
   const char* prec;
@@ -114,17 +182,28 @@ struct Row {
   double cell;
   std::map<std::string, double> stage_ms;
   double gpu_sum_ms, total_ms, floor_ms, upload_ms, download_ms, bytes_per_sphere, bytes_no_contacts;
+  std::uint64_t candidates, fallbacks, unconverged;  // narrow stage (shape scenes); over all runs
 };
 
+// Contacts per body of the scene at 2^16 with the given density scale (fp32 engine, one run).
+double contacts_per_body(SceneKind kind, double scale) {
+  const std::uint64_t n = 1u << 16;
+  const HostScene h = make_scene(kind, n, scale, 0x5EED0000ull);
+  DeviceScene d;
+  upload(d.pos, h.pos), upload(d.rad, h.rad), upload(d.semi, h.semi), upload(d.quat, h.quat);
+  upload(d.shape, h.shape);
+  cg::Engine<float> engine({.backend = cg::Backend::cuda});
+  return double(engine.detect_device_resident(d.view(n)).count) / double(n);
+}
+
 template <class Real>
-Row bench(int log2n, std::uint64_t n, const double* d_pos, const double* d_rad, double upload_ms, int runs,
-          Flusher& flush) {
+Row bench(int log2n, std::uint64_t n, const DeviceScene& scene, int runs, Flusher& flush) {
   Row row{};
   row.log2n = log2n;
   row.prec = cg::to_string(cg::precision_of<Real>());
   row.n = n;
-  row.upload_ms = upload_ms;
-  const cg::DeviceBodiesView bodies{d_pos, d_rad, nullptr, n};
+  row.upload_ms = scene.upload_ms;
+  const cg::DeviceBodiesView bodies = scene.view(n);
   {
     cg::Engine<Real> engine(
         {.backend = cg::Backend::cuda, .cell_size = g_cell_size, .cell_choice = g_cell_choice});
@@ -145,7 +224,10 @@ Row bench(int log2n, std::uint64_t n, const double* d_pos, const double* d_rad, 
       gpu_sum.push_back(sum);
       row.contacts = c.count;
       if (engine.stats().device_allocations != 0) std::fprintf(stderr, "warning: a warm run allocated\n");
+      row.fallbacks += engine.stats().narrow_fallbacks;
+      row.unconverged += engine.stats().narrow_unconverged;
     }
+    row.candidates = engine.stats().candidates;
     for (auto& [name, v] : stages) row.stage_ms[name] = median(v);
     row.total_ms = median(total);
     row.gpu_sum_ms = median(gpu_sum);
@@ -176,8 +258,13 @@ Row bench(int log2n, std::uint64_t n, const double* d_pos, const double* d_rad, 
 }  // namespace
 
 int main(int argc, char** argv) try {
-  // usage: contactgrid_cuda_bench [lo 16] [hi 26] [step 2] [runs 20] [cell: auto | min | edge]
+  // usage: contactgrid_cuda_bench [lo 16] [hi 26] [step 2] [runs 20] [cell: auto | min | edge] [scene]
   const std::string cell = argc > 5 ? argv[5] : "auto";
+  const std::string scene_name = argc > 6 ? argv[6] : "spheres";
+  const SceneKind kind = scene_name == "ellipsoids" ? SceneKind::ellipsoids
+                         : scene_name == "mixed"    ? SceneKind::mixed
+                         : scene_name == "spheres"  ? SceneKind::spheres
+                                                    : throw std::runtime_error("scene: spheres, ellipsoids or mixed");
   if (cell == "min")
     g_cell_choice = cg::CellChoice::smallest;
   else if (cell != "auto")
@@ -189,34 +276,34 @@ int main(int argc, char** argv) try {
   cudaDeviceProp prop{};
   CG_CUDA_CHECK(cudaGetDeviceProperties(&prop, 0));
   std::printf(
-      "# contactgrid_cuda_bench on %s (%d SMs, %.1f GiB), median of %d warm runs, L2 flushed, cell %s\n",
-      prop.name, prop.multiProcessorCount, prop.totalGlobalMem / double(1 << 30), runs, cell.c_str());
+      "# contactgrid_cuda_bench on %s (%d SMs, %.1f GiB), median of %d warm runs, L2 flushed, cell %s, "
+      "scene %s\n",
+      prop.name, prop.multiProcessorCount, prop.totalGlobalMem / double(1 << 30), runs, cell.c_str(),
+      scene_name.c_str());
+  double scale = 1.0;  // L factor; shape scenes: calibrated to 0.4 contacts per body
+  if (kind != SceneKind::spheres) {
+    for (int it = 0; it < 3; ++it) {
+      const double c = contacts_per_body(kind, scale);
+      std::printf("# calibration: L scale %.5f -> %.4f contacts/N\n", scale, c);
+      if (it < 2) scale *= std::cbrt(c / 0.4);
+    }
+  }
   Flusher flush;
   std::vector<Row> rows;
   for (int p = lo; p <= hi; p += step) {
     const std::uint64_t n = std::uint64_t(1) << p;
-    std::vector<double> pos(3 * n), rad(n);
-    std::uint64_t seed = 0x5EED0000ull + p;
-    const double L = 2.65 * std::cbrt(double(n));
-    for (std::uint64_t i = 0; i < n; ++i) {
-      pos[3 * i] = unit(seed) * L;
-      pos[3 * i + 1] = unit(seed) * L;
-      pos[3 * i + 2] = unit(seed) * L;
-      rad[i] = 0.5 + 0.5 * unit(seed);
-    }
-    DeviceBuffer<double> d_pos, d_rad;
-    d_pos.reserve(3 * n, false);
-    d_rad.reserve(n, false);
-    std::vector<double> up;
+    const HostScene h = make_scene(kind, n, scale, 0x5EED0000ull + p);
+    DeviceScene d;
+    std::vector<double> up;  // input upload (positions, radii, shape rows) from pageable memory
     for (int r = 0; r < 3; ++r) {
       const auto t0 = std::chrono::steady_clock::now();
-      CG_CUDA_CHECK(cudaMemcpy(d_pos.data(), pos.data(), 3 * n * sizeof(double), cudaMemcpyHostToDevice));
-      CG_CUDA_CHECK(cudaMemcpy(d_rad.data(), rad.data(), n * sizeof(double), cudaMemcpyHostToDevice));
+      upload(d.pos, h.pos), upload(d.rad, h.rad), upload(d.semi, h.semi), upload(d.quat, h.quat);
+      upload(d.shape, h.shape);
       up.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
     }
-    const double upload_ms = median(up);
-    rows.push_back(bench<float>(p, n, d_pos.data(), d_rad.data(), upload_ms, runs, flush));
-    rows.push_back(bench<double>(p, n, d_pos.data(), d_rad.data(), upload_ms, runs, flush));
+    d.upload_ms = median(up);
+    rows.push_back(bench<float>(p, n, d, runs, flush));
+    rows.push_back(bench<double>(p, n, d, runs, flush));
     std::fprintf(stderr, "done 2^%d\n", p);
   }
   std::printf(
@@ -224,8 +311,9 @@ int main(int argc, char** argv) try {
       "| "
       "total | "
       "Mspheres/s | contacts/N | workspace B/N | excl. contacts B/N | sort floor | sort/floor | total/floor "
-      "| upload | download |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+      "| upload | download | candidates/N | fallbacks | unconverged |\n");
+  std::printf(
+      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const Row& r : rows) {
     auto st = [&](const char* s) {
       auto it = r.stage_ms.find(s);
@@ -235,16 +323,19 @@ int main(int argc, char** argv) try {
         "| 2^%d | %s | %.3g | %.2f | %d | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.0f | "
         "%.3f | "
         "%.1f | %.1f | "
-        "%.3f | %.2f | %.2f | %.2f | %.2f |\n",
+        "%.3f | %.2f | %.2f | %.2f | %.2f | %.3f | %llu | %llu |\n",
         r.log2n, r.prec, r.cell, double(r.entries) / double(r.n), r.key_bits, st("pack"), st("entries"),
         st("sort"), st("pairs"), st("order"), st("narrow"), r.gpu_sum_ms, r.total_ms,
         double(r.n) / (r.total_ms * 1e-3) / 1e6, double(r.contacts) / double(r.n), r.bytes_per_sphere,
         r.bytes_no_contacts, r.floor_ms, r.floor_ms > 0 ? st("sort") / r.floor_ms : 0.0,
-        r.floor_ms > 0 ? r.total_ms / r.floor_ms : 0.0, r.upload_ms, r.download_ms);
+        r.floor_ms > 0 ? r.total_ms / r.floor_ms : 0.0, r.upload_ms, r.download_ms,
+        double(r.candidates) / double(r.n), static_cast<unsigned long long>(r.fallbacks),
+        static_cast<unsigned long long>(r.unconverged));
   }
   std::printf(
       "\nAll times in ms. workspace B/N = device bytes held by the engine / N, including the contact "
-      "output buffer, excluding the caller's input arrays (32 B/N). total = wall time of "
+      "output buffer, excluding the caller's input arrays (32 B/N; shape scenes 89 B/N). fallbacks, "
+      "unconverged: narrow-phase solver flags summed over the timed runs. total = wall time of "
       "detect_device_resident (device bounds, plan, stages, 3 host syncs).\n");
   return 0;
 } catch (const std::exception& e) {

@@ -90,6 +90,13 @@ void check_storage(const Where& where, hid_t dataset, const std::string& name, s
     where.bad(fmt::format("{}: storage layout {} is not read (contiguous, chunked or compact only)", name,
                           static_cast<int>(layout)));
   const hsize_t stored = H5Dget_storage_size(dataset);
+  // Compact data is the raw values themselves, inside the object header (no filters): exactly the
+  // declared bytes. libhdf5 1.10.8 copies the declared bytes from the stored buffer without checking
+  // its size (a damaged header with 0 bytes stored made H5Dread copy from a null pointer).
+  if (layout == H5D_COMPACT && stored != declared_bytes) {
+    where.bad(fmt::format("{}: compact data of {} bytes where its shape and type need {} (damaged?)", name,
+                          stored, declared_bytes));
+  }
   if (stored > file_bytes || declared_bytes / kMaxExpansion > file_bytes) {
     where.bad(fmt::format("{}: {} bytes of data ({} stored) for a file of {} bytes (damaged?)", name,
                           declared_bytes, stored, file_bytes));

@@ -18,6 +18,7 @@
 //     must agree with the reference minimum everywhere outside 1e-9 of F = 1.
 // Pairs whose two best local minima are within the distance tolerance of each other (two equally deep
 // exits) are "ambiguous": the distance must agree, the direction may be either; they are counted.
+#include <array>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -298,6 +299,58 @@ TYPED_TEST(EllipsoidContactTest, TouchingPairs) {
     st.print();
     std::printf("[ellipsoid] %-28s max |distance|/s at touching %.2e (band %.0e)\n", st.name.c_str(), max_abs,
                 Tol<Real>::dist);
+  }
+}
+
+// The globality certificate (ellipsoid_solve.hpp): a first minimum with f < ρ/2, ρ = Σ e_min²/e_max, is
+// the global one, so the rest of the start set is skipped. Over touching pairs pushed together by depths
+// from 0 to well past ρ, and random overlaps, the certified solve must give exactly the bits of the
+// whole start set (the other starts would only find the same minimum), and shallow pairs must stop
+// early (the point of the certificate).
+TYPED_TEST(EllipsoidContactTest, CertifiedFirstMinimumIsTheWholeSetsAnswer) {
+  using Real = TypeParam;
+  SolverSettings<Real> full;
+  full.certify = false;
+  for (double aspect : {1.5, 4.0, 10.0, 100.0}) {
+    std::mt19937_64 rng(7000 + int(aspect));
+    int shallow = 0, shallow_early = 0;
+    long evals_certified = 0, evals_full = 0;
+    for (int i = 0; i < 240; ++i) {
+      Body<Real> b{{Real(0.25), Real(0.5), Real(-0.125)}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
+      Body<Real> a{{}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
+      const Vec3<double> nd = random_unit(rng);
+      const exact::V n{nd.x, nd.y, nd.z};
+      const exact::V off =
+          exact::add(exact::support_point(reference_body(a), n), exact::support_point(reference_body(b), n));
+      auto rho_of = [](Vec3<Real> e) {
+        const double lo = std::min({double(e.x), double(e.y), double(e.z)});
+        return lo * lo / std::max({double(e.x), double(e.y), double(e.z)});
+      };
+      const double rho = rho_of(a.axes) + rho_of(b.axes);
+      // depth along n: i % 6 picks 0, 0.05ρ, 0.2ρ, 0.45ρ (certifiable), 0.8ρ, 3ρ (not)
+      const double depth = rho * std::array<double, 6>{0, 0.05, 0.2, 0.45, 0.8, 3.0}[i % 6];
+      a.centre = {Real(LD(b.centre.x) + off.x - LD(depth) * n.x), Real(LD(b.centre.y) + off.y - LD(depth) * n.y),
+                  Real(LD(b.centre.z) + off.z - LD(depth) * n.z)};
+      const Ellipsoid<Real> ea = engine_body(a), eb = engine_body(b);
+      const PerramWertheim<Real> pw = perram_wertheim(ea, eb);
+      const EllipsoidContact<Real> c = ellipsoid_pair_contact(ea, eb, pw);
+      const EllipsoidContact<Real> w = ellipsoid_pair_contact(ea, eb, pw, full);
+      const auto& g = c.geometry;
+      const auto& h = w.geometry;
+      EXPECT_TRUE(g.normal_on_b.x == h.normal_on_b.x && g.normal_on_b.y == h.normal_on_b.y &&
+                  g.normal_on_b.z == h.normal_on_b.z && g.distance == h.distance)
+          << tag<Real>("1:") << aspect << " pair " << i << ": certified distance " << double(g.distance)
+          << " vs whole set " << double(h.distance);
+      evals_certified += c.iterations;
+      evals_full += w.iterations;
+      if (i % 6 < 4) {
+        ++shallow;
+        shallow_early += c.iterations < w.iterations;
+      }
+    }
+    std::printf("[ellipsoid] %s certificate 1:%-5g shallow pairs stopped early %d of %d; evaluations %ld vs %ld\n",
+                tag<Real>("").c_str(), aspect, shallow_early, shallow, evals_certified, evals_full);
+    EXPECT_GE(shallow_early, shallow * 9 / 10) << "the certificate should stop shallow contacts after one start";
   }
 }
 
