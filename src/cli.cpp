@@ -5,6 +5,7 @@
 
 #include <CLI/CLI.hpp>
 #include <cmath>
+#include <iostream>
 #include <map>
 
 #include "pipeline.hpp"
@@ -13,6 +14,8 @@
 #include "validate.hpp"
 #endif
 #include "session.hpp"
+#include "study.hpp"
+#include "study_families.hpp"
 
 namespace cg {
 namespace {
@@ -143,6 +146,38 @@ int run_cli(int argc, char** argv, Session& session) {
   c->add_option("a", cmp_a, "Contacts file")->required();
   c->add_option("b", cmp_b, "Contacts file")->required();
 
+  // study
+  StudyOptions study;
+  std::vector<std::string> study_backends;
+  std::vector<std::string> family_names;
+  for (const auto& f : study_families()) family_names.push_back(f.name);
+  auto* st = app.add_subcommand(
+      "study", "Speed vs accuracy of each precision mode on adversarial scene families, against the exact "
+               "(long-double) reference: table, CSV, SVG plot; no Bullet needed");
+  st->add_option("--families", study.families, "Families to run (default: all)")
+      ->delimiter(',')
+      ->check(CLI::IsMember(family_names));
+  st->add_option("--modes", study.modes, "Precision modes to run (default: all)")
+      ->delimiter(',')
+      ->check(CLI::IsMember(study_mode_names()));
+  st->add_option("--backends", study_backends, "cpu, cuda (default: cpu, and cuda when a GPU is present)")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"cpu", "cuda"}));
+  st->add_option("--tolerances", study.tolerances,
+                 "Ellipsoid solver tolerances (relative to the bodies' size; 0: the mode's default)")
+      ->delimiter(',')
+      ->capture_default_str();
+  st->add_option("--scale", study.scale, "Family sizes × scale (1: ~1-2 min on 2 CPU cores)")
+      ->check(CLI::Range(1e-6, 1e4))
+      ->capture_default_str();
+  st->add_option("--repetitions", study.repetitions, "Time = median of this many detect calls")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  st->add_option("--seed", study.seed, "Scene seed")->capture_default_str();
+  st->add_option("--threads", study.threads, "CPU backend threads (0: all cores)")->check(CLI::NonNegativeNumber);
+  st->add_option("--csv", study.csv, "Write the rows as CSV");
+  st->add_option("--svg", study.svg, "Write the time-vs-error plot (Pareto front) as SVG");
+
 #if defined(CONTACTGRID_HAVE_BULLET)
   // validate
   std::string val_scene, val_contacts, val_bullet = "auto";
@@ -217,6 +252,12 @@ int run_cli(int argc, char** argv, Session& session) {
   }
   if (d->parsed()) return run_detect(det, session);
   if (c->parsed()) return session.rank() == 0 ? run_compare(cmp_a, cmp_b) : 0;
+  if (st->parsed()) {
+    if (session.rank() != 0) return 0;
+    for (const auto& name : study_backends) study.backends.push_back(name == "cuda" ? Backend::cuda : Backend::cpu);
+    run_study(study, std::cout, std::cerr);
+    return 0;
+  }
 #if defined(CONTACTGRID_HAVE_BULLET)
   if (v->parsed()) {
     if (session.rank() != 0) return 0;

@@ -1,6 +1,6 @@
 // Bodies with shapes through Engine<Real>::detect (issue #11 item 6, issue #12's engine part): seeded
 // ellipsoid and mixed scenes on the CPU backend against a brute-force all-pairs reference built from
-// the exact long-double solver (tests/support/exact_ellipsoid.hpp, which shares no code with the
+// the exact long-double solver (src/reference/ellipsoid_reference.hpp, which shares no code with the
 // engine); sphere-only scenes unchanged by shape rows; bad shape rows → InputError naming the body;
 // CPU vs CUDA bit-identical on shape scenes, host arrays and device arrays (CUDA cases skip, visibly,
 // without a GPU).
@@ -27,7 +27,7 @@
 #include "backend.hpp"
 #include "core/shape_narrow.hpp"
 #include "engine.hpp"
-#include "support/exact_ellipsoid.hpp"
+#include "reference/ellipsoid_reference.hpp"
 
 #if defined(CONTACTGRID_HAVE_CUDA)
 #include <cuda_runtime.h>
