@@ -5,6 +5,8 @@
 //   accept(a, b, flags)  the count pass: is candidate (a, b) a contact (and the solver's flags, counted
 //                        once per candidate into EngineStats)
 //   row(a, b, full)      the fill pass, for an accepted candidate: its row, world frame
+// The bodies come as NarrowBodies (core/narrow.hpp): fp64 and mixed decide and compute from the world
+// doubles (pair_frame), fp32 from pack's local floats.
 // SphereDecide: narrow_decide() on the bounding spheres (sphere-only scenes, looser filters).
 // ShapeDecide: scenes with ellipsoids: dispatch on the shape pair —
 //   sphere–sphere        the closed form (narrow_decide: exactly the sphere path's bits)
@@ -15,6 +17,7 @@
 // solve costs twice on the device, the price of not storing a row per candidate (the host keeps the
 // rows of its count pass: accept_row()).
 #include <cstdint>
+#include <type_traits>
 
 #include "core/ellipsoid_contact.hpp"
 #include "core/narrow.hpp"
@@ -22,20 +25,15 @@
 
 namespace cg {
 
-// Solver flags of one candidate (ellipsoid pairs only; always zero for spheres).
-struct NarrowFlags {
-  std::uint32_t fallbacks = 0, unconverged = 0;
-};
-
 template <class Real>
 struct SphereDecide {
-  const Sphere<Real>* spheres;  // local frame, by body index
-  Vec3<double> origin;
-  CG_HD bool accept(std::uint32_t a, std::uint32_t b, NarrowFlags&) const {
-    return narrow_decide(spheres[a], spheres[b], origin, false).contact;
+  NarrowBodies<Real> bodies;
+  CG_HD bool accept(std::uint32_t a, std::uint32_t b, NarrowFlags& flags) const {
+    return narrow_decide(bodies, a, b, false, flags).contact;
   }
   CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
-    return narrow_decide(spheres[a], spheres[b], origin, full).row;
+    NarrowFlags unused;  // counted by accept()
+    return narrow_decide(bodies, a, b, full, unused).row;
   }
 };
 
@@ -45,7 +43,7 @@ CG_HD Ellipsoid<Real> ellipsoid_of(const Sphere<Real>& s, const PackedShape<Real
   return {s.centre(), p.semi_axes, p.rotation};
 }
 
-// The contact of a pair with at least one ellipsoid (local frame) and whether it is one.
+// The contact of a pair with at least one ellipsoid (in the frame of sa, sb) and whether it is one.
 template <class Real>
 CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, const PackedShape<Real>& pa,
                               const PackedShape<Real>& pb, const SolverSettings<Real>& settings,
@@ -64,11 +62,29 @@ CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, co
   return r.in_contact;
 }
 
+// The two bounding spheres of a pair in the frame the solve runs in, and that frame's origin (world).
+// fp64 and mixed: B's world centre, so A's centre is the world difference a − b (exact when they are
+// within a factor 2 of each other) and B's is 0: the solve sees the exact centre difference, and its
+// points come back as b + offset. fp32: the engine's frame (pack's local floats).
+template <class Real>
+struct PairFrame {
+  Sphere<Real> a, b;
+  Vec3<double> origin;
+};
+template <class Real>
+CG_HD PairFrame<Real> pair_frame(const NarrowBodies<Real>& w, std::uint32_t a, std::uint32_t b) {
+  if constexpr (std::is_same_v<Real, double>) {
+    const Sphere<double> wa = world_sphere(w, a), wb = world_sphere(w, b);
+    return {{wa.x - wb.x, wa.y - wb.y, wa.z - wb.z, wa.r}, {0, 0, 0, wb.r}, wb.centre()};
+  } else {
+    return {w.spheres[a], w.spheres[b], w.origin};
+  }
+}
+
 template <class Real>
 struct ShapeDecide {
-  const Sphere<Real>* spheres;      // local frame (centre, bounding radius), by body index
+  NarrowBodies<Real> bodies;
   const PackedShape<Real>* shapes;  // by body index
-  Vec3<double> origin;
   SolverSettings<Real> settings;
 
   CG_HD bool both_spheres(std::uint32_t a, std::uint32_t b) const {
@@ -76,36 +92,40 @@ struct ShapeDecide {
            shapes[b].kind == static_cast<std::uint32_t>(Shape::sphere);
   }
   CG_HD bool accept(std::uint32_t a, std::uint32_t b, NarrowFlags& flags) const {
-    if (both_spheres(a, b)) return narrow_decide(spheres[a], spheres[b], origin, false).contact;
+    if (both_spheres(a, b)) return narrow_decide(bodies, a, b, false, flags).contact;
     EllipsoidContact<Real> c;
-    const bool contact = shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c);
+    const PairFrame<Real> f = pair_frame(bodies, a, b);
+    const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
     flags.fallbacks += c.fallback ? 1u : 0u;
     flags.unconverged += c.converged ? 0u : 1u;
     return contact;
   }
   CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
-    if (both_spheres(a, b)) return narrow_decide(spheres[a], spheres[b], origin, full).row;
+    NarrowFlags unused;  // counted by accept()
+    if (both_spheres(a, b)) return narrow_decide(bodies, a, b, full, unused).row;
     EllipsoidContact<Real> c;
-    shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c);
-    return row_of(c, full);
+    const PairFrame<Real> f = pair_frame(bodies, a, b);
+    shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
+    return row_of(c, f.origin, full);
   }
   // accept() and row() from one solve (the host's count pass keeps the rows of its contacts: the
   // same bits as row(), which solves again from the same inputs).
   CG_HD bool accept_row(std::uint32_t a, std::uint32_t b, bool full, NarrowFlags& flags,
                         ContactRow<Real>& out) const {
     if (both_spheres(a, b)) {
-      const NarrowDecision<Real> d = narrow_decide(spheres[a], spheres[b], origin, full);
+      const NarrowDecision<Real> d = narrow_decide(bodies, a, b, full, flags);
       out = d.row;
       return d.contact;
     }
     EllipsoidContact<Real> c;
-    const bool contact = shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c);
+    const PairFrame<Real> f = pair_frame(bodies, a, b);
+    const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
     flags.fallbacks += c.fallback ? 1u : 0u;
     flags.unconverged += c.converged ? 0u : 1u;
-    if (contact) out = row_of(c, full);
+    if (contact) out = row_of(c, f.origin, full);
     return contact;
   }
-  CG_HD ContactRow<Real> row_of(const EllipsoidContact<Real>& c, bool full) const {
+  CG_HD static ContactRow<Real> row_of(const EllipsoidContact<Real>& c, const Vec3<double>& origin, bool full) {
     ContactRow<Real> row{};
     row.position_on_a = to_world(origin, c.geometry.position_on_a);
     row.position_on_b = to_world(origin, c.geometry.position_on_b);

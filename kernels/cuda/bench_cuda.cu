@@ -1,5 +1,5 @@
 // contactgrid_cuda_bench: the CUDA engine on uniform random spheres, device-resident input, warm.
-// For N = 2^min … 2^max (step 2 by default), both precisions: per-stage medians (CUDA events), the
+// For N = 2^min … 2^max (step 2 by default), the three precision modes (fp32, mixed, fp64): per-stage medians (CUDA events), the
 // total wall time of Engine::detect_device_resident (bounds + plan + stages + host syncs; L2 flushed
 // before every run), spheres/s, contacts and entries per sphere, device workspace per sphere, and the
 // ratio of the sort stage and of the total to the CUB sort floor measured here for the same number
@@ -116,18 +116,21 @@ struct Row {
   double gpu_sum_ms, total_ms, floor_ms, upload_ms, download_ms, bytes_per_sphere, bytes_no_contacts;
 };
 
+// One precision mode: Engine<Real>, mixed = Engine<double> with the fp32 broad phase.
 template <class Real>
 Row bench(int log2n, std::uint64_t n, const double* d_pos, const double* d_rad, double upload_ms, int runs,
-          Flusher& flush) {
+          Flusher& flush, bool mixed = false) {
   Row row{};
   row.log2n = log2n;
-  row.prec = cg::to_string(cg::precision_of<Real>());
+  row.prec = mixed ? "mixed" : cg::to_string(cg::precision_of<Real>());
   row.n = n;
   row.upload_ms = upload_ms;
   const cg::DeviceBodiesView bodies{d_pos, d_rad, nullptr, n};
   {
-    cg::Engine<Real> engine(
-        {.backend = cg::Backend::cuda, .cell_size = g_cell_size, .cell_choice = g_cell_choice});
+    cg::Engine<Real> engine({.backend = cg::Backend::cuda,
+                             .cell_size = g_cell_size,
+                             .cell_choice = g_cell_choice,
+                             .fp32_broad_phase = mixed});
     for (int w = 0; w < 3; ++w) engine.detect_device_resident(bodies);
     std::map<std::string, std::vector<double>> stages;
     std::vector<double> total, gpu_sum;
@@ -216,6 +219,7 @@ int main(int argc, char** argv) try {
     }
     const double upload_ms = median(up);
     rows.push_back(bench<float>(p, n, d_pos.data(), d_rad.data(), upload_ms, runs, flush));
+    rows.push_back(bench<double>(p, n, d_pos.data(), d_rad.data(), upload_ms, runs, flush, true));
     rows.push_back(bench<double>(p, n, d_pos.data(), d_rad.data(), upload_ms, runs, flush));
     std::fprintf(stderr, "done 2^%d\n", p);
   }

@@ -59,6 +59,7 @@ NarrowFlags narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& dec
   for (const NarrowFlags& f : chunk_flags) {
     total.fallbacks += f.fallbacks;
     total.unconverged += f.unconverged;
+    total.fp64_rows += f.fp64_rows;
   }
   return total;
 }
@@ -66,21 +67,21 @@ NarrowFlags narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& dec
 }  // namespace
 
 template <class Real>
-void narrow_shapes(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres,
-                   const std::vector<PackedShape<Real>>& shapes, const Vec3<double>& origin,
-                   const SolverSettings<Real>& settings, Fields fields, int nt, Contacts<Real>& out,
-                   EngineStats& stats) {
-  const NarrowFlags f = narrow_compact(c, ShapeDecide<Real>{spheres.data(), shapes.data(), origin, settings},
+void narrow_shapes(const CandidatePairs& c, const NarrowBodies<Real>& bodies,
+                   const std::vector<PackedShape<Real>>& shapes, const SolverSettings<Real>& settings,
+                   Fields fields, int nt, Contacts<Real>& out, EngineStats& stats) {
+  const NarrowFlags f = narrow_compact(c, ShapeDecide<Real>{bodies, shapes.data(), settings},
                                        fields == Fields::full, nt, out);
   stats.narrow_fallbacks += f.fallbacks;
   stats.narrow_unconverged += f.unconverged;
+  stats.fp64_rows += f.fp64_rows;
 }
 
-template void narrow_shapes(const CandidatePairs&, const std::vector<Sphere<float>>&,
-                            const std::vector<PackedShape<float>>&, const Vec3<double>&,
-                            const SolverSettings<float>&, Fields, int, Contacts<float>&, EngineStats&);
-template void narrow_shapes(const CandidatePairs&, const std::vector<Sphere<double>>&,
-                            const std::vector<PackedShape<double>>&, const Vec3<double>&,
-                            const SolverSettings<double>&, Fields, int, Contacts<double>&, EngineStats&);
+template void narrow_shapes(const CandidatePairs&, const NarrowBodies<float>&,
+                            const std::vector<PackedShape<float>>&, const SolverSettings<float>&, Fields,
+                            int, Contacts<float>&, EngineStats&);
+template void narrow_shapes(const CandidatePairs&, const NarrowBodies<double>&,
+                            const std::vector<PackedShape<double>>&, const SolverSettings<double>&, Fields,
+                            int, Contacts<double>&, EngineStats&);
 
 }  // namespace cg::detail::host
