@@ -145,12 +145,17 @@ struct SharedFrame {
 };
 
 template <class Real>
-SharedFrame agree_frame(const Session& session, const Bounds& mine, const DistributedOptions& options) {
+SharedFrame agree_frame(const Session& session, const std::string& path, const Bounds& mine,
+                        const DistributedOptions& options) {
   const Precision precision = options.engine.fp32_broad_phase ? Precision::mixed : precision_of<Real>();
   SharedFrame f;
   f.global = allgather_bounds(session, mine);
   agreed_stage(session, "frame", [&] {
-    f.frame = make_frame(f.global, options.engine.cell_size, precision, options.engine.cell_choice);
+    try {
+      f.frame = make_frame(f.global, options.engine.cell_size, precision, options.engine.cell_choice);
+    } catch (const InputError& e) {  // the scene cannot be run in this mode: name it
+      throw InputError(path + ": " + e.what());
+    }
     f.axis = choose_axis(f.global, static_cast<int>(options.axis));
     double extent = 0;
     for (int k = 0; k < 3; ++k) {
@@ -409,7 +414,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   StageClock clock;
 
   Partition part = read_partition(session, path, all_rows, options.resident_steps);
-  const SharedFrame f = agree_frame<Real>(session, part.bounds, options);
+  const SharedFrame f = agree_frame<Real>(session, path, part.bounds, options);
   clock.stop(Stage::read);
   result.bodies = part.bodies;
   result.ellipsoids = part.ellipsoids;

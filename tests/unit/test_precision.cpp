@@ -105,6 +105,15 @@ void worst_errors(const Spheres& s, const Contacts<Real>& c, double& angle_deg, 
   }
 }
 
+// worst_errors() within the bounds of a mode.
+template <class Real>
+void expect_within(const Spheres& s, const Contacts<Real>& c, double max_deg, double max_rel) {
+  double angle = 0, pos = 0;
+  worst_errors(s, c, angle, pos);
+  EXPECT_LT(angle, max_deg) << s.name;
+  EXPECT_LT(pos, max_rel) << s.name;
+}
+
 // fp64 (and mixed, bit for bit): exact centre differences from the world doubles, so normals within
 // 1e-9° and points within 1e-12 of |centre| + r even 1e-12 apart (issue #13: 0.0135° and 2e-4 before,
 // near 70, because the frame shift rounded each centre first).
@@ -112,10 +121,7 @@ TYPED_TEST(PrecisionTest, NearlyCoincidentCentresAreExactInFp64AndMixed) {
   for (double base : {70.0, 1e6}) {
     const Spheres s = nearly_coincident(base, 8, 1301);
     const Contacts<double> fp64 = this->template run<double>(s, Precision::fp64);
-    double angle = 0, pos = 0;
-    worst_errors(s, fp64, angle, pos);
-    EXPECT_LT(angle, 1e-9) << s.name;
-    EXPECT_LT(pos, 1e-12) << s.name;
+    expect_within(s, fp64, 1e-9, 1e-12);
     for (std::size_t k = 0; k < fp64.size(); ++k) {  // local points are the offsets themselves
       const double ra = s.r[std::size_t(fp64.id_a[k])];
       EXPECT_EQ(fp64.local_point_a[k].x, -ra * fp64.normal_on_b[k].x);
@@ -132,10 +138,7 @@ TYPED_TEST(PrecisionTest, Fp32NeverGivesASilentWrongNormal) {
   for (double base : {70.0, 1e6}) {
     const Spheres s = nearly_coincident(base, 8, 1302);
     const Contacts<float> c = this->template run<float>(s, Precision::fp32);
-    double angle = 0, pos = 0;
-    worst_errors(s, c, angle, pos);
-    EXPECT_LT(angle, 0.025) << s.name;
-    EXPECT_LT(pos, 4 * std::numeric_limits<float>::epsilon()) << s.name;
+    expect_within(s, c, 0.025, 4 * std::numeric_limits<float>::epsilon());
     // every pair closer than 1e-4 is below fp32's resolution (2^-11 of its largest local coordinate,
     // >= 0.5 here); the 8 well-separated pairs are not
     EXPECT_GE(this->m_stats.fp64_rows, 4u * 9u) << s.name;
