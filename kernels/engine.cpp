@@ -11,6 +11,7 @@
 #include <cstring>
 #include <limits>
 #include <sstream>
+#include <type_traits>
 #include <vector>
 
 #include "backend.hpp"
@@ -70,8 +71,8 @@ class CudaBackend {};
 std::unique_ptr<CudaBackend> make_cuda_backend(int) {
   throw CudaError("this contactgrid was built without CUDA (rebuild with nvcc present)");
 }
-template <class Real>
-void run_stages(CudaBackend&, const DetectJob<Real>&, Contacts<Real>&, StageTimes&, EngineStats&) {
+template <class Broad, class Narrow>
+void run_stages(CudaBackend&, const DetectJob<Broad, Narrow>&, Contacts<Narrow>&, StageTimes&, EngineStats&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
 void destroy(CudaBackend* b) { delete b; }
@@ -134,6 +135,8 @@ Engine<Real>::Engine(EngineOptions options) : m_impl(std::make_unique<Impl>()) {
   if (!(options.ellipsoid_tolerance >= 0) || !std::isfinite(options.ellipsoid_tolerance))
     throw UsageError("ellipsoid tolerance must be finite and >= 0 (0: the default)");
   if (options.ellipsoid_max_iterations < 0) throw UsageError("ellipsoid iteration cap must be >= 0");
+  if (options.fp32_broad_phase && std::is_same_v<Real, float>)
+    throw UsageError("fp32_broad_phase (precision mixed) is an option of Engine<double>");
   Backend b = options.backend;
   if (b == Backend::automatic) b = cuda_available() ? Backend::cuda : Backend::cpu;
   if (b == Backend::cuda) m_impl->cuda = detail::make_cuda_backend(options.device).release();
@@ -150,6 +153,10 @@ Backend Engine<Real>::backend() const {
   return m_impl->resolved;
 }
 template <class Real>
+Precision Engine<Real>::precision() const {
+  return m_impl->options.fp32_broad_phase ? Precision::mixed : precision_of<Real>();
+}
+template <class Real>
 const StageTimes& Engine<Real>::times() const {
   return m_impl->times;
 }
@@ -164,20 +171,32 @@ const EngineOptions& Engine<Real>::options() const {
 
 namespace {
 // Frame and grid plan of one call from the bodies' bounds; pushes the "plan" stage time.
-template <class Real>
-detail::DetectJob<Real> plan_job(const Bounds& b, std::optional<Frame> frame, const EngineOptions& options,
-                                 EngineStats& stats) {
-  constexpr Precision prec = precision_of<Real>();
+template <class Broad, class Narrow>
+detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> frame,
+                                          const EngineOptions& options, EngineStats& stats) {
+  constexpr Precision prec = precision_of<Broad, Narrow>();
   const Frame f = frame ? *frame : make_frame(b, options.cell_size, prec, options.cell_choice);
-  if (frame && f.cell_size < 2 * b.r_max)
+  if (frame) check_fp32_world(b, prec);
+  const double margin = broad_margin(b, f.origin, prec);
+  if (frame && f.cell_size < 2 * (b.r_max + margin))
     throw UsageError("frame cell size is smaller than the largest diameter");
-  detail::DetectJob<Real> job{{}, plan_grid(b, f, prec), {}, options.fields};
-  job.grid = detail::grid_params<Real>(job.plan);
-  if (options.ellipsoid_tolerance > 0) job.solver.tolerance = static_cast<Real>(options.ellipsoid_tolerance);
+  detail::DetectJob<Broad, Narrow> job{{}, plan_grid(b, f, prec), {}, options.fields};
+  job.grid = detail::grid_params<Broad>(job.plan, margin);
+  if (options.ellipsoid_tolerance > 0) job.solver.tolerance = static_cast<Narrow>(options.ellipsoid_tolerance);
   if (options.ellipsoid_max_iterations > 0) job.solver.max_iterations = options.ellipsoid_max_iterations;
   stats.key_bits = job.plan.key_bits;
   stats.cell_size = f.cell_size;
   return job;
+}
+
+// The job of one call in the engine's precision mode (mixed: a float broad phase), handed to `run`.
+template <class Real, class Run>
+void run_job(const EngineOptions& options, const Bounds& b, std::optional<Frame> frame, EngineStats& stats,
+             Run&& run) {
+  if constexpr (std::is_same_v<Real, double>) {
+    if (options.fp32_broad_phase) return run(plan_job<float, double>(b, frame, options, stats));
+  }
+  run(plan_job<Real, Real>(b, frame, options, stats));
 }
 }  // namespace
 
@@ -195,16 +214,16 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
   s.stats.bodies = b.count;
   s.stats.ellipsoids = ellipsoids;
   if (b.count == 0) return out;
-  detail::DetectJob<Real> job = plan_job<Real>(b, frame, s.options, s.stats);
-  job.bodies = bodies;
-  job.ellipsoids = ellipsoids;
-  s.times.push_back(
-      {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
-
-  if (s.resolved == Backend::cuda)
-    detail::run_stages(*s.cuda, job, out, s.times, s.stats);
-  else
-    detail::run_stages(s.host, job, out, s.times, s.stats);
+  run_job<Real>(s.options, b, frame, s.stats, [&](auto job) {
+    job.bodies = bodies;
+    job.ellipsoids = ellipsoids;
+    s.times.push_back(
+        {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
+    if (s.resolved == Backend::cuda)
+      detail::run_stages(*s.cuda, job, out, s.times, s.stats);
+    else
+      detail::run_stages(s.host, job, out, s.times, s.stats);
+  });
 
   // Local indices → global ids (monotone, so the (id_a, id_b) order is kept).
   if (!bodies.id.empty()) {
@@ -245,13 +264,14 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
   s.stats.bodies = b.count;
   s.stats.ellipsoids = ellipsoids;
   if (b.count == 0) return;
-  detail::DetectJob<Real> job = plan_job<Real>(b, frame, s.options, s.stats);
-  job.device_bodies = &bodies;
-  job.ellipsoids = ellipsoids;
-  job.device_out = device_out;
-  s.times.push_back(
-      {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
-  detail::run_stages(*s.cuda, job, out, s.times, s.stats);
+  run_job<Real>(s.options, b, frame, s.stats, [&](auto job) {
+    job.device_bodies = &bodies;
+    job.ellipsoids = ellipsoids;
+    job.device_out = device_out;
+    s.times.push_back(
+        {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
+    detail::run_stages(*s.cuda, job, out, s.times, s.stats);
+  });
   s.stats.contacts = device_out ? device_out->count : out.size();
 }
 

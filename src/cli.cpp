@@ -22,7 +22,8 @@ namespace {
 
 const std::map<std::string, Backend> k_backends{
     {"cpu", Backend::cpu}, {"cuda", Backend::cuda}, {"auto", Backend::automatic}};
-const std::map<std::string, Precision> k_precisions{{"fp32", Precision::fp32}, {"fp64", Precision::fp64}};
+const std::map<std::string, Precision> k_precisions{
+    {"fp32", Precision::fp32}, {"fp64", Precision::fp64}, {"mixed", Precision::mixed}};
 const std::map<std::string, Fields> k_fields{{"basic", Fields::basic}, {"full", Fields::full}};
 const std::map<std::string, SlabAxis> k_axes{
     {"auto", SlabAxis::automatic}, {"x", SlabAxis::x}, {"y", SlabAxis::y}, {"z", SlabAxis::z}};
@@ -84,7 +85,10 @@ int run_cli(int argc, char** argv, Session& session) {
   d->add_option("--backend", det.backend, "cpu | cuda | auto (cuda when a GPU is present)")
       ->transform(CLI::CheckedTransformer(k_backends))
       ->default_str("auto");
-  d->add_option("--precision", det.precision, "fp32 | fp64: real type of the whole pipeline and output")
+  d->add_option("--precision", det.precision,
+                "fp32 | fp64 | mixed: fp32 and fp64 run every stage and write their real type; mixed "
+                "runs the broad phase in fp32 and the narrow phase in fp64 from the world coordinates "
+                "(float64 output, fp64's contacts); README 'Choosing a precision'")
       ->transform(CLI::CheckedTransformer(k_precisions))
       ->default_str("fp64");
   d->add_option("--fields", det.fields, "basic | full (adds local points and friction directions)")
@@ -225,6 +229,9 @@ int run_cli(int argc, char** argv, Session& session) {
   b->add_option("--backend", bench_backends, "cpu | cuda (repeatable; default: cpu, and cuda when present)")
       ->check(CLI::IsMember({"cpu", "cuda"}));
   b->add_option("--threads", bench.threads, "CPU backend threads (0: all cores)");
+  b->add_option("--precision", bench.precision, "fp32 | fp64 | mixed: the engine's precision mode")
+      ->transform(CLI::CheckedTransformer(k_precisions))
+      ->default_str("fp64");
   b->add_option("--seed", bench.seed, "Scene seed")->capture_default_str();
   b->add_option("--csv", bench.csv, "CSV output")->capture_default_str();
   b->add_option("--plot-prefix", bench.plot_prefix, "Plot file prefix (PNG and SVG); default: the CSV name");

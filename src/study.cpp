@@ -63,6 +63,13 @@ Measured measure(const BodiesView& bodies, const EngineOptions& options, int rep
   return m;
 }
 
+// mixed: Engine<double> with the fp32 broad phase (decisions and rows are fp64's).
+Measured measure_mixed(const BodiesView& bodies, const EngineOptions& options, int repetitions) {
+  EngineOptions mixed = options;
+  mixed.fp32_broad_phase = true;
+  return measure<double>(bodies, mixed, repetitions);
+}
+
 // A precision mode of the study: its name (--precision's), the machine epsilon of the type it decides
 // contacts in (its rounding band), the ellipsoid solver's default tolerance, and how to run it.
 struct StudyMode {
@@ -72,9 +79,10 @@ struct StudyMode {
   Measured (*run)(const BodiesView&, const EngineOptions&, int);
 };
 
-// The modes, one line each (a new mode, e.g. mixed, is one more line).
+// The modes, one line each (a new mode is one more line).
 const StudyMode kModes[] = {
     {"fp32", std::numeric_limits<float>::epsilon(), SolverSettings<float>{}.tolerance, measure<float>},
+    {"mixed", std::numeric_limits<double>::epsilon(), SolverSettings<double>{}.tolerance, measure_mixed},
     {"fp64", std::numeric_limits<double>::epsilon(), SolverSettings<double>{}.tolerance, measure<double>},
 };
 

@@ -396,7 +396,7 @@ ValidateReport validate_files(const std::string& scene_path, const std::string& 
   const ContactFile file = read_contacts(contacts_path);
   if (file.precision == "fp32")
     options.contacts_precision = Precision::fp32;
-  else if (file.precision == "fp64" || file.precision.empty())
+  else if (file.precision == "fp64" || file.precision == "mixed" || file.precision.empty())
     options.contacts_precision = Precision::fp64;
   else
     throw InputError(contacts_path + ": unknown precision attribute '" + file.precision + "'");

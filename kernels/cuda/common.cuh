@@ -45,6 +45,7 @@ struct Counters {
   // shapes (cuda/shapes.cuh, narrow.cuh): n - i of the first body with bad shape rows (atomicMax),
   // ellipsoids counted, and the ellipsoid solver's flags (narrow accept pass)
   unsigned long long bad_shape, ellipsoids, fallbacks, unconverged;
+  unsigned long long fp64_rows;  // fp32 rows recomputed in fp64 (narrow.cuh)
 };
 
 // Pointers of the contact arrays in DEVICE memory (core/contact_fields.hpp); the optional ones are

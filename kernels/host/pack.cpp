@@ -1,5 +1,5 @@
-// Host stage pack: world (double) → local frame Real spheres; per body its cells, control byte and
-// entry count (see stages.hpp).
+// Host stage pack: world (double) → local frame Real spheres (radius + g.radius_margin: mixed's
+// enlarged spheres); per body its cells, control byte and entry count (see stages.hpp).
 #include "host/stages.hpp"
 
 namespace cg::detail::host {
@@ -16,7 +16,7 @@ void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams
   for (std::size_t i = 0; i < n; ++i) {
     const Vec3<double> p = bodies.position[i];
     Sphere<Real> s{static_cast<Real>(p.x - origin.x), static_cast<Real>(p.y - origin.y),
-                   static_cast<Real>(p.z - origin.z), static_cast<Real>(bodies.radius[i])};
+                   static_cast<Real>(p.z - origin.z), static_cast<Real>(bodies.radius[i]) + g.radius_margin};
     out.spheres[i] = s;
     out.cells[i] = body_cells(s, g);
     out.ctrl[i] = control_bits(out.cells[i]);

@@ -80,6 +80,24 @@ TEST_F(Cli, GenerateDetectRoundTrip) {
   EXPECT_EQ(run("compare " + path("c.h5") + " " + path("c32.h5")).code, 1);
 }
 
+// --precision mixed writes float64 datasets and the attribute "mixed", fp64's contacts byte for byte;
+// fp32 refuses a 1e8 offset (its float32 positions would be 8 apart) with exit 3 and the reason.
+TEST_F(Cli, MixedPrecisionAndFp32FarOffsetRefusal) {
+  Result g = run("generate " + path("far.h5") + " --count 2000 --seed 5 --offset 1e8 1e8 1e8 -q");
+  ASSERT_EQ(g.code, 0) << g.output;
+  expect_detect_fails(path("far.h5"), 3, {"far.h5", "float32", "use --precision mixed or fp64"},
+                      "--backend cpu --precision fp32");
+  Result m = run("detect " + path("far.h5") + " -o " + path("m.h5") + " --backend cpu --precision mixed");
+  ASSERT_EQ(m.code, 0) << m.output;
+  EXPECT_NE(m.output.find("mixed"), std::string::npos) << m.output;
+  ASSERT_EQ(run("detect " + path("far.h5") + " -o " + path("d.h5") + " --backend cpu -q").code, 0);
+  const ContactFile mixed = read_contacts(path("m.h5")), fp64 = read_contacts(path("d.h5"));
+  EXPECT_EQ(mixed.precision, "mixed");
+  EXPECT_GT(mixed.contacts.size(), 0u);
+  Result same = run("compare " + path("m.h5") + " " + path("d.h5"));
+  EXPECT_NE(same.output.find("IDENTICAL"), std::string::npos) << same.output;
+}
+
 TEST_F(Cli, PolydisperseUsesTheRatio) {
   ASSERT_EQ(run("generate " + path("p.h5") + " --kind polydisperse -n 5000 --ratio 100 -q").code, 0);
   const Scene s = read_scene(path("p.h5"));

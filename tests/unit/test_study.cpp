@@ -2,9 +2,8 @@
 // every family, judged against the exact reference:
 //   - fp64 decides every pair outside its band as the reference does, on every family;
 //   - no mode is ever wrong without a word: every row has no missed or extra pair outside its band
-//     (or the engine refused the scene), and a normal off by more than a degree comes with a flag,
-//     except where issue #13 names today's defect (kKnownUnflaggedNormals; the precision-modes work
-//     removes those entries, and this test then holds them to the invariant);
+//     (or the engine refused the scene), and a normal off by more than a degree comes with a flag
+//     (fp32's unresolved normals are recomputed in fp64, so none is left);
 //   - fp32 writes world positions as float32, so far from the origin its points are off by the float
 //     spacing there (a property of the mode, which the study must show).
 #include <gtest/gtest.h>
@@ -37,10 +36,6 @@ std::vector<std::string> split(const std::string& line) {
   if (!line.empty() && line.back() == ',') out.emplace_back();
   return out;
 }
-
-// (mode, family) pairs whose normals are wrong today without a flag (issue #13): fp32 cannot resolve
-// centres closer than its rounding (normals off by up to 180°, item 3).
-const std::set<std::pair<std::string, std::string>> kKnownUnflaggedNormals{{"fp32", "near-coincident"}};
 
 class Study : public TempDirTest {
  protected:
@@ -87,10 +82,8 @@ TEST_F(Study, TinyStudyMeetsTheInvariantsOnEveryFamily) {
     EXPECT_EQ(r.at("extra"), "0") << what << ": a pair outside the band was invented";
     EXPECT_GE(std::stod(r.at("time_s")), 0) << what;
     const bool flagged = std::stoull(r.at("flagged")) > 0;
-    if (!kKnownUnflaggedNormals.count({r.at("mode"), r.at("family")})) {
-      EXPECT_TRUE(std::stod(r.at("max_normal_deg")) <= 1 || flagged)
-          << what << ": normal off by " << r.at("max_normal_deg") << "° unflagged";
-    }
+    EXPECT_TRUE(std::stod(r.at("max_normal_deg")) <= 1 || flagged)
+        << what << ": normal off by " << r.at("max_normal_deg") << "° unflagged";
     if (r.at("mode") == "fp32" && r.at("family").rfind("far-", 0) == 0) {  // float32 world positions
       EXPECT_GT(std::stod(r.at("max_position_rel")), 1e-3) << what;
     }
