@@ -1,5 +1,5 @@
 // The precision modes (issue #13, README "Choosing a precision") against the exact long-double
-// reference (tests/reference.hpp), one body over both backends (CUDA cases skip without a GPU):
+// reference (src/reference, cg_reference), one body over both backends (CUDA cases skip without a GPU):
 //   fp64   decisions on the frame-local doubles, rows from the world doubles: normals and points
 //          exact to a few ulps even for centres 1e-12 apart at 1e6;
 //   mixed  fp32 broad phase + fp64 narrow phase: bit-identical to fp64 on every scene;
@@ -12,12 +12,15 @@
 #include <random>
 
 #include "engine.hpp"
-#include "reference.hpp"
+#include "reference/sphere_reference.hpp"
 #include "scenes.hpp"
 #include "support/contacts_equal.hpp"
 
 namespace cg::test {
 namespace {
+
+using exact::RefContact;
+using exact::reference_contacts;
 
 template <Backend B>
 struct OnBackend {
