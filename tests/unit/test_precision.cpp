@@ -12,12 +12,15 @@
 #include <random>
 
 #include "engine.hpp"
-#include "reference.hpp"
+#include "reference/sphere_reference.hpp"
 #include "scenes.hpp"
 #include "support/contacts_equal.hpp"
 
 namespace cg::test {
 namespace {
+
+using exact::RefContact;
+using exact::reference_contacts;
 
 template <Backend B>
 struct OnBackend {
@@ -242,7 +245,8 @@ TYPED_TEST(PrecisionTest, EveryModeIsBitIdenticalAcrossBackendsAndThreads) {
   const Contacts<float> f32 = this->template run<float>(s, Precision::fp32);
   const std::uint64_t fp64_rows = this->m_stats.fp64_rows;
   EXPECT_GT(fp64_rows, 0u);
-  EXPECT_EQ(compare_contacts(f32, this->template run<float>(s, Precision::fp32, other, threads)), "identical");
+  EXPECT_EQ(compare_contacts(f32, this->template run<float>(s, Precision::fp32, other, threads)),
+            "identical");
   EXPECT_EQ(this->m_stats.fp64_rows, fp64_rows);
   for (Precision mode : {Precision::fp64, Precision::mixed})
     EXPECT_EQ(compare_contacts(this->template run<double>(s, mode),
