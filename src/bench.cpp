@@ -311,15 +311,8 @@ void print_table(const BenchResult& r, const std::vector<Backend>& backends, std
 }  // namespace
 
 const char* to_string(BenchKind kind) {
-  switch (kind) {
-    case BenchKind::spheres:
-      return "spheres";
-    case BenchKind::ellipsoids:
-      return "ellipsoids";
-    case BenchKind::mixed:
-      return "mixed";
-  }
-  return "?";
+  static constexpr const char* names[] = {"spheres", "ellipsoids", "mixed"};  // BenchKind's order
+  return names[static_cast<int>(kind)];
 }
 
 std::int64_t bullet_count_allowance(std::int64_t engine_contacts) {

@@ -58,11 +58,12 @@ inline constexpr const char* kShapeCsvColumns =
     "narrow_unconverged,narrow_cpu_s,narrow_cuda_s,narrow_cpu_pairs_per_s,narrow_cuda_pairs_per_s";
 
 // Float Bullet (exact ellipsoid support, margin 0.04) misses this share of the contacts, all shallow
-// (|distance| < 0.004): 0.2–0.3 % at semi-axes U[0.5, 1] (BENCHMARKS.md §8), 0.36 % at U[0.25, 1]
-// (2^14, seed 15: 11 of 3 061; §8 "bench --kind ellipsoids"). The largest |engine − Bullet| contact count
-// difference that still "agrees" on a scene with ellipsoids: the expected misses μ = rate × the
-// engine's count plus three Poisson deviations, ceil(μ + 3√μ), and at least 3.
-inline constexpr double kBulletShallowMissRate = 0.004;
+// (|distance| < 0.004): 0.2–0.3 % at semi-axes U[0.5, 1] (BENCHMARKS.md §8), 0.36 % and 0.49 % at
+// U[0.25, 1] (bench's scenes at 2^14 and 2^16: 11 of 3 061, 59 of 11 974, judged by `validate`). The
+// largest |engine − Bullet| contact count difference that still "agrees" on a scene with ellipsoids:
+// the expected misses μ = rate × the engine's count plus three Poisson deviations, ceil(μ + 3√μ), and
+// at least 3.
+inline constexpr double kBulletShallowMissRate = 0.005;
 std::int64_t bullet_count_allowance(std::int64_t engine_contacts);
 
 struct BenchOptions {

@@ -156,7 +156,7 @@ TEST_F(Cli, BenchWritesTheTable) {
 
 // `bench --kind ellipsoids|mixed` at tiny N: the documented CSV columns, one row per N, the engine
 // against float Bullet with the exact ellipsoid support within float Bullet's shallow-miss rate
-// (0.2–0.4 % measured, BENCHMARKS.md §8; allowed: 0.4 % plus three Poisson deviations, at least 3
+// (0.2–0.5 % measured, BENCHMARKS.md §8; allowed: 0.5 % plus three Poisson deviations, at least 3
 // pairs), and the
 // narrow-phase counters of the ellipsoid solve.
 TEST_F(Cli, BenchEllipsoidAndMixedScenes) {
@@ -213,7 +213,7 @@ TEST_F(Cli, BenchEllipsoidAndMixedScenes) {
       EXPECT_EQ(std::stoull(col(v, "ellipsoids")), kind == "ellipsoids" ? n : n / 2) << line;
       const long long ours = std::stoll(col(v, "contacts")), bullet = std::stoll(col(v, "bullet_contacts"));
       EXPECT_GT(ours, std::int64_t(n) / 10) << line;
-      const double misses = 0.004 * double(ours);  // float Bullet's shallow misses, expected
+      const double misses = 0.005 * double(ours);  // float Bullet's shallow misses, expected
       const long long allowed =
           std::max(3LL, static_cast<long long>(std::ceil(misses + 3 * std::sqrt(misses))));
       EXPECT_LE(std::llabs(ours - bullet), allowed) << line;
