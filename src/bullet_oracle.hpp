@@ -40,6 +40,8 @@
 
 namespace cg {
 
+struct Scene;
+
 // The collision margin of an ellipsoid in Bullet (measured, issue #12: float Bullet with the exact
 // support and this margin agrees best with the exact contacts), shrunk per body to half its smallest
 // radius of curvature c_min² / a_max so that the margin-free core stays convex.
@@ -67,6 +69,13 @@ struct OracleResult {
   double scratch_seconds = 0;  // world construction + adding bodies + first detection
   double warm_seconds = -1;    // one warm step (move every body slightly, detect again); -1: not run
 };
+
+// The bodies `ids` (ascending) of a scene for Bullet (ellipsoids with their semi-axes and
+// orientation when the scene has any). With `framed`, Bullet works relative to the middle of their
+// centres' box (float Bullet is exact only near its origin); `extent` gets the largest |coordinate|
+// Bullet then sees. Defined in validate.cpp (cg_validate; used by validate and bench).
+OracleBodies oracle_bodies(const Scene& scene, const std::vector<std::int64_t>& ids, bool framed,
+                           double& extent);
 
 // Runs Bullet of the requested precision: fp64 in this process, fp32 through the float executable.
 // `warm_step`: also time one warm step (the contacts returned are always those of the first

@@ -22,6 +22,10 @@ namespace {
 
 const std::map<std::string, Backend> k_backends{
     {"cpu", Backend::cpu}, {"cuda", Backend::cuda}, {"auto", Backend::automatic}};
+#if defined(CONTACTGRID_HAVE_BULLET)
+const std::map<std::string, BenchKind> k_bench_kinds{
+    {"spheres", BenchKind::spheres}, {"ellipsoids", BenchKind::ellipsoids}, {"mixed", BenchKind::mixed}};
+#endif
 const std::map<std::string, Precision> k_precisions{
     {"fp32", Precision::fp32}, {"fp64", Precision::fp64}, {"mixed", Precision::mixed}};
 const std::map<std::string, Fields> k_fields{{"basic", Fields::basic}, {"full", Fields::full}};
@@ -69,6 +73,12 @@ int run_cli(int argc, char** argv, Session& session) {
       ->check(CLI::Range(1.0, 1000.0))
       ->capture_default_str();
   g->add_option("--rhigh", gen.radius_high, "Largest radius Rhigh (length units)")->capture_default_str();
+  double gen_max_aspect = 0;
+  auto* aspect_opt =
+      g->add_option("--max-aspect", gen_max_aspect,
+                    "ellipsoids, mixed: semi-axes U[Rhigh/K, Rhigh], no body longer than 1:K (sets Rlow)")
+          ->check(CLI::Range(1.0, 1000.0))
+          ->excludes(rlow_opt);
   g->add_option("--contacts-per-body", gen.contacts_per_body,
                 "Target mean contacts per sphere; sets the box edge (course: 0.4)")
       ->check(CLI::PositiveNumber)
@@ -219,6 +229,22 @@ int run_cli(int argc, char** argv, Session& session) {
   bool bench_no_plot = false;
   auto* b =
       app.add_subcommand("bench", "Timing study: engine vs Bullet for N = 2^lo … 2^hi (table, CSV, plots)");
+  b->add_option("--kind", bench.kind,
+                "spheres (double Bullet, warm step) | ellipsoids | mixed (float Bullet with the exact "
+                "ellipsoid support, from scratch; narrow-phase counters)")
+      ->transform(CLI::CheckedTransformer(k_bench_kinds))
+      ->default_str("spheres");
+  b->add_option("--max-aspect", bench.max_aspect,
+                "ellipsoids, mixed: semi-axes U[1/K, 1], so no body is longer than 1:K (issue #12: 4)")
+      ->check(CLI::Range(1.0, 1000.0))
+      ->capture_default_str();
+  b->add_option("--ellipsoid-fraction", bench.ellipsoid_fraction, "mixed: share of ellipsoids, in [0, 1]")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  b->add_option("--contacts-per-body", bench.contacts_per_body,
+                "The generator's density (bounding spheres: for ellipsoids the candidates per body)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   b->add_option("--lo", bench.lo, "First N = 2^lo")->capture_default_str();
   b->add_option("--bullet-hi", bench.bullet_hi, "Bullet runs while N <= 2^bullet-hi")->capture_default_str();
   b->add_option("--engine-hi", bench.engine_hi, "The engine runs while N <= 2^engine-hi")
@@ -255,6 +281,11 @@ int run_cli(int argc, char** argv, Session& session) {
     if (session.rank() != 0) return 0;  // one writer
     if (!offset.empty()) gen.offset = {offset[0], offset[1], offset[2]};
     if (gen.kind == "polydisperse" && rlow_opt->count() == 0) gen.radius_low = gen.radius_high / gen_ratio;
+    if (aspect_opt->count() > 0) {
+      if (gen.kind != "ellipsoids" && gen.kind != "mixed")
+        throw UsageError("--max-aspect applies to --kind ellipsoids or mixed");
+      gen.radius_low = gen.radius_high / gen_max_aspect;
+    }
     return run_generate(gen_out, gen, gen_quiet);
   }
   if (d->parsed()) return run_detect(det, session);

@@ -190,37 +190,6 @@ std::vector<Box> pick_boxes(const SceneStats& st, std::size_t bodies, const Vali
   return boxes;
 }
 
-// The bodies `ids` (ascending) for Bullet. With `framed`, Bullet works relative to the middle of
-// their centres' box (float Bullet is exact only near its origin); `extent` gets the largest
-// |coordinate| Bullet then sees.
-OracleBodies oracle_bodies(const Scene& scene, const std::vector<std::int64_t>& ids, bool framed, double& extent) {
-  OracleBodies b;
-  const bool shapes = scene.ellipsoid_count() > 0;
-  Box span{centre(scene, 0), centre(scene, 0)};
-  for (const std::int64_t id : ids) {
-    const std::size_t i = std::size_t(id);
-    const Vec3<double> c = centre(scene, i);
-    b.position.push_back(c);
-    b.radius.push_back(bounding_radius(scene, i));
-    b.id.push_back(id);
-    if (shapes) {
-      const bool sphere = i < scene.sphere_count();
-      const std::size_t e = i - scene.sphere_count();
-      b.semi_axes.push_back(sphere ? Vec3<double>{0, 0, 0} : scene.ellipsoid_semi_axes[e]);
-      b.orientation.push_back(sphere ? std::array<double, 4>{1, 0, 0, 0} : scene.ellipsoid_orientation[e]);
-    }
-    span.lo = {std::min(span.lo.x, c.x), std::min(span.lo.y, c.y), std::min(span.lo.z, c.z)};
-    span.hi = {std::max(span.hi.x, c.x), std::max(span.hi.y, c.y), std::max(span.hi.z, c.z)};
-  }
-  if (framed && !ids.empty()) b.origin = 0.5 * (span.lo + span.hi);
-  extent = 0;
-  for (std::size_t k = 0; k < b.size(); ++k) {
-    const Vec3<double> c = b.position[k] - b.origin;
-    extent = std::max({extent, std::abs(c.x), std::abs(c.y), std::abs(c.z)});
-  }
-  return b;
-}
-
 // The failure lines of the report's counters (contract violations were added by check_contract).
 void add_failures(ValidateReport& rep) {
   if (rep.missing)
@@ -252,6 +221,34 @@ void add_failures(ValidateReport& rep) {
 }
 
 }  // namespace
+
+OracleBodies oracle_bodies(const Scene& scene, const std::vector<std::int64_t>& ids, bool framed, double& extent) {
+  OracleBodies b;
+  const bool shapes = scene.ellipsoid_count() > 0;
+  Box span{centre(scene, 0), centre(scene, 0)};
+  for (const std::int64_t id : ids) {
+    const std::size_t i = std::size_t(id);
+    const Vec3<double> c = centre(scene, i);
+    b.position.push_back(c);
+    b.radius.push_back(bounding_radius(scene, i));
+    b.id.push_back(id);
+    if (shapes) {
+      const bool sphere = i < scene.sphere_count();
+      const std::size_t e = i - scene.sphere_count();
+      b.semi_axes.push_back(sphere ? Vec3<double>{0, 0, 0} : scene.ellipsoid_semi_axes[e]);
+      b.orientation.push_back(sphere ? std::array<double, 4>{1, 0, 0, 0} : scene.ellipsoid_orientation[e]);
+    }
+    span.lo = {std::min(span.lo.x, c.x), std::min(span.lo.y, c.y), std::min(span.lo.z, c.z)};
+    span.hi = {std::max(span.hi.x, c.x), std::max(span.hi.y, c.y), std::max(span.hi.z, c.z)};
+  }
+  if (framed && !ids.empty()) b.origin = 0.5 * (span.lo + span.hi);
+  extent = 0;
+  for (std::size_t k = 0; k < b.size(); ++k) {
+    const Vec3<double> c = b.position[k] - b.origin;
+    extent = std::max({extent, std::abs(c.x), std::abs(c.y), std::abs(c.z)});
+  }
+  return b;
+}
 
 const char* to_string(ValidateOffender::Kind k) {
   static constexpr const char* names[ValidateOffender::kinds] = {

@@ -5,10 +5,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "engine.hpp"
 #include "hdf5_io.hpp"
@@ -98,6 +100,26 @@ TEST_F(Cli, MixedPrecisionAndFp32FarOffsetRefusal) {
   EXPECT_NE(same.output.find("IDENTICAL"), std::string::npos) << same.output;
 }
 
+// --max-aspect K: semi-axes U[Rhigh/K, Rhigh], so no ellipsoid is longer than 1:K (bench's scene).
+TEST_F(Cli, GenerateMaxAspectBoundsTheEllipsoids) {
+  ASSERT_EQ(run("generate " + path("e.h5") + " --kind ellipsoids -n 4000 --max-aspect 4 -q").code, 0);
+  const Scene s = read_scene(path("e.h5"));
+  ASSERT_EQ(s.ellipsoid_count(), 4000u);
+  EXPECT_EQ(s.radius_low, 0.25);
+  double widest = 1;
+  for (const Vec3<double>& e : s.ellipsoid_semi_axes) {
+    const double lo = std::min({e.x, e.y, e.z}), hi = std::max({e.x, e.y, e.z});
+    EXPECT_GE(lo, 0.25);
+    EXPECT_LE(hi, 1.0);
+    widest = std::max(widest, hi / lo);
+  }
+  EXPECT_GT(widest, 3.5) << "4000 bodies reach close to 1:4";
+  EXPECT_EQ(run("generate " + path("f.h5") + " --kind uniform -n 10 --max-aspect 4").code, 2);
+  EXPECT_EQ(run("generate " + path("f.h5") + " --kind ellipsoids -n 10 --max-aspect 4 --rlow 0.1").code, 2);
+  EXPECT_EQ(run("generate " + path("f.h5") + " --kind ellipsoids -n 10 --max-aspect 0.5").code, 2);
+  EXPECT_FALSE(fs::exists(path("f.h5")));
+}
+
 TEST_F(Cli, PolydisperseUsesTheRatio) {
   ASSERT_EQ(run("generate " + path("p.h5") + " --kind polydisperse -n 5000 --ratio 100 -q").code, 0);
   const Scene s = read_scene(path("p.h5"));
@@ -130,6 +152,96 @@ TEST_F(Cli, BenchWritesTheTable) {
   std::size_t lines = 0;
   for (std::string l; std::getline(csv, l);) ++lines;
   EXPECT_EQ(lines, 4u) << "header + N = 2^8, 2^9, 2^10";
+}
+
+// `bench --kind ellipsoids|mixed` at tiny N: the documented CSV columns, one row per N, the engine
+// against float Bullet with the exact ellipsoid support within float Bullet's shallow-miss rate
+// (0.2–0.5 % measured, BENCHMARKS.md §8; allowed: 0.5 % plus three Poisson deviations, at least 3
+// pairs), and the
+// narrow-phase counters of the ellipsoid solve.
+TEST_F(Cli, BenchEllipsoidAndMixedScenes) {
+  auto split = [](const std::string& line) {
+    std::vector<std::string> out;
+    std::stringstream ss(line);
+    for (std::string f; std::getline(ss, f, ',');) out.push_back(f);
+    if (!line.empty() && line.back() == ',') out.emplace_back();
+    return out;
+  };
+  const std::vector<std::string> columns{"n",
+                                         "log2n",
+                                         "kind",
+                                         "ellipsoids",
+                                         "contacts",
+                                         "bullet_contacts",
+                                         "agree",
+                                         "bullet_scratch_s",
+                                         "engine_cpu_s",
+                                         "engine_cuda_s",
+                                         "speedup_cpu_vs_scratch",
+                                         "speedup_cuda_vs_scratch",
+                                         "candidates",
+                                         "narrow_hard",
+                                         "narrow_fallbacks",
+                                         "narrow_unconverged",
+                                         "narrow_cpu_s",
+                                         "narrow_cuda_s",
+                                         "narrow_cpu_pairs_per_s",
+                                         "narrow_cuda_pairs_per_s"};
+  for (const std::string kind : {"ellipsoids", "mixed"}) {
+    SCOPED_TRACE(kind);
+    const std::string csv = path(kind + ".csv");
+    Result r = run("bench --kind " + kind +
+                   " --lo 9 --bullet-hi 10 --engine-hi 10 --repetitions 1 "
+                   "--backend cpu --no-plot --csv " +
+                   csv);
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_NE(r.output.find("float, exact ellipsoid support"), std::string::npos) << r.output;
+    std::ifstream f(csv);
+    std::string line;
+    ASSERT_TRUE(std::getline(f, line));
+    ASSERT_EQ(split(line), columns);
+    auto col = [&](const std::vector<std::string>& v, const char* name) {
+      return v[std::size_t(std::find(columns.begin(), columns.end(), name) - columns.begin())];
+    };
+    int rows = 0;
+    while (std::getline(f, line)) {
+      const auto v = split(line);
+      ASSERT_EQ(v.size(), columns.size()) << line;
+      const std::uint64_t n = std::stoull(col(v, "n"));
+      EXPECT_EQ(n, 1ull << (9 + rows));
+      EXPECT_EQ(col(v, "kind"), kind);
+      EXPECT_EQ(std::stoull(col(v, "ellipsoids")), kind == "ellipsoids" ? n : n / 2) << line;
+      const long long ours = std::stoll(col(v, "contacts")), bullet = std::stoll(col(v, "bullet_contacts"));
+      EXPECT_GT(ours, std::int64_t(n) / 10) << line;
+      const double misses = 0.005 * double(ours);  // float Bullet's shallow misses, expected
+      const long long allowed =
+          std::max(3LL, static_cast<long long>(std::ceil(misses + 3 * std::sqrt(misses))));
+      EXPECT_LE(std::llabs(ours - bullet), allowed) << line;
+      EXPECT_EQ(col(v, "agree"), "yes") << line;
+      EXPECT_GT(std::stod(col(v, "bullet_scratch_s")), 0.0);
+      EXPECT_GT(std::stod(col(v, "engine_cpu_s")), 0.0);
+      EXPECT_TRUE(col(v, "engine_cuda_s").empty()) << "no CUDA asked for";
+      EXPECT_GT(std::stod(col(v, "speedup_cpu_vs_scratch")), 0.0);
+      const unsigned long long candidates = std::stoull(col(v, "candidates"));
+      EXPECT_GE(candidates, static_cast<unsigned long long>(ours)) << "every contact was a candidate";
+      // the generator's 0.4 per body is a density of bounding spheres, i.e. of candidates
+      EXPECT_NEAR(double(candidates) / double(n), 0.4, 0.1) << line;
+      EXPECT_LE(std::stoull(col(v, "narrow_hard")), candidates);
+      EXPECT_LE(std::stoull(col(v, "narrow_fallbacks")), candidates);
+      EXPECT_EQ(col(v, "narrow_unconverged"), "0") << "no pair misses the tolerance at aspect <= 1:4";
+      EXPECT_GT(std::stod(col(v, "narrow_cpu_s")), 0.0);
+      EXPECT_NEAR(std::stod(col(v, "narrow_cpu_pairs_per_s")) * std::stod(col(v, "narrow_cpu_s")),
+                  double(candidates), 1e-3 * double(candidates))
+          << line;
+      EXPECT_TRUE(col(v, "narrow_cuda_pairs_per_s").empty());
+      ++rows;
+    }
+    EXPECT_EQ(rows, 2);
+  }
+  // the options' bounds
+  EXPECT_EQ(run("bench --kind cubes --no-plot --csv " + path("x.csv")).code, 2);
+  EXPECT_EQ(run("bench --kind ellipsoids --max-aspect 0.5 --no-plot --csv " + path("x.csv")).code, 2);
+  EXPECT_FALSE(fs::exists(path("x.csv")));
 }
 
 TEST_F(Cli, UsageErrorsExitTwo) {

@@ -245,7 +245,8 @@ TYPED_TEST(PrecisionTest, EveryModeIsBitIdenticalAcrossBackendsAndThreads) {
   const Contacts<float> f32 = this->template run<float>(s, Precision::fp32);
   const std::uint64_t fp64_rows = this->m_stats.fp64_rows;
   EXPECT_GT(fp64_rows, 0u);
-  EXPECT_EQ(compare_contacts(f32, this->template run<float>(s, Precision::fp32, other, threads)), "identical");
+  EXPECT_EQ(compare_contacts(f32, this->template run<float>(s, Precision::fp32, other, threads)),
+            "identical");
   EXPECT_EQ(this->m_stats.fp64_rows, fp64_rows);
   for (Precision mode : {Precision::fp64, Precision::mixed})
     EXPECT_EQ(compare_contacts(this->template run<double>(s, mode),
