@@ -4,15 +4,18 @@
 #   (jobs/gpu_shapes_check.sh); validate on ellipsoid and mixed scenes (float Bullet, the judge);
 #   contactgrid_cuda_bench on spheres (fp32, mixed, fp64 at 2^20 and 2^24) and on ellipsoid and mixed
 #   scenes (2^16 … 2^22, 0.4 contacts per body); the precision study on both backends.
-#   BIN=dir-with-binaries OUT=results-dir jobs/gpu_wave_check.sh
+#   BIN=dir-with-binaries OUT=results-dir [PART=first|second] jobs/gpu_wave_check.sh
+# (first: tests, CLI, validate, cuda bench; second: the study and the bench against float Bullet)
 set -u
 BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}; mkdir -p "$OUT"; W=${WORK:-/tmp/cgwork}; mkdir -p "$W"
 CG="$BIN/contactgrid"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
 log() { echo "[$(date -u +%H:%M:%S)] $*"; }
 nvidia-smi --query-gpu=name,driver_version --format=csv,noheader
-log "unit suite"
-"$BIN/contactgrid_tests" >"$OUT/unit.log" 2>&1; echo "exit $?"
+if [ "${PART:-all}" != second ]; then
+log "unit suite: the cases that touch CUDA, the precision modes, the study, the shapes"
+"$BIN/contactgrid_tests" --gtest_filter="${FILTER:-*uda*:*Precision*:*Study*:*Shape*:*Ellipsoid*:*Skin*:*skin*}" \
+  >"$OUT/unit.log" 2>&1; echo "exit $?"
 grep -E '^\[  (PASSED|FAILED) |^\[  FAILED  \]|SKIPPED \]' "$OUT/unit.log" | head -20
 grep -E 'certificate' "$OUT/unit.log" | head -4
 log "CLI: cpu vs cuda byte-identical /contacts (every mode), mpirun np 2 vs np 1"
@@ -44,8 +47,16 @@ for s in ellipsoids mixed; do
   log "cuda bench: $s"
   "$BIN/contactgrid_cuda_bench" 16 22 2 10 auto $s >"$OUT/bench_$s.txt" 2>&1; grep -E '^#|^\| 2' "$OUT/bench_$s.txt"
 done
+fi
+[ "${PART:-all}" = first ] && { log "done (first part)"; exit 0; }
 log "study (cpu, cuda)"
 timeout 300 "$CG" study --backends cpu,cuda --csv "$OUT/study_gpu.csv" --svg "$OUT/study_gpu.svg" \
   >"$OUT/study_gpu.txt" 2>"$OUT/study_gpu.progress"; echo "study exit $?"
 cat "$OUT/study_gpu.txt" | head -80
+log "bench vs float Bullet: ellipsoids at 0.4 contacts per body (--contacts-per-body 0.87), 2^16 … 2^20"
+for p in fp32 fp64; do
+  timeout 200 "$CG" bench --kind ellipsoids --precision $p --contacts-per-body 0.87 --lo 16 --bullet-hi 20 \
+    --engine-hi 20 --repetitions 10 --no-plot --csv "$OUT/bench_ell_${p}_h100.csv" >"$OUT/bench_ell_$p.txt" 2>&1
+  echo "exit $?"; cat "$OUT/bench_ell_$p.txt" | tail -12
+done
 log "done"
