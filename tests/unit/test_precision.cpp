@@ -12,12 +12,15 @@
 #include <random>
 
 #include "engine.hpp"
-#include "reference.hpp"
+#include "reference/sphere_reference.hpp"
 #include "scenes.hpp"
 #include "support/contacts_equal.hpp"
 
 namespace cg::test {
 namespace {
+
+using exact::RefContact;
+using exact::reference_contacts;
 
 template <Backend B>
 struct OnBackend {
