@@ -83,6 +83,7 @@ PrecisionScene precision_scene(const Bounds& global, bool ellipsoids, double cel
       plan_grid(global, make_frame(global, cell_size, p, choice), p);
     } catch (const std::exception& e) {
       s.refusal[index_of(p)] = e.what();
+      s.refusal_error[index_of(p)] = std::current_exception();
     }
   }
   return s;
@@ -130,6 +131,11 @@ PrecisionChoice choose_precision(const PrecisionScene& s, Backend backend, const
     if (!skipped.empty()) c.reason += " (passed over: " + skipped + ")";
     return c;
   }
+  const std::size_t fp64_index = index_of(Precision::fp64);
+  if (s.refusal_error[fp64_index] && std::all_of(s.refusal.begin(), s.refusal.end(), [](const std::string& r) {
+        return !r.empty();
+      }))
+    std::rethrow_exception(s.refusal_error[fp64_index]);
   throw InputError("no precision mode meets " + request + " for this scene (|x| up to " + g3(s.world_max) +
                    ", extent " + g3(s.extent) + ", radii " + g3(s.r_min) + " … " + g3(s.r_max) +
                    "): " + skipped + "; ask for at least what fp64 gives");

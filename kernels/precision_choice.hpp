@@ -3,6 +3,7 @@
 // whose documented bounds hold for this scene at the accuracy the user accepts (--accuracy). Pure host
 // code on the run's agreed global bounds, so every rank of an MPI run picks the same mode.
 #include <array>
+#include <exception>
 #include <optional>
 #include <string>
 
@@ -37,6 +38,7 @@ struct PrecisionScene {
   // positions spaced above r_max/4 (check_fp32_world), a float broad phase's grid beyond 2^22 cells
   // per axis, a --cell-size below the mode's smallest valid edge.
   std::array<std::string, 3> refusal;
+  std::array<std::exception_ptr, 3> refusal_error;  // the error itself (UsageError, InputError)
 };
 
 // From the global bounds and the run's cell-size request: make_frame and plan_grid tried per mode.
@@ -64,7 +66,9 @@ struct PrecisionChoice {
 };
 
 // The first mode of cost_order(backend) (backend: cpu or cuda) that can run the scene and whose
-// bounds meet `accuracy`. Throws InputError (exit 3) saying what the best mode gives here when none does.
+// bounds meet `accuracy`. When no mode can run the scene, rethrows fp64's refusal (what --precision
+// fp64 says: a --cell-size too small is a UsageError); when none meets the accuracy, throws InputError
+// (exit 3) saying what each mode gives here.
 PrecisionChoice choose_precision(const PrecisionScene& scene, Backend backend, const Accuracy& accuracy);
 
 }  // namespace cg

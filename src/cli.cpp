@@ -85,12 +85,34 @@ int run_cli(int argc, char** argv, Session& session) {
   d->add_option("--backend", det.backend, "cpu | cuda | auto (cuda when a GPU is present)")
       ->transform(CLI::CheckedTransformer(k_backends))
       ->default_str("auto");
-  d->add_option("--precision", det.precision,
-                "fp32 | fp64 | mixed: fp32 and fp64 run every stage and write their real type; mixed "
-                "runs the broad phase in fp32 and the narrow phase in fp64 from the world coordinates "
-                "(float64 output, fp64's contacts); README 'Choosing a precision'")
-      ->transform(CLI::CheckedTransformer(k_precisions))
-      ->default_str("fp64");
+  d->add_option_function<std::string>(
+       "--precision",
+       [&det](const std::string& v) {
+         if (v == "auto") {
+           det.precision.reset();
+           return;
+         }
+         const auto it = k_precisions.find(v);
+         if (it == k_precisions.end())
+           throw CLI::ValidationError("--precision", "'" + v + "' is not auto, fp32, fp64 or mixed");
+         det.precision = it->second;
+       },
+       "auto | fp32 | fp64 | mixed: auto (default) picks the cheapest mode whose documented bounds meet "
+       "--accuracy for this scene (default accuracy: fp64's, so fp64's answers); fp32 and fp64 run every "
+       "stage and write their real type; mixed runs the broad phase in fp32 and the narrow phase in fp64 "
+       "from the world coordinates (float64 output, fp64's contacts); README 'Choosing a precision'")
+      ->default_str("auto");
+  d->add_option_function<std::string>(
+       "--accuracy",
+       [&det](const std::string& v) {
+         try {
+           det.accuracy = parse_accuracy(v);
+         } catch (const UsageError& e) {
+           throw CLI::ValidationError("--accuracy", e.what());
+         }
+       },
+       "POS[,ANGLE] for --precision auto: the position error accepted, relative to the smallest radius, "
+       "and the normal angle in degrees (default: what fp64 gives)");
   d->add_option("--fields", det.fields, "basic | full (adds local points and friction directions)")
       ->transform(CLI::CheckedTransformer(k_fields))
       ->default_str("basic");

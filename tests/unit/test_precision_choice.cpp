@@ -123,6 +123,10 @@ TEST(PrecisionChoice, AnAccuracyNoModeMeetsIsABadInputError) {
     EXPECT_NE(m.find("no precision mode meets --accuracy 1e-14"), std::string::npos) << m;
     EXPECT_NE(m.find("fp64 gives position"), std::string::npos) << m;
   }
+  // a --cell-size no mode can use: fp64's own refusal (a UsageError, exit 2), not an accuracy error
+  const Bounds small = box(0, 100, 0.5, 1);
+  EXPECT_THROW(choose_precision(precision_scene(small, false, 1.0, CellChoice::tuned), Backend::cpu, Accuracy{}),
+               UsageError);
   // an angle below fp64's few ulps
   EXPECT_THROW(choose_precision(scene_of(box(0, 100, 0.5, 1)), Backend::cpu, accuracy(1, 1e-20)), InputError);
 }
