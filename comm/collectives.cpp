@@ -18,8 +18,8 @@ static_assert(std::is_trivially_copyable_v<BoundsRecord>);
 }  // namespace
 
 Bounds allgather_bounds(const Session& session, const Bounds& mine) {
-  const BoundsRecord record{
-      mine.lo, mine.hi, mine.r_max, mine.r_min, mine.count, {mine.r_sum[0], mine.r_sum[1], mine.r_sum[2]}};
+  const BoundsRecord record{mine.lo,    mine.hi,    mine.r_max,
+                            mine.r_min, mine.count, {mine.r_sum[0], mine.r_sum[1], mine.r_sum[2]}};
   Bounds global;
   bool any = false;
   for (const BoundsRecord& r : detail::Comm(session).allgather(record)) {

@@ -6,7 +6,6 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
-#include <sstream>
 #include <string>
 
 namespace cg {
@@ -48,32 +47,13 @@ std::string passed_over(Precision mode, const PrecisionScene& s, double position
 
 }  // namespace
 
-Accuracy parse_accuracy(const std::string& text) {
-  Accuracy a;
-  const std::size_t comma = text.find(',');
-  auto number = [&](const std::string& word, const char* what) {
-    std::size_t used = 0;
-    double v = 0;
-    try {
-      v = std::stod(word, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used == 0 || used != word.size() || !std::isfinite(v) || !(v > 0))
-      throw UsageError("--accuracy " + text + ": " + what + " '" + word + "' is not a number > 0");
-    return v;
-  };
-  a.position = number(text.substr(0, comma), "the position error (relative to the smallest radius)");
-  if (comma != std::string::npos) a.angle_deg = number(text.substr(comma + 1), "the normal angle (degrees)");
-  return a;
-}
-
 PrecisionScene precision_scene(const Bounds& global, bool ellipsoids, double cell_size, CellChoice choice) {
   PrecisionScene s;
   s.ellipsoids = ellipsoids;
   s.r_min = global.r_min;
   s.r_max = global.r_max;
-  const double lo[3] = {global.lo.x, global.lo.y, global.lo.z}, hi[3] = {global.hi.x, global.hi.y, global.hi.z};
+  const double lo[3] = {global.lo.x, global.lo.y, global.lo.z},
+               hi[3] = {global.hi.x, global.hi.y, global.hi.z};
   for (int k = 0; k < 3; ++k) {
     s.extent = std::max(s.extent, hi[k] - lo[k]);
     s.world_max = std::max({s.world_max, std::abs(lo[k]), std::abs(hi[k])});
@@ -132,9 +112,8 @@ PrecisionChoice choose_precision(const PrecisionScene& s, Backend backend, const
     return c;
   }
   const std::size_t fp64_index = index_of(Precision::fp64);
-  if (s.refusal_error[fp64_index] && std::all_of(s.refusal.begin(), s.refusal.end(), [](const std::string& r) {
-        return !r.empty();
-      }))
+  if (s.refusal_error[fp64_index] &&
+      std::all_of(s.refusal.begin(), s.refusal.end(), [](const std::string& r) { return !r.empty(); }))
     std::rethrow_exception(s.refusal_error[fp64_index]);
   throw InputError("no precision mode meets " + request + " for this scene (|x| up to " + g3(s.world_max) +
                    ", extent " + g3(s.extent) + ", radii " + g3(s.r_min) + " … " + g3(s.r_max) +

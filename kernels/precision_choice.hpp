@@ -25,9 +25,6 @@ struct Accuracy {
   std::optional<double> angle_deg;
 };
 
-// Parses "POS" or "POS,ANGLE" (POS > 0, ANGLE > 0 in degrees); throws UsageError naming --accuracy.
-Accuracy parse_accuracy(const std::string& text);
-
 // What the choice reads of a scene: all from the global bounds every rank agreed on.
 struct PrecisionScene {
   double extent = 0;     // L: the largest local coordinate (the frame's origin is the lower corner)

@@ -330,7 +330,8 @@ CollectedContacts<Real> collect_contacts(const Session& session, Contacts<Real>&
 // The engine of the run's mode, built with the rank's threads (after the read: --precision auto
 // chooses the mode from the agreed bounds).
 template <class Real>
-std::optional<Engine<Real>> make_engine(const Session& session, const DistributedOptions& options, int threads) {
+std::optional<Engine<Real>> make_engine(const Session& session, const DistributedOptions& options,
+                                        int threads) {
   std::optional<Engine<Real>> engine;
   agreed_stage(session, "engine", [&] {
     EngineOptions engine_options = options.engine;
@@ -511,9 +512,8 @@ auto or_abort(Session& session, F&& f) -> decltype(f()) {
 // the same mode.
 PrecisionChoice choose_mode(const Session& session, const DetectCommand& cmd, const ReadScene& in) {
   if (cmd.precision) return {*cmd.precision, {}};
-  const Backend mine = cmd.backend == Backend::automatic
-                           ? (cuda_available() ? Backend::cuda : Backend::cpu)
-                           : cmd.backend;
+  const Backend mine =
+      cmd.backend == Backend::automatic ? (cuda_available() ? Backend::cuda : Backend::cpu) : cmd.backend;
   const Backend backend = session.max(mine == Backend::cuda ? 0.0 : 1.0) > 0 ? Backend::cpu : Backend::cuda;
   PrecisionChoice pick;
   agreed_stage(session, "frame", [&] {
@@ -574,8 +574,9 @@ int run_detect(const DetectCommand& cmd, Session& session) {
   ReadScene in = or_abort(session, [&] { return read_scene(session, cmd.input, options); });
   const PrecisionChoice choice = or_abort(session, [&] { return choose_mode(session, cmd, in); });
   options.engine.fp32_broad_phase = choice.mode == Precision::mixed;
-  return choice.mode == Precision::fp32 ? detect<float>(cmd, session, options, std::move(in), choice, threads)
-                                        : detect<double>(cmd, session, options, std::move(in), choice, threads);
+  return choice.mode == Precision::fp32
+             ? detect<float>(cmd, session, options, std::move(in), choice, threads)
+             : detect<double>(cmd, session, options, std::move(in), choice, threads);
 }
 
 }  // namespace cg

@@ -49,8 +49,8 @@
 #include <vector>
 
 #include "engine.hpp"
-#include "precision_choice.hpp"
 #include "generate.hpp"
+#include "precision_choice.hpp"
 #include "resident_steps.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"

@@ -21,9 +21,10 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
     fmt::print("\n  {} ellipsoids, {} narrow fallbacks, {} narrow solves unconverged (summed over ranks)",
                r.ellipsoids, r.stats.narrow_fallbacks, r.stats.narrow_unconverged);
   if (r.stats.fp64_rows > 0)
-    fmt::print("\n  {} fp32 rows recomputed in fp64 (centres closer than fp32 resolves a normal; summed over "
-               "ranks)",
-               r.stats.fp64_rows);
+    fmt::print(
+        "\n  {} fp32 rows recomputed in fp64 (centres closer than fp32 resolves a normal; summed over "
+        "ranks)",
+        r.stats.fp64_rows);
   fmt::print("\n  {}-bit cell keys, {} (cell, body) entries, {} pair tests; times: maximum over ranks\n",
              r.stats.key_bits, r.stats.entries, r.stats.pair_tests);
   double total = 0;
@@ -50,7 +51,8 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
   }
 }
 
-template void print_summary<float>(const RunInfo&, const RunTimes&, std::uint64_t, const DistributedResult<float>&);
+template void print_summary<float>(const RunInfo&, const RunTimes&, std::uint64_t,
+                                   const DistributedResult<float>&);
 template void print_summary<double>(const RunInfo&, const RunTimes&, std::uint64_t,
                                     const DistributedResult<double>&);
 

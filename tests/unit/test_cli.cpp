@@ -90,7 +90,8 @@ TEST_F(Cli, MixedPrecisionAndFp32FarOffsetRefusal) {
   Result m = run("detect " + path("far.h5") + " -o " + path("m.h5") + " --backend cpu --precision mixed");
   ASSERT_EQ(m.code, 0) << m.output;
   EXPECT_NE(m.output.find("mixed"), std::string::npos) << m.output;
-  ASSERT_EQ(run("detect " + path("far.h5") + " -o " + path("d.h5") + " --backend cpu --precision fp64 -q").code, 0);
+  ASSERT_EQ(
+      run("detect " + path("far.h5") + " -o " + path("d.h5") + " --backend cpu --precision fp64 -q").code, 0);
   const ContactFile mixed = read_contacts(path("m.h5")), fp64 = read_contacts(path("d.h5"));
   EXPECT_EQ(mixed.precision, "mixed");
   EXPECT_GT(mixed.contacts.size(), 0u);
@@ -149,7 +150,8 @@ TEST_F(Cli, PrecisionAutoPicksTheCheapestModeThatMeetsTheAccuracy) {
       << lax.output;
   const ContactFile f32 = read_contacts(path("lax.h5"));
   EXPECT_EQ(f32.precision, "fp32");
-  EXPECT_EQ(std::get<std::string>(f32.attributes.at("precision_choice")).rfind("precision auto: fp32", 0), 0u);
+  EXPECT_EQ(std::get<std::string>(f32.attributes.at("precision_choice")).rfind("precision auto: fp32", 0),
+            0u);
   Result quiet = detect("s.h5", "quiet.h5", "--accuracy 1e-2,0.1 -q");
   ASSERT_EQ(quiet.code, 0) << quiet.output;
   EXPECT_EQ(quiet.output.find("precision auto"), std::string::npos) << "-q silences it: " << quiet.output;

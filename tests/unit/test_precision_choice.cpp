@@ -11,6 +11,8 @@
 #include <random>
 #include <string>
 
+#include "backends.hpp"
+#include "cli.hpp"
 #include "engine.hpp"
 #include "precision_choice.hpp"
 #include "reference/sphere_reference.hpp"
@@ -96,7 +98,8 @@ TEST(PrecisionChoice, ModesThatCannotRunTheSceneArePassedOver) {
   // a --cell-size below mixed's smallest valid edge (its radii grow by 4·ε32·(L + 2·r_max), 1.3e-4
   // here) but above fp64's: mixed is out, the default takes fp64
   const Bounds wide = box(0, 1e5, 1, 1);
-  const double fp64_edge = min_cell_size(wide, Precision::fp64), mixed_edge = min_cell_size(wide, Precision::mixed);
+  const double fp64_edge = min_cell_size(wide, Precision::fp64),
+               mixed_edge = min_cell_size(wide, Precision::mixed);
   ASSERT_LT(fp64_edge, mixed_edge);
   const PrecisionScene s = precision_scene(wide, false, 0.5 * (fp64_edge + mixed_edge), CellChoice::tuned);
   EXPECT_FALSE(s.refusal[std::size_t(Precision::mixed)].empty());
@@ -125,8 +128,9 @@ TEST(PrecisionChoice, AnAccuracyNoModeMeetsIsABadInputError) {
   }
   // a --cell-size no mode can use: fp64's own refusal (a UsageError, exit 2), not an accuracy error
   const Bounds small = box(0, 100, 0.5, 1);
-  EXPECT_THROW(choose_precision(precision_scene(small, false, 1.0, CellChoice::tuned), Backend::cpu, Accuracy{}),
-               UsageError);
+  EXPECT_THROW(
+      choose_precision(precision_scene(small, false, 1.0, CellChoice::tuned), Backend::cpu, Accuracy{}),
+      UsageError);
   // an angle below fp64's few ulps
   EXPECT_THROW(choose_precision(scene_of(box(0, 100, 0.5, 1)), Backend::cpu, accuracy(1, 1e-20)), InputError);
 }
@@ -155,27 +159,12 @@ TEST(PrecisionChoice, ParseAccuracy) {
 
 // ---- the documented bounds hold: the engine in each mode against the exact reference ----------------
 
-template <Backend B>
-struct OnBackend {
-  static constexpr Backend backend = B;
-};
-using Backends = ::testing::Types<OnBackend<Backend::cpu>, OnBackend<Backend::cuda>>;
-struct BackendNames {
-  template <class T>
-  static std::string GetName(int) {
-    return to_string(T::backend);
-  }
-};
-
 template <class T>
 class ModeBoundsHold : public ::testing::Test {
  protected:
-  void SetUp() override {
-    if (T::backend == Backend::cuda && !cuda_available())
-      GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
-  }
+  void SetUp() override { CG_SKIP_WITHOUT_BACKEND(T); }
 };
-TYPED_TEST_SUITE(ModeBoundsHold, Backends, BackendNames);
+TYPED_TEST_SUITE(ModeBoundsHold, BackendTypes, BackendTypeNames);
 
 // Pairs of spheres whose centres are 1e-2 … 1e-9 apart (random directions), 5 apart from each other,
 // from `base` on: the separations just above and below fp32's resolution.
@@ -213,9 +202,12 @@ ModeBounds measured_errors(const Spheres& s, const Contacts<Real>& c, double coi
     const long double ea[3] = {pa.x - r.pa[0], pa.y - r.pa[1], pa.z - r.pa[2]};
     const long double eb[3] = {pb.x - r.pb[0], pb.y - r.pb[1], pb.z - r.pb[2]};
     const long double dn[3] = {n.x - r.n[0], n.y - r.n[1], n.z - r.n[2]};
-    auto norm = [](const long double* v) { return double(std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])); };
+    auto norm = [](const long double* v) {
+      return double(std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]));
+    };
     worst.position = std::max({worst.position, norm(ea), norm(eb)});
-    worst.angle_deg = std::max(worst.angle_deg, 2 * std::asin(std::min(1.0, norm(dn) / 2)) * 180 / std::numbers::pi);
+    worst.angle_deg =
+        std::max(worst.angle_deg, 2 * std::asin(std::min(1.0, norm(dn) / 2)) * 180 / std::numbers::pi);
   }
   EXPECT_GT(matched, ref.size() / 2) << s.name;
   return worst;
@@ -229,7 +221,8 @@ void expect_within_bounds(const Spheres& s, Precision mode, Backend backend) {
   Engine<Real> engine(o);
   const BodiesView bodies{s.p, s.r, {}, {}};
   const Contacts<Real> c = engine.detect(bodies);
-  const ModeBounds bound = mode_bounds(mode, precision_scene(compute_bounds(bodies), false, 0, CellChoice::tuned));
+  const ModeBounds bound =
+      mode_bounds(mode, precision_scene(compute_bounds(bodies), false, 0, CellChoice::tuned));
   const double eps = mode == Precision::fp32 ? std::numeric_limits<float>::epsilon()
                                              : std::numeric_limits<double>::epsilon();
   const ModeBounds got = measured_errors(s, c, eps);
