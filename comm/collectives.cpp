@@ -9,7 +9,7 @@ namespace {
 // Bounds of one rank as exchanged (count 0: the rank read no body and is skipped).
 struct BoundsRecord {
   Vec3<double> lo, hi;
-  double r_max;
+  double r_max, r_min;
   std::uint64_t count;
   double r_sum[3];  // radius moments (the tuned cell size)
 };
@@ -18,8 +18,8 @@ static_assert(std::is_trivially_copyable_v<BoundsRecord>);
 }  // namespace
 
 Bounds allgather_bounds(const Session& session, const Bounds& mine) {
-  const BoundsRecord record{
-      mine.lo, mine.hi, mine.r_max, mine.count, {mine.r_sum[0], mine.r_sum[1], mine.r_sum[2]}};
+  const BoundsRecord record{mine.lo,    mine.hi,    mine.r_max,
+                            mine.r_min, mine.count, {mine.r_sum[0], mine.r_sum[1], mine.r_sum[2]}};
   Bounds global;
   bool any = false;
   for (const BoundsRecord& r : detail::Comm(session).allgather(record)) {
@@ -28,6 +28,7 @@ Bounds allgather_bounds(const Session& session, const Bounds& mine) {
     b.lo = r.lo;
     b.hi = r.hi;
     b.r_max = r.r_max;
+    b.r_min = r.r_min;
     b.count = r.count;
     for (int k = 0; k < 3; ++k) b.r_sum[k] = r.r_sum[k];
     if (any) {

@@ -3,7 +3,8 @@
 #   the whole unit suite with CUDA present; CLI CPU vs CUDA byte-identical /contacts and np 2 = np 1
 #   (jobs/gpu_shapes_check.sh); validate on ellipsoid and mixed scenes (float Bullet, the judge);
 #   contactgrid_cuda_bench on spheres (fp32, mixed, fp64 at 2^20 and 2^24) and on ellipsoid and mixed
-#   scenes (2^16 … 2^22, 0.4 contacts per body); the precision study on both backends.
+#   scenes (2^16 … 2^22, 0.4 contacts per body); the precision study on both backends; --precision auto
+#   on cuda (default: mixed = fp64's bytes; --accuracy 1e-2,0.1: fp32).
 #   BIN=dir-with-binaries OUT=results-dir [PART=first|second] jobs/gpu_wave_check.sh
 # (first: tests, CLI, validate, cuda bench; second: the study and the bench against float Bullet)
 set -u
@@ -33,8 +34,13 @@ log "CLI: cpu vs cuda byte-identical /contacts (every mode), mpirun np 2 vs np 1
     mpirun --bind-to none -np 2 "$CG" detect "$W/$s.h5" -o "$W/$s.np2.h5" --backend cuda --fields full -q
     echo "compare $s np1/np2 cuda fp64: $("$CG" compare "$W/$s.cuda.fp64.h5" "$W/$s.np2.h5" 2>&1 | tail -1)"
   done
+  # --precision auto on cuda (the default): mixed, fp64's bytes; a lax --accuracy: fp32
+  "$CG" detect "$W/s.h5" -o "$W/s.cuda.auto.h5" --backend cuda --fields full | grep -o 'precision auto: [a-z0-9]*, the cheapest on [a-z]*'
+  echo "compare s auto/fp64 (cuda): $("$CG" compare "$W/s.cuda.auto.h5" "$W/s.cuda.fp64.h5" 2>&1 | tail -1)"
+  "$CG" detect "$W/s.h5" -o "$W/s.cuda.lax.h5" --backend cuda --fields full --accuracy 1e-2,0.1 | grep -o 'precision auto: [a-z0-9]*, the cheapest on [a-z]*'
+  echo "compare s auto-lax/fp32 (cuda): $("$CG" compare "$W/s.cuda.lax.h5" "$W/s.cuda.fp32.h5" 2>&1 | tail -1)"
 } >"$OUT/cli.log" 2>&1
-grep -E '^compare' "$OUT/cli.log"; grep -ciE 'error' "$OUT/cli.log"
+grep -E '^compare|^precision auto' "$OUT/cli.log"; grep -ciE 'error' "$OUT/cli.log"
 log "validate ellipsoids and mixed (CUDA contacts, float Bullet)"
 for k in ellipsoids mixed; do
   "$CG" generate "$W/v_$k.h5" -n 65536 --seed 3 --kind $k -q

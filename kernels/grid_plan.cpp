@@ -35,6 +35,7 @@ void Bounds::merge(const Bounds& o) {
   lo = {std::min(lo.x, o.lo.x), std::min(lo.y, o.lo.y), std::min(lo.z, o.lo.z)};
   hi = {std::max(hi.x, o.hi.x), std::max(hi.y, o.hi.y), std::max(hi.z, o.hi.z)};
   r_max = std::max(r_max, o.r_max);
+  r_min = std::min(r_min, o.r_min);
   count += o.count;
   for (int k = 0; k < 3; ++k) r_sum[k] += o.r_sum[k];
 }
@@ -53,6 +54,7 @@ Bounds compute_bounds(const BodiesView& bodies) {
   constexpr double inf = std::numeric_limits<double>::infinity();
   b.lo = {inf, inf, inf};
   b.hi = {-inf, -inf, -inf};
+  b.r_min = inf;
   auto id_of = [&](std::size_t i) { return bodies.id.empty() ? std::int64_t(i) : bodies.id[i]; };
   auto bad = [&](std::size_t i) {
     const Vec3<double> p = bodies.position[i];
@@ -71,7 +73,7 @@ Bounds compute_bounds(const BodiesView& bodies) {
     const std::size_t begin = n * std::size_t(t) / std::size_t(threads),
                       end = n * std::size_t(t + 1) / std::size_t(threads);
     Vec3<double> lo = b.lo, hi = b.hi;
-    double r_max = 0, s1 = 0, s2 = 0, s3 = 0;
+    double r_max = 0, r_min = std::numeric_limits<double>::infinity(), s1 = 0, s2 = 0, s3 = 0;
     for (std::size_t i = begin; i < end; ++i) {
       if (bad(i)) {
         first_bad[static_cast<std::size_t>(t)] = i;
@@ -82,6 +84,7 @@ Bounds compute_bounds(const BodiesView& bodies) {
       lo = {std::min(lo.x, p.x - r), std::min(lo.y, p.y - r), std::min(lo.z, p.z - r)};
       hi = {std::max(hi.x, p.x + r), std::max(hi.y, p.y + r), std::max(hi.z, p.z + r)};
       r_max = std::max(r_max, r);
+      r_min = std::min(r_min, r);
       s1 += r;
       s2 += r * r;
       s3 += r * r * r;
@@ -92,6 +95,7 @@ Bounds compute_bounds(const BodiesView& bodies) {
     part[static_cast<std::size_t>(t)].lo = lo;
     part[static_cast<std::size_t>(t)].hi = hi;
     part[static_cast<std::size_t>(t)].r_max = r_max;
+    part[static_cast<std::size_t>(t)].r_min = r_min;
   }
   const std::size_t i = *std::min_element(first_bad.begin(), first_bad.end());
   if (i < n) {
@@ -113,6 +117,7 @@ Bounds compute_bounds(const BodiesView& bodies) {
     b.lo = {std::min(b.lo.x, q.lo.x), std::min(b.lo.y, q.lo.y), std::min(b.lo.z, q.lo.z)};
     b.hi = {std::max(b.hi.x, q.hi.x), std::max(b.hi.y, q.hi.y), std::max(b.hi.z, q.hi.z)};
     b.r_max = std::max(b.r_max, q.r_max);
+    b.r_min = std::min(b.r_min, q.r_min);
     for (int k = 0; k < 3; ++k) b.r_sum[k] += q.r_sum[k];
   }
   return b;

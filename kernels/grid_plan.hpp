@@ -31,10 +31,11 @@ constexpr Precision precision_of() {
 // The real type of the broad phase's local coordinates is float (fp32, mixed).
 constexpr bool float_broad_phase(Precision p) { return p != Precision::fp64; }
 
-// Axis-aligned bounds of the bounding spheres' boxes, and the largest radius.
+// Axis-aligned bounds of the bounding spheres' boxes, and the largest and smallest radius.
 struct Bounds {
   Vec3<double> lo{0, 0, 0}, hi{0, 0, 0};
   double r_max = 0;
+  double r_min = 0;  // the smallest bounding radius (--precision auto: accuracy relative to it)
   std::size_t count = 0;
   double r_sum[3] = {0, 0, 0};  // Σ r, Σ r², Σ r³: the radius moments of the cell-size model
   void merge(const Bounds& o);

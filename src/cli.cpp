@@ -39,6 +39,31 @@ const std::map<std::string, ContactOutput> k_writes{{"gather", ContactOutput::ga
 
 }  // namespace
 
+std::optional<double> positive_number(const std::string& word) {
+  std::size_t used = 0;
+  double x = 0;
+  try {
+    x = std::stod(word, &used);
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+  if (used != word.size() || !(x > 0) || !std::isfinite(x)) return std::nullopt;
+  return x;
+}
+
+Accuracy parse_accuracy(const std::string& text) {
+  const std::size_t comma = text.find(',');
+  auto number = [&](const std::string& word, const char* what) {
+    const std::optional<double> v = positive_number(word);
+    if (!v) throw UsageError("--accuracy " + text + ": " + what + " '" + word + "' is not a number > 0");
+    return *v;
+  };
+  Accuracy a;
+  a.position = number(text.substr(0, comma), "the position error (relative to the smallest radius)");
+  if (comma != std::string::npos) a.angle_deg = number(text.substr(comma + 1), "the normal angle (degrees)");
+  return a;
+}
+
 int run_cli(int argc, char** argv, Session& session) {
   CLI::App app{
       "contactgrid: every touching or overlapping pair of spheres, with Bullet's contact data.\n"
@@ -95,12 +120,34 @@ int run_cli(int argc, char** argv, Session& session) {
   d->add_option("--backend", det.backend, "cpu | cuda | auto (cuda when a GPU is present)")
       ->transform(CLI::CheckedTransformer(k_backends))
       ->default_str("auto");
-  d->add_option("--precision", det.precision,
-                "fp32 | fp64 | mixed: fp32 and fp64 run every stage and write their real type; mixed "
-                "runs the broad phase in fp32 and the narrow phase in fp64 from the world coordinates "
-                "(float64 output, fp64's contacts); README 'Choosing a precision'")
-      ->transform(CLI::CheckedTransformer(k_precisions))
-      ->default_str("fp64");
+  d->add_option_function<std::string>(
+       "--precision",
+       [&det](const std::string& v) {
+         if (v == "auto") {
+           det.precision.reset();
+           return;
+         }
+         const auto it = k_precisions.find(v);
+         if (it == k_precisions.end())
+           throw CLI::ValidationError("--precision", "'" + v + "' is not auto, fp32, fp64 or mixed");
+         det.precision = it->second;
+       },
+       "auto | fp32 | fp64 | mixed: auto (default) picks the cheapest mode whose documented bounds meet "
+       "--accuracy for this scene (default accuracy: fp64's, so fp64's answers); fp32 and fp64 run every "
+       "stage and write their real type; mixed runs the broad phase in fp32 and the narrow phase in fp64 "
+       "from the world coordinates (float64 output, fp64's contacts); README 'Choosing a precision'")
+      ->default_str("auto");
+  d->add_option_function<std::string>(
+      "--accuracy",
+      [&det](const std::string& v) {
+        try {
+          det.accuracy = parse_accuracy(v);
+        } catch (const UsageError& e) {
+          throw CLI::ValidationError("--accuracy", e.what());
+        }
+      },
+      "POS[,ANGLE] for --precision auto: the position error accepted, relative to the smallest radius, "
+      "and the normal angle in degrees (default: what fp64 gives)");
   d->add_option("--fields", det.fields, "basic | full (adds local points and friction directions)")
       ->transform(CLI::CheckedTransformer(k_fields))
       ->default_str("basic");
@@ -112,16 +159,9 @@ int run_cli(int argc, char** argv, Session& session) {
            det.cell_choice = v == "auto" ? CellChoice::tuned : CellChoice::smallest;
            return;
          }
-         std::size_t used = 0;
-         double x = 0;
-         try {
-           x = std::stod(v, &used);
-         } catch (const std::exception&) {
-           used = 0;
-         }
-         if (used != v.size() || !(x > 0) || !std::isfinite(x))
-           throw CLI::ValidationError("--cell-size", "'" + v + "' is not auto, min or a length > 0");
-         det.cell_size = x;
+         const std::optional<double> x = positive_number(v);
+         if (!x) throw CLI::ValidationError("--cell-size", "'" + v + "' is not auto, min or a length > 0");
+         det.cell_size = *x;
        },
        "Grid cell edge: auto (the edge a cost model of the sort and pair stages picks, 1-3x the "
        "smallest), min (the largest diameter + rounding margin, Le Grand's choice) or a length")

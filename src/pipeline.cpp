@@ -23,9 +23,12 @@
 #include "hdf5_io.hpp"
 #include "io/contacts_csv.hpp"
 #include "node_threads.hpp"
+#include "precision_choice.hpp"
 #include "routing.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
+#include "stage_clock.hpp"
+#include "summary.hpp"
 
 namespace cg {
 
@@ -66,11 +69,6 @@ void check_options(const DistributedOptions& options) {
 }
 
 namespace {
-
-using clock_type = std::chrono::steady_clock;
-double seconds_since(clock_type::time_point t) {
-  return std::chrono::duration<double>(clock_type::now() - t).count();
-}
 
 // ---- the stages of a distributed run ---------------------------------------------------------------
 
@@ -135,8 +133,35 @@ Partition read_partition(const Session& session, const std::string& path, bool a
   return in;
 }
 
-// The frame every rank shares: global bounds (all-gathered), make_frame, the slab axis and the ghost
-// width (2·r_max + the rounding margin of Real).
+// The read stage: the options checked before any communication, this rank's partition read, the global
+// bounds all-gathered (every rank the same: what --precision auto chooses from), and its time.
+struct ReadScene {
+  Partition part;
+  Bounds global;
+  bool all_rows = false;
+  double seconds = 0;
+};
+
+ReadScene read_scene(const Session& session, const std::string& path, const DistributedOptions& options) {
+  agreed_stage(session, "options", [&] {
+    check_options(options);
+    if (path.empty()) throw UsageError("no scene file given");
+  });
+  const auto t0 = clock_type::now();
+  const int ranks = session.size();
+  ReadScene in;
+  // All rows when the ranks share one node (one page cache). One rank's own rows are all rows: the
+  // two modes coincide, and all rows takes the rows as read (no records routed to itself).
+  in.all_rows = ranks == 1 || options.read == SceneRead::all_rows ||
+                (options.read == SceneRead::automatic && session.local_size() == ranks);
+  in.part = read_partition(session, path, in.all_rows, options.resident_steps);
+  in.global = allgather_bounds(session, in.part.bounds);
+  in.seconds = seconds_since(t0);
+  return in;
+}
+
+// The frame every rank shares: make_frame of the global bounds, the slab axis and the ghost width
+// (2·r_max + the rounding margin of Real).
 struct SharedFrame {
   Bounds global;
   Frame frame;
@@ -145,11 +170,11 @@ struct SharedFrame {
 };
 
 template <class Real>
-SharedFrame agree_frame(const Session& session, const std::string& path, const Bounds& mine,
+SharedFrame agree_frame(const Session& session, const std::string& path, const Bounds& global,
                         const DistributedOptions& options) {
   const Precision precision = options.engine.fp32_broad_phase ? Precision::mixed : precision_of<Real>();
   SharedFrame f;
-  f.global = allgather_bounds(session, mine);
+  f.global = global;
   agreed_stage(session, "frame", [&] {
     try {
       f.frame = make_frame(f.global, options.engine.cell_size, precision, options.engine.cell_choice);
@@ -302,57 +327,19 @@ CollectedContacts<Real> collect_contacts(const Session& session, Contacts<Real>&
                                                  : exchange_contacts(session, std::move(local), bodies, o);
 }
 
-// Everything checked before the first communication; the engine built with the rank's threads.
+// The engine of the run's mode, built with the rank's threads (after the read: --precision auto
+// chooses the mode from the agreed bounds).
 template <class Real>
-std::optional<Engine<Real>> make_engine(const Session& session, const std::string& path,
-                                        const DistributedOptions& options, int threads) {
+std::optional<Engine<Real>> make_engine(const Session& session, const DistributedOptions& options,
+                                        int threads) {
   std::optional<Engine<Real>> engine;
-  agreed_stage(session, "options", [&] {
-    check_options(options);
-    if (path.empty()) throw UsageError("no scene file given");
+  agreed_stage(session, "engine", [&] {
     EngineOptions engine_options = options.engine;
     engine_options.threads = threads;
     engine.emplace(engine_options);
   });
   return engine;
 }
-
-// This rank's stage times by Stage (and the engine's stages inside detect); times() gives the
-// maximum over ranks of each, in pipeline order.
-class StageClock {
- public:
-  void start() { m_t0 = clock_type::now(); }
-  void stop(Stage stage) { m_top[static_cast<std::size_t>(stage)] += seconds_since(m_t0); }
-  void add(Stage stage, double seconds) { m_top[static_cast<std::size_t>(stage)] += seconds; }
-  void add_engine(const StageTimes& engine_times) {
-    const std::vector<std::string>& names = engine_stage_names();
-    for (const StageTime& t : engine_times)
-      for (std::size_t k = 0; k < names.size(); ++k)
-        if (t.name == names[k]) m_engine[k] = t.seconds;
-  }
-  // Collective. read, redistribute, halo, detect (then the engine's stages that took time), the
-  // contacts' transfer (gather or exchange), merge.
-  RunTimes times(const Session& session, Stage transfer) const {
-    std::vector<double> all(m_top.begin(), m_top.end());
-    all.insert(all.end(), m_engine.begin(), m_engine.end());
-    max_over_ranks(session, all);
-    RunTimes out;
-    for (Stage stage :
-         {Stage::read, Stage::redistribute, Stage::halo, Stage::detect, transfer, Stage::merge}) {
-      out.push_back({stage, -1, all[static_cast<std::size_t>(stage)]});
-      if (stage != Stage::detect) continue;
-      for (std::size_t k = 0; k < m_engine.size(); ++k)
-        if (all[k_stages + k] > 0) out.push_back({Stage::detect, static_cast<int>(k), all[k_stages + k]});
-    }
-    return out;
-  }
-
- private:
-  static constexpr std::size_t k_stages = static_cast<std::size_t>(Stage::csv) + 1;
-  clock_type::time_point m_t0 = clock_type::now();
-  std::vector<double> m_top = std::vector<double>(k_stages, 0.0);
-  std::vector<double> m_engine = std::vector<double>(engine_stage_names().size(), 0.0);
-};
 
 // The run's statistics after detection: the engine's counts summed over ranks, the balance of the
 // slabs (owned bodies per rank) and the ghosts held. Collective.
@@ -397,25 +384,24 @@ StepStats run_resident_steps(Session& session, Engine<Real>& engine, const Share
                         session.sum(hash), threads);
 }
 
-// The stages read … collect, with their times (max over ranks) and the run's statistics.
+// The stages frame … collect after the read stage (read_scene), with their times (max over ranks)
+// and the run's statistics. Called inside the rank's DefaultTeam of `threads`.
 template <class Real>
-DistributedResult<Real> run(Session& session, const std::string& path, const DistributedOptions& options) {
-  const int ranks = session.size(), threads = host_threads(options.engine.threads, session);
-  const DefaultTeam team(threads);
-  std::optional<Engine<Real>> engine = make_engine<Real>(session, path, options, threads);
-  // All rows when the ranks share one node (one page cache). One rank's own rows are all rows: the
-  // two modes coincide, and all rows takes the rows as read (no records routed to itself).
-  const bool all_rows = ranks == 1 || options.read == SceneRead::all_rows ||
-                        (options.read == SceneRead::automatic && session.local_size() == ranks);
+DistributedResult<Real> run(Session& session, const std::string& path, const DistributedOptions& options,
+                            ReadScene&& in, int threads) {
+  const bool all_rows = in.all_rows;
+  Partition& part = in.part;
   DistributedResult<Real> result;
-  result.ranks = ranks;
+  result.ranks = session.size();
   result.threads = threads;
   result.read = all_rows ? SceneRead::all_rows : SceneRead::own_rows;
   StageClock clock;
+  clock.add(Stage::read, in.seconds);
 
-  Partition part = read_partition(session, path, all_rows, options.resident_steps);
-  const SharedFrame f = agree_frame<Real>(session, path, part.bounds, options);
+  clock.start();
+  const SharedFrame f = agree_frame<Real>(session, path, in.global, options);
   clock.stop(Stage::read);
+  std::optional<Engine<Real>> engine = make_engine<Real>(session, options, threads);
   result.bodies = part.bodies;
   result.ellipsoids = part.ellipsoids;
   result.frame = f.frame;
@@ -453,50 +439,6 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   return result;
 }
 
-template <class Real>
-void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t contacts,
-                   const DistributedResult<Real>& r) {
-  fmt::print("contactgrid detect: {} bodies, {} contacts ({:.3f} per body), {} rank(s), backend {}, {}\n",
-             info.bodies, contacts, info.bodies ? double(contacts) / double(info.bodies) : 0.0, info.ranks,
-             info.backend, info.precision);
-  fmt::print("  cell size {:.6g}", info.cell_size);
-  if (r.ranks > 1)
-    fmt::print(", read {}, slab axis {}, owned bodies per rank {} … {}, ghosts {}, duplicates removed {}",
-               r.read == SceneRead::all_rows ? "all rows per rank" : "own rows", "xyz"[r.axis], r.owned_min,
-               r.owned_max, r.ghosts, r.duplicates_removed);
-  if (r.ellipsoids > 0)
-    fmt::print("\n  {} ellipsoids, {} narrow fallbacks, {} narrow solves unconverged (summed over ranks)",
-               r.ellipsoids, r.stats.narrow_fallbacks, r.stats.narrow_unconverged);
-  if (r.stats.fp64_rows > 0)
-    fmt::print("\n  {} fp32 rows recomputed in fp64 (centres closer than fp32 resolves a normal; summed over "
-               "ranks)",
-               r.stats.fp64_rows);
-  fmt::print("\n  {}-bit cell keys, {} (cell, body) entries, {} pair tests; times: maximum over ranks\n",
-             r.stats.key_bits, r.stats.entries, r.stats.pair_tests);
-  double total = 0;
-  fmt::print("  {:<16} {:>12}\n", "stage", "seconds");
-  for (const RunTime& t : times) {
-    const bool sub = t.engine_stage >= 0;  // the engine's stages, inside "detect"
-    if (!sub) total += t.seconds;
-    fmt::print("  {:<16} {:>12.6f}\n",
-               sub ? "  " + engine_stage_names()[static_cast<std::size_t>(t.engine_stage)]
-                   : std::string(stage_name(t.stage)),
-               t.seconds);
-  }
-  fmt::print("  {:<16} {:>12.6f}\n", "total", total);
-  if (r.steps.steps > 0) {
-    const StepStats& s = r.steps;
-    fmt::print(
-        "resident steps: {} (bodies kept in each rank's engine), {} contacts per step (= the file's), {} "
-        "ghost "
-        "rows refreshed per step; setup {:.6f} s; per step, median of the maxima over ranks:\n",
-        s.steps, s.contacts, s.halo_rows, s.setup);
-    fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "halo", s.halo, "interior", s.interior);
-    for (const StageTime& t : s.stages) fmt::print("    {:<14} {:>12.6f}\n", t.name, t.seconds);
-    fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "boundary", s.boundary, "step", s.step);
-  }
-}
-
 DistributedOptions run_options(const DetectCommand& cmd, const Session& session) {
   DistributedOptions o;
   o.engine.backend = cmd.backend;
@@ -504,7 +446,6 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.engine.cell_size = cmd.cell_size;
   o.engine.cell_choice = cmd.cell_choice;
   o.engine.threads = cmd.threads;
-  o.engine.fp32_broad_phase = cmd.precision == Precision::mixed;
   if (cmd.backend != Backend::cpu) o.engine.device = session.device_for(cuda_device_count());
   o.axis = cmd.axis;
   o.balance = cmd.balance;
@@ -524,7 +465,6 @@ template <class Real>
 RunTime write_output(Session& session, const DetectCommand& cmd, const DistributedResult<Real>& r,
                      RunInfo& info) {
   info.bodies = r.bodies;
-  info.precision = to_string(cmd.precision);
   info.backend = to_string(r.backend);
   info.ranks = r.ranks;
   info.cell_size = r.cell_size;
@@ -556,13 +496,49 @@ RunTime write_csv(const Session& session, const std::string& path, const Contact
   return {Stage::csv, -1, seconds};
 }
 
-// read → frame → slabs → distribute → exchange ghosts → detect → collect contacts (distributed_detect)
-// → write → summary
+// A failing MPI call (CommFailure) leaves other ranks possibly waiting in a collective this rank will
+// never join: it ends the job (Session::abort, exit code 5).
+template <class F>
+auto or_abort(Session& session, F&& f) -> decltype(f()) {
+  try {
+    return f();
+  } catch (const CommFailure& e) {
+    session.abort(e.exit_code(), e.what());
+  }
+}
+
+// The mode of the run: --precision as given, or (auto) choose_precision on the agreed global bounds
+// and the backend every rank runs (cuda only where every rank's engine would), so every rank picks
+// the same mode.
+PrecisionChoice choose_mode(const Session& session, const DetectCommand& cmd, const ReadScene& in) {
+  if (cmd.precision) return {*cmd.precision, {}};
+  const Backend mine =
+      cmd.backend == Backend::automatic ? (cuda_available() ? Backend::cuda : Backend::cpu) : cmd.backend;
+  const Backend backend = session.max(mine == Backend::cuda ? 0.0 : 1.0) > 0 ? Backend::cpu : Backend::cuda;
+  PrecisionChoice pick;
+  agreed_stage(session, "frame", [&] {
+    try {
+      const bool ellipsoids = in.part.has_shapes;
+      pick = choose_precision(precision_scene(in.global, ellipsoids, cmd.cell_size, cmd.cell_choice), backend,
+                              cmd.accuracy);
+    } catch (const InputError& e) {  // no mode meets the accuracy here: name the scene
+      throw InputError(cmd.input + ": " + e.what());
+    }
+  });
+  return pick;
+}
+
+// frame → slabs → distribute → exchange ghosts → detect → collect contacts (run) → write → summary, in
+// the chosen mode.
 template <class Real>
-int detect(const DetectCommand& cmd, Session& session) {
-  DistributedResult<Real> r = distributed_detect<Real>(session, cmd.input, run_options(cmd, session));
+int detect(const DetectCommand& cmd, Session& session, const DistributedOptions& options, ReadScene&& in,
+           const PrecisionChoice& choice, int threads) {
+  DistributedResult<Real> r =
+      or_abort(session, [&] { return run<Real>(session, cmd.input, options, std::move(in), threads); });
   RunTimes times = r.times;
   RunInfo info;
+  info.precision = to_string(choice.mode);
+  info.precision_choice = choice.reason;
   times.push_back(write_output(session, cmd, r, info));
   if (!cmd.csv.empty()) times.push_back(write_csv(session, cmd.csv, r.contacts));
   if (!cmd.quiet && session.rank() == 0) print_summary(info, times, r.total_contacts, r);
@@ -574,12 +550,11 @@ int detect(const DetectCommand& cmd, Session& session) {
 template <class Real>
 DistributedResult<Real> distributed_detect(Session& session, const std::string& scene_path,
                                            const DistributedOptions& options) {
-  try {
-    return run<Real>(session, scene_path, options);
-  } catch (const CommFailure& e) {
-    // Other ranks may be waiting in a collective this rank will never join.
-    session.abort(e.exit_code(), e.what());
-  }
+  return or_abort(session, [&] {
+    const int threads = host_threads(options.engine.threads, session);
+    const DefaultTeam team(threads);
+    return run<Real>(session, scene_path, options, read_scene(session, scene_path, options), threads);
+  });
 }
 
 template DistributedResult<float> distributed_detect<float>(Session&, const std::string&,
@@ -587,9 +562,21 @@ template DistributedResult<float> distributed_detect<float>(Session&, const std:
 template DistributedResult<double> distributed_detect<double>(Session&, const std::string&,
                                                               const DistributedOptions&);
 
+// read → (--precision auto: choose the mode) → the run in that mode → write → summary
 int run_detect(const DetectCommand& cmd, Session& session) {
   if (cmd.output.empty()) throw UsageError("detect: -o/--output is required");
-  return cmd.precision == Precision::fp32 ? detect<float>(cmd, session) : detect<double>(cmd, session);
+  if (cmd.precision && cmd.accuracy.position)
+    throw UsageError(std::string("--accuracy: only with --precision auto (the default), not --precision ") +
+                     to_string(*cmd.precision));
+  DistributedOptions options = run_options(cmd, session);
+  const int threads = host_threads(options.engine.threads, session);
+  const DefaultTeam team(threads);
+  ReadScene in = or_abort(session, [&] { return read_scene(session, cmd.input, options); });
+  const PrecisionChoice choice = or_abort(session, [&] { return choose_mode(session, cmd, in); });
+  options.engine.fp32_broad_phase = choice.mode == Precision::mixed;
+  return choice.mode == Precision::fp32
+             ? detect<float>(cmd, session, options, std::move(in), choice, threads)
+             : detect<double>(cmd, session, options, std::move(in), choice, threads);
 }
 
 }  // namespace cg

@@ -44,11 +44,13 @@
 // ranks possibly waiting, so it ends the job with Session::abort (exit code 5).
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "engine.hpp"
 #include "generate.hpp"
+#include "precision_choice.hpp"
 #include "resident_steps.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
@@ -155,7 +157,8 @@ struct DetectCommand {
   std::string output;
   std::string csv;  // optional text copy
   Backend backend = Backend::automatic;
-  Precision precision = Precision::fp64;
+  std::optional<Precision> precision;  // --precision; empty: auto (the default), chosen by accuracy
+  Accuracy accuracy;                   // --accuracy (auto only; unset: fp64's, README "Choosing a precision")
   Fields fields = Fields::basic;
   double cell_size = 0;                        // 0: chosen by cell_choice
   CellChoice cell_choice = CellChoice::tuned;  // --cell-size auto | min

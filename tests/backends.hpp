@@ -22,6 +22,19 @@ struct ConfigNames {
   }
 };
 
+// One test body per backend, the precision modes chosen inside the body.
+template <Backend B>
+struct OnBackend {
+  static constexpr Backend backend = B;
+};
+using BackendTypes = ::testing::Types<OnBackend<Backend::cpu>, OnBackend<Backend::cuda>>;
+struct BackendTypeNames {
+  template <class T>
+  static std::string GetName(int) {
+    return to_string(T::backend);
+  }
+};
+
 #define CG_SKIP_WITHOUT_BACKEND(cfg)                                       \
   do {                                                                     \
     if ((cfg::backend) == ::cg::Backend::cuda && !::cg::cuda_available())  \

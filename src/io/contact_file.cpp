@@ -248,6 +248,7 @@ void commit_contact_file(const ContactFileLayout& layout, const RunInfo& info) {
                           fmt::format("cannot reopen {}", layout.temp));
     Attributes attributes;
     attributes["precision"] = precision;
+    if (!info.precision_choice.empty()) attributes["precision_choice"] = info.precision_choice;
     attributes["backend"] = info.backend;
     attributes["ranks"] = std::int64_t{info.ranks};
     attributes["bodies"] = static_cast<std::int64_t>(info.bodies);

@@ -19,6 +19,7 @@ namespace cg {
 struct RunInfo {
   std::uint64_t bodies = 0;
   std::string precision;  // "fp32" | "fp64" | "mixed" (float64 datasets); empty: the contacts' type
+  std::string precision_choice;  // --precision auto: why that mode (root attribute only when set)
   std::string backend;    // "cpu" | "cuda"
   int ranks = 1;
   double cell_size = 0;

@@ -3,7 +3,8 @@
 # for P = 2, 3, 4 (and 8 oversubscribed), on a uniform and a polydisperse scene, fp64 and fp32, with
 # the defaults (every rank reads every row, all ranks being on one node; rank 0 gathers and writes)
 # and, at P = 3, each rank reading its own rows and each rank writing its id_a range; then an
-# ellipsoid and a mixed scene (P = 2, 3, 4, own rows, id_a ranges) and the --steps refusal of shapes.
+# ellipsoid and a mixed scene (P = 2, 3, 4, own rows, id_a ranges) and the --steps refusal of shapes;
+# --precision auto picks the same mode on 1 and 3 ranks.
 # Usage: mpi_identical.sh CONTACTGRID MPIEXEC WORKDIR
 set -euo pipefail
 CG=$1; MPIEXEC=$2; W=$3
@@ -30,6 +31,22 @@ identical_across_ranks() {
 for scene in u p; do
   for prec in fp64 fp32; do identical_across_ranks $scene $prec 2 3 4 8; done
 done
+# --precision auto chooses from the all-gathered bounds: one rank and three (reading their own rows)
+# pick the same mode (the summary's line) and write the same bytes. SCENE EXPECTED [--accuracy …]
+same_auto_pick() {
+  local scene=$1 want=$2; shift 2
+  "$CG" detect "$W/$scene.h5" -o "$W/$scene.auto.1.h5" --backend cpu "$@" >"$W/auto.1.txt"
+  "$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/$scene.h5" -o "$W/$scene.auto.3.h5" \
+    --backend cpu --threads 1 --read own "$@" >"$W/auto.3.txt"
+  local one three
+  one=$(grep -o 'precision auto: [a-z0-9]*' "$W/auto.1.txt"); three=$(grep -o 'precision auto: [a-z0-9]*' "$W/auto.3.txt")
+  [ "$one" = "precision auto: $want" ] && [ "$three" = "$one" ] ||
+    { echo "auto on $scene $*: np 1 '$one', np 3 '$three', expected $want"; exit 1; }
+  "$CG" compare "$W/$scene.auto.1.h5" "$W/$scene.auto.3.h5"
+}
+same_auto_pick u mixed
+same_auto_pick u fp32 --accuracy 1e-2,0.1
+same_auto_pick p mixed --accuracy 1e-2,0.1  # r_min 0.01: fp32's r_max·θ32 is 0.042·r_min
 # ellipsoid and mixed scenes: the shape rows move with their bodies (distribute, halo)
 "$CG" generate "$W/e.h5" -n 3000 --seed 7 --kind ellipsoids --rlow 0.3 --rhigh 1 -q
 "$CG" generate "$W/m.h5" -n 4000 --seed 8 --kind mixed --ellipsoid-fraction 0.4 --rlow 0.3 --rhigh 1 \

@@ -61,7 +61,7 @@ TEST_F(Cli, GenerateDetectRoundTrip) {
   EXPECT_NE(d.output.find("sort"), std::string::npos) << "per-stage times in the summary: " << d.output;
   ContactFile c = read_contacts(path("c.h5"));
   EXPECT_GT(c.contacts.size(), 3000u / 5);
-  EXPECT_EQ(c.precision, "fp64");
+  EXPECT_EQ(c.precision, "mixed");  // --precision auto, the default: fp64's answers, the cheapest on cpu
   std::ifstream csv(path("c.csv"));
   std::size_t lines = 0;
   for (std::string l; std::getline(csv, l);) ++lines;
@@ -92,7 +92,8 @@ TEST_F(Cli, MixedPrecisionAndFp32FarOffsetRefusal) {
   Result m = run("detect " + path("far.h5") + " -o " + path("m.h5") + " --backend cpu --precision mixed");
   ASSERT_EQ(m.code, 0) << m.output;
   EXPECT_NE(m.output.find("mixed"), std::string::npos) << m.output;
-  ASSERT_EQ(run("detect " + path("far.h5") + " -o " + path("d.h5") + " --backend cpu -q").code, 0);
+  ASSERT_EQ(
+      run("detect " + path("far.h5") + " -o " + path("d.h5") + " --backend cpu --precision fp64 -q").code, 0);
   const ContactFile mixed = read_contacts(path("m.h5")), fp64 = read_contacts(path("d.h5"));
   EXPECT_EQ(mixed.precision, "mixed");
   EXPECT_GT(mixed.contacts.size(), 0u);
@@ -242,6 +243,49 @@ TEST_F(Cli, BenchEllipsoidAndMixedScenes) {
   EXPECT_EQ(run("bench --kind cubes --no-plot --csv " + path("x.csv")).code, 2);
   EXPECT_EQ(run("bench --kind ellipsoids --max-aspect 0.5 --no-plot --csv " + path("x.csv")).code, 2);
   EXPECT_FALSE(fs::exists(path("x.csv")));
+// --precision auto (the default): the cheapest mode whose documented bounds meet --accuracy for the
+// scene, said in the summary (not with -q) and in the root attribute precision_choice; with no
+// --accuracy, fp64's contacts byte for byte; an accuracy no mode meets exits 3 naming the scene.
+TEST_F(Cli, PrecisionAutoPicksTheCheapestModeThatMeetsTheAccuracy) {
+  ASSERT_EQ(run("generate " + path("s.h5") + " --count 3000 --seed 9 -q").code, 0);
+  ASSERT_EQ(run("generate " + path("far.h5") + " --count 3000 --seed 9 --offset 1e6 1e6 1e6 -q").code, 0);
+  auto detect = [&](const std::string& scene, const std::string& out, const std::string& extra) {
+    return run("detect " + path(scene) + " -o " + path(out) + " --backend cpu " + extra);
+  };
+  // near the origin a lax accuracy takes fp32, and the file says why
+  Result lax = detect("s.h5", "lax.h5", "--precision auto --accuracy 1e-2,0.1");
+  ASSERT_EQ(lax.code, 0) << lax.output;
+  EXPECT_NE(lax.output.find("precision auto: fp32, the cheapest on cpu that meets --accuracy 0.01,0.1°"),
+            std::string::npos)
+      << lax.output;
+  const ContactFile f32 = read_contacts(path("lax.h5"));
+  EXPECT_EQ(f32.precision, "fp32");
+  EXPECT_EQ(std::get<std::string>(f32.attributes.at("precision_choice")).rfind("precision auto: fp32", 0),
+            0u);
+  Result quiet = detect("s.h5", "quiet.h5", "--accuracy 1e-2,0.1 -q");
+  ASSERT_EQ(quiet.code, 0) << quiet.output;
+  EXPECT_EQ(quiet.output.find("precision auto"), std::string::npos) << "-q silences it: " << quiet.output;
+  // at 1e6 float32 positions are 0.11·r_min off: 1e-3 passes fp32 over, for mixed
+  Result far = detect("far.h5", "far_auto.h5", "--accuracy 1e-3");
+  ASSERT_EQ(far.code, 0) << far.output;
+  EXPECT_NE(far.output.find("precision auto: mixed"), std::string::npos) << far.output;
+  EXPECT_NE(far.output.find("fp32 gives position 0.109·r_min"), std::string::npos) << far.output;
+  // no --accuracy: fp64's answers (mixed's are fp64's bit for bit); an explicit mode records no choice
+  Result def = detect("far.h5", "def.h5", "");
+  ASSERT_EQ(def.code, 0) << def.output;
+  EXPECT_NE(def.output.find("precision auto: mixed, the cheapest on cpu that meets the default accuracy"),
+            std::string::npos)
+      << def.output;
+  ASSERT_EQ(detect("far.h5", "fp64.h5", "--precision fp64 -q").code, 0);
+  EXPECT_EQ(run("compare " + path("def.h5") + " " + path("fp64.h5")).code, 0);
+  EXPECT_EQ(read_contacts(path("fp64.h5")).attributes.count("precision_choice"), 0u);
+  // what no mode meets: exit 3, the scene named, what the best mode gives; and usage errors
+  expect_detect_fails(path("far.h5"), 3, {"far.h5", "no precision mode meets --accuracy 1e-14", "fp64 gives"},
+                      "--backend cpu --accuracy 1e-14");
+  expect_detect_fails(path("s.h5"), 2, {"--accuracy", "only with --precision auto"},
+                      "--precision fp32 --accuracy 1e-2");
+  expect_detect_fails(path("s.h5"), 2, {"--accuracy", "'x' is not a number > 0"}, "--accuracy 1e-2,x");
+  expect_detect_fails(path("s.h5"), 2, {"--precision"}, "--precision automatic");
 }
 
 TEST_F(Cli, UsageErrorsExitTwo) {

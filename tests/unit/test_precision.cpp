@@ -11,6 +11,7 @@
 #include <limits>
 #include <random>
 
+#include "backends.hpp"
 #include "engine.hpp"
 #include "reference/sphere_reference.hpp"
 #include "scenes.hpp"
@@ -22,25 +23,10 @@ namespace {
 using exact::RefContact;
 using exact::reference_contacts;
 
-template <Backend B>
-struct OnBackend {
-  static constexpr Backend backend = B;
-};
-using Backends = ::testing::Types<OnBackend<Backend::cpu>, OnBackend<Backend::cuda>>;
-struct BackendNames {
-  template <class T>
-  static std::string GetName(int) {
-    return to_string(T::backend);
-  }
-};
-
 template <class T>
 class PrecisionTest : public ::testing::Test {
  protected:
-  void SetUp() override {
-    if (T::backend == Backend::cuda && !cuda_available())
-      GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
-  }
+  void SetUp() override { CG_SKIP_WITHOUT_BACKEND(T); }
   // One detection in mode `mode` (Real: float for fp32, double for fp64 and mixed), every field.
   template <class Real>
   Contacts<Real> run(const Spheres& s, Precision mode, Backend backend = T::backend, int threads = 0) {
@@ -57,7 +43,7 @@ class PrecisionTest : public ::testing::Test {
   }
   EngineStats m_stats;
 };
-TYPED_TEST_SUITE(PrecisionTest, Backends, BackendNames);
+TYPED_TEST_SUITE(PrecisionTest, BackendTypes, BackendTypeNames);
 
 constexpr double kDeg = 3.14159265358979323846 / 180;
 

@@ -1,0 +1,59 @@
+// The summary stage of `contactgrid detect` (summary.hpp).
+#include "summary.hpp"
+
+#include <fmt/format.h>
+
+namespace cg {
+
+template <class Real>
+void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t contacts,
+                   const DistributedResult<Real>& r) {
+  fmt::print("contactgrid detect: {} bodies, {} contacts ({:.3f} per body), {} rank(s), backend {}, {}\n",
+             info.bodies, contacts, info.bodies ? double(contacts) / double(info.bodies) : 0.0, info.ranks,
+             info.backend, info.precision);
+  if (!info.precision_choice.empty()) fmt::print("  {}\n", info.precision_choice);
+  fmt::print("  cell size {:.6g}", info.cell_size);
+  if (r.ranks > 1)
+    fmt::print(", read {}, slab axis {}, owned bodies per rank {} … {}, ghosts {}, duplicates removed {}",
+               r.read == SceneRead::all_rows ? "all rows per rank" : "own rows", "xyz"[r.axis], r.owned_min,
+               r.owned_max, r.ghosts, r.duplicates_removed);
+  if (r.ellipsoids > 0)
+    fmt::print("\n  {} ellipsoids, {} narrow fallbacks, {} narrow solves unconverged (summed over ranks)",
+               r.ellipsoids, r.stats.narrow_fallbacks, r.stats.narrow_unconverged);
+  if (r.stats.fp64_rows > 0)
+    fmt::print(
+        "\n  {} fp32 rows recomputed in fp64 (centres closer than fp32 resolves a normal; summed over "
+        "ranks)",
+        r.stats.fp64_rows);
+  fmt::print("\n  {}-bit cell keys, {} (cell, body) entries, {} pair tests; times: maximum over ranks\n",
+             r.stats.key_bits, r.stats.entries, r.stats.pair_tests);
+  double total = 0;
+  fmt::print("  {:<16} {:>12}\n", "stage", "seconds");
+  for (const RunTime& t : times) {
+    const bool sub = t.engine_stage >= 0;  // the engine's stages, inside "detect"
+    if (!sub) total += t.seconds;
+    fmt::print("  {:<16} {:>12.6f}\n",
+               sub ? "  " + engine_stage_names()[static_cast<std::size_t>(t.engine_stage)]
+                   : std::string(stage_name(t.stage)),
+               t.seconds);
+  }
+  fmt::print("  {:<16} {:>12.6f}\n", "total", total);
+  if (r.steps.steps > 0) {
+    const StepStats& s = r.steps;
+    fmt::print(
+        "resident steps: {} (bodies kept in each rank's engine), {} contacts per step (= the file's), {} "
+        "ghost "
+        "rows refreshed per step; setup {:.6f} s; per step, median of the maxima over ranks:\n",
+        s.steps, s.contacts, s.halo_rows, s.setup);
+    fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "halo", s.halo, "interior", s.interior);
+    for (const StageTime& t : s.stages) fmt::print("    {:<14} {:>12.6f}\n", t.name, t.seconds);
+    fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "boundary", s.boundary, "step", s.step);
+  }
+}
+
+template void print_summary<float>(const RunInfo&, const RunTimes&, std::uint64_t,
+                                   const DistributedResult<float>&);
+template void print_summary<double>(const RunInfo&, const RunTimes&, std::uint64_t,
+                                    const DistributedResult<double>&);
+
+}  // namespace cg
