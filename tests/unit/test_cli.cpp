@@ -243,6 +243,8 @@ TEST_F(Cli, BenchEllipsoidAndMixedScenes) {
   EXPECT_EQ(run("bench --kind cubes --no-plot --csv " + path("x.csv")).code, 2);
   EXPECT_EQ(run("bench --kind ellipsoids --max-aspect 0.5 --no-plot --csv " + path("x.csv")).code, 2);
   EXPECT_FALSE(fs::exists(path("x.csv")));
+}
+
 // --precision auto (the default): the cheapest mode whose documented bounds meet --accuracy for the
 // scene, said in the summary (not with -q) and in the root attribute precision_choice; with no
 // --accuracy, fp64's contacts byte for byte; an accuracy no mode meets exits 3 naming the scene.
