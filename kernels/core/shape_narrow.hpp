@@ -69,6 +69,11 @@ CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, co
   return r.in_contact;
 }
 
+// A pair with an ellipsoid is decided only when its bounding spheres touch (spheres_touch, the pair
+// stage's own test for bounding_spheres; accept() and triage(), solve() takes only what triage
+// left): a looser candidate list (the cell rule, a list kept with a skin) then gives the same
+// contacts and solver flags as bounding_spheres, also for a pair whose solve would call it touching
+// within the solver's tolerance while its bounding spheres, in Real, do not quite.
 template <class Real>
 struct ShapeDecide {
   const Sphere<Real>* spheres;      // local frame (centre, bounding radius), by body index
@@ -82,6 +87,7 @@ struct ShapeDecide {
   }
   CG_HD bool accept(std::uint32_t a, std::uint32_t b, NarrowFlags& flags) const {
     if (both_spheres(a, b)) return narrow_decide(spheres[a], spheres[b], origin, false).contact;
+    if (!spheres_touch(spheres[a], spheres[b])) return false;  // bounding spheres apart (above)
     EllipsoidContact<Real> c;
     const bool contact = shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c);
     flags.fallbacks += c.fallback ? 1u : 0u;
@@ -103,6 +109,7 @@ struct ShapeDecide {
   CG_HD Verdict triage(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
     if (both_spheres(a, b))
       return narrow_decide(spheres[a], spheres[b], origin, false).contact ? Verdict::accept : Verdict::reject;
+    if (!spheres_touch(spheres[a], spheres[b])) return Verdict::reject;  // bounding spheres apart (above)
     EllipsoidContact<Real> c;
     const bool contact =
         shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c, SolveScope::first_start);
