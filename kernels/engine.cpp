@@ -119,6 +119,15 @@ struct Engine<Real>::Impl {
   Contacts<Real> resident_contacts;
   std::optional<DeviceContactsView<Real>> resident_on_device;  // CUDA: not yet downloaded
   bool resident_overwritten = false;  // CUDA: a later detection reused the workspace first
+  // EngineOptions::skin > 0: what the kept candidate list was built for (the backend keeps the list
+  // and the bodies' state); a call that matches it checks the motion, any other call rebuilds.
+  struct KeptFor {
+    bool valid = false;
+    std::size_t count = 0;
+    std::vector<std::int64_t> id;  // the bodies' ids (empty: implied, as for device bodies)
+    bool shapes = false;           // the scene had ellipsoids
+    double coordinate_bound = 0;   // core/skin.hpp: a later call's coordinates must stay within
+  } kept;
   void forget_resident_view() {       // before any detection: the view's storage is reused
     if (resident_on_device) resident_overwritten = true;
     resident_on_device.reset();
@@ -134,6 +143,8 @@ Engine<Real>::Engine(EngineOptions options) : m_impl(std::make_unique<Impl>()) {
   if (!(options.ellipsoid_tolerance >= 0) || !std::isfinite(options.ellipsoid_tolerance))
     throw UsageError("ellipsoid tolerance must be finite and >= 0 (0: the default)");
   if (options.ellipsoid_max_iterations < 0) throw UsageError("ellipsoid iteration cap must be >= 0");
+  if (!(options.skin >= 0) || !std::isfinite(options.skin))
+    throw UsageError("skin must be a finite length >= 0 (0: no candidates kept across calls)");
   Backend b = options.backend;
   if (b == Backend::automatic) b = cuda_available() ? Backend::cuda : Backend::cpu;
   if (b == Backend::cuda) m_impl->cuda = detail::make_cuda_backend(options.device).release();
@@ -163,15 +174,35 @@ const EngineOptions& Engine<Real>::options() const {
 }
 
 namespace {
-// Frame and grid plan of one call from the bodies' bounds; pushes the "plan" stage time.
+// The bounds of the bodies inflated by `d` (EngineOptions::skin): boxes, largest radius and the
+// radius moments of the cell-size model, of the radii r + d.
+Bounds inflated(Bounds b, double d) {
+  b.lo = {b.lo.x - d, b.lo.y - d, b.lo.z - d};
+  b.hi = {b.hi.x + d, b.hi.y + d, b.hi.z + d};
+  b.r_max += d;
+  const double n = double(b.count), s1 = b.r_sum[0], s2 = b.r_sum[1], s3 = b.r_sum[2];
+  b.r_sum[0] = s1 + n * d;
+  b.r_sum[1] = s2 + 2 * d * s1 + n * d * d;
+  b.r_sum[2] = s3 + 3 * d * s2 + 3 * d * d * s1 + n * d * d * d;
+  return b;
+}
+
+// Frame and grid plan of one call from the bodies' bounds; pushes the "plan" stage time. A skin
+// (inflation > 0): the origin is the one of a skin-0 call (so the packed spheres and the contacts are
+// the same bits), the cell edge and the grid cover the radii inflated by `inflation`.
 template <class Real>
 detail::DetectJob<Real> plan_job(const Bounds& b, std::optional<Frame> frame, const EngineOptions& options,
-                                 EngineStats& stats) {
+                                 double inflation, EngineStats& stats) {
   constexpr Precision prec = precision_of<Real>();
-  const Frame f = frame ? *frame : make_frame(b, options.cell_size, prec, options.cell_choice);
+  Frame f = frame ? *frame : make_frame(b, options.cell_size, prec, options.cell_choice);
   if (frame && f.cell_size < 2 * b.r_max)
     throw UsageError("frame cell size is smaller than the largest diameter");
-  detail::DetectJob<Real> job{{}, plan_grid(b, f, prec), {}, options.fields};
+  const Bounds grid_bounds = inflation > 0 ? inflated(b, inflation) : b;
+  if (inflation > 0)  // a requested or shared edge grows to the inflated radii' smallest valid edge
+    f.cell_size = frame || options.cell_size > 0
+                      ? std::max(f.cell_size, min_cell_size(grid_bounds, prec))
+                      : make_frame(grid_bounds, 0, prec, options.cell_choice).cell_size;
+  detail::DetectJob<Real> job{{}, plan_grid(grid_bounds, f, prec), {}, options.fields};
   job.grid = detail::grid_params<Real>(job.plan);
   if (options.ellipsoid_tolerance > 0) job.solver.tolerance = static_cast<Real>(options.ellipsoid_tolerance);
   if (options.ellipsoid_max_iterations > 0) job.solver.max_iterations = options.ellipsoid_max_iterations;
@@ -179,7 +210,61 @@ detail::DetectJob<Real> plan_job(const Bounds& b, std::optional<Frame> frame, co
   stats.cell_size = f.cell_size;
   return job;
 }
+
+// The largest magnitude of a local coordinate of the bodies' boxes in a frame with this origin.
+double coordinate_magnitude(const Bounds& b, const Vec3<double>& origin) {
+  return std::max({std::abs(b.lo.x - origin.x), std::abs(b.lo.y - origin.y), std::abs(b.lo.z - origin.z),
+                   std::abs(b.hi.x - origin.x), std::abs(b.hi.y - origin.y), std::abs(b.hi.z - origin.z)});
+}
+
+// A fresh per-call EngineStats that carries the counters kept across calls.
+void reset_stats(EngineStats& stats) {
+  EngineStats fresh;
+  fresh.candidate_builds = stats.candidate_builds;
+  fresh.candidate_reuses = stats.candidate_reuses;
+  stats = fresh;
+}
 }  // namespace
+
+// EngineOptions::skin: the call's check (the bodies match the kept list's: count, ids, shape
+// presence, coordinates within its bound) and the inflation of a build (core/skin.hpp); the plan.
+// Marks the kept list invalid until remember_build() (a call that throws leaves it unusable).
+template <class Real>
+static detail::DetectJob<Real> plan_call(typename Engine<Real>::Impl& s, const Bounds& b,
+                                         std::optional<Frame> frame, std::span<const std::int64_t> id,
+                                         std::size_t ellipsoids, double& bound) {
+  const double skin = s.options.skin;
+  bool check = false;
+  double inflation = 0;
+  if (skin > 0) {
+    auto& k = s.kept;
+    const double now = coordinate_magnitude(b, frame ? frame->origin : b.lo);
+    check = k.valid && k.count == b.count && std::equal(id.begin(), id.end(), k.id.begin(), k.id.end()) &&
+            k.shapes == (ellipsoids > 0) && now <= k.coordinate_bound;
+    bound = check ? k.coordinate_bound : now + skin;
+    inflation = skin_inflation(skin, bound, b.r_max, double(std::numeric_limits<Real>::epsilon()));
+    k.valid = false;
+  }
+  detail::DetectJob<Real> job = plan_job<Real>(b, frame, s.options, inflation, s.stats);
+  job.skin = skin;
+  job.inflation = inflation;
+  job.check = check;
+  job.ellipsoids = ellipsoids;
+  return job;
+}
+
+// After a call that ran with a skin: the kept list is what this call used (reused or built).
+template <class Real>
+static void remember_build(typename Engine<Real>::Impl& s, const Bounds& b, std::span<const std::int64_t> id,
+                           std::size_t ellipsoids, double bound) {
+  if (!(s.options.skin > 0)) return;
+  auto& k = s.kept;
+  k.valid = true;
+  k.count = b.count;
+  k.id.assign(id.begin(), id.end());
+  k.shapes = ellipsoids > 0;
+  k.coordinate_bound = bound;
+}
 
 template <class Real>
 Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Frame> frame) {
@@ -187,7 +272,7 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
   Impl& s = *m_impl;
   s.forget_resident_view();
   s.times.clear();
-  s.stats = EngineStats{};
+  reset_stats(s.stats);
   Contacts<Real> out;
   auto t0 = clock::now();
   const Bounds b = compute_bounds(bodies);
@@ -195,9 +280,9 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
   s.stats.bodies = b.count;
   s.stats.ellipsoids = ellipsoids;
   if (b.count == 0) return out;
-  detail::DetectJob<Real> job = plan_job<Real>(b, frame, s.options, s.stats);
+  double bound = 0;
+  detail::DetectJob<Real> job = plan_call<Real>(s, b, frame, bodies.id, ellipsoids, bound);
   job.bodies = bodies;
-  job.ellipsoids = ellipsoids;
   s.times.push_back(
       {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
 
@@ -205,6 +290,7 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
     detail::run_stages(*s.cuda, job, out, s.times, s.stats);
   else
     detail::run_stages(s.host, job, out, s.times, s.stats);
+  remember_build<Real>(s, b, bodies.id, ellipsoids, bound);
 
   // Local indices → global ids (monotone, so the (id_a, id_b) order is kept).
   if (!bodies.id.empty()) {
@@ -232,7 +318,7 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
   using clock = std::chrono::steady_clock;
   s.forget_resident_view();
   s.times.clear();
-  s.stats = EngineStats{};
+  reset_stats(s.stats);
   if (s.resolved != Backend::cuda) throw UsageError("detect_device needs the CUDA backend");
   if (bodies.count > 0 && (!bodies.position || !bodies.radius))
     throw UsageError("detect_device: null position or radius pointer");
@@ -245,13 +331,14 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
   s.stats.bodies = b.count;
   s.stats.ellipsoids = ellipsoids;
   if (b.count == 0) return;
-  detail::DetectJob<Real> job = plan_job<Real>(b, frame, s.options, s.stats);
+  double bound = 0;
+  detail::DetectJob<Real> job = plan_call<Real>(s, b, frame, {}, ellipsoids, bound);
   job.device_bodies = &bodies;
-  job.ellipsoids = ellipsoids;
   job.device_out = device_out;
   s.times.push_back(
       {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
   detail::run_stages(*s.cuda, job, out, s.times, s.stats);
+  remember_build<Real>(s, b, {}, ellipsoids, bound);
   s.stats.contacts = device_out ? device_out->count : out.size();
 }
 

@@ -13,6 +13,9 @@
 //   narrow    narrow_decide() per candidate; contact rows in the requested fields, world frame
 //             (scenes with ellipsoids: pack also packs the shapes, the pair stage keeps bounding-sphere
 //             overlaps, and narrow dispatches on the shape pair: core/shape_narrow.hpp)
+// With a skin (EngineOptions::skin, core/skin.hpp): the pair stage tests spheres inflated by
+// job.inflation and the ordered list is kept (keep_candidates); a later call first checks the motion
+// since (stage skin) and, when the list still covers every contact, runs pack + narrow over it.
 #include <omp.h>
 
 #include "backend.hpp"
@@ -23,38 +26,52 @@ namespace cg::detail {
 namespace {
 
 template <class Real, class Key>
-void run_typed(const HostBackend& be, const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times,
+void run_typed(HostBackend& be, const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times,
                EngineStats& stats) {
   const int nt = be.threads > 0 ? be.threads : omp_get_max_threads();
   HostStageTimer timer(times);
-  // Scenes with ellipsoids: candidates are bounding-sphere overlaps (or the looser cell rule), the
-  // narrow stage decides per shape pair. Sphere-only scenes: exactly the sphere path.
+  // Scenes with ellipsoids and lists kept with a skin: candidates are (inflated) bounding-sphere
+  // overlaps (or the looser cell rule), the narrow stage decides. Else exactly the sphere path.
   const bool shapes = job.ellipsoids > 0;
-  const CandidateFilter filter = shapes && be.candidates == CandidateFilter::spheres_touch
+  const bool skin = job.skin > 0;
+  const CandidateFilter filter = (shapes || skin) && be.candidates == CandidateFilter::spheres_touch
                                      ? CandidateFilter::bounding_spheres
                                      : be.candidates;
+  bool reuse = false;
+  if (skin && job.check) {
+    const Motion m = host::measure_motion(job.bodies, be.kept, nt);
+    stats.skin_displacement = m.displacement;
+    stats.skin_growth = m.growth;
+    reuse = skin_covers(m, job.skin);
+    timer.lap(Stage::skin);
+  }
 
   host::PackedBodies<Real> bodies;
-  host::pack(job.bodies, job.plan.frame.origin, job.grid, nt, bodies);
+  host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Real>(job.inflation), !reuse, nt, bodies);
   if (shapes) host::pack_shapes(job.bodies, nt, bodies.shapes);
   timer.lap(Stage::pack);
 
-  host::Entries<Key> entries;
-  stats.entries = host::fill_entries(bodies, job.grid, nt, entries);
-  timer.lap(Stage::entries);
+  host::CandidatePairs built;
+  if (!reuse) {
+    host::Entries<Key> entries;
+    stats.entries = host::fill_entries(bodies, job.grid, nt, entries);
+    timer.lap(Stage::entries);
 
-  host::sort_entries(entries, job.plan.key_bits, nt);
-  timer.lap(Stage::sort);
+    host::sort_entries(entries, job.plan.key_bits, nt);
+    timer.lap(Stage::sort);
 
-  host::CandidatePairs candidates;
-  stats.pair_tests =
-      host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter, nt, candidates);
+    stats.pair_tests =
+        host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter, nt, built);
+    entries = {};
+    timer.lap(Stage::pairs);
+
+    host::order_candidates(built, nt);
+    if (skin) host::keep_candidates(job.bodies, built, be.kept);
+    timer.lap(Stage::order);
+  }
+  if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
+  const host::CandidatePairs& candidates = reuse ? be.kept.pairs : built;
   stats.candidates = candidates.size();
-  entries = {};
-  timer.lap(Stage::pairs);
-
-  host::order_candidates(candidates, nt);
-  timer.lap(Stage::order);
 
   if (shapes)
     host::narrow_shapes(candidates, bodies.spheres, bodies.shapes, job.plan.frame.origin, job.solver,
