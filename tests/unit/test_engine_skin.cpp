@@ -27,7 +27,10 @@ namespace cg::test {
 namespace {
 
 template <class Cfg>
-class EngineSkinTest : public ::testing::Test {};
+class EngineSkinTest : public ::testing::Test {
+ protected:
+  void SetUp() override { CG_SKIP_WITHOUT_BACKEND(Cfg); }
+};
 TYPED_TEST_SUITE(EngineSkinTest, AllConfigs, ConfigNames);
 
 EngineOptions options_for(Backend backend, double skin) {
@@ -37,6 +40,15 @@ EngineOptions options_for(Backend backend, double skin) {
   o.fields = Fields::full;  // every field compared
   return o;
 }
+
+// The engine under test (with a skin) and its oracle (skin 0), on the configuration's backend.
+template <class Cfg>
+struct SkinEngines {
+  explicit SkinEngines(double skin_)
+      : kept(options_for(Cfg::backend, skin_)), fresh(options_for(Cfg::backend, 0)), skin(skin_) {}
+  Engine<typename Cfg::Real> kept, fresh;
+  const double skin;
+};
 
 std::vector<std::string> stage_names(const StageTimes& times) {
   std::vector<std::string> names;
@@ -73,10 +85,8 @@ void expect_decision(const EngineStats& st, std::uint64_t calls_before, const st
 // a fresh skin-0 detection; small steps reuse, the rebuilds come when the motion passes skin/2.
 TYPED_TEST(EngineSkinTest, RandomWalkEqualsFreshDetection) {
   using Real = typename TypeParam::Real;
-  CG_SKIP_WITHOUT_BACKEND(TypeParam);
-  const double skin = 0.2;
-  Engine<Real> engine(options_for(TypeParam::backend, skin));
-  Engine<Real> fresh(options_for(TypeParam::backend, 0));
+  SkinEngines<TypeParam> engines(0.2);
+  auto& [engine, fresh, skin] = engines;
   Spheres s = random_spheres(4000, 0.4, 1.0, 9101);
   std::vector<std::int64_t> id(s.r.size());
   for (std::size_t i = 0; i < id.size(); ++i) id[i] = 3 * std::int64_t(i) + 7;
@@ -114,13 +124,11 @@ TYPED_TEST(EngineSkinTest, RandomWalkEqualsFreshDetection) {
 // The resident bodies (the simulation loop: write_resident + detect_resident) with a report mask.
 TYPED_TEST(EngineSkinTest, ResidentStepsEqualFreshDetection) {
   using Real = typename TypeParam::Real;
-  CG_SKIP_WITHOUT_BACKEND(TypeParam);
-  const double skin = 0.15;
-  Engine<Real> engine(options_for(TypeParam::backend, skin));
-  Engine<Real> fresh(options_for(TypeParam::backend, 0));
+  SkinEngines<TypeParam> engines(0.15);
+  auto& [engine, fresh, skin] = engines;
   Spheres s = random_spheres(3000, 0.5, 1.0, 9111);
-  std::vector<std::uint8_t> report(s.r.size());
   std::mt19937_64 rng(9112);
+  std::vector<std::uint8_t> report(s.r.size());
   for (auto& m : report) m = static_cast<std::uint8_t>(rng() % 4);  // every combination of the bits
   engine.set_resident(BodiesView{s.p, s.r, {}, report});
   for (int call = 0; call < 25; ++call) {
@@ -142,10 +150,8 @@ TYPED_TEST(EngineSkinTest, ResidentStepsEqualFreshDetection) {
 // dyadic coordinates: the displacement is exact) the list is kept. Every call equals a fresh one.
 TYPED_TEST(EngineSkinTest, StepPastHalfSkinRebuilds) {
   using Real = typename TypeParam::Real;
-  CG_SKIP_WITHOUT_BACKEND(TypeParam);
-  const double skin = 0.25;
-  Engine<Real> engine(options_for(TypeParam::backend, skin));
-  Engine<Real> fresh(options_for(TypeParam::backend, 0));
+  SkinEngines<TypeParam> engines(0.25);
+  auto& [engine, fresh, skin] = engines;
   Spheres s = random_spheres(2000, 0.5, 1.0, 9121);
   for (auto& p : s.p) p = {std::round(p.x * 64) / 64, std::round(p.y * 64) / 64, std::round(p.z * 64) / 64};
   for (auto& r : s.r) r = std::round(r * 64) / 64;  // dyadic: every step and growth below is exact
@@ -181,10 +187,9 @@ TYPED_TEST(EngineSkinTest, StepPastHalfSkinRebuilds) {
 // apart. Coordinates and radii are dyadic, so fp32 and fp64 hold them exactly.
 TYPED_TEST(EngineSkinTest, PairsClosingExactlyTheSkinAreFound) {
   using Real = typename TypeParam::Real;
-  CG_SKIP_WITHOUT_BACKEND(TypeParam);
-  const double skin = 0.25, ra = 0.5, rb = 0.75;
-  Engine<Real> engine(options_for(TypeParam::backend, skin));
-  Engine<Real> fresh(options_for(TypeParam::backend, 0));
+  SkinEngines<TypeParam> engines(0.25);
+  auto& [engine, fresh, skin] = engines;
+  const double ra = 0.5, rb = 0.75;
   Spheres s;
   std::mt19937_64 rng(9131);
   for (int k = 0; k < 200; ++k) {
@@ -217,10 +222,9 @@ TYPED_TEST(EngineSkinTest, PairsClosingExactlyTheSkinAreFound) {
 
 // A body count change, a report mask change and other ids rebuild (no skin check runs).
 TYPED_TEST(EngineSkinTest, OtherBodiesRebuild) {
-  using Real = typename TypeParam::Real;
-  CG_SKIP_WITHOUT_BACKEND(TypeParam);
-  Engine<Real> engine(options_for(TypeParam::backend, 0.2));
-  Engine<Real> fresh(options_for(TypeParam::backend, 0));
+  SkinEngines<TypeParam> engines(0.2);
+  auto& [engine, fresh, skin] = engines;
+  EXPECT_EQ(skin, engine.options().skin);
   Spheres s = random_spheres(2500, 0.5, 1.0, 9141);
   std::vector<std::uint8_t> report(s.r.size(), kReportedBit);
   auto call = [&](const BodiesView& v, const std::string& at) {
@@ -253,7 +257,6 @@ TYPED_TEST(EngineSkinTest, OtherBodiesRebuild) {
 // Skin 0 (the default) is today's engine: no check, no counters, the stage list of before.
 TYPED_TEST(EngineSkinTest, NoSkinKeepsNothing) {
   using Real = typename TypeParam::Real;
-  CG_SKIP_WITHOUT_BACKEND(TypeParam);
   Engine<Real> engine(options_for(TypeParam::backend, 0));
   const Spheres s = random_spheres(1500, 0.5, 1.0, 9151);
   for (int call = 0; call < 3; ++call) engine.detect(BodiesView{s.p, s.r, {}, {}});
@@ -271,10 +274,8 @@ TYPED_TEST(EngineSkinTest, NoSkinKeepsNothing) {
 // bounding-sphere overlaps, which a rotation does not change).
 TYPED_TEST(EngineSkinTest, MixedScenesEqualFreshDetection) {
   using Real = typename TypeParam::Real;
-  CG_SKIP_WITHOUT_BACKEND(TypeParam);
-  const double skin = 0.1;
-  Engine<Real> engine(options_for(TypeParam::backend, skin));
-  Engine<Real> fresh(options_for(TypeParam::backend, 0));
+  SkinEngines<TypeParam> engines(0.1);
+  auto& [engine, fresh, skin] = engines;
   ShapeScene s = make_scene("skin mixed", 9161, 800, 0.5, 13.0);
   std::mt19937_64 rng(9162);
   std::uniform_real_distribution<double> u(-1, 1);
