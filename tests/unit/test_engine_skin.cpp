@@ -287,6 +287,7 @@ TYPED_TEST(EngineSkinTest, MixedScenesEqualFreshDetection) {
     ASSERT_EQ(compare_contacts(got, want), "identical") << at;
     EXPECT_EQ(st.narrow_fallbacks, fresh.stats().narrow_fallbacks) << at;
     EXPECT_EQ(st.narrow_unconverged, fresh.stats().narrow_unconverged) << at;
+    EXPECT_EQ(st.narrow_hard, fresh.stats().narrow_hard) << at;
     EXPECT_GT(got.size(), 50u) << at;
     for (std::size_t i = 0; i < s.p.size(); ++i) {
       s.p[i] = s.p[i] + Vec3<double>{0.006 * u(rng), 0.006 * u(rng), 0.006 * u(rng)};
