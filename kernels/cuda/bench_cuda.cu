@@ -412,10 +412,11 @@ int main(int argc, char** argv) try {
       "unconverged: narrow-phase solver flags summed over the timed runs. total = wall time of "
       "detect_device_resident (device bounds, plan, stages, 3 host syncs).\n");
   if (!skin_rows.empty()) {
-    std::printf("\nSteps with a skin of %g (moves <= skin/10 per step, %d steps; wall ms per step of "
-                "detect_device_resident):\n\n| N | prec | from scratch | skin: reuse | skin: rebuild | "
-                "skin: mean | builds | reuses | same counts |\n|---|---|---|---|---|---|---|---|---|\n",
-                skin, runs);
+    std::printf(
+        "\nSteps with a skin of %g (moves <= skin/10 per step, %d steps; wall ms per step of "
+        "detect_device_resident):\n\n| N | prec | from scratch | skin: reuse | skin: rebuild | "
+        "skin: mean | builds | reuses | same counts |\n|---|---|---|---|---|---|---|---|---|\n",
+        skin, runs);
     for (const SkinRow& r : skin_rows)
       std::printf("| 2^%d | %s | %.3f | %.3f | %.3f | %.3f | %llu | %llu | %s |\n", r.log2n, r.prec,
                   r.scratch_ms, r.reuse_ms, r.build_ms, r.mean_ms, static_cast<unsigned long long>(r.builds),

@@ -139,8 +139,8 @@ class CudaBackend {
     reserve_pack(r);
     m_events.start(m_stream);
     upload_stage(r);
-    shapes_stage(r);                     // scenes with ellipsoids only
-    const bool reuse = skin_stage(r);    // a skin: the kept candidates still hold every contact?
+    shapes_stage(r);                   // scenes with ellipsoids only
+    const bool reuse = skin_stage(r);  // a skin: the kept candidates still hold every contact?
     pack_stage(r, reuse);
     if (reuse) {
       reuse_candidates(r);

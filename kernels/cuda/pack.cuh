@@ -46,7 +46,8 @@ __global__ void __launch_bounds__(kBlock)
 }
 
 // reorder: cell-ordered copy of the spheres (body j = input body perm[j]; radii + `inflation`, the
-// pair stage's spheres: 0 without a skin), control bytes, and per block the sum of the entry counts (block_entries[blockIdx.x]; total added to c->entries).
+// pair stage's spheres: 0 without a skin), control bytes, and per block the sum of the entry counts
+// (block_entries[blockIdx.x]; total added to c->entries).
 // Type-pass path (base != nullptr): also the super-cell index of the body's lowest even cell
 // (cell_key of lo & ~1, type bits 0) and per block the number of bodies having a cell of each
 // type (type_blocks[t * gridDim.x + blockIdx.x]; totals added to c->type_entries[t]).

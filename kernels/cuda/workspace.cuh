@@ -64,7 +64,7 @@ struct Workspace {
   Bytes shape_kind, shape_semi, shape_orient, shapes, normals;
   Bytes kept_pairs, ref_pos, ref_rad, ref_report;
   std::size_t res_count = 0;
-  bool res_reported = false;    // resident report mask present
+  bool res_reported = false;     // resident report mask present
   std::uint32_t kept_count = 0;  // kept candidate pairs
   bool kept_reported = false;    // the kept list was built with a report mask
 
@@ -78,7 +78,7 @@ struct Workspace {
          {&pos,         &rad,        &report,     &spheres,      &cell_spheres, &perm,      &ctrl,
           &body_blocks, &base,       &keys[0],    &keys[1],      &bodies[0],    &bodies[1], &entry_blocks,
           &pairs,       &out,        &temp,       &counters,     &partials,     &res_pos,   &res_rad,
-          &res_report,  &shape_kind, &shape_semi, &shape_orient, &shapes,    &normals,   &kept_pairs,
+          &res_report,  &shape_kind, &shape_semi, &shape_orient, &shapes,       &normals,   &kept_pairs,
           &ref_pos,     &ref_rad,    &ref_report})
       s += b->bytes();
     return s;

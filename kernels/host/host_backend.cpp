@@ -47,7 +47,8 @@ void run_typed(HostBackend& be, const DetectJob<Real>& job, Contacts<Real>& out,
   }
 
   host::PackedBodies<Real> bodies;
-  host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Real>(job.inflation), !reuse, nt, bodies);
+  host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Real>(job.inflation), !reuse, nt,
+             bodies);
   if (shapes) host::pack_shapes(job.bodies, nt, bodies.shapes);
   timer.lap(Stage::pack);
 

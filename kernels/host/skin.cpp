@@ -11,8 +11,10 @@ Motion measure_motion(const BodiesView& bodies, const KeptCandidates& kept, int 
   const std::size_t n = bodies.size();
   double moved_sq = 0, growth = 0;
   // max is exact, so the result does not depend on the thread count
+  // clang-format off
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : moved_sq, growth) \
     if (n > k_parallel_min)
+  // clang-format on
   for (std::size_t i = 0; i < n; ++i) {
     const Vec3<double> d = bodies.position[i] - kept.position[i];
     moved_sq = std::max(moved_sq, d.x * d.x + d.y * d.y + d.z * d.z);
@@ -21,8 +23,8 @@ Motion measure_motion(const BodiesView& bodies, const KeptCandidates& kept, int 
   Motion m;
   m.displacement = std::sqrt(moved_sq);
   m.growth = growth;
-  m.report_changed = !std::equal(bodies.report.begin(), bodies.report.end(), kept.report.begin(),
-                                 kept.report.end());
+  m.report_changed =
+      !std::equal(bodies.report.begin(), bodies.report.end(), kept.report.begin(), kept.report.end());
   return m;
 }
 

@@ -176,7 +176,7 @@ TYPED_TEST(EngineSkinTest, StepPastHalfSkinRebuilds) {
   call("grown");
   EXPECT_EQ(engine.stats().candidate_reuses, 3u);
   EXPECT_EQ(engine.stats().skin_growth, 0.0625);
-  s.r[6] += 0.125;  // 2·0.125 <= skin, still kept
+  s.r[6] += 0.125;        // 2·0.125 <= skin, still kept
   s.p[6].y -= 0.0078125;  // but with the move: 2·(0.0078125 + 0.125) > skin
   call("grown and moved");
   EXPECT_EQ(engine.stats().candidate_builds, 3u);
