@@ -14,20 +14,25 @@
 
 namespace cg::detail {
 
-template <class Real>
+// One detection for the backends. Broad: the real type of the broad phase (pack … order: local
+// spheres, grid); Narrow: of the narrow phase and the output (precision_of<Broad, Narrow>(): fp32
+// float/float, fp64 double/double, mixed float/double).
+template <class Broad, class Narrow = Broad>
 struct DetectJob {
+  using BroadReal = Broad;
+  using NarrowReal = Narrow;
   BodiesView bodies;  // host, world frame, ascending ids
   GridPlan plan;
-  GridParams<Real> grid;
+  GridParams<Broad> grid;
   Fields fields = Fields::basic;
   // CUDA only. device_bodies set: read the bodies from DEVICE memory (bodies is then empty).
   // device_out set: leave the contacts on the device and describe them there (out stays empty).
   const DeviceBodiesView* device_bodies = nullptr;
-  DeviceContactsView<Real>* device_out = nullptr;
+  DeviceContactsView<Narrow>* device_out = nullptr;
   // Shapes: the number of ellipsoids (0: the sphere-only path, exactly as before shapes existed) and
   // the ellipsoid solver's settings (from EngineOptions).
   std::size_t ellipsoids = 0;
-  SolverSettings<Real> solver{};
+  SolverSettings<Narrow> solver{};
   // Candidates kept across calls (EngineOptions::skin > 0; skin 0: neither field is read).
   // inflation: world length added to every radius in the pair stage (cells and the sphere test) when
   // the list is built. check: the bodies match the kept list's (count, ids, shape presence, frame
@@ -38,9 +43,10 @@ struct DetectJob {
 };
 
 template <class Real>
-GridParams<Real> grid_params(const GridPlan& plan) {
+GridParams<Real> grid_params(const GridPlan& plan, double radius_margin = 0) {
   GridParams<Real> g{};
   g.inv_cell = static_cast<Real>(1.0 / plan.frame.cell_size);
+  g.radius_margin = static_cast<Real>(radius_margin);
   for (int k = 0; k < 3; ++k) {
     g.base[k] = plan.base[k];
     g.dims[k] = plan.dims[k];
@@ -79,16 +85,16 @@ struct HostBackend {
   host::KeptCandidates kept;  // EngineOptions::skin > 0: the list kept across calls
 };
 
-template <class Real>
-void run_stages(HostBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times,
-                EngineStats& stats);
+template <class Broad, class Narrow>
+void run_stages(HostBackend& backend, const DetectJob<Broad, Narrow>& job, Contacts<Narrow>& out,
+                StageTimes& times, EngineStats& stats);
 
 // The CUDA backend (kernels/cuda/): owns persistent device buffers; defined only in CUDA builds.
 class CudaBackend;
 std::unique_ptr<CudaBackend> make_cuda_backend(int device);  // throws CudaError without CUDA
-template <class Real>
-void run_stages(CudaBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times,
-                EngineStats& stats);
+template <class Broad, class Narrow>
+void run_stages(CudaBackend& backend, const DetectJob<Broad, Narrow>& job, Contacts<Narrow>& out,
+                StageTimes& times, EngineStats& stats);
 void destroy(CudaBackend* backend);
 // Resident bodies of Engine::set_resident (DEVICE rows kept between calls).
 void resident_upload(CudaBackend& backend, const BodiesView& bodies);

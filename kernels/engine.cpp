@@ -11,6 +11,7 @@
 #include <cstring>
 #include <limits>
 #include <sstream>
+#include <type_traits>
 #include <vector>
 
 #include "backend.hpp"
@@ -70,8 +71,8 @@ class CudaBackend {};
 std::unique_ptr<CudaBackend> make_cuda_backend(int) {
   throw CudaError("this contactgrid was built without CUDA (rebuild with nvcc present)");
 }
-template <class Real>
-void run_stages(CudaBackend&, const DetectJob<Real>&, Contacts<Real>&, StageTimes&, EngineStats&) {
+template <class Broad, class Narrow>
+void run_stages(CudaBackend&, const DetectJob<Broad, Narrow>&, Contacts<Narrow>&, StageTimes&, EngineStats&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
 void destroy(CudaBackend* b) { delete b; }
@@ -145,6 +146,8 @@ Engine<Real>::Engine(EngineOptions options) : m_impl(std::make_unique<Impl>()) {
   if (options.ellipsoid_max_iterations < 0) throw UsageError("ellipsoid iteration cap must be >= 0");
   if (!(options.skin >= 0) || !std::isfinite(options.skin))
     throw UsageError("skin must be a finite length >= 0 (0: no candidates kept across calls)");
+  if (options.fp32_broad_phase && std::is_same_v<Real, float>)
+    throw UsageError("fp32_broad_phase (precision mixed) is an option of Engine<double>");
   Backend b = options.backend;
   if (b == Backend::automatic) b = cuda_available() ? Backend::cuda : Backend::cpu;
   if (b == Backend::cuda) m_impl->cuda = detail::make_cuda_backend(options.device).release();
@@ -159,6 +162,10 @@ Engine<Real>& Engine<Real>::operator=(Engine&&) noexcept = default;
 template <class Real>
 Backend Engine<Real>::backend() const {
   return m_impl->resolved;
+}
+template <class Real>
+Precision Engine<Real>::precision() const {
+  return m_impl->options.fp32_broad_phase ? Precision::mixed : precision_of<Real>();
 }
 template <class Real>
 const StageTimes& Engine<Real>::times() const {
@@ -190,25 +197,37 @@ Bounds inflated(Bounds b, double d) {
 // Frame and grid plan of one call from the bodies' bounds; pushes the "plan" stage time. A skin
 // (inflation > 0): the origin is the one of a skin-0 call (so the packed spheres and the contacts are
 // the same bits), the cell edge and the grid cover the radii inflated by `inflation`.
-template <class Real>
-detail::DetectJob<Real> plan_job(const Bounds& b, std::optional<Frame> frame, const EngineOptions& options,
-                                 double inflation, EngineStats& stats) {
-  constexpr Precision prec = precision_of<Real>();
+template <class Broad, class Narrow>
+detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> frame,
+                                          const EngineOptions& options, double inflation, EngineStats& stats) {
+  constexpr Precision prec = precision_of<Broad, Narrow>();
   Frame f = frame ? *frame : make_frame(b, options.cell_size, prec, options.cell_choice);
-  if (frame && f.cell_size < 2 * b.r_max)
+  if (frame) check_fp32_world(b, prec);
+  const double margin = broad_margin(b, f.origin, prec);
+  if (frame && f.cell_size < 2 * (b.r_max + margin))
     throw UsageError("frame cell size is smaller than the largest diameter");
   const Bounds grid_bounds = inflation > 0 ? inflated(b, inflation) : b;
   if (inflation > 0)  // a requested or shared edge grows to the inflated radii' smallest valid edge
     f.cell_size = frame || options.cell_size > 0
                       ? std::max(f.cell_size, min_cell_size(grid_bounds, prec))
                       : make_frame(grid_bounds, 0, prec, options.cell_choice).cell_size;
-  detail::DetectJob<Real> job{{}, plan_grid(grid_bounds, f, prec), {}, options.fields};
-  job.grid = detail::grid_params<Real>(job.plan);
-  if (options.ellipsoid_tolerance > 0) job.solver.tolerance = static_cast<Real>(options.ellipsoid_tolerance);
+  detail::DetectJob<Broad, Narrow> job{{}, plan_grid(grid_bounds, f, prec), {}, options.fields};
+  job.grid = detail::grid_params<Broad>(job.plan, margin);
+  if (options.ellipsoid_tolerance > 0) job.solver.tolerance = static_cast<Narrow>(options.ellipsoid_tolerance);
   if (options.ellipsoid_max_iterations > 0) job.solver.max_iterations = options.ellipsoid_max_iterations;
   stats.key_bits = job.plan.key_bits;
   stats.cell_size = f.cell_size;
   return job;
+}
+
+// The job of one call in the engine's precision mode (mixed: a float broad phase), handed to `run`.
+template <class Real, class Run>
+void run_job(const EngineOptions& options, const Bounds& b, std::optional<Frame> frame, double inflation,
+             EngineStats& stats, Run&& run) {
+  if constexpr (std::is_same_v<Real, double>) {
+    if (options.fp32_broad_phase) return run(plan_job<float, double>(b, frame, options, inflation, stats));
+  }
+  run(plan_job<Real, Real>(b, frame, options, inflation, stats));
 }
 
 // The largest magnitude of a local coordinate of the bodies' boxes in a frame with this origin.
@@ -224,46 +243,53 @@ void reset_stats(EngineStats& stats) {
   fresh.candidate_reuses = stats.candidate_reuses;
   stats = fresh;
 }
+
+// EngineOptions::skin of one call (core/skin.hpp): whether it checks the kept list, the coordinate
+// bound it is built or checked for, the inflation of a build.
+struct SkinPlan {
+  double skin = 0, bound = 0, inflation = 0;
+  bool check = false;
+  template <class Job>
+  void apply(Job& job) const {
+    job.skin = skin;
+    job.inflation = inflation;
+    job.check = check;
+  }
+};
 }  // namespace
 
-// EngineOptions::skin: the call's check (the bodies match the kept list's: count, ids, shape
-// presence, coordinates within its bound) and the inflation of a build (core/skin.hpp); the plan.
-// Marks the kept list invalid until remember_build() (a call that throws leaves it unusable).
+// The call's skin plan: it checks when the bodies match the kept list's (count, ids, shape presence,
+// coordinates within its bound). Marks the kept list invalid until remember_build() (a call that
+// throws leaves it unusable). The rounding margin is the broad phase's (mixed: float).
 template <class Real>
-static detail::DetectJob<Real> plan_call(typename Engine<Real>::Impl& s, const Bounds& b,
-                                         std::optional<Frame> frame, std::span<const std::int64_t> id,
-                                         std::size_t ellipsoids, double& bound) {
-  const double skin = s.options.skin;
-  bool check = false;
-  double inflation = 0;
-  if (skin > 0) {
-    auto& k = s.kept;
-    const double now = coordinate_magnitude(b, frame ? frame->origin : b.lo);
-    check = k.valid && k.count == b.count && std::equal(id.begin(), id.end(), k.id.begin(), k.id.end()) &&
+static SkinPlan plan_skin(typename Engine<Real>::Impl& s, const Bounds& b, std::optional<Frame> frame,
+                          std::span<const std::int64_t> id, std::size_t ellipsoids) {
+  SkinPlan p;
+  p.skin = s.options.skin;
+  if (!(p.skin > 0)) return p;
+  auto& k = s.kept;
+  const double now = coordinate_magnitude(b, frame ? frame->origin : b.lo);
+  p.check = k.valid && k.count == b.count && std::equal(id.begin(), id.end(), k.id.begin(), k.id.end()) &&
             k.shapes == (ellipsoids > 0) && now <= k.coordinate_bound;
-    bound = check ? k.coordinate_bound : now + skin;
-    inflation = skin_inflation(skin, bound, b.r_max, double(std::numeric_limits<Real>::epsilon()));
-    k.valid = false;
-  }
-  detail::DetectJob<Real> job = plan_job<Real>(b, frame, s.options, inflation, s.stats);
-  job.skin = skin;
-  job.inflation = inflation;
-  job.check = check;
-  job.ellipsoids = ellipsoids;
-  return job;
+  p.bound = p.check ? k.coordinate_bound : now + p.skin;
+  const double eps = s.options.fp32_broad_phase ? double(std::numeric_limits<float>::epsilon())
+                                                : double(std::numeric_limits<Real>::epsilon());
+  p.inflation = skin_inflation(p.skin, p.bound, b.r_max, eps);
+  k.valid = false;
+  return p;
 }
 
 // After a call that ran with a skin: the kept list is what this call used (reused or built).
 template <class Real>
 static void remember_build(typename Engine<Real>::Impl& s, const Bounds& b, std::span<const std::int64_t> id,
-                           std::size_t ellipsoids, double bound) {
-  if (!(s.options.skin > 0)) return;
+                           std::size_t ellipsoids, const SkinPlan& p) {
+  if (!(p.skin > 0)) return;
   auto& k = s.kept;
   k.valid = true;
   k.count = b.count;
   k.id.assign(id.begin(), id.end());
   k.shapes = ellipsoids > 0;
-  k.coordinate_bound = bound;
+  k.coordinate_bound = p.bound;
 }
 
 template <class Real>
@@ -280,17 +306,19 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
   s.stats.bodies = b.count;
   s.stats.ellipsoids = ellipsoids;
   if (b.count == 0) return out;
-  double bound = 0;
-  detail::DetectJob<Real> job = plan_call<Real>(s, b, frame, bodies.id, ellipsoids, bound);
-  job.bodies = bodies;
-  s.times.push_back(
-      {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
-
-  if (s.resolved == Backend::cuda)
-    detail::run_stages(*s.cuda, job, out, s.times, s.stats);
-  else
-    detail::run_stages(s.host, job, out, s.times, s.stats);
-  remember_build<Real>(s, b, bodies.id, ellipsoids, bound);
+  const SkinPlan skin = plan_skin<Real>(s, b, frame, bodies.id, ellipsoids);
+  run_job<Real>(s.options, b, frame, skin.inflation, s.stats, [&](auto job) {
+    job.bodies = bodies;
+    job.ellipsoids = ellipsoids;
+    skin.apply(job);
+    s.times.push_back(
+        {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
+    if (s.resolved == Backend::cuda)
+      detail::run_stages(*s.cuda, job, out, s.times, s.stats);
+    else
+      detail::run_stages(s.host, job, out, s.times, s.stats);
+  });
+  remember_build<Real>(s, b, bodies.id, ellipsoids, skin);
 
   // Local indices → global ids (monotone, so the (id_a, id_b) order is kept).
   if (!bodies.id.empty()) {
@@ -331,14 +359,17 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
   s.stats.bodies = b.count;
   s.stats.ellipsoids = ellipsoids;
   if (b.count == 0) return;
-  double bound = 0;
-  detail::DetectJob<Real> job = plan_call<Real>(s, b, frame, {}, ellipsoids, bound);
-  job.device_bodies = &bodies;
-  job.device_out = device_out;
-  s.times.push_back(
-      {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
-  detail::run_stages(*s.cuda, job, out, s.times, s.stats);
-  remember_build<Real>(s, b, {}, ellipsoids, bound);
+  const SkinPlan skin = plan_skin<Real>(s, b, frame, {}, ellipsoids);
+  run_job<Real>(s.options, b, frame, skin.inflation, s.stats, [&](auto job) {
+    job.device_bodies = &bodies;
+    job.ellipsoids = ellipsoids;
+    job.device_out = device_out;
+    skin.apply(job);
+    s.times.push_back(
+        {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
+    detail::run_stages(*s.cuda, job, out, s.times, s.stats);
+  });
+  remember_build<Real>(s, b, {}, ellipsoids, skin);
   s.stats.contacts = device_out ? device_out->count : out.size();
 }
 

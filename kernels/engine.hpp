@@ -52,6 +52,10 @@ struct EngineOptions {
   // iteration cap per start. 0: the precision's default (fp32 2e-5, fp64 1e-11; 40 iterations).
   double ellipsoid_tolerance = 0;
   int ellipsoid_max_iterations = 0;
+  // Precision::mixed (Engine<double> only; UsageError for Engine<float>): the broad phase (pack …
+  // order) in float with enlarged spheres (broad_margin), the narrow phase in double from the world
+  // coordinates. Contacts bit-identical to Engine<double> without it (same frame).
+  bool fp32_broad_phase = false;
   // Verlet skin (world length, >= 0): 0 detects from scratch every call (the default). > 0 keeps the
   // candidate pairs across calls: a call builds them from bounding spheres inflated by skin/2 (the
   // cell edge grows to cover the inflated radii), and a later call on the same bodies (same count,
@@ -77,6 +81,9 @@ struct EngineStats {
   // Candidates whose first start was not certified global, so the whole start set ran (the device's
   // second narrow pass; the same count on both backends).
   std::uint64_t narrow_hard = 0;
+  // fp32: contact rows whose local centres were closer than fp32 resolves a normal (fp32_resolves,
+  // core/narrow.hpp), recomputed in fp64 from the world coordinates and rounded to float.
+  std::uint64_t fp64_rows = 0;
   // EngineOptions::skin > 0: candidate lists built and reused since the engine was made (the only
   // counters kept across calls), and the largest displacement and radius growth the last skin check
   // measured (0 when the call rebuilt without a check: first call, other bodies).
@@ -146,7 +153,8 @@ class Engine {
   bool pin_host(void* p, std::size_t bytes);
   void unpin_host(void* p);
 
-  Backend backend() const;  // the resolved backend (never automatic)
+  Backend backend() const;      // the resolved backend (never automatic)
+  Precision precision() const;  // fp32, fp64, or mixed (Engine<double> with fp32_broad_phase)
   const StageTimes& times() const;
   const EngineStats& stats() const;
   const EngineOptions& options() const;

@@ -14,7 +14,17 @@
 
 namespace cg {
 
-const char* to_string(Precision p) { return p == Precision::fp32 ? "fp32" : "fp64"; }
+const char* to_string(Precision p) {
+  switch (p) {
+    case Precision::fp32:
+      return "fp32";
+    case Precision::fp64:
+      return "fp64";
+    case Precision::mixed:
+      return "mixed";
+  }
+  return "?";
+}
 
 void Bounds::merge(const Bounds& o) {
   if (o.count == 0) return;
@@ -109,19 +119,42 @@ Bounds compute_bounds(const BodiesView& bodies) {
 }
 
 namespace {
+// The epsilon of the broad phase's local coordinates.
 double real_epsilon(Precision p) {
-  return p == Precision::fp32 ? double(std::numeric_limits<float>::epsilon())
+  return float_broad_phase(p) ? double(std::numeric_limits<float>::epsilon())
                               : std::numeric_limits<double>::epsilon();
 }
 double max_extent(const Bounds& b) { return std::max({b.hi.x - b.lo.x, b.hi.y - b.lo.y, b.hi.z - b.lo.z}); }
 }  // namespace
 
+double broad_margin(const Bounds& b, const Vec3<double>& origin, Precision p) {
+  if (p != Precision::mixed || b.count == 0) return 0;
+  const double l = std::max({std::abs(b.lo.x - origin.x), std::abs(b.lo.y - origin.y),
+                             std::abs(b.lo.z - origin.z), std::abs(b.hi.x - origin.x),
+                             std::abs(b.hi.y - origin.y), std::abs(b.hi.z - origin.z)});
+  return 4 * double(std::numeric_limits<float>::epsilon()) * (l + 2 * b.r_max);
+}
+
+void check_fp32_world(const Bounds& b, Precision p) {
+  if (p != Precision::fp32 || b.count == 0) return;
+  const double x = std::max({std::abs(b.lo.x), std::abs(b.lo.y), std::abs(b.lo.z), std::abs(b.hi.x),
+                             std::abs(b.hi.y), std::abs(b.hi.z)});
+  const double ulp = double(std::nextafter(float(x), std::numeric_limits<float>::infinity()) - float(x));
+  if (ulp > b.r_max / 4) {
+    std::ostringstream m;
+    m << "fp32 writes world positions as float32, whose spacing at the scene's largest coordinate " << x
+      << " is " << ulp << ", more than a quarter of the largest radius " << b.r_max
+      << "; use --precision mixed or fp64 (float64 output from the world coordinates)";
+    throw InputError(m.str());
+  }
+}
+
 double min_cell_size(const Bounds& b, Precision p) {
   // c ± r is computed in Real in the local frame, where |c| <= extent: each of the two bounds and the
   // product by 1/cell carries a few ulps of rounding. 16 ulps of (extent + 2 r_max) covers them all,
-  // so a body never spans three cells along an axis.
+  // so a body never spans three cells along an axis. mixed: of the radius plus broad_margin().
   const double eps = real_epsilon(p);
-  const double d = 2.0 * b.r_max;
+  const double d = 2.0 * (b.r_max + broad_margin(b, b.lo, p));
   return d * (1.0 + 16 * eps) + 16 * eps * (max_extent(b) + d);
 }
 
@@ -148,6 +181,7 @@ double tuned_cell_size(const Bounds& b, Precision p) {
 
 Frame make_frame(const Bounds& b, double requested_cell_size, Precision p, CellChoice choice) {
   if (b.count == 0) throw InputError("scene has no bodies");
+  check_fp32_world(b, p);
   Frame f;
   f.origin = b.lo;
   const double need = min_cell_size(b, p);
@@ -174,7 +208,7 @@ GridPlan plan_grid(const Bounds& local, const Frame& frame, Precision p) {
   if (local.count == 0) return g;
   // Per axis, the frame cell coordinates the local bodies can produce, with one cell of slack for
   // rounding on each side; base rounded down to even so cell parity (type) is the frame's.
-  const double lim = p == Precision::fp32 ? double(1u << 22) : double(1u << 31) - 4;
+  const double lim = float_broad_phase(p) ? double(1u << 22) : double(1u << 31) - 4;
   const double lo[3] = {local.lo.x - frame.origin.x, local.lo.y - frame.origin.y,
                         local.lo.z - frame.origin.z};
   const double hi[3] = {local.hi.x - frame.origin.x, local.hi.y - frame.origin.y,

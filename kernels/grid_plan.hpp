@@ -11,15 +11,25 @@
 
 namespace cg {
 
-enum class Precision { fp32, fp64 };
+// The precision modes (README "Choosing a precision"): fp32 and fp64 run every stage in one real
+// type; mixed runs the broad phase (pack … order) in float and the narrow phase in double from the
+// world coordinates, with float64 output (Engine<double> with EngineOptions::fp32_broad_phase).
+enum class Precision { fp32, fp64, mixed };
 const char* to_string(Precision p);
 
-// The precision mode whose real type is Real: the one conversion from the template to the enum.
-template <class Real>
+// The precision mode of the stage types Broad (pack … order) and Narrow (narrow, output): the one
+// conversion from the templates to the enum.
+template <class Broad, class Narrow = Broad>
 constexpr Precision precision_of() {
-  static_assert(std::is_same_v<Real, float> || std::is_same_v<Real, double>, "Real is float or double");
-  return std::is_same_v<Real, float> ? Precision::fp32 : Precision::fp64;
+  static_assert(std::is_same_v<Broad, float> || std::is_same_v<Broad, double>, "Real is float or double");
+  static_assert(std::is_same_v<Narrow, double> || std::is_same_v<Broad, Narrow>, "no fp64 broad, fp32 narrow");
+  return !std::is_same_v<Broad, Narrow> ? Precision::mixed
+         : std::is_same_v<Broad, float> ? Precision::fp32
+                                        : Precision::fp64;
 }
+
+// The real type of the broad phase's local coordinates is float (fp32, mixed).
+constexpr bool float_broad_phase(Precision p) { return p != Precision::fp64; }
 
 // Axis-aligned bounds of the bounding spheres' boxes, and the largest radius.
 struct Bounds {
@@ -42,8 +52,20 @@ struct Frame {
 };
 
 // Smallest valid cell edge for these bounds: 2·r_max plus a margin that covers the rounding of
-// c ± r in the local frame, so a body never spans more than two cells per axis.
+// c ± r in the local frame, so a body never spans more than two cells per axis (mixed: of the radius
+// enlarged by broad_margin()).
 double min_cell_size(const Bounds& b, Precision p);
+
+// mixed: what the fp32 broad phase adds to every radius so that its float test keeps every pair that
+// touches in exact arithmetic (and every pair fp64 decides is a contact): 4·ε32·(L + 2·r_max), L the
+// largest |coordinate| of the bodies relative to `origin` (README "Choosing a precision" derives it).
+// 0 for fp32 and fp64.
+double broad_margin(const Bounds& b, const Vec3<double>& origin, Precision p);
+
+// fp32 writes world positions as float32: refuses (InputError, exit 3) scenes whose largest world
+// coordinate X makes the float32 spacing ulp32(X) larger than a quarter of the largest radius (from
+// |X| ≈ 2^21 for r_max = 1: 1e8 is refused, 1e6 is not), naming the offset and the other modes.
+void check_fp32_world(const Bounds& b, Precision p);
 
 // How the cell edge is chosen when none is requested (EngineOptions::cell_size = 0).
 enum class CellChoice {

@@ -202,9 +202,9 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
   BenchResult result;
   const int hi = std::max(o.bullet_hi, o.engine_hi);
   out << fmt::format(
-      "bench: N = 2^{} … 2^{} (Bullet double to 2^{}, engine to 2^{}), {} repetitions, "
+      "bench: N = 2^{} … 2^{} (Bullet double to 2^{}, engine {} to 2^{}), {} repetitions, "
       "seed {}\n",
-      o.lo, hi, o.bullet_hi, o.engine_hi, o.repetitions, o.seed);
+      o.lo, hi, o.bullet_hi, to_string(o.precision), o.engine_hi, o.repetitions, o.seed);
   for (int e = o.lo; e <= hi; ++e) {
     BenchRow row;
     row.n = std::uint64_t(1) << e;
@@ -223,24 +223,32 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
         EngineOptions eo;
         eo.backend = b;
         eo.threads = o.threads;
-        Engine<double> engine(eo);
-        const std::int64_t count = std::int64_t(engine.detect(view).size());  // warm-up, untimed
+        eo.fp32_broad_phase = o.precision == Precision::mixed;
+        std::int64_t count = 0;
         std::vector<double> times;
-        for (int r = 0; r < o.repetitions; ++r) {
-          const auto t0 = Clock::now();
-          const auto c = engine.detect(view);
-          times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
-          if (std::int64_t(c.size()) != count)
-            throw Error(fmt::format("bench: engine ({}) gave {} then {} contacts at N = {}", to_string(b),
-                                    count, c.size(), row.n));
-        }
+        auto time_engine = [&](auto real) {
+          Engine<decltype(real)> engine(eo);
+          count = std::int64_t(engine.detect(view).size());  // warm-up, untimed
+          for (int r = 0; r < o.repetitions; ++r) {
+            const auto t0 = Clock::now();
+            const auto c = engine.detect(view);
+            times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+            if (std::int64_t(c.size()) != count)
+              throw Error(fmt::format("bench: engine ({}) gave {} then {} contacts at N = {}", to_string(b),
+                                      count, c.size(), row.n));
+          }
+        };
+        if (o.precision == Precision::fp32)
+          time_engine(float{});
+        else
+          time_engine(double{});
         row.engine_s[b] = median(times);
         row.engine_contacts[b] = count;
         if (row.contacts < 0) row.contacts = count;
       }
     }
     if (e <= o.bullet_hi) {
-      OracleSpheres s;
+      OracleBodies s;
       s.position.assign(scene.sphere_position.begin(), scene.sphere_position.end());
       s.radius.assign(scene.sphere_radius.begin(), scene.sphere_radius.end());
       s.id.resize(scene.sphere_count());

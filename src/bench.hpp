@@ -1,7 +1,7 @@
 #pragma once
 // `contactgrid bench`: the timing study (course report Figures 1–2). For N = 2^lo … 2^max(bullet_hi,
 // engine_hi) it generates a uniform scene (generate_scene, seeded), times Bullet double from scratch
-// and for one warm step while N <= 2^bullet_hi, and the engine (cg::Engine<double>) on each backend
+// and for one warm step while N <= 2^bullet_hi, and the engine (--precision: fp64 by default) on each backend
 // while N <= 2^engine_hi; prints a table, writes a CSV, and plots it with jobs/plot_bench.gp.
 //
 // Engine timing: one Engine per backend and N, one untimed warm-up detect(), then the median of
@@ -33,6 +33,7 @@ struct BenchOptions {
   int repetitions = 5;            // --repetitions: engine timings are the median of this many
   std::vector<Backend> backends;  // --backend cpu|cuda (repeatable); empty: cpu, + cuda if available
   int threads = 0;                // --threads: CPU backend threads (0: all)
+  Precision precision = Precision::fp64;  // --precision fp32 | fp64 | mixed: the engine's mode
   std::uint64_t seed = 1;         // --seed: scene generator seed (scene i uses seed + log2 N)
   double radius_low = 0.5, radius_high = 1.0;  // --radius-low / --radius-high
   double contacts_per_body = 0.4;              // --contacts-per-body

@@ -5,6 +5,7 @@
 // Invariants: every read checks the magic, the sizes and that the file ends where the counts say;
 // any mismatch is an IoError naming the file (the two ends are always the same build).
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -17,7 +18,7 @@
 namespace cg {
 namespace {
 
-constexpr char kInputMagic[8] = {'C', 'G', 'B', 'O', 'I', 'N', '0', '1'};
+constexpr char kInputMagic[8] = {'C', 'G', 'B', 'O', 'I', 'N', '0', '2'};
 constexpr char kOutputMagic[8] = {'C', 'G', 'B', 'O', 'O', 'U', 'T', '1'};
 
 struct FileCloser {
@@ -84,33 +85,42 @@ Vec3<double> warm_step_displacement(std::size_t index, double radius) {
   return (1e-3 * radius) * Vec3<double>{s * std::cos(phi), s * std::sin(phi), z};
 }
 
-void write_oracle_input(const std::string& path, const OracleSpheres& s, bool warm_step) {
+void write_oracle_input(const std::string& path, const OracleBodies& s, bool warm_step) {
   BinaryFile f(path, "wb");
   f.write(kInputMagic, 8);
   f.put<std::uint64_t>(s.size());
   f.put<std::uint8_t>(warm_step ? 1 : 0);
+  f.put(s.origin);
   for (std::size_t i = 0; i < s.size(); ++i) {
-    const double row[4] = {s.position[i].x, s.position[i].y, s.position[i].z, s.radius[i]};
+    const Vec3<double> e = s.is_ellipsoid(i) ? s.semi_axes[i] : Vec3<double>{0, 0, 0};
+    const std::array<double, 4> q = s.is_ellipsoid(i) ? s.orientation[i] : std::array<double, 4>{1, 0, 0, 0};
+    const double row[11] = {s.position[i].x, s.position[i].y, s.position[i].z, s.radius[i], e.x, e.y, e.z,
+                            q[0],            q[1],            q[2],            q[3]};
     f.write(row, sizeof row);
   }
   f.write(s.id.data(), s.id.size() * sizeof(std::int64_t));
   f.close();
 }
 
-OracleSpheres read_oracle_input(const std::string& path, bool& warm_step) {
+OracleBodies read_oracle_input(const std::string& path, bool& warm_step) {
   BinaryFile f(path, "rb");
   f.expect_magic(kInputMagic);
   const std::uint64_t n = checked_count(f.get<std::uint64_t>(), path);
   warm_step = f.get<std::uint8_t>() != 0;
-  OracleSpheres s;
+  OracleBodies s;
+  s.origin = f.get<Vec3<double>>();
   s.position.resize(n);
   s.radius.resize(n);
+  s.semi_axes.resize(n);
+  s.orientation.resize(n);
   s.id.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
-    double row[4];
+    double row[11];
     f.read(row, sizeof row);
     s.position[i] = {row[0], row[1], row[2]};
     s.radius[i] = row[3];
+    s.semi_axes[i] = {row[4], row[5], row[6]};
+    s.orientation[i] = {row[7], row[8], row[9], row[10]};
   }
   f.read(s.id.data(), n * sizeof(std::int64_t));
   f.expect_end();

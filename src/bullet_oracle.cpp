@@ -3,7 +3,7 @@
 // CG_BULLET_ORACLE_MAIN defined, into the executable `contactgrid-bullet-float`. Nothing here may
 // depend on which flavour it is, except through btScalar.
 //
-// Invariants: bodies are added in id order (so Bullet's body A, the first added, is the smaller id);
+// Invariants: bodies are added in id order, each at its centre minus the bodies' origin (so Bullet's body A, the first added, is the smaller id);
 // one performDiscreteCollisionDetection() gives the contacts; the world is torn down in O(pairs + n)
 // (Bullet's own teardown removes each proxy by scanning every pair: O(n · pairs), minutes at 2^20).
 #include "bullet_oracle.hpp"
@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "bullet_ellipsoid_shape.hpp"
 #include "errors.hpp"
 
 namespace cg::bullet_native {
@@ -38,22 +39,25 @@ struct RemoveAllPairs : btOverlapCallback {
   bool processOverlap(btBroadphasePair&) override { return true; }
 };
 
-// One Bullet collision world over the spheres. Members are declared in destruction-safe order:
+// One Bullet collision world over the bodies. Members are declared in destruction-safe order:
 // shapes and objects outlive the world that points at them.
 class BulletWorld {
  public:
-  explicit BulletWorld(const OracleSpheres& s)
+  explicit BulletWorld(const OracleBodies& s)
       : m_dispatcher(&m_config), m_world(&m_dispatcher, &m_broadphase, &m_config) {
     const std::size_t n = s.size();
     m_shapes.reserve(n);
     m_objects.reserve(n);
     for (std::size_t i = 0; i < n; ++i) {
-      m_shapes.push_back(std::make_unique<btSphereShape>(btScalar(s.radius[i])));
+      if (s.is_ellipsoid(i)) {
+        const Vec3<double> e = s.semi_axes[i];
+        m_shapes.push_back(std::make_unique<EllipsoidShape>(btScalar(e.x), btScalar(e.y), btScalar(e.z),
+                                                            btScalar(kEllipsoidMargin)));
+      } else {
+        m_shapes.push_back(std::make_unique<btSphereShape>(btScalar(s.radius[i])));
+      }
       m_objects.push_back(std::make_unique<btCollisionObject>());
-      btTransform t;
-      t.setIdentity();
-      t.setOrigin(to_bt(s.position[i]));
-      m_objects.back()->setWorldTransform(t);
+      m_objects.back()->setWorldTransform(transform(s, i, s.position[i]));
       m_objects.back()->setCollisionShape(m_shapes.back().get());
       m_world.addCollisionObject(m_objects.back().get());  // world array index == i
     }
@@ -67,15 +71,13 @@ class BulletWorld {
 
   void detect() { m_world.performDiscreteCollisionDetection(); }
 
-  void move_all(const OracleSpheres& s) {
-    for (std::size_t i = 0; i < m_objects.size(); ++i) {
-      btTransform& t = m_objects[i]->getWorldTransform();
-      t.setOrigin(to_bt(s.position[i] + warm_step_displacement(i, s.radius[i])));
-    }
+  void move_all(const OracleBodies& s) {
+    for (std::size_t i = 0; i < m_objects.size(); ++i)
+      m_objects[i]->setWorldTransform(transform(s, i, s.position[i] + warm_step_displacement(i, s.radius[i])));
   }
 
   // Deepest manifold point of every pair with distance <= 0, as (id_a < id_b), sorted.
-  Contacts<double> contacts(const OracleSpheres& s) {
+  Contacts<double> contacts(const OracleBodies& s) {
     struct Row {
       std::int64_t a, b;
       Vec3<double> pa, pb, n;
@@ -97,8 +99,8 @@ class BulletWorld {
       const btManifoldPoint& p = pm->getContactPoint(best);
       Row r{s.id[std::size_t(pm->getBody0()->getWorldArrayIndex())],
             s.id[std::size_t(pm->getBody1()->getWorldArrayIndex())],
-            from_bt(p.getPositionWorldOnA()),
-            from_bt(p.getPositionWorldOnB()),
+            from_bt(p.getPositionWorldOnA()) + s.origin,
+            from_bt(p.getPositionWorldOnB()) + s.origin,
             from_bt(p.m_normalWorldOnB),
             double(p.getDistance())};
       if (r.a > r.b) {  // express the contact with A = the smaller id
@@ -123,7 +125,20 @@ class BulletWorld {
   }
 
  private:
-  std::vector<std::unique_ptr<btSphereShape>> m_shapes;
+  // Body i at `centre` (world), seen by Bullet relative to the bodies' origin, rotated by its quaternion.
+  static btTransform transform(const OracleBodies& s, std::size_t i, Vec3<double> centre) {
+    btTransform t;
+    t.setIdentity();
+    t.setOrigin(to_bt(centre - s.origin));
+    if (s.is_ellipsoid(i)) {
+      const auto& q = s.orientation[i];  // (w, x, y, z); btQuaternion takes (x, y, z, w)
+      const btQuaternion r{btScalar(q[1]), btScalar(q[2]), btScalar(q[3]), btScalar(q[0])};
+      t.setRotation(r.normalized());
+    }
+    return t;
+  }
+
+  std::vector<std::unique_ptr<btConvexShape>> m_shapes;
   std::vector<std::unique_ptr<btCollisionObject>> m_objects;
   btDefaultCollisionConfiguration m_config;
   btCollisionDispatcher m_dispatcher;
@@ -133,20 +148,20 @@ class BulletWorld {
 
 }  // namespace
 
-OracleResult collide(const OracleSpheres& spheres, bool warm_step) {
-  for (std::size_t i = 1; i < spheres.size(); ++i)
-    if (spheres.id[i - 1] >= spheres.id[i])
+OracleResult collide(const OracleBodies& bodies, bool warm_step) {
+  for (std::size_t i = 1; i < bodies.size(); ++i)
+    if (bodies.id[i - 1] >= bodies.id[i])
       throw InputError("Bullet oracle: body ids must be strictly ascending (row " + std::to_string(i) + ")");
   OracleResult result;
   result.scalar_bytes = int(sizeof(btScalar));
   const auto t0 = Clock::now();
-  BulletWorld world(spheres);
+  BulletWorld world(bodies);
   world.detect();
   result.scratch_seconds = seconds_since(t0);
-  result.contacts = world.contacts(spheres);
+  result.contacts = world.contacts(bodies);
   if (warm_step) {
     const auto t1 = Clock::now();
-    world.move_all(spheres);
+    world.move_all(bodies);
     world.detect();
     result.warm_seconds = seconds_since(t1);
   }
@@ -162,7 +177,7 @@ int main(int argc, char** argv) {
   if (argc != 3) {
     std::fprintf(stderr,
                  "usage: %s INPUT OUTPUT\n"
-                 "Runs Bullet (%s precision) on the spheres of INPUT (contactgrid's oracle exchange\n"
+                 "Runs Bullet (%s precision) on the bodies of INPUT (contactgrid's oracle exchange\n"
                  "format, see src/bullet_oracle.hpp) and writes the contacts to OUTPUT.\n"
                  "Started by `contactgrid validate --bullet float`; not meant to be run by hand.\n",
                  argv[0], sizeof(btScalar) == 8 ? "double" : "single");
@@ -170,8 +185,8 @@ int main(int argc, char** argv) {
   }
   try {
     bool warm = false;
-    const cg::OracleSpheres spheres = cg::read_oracle_input(argv[1], warm);
-    cg::write_oracle_output(argv[2], cg::bullet_native::collide(spheres, warm));
+    const cg::OracleBodies bodies = cg::read_oracle_input(argv[1], warm);
+    cg::write_oracle_output(argv[2], cg::bullet_native::collide(bodies, warm));
     return 0;
   } catch (const cg::Error& e) {
     std::fprintf(stderr, "%s: %s\n", argv[0], e.what());

@@ -1,5 +1,8 @@
 #pragma once
-// Bullet 3 as the oracle for sphere contacts (CONTRACT §4), behind an interface without Bullet types.
+// Bullet 3 as the oracle for sphere and ellipsoid contacts (CONTRACT §4), behind an interface without
+// Bullet types. A sphere is a btSphereShape; an ellipsoid is an EllipsoidShape
+// (bullet_ellipsoid_shape.hpp): the exact support R D² Rᵀ u / |D Rᵀ u| with a collision margin of
+// kEllipsoidMargin folded into it, so Bullet's margin-inflated shape is the ellipsoid itself.
 //
 // bullet_oracle.cpp is compiled twice: once against double Bullet (pkg-config bullet-float64, which
 // adds -DBT_USE_DOUBLE_PRECISION) into cg_validate, and once against float Bullet (pkg-config bullet)
@@ -22,9 +25,12 @@
 //   3. the path the build tree gave it (compile definition CG_BULLET_FLOAT_BUILD_PATH), for tests.
 //
 // Exchange format (native endianness; both processes run on the same host):
-//   input : "CGBOIN01", u64 n, u8 warm, n × {f64 x, y, z, r}, n × i64 id
+//   input : "CGBOIN02", u64 n, u8 warm, f64 origin[3],
+//           n × {f64 x, y, z, r, semi_a, semi_b, semi_c, qw, qx, qy, qz}, n × i64 id
+//           (a sphere has semi-axes 0; an ellipsoid has r = its largest semi-axis)
 //   output: "CGBOOUT1", u32 sizeof(btScalar), f64 scratch_s, f64 warm_s (-1: not run), u64 k,
 //           k × {i64 id_a, i64 id_b, f64 pa[3], f64 pb[3], f64 n[3], f64 distance}
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -34,12 +40,25 @@
 
 namespace cg {
 
-// Spheres handed to Bullet, in world coordinates. Invariant: ids strictly ascending.
-struct OracleSpheres {
+// The collision margin of an ellipsoid in Bullet (measured, issue #12: float Bullet with the exact
+// support and this margin agrees best with the exact contacts), shrunk per body to half its smallest
+// radius of curvature c_min² / a_max so that the margin-free core stays convex.
+inline constexpr double kEllipsoidMargin = 0.04;
+
+// Bodies handed to Bullet, in world coordinates. Invariant: ids strictly ascending. `semi_axes` and
+// `orientation` are empty (every body a sphere) or one row per body; a row with semi-axes (0, 0, 0)
+// is a sphere of `radius`, any other an ellipsoid (radius = its largest semi-axis, orientation the
+// unit quaternion (w, x, y, z) of CONTRACT §1). Bullet sees `position − origin`, and the points it
+// returns are moved back by `origin` (in double): float Bullet is exact only near its origin.
+struct OracleBodies {
   std::vector<Vec3<double>> position;
   std::vector<double> radius;
+  std::vector<Vec3<double>> semi_axes;
+  std::vector<std::array<double, 4>> orientation;
   std::vector<std::int64_t> id;
+  Vec3<double> origin{0, 0, 0};
   std::size_t size() const { return radius.size(); }
+  bool is_ellipsoid(std::size_t i) const { return !semi_axes.empty() && semi_axes[i].x > 0; }
 };
 
 struct OracleResult {
@@ -52,7 +71,7 @@ struct OracleResult {
 // Runs Bullet of the requested precision: fp64 in this process, fp32 through the float executable.
 // `warm_step`: also time one warm step (the contacts returned are always those of the first
 // detection). Throws IoError when the float executable cannot be found or run.
-OracleResult bullet_collide(const OracleSpheres& spheres, Precision bullet, bool warm_step = false);
+OracleResult bullet_collide(const OracleBodies& bodies, Precision bullet, bool warm_step = false);
 
 // Path of `contactgrid-bullet-float` as located above; throws IoError listing where it looked.
 std::string bullet_float_executable();
@@ -63,12 +82,12 @@ Vec3<double> warm_step_displacement(std::size_t index, double radius);
 // ---- inside bullet_oracle.cpp (one flavour per binary) ------------------------------------------
 namespace bullet_native {
 // Runs the Bullet linked into this binary (double in cg_validate, float in the float executable).
-OracleResult collide(const OracleSpheres& spheres, bool warm_step);
+OracleResult collide(const OracleBodies& bodies, bool warm_step);
 }  // namespace bullet_native
 
 // Exchange files (bullet_exchange.cpp; used by both binaries).
-void write_oracle_input(const std::string& path, const OracleSpheres& spheres, bool warm_step);
-OracleSpheres read_oracle_input(const std::string& path, bool& warm_step);
+void write_oracle_input(const std::string& path, const OracleBodies& bodies, bool warm_step);
+OracleBodies read_oracle_input(const std::string& path, bool& warm_step);
 void write_oracle_output(const std::string& path, const OracleResult& result);
 OracleResult read_oracle_output(const std::string& path);
 

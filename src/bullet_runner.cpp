@@ -57,12 +57,12 @@ class TempDir {
   fs::path m_path;
 };
 
-OracleResult run_float_executable(const OracleSpheres& spheres, bool warm_step) {
+OracleResult run_float_executable(const OracleBodies& bodies, bool warm_step) {
   const std::string exe = bullet_float_executable();
   TempDir dir;
-  const std::string in = (dir.path() / "spheres.bin").string();
+  const std::string in = (dir.path() / "bodies.bin").string();
   const std::string out = (dir.path() / "contacts.bin").string();
-  write_oracle_input(in, spheres, warm_step);
+  write_oracle_input(in, bodies, warm_step);
 
   std::vector<std::string> args{exe, in, out};
   std::vector<char*> argv;
@@ -107,10 +107,10 @@ std::string bullet_float_executable() {
   throw IoError(msg + "); set CONTACTGRID_BULLET_FLOAT to its path");
 }
 
-OracleResult bullet_collide(const OracleSpheres& spheres, Precision bullet, bool warm_step) {
+OracleResult bullet_collide(const OracleBodies& bodies, Precision bullet, bool warm_step) {
   const int want = bullet == Precision::fp64 ? 8 : 4;
-  OracleResult r = bullet == Precision::fp64 ? bullet_native::collide(spheres, warm_step)
-                                             : run_float_executable(spheres, warm_step);
+  OracleResult r = bullet == Precision::fp64 ? bullet_native::collide(bodies, warm_step)
+                                             : run_float_executable(bodies, warm_step);
   if (r.scalar_bytes != want)
     throw Error("Bullet oracle: asked for " + std::to_string(want * 8) + "-bit Bullet, got " +
                 std::to_string(r.scalar_bytes * 8) + "-bit (build mixes the flavours)");

@@ -5,6 +5,7 @@
 
 #include <CLI/CLI.hpp>
 #include <cmath>
+#include <iostream>
 #include <map>
 
 #include "pipeline.hpp"
@@ -13,13 +14,16 @@
 #include "validate.hpp"
 #endif
 #include "session.hpp"
+#include "study.hpp"
+#include "study_families.hpp"
 
 namespace cg {
 namespace {
 
 const std::map<std::string, Backend> k_backends{
     {"cpu", Backend::cpu}, {"cuda", Backend::cuda}, {"auto", Backend::automatic}};
-const std::map<std::string, Precision> k_precisions{{"fp32", Precision::fp32}, {"fp64", Precision::fp64}};
+const std::map<std::string, Precision> k_precisions{
+    {"fp32", Precision::fp32}, {"fp64", Precision::fp64}, {"mixed", Precision::mixed}};
 const std::map<std::string, Fields> k_fields{{"basic", Fields::basic}, {"full", Fields::full}};
 const std::map<std::string, SlabAxis> k_axes{
     {"auto", SlabAxis::automatic}, {"x", SlabAxis::x}, {"y", SlabAxis::y}, {"z", SlabAxis::z}};
@@ -81,7 +85,10 @@ int run_cli(int argc, char** argv, Session& session) {
   d->add_option("--backend", det.backend, "cpu | cuda | auto (cuda when a GPU is present)")
       ->transform(CLI::CheckedTransformer(k_backends))
       ->default_str("auto");
-  d->add_option("--precision", det.precision, "fp32 | fp64: real type of the whole pipeline and output")
+  d->add_option("--precision", det.precision,
+                "fp32 | fp64 | mixed: fp32 and fp64 run every stage and write their real type; mixed "
+                "runs the broad phase in fp32 and the narrow phase in fp64 from the world coordinates "
+                "(float64 output, fp64's contacts); README 'Choosing a precision'")
       ->transform(CLI::CheckedTransformer(k_precisions))
       ->default_str("fp64");
   d->add_option("--fields", det.fields, "basic | full (adds local points and friction directions)")
@@ -148,24 +155,64 @@ int run_cli(int argc, char** argv, Session& session) {
   c->add_option("a", cmp_a, "Contacts file")->required();
   c->add_option("b", cmp_b, "Contacts file")->required();
 
+  // study
+  StudyOptions study;
+  std::vector<std::string> study_backends;
+  std::vector<std::string> family_names;
+  for (const auto& f : study_families()) family_names.push_back(f.name);
+  auto* st = app.add_subcommand(
+      "study", "Speed vs accuracy of each precision mode on adversarial scene families, against the exact "
+               "(long-double) reference: table, CSV, SVG plot; no Bullet needed");
+  st->add_option("--families", study.families, "Families to run (default: all)")
+      ->delimiter(',')
+      ->check(CLI::IsMember(family_names));
+  st->add_option("--modes", study.modes, "Precision modes to run (default: all)")
+      ->delimiter(',')
+      ->check(CLI::IsMember(study_mode_names()));
+  st->add_option("--backends", study_backends, "cpu, cuda (default: cpu, and cuda when a GPU is present)")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"cpu", "cuda"}));
+  st->add_option("--tolerances", study.tolerances,
+                 "Ellipsoid solver tolerances (relative to the bodies' size; 0: the mode's default)")
+      ->delimiter(',')
+      ->capture_default_str();
+  st->add_option("--scale", study.scale, "Family sizes × scale (1: ~1-2 min on 2 CPU cores)")
+      ->check(CLI::Range(1e-6, 1e4))
+      ->capture_default_str();
+  st->add_option("--repetitions", study.repetitions, "Time = median of this many detect calls")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  st->add_option("--seed", study.seed, "Scene seed")->capture_default_str();
+  st->add_option("--threads", study.threads, "CPU backend threads (0: all cores)")->check(CLI::NonNegativeNumber);
+  st->add_option("--csv", study.csv, "Write the rows as CSV");
+  st->add_option("--svg", study.svg, "Write the time-vs-error plot (Pareto front) as SVG");
+
 #if defined(CONTACTGRID_HAVE_BULLET)
   // validate
-  std::string val_scene, val_contacts, val_bullet = "double";
+  std::string val_scene, val_contacts, val_bullet = "auto";
   ValidateOptions val;
   auto* v = app.add_subcommand(
       "validate", "Compare a contacts file with Bullet 3.24 (CONTRACT §4); PASS exits 0, FAIL 1");
   v->add_option("scene", val_scene, "Scene file (.h5)")->required();
   v->add_option("contacts", val_contacts, "Contacts file (.h5) written by detect")->required();
-  v->add_option("--pos-eps", val.pos_eps, "Largest position error allowed (absolute, length units)")
+  v->add_option("--pos-eps", val.pos_eps,
+                "Largest position error allowed (length units; for pairs with an ellipsoid, times the pair's "
+                "larger bounding radius, and also the largest distance error)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   v->add_option("--angle-deg", val.angle_deg, "Largest angle between normals allowed (degrees)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  v->add_option("--bullet-precision", val_bullet,
-                "double (default) | float: Bullet build to compare with; float Bullet is wrong far from the "
-                "origin and for nearly coincident centres")
-      ->check(CLI::IsMember({"double", "float"}))
+  v->add_option("--bullet-precision,--bullet", val_bullet,
+                "auto | double | float: Bullet build to compare with; auto: float for scenes with ellipsoids "
+                "(double Bullet's EPA is degenerate on many ellipsoid pairs), double otherwise (float Bullet is "
+                "wrong far from the origin and for nearly coincident centres)")
+      ->check(CLI::IsMember({"auto", "double", "float"}))
+      ->capture_default_str();
+  v->add_option("--shallow", val.shallow_threshold,
+                "Ellipsoid pairs only we report, judged correct and shallower than this, are shallow Bullet "
+                "misses (accepted; length units; default: a quarter of Bullet's ellipsoid margin 0.04)")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   v->add_option("--sample", val.sample,
                 "Validate K random sub-boxes instead of the whole scene (large scenes)");
@@ -187,6 +234,9 @@ int run_cli(int argc, char** argv, Session& session) {
   b->add_option("--backend", bench_backends, "cpu | cuda (repeatable; default: cpu, and cuda when present)")
       ->check(CLI::IsMember({"cpu", "cuda"}));
   b->add_option("--threads", bench.threads, "CPU backend threads (0: all cores)");
+  b->add_option("--precision", bench.precision, "fp32 | fp64 | mixed: the engine's precision mode")
+      ->transform(CLI::CheckedTransformer(k_precisions))
+      ->default_str("fp64");
   b->add_option("--seed", bench.seed, "Scene seed")->capture_default_str();
   b->add_option("--csv", bench.csv, "CSV output")->capture_default_str();
   b->add_option("--plot-prefix", bench.plot_prefix, "Plot file prefix (PNG and SVG); default: the CSV name");
@@ -214,6 +264,12 @@ int run_cli(int argc, char** argv, Session& session) {
   }
   if (d->parsed()) return run_detect(det, session);
   if (c->parsed()) return session.rank() == 0 ? run_compare(cmp_a, cmp_b) : 0;
+  if (st->parsed()) {
+    if (session.rank() != 0) return 0;
+    for (const auto& name : study_backends) study.backends.push_back(name == "cuda" ? Backend::cuda : Backend::cpu);
+    run_study(study, std::cout, std::cerr);
+    return 0;
+  }
 #if defined(CONTACTGRID_HAVE_BULLET)
   if (v->parsed()) {
     if (session.rank() != 0) return 0;

@@ -1,5 +1,5 @@
 #pragma once
-// The contactgrid command line (CLI11): generate, detect, validate, bench.
+// The contactgrid command line (CLI11): generate, detect, compare, study, validate, bench.
 namespace cg {
 // Parses argv and runs the command. Returns the exit code; throws cg::Error for the caller (main)
 // to turn into a message and its exit code.

@@ -145,12 +145,17 @@ struct SharedFrame {
 };
 
 template <class Real>
-SharedFrame agree_frame(const Session& session, const Bounds& mine, const DistributedOptions& options) {
-  constexpr Precision precision = precision_of<Real>();
+SharedFrame agree_frame(const Session& session, const std::string& path, const Bounds& mine,
+                        const DistributedOptions& options) {
+  const Precision precision = options.engine.fp32_broad_phase ? Precision::mixed : precision_of<Real>();
   SharedFrame f;
   f.global = allgather_bounds(session, mine);
   agreed_stage(session, "frame", [&] {
-    f.frame = make_frame(f.global, options.engine.cell_size, precision, options.engine.cell_choice);
+    try {
+      f.frame = make_frame(f.global, options.engine.cell_size, precision, options.engine.cell_choice);
+    } catch (const InputError& e) {  // the scene cannot be run in this mode: name it
+      throw InputError(path + ": " + e.what());
+    }
     f.axis = choose_axis(f.global, static_cast<int>(options.axis));
     double extent = 0;
     for (int k = 0; k < 3; ++k) {
@@ -360,6 +365,7 @@ void record_detection(const Session& session, const Engine<Real>& engine, const 
   result.stats.pair_tests = session.sum(result.stats.pair_tests);
   result.stats.narrow_fallbacks = session.sum(result.stats.narrow_fallbacks);
   result.stats.narrow_unconverged = session.sum(result.stats.narrow_unconverged);
+  result.stats.fp64_rows = session.sum(result.stats.fp64_rows);
   result.stats.ellipsoids = result.ellipsoids;  // the scene's (the engines' counts include ghosts)
   result.stats.key_bits = int(session.max(double(result.stats.key_bits)));
   const std::vector<std::uint64_t> owned = allgather_counts(session, input.owned);
@@ -408,7 +414,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   StageClock clock;
 
   Partition part = read_partition(session, path, all_rows, options.resident_steps);
-  const SharedFrame f = agree_frame<Real>(session, part.bounds, options);
+  const SharedFrame f = agree_frame<Real>(session, path, part.bounds, options);
   clock.stop(Stage::read);
   result.bodies = part.bodies;
   result.ellipsoids = part.ellipsoids;
@@ -461,6 +467,10 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
   if (r.ellipsoids > 0)
     fmt::print("\n  {} ellipsoids, {} narrow fallbacks, {} narrow solves unconverged (summed over ranks)",
                r.ellipsoids, r.stats.narrow_fallbacks, r.stats.narrow_unconverged);
+  if (r.stats.fp64_rows > 0)
+    fmt::print("\n  {} fp32 rows recomputed in fp64 (centres closer than fp32 resolves a normal; summed over "
+               "ranks)",
+               r.stats.fp64_rows);
   fmt::print("\n  {}-bit cell keys, {} (cell, body) entries, {} pair tests; times: maximum over ranks\n",
              r.stats.key_bits, r.stats.entries, r.stats.pair_tests);
   double total = 0;
@@ -494,6 +504,7 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.engine.cell_size = cmd.cell_size;
   o.engine.cell_choice = cmd.cell_choice;
   o.engine.threads = cmd.threads;
+  o.engine.fp32_broad_phase = cmd.precision == Precision::mixed;
   o.engine.skin = cmd.skin;
   if (cmd.backend != Backend::cpu) o.engine.device = session.device_for(cuda_device_count());
   o.axis = cmd.axis;

@@ -2,17 +2,15 @@
 //
 // Data flow: check the contacts against CONTRACT §2 → index them in canonical form (id_a < id_b,
 // sorted; duplicates skipped) without copying when they already are → choose the region(s): the
-// whole scene, or K disjoint sub-boxes → per region: Bullet on the spheres there (ids ascending),
-// the contacts of pairs inside the region, merge-join by (id_a, id_b) → aggregate → PASS/FAIL.
-//
-// Invariants: both lists handed to the merge are sorted by (id_a, id_b) with each pair once; every
-// pair found by one side only is classified with its exact distance from the scene, never with the
-// value either side computed.
+// whole scene, or K disjoint sub-boxes → per region: Bullet on the bodies there (ids ascending; in a
+// frame centred on them when the scene has ellipsoids), the contacts of pairs inside the region,
+// merge-join by (id_a, id_b) (validate_compare.cpp) → aggregate → PASS/FAIL.
 #include "validate.hpp"
 
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -22,118 +20,12 @@
 #include "bullet_oracle.hpp"
 #include "errors.hpp"
 #include "hdf5_io.hpp"
+#include "validate_detail.hpp"
 
 namespace cg {
 namespace {
 
-using Key = std::pair<std::int64_t, std::int64_t>;
-
-double norm(Vec3<double> v) { return std::sqrt(dot(v, v)); }
-
-bool finite(Vec3<double> v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
-
-// Angle between two directions in degrees, accurate for small angles; 180 for a zero/NaN vector.
-double angle_deg(Vec3<double> u, Vec3<double> v) {
-  const double c = norm(cross(u, v)), d = dot(u, v);
-  const double a = std::atan2(c, d) * 180.0 / 3.141592653589793;
-  return std::isfinite(a) && (c != 0 || d != 0) ? a : 180.0;
-}
-
-// One contact in canonical form (A = smaller id), geometry in double.
-struct Geometry {
-  Vec3<double> pa, pb, n;
-  double d;
-};
-
-// The contacts given, viewed in canonical order without copying their geometry.
-class ContactIndex {
- public:
-  explicit ContactIndex(const Contacts<double>& c) : m_c(c) {}
-
-  // Builds the order when the rows are not already canonical and sorted; drops rows `keep` rejects.
-  template <class Keep>
-  void build(bool canonical_sorted, Keep keep) {
-    m_order.clear();
-    m_identity = canonical_sorted;
-    if (canonical_sorted) {
-      for (std::size_t r = 0; r < m_c.size(); ++r)
-        if (!keep(r)) m_identity = false;
-      if (m_identity) return;
-    }
-    for (std::size_t r = 0; r < m_c.size(); ++r)
-      if (keep(r)) m_order.push_back(r);
-    std::stable_sort(m_order.begin(), m_order.end(),
-                     [&](std::size_t x, std::size_t y) { return row_key(x) < row_key(y); });
-    // Each pair once: keep the first row of a run of equal keys.
-    m_order.erase(std::unique(m_order.begin(), m_order.end(),
-                              [&](std::size_t x, std::size_t y) { return row_key(x) == row_key(y); }),
-                  m_order.end());
-  }
-
-  std::size_t size() const { return m_identity ? m_c.size() : m_order.size(); }
-  std::size_t row(std::size_t k) const { return m_identity ? k : m_order[k]; }
-  Key key(std::size_t k) const { return row_key(row(k)); }
-
-  Key row_key(std::size_t r) const {
-    const auto a = m_c.id_a[r], b = m_c.id_b[r];
-    return a < b ? Key{a, b} : Key{b, a};
-  }
-  Geometry geometry(std::size_t k) const {
-    const std::size_t r = row(k);
-    Geometry g{m_c.position_on_a[r], m_c.position_on_b[r], m_c.normal_on_b[r], m_c.distance[r]};
-    if (m_c.id_a[r] > m_c.id_b[r]) {  // the row's own A/B: express it with A = smaller id
-      std::swap(g.pa, g.pb);
-      g.n = -g.n;
-    }
-    return g;
-  }
-  // First k with key(k).first >= id.
-  std::size_t lower_bound_a(std::int64_t id) const {
-    std::size_t lo = 0, hi = size();
-    while (lo < hi) {
-      const std::size_t mid = lo + (hi - lo) / 2;
-      if (key(mid).first < id)
-        lo = mid + 1;
-      else
-        hi = mid;
-    }
-    return lo;
-  }
-
- private:
-  const Contacts<double>& m_c;
-  std::vector<std::size_t> m_order;
-  bool m_identity = true;
-};
-
-// Keeps the `limit` largest offenders of each kind.
-class Offenders {
- public:
-  explicit Offenders(std::size_t limit) : m_limit(limit) {}
-  void add(const ValidateOffender& o) {
-    if (m_limit == 0) return;
-    auto& v = m_by_kind[std::size_t(o.kind)];
-    v.push_back(o);
-    if (v.size() > 4 * m_limit) trim(v);
-  }
-  std::vector<ValidateOffender> take() {
-    std::vector<ValidateOffender> out;
-    for (auto& v : m_by_kind) {
-      trim(v);
-      out.insert(out.end(), v.begin(), v.end());
-    }
-    return out;
-  }
-
- private:
-  void trim(std::vector<ValidateOffender>& v) const {
-    std::stable_sort(v.begin(), v.end(),
-                     [](const ValidateOffender& x, const ValidateOffender& y) { return x.value > y.value; });
-    if (v.size() > m_limit) v.resize(m_limit);
-  }
-  std::size_t m_limit;
-  std::vector<ValidateOffender> m_by_kind[5];
-};
+using namespace validate_detail;
 
 struct Box {
   Vec3<double> lo, hi;
@@ -147,16 +39,27 @@ struct SceneStats {
   double r_max = 0, r_mean = 0, extent = 0, magnitude = 0;
 };
 
+Vec3<double> centre(const Scene& s, std::size_t id) {
+  return id < s.sphere_count() ? s.sphere_position[id] : s.ellipsoid_position[id - s.sphere_count()];
+}
+
+// A sphere's radius, an ellipsoid's largest semi-axis.
+double bounding_radius(const Scene& s, std::size_t id) {
+  if (id < s.sphere_count()) return s.sphere_radius[id];
+  const Vec3<double> e = s.ellipsoid_semi_axes[id - s.sphere_count()];
+  return std::max({e.x, e.y, e.z});
+}
+
 SceneStats scene_stats(const Scene& s) {
   SceneStats st;
-  const std::size_t n = s.sphere_count();
+  const std::size_t n = s.size();
   const double inf = std::numeric_limits<double>::infinity();
   st.centres = {{inf, inf, inf}, {-inf, -inf, -inf}};
   Box body_box = st.centres;
   double sum = 0;
   for (std::size_t i = 0; i < n; ++i) {
-    const Vec3<double> c = s.sphere_position[i];
-    const double r = s.sphere_radius[i];
+    const Vec3<double> c = centre(s, i);
+    const double r = bounding_radius(s, i);
     st.centres.lo = {std::min(st.centres.lo.x, c.x), std::min(st.centres.lo.y, c.y),
                      std::min(st.centres.lo.z, c.z)};
     st.centres.hi = {std::max(st.centres.hi.x, c.x), std::max(st.centres.hi.y, c.y),
@@ -181,68 +84,6 @@ double tolerance(Precision p, double scale, double span) {
   return p == Precision::fp64
              ? std::max(1e-9 * scale, 16 * std::numeric_limits<double>::epsilon() * span)
              : std::max(1e-4 * scale, 16 * double(std::numeric_limits<float>::epsilon()) * span);
-}
-
-// Exact signed distance of two spheres (long double), as CONTRACT §3.
-double exact_distance(const Scene& s, std::int64_t a, std::int64_t b) {
-  const Vec3<double> ca = s.sphere_position[std::size_t(a)], cb = s.sphere_position[std::size_t(b)];
-  const long double dx = (long double)ca.x - cb.x, dy = (long double)ca.y - cb.y,
-                    dz = (long double)ca.z - cb.z;
-  const long double d = std::sqrt(dx * dx + dy * dy + dz * dz);
-  return double(d - ((long double)s.sphere_radius[std::size_t(a)] + s.sphere_radius[std::size_t(b)]));
-}
-
-// Compares one region: `mine` are positions in the ContactIndex (sorted by key), `ref` Bullet's.
-void compare_region(const Scene& scene, const ContactIndex& index, const std::vector<std::size_t>& mine,
-                    const Contacts<double>& ref, const std::vector<std::size_t>& ref_rows, double band,
-                    ValidateReport& rep, Offenders& off) {
-  const double nan = std::numeric_limits<double>::quiet_NaN();
-  std::size_t i = 0, j = 0;
-  auto one_sided = [&](Key k, bool only_mine, double side_distance) {
-    const double ed = exact_distance(scene, k.first, k.second);
-    if (std::abs(ed) <= band) {
-      ++(only_mine ? rep.borderline_extra : rep.borderline_missing);
-      return;
-    }
-    ++(only_mine ? rep.extra : rep.missing);
-    off.add({only_mine ? ValidateOffender::Kind::extra : ValidateOffender::Kind::missing, k.first, k.second,
-             std::abs(ed), ed, only_mine ? side_distance : nan, only_mine ? nan : side_distance});
-  };
-  rep.checked += mine.size();
-  rep.bullet_contacts += ref_rows.size();
-  while (i < mine.size() || j < ref_rows.size()) {
-    const Key km = i < mine.size() ? index.key(mine[i]) : Key{INT64_MAX, INT64_MAX};
-    const Key kr =
-        j < ref_rows.size() ? Key{ref.id_a[ref_rows[j]], ref.id_b[ref_rows[j]]} : Key{INT64_MAX, INT64_MAX};
-    if (km < kr) {
-      one_sided(km, true, index.geometry(mine[i]).d);
-      ++i;
-    } else if (kr < km) {
-      one_sided(kr, false, ref.distance[ref_rows[j]]);
-      ++j;
-    } else {
-      const Geometry g = index.geometry(mine[i]);
-      const std::size_t r = ref_rows[j];
-      double pos = std::max(norm(g.pa - ref.position_on_a[r]), norm(g.pb - ref.position_on_b[r]));
-      double ang = angle_deg(g.n, ref.normal_on_b[r]);
-      double dist = std::abs(g.d - ref.distance[r]);
-      if (!std::isfinite(pos)) pos = std::numeric_limits<double>::infinity();
-      if (!std::isfinite(dist)) dist = std::numeric_limits<double>::infinity();
-      ++rep.matched;
-      rep.max_position_error = std::max(rep.max_position_error, pos);
-      rep.max_angle_deg = std::max(rep.max_angle_deg, ang);
-      rep.max_distance_error = std::max(rep.max_distance_error, dist);
-      const double ed = exact_distance(scene, km.first, km.second);
-      if (pos > rep.pos_eps)
-        off.add({ValidateOffender::Kind::position, km.first, km.second, pos, ed, g.d, ref.distance[r]});
-      if (ang > rep.angle_deg)
-        off.add({ValidateOffender::Kind::angle, km.first, km.second, ang, ed, g.d, ref.distance[r]});
-      if (dist > rep.band)
-        off.add({ValidateOffender::Kind::distance, km.first, km.second, dist, ed, g.d, ref.distance[r]});
-      ++i;
-      ++j;
-    }
-  }
 }
 
 // Checks CONTRACT §2 on the rows as given; fills the violation counters and failure lines.
@@ -304,7 +145,7 @@ void check_lengths(const Contacts<double>& c) {
 // K distinct cells, drawn at random, of a lattice over the centres' box whose cells hold about
 // `per_box` centres each: disjoint by construction. Cells are half-open [lo, hi); the last cell of
 // each axis is open above so every centre lies in exactly one cell. Empty: check the whole scene.
-std::vector<Box> pick_boxes(const SceneStats& st, std::size_t spheres, const ValidateOptions& o,
+std::vector<Box> pick_boxes(const SceneStats& st, std::size_t bodies, const ValidateOptions& o,
                             ValidateReport& rep) {
   std::vector<Box> boxes;
   if (o.sample == 0) return boxes;
@@ -312,12 +153,12 @@ std::vector<Box> pick_boxes(const SceneStats& st, std::size_t spheres, const Val
   const double floor = 2 * st.r_max;  // a box thinner than a contact is meaningless
   const double ex = std::max(e.x, floor), ey = std::max(e.y, floor), ez = std::max(e.z, floor);
   const double edge =
-      std::max(std::cbrt(ex * ey * ez * double(o.bodies_per_box) / double(spheres)), 4 * st.r_max);
+      std::max(std::cbrt(ex * ey * ez * double(o.bodies_per_box) / double(bodies)), 4 * st.r_max);
   auto cells = [&](double span) { return std::max<std::uint64_t>(1, std::uint64_t(span / edge)); };
   const std::uint64_t mx = cells(e.x), my = cells(e.y), mz = cells(e.z);
   const std::uint64_t total = mx * my * mz;
   if (total == 1) {
-    rep.notes.push_back(fmt::format("the scene ({} spheres) fits in one sub-box: checked whole", spheres));
+    rep.notes.push_back(fmt::format("the scene ({} bodies) fits in one sub-box: checked whole", bodies));
     return boxes;
   }
   std::mt19937_64 rng(o.seed);
@@ -349,112 +190,39 @@ std::vector<Box> pick_boxes(const SceneStats& st, std::size_t spheres, const Val
   return boxes;
 }
 
-}  // namespace
-
-const char* to_string(ValidateOffender::Kind k) {
-  switch (k) {
-    case ValidateOffender::Kind::missing:
-      return "missing";
-    case ValidateOffender::Kind::extra:
-      return "extra";
-    case ValidateOffender::Kind::position:
-      return "position";
-    case ValidateOffender::Kind::angle:
-      return "angle";
-    case ValidateOffender::Kind::distance:
-      return "distance";
+// The bodies `ids` (ascending) for Bullet. With `framed`, Bullet works relative to the middle of
+// their centres' box (float Bullet is exact only near its origin); `extent` gets the largest
+// |coordinate| Bullet then sees.
+OracleBodies oracle_bodies(const Scene& scene, const std::vector<std::int64_t>& ids, bool framed, double& extent) {
+  OracleBodies b;
+  const bool shapes = scene.ellipsoid_count() > 0;
+  Box span{centre(scene, 0), centre(scene, 0)};
+  for (const std::int64_t id : ids) {
+    const std::size_t i = std::size_t(id);
+    const Vec3<double> c = centre(scene, i);
+    b.position.push_back(c);
+    b.radius.push_back(bounding_radius(scene, i));
+    b.id.push_back(id);
+    if (shapes) {
+      const bool sphere = i < scene.sphere_count();
+      const std::size_t e = i - scene.sphere_count();
+      b.semi_axes.push_back(sphere ? Vec3<double>{0, 0, 0} : scene.ellipsoid_semi_axes[e]);
+      b.orientation.push_back(sphere ? std::array<double, 4>{1, 0, 0, 0} : scene.ellipsoid_orientation[e]);
+    }
+    span.lo = {std::min(span.lo.x, c.x), std::min(span.lo.y, c.y), std::min(span.lo.z, c.z)};
+    span.hi = {std::max(span.hi.x, c.x), std::max(span.hi.y, c.y), std::max(span.hi.z, c.z)};
   }
-  return "?";
+  if (framed && !ids.empty()) b.origin = 0.5 * (span.lo + span.hi);
+  extent = 0;
+  for (std::size_t k = 0; k < b.size(); ++k) {
+    const Vec3<double> c = b.position[k] - b.origin;
+    extent = std::max({extent, std::abs(c.x), std::abs(c.y), std::abs(c.z)});
+  }
+  return b;
 }
 
-Precision parse_bullet_precision(const std::string& name) {
-  if (name == "double" || name == "fp64") return Precision::fp64;
-  if (name == "float" || name == "fp32") return Precision::fp32;
-  throw UsageError("--bullet must be double or float, not '" + name + "'");
-}
-
-ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, const ValidateOptions& o) {
-  if (!(o.pos_eps > 0) || !std::isfinite(o.pos_eps)) throw UsageError("--pos-eps must be > 0");
-  if (!(o.angle_deg > 0) || !(o.angle_deg <= 180)) throw UsageError("--angle-deg must be in (0, 180]");
-  if (o.bodies_per_box < 16) throw UsageError("validate: bodies per sub-box must be >= 16");
-  check_lengths(contacts);
-
-  ValidateReport rep;
-  rep.bullet = o.bullet;
-  rep.pos_eps = o.pos_eps;
-  rep.angle_deg = o.angle_deg;
-  rep.contacts = contacts.size();
-
-  const std::int64_t spheres = std::int64_t(scene.sphere_count());
-  const std::int64_t bodies = std::int64_t(scene.size());
-  const SceneStats st = scene_stats(scene);
-  rep.scale = st.r_mean;
-  const double bullet_tol =
-      o.bullet == Precision::fp64 ? tolerance(Precision::fp64, st.r_mean, st.magnitude) : 1e-4 * st.r_mean;
-  rep.band = std::max(tolerance(o.contacts_precision, st.r_mean, st.extent), bullet_tol);
-
-  const bool canonical = check_contract(contacts, bodies, rep);
-  ContactIndex index(contacts);
-  index.build(canonical, [&](std::size_t r) {
-    const auto a = contacts.id_a[r], b = contacts.id_b[r];
-    if (a < 0 || b < 0 || a >= bodies || b >= bodies || a == b) return false;
-    if (a >= spheres || b >= spheres) {
-      ++rep.skipped_ellipsoid;
-      return false;
-    }
-    return true;
-  });
-  if (rep.skipped_ellipsoid)
-    rep.notes.push_back(
-        fmt::format("{} contacts involve ellipsoids and are not checked (Bullet has no "
-                    "ellipsoid shape)",
-                    rep.skipped_ellipsoid));
-
-  Offenders off(o.max_offenders);
-  const std::vector<Box> boxes = pick_boxes(st, std::size_t(spheres), o, rep);
-  rep.sample_boxes = boxes.size();
-  if (boxes.empty()) {
-    OracleSpheres all;
-    all.position.assign(scene.sphere_position.begin(), scene.sphere_position.end());
-    all.radius.assign(scene.sphere_radius.begin(), scene.sphere_radius.end());
-    all.id.resize(std::size_t(spheres));
-    std::iota(all.id.begin(), all.id.end(), std::int64_t(0));
-    const OracleResult bullet = bullet_collide(all, o.bullet);
-    rep.bullet_seconds += bullet.scratch_seconds;
-    std::vector<std::size_t> mine(index.size()), ref(bullet.contacts.size());
-    std::iota(mine.begin(), mine.end(), std::size_t(0));
-    std::iota(ref.begin(), ref.end(), std::size_t(0));
-    compare_region(scene, index, mine, bullet.contacts, ref, rep.band, rep, off);
-  } else {
-    const double margin = 2 * st.r_max;
-    for (const Box& box : boxes) {
-      const Box outer{box.lo - Vec3<double>{margin, margin, margin},
-                      box.hi + Vec3<double>{margin, margin, margin}};
-      OracleSpheres sub;
-      std::vector<std::int64_t> inside;  // ids with centres inside the box itself, ascending
-      for (std::int64_t i = 0; i < spheres; ++i) {
-        const Vec3<double> c = scene.sphere_position[std::size_t(i)];
-        if (!outer.contains(c)) continue;
-        sub.position.push_back(c);
-        sub.radius.push_back(scene.sphere_radius[std::size_t(i)]);
-        sub.id.push_back(i);
-        if (box.contains(c)) inside.push_back(i);
-      }
-      const OracleResult bullet = bullet_collide(sub, o.bullet);
-      rep.bullet_seconds += bullet.scratch_seconds;
-      auto in_box = [&](std::int64_t id) { return box.contains(scene.sphere_position[std::size_t(id)]); };
-      std::vector<std::size_t> ref;
-      for (std::size_t r = 0; r < bullet.contacts.size(); ++r)
-        if (in_box(bullet.contacts.id_a[r]) && in_box(bullet.contacts.id_b[r])) ref.push_back(r);
-      std::vector<std::size_t> mine;
-      for (const std::int64_t a : inside)
-        for (std::size_t k = index.lower_bound_a(a); k < index.size() && index.key(k).first == a; ++k)
-          if (in_box(index.key(k).second)) mine.push_back(k);
-      compare_region(scene, index, mine, bullet.contacts, ref, rep.band, rep, off);
-    }
-  }
-  rep.offenders = off.take();
-
+// The failure lines of the report's counters (contract violations were added by check_contract).
+void add_failures(ValidateReport& rep) {
   if (rep.missing)
     rep.failures.push_back(
         fmt::format("missing: {} pairs Bullet found are not in the contacts (outside "
@@ -465,12 +233,113 @@ ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, co
         fmt::format("extra: {} pairs in the contacts Bullet did not find (outside the "
                     "borderline band ±{:.3g})",
                     rep.extra, rep.band));
-  if (rep.max_position_error > o.pos_eps)
+  if (rep.max_position_error > rep.pos_eps)
     rep.failures.push_back(fmt::format("position: largest position error {:.3g} > --pos-eps {:.3g}",
-                                       rep.max_position_error, o.pos_eps));
-  if (rep.max_angle_deg > o.angle_deg)
+                                       rep.max_position_error, rep.pos_eps));
+  if (rep.max_angle_deg > rep.angle_deg)
     rep.failures.push_back(fmt::format("angle: largest angle between normals {:.3g}° > --angle-deg {:.3g}°",
-                                       rep.max_angle_deg, o.angle_deg));
+                                       rep.max_angle_deg, rep.angle_deg));
+  if (rep.our_errors) {
+    auto first = std::find_if(rep.offenders.begin(), rep.offenders.end(), [](const ValidateOffender& o) {
+      return o.kind == ValidateOffender::Kind::ours_wrong;
+    });
+    const std::string worst = first == rep.offenders.end()
+                                  ? std::string()
+                                  : fmt::format(" (worst: ({}, {}): {})", first->id_a, first->id_b, first->reason);
+    rep.failures.push_back(fmt::format("judged wrong: {} of our ellipsoid contacts fail the optimality conditions{}",
+                                       rep.our_errors, worst));
+  }
+}
+
+}  // namespace
+
+const char* to_string(ValidateOffender::Kind k) {
+  static constexpr const char* names[ValidateOffender::kinds] = {
+      "missing", "extra", "position", "angle", "distance", "ours wrong", "Bullet wrong", "shallow Bullet miss"};
+  return std::size_t(k) < ValidateOffender::kinds ? names[std::size_t(k)] : "?";
+}
+
+std::optional<Precision> parse_bullet_precision(const std::string& name) {
+  if (name == "double" || name == "fp64") return Precision::fp64;
+  if (name == "float" || name == "fp32") return Precision::fp32;
+  if (name == "auto") return std::nullopt;
+  throw UsageError("--bullet-precision must be auto, double or float, not '" + name + "'");
+}
+
+ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, const ValidateOptions& o) {
+  if (!(o.pos_eps > 0) || !std::isfinite(o.pos_eps)) throw UsageError("--pos-eps must be > 0");
+  if (!(o.angle_deg > 0) || !(o.angle_deg <= 180)) throw UsageError("--angle-deg must be in (0, 180]");
+  if (!(o.shallow_threshold >= 0)) throw UsageError("--shallow must be >= 0");
+  if (o.bodies_per_box < 16) throw UsageError("validate: bodies per sub-box must be >= 16");
+  check_lengths(contacts);
+
+  const bool shapes = scene.ellipsoid_count() > 0;
+  ValidateReport rep;
+  rep.bullet = o.bullet.value_or(shapes ? Precision::fp32 : Precision::fp64);
+  rep.pos_eps = o.pos_eps;
+  rep.angle_deg = o.angle_deg;
+  rep.shallow_threshold = o.shallow_threshold;
+  rep.contacts = contacts.size();
+
+  const std::int64_t bodies = std::int64_t(scene.size());
+  const SceneStats st = scene_stats(scene);
+  rep.scale = st.r_mean;
+  const double bullet_tol =
+      rep.bullet == Precision::fp64 ? tolerance(Precision::fp64, st.r_mean, st.magnitude) : 1e-4 * st.r_mean;
+  rep.band = std::max(tolerance(o.contacts_precision, st.r_mean, st.extent), bullet_tol);
+
+  const bool canonical = check_contract(contacts, bodies, rep);
+  ContactIndex index(contacts);
+  index.build(canonical, [&](std::size_t r) {
+    const auto a = contacts.id_a[r], b = contacts.id_b[r];
+    return a >= 0 && b >= 0 && a < bodies && b < bodies && a != b;
+  });
+  if (shapes)
+    rep.notes.push_back(fmt::format(
+        "ellipsoids: Bullet shape with the exact support and margin {:g}; Bullet works in a frame centred on "
+        "the bodies of each region; shallow Bullet misses: |distance| < {:.3g}",
+        kEllipsoidMargin, o.shallow_threshold));
+
+  Offenders off(o.max_offenders);
+  CompareContext ctx{scene,         rep.band, o.contacts_precision, rep.bullet, st.magnitude,
+                     /*extent=*/0., o.shallow_threshold};
+  const std::vector<Box> boxes = pick_boxes(st, std::size_t(bodies), o, rep);
+  rep.sample_boxes = boxes.size();
+  if (boxes.empty()) {
+    std::vector<std::int64_t> all(static_cast<std::size_t>(bodies));
+    std::iota(all.begin(), all.end(), std::int64_t(0));
+    const OracleResult bullet = bullet_collide(oracle_bodies(scene, all, shapes, ctx.bullet_extent), rep.bullet);
+    rep.bullet_seconds += bullet.scratch_seconds;
+    std::vector<std::size_t> mine(index.size()), ref(bullet.contacts.size());
+    std::iota(mine.begin(), mine.end(), std::size_t(0));
+    std::iota(ref.begin(), ref.end(), std::size_t(0));
+    compare_region(ctx, index, mine, bullet.contacts, ref, rep, off);
+  } else {
+    const double margin = 2 * st.r_max;
+    for (const Box& box : boxes) {
+      const Box outer{box.lo - Vec3<double>{margin, margin, margin},
+                      box.hi + Vec3<double>{margin, margin, margin}};
+      std::vector<std::int64_t> near, inside;  // centres inside the grown box / the box itself, ascending
+      for (std::int64_t i = 0; i < bodies; ++i) {
+        const Vec3<double> c = centre(scene, std::size_t(i));
+        if (outer.contains(c)) near.push_back(i);
+        if (box.contains(c)) inside.push_back(i);
+      }
+      const OracleResult bullet = bullet_collide(oracle_bodies(scene, near, shapes, ctx.bullet_extent), rep.bullet);
+      rep.bullet_seconds += bullet.scratch_seconds;
+      auto in_box = [&](std::int64_t id) { return box.contains(centre(scene, std::size_t(id))); };
+      std::vector<std::size_t> ref;
+      for (std::size_t r = 0; r < bullet.contacts.size(); ++r)
+        if (in_box(bullet.contacts.id_a[r]) && in_box(bullet.contacts.id_b[r])) ref.push_back(r);
+      std::vector<std::size_t> mine;
+      for (const std::int64_t a : inside)
+        for (std::size_t k = index.lower_bound_a(a); k < index.size() && index.key(k).first == a; ++k)
+          if (in_box(index.key(k).second)) mine.push_back(k);
+      compare_region(ctx, index, mine, bullet.contacts, ref, rep, off);
+    }
+  }
+  rep.offenders = off.take();
+  add_failures(rep);
   rep.pass = rep.failures.empty();
   return rep;
 }
@@ -481,16 +350,29 @@ std::string ValidateReport::text() const {
   s += fmt::format(
       "validate: {} (Bullet {}, {})\n", pass ? "PASS" : "FAIL", flavour,
       sample_boxes ? fmt::format("{} sampled sub-boxes", sample_boxes) : std::string("whole scene"));
-  s += fmt::format("  contacts: {} given, {} checked ({:.2f}% of the checkable), Bullet {}, matched {}\n",
+  s += fmt::format("  contacts: {} given, {} checked ({:.2f}%), Bullet {}, matched {}\n",
                    contacts, checked, 100 * checked_fraction(), bullet_contacts, matched);
   s += fmt::format(
       "  only Bullet (missing): {}   only contacts (extra): {}   borderline accepted: {} + {} "
       "(band ±{:.3g}, scale {:.3g})\n",
       missing, extra, borderline_missing, borderline_extra, band, scale);
-  s += fmt::format(
-      "  max position error {:.3g} (limit {:.3g})   max normal angle {:.3g}° (limit {:.3g}°)   "
-      "max distance error {:.3g}\n",
-      max_position_error, pos_eps, max_angle_deg, angle_deg, max_distance_error);
+  if (matched > shape_matched || shape_matched == 0)
+    s += fmt::format(
+        "  {}max position error {:.3g} (limit {:.3g})   max normal angle {:.3g}° (limit {:.3g}°)   "
+        "max distance error {:.3g}\n",
+        shape_matched ? "sphere pairs: " : "", max_position_error, pos_eps, max_angle_deg, angle_deg,
+        max_distance_error);
+  if (shape_matched + judged > 0) {
+    s += fmt::format(
+        "  ellipsoid pairs: matched {}, agreeing {} ({:.2f}%; max position error {:.3g}·L, max normal angle "
+        "{:.3g}°)\n",
+        shape_matched, shape_agree, shape_matched ? 100.0 * double(shape_agree) / double(shape_matched) : 100.0,
+        shape_max_position_error, shape_max_angle_deg);
+    s += fmt::format(
+        "  judged {}: our errors {}   Bullet errors {}   both valid {}   shallow Bullet misses {} (|distance| < "
+        "{:.3g}, deepest {:.3g})\n",
+        judged, our_errors, bullet_errors, both_valid, shallow_misses, shallow_threshold, shallow_deepest);
+  }
   s += fmt::format("  Bullet time {:.3f} s\n", bullet_seconds);
   for (const auto& f : failures) s += "  FAIL " + f + "\n";
   for (const auto& n : notes) s += "  note: " + n + "\n";
@@ -499,10 +381,10 @@ std::string ValidateReport::text() const {
     for (const auto& o : offenders) {
       auto dist = [](double d) { return std::isnan(d) ? std::string("-") : fmt::format("{:.6g}", d); };
       s += fmt::format(
-          "    {:<8} ({}, {})  value {:.4g}  exact distance {:.6g} ({})  contacts {}  Bullet {}\n",
+          "    {:<8} ({}, {})  value {:.4g}  exact distance {:.6g} ({})  contacts {}  Bullet {}{}\n",
           cg::to_string(o.kind), o.id_a, o.id_b, o.value, o.exact_distance,
-          o.exact_distance <= 0 ? "contact" : "no contact", dist(o.contacts_distance),
-          dist(o.bullet_distance));
+          o.exact_distance <= 0 ? "contact" : "no contact", dist(o.contacts_distance), dist(o.bullet_distance),
+          o.reason.empty() ? std::string() : "\n      " + o.reason);
     }
   }
   return s;
@@ -514,7 +396,7 @@ ValidateReport validate_files(const std::string& scene_path, const std::string& 
   const ContactFile file = read_contacts(contacts_path);
   if (file.precision == "fp32")
     options.contacts_precision = Precision::fp32;
-  else if (file.precision == "fp64" || file.precision.empty())
+  else if (file.precision == "fp64" || file.precision == "mixed" || file.precision.empty())
     options.contacts_precision = Precision::fp64;
   else
     throw InputError(contacts_path + ": unknown precision attribute '" + file.precision + "'");

@@ -4,12 +4,12 @@
 // Comparison: pairs are matched by (id_a, id_b). A pair found by one side only is "missing" (only
 // Bullet found it) or "extra" (only the contacts given found it) unless it is borderline: its exact
 // signed distance (recomputed from the scene in long double) is within the band
-//     band = max(tol(contacts precision), tol(Bullet precision)),  scale = mean sphere radius,
+//     band = max(tol(contacts precision), tol(Bullet precision)),  scale = mean bounding radius,
 //     tol(fp64 contacts) = max(1e-9·scale, 16·eps64·extent)   extent: largest edge of the scene box
 //     tol(fp32 contacts) = max(1e-4·scale, 16·eps32·extent)   (the engine computes in a local frame)
 //     tol(double Bullet) = max(1e-9·scale, 16·eps64·magnitude) magnitude: largest |world coordinate|
-//     tol(float Bullet)  = 1e-4·scale  (float Bullet works in world coordinates; far from the origin
-//                                       it is simply wrong, and that must show, not be excused)
+//     tol(float Bullet)  = 1e-4·scale  (in sphere-only scenes float Bullet works in world coordinates;
+//                                       far from the origin it is simply wrong, and that must show)
 // where either decision is correct. For matched pairs: position error = max(|Δposition_on_a|,
 // |Δposition_on_b|), normal angle in degrees, |Δdistance|.
 // PASS iff the contacts obey CONTRACT §2 (id_a < id_b, sorted, each pair once, ids in range), no pair
@@ -17,15 +17,31 @@
 // The distance error is reported, not judged (it is bounded by the position errors).
 //
 // Sampling (sample = K > 0): the centres' box is cut into a lattice of cells holding about
-// bodies_per_box sphere centres each, and K distinct cells are drawn at random (seeded): disjoint
-// sub-boxes, so no pair is counted twice. Bullet runs on the spheres within the box grown by
-// 2·r_max, and only pairs whose two centres lie inside the box itself are compared. The report gives
+// bodies_per_box body centres each, and K distinct cells are drawn at random (seeded): disjoint
+// sub-boxes, so no pair is counted twice. Bullet runs on the bodies within the box grown by
+// 2·r_max (bounding radii), and only pairs whose two centres lie inside the box itself are compared. The report gives
 // the fraction of the contacts checked. A scene smaller than one box is checked whole.
 //
-// Ellipsoids: Bullet has no ellipsoid shape, so contacts involving an ellipsoid are not checked; the
-// report says how many were skipped and the checked fraction excludes them.
+// Pairs with an ellipsoid (README, "Validating ellipsoids"): Bullet collides ellipsoids as a convex
+// shape with the exact support and a margin of kEllipsoidMargin (bullet_ellipsoid_shape.hpp), by
+// default in float (double Bullet's EPA is degenerate on 17–20 % of ellipsoid pairs), in a frame
+// centred on the bodies it is given (float Bullet is exact only near its origin). A matched pair agrees
+// when its positions and distances differ by <= pos_eps·L (L: the pair's larger bounding radius) and
+// its normals by <= angle_deg. Where they disagree, or one side lacks the pair, each side's answer is
+// judged by the contact's optimality conditions (contact_judge.hpp):
+//   - matched, disagreeing: our answer fails → our error (FAIL); else Bullet's fails → a Bullet error
+//     (listed, accepted); both pass → both valid (two equally deep directions);
+//   - only ours: our answer fails → our error (FAIL); it passes and |distance| < shallow_threshold →
+//     a shallow Bullet miss (listed with its distance, accepted); it passes deeper → a Bullet error;
+//   - only Bullet's: the judge's exact distance <= −band → missing (FAIL, a real contact we missed);
+//     > band → a Bullet error (Bullet's answer fails the conditions: it invented the contact).
+// The judge's length tolerance: our answers 1e-6·L (fp64) or 1e-4·L (fp32) + 16·eps·magnitude (they
+// are stored in world coordinates), Bullet's 1e-3·L (its GJK/EPA stop at ~1e-4 relative) + 16·eps·(the
+// extent of its frame). Sphere–sphere pairs keep the rule above (Bullet's sphere contacts are exact
+// formulas).
 #include <cstdint>
 #include <iosfwd>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -37,33 +53,38 @@ namespace cg {
 struct ValidateOptions {
   double pos_eps = 0.1;                            // --pos-eps: absolute, world units
   double angle_deg = 10.0;                         // --angle-deg
-  Precision bullet = Precision::fp64;              // --bullet double|float
+  std::optional<Precision> bullet;                 // --bullet-precision double|float; unset (auto):
+                                                   // float for scenes with ellipsoids, else double
   std::uint64_t sample = 0;                        // --sample K: K random sub-boxes; 0 = whole scene
   std::uint64_t seed = 1;                          // --seed: picks the sub-boxes
-  std::uint64_t bodies_per_box = 4000;             // target sphere count of one sub-box
+  std::uint64_t bodies_per_box = 4000;             // target body count of one sub-box
   Precision contacts_precision = Precision::fp64;  // precision the contacts were computed in
                                                    // (validate_files takes it from the file)
   std::size_t max_offenders = 8;                   // listed per kind in the report
+  double shallow_threshold = 0.25 * 0.04;          // shallow Bullet misses: |distance| below this
+                                                   // (a quarter of Bullet's ellipsoid margin)
 };
 
-// "double" | "float" (also "fp64" | "fp32") -> Precision; UsageError otherwise.
-Precision parse_bullet_precision(const std::string& name);
+// "double" | "float" (also "fp64" | "fp32") -> Precision, "auto" -> unset; UsageError otherwise.
+std::optional<Precision> parse_bullet_precision(const std::string& name);
 
 struct ValidateOffender {
-  enum class Kind { missing, extra, position, angle, distance };
+  enum class Kind { missing, extra, position, angle, distance, ours_wrong, bullet_wrong, shallow_miss };
+  static constexpr std::size_t kinds = 8;
   Kind kind;
   std::int64_t id_a = 0, id_b = 0;
   double value = 0;              // position error, angle (deg), distance error, or |exact distance|
   double exact_distance = 0;     // recomputed from the scene in long double
   double contacts_distance = 0;  // NaN when the contacts lack the pair
   double bullet_distance = 0;    // NaN when Bullet lacks the pair
+  std::string reason;            // judged pairs: the condition that failed (or why it is accepted)
 };
 const char* to_string(ValidateOffender::Kind k);
 
 struct ValidateReport {
   bool pass = false;
   std::vector<std::string> failures;  // one line per failed criterion or contract violation
-  std::vector<std::string> notes;     // skipped ellipsoids, sampling fallbacks, …
+  std::vector<std::string> notes;     // the Bullet frame, sampling fallbacks, …
 
   // What was compared.
   Precision bullet = Precision::fp64;
@@ -74,7 +95,16 @@ struct ValidateReport {
   std::uint64_t matched = 0;
   std::uint64_t missing = 0, extra = 0;                        // outside the band
   std::uint64_t borderline_missing = 0, borderline_extra = 0;  // inside the band (accepted)
-  std::uint64_t skipped_ellipsoid = 0;                         // contacts with an ellipsoid
+
+  // Pairs with an ellipsoid (see the rules above).
+  std::uint64_t shape_matched = 0, shape_agree = 0;  // matched; of which within the tolerances
+  std::uint64_t judged = 0;                          // pairs judged (disagreeing or one-sided)
+  std::uint64_t our_errors = 0;                      // our answers failing the conditions (FAIL)
+  std::uint64_t bullet_errors = 0;                   // Bullet's answers failing them (accepted)
+  std::uint64_t both_valid = 0;                      // disagreeing, and both answers pass
+  std::uint64_t shallow_misses = 0;                  // ours only, shallow, ours passes (accepted)
+  double shallow_deepest = 0;                        // the largest |distance| among them
+  double shape_max_position_error = 0, shape_max_angle_deg = 0;  // matched, relative / degrees
 
   // Contract violations of the contacts given (CONTRACT §2).
   std::uint64_t bad_id_order = 0, unsorted = 0, duplicates = 0, bad_ids = 0, non_finite = 0;
@@ -83,15 +113,12 @@ struct ValidateReport {
   double max_position_error = 0, max_angle_deg = 0, max_distance_error = 0;
 
   // Criteria used.
-  double pos_eps = 0, angle_deg = 0, band = 0, scale = 0;
+  double pos_eps = 0, angle_deg = 0, band = 0, scale = 0, shallow_threshold = 0;
   double bullet_seconds = 0;
 
   std::vector<ValidateOffender> offenders;  // worst first within each kind
 
-  double checked_fraction() const {
-    const std::uint64_t checkable = contacts - skipped_ellipsoid;
-    return checkable ? double(checked) / double(checkable) : 1.0;
-  }
+  double checked_fraction() const { return contacts ? double(checked) / double(contacts) : 1.0; }
   // "validate: PASS|FAIL …" followed by the statistics, the failures and the worst offenders.
   std::string text() const;
 };

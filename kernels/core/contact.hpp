@@ -1,7 +1,9 @@
 #pragma once
 // Narrow phase for sphere pairs, exactly as CONTRACT §3 (Bullet's btSphereSphereCollisionAlgorithm
-// semantics), shared by both backends. All points are in the engine's local frame.
+// semantics), shared by both backends. sphere_contact_row: points in the engine's local frame, moved
+// to the world by to_world (fp32); world_sphere_row: from the world doubles (fp64, mixed).
 #include <limits>
+#include <type_traits>
 
 #include "core/config.hpp"
 #include "core/contact_fields.hpp"
@@ -96,6 +98,39 @@ CG_HD ContactRow<Real> sphere_contact_row(const Sphere<Real>& a, const Sphere<Re
     plane_space(c.normal_on_b, row.lateral_friction_dir1, row.lateral_friction_dir2);
   }
   return row;
+}
+
+// The row of a sphere pair from its WORLD centres and radii (fp64 and mixed): d = a − b is the
+// difference of two world doubles (exact when they are within a factor 2 of each other, Sterbenz),
+// the points are the world centres plus their offsets (one rounding each), and the local points are
+// the offsets themselves (−ra·n, rb·n: R = identity), with no cancellation against the centres.
+CG_HD ContactRow<double> world_sphere_row(const Sphere<double>& a, const Sphere<double>& b, bool full) {
+  const ContactGeometry<double> c = sphere_sphere_contact(a, b);
+  ContactRow<double> row{};
+  row.position_on_a = c.position_on_a;
+  row.position_on_b = c.position_on_b;
+  row.normal_on_b = c.normal_on_b;
+  row.distance = c.distance;
+  if (full) {
+    row.local_point_a = (-a.r) * c.normal_on_b;
+    row.local_point_b = b.r * c.normal_on_b;
+    plane_space(c.normal_on_b, row.lateral_friction_dir1, row.lateral_friction_dir2);
+  }
+  return row;
+}
+
+// A row rounded to another real type, field by field (ids unchanged).
+template <class To, class From>
+CG_HD ContactRow<To> row_cast(const ContactRow<From>& in, bool full) {
+  ContactRow<To> out{};
+  zip_contact_fields(out, in, full, [](auto, auto& o, const auto& i) {
+    using T = std::remove_reference_t<decltype(o)>;
+    if constexpr (std::is_same_v<T, Vec3<To>>)
+      o = vec_cast<To>(i);
+    else
+      o = static_cast<T>(i);
+  });
+  return out;
 }
 
 }  // namespace cg

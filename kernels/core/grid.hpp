@@ -36,6 +36,7 @@ struct GridParams {
   std::uint32_t dims[3];  // cells per axis
   std::uint32_t half[3];  // ceil(dims / 2): super-cells (2x2x2 blocks) per axis
   int half_bits;          // bits of the super-cell index; key bits = half_bits + 3
+  Real radius_margin;     // added to every packed radius: mixed's broad_margin(), else 0 (r + 0 == r)
 };
 
 // The cells one body overlaps: lowest cell coordinates and, per axis, whether it spans two cells.

@@ -6,6 +6,8 @@
 //                        once per candidate into EngineStats)
 //   row(a, b, full)      the fill pass, for an accepted candidate: its row, world frame
 //   ShapeDecide only: triage / solve / row_from, the two-pass count of both backends (below)
+// The bodies come as NarrowBodies (core/narrow.hpp): fp64 and mixed decide and compute from the world
+// doubles (pair_frame), fp32 from pack's local floats.
 // SphereDecide: narrow_decide() on the bounding spheres (sphere-only scenes, looser filters).
 // ShapeDecide: scenes with ellipsoids: dispatch on the shape pair —
 //   sphere–sphere        the closed form (narrow_decide: exactly the sphere path's bits)
@@ -16,6 +18,7 @@
 // the hard pairs alone) and keep each general ellipsoid pair's minimiser, from which the row is
 // rebuilt (row_from()): the host at once, the device in its fill pass.
 #include <cstdint>
+#include <type_traits>
 
 #include "core/ellipsoid_contact.hpp"
 #include "core/narrow.hpp"
@@ -23,20 +26,15 @@
 
 namespace cg {
 
-// Solver flags of one candidate (ellipsoid pairs only; always zero for spheres).
-struct NarrowFlags {
-  std::uint32_t fallbacks = 0, unconverged = 0;
-};
-
 template <class Real>
 struct SphereDecide {
-  const Sphere<Real>* spheres;  // local frame, by body index
-  Vec3<double> origin;
-  CG_HD bool accept(std::uint32_t a, std::uint32_t b, NarrowFlags&) const {
-    return narrow_decide(spheres[a], spheres[b], origin, false).contact;
+  NarrowBodies<Real> bodies;
+  CG_HD bool accept(std::uint32_t a, std::uint32_t b, NarrowFlags& flags) const {
+    return narrow_decide(bodies, a, b, false, flags).contact;
   }
   CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
-    return narrow_decide(spheres[a], spheres[b], origin, full).row;
+    NarrowFlags unused;  // counted by accept()
+    return narrow_decide(bodies, a, b, full, unused).row;
   }
   CG_HD ContactRow<Real> row_from(std::uint32_t a, std::uint32_t b, Vec3<Real>, bool full) const {
     return row(a, b, full);  // nothing kept: the closed form again
@@ -49,7 +47,7 @@ CG_HD Ellipsoid<Real> ellipsoid_of(const Sphere<Real>& s, const PackedShape<Real
   return {s.centre(), p.semi_axes, p.rotation};
 }
 
-// The contact of a pair with at least one ellipsoid (local frame) and whether it is one.
+// The contact of a pair with at least one ellipsoid (in the frame of sa, sb) and whether it is one.
 template <class Real>
 CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, const PackedShape<Real>& pa,
                               const PackedShape<Real>& pb, const SolverSettings<Real>& settings,
@@ -69,16 +67,42 @@ CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, co
   return r.in_contact;
 }
 
-// A pair with an ellipsoid is decided only when its bounding spheres touch (spheres_touch, the pair
-// stage's own test for bounding_spheres; accept() and triage(), solve() takes only what triage
-// left): a looser candidate list (the cell rule, a list kept with a skin) then gives the same
-// contacts and solver flags as bounding_spheres, also for a pair whose solve would call it touching
-// within the solver's tolerance while its bounding spheres, in Real, do not quite.
+// The two bounding spheres of a pair in the frame the solve runs in, and that frame's origin (world).
+// fp64 and mixed: B's world centre, so A's centre is the world difference a − b (exact when they are
+// within a factor 2 of each other) and B's is 0: the solve sees the exact centre difference, and its
+// points come back as b + offset. fp32: the engine's frame (pack's local floats).
+template <class Real>
+struct PairFrame {
+  Sphere<Real> a, b;
+  Vec3<double> origin;
+};
+template <class Real>
+CG_HD PairFrame<Real> pair_frame(const NarrowBodies<Real>& w, std::uint32_t a, std::uint32_t b) {
+  if constexpr (std::is_same_v<Real, double>) {
+    const Sphere<double> wa = world_sphere(w, a), wb = world_sphere(w, b);
+    return {{wa.x - wb.x, wa.y - wb.y, wa.z - wb.z, wa.r}, {0, 0, 0, wb.r}, wb.centre()};
+  } else {
+    return {w.spheres[a], w.spheres[b], w.origin};
+  }
+}
+
+// A pair with an ellipsoid is decided only when its bounding spheres touch, as narrow_decide decides
+// a sphere pair (fp64 and mixed: the frame-local doubles; fp32: the packed floats): a looser
+// candidate list (the cell rule, mixed's enlarged spheres, a list kept with a skin) then gives the
+// same contacts and solver flags as the bounding spheres themselves, also for a pair whose solve
+// would call it touching within the solver's tolerance while its bounding spheres do not quite.
+template <class Real>
+CG_HD bool bounding_spheres_touch(const NarrowBodies<Real>& w, std::uint32_t a, std::uint32_t b) {
+  if constexpr (std::is_same_v<Real, double>)
+    return spheres_touch(local_sphere_fp64(w, a), local_sphere_fp64(w, b));
+  else
+    return spheres_touch(w.spheres[a], w.spheres[b]);
+}
+
 template <class Real>
 struct ShapeDecide {
-  const Sphere<Real>* spheres;      // local frame (centre, bounding radius), by body index
+  NarrowBodies<Real> bodies;
   const PackedShape<Real>* shapes;  // by body index
-  Vec3<double> origin;
   SolverSettings<Real> settings;
 
   CG_HD bool both_spheres(std::uint32_t a, std::uint32_t b) const {
@@ -86,33 +110,37 @@ struct ShapeDecide {
            shapes[b].kind == static_cast<std::uint32_t>(Shape::sphere);
   }
   CG_HD bool accept(std::uint32_t a, std::uint32_t b, NarrowFlags& flags) const {
-    if (both_spheres(a, b)) return narrow_decide(spheres[a], spheres[b], origin, false).contact;
-    if (!spheres_touch(spheres[a], spheres[b])) return false;  // bounding spheres apart (above)
+    if (both_spheres(a, b)) return narrow_decide(bodies, a, b, false, flags).contact;
+    if (!bounding_spheres_touch(bodies, a, b)) return false;  // (above)
     EllipsoidContact<Real> c;
-    const bool contact = shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c);
+    const PairFrame<Real> f = pair_frame(bodies, a, b);
+    const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
     flags.fallbacks += c.fallback ? 1u : 0u;
     flags.unconverged += c.converged ? 0u : 1u;
     return contact;
   }
   CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
-    if (both_spheres(a, b)) return narrow_decide(spheres[a], spheres[b], origin, full).row;
+    NarrowFlags unused;  // counted by accept()
+    if (both_spheres(a, b)) return narrow_decide(bodies, a, b, full, unused).row;
     EllipsoidContact<Real> c;
-    shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c);
-    return row_of(c, full);
+    const PairFrame<Real> f = pair_frame(bodies, a, b);
+    shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
+    return row_of(c, f.origin, full);
   }
-  // The device's two-pass narrow (cuda/narrow.cuh): triage settles each candidate cheaply — closed
-  // forms, the sphere–ellipsoid root find, the PW filter, the first start with its certificate — and
-  // keeps the minimiser `n` of a general ellipsoid pair; the rest (Verdict::hard) take solve(), the
-  // whole start set, in a second pass over those candidates alone; row_from() rebuilds the row from
-  // the kept minimiser (contact_at_normal: the bits of row(), without solving again).
+  // The two-pass narrow of both backends (host/narrow_shapes.cpp, cuda/narrow.cuh): triage settles
+  // each candidate cheaply — closed forms, the sphere–ellipsoid root find, the PW filter, the first
+  // start with its certificate — and keeps the minimiser `n` of a general ellipsoid pair; the rest
+  // (Verdict::hard) take solve(), the whole start set, in a second pass over those candidates alone;
+  // row_from() rebuilds the row from the kept minimiser (contact_at_normal: the bits of row(), without
+  // solving again).
   enum class Verdict : std::uint32_t { reject = 0, accept = 1, hard = 2 };
   CG_HD Verdict triage(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
     if (both_spheres(a, b))
-      return narrow_decide(spheres[a], spheres[b], origin, false).contact ? Verdict::accept : Verdict::reject;
-    if (!spheres_touch(spheres[a], spheres[b])) return Verdict::reject;  // bounding spheres apart (above)
+      return narrow_decide(bodies, a, b, false, flags).contact ? Verdict::accept : Verdict::reject;
+    if (!bounding_spheres_touch(bodies, a, b)) return Verdict::reject;  // (above)
     EllipsoidContact<Real> c;
-    const bool contact =
-        shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c, SolveScope::first_start);
+    const PairFrame<Real> f = pair_frame(bodies, a, b);
+    const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c, SolveScope::first_start);
     if (!c.complete) return Verdict::hard;
     flags.fallbacks += c.fallback ? 1u : 0u;
     flags.unconverged += c.converged ? 0u : 1u;
@@ -121,7 +149,8 @@ struct ShapeDecide {
   }
   CG_HD bool solve(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
     EllipsoidContact<Real> c;
-    const bool contact = shape_pair_contact(spheres[a], spheres[b], shapes[a], shapes[b], settings, c);
+    const PairFrame<Real> f = pair_frame(bodies, a, b);
+    const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
     flags.fallbacks += c.fallback ? 1u : 0u;
     flags.unconverged += c.converged ? 0u : 1u;
     n = c.geometry.normal_on_b;
@@ -138,10 +167,11 @@ struct ShapeDecide {
   CG_HD ContactRow<Real> row_from(std::uint32_t a, std::uint32_t b, Vec3<Real> n, bool full) const {
     if (!general_pair(a, b)) return row(a, b, full);  // closed forms and root finds: cheap again
     EllipsoidContact<Real> c{};
-    contact_at_normal(ellipsoid_of(spheres[a], shapes[a]), ellipsoid_of(spheres[b], shapes[b]), n, c);
-    return row_of(c, full);
+    const PairFrame<Real> f = pair_frame(bodies, a, b);
+    contact_at_normal(ellipsoid_of(f.a, shapes[a]), ellipsoid_of(f.b, shapes[b]), n, c);
+    return row_of(c, f.origin, full);
   }
-  CG_HD ContactRow<Real> row_of(const EllipsoidContact<Real>& c, bool full) const {
+  CG_HD static ContactRow<Real> row_of(const EllipsoidContact<Real>& c, const Vec3<double>& origin, bool full) {
     ContactRow<Real> row{};
     row.position_on_a = to_world(origin, c.geometry.position_on_a);
     row.position_on_b = to_world(origin, c.geometry.position_on_b);

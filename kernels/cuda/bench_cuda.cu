@@ -1,5 +1,5 @@
 // contactgrid_cuda_bench: the CUDA engine on uniform random spheres, device-resident input, warm.
-// For N = 2^min … 2^max (step 2 by default), both precisions: per-stage medians (CUDA events), the
+// For N = 2^min … 2^max (step 2 by default), the three precision modes (fp32, mixed, fp64): per-stage medians (CUDA events), the
 // total wall time of Engine::detect_device_resident (bounds + plan + stages + host syncs; L2 flushed
 // before every run), spheres/s, contacts and entries per sphere, device workspace per sphere, and the
 // ratio of the sort stage and of the total to the CUB sort floor measured here for the same number
@@ -200,17 +200,20 @@ double contacts_per_body(SceneKind kind, double scale) {
   return double(engine.detect_device_resident(d.view(n)).count) / double(n);
 }
 
+// One precision mode: Engine<Real>, mixed = Engine<double> with the fp32 broad phase.
 template <class Real>
-Row bench(int log2n, std::uint64_t n, const DeviceScene& scene, int runs, Flusher& flush) {
+Row bench(int log2n, std::uint64_t n, const DeviceScene& scene, int runs, Flusher& flush, bool mixed = false) {
   Row row{};
   row.log2n = log2n;
-  row.prec = cg::to_string(cg::precision_of<Real>());
+  row.prec = mixed ? "mixed" : cg::to_string(cg::precision_of<Real>());
   row.n = n;
   row.upload_ms = scene.upload_ms;
   const cg::DeviceBodiesView bodies = scene.view(n);
   {
-    cg::Engine<Real> engine(
-        {.backend = cg::Backend::cuda, .cell_size = g_cell_size, .cell_choice = g_cell_choice});
+    cg::Engine<Real> engine({.backend = cg::Backend::cuda,
+                             .cell_size = g_cell_size,
+                             .cell_choice = g_cell_choice,
+                             .fp32_broad_phase = mixed});
     for (int w = 0; w < 3; ++w) engine.detect_device_resident(bodies);
     std::map<std::string, std::vector<double>> stages;
     std::vector<double> total, gpu_sum;
@@ -373,6 +376,7 @@ int main(int argc, char** argv) try {
     }
     d.upload_ms = median(up);
     rows.push_back(bench<float>(p, n, d, runs, flush));
+    rows.push_back(bench<double>(p, n, d, runs, flush, true));
     rows.push_back(bench<double>(p, n, d, runs, flush));
     if (skin > 0) {
       skin_rows.push_back(bench_skin<float>(p, n, d, skin, runs));

@@ -15,8 +15,9 @@
 //   type_passes.cuh  opt-in (Tuning::type_passes): entries, sort and pairs as Le Grand's 8 passes
 //   order.cuh      candidates in (a, b) order: grouped by a (counting or radix sort), runs by b
 //   shapes.cuh     scenes with ellipsoids: shape check (device-array API), shape upload, pack_shapes
-//   narrow.cuh     narrow_decide + contact rows of the requested fields, world frame (mixed scenes:
-//                  ShapeDecide, count → scan → fill)
+//   narrow.cuh     narrow_decide + contact rows of the requested fields, world frame (scenes with
+//                  ellipsoids and precision mixed: count → scan → fill; fp64 and mixed read the world
+//                  doubles of the upload buffer or the caller's DeviceBodiesView)
 // Around them: workspace.cuh (the named DEVICE buffers, their aliases, cub_run), tuning.hpp (the
 // environment knobs, read in one place), stage_events.cuh (event timing by typed Stage).
 //
@@ -105,8 +106,9 @@ class CudaBackend {
   }
 
   // One detection: the stages in order (see the file comment).
-  template <class Real, class Key>
-  void run(const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times, EngineStats& stats) {
+  // Real: the broad phase's real type, Narrow: the narrow stage's and the output's (mixed: float, double).
+  template <class Real, class Narrow, class Key>
+  void run(const DetectJob<Real, Narrow>& job, Contacts<Narrow>& out, StageTimes& times, EngineStats& stats) {
     CG_CUDA_CHECK(cudaSetDevice(m_device));
     refresh_tuning();
     m_ws.allocations = 0;
@@ -114,7 +116,7 @@ class CudaBackend {
     if (n64 >= (std::uint64_t(1) << 32))
       throw InputError("more than 2^32 - 1 bodies on one rank; use more MPI ranks");
     m_h_counters.reserve(sizeof(cuda::Counters));
-    RunState<Real, Key> r{job,
+    RunState<Real, Key, Narrow> r{job,
                           m_ws,
                           m_tuning,
                           m_events,
@@ -130,10 +132,12 @@ class CudaBackend {
     r.full = job.fields == Fields::full;
     r.type_passes = m_tuning.type_passes;
     r.filter = m_tuning.candidates;
-    // Scenes with ellipsoids: bounding-sphere candidates, the narrow stage decides (shapes.cuh).
-    // A skin (EngineOptions::skin): inflated bounding-sphere candidates, kept across calls.
+    // Scenes with ellipsoids: bounding-sphere candidates, the narrow stage decides (shapes.cuh); mixed:
+    // the enlarged spheres of the fp32 broad phase, the fp64 narrow stage decides; a skin
+    // (EngineOptions::skin): inflated bounding-sphere candidates, kept across calls.
     const bool skin = job.skin > 0;
-    if ((job.ellipsoids > 0 || skin) && r.filter == CandidateFilter::spheres_touch)
+    if ((job.ellipsoids > 0 || !std::is_same_v<Real, Narrow> || skin) &&
+        r.filter == CandidateFilter::spheres_touch)
       r.filter = CandidateFilter::bounding_spheres;
 
     reserve_pack(r);
@@ -160,6 +164,7 @@ class CudaBackend {
     narrow_stage(r);
     const DownloadHostTimes host = download_stage(r, m_h_staging, out);
     m_events.collect(times, host.overlap_s, host.extra_s);  // all events complete: the stream synced
+    stats.fp64_rows = r.h_counters->fp64_rows;              // copied after the narrow stage
     stats.peak_device_bytes = m_ws.held_bytes();
     stats.device_allocations = m_ws.allocations;
   }
@@ -274,17 +279,19 @@ void resident_copy(CudaBackend& b, std::size_t first, std::size_t count, Vec3<do
   CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
 }
 
-template <class Real>
-void run_stages(CudaBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times,
-                EngineStats& stats) {
+template <class Broad, class Narrow>
+void run_stages(CudaBackend& backend, const DetectJob<Broad, Narrow>& job, Contacts<Narrow>& out,
+                StageTimes& times, EngineStats& stats) {
   if (job.plan.key64)
-    backend.run<Real, std::uint64_t>(job, out, times, stats);
+    backend.run<Broad, Narrow, std::uint64_t>(job, out, times, stats);
   else
-    backend.run<Real, std::uint32_t>(job, out, times, stats);
+    backend.run<Broad, Narrow, std::uint32_t>(job, out, times, stats);
 }
 
 template void run_stages(CudaBackend&, const DetectJob<float>&, Contacts<float>&, StageTimes&, EngineStats&);
 template void run_stages(CudaBackend&, const DetectJob<double>&, Contacts<double>&, StageTimes&,
+                         EngineStats&);
+template void run_stages(CudaBackend&, const DetectJob<float, double>&, Contacts<double>&, StageTimes&,
                          EngineStats&);
 
 }  // namespace detail

@@ -76,8 +76,8 @@ __global__ void __launch_bounds__(kBlock)
 
 namespace cg::detail {
 
-template <class Real, class Key>
-void entries_stage(RunState<Real, Key>& r) {
+template <class Real, class Key, class Narrow>
+void entries_stage(RunState<Real, Key, Narrow>& r) {
   Workspace& ws = r.ws;
   const auto ne = static_cast<std::uint32_t>(r.n_entries);
   const std::uint32_t neb = cuda::blocks_for(ne);

@@ -8,7 +8,8 @@
 // exclusive scan, the host reads the row count (one more synchronisation), the accepted rows written
 // compacted.
 // The rejecting kernels take a decider (core/shape_narrow.hpp): SphereDecide, or ShapeDecide when the
-// scene has ellipsoids (r.d_shapes set by shapes.cuh); the host backend uses the same structs.
+// scene has ellipsoids (r.d_shapes set by shapes.cuh); the host backend uses the same structs. mixed
+// (fp32 broad phase, enlarged spheres) always takes the rejecting path: the fp64 narrow stage decides.
 // Flags and offsets live in the candidates' dead alternate buffers (pair_a / pair_b .Alternate()).
 #include <cub/device/device_scan.cuh>
 #include <cub/device/device_select.cuh>
@@ -22,20 +23,30 @@
 
 namespace cg::cuda {
 
-// narrow: contact data of each sorted pair, world frame as the host: Real(double(origin) + double(v)).
+// narrow: contact data of each sorted pair, world frame as the host (core/narrow.hpp: fp32 from the
+// local floats, Real(double(origin) + double(v)), its unresolved normals and fp64 from the world
+// doubles). fp32 rows recomputed in fp64 are added to c->fp64_rows.
 template <class Real>
 __global__ void __launch_bounds__(kBlock)
     narrow_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
-                  std::uint32_t n_pairs, const Sphere<Real>* __restrict__ spheres, Vec3<double> origin,
-                  ContactPtrs<Real> out, bool full) {
+                  std::uint32_t n_pairs, NarrowBodies<Real> bodies, ContactPtrs<Real> out, bool full,
+                  Counters* __restrict__ c) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   if (k >= n_pairs) return;
   const std::uint32_t a = pair_a[k], b = pair_b[k];
-  const Sphere<Real> sa = spheres[a], sb = spheres[b];
-  ContactRow<Real> row = narrow_decide(sa, sb, origin, full).row;  // core/narrow.hpp
+  NarrowFlags flags;
+  ContactRow<Real> row = narrow_decide(bodies, a, b, full, flags).row;  // core/narrow.hpp
   row.id_a = a;
   row.id_b = b;
   store_row(out, k, row, full);  // core/contact_fields.hpp: the one row store
+  if (flags.fp64_rows) atomicAdd(&c->fp64_rows, static_cast<unsigned long long>(flags.fp64_rows));
+}
+
+// The narrow flags of one candidate into the call's counters.
+__device__ inline void add_flags(const NarrowFlags& flags, Counters* c) {
+  if (flags.fallbacks) atomicAdd(&c->fallbacks, static_cast<unsigned long long>(flags.fallbacks));
+  if (flags.unconverged) atomicAdd(&c->unconverged, static_cast<unsigned long long>(flags.unconverged));
+  if (flags.fp64_rows) atomicAdd(&c->fp64_rows, static_cast<unsigned long long>(flags.fp64_rows));
 }
 
 // narrow, rejecting path, count: accept[k] = 1 when candidate k is a contact. Decide: SphereDecide or
@@ -51,8 +62,7 @@ __global__ void __launch_bounds__(kBlock)
   if (k >= n_pairs) return;
   NarrowFlags flags;
   accept[k] = decide.accept(pair_a[k], pair_b[k], flags) ? 1u : 0u;
-  if (flags.fallbacks) atomicAdd(&c->fallbacks, static_cast<unsigned long long>(flags.fallbacks));
-  if (flags.unconverged) atomicAdd(&c->unconverged, static_cast<unsigned long long>(flags.unconverged));
+  add_flags(flags, c);
 }
 
 // narrow, shapes, first pass: ShapeDecide::triage on every candidate — verdict[k] (reject, accept,
@@ -69,8 +79,7 @@ __global__ void __launch_bounds__(kBlock)
   Vec3<Real> n{};
   verdict[k] = static_cast<std::uint32_t>(decide.triage(pair_a[k], pair_b[k], flags, n));
   normal[k] = n;
-  if (flags.fallbacks) atomicAdd(&c->fallbacks, static_cast<unsigned long long>(flags.fallbacks));
-  if (flags.unconverged) atomicAdd(&c->unconverged, static_cast<unsigned long long>(flags.unconverged));
+  add_flags(flags, c);
 }
 
 // Selects the hard candidates (verdict 2) for the second pass.
@@ -94,8 +103,7 @@ __global__ void __launch_bounds__(kBlock)
   Vec3<Real> n{};
   verdict[k] = decide.solve(pair_a[k], pair_b[k], flags, n) ? 1u : 0u;
   normal[k] = n;
-  if (flags.fallbacks) atomicAdd(&c->fallbacks, static_cast<unsigned long long>(flags.fallbacks));
-  if (flags.unconverged) atomicAdd(&c->unconverged, static_cast<unsigned long long>(flags.unconverged));
+  add_flags(flags, c);
 }
 
 // narrow, rejecting path, fill: the row of each accepted candidate k at offset[k] (exclusive scan of
@@ -146,18 +154,19 @@ std::size_t layout_contacts(std::byte* o, std::size_t rows, bool full, cuda::Con
 // The count pass of scenes with ellipsoids, in two: triage every candidate, then the whole solve for
 // the hard ones alone (listed by cub::DeviceSelect into d_offset, dead until the scan). Returns the
 // kept minimisers (ws.normals, one per candidate).
-template <class Real, class Key>
-const Vec3<Real>* narrow_shapes_count(RunState<Real, Key>& r, const ShapeDecide<Real>& decide,
-                                      std::uint32_t* d_verdict, std::uint32_t* d_hard) {
+template <class Real, class Key, class Narrow>
+const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const ShapeDecide<Narrow>& decide,
+                                        std::uint32_t* d_verdict, std::uint32_t* d_hard) {
   using cuda::blocks_for;
   using cuda::kBlock;
   cudaStream_t st = r.st;
   const std::uint32_t np = r.np;
-  r.ws.reserve({{&r.ws.normals, std::size_t(np) * sizeof(Vec3<Real>) + sizeof(std::uint32_t)}}, "narrow");
-  Vec3<Real>* d_normal = r.ws.normals.template span_as<Vec3<Real>>(np).data();
-  // the hard count after the normals (16-byte aligned: Vec3<Real> is 12 or 24 bytes)
-  auto* d_n_hard = reinterpret_cast<std::uint32_t*>(r.ws.normals.data() + std::size_t(np) * sizeof(Vec3<Real>));
-  cuda::narrow_triage_kernel<Real><<<blocks_for(np), kBlock, 0, st>>>(
+  r.ws.reserve({{&r.ws.normals, std::size_t(np) * sizeof(Vec3<Narrow>) + sizeof(std::uint32_t)}}, "narrow");
+  Vec3<Narrow>* d_normal = r.ws.normals.template span_as<Vec3<Narrow>>(np).data();
+  // the hard count after the normals (4-byte aligned: Vec3<Narrow> is 12 or 24 bytes)
+  auto* d_n_hard =
+      reinterpret_cast<std::uint32_t*>(r.ws.normals.data() + std::size_t(np) * sizeof(Vec3<Narrow>));
+  cuda::narrow_triage_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
       r.pair_a.Current(), r.pair_b.Current(), np, decide, d_verdict, d_normal, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_triage");
   cub_run(r.ws, "narrow", [&](void* t, std::size_t& b) {
@@ -169,7 +178,7 @@ const Vec3<Real>* narrow_shapes_count(RunState<Real, Key>& r, const ShapeDecide<
   CG_CUDA_CHECK(cudaStreamSynchronize(st));
   r.stats.narrow_hard = n_hard;
   if (n_hard > 0) {
-    cuda::narrow_hard_kernel<Real><<<blocks_for(n_hard), kBlock, 0, st>>>(
+    cuda::narrow_hard_kernel<Narrow><<<blocks_for(n_hard), kBlock, 0, st>>>(
         r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, decide, d_verdict, d_normal, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("narrow_hard");
   }
@@ -177,19 +186,19 @@ const Vec3<Real>* narrow_shapes_count(RunState<Real, Key>& r, const ShapeDecide<
 }
 
 // The rejecting path: count → scan → fill (see the file comment).
-template <class Real, class Key, class Decide>
-void narrow_compact(RunState<Real, Key>& r, const Decide& decide) {
+template <class Real, class Key, class Narrow, class Decide>
+void narrow_compact(RunState<Real, Key, Narrow>& r, const Decide& decide) {
   using cuda::blocks_for;
   using cuda::kBlock;
   cudaStream_t st = r.st;
   const std::uint32_t np = r.np;
   std::uint32_t* d_accept = r.pair_a.Alternate();  // dead after the order stage: >= np u32 each
   std::uint32_t* d_offset = r.pair_b.Alternate();
-  const Vec3<Real>* d_normal = nullptr;
-  if constexpr (std::is_same_v<Decide, ShapeDecide<Real>>) {
+  const Vec3<Narrow>* d_normal = nullptr;
+  if constexpr (std::is_same_v<Decide, ShapeDecide<Narrow>>) {
     d_normal = narrow_shapes_count(r, decide, d_accept, d_offset);
   } else {
-    cuda::narrow_accept_kernel<Real, Decide><<<blocks_for(np), kBlock, 0, st>>>(
+    cuda::narrow_accept_kernel<Narrow, Decide><<<blocks_for(np), kBlock, 0, st>>>(
         r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("narrow_accept");
   }
@@ -201,38 +210,50 @@ void narrow_compact(RunState<Real, Key>& r, const Decide& decide) {
       cudaMemcpyAsync(&last[0], d_offset + np - 1, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, st));
   CG_CUDA_CHECK(
       cudaMemcpyAsync(&last[1], d_accept + np - 1, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, st));
-  if (r.d_shapes)  // the solver's flags (accept pass)
-    CG_CUDA_CHECK(
-        cudaMemcpyAsync(r.h_counters, r.d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, st));
+  // the solver's flags and the fp64 rows (accept pass)
+  CG_CUDA_CHECK(cudaMemcpyAsync(r.h_counters, r.d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, st));
   CG_CUDA_CHECK(cudaStreamSynchronize(st));
-  if (r.d_shapes) {
-    r.stats.narrow_fallbacks = r.h_counters->fallbacks;
-    r.stats.narrow_unconverged = r.h_counters->unconverged;
-  }
+  r.stats.narrow_fallbacks = r.h_counters->fallbacks;
+  r.stats.narrow_unconverged = r.h_counters->unconverged;
+  r.stats.fp64_rows = r.h_counters->fp64_rows;
   r.n_rows = last[0] + last[1];
   r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.full, r.cp);  // n_rows <= np: ws.out holds them
-  cuda::narrow_fill_kernel<Real, Decide><<<blocks_for(np), kBlock, 0, st>>>(
+  cuda::narrow_fill_kernel<Narrow, Decide><<<blocks_for(np), kBlock, 0, st>>>(
       r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept, d_offset, d_normal, r.cp, r.full);
   CG_CUDA_CHECK_LAUNCH("narrow_fill");
 }
 
-template <class Real, class Key>
-void narrow_stage(RunState<Real, Key>& r) {
+// The bodies the narrow stage reads (core/narrow.hpp): fp32 pack's local floats in input order,
+// every mode the world doubles (the upload buffer ws.pos / ws.rad, or the caller's DeviceBodiesView:
+// both live until the end of the call, see workspace.cuh).
+template <class Real, class Key, class Narrow>
+NarrowBodies<Narrow> narrow_bodies(const RunState<Real, Key, Narrow>& r) {
+  const Sphere<Narrow>* spheres = nullptr;
+  if constexpr (std::is_same_v<Real, Narrow>) spheres = r.d_spheres;
+  return {spheres, r.d_pos, r.d_rad, r.origin};
+}
+
+template <class Real, class Key, class Narrow>
+void narrow_stage(RunState<Real, Key, Narrow>& r) {
   r.stats.candidates = r.np;
+  const NarrowBodies<Narrow> bodies = narrow_bodies(r);
   if (narrow_may_reject(r.filter) && r.np > 0) {
     if (r.d_shapes)  // scenes with ellipsoids (r.filter is then never spheres_touch)
-      narrow_compact(r, ShapeDecide<Real>{r.d_spheres, r.d_shapes, r.origin, r.job.solver});
+      narrow_compact(r, ShapeDecide<Narrow>{bodies, r.d_shapes, r.job.solver});
     else
-      narrow_compact(r, SphereDecide<Real>{r.d_spheres, r.origin});
+      narrow_compact(r, SphereDecide<Narrow>{bodies});
     r.events.mark(Stage::narrow, r.st);
     return;
   }
   r.n_rows = r.np;
   r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.full, r.cp);
   if (r.np > 0) {
-    cuda::narrow_kernel<Real><<<cuda::blocks_for(r.np), cuda::kBlock, 0, r.st>>>(
-        r.pair_a.Current(), r.pair_b.Current(), r.np, r.d_spheres, r.origin, r.cp, r.full);
+    cuda::narrow_kernel<Narrow><<<cuda::blocks_for(r.np), cuda::kBlock, 0, r.st>>>(
+        r.pair_a.Current(), r.pair_b.Current(), r.np, bodies, r.cp, r.full, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("narrow");
+    // fp32's fp64 rows, read by the backend after the call's last synchronisation
+    CG_CUDA_CHECK(
+        cudaMemcpyAsync(r.h_counters, r.d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, r.st));
   }
   r.events.mark(Stage::narrow, r.st);
 }

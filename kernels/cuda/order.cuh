@@ -58,8 +58,8 @@ __global__ void __launch_bounds__(kBlock)
 
 namespace cg::detail {
 
-template <class Real, class Key>
-void order_stage(RunState<Real, Key>& r) {
+template <class Real, class Key, class Narrow>
+void order_stage(RunState<Real, Key, Narrow>& r) {
   using cuda::blocks_for;
   using cuda::kBlock;
   Workspace& ws = r.ws;

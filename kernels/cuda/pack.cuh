@@ -25,7 +25,8 @@ __device__ __forceinline__ Key home_layer_key(const BodyCells& bc, int shift) {
   return Key(bc.lo[2] >> shift);
 }
 
-// pack: world (double) → local Real sphere `Real(p - origin)` in input order, and the (locality key,
+// pack: world (double) → local Real sphere `Real(p - origin)`, radius Real(r) + g.radius_margin (mixed's
+// enlarged spheres; + 0 otherwise) in input order, and the (locality key,
 // index) pairs of the renumbering sort. Invalid bodies → c->bad.
 template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock)
@@ -39,7 +40,7 @@ __global__ void __launch_bounds__(kBlock)
   const double px = pos[i3], py = pos[i3 + 1], pz = pos[i3 + 2], r = rad[i];
   if (body_is_bad(px, py, pz, r)) atomicMax(&c->bad, static_cast<unsigned long long>(n - i));
   const Sphere<Real> s{static_cast<Real>(px - origin.x), static_cast<Real>(py - origin.y),
-                       static_cast<Real>(pz - origin.z), static_cast<Real>(r)};
+                       static_cast<Real>(pz - origin.z), static_cast<Real>(r) + g.radius_margin};
   spheres[i] = s;
   home_key[i] = home_layer_key<Key>(body_cells(s, g), layer_shift);
   home_index[i] = i;
@@ -103,8 +104,8 @@ __global__ void __launch_bounds__(kBlock)
 namespace cg::detail {
 
 // Sizes of the call and the workspace of the stages up to entries (before the first event).
-template <class Real, class Key>
-void reserve_pack(RunState<Real, Key>& r) {
+template <class Real, class Key, class Narrow>
+void reserve_pack(RunState<Real, Key, Narrow>& r) {
   r.nb = cuda::blocks_for(r.n);
   // Block totals and their scan: of the entry counts (single sort), or, in the type-pass path, the
   // entry totals then [8][nb] bodies-per-type totals and their scan.
@@ -133,8 +134,8 @@ void reserve_pack(RunState<Real, Key>& r) {
 
 // spheres_only: the spheres in input order alone (the reuse of candidates kept with a skin needs no
 // cells, renumbering or entry totals).
-template <class Real, class Key>
-void pack_stage(RunState<Real, Key>& r, bool spheres_only) {
+template <class Real, class Key, class Narrow>
+void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   using cuda::kBlock;
   Workspace& ws = r.ws;
   const std::uint32_t n = r.n, nb = r.nb;
@@ -182,8 +183,8 @@ void pack_stage(RunState<Real, Key>& r, bool spheres_only) {
 
 // The scan of the block totals (timed with the entries stage) and the host's read of the entries
 // total and the bad-data status (throws the InputError of compute_bounds for an invalid body).
-template <class Real, class Key>
-void scan_body_blocks(RunState<Real, Key>& r) {
+template <class Real, class Key, class Narrow>
+void scan_body_blocks(RunState<Real, Key, Narrow>& r) {
   cudaStream_t st = r.st;
   const int nb = int(r.nb);
   if (r.type_passes) {

@@ -232,8 +232,8 @@ void launch_fill_pairs(CandidateFilter filter, std::uint32_t blocks, cudaStream_
   CG_CUDA_CHECK_LAUNCH("fill_pairs");
 }
 
-template <class Real, class Key>
-void pairs_stage(RunState<Real, Key>& r) {
+template <class Real, class Key, class Narrow>
+void pairs_stage(RunState<Real, Key, Narrow>& r) {
   using cuda::kBlock;
   Workspace& ws = r.ws;
   cudaStream_t st = r.st;

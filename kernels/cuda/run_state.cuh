@@ -13,10 +13,12 @@
 
 namespace cg::detail {
 
-template <class Real, class Key>
+// Real: the broad phase's real type (pack … order); Narrow: the narrow stage's and the output's
+// (precision_of<Real, Narrow>(): mixed is float, double).
+template <class Real, class Key, class Narrow = Real>
 struct RunState {
   // the call
-  const DetectJob<Real>& job;
+  const DetectJob<Real, Narrow>& job;
   Workspace& ws;
   const Tuning& tuning;
   StageEvents& events;
@@ -31,13 +33,13 @@ struct RunState {
   Vec3<double> origin{};
   bool device_in = false, full = false, type_passes = false;
   std::size_t body_block_words = 0;
-  // upload: the bodies (DEVICE)
+  // upload: the bodies (DEVICE; read again by the narrow stage, NarrowBodies)
   const double* d_pos = nullptr;
   const double* d_rad = nullptr;
   const std::uint8_t* d_report = nullptr;
   // pack
   Sphere<Real>* d_spheres = nullptr;       // input order
-  PackedShape<Real>* d_shapes = nullptr;   // input order; scenes with ellipsoids only (shapes.cuh)
+  PackedShape<Narrow>* d_shapes = nullptr;  // input order; scenes with ellipsoids only (shapes.cuh)
   Sphere<Real>* d_cell_spheres = nullptr;  // cell order
   std::uint32_t* d_perm = nullptr;         // cell order → input index
   std::uint8_t* d_ctrl = nullptr;          // cell order
@@ -58,15 +60,15 @@ struct RunState {
   CandidateFilter filter = CandidateFilter::spheres_touch;  // Tuning::candidates
   // narrow: the contact rows (DEVICE; n_rows <= np, the accepted candidates) and their bytes from
   // ws.out.data()
-  cuda::ContactPtrs<Real> cp{};
+  cuda::ContactPtrs<Narrow> cp{};
   std::size_t out_bytes = 0;
   std::uint32_t n_rows = 0;
 
   // Bytes of the contact rows of `pairs` pairs (the layout of narrow_stage).
   std::size_t out_bytes_for(std::uint64_t pairs) const {
-    const std::size_t v3 = cuda::align16(pairs * sizeof(Vec3<Real>)),
+    const std::size_t v3 = cuda::align16(pairs * sizeof(Vec3<Narrow>)),
                       ids = cuda::align16(pairs * sizeof(std::int64_t)),
-                      reals = cuda::align16(pairs * sizeof(Real));
+                      reals = cuda::align16(pairs * sizeof(Narrow));
     return 2 * ids + 3 * v3 + reals + (full ? 4 * v3 : 0);
   }
   // The counters copied to h_counters (synchronises the stream).

@@ -86,8 +86,8 @@ inline std::size_t shape_check_stage(Workspace& ws, cuda::PinnedBuffer& h_stagin
 
 // Scenes with ellipsoids: the shape rows on the device (host-array path: uploaded) and the packed
 // shapes (r.d_shapes). Sphere-only scenes: nothing (r.d_shapes stays null).
-template <class Real, class Key>
-void shapes_stage(RunState<Real, Key>& r) {
+template <class Real, class Key, class Narrow>
+void shapes_stage(RunState<Real, Key, Narrow>& r) {
   if (r.job.ellipsoids == 0 || r.n == 0) return;
   Workspace& ws = r.ws;
   const std::uint64_t n64 = r.n64;
@@ -97,12 +97,12 @@ void shapes_stage(RunState<Real, Key>& r) {
     d_kind = r.job.device_bodies->shape;
     d_semi = r.job.device_bodies->semi_axes;
     d_orient = r.job.device_bodies->orientation;
-    ws.reserve({{&ws.shapes, n64 * sizeof(PackedShape<Real>)}}, "pack");
+    ws.reserve({{&ws.shapes, n64 * sizeof(PackedShape<Narrow>)}}, "pack");
   } else {
     ws.reserve({{&ws.shape_kind, n64 * sizeof(Shape)},
                 {&ws.shape_semi, n64 * sizeof(Vec3<double>)},
                 {&ws.shape_orient, n64 * sizeof(Quat<double>)},
-                {&ws.shapes, n64 * sizeof(PackedShape<Real>)}},
+                {&ws.shapes, n64 * sizeof(PackedShape<Narrow>)}},
                "pack");
     const BodiesView& b = r.job.bodies;
     CG_CUDA_CHECK(cudaMemcpyAsync(ws.shape_kind.data(), b.shape.data(), n64 * sizeof(Shape),
@@ -115,8 +115,8 @@ void shapes_stage(RunState<Real, Key>& r) {
     d_semi = reinterpret_cast<const double*>(ws.shape_semi.data());
     d_orient = reinterpret_cast<const double*>(ws.shape_orient.data());
   }
-  r.d_shapes = ws.shapes.span_as<PackedShape<Real>>(r.n).data();
-  cuda::pack_shapes_kernel<Real>
+  r.d_shapes = ws.shapes.span_as<PackedShape<Narrow>>(r.n).data();
+  cuda::pack_shapes_kernel<Narrow>
       <<<cuda::blocks_for(r.n), cuda::kBlock, 0, r.st>>>(d_kind, d_semi, d_orient, r.n, r.d_shapes);
   CG_CUDA_CHECK_LAUNCH("pack_shapes");
 }

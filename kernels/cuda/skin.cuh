@@ -57,8 +57,8 @@ namespace cg::detail {
 // The check (EngineOptions::skin > 0 and the engine found the bodies matching the kept list's):
 // true when the kept list still holds every contact. Records the motion in stats and the stage
 // "skin". Before pack (which zeroes the counters again).
-template <class Real, class Key>
-bool skin_stage(RunState<Real, Key>& r) {
+template <class Real, class Key, class Narrow>
+bool skin_stage(RunState<Real, Key, Narrow>& r) {
   if (!(r.job.skin > 0) || !r.job.check) return false;
   Workspace& ws = r.ws;
   cudaStream_t st = r.st;
@@ -85,8 +85,8 @@ bool skin_stage(RunState<Real, Key>& r) {
 
 // After the order stage of a build with a skin: the list and the state it was built from, kept.
 // Timed with the order stage.
-template <class Real, class Key>
-void keep_candidates(RunState<Real, Key>& r) {
+template <class Real, class Key, class Narrow>
+void keep_candidates(RunState<Real, Key, Narrow>& r) {
   Workspace& ws = r.ws;
   cudaStream_t st = r.st;
   const std::size_t np = r.np, n = r.n64;
@@ -111,8 +111,8 @@ void keep_candidates(RunState<Real, Key>& r) {
 
 // The reuse: the kept list as the candidates (Current; the narrow stage's accept flags and offsets
 // in the Alternate halves, the call's pairs buffer), and the contact rows' room.
-template <class Real, class Key>
-void reuse_candidates(RunState<Real, Key>& r) {
+template <class Real, class Key, class Narrow>
+void reuse_candidates(RunState<Real, Key, Narrow>& r) {
   Workspace& ws = r.ws;
   r.np = ws.kept_count;
   const std::size_t np = r.np;

@@ -7,8 +7,8 @@
 
 namespace cg::detail {
 
-template <class Real, class Key>
-void sort_stage(RunState<Real, Key>& r) {
+template <class Real, class Key, class Narrow>
+void sort_stage(RunState<Real, Key, Narrow>& r) {
   const int ne = int(r.n_entries), key_bits = r.job.plan.key_bits;
   cub_run(r.ws, "sort", [&](void* t, std::size_t& b) {
     return cub::DeviceRadixSort::SortPairs(t, b, r.keys, r.body, ne, 0, key_bits, r.st);

@@ -24,8 +24,8 @@ void for_each_field(Contacts<Real>& out, const cuda::ContactPtrs<Real>& cp, bool
 // pageable copy is staged by the driver on one thread (2^26 bodies, 2 GB: 0.29 s on the H200 host).
 // A range the driver refuses (e.g. a page shared with an array already registered) is copied
 // pageable. Tuning::upload_registered forces one.
-template <class Real, class Key>
-void upload_stage(RunState<Real, Key>& r) {
+template <class Real, class Key, class Narrow>
+void upload_stage(RunState<Real, Key, Narrow>& r) {
   if (r.device_in) {
     r.d_pos = r.job.device_bodies->position;
     r.d_rad = r.job.device_bodies->radius;
@@ -75,17 +75,18 @@ struct DownloadHostTimes {
 // their first touch); small ones, and any range the driver will not register, through the pinned
 // staging buffer and a parallel host copy. At 2^26 contacts the staged path paid a first touch of
 // the staging buffer and another of the vectors. Tuning::download_registered forces one.
-template <class Real, class Key>
-DownloadHostTimes download_stage(RunState<Real, Key>& r, cuda::PinnedBuffer& h_staging, Contacts<Real>& out) {
+template <class Real, class Key, class Narrow>
+DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuffer& h_staging,
+                                 Contacts<Narrow>& out) {
   using clock_type = std::chrono::steady_clock;
-  const cuda::ContactPtrs<Real>& cp = r.cp;
+  const cuda::ContactPtrs<Narrow>& cp = r.cp;
   const std::uint32_t np = r.n_rows;
   const bool full = r.full;
   cudaStream_t st = r.st;
   DownloadHostTimes ht;
   if (r.job.device_out) {
-    DeviceContactsView<Real>& v = *r.job.device_out;
-    v = DeviceContactsView<Real>{};
+    DeviceContactsView<Narrow>& v = *r.job.device_out;
+    v = DeviceContactsView<Narrow>{};
     v.count = np;
     v.full = full;
     zip_contact_fields(v, cp, full, [](auto, auto& view, auto* d_ptr) { view = d_ptr; });

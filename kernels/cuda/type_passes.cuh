@@ -15,8 +15,8 @@
 
 namespace cg::detail {
 
-template <class Real, class Key>
-void type_pass_stages(RunState<Real, Key>& r) {
+template <class Real, class Key, class Narrow>
+void type_pass_stages(RunState<Real, Key, Narrow>& r) {
   using cuda::kBlock;
   Workspace& ws = r.ws;
   StageEvents& ev_all = r.events;

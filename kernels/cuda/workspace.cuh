@@ -5,8 +5,11 @@
 // done with them.
 //
 // Buffers and who uses them (n bodies, ne entries, nb = blocks of n, neb = blocks of ne, np pairs):
-//   pos, rad, report       upload → pack       host-array path: the input copied to the device
-//   spheres                pack → narrow       Real spheres in input order
+//   pos, rad               upload → narrow     host-array path: the input copied to the device; the
+//                                              narrow stage reads the world doubles by body index
+//                                              (fp64, mixed, fp32's fp64 rows): never aliased
+//   report                 upload → pack       host-array path: the report mask
+//   spheres                pack → narrow       Real spheres in input order (narrow: fp32 only)
 //   cell_spheres, perm,    pack → pairs        spheres, input index and control byte in cell order
 //   ctrl
 //   body_blocks            pack → entries      per block of bodies: entry totals, their scan (2 nb);
@@ -21,7 +24,7 @@
 //   counters, partials     every stage         Counters of the call; bounds partials
 //   shape_kind, shape_semi, upload → pack      scenes with ellipsoids, host-array path: the shape rows
 //   shape_orient
-//   shapes                 pack → narrow       scenes with ellipsoids: PackedShape per body, input order
+//   shapes                 pack → narrow       scenes with ellipsoids: PackedShape<Narrow> per body, input order
 //   normals                narrow              scenes with ellipsoids: the minimiser kept per candidate
 //                                              (triage / hard pass → fill) and the hard count
 //   res_pos, res_rad,      between calls       resident bodies (Engine::set_resident)

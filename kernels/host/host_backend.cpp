@@ -3,20 +3,23 @@
 // contact test) and every contact value is computed by the same CG_HD functions in the same order.
 //
 // Stages (stage.hpp names them for the timing table), one file each in kernels/host/ (stages.hpp):
-//   pack      world (double) → local frame Real spheres; per body: cells, entry count, control byte
+//   pack      world (double) → local frame Broad spheres; per body: cells, entry count, control byte
 //   entries   exclusive scan of entry counts → fill (cell key, body) entries in body order
 //   sort      stable radix sort of the entries by cell key over plan.key_bits bits
 //   pairs     per entry: tests against later entries of its cell (cells of type 0 first: Le Grand's
 //             8 passes); candidate pairs (a < b, local indices) collected per chunk of entries,
 //             then chunk sizes → scan → fill
 //   order     radix sort of the candidates by (a, b)
-//   narrow    narrow_decide() per candidate; contact rows in the requested fields, world frame
+//   narrow    narrow_decide() per candidate, in Narrow (fp64 and mixed: from the world doubles);
+//             contact rows in the requested fields, world frame
 //             (scenes with ellipsoids: pack also packs the shapes, the pair stage keeps bounding-sphere
 //             overlaps, and narrow dispatches on the shape pair: core/shape_narrow.hpp)
 // With a skin (EngineOptions::skin, core/skin.hpp): the pair stage tests spheres inflated by
 // job.inflation and the ordered list is kept (keep_candidates); a later call first checks the motion
 // since (stage skin) and, when the list still covers every contact, runs pack + narrow over it.
 #include <omp.h>
+
+#include <type_traits>
 
 #include "backend.hpp"
 #include "host/stages.hpp"
@@ -25,16 +28,29 @@
 namespace cg::detail {
 namespace {
 
-template <class Real, class Key>
-void run_typed(HostBackend& be, const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times,
-               EngineStats& stats) {
+// The bodies the narrow stage reads (core/narrow.hpp): fp32 the packed local floats, every mode the
+// world doubles of the input.
+template <class Broad, class Narrow>
+NarrowBodies<Narrow> narrow_bodies(const BodiesView& bodies, const host::PackedBodies<Broad>& packed,
+                                   const Vec3<double>& origin) {
+  const Sphere<Narrow>* spheres = nullptr;
+  if constexpr (std::is_same_v<Broad, Narrow>) spheres = packed.spheres.data();
+  return {spheres, reinterpret_cast<const double*>(bodies.position.data()), bodies.radius.data(), origin};
+}
+
+template <class Broad, class Narrow, class Key>
+void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Narrow>& out,
+               StageTimes& times, EngineStats& stats) {
   const int nt = be.threads > 0 ? be.threads : omp_get_max_threads();
   HostStageTimer timer(times);
-  // Scenes with ellipsoids and lists kept with a skin: candidates are (inflated) bounding-sphere
-  // overlaps (or the looser cell rule), the narrow stage decides. Else exactly the sphere path.
+  // Scenes with ellipsoids: candidates are bounding-sphere overlaps (or the looser cell rule), the
+  // narrow stage decides per shape pair. Sphere-only scenes: exactly the sphere path. mixed: the fp32
+  // pair stage tests enlarged spheres, so the narrow stage decides (in fp64) there too; so does a
+  // list kept with a skin (inflated spheres).
   const bool shapes = job.ellipsoids > 0;
   const bool skin = job.skin > 0;
-  const CandidateFilter filter = (shapes || skin) && be.candidates == CandidateFilter::spheres_touch
+  constexpr bool mixed = !std::is_same_v<Broad, Narrow>;
+  const CandidateFilter filter = (shapes || mixed || skin) && be.candidates == CandidateFilter::spheres_touch
                                      ? CandidateFilter::bounding_spheres
                                      : be.candidates;
   bool reuse = false;
@@ -46,10 +62,11 @@ void run_typed(HostBackend& be, const DetectJob<Real>& job, Contacts<Real>& out,
     timer.lap(Stage::skin);
   }
 
-  host::PackedBodies<Real> bodies;
-  host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Real>(job.inflation), !reuse, nt,
+  host::PackedBodies<Broad> bodies;
+  std::vector<PackedShape<Narrow>> packed_shapes;
+  host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Broad>(job.inflation), !reuse, nt,
              bodies);
-  if (shapes) host::pack_shapes(job.bodies, nt, bodies.shapes);
+  if (shapes) host::pack_shapes(job.bodies, nt, packed_shapes);
   timer.lap(Stage::pack);
 
   host::CandidatePairs built;
@@ -74,29 +91,31 @@ void run_typed(HostBackend& be, const DetectJob<Real>& job, Contacts<Real>& out,
   const host::CandidatePairs& candidates = reuse ? be.kept.pairs : built;
   stats.candidates = candidates.size();
 
+  const NarrowBodies<Narrow> world = narrow_bodies<Broad, Narrow>(job.bodies, bodies, job.plan.frame.origin);
   if (shapes)
-    host::narrow_shapes(candidates, bodies.spheres, bodies.shapes, job.plan.frame.origin, job.solver,
-                        job.fields, nt, out, stats);
+    host::narrow_shapes(candidates, world, packed_shapes, job.solver, job.fields, nt, out, stats);
   else
-    host::narrow(candidates, bodies.spheres, job.plan.frame.origin, job.fields, nt, out);
+    host::narrow(candidates, world, job.fields, nt, out, stats);
   timer.lap(Stage::narrow);
 }
 
 }  // namespace
 
-template <class Real>
-void run_stages(HostBackend& backend, const DetectJob<Real>& job, Contacts<Real>& out, StageTimes& times,
-                EngineStats& stats) {
+template <class Broad, class Narrow>
+void run_stages(HostBackend& backend, const DetectJob<Broad, Narrow>& job, Contacts<Narrow>& out,
+                StageTimes& times, EngineStats& stats) {
   if (job.bodies.size() >= (std::size_t(1) << 32))
     throw InputError("more than 2^32 - 1 bodies on one rank; use more MPI ranks");
   if (job.plan.key64)
-    run_typed<Real, std::uint64_t>(backend, job, out, times, stats);
+    run_typed<Broad, Narrow, std::uint64_t>(backend, job, out, times, stats);
   else
-    run_typed<Real, std::uint32_t>(backend, job, out, times, stats);
+    run_typed<Broad, Narrow, std::uint32_t>(backend, job, out, times, stats);
 }
 
 template void run_stages(HostBackend&, const DetectJob<float>&, Contacts<float>&, StageTimes&, EngineStats&);
 template void run_stages(HostBackend&, const DetectJob<double>&, Contacts<double>&, StageTimes&,
+                         EngineStats&);
+template void run_stages(HostBackend&, const DetectJob<float, double>&, Contacts<double>&, StageTimes&,
                          EngineStats&);
 
 }  // namespace cg::detail

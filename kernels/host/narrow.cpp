@@ -19,34 +19,42 @@ void write_row(const ContactColumns<Real, Ptr>& rows, std::size_t k, std::uint32
 }  // namespace
 
 template <class Real>
-void narrow(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres, const Vec3<double>& origin,
-            Fields fields, int nt, Contacts<Real>& out) {
+void narrow(const CandidatePairs& c, const NarrowBodies<Real>& bodies, Fields fields, int nt,
+            Contacts<Real>& out, EngineStats& stats) {
   const bool full = fields == Fields::full;
   const std::size_t n_cand = c.size();
+  std::uint64_t fp64_rows = 0;
   if (!narrow_may_reject(c.filter)) {  // every candidate is a contact: no scan
     out.resize(n_cand, full);
     const ContactColumns<Real, Ptr> rows = columns_of(out);
-#pragma omp parallel for num_threads(nt) schedule(static) if (n_cand > k_parallel_min)
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : fp64_rows) if (n_cand > k_parallel_min)
     for (std::size_t k = 0; k < n_cand; ++k) {
       const std::uint32_t a = c.a(k), b = c.b(k);
-      write_row(rows, k, a, b, narrow_decide(spheres[a], spheres[b], origin, full).row, full);
+      NarrowFlags flags;
+      write_row(rows, k, a, b, narrow_decide(bodies, a, b, full, flags).row, full);
+      fp64_rows += flags.fp64_rows;
     }
+    stats.fp64_rows += fp64_rows;
     return;
   }
   // count: an accept flag per candidate and the accepted total per fixed chunk of candidates (the
   // chunking depends only on the candidate count: the rows are the same for any thread count)
+  const SphereDecide<Real> decide{bodies};
   const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(256, n_cand / 16384));
   std::vector<std::uint64_t> chunk_count(n_chunks, 0), chunk_offset;
   std::vector<std::uint8_t> accept(n_cand);
-#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : fp64_rows) if (n_chunks > 1)
   for (std::size_t ch = 0; ch < n_chunks; ++ch) {
     std::uint64_t count = 0;
+    NarrowFlags flags;
     for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
-      accept[k] = narrow_decide(spheres[c.a(k)], spheres[c.b(k)], origin, false).contact;
+      accept[k] = decide.accept(c.a(k), c.b(k), flags);
       count += accept[k];
     }
     chunk_count[ch] = count;
+    fp64_rows += flags.fp64_rows;
   }
+  stats.fp64_rows += fp64_rows;
   // scan → fill
   const std::uint64_t n_rows = exclusive_scan_into(chunk_count, chunk_offset);
   out.resize(n_rows, full);
@@ -57,14 +65,14 @@ void narrow(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres, c
     for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
       if (!accept[k]) continue;
       const std::uint32_t a = c.a(k), b = c.b(k);
-      write_row(rows, w++, a, b, narrow_decide(spheres[a], spheres[b], origin, full).row, full);
+      write_row(rows, w++, a, b, decide.row(a, b, full), full);
     }
   }
 }
 
-template void narrow(const CandidatePairs&, const std::vector<Sphere<float>>&, const Vec3<double>&, Fields,
-                     int, Contacts<float>&);
-template void narrow(const CandidatePairs&, const std::vector<Sphere<double>>&, const Vec3<double>&, Fields,
-                     int, Contacts<double>&);
+template void narrow(const CandidatePairs&, const NarrowBodies<float>&, Fields, int, Contacts<float>&,
+                     EngineStats&);
+template void narrow(const CandidatePairs&, const NarrowBodies<double>&, Fields, int, Contacts<double>&,
+                     EngineStats&);
 
 }  // namespace cg::detail::host

@@ -76,6 +76,7 @@ NarrowCounts narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& de
   for (std::size_t ch = 0; ch < n_chunks; ++ch) {
     total.flags.fallbacks += chunk_flags[ch].fallbacks;
     total.flags.unconverged += chunk_flags[ch].unconverged;
+    total.flags.fp64_rows += chunk_flags[ch].fp64_rows;
     total.hard += chunk_hard[ch];
   }
   return total;
@@ -84,22 +85,22 @@ NarrowCounts narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& de
 }  // namespace
 
 template <class Real>
-void narrow_shapes(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres,
-                   const std::vector<PackedShape<Real>>& shapes, const Vec3<double>& origin,
-                   const SolverSettings<Real>& settings, Fields fields, int nt, Contacts<Real>& out,
-                   EngineStats& stats) {
-  const NarrowCounts f = narrow_compact(c, ShapeDecide<Real>{spheres.data(), shapes.data(), origin, settings},
-                                        fields == Fields::full, nt, out);
+void narrow_shapes(const CandidatePairs& c, const NarrowBodies<Real>& bodies,
+                   const std::vector<PackedShape<Real>>& shapes, const SolverSettings<Real>& settings,
+                   Fields fields, int nt, Contacts<Real>& out, EngineStats& stats) {
+  const NarrowCounts f =
+      narrow_compact(c, ShapeDecide<Real>{bodies, shapes.data(), settings}, fields == Fields::full, nt, out);
   stats.narrow_fallbacks += f.flags.fallbacks;
   stats.narrow_unconverged += f.flags.unconverged;
+  stats.fp64_rows += f.flags.fp64_rows;
   stats.narrow_hard += f.hard;
 }
 
-template void narrow_shapes(const CandidatePairs&, const std::vector<Sphere<float>>&,
-                            const std::vector<PackedShape<float>>&, const Vec3<double>&,
-                            const SolverSettings<float>&, Fields, int, Contacts<float>&, EngineStats&);
-template void narrow_shapes(const CandidatePairs&, const std::vector<Sphere<double>>&,
-                            const std::vector<PackedShape<double>>&, const Vec3<double>&,
-                            const SolverSettings<double>&, Fields, int, Contacts<double>&, EngineStats&);
+template void narrow_shapes(const CandidatePairs&, const NarrowBodies<float>&,
+                            const std::vector<PackedShape<float>>&, const SolverSettings<float>&, Fields,
+                            int, Contacts<float>&, EngineStats&);
+template void narrow_shapes(const CandidatePairs&, const NarrowBodies<double>&,
+                            const std::vector<PackedShape<double>>&, const SolverSettings<double>&, Fields,
+                            int, Contacts<double>&, EngineStats&);
 
 }  // namespace cg::detail::host

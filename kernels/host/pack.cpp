@@ -1,15 +1,16 @@
-// Host stage pack: world (double) → local frame Real spheres; per body its cells, control byte and
-// entry count (see stages.hpp).
+// Host stage pack: world (double) → local frame Real spheres (radius + g.radius_margin: mixed's
+// enlarged spheres); per body its cells, control byte and entry count (see stages.hpp).
 #include "host/stages.hpp"
 
 namespace cg::detail::host {
 namespace {
-// Body i in the local frame: Real(world − origin), its radius in Real.
+// Body i in the local frame: Real(world − origin), its radius Real(r) + g.radius_margin.
 template <class Real>
-Sphere<Real> local_sphere(const BodiesView& bodies, const Vec3<double>& origin, std::size_t i) {
+Sphere<Real> local_sphere(const BodiesView& bodies, const Vec3<double>& origin, const GridParams<Real>& g,
+                          std::size_t i) {
   const Vec3<double> p = bodies.position[i];
   return {static_cast<Real>(p.x - origin.x), static_cast<Real>(p.y - origin.y),
-          static_cast<Real>(p.z - origin.z), static_cast<Real>(bodies.radius[i])};
+          static_cast<Real>(p.z - origin.z), static_cast<Real>(bodies.radius[i]) + g.radius_margin};
 }
 }  // namespace
 
@@ -21,7 +22,7 @@ void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams
   out.inflation = inflation;
   if (!cells_too) {
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
-    for (std::size_t i = 0; i < n; ++i) out.spheres[i] = local_sphere<Real>(bodies, origin, i);
+    for (std::size_t i = 0; i < n; ++i) out.spheres[i] = local_sphere<Real>(bodies, origin, g, i);
     return;
   }
   out.cells.resize(n);
@@ -29,7 +30,7 @@ void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams
   out.count.resize(n);
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
-    const Sphere<Real> s = local_sphere<Real>(bodies, origin, i);
+    const Sphere<Real> s = local_sphere<Real>(bodies, origin, g, i);
     out.spheres[i] = s;
     out.cells[i] = body_cells(Sphere<Real>{s.x, s.y, s.z, s.r + inflation}, g);
     out.ctrl[i] = control_bits(out.cells[i]);

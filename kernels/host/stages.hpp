@@ -40,7 +40,6 @@ struct PackedBodies {
   std::vector<BodyCells> cells;           // freed by fill_entries
   std::vector<std::uint8_t> ctrl;         // control_bits
   std::vector<std::uint32_t> count;       // entry_count; freed by fill_entries
-  std::vector<PackedShape<Real>> shapes;  // scenes with ellipsoids only (pack_shapes), else empty
 };
 
 // (cell key, body) entries; body-ascending after fill_entries, key-ascending (stable) after sort.
@@ -110,20 +109,21 @@ std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p
 // order: radix sort of the candidates by (a, b).
 void order_candidates(CandidatePairs& c, int threads);
 
-// narrow: narrow_decide() on every candidate; contact rows of the requested fields, world frame,
-// in candidate order. When the filter may reject (narrow_may_reject): count → scan → fill (accept
-// flags, exclusive scan of chunk counts, fill of the accepted rows); else one row per candidate.
+// narrow: narrow_decide() on every candidate (core/narrow.hpp: fp32 from the local floats in
+// bodies.spheres, fp64 and mixed from the world doubles); contact rows of the requested fields, world
+// frame, in candidate order. When the filter may reject (narrow_may_reject): count → scan → fill
+// (accept flags, exclusive scan of chunk counts, fill of the accepted rows); else one row per
+// candidate. fp32 rows recomputed in fp64 are added to stats.fp64_rows.
 template <class Real>
-void narrow(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres, const Vec3<double>& origin,
-            Fields fields, int threads, Contacts<Real>& out);
+void narrow(const CandidatePairs& c, const NarrowBodies<Real>& bodies, Fields fields, int threads,
+            Contacts<Real>& out, EngineStats& stats);
 
 // narrow for scenes with ellipsoids: ShapeDecide (core/shape_narrow.hpp) on every candidate, always
 // count → scan → fill (c.filter may reject); the solver's flags are added to stats.narrow_fallbacks
 // and stats.narrow_unconverged.
 template <class Real>
-void narrow_shapes(const CandidatePairs& c, const std::vector<Sphere<Real>>& spheres,
-                   const std::vector<PackedShape<Real>>& shapes, const Vec3<double>& origin,
-                   const SolverSettings<Real>& settings, Fields fields, int threads, Contacts<Real>& out,
-                   EngineStats& stats);
+void narrow_shapes(const CandidatePairs& c, const NarrowBodies<Real>& bodies,
+                   const std::vector<PackedShape<Real>>& shapes, const SolverSettings<Real>& settings,
+                   Fields fields, int threads, Contacts<Real>& out, EngineStats& stats);
 
 }  // namespace cg::detail::host

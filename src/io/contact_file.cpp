@@ -233,18 +233,21 @@ template void write_contact_rows<double>(const ContactFileLayout&, std::uint64_t
                                          int);
 
 void commit_contact_file(const ContactFileLayout& layout, const RunInfo& info) {
-  const char* precision = to_string(layout.precision);
+  // The precision attribute is the run's mode (CONTRACT §2: mixed writes float64 datasets).
+  const std::string precision = info.precision.empty() ? to_string(layout.precision) : info.precision;
   try {
-    if (!info.precision.empty() && info.precision != precision) {
+    const bool fp32 = precision == "fp32";
+    if ((precision != "fp32" && precision != "fp64" && precision != "mixed") ||
+        fp32 != (layout.precision == Precision::fp32)) {
       throw Error(fmt::format("{}: write_contacts: RunInfo says precision {}, the contacts are {}",
-                              layout.path, info.precision, precision));
+                              layout.path, precision, to_string(layout.precision)));
     }
     LibraryLock lock;
     Where where(layout.path, true);
     Handle file = checked(H5Fopen(layout.temp.c_str(), H5F_ACC_RDWR, H5P_DEFAULT), H5Fclose, where,
                           fmt::format("cannot reopen {}", layout.temp));
     Attributes attributes;
-    attributes["precision"] = std::string(precision);
+    attributes["precision"] = precision;
     attributes["backend"] = info.backend;
     attributes["ranks"] = std::int64_t{info.ranks};
     attributes["bodies"] = static_cast<std::int64_t>(info.bodies);
@@ -281,13 +284,8 @@ void discard_contact_file(const ContactFileLayout& layout) noexcept { remove_qui
 
 template <class Real>
 void write_contacts(const std::string& path, const Contacts<Real>& c, const RunInfo& info, int threads) {
-  const char* precision = to_string(precision_of<Real>());
   if (!c.consistent())
     throw Error(fmt::format("{}: write_contacts: the contact arrays differ in length", path));
-  if (!info.precision.empty() && info.precision != precision) {
-    throw Error(fmt::format("{}: write_contacts: RunInfo says precision {}, the contacts are {}", path,
-                            info.precision, precision));
-  }
   const ContactFileLayout layout = create_contact_file(path, c.size(), precision_of<Real>(), c.full);
   try {
     write_contact_rows(layout, 0, c, threads);
@@ -313,8 +311,9 @@ ContactFile read_contacts(const std::string& path) {
   out.attributes = other_attributes(raw);
   if (auto precision = out.attributes.find("precision"); precision != out.attributes.end()) {
     const auto* precision_text = std::get_if<std::string>(&precision->second);
-    if (precision_text == nullptr || (*precision_text != "fp32" && *precision_text != "fp64"))
-      where.bad("root attribute precision is not \"fp32\" or \"fp64\"");
+    if (precision_text == nullptr ||
+        (*precision_text != "fp32" && *precision_text != "fp64" && *precision_text != "mixed"))
+      where.bad("root attribute precision is not \"fp32\", \"fp64\" or \"mixed\"");
     out.precision = *precision_text;
   }
 

@@ -18,7 +18,7 @@ namespace cg {
 // Everything recorded about a run in the contact file's root attributes (CONTRACT §2).
 struct RunInfo {
   std::uint64_t bodies = 0;
-  std::string precision;  // "fp32" | "fp64"
+  std::string precision;  // "fp32" | "fp64" | "mixed" (float64 datasets); empty: the contacts' type
   std::string backend;    // "cpu" | "cuda"
   int ranks = 1;
   double cell_size = 0;

@@ -14,6 +14,7 @@
 #include "hdf5_io.hpp"
 #include "pipeline.hpp"
 #include "resident_steps.hpp"
+#include "support/run_cli.hpp"
 #include "temp_dir.hpp"
 
 namespace fs = std::filesystem;
@@ -21,22 +22,8 @@ namespace fs = std::filesystem;
 namespace cg::test {
 namespace {
 
-struct Result {
-  int code;
-  std::string output;  // stdout + stderr
-};
-
-Result run(const std::string& args) {
-  const std::string cmd = std::string(CG_BINARY) + " " + args + " 2>&1";
-  Result r{-1, {}};
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  while (fgets(buf, sizeof buf, p)) r.output += buf;
-  const int status = pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
+using Result = CliResult;
+Result run(const std::string& args) { return run_cli(args); }
 
 class Cli : public TempDirTest {
  protected:
@@ -91,6 +78,24 @@ TEST_F(Cli, GenerateDetectRoundTrip) {
   EXPECT_EQ(same.code, 0) << same.output;
   EXPECT_NE(same.output.find("IDENTICAL"), std::string::npos) << same.output;
   EXPECT_EQ(run("compare " + path("c.h5") + " " + path("c32.h5")).code, 1);
+}
+
+// --precision mixed writes float64 datasets and the attribute "mixed", fp64's contacts byte for byte;
+// fp32 refuses a 1e8 offset (its float32 positions would be 8 apart) with exit 3 and the reason.
+TEST_F(Cli, MixedPrecisionAndFp32FarOffsetRefusal) {
+  Result g = run("generate " + path("far.h5") + " --count 2000 --seed 5 --offset 1e8 1e8 1e8 -q");
+  ASSERT_EQ(g.code, 0) << g.output;
+  expect_detect_fails(path("far.h5"), 3, {"far.h5", "float32", "use --precision mixed or fp64"},
+                      "--backend cpu --precision fp32");
+  Result m = run("detect " + path("far.h5") + " -o " + path("m.h5") + " --backend cpu --precision mixed");
+  ASSERT_EQ(m.code, 0) << m.output;
+  EXPECT_NE(m.output.find("mixed"), std::string::npos) << m.output;
+  ASSERT_EQ(run("detect " + path("far.h5") + " -o " + path("d.h5") + " --backend cpu -q").code, 0);
+  const ContactFile mixed = read_contacts(path("m.h5")), fp64 = read_contacts(path("d.h5"));
+  EXPECT_EQ(mixed.precision, "mixed");
+  EXPECT_GT(mixed.contacts.size(), 0u);
+  Result same = run("compare " + path("m.h5") + " " + path("d.h5"));
+  EXPECT_NE(same.output.find("IDENTICAL"), std::string::npos) << same.output;
 }
 
 TEST_F(Cli, PolydisperseUsesTheRatio) {

@@ -192,12 +192,16 @@ TEST(GridPlan, ChoosesKeyWidthAndRefusesWhatItCannotEncode) {
 
   b.hi = {1e9, 1e9, 1e9};  // 1e27 cells: refused with a message
   EXPECT_THROW(plan_grid(b, make_frame(b, 0, Precision::fp64), Precision::fp64), InputError);
-  // fp32 resolves 2^-23 of the extent: the cell grows with the extent so no body spans three cells,
-  // and a requested cell below that is refused; an explicit frame beyond 2^22 cells is refused.
+  // A float broad phase (fp32, mixed) resolves 2^-23 of the extent: the cell grows with the extent so
+  // no body spans three cells, and a requested cell below that is refused; an explicit frame beyond
+  // 2^22 cells is refused. fp32 itself refuses this scene: its float32 world positions would be 1
+  // apart at 1e7, more than a quarter of the largest radius 0.5 (check_fp32_world).
   b.hi = {1e7, 1, 1};
-  EXPECT_GE(make_frame(b, 0, Precision::fp32).cell_size, 16 * 1.1920929e-7 * 1e7);
-  EXPECT_THROW(make_frame(b, 1.0, Precision::fp32), UsageError);
+  EXPECT_THROW(make_frame(b, 0, Precision::fp32), InputError);
+  EXPECT_GE(make_frame(b, 0, Precision::mixed).cell_size, 16 * 1.1920929e-7 * 1e7);
+  EXPECT_THROW(make_frame(b, 1.0, Precision::mixed), UsageError);
   EXPECT_THROW(plan_grid(b, Frame{{0, 0, 0}, 1.0}, Precision::fp32), InputError);
+  EXPECT_THROW(plan_grid(b, Frame{{0, 0, 0}, 1.0}, Precision::mixed), InputError);
   EXPECT_NO_THROW(plan_grid(b, make_frame(b, 0, Precision::fp64), Precision::fp64));
   EXPECT_THROW(make_frame(b, 0.5, Precision::fp64), UsageError);
 }

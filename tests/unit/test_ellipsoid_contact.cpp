@@ -1,5 +1,5 @@
 // Ellipsoid and sphere–ellipsoid contacts (kernels/core/ellipsoid_contact.hpp, issue #12) against the
-// exact long-double reference of tests/support/exact_ellipsoid.hpp, which shares no code with it.
+// exact long-double reference of src/reference/ellipsoid_reference.hpp, which shares no code with it.
 //
 // Tolerances are relative to the pair's scale s = (largest semi-axis of A) + (largest of B); the Tol
 // struct lists them with the measured maxima (every suite prints its own: lines starting [ellipsoid]):
@@ -31,7 +31,7 @@
 #include "core/contact.hpp"
 #include "core/ellipsoid_contact.hpp"
 #include "core/quat.hpp"
-#include "support/exact_ellipsoid.hpp"
+#include "reference/ellipsoid_reference.hpp"
 
 namespace cg::test {
 namespace {

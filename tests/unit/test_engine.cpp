@@ -1,4 +1,4 @@
-// The engine against the exact reference (tests/reference.hpp) on random and adversarial scenes, in
+// The engine against the exact reference (src/reference/sphere_reference.hpp) on random and adversarial scenes, in
 // both precisions and on both backends (CUDA cases skip without a GPU).
 //
 // Borderline band (CONTRACT §3): a pair whose exact |distance| is below
@@ -15,11 +15,13 @@
 #include "backends.hpp"
 #include "core/grid.hpp"
 #include "engine.hpp"
-#include "reference.hpp"
+#include "reference/sphere_reference.hpp"
 #include "scenes.hpp"
 
 namespace cg::test {
 namespace {
+
+using exact::reference_contacts;
 
 template <class T>
 class EngineTest : public ::testing::Test {

@@ -1,6 +1,6 @@
 // Bodies with shapes through Engine<Real>::detect (issue #11 item 6, issue #12's engine part): seeded
 // ellipsoid and mixed scenes on the CPU backend against a brute-force all-pairs reference built from
-// the exact long-double solver (tests/support/exact_ellipsoid.hpp, which shares no code with the
+// the exact long-double solver (src/reference/ellipsoid_reference.hpp, which shares no code with the
 // engine); sphere-only scenes unchanged by shape rows; bad shape rows → InputError naming the body;
 // CPU vs CUDA bit-identical on shape scenes, host arrays and device arrays (CUDA cases skip, visibly,
 // without a GPU).
@@ -27,8 +27,8 @@
 #include "backend.hpp"
 #include "core/shape_narrow.hpp"
 #include "engine.hpp"
+#include "reference/ellipsoid_reference.hpp"
 #include "scenes.hpp"
-#include "support/exact_ellipsoid.hpp"
 
 #if defined(CONTACTGRID_HAVE_CUDA)
 #include <cuda_runtime.h>
@@ -284,7 +284,8 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
                  q[4] = {s.q[i].w, s.q[i].x, s.q[i].y, s.q[i].z};
     packed.push_back(pack_shape<Real>(static_cast<std::uint8_t>(s.shape[i]), semi, q));
   }
-  const ShapeDecide<Real> d{sph.data(), packed.data(), {1, 2, 3}, {}};
+  const NarrowBodies<Real> world{sph.data(), reinterpret_cast<const double*>(s.p.data()), s.r.data(), {1, 2, 3}};
+  const ShapeDecide<Real> d{world, packed.data(), {}};
   int contacts = 0, hard = 0, certified = 0;
   for (std::uint32_t a = 0; a < sph.size(); ++a)
     for (std::uint32_t b = a + 1; b < sph.size(); ++b) {

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <random>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "backends.hpp"
@@ -144,6 +145,29 @@ TYPED_TEST(EngineSkinTest, ResidentStepsEqualFreshDetection) {
   }
   EXPECT_GE(engine.stats().candidate_builds, 2u);
   EXPECT_GE(engine.stats().candidate_reuses, 15u);
+}
+
+// Precision::mixed (Engine<double> with an fp32 broad phase): the kept list is built by the float
+// pair stage (its enlarged spheres plus the skin's inflation, whose margin is float's); every call
+// equals a fresh mixed detection (= fp64's contacts). Engine<float> has no mixed mode: skipped.
+TYPED_TEST(EngineSkinTest, MixedPrecisionWalkEqualsFreshDetection) {
+  if constexpr (!std::is_same_v<typename TypeParam::Real, double>) {
+    GTEST_SKIP() << "precision mixed is a mode of Engine<double>";
+  } else {
+    EngineOptions with = options_for(TypeParam::backend, 0.2), without = options_for(TypeParam::backend, 0);
+    with.fp32_broad_phase = without.fp32_broad_phase = true;
+    Engine<double> engine(with), fresh(without);
+    Spheres s = random_spheres(3000, 0.5, 1.0, 9181).translated({1e4, -2e4, 3e3});
+    std::mt19937_64 rng(9182);
+    for (int call = 0; call < 20; ++call) {
+      const Contacts<double> got = engine.detect(BodiesView{s.p, s.r, {}, {}});
+      ASSERT_EQ(compare_contacts(got, fresh.detect(BodiesView{s.p, s.r, {}, {}})), "identical")
+          << "call " << call;
+      random_step(s, 0.012, 0.001, rng);
+    }
+    EXPECT_GE(engine.stats().candidate_builds, 2u);
+    EXPECT_GE(engine.stats().candidate_reuses, 10u);
+  }
 }
 
 // One body moved by just more than skin/2 forces a rebuild; by exactly skin/2 (a dyadic step on

@@ -126,8 +126,11 @@ TYPED_TEST(HostStagesTest, StagesByHand) {
   for (std::size_t k = 0; k < loose.size(); ++k) ASSERT_LT(loose.a(k), loose.b(k));
 
   Contacts<Real> from_exact, from_loose;
-  detail::host::narrow(exact, bodies.spheres, job.plan.frame.origin, Fields::basic, nt, from_exact);
-  detail::host::narrow(loose, bodies.spheres, job.plan.frame.origin, Fields::basic, nt, from_loose);
+  const NarrowBodies<Real> world{bodies.spheres.data(), reinterpret_cast<const double*>(s.p.data()),
+                                 s.r.data(), job.plan.frame.origin};
+  EngineStats stats;
+  detail::host::narrow(exact, world, Fields::basic, nt, from_exact, stats);
+  detail::host::narrow(loose, world, Fields::basic, nt, from_loose, stats);
   ASSERT_EQ(from_exact.size(), exact.size());
   expect_same(from_exact, from_loose);
   for (std::size_t k = 0; k < exact.size(); ++k) {
@@ -136,15 +139,18 @@ TYPED_TEST(HostStagesTest, StagesByHand) {
   }
 }
 
-// narrow_decide on its own: touching counts, a gap is rejected, the row is the sphere row.
+// narrow_decide on its own: touching counts, a gap is rejected, the row is the sphere row (world
+// centres 10, 12 and 12.5 on x, frame origin 10).
 TEST(NarrowDecide, TouchingAcceptedGapRejected) {
-  const Sphere<double> a{0, 0, 0, 1}, touching{2, 0, 0, 1}, apart{2.5, 0, 0, 1};
-  const Vec3<double> origin{10, 0, 0};
-  const auto yes = narrow_decide(a, touching, origin, true);
+  const double pos[9] = {10, 0, 0, 12, 0, 0, 12.5, 0, 0}, rad[3] = {1, 1, 1};
+  const NarrowBodies<double> w{nullptr, pos, rad, {10, 0, 0}};
+  NarrowFlags flags;
+  const auto yes = narrow_decide(w, 0, 1, true, flags);
   EXPECT_TRUE(yes.contact);
   EXPECT_EQ(yes.row.distance, 0.0);
   EXPECT_EQ(yes.row.position_on_a.x, 11.0);
-  EXPECT_FALSE(narrow_decide(a, apart, origin, true).contact);
+  EXPECT_FALSE(narrow_decide(w, 0, 2, true, flags).contact);
+  EXPECT_EQ(flags.fp64_rows, 0u);
   EXPECT_FALSE(narrow_may_reject(CandidateFilter::spheres_touch));
   EXPECT_TRUE(narrow_may_reject(CandidateFilter::cells));
 }

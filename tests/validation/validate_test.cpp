@@ -162,7 +162,7 @@ TEST_F(ValidateTest, BadOptionsAndLengthsThrow) {
 
 TEST(BulletOracle, ConventionsAndIdOrder) {
   // Three spheres; ids given non-contiguous to check the id mapping.
-  OracleSpheres s;
+  OracleBodies s;
   s.position = {{0, 0, 0}, {1.5, 0, 0}, {10, 10, 10}};
   s.radius = {1.0, 0.75, 0.5};
   s.id = {4, 9, 12};
