@@ -199,7 +199,8 @@ Bounds inflated(Bounds b, double d) {
 // the same bits), the cell edge and the grid cover the radii inflated by `inflation`.
 template <class Broad, class Narrow>
 detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> frame,
-                                          const EngineOptions& options, double inflation, EngineStats& stats) {
+                                          const EngineOptions& options, double inflation,
+                                          EngineStats& stats) {
   constexpr Precision prec = precision_of<Broad, Narrow>();
   Frame f = frame ? *frame : make_frame(b, options.cell_size, prec, options.cell_choice);
   if (frame) check_fp32_world(b, prec);

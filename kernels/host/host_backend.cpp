@@ -39,8 +39,8 @@ NarrowBodies<Narrow> narrow_bodies(const BodiesView& bodies, const host::PackedB
 }
 
 template <class Broad, class Narrow, class Key>
-void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Narrow>& out,
-               StageTimes& times, EngineStats& stats) {
+void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Narrow>& out, StageTimes& times,
+               EngineStats& stats) {
   const int nt = be.threads > 0 ? be.threads : omp_get_max_threads();
   HostStageTimer timer(times);
   // Scenes with ellipsoids: candidates are bounding-sphere overlaps (or the looser cell rule), the
