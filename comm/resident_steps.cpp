@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "agreed_stage.hpp"
+#include "stage.hpp"  // the engine's typed stage names
 #include "transport.hpp"
 
 namespace cg {
@@ -49,8 +50,11 @@ double median_of(std::vector<double> v) {
 }  // namespace
 
 const std::vector<std::string>& engine_stage_names() {
-  static const std::vector<std::string> names{"plan",  "upload", "pack",   "entries", "sort",
-                                              "pairs", "order",  "narrow", "download"};
+  static const std::vector<std::string> names = [] {  // the engine's typed stages (stage.hpp)
+    std::vector<std::string> v;
+    for (int i = 0; i < detail::kStageCount; ++i) v.emplace_back(detail::name(detail::stage_at(i)));
+    return v;
+  }();
   return names;
 }
 

@@ -8,7 +8,9 @@
 #include "core/ellipsoid_contact.hpp"
 #include "core/grid.hpp"
 #include "core/narrow.hpp"
+#include "core/skin.hpp"
 #include "engine.hpp"
+#include "host/stages.hpp"
 
 namespace cg::detail {
 
@@ -31,6 +33,12 @@ struct DetectJob {
   // the ellipsoid solver's settings (from EngineOptions).
   std::size_t ellipsoids = 0;
   SolverSettings<Narrow> solver{};
+  // Candidates kept across calls (EngineOptions::skin > 0; skin 0: neither field is read).
+  // inflation: world length added to every radius in the pair stage (cells and the sphere test) when
+  // the list is built. check: the bodies match the kept list's (count, ids, shape presence, frame
+  // bound; engine.cpp): measure the motion since its build, reuse it when skin_covers(), else build.
+  double skin = 0, inflation = 0;
+  bool check = false;
   std::size_t body_count() const { return device_bodies ? device_bodies->count : bodies.size(); }
 };
 
@@ -68,10 +76,13 @@ inline int bits_for(std::uint64_t n) {
 
 // The CPU backend (kernels/host/): OpenMP threads, the oracle for the CUDA backend.
 struct HostBackend {
+  explicit HostBackend(int threads_ = 0, CandidateFilter candidates_ = CandidateFilter::spheres_touch)
+      : threads(threads_), candidates(candidates_) {}
   int threads = 0;
   // The pair stage's filter: spheres_touch (default; narrow then writes one row per candidate) or
   // cells (every pair the cell rule assigns: narrow rejects the non-touching ones; same contacts).
   CandidateFilter candidates = CandidateFilter::spheres_touch;
+  host::KeptCandidates kept;  // EngineOptions::skin > 0: the list kept across calls
 };
 
 template <class Broad, class Narrow>

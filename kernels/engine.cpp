@@ -120,6 +120,15 @@ struct Engine<Real>::Impl {
   Contacts<Real> resident_contacts;
   std::optional<DeviceContactsView<Real>> resident_on_device;  // CUDA: not yet downloaded
   bool resident_overwritten = false;  // CUDA: a later detection reused the workspace first
+  // EngineOptions::skin > 0: what the kept candidate list was built for (the backend keeps the list
+  // and the bodies' state); a call that matches it checks the motion, any other call rebuilds.
+  struct KeptFor {
+    bool valid = false;
+    std::size_t count = 0;
+    std::vector<std::int64_t> id;  // the bodies' ids (empty: implied, as for device bodies)
+    bool shapes = false;           // the scene had ellipsoids
+    double coordinate_bound = 0;   // core/skin.hpp: a later call's coordinates must stay within
+  } kept;
   void forget_resident_view() {       // before any detection: the view's storage is reused
     if (resident_on_device) resident_overwritten = true;
     resident_on_device.reset();
@@ -135,6 +144,8 @@ Engine<Real>::Engine(EngineOptions options) : m_impl(std::make_unique<Impl>()) {
   if (!(options.ellipsoid_tolerance >= 0) || !std::isfinite(options.ellipsoid_tolerance))
     throw UsageError("ellipsoid tolerance must be finite and >= 0 (0: the default)");
   if (options.ellipsoid_max_iterations < 0) throw UsageError("ellipsoid iteration cap must be >= 0");
+  if (!(options.skin >= 0) || !std::isfinite(options.skin))
+    throw UsageError("skin must be a finite length >= 0 (0: no candidates kept across calls)");
   if (options.fp32_broad_phase && std::is_same_v<Real, float>)
     throw UsageError("fp32_broad_phase (precision mixed) is an option of Engine<double>");
   Backend b = options.backend;
@@ -170,17 +181,38 @@ const EngineOptions& Engine<Real>::options() const {
 }
 
 namespace {
-// Frame and grid plan of one call from the bodies' bounds; pushes the "plan" stage time.
+// The bounds of the bodies inflated by `d` (EngineOptions::skin): boxes, largest radius and the
+// radius moments of the cell-size model, of the radii r + d.
+Bounds inflated(Bounds b, double d) {
+  b.lo = {b.lo.x - d, b.lo.y - d, b.lo.z - d};
+  b.hi = {b.hi.x + d, b.hi.y + d, b.hi.z + d};
+  b.r_max += d;
+  const double n = double(b.count), s1 = b.r_sum[0], s2 = b.r_sum[1], s3 = b.r_sum[2];
+  b.r_sum[0] = s1 + n * d;
+  b.r_sum[1] = s2 + 2 * d * s1 + n * d * d;
+  b.r_sum[2] = s3 + 3 * d * s2 + 3 * d * d * s1 + n * d * d * d;
+  return b;
+}
+
+// Frame and grid plan of one call from the bodies' bounds; pushes the "plan" stage time. A skin
+// (inflation > 0): the origin is the one of a skin-0 call (so the packed spheres and the contacts are
+// the same bits), the cell edge and the grid cover the radii inflated by `inflation`.
 template <class Broad, class Narrow>
 detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> frame,
-                                          const EngineOptions& options, EngineStats& stats) {
+                                          const EngineOptions& options, double inflation,
+                                          EngineStats& stats) {
   constexpr Precision prec = precision_of<Broad, Narrow>();
-  const Frame f = frame ? *frame : make_frame(b, options.cell_size, prec, options.cell_choice);
+  Frame f = frame ? *frame : make_frame(b, options.cell_size, prec, options.cell_choice);
   if (frame) check_fp32_world(b, prec);
   const double margin = broad_margin(b, f.origin, prec);
   if (frame && f.cell_size < 2 * (b.r_max + margin))
     throw UsageError("frame cell size is smaller than the largest diameter");
-  detail::DetectJob<Broad, Narrow> job{{}, plan_grid(b, f, prec), {}, options.fields};
+  const Bounds grid_bounds = inflation > 0 ? inflated(b, inflation) : b;
+  if (inflation > 0)  // a requested or shared edge grows to the inflated radii' smallest valid edge
+    f.cell_size = frame || options.cell_size > 0
+                      ? std::max(f.cell_size, min_cell_size(grid_bounds, prec))
+                      : make_frame(grid_bounds, 0, prec, options.cell_choice).cell_size;
+  detail::DetectJob<Broad, Narrow> job{{}, plan_grid(grid_bounds, f, prec), {}, options.fields};
   job.grid = detail::grid_params<Broad>(job.plan, margin);
   if (options.ellipsoid_tolerance > 0) job.solver.tolerance = static_cast<Narrow>(options.ellipsoid_tolerance);
   if (options.ellipsoid_max_iterations > 0) job.solver.max_iterations = options.ellipsoid_max_iterations;
@@ -191,14 +223,75 @@ detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> 
 
 // The job of one call in the engine's precision mode (mixed: a float broad phase), handed to `run`.
 template <class Real, class Run>
-void run_job(const EngineOptions& options, const Bounds& b, std::optional<Frame> frame, EngineStats& stats,
-             Run&& run) {
+void run_job(const EngineOptions& options, const Bounds& b, std::optional<Frame> frame, double inflation,
+             EngineStats& stats, Run&& run) {
   if constexpr (std::is_same_v<Real, double>) {
-    if (options.fp32_broad_phase) return run(plan_job<float, double>(b, frame, options, stats));
+    if (options.fp32_broad_phase) return run(plan_job<float, double>(b, frame, options, inflation, stats));
   }
-  run(plan_job<Real, Real>(b, frame, options, stats));
+  run(plan_job<Real, Real>(b, frame, options, inflation, stats));
 }
+
+// The largest magnitude of a local coordinate of the bodies' boxes in a frame with this origin.
+double coordinate_magnitude(const Bounds& b, const Vec3<double>& origin) {
+  return std::max({std::abs(b.lo.x - origin.x), std::abs(b.lo.y - origin.y), std::abs(b.lo.z - origin.z),
+                   std::abs(b.hi.x - origin.x), std::abs(b.hi.y - origin.y), std::abs(b.hi.z - origin.z)});
+}
+
+// A fresh per-call EngineStats that carries the counters kept across calls.
+void reset_stats(EngineStats& stats) {
+  EngineStats fresh;
+  fresh.candidate_builds = stats.candidate_builds;
+  fresh.candidate_reuses = stats.candidate_reuses;
+  stats = fresh;
+}
+
+// EngineOptions::skin of one call (core/skin.hpp): whether it checks the kept list, the coordinate
+// bound it is built or checked for, the inflation of a build.
+struct SkinPlan {
+  double skin = 0, bound = 0, inflation = 0;
+  bool check = false;
+  template <class Job>
+  void apply(Job& job) const {
+    job.skin = skin;
+    job.inflation = inflation;
+    job.check = check;
+  }
+};
 }  // namespace
+
+// The call's skin plan: it checks when the bodies match the kept list's (count, ids, shape presence,
+// coordinates within its bound). Marks the kept list invalid until remember_build() (a call that
+// throws leaves it unusable). The rounding margin is the broad phase's (mixed: float).
+template <class Real>
+static SkinPlan plan_skin(typename Engine<Real>::Impl& s, const Bounds& b, std::optional<Frame> frame,
+                          std::span<const std::int64_t> id, std::size_t ellipsoids) {
+  SkinPlan p;
+  p.skin = s.options.skin;
+  if (!(p.skin > 0)) return p;
+  auto& k = s.kept;
+  const double now = coordinate_magnitude(b, frame ? frame->origin : b.lo);
+  p.check = k.valid && k.count == b.count && std::equal(id.begin(), id.end(), k.id.begin(), k.id.end()) &&
+            k.shapes == (ellipsoids > 0) && now <= k.coordinate_bound;
+  p.bound = p.check ? k.coordinate_bound : now + p.skin;
+  const double eps = s.options.fp32_broad_phase ? double(std::numeric_limits<float>::epsilon())
+                                                : double(std::numeric_limits<Real>::epsilon());
+  p.inflation = skin_inflation(p.skin, p.bound, b.r_max, eps);
+  k.valid = false;
+  return p;
+}
+
+// After a call that ran with a skin: the kept list is what this call used (reused or built).
+template <class Real>
+static void remember_build(typename Engine<Real>::Impl& s, const Bounds& b, std::span<const std::int64_t> id,
+                           std::size_t ellipsoids, const SkinPlan& p) {
+  if (!(p.skin > 0)) return;
+  auto& k = s.kept;
+  k.valid = true;
+  k.count = b.count;
+  k.id.assign(id.begin(), id.end());
+  k.shapes = ellipsoids > 0;
+  k.coordinate_bound = p.bound;
+}
 
 template <class Real>
 Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Frame> frame) {
@@ -206,7 +299,7 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
   Impl& s = *m_impl;
   s.forget_resident_view();
   s.times.clear();
-  s.stats = EngineStats{};
+  reset_stats(s.stats);
   Contacts<Real> out;
   auto t0 = clock::now();
   const Bounds b = compute_bounds(bodies);
@@ -214,9 +307,11 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
   s.stats.bodies = b.count;
   s.stats.ellipsoids = ellipsoids;
   if (b.count == 0) return out;
-  run_job<Real>(s.options, b, frame, s.stats, [&](auto job) {
+  const SkinPlan skin = plan_skin<Real>(s, b, frame, bodies.id, ellipsoids);
+  run_job<Real>(s.options, b, frame, skin.inflation, s.stats, [&](auto job) {
     job.bodies = bodies;
     job.ellipsoids = ellipsoids;
+    skin.apply(job);
     s.times.push_back(
         {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
     if (s.resolved == Backend::cuda)
@@ -224,6 +319,7 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
     else
       detail::run_stages(s.host, job, out, s.times, s.stats);
   });
+  remember_build<Real>(s, b, bodies.id, ellipsoids, skin);
 
   // Local indices → global ids (monotone, so the (id_a, id_b) order is kept).
   if (!bodies.id.empty()) {
@@ -251,7 +347,7 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
   using clock = std::chrono::steady_clock;
   s.forget_resident_view();
   s.times.clear();
-  s.stats = EngineStats{};
+  reset_stats(s.stats);
   if (s.resolved != Backend::cuda) throw UsageError("detect_device needs the CUDA backend");
   if (bodies.count > 0 && (!bodies.position || !bodies.radius))
     throw UsageError("detect_device: null position or radius pointer");
@@ -264,14 +360,17 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
   s.stats.bodies = b.count;
   s.stats.ellipsoids = ellipsoids;
   if (b.count == 0) return;
-  run_job<Real>(s.options, b, frame, s.stats, [&](auto job) {
+  const SkinPlan skin = plan_skin<Real>(s, b, frame, {}, ellipsoids);
+  run_job<Real>(s.options, b, frame, skin.inflation, s.stats, [&](auto job) {
     job.device_bodies = &bodies;
     job.ellipsoids = ellipsoids;
     job.device_out = device_out;
+    skin.apply(job);
     s.times.push_back(
         {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
     detail::run_stages(*s.cuda, job, out, s.times, s.stats);
   });
+  remember_build<Real>(s, b, {}, ellipsoids, skin);
   s.stats.contacts = device_out ? device_out->count : out.size();
 }
 

@@ -56,6 +56,13 @@ struct EngineOptions {
   // order) in float with enlarged spheres (broad_margin), the narrow phase in double from the world
   // coordinates. Contacts bit-identical to Engine<double> without it (same frame).
   bool fp32_broad_phase = false;
+  // Verlet skin (world length, >= 0): 0 detects from scratch every call (the default). > 0 keeps the
+  // candidate pairs across calls: a call builds them from bounding spheres inflated by skin/2 (the
+  // cell edge grows to cover the inflated radii), and a later call on the same bodies (same count,
+  // ids, report mask and shape presence) whose centres moved by at most d and radii grew by at most g
+  // since that build, 2·(d + g) <= skin, skips entries/sort/pairs/order and runs pack + narrow over
+  // the kept list. Either way the contacts are those of a skin-0 detection, bit for bit.
+  double skin = 0;
 };
 
 // Counters of one run (for tests and the summary).
@@ -77,6 +84,11 @@ struct EngineStats {
   // fp32: contact rows whose local centres were closer than fp32 resolves a normal (fp32_resolves,
   // core/narrow.hpp), recomputed in fp64 from the world coordinates and rounded to float.
   std::uint64_t fp64_rows = 0;
+  // EngineOptions::skin > 0: candidate lists built and reused since the engine was made (the only
+  // counters kept across calls), and the largest displacement and radius growth the last skin check
+  // measured (0 when the call rebuilt without a check: first call, other bodies).
+  std::uint64_t candidate_builds = 0, candidate_reuses = 0;
+  double skin_displacement = 0, skin_growth = 0;
 };
 
 template <class Real>
@@ -117,6 +129,17 @@ class Engine {
   // returning their number; resident_contacts() gives them in host memory (ids are row indices;
   // CUDA: downloaded on the first request, which must come before the engine's next detection,
   // else UsageError).
+  //
+  // A granular simulation's loop with a skin (EngineOptions::skin): every call returns the contacts of
+  // the current bodies; most calls reuse the candidate list of an earlier one (EngineStats says which):
+  //
+  //   cg::Engine<double> engine({.skin = 0.1 * r_min});  // candidates kept while motion < skin/2
+  //   engine.set_resident(cg::BodiesView{centre, radius, {}, {}});
+  //   for (int step = 0; step < steps; ++step) {
+  //     engine.write_resident(0, n, new_centre, radius);   // the integrator's positions
+  //     std::size_t k = engine.detect_resident();           // reuse or rebuild, same contacts
+  //   }
+  //   // engine.stats().candidate_reuses / candidate_builds: how often the list was kept
   void set_resident(const BodiesView& bodies);
   std::size_t resident_size() const;
   void read_resident(std::size_t first, std::size_t count, Vec3<double>* position, double* radius);

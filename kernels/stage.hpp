@@ -9,9 +9,10 @@
 namespace cg::detail {
 
 // In pipeline order. plan: the engine's (bounds, frame, grid plan; engine.cpp); upload and download:
-// CUDA backend only (the host reads and writes in place).
-enum class Stage : int { plan, upload, pack, entries, sort, pairs, order, narrow, download };
-inline constexpr int kStageCount = 9;
+// CUDA backend only (the host reads and writes in place); skin: the check of candidates kept across
+// calls (EngineOptions::skin > 0, when the bodies match the kept list's: the displacement reduction).
+enum class Stage : int { plan, upload, skin, pack, entries, sort, pairs, order, narrow, download };
+inline constexpr int kStageCount = 10;
 
 constexpr const char* name(Stage s) {
   switch (s) {
@@ -19,6 +20,8 @@ constexpr const char* name(Stage s) {
       return "plan";
     case Stage::upload:
       return "upload";
+    case Stage::skin:
+      return "skin";
     case Stage::pack:
       return "pack";
     case Stage::entries:

@@ -191,6 +191,11 @@ int run_cli(int argc, char** argv, Session& session) {
                 "refreshes its ghosts through MPI and detects again, contacts left in place (checked "
                 "against the file's count); prints the median step")
       ->check(CLI::NonNegativeNumber);
+  d->add_option("--skin", det.skin,
+                "Verlet skin (world length, default 0): the engines keep their candidate pairs across the "
+                "--steps and reuse them while the bodies moved less than skin/2 (stage skin in the step "
+                "times); contacts unchanged")
+      ->check(CLI::NonNegativeNumber);
   d->add_flag("-q,--quiet", det.quiet, "No summary");
 
   // compare

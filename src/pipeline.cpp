@@ -446,6 +446,7 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.engine.cell_size = cmd.cell_size;
   o.engine.cell_choice = cmd.cell_choice;
   o.engine.threads = cmd.threads;
+  o.engine.skin = cmd.skin;
   if (cmd.backend != Backend::cpu) o.engine.device = session.device_for(cuda_device_count());
   o.axis = cmd.axis;
   o.balance = cmd.balance;

@@ -1,12 +1,14 @@
 #pragma once
 // Adversarial and random test scenes for the engine, deterministic from a seed. Each returns spheres
 // as (positions, radii) in double. Fresh seeds per test case; never only zeros or regular grids.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <random>
 #include <string>
 #include <vector>
 
+#include "bodies.hpp"
 #include "core/vec3.hpp"
 
 namespace cg::test {
@@ -114,6 +116,55 @@ inline Spheres tangent(std::uint64_t seed) {
     const double rb = t[3] * scale - ra;
     s.add(x, y, z, ra);
     s.add(x + t[0] * scale, y + t[1] * scale, z + t[2] * scale, rb);
+  }
+  return s;
+}
+
+// A scene of spheres and ellipsoids (body i has id i) in [0, L]^3.
+struct ShapeScene {
+  std::string name;
+  double extent = 0;
+  std::vector<Vec3<double>> p;
+  std::vector<double> r;
+  std::vector<Shape> shape;
+  std::vector<Vec3<double>> axes;
+  std::vector<Quat<double>> q;
+  BodiesView view() const {
+    BodiesView v{p, r, {}, {}};
+    v.shape = shape;
+    v.semi_axes = axes;
+    v.orientation = q;
+    return v;
+  }
+};
+
+// n bodies, a fraction `ellipsoid_share` ellipsoids (semi-axes in [0.2, 1]: axis ratios up to 5,
+// uniformly random orientations), the rest spheres (radius in [0.3, 1]); extent L chosen for a few
+// hundred bounding-sphere overlaps.
+inline ShapeScene make_scene(const std::string& name, std::uint32_t seed, int n, double ellipsoid_share, double L) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u01(0, 1), axis(0.2, 1.0), rad(0.3, 1.0);
+  std::normal_distribution<double> gauss;
+  ShapeScene s;
+  s.name = name + " seed " + std::to_string(seed);
+  s.extent = L;
+  for (int i = 0; i < n; ++i) {
+    s.p.push_back({L * u01(rng), L * u01(rng), L * u01(rng)});
+    if (u01(rng) < ellipsoid_share) {
+      const Vec3<double> e{axis(rng), axis(rng), axis(rng)};
+      double w = gauss(rng), x = gauss(rng), y = gauss(rng), z = gauss(rng);
+      const double k = 1 / std::sqrt(w * w + x * x + y * y + z * z);
+      s.shape.push_back(Shape::ellipsoid);
+      s.axes.push_back(e);
+      s.q.push_back({w * k, x * k, y * k, z * k});
+      s.r.push_back(std::max(e.x, std::max(e.y, e.z)));
+    } else {
+      const double r = rad(rng);
+      s.shape.push_back(Shape::sphere);
+      s.axes.push_back({0, 0, 0});  // not read for spheres
+      s.q.push_back({0, 0, 0, 0});
+      s.r.push_back(r);
+    }
   }
   return s;
 }

@@ -86,6 +86,19 @@ CG_HD PairFrame<Real> pair_frame(const NarrowBodies<Real>& w, std::uint32_t a, s
   }
 }
 
+// A pair with an ellipsoid is decided only when its bounding spheres touch, as narrow_decide decides
+// a sphere pair (fp64 and mixed: the frame-local doubles; fp32: the packed floats): a looser
+// candidate list (the cell rule, mixed's enlarged spheres, a list kept with a skin) then gives the
+// same contacts and solver flags as the bounding spheres themselves, also for a pair whose solve
+// would call it touching within the solver's tolerance while its bounding spheres do not quite.
+template <class Real>
+CG_HD bool bounding_spheres_touch(const NarrowBodies<Real>& w, std::uint32_t a, std::uint32_t b) {
+  if constexpr (std::is_same_v<Real, double>)
+    return spheres_touch(local_sphere_fp64(w, a), local_sphere_fp64(w, b));
+  else
+    return spheres_touch(w.spheres[a], w.spheres[b]);
+}
+
 template <class Real>
 struct ShapeDecide {
   NarrowBodies<Real> bodies;
@@ -98,6 +111,7 @@ struct ShapeDecide {
   }
   CG_HD bool accept(std::uint32_t a, std::uint32_t b, NarrowFlags& flags) const {
     if (both_spheres(a, b)) return narrow_decide(bodies, a, b, false, flags).contact;
+    if (!bounding_spheres_touch(bodies, a, b)) return false;  // (above)
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
@@ -123,6 +137,7 @@ struct ShapeDecide {
   CG_HD Verdict triage(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
     if (both_spheres(a, b))
       return narrow_decide(bodies, a, b, false, flags).contact ? Verdict::accept : Verdict::reject;
+    if (!bounding_spheres_touch(bodies, a, b)) return Verdict::reject;  // (above)
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c, SolveScope::first_start);

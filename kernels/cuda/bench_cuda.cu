@@ -13,7 +13,11 @@
 // radius U[0.5, 1]. For the shape scenes L is calibrated at 2^16 on the GPU so that contacts/N = 0.4
 // (the issue's scene; two secant steps on L^-3, printed). All from a seeded splitmix64.
 // usage: contactgrid_cuda_bench [min_log2=16] [max_log2=26] [step=2] [runs=20] [cell=auto]
-//                               [scene=spheres|ellipsoids|mixed]
+//                               [scene=spheres|ellipsoids|mixed] [skin=0]
+// skin > 0 adds the steps table (EngineOptions::skin): `runs` steps in which every centre moves by a
+// random vector of length <= skin/10 (a device kernel, not timed), detect_device_resident per step
+// with the skin (reuse or rebuild) and without (every step from scratch, skin 0), L2 not flushed
+// (a simulation's step follows its integrator).
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -258,6 +262,70 @@ Row bench(int log2n, std::uint64_t n, const DeviceScene& scene, int runs, Flushe
   return row;
 }
 
+// Every centre moved by a random vector of length <= step (per body and step from a hash).
+__global__ void random_move(double* pos, std::uint32_t n, double step, std::uint64_t seed) {
+  const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  std::uint64_t s = seed ^ (std::uint64_t(i) * 0xD1B54A32D192ED03ull);
+  for (int k = 0; k < 3; ++k) {
+    std::uint64_t x = (s += 0x9E3779B97F4A7C15ull);
+    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+    x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+    const double u = double((x ^ (x >> 31)) >> 11) * 0x1.0p-53 - 0.5;  // [-1/2, 1/2): |move| <= step
+    pos[3 * std::uint64_t(i) + k] += u * (2 * step / 1.7320508075688772);
+  }
+}
+
+struct SkinRow {
+  int log2n;
+  const char* prec;
+  std::uint64_t builds, reuses;
+  double scratch_ms, reuse_ms, build_ms, mean_ms;
+  bool same;
+};
+
+// `runs` steps of moves <= skin/10: median wall time of detect_device_resident per step without a
+// skin (every step from scratch), and with it: of the reused steps, of the rebuilt ones; the mean.
+template <class Real>
+SkinRow bench_skin(int log2n, std::uint64_t n, const DeviceScene& d, double skin, int runs) {
+  SkinRow row{log2n, cg::to_string(cg::precision_of<Real>()), 0, 0, 0, 0, 0, 0, true};
+  DeviceBuffer<double> pos;  // the scene's centres, moved step by step
+  pos.reserve(3 * n, false);
+  CG_CUDA_CHECK(cudaMemcpy(pos.data(), d.pos.data(), 3 * n * sizeof(double), cudaMemcpyDeviceToDevice));
+  cg::DeviceBodiesView bodies = d.view(n);
+  bodies.position = pos.data();
+  cg::Engine<Real> kept(
+      {.backend = cg::Backend::cuda, .cell_size = g_cell_size, .cell_choice = g_cell_choice, .skin = skin});
+  cg::Engine<Real> scratch(
+      {.backend = cg::Backend::cuda, .cell_size = g_cell_size, .cell_choice = g_cell_choice});
+  for (int w = 0; w < 3; ++w) scratch.detect_device_resident(bodies), kept.detect_device_resident(bodies);
+  std::vector<double> t_scratch, t_reuse, t_build;
+  double sum = 0;
+  auto wall = [](auto&& f) {
+    const auto t0 = std::chrono::steady_clock::now();
+    f();
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  };
+  for (int r = 0; r < runs; ++r) {
+    random_move<<<unsigned((n + 255) / 256), 256>>>(pos.data(), std::uint32_t(n), skin / 10, 991 + r);
+    CG_CUDA_CHECK(cudaDeviceSynchronize());
+    std::size_t k_scratch = 0, k_kept = 0;
+    t_scratch.push_back(wall([&] { k_scratch = scratch.detect_device_resident(bodies).count; }));
+    const std::uint64_t reuses = kept.stats().candidate_reuses;
+    const double t = wall([&] { k_kept = kept.detect_device_resident(bodies).count; });
+    (kept.stats().candidate_reuses > reuses ? t_reuse : t_build).push_back(t);
+    sum += t;
+    row.same = row.same && k_scratch == k_kept;
+  }
+  row.builds = t_build.size();
+  row.reuses = t_reuse.size();
+  row.scratch_ms = median(t_scratch);
+  row.reuse_ms = median(t_reuse);
+  row.build_ms = median(t_build);
+  row.mean_ms = sum / double(runs);
+  return row;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) try {
@@ -276,6 +344,7 @@ int main(int argc, char** argv) try {
   const int hi = argc > 2 ? std::atoi(argv[2]) : 26;
   const int step = argc > 3 ? std::atoi(argv[3]) : 2;
   const int runs = argc > 4 ? std::atoi(argv[4]) : 20;
+  const double skin = argc > 7 ? std::atof(argv[7]) : 0.0;
   cudaDeviceProp prop{};
   CG_CUDA_CHECK(cudaGetDeviceProperties(&prop, 0));
   std::printf(
@@ -293,6 +362,7 @@ int main(int argc, char** argv) try {
   }
   Flusher flush;
   std::vector<Row> rows;
+  std::vector<SkinRow> skin_rows;
   for (int p = lo; p <= hi; p += step) {
     const std::uint64_t n = std::uint64_t(1) << p;
     const HostScene h = make_scene(kind, n, scale, 0x5EED0000ull + p);
@@ -308,6 +378,10 @@ int main(int argc, char** argv) try {
     rows.push_back(bench<float>(p, n, d, runs, flush));
     rows.push_back(bench<double>(p, n, d, runs, flush, true));
     rows.push_back(bench<double>(p, n, d, runs, flush));
+    if (skin > 0) {
+      skin_rows.push_back(bench_skin<float>(p, n, d, skin, runs));
+      skin_rows.push_back(bench_skin<double>(p, n, d, skin, runs));
+    }
     std::fprintf(stderr, "done 2^%d\n", p);
   }
   std::printf(
@@ -341,6 +415,17 @@ int main(int argc, char** argv) try {
       "output buffer, excluding the caller's input arrays (32 B/N; shape scenes 89 B/N). fallbacks, "
       "unconverged: narrow-phase solver flags summed over the timed runs. total = wall time of "
       "detect_device_resident (device bounds, plan, stages, 3 host syncs).\n");
+  if (!skin_rows.empty()) {
+    std::printf(
+        "\nSteps with a skin of %g (moves <= skin/10 per step, %d steps; wall ms per step of "
+        "detect_device_resident):\n\n| N | prec | from scratch | skin: reuse | skin: rebuild | "
+        "skin: mean | builds | reuses | same counts |\n|---|---|---|---|---|---|---|---|---|\n",
+        skin, runs);
+    for (const SkinRow& r : skin_rows)
+      std::printf("| 2^%d | %s | %.3f | %.3f | %.3f | %.3f | %llu | %llu | %s |\n", r.log2n, r.prec,
+                  r.scratch_ms, r.reuse_ms, r.build_ms, r.mean_ms, static_cast<unsigned long long>(r.builds),
+                  static_cast<unsigned long long>(r.reuses), r.same ? "yes" : "NO");
+  }
   return 0;
 } catch (const std::exception& e) {
   std::fprintf(stderr, "contactgrid_cuda_bench: %s\n", e.what());

@@ -46,6 +46,9 @@ struct Counters {
   // ellipsoids counted, and the ellipsoid solver's flags (narrow accept pass)
   unsigned long long bad_shape, ellipsoids, fallbacks, unconverged;
   unsigned long long fp64_rows;  // fp32 rows recomputed in fp64 (narrow.cuh)
+  // skin check (cuda/skin.cuh): the bits of the largest squared displacement and radius growth
+  // (non-negative doubles order as their bits), and whether a report byte changed
+  unsigned long long skin_moved_sq, skin_growth, skin_report_changed;
 };
 
 // Pointers of the contact arrays in DEVICE memory (core/contact_fields.hpp); the optional ones are

@@ -5,6 +5,7 @@
 //   bounds.cuh     device-array API: validation and bounds of DEVICE bodies
 //   transfer.cuh   upload (host-array path: positions, radii, report mask → device), download
 //                  (contacts → pinned staging or page-locked result vectors, or left on the device)
+//   skin.cuh       candidates kept across calls (EngineOptions::skin): the motion check, the kept list
 //   pack.cuh       world double → local Real spheres; renumbering by z layer of cells (locality
 //                  only, when the spheres outgrow the L2); control bytes, per-block entry totals
 //   entries.cuh    scan of the block totals → fill (cell key, body) in body order
@@ -41,6 +42,7 @@
 #include "cuda/pairs.cuh"
 #include "cuda/run_state.cuh"
 #include "cuda/shapes.cuh"
+#include "cuda/skin.cuh"
 #include "cuda/sort.cuh"
 #include "cuda/stage_events.cuh"
 #include "cuda/transfer.cuh"
@@ -131,24 +133,34 @@ class CudaBackend {
     r.type_passes = m_tuning.type_passes;
     r.filter = m_tuning.candidates;
     // Scenes with ellipsoids: bounding-sphere candidates, the narrow stage decides (shapes.cuh); mixed:
-    // the enlarged spheres of the fp32 broad phase, the fp64 narrow stage decides.
-    if ((job.ellipsoids > 0 || !std::is_same_v<Real, Narrow>) && r.filter == CandidateFilter::spheres_touch)
+    // the enlarged spheres of the fp32 broad phase, the fp64 narrow stage decides; a skin
+    // (EngineOptions::skin): inflated bounding-sphere candidates, kept across calls.
+    const bool skin = job.skin > 0;
+    if ((job.ellipsoids > 0 || !std::is_same_v<Real, Narrow> || skin) &&
+        r.filter == CandidateFilter::spheres_touch)
       r.filter = CandidateFilter::bounding_spheres;
 
     reserve_pack(r);
     m_events.start(m_stream);
     upload_stage(r);
-    shapes_stage(r);  // scenes with ellipsoids only
-    pack_stage(r);
-    scan_body_blocks(r);
-    if (!r.type_passes) {
-      entries_stage(r);
-      sort_stage(r);
-      pairs_stage(r);
+    shapes_stage(r);                   // scenes with ellipsoids only
+    const bool reuse = skin_stage(r);  // a skin: the kept candidates still hold every contact?
+    pack_stage(r, reuse);
+    if (reuse) {
+      reuse_candidates(r);
     } else {
-      type_pass_stages(r);
+      scan_body_blocks(r);
+      if (!r.type_passes) {
+        entries_stage(r);
+        sort_stage(r);
+        pairs_stage(r);
+      } else {
+        type_pass_stages(r);
+      }
+      order_stage(r);
+      if (skin) keep_candidates(r);
     }
-    order_stage(r);
+    if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
     narrow_stage(r);
     const DownloadHostTimes host = download_stage(r, m_h_staging, out);
     m_events.collect(times, host.overlap_s, host.extra_s);  // all events complete: the stream synced

@@ -46,8 +46,9 @@ __global__ void __launch_bounds__(kBlock)
   home_index[i] = i;
 }
 
-// reorder: cell-ordered copy of the spheres (body j = input body perm[j]), control bytes, and per
-// block the sum of the entry counts (block_entries[blockIdx.x]; total added to c->entries).
+// reorder: cell-ordered copy of the spheres (body j = input body perm[j]; radii + `inflation`, the
+// pair stage's spheres: 0 without a skin), control bytes, and per block the sum of the entry counts
+// (block_entries[blockIdx.x]; total added to c->entries).
 // Type-pass path (base != nullptr): also the super-cell index of the body's lowest even cell
 // (cell_key of lo & ~1, type bits 0) and per block the number of bodies having a cell of each
 // type (type_blocks[t * gridDim.x + blockIdx.x]; totals added to c->type_entries[t]).
@@ -58,7 +59,7 @@ __global__ void __launch_bounds__(kBlock)
                    std::uint8_t* __restrict__ ctrl, std::uint32_t* __restrict__ perm,
                    std::uint32_t* __restrict__ block_entries, Counters* __restrict__ c,
                    Key* __restrict__ base, std::uint32_t* __restrict__ type_blocks,
-                   const std::uint8_t* __restrict__ report) {
+                   const std::uint8_t* __restrict__ report, Real inflation) {
   using Reduce = cub::BlockReduce<std::uint32_t, kBlock>;
   __shared__ typename Reduce::TempStorage tmp;
   __shared__ std::uint32_t s_types[8];
@@ -68,7 +69,8 @@ __global__ void __launch_bounds__(kBlock)
   bool live = false;
   if (j < n) {
     const std::uint32_t i = sorted_index[j];
-    const Sphere<Real> s = spheres[i];
+    Sphere<Real> s = spheres[i];
+    s.r += inflation;  // a skin (EngineOptions::skin): cells and pair test of the inflated sphere
     cell_spheres[j] = s;
     perm[j] = i;
     const BodyCells bc = body_cells(s, g);
@@ -130,8 +132,10 @@ void reserve_pack(RunState<Real, Key, Narrow>& r) {
              "pack");
 }
 
+// spheres_only: the spheres in input order alone (the reuse of candidates kept with a skin needs no
+// cells, renumbering or entry totals).
 template <class Real, class Key, class Narrow>
-void pack_stage(RunState<Real, Key, Narrow>& r) {
+void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   using cuda::kBlock;
   Workspace& ws = r.ws;
   const std::uint32_t n = r.n, nb = r.nb;
@@ -158,6 +162,10 @@ void pack_stage(RunState<Real, Key, Narrow>& r) {
                                                       layer_shift, home_key.Current(), home_index.Current(),
                                                       r.d_counters);
   CG_CUDA_CHECK_LAUNCH("pack");
+  if (spheres_only) {
+    r.events.mark(Stage::pack, st);
+    return;
+  }
   // The renumbering pays only when the spheres do not stay in L2 anyway (the pair stage's gathers hit
   // it either way): when they outgrow the L2 (Tuning::renumber forces it). Without it, reorder reads
   // the identity written by pack: the bodies keep their input order (no result changes).
@@ -167,7 +175,8 @@ void pack_stage(RunState<Real, Key, Narrow>& r) {
     });
   cuda::reorder_kernel<Real, Key><<<nb, kBlock, 0, st>>>(
       r.d_spheres, n, r.g, home_index.Current(), r.d_cell_spheres, r.d_ctrl, r.d_perm, r.d_body_totals,
-      r.d_counters, r.d_base, r.type_passes ? r.d_type_totals : nullptr, r.d_report);
+      r.d_counters, r.d_base, r.type_passes ? r.d_type_totals : nullptr, r.d_report,
+      static_cast<Real>(r.job.inflation));
   CG_CUDA_CHECK_LAUNCH("reorder");
   r.events.mark(Stage::pack, st);
 }

@@ -29,6 +29,9 @@
 //                                              (triage / hard pass → fill) and the hard count
 //   res_pos, res_rad,      between calls       resident bodies (Engine::set_resident)
 //   res_report
+//   kept_pairs, ref_pos,   between calls       EngineOptions::skin: the kept candidate list (a then b,
+//   ref_rad, ref_report                        kept_count each) and the bodies' state it was built
+//                                              from (cuda/skin.cuh); owned across calls, never aliased
 //
 // Aliases (a buffer seen under another name once its first use is dead):
 //   view                 storage                  when
@@ -41,8 +44,8 @@
 //   (narrow.cuh)         pair_a / pair_b          narrow (rejecting filter): accept flags (shapes: the
 //                        .Alternate()             verdicts) and their scan (shapes: first the list of
 //                                                 hard candidates), in the candidates' dead second copies
-// Contents do not survive a call, except the resident bodies and the contact rows of the last call
-// (DeviceContactsView, valid until the next detection).
+// Contents do not survive a call, except the resident bodies, the kept candidates and their state,
+// and the contact rows of the last call (DeviceContactsView, valid until the next detection).
 #include <cub/util_type.cuh>
 #include <initializer_list>
 #include <optional>
@@ -62,8 +65,11 @@ struct Workspace {
   Bytes entry_blocks, pairs, out, temp, counters, partials;
   Bytes res_pos, res_rad, res_report;
   Bytes shape_kind, shape_semi, shape_orient, shapes, normals;
+  Bytes kept_pairs, ref_pos, ref_rad, ref_report;
   std::size_t res_count = 0;
-  bool res_reported = false;  // resident report mask present
+  bool res_reported = false;     // resident report mask present
+  std::uint32_t kept_count = 0;  // kept candidate pairs
+  bool kept_reported = false;    // the kept list was built with a report mask
 
   int device = 0;                           // for messages
   std::optional<std::size_t> memory_limit;  // Tuning::memory_limit
@@ -75,7 +81,8 @@ struct Workspace {
          {&pos,         &rad,        &report,     &spheres,      &cell_spheres, &perm,      &ctrl,
           &body_blocks, &base,       &keys[0],    &keys[1],      &bodies[0],    &bodies[1], &entry_blocks,
           &pairs,       &out,        &temp,       &counters,     &partials,     &res_pos,   &res_rad,
-          &res_report,  &shape_kind, &shape_semi, &shape_orient, &shapes,    &normals})
+          &res_report,  &shape_kind, &shape_semi, &shape_orient, &shapes,       &normals,   &kept_pairs,
+          &ref_pos,     &ref_rad,    &ref_report})
       s += b->bytes();
     return s;
   }

@@ -14,6 +14,9 @@
 //             contact rows in the requested fields, world frame
 //             (scenes with ellipsoids: pack also packs the shapes, the pair stage keeps bounding-sphere
 //             overlaps, and narrow dispatches on the shape pair: core/shape_narrow.hpp)
+// With a skin (EngineOptions::skin, core/skin.hpp): the pair stage tests spheres inflated by
+// job.inflation and the ordered list is kept (keep_candidates); a later call first checks the motion
+// since (stage skin) and, when the list still covers every contact, runs pack + narrow over it.
 #include <omp.h>
 
 #include <type_traits>
@@ -36,41 +39,57 @@ NarrowBodies<Narrow> narrow_bodies(const BodiesView& bodies, const host::PackedB
 }
 
 template <class Broad, class Narrow, class Key>
-void run_typed(const HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Narrow>& out,
-               StageTimes& times, EngineStats& stats) {
+void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Narrow>& out, StageTimes& times,
+               EngineStats& stats) {
   const int nt = be.threads > 0 ? be.threads : omp_get_max_threads();
   HostStageTimer timer(times);
   // Scenes with ellipsoids: candidates are bounding-sphere overlaps (or the looser cell rule), the
   // narrow stage decides per shape pair. Sphere-only scenes: exactly the sphere path. mixed: the fp32
-  // pair stage tests enlarged spheres, so the narrow stage decides (in fp64) there too.
+  // pair stage tests enlarged spheres, so the narrow stage decides (in fp64) there too; so does a
+  // list kept with a skin (inflated spheres).
   const bool shapes = job.ellipsoids > 0;
+  const bool skin = job.skin > 0;
   constexpr bool mixed = !std::is_same_v<Broad, Narrow>;
-  const CandidateFilter filter = (shapes || mixed) && be.candidates == CandidateFilter::spheres_touch
+  const CandidateFilter filter = (shapes || mixed || skin) && be.candidates == CandidateFilter::spheres_touch
                                      ? CandidateFilter::bounding_spheres
                                      : be.candidates;
+  bool reuse = false;
+  if (skin && job.check) {
+    const Motion m = host::measure_motion(job.bodies, be.kept, nt);
+    stats.skin_displacement = m.displacement;
+    stats.skin_growth = m.growth;
+    reuse = skin_covers(m, job.skin);
+    timer.lap(Stage::skin);
+  }
 
   host::PackedBodies<Broad> bodies;
   std::vector<PackedShape<Narrow>> packed_shapes;
-  host::pack(job.bodies, job.plan.frame.origin, job.grid, nt, bodies);
+  host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Broad>(job.inflation), !reuse, nt,
+             bodies);
   if (shapes) host::pack_shapes(job.bodies, nt, packed_shapes);
   timer.lap(Stage::pack);
 
-  host::Entries<Key> entries;
-  stats.entries = host::fill_entries(bodies, job.grid, nt, entries);
-  timer.lap(Stage::entries);
+  host::CandidatePairs built;
+  if (!reuse) {
+    host::Entries<Key> entries;
+    stats.entries = host::fill_entries(bodies, job.grid, nt, entries);
+    timer.lap(Stage::entries);
 
-  host::sort_entries(entries, job.plan.key_bits, nt);
-  timer.lap(Stage::sort);
+    host::sort_entries(entries, job.plan.key_bits, nt);
+    timer.lap(Stage::sort);
 
-  host::CandidatePairs candidates;
-  stats.pair_tests =
-      host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter, nt, candidates);
+    stats.pair_tests =
+        host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter, nt, built);
+    entries = {};
+    timer.lap(Stage::pairs);
+
+    host::order_candidates(built, nt);
+    if (skin) host::keep_candidates(job.bodies, built, be.kept);
+    timer.lap(Stage::order);
+  }
+  if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
+  const host::CandidatePairs& candidates = reuse ? be.kept.pairs : built;
   stats.candidates = candidates.size();
-  entries = {};
-  timer.lap(Stage::pairs);
-
-  host::order_candidates(candidates, nt);
-  timer.lap(Stage::order);
 
   const NarrowBodies<Narrow> world = narrow_bodies<Broad, Narrow>(job.bodies, bodies, job.plan.frame.origin);
   if (shapes)

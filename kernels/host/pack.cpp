@@ -3,22 +3,36 @@
 #include "host/stages.hpp"
 
 namespace cg::detail::host {
+namespace {
+// Body i in the local frame: Real(world − origin), its radius Real(r) + g.radius_margin.
+template <class Real>
+Sphere<Real> local_sphere(const BodiesView& bodies, const Vec3<double>& origin, const GridParams<Real>& g,
+                          std::size_t i) {
+  const Vec3<double> p = bodies.position[i];
+  return {static_cast<Real>(p.x - origin.x), static_cast<Real>(p.y - origin.y),
+          static_cast<Real>(p.z - origin.z), static_cast<Real>(bodies.radius[i]) + g.radius_margin};
+}
+}  // namespace
 
 template <class Real>
-void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams<Real>& g, int threads,
-          PackedBodies<Real>& out) {
+void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams<Real>& g, Real inflation,
+          bool cells_too, int threads, PackedBodies<Real>& out) {
   const std::size_t n = bodies.size();
   out.spheres.resize(n);
+  out.inflation = inflation;
+  if (!cells_too) {
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
+    for (std::size_t i = 0; i < n; ++i) out.spheres[i] = local_sphere<Real>(bodies, origin, g, i);
+    return;
+  }
   out.cells.resize(n);
   out.ctrl.resize(n);
   out.count.resize(n);
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
-    const Vec3<double> p = bodies.position[i];
-    Sphere<Real> s{static_cast<Real>(p.x - origin.x), static_cast<Real>(p.y - origin.y),
-                   static_cast<Real>(p.z - origin.z), static_cast<Real>(bodies.radius[i]) + g.radius_margin};
+    const Sphere<Real> s = local_sphere<Real>(bodies, origin, g, i);
     out.spheres[i] = s;
-    out.cells[i] = body_cells(s, g);
+    out.cells[i] = body_cells(Sphere<Real>{s.x, s.y, s.z, s.r + inflation}, g);
     out.ctrl[i] = control_bits(out.cells[i]);
     out.count[i] = entry_count(out.cells[i]);
   }
@@ -40,9 +54,9 @@ void pack_shapes(const BodiesView& bodies, int threads, std::vector<PackedShape<
 template void pack_shapes(const BodiesView&, int, std::vector<PackedShape<float>>&);
 template void pack_shapes(const BodiesView&, int, std::vector<PackedShape<double>>&);
 
-template void pack(const BodiesView&, const Vec3<double>&, const GridParams<float>&, int,
+template void pack(const BodiesView&, const Vec3<double>&, const GridParams<float>&, float, bool, int,
                    PackedBodies<float>&);
-template void pack(const BodiesView&, const Vec3<double>&, const GridParams<double>&, int,
+template void pack(const BodiesView&, const Vec3<double>&, const GridParams<double>&, double, bool, int,
                    PackedBodies<double>&);
 
 }  // namespace cg::detail::host

@@ -36,13 +36,14 @@ template <bool touch_only, class Real, class Key>
 std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const std::uint8_t* report,
                       int half_bits, int nt, CandidatePairs& out) {
   const std::size_t n_entries = en.size();
-  // The spheres and control bytes are first gathered into entry order, so the walk reads memory in
-  // sequence.
+  // The spheres (inflated by a skin) and control bytes are first gathered into entry order, so the
+  // walk reads memory in sequence.
   std::vector<Sphere<Real>> entry_sphere(n_entries);
   std::vector<std::uint8_t> entry_ctrl(n_entries);
 #pragma omp parallel for num_threads(nt) schedule(static) if (n_entries > k_parallel_min)
   for (std::size_t e = 0; e < n_entries; ++e) {
     entry_sphere[e] = p.spheres[en.body[e]];
+    entry_sphere[e].r += p.inflation;  // a skin: the inflated spheres (0: exactly r)
     entry_ctrl[e] = p.ctrl[en.body[e]];
   }
   // count → scan → fill at the granularity of fixed chunks of entries: each chunk collects its pairs

@@ -11,6 +11,7 @@
 #include "core/grid.hpp"
 #include "core/narrow.hpp"
 #include "core/shape_narrow.hpp"
+#include "core/skin.hpp"
 #include "engine.hpp"
 
 namespace cg::detail::host {
@@ -35,6 +36,7 @@ Acc exclusive_scan_into(const std::vector<T>& counts, std::vector<Acc>& offsets)
 template <class Real>
 struct PackedBodies {
   std::vector<Sphere<Real>> spheres;      // local frame: Real(world - origin)
+  Real inflation = 0;                     // added to every radius by the pair stage (cells, test)
   std::vector<BodyCells> cells;           // freed by fill_entries
   std::vector<std::uint8_t> ctrl;         // control_bits
   std::vector<std::uint32_t> count;       // entry_count; freed by fill_entries
@@ -61,10 +63,26 @@ struct CandidatePairs {
   }
 };
 
-// pack: world (double) → local Real spheres; per body its cells, control byte and entry count.
+// The candidates kept across calls (EngineOptions::skin) and the state they were built from: the
+// bodies' positions, radii and report mask (empty: none).
+struct KeptCandidates {
+  CandidatePairs pairs;
+  std::vector<Vec3<double>> position;
+  std::vector<double> radius;
+  std::vector<std::uint8_t> report;
+};
+
+// skin: what moved since `kept` was built (same body count): max |x − x_ref|, max radius growth,
+// whether the report mask changed. keep_candidates: `c` and the state of `bodies` into `kept`.
+Motion measure_motion(const BodiesView& bodies, const KeptCandidates& kept, int threads);
+void keep_candidates(const BodiesView& bodies, const CandidatePairs& c, KeptCandidates& kept);
+
+// pack: world (double) → local Real spheres; per body its cells (of the sphere inflated by
+// `inflation`, 0 without a skin), control byte and entry count. cells_too false: the spheres only
+// (the reuse of kept candidates needs no grid).
 template <class Real>
-void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams<Real>& g, int threads,
-          PackedBodies<Real>& out);
+void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams<Real>& g, Real inflation,
+          bool cells_too, int threads, PackedBodies<Real>& out);
 
 // pack_shapes (scenes with ellipsoids): pack_shape() of every body, input order.
 template <class Real>

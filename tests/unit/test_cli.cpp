@@ -321,6 +321,15 @@ TEST_F(Cli, UsageErrorsExitTwo) {
   EXPECT_EQ(steps.code, 0) << steps.output;
   EXPECT_NE(steps.output.find("resident steps: 3 "), std::string::npos) << steps.output;
   EXPECT_NE(steps.output.find("contacts per step (= the file's)"), std::string::npos) << steps.output;
+  // with a skin the steps reuse the candidates of the first (stage skin; the same contacts, checked)
+  const auto skin =
+      run("detect " + path("s.h5") + " -o " + path("skin.h5") + " --backend cpu --steps 3 --skin 0.1");
+  EXPECT_EQ(skin.code, 0) << skin.output;
+  EXPECT_NE(skin.output.find("contacts per step (= the file's)"), std::string::npos) << skin.output;
+  EXPECT_NE(skin.output.find("    skin "), std::string::npos) << skin.output;
+  EXPECT_EQ(steps.output.find("    skin "), std::string::npos) << steps.output;
+  EXPECT_EQ(run("compare " + path("steps.h5") + " " + path("skin.h5")).code, 0);
+  expect_detect_fails(path("s.h5"), 2, {"--skin"}, "--skin -0.5");
 }
 
 // Stage times are typed; their names (the summary's rows, the contact file's attributes) are made once.

@@ -28,6 +28,7 @@
 #include "core/shape_narrow.hpp"
 #include "engine.hpp"
 #include "reference/ellipsoid_reference.hpp"
+#include "scenes.hpp"
 
 #if defined(CONTACTGRID_HAVE_CUDA)
 #include <cuda_runtime.h>
@@ -35,55 +36,6 @@
 
 namespace cg::test {
 namespace {
-
-// A scene of spheres and ellipsoids (body i has id i) in [0, L]^3.
-struct ShapeScene {
-  std::string name;
-  double extent = 0;
-  std::vector<Vec3<double>> p;
-  std::vector<double> r;
-  std::vector<Shape> shape;
-  std::vector<Vec3<double>> axes;
-  std::vector<Quat<double>> q;
-  BodiesView view() const {
-    BodiesView v{p, r, {}, {}};
-    v.shape = shape;
-    v.semi_axes = axes;
-    v.orientation = q;
-    return v;
-  }
-};
-
-// n bodies, a fraction `ellipsoid_share` ellipsoids (semi-axes in [0.2, 1]: axis ratios up to 5,
-// uniformly random orientations), the rest spheres (radius in [0.3, 1]); extent L chosen for a few
-// hundred bounding-sphere overlaps.
-ShapeScene make_scene(const std::string& name, std::uint32_t seed, int n, double ellipsoid_share, double L) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u01(0, 1), axis(0.2, 1.0), rad(0.3, 1.0);
-  std::normal_distribution<double> gauss;
-  ShapeScene s;
-  s.name = name + " seed " + std::to_string(seed);
-  s.extent = L;
-  for (int i = 0; i < n; ++i) {
-    s.p.push_back({L * u01(rng), L * u01(rng), L * u01(rng)});
-    if (u01(rng) < ellipsoid_share) {
-      const Vec3<double> e{axis(rng), axis(rng), axis(rng)};
-      double w = gauss(rng), x = gauss(rng), y = gauss(rng), z = gauss(rng);
-      const double k = 1 / std::sqrt(w * w + x * x + y * y + z * z);
-      s.shape.push_back(Shape::ellipsoid);
-      s.axes.push_back(e);
-      s.q.push_back({w * k, x * k, y * k, z * k});
-      s.r.push_back(std::max(e.x, std::max(e.y, e.z)));
-    } else {
-      const double r = rad(rng);
-      s.shape.push_back(Shape::sphere);
-      s.axes.push_back({0, 0, 0});  // not read for spheres
-      s.q.push_back({0, 0, 0, 0});
-      s.r.push_back(r);
-    }
-  }
-  return s;
-}
 
 exact::Body reference_body(const ShapeScene& s, std::size_t i) {
   const exact::V c{s.p[i].x, s.p[i].y, s.p[i].z};

@@ -103,7 +103,7 @@ TYPED_TEST(HostStagesTest, StagesByHand) {
   const detail::DetectJob<Real> job = make_job<Real>(s, Fields::basic);
   const int nt = 2;
   detail::host::PackedBodies<Real> bodies;
-  detail::host::pack(job.bodies, job.plan.frame.origin, job.grid, nt, bodies);
+  detail::host::pack(job.bodies, job.plan.frame.origin, job.grid, Real(0), true, nt, bodies);
   ASSERT_EQ(bodies.spheres.size(), s.r.size());
   detail::host::Entries<std::uint64_t> entries;
   const std::uint64_t n_entries = detail::host::fill_entries(bodies, job.grid, nt, entries);

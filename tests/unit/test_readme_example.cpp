@@ -1,4 +1,4 @@
-// The README's library example, compiled and run. The region between the EXAMPLE markers must appear
+// The README's library examples, compiled and run. The regions between the markers must appear
 // verbatim in README.md (checked below), so the documentation cannot drift from code that works.
 #include <gtest/gtest.h>
 
@@ -26,7 +26,28 @@ std::size_t count_contacts_example() {
 }
 // EXAMPLE-END
 
+// SKIN-EXAMPLE-BEGIN
+// A simulation loop with a skin: sphere 0 drifts towards sphere 1 by 1/64 per step. The candidates
+// of the first call serve while the motion since their build is within skin/2 (steps 1-4), step 5
+// rebuilds them, steps 6-7 reuse the new list; every call returns the contacts of a skin-0 call.
+std::uint64_t skin_steps_example() {
+  std::vector<cg::Vec3<double>> centre{{0, 0, 0}, {2.0625, 0, 0}, {10, 0, 0}};
+  std::vector<double> radius{1.0, 1.0, 0.5};
+  cg::Engine<double> engine({.skin = 0.125});  // candidates kept while motion <= skin/2
+  engine.set_resident(cg::BodiesView{centre, radius, {}, {}});
+  for (int step = 0; step < 8; ++step) {
+    centre[0].x += 1.0 / 64;  // the integrator's positions
+    engine.write_resident(0, centre.size(), centre.data(), radius.data());
+    std::size_t k = engine.detect_resident();  // 0 before step 3, then 1: (0, 1) touch
+    if (k != (step >= 3 ? 1u : 0u)) return 0;
+  }
+  return engine.stats().candidate_reuses;  // 6 (and candidate_builds 2)
+}
+// SKIN-EXAMPLE-END
+
 TEST(Readme, LibraryExampleRuns) { EXPECT_EQ(count_contacts_example(), 1u); }
+
+TEST(Readme, SkinExampleRuns) { EXPECT_EQ(skin_steps_example(), 6u); }
 
 TEST(Readme, LibraryExampleIsInTheReadme) {
   // By CG_SOURCE_DIR, not __FILE__: with CCACHE_BASEDIR set, ccache makes __FILE__ relative to the
@@ -38,8 +59,11 @@ TEST(Readme, LibraryExampleIsInTheReadme) {
   a << self.rdbuf();
   b << readme.rdbuf();
   const std::string src = a.str();
-  const auto begin = src.find("// EXAMPLE-BEGIN\n") + 17, end = src.find("// EXAMPLE-END");
-  const std::string example = src.substr(begin, end - begin);
-  EXPECT_NE(b.str().find(example), std::string::npos)
-      << "README.md does not contain the example of tests/unit/test_readme_example.cpp";
+  for (const std::string marker : {"EXAMPLE", "SKIN-EXAMPLE"}) {
+    const std::string open = "// " + marker + "-BEGIN\n";
+    const auto begin = src.find(open) + open.size(), end = src.find("// " + marker + "-END");
+    const std::string example = src.substr(begin, end - begin);
+    EXPECT_NE(b.str().find(example), std::string::npos)
+        << "README.md does not contain the " << marker << " of tests/unit/test_readme_example.cpp";
+  }
 }

@@ -1,0 +1,41 @@
+#pragma once
+// Candidates kept across calls (EngineOptions::skin, a Verlet skin): the rule that decides whether a
+// kept candidate list still holds every contact, shared by both backends (g++-safe, host only).
+//
+// A list is built from bounding spheres inflated by `inflation` = skin/2 + a rounding margin each
+// (so every pair with |a − b| <= r_a + r_b + skin is a candidate). At a later call, with d the largest
+// displacement of a centre since the build and g the largest radius growth, a pair in contact now
+// had |a − b| <= r_a + r_b + 2(d + g) at the build: the list still covers it when 2(d + g) <= skin.
+//
+// Rounding. The pair test runs in Real on local coordinates of magnitude <= C (the bounds' distance
+// from the origin); its error on a distance is below 4·eps·(C + r_a + r_b + skin) at the build and at
+// the later call. The margin 16·eps·(C + 2 r_max + 2 skin) per radius (32·eps… per pair) covers both,
+// where C is the build's coordinate bound plus the skin; a later call whose bound exceeds that
+// (a far-away explicit frame) rebuilds. The displacement is measured in double (relative error a few
+// double ulps, far inside the margin).
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace cg {
+
+// What moved since the candidates were built (the skin check's reduction).
+struct Motion {
+  double displacement = 0;      // max |x_i − x_i,ref|
+  double growth = 0;            // max(0, max r_i − r_i,ref)
+  bool report_changed = false;  // the report mask differs from the build's
+};
+
+// True when a list built with `skin` still holds every contact.
+inline bool skin_covers(const Motion& m, double skin) {
+  return !m.report_changed && 2 * (m.displacement + m.growth) <= skin;
+}
+
+// The radius inflation of the candidate filter for a list built with `skin` (see the file comment):
+// `coordinate_bound` is the call's largest local coordinate magnitude plus the skin, `r_max` the
+// largest radius, `real_epsilon` the machine epsilon of the run's real type.
+inline double skin_inflation(double skin, double coordinate_bound, double r_max, double real_epsilon) {
+  return 0.5 * skin + 16 * real_epsilon * (coordinate_bound + 2 * r_max + 2 * skin);
+}
+
+}  // namespace cg

@@ -1,0 +1,126 @@
+#pragma once
+// CUDA stage skin: candidates kept across calls (EngineOptions::skin; the rule is core/skin.hpp).
+//   skin_stage        the check: max |x − x_ref|², max radius growth and whether the report mask
+//                     changed, in one reduction over the bodies (block maxima, one atomicMax per block
+//                     on the bits of a non-negative double); the host reads them (one
+//                     synchronisation) and decides, with the same arithmetic as the CPU backend
+//   keep_candidates   after a build: the ordered list and the bodies' state copied into the
+//                     workspace's kept buffers (owned across calls, never aliased: workspace.cuh)
+//   reuse_candidates  the kept list as the narrow stage's candidates (its flags and offsets in the
+//                     call's pairs buffer)
+#include <cmath>
+#include <cstring>
+#include <cub/block/block_reduce.cuh>
+
+#include "core/skin.hpp"
+#include "cuda/common.cuh"
+#include "cuda/run_state.cuh"
+
+namespace cg::cuda {
+
+// skin: the motion of bodies [0, n) since the reference state (ref_report read only when report is).
+__global__ void __launch_bounds__(kBlock)
+    motion_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
+                  const std::uint8_t* __restrict__ report, const double* __restrict__ ref_pos,
+                  const double* __restrict__ ref_rad, const std::uint8_t* __restrict__ ref_report,
+                  std::uint32_t n, Counters* __restrict__ c) {
+  using Reduce = cub::BlockReduce<double, kBlock>;
+  __shared__ typename Reduce::TempStorage tmp;
+  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+  double moved_sq = 0, growth = 0;
+  int changed = 0;
+  if (i < n) {
+    const std::uint64_t i3 = 3 * std::uint64_t(i);
+    const double dx = pos[i3] - ref_pos[i3], dy = pos[i3 + 1] - ref_pos[i3 + 1],
+                 dz = pos[i3 + 2] - ref_pos[i3 + 2];
+    moved_sq = dx * dx + dy * dy + dz * dz;  // the host's order (host/skin.cpp), no FMA
+    const double g = rad[i] - ref_rad[i];
+    growth = g > 0 ? g : 0;
+    changed = report && report[i] != ref_report[i];
+  }
+  auto larger = [](double a, double b) { return a > b ? a : b; };
+  const double block_moved = Reduce(tmp).Reduce(moved_sq, larger);
+  __syncthreads();  // tmp is reused
+  const double block_growth = Reduce(tmp).Reduce(growth, larger);
+  const int block_changed = __syncthreads_or(changed);
+  if (threadIdx.x == 0) {
+    atomicMax(&c->skin_moved_sq, static_cast<unsigned long long>(__double_as_longlong(block_moved)));
+    atomicMax(&c->skin_growth, static_cast<unsigned long long>(__double_as_longlong(block_growth)));
+    if (block_changed) atomicMax(&c->skin_report_changed, 1ull);
+  }
+}
+
+}  // namespace cg::cuda
+
+namespace cg::detail {
+
+// The check (EngineOptions::skin > 0 and the engine found the bodies matching the kept list's):
+// true when the kept list still holds every contact. Records the motion in stats and the stage
+// "skin". Before pack (which zeroes the counters again).
+template <class Real, class Key, class Narrow>
+bool skin_stage(RunState<Real, Key, Narrow>& r) {
+  if (!(r.job.skin > 0) || !r.job.check) return false;
+  Workspace& ws = r.ws;
+  cudaStream_t st = r.st;
+  r.d_counters = ws.counters.span_as<cuda::Counters>(1).data();
+  CG_CUDA_CHECK(cudaMemsetAsync(r.d_counters, 0, sizeof(cuda::Counters), st));
+  const bool both_reported = r.d_report && ws.kept_reported;
+  cuda::motion_kernel<<<r.nb, cuda::kBlock, 0, st>>>(
+      r.d_pos, r.d_rad, both_reported ? r.d_report : nullptr, ws.ref_pos.span_as<double>(3 * r.n64).data(),
+      ws.ref_rad.span_as<double>(r.n64).data(),
+      both_reported ? ws.ref_report.span_as<std::uint8_t>(r.n64).data() : nullptr, r.n, r.d_counters);
+  CG_CUDA_CHECK_LAUNCH("motion");
+  r.read_counters();
+  Motion m;
+  double moved_sq = 0;
+  std::memcpy(&moved_sq, &r.h_counters->skin_moved_sq, sizeof(double));
+  std::memcpy(&m.growth, &r.h_counters->skin_growth, sizeof(double));
+  m.displacement = std::sqrt(moved_sq);
+  m.report_changed = r.h_counters->skin_report_changed != 0 || (r.d_report != nullptr) != ws.kept_reported;
+  r.stats.skin_displacement = m.displacement;
+  r.stats.skin_growth = m.growth;
+  r.events.mark(Stage::skin, st);
+  return skin_covers(m, r.job.skin);
+}
+
+// After the order stage of a build with a skin: the list and the state it was built from, kept.
+// Timed with the order stage.
+template <class Real, class Key, class Narrow>
+void keep_candidates(RunState<Real, Key, Narrow>& r) {
+  Workspace& ws = r.ws;
+  cudaStream_t st = r.st;
+  const std::size_t np = r.np, n = r.n64;
+  ws.reserve({{&ws.kept_pairs, 2 * np * sizeof(std::uint32_t)},
+              {&ws.ref_pos, n * sizeof(Vec3<double>)},
+              {&ws.ref_rad, n * sizeof(double)},
+              {&ws.ref_report, r.d_report ? n : 0}},
+             "skin");
+  auto copy = [&](void* dst, const void* src, std::size_t bytes) {
+    if (bytes > 0) CG_CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyDeviceToDevice, st));
+  };
+  std::uint32_t* kept = ws.kept_pairs.span_as<std::uint32_t>(2 * np).data();
+  copy(kept, r.pair_a.Current(), np * sizeof(std::uint32_t));
+  copy(kept + np, r.pair_b.Current(), np * sizeof(std::uint32_t));
+  copy(ws.ref_pos.data(), r.d_pos, n * sizeof(Vec3<double>));
+  copy(ws.ref_rad.data(), r.d_rad, n * sizeof(double));
+  if (r.d_report) copy(ws.ref_report.data(), r.d_report, n);
+  ws.kept_count = r.np;
+  ws.kept_reported = r.d_report != nullptr;
+  r.events.mark(Stage::order, st);
+}
+
+// The reuse: the kept list as the candidates (Current; the narrow stage's accept flags and offsets
+// in the Alternate halves, the call's pairs buffer), and the contact rows' room.
+template <class Real, class Key, class Narrow>
+void reuse_candidates(RunState<Real, Key, Narrow>& r) {
+  Workspace& ws = r.ws;
+  r.np = ws.kept_count;
+  const std::size_t np = r.np;
+  ws.reserve({{&ws.pairs, 2 * np * sizeof(std::uint32_t)}, {&ws.out, r.out_bytes_for(np)}}, "skin");
+  std::uint32_t* kept = ws.kept_pairs.span_as<std::uint32_t>(2 * np).data();
+  std::uint32_t* scratch = ws.pairs.span_as<std::uint32_t>(2 * np).data();
+  r.pair_a = cub::DoubleBuffer<std::uint32_t>(kept, scratch);
+  r.pair_b = cub::DoubleBuffer<std::uint32_t>(kept + np, scratch + np);
+}
+
+}  // namespace cg::detail
