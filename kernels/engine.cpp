@@ -129,7 +129,7 @@ struct Engine<Real>::Impl {
     bool shapes = false;           // the scene had ellipsoids
     double coordinate_bound = 0;   // core/skin.hpp: a later call's coordinates must stay within
   } kept;
-  void forget_resident_view() {       // before any detection: the view's storage is reused
+  void forget_resident_view() {  // before any detection: the view's storage is reused
     if (resident_on_device) resident_overwritten = true;
     resident_on_device.reset();
   }
@@ -214,7 +214,8 @@ detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> 
                       : make_frame(grid_bounds, 0, prec, options.cell_choice).cell_size;
   detail::DetectJob<Broad, Narrow> job{{}, plan_grid(grid_bounds, f, prec), {}, options.fields};
   job.grid = detail::grid_params<Broad>(job.plan, margin);
-  if (options.ellipsoid_tolerance > 0) job.solver.tolerance = static_cast<Narrow>(options.ellipsoid_tolerance);
+  if (options.ellipsoid_tolerance > 0)
+    job.solver.tolerance = static_cast<Narrow>(options.ellipsoid_tolerance);
   if (options.ellipsoid_max_iterations > 0) job.solver.max_iterations = options.ellipsoid_max_iterations;
   stats.key_bits = job.plan.key_bits;
   stats.cell_size = f.cell_size;

@@ -134,9 +134,9 @@ double max_extent(const Bounds& b) { return std::max({b.hi.x - b.lo.x, b.hi.y - 
 
 double broad_margin(const Bounds& b, const Vec3<double>& origin, Precision p) {
   if (p != Precision::mixed || b.count == 0) return 0;
-  const double l = std::max({std::abs(b.lo.x - origin.x), std::abs(b.lo.y - origin.y),
-                             std::abs(b.lo.z - origin.z), std::abs(b.hi.x - origin.x),
-                             std::abs(b.hi.y - origin.y), std::abs(b.hi.z - origin.z)});
+  const double l =
+      std::max({std::abs(b.lo.x - origin.x), std::abs(b.lo.y - origin.y), std::abs(b.lo.z - origin.z),
+                std::abs(b.hi.x - origin.x), std::abs(b.hi.y - origin.y), std::abs(b.hi.z - origin.z)});
   return 4 * double(std::numeric_limits<float>::epsilon()) * (l + 2 * b.r_max);
 }
 

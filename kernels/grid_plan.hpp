@@ -22,7 +22,8 @@ const char* to_string(Precision p);
 template <class Broad, class Narrow = Broad>
 constexpr Precision precision_of() {
   static_assert(std::is_same_v<Broad, float> || std::is_same_v<Broad, double>, "Real is float or double");
-  static_assert(std::is_same_v<Narrow, double> || std::is_same_v<Broad, Narrow>, "no fp64 broad, fp32 narrow");
+  static_assert(std::is_same_v<Narrow, double> || std::is_same_v<Broad, Narrow>,
+                "no fp64 broad, fp32 narrow");
   return !std::is_same_v<Broad, Narrow> ? Precision::mixed
          : std::is_same_v<Broad, float> ? Precision::fp32
                                         : Precision::fp64;

@@ -94,8 +94,17 @@ void write_oracle_input(const std::string& path, const OracleBodies& s, bool war
   for (std::size_t i = 0; i < s.size(); ++i) {
     const Vec3<double> e = s.is_ellipsoid(i) ? s.semi_axes[i] : Vec3<double>{0, 0, 0};
     const std::array<double, 4> q = s.is_ellipsoid(i) ? s.orientation[i] : std::array<double, 4>{1, 0, 0, 0};
-    const double row[11] = {s.position[i].x, s.position[i].y, s.position[i].z, s.radius[i], e.x, e.y, e.z,
-                            q[0],            q[1],            q[2],            q[3]};
+    const double row[11] = {s.position[i].x,
+                            s.position[i].y,
+                            s.position[i].z,
+                            s.radius[i],
+                            e.x,
+                            e.y,
+                            e.z,
+                            q[0],
+                            q[1],
+                            q[2],
+                            q[3]};
     f.write(row, sizeof row);
   }
   f.write(s.id.data(), s.id.size() * sizeof(std::int64_t));

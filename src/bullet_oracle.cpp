@@ -3,9 +3,10 @@
 // CG_BULLET_ORACLE_MAIN defined, into the executable `contactgrid-bullet-float`. Nothing here may
 // depend on which flavour it is, except through btScalar.
 //
-// Invariants: bodies are added in id order, each at its centre minus the bodies' origin (so Bullet's body A, the first added, is the smaller id);
-// one performDiscreteCollisionDetection() gives the contacts; the world is torn down in O(pairs + n)
-// (Bullet's own teardown removes each proxy by scanning every pair: O(n · pairs), minutes at 2^20).
+// Invariants: bodies are added in id order, each at its centre minus the bodies' origin (so Bullet's body A,
+// the first added, is the smaller id); one performDiscreteCollisionDetection() gives the contacts; the world
+// is torn down in O(pairs + n) (Bullet's own teardown removes each proxy by scanning every pair: O(n ·
+// pairs), minutes at 2^20).
 #include "bullet_oracle.hpp"
 
 #include <btBulletCollisionCommon.h>
@@ -73,7 +74,8 @@ class BulletWorld {
 
   void move_all(const OracleBodies& s) {
     for (std::size_t i = 0; i < m_objects.size(); ++i)
-      m_objects[i]->setWorldTransform(transform(s, i, s.position[i] + warm_step_displacement(i, s.radius[i])));
+      m_objects[i]->setWorldTransform(
+          transform(s, i, s.position[i] + warm_step_displacement(i, s.radius[i])));
   }
 
   // Deepest manifold point of every pair with distance <= 0, as (id_a < id_b), sorted.

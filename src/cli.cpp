@@ -211,8 +211,9 @@ int run_cli(int argc, char** argv, Session& session) {
   std::vector<std::string> family_names;
   for (const auto& f : study_families()) family_names.push_back(f.name);
   auto* st = app.add_subcommand(
-      "study", "Speed vs accuracy of each precision mode on adversarial scene families, against the exact "
-               "(long-double) reference: table, CSV, SVG plot; no Bullet needed");
+      "study",
+      "Speed vs accuracy of each precision mode on adversarial scene families, against the exact "
+      "(long-double) reference: table, CSV, SVG plot; no Bullet needed");
   st->add_option("--families", study.families, "Families to run (default: all)")
       ->delimiter(',')
       ->check(CLI::IsMember(family_names));
@@ -233,7 +234,8 @@ int run_cli(int argc, char** argv, Session& session) {
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
   st->add_option("--seed", study.seed, "Scene seed")->capture_default_str();
-  st->add_option("--threads", study.threads, "CPU backend threads (0: all cores)")->check(CLI::NonNegativeNumber);
+  st->add_option("--threads", study.threads, "CPU backend threads (0: all cores)")
+      ->check(CLI::NonNegativeNumber);
   st->add_option("--csv", study.csv, "Write the rows as CSV");
   st->add_option("--svg", study.svg, "Write the time-vs-error plot (Pareto front) as SVG");
 
@@ -253,10 +255,11 @@ int run_cli(int argc, char** argv, Session& session) {
   v->add_option("--angle-deg", val.angle_deg, "Largest angle between normals allowed (degrees)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  v->add_option("--bullet-precision,--bullet", val_bullet,
-                "auto | double | float: Bullet build to compare with; auto: float for scenes with ellipsoids "
-                "(double Bullet's EPA is degenerate on many ellipsoid pairs), double otherwise (float Bullet is "
-                "wrong far from the origin and for nearly coincident centres)")
+  v->add_option(
+       "--bullet-precision,--bullet", val_bullet,
+       "auto | double | float: Bullet build to compare with; auto: float for scenes with ellipsoids "
+       "(double Bullet's EPA is degenerate on many ellipsoid pairs), double otherwise (float Bullet is "
+       "wrong far from the origin and for nearly coincident centres)")
       ->check(CLI::IsMember({"auto", "double", "float"}))
       ->capture_default_str();
   v->add_option("--shallow", val.shallow_threshold,
@@ -337,7 +340,8 @@ int run_cli(int argc, char** argv, Session& session) {
   if (c->parsed()) return session.rank() == 0 ? run_compare(cmp_a, cmp_b) : 0;
   if (st->parsed()) {
     if (session.rank() != 0) return 0;
-    for (const auto& name : study_backends) study.backends.push_back(name == "cuda" ? Backend::cuda : Backend::cpu);
+    for (const auto& name : study_backends)
+      study.backends.push_back(name == "cuda" ? Backend::cuda : Backend::cpu);
     run_study(study, std::cout, std::cerr);
     return 0;
   }

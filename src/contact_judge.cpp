@@ -95,7 +95,9 @@ void cap(std::vector<V>& out, V n) {
     }
 }
 
-std::string vec_text(V v) { return fmt::format("({:.6g}, {:.6g}, {:.6g})", double(v.x), double(v.y), double(v.z)); }
+std::string vec_text(V v) {
+  return fmt::format("({:.6g}, {:.6g}, {:.6g})", double(v.x), double(v.y), double(v.z));
+}
 
 }  // namespace
 
@@ -180,7 +182,8 @@ Verdict judge_answer(const Body& a, const Body& b, const Answer& ans, double tol
     return v;
   };
   if (!std::isfinite(n_len) || !(std::fabs(1 - n_len) <= 1e-6L + tol / L))
-    return fail(fmt::format("normal_on_b {} is not a unit vector (length {:.9g})", vec_text(n_raw), double(n_len)));
+    return fail(
+        fmt::format("normal_on_b {} is not a unit vector (length {:.9g})", vec_text(n_raw), double(n_len)));
   struct Side {
     const char* point;
     const char* body;
@@ -202,19 +205,23 @@ Verdict judge_answer(const Body& a, const Body& b, const Answer& ans, double tol
                               double(off), s.body, tol));
     const LD turn = angle_between(grad, s.outward), allowed = tol / s.x.curvature_radius();
     if (!(turn <= allowed))
-      return fail(fmt::format("{}'s surface normal at {} is {:.3g}° from {} (tolerance {:.3g}°)", s.body, s.point,
-                              double(turn * 180 / kPi), s.body[0] == 'A' ? "−n" : "n", double(allowed * 180 / kPi)));
+      return fail(fmt::format("{}'s surface normal at {} is {:.3g}° from {} (tolerance {:.3g}°)", s.body,
+                              s.point, double(turn * 180 / kPi), s.body[0] == 'A' ? "−n" : "n",
+                              double(allowed * 180 / kPi)));
   }
   const LD gap = norm(pa - (pb + LD(ans.distance) * n));
   if (!(gap <= tol))
-    return fail(fmt::format("position_on_a differs from position_on_b + n·distance by {:.3g} (tolerance {:.3g})",
-                            double(gap), tol));
+    return fail(
+        fmt::format("position_on_a differs from position_on_b + n·distance by {:.3g} (tolerance {:.3g})",
+                    double(gap), tol));
   const LD f_n = contact_function(a, b, n);
   if (deepest.f < f_n - tol)
-    return fail(fmt::format(
-        "not the global minimum: direction {} ({:.3g}° from n) gives distance {:.6g}, deeper than the answer's "
-        "{:.6g}",
-        vec_text(deepest.n), double(angle_between(deepest.n, n) * 180 / kPi), double(-deepest.f), double(-f_n)));
+    return fail(
+        fmt::format("not the global minimum: direction {} ({:.3g}° from n) gives distance {:.6g}, deeper "
+                    "than the answer's "
+                    "{:.6g}",
+                    vec_text(deepest.n), double(angle_between(deepest.n, n) * 180 / kPi), double(-deepest.f),
+                    double(-f_n)));
   v.ok = true;
   return v;
 }

@@ -167,8 +167,8 @@ struct DetectCommand {
   Balance balance = Balance::count;
   SceneRead read = SceneRead::automatic;
   ContactOutput write = ContactOutput::gather;
-  int steps = 0;     // resident steps after the run (a simulation's per-step cost)
-  double skin = 0;   // EngineOptions::skin: candidates kept across the resident steps
+  int steps = 0;    // resident steps after the run (a simulation's per-step cost)
+  double skin = 0;  // EngineOptions::skin: candidates kept across the resident steps
   bool quiet = false;
 };
 

@@ -37,7 +37,11 @@ std::vector<exact::FoundContact> found_contacts(const Contacts<Real>& c) {
   auto d = [](const Vec3<Real>& v) { return Vec3<double>{double(v.x), double(v.y), double(v.z)}; };
   std::vector<exact::FoundContact> out(c.size());
   for (std::size_t k = 0; k < c.size(); ++k)
-    out[k] = {c.id_a[k], c.id_b[k], double(c.distance[k]), d(c.normal_on_b[k]), d(c.position_on_a[k]),
+    out[k] = {c.id_a[k],
+              c.id_b[k],
+              double(c.distance[k]),
+              d(c.normal_on_b[k]),
+              d(c.position_on_a[k]),
               d(c.position_on_b[k])};
   return out;
 }
@@ -162,9 +166,10 @@ void check_options(const StudyOptions& o) {
 std::string number(double v) { return fmt::format("{:.3g}", v); }
 
 void print_table(const std::vector<StudyRow>& rows, std::ostream& out) {
-  out << fmt::format("{:<20} {:<5} {:>7} {:<4} {:>7} {:>8} {:>10} {:>6} {:>5} {:>6} {:>5} {:>9} {:>9} {:>9} {:>9}\n",
-                     "family", "mode", "tol", "bknd", "bodies", "contacts", "time ms", "missed", "extra",
-                     "border", "flag", "pos max/r", "pos p99/r", "normal °", "dist err");
+  out << fmt::format(
+      "{:<20} {:<5} {:>7} {:<4} {:>7} {:>8} {:>10} {:>6} {:>5} {:>6} {:>5} {:>9} {:>9} {:>9} {:>9}\n",
+      "family", "mode", "tol", "bknd", "bodies", "contacts", "time ms", "missed", "extra", "border", "flag",
+      "pos max/r", "pos p99/r", "normal °", "dist err");
   for (const StudyRow& r : rows) {
     const std::string tol = r.tolerance < 0 ? "-" : number(r.tolerance);
     if (r.refused) {
@@ -173,10 +178,11 @@ void print_table(const std::vector<StudyRow>& rows, std::ostream& out) {
       continue;
     }
     const exact::ContactErrors& e = r.errors;
-    out << fmt::format("{:<20} {:<5} {:>7} {:<4} {:>7} {:>8} {:>10.4g} {:>6} {:>5} {:>6} {:>5} {:>9} {:>9} {:>9} {:>9}\n",
-                       r.family, r.mode, tol, r.backend, r.bodies, r.contacts, r.seconds * 1e3, e.missed,
-                       e.extra, e.borderline, r.flagged, number(e.max_position_rel), number(e.p99_position_rel),
-                       number(e.max_normal_deg), number(e.max_distance));
+    out << fmt::format(
+        "{:<20} {:<5} {:>7} {:<4} {:>7} {:>8} {:>10.4g} {:>6} {:>5} {:>6} {:>5} {:>9} {:>9} {:>9} {:>9}\n",
+        r.family, r.mode, tol, r.backend, r.bodies, r.contacts, r.seconds * 1e3, e.missed, e.extra,
+        e.borderline, r.flagged, number(e.max_position_rel), number(e.p99_position_rel),
+        number(e.max_normal_deg), number(e.max_distance));
   }
 }
 
@@ -189,17 +195,18 @@ std::vector<std::string> study_mode_names() {
 }
 
 std::string study_csv_header() {
-  return "family,mode,tolerance,backend,bodies,reference_pairs,contacts,status,time_s,repetitions,band,missed,"
+  return "family,mode,tolerance,backend,bodies,reference_pairs,contacts,status,time_s,repetitions,band,"
+         "missed,"
          "extra,borderline,flagged,max_position_rel,p99_position_rel,max_normal_deg,max_distance_err";
 }
 
 std::string study_csv_line(const StudyRow& r) {
   const exact::ContactErrors& e = r.errors;
-  return fmt::format("{},{},{},{},{},{},{},{},{:.6g},{},{:.6g},{},{},{},{},{:.6g},{:.6g},{:.6g},{:.6g}", r.family,
-                     r.mode, r.tolerance < 0 ? std::string() : fmt::format("{:.6g}", r.tolerance), r.backend,
-                     r.bodies, r.reference_pairs, r.contacts, r.refused ? "refused" : "ok", r.seconds,
-                     r.repetitions, r.band, e.missed, e.extra, e.borderline, r.flagged, e.max_position_rel,
-                     e.p99_position_rel, e.max_normal_deg, e.max_distance);
+  return fmt::format("{},{},{},{},{},{},{},{},{:.6g},{},{:.6g},{},{},{},{},{:.6g},{:.6g},{:.6g},{:.6g}",
+                     r.family, r.mode, r.tolerance < 0 ? std::string() : fmt::format("{:.6g}", r.tolerance),
+                     r.backend, r.bodies, r.reference_pairs, r.contacts, r.refused ? "refused" : "ok",
+                     r.seconds, r.repetitions, r.band, e.missed, e.extra, e.borderline, r.flagged,
+                     e.max_position_rel, e.p99_position_rel, e.max_normal_deg, e.max_distance);
 }
 
 std::vector<StudyRow> run_study(const StudyOptions& o, std::ostream& out, std::ostream& progress) {
@@ -212,8 +219,9 @@ std::vector<StudyRow> run_study(const StudyOptions& o, std::ostream& out, std::o
     backends.push_back(Backend::cpu);
     if (cuda_available()) backends.push_back(Backend::cuda);
   }
-  progress << fmt::format("study: {} families × {} modes × {} backends, scale {}, seed {}, time = median of {}\n",
-                          families.size(), modes.size(), backends.size(), o.scale, o.seed, o.repetitions);
+  progress << fmt::format(
+      "study: {} families × {} modes × {} backends, scale {}, seed {}, time = median of {}\n",
+      families.size(), modes.size(), backends.size(), o.scale, o.seed, o.repetitions);
 
   std::vector<StudyRow> rows;
   for (const StudyFamily* family : families) {
@@ -224,8 +232,9 @@ std::vector<StudyRow> run_study(const StudyOptions& o, std::ostream& out, std::o
     for (const Point& p : points) widest = std::max(widest, p.band);
     const auto t0 = Clock::now();
     const auto reference = exact::reference_contacts(bodies, {widest, o.ellipsoid_samples});
-    progress << fmt::format("  {} ({} bodies): exact reference {} pairs in {:.2f} s\n", family->name, bodies.size(),
-                            reference.size(), std::chrono::duration<double>(Clock::now() - t0).count());
+    progress << fmt::format("  {} ({} bodies): exact reference {} pairs in {:.2f} s\n", family->name,
+                            bodies.size(), reference.size(),
+                            std::chrono::duration<double>(Clock::now() - t0).count());
     for (const Point& p : points)
       for (Backend b : backends) {
         StudyRow row;

@@ -26,17 +26,17 @@
 namespace cg {
 
 struct StudyOptions {
-  double scale = 1;                       // --scale: family sizes × scale
-  std::uint64_t seed = 1;                 // --seed
-  int repetitions = 3;                    // --repetitions: timed detect() calls per point (median)
-  int threads = 0;                        // --threads: CPU backend threads (0: all)
-  std::vector<std::string> families;      // --families: names (empty: all)
-  std::vector<std::string> modes;         // --modes: names (empty: all)
-  std::vector<Backend> backends;          // --backends (empty: cpu, and cuda when available)
+  double scale = 1;                   // --scale: family sizes × scale
+  std::uint64_t seed = 1;             // --seed
+  int repetitions = 3;                // --repetitions: timed detect() calls per point (median)
+  int threads = 0;                    // --threads: CPU backend threads (0: all)
+  std::vector<std::string> families;  // --families: names (empty: all)
+  std::vector<std::string> modes;     // --modes: names (empty: all)
+  std::vector<Backend> backends;      // --backends (empty: cpu, and cuda when available)
   std::vector<double> tolerances{0, 1e-3, 1e-6, 1e-9};  // --tolerances: 0 is the mode's default
-  int ellipsoid_samples = 4000;           // reference directions per ellipsoid pair
-  std::string csv;                        // --csv: file ("" none)
-  std::string svg;                        // --svg: the time-vs-error plot ("" none)
+  int ellipsoid_samples = 4000;                         // reference directions per ellipsoid pair
+  std::string csv;                                      // --csv: file ("" none)
+  std::string svg;                                      // --svg: the time-vs-error plot ("" none)
 };
 
 struct StudyRow {

@@ -85,7 +85,8 @@ BodyRows dense(std::uint64_t n, std::uint64_t seed) {
   std::uniform_real_distribution<double> u(0, 1);
   const double edge = 2 * std::cbrt(double(n) / 32);
   BodyRows rows;
-  for (std::uint64_t i = 0; i < n; ++i) add_sphere(rows, {edge * u(rng), edge * u(rng), edge * u(rng)}, 0.5 + 0.5 * u(rng));
+  for (std::uint64_t i = 0; i < n; ++i)
+    add_sphere(rows, {edge * u(rng), edge * u(rng), edge * u(rng)}, 0.5 + 0.5 * u(rng));
   return rows;
 }
 
@@ -128,7 +129,8 @@ BodyRows ellipsoid_pairs(std::uint64_t repeats, std::uint64_t seed) {
         const Vec3<double> ea = random_axes(k), eb = random_axes(k);
         const auto qa = random_unit4(), qb = random_unit4();
         const exact::V n = exact::unit({LD(g(rng)), LD(g(rng)), LD(g(rng))});
-        const exact::Body A = exact::make_body({a.x, a.y, a.z}, {ea.x, ea.y, ea.z}, {qa[0], qa[1], qa[2], qa[3]});
+        const exact::Body A =
+            exact::make_body({a.x, a.y, a.z}, {ea.x, ea.y, ea.z}, {qa[0], qa[1], qa[2], qa[3]});
         const exact::Body B = exact::make_body({0, 0, 0}, {eb.x, eb.y, eb.z}, {qb[0], qb[1], qb[2], qb[3]});
         const exact::V b = exact::sub(exact::add(A.centre, exact::support_point(A, exact::scale(-1, n))),
                                       exact::add(exact::support_point(B, n), exact::scale(LD(gap), n)));
@@ -146,18 +148,30 @@ BodiesView bodies_view(const BodyRows& rows) {
 
 const std::vector<StudyFamily>& study_families() {
   static const std::vector<StudyFamily> families{
-      {"uniform", false, [](double s, std::uint64_t seed) { return generated("uniform", scaled(1 << 18, s), seed, 0.5); }},
+      {"uniform", false,
+       [](double s, std::uint64_t seed) { return generated("uniform", scaled(1 << 18, s), seed, 0.5); }},
       {"polydisperse-1:1000", false,
-       [](double s, std::uint64_t seed) { return generated("polydisperse", scaled(1 << 18, s), seed, 1e-3); }},
+       [](double s, std::uint64_t seed) {
+         return generated("polydisperse", scaled(1 << 18, s), seed, 1e-3);
+       }},
       {"far-1e6", false,
-       [](double s, std::uint64_t seed) { return generated("uniform", scaled(1 << 16, s), seed, 0.5, {1e6, -1e6, 1e6}); }},
+       [](double s, std::uint64_t seed) {
+         return generated("uniform", scaled(1 << 16, s), seed, 0.5, {1e6, -1e6, 1e6});
+       }},
       {"far-1e8", false,
-       [](double s, std::uint64_t seed) { return generated("uniform", scaled(1 << 16, s), seed, 0.5, {1e8, -1e8, 1e8}); }},
-      {"tangent-ulp-double", false, [](double s, std::uint64_t seed) { return tangent_pairs<double>(scaled(16000, s), seed); }},
-      {"tangent-ulp-float", false, [](double s, std::uint64_t seed) { return tangent_pairs<float>(scaled(16000, s), seed); }},
-      {"near-coincident", false, [](double s, std::uint64_t seed) { return near_coincident(scaled(8000, s), seed); }},
-      {"dense-32-per-cell", false, [](double s, std::uint64_t seed) { return dense(scaled(1 << 16, s), seed); }},
-      {"ellipsoids-tangent", true, [](double s, std::uint64_t seed) { return ellipsoid_pairs(scaled(16, s), seed); }},
+       [](double s, std::uint64_t seed) {
+         return generated("uniform", scaled(1 << 16, s), seed, 0.5, {1e8, -1e8, 1e8});
+       }},
+      {"tangent-ulp-double", false,
+       [](double s, std::uint64_t seed) { return tangent_pairs<double>(scaled(16000, s), seed); }},
+      {"tangent-ulp-float", false,
+       [](double s, std::uint64_t seed) { return tangent_pairs<float>(scaled(16000, s), seed); }},
+      {"near-coincident", false,
+       [](double s, std::uint64_t seed) { return near_coincident(scaled(8000, s), seed); }},
+      {"dense-32-per-cell", false,
+       [](double s, std::uint64_t seed) { return dense(scaled(1 << 16, s), seed); }},
+      {"ellipsoids-tangent", true,
+       [](double s, std::uint64_t seed) { return ellipsoid_pairs(scaled(16, s), seed); }},
   };
   return families;
 }

@@ -25,9 +25,7 @@ struct Dot {
 
 double error_of(const StudyRow& r) { return std::max(r.errors.max_position_rel, kErrorFloor); }
 
-bool dominates(const Dot& a, const Dot& b) {
-  return a.x <= b.x && a.y <= b.y && (a.x < b.x || a.y < b.y);
-}
+bool dominates(const Dot& a, const Dot& b) { return a.x <= b.x && a.y <= b.y && (a.x < b.x || a.y < b.y); }
 
 std::string escape(const std::string& s) {
   std::string out;
@@ -40,11 +38,14 @@ std::string escape(const std::string& s) {
 std::string study_svg(const std::vector<StudyRow>& rows) {
   std::vector<Dot> dots;
   for (const StudyRow& r : rows)
-    if (!r.refused && r.seconds > 0) dots.push_back({std::log10(r.seconds * 1e3), std::log10(error_of(r)), &r});
+    if (!r.refused && r.seconds > 0)
+      dots.push_back({std::log10(r.seconds * 1e3), std::log10(error_of(r)), &r});
   double x0 = -2, x1 = 1, y0 = -17, y1 = 0;
   if (!dots.empty()) {
-    auto [xmin, xmax] = std::minmax_element(dots.begin(), dots.end(), [](auto& a, auto& b) { return a.x < b.x; });
-    auto [ymin, ymax] = std::minmax_element(dots.begin(), dots.end(), [](auto& a, auto& b) { return a.y < b.y; });
+    auto [xmin, xmax] =
+        std::minmax_element(dots.begin(), dots.end(), [](auto& a, auto& b) { return a.x < b.x; });
+    auto [ymin, ymax] =
+        std::minmax_element(dots.begin(), dots.end(), [](auto& a, auto& b) { return a.y < b.y; });
     x0 = std::floor(xmin->x), x1 = std::max(std::ceil(xmax->x), x0 + 1);
     y0 = std::floor(ymin->y), y1 = std::max(std::ceil(ymax->y), y0 + 1);
   }
@@ -58,18 +59,21 @@ std::string study_svg(const std::vector<StudyRow>& rows) {
       "(filled: Pareto-optimal in its family)</text>\n",
       kWidth, kHeight, kLeft);
   for (double x = x0; x <= x1; ++x)
-    s += fmt::format("<line x1=\"{0}\" y1=\"{1}\" x2=\"{0}\" y2=\"{2}\" stroke=\"#ddd\"/><text x=\"{0}\" y=\"{3}\" "
-                     "text-anchor=\"middle\">1e{4}</text>\n",
-                     px(x), py(y0), py(y1), py(y0) + 16, int(x));
+    s += fmt::format(
+        "<line x1=\"{0}\" y1=\"{1}\" x2=\"{0}\" y2=\"{2}\" stroke=\"#ddd\"/><text x=\"{0}\" y=\"{3}\" "
+        "text-anchor=\"middle\">1e{4}</text>\n",
+        px(x), py(y0), py(y1), py(y0) + 16, int(x));
   for (double y = y0; y <= y1; ++y)
-    s += fmt::format("<line x1=\"{1}\" y1=\"{0}\" x2=\"{2}\" y2=\"{0}\" stroke=\"#ddd\"/><text x=\"{3}\" y=\"{4}\" "
-                     "text-anchor=\"end\">1e{5}</text>\n",
-                     py(y), px(x0), px(x1), px(x0) - 6, py(y) + 4, int(y));
+    s += fmt::format(
+        "<line x1=\"{1}\" y1=\"{0}\" x2=\"{2}\" y2=\"{0}\" stroke=\"#ddd\"/><text x=\"{3}\" y=\"{4}\" "
+        "text-anchor=\"end\">1e{5}</text>\n",
+        py(y), px(x0), px(x1), px(x0) - 6, py(y) + 4, int(y));
   s += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">time per detect (ms, median)</text>\n",
                    px((x0 + x1) / 2), kHeight - 15);
-  s += fmt::format("<text transform=\"translate(18,{}) rotate(-90)\" text-anchor=\"middle\">max |p − p_exact| / r "
-                   "(exact drawn at 1e-17)</text>\n",
-                   py((y0 + y1) / 2));
+  s += fmt::format(
+      "<text transform=\"translate(18,{}) rotate(-90)\" text-anchor=\"middle\">max |p − p_exact| / r "
+      "(exact drawn at 1e-17)</text>\n",
+      py((y0 + y1) / 2));
 
   std::map<std::string, std::string> colour;
   for (const Dot& d : dots)
@@ -82,19 +86,19 @@ std::string study_svg(const std::vector<StudyRow>& rows) {
     if (optimal) front[d.row->family].push_back(&d);
     const std::string fill = optimal ? colour[d.row->mode] : "none";
     if (d.row->backend == std::string("cuda"))
-      s += fmt::format("<rect x=\"{}\" y=\"{}\" width=\"8\" height=\"8\" fill=\"{}\" stroke=\"{}\"/>\n", px(d.x) - 4,
-                       py(d.y) - 4, fill, colour[d.row->mode]);
+      s += fmt::format("<rect x=\"{}\" y=\"{}\" width=\"8\" height=\"8\" fill=\"{}\" stroke=\"{}\"/>\n",
+                       px(d.x) - 4, py(d.y) - 4, fill, colour[d.row->mode]);
     else
-      s += fmt::format("<circle cx=\"{}\" cy=\"{}\" r=\"4\" fill=\"{}\" stroke=\"{}\"/>\n", px(d.x), py(d.y), fill,
-                       colour[d.row->mode]);
+      s += fmt::format("<circle cx=\"{}\" cy=\"{}\" r=\"4\" fill=\"{}\" stroke=\"{}\"/>\n", px(d.x), py(d.y),
+                       fill, colour[d.row->mode]);
   }
   for (auto& [family, f] : front) {
     std::sort(f.begin(), f.end(), [](const Dot* a, const Dot* b) { return a->x < b->x; });
     std::string path;
     for (const Dot* d : f) path += fmt::format("{}{},{}", path.empty() ? "M" : " L", px(d->x), py(d->y));
     s += fmt::format("<path d=\"{}\" fill=\"none\" stroke=\"#888\" stroke-dasharray=\"3,3\"/>\n", path);
-    s += fmt::format("<text x=\"{}\" y=\"{}\" fill=\"#444\">{}</text>\n", px(f.front()->x) + 6, py(f.front()->y) - 6,
-                     escape(family));
+    s += fmt::format("<text x=\"{}\" y=\"{}\" fill=\"#444\">{}</text>\n", px(f.front()->x) + 6,
+                     py(f.front()->y) - 6, escape(family));
   }
   double ly = kTop + 10;
   for (const auto& [mode, c] : colour) {
@@ -102,7 +106,8 @@ std::string study_svg(const std::vector<StudyRow>& rows) {
                      kWidth - kRight + 20, ly, c, kWidth - kRight + 32, ly + 4, escape(mode));
     ly += 18;
   }
-  s += fmt::format("<text x=\"{}\" y=\"{}\">circle: cpu, square: cuda</text>\n", kWidth - kRight + 14, ly + 4);
+  s +=
+      fmt::format("<text x=\"{}\" y=\"{}\">circle: cpu, square: cuda</text>\n", kWidth - kRight + 14, ly + 4);
   return s + "</svg>\n";
 }
 

@@ -212,17 +212,20 @@ void add_failures(ValidateReport& rep) {
     auto first = std::find_if(rep.offenders.begin(), rep.offenders.end(), [](const ValidateOffender& o) {
       return o.kind == ValidateOffender::Kind::ours_wrong;
     });
-    const std::string worst = first == rep.offenders.end()
-                                  ? std::string()
-                                  : fmt::format(" (worst: ({}, {}): {})", first->id_a, first->id_b, first->reason);
-    rep.failures.push_back(fmt::format("judged wrong: {} of our ellipsoid contacts fail the optimality conditions{}",
-                                       rep.our_errors, worst));
+    const std::string worst =
+        first == rep.offenders.end()
+            ? std::string()
+            : fmt::format(" (worst: ({}, {}): {})", first->id_a, first->id_b, first->reason);
+    rep.failures.push_back(
+        fmt::format("judged wrong: {} of our ellipsoid contacts fail the optimality conditions{}",
+                    rep.our_errors, worst));
   }
 }
 
 }  // namespace
 
-OracleBodies oracle_bodies(const Scene& scene, const std::vector<std::int64_t>& ids, bool framed, double& extent) {
+OracleBodies oracle_bodies(const Scene& scene, const std::vector<std::int64_t>& ids, bool framed,
+                           double& extent) {
   OracleBodies b;
   const bool shapes = scene.ellipsoid_count() > 0;
   Box span{centre(scene, 0), centre(scene, 0)};
@@ -252,7 +255,8 @@ OracleBodies oracle_bodies(const Scene& scene, const std::vector<std::int64_t>& 
 
 const char* to_string(ValidateOffender::Kind k) {
   static constexpr const char* names[ValidateOffender::kinds] = {
-      "missing", "extra", "position", "angle", "distance", "ours wrong", "Bullet wrong", "shallow Bullet miss"};
+      "missing",  "extra",      "position",     "angle",
+      "distance", "ours wrong", "Bullet wrong", "shallow Bullet miss"};
   return std::size_t(k) < ValidateOffender::kinds ? names[std::size_t(k)] : "?";
 }
 
@@ -298,14 +302,15 @@ ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, co
         kEllipsoidMargin, o.shallow_threshold));
 
   Offenders off(o.max_offenders);
-  CompareContext ctx{scene,         rep.band, o.contacts_precision, rep.bullet, st.magnitude,
+  CompareContext ctx{scene,         rep.band,           o.contacts_precision, rep.bullet, st.magnitude,
                      /*extent=*/0., o.shallow_threshold};
   const std::vector<Box> boxes = pick_boxes(st, std::size_t(bodies), o, rep);
   rep.sample_boxes = boxes.size();
   if (boxes.empty()) {
     std::vector<std::int64_t> all(static_cast<std::size_t>(bodies));
     std::iota(all.begin(), all.end(), std::int64_t(0));
-    const OracleResult bullet = bullet_collide(oracle_bodies(scene, all, shapes, ctx.bullet_extent), rep.bullet);
+    const OracleResult bullet =
+        bullet_collide(oracle_bodies(scene, all, shapes, ctx.bullet_extent), rep.bullet);
     rep.bullet_seconds += bullet.scratch_seconds;
     std::vector<std::size_t> mine(index.size()), ref(bullet.contacts.size());
     std::iota(mine.begin(), mine.end(), std::size_t(0));
@@ -322,7 +327,8 @@ ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, co
         if (outer.contains(c)) near.push_back(i);
         if (box.contains(c)) inside.push_back(i);
       }
-      const OracleResult bullet = bullet_collide(oracle_bodies(scene, near, shapes, ctx.bullet_extent), rep.bullet);
+      const OracleResult bullet =
+          bullet_collide(oracle_bodies(scene, near, shapes, ctx.bullet_extent), rep.bullet);
       rep.bullet_seconds += bullet.scratch_seconds;
       auto in_box = [&](std::int64_t id) { return box.contains(centre(scene, std::size_t(id))); };
       std::vector<std::size_t> ref;
@@ -347,8 +353,8 @@ std::string ValidateReport::text() const {
   s += fmt::format(
       "validate: {} (Bullet {}, {})\n", pass ? "PASS" : "FAIL", flavour,
       sample_boxes ? fmt::format("{} sampled sub-boxes", sample_boxes) : std::string("whole scene"));
-  s += fmt::format("  contacts: {} given, {} checked ({:.2f}%), Bullet {}, matched {}\n",
-                   contacts, checked, 100 * checked_fraction(), bullet_contacts, matched);
+  s += fmt::format("  contacts: {} given, {} checked ({:.2f}%), Bullet {}, matched {}\n", contacts, checked,
+                   100 * checked_fraction(), bullet_contacts, matched);
   s += fmt::format(
       "  only Bullet (missing): {}   only contacts (extra): {}   borderline accepted: {} + {} "
       "(band ±{:.3g}, scale {:.3g})\n",
@@ -363,10 +369,12 @@ std::string ValidateReport::text() const {
     s += fmt::format(
         "  ellipsoid pairs: matched {}, agreeing {} ({:.2f}%; max position error {:.3g}·L, max normal angle "
         "{:.3g}°)\n",
-        shape_matched, shape_agree, shape_matched ? 100.0 * double(shape_agree) / double(shape_matched) : 100.0,
-        shape_max_position_error, shape_max_angle_deg);
+        shape_matched, shape_agree,
+        shape_matched ? 100.0 * double(shape_agree) / double(shape_matched) : 100.0, shape_max_position_error,
+        shape_max_angle_deg);
     s += fmt::format(
-        "  judged {}: our errors {}   Bullet errors {}   both valid {}   shallow Bullet misses {} (|distance| < "
+        "  judged {}: our errors {}   Bullet errors {}   both valid {}   shallow Bullet misses {} "
+        "(|distance| < "
         "{:.3g}, deepest {:.3g})\n",
         judged, our_errors, bullet_errors, both_valid, shallow_misses, shallow_threshold, shallow_deepest);
   }
@@ -380,8 +388,8 @@ std::string ValidateReport::text() const {
       s += fmt::format(
           "    {:<8} ({}, {})  value {:.4g}  exact distance {:.6g} ({})  contacts {}  Bullet {}{}\n",
           cg::to_string(o.kind), o.id_a, o.id_b, o.value, o.exact_distance,
-          o.exact_distance <= 0 ? "contact" : "no contact", dist(o.contacts_distance), dist(o.bullet_distance),
-          o.reason.empty() ? std::string() : "\n      " + o.reason);
+          o.exact_distance <= 0 ? "contact" : "no contact", dist(o.contacts_distance),
+          dist(o.bullet_distance), o.reason.empty() ? std::string() : "\n      " + o.reason);
     }
   }
   return s;

@@ -19,8 +19,8 @@
 // Sampling (sample = K > 0): the centres' box is cut into a lattice of cells holding about
 // bodies_per_box body centres each, and K distinct cells are drawn at random (seeded): disjoint
 // sub-boxes, so no pair is counted twice. Bullet runs on the bodies within the box grown by
-// 2·r_max (bounding radii), and only pairs whose two centres lie inside the box itself are compared. The report gives
-// the fraction of the contacts checked. A scene smaller than one box is checked whole.
+// 2·r_max (bounding radii), and only pairs whose two centres lie inside the box itself are compared. The
+// report gives the fraction of the contacts checked. A scene smaller than one box is checked whole.
 //
 // Pairs with an ellipsoid (README, "Validating ellipsoids"): Bullet collides ellipsoids as a convex
 // shape with the exact support and a margin of kEllipsoidMargin (bullet_ellipsoid_shape.hpp), by
@@ -97,13 +97,13 @@ struct ValidateReport {
   std::uint64_t borderline_missing = 0, borderline_extra = 0;  // inside the band (accepted)
 
   // Pairs with an ellipsoid (see the rules above).
-  std::uint64_t shape_matched = 0, shape_agree = 0;  // matched; of which within the tolerances
-  std::uint64_t judged = 0;                          // pairs judged (disagreeing or one-sided)
-  std::uint64_t our_errors = 0;                      // our answers failing the conditions (FAIL)
-  std::uint64_t bullet_errors = 0;                   // Bullet's answers failing them (accepted)
-  std::uint64_t both_valid = 0;                      // disagreeing, and both answers pass
-  std::uint64_t shallow_misses = 0;                  // ours only, shallow, ours passes (accepted)
-  double shallow_deepest = 0;                        // the largest |distance| among them
+  std::uint64_t shape_matched = 0, shape_agree = 0;              // matched; of which within the tolerances
+  std::uint64_t judged = 0;                                      // pairs judged (disagreeing or one-sided)
+  std::uint64_t our_errors = 0;                                  // our answers failing the conditions (FAIL)
+  std::uint64_t bullet_errors = 0;                               // Bullet's answers failing them (accepted)
+  std::uint64_t both_valid = 0;                                  // disagreeing, and both answers pass
+  std::uint64_t shallow_misses = 0;                              // ours only, shallow, ours passes (accepted)
+  double shallow_deepest = 0;                                    // the largest |distance| among them
   double shape_max_position_error = 0, shape_max_angle_deg = 0;  // matched, relative / degrees
 
   // Contract violations of the contacts given (CONTRACT §2).

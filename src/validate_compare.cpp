@@ -36,7 +36,8 @@ judge::Body body(const Scene& s, std::int64_t id) {
 // Exact signed distance of two spheres (long double), as CONTRACT §3.
 double sphere_distance(const Scene& s, std::int64_t a, std::int64_t b) {
   const Vec3<double> ca = s.sphere_position[std::size_t(a)], cb = s.sphere_position[std::size_t(b)];
-  const long double dx = (long double)ca.x - cb.x, dy = (long double)ca.y - cb.y, dz = (long double)ca.z - cb.z;
+  const long double dx = (long double)ca.x - cb.x, dy = (long double)ca.y - cb.y,
+                    dz = (long double)ca.z - cb.z;
   const long double d = std::sqrt(dx * dx + dy * dy + dz * dz);
   return double(d - ((long double)s.sphere_radius[std::size_t(a)] + s.sphere_radius[std::size_t(b)]));
 }
@@ -50,7 +51,8 @@ Geometry row_geometry(const Contacts<double>& c, std::size_t r) {
 class ShapePair {
  public:
   ShapePair(const CompareContext& ctx, Key k)
-      : m_a(body(ctx.scene, k.first)), m_b(body(ctx.scene, k.second)),
+      : m_a(body(ctx.scene, k.first)),
+        m_b(body(ctx.scene, k.second)),
         m_size(double(std::max(m_a.bounding(), m_b.bounding()))),
         m_ours_tol((ctx.contacts_precision == Precision::fp64 ? 1e-6 : 1e-4) * m_size +
                    16 * epsilon(ctx.contacts_precision) * ctx.magnitude),
@@ -139,8 +141,12 @@ class RegionComparison {
  private:
   using Kind = ValidateOffender::Kind;
 
-  static double finite_or_inf(double v) { return std::isfinite(v) ? v : std::numeric_limits<double>::infinity(); }
-  bool both_spheres(Key k) const { return is_sphere(m_ctx.scene, k.first) && is_sphere(m_ctx.scene, k.second); }
+  static double finite_or_inf(double v) {
+    return std::isfinite(v) ? v : std::numeric_limits<double>::infinity();
+  }
+  bool both_spheres(Key k) const {
+    return is_sphere(m_ctx.scene, k.first) && is_sphere(m_ctx.scene, k.second);
+  }
 
   // The verdict on the answer of the one side that reports a pair with an ellipsoid; nothing (and
   // counted as borderline) when the judge's exact distance lies within the band.
@@ -153,7 +159,8 @@ class RegionComparison {
     return std::nullopt;
   }
 
-  void add(Kind kind, Key k, double value, double exact, double ours, double bullet, std::string reason = {}) {
+  void add(Kind kind, Key k, double value, double exact, double ours, double bullet,
+           std::string reason = {}) {
     m_off.add({kind, k.first, k.second, value, exact, ours, bullet, std::move(reason)});
   }
 
@@ -185,9 +192,9 @@ class RegionComparison {
 
 }  // namespace
 
-void compare_region(const CompareContext& ctx, const ContactIndex& index, const std::vector<std::size_t>& mine,
-                    const Contacts<double>& ref, const std::vector<std::size_t>& ref_rows, ValidateReport& rep,
-                    Offenders& off) {
+void compare_region(const CompareContext& ctx, const ContactIndex& index,
+                    const std::vector<std::size_t>& mine, const Contacts<double>& ref,
+                    const std::vector<std::size_t>& ref_rows, ValidateReport& rep, Offenders& off) {
   RegionComparison cmp(ctx, rep, off);
   rep.checked += mine.size();
   rep.bullet_contacts += ref_rows.size();

@@ -121,22 +121,21 @@ class Offenders {
   std::vector<ValidateOffender> m_by_kind[ValidateOffender::kinds];
 };
 
-
 // What the comparison of a region needs besides the two contact lists.
 struct CompareContext {
   const Scene& scene;
-  double band;                  // borderline band (validate.hpp)
+  double band;  // borderline band (validate.hpp)
   Precision contacts_precision;
   Precision bullet_precision;
-  double magnitude;             // largest |world coordinate| of the scene's centres
-  double bullet_extent;         // largest |coordinate| Bullet saw in its frame (this region)
+  double magnitude;      // largest |world coordinate| of the scene's centres
+  double bullet_extent;  // largest |coordinate| Bullet saw in its frame (this region)
   double shallow_threshold;
 };
 
 // Compares one region: `mine` are positions in the ContactIndex (sorted by key), `ref_rows` rows of
 // Bullet's sorted contacts `ref`. Adds to the report's counters and maxima and to the offenders.
-void compare_region(const CompareContext& ctx, const ContactIndex& index, const std::vector<std::size_t>& mine,
-                    const Contacts<double>& ref, const std::vector<std::size_t>& ref_rows, ValidateReport& rep,
-                    Offenders& off);
+void compare_region(const CompareContext& ctx, const ContactIndex& index,
+                    const std::vector<std::size_t>& mine, const Contacts<double>& ref,
+                    const std::vector<std::size_t>& ref_rows, ValidateReport& rep, Offenders& off);
 
 }  // namespace cg::validate_detail

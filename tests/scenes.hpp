@@ -141,7 +141,8 @@ struct ShapeScene {
 // n bodies, a fraction `ellipsoid_share` ellipsoids (semi-axes in [0.2, 1]: axis ratios up to 5,
 // uniformly random orientations), the rest spheres (radius in [0.3, 1]); extent L chosen for a few
 // hundred bounding-sphere overlaps.
-inline ShapeScene make_scene(const std::string& name, std::uint32_t seed, int n, double ellipsoid_share, double L) {
+inline ShapeScene make_scene(const std::string& name, std::uint32_t seed, int n, double ellipsoid_share,
+                             double L) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u01(0, 1), axis(0.2, 1.0), rad(0.3, 1.0);
   std::normal_distribution<double> gauss;

@@ -231,8 +231,9 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
   // points never meet: the global minimiser (value in [0, t]) is n itself. Half of rho leaves room for the
   // solver's tolerance and rounding. Shallow contacts — the common case of granular packings — take one
   // start; deep overlaps run the whole set.
-  const Real rho = detail::min_axis(a.semi_axes) * detail::min_axis(a.semi_axes) / detail::max_axis(a.semi_axes) +
-                   detail::min_axis(b.semi_axes) * detail::min_axis(b.semi_axes) / detail::max_axis(b.semi_axes);
+  const Real rho =
+      detail::min_axis(a.semi_axes) * detail::min_axis(a.semi_axes) / detail::max_axis(a.semi_axes) +
+      detail::min_axis(b.semi_axes) * detail::min_axis(b.semi_axes) / detail::max_axis(b.semi_axes);
   auto certified = [&] { return settings.certify && have && best.converged && best.f < Real(0.5) * rho; };
   // The fixed ordered start set.
   const int nstarts = settings.starts < 1 ? 1 : (settings.starts > 11 ? 11 : settings.starts);

@@ -140,7 +140,8 @@ struct ShapeDecide {
     if (!bounding_spheres_touch(bodies, a, b)) return Verdict::reject;  // (above)
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
-    const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c, SolveScope::first_start);
+    const bool contact =
+        shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c, SolveScope::first_start);
     if (!c.complete) return Verdict::hard;
     flags.fallbacks += c.fallback ? 1u : 0u;
     flags.unconverged += c.converged ? 0u : 1u;
@@ -171,7 +172,8 @@ struct ShapeDecide {
     contact_at_normal(ellipsoid_of(f.a, shapes[a]), ellipsoid_of(f.b, shapes[b]), n, c);
     return row_of(c, f.origin, full);
   }
-  CG_HD static ContactRow<Real> row_of(const EllipsoidContact<Real>& c, const Vec3<double>& origin, bool full) {
+  CG_HD static ContactRow<Real> row_of(const EllipsoidContact<Real>& c, const Vec3<double>& origin,
+                                       bool full) {
     ContactRow<Real> row{};
     row.position_on_a = to_world(origin, c.geometry.position_on_a);
     row.position_on_b = to_world(origin, c.geometry.position_on_b);

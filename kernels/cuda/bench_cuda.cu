@@ -1,11 +1,11 @@
 // contactgrid_cuda_bench: the CUDA engine on uniform random spheres, device-resident input, warm.
-// For N = 2^min … 2^max (step 2 by default), the three precision modes (fp32, mixed, fp64): per-stage medians (CUDA events), the
-// total wall time of Engine::detect_device_resident (bounds + plan + stages + host syncs; L2 flushed
-// before every run), spheres/s, contacts and entries per sphere, device workspace per sphere, and the
-// ratio of the sort stage and of the total to the CUB sort floor measured here for the same number
-// of (cell, body) entries and key bits (SortPairs u32 key + u32 value, L2 flushed, median).
-// Transfers are reported apart: upload = input (positions + radii) H2D from pageable host memory,
-// download = the engine's "download" stage (contacts → host vectors).
+// For N = 2^min … 2^max (step 2 by default), the three precision modes (fp32, mixed, fp64): per-stage medians
+// (CUDA events), the total wall time of Engine::detect_device_resident (bounds + plan + stages + host syncs;
+// L2 flushed before every run), spheres/s, contacts and entries per sphere, device workspace per sphere, and
+// the ratio of the sort stage and of the total to the CUB sort floor measured here for the same number of
+// (cell, body) entries and key bits (SortPairs u32 key + u32 value, L2 flushed, median). Transfers are
+// reported apart: upload = input (positions + radii) H2D from pageable host memory, download = the engine's
+// "download" stage (contacts → host vectors).
 //
 // Scene (6th argument): `spheres` (default): radii U[0.5, 1], centres U[0, L)^3 with L = 2.65·N^(1/3);
 // `ellipsoids`: semi-axes each U[0.25, 1] (aspect <= 1:4), orientations uniform on SO(3) (Shoemake),
@@ -202,7 +202,8 @@ double contacts_per_body(SceneKind kind, double scale) {
 
 // One precision mode: Engine<Real>, mixed = Engine<double> with the fp32 broad phase.
 template <class Real>
-Row bench(int log2n, std::uint64_t n, const DeviceScene& scene, int runs, Flusher& flush, bool mixed = false) {
+Row bench(int log2n, std::uint64_t n, const DeviceScene& scene, int runs, Flusher& flush,
+          bool mixed = false) {
   Row row{};
   row.log2n = log2n;
   row.prec = mixed ? "mixed" : cg::to_string(cg::precision_of<Real>());
@@ -334,8 +335,9 @@ int main(int argc, char** argv) try {
   const std::string scene_name = argc > 6 ? argv[6] : "spheres";
   const SceneKind kind = scene_name == "ellipsoids" ? SceneKind::ellipsoids
                          : scene_name == "mixed"    ? SceneKind::mixed
-                         : scene_name == "spheres"  ? SceneKind::spheres
-                                                    : throw std::runtime_error("scene: spheres, ellipsoids or mixed");
+                         : scene_name == "spheres"
+                             ? SceneKind::spheres
+                             : throw std::runtime_error("scene: spheres, ellipsoids or mixed");
   if (cell == "min")
     g_cell_choice = cg::CellChoice::smallest;
   else if (cell != "auto")
@@ -391,7 +393,8 @@ int main(int argc, char** argv) try {
       "Mspheres/s | contacts/N | workspace B/N | excl. contacts B/N | sort floor | sort/floor | total/floor "
       "| upload | download | candidates/N | fallbacks | unconverged |\n");
   std::printf(
-      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+      "\n");
   for (const Row& r : rows) {
     auto st = [&](const char* s) {
       auto it = r.stage_ms.find(s);

@@ -117,13 +117,13 @@ class CudaBackend {
       throw InputError("more than 2^32 - 1 bodies on one rank; use more MPI ranks");
     m_h_counters.reserve(sizeof(cuda::Counters));
     RunState<Real, Key, Narrow> r{job,
-                          m_ws,
-                          m_tuning,
-                          m_events,
-                          m_stream,
-                          m_l2_bytes,
-                          reinterpret_cast<cuda::Counters*>(m_h_counters.data()),
-                          stats};
+                                  m_ws,
+                                  m_tuning,
+                                  m_events,
+                                  m_stream,
+                                  m_l2_bytes,
+                                  reinterpret_cast<cuda::Counters*>(m_h_counters.data()),
+                                  stats};
     r.n64 = n64;
     r.n = static_cast<std::uint32_t>(n64);
     r.g = job.grid;

@@ -11,9 +11,10 @@
 // scene has ellipsoids (r.d_shapes set by shapes.cuh); the host backend uses the same structs. mixed
 // (fp32 broad phase, enlarged spheres) always takes the rejecting path: the fp64 narrow stage decides.
 // Flags and offsets live in the candidates' dead alternate buffers (pair_a / pair_b .Alternate()).
+#include <thrust/iterator/counting_iterator.h>
+
 #include <cub/device/device_scan.cuh>
 #include <cub/device/device_select.cuh>
-#include <thrust/iterator/counting_iterator.h>
 #include <type_traits>
 
 #include "core/narrow.hpp"
@@ -170,8 +171,8 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
       r.pair_a.Current(), r.pair_b.Current(), np, decide, d_verdict, d_normal, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_triage");
   cub_run(r.ws, "narrow", [&](void* t, std::size_t& b) {
-    return cub::DeviceSelect::If(t, b, thrust::counting_iterator<std::uint32_t>(0), d_hard, d_n_hard,
-                                 int(np), cuda::IsHard{d_verdict}, st);
+    return cub::DeviceSelect::If(t, b, thrust::counting_iterator<std::uint32_t>(0), d_hard, d_n_hard, int(np),
+                                 cuda::IsHard{d_verdict}, st);
   });
   std::uint32_t n_hard = 0;
   CG_CUDA_CHECK(cudaMemcpyAsync(&n_hard, d_n_hard, sizeof(n_hard), cudaMemcpyDeviceToHost, st));
@@ -211,7 +212,8 @@ void narrow_compact(RunState<Real, Key, Narrow>& r, const Decide& decide) {
   CG_CUDA_CHECK(
       cudaMemcpyAsync(&last[1], d_accept + np - 1, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, st));
   // the solver's flags and the fp64 rows (accept pass)
-  CG_CUDA_CHECK(cudaMemcpyAsync(r.h_counters, r.d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, st));
+  CG_CUDA_CHECK(
+      cudaMemcpyAsync(r.h_counters, r.d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, st));
   CG_CUDA_CHECK(cudaStreamSynchronize(st));
   r.stats.narrow_fallbacks = r.h_counters->fallbacks;
   r.stats.narrow_unconverged = r.h_counters->unconverged;

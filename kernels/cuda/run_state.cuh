@@ -38,11 +38,11 @@ struct RunState {
   const double* d_rad = nullptr;
   const std::uint8_t* d_report = nullptr;
   // pack
-  Sphere<Real>* d_spheres = nullptr;       // input order
+  Sphere<Real>* d_spheres = nullptr;        // input order
   PackedShape<Narrow>* d_shapes = nullptr;  // input order; scenes with ellipsoids only (shapes.cuh)
-  Sphere<Real>* d_cell_spheres = nullptr;  // cell order
-  std::uint32_t* d_perm = nullptr;         // cell order → input index
-  std::uint8_t* d_ctrl = nullptr;          // cell order
+  Sphere<Real>* d_cell_spheres = nullptr;   // cell order
+  std::uint32_t* d_perm = nullptr;          // cell order → input index
+  std::uint8_t* d_ctrl = nullptr;           // cell order
   std::uint32_t* d_body_totals = nullptr;
   std::uint32_t* d_body_offsets = nullptr;  // single-sort path
   std::uint32_t* d_type_totals = nullptr;   // type-pass path: [8][nb] totals, then offsets

@@ -24,8 +24,8 @@
 //   counters, partials     every stage         Counters of the call; bounds partials
 //   shape_kind, shape_semi, upload → pack      scenes with ellipsoids, host-array path: the shape rows
 //   shape_orient
-//   shapes                 pack → narrow       scenes with ellipsoids: PackedShape<Narrow> per body, input order
-//   normals                narrow              scenes with ellipsoids: the minimiser kept per candidate
+//   shapes                 pack → narrow       scenes with ellipsoids: PackedShape<Narrow> per body, input
+//   order normals                narrow              scenes with ellipsoids: the minimiser kept per candidate
 //                                              (triage / hard pass → fill) and the hard count
 //   res_pos, res_rad,      between calls       resident bodies (Engine::set_resident)
 //   res_report

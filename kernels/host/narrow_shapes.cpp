@@ -21,7 +21,7 @@ struct NarrowCounts {
 
 template <class Real>
 NarrowCounts narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& decide, bool full, int nt,
-                           Contacts<Real>& out) {
+                            Contacts<Real>& out) {
   const std::size_t n_cand = c.size();
   const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(8192, n_cand / 64));
   std::vector<std::uint64_t> chunk_count(n_chunks, 0), chunk_offset;
@@ -97,8 +97,8 @@ void narrow_shapes(const CandidatePairs& c, const NarrowBodies<Real>& bodies,
 }
 
 template void narrow_shapes(const CandidatePairs&, const NarrowBodies<float>&,
-                            const std::vector<PackedShape<float>>&, const SolverSettings<float>&, Fields,
-                            int, Contacts<float>&, EngineStats&);
+                            const std::vector<PackedShape<float>>&, const SolverSettings<float>&, Fields, int,
+                            Contacts<float>&, EngineStats&);
 template void narrow_shapes(const CandidatePairs&, const NarrowBodies<double>&,
                             const std::vector<PackedShape<double>>&, const SolverSettings<double>&, Fields,
                             int, Contacts<double>&, EngineStats&);

@@ -35,11 +35,11 @@ Acc exclusive_scan_into(const std::vector<T>& counts, std::vector<Acc>& offsets)
 // pack's output, per body in input order.
 template <class Real>
 struct PackedBodies {
-  std::vector<Sphere<Real>> spheres;      // local frame: Real(world - origin)
-  Real inflation = 0;                     // added to every radius by the pair stage (cells, test)
-  std::vector<BodyCells> cells;           // freed by fill_entries
-  std::vector<std::uint8_t> ctrl;         // control_bits
-  std::vector<std::uint32_t> count;       // entry_count; freed by fill_entries
+  std::vector<Sphere<Real>> spheres;  // local frame: Real(world - origin)
+  Real inflation = 0;                 // added to every radius by the pair stage (cells, test)
+  std::vector<BodyCells> cells;       // freed by fill_entries
+  std::vector<std::uint8_t> ctrl;     // control_bits
+  std::vector<std::uint32_t> count;   // entry_count; freed by fill_entries
 };
 
 // (cell key, body) entries; body-ascending after fill_entries, key-ascending (stable) after sort.

@@ -18,9 +18,9 @@ namespace cg {
 // Everything recorded about a run in the contact file's root attributes (CONTRACT §2).
 struct RunInfo {
   std::uint64_t bodies = 0;
-  std::string precision;  // "fp32" | "fp64" | "mixed" (float64 datasets); empty: the contacts' type
+  std::string precision;         // "fp32" | "fp64" | "mixed" (float64 datasets); empty: the contacts' type
   std::string precision_choice;  // --precision auto: why that mode (root attribute only when set)
-  std::string backend;    // "cpu" | "cuda"
+  std::string backend;           // "cpu" | "cuda"
   int ranks = 1;
   double cell_size = 0;
   std::string input;  // input file name

@@ -16,9 +16,7 @@ double point_error(const Vec3<double>& p, const LD q[3]) {
 Vec3<double> to_double(const LD v[3]) { return {double(v[0]), double(v[1]), double(v[2])}; }
 
 // The larger error; a NaN error is infinitely large (never hidden by max).
-double worse(double current, double value) {
-  return std::isnan(value) ? HUGE_VAL : std::max(current, value);
-}
+double worse(double current, double value) { return std::isnan(value) ? HUGE_VAL : std::max(current, value); }
 
 // Nearest-rank 99th percentile (0 for none).
 double p99(std::vector<double> v) {
@@ -36,8 +34,9 @@ double angle_deg(Vec3<double> u, Vec3<double> v) {
   return std::atan2(s, d) * 180 / std::numbers::pi;
 }
 
-ContactErrors compare_with_reference(std::span<const FoundContact> found, std::span<const RefContact> reference,
-                                     std::span<const double> radius, double band) {
+ContactErrors compare_with_reference(std::span<const FoundContact> found,
+                                     std::span<const RefContact> reference, std::span<const double> radius,
+                                     double band) {
   ContactErrors e;
   e.reported = found.size();
   e.reference = reference.size();
@@ -47,10 +46,11 @@ ContactErrors compare_with_reference(std::span<const FoundContact> found, std::s
   };
   std::size_t i = 0, j = 0;
   while (i < found.size() || j < reference.size()) {
-    const bool take_found = j == reference.size() ||
-                            (i < found.size() && before(found[i].a, found[i].b, reference[j].a, reference[j].b));
-    const bool take_ref = i == found.size() ||
-                          (j < reference.size() && before(reference[j].a, reference[j].b, found[i].a, found[i].b));
+    const bool take_found =
+        j == reference.size() ||
+        (i < found.size() && before(found[i].a, found[i].b, reference[j].a, reference[j].b));
+    const bool take_ref = i == found.size() || (j < reference.size() && before(reference[j].a, reference[j].b,
+                                                                               found[i].a, found[i].b));
     if (take_found) {  // not within the band of the reference: beyond it
       ++e.extra;
       ++i;

@@ -38,8 +38,9 @@ struct ContactErrors {
 // `found` and `reference` sorted by (a, b) (as the engine and reference_contacts return them),
 // `reference` holding every pair with exact distance <= band (reference_contacts with slack >= band);
 // `radius[i]`: body i's bounding radius.
-ContactErrors compare_with_reference(std::span<const FoundContact> found, std::span<const RefContact> reference,
-                                     std::span<const double> radius, double band);
+ContactErrors compare_with_reference(std::span<const FoundContact> found,
+                                     std::span<const RefContact> reference, std::span<const double> radius,
+                                     double band);
 
 // The angle between two directions in degrees (0 … 180), accurate near 0 and 180.
 double angle_deg(Vec3<double> u, Vec3<double> v);

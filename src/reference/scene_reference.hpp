@@ -11,7 +11,7 @@
 namespace cg::exact {
 
 struct SceneReferenceOptions {
-  LD slack = 0;                // keep pairs with exact distance <= slack (a rounding band)
+  LD slack = 0;                  // keep pairs with exact distance <= slack (a rounding band)
   int ellipsoid_samples = 4000;  // Fibonacci directions per ellipsoid pair (exact_contact)
 };
 

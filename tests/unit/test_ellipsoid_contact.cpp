@@ -18,10 +18,10 @@
 //     must agree with the reference minimum everywhere outside 1e-9 of F = 1.
 // Pairs whose two best local minima are within the distance tolerance of each other (two equally deep
 // exits) are "ambiguous": the distance must agree, the direction may be either; they are counted.
-#include <array>
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -316,7 +316,8 @@ TYPED_TEST(EllipsoidContactTest, CertifiedFirstMinimumIsTheWholeSetsAnswer) {
     int shallow = 0, shallow_early = 0;
     long evals_certified = 0, evals_full = 0;
     for (int i = 0; i < 240; ++i) {
-      Body<Real> b{{Real(0.25), Real(0.5), Real(-0.125)}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
+      Body<Real> b{
+          {Real(0.25), Real(0.5), Real(-0.125)}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
       Body<Real> a{{}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
       const Vec3<double> nd = random_unit(rng);
       const exact::V n{nd.x, nd.y, nd.z};
@@ -329,7 +330,8 @@ TYPED_TEST(EllipsoidContactTest, CertifiedFirstMinimumIsTheWholeSetsAnswer) {
       const double rho = rho_of(a.axes) + rho_of(b.axes);
       // depth along n: i % 6 picks 0, 0.05ρ, 0.2ρ, 0.45ρ (certifiable), 0.8ρ, 3ρ (not)
       const double depth = rho * std::array<double, 6>{0, 0.05, 0.2, 0.45, 0.8, 3.0}[i % 6];
-      a.centre = {Real(LD(b.centre.x) + off.x - LD(depth) * n.x), Real(LD(b.centre.y) + off.y - LD(depth) * n.y),
+      a.centre = {Real(LD(b.centre.x) + off.x - LD(depth) * n.x),
+                  Real(LD(b.centre.y) + off.y - LD(depth) * n.y),
                   Real(LD(b.centre.z) + off.z - LD(depth) * n.z)};
       const Ellipsoid<Real> ea = engine_body(a), eb = engine_body(b);
       const PerramWertheim<Real> pw = perram_wertheim(ea, eb);
@@ -348,9 +350,11 @@ TYPED_TEST(EllipsoidContactTest, CertifiedFirstMinimumIsTheWholeSetsAnswer) {
         shallow_early += c.iterations < w.iterations;
       }
     }
-    std::printf("[ellipsoid] %s certificate 1:%-5g shallow pairs stopped early %d of %d; evaluations %ld vs %ld\n",
-                tag<Real>("").c_str(), aspect, shallow_early, shallow, evals_certified, evals_full);
-    EXPECT_GE(shallow_early, shallow * 9 / 10) << "the certificate should stop shallow contacts after one start";
+    std::printf(
+        "[ellipsoid] %s certificate 1:%-5g shallow pairs stopped early %d of %d; evaluations %ld vs %ld\n",
+        tag<Real>("").c_str(), aspect, shallow_early, shallow, evals_certified, evals_full);
+    EXPECT_GE(shallow_early, shallow * 9 / 10)
+        << "the certificate should stop shallow contacts after one start";
   }
 }
 

@@ -1,5 +1,5 @@
-// The engine against the exact reference (src/reference/sphere_reference.hpp) on random and adversarial scenes, in
-// both precisions and on both backends (CUDA cases skip without a GPU).
+// The engine against the exact reference (src/reference/sphere_reference.hpp) on random and adversarial
+// scenes, in both precisions and on both backends (CUDA cases skip without a GPU).
 //
 // Borderline band (CONTRACT §3): a pair whose exact |distance| is below
 //   tol = 16 · eps(Real) · (largest local coordinate + 2 · r_max)

@@ -284,7 +284,8 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
                  q[4] = {s.q[i].w, s.q[i].x, s.q[i].y, s.q[i].z};
     packed.push_back(pack_shape<Real>(static_cast<std::uint8_t>(s.shape[i]), semi, q));
   }
-  const NarrowBodies<Real> world{sph.data(), reinterpret_cast<const double*>(s.p.data()), s.r.data(), {1, 2, 3}};
+  const NarrowBodies<Real> world{
+      sph.data(), reinterpret_cast<const double*>(s.p.data()), s.r.data(), {1, 2, 3}};
   const ShapeDecide<Real> d{world, packed.data(), {}};
   int contacts = 0, hard = 0, certified = 0;
   for (std::uint32_t a = 0; a < sph.size(); ++a)

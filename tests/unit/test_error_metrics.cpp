@@ -57,7 +57,7 @@ TEST(ErrorMetrics, MissedExtraAndBorderlineAreJudgedByTheBand) {
   // The same sets with a band wider than every distance: nothing is wrong any more.
   const auto wide = exact::compare_with_reference(found, reference, kRadius, 0.15);
   EXPECT_EQ(wide.missed, 0u);
-  EXPECT_EQ(wide.extra, 1u);  // (8,9) is not in the reference at all
+  EXPECT_EQ(wide.extra, 1u);       // (8,9) is not in the reference at all
   EXPECT_EQ(wide.borderline, 4u);  // all four reference pairs; (6,7) is matched as well
 }
 
@@ -145,9 +145,14 @@ TEST(ExactReference, SceneReferenceOfRoundEllipsoidsIsTheSphereClosedForm) {
 TEST(ExactReference, SlackTakesInExactlyThePairsWithinIt) {
   const std::vector<Vec3<double>> p{{0, 0, 0}, {2.5, 0, 0}, {10, 0, 0}, {11.0009765625, 0, 0}};
   const std::vector<double> r{1, 1, 0.5, 0.5};  // gaps 0.5 and 2^-10
-  EXPECT_EQ(exact::reference_contacts(std::span<const Vec3<double>>(p), std::span<const double>(r)).size(), 0u);
-  EXPECT_EQ(exact::reference_contacts(std::span<const Vec3<double>>(p), std::span<const double>(r), 0.001L).size(), 1u);
-  EXPECT_EQ(exact::reference_contacts(std::span<const Vec3<double>>(p), std::span<const double>(r), 0.5L).size(), 2u);
+  EXPECT_EQ(exact::reference_contacts(std::span<const Vec3<double>>(p), std::span<const double>(r)).size(),
+            0u);
+  EXPECT_EQ(
+      exact::reference_contacts(std::span<const Vec3<double>>(p), std::span<const double>(r), 0.001L).size(),
+      1u);
+  EXPECT_EQ(
+      exact::reference_contacts(std::span<const Vec3<double>>(p), std::span<const double>(r), 0.5L).size(),
+      2u);
 }
 
 }  // namespace

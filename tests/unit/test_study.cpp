@@ -41,7 +41,8 @@ class Study : public TempDirTest {
  protected:
   // One tiny study of every family and mode; returns the CSV rows by column name.
   std::vector<Record> run_tiny() {
-    const Result r = run("study --scale 0.02 --repetitions 1 --csv " + path("s.csv") + " --svg " + path("s.svg"));
+    const Result r =
+        run("study --scale 0.02 --repetitions 1 --csv " + path("s.csv") + " --svg " + path("s.svg"));
     EXPECT_EQ(r.code, 0) << r.output;
     std::ifstream f(path("s.csv"));
     std::string line;
@@ -65,12 +66,13 @@ TEST_F(Study, TinyStudyMeetsTheInvariantsOnEveryFamily) {
   EXPECT_EQ(m_header, split(study_csv_header()));
   EXPECT_EQ(m_header,
             (std::vector<std::string>{"family", "mode", "tolerance", "backend", "bodies", "reference_pairs",
-                                      "contacts", "status", "time_s", "repetitions", "band", "missed", "extra",
-                                      "borderline", "flagged", "max_position_rel", "p99_position_rel",
-                                      "max_normal_deg", "max_distance_err"}));
+                                      "contacts", "status", "time_s", "repetitions", "band", "missed",
+                                      "extra", "borderline", "flagged", "max_position_rel",
+                                      "p99_position_rel", "max_normal_deg", "max_distance_err"}));
   std::set<std::string> seen_fp64;
   for (const Record& r : rows) {
-    const std::string what = r.at("mode") + " " + r.at("family") + " " + r.at("backend") + " tol " + r.at("tolerance");
+    const std::string what =
+        r.at("mode") + " " + r.at("family") + " " + r.at("backend") + " tol " + r.at("tolerance");
     ASSERT_TRUE(r.at("status") == "ok" || r.at("status") == "refused") << what;
     EXPECT_GT(std::stoull(r.at("bodies")), 0u) << what;
     if (r.at("mode") == "fp64") {
@@ -102,8 +104,10 @@ TEST_F(Study, TinyStudyMeetsTheInvariantsOnEveryFamily) {
 }
 
 TEST_F(Study, BoundsAreHonouredAndNamesChecked) {
-  const Result r = run("study --families near-coincident --modes fp64 --backends cpu --scale 0.01 "
-                       "--repetitions 1 --csv " + path("one.csv"));
+  const Result r =
+      run("study --families near-coincident --modes fp64 --backends cpu --scale 0.01 "
+          "--repetitions 1 --csv " +
+          path("one.csv"));
   ASSERT_EQ(r.code, 0) << r.output;
   std::ifstream f(path("one.csv"));
   std::string line;

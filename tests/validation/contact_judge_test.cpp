@@ -116,7 +116,7 @@ TEST(ContactJudge, SpheresFollowTheClosedForm) {
 TEST(ContactJudge, CrossedBodiesLocalMinimumRejected) {
   const std::array<double, 4> identity{1, 0, 0, 0};
   const Body a = ellipsoid({0, 0, 0}, {5, 4, 0.3}, identity);    // the plate
-  const Body b = ellipsoid({0, 0, 0}, {0.3, 0.3, 5}, identity);    // the needle
+  const Body b = ellipsoid({0, 0, 0}, {0.3, 0.3, 5}, identity);  // the needle
 
   auto answer_at = [&](V n) {
     const V pa = a.centre + a.support_offset(-n), pb = b.centre + b.support_offset(n);

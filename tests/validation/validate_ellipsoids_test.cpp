@@ -111,7 +111,7 @@ class CorruptedContact : public ValidateShapes {
     ValidateShapes::SetUp();
     ASSERT_NO_FATAL_FAILURE(generate_and_detect("--kind mixed -n 3000 --seed 9"));
     contacts = read_contacts(path("c.h5")).contacts;
-    spheres = 1500;  // mixed, fraction 0.5: spheres 0 … 1499, then ellipsoids
+    spheres = 1500;                              // mixed, fraction 0.5: spheres 0 … 1499, then ellipsoids
     for (row = 0; row < contacts.size(); ++row)  // a deep contact of two ellipsoids
       if (contacts.id_a[row] >= std::int64_t(spheres) && contacts.distance[row] < -0.2) break;
     ASSERT_LT(row, contacts.size());
