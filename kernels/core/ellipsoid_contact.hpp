@@ -76,10 +76,9 @@ struct EllipsoidPairResult {
   bool in_contact;
 };
 
-template <class Real>
+template <SolveScope Scope = SolveScope::whole, class Real>
 CG_HD EllipsoidPairResult<Real> ellipsoid_contact(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b,
-                                                  const SolverSettings<Real>& settings = {},
-                                                  SolveScope scope = SolveScope::whole) {
+                                                  const SolverSettings<Real>& settings = {}) {
   const Vec3<Real> ea = a.semi_axes, eb = b.semi_axes;
   const bool sa = ea.x == ea.y && ea.y == ea.z, sb = eb.x == eb.y && eb.y == eb.z;
   EllipsoidPairResult<Real> res{};
@@ -102,7 +101,7 @@ CG_HD EllipsoidPairResult<Real> ellipsoid_contact(const Ellipsoid<Real>& a, cons
       res.in_contact = false;
       return res;
     }
-    res.contact = ellipsoid_pair_contact(a, b, pw, settings, scope);
+    res.contact = ellipsoid_pair_contact<Scope>(a, b, pw, settings);
     if (!res.contact.complete) {  // first start uncertified: no geometry yet
       res.in_contact = false;
       return res;

@@ -186,12 +186,12 @@ CG_HD void contact_at_normal(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b,
 // The general solve (no dispatch on spheres): see the file comment. `pw` is the result of
 // perram_wertheim(a, b) (the caller has it from the filter). SolveScope::first_start stops after the
 // first start unless it is certified (and consistent with the PW sign): `complete` false, no geometry;
-// where it is certified, the answer is the whole solve's, bit for bit.
-template <class Real>
+// where it is certified, the answer is the whole solve's, bit for bit. The scope is a template
+// parameter so that the first-start kernel does not carry the whole set's code (registers, stack).
+template <SolveScope Scope = SolveScope::whole, class Real>
 CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b,
                                                     const PerramWertheim<Real>& pw,
-                                                    const SolverSettings<Real>& settings = {},
-                                                    SolveScope scope = SolveScope::whole) {
+                                                    const SolverSettings<Real>& settings = {}) {
   const Vec3<Real> r = a.centre - b.centre;
   const bool coincident = r.x == Real(0) && r.y == Real(0) && r.z == Real(0);
   const Real scale = detail::max_axis(a.semi_axes) + detail::max_axis(b.semi_axes);
@@ -235,84 +235,89 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
       detail::min_axis(a.semi_axes) * detail::min_axis(a.semi_axes) / detail::max_axis(a.semi_axes) +
       detail::min_axis(b.semi_axes) * detail::min_axis(b.semi_axes) / detail::max_axis(b.semi_axes);
   auto certified = [&] { return settings.certify && have && best.converged && best.f < Real(0.5) * rho; };
-  // The fixed ordered start set.
-  const int nstarts = settings.starts < 1 ? 1 : (settings.starts > 11 ? 11 : settings.starts);
-  for (int s = 0; s < nstarts && !certified(); ++s) {
-    Vec3<Real> start;
-    if (s == 0) {
-      start = coincident ? Vec3<Real>{Real(1), Real(0), Real(0)} : pw.normal;
-    } else if (s == 1) {
-      if (coincident) continue;  // (1,0,0) already ran
-      start = (Real(1) / rlen) * r;
-    } else if (s < 8) {
-      start = s < 5 ? column(a.rotation, s - 2) : column(b.rotation, s - 5);
-    } else if (s < 10) {  // the two bisectors of the thinnest axes of A and B
-      const Vec3<Real> ta = column(a.rotation, detail::min_index(a.semi_axes));
-      const Vec3<Real> tb = detail::towards(column(b.rotation, detail::min_index(b.semi_axes)), ta);
-      const Vec3<Real> v = s == 8 ? ta + tb : ta - tb;
-      if (dot(v, v) < Real(1e-6)) continue;
-      start = detail::normalized(v);
-    } else {  // the common normal of the longest axes (crossed needles)
-      const Vec3<Real> v = cross(column(a.rotation, detail::max_index(a.semi_axes)),
-                                 column(b.rotation, detail::max_index(b.semi_axes)));
-      if (dot(v, v) < Real(1e-6)) continue;
-      start = detail::normalized(v);
-    }
-    consider(start, settings.max_iterations);
-    if (scope == SolveScope::first_start && !certified()) {
+  if constexpr (Scope == SolveScope::first_start) {
+    consider(coincident ? Vec3<Real>{Real(1), Real(0), Real(0)} : pw.normal, settings.max_iterations);
+    if (!certified()) {
       out.complete = false;  // the second pass runs the whole solve
       return out;
     }
-  }
-  // The screen: f (value only) at the 4 cube diagonals and 6 face diagonals of each body's frame (up
-  // to sign, put towards a − b); Newton from the `screen` lowest. These in-between directions reach
-  // basins that no axis start does (two comparable thin axes, one body's thin axis tilted by the other).
-  if (settings.screen > 0 && !certified()) {
-    const int keep = settings.screen > 4 ? 4 : settings.screen;
-    Real top_f[4];
-    Vec3<Real> top_n[4];
-    int count = 0;
-    for (int i = 0; i < 20; ++i) {
-      const Mat3<Real>& rot = i < 10 ? a.rotation : b.rotation;
-      const Vec3<Real> n = detail::towards(mul(rot, detail::extra_start<Real>(3 + i % 10)), r);
-      const Real fv = detail::support_value(a, n) + detail::support_value(b, n) - dot(n, r);
-      int pos = count < keep ? count : keep;
-      while (pos > 0 && fv < top_f[pos - 1]) {
-        if (pos < keep) {
-          top_f[pos] = top_f[pos - 1];
-          top_n[pos] = top_n[pos - 1];
-        }
-        --pos;
+  } else {
+    // The fixed ordered start set.
+    const int nstarts = settings.starts < 1 ? 1 : (settings.starts > 11 ? 11 : settings.starts);
+    for (int s = 0; s < nstarts && !certified(); ++s) {
+      Vec3<Real> start;
+      if (s == 0) {
+        start = coincident ? Vec3<Real>{Real(1), Real(0), Real(0)} : pw.normal;
+      } else if (s == 1) {
+        if (coincident) continue;  // (1,0,0) already ran
+        start = (Real(1) / rlen) * r;
+      } else if (s < 8) {
+        start = s < 5 ? column(a.rotation, s - 2) : column(b.rotation, s - 5);
+      } else if (s < 10) {  // the two bisectors of the thinnest axes of A and B
+        const Vec3<Real> ta = column(a.rotation, detail::min_index(a.semi_axes));
+        const Vec3<Real> tb = detail::towards(column(b.rotation, detail::min_index(b.semi_axes)), ta);
+        const Vec3<Real> v = s == 8 ? ta + tb : ta - tb;
+        if (dot(v, v) < Real(1e-6)) continue;
+        start = detail::normalized(v);
+      } else {  // the common normal of the longest axes (crossed needles)
+        const Vec3<Real> v = cross(column(a.rotation, detail::max_index(a.semi_axes)),
+                                   column(b.rotation, detail::max_index(b.semi_axes)));
+        if (dot(v, v) < Real(1e-6)) continue;
+        start = detail::normalized(v);
       }
-      if (pos < keep) {
-        top_f[pos] = fv;
-        top_n[pos] = n;
-        if (count < keep) ++count;
-      }
+      consider(start, settings.max_iterations);
     }
-    out.iterations += 20 / 4;  // 20 value-only evaluations ≈ 5 full ones
-    for (int k = 0; k < count; ++k) consider(top_n[k], settings.max_iterations);
-  }
-  // The antipode of the best: where a − b is short against the bodies, minima come in near-antipodal
-  // pairs (f(−n) = f(n) + 2 n·r) and the deeper one of a pair may be the one no start reached.
-  for (int round = 0; round < 2 && !certified(); ++round) {
-    const detail::LocalResult<Real> res =
-        detail::local_minimise(a, b, r, -best.n, scale, settings.tolerance, settings.max_iterations);
-    out.iterations += res.evaluations;
-    if (!(res.f < best.f - f_tie)) break;
-    best = res;
-  }
+    // The screen: f (value only) at the 4 cube diagonals and 6 face diagonals of each body's frame (up
+    // to sign, put towards a − b); Newton from the `screen` lowest. These in-between directions reach
+    // basins that no axis start does (two comparable thin axes, one body's thin axis tilted by the other).
+    if (settings.screen > 0 && !certified()) {
+      const int keep = settings.screen > 4 ? 4 : settings.screen;
+      Real top_f[4];
+      Vec3<Real> top_n[4];
+      int count = 0;
+      for (int i = 0; i < 20; ++i) {
+        const Mat3<Real>& rot = i < 10 ? a.rotation : b.rotation;
+        const Vec3<Real> n = detail::towards(mul(rot, detail::extra_start<Real>(3 + i % 10)), r);
+        const Real fv = detail::support_value(a, n) + detail::support_value(b, n) - dot(n, r);
+        int pos = count < keep ? count : keep;
+        while (pos > 0 && fv < top_f[pos - 1]) {
+          if (pos < keep) {
+            top_f[pos] = top_f[pos - 1];
+            top_n[pos] = top_n[pos - 1];
+          }
+          --pos;
+        }
+        if (pos < keep) {
+          top_f[pos] = fv;
+          top_n[pos] = n;
+          if (count < keep) ++count;
+        }
+      }
+      out.iterations += 20 / 4;  // 20 value-only evaluations ≈ 5 full ones
+      for (int k = 0; k < count; ++k) consider(top_n[k], settings.max_iterations);
+    }
+    // The antipode of the best: where a − b is short against the bodies, minima come in near-antipodal
+    // pairs (f(−n) = f(n) + 2 n·r) and the deeper one of a pair may be the one no start reached.
+    for (int round = 0; round < 2 && !certified(); ++round) {
+      const detail::LocalResult<Real> res =
+          detail::local_minimise(a, b, r, -best.n, scale, settings.tolerance, settings.max_iterations);
+      out.iterations += res.evaluations;
+      if (!(res.f < best.f - f_tie)) break;
+      best = res;
+    }
+  }  // whole set
 
   // The safety net: the PW sign is exact (a global statement), min f must agree with it beyond rounding.
   const Real eps = std::numeric_limits<Real>::epsilon();
   const Real f_band = Real(64) * eps * (scale + rlen) + settings.tolerance * scale;
   const bool pw_overlap = pw.value<Real(1) - pw.band, pw_apart = pw.value> Real(1) + pw.band;
   const bool inconsistent = (pw_overlap && best.f < -f_band) || (pw_apart && best.f > f_band);
-  if ((inconsistent || !best.converged) && scope == SolveScope::first_start) {
-    out.complete = false;
-    return out;
-  }
-  if (inconsistent || !best.converged) {
+  if constexpr (Scope == SolveScope::first_start) {
+    if (inconsistent || !best.converged) {
+      out.complete = false;
+      return out;
+    }
+  } else if (inconsistent || !best.converged) {
     out.fallback = true;
     for (int i = 0; i < 13; ++i) consider(detail::extra_start<Real>(i), settings.max_iterations);
     if (!best.converged) consider(best.n, 4 * settings.max_iterations);  // continuation

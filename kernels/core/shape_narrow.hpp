@@ -48,10 +48,10 @@ CG_HD Ellipsoid<Real> ellipsoid_of(const Sphere<Real>& s, const PackedShape<Real
 }
 
 // The contact of a pair with at least one ellipsoid (in the frame of sa, sb) and whether it is one.
-template <class Real>
+template <SolveScope Scope = SolveScope::whole, class Real>
 CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, const PackedShape<Real>& pa,
                               const PackedShape<Real>& pb, const SolverSettings<Real>& settings,
-                              EllipsoidContact<Real>& c, SolveScope scope = SolveScope::whole) {
+                              EllipsoidContact<Real>& c) {
   constexpr std::uint32_t sphere = static_cast<std::uint32_t>(Shape::sphere);
   if (pa.kind == sphere) {
     c = sphere_ellipsoid_contact(sa, ellipsoid_of(sb, pb), true);
@@ -62,7 +62,7 @@ CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, co
     return c.geometry.distance <= Real(0);
   }
   const EllipsoidPairResult<Real> r =
-      ellipsoid_contact(ellipsoid_of(sa, pa), ellipsoid_of(sb, pb), settings, scope);
+      ellipsoid_contact<Scope>(ellipsoid_of(sa, pa), ellipsoid_of(sb, pb), settings);
   c = r.contact;
   return r.in_contact;
 }
@@ -141,7 +141,7 @@ struct ShapeDecide {
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     const bool contact =
-        shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c, SolveScope::first_start);
+        shape_pair_contact<SolveScope::first_start>(f.a, f.b, shapes[a], shapes[b], settings, c);
     if (!c.complete) return Verdict::hard;
     flags.fallbacks += c.fallback ? 1u : 0u;
     flags.unconverged += c.converged ? 0u : 1u;
