@@ -306,7 +306,8 @@ void resident_shape_copy(CudaBackend& b, std::size_t first, std::size_t count, V
   auto copy = [&](void* host, std::byte* device, std::size_t row_bytes) {
     if (!host) return;
     void* d = device + first * row_bytes;
-    CG_CUDA_CHECK(cudaMemcpyAsync(to_device ? d : host, to_device ? host : d, count * row_bytes, kind, b.m_stream));
+    CG_CUDA_CHECK(
+        cudaMemcpyAsync(to_device ? d : host, to_device ? host : d, count * row_bytes, kind, b.m_stream));
   };
   copy(semi_axes, b.m_ws.res_semi.data(), sizeof(Vec3<double>));
   copy(orientation, b.m_ws.res_orient.data(), sizeof(Quat<double>));

@@ -80,11 +80,11 @@ struct Workspace {
   std::uint64_t held_bytes() const {
     std::uint64_t s = 0;
     for (const Bytes* b :
-         {&pos,         &rad,        &report,     &spheres,      &cell_spheres, &perm,      &ctrl,
-          &body_blocks, &base,       &keys[0],    &keys[1],      &bodies[0],    &bodies[1], &entry_blocks,
-          &pairs,       &out,        &temp,       &counters,     &partials,     &res_pos,   &res_rad,
-          &res_report,  &res_shape,  &res_semi,   &res_orient,   &shape_kind, &shape_semi, &shape_orient, &shapes,       &normals,   &kept_pairs,
-          &ref_pos,     &ref_rad,    &ref_report})
+         {&pos,         &rad,       &report,     &spheres,    &cell_spheres, &perm,       &ctrl,
+          &body_blocks, &base,      &keys[0],    &keys[1],    &bodies[0],    &bodies[1],  &entry_blocks,
+          &pairs,       &out,       &temp,       &counters,   &partials,     &res_pos,    &res_rad,
+          &res_report,  &res_shape, &res_semi,   &res_orient, &shape_kind,   &shape_semi, &shape_orient,
+          &shapes,      &normals,   &kept_pairs, &ref_pos,    &ref_rad,      &ref_report})
       s += b->bytes();
     return s;
   }
