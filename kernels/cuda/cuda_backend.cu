@@ -217,14 +217,7 @@ void resident_upload(CudaBackend& b, const BodiesView& bodies) {
   ws.res_reported = !bodies.report.empty();
   ws.res_shaped = shapes;
   if (n == 0) return;
-  if (shapes) {
-    CG_CUDA_CHECK(cudaMemcpyAsync(ws.res_shape.data(), bodies.shape.data(), n * sizeof(Shape),
-                                  cudaMemcpyHostToDevice, b.m_stream));
-    CG_CUDA_CHECK(cudaMemcpyAsync(ws.res_semi.data(), bodies.semi_axes.data(), n * sizeof(Vec3<double>),
-                                  cudaMemcpyHostToDevice, b.m_stream));
-    CG_CUDA_CHECK(cudaMemcpyAsync(ws.res_orient.data(), bodies.orientation.data(), n * sizeof(Quat<double>),
-                                  cudaMemcpyHostToDevice, b.m_stream));
-  }
+  if (shapes) upload_shape_rows(bodies, ws.res_shape, ws.res_semi, ws.res_orient, b.m_stream);
   CG_CUDA_CHECK(cudaMemcpyAsync(ws.res_pos.data(), bodies.position.data(), n * sizeof(Vec3<double>),
                                 cudaMemcpyHostToDevice, b.m_stream));
   CG_CUDA_CHECK(cudaMemcpyAsync(ws.res_rad.data(), bodies.radius.data(), n * sizeof(double),
