@@ -41,6 +41,20 @@ struct Pin {
   Pin& operator=(const Pin&) = delete;
 };
 
+// Shape rows for `n` bodies (0: none, all spheres) and row k set from a ShapeRecord.
+ShapeRows shaped_rows(std::size_t n) {
+  ShapeRows s;
+  s.shape = HostVector<Shape>(n);
+  s.semi_axes = HostVector<Vec3<double>>(n);
+  s.orientation = HostVector<Quat<double>>(n);
+  return s;
+}
+void put(ShapeRows& s, std::size_t k, const ShapeRecord& r) {
+  s.shape[k] = r.shape;
+  s.semi_axes[k] = r.semi_axes;
+  s.orientation[k] = r.orientation;
+}
+
 double median_of(std::vector<double> v) {
   if (v.empty()) return 0;
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
@@ -81,6 +95,14 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
   const std::span<const std::int64_t> id = in.id;
   const std::span<const std::uint8_t> report = in.report;
   auto id_of = [&](std::size_t i) { return in.implied() ? static_cast<std::int64_t>(i) : id[i]; };
+  // Scenes with ellipsoids: the shape rows go with the bodies into A and B once (the ghosts' travel
+  // with the first exchange); a step refreshes positions and radii only (orientations do not change
+  // here). Agreed over the ranks, as a rank without rows has none.
+  const bool shapes = session.sum(std::uint64_t(in.shapes.empty() ? 0 : 1)) > 0;
+  const ShapeRows& shape_rows = in.shapes;
+  auto shape_of = [&](std::size_t i) {
+    return ShapeRecord{shape_rows.orientation[i], shape_rows.semi_axes[i], shape_rows.shape[i]};
+  };
   StepStats st;
   st.steps = steps;
   const int ranks = session.size(), me = session.rank();
@@ -97,7 +119,10 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
   std::optional<Engine<Real>> boundary;  // engine B
   std::optional<Pin<Real>> pin_p, pin_r;
   if (!slabs) {  // one rank: every row resident as held (all owned, in id order: ids implied), all pairs
-    agreed_stage(session, "steps", [&] { engine.set_resident(BodiesView{position, radius, {}, {}}); });
+    agreed_stage(session, "steps", [&] {
+      engine.set_resident(BodiesView{
+          position, radius, {}, {}, shape_rows.shape, shape_rows.semi_axes, shape_rows.orientation});
+    });
   } else {
     std::vector<std::size_t> owned_rows;  // input rows of engine A's rows
     agreed_stage(session, "steps", [&] {
@@ -137,33 +162,40 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
       // engine A: the owned rows, all their pairs
       HostVector<Vec3<double>> a_p(l.owned);
       HostVector<double> a_r(l.owned);
+      ShapeRows a_s = shaped_rows(shapes ? l.owned : 0);
       owned_id = HostVector<std::int64_t>(l.owned);
 #pragma omp parallel for num_threads(threads) schedule(static)
       for (std::size_t k = 0; k < l.owned; ++k) {
         a_p[k] = position[owned_rows[k]];
         a_r[k] = radius[owned_rows[k]];
         owned_id[k] = id_of(owned_rows[k]);
+        if (shapes) put(a_s, k, shape_of(owned_rows[k]));
       }
-      engine.set_resident(BodiesView{a_p, a_r, {}, {}});
+      engine.set_resident(BodiesView{a_p, a_r, {}, {}, a_s.shape, a_s.semi_axes, a_s.orientation});
     });
     l.recv_counts = comm.alltoall_counts(l.send_counts);
     for (std::size_t q = 0; q < static_cast<std::size_t>(me); ++q) l.lower_ghosts += l.recv_counts[q];
     // the first exchange carries the ghosts' records (ids too); later steps refresh their rows
     HostVector<BodyRecord> send;
+    HostVector<ShapeRecord> send_shapes;
     agreed_stage(session, "steps", [&] {
       std::uint64_t total = 0;
       for (std::uint64_t c : l.send_counts) total += c;
       send = HostVector<BodyRecord>(total);
+      if (shapes) send_shapes = HostVector<ShapeRecord>(total);
       std::size_t w = 0;
       for (std::size_t q = 0; q < p; ++q) {
         const std::size_t from = static_cast<int>(q) < me ? 0 : l.sent - l.up;
         for (std::size_t k = from; k < from + l.send_counts[q]; ++k) {
           const std::size_t i = owned_rows[k];
+          if (shapes) send_shapes[w] = shape_of(i);
           send[w++] = BodyRecord{position[i], radius[i], id_of(i)};
         }
       }
     });
     const HostVector<BodyRecord> got = comm.exchange(send, l.send_counts, l.recv_counts);
+    HostVector<ShapeRecord> got_shapes;  // the same ghosts' shape rows, in the same order
+    if (shapes) got_shapes = comm.exchange(send_shapes, l.send_counts, l.recv_counts);
     agreed_stage(session, "steps", [&] {
       // engine B: [lower ghosts][boundary owned rows][upper ghosts]; the owned ones are paired with
       // each other by engine A already
@@ -172,23 +204,27 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
       b_r = HostVector<double>(total);
       b_id = HostVector<std::int64_t>(total);
       HostVector<std::uint8_t> mask(total);
+      ShapeRows b_s = shaped_rows(shapes ? total : 0);
       for (std::size_t k = 0; k < total; ++k) {
         const bool ghost = k < l.lower_ghosts || k >= l.lower_ghosts + l.sent;
         if (ghost) {
-          const BodyRecord& g = got[k < l.lower_ghosts ? k : k - l.sent];
+          const std::size_t g_at = k < l.lower_ghosts ? k : k - l.sent;
+          const BodyRecord& g = got[g_at];
           b_p[k] = g.position;
           b_r[k] = g.radius;
           b_id[k] = g.id;
+          if (shapes) put(b_s, k, got_shapes[g_at]);
         } else {
           const std::size_t i = owned_rows[k - l.lower_ghosts];
           b_p[k] = position[i];
           b_r[k] = radius[i];
           b_id[k] = id_of(i);
+          if (shapes) put(b_s, k, shape_of(i));
         }
         mask[k] = ghost ? 0 : kReportedBit | kPairedBit;
       }
       boundary.emplace(engine.options());
-      boundary->set_resident(BodiesView{b_p, b_r, {}, mask});
+      boundary->set_resident(BodiesView{b_p, b_r, {}, mask, b_s.shape, b_s.semi_axes, b_s.orientation});
       pin_p.emplace(engine, b_p.data(), b_p.size() * sizeof(Vec3<double>));
       pin_r.emplace(engine, b_r.data(), b_r.size() * sizeof(double));
     });

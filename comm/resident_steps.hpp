@@ -16,7 +16,10 @@
 // whole downward set to every lower rank that needs any of it (upward likewise): with slabs thinner
 // than the ghost width a superset of the ghosts, which changes no contact. Bodies do not move between
 // steps (no migration), so a step is the "everything recomputed, halo refreshed" cost; contacts stay
-// where they were computed. One rank has no halo and no engine B.
+// where they were computed. One rank has no halo and no engine B. Scenes with ellipsoids: A and B
+// hold the shape rows too (the ghosts' travel with the first exchange); a step refreshes positions and
+// radii only, as the bodies neither move nor rotate here (a simulation that rotates them writes the
+// orientations of the same ranges: Engine::write_resident_shapes).
 #include <cstdint>
 #include <string>
 #include <vector>

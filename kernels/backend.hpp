@@ -96,7 +96,7 @@ template <class Broad, class Narrow>
 void run_stages(CudaBackend& backend, const DetectJob<Broad, Narrow>& job, Contacts<Narrow>& out,
                 StageTimes& times, EngineStats& stats);
 void destroy(CudaBackend* backend);
-// Resident bodies of Engine::set_resident (DEVICE rows kept between calls).
+// Resident bodies of Engine::set_resident (DEVICE rows kept between calls, shape rows included).
 void resident_upload(CudaBackend& backend, const BodiesView& bodies);
 DeviceBodiesView resident_view(const CudaBackend& backend);
 // The contacts of a DeviceContactsView copied into `out` (sized here).
@@ -106,6 +106,9 @@ bool pin_host(CudaBackend& backend, void* p, std::size_t bytes);
 void unpin_host(CudaBackend& backend, void* p);
 void resident_copy(CudaBackend& backend, std::size_t first, std::size_t count, Vec3<double>* position,
                    double* radius, bool to_device);
+// The same for the semi-axes and orientations of resident shape rows (a null pointer: skipped).
+void resident_shape_copy(CudaBackend& backend, std::size_t first, std::size_t count, Vec3<double>* semi_axes,
+                         Quat<double>* orientation, bool to_device);
 // Validation and bounds of DEVICE bodies (same results and InputError texts as compute_bounds).
 Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies);
 // The shape rows of DEVICE bodies checked as validate_shapes (same InputError texts); returns the

@@ -101,6 +101,9 @@ DeviceBodiesView resident_view(const CudaBackend&) {
 void resident_copy(CudaBackend&, std::size_t, std::size_t, Vec3<double>*, double*, bool) {
   throw CudaError("this contactgrid was built without CUDA");
 }
+void resident_shape_copy(CudaBackend&, std::size_t, std::size_t, Vec3<double>*, Quat<double>*, bool) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
 }  // namespace detail
 #endif
 
@@ -116,7 +119,11 @@ struct Engine<Real>::Impl {
   HostVector<Vec3<double>> resident_position;
   HostVector<double> resident_radius;
   HostVector<std::uint8_t> resident_report;
+  HostVector<Shape> resident_shape;  // shape rows (empty: all spheres)
+  HostVector<Vec3<double>> resident_semi_axes;
+  HostVector<Quat<double>> resident_orientation;
   std::size_t resident_rows = 0;
+  bool resident_shapes = false;  // set_resident had shape rows (either backend)
   Contacts<Real> resident_contacts;
   std::optional<DeviceContactsView<Real>> resident_on_device;  // CUDA: not yet downloaded
   bool resident_overwritten = false;  // CUDA: a later detection reused the workspace first
@@ -379,10 +386,14 @@ template <class Real>
 void Engine<Real>::set_resident(const BodiesView& b) {
   Impl& s = *m_impl;
   if (!b.id.empty()) throw UsageError("set_resident: ids are implied (row i is body i)");
-  if (!b.shape.empty()) throw UsageError("set_resident: resident bodies are spheres only (no shape rows)");
-  if (b.position.size() != b.size() || (!b.report.empty() && b.report.size() != b.size()))
+  const bool shapes = !b.shape.empty();
+  if (b.position.size() != b.size() || (!b.report.empty() && b.report.size() != b.size()) ||
+      (shapes &&
+       (b.shape.size() != b.size() || b.semi_axes.size() != b.size() || b.orientation.size() != b.size())) ||
+      (!shapes && (!b.semi_axes.empty() || !b.orientation.empty())))
     throw UsageError("set_resident: the arrays differ in length");
   s.resident_rows = b.size();
+  s.resident_shapes = shapes;
   s.resident_contacts = Contacts<Real>{};
   s.resident_on_device.reset();
   s.resident_overwritten = false;
@@ -393,6 +404,9 @@ void Engine<Real>::set_resident(const BodiesView& b) {
   s.resident_position.assign(b.position.begin(), b.position.end());
   s.resident_radius.assign(b.radius.begin(), b.radius.end());
   s.resident_report.assign(b.report.begin(), b.report.end());
+  s.resident_shape.assign(b.shape.begin(), b.shape.end());
+  s.resident_semi_axes.assign(b.semi_axes.begin(), b.semi_axes.end());
+  s.resident_orientation.assign(b.orientation.begin(), b.orientation.end());
 }
 
 template <class Real>
@@ -438,6 +452,37 @@ void Engine<Real>::write_resident(std::size_t first, std::size_t count, const Ve
 }
 
 template <class Real>
+void Engine<Real>::read_resident_shapes(std::size_t first, std::size_t count, Vec3<double>* semi_axes,
+                                        Quat<double>* orientation) {
+  Impl& s = *m_impl;
+  check_rows(first, count, s.resident_rows, "read_resident_shapes");
+  if (!s.resident_shapes) throw UsageError("read_resident_shapes: the resident bodies have no shape rows");
+  if (count == 0) return;
+  if (s.resolved == Backend::cuda) {
+    detail::resident_shape_copy(*s.cuda, first, count, semi_axes, orientation, false);
+    return;
+  }
+  if (semi_axes) std::copy_n(s.resident_semi_axes.data() + first, count, semi_axes);
+  if (orientation) std::copy_n(s.resident_orientation.data() + first, count, orientation);
+}
+
+template <class Real>
+void Engine<Real>::write_resident_shapes(std::size_t first, std::size_t count, const Vec3<double>* semi_axes,
+                                         const Quat<double>* orientation) {
+  Impl& s = *m_impl;
+  check_rows(first, count, s.resident_rows, "write_resident_shapes");
+  if (!s.resident_shapes) throw UsageError("write_resident_shapes: the resident bodies have no shape rows");
+  if (count == 0) return;
+  if (s.resolved == Backend::cuda) {
+    detail::resident_shape_copy(*s.cuda, first, count, const_cast<Vec3<double>*>(semi_axes),
+                                const_cast<Quat<double>*>(orientation), true);
+    return;
+  }
+  if (semi_axes) std::copy_n(semi_axes, count, s.resident_semi_axes.data() + first);
+  if (orientation) std::copy_n(orientation, count, s.resident_orientation.data() + first);
+}
+
+template <class Real>
 std::size_t Engine<Real>::detect_resident(std::optional<Frame> frame) {
   Impl& s = *m_impl;
   if (s.resolved == Backend::cuda) {
@@ -452,7 +497,10 @@ std::size_t Engine<Real>::detect_resident(std::optional<Frame> frame) {
   s.resident_contacts = detect(BodiesView{{s.resident_position.data(), n},
                                           {s.resident_radius.data(), n},
                                           {},
-                                          {s.resident_report.data(), s.resident_report.size()}},
+                                          {s.resident_report.data(), s.resident_report.size()},
+                                          s.resident_shape,
+                                          s.resident_semi_axes,
+                                          s.resident_orientation},
                                frame);
   return s.resident_contacts.size();
 }

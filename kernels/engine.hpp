@@ -123,8 +123,12 @@ class Engine {
   // Resident bodies: a simulation's state kept where the backend computes (host memory for the CPU
   // backend, DEVICE memory for CUDA) between detect calls, refreshed in row ranges (a halo exchange)
   // without moving the rest. set_resident copies `bodies` (ids implied: row i is body i; report as in
-  // BodiesView); read_resident / write_resident copy the positions and radii of rows
-  // [first, first + count) out and in (UsageError outside the rows); detect_resident detects among the
+  // BodiesView; shape rows as in BodiesView, all three or none); read_resident / write_resident copy
+  // the positions and radii of rows [first, first + count) out and in (UsageError outside the rows);
+  // read_resident_shapes / write_resident_shapes the semi-axes and orientations of rows (a null
+  // pointer: that field is left alone; UsageError when the rows were set without shape rows; a body's
+  // kind stays the one set, and an ellipsoid whose semi-axes change needs its bounding radius, the
+  // largest semi-axis, written with write_resident); detect_resident detects among the
   // resident rows and keeps the contacts where they were computed (CUDA: as detect_device_resident),
   // returning their number; resident_contacts() gives them in host memory (ids are row indices;
   // CUDA: downloaded on the first request, which must come before the engine's next detection,
@@ -140,11 +144,18 @@ class Engine {
   //     std::size_t k = engine.detect_resident();           // reuse or rebuild, same contacts
   //   }
   //   // engine.stats().candidate_reuses / candidate_builds: how often the list was kept
+  //
+  // Ellipsoids rotate in place: set_resident with shape rows, then per step
+  //   engine.write_resident_shapes(0, n, nullptr, new_orientation);  // semi-axes kept
   void set_resident(const BodiesView& bodies);
   std::size_t resident_size() const;
   void read_resident(std::size_t first, std::size_t count, Vec3<double>* position, double* radius);
   void write_resident(std::size_t first, std::size_t count, const Vec3<double>* position,
                       const double* radius);
+  void read_resident_shapes(std::size_t first, std::size_t count, Vec3<double>* semi_axes,
+                            Quat<double>* orientation);
+  void write_resident_shapes(std::size_t first, std::size_t count, const Vec3<double>* semi_axes,
+                             const Quat<double>* orientation);
   std::size_t detect_resident(std::optional<Frame> frame = std::nullopt);
   const Contacts<Real>& resident_contacts();
   // Page-locks host memory that read_resident / write_resident use again and again (CUDA:

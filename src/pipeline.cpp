@@ -86,17 +86,13 @@ struct Partition {
   Bounds bounds;  // of the partition's rows (count 0: none)
 };
 
-Partition read_partition(const Session& session, const std::string& path, bool all_rows, int resident_steps) {
+Partition read_partition(const Session& session, const std::string& path, bool all_rows) {
   Partition in;
   agreed_stage(session, "read", [&] {
     const SceneShape shape = read_scene_shape(path);
     if (shape.spheres + shape.ellipsoids == 0) throw InputError(path + ": the scene has no bodies");
     in.has_shapes = shape.ellipsoids > 0;
     in.ellipsoids = shape.ellipsoids;
-    if (in.has_shapes && resident_steps > 0) {
-      throw UsageError("--steps: the resident steps handle spheres only; " + path + " has " +
-                       std::to_string(shape.ellipsoids) + " ellipsoids (run without --steps)");
-    }
     const std::uint64_t n = shape.spheres + shape.ellipsoids, me = static_cast<std::uint64_t>(session.rank()),
                         p = static_cast<std::uint64_t>(session.size());
     in.bodies = n;
@@ -154,7 +150,7 @@ ReadScene read_scene(const Session& session, const std::string& path, const Dist
   // two modes coincide, and all rows takes the rows as read (no records routed to itself).
   in.all_rows = ranks == 1 || options.read == SceneRead::all_rows ||
                 (options.read == SceneRead::automatic && session.local_size() == ranks);
-  in.part = read_partition(session, path, in.all_rows, options.resident_steps);
+  in.part = read_partition(session, path, in.all_rows);
   in.global = allgather_bounds(session, in.part.bounds);
   in.seconds = seconds_since(t0);
   return in;

@@ -205,13 +205,19 @@ void resident_upload(CudaBackend& b, const BodiesView& bodies) {
   CG_CUDA_CHECK(cudaSetDevice(b.m_device));
   b.refresh_tuning();
   Workspace& ws = b.m_ws;
+  const bool shapes = !bodies.shape.empty();
   ws.reserve({{&ws.res_pos, n * sizeof(Vec3<double>)},
               {&ws.res_rad, n * sizeof(double)},
-              {&ws.res_report, bodies.report.empty() ? 0 : n}},
+              {&ws.res_report, bodies.report.empty() ? 0 : n},
+              {&ws.res_shape, shapes ? n * sizeof(Shape) : 0},
+              {&ws.res_semi, shapes ? n * sizeof(Vec3<double>) : 0},
+              {&ws.res_orient, shapes ? n * sizeof(Quat<double>) : 0}},
              "resident bodies");
   ws.res_count = n;
   ws.res_reported = !bodies.report.empty();
+  ws.res_shaped = shapes;
   if (n == 0) return;
+  if (shapes) upload_shape_rows(bodies, ws.res_shape, ws.res_semi, ws.res_orient, b.m_stream);
   CG_CUDA_CHECK(cudaMemcpyAsync(ws.res_pos.data(), bodies.position.data(), n * sizeof(Vec3<double>),
                                 cudaMemcpyHostToDevice, b.m_stream));
   CG_CUDA_CHECK(cudaMemcpyAsync(ws.res_rad.data(), bodies.radius.data(), n * sizeof(double),
@@ -259,6 +265,11 @@ DeviceBodiesView resident_view(const CudaBackend& b) {
   v.radius = reinterpret_cast<const double*>(b.m_ws.res_rad.data());
   v.report = b.m_ws.res_reported ? reinterpret_cast<const std::uint8_t*>(b.m_ws.res_report.data()) : nullptr;
   v.count = b.m_ws.res_count;
+  if (b.m_ws.res_shaped) {  // else null: the sphere-only path
+    v.shape = reinterpret_cast<const Shape*>(b.m_ws.res_shape.data());
+    v.semi_axes = reinterpret_cast<const double*>(b.m_ws.res_semi.data());
+    v.orientation = reinterpret_cast<const double*>(b.m_ws.res_orient.data());
+  }
   return v;
 }
 
@@ -276,6 +287,23 @@ void resident_copy(CudaBackend& b, std::size_t first, std::size_t count, Vec3<do
   CG_CUDA_CHECK(cudaMemcpyAsync(to_device ? static_cast<void*>(d_rad) : radius,
                                 to_device ? static_cast<const void*>(radius) : d_rad, count * sizeof(double),
                                 kind, b.m_stream));
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+}
+
+// Rows [first, first + count) of the resident semi-axes and orientations (a null host pointer: that
+// field is not copied), as resident_copy.
+void resident_shape_copy(CudaBackend& b, std::size_t first, std::size_t count, Vec3<double>* semi_axes,
+                         Quat<double>* orientation, bool to_device) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  const auto kind = to_device ? cudaMemcpyHostToDevice : cudaMemcpyDeviceToHost;
+  auto copy = [&](void* host, std::byte* device, std::size_t row_bytes) {
+    if (!host) return;
+    void* d = device + first * row_bytes;
+    CG_CUDA_CHECK(
+        cudaMemcpyAsync(to_device ? d : host, to_device ? host : d, count * row_bytes, kind, b.m_stream));
+  };
+  copy(semi_axes, b.m_ws.res_semi.data(), sizeof(Vec3<double>));
+  copy(orientation, b.m_ws.res_orient.data(), sizeof(Quat<double>));
   CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
 }
 

@@ -84,6 +84,16 @@ inline std::size_t shape_check_stage(Workspace& ws, cuda::PinnedBuffer& h_stagin
   return static_cast<std::size_t>(c.ellipsoids);
 }
 
+// The shape rows of host bodies copied into DEVICE buffers of at least their size (queued on `st`).
+inline void upload_shape_rows(const BodiesView& b, Bytes& kind, Bytes& semi, Bytes& orient, cudaStream_t st) {
+  const std::size_t n = b.size();
+  CG_CUDA_CHECK(cudaMemcpyAsync(kind.data(), b.shape.data(), n * sizeof(Shape), cudaMemcpyHostToDevice, st));
+  CG_CUDA_CHECK(
+      cudaMemcpyAsync(semi.data(), b.semi_axes.data(), n * sizeof(Vec3<double>), cudaMemcpyHostToDevice, st));
+  CG_CUDA_CHECK(cudaMemcpyAsync(orient.data(), b.orientation.data(), n * sizeof(Quat<double>),
+                                cudaMemcpyHostToDevice, st));
+}
+
 // Scenes with ellipsoids: the shape rows on the device (host-array path: uploaded) and the packed
 // shapes (r.d_shapes). Sphere-only scenes: nothing (r.d_shapes stays null).
 template <class Real, class Key, class Narrow>
@@ -104,13 +114,7 @@ void shapes_stage(RunState<Real, Key, Narrow>& r) {
                 {&ws.shape_orient, n64 * sizeof(Quat<double>)},
                 {&ws.shapes, n64 * sizeof(PackedShape<Narrow>)}},
                "pack");
-    const BodiesView& b = r.job.bodies;
-    CG_CUDA_CHECK(cudaMemcpyAsync(ws.shape_kind.data(), b.shape.data(), n64 * sizeof(Shape),
-                                  cudaMemcpyHostToDevice, r.st));
-    CG_CUDA_CHECK(cudaMemcpyAsync(ws.shape_semi.data(), b.semi_axes.data(), n64 * sizeof(Vec3<double>),
-                                  cudaMemcpyHostToDevice, r.st));
-    CG_CUDA_CHECK(cudaMemcpyAsync(ws.shape_orient.data(), b.orientation.data(), n64 * sizeof(Quat<double>),
-                                  cudaMemcpyHostToDevice, r.st));
+    upload_shape_rows(r.job.bodies, ws.shape_kind, ws.shape_semi, ws.shape_orient, r.st);
     d_kind = reinterpret_cast<const Shape*>(ws.shape_kind.data());
     d_semi = reinterpret_cast<const double*>(ws.shape_semi.data());
     d_orient = reinterpret_cast<const double*>(ws.shape_orient.data());

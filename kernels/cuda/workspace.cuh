@@ -27,8 +27,9 @@
 //   shapes                 pack → narrow       scenes with ellipsoids: PackedShape<Narrow> per body, input
 //   order normals                narrow              scenes with ellipsoids: the minimiser kept per candidate
 //                                              (triage / hard pass → fill) and the hard count
-//   res_pos, res_rad,      between calls       resident bodies (Engine::set_resident)
-//   res_report
+//   res_pos, res_rad,      between calls       resident bodies (Engine::set_resident); res_shape,
+//   res_report, res_shape,                     res_semi, res_orient: their shape rows (empty for a
+//   res_semi, res_orient                       sphere-only set); owned across calls, never aliased
 //   kept_pairs, ref_pos,   between calls       EngineOptions::skin: the kept candidate list (a then b,
 //   ref_rad, ref_report                        kept_count each) and the bodies' state it was built
 //                                              from (cuda/skin.cuh); owned across calls, never aliased
@@ -63,11 +64,12 @@ struct Workspace {
   Bytes spheres, cell_spheres, perm, ctrl, body_blocks, base;
   Bytes keys[2], bodies[2];
   Bytes entry_blocks, pairs, out, temp, counters, partials;
-  Bytes res_pos, res_rad, res_report;
+  Bytes res_pos, res_rad, res_report, res_shape, res_semi, res_orient;
   Bytes shape_kind, shape_semi, shape_orient, shapes, normals;
   Bytes kept_pairs, ref_pos, ref_rad, ref_report;
   std::size_t res_count = 0;
   bool res_reported = false;     // resident report mask present
+  bool res_shaped = false;       // resident shape rows present
   std::uint32_t kept_count = 0;  // kept candidate pairs
   bool kept_reported = false;    // the kept list was built with a report mask
 
@@ -78,11 +80,11 @@ struct Workspace {
   std::uint64_t held_bytes() const {
     std::uint64_t s = 0;
     for (const Bytes* b :
-         {&pos,         &rad,        &report,     &spheres,      &cell_spheres, &perm,      &ctrl,
-          &body_blocks, &base,       &keys[0],    &keys[1],      &bodies[0],    &bodies[1], &entry_blocks,
-          &pairs,       &out,        &temp,       &counters,     &partials,     &res_pos,   &res_rad,
-          &res_report,  &shape_kind, &shape_semi, &shape_orient, &shapes,       &normals,   &kept_pairs,
-          &ref_pos,     &ref_rad,    &ref_report})
+         {&pos,         &rad,       &report,     &spheres,    &cell_spheres, &perm,       &ctrl,
+          &body_blocks, &base,      &keys[0],    &keys[1],    &bodies[0],    &bodies[1],  &entry_blocks,
+          &pairs,       &out,       &temp,       &counters,   &partials,     &res_pos,    &res_rad,
+          &res_report,  &res_shape, &res_semi,   &res_orient, &shape_kind,   &shape_semi, &shape_orient,
+          &shapes,      &normals,   &kept_pairs, &ref_pos,    &ref_rad,      &ref_report})
       s += b->bytes();
     return s;
   }

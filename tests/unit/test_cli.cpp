@@ -332,6 +332,28 @@ TEST_F(Cli, UsageErrorsExitTwo) {
   expect_detect_fails(path("s.h5"), 2, {"--skin"}, "--skin -0.5");
 }
 
+// The resident steps on a mixed scene (issue #12): every step finds the file's contacts (the run checks
+// the count and the pairs' hash per step, else exit 1), with and without a skin, and the file is the one
+// a run without --steps writes.
+TEST_F(Cli, ResidentStepsOnAMixedScene) {
+  ASSERT_EQ(run("generate " + path("m.h5") +
+                " -n 3000 --seed 9 --kind mixed --ellipsoid-fraction 0.4 --rlow 0.3 "
+                "--rhigh 1 --contacts-per-body 1 -q")
+                .code,
+            0);
+  const std::string opts = " --backend cpu --precision fp64 --fields full";
+  ASSERT_EQ(run("detect " + path("m.h5") + " -o " + path("plain.h5") + opts + " -q").code, 0);
+  for (const std::string extra : {"", " --skin 0.05"}) {
+    const auto steps =
+        run("detect " + path("m.h5") + " -o " + path("steps.h5") + opts + " --steps 3" + extra);
+    EXPECT_EQ(steps.code, 0) << extra << steps.output;
+    EXPECT_NE(steps.output.find("resident steps: 3 "), std::string::npos) << steps.output;
+    EXPECT_NE(steps.output.find("contacts per step (= the file's)"), std::string::npos) << steps.output;
+    EXPECT_EQ(run("compare " + path("plain.h5") + " " + path("steps.h5")).code, 0) << extra;
+  }
+  EXPECT_GT(read_contacts(path("plain.h5")).contacts.size(), 500u);  // the scene has contacts
+}
+
 // Stage times are typed; their names (the summary's rows, the contact file's attributes) are made once.
 TEST(StageTimes, NamesOfTheSummaryAndTheFile) {
   const auto& engine = engine_stage_names();

@@ -360,9 +360,9 @@ TEST(EngineShapes, BadShapeInputNamesTheBody) {
   ShapeScene short_rows = base;
   short_rows.q.pop_back();
   EXPECT_THROW(Engine<double>({.backend = Backend::cpu}).detect(short_rows.view()), InputError);
-  // resident bodies are spheres only
+  // resident shape rows must match the bodies in length (their contents are checked by detect_resident)
   Engine<double> r({.backend = Backend::cpu});
-  EXPECT_THROW(r.set_resident(base.view()), UsageError);
+  EXPECT_THROW(r.set_resident(short_rows.view()), UsageError);
 }
 
 // ---- CUDA: bit-identical to the CPU backend on shape scenes (skips without a GPU) ----
