@@ -265,6 +265,24 @@ TYPED_TEST(EllipsoidContactTest, RandomPairsAgainstReference) {
   }
 }
 
+// A pair touching by construction: B at a fixed place, A's support point at −n on B's at n (long
+// double), for a random unit n; `off` = ∇h_A(n) + ∇h_B(n), so a = b + off touches with normal n.
+template <class Real>
+struct TouchingPair {
+  Body<Real> a, b;
+  exact::V n, off;
+};
+template <class Real>
+TouchingPair<Real> touching_pair(std::mt19937_64& rng, double aspect) {
+  Body<Real> b{{Real(0.25), Real(0.5), Real(-0.125)}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
+  Body<Real> a{{}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
+  const Vec3<double> nd = random_unit(rng);
+  const exact::V n{nd.x, nd.y, nd.z};
+  const exact::V off =
+      exact::add(exact::support_point(reference_body(a), n), exact::support_point(reference_body(b), n));
+  return {a, b, n, off};
+}
+
 // Touching by construction: for a random n, a = b + ∇h_A(n) + ∇h_B(n) (computed in long double) puts
 // the support points of A at −n and of B at n on top of each other with the common normal n: the exact
 // distance is 0 up to the rounding of a to Real. The engine's |distance| must stay inside the band.
@@ -276,13 +294,7 @@ TYPED_TEST(EllipsoidContactTest, TouchingPairs) {
     std::mt19937_64 rng(2000 + int(aspect));
     double max_abs = 0;
     for (int i = 0; i < 200; ++i) {
-      Body<Real> b{
-          {Real(0.25), Real(0.5), Real(-0.125)}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
-      Body<Real> a{{}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
-      const Vec3<double> nd = random_unit(rng);
-      const exact::V n{nd.x, nd.y, nd.z};
-      const exact::V off =
-          exact::add(exact::support_point(reference_body(a), n), exact::support_point(reference_body(b), n));
+      auto [a, b, n, off] = touching_pair<Real>(rng, aspect);
       a.centre = {Real(LD(b.centre.x) + off.x), Real(LD(b.centre.y) + off.y), Real(LD(b.centre.z) + off.z)};
       const EllipsoidContact<Real> c = solve(a, b);
       const double s = double(scale_of(a, b));
@@ -316,13 +328,7 @@ TYPED_TEST(EllipsoidContactTest, CertifiedFirstMinimumIsTheWholeSetsAnswer) {
     int shallow = 0, shallow_early = 0;
     long evals_certified = 0, evals_full = 0;
     for (int i = 0; i < 240; ++i) {
-      Body<Real> b{
-          {Real(0.25), Real(0.5), Real(-0.125)}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
-      Body<Real> a{{}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
-      const Vec3<double> nd = random_unit(rng);
-      const exact::V n{nd.x, nd.y, nd.z};
-      const exact::V off =
-          exact::add(exact::support_point(reference_body(a), n), exact::support_point(reference_body(b), n));
+      auto [a, b, n, off] = touching_pair<Real>(rng, aspect);
       auto rho_of = [](Vec3<Real> e) {
         const double lo = std::min({double(e.x), double(e.y), double(e.z)});
         return lo * lo / std::max({double(e.x), double(e.y), double(e.z)});
