@@ -45,6 +45,9 @@ struct Counters {
   // shapes (cuda/shapes.cuh, narrow.cuh): n - i of the first body with bad shape rows (atomicMax),
   // ellipsoids counted, and the ellipsoid solver's flags (narrow accept pass)
   unsigned long long bad_shape, ellipsoids, fallbacks, unconverged;
+  // narrow, scenes with ellipsoids: the candidates the triage pass left to the whole solve (written by
+  // cub::DeviceSelect, read by the hard kernel on the device and by the host with the other counters)
+  unsigned long long hard;
   unsigned long long fp64_rows;  // fp32 rows recomputed in fp64 (narrow.cuh)
   // skin check (cuda/skin.cuh): the bits of the largest squared displacement and radius growth
   // (non-negative doubles order as their bits), and whether a report byte changed

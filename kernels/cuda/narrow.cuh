@@ -90,11 +90,13 @@ struct IsHard {
 };
 
 // narrow, shapes, second pass: the whole solve for the hard candidates alone (listed in `hard`, their
-// count on the device), so every lane of a warp runs one: verdict 0 / 1 and the minimiser.
+// count on the device: launched over every candidate, the threads past the count return at once, so
+// the host need not wait for the count), so every lane of a warp runs one: verdict 0 / 1 and the
+// minimiser.
 template <class Real>
 __global__ void __launch_bounds__(kBlock)
     narrow_hard_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
-                       const std::uint32_t* __restrict__ hard, const std::uint32_t* __restrict__ n_hard,
+                       const std::uint32_t* __restrict__ hard, const unsigned long long* __restrict__ n_hard,
                        ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
                        Vec3<Real>* __restrict__ normal, Counters* __restrict__ c) {
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
@@ -162,11 +164,9 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
   using cuda::kBlock;
   cudaStream_t st = r.st;
   const std::uint32_t np = r.np;
-  r.ws.reserve({{&r.ws.normals, std::size_t(np) * sizeof(Vec3<Narrow>) + sizeof(std::uint32_t)}}, "narrow");
+  r.ws.reserve({{&r.ws.normals, std::size_t(np) * sizeof(Vec3<Narrow>)}}, "narrow");
   Vec3<Narrow>* d_normal = r.ws.normals.template span_as<Vec3<Narrow>>(np).data();
-  // the hard count after the normals (4-byte aligned: Vec3<Narrow> is 12 or 24 bytes)
-  auto* d_n_hard =
-      reinterpret_cast<std::uint32_t*>(r.ws.normals.data() + std::size_t(np) * sizeof(Vec3<Narrow>));
+  unsigned long long* d_n_hard = &r.d_counters->hard;
   cuda::narrow_triage_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
       r.pair_a.Current(), r.pair_b.Current(), np, decide, d_verdict, d_normal, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_triage");
@@ -174,15 +174,9 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
     return cub::DeviceSelect::If(t, b, thrust::counting_iterator<std::uint32_t>(0), d_hard, d_n_hard, int(np),
                                  cuda::IsHard{d_verdict}, st);
   });
-  std::uint32_t n_hard = 0;
-  CG_CUDA_CHECK(cudaMemcpyAsync(&n_hard, d_n_hard, sizeof(n_hard), cudaMemcpyDeviceToHost, st));
-  CG_CUDA_CHECK(cudaStreamSynchronize(st));
-  r.stats.narrow_hard = n_hard;
-  if (n_hard > 0) {
-    cuda::narrow_hard_kernel<Narrow><<<blocks_for(n_hard), kBlock, 0, st>>>(
-        r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, decide, d_verdict, d_normal, r.d_counters);
-    CG_CUDA_CHECK_LAUNCH("narrow_hard");
-  }
+  cuda::narrow_hard_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
+      r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, decide, d_verdict, d_normal, r.d_counters);
+  CG_CUDA_CHECK_LAUNCH("narrow_hard");
   return d_normal;
 }
 
@@ -218,6 +212,7 @@ void narrow_compact(RunState<Real, Key, Narrow>& r, const Decide& decide) {
   r.stats.narrow_fallbacks = r.h_counters->fallbacks;
   r.stats.narrow_unconverged = r.h_counters->unconverged;
   r.stats.fp64_rows = r.h_counters->fp64_rows;
+  r.stats.narrow_hard = r.h_counters->hard;
   r.n_rows = last[0] + last[1];
   r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.full, r.cp);  // n_rows <= np: ws.out holds them
   cuda::narrow_fill_kernel<Narrow, Decide><<<blocks_for(np), kBlock, 0, st>>>(
