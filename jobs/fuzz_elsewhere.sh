@@ -5,7 +5,7 @@
 #   here:   jobs/fuzz_elsewhere.sh pack DIR        (fuzz_readers, its libraries, the grown corpus)
 #   there:  jobs/fuzz_elsewhere.sh run DIR SECONDS JOBS OUTDIR
 set -euo pipefail
-mode=$1 dir=$2
+mode=$1 dir=$(realpath -m "$2")
 case $mode in
   pack)
     mkdir -p "$dir/lib"
@@ -14,14 +14,12 @@ case $mode in
       grep -v -E 'libc\.so|libm\.so|libstdc|libgcc_s|ld-linux' | xargs -I{} cp -L {} "$dir/lib/"
     tar czf "$dir/corpus.tgz" -C build-fuzz corpus seeds ;;
   run)
-    seconds=$3 jobs=$4 out=$5
+    seconds=$3 jobs=$4 out=$(realpath -m "$5")
     mkdir -p "$out" /tmp/fuzzrun/findings && tar xzf "$dir/corpus.tgz" -C /tmp/fuzzrun
+    source tests/fuzz/fuzz_options.sh
     cd /tmp/fuzzrun
-    LD_LIBRARY_PATH="$(cd "$OLDPWD" && cd "$dir/lib" && pwd)" \
-    ASAN_OPTIONS=detect_leaks=0:allocator_may_return_null=1:max_allocation_size_mb=2048 \
-      "$OLDPWD/$dir/fuzz_readers" corpus seeds -fork="$jobs" -max_total_time="$seconds" -timeout=10 \
-      -rss_limit_mb=4096 -malloc_limit_mb=1048576 -max_len=65536 -artifact_prefix=findings/ \
-      -ignore_crashes=1 -ignore_timeouts=1 -ignore_ooms=1 -print_final_stats=1 >"$out/fuzz.log" 2>&1 || true
+    LD_LIBRARY_PATH="$dir/lib" "$dir/fuzz_readers" corpus seeds -fork="$jobs" -max_total_time="$seconds" "${FUZZ_LIMITS[@]}" \
+      -ignore_crashes=1 -ignore_timeouts=1 -ignore_ooms=1 >"$out/fuzz.log" 2>&1 || true
     grep -E '^#[0-9]+:' "$out/fuzz.log" | tail -3
     grep -E 'INFO: exiting|ERROR|SUMMARY' "$out/fuzz.log" | tail -5
     ls findings | head; tar czf "$out/findings.tgz" findings ;;

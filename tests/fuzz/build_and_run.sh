@@ -32,10 +32,5 @@ if [[ -x $CG && -z $(ls -A "$OUT/seeds") ]]; then
   cp tests/data/damaged/*.h5 "$OUT/seeds/" 2>/dev/null || true
 fi
 cd "$OUT"
-# allocator_may_return_null: HDF5 sizes some buffers from the file (H5C_protect) and handles a failed
-# malloc as an error; ASan would abort instead of returning null, and spend seconds on the
-# gigabytes a damaged size asks for (the contactgrid binary gets them as untouched virtual memory).
-ASAN_OPTIONS=detect_leaks=0:allocator_may_return_null=1:max_allocation_size_mb=2048 \
-  ./fuzz_readers corpus seeds -max_total_time="$SECONDS_TO_RUN" -timeout=10 \
-  -rss_limit_mb=4096 -malloc_limit_mb=1048576 -max_len=65536 -artifact_prefix=findings/ \
-  -print_final_stats=1 ${FUZZ_ARGS:-} 2>&1 | tee fuzz.log | grep -E '^#[0-9]+ *(pulse|DONE|NEW)|ERROR|SUMMARY|stat::' || true
+source ../tests/fuzz/fuzz_options.sh
+./fuzz_readers corpus seeds -max_total_time="$SECONDS_TO_RUN" "${FUZZ_LIMITS[@]}" ${FUZZ_ARGS:-} 2>&1 | tee fuzz.log | grep -E '^#[0-9]+ *(pulse|DONE|NEW)|ERROR|SUMMARY|stat::' || true
