@@ -5,7 +5,9 @@
 //   accept(a, b, flags)  the count pass: is candidate (a, b) a contact (and the solver's flags, counted
 //                        once per candidate into EngineStats)
 //   row(a, b, full)      the fill pass, for an accepted candidate: its row, world frame
-//   ShapeDecide only: triage / solve / row_from, the two-pass count of both backends (below)
+//   ShapeDecide only: triage / solve / row_from, the two-pass count both backends run (below); its
+//   accept / row are the one whole solve per candidate that the two passes must reproduce bit for bit
+//   (EngineShapesTest.TwoPassNarrowEqualsOneWholeSolve), and row serves the closed-form pairs.
 // The bodies come as NarrowBodies (core/narrow.hpp): fp64 and mixed decide and compute from the world
 // doubles (pair_frame), fp32 from pack's local floats.
 // SphereDecide: narrow_decide() on the bounding spheres (sphere-only scenes, looser filters).
