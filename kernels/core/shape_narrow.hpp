@@ -96,7 +96,7 @@ CG_HD PairFrame<Real> pair_frame(const NarrowBodies<Real>& w, std::uint32_t a, s
 template <class Real>
 CG_HD bool bounding_spheres_touch(const NarrowBodies<Real>& w, std::uint32_t a, std::uint32_t b) {
   if constexpr (std::is_same_v<Real, double>)
-    return spheres_touch(local_sphere_fp64(w, a), local_sphere_fp64(w, b));
+    return touch_fp64(w, a, b);
   else
     return spheres_touch(w.spheres[a], w.spheres[b]);
 }
@@ -117,8 +117,7 @@ struct ShapeDecide {
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
-    flags.fallbacks += c.fallback ? 1u : 0u;
-    flags.unconverged += c.converged ? 0u : 1u;
+    note(a, b, c, flags);
     return contact;
   }
   CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
@@ -144,9 +143,11 @@ struct ShapeDecide {
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     const bool contact =
         shape_pair_contact<SolveScope::first_start>(f.a, f.b, shapes[a], shapes[b], settings, c);
-    if (!c.complete) return Verdict::hard;
-    flags.fallbacks += c.fallback ? 1u : 0u;
-    flags.unconverged += c.converged ? 0u : 1u;
+    if (!c.complete) {
+      note_work(a, b, c, flags);
+      return Verdict::hard;
+    }
+    note(a, b, c, flags);
     n = c.geometry.normal_on_b;
     return contact ? Verdict::accept : Verdict::reject;
   }
@@ -154,10 +155,25 @@ struct ShapeDecide {
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
-    flags.fallbacks += c.fallback ? 1u : 0u;
-    flags.unconverged += c.converged ? 0u : 1u;
+    note(a, b, c, flags);
     n = c.geometry.normal_on_b;
     return contact;
+  }
+  // The solver's flags of a settled pair, and its work (general pairs that reached the solve: the PW
+  // filter's rejections and the closed forms make none).
+  CG_HD void note(std::uint32_t a, std::uint32_t b, const EllipsoidContact<Real>& c,
+                  NarrowFlags& flags) const {
+    flags.fallbacks += c.fallback ? 1u : 0u;
+    flags.unconverged += c.converged ? 0u : 1u;
+    note_work(a, b, c, flags);
+  }
+  CG_HD void note_work(std::uint32_t a, std::uint32_t b, const EllipsoidContact<Real>& c,
+                       NarrowFlags& flags) const {
+    if (c.iterations <= 0 || !general_pair(a, b)) return;
+    const auto e = static_cast<std::uint32_t>(c.iterations);
+    ++flags.solver_runs;
+    flags.evaluations += e;
+    flags.max_evaluations = e > flags.max_evaluations ? e : flags.max_evaluations;
   }
   // A pair of ellipsoids that takes the general solve (ellipsoid_contact: neither has equal axes).
   CG_HD bool general_pair(std::uint32_t a, std::uint32_t b) const {

@@ -238,6 +238,8 @@ TYPED_TEST(EngineShapesTest, ThreadInvariantAndStarvedSolverCounted) {
   Engine<Real> one({.backend = Backend::cpu, .fields = Fields::full, .threads = 1});
   Engine<Real> two({.backend = Backend::cpu, .fields = Fields::full, .threads = 2});
   expect_identical(one.detect(s.view()), two.detect(s.view()), "threads 1 vs 2");
+  EXPECT_EQ(one.stats().narrow_evaluations, two.stats().narrow_evaluations);
+  EXPECT_EQ(one.stats().narrow_max_evaluations, two.stats().narrow_max_evaluations);
   Engine<Real> starved({.backend = Backend::cpu, .ellipsoid_max_iterations = 1});
   starved.detect(s.view());
   EXPECT_GT(starved.stats().narrow_fallbacks + starved.stats().narrow_unconverged, 0u);
@@ -288,6 +290,7 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
       sph.data(), reinterpret_cast<const double*>(s.p.data()), s.r.data(), {1, 2, 3}};
   const ShapeDecide<Real> d{world, packed.data(), {}};
   int contacts = 0, hard = 0, certified = 0;
+  NarrowFlags work;  // the solver's work over both passes, as the engine counts it
   for (std::uint32_t a = 0; a < sph.size(); ++a)
     for (std::uint32_t b = a + 1; b < sph.size(); ++b) {
       if (!spheres_touch(sph[a], sph[b])) continue;
@@ -302,6 +305,7 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
         ++certified;
       }
       ASSERT_EQ(x, v == Verdict::accept) << a << "," << b;
+      work.add(f2);
       EXPECT_EQ(f1.fallbacks, f2.fallbacks);
       EXPECT_EQ(f1.unconverged, f2.unconverged);
       if (!x) continue;
@@ -316,6 +320,18 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
   EXPECT_GT(contacts, 20);
   EXPECT_GT(hard, 0) << "no candidate took the second pass";
   EXPECT_GT(certified, 0) << "no ellipsoid contact was certified by the first start";
+  // The engine's work counters are these sums (fp64 solves from the world doubles, so in any frame).
+  EXPECT_GE(work.solver_runs, std::uint32_t(certified + 2 * hard));
+  EXPECT_GT(work.evaluations, 2 * work.solver_runs);
+  EXPECT_LE(work.max_evaluations, work.evaluations);
+  if constexpr (std::is_same_v<Real, double>) {
+    Engine<Real> e({.backend = Backend::cpu});
+    e.detect(s.view());
+    EXPECT_EQ(e.stats().narrow_hard, std::uint64_t(hard));
+    EXPECT_EQ(e.stats().narrow_solver_runs, work.solver_runs);
+    EXPECT_EQ(e.stats().narrow_evaluations, work.evaluations);
+    EXPECT_EQ(e.stats().narrow_max_evaluations, work.max_evaluations);
+  }
 }
 
 // Bad rows → InputError whose text names the body's id.
@@ -391,6 +407,10 @@ TYPED_TEST(EngineShapesTest, CudaBitIdenticalToCpu) {
       EXPECT_EQ(cpu.stats().narrow_fallbacks, gpu.stats().narrow_fallbacks) << s.name;
       EXPECT_EQ(cpu.stats().narrow_unconverged, gpu.stats().narrow_unconverged) << s.name;
       EXPECT_EQ(gpu.stats().ellipsoids, cpu.stats().ellipsoids) << s.name;
+      EXPECT_EQ(cpu.stats().narrow_hard, gpu.stats().narrow_hard) << s.name;
+      EXPECT_EQ(cpu.stats().narrow_solver_runs, gpu.stats().narrow_solver_runs) << s.name;
+      EXPECT_EQ(cpu.stats().narrow_evaluations, gpu.stats().narrow_evaluations) << s.name;
+      EXPECT_EQ(cpu.stats().narrow_max_evaluations, gpu.stats().narrow_max_evaluations) << s.name;
     }
 }
 
