@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <numbers>
 #include <optional>
 #include <thread>
 
@@ -55,6 +57,38 @@ void put(ShapeRows& s, std::size_t k, const ShapeRecord& r) {
   s.orientation[k] = r.orientation;
 }
 
+// B's boundary rows [lower_ghosts, lower_ghosts + sent) in the order the halo sends them (per
+// destination rank: the downward set to a lower rank, the upward set to a higher one): f(w, j) puts
+// B's row j at send position w.
+template <class F>
+void for_each_sent(const StepLayout& l, int me, F&& f) {
+  std::size_t w = 0;
+  for (std::size_t q = 0; q < l.send_counts.size(); ++q) {
+    const std::size_t from = l.lower_ghosts + (static_cast<int>(q) < me ? 0 : l.sent - l.up);
+    for (std::size_t j = from; j < from + l.send_counts[q]; ++j) f(w++, j);
+  }
+}
+
+// B's row of the g-th received ghost: the lower ranks' before the boundary owned rows, the upper
+// ranks' after them.
+std::size_t ghost_row(const StepLayout& l, std::size_t g) { return g < l.lower_ghosts ? g : g + l.sent; }
+
+// One shape field of B's rows (orientations; semi-axes when they grow) through the halo: the
+// boundary rows go out as the layout says, the ghosts' land in B's ghost rows. Every rank calls it.
+template <class T>
+void halo_field(const detail::Comm& comm, const StepLayout& l, int me, HostVector<T>& rows,
+                HostVector<T>& send) {
+  for_each_sent(l, me, [&](std::size_t w, std::size_t j) { send[w] = rows[j]; });
+  const HostVector<T> got = comm.exchange(send, l.send_counts, l.recv_counts);
+  for (std::size_t g = 0; g < got.size(); ++g) rows[ghost_row(l, g)] = got[g];
+}
+
+// a ⊗ b: the rotation b, then a.
+Quat<double> product(const Quat<double>& a, const Quat<double>& b) {
+  return {a.w * b.w - a.x * b.x - a.y * b.y - a.z * b.z, a.w * b.x + a.x * b.w + a.y * b.z - a.z * b.y,
+          a.w * b.y - a.x * b.z + a.y * b.w + a.z * b.x, a.w * b.z + a.x * b.y - a.y * b.x + a.z * b.w};
+}
+
 double median_of(std::vector<double> v) {
   if (v.empty()) return 0;
   std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
@@ -82,10 +116,25 @@ std::uint64_t pair_hash(std::int64_t a, std::int64_t b) {
   return x ^ (x >> 31);
 }
 
+Vec3<double> spin_axis(std::int64_t id) {
+  constexpr double k_unit = 0x1.0p-53;  // 53 random bits → [0, 1)
+  const double z = 2 * static_cast<double>(pair_hash(id, 1) >> 11) * k_unit - 1;
+  const double phi = 2 * std::numbers::pi * static_cast<double>(pair_hash(id, 2) >> 11) * k_unit;
+  const double s = std::sqrt(std::max(0.0, 1 - z * z));
+  return {s * std::cos(phi), s * std::sin(phi), z};
+}
+
+Quat<double> spun_orientation(std::int64_t id, Quat<double> q0, double angle) {
+  const Vec3<double> a = spin_axis(id);
+  const double c = std::cos(angle / 2), s = std::sin(angle / 2);
+  return product({c, s * a.x, s * a.y, s * a.z}, q0);
+}
+
 template <class Real>
 StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& frame,
                          const SlabDecomposition& slab_decomposition, double width, const EngineInput& in,
-                         int steps, std::uint64_t expected, std::uint64_t expected_hash, int threads) {
+                         int steps, const StepMotion& motion, std::uint64_t expected,
+                         std::uint64_t expected_hash, int threads) {
   const detail::Comm comm(session);
   // One rank has no neighbours: no halo, no engine B; every row resident as held, all pairs.
   const SlabDecomposition* slabs = session.size() > 1 ? &slab_decomposition : nullptr;
@@ -95,16 +144,25 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
   const std::span<const std::int64_t> id = in.id;
   const std::span<const std::uint8_t> report = in.report;
   auto id_of = [&](std::size_t i) { return in.implied() ? static_cast<std::int64_t>(i) : id[i]; };
-  // Scenes with ellipsoids: the shape rows go with the bodies into A and B once (the ghosts' travel
-  // with the first exchange); a step refreshes positions and radii only (orientations do not change
-  // here). Agreed over the ranks, as a rank without rows has none.
+  // Scenes with ellipsoids: the shape rows go with the bodies into A and B (the ghosts' with the first
+  // exchange), and every step refreshes B's orientations (semi-axes too when they grow) as it does
+  // the positions. Agreed over the ranks, as a rank without rows has none.
   const bool shapes = session.sum(std::uint64_t(in.shapes.empty() ? 0 : 1)) > 0;
+  const bool refresh = shapes && motion.refresh_shapes, grow = motion.send_semi_axes;
   const ShapeRows& shape_rows = in.shapes;
   auto shape_of = [&](std::size_t i) {
     return ShapeRecord{shape_rows.orientation[i], shape_rows.semi_axes[i], shape_rows.shape[i]};
   };
+  // Input row i's orientation at `angle` by the spin's rule (spheres keep theirs).
+  auto turned = [&](std::size_t i, double angle) {
+    return shape_rows.shape[i] == Shape::ellipsoid
+               ? spun_orientation(id_of(i), shape_rows.orientation[i], angle)
+               : shape_rows.orientation[i];
+  };
   StepStats st;
   st.steps = steps;
+  st.spin = motion.spin;
+  st.turned = shapes && motion.spin != 0;
   const int ranks = session.size(), me = session.rank();
   const std::size_t p = static_cast<std::size_t>(ranks), n = radius.size(),
                     n_steps = static_cast<std::size_t>(steps);
@@ -112,19 +170,21 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
   StepLayout l;
   l.send_counts.assign(p, 0);
   l.recv_counts.assign(p, 0);
-  HostVector<std::int64_t> owned_id;  // engine A's rows → global id
-  HostVector<Vec3<double>> b_p;       // engine B's rows, host side (page-locked)
+  HostVector<std::int64_t> owned_id;    // engine A's rows → global id
+  std::vector<std::size_t> owned_rows;  // engine A's rows → input rows (one rank: the same rows)
+  HostVector<Vec3<double>> b_p;         // engine B's rows, host side (page-locked)
   HostVector<double> b_r;
   HostVector<std::int64_t> b_id;
+  HostVector<Quat<double>> b_q;          // B's orientations (scenes with ellipsoids)
+  HostVector<Vec3<double>> b_semi;       // B's semi-axes (when they travel: StepMotion::send_semi_axes)
   std::optional<Engine<Real>> boundary;  // engine B
-  std::optional<Pin<Real>> pin_p, pin_r;
+  std::optional<Pin<Real>> pin_p, pin_r, pin_q;
   if (!slabs) {  // one rank: every row resident as held (all owned, in id order: ids implied), all pairs
     agreed_stage(session, "steps", [&] {
       engine.set_resident(BodiesView{
           position, radius, {}, {}, shape_rows.shape, shape_rows.semi_axes, shape_rows.orientation});
     });
   } else {
-    std::vector<std::size_t> owned_rows;  // input rows of engine A's rows
     agreed_stage(session, "steps", [&] {
       HostVector<std::uint8_t> cls(n);
       std::vector<char> need(p, 0);
@@ -227,6 +287,11 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
       boundary->set_resident(BodiesView{b_p, b_r, {}, mask, b_s.shape, b_s.semi_axes, b_s.orientation});
       pin_p.emplace(engine, b_p.data(), b_p.size() * sizeof(Vec3<double>));
       pin_r.emplace(engine, b_r.data(), b_r.size() * sizeof(double));
+      if (refresh) {
+        b_q = std::move(b_s.orientation);
+        pin_q.emplace(engine, b_q.data(), b_q.size() * sizeof(Quat<double>));
+      }
+      if (refresh && grow) b_semi = std::move(b_s.semi_axes);
     });
     st.halo_rows = got.size();
   }
@@ -236,16 +301,26 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
   // Each step: the boundary owned rows out of engine A; A detects its owned rows (another thread)
   // while this thread exchanges the halo (MPI only here) and writes engine B's rows, then B detects.
   // Per step (max over ranks): halo, interior (A), boundary (B), step (wall); medians reported.
+  // With a spin, the owners first write their ellipsoids' orientations of the step into A (the
+  // integrator's part, before the step's clock).
   std::uint64_t total_send = 0;
   for (std::uint64_t c : l.send_counts) total_send += c;
   HostVector<BodyRecord> send(total_send);
+  HostVector<Quat<double>> send_q(refresh ? total_send : 0);
+  HostVector<Vec3<double>> send_semi(refresh && grow ? total_send : 0);
+  HostVector<Quat<double>> a_q(st.turned ? (slabs ? l.owned : n) : 0);  // A's orientations of a step
   const std::size_t n_stages = engine_stage_names().size();
   std::vector<double> times(4 * n_steps, 0), stage_times(n_stages * n_steps, 0);
   std::vector<std::uint64_t> found(n_steps, 0);
   const std::size_t mid = l.lower_ghosts;  // B's boundary owned rows start here
+  auto turn_owned = [&](double angle) {    // A's rows at the step's angle (its owned ellipsoids turn)
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (std::size_t r = 0; r < a_q.size(); ++r) a_q[r] = turned(slabs ? owned_rows[r] : r, angle);
+    engine.write_resident_shapes(0, a_q.size(), nullptr, a_q.data());
+  };
   for (std::size_t k = 0; k < n_steps; ++k) {
-    const auto s0 = Clock::now();
     std::exception_ptr error, interior_error;
+    Clock::time_point s0;
     std::uint64_t found_a = 0, found_b = 0;
     double t_interior = 0;
     std::thread interior;
@@ -259,15 +334,14 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
       t_interior = seconds_since(i0);
     };
     try {
+      if (st.turned) turn_owned(motion.spin * static_cast<double>(k + 1));  // before the step's clock
+      s0 = Clock::now();
       if (slabs) {
         engine.read_resident(0, l.sent, b_p.data() + mid, b_r.data() + mid);
+        if (refresh)
+          engine.read_resident_shapes(0, l.sent, grow ? b_semi.data() + mid : nullptr, b_q.data() + mid);
         interior = std::thread(detect_interior);
-        std::size_t w = 0;
-        for (std::size_t q = 0; q < p; ++q) {
-          const std::size_t from = mid + (static_cast<int>(q) < me ? 0 : l.sent - l.up);
-          for (std::size_t j = from; j < from + l.send_counts[q]; ++j)
-            send[w++] = BodyRecord{b_p[j], b_r[j], 0};
-        }
+        for_each_sent(l, me, [&](std::size_t w, std::size_t j) { send[w] = BodyRecord{b_p[j], b_r[j], 0}; });
       } else {
         detect_interior();
       }
@@ -275,16 +349,19 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
       error = std::current_exception();
     }
     double t_halo = 0, t_boundary = 0;
-    if (slabs) {
-      const HostVector<BodyRecord> got = comm.exchange(send, l.send_counts, l.recv_counts);  // every rank
+    if (slabs) {  // every rank exchanges, whatever its error
+      const HostVector<BodyRecord> got = comm.exchange(send, l.send_counts, l.recv_counts);
+      if (refresh) halo_field(comm, l, me, b_q, send_q);
+      if (refresh && grow) halo_field(comm, l, me, b_semi, send_semi);
       try {
         if (!error) {
           for (std::size_t g = 0; g < got.size(); ++g) {
-            const std::size_t row = g < mid ? g : g + l.sent;
-            b_p[row] = got[g].position;
-            b_r[row] = got[g].radius;
+            b_p[ghost_row(l, g)] = got[g].position;
+            b_r[ghost_row(l, g)] = got[g].radius;
           }
           boundary->write_resident(0, b_r.size(), b_p.data(), b_r.data());
+          if (refresh)
+            boundary->write_resident_shapes(0, b_q.size(), grow ? b_semi.data() : nullptr, b_q.data());
           t_halo = seconds_since(s0);
           const auto b0 = Clock::now();
           found_b = boundary->detect_resident(frame);
@@ -322,15 +399,43 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
     add(engine.resident_contacts(), slabs ? owned_id.data() : nullptr);
     if (boundary) add(boundary->resident_contacts(), b_id.data());
   }
-  hash = session.sum(hash);
-  for (std::size_t k = 0; k < n_steps; ++k) {
+  st.hash = session.sum(hash);
+  if (st.turned && steps > 0) {  // the last step against the turned bodies detected from scratch
+    st.contacts = session.sum(found[n_steps - 1]);
+    boundary.reset();  // B is done: its memory for the engine from scratch
+    std::uint64_t want = 0, want_hash = 0;
+    agreed_stage(session, "steps", [&] {
+      if (in.owned == 0) return;  // as the file run: a rank without owned bodies detects nothing
+      HostVector<Quat<double>> q(n);
+#pragma omp parallel for num_threads(threads) schedule(static)
+      for (std::size_t i = 0; i < n; ++i) q[i] = turned(i, motion.spin * static_cast<double>(steps));
+      EngineOptions options = engine.options();
+      options.skin = 0;
+      BodiesView bodies = in.view();
+      bodies.orientation = q;
+      const Contacts<Real> c = Engine<Real>(options).detect(bodies, frame);
+      want = c.size();
+      for (std::size_t j = 0; j < c.size(); ++j)
+        want_hash += pair_hash(std::min(c.id_a[j], c.id_b[j]), std::max(c.id_a[j], c.id_b[j]));
+    });
+    want = session.sum(want);
+    want_hash = session.sum(want_hash);
+    agreed_stage(session, "steps", [&] {
+      if ((st.contacts != want || st.hash != want_hash) && me == 0)
+        throw Error("resident steps: the last step's " + std::to_string(st.contacts) +
+                    " contacts over the ranks differ from a detection of the turned bodies from scratch (" +
+                    std::to_string(want) + (st.contacts == want ? ", other pairs" : "") +
+                    "): a stale orientation; internal error");
+    });
+  }
+  for (std::size_t k = 0; k < n_steps && !st.turned; ++k) {
     st.contacts = session.sum(found[k]);
     agreed_stage(session, "steps", [&] {
       if (st.contacts != expected && me == 0)
         throw Error("resident step " + std::to_string(k) + ": " + std::to_string(st.contacts) +
                     " contacts over the ranks, the run found " + std::to_string(expected) +
                     ": internal error");
-      if (k + 1 == n_steps && hash != expected_hash && me == 0)
+      if (k + 1 == n_steps && st.hash != expected_hash && me == 0)
         throw Error("resident steps: the last step's pairs differ from the run's: internal error");
     });
   }
@@ -351,8 +456,10 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
 }
 
 template StepStats resident_steps(Session&, Engine<float>&, const Frame&, const SlabDecomposition&, double,
-                                  const EngineInput&, int, std::uint64_t, std::uint64_t, int);
+                                  const EngineInput&, int, const StepMotion&, std::uint64_t, std::uint64_t,
+                                  int);
 template StepStats resident_steps(Session&, Engine<double>&, const Frame&, const SlabDecomposition&, double,
-                                  const EngineInput&, int, std::uint64_t, std::uint64_t, int);
+                                  const EngineInput&, int, const StepMotion&, std::uint64_t, std::uint64_t,
+                                  int);
 
 }  // namespace cg

@@ -186,16 +186,22 @@ int run_cli(int argc, char** argv, Session& session) {
                 "(each rank merges the contacts of its id_a range and writes them into the same file)")
       ->transform(CLI::CheckedTransformer(k_writes))
       ->default_str("gather");
-  d->add_option("--steps", det.steps,
-                "Then measure N resident steps: each rank keeps its bodies on its GPU (or in memory), "
-                "refreshes its ghosts through MPI and detects again, contacts left in place (checked "
-                "against the file's count); prints the median step")
-      ->check(CLI::NonNegativeNumber);
+  auto* steps =
+      d->add_option("--steps", det.steps,
+                    "Then measure N resident steps: each rank keeps its bodies on its GPU (or in memory), "
+                    "refreshes its ghosts through MPI and detects again, contacts left in place (checked "
+                    "against the file's count); prints the median step")
+          ->check(CLI::NonNegativeNumber);
   d->add_option("--skin", det.skin,
                 "Verlet skin (world length, default 0): the engines keep their candidate pairs across the "
                 "--steps and reuse them while the bodies moved less than skin/2 (stage skin in the step "
                 "times); contacts unchanged")
       ->check(CLI::NonNegativeNumber);
+  d->add_option("--spin", det.spin,
+                "Radians per step (default 0): in the --steps every ellipsoid turns by W·step about a fixed "
+                "axis drawn from its id, and the ghosts' orientations refresh through MPI; the last step's "
+                "contacts are then checked against the turned bodies detected from scratch")
+      ->needs(steps);
   d->add_flag("-q,--quiet", det.quiet, "No summary");
 
   // compare

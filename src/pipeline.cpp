@@ -66,6 +66,7 @@ void check_options(const DistributedOptions& options) {
   if (options.max_sample < 1) throw UsageError("max_sample: must be >= 1");
   if (options.max_message_bytes < 64) throw UsageError("max_message_bytes: must be >= 64");
   if (options.resident_steps < 0) throw UsageError("--steps: must be >= 0");
+  if (!std::isfinite(options.step_motion.spin)) throw UsageError("--spin: must be a finite angle (radians)");
 }
 
 namespace {
@@ -372,16 +373,17 @@ void record_contacts(CollectedContacts<Real>&& c, DistributedResult<Real>& resul
 }
 
 // The resident steps from the run's engine input, checked against the run's contacts (count and
-// an order-free hash of the pairs).
+// an order-free hash of the pairs; with a spin, against the turned bodies: resident_steps.hpp).
 template <class Real>
 StepStats run_resident_steps(Session& session, Engine<Real>& engine, const SharedFrame& f,
                              const SlabDecomposition& slabs, const EngineInput& input,
-                             const DistributedResult<Real>& result, int steps, int threads) {
+                             const DistributedResult<Real>& result, const DistributedOptions& options,
+                             int threads) {
   std::uint64_t hash = 0;
   for (std::size_t k = 0; k < result.contacts.size(); ++k)
     hash += pair_hash(result.contacts.id_a[k], result.contacts.id_b[k]);
-  return resident_steps(session, engine, f.frame, slabs, f.width, input, steps, result.total_contacts,
-                        session.sum(hash), threads);
+  return resident_steps(session, engine, f.frame, slabs, f.width, input, options.resident_steps,
+                        options.step_motion, result.total_contacts, session.sum(hash), threads);
 }
 
 // The stages frame … collect after the read stage (read_scene), with their times (max over ranks)
@@ -433,8 +435,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   record_contacts(std::move(c), result);
 
   if (options.resident_steps > 0)
-    result.steps =
-        run_resident_steps(session, *engine, f, slabs, held.input, result, options.resident_steps, threads);
+    result.steps = run_resident_steps(session, *engine, f, slabs, held.input, result, options, threads);
   result.times = clock.times(session, transfer);
   return result;
 }
@@ -457,6 +458,7 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   // into the one output file. A CSV copy is written by rank 0 alone, so it always gathers.
   o.output = cmd.csv.empty() ? cmd.write : ContactOutput::gather;
   o.resident_steps = cmd.steps;
+  o.step_motion.spin = cmd.spin;
   return o;
 }
 

@@ -104,6 +104,7 @@ struct DistributedOptions {
   ContactOutput output = ContactOutput::gather;
   SceneRead read = SceneRead::automatic;
   int resident_steps = 0;  // > 0: then that many resident steps (comm/resident_steps.hpp)
+  StepMotion step_motion;  // how the bodies change between those steps (--spin)
   // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
   // printed to stderr as a warning only if duplicates were removed.
   std::function<void(const std::string&)> log;
@@ -169,6 +170,7 @@ struct DetectCommand {
   ContactOutput write = ContactOutput::gather;
   int steps = 0;    // resident steps after the run (a simulation's per-step cost)
   double skin = 0;  // EngineOptions::skin: candidates kept across the resident steps
+  double spin = 0;  // StepMotion::spin: radians per step the ellipsoids turn in the resident steps
   bool quiet = false;
 };
 

@@ -45,11 +45,20 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
   fmt::print("  {:<16} {:>12.6f}\n", "total", total);
   if (r.steps.steps > 0) {
     const StepStats& s = r.steps;
-    fmt::print(
-        "resident steps: {} (bodies kept in each rank's engine), {} contacts per step (= the file's), {} "
-        "ghost "
-        "rows refreshed per step; setup {:.6f} s; per step, median of the maxima over ranks:\n",
-        s.steps, s.contacts, s.halo_rows, s.setup);
+    if (s.turned) {
+      fmt::print(
+          "resident steps: {} (bodies kept in each rank's engine), the ellipsoids turning {} rad per step, "
+          "{} contacts on the last step (= the turned bodies detected from scratch), {} ghost rows "
+          "(with orientations) refreshed per step; setup {:.6f} s; per step, median of the maxima over "
+          "ranks:\n",
+          s.steps, s.spin, s.contacts, s.halo_rows, s.setup);
+    } else {
+      fmt::print(
+          "resident steps: {} (bodies kept in each rank's engine), {} contacts per step (= the file's), {} "
+          "ghost "
+          "rows refreshed per step; setup {:.6f} s; per step, median of the maxima over ranks:\n",
+          s.steps, s.contacts, s.halo_rows, s.setup);
+    }
     fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "halo", s.halo, "interior", s.interior);
     for (const StageTime& t : s.stages) fmt::print("    {:<14} {:>12.6f}\n", t.name, t.seconds);
     fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "boundary", s.boundary, "step", s.step);

@@ -352,6 +352,17 @@ TEST_F(Cli, ResidentStepsOnAMixedScene) {
     EXPECT_EQ(run("compare " + path("plain.h5") + " " + path("steps.h5")).code, 0) << extra;
   }
   EXPECT_GT(read_contacts(path("plain.h5")).contacts.size(), 500u);  // the scene has contacts
+  // --spin: the ellipsoids turn in the steps; the last step is checked against the turned bodies
+  // detected from scratch (else exit 1), and the file stays the run's
+  const auto spin = run("detect " + path("m.h5") + " -o " + path("spin.h5") + opts + " --steps 3 --spin 0.3");
+  EXPECT_EQ(spin.code, 0) << spin.output;
+  EXPECT_NE(spin.output.find("the ellipsoids turning 0.3 rad per step, "), std::string::npos) << spin.output;
+  EXPECT_NE(spin.output.find("contacts on the last step (= the turned bodies detected from scratch)"),
+            std::string::npos)
+      << spin.output;
+  EXPECT_EQ(run("compare " + path("plain.h5") + " " + path("spin.h5")).code, 0);
+  expect_detect_fails(path("m.h5"), 2, {"--spin", "--steps"}, "--spin 0.3");  // --spin needs --steps
+  expect_detect_fails(path("m.h5"), 2, {"--spin"}, "--steps 1 --spin inf");
 }
 
 // Stage times are typed; their names (the summary's rows, the contact file's attributes) are made once.
