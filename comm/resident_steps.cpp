@@ -73,14 +73,23 @@ void for_each_sent(const StepLayout& l, int me, F&& f) {
 // ranks' after them.
 std::size_t ghost_row(const StepLayout& l, std::size_t g) { return g < l.lower_ghosts ? g : g + l.sent; }
 
-// One shape field of B's rows (orientations; semi-axes when they grow) through the halo: the
-// boundary rows go out as the layout says, the ghosts' land in B's ghost rows. Every rank calls it.
-template <class T>
-void halo_field(const detail::Comm& comm, const StepLayout& l, int me, HostVector<T>& rows,
-                HostVector<T>& send) {
-  for_each_sent(l, me, [&](std::size_t w, std::size_t j) { send[w] = rows[j]; });
-  const HostVector<T> got = comm.exchange(send, l.send_counts, l.recv_counts);
-  for (std::size_t g = 0; g < got.size(); ++g) rows[ghost_row(l, g)] = got[g];
+// A boundary row as a step sends it in a scene with ellipsoids: the orientation in the same message
+// as the position and bounding radius (64 bytes; a sphere-only scene sends BodyRecords, 40).
+struct OrientedRecord {
+  Vec3<double> position;
+  double radius;
+  Quat<double> orientation;
+};
+
+// One message per neighbour of B's rows: `record(j)` of each boundary row j goes out as the layout
+// says (through `send`), and `put(row, r)` lands each received record in B's ghost row. Every rank
+// calls it (whatever its error: its neighbours wait for its messages).
+template <class R, class Record, class Put>
+void halo_rows(const detail::Comm& comm, const StepLayout& l, int me, HostVector<R>& send, Record&& record,
+               Put&& put) {
+  for_each_sent(l, me, [&](std::size_t w, std::size_t j) { send[w] = record(j); });
+  const HostVector<R> got = comm.exchange(send, l.send_counts, l.recv_counts);
+  for (std::size_t g = 0; g < got.size(); ++g) put(ghost_row(l, g), got[g]);
 }
 
 // a ⊗ b: the rotation b, then a.
@@ -305,8 +314,8 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
   // integrator's part, before the step's clock).
   std::uint64_t total_send = 0;
   for (std::uint64_t c : l.send_counts) total_send += c;
-  HostVector<BodyRecord> send(total_send);
-  HostVector<Quat<double>> send_q(refresh ? total_send : 0);
+  HostVector<BodyRecord> send(refresh ? 0 : total_send);
+  HostVector<OrientedRecord> send_oriented(refresh ? total_send : 0);
   HostVector<Vec3<double>> send_semi(refresh && grow ? total_send : 0);
   HostVector<Quat<double>> a_q(st.turned ? (slabs ? l.owned : n) : 0);  // A's orientations of a step
   const std::size_t n_stages = engine_stage_names().size();
@@ -341,7 +350,6 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
         if (refresh)
           engine.read_resident_shapes(0, l.sent, grow ? b_semi.data() + mid : nullptr, b_q.data() + mid);
         interior = std::thread(detect_interior);
-        for_each_sent(l, me, [&](std::size_t w, std::size_t j) { send[w] = BodyRecord{b_p[j], b_r[j], 0}; });
       } else {
         detect_interior();
       }
@@ -350,15 +358,35 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
     }
     double t_halo = 0, t_boundary = 0;
     if (slabs) {  // every rank exchanges, whatever its error
-      const HostVector<BodyRecord> got = comm.exchange(send, l.send_counts, l.recv_counts);
-      if (refresh) halo_field(comm, l, me, b_q, send_q);
-      if (refresh && grow) halo_field(comm, l, me, b_semi, send_semi);
+      if (refresh) {
+        halo_rows(
+            comm, l, me, send_oriented,
+            [&](std::size_t j) {
+              return OrientedRecord{b_p[j], b_r[j], b_q[j]};
+            },
+            [&](std::size_t row, const OrientedRecord& g) {
+              b_p[row] = g.position;
+              b_r[row] = g.radius;
+              b_q[row] = g.orientation;
+            });
+      } else {
+        halo_rows(
+            comm, l, me, send,
+            [&](std::size_t j) {
+              return BodyRecord{b_p[j], b_r[j], 0};
+            },
+            [&](std::size_t row, const BodyRecord& g) {
+              b_p[row] = g.position;
+              b_r[row] = g.radius;
+            });
+      }
+      if (refresh && grow) {  // semi-axes that grow: a message of their own
+        halo_rows(
+            comm, l, me, send_semi, [&](std::size_t j) { return b_semi[j]; },
+            [&](std::size_t row, const Vec3<double>& v) { b_semi[row] = v; });
+      }
       try {
         if (!error) {
-          for (std::size_t g = 0; g < got.size(); ++g) {
-            b_p[ghost_row(l, g)] = got[g].position;
-            b_r[ghost_row(l, g)] = got[g].radius;
-          }
           boundary->write_resident(0, b_r.size(), b_p.data(), b_r.data());
           if (refresh)
             boundary->write_resident_shapes(0, b_q.size(), grow ? b_semi.data() : nullptr, b_q.data());

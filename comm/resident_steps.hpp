@@ -20,11 +20,12 @@
 //
 // Scenes with ellipsoids: A and B hold the shape rows too (the ghosts' travel with the first
 // exchange), and every step refreshes the orientations as it does the positions: the boundary rows'
-// quaternions come out of A (read_resident_shapes), go to the neighbours in one more message each
-// (32 bytes a row, beside the 40 of the position and radius) and into B's rows
-// (write_resident_shapes), inside the halo time, so the step costs what a simulation that rotates
-// its bodies pays. Sphere-only scenes send and call nothing more. Semi-axes stay fixed (set once);
-// a simulation whose shapes grow sets StepMotion::send_semi_axes and they travel the same way.
+// quaternions come out of A (read_resident_shapes), go to the neighbours in the same message as the
+// position and radius (64 bytes a row instead of 40; a second message per neighbour measured slower,
+// BENCHMARKS §10) and into B's rows (write_resident_shapes), inside the halo time, so the step costs
+// what a simulation that rotates its bodies pays. Sphere-only scenes send and call nothing more.
+// Semi-axes stay fixed (set once); a simulation whose shapes grow sets StepMotion::send_semi_axes:
+// they then go out of A and into B with the orientations, in a message of their own.
 // StepMotion::spin makes the steps rotate the ellipsoids (spun_orientation, written into A on the
 // owning rank before the step's clock starts, as an integrator would): the contacts then change
 // from step to step, so instead of the file's K the last step's contacts (count and pair hash,

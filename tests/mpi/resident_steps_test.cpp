@@ -133,7 +133,9 @@ TEST(ResidentSteps, SpinOnSpheresChangesNothing) {
   const DistributedResult<double> got = distributed_detect<double>(session(), path, o);
   EXPECT_FALSE(got.steps.turned);
   EXPECT_EQ(got.steps.contacts, got.total_contacts);
-  if (session().rank() == 0) EXPECT_EQ((PairSet{got.steps.contacts, got.steps.hash}), pair_set(got.contacts));
+  if (session().rank() == 0) {
+    EXPECT_EQ((PairSet{got.steps.contacts, got.steps.hash}), pair_set(got.contacts));
+  }
 }
 
 }  // namespace
