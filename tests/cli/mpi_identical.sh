@@ -3,7 +3,8 @@
 # for P = 2, 3, 4 (and 8 oversubscribed), on a uniform and a polydisperse scene, fp64 and fp32, with
 # the defaults (every rank reads every row, all ranks being on one node; rank 0 gathers and writes)
 # and, at P = 3, each rank reading its own rows and each rank writing its id_a range; then an
-# ellipsoid and a mixed scene (P = 2, 3, 4, own rows, id_a ranges) and the resident steps on it;
+# ellipsoid and a mixed scene (P = 2, 3, 4, own rows, id_a ranges) and the resident steps on it (with
+# --spin: turning ellipsoids);
 # --precision auto picks the same mode on 1 and 3 ranks.
 # Usage: mpi_identical.sh CONTACTGRID MPIEXEC WORKDIR
 set -euo pipefail
@@ -66,6 +67,14 @@ for np in 1 2 3; do
   grep -q "contacts per step (= the file's)" "$W/steps.txt" || { cat "$W/steps.txt"; exit 1; }
   "$CG" compare "$W/m.fp64.1.h5" "$W/steps.$np.h5"
 done
+# --spin: the ellipsoids turn in the steps, the ghosts' orientations come through the halo, and the
+# last step equals the turned bodies detected from scratch (checked by the run, else exit 8); the file
+# is the run's
+"$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/m.h5" -o "$W/spin.h5" --backend cpu \
+  --precision fp64 --fields full --threads 1 --read own --steps 3 --spin 0.3 >"$W/spin.txt"
+grep -q "contacts on the last step (= the turned bodies detected from scratch)" "$W/spin.txt" ||
+  { cat "$W/spin.txt"; exit 1; }
+"$CG" compare "$W/m.fp64.1.h5" "$W/spin.h5"
 # an error on one rank ends the whole job with one message and no output
 if "$MPIEXEC" -np 3 --oversubscribe --allow-run-as-root "$CG" detect "$W/missing.h5" -o "$W/x.h5" 2>"$W/err"; then
   echo "a missing scene must fail"; exit 1
