@@ -172,6 +172,7 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
   st.steps = steps;
   st.spin = motion.spin;
   st.turned = shapes && motion.spin != 0;
+  st.oriented = refresh && session.size() > 1;
   const int ranks = session.size(), me = session.rank();
   const std::size_t p = static_cast<std::size_t>(ranks), n = radius.size(),
                     n_steps = static_cast<std::size_t>(steps);

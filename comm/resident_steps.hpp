@@ -64,6 +64,7 @@ struct StepStats {
   std::uint64_t hash = 0;       // the last step's pairs, pair_hash summed over ranks (checked likewise)
   double spin = 0;              // StepMotion::spin of the steps (0: the bodies did not turn)
   bool turned = false;          // the ellipsoids turned (a spin and a scene with ellipsoids)
+  bool oriented = false;        // the halo carried the ghosts' orientations (a scene with ellipsoids)
   std::uint64_t halo_rows = 0;  // ghost rows refreshed per step, summed over ranks
   double setup = 0;             // layout, first exchange, upload (once, max over ranks)
   double halo = 0;              // ghost refresh: boundary rows (and orientations) out of the GPU, MPI, into B

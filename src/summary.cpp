@@ -3,6 +3,8 @@
 
 #include <fmt/format.h>
 
+#include <string>
+
 namespace cg {
 
 template <class Real>
@@ -45,20 +47,16 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
   fmt::print("  {:<16} {:>12.6f}\n", "total", total);
   if (r.steps.steps > 0) {
     const StepStats& s = r.steps;
-    if (s.turned) {
-      fmt::print(
-          "resident steps: {} (bodies kept in each rank's engine), the ellipsoids turning {} rad per step, "
-          "{} contacts on the last step (= the turned bodies detected from scratch), {} ghost rows "
-          "(with orientations) refreshed per step; setup {:.6f} s; per step, median of the maxima over "
-          "ranks:\n",
-          s.steps, s.spin, s.contacts, s.halo_rows, s.setup);
-    } else {
-      fmt::print(
-          "resident steps: {} (bodies kept in each rank's engine), {} contacts per step (= the file's), {} "
-          "ghost "
-          "rows refreshed per step; setup {:.6f} s; per step, median of the maxima over ranks:\n",
-          s.steps, s.contacts, s.halo_rows, s.setup);
-    }
+    const std::string checked =
+        s.turned ? fmt::format(
+                       "the ellipsoids turning {} rad per step, {} contacts on the last step (= the "
+                       "turned bodies detected from scratch)",
+                       s.spin, s.contacts)
+                 : fmt::format("{} contacts per step (= the file's)", s.contacts);
+    fmt::print(
+        "resident steps: {} (bodies kept in each rank's engine), {}, {} ghost rows{} refreshed per step; "
+        "setup {:.6f} s; per step, median of the maxima over ranks:\n",
+        s.steps, checked, s.halo_rows, s.oriented ? " (with orientations)" : "", s.setup);
     fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "halo", s.halo, "interior", s.interior);
     for (const StageTime& t : s.stages) fmt::print("    {:<14} {:>12.6f}\n", t.name, t.seconds);
     fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "boundary", s.boundary, "step", s.step);
