@@ -271,11 +271,18 @@ TYPED_TEST(EngineShapesTest, CellFilterGivesTheSameRows) {
 // Both backends run the narrow stage of shapes as the device does: triage (first start + certificate),
 // the whole solve for the hard candidates alone, and the row rebuilt from the kept minimiser
 // (row_from). That must give the decisions, flags and bits of one whole solve per candidate (accept(),
-// row()), and the scene must exercise both passes.
+// row()), and the scene must exercise both passes. fp32: the pairs with nearly coincident centres
+// (appended: partners 1e-5 … 1e-11 apart) are solved in fp64 on every path, counted alike.
 TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
   using Real = TypeParam;
   using Verdict = typename ShapeDecide<Real>::Verdict;
-  const ShapeScene s = make_scene("mixed", 37, 200, 0.6, 7.0);
+  ShapeScene s = make_scene("mixed", 37, 200, 0.6, 7.0);
+  for (std::size_t i = 0, n = s.p.size(); i < n && i < 28; ++i) {  // a partner for 28 bodies
+    const double delta = std::pow(10.0, -5 - int(i % 7));
+    s.p.push_back({s.p[i].x + delta, s.p[i].y - 0.6 * delta, s.p[i].z + 0.8 * delta});
+    const std::size_t j = (i * 7 + 3) % n;  // another body's shape (either kind)
+    s.r.push_back(s.r[j]), s.shape.push_back(s.shape[j]), s.axes.push_back(s.axes[j]), s.q.push_back(s.q[j]);
+  }
   std::vector<Sphere<Real>> sph;
   std::vector<PackedShape<Real>> packed;
   for (std::size_t i = 0; i < s.p.size(); ++i) {
@@ -286,8 +293,10 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
   }
   const NarrowBodies<Real> world{
       sph.data(), reinterpret_cast<const double*>(s.p.data()), s.r.data(), {1, 2, 3}};
-  const ShapeDecide<Real> d{world, packed.data(), {}};
-  int contacts = 0, hard = 0, certified = 0;
+  const ShapeRowsView rows{reinterpret_cast<const double*>(s.axes.data()),
+                           reinterpret_cast<const double*>(s.q.data())};
+  const ShapeDecide<Real> d{world, packed.data(), {}, rows};
+  int contacts = 0, hard = 0, certified = 0, fp64 = 0;
   for (std::uint32_t a = 0; a < sph.size(); ++a)
     for (std::uint32_t b = a + 1; b < sph.size(); ++b) {
       if (!spheres_touch(sph[a], sph[b])) continue;
@@ -304,6 +313,8 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
       ASSERT_EQ(x, v == Verdict::accept) << a << "," << b;
       EXPECT_EQ(f1.fallbacks, f2.fallbacks);
       EXPECT_EQ(f1.unconverged, f2.unconverged);
+      EXPECT_EQ(f1.fp64_rows, f2.fp64_rows);
+      fp64 += d.both_spheres(a, b) ? 0 : int(f1.fp64_rows);
       if (!x) continue;
       ++contacts;
       const ContactRow<Real> kept = d.row_from(a, b, n, true), again = d.row(a, b, true);
@@ -316,6 +327,10 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
   EXPECT_GT(contacts, 20);
   EXPECT_GT(hard, 0) << "no candidate took the second pass";
   EXPECT_GT(certified, 0) << "no ellipsoid contact was certified by the first start";
+  if (std::is_same_v<Real, float>)
+    EXPECT_GE(fp64, 20) << "the nearly coincident pairs with an ellipsoid were not solved in fp64";
+  else
+    EXPECT_EQ(fp64, 0);
 }
 
 // Bad rows → InputError whose text names the body's id.
