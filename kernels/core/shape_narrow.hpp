@@ -9,7 +9,8 @@
 //   accept / row are the one whole solve per candidate that the two passes must reproduce bit for bit
 //   (EngineShapesTest.TwoPassNarrowEqualsOneWholeSolve), and row serves the closed-form pairs.
 // The bodies come as NarrowBodies (core/narrow.hpp): fp64 and mixed decide and compute from the world
-// doubles (pair_frame), fp32 from pack's local floats.
+// doubles (pair_frame), fp32 from pack's local floats — except the pairs whose float centres it does
+// not resolve, which it solves as fp64 does (ShapeDecide, "fp32's pairs in fp64").
 // SphereDecide: narrow_decide() on the bounding spheres (sphere-only scenes, looser filters).
 // ShapeDecide: scenes with ellipsoids: dispatch on the shape pair —
 //   sphere–sphere        the closed form (narrow_decide: exactly the sphere path's bits)

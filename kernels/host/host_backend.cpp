@@ -94,7 +94,7 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   const NarrowBodies<Narrow> world = narrow_bodies<Broad, Narrow>(job.bodies, bodies, job.plan.frame.origin);
   if (shapes) {
     const ShapeRowsView rows{reinterpret_cast<const double*>(job.bodies.semi_axes.data()),
-                         reinterpret_cast<const double*>(job.bodies.orientation.data())};
+                             reinterpret_cast<const double*>(job.bodies.orientation.data())};
     host::narrow_shapes(candidates, world, packed_shapes, rows, job.solver, job.fields, nt, out, stats);
   } else {
     host::narrow(candidates, world, job.fields, nt, out, stats);

@@ -98,10 +98,10 @@ void narrow_shapes(const CandidatePairs& c, const NarrowBodies<Real>& bodies,
 }
 
 template void narrow_shapes(const CandidatePairs&, const NarrowBodies<float>&,
-                            const std::vector<PackedShape<float>>&, ShapeRowsView, const SolverSettings<float>&,
-                            Fields, int, Contacts<float>&, EngineStats&);
+                            const std::vector<PackedShape<float>>&, ShapeRowsView,
+                            const SolverSettings<float>&, Fields, int, Contacts<float>&, EngineStats&);
 template void narrow_shapes(const CandidatePairs&, const NarrowBodies<double>&,
-                            const std::vector<PackedShape<double>>&, ShapeRowsView, const SolverSettings<double>&,
-                            Fields, int, Contacts<double>&, EngineStats&);
+                            const std::vector<PackedShape<double>>&, ShapeRowsView,
+                            const SolverSettings<double>&, Fields, int, Contacts<double>&, EngineStats&);
 
 }  // namespace cg::detail::host

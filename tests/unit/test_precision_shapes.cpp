@@ -138,7 +138,8 @@ double expect_near_pairs_exact(const NearScene& n, const Contacts<float>& c) {
     EXPECT_LE(angle, 5e-4 * kappa) << what << ": normal (reversed: " << (angle > 3) << ")";
     worst = std::max(worst, angle * 180 / 3.14159265358979323846);
     auto err = [](Vec3<float> a, exact::V b) {
-      const double x = double(a.x) - double(b.x), y = double(a.y) - double(b.y), z = double(a.z) - double(b.z);
+      const double x = double(a.x) - double(b.x), y = double(a.y) - double(b.y),
+                   z = double(a.z) - double(b.z);
       return std::sqrt(x * x + y * y + z * z);
     };
     const double x = std::max({std::fabs(s.p[i].x), std::fabs(s.p[i].y), std::fabs(s.p[i].z)}) + 1;
