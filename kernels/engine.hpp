@@ -81,6 +81,14 @@ struct EngineStats {
   // Candidates whose first start was not certified global, so the whole start set ran (the device's
   // second narrow pass; the same count on both backends).
   std::uint64_t narrow_hard = 0;
+  // CUDA, scenes with ellipsoids: seconds of the narrow stage's triage pass (every candidate) and of its
+  // hard pass (the selection and the whole solves); the rest of the stage is the scan and the rows.
+  // The host runs both in one loop per candidate and leaves them 0.
+  double narrow_triage_s = 0, narrow_hard_s = 0;
+  // Scenes with ellipsoids: runs of the general ellipsoid solve (each triage's first start, each hard
+  // pair's whole set), the evaluations of f (value, gradient, Hessian at one normal) they made, and the
+  // most one run made: mean = narrow_evaluations / narrow_solver_runs. The same on both backends.
+  std::uint64_t narrow_solver_runs = 0, narrow_evaluations = 0, narrow_max_evaluations = 0;
   // fp32: contact rows whose local centres were closer than fp32 resolves a normal (fp32_resolves,
   // core/narrow.hpp), recomputed in fp64 from the world coordinates and rounded to float.
   std::uint64_t fp64_rows = 0;

@@ -348,6 +348,10 @@ void record_detection(const Session& session, const Engine<Real>& engine, const 
   result.stats.pair_tests = session.sum(result.stats.pair_tests);
   result.stats.narrow_fallbacks = session.sum(result.stats.narrow_fallbacks);
   result.stats.narrow_unconverged = session.sum(result.stats.narrow_unconverged);
+  result.stats.narrow_solver_runs = session.sum(result.stats.narrow_solver_runs);
+  result.stats.narrow_evaluations = session.sum(result.stats.narrow_evaluations);
+  result.stats.narrow_max_evaluations =
+      std::uint64_t(session.max(double(result.stats.narrow_max_evaluations)));
   result.stats.fp64_rows = session.sum(result.stats.fp64_rows);
   result.stats.ellipsoids = result.ellipsoids;  // the scene's (the engines' counts include ghosts)
   result.stats.key_bits = int(session.max(double(result.stats.key_bits)));

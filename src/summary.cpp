@@ -20,6 +20,11 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
   if (r.ellipsoids > 0)
     fmt::print("\n  {} ellipsoids, {} narrow fallbacks, {} narrow solves unconverged (summed over ranks)",
                r.ellipsoids, r.stats.narrow_fallbacks, r.stats.narrow_unconverged);
+  if (r.stats.narrow_solver_runs > 0)
+    fmt::print("\n  ellipsoid solver: {} runs, {:.1f} evaluations of f per run, at most {} in one",
+               r.stats.narrow_solver_runs,
+               double(r.stats.narrow_evaluations) / double(r.stats.narrow_solver_runs),
+               r.stats.narrow_max_evaluations);
   if (r.stats.fp64_rows > 0)
     fmt::print(
         "\n  {} fp32 rows recomputed in fp64 (centres closer than fp32 resolves a normal; summed over "

@@ -5,7 +5,8 @@
 //
 // Where each precision mode takes its numbers (README "Choosing a precision"):
 //   fp64, mixed  decision: spheres_touch on the frame-local doubles Real(world − origin), exactly the
-//                bits of fp64's pack, so fp64's pair stage and mixed's narrow stage decide alike;
+//                bits of fp64's pack, so fp64's pair stage and mixed's narrow stage decide alike
+//                (mixed settles most candidates on its broad phase's floats first: touch_fp64);
 //                row: from the WORLD doubles (world_sphere_row): the centre difference a − b of two
 //                world doubles (exact when they are within a factor 2 of each other, Sterbenz; else
 //                one rounding), the points world + offset. No rounding from the frame.
@@ -18,10 +19,21 @@
 
 namespace cg {
 
-// Flags of one candidate, counted into EngineStats: the ellipsoid solver's (ellipsoid pairs only) and
-// the fp32 rows recomputed in fp64.
+// Flags of one candidate (or summed over a run of candidates), counted into EngineStats: the
+// ellipsoid solver's (ellipsoid pairs only), its work, and the fp32 rows recomputed in fp64.
 struct NarrowFlags {
   std::uint32_t fallbacks = 0, unconverged = 0, fp64_rows = 0;
+  // runs of the general ellipsoid solve (a triage's first start and a hard pair's whole set count
+  // one each), the evaluations of f they made (ellipsoid_pair_contact's `iterations`), the most of one
+  std::uint32_t solver_runs = 0, evaluations = 0, max_evaluations = 0;
+  CG_HD void add(const NarrowFlags& o) {
+    fallbacks += o.fallbacks;
+    unconverged += o.unconverged;
+    fp64_rows += o.fp64_rows;
+    solver_runs += o.solver_runs;
+    evaluations += o.evaluations;
+    max_evaluations = o.max_evaluations > max_evaluations ? o.max_evaluations : max_evaluations;
+  }
 };
 
 // The bodies as the narrow stage reads them, by body index.
@@ -31,6 +43,10 @@ struct NarrowBodies {
   const double* position;       // world centres, x y z of body i at 3i (host or DEVICE memory)
   const double* radius;         // world (bounding) radii
   Vec3<double> origin;          // the frame's origin
+  // mixed: the fp32 broad phase's spheres (pack's Real(world − origin), radius + broad_margin), by body
+  // index, and that margin; null otherwise (touch_fp64).
+  const Sphere<float>* broad = nullptr;
+  float broad_margin = 0;
 };
 
 template <class Real>
@@ -52,6 +68,71 @@ CG_HD Sphere<double> local_sphere_fp64(const NarrowBodies<Real>& w, std::uint32_
   const Vec3<double> c = world_centre(w, i);
   return {c.x - w.origin.x, c.y - w.origin.y, c.z - w.origin.z, w.radius[i]};
 }
+
+// What two of mixed's float broad-phase spheres say of fp64's decision (spheres_touch on the
+// frame-local doubles). With m = broad_margin = 4·ε32·(L + 2·r_max) (grid_plan.cpp), each packed radius
+// is r + m, and the float distance errs by less than 1.74·ε32·L + 7.1·ε32·r_max from the rounded
+// centres, the test's arithmetic and the radii's rounding together (README "Choosing a precision",
+// mixed), which is < m. So a float distance <= (r_a + m) + (r_b + m) − 4m puts the exact distance below
+// r_a + r_b − m, and one above the sum + 2m puts it beyond r_a + r_b + m; fp64's own rounding is ~2^29
+// times smaller than m, so fp64 decides the same. Only a pair within a few m of touching is `unsure`.
+enum class BroadSays { apart, touch, unsure };
+CG_HD BroadSays broad_says(const Sphere<float>& sa, const Sphere<float>& sb, float m) {
+  if (!(m > 0.0f)) return BroadSays::unsure;
+  const float dx = sa.x - sb.x, dy = sa.y - sb.y, dz = sa.z - sb.z;
+  const float d2 = dx * dx + dy * dy + dz * dz;
+  const float sum = sa.r + sb.r;
+  const float inner = sum - 4.0f * m, outer = sum + 2.0f * m;
+  if (inner > 0.0f && d2 <= inner * inner) return BroadSays::touch;
+  if (d2 > outer * outer) return BroadSays::apart;
+  return BroadSays::unsure;
+}
+
+// fp64's decision, as both fp64 and mixed take it. mixed first reads the two float spheres its broad
+// phase tested (16 bytes each, against 32 from two double arrays): only the unsure pairs read the
+// world doubles, and the result is fp64's decision bit for bit, with or without the floats.
+template <class Real>
+CG_HD bool touch_fp64(const NarrowBodies<Real>& w, std::uint32_t a, std::uint32_t b) {
+  if (w.broad != nullptr) {
+    const BroadSays s = broad_says(w.broad[a], w.broad[b], w.broad_margin);
+    if (s != BroadSays::unsure) return s == BroadSays::touch;
+  }
+  return spheres_touch(local_sphere_fp64(w, a), local_sphere_fp64(w, b));
+}
+
+// The pair stage's test of two packed spheres sa, sb (bodies a, b in the stage's own order; `perm`, if
+// set, maps it to input order), by candidate filter (below): every pair of the cell rule (CellRule),
+// the sphere test itself (SpheresTouch: the default filter, and the bounding or inflated spheres of
+// scenes with ellipsoids, mixed with a skin), or — mixed, default filter — fp64's decision (Fp64Touch:
+// broad_says on the enlarged floats, the world doubles for the unsure pairs), so that mixed's
+// candidates are fp64's contacts exactly and its narrow stage writes one row per candidate, as fp64's.
+struct CellRule {
+  template <class Real>
+  CG_HD bool operator()(const Sphere<Real>&, const Sphere<Real>&, std::uint32_t, std::uint32_t) const {
+    return true;
+  }
+};
+struct SpheresTouch {
+  template <class Real>
+  CG_HD bool operator()(const Sphere<Real>& sa, const Sphere<Real>& sb, std::uint32_t, std::uint32_t) const {
+    return spheres_touch(sa, sb);
+  }
+};
+struct Fp64Touch {
+  NarrowBodies<double> world;  // broad unused: the stage passes its floats
+  float margin;                // the packed radii's broad_margin
+  const std::uint32_t* perm;   // stage order → input order (null: the same)
+  CG_HD bool operator()(const Sphere<float>& sa, const Sphere<float>& sb, std::uint32_t a,
+                        std::uint32_t b) const {
+    const BroadSays s = broad_says(sa, sb, margin);
+    if (s != BroadSays::unsure) return s == BroadSays::touch;
+    if (perm != nullptr) {
+      a = perm[a];
+      b = perm[b];
+    }
+    return spheres_touch(local_sphere_fp64(world, a), local_sphere_fp64(world, b));
+  }
+};
 
 template <class Real>
 struct NarrowDecision {
@@ -81,7 +162,7 @@ CG_HD NarrowDecision<Real> narrow_decide(const NarrowBodies<Real>& w, std::uint3
                                          bool full, NarrowFlags& flags) {
   NarrowDecision<Real> d{};
   if constexpr (std::is_same_v<Real, double>) {
-    d.contact = spheres_touch(local_sphere_fp64(w, a), local_sphere_fp64(w, b));
+    d.contact = touch_fp64(w, a, b);
     if (d.contact) d.row = world_sphere_row(world_sphere(w, a), world_sphere(w, b), full);
   } else {
     const Sphere<float> sa = w.spheres[a], sb = w.spheres[b];

@@ -113,7 +113,7 @@ CG_HD SolverSettings<double> fp64_settings(const SolverSettings<Real>& s) {
 template <class Real>
 CG_HD bool bounding_spheres_touch(const NarrowBodies<Real>& w, std::uint32_t a, std::uint32_t b) {
   if constexpr (std::is_same_v<Real, double>)
-    return spheres_touch(local_sphere_fp64(w, a), local_sphere_fp64(w, b));
+    return touch_fp64(w, a, b);
   else
     return spheres_touch(w.spheres[a], w.spheres[b]);
 }
@@ -157,7 +157,7 @@ struct ShapeDecide {
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
-    add_solver_flags(c, flags);
+    note(a, b, c, flags);
     return contact;
   }
   CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
@@ -185,8 +185,11 @@ struct ShapeDecide {
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     const bool contact =
         shape_pair_contact<SolveScope::first_start>(f.a, f.b, shapes[a], shapes[b], settings, c);
-    if (!c.complete) return Verdict::hard;
-    add_solver_flags(c, flags);
+    if (!c.complete) {
+      note_work(a, b, c, flags);
+      return Verdict::hard;
+    }
+    note(a, b, c, flags);
     n = c.geometry.normal_on_b;
     return contact ? Verdict::accept : Verdict::reject;
   }
@@ -199,9 +202,27 @@ struct ShapeDecide {
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
-    add_solver_flags(c, flags);
+    note(a, b, c, flags);
     n = c.geometry.normal_on_b;
     return contact;
+  }
+  // The solver's flags of a settled pair, and its work (general pairs that reached the solve: the PW
+  // filter's rejections and the closed forms make none).
+  // (R: Real, or double for fp32's pairs in fp64)
+  template <class R>
+  CG_HD void note(std::uint32_t a, std::uint32_t b, const EllipsoidContact<R>& c, NarrowFlags& flags) const {
+    flags.fallbacks += c.fallback ? 1u : 0u;
+    flags.unconverged += c.converged ? 0u : 1u;
+    note_work(a, b, c, flags);
+  }
+  template <class R>
+  CG_HD void note_work(std::uint32_t a, std::uint32_t b, const EllipsoidContact<R>& c,
+                       NarrowFlags& flags) const {
+    if (c.iterations <= 0 || !general_pair(a, b)) return;
+    const auto e = static_cast<std::uint32_t>(c.iterations);
+    ++flags.solver_runs;
+    flags.evaluations += e;
+    flags.max_evaluations = e > flags.max_evaluations ? e : flags.max_evaluations;
   }
   // A pair of ellipsoids that takes the general solve (ellipsoid_contact: neither has equal axes).
   CG_HD bool general_pair(std::uint32_t a, std::uint32_t b) const {
@@ -241,11 +262,6 @@ struct ShapeDecide {
     Vec3<double> origin;  // B's world centre: the frame's origin
     bool contact;
   };
-  template <class R>
-  CG_HD static void add_solver_flags(const EllipsoidContact<R>& c, NarrowFlags& flags) {
-    flags.fallbacks += c.fallback ? 1u : 0u;
-    flags.unconverged += c.converged ? 0u : 1u;
-  }
   // fp64's packed shape of body i, from the world shape rows.
   CG_HD PackedShape<double> fp64_shape(std::uint32_t i) const {
     return pack_shape<double>(static_cast<std::uint8_t>(shapes[i].kind), rows.semi_axes + 3 * std::size_t(i),
@@ -262,7 +278,7 @@ struct ShapeDecide {
   // The count pass's solve: the solver's flags, and the row counted as an fp64 row.
   CG_HD Fp64Pair fp64_solve(std::uint32_t a, std::uint32_t b, NarrowFlags& flags) const {
     const Fp64Pair p = fp64_pair(a, b);
-    add_solver_flags(p.c, flags);
+    note(a, b, p.c, flags);
     flags.fp64_rows += p.contact ? 1u : 0u;
     return p;
   }

@@ -49,6 +49,8 @@ struct Counters {
   // cub::DeviceSelect, read by the hard kernel on the device and by the host with the other counters)
   unsigned long long hard;
   unsigned long long fp64_rows;  // fp32 rows recomputed in fp64 (narrow.cuh)
+  // the ellipsoid solver's work (narrow.cuh: NarrowFlags, summed; the largest by atomicMax)
+  unsigned long long solver_runs, evaluations, max_evaluations;
   // skin check (cuda/skin.cuh): the bits of the largest squared displacement and radius growth
   // (non-negative doubles order as their bits), and whether a report byte changed
   unsigned long long skin_moved_sq, skin_growth, skin_report_changed;

@@ -132,12 +132,12 @@ class CudaBackend {
     r.full = job.fields == Fields::full;
     r.type_passes = m_tuning.type_passes;
     r.filter = m_tuning.candidates;
-    // Scenes with ellipsoids: bounding-sphere candidates, the narrow stage decides (shapes.cuh); mixed:
-    // the enlarged spheres of the fp32 broad phase, the fp64 narrow stage decides; a skin
-    // (EngineOptions::skin): inflated bounding-sphere candidates, kept across calls.
+    // Scenes with ellipsoids: bounding-sphere candidates, the narrow stage decides (shapes.cuh); a skin
+    // (EngineOptions::skin): inflated bounding-sphere candidates, kept across calls. mixed, sphere
+    // scenes: the pair stage takes fp64's decision on its enlarged floats (Fp64Touch, pairs.cuh), so
+    // the candidates are fp64's contacts and the narrow stage writes one row each.
     const bool skin = job.skin > 0;
-    if ((job.ellipsoids > 0 || !std::is_same_v<Real, Narrow> || skin) &&
-        r.filter == CandidateFilter::spheres_touch)
+    if ((job.ellipsoids > 0 || skin) && r.filter == CandidateFilter::spheres_touch)
       r.filter = CandidateFilter::bounding_spheres;
 
     reserve_pack(r);
@@ -164,7 +164,8 @@ class CudaBackend {
     narrow_stage(r);
     const DownloadHostTimes host = download_stage(r, m_h_staging, out);
     m_events.collect(times, host.overlap_s, host.extra_s);  // all events complete: the stream synced
-    stats.fp64_rows = r.h_counters->fp64_rows;              // copied after the narrow stage
+    m_events.narrow_split(stats.narrow_triage_s, stats.narrow_hard_s);
+    stats.fp64_rows = r.h_counters->fp64_rows;  // copied after the narrow stage
     stats.peak_device_bytes = m_ws.held_bytes();
     stats.device_allocations = m_ws.allocations;
   }

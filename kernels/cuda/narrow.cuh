@@ -9,7 +9,8 @@
 // compacted.
 // The rejecting kernels take a decider (core/shape_narrow.hpp): SphereDecide, or ShapeDecide when the
 // scene has ellipsoids (r.d_shapes set by shapes.cuh); the host backend uses the same structs. mixed
-// (fp32 broad phase, enlarged spheres) always takes the rejecting path: the fp64 narrow stage decides.
+// (fp32 broad phase, enlarged spheres): on sphere scenes its pair stage already takes fp64's decision
+// (Fp64Touch), so one row per candidate; with ellipsoids or a skin the fp64 narrow stage decides.
 // Flags and offsets live in the candidates' dead alternate buffers (pair_a / pair_b .Alternate()).
 #include <thrust/iterator/counting_iterator.h>
 
@@ -43,11 +44,22 @@ __global__ void __launch_bounds__(kBlock)
   if (flags.fp64_rows) atomicAdd(&c->fp64_rows, static_cast<unsigned long long>(flags.fp64_rows));
 }
 
-// The narrow flags of one candidate into the call's counters.
-__device__ inline void add_flags(const NarrowFlags& flags, Counters* c) {
-  if (flags.fallbacks) atomicAdd(&c->fallbacks, static_cast<unsigned long long>(flags.fallbacks));
-  if (flags.unconverged) atomicAdd(&c->unconverged, static_cast<unsigned long long>(flags.unconverged));
-  if (flags.fp64_rows) atomicAdd(&c->fp64_rows, static_cast<unsigned long long>(flags.fp64_rows));
+// The narrow flags of the warp's candidates into the call's counters: summed (the largest of
+// max_evaluations) over the warp, one lane's atomics. Every lane of the warp must call it (the kernels
+// below do not return early).
+__device__ inline void add_flags(const NarrowFlags& f, Counters* c) {
+  constexpr unsigned kAll = 0xffffffffu;
+  auto add = [&](unsigned long long* to, std::uint32_t v) {
+    const std::uint32_t sum = __reduce_add_sync(kAll, v);
+    if ((threadIdx.x & 31u) == 0 && sum) atomicAdd(to, static_cast<unsigned long long>(sum));
+  };
+  add(&c->fallbacks, f.fallbacks);
+  add(&c->unconverged, f.unconverged);
+  add(&c->fp64_rows, f.fp64_rows);
+  add(&c->solver_runs, f.solver_runs);
+  add(&c->evaluations, f.evaluations);
+  const std::uint32_t most = __reduce_max_sync(kAll, f.max_evaluations);
+  if ((threadIdx.x & 31u) == 0 && most) atomicMax(&c->max_evaluations, static_cast<unsigned long long>(most));
 }
 
 // narrow, rejecting path, count: accept[k] = 1 when candidate k is a contact. Decide: SphereDecide or
@@ -60,9 +72,8 @@ __global__ void __launch_bounds__(kBlock)
                          std::uint32_t n_pairs, Decide decide, std::uint32_t* __restrict__ accept,
                          Counters* __restrict__ c) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
-  if (k >= n_pairs) return;
   NarrowFlags flags;
-  accept[k] = decide.accept(pair_a[k], pair_b[k], flags) ? 1u : 0u;
+  if (k < n_pairs) accept[k] = decide.accept(pair_a[k], pair_b[k], flags) ? 1u : 0u;
   add_flags(flags, c);
 }
 
@@ -75,11 +86,12 @@ __global__ void __launch_bounds__(kBlock)
                          std::uint32_t n_pairs, ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
                          Vec3<Real>* __restrict__ normal, Counters* __restrict__ c) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
-  if (k >= n_pairs) return;
   NarrowFlags flags;
-  Vec3<Real> n{};
-  verdict[k] = static_cast<std::uint32_t>(decide.triage(pair_a[k], pair_b[k], flags, n));
-  normal[k] = n;
+  if (k < n_pairs) {
+    Vec3<Real> n{};
+    verdict[k] = static_cast<std::uint32_t>(decide.triage(pair_a[k], pair_b[k], flags, n));
+    normal[k] = n;
+  }
   add_flags(flags, c);
 }
 
@@ -100,12 +112,15 @@ __global__ void __launch_bounds__(kBlock)
                        ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
                        Vec3<Real>* __restrict__ normal, Counters* __restrict__ c) {
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
-  if (i >= *n_hard) return;
-  const std::uint32_t k = hard[i];
+  const unsigned long long count = *n_hard;
+  if (blockIdx.x * kBlock >= count) return;  // the whole block is past the count
   NarrowFlags flags;
-  Vec3<Real> n{};
-  verdict[k] = decide.solve(pair_a[k], pair_b[k], flags, n) ? 1u : 0u;
-  normal[k] = n;
+  if (i < count) {
+    const std::uint32_t k = hard[i];
+    Vec3<Real> n{};
+    verdict[k] = decide.solve(pair_a[k], pair_b[k], flags, n) ? 1u : 0u;
+    normal[k] = n;
+  }
   add_flags(flags, c);
 }
 
@@ -167,9 +182,11 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
   r.ws.reserve({{&r.ws.normals, std::size_t(np) * sizeof(Vec3<Narrow>)}}, "narrow");
   Vec3<Narrow>* d_normal = r.ws.normals.template span_as<Vec3<Narrow>>(np).data();
   unsigned long long* d_n_hard = &r.d_counters->hard;
+  r.events.mark_narrow_split(0, st);
   cuda::narrow_triage_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
       r.pair_a.Current(), r.pair_b.Current(), np, decide, d_verdict, d_normal, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_triage");
+  r.events.mark_narrow_split(1, st);
   cub_run(r.ws, "narrow", [&](void* t, std::size_t& b) {
     return cub::DeviceSelect::If(t, b, thrust::counting_iterator<std::uint32_t>(0), d_hard, d_n_hard, int(np),
                                  cuda::IsHard{d_verdict}, st);
@@ -177,6 +194,7 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
   cuda::narrow_hard_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
       r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, decide, d_verdict, d_normal, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_hard");
+  r.events.mark_narrow_split(2, st);
   return d_normal;
 }
 
@@ -213,6 +231,9 @@ void narrow_compact(RunState<Real, Key, Narrow>& r, const Decide& decide) {
   r.stats.narrow_unconverged = r.h_counters->unconverged;
   r.stats.fp64_rows = r.h_counters->fp64_rows;
   r.stats.narrow_hard = r.h_counters->hard;
+  r.stats.narrow_solver_runs = r.h_counters->solver_runs;
+  r.stats.narrow_evaluations = r.h_counters->evaluations;
+  r.stats.narrow_max_evaluations = r.h_counters->max_evaluations;
   r.n_rows = last[0] + last[1];
   r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.full, r.cp);  // n_rows <= np: ws.out holds them
   cuda::narrow_fill_kernel<Narrow, Decide><<<blocks_for(np), kBlock, 0, st>>>(
@@ -223,11 +244,17 @@ void narrow_compact(RunState<Real, Key, Narrow>& r, const Decide& decide) {
 // The bodies the narrow stage reads (core/narrow.hpp): fp32 pack's local floats in input order,
 // every mode the world doubles (the upload buffer ws.pos / ws.rad, or the caller's DeviceBodiesView:
 // both live until the end of the call, see workspace.cuh).
+// mixed: also the float spheres of its broad phase, which settle most decisions (touch_fp64).
 template <class Real, class Key, class Narrow>
 NarrowBodies<Narrow> narrow_bodies(const RunState<Real, Key, Narrow>& r) {
-  const Sphere<Narrow>* spheres = nullptr;
-  if constexpr (std::is_same_v<Real, Narrow>) spheres = r.d_spheres;
-  return {spheres, r.d_pos, r.d_rad, r.origin};
+  NarrowBodies<Narrow> w{nullptr, r.d_pos, r.d_rad, r.origin};
+  if constexpr (std::is_same_v<Real, Narrow>) {
+    w.spheres = r.d_spheres;
+  } else {
+    w.broad = r.d_spheres;
+    w.broad_margin = r.g.radius_margin;
+  }
+  return w;
 }
 
 template <class Real, class Key, class Narrow>

@@ -25,29 +25,29 @@ struct EntryBody {  // what a visit needs of the first body of a pair
   Sphere<Real> sa;
 };
 
-// kTouch: the candidate filter is spheres_touch (CandidateFilter::spheres_touch, the default); else
-// every pair the cell rule assigns is a candidate (CandidateFilter::cells: narrow rejects).
-template <bool kTouch, class Real, class Emit>
+// `test`: the candidate filter's pair test (core/narrow.hpp: SpheresTouch by default, CellRule for
+// CandidateFilter::cells, Fp64Touch for mixed), on cell-ordered body indices (its perm maps them).
+template <class Test, class Real, class Emit>
 __device__ __forceinline__ void visit(const EntryBody<Real>& x, std::uint32_t b, std::uint8_t cb,
                                       const Sphere<Real>& sb, std::uint32_t pb, const std::uint8_t* report,
-                                      std::uint32_t& tests, Emit& emit) {
+                                      std::uint32_t& tests, const Test& test, Emit& emit) {
   // the report flag of the smaller input index; no pair of two bodies paired elsewhere
   if (report && (!((x.pa < pb ? x.ca : cb) & kReportBit) || (x.ca & cb & kPairedCtrlBit))) return;
   if (!test_in_cell(x.ca, cb, x.type)) return;
   ++tests;
-  if (!kTouch || spheres_touch(x.sa, sb)) emit(x.a, b);
+  if (test(x.sa, sb, x.a, b)) emit(x.a, b);
 }
 
-template <bool kTouch, class Real, class Key, class Emit>
+template <class Test, class Real, class Key, class Emit>
 __device__ __forceinline__ std::uint32_t walk_from_memory(
     std::uint32_t f0, Key k, const EntryBody<Real>& x, const Key* __restrict__ keys,
     const std::uint32_t* __restrict__ body, std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
     const Sphere<Real>* __restrict__ spheres, const std::uint32_t* __restrict__ perm,
-    const std::uint8_t* __restrict__ report, Emit&& emit) {
+    const std::uint8_t* __restrict__ report, const Test& test, Emit&& emit) {
   std::uint32_t tests = 0;
   for (std::uint32_t f = f0; f < n_entries && keys[f] == k; ++f) {
     const std::uint32_t b = body[f];
-    visit<kTouch>(x, b, ctrl[b], spheres[b], report ? perm[b] : 0u, report, tests, emit);
+    visit(x, b, ctrl[b], spheres[b], report ? perm[b] : 0u, report, tests, test, emit);
   }
   return tests;
 }
@@ -67,7 +67,7 @@ __device__ __forceinline__ std::uint32_t walk_from_memory(
 // input indices, a < b, there, each thread at base + its exclusive rank (same walk, emitting). When
 // the cursor ends above cap, the host discards those writes and runs the scan → fill_pairs path
 // from the masks instead. The pairs' order is the blocks' arrival order; the order stage sorts them.
-template <class Real, class Key, bool kTouch = true>
+template <class Real, class Key, class Test>
 __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
     count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
                        std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
@@ -75,7 +75,7 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
                        const std::uint8_t* __restrict__ report, int half_bits, std::uint32_t pass_type,
                        std::uint32_t* __restrict__ mask, std::uint32_t* __restrict__ block_pairs,
                        Counters* __restrict__ c, std::uint32_t* __restrict__ pair_a,
-                       std::uint32_t* __restrict__ pair_b, unsigned long long cap) {
+                       std::uint32_t* __restrict__ pair_b, unsigned long long cap, Test test) {
   using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
   using Scan = cub::BlockScan<unsigned long long, kBlock>;
   __shared__ union {
@@ -126,11 +126,11 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
       bits |= 1u << (f - t);
     };
     for (; f < lim && s_key[f] == k; ++f)
-      visit<kTouch>(x, 0u, s_ctrl[f], s_sphere[f], s_perm[f], report, tests, mark_one);
+      visit(x, s_body[f], s_ctrl[f], s_sphere[f], s_perm[f], report, tests, test, mark_one);
     if (f == lim) {  // the cell may go on past the staged window: walk the rest from memory
       const std::uint32_t before = found;
-      tests += walk_from_memory<kTouch>(base + f, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
-                                        [&](std::uint32_t, std::uint32_t) { ++found; });
+      tests += walk_from_memory(base + f, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test,
+                                [&](std::uint32_t, std::uint32_t) { ++found; });
       if (found != before) bits |= 1u;
     }
     mask[e] = bits;
@@ -156,7 +156,7 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
     ++w;
   };
   if (bits & 1u) {
-    walk_from_memory<kTouch>(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, emit);
+    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test, emit);
   } else {
     for (std::uint32_t m = bits; m != 0; m &= m - 1) emit(x.a, s_body[t + __ffs(m) - 1]);
   }
@@ -165,14 +165,14 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
 // pairs, fill: pairs (pair_a[w], pair_b[w]) of input indices, a < b, at w = the block's scanned total +
 // the entry's rank, from the contact masks of count_pairs_kernel (entries flagged in bit 0: the cell
 // is walked from memory again, counting then emitting).
-template <class Real, class Key, bool kTouch = true>
+template <class Real, class Key, class Test>
 __global__ void __launch_bounds__(kBlock)
     fill_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
                       std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
                       const Sphere<Real>* __restrict__ spheres, const std::uint32_t* __restrict__ perm,
                       const std::uint8_t* __restrict__ report, int half_bits,
                       const std::uint32_t* __restrict__ mask, const std::uint32_t* __restrict__ block_offset,
-                      std::uint32_t* __restrict__ pair_a, std::uint32_t* __restrict__ pair_b) {
+                      std::uint32_t* __restrict__ pair_a, std::uint32_t* __restrict__ pair_b, Test test) {
   using Scan = cub::BlockScan<std::uint32_t, kBlock>;
   __shared__ typename Scan::TempStorage tmp;
   const std::uint32_t e = blockIdx.x * kBlock + threadIdx.x;
@@ -187,8 +187,8 @@ __global__ void __launch_bounds__(kBlock)
     x.ca = ctrl[x.a];
     x.sa = spheres[x.a];
     x.pa = report ? perm[x.a] : 0u;
-    walk_from_memory<kTouch>(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report,
-                             [&](std::uint32_t, std::uint32_t) { ++mine; });
+    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test,
+                     [&](std::uint32_t, std::uint32_t) { ++mine; });
   } else {
     mine = __popc(bits);
   }
@@ -203,7 +203,7 @@ __global__ void __launch_bounds__(kBlock)
     ++w;
   };
   if (bits & 1u) {
-    walk_from_memory<kTouch>(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, emit);
+    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test, emit);
   } else {
     const std::uint32_t a = body[e];
     for (std::uint32_t m = bits; m != 0; m &= m - 1) emit(a, body[e + __ffs(m) - 1]);
@@ -214,21 +214,30 @@ __global__ void __launch_bounds__(kBlock)
 
 namespace cg::detail {
 
-// count_pairs_kernel / fill_pairs_kernel instantiated for the call's candidate filter.
-template <class Real, class Key, class... Args>
-void launch_count_pairs(CandidateFilter filter, std::uint32_t blocks, cudaStream_t st, Args... args) {
-  if (candidates_touch(filter))
-    cuda::count_pairs_kernel<Real, Key, true><<<blocks, cuda::kBlock, 0, st>>>(args...);
-  else
-    cuda::count_pairs_kernel<Real, Key, false><<<blocks, cuda::kBlock, 0, st>>>(args...);
+// Calls launch(test) with the pair test of the call's candidate filter (core/narrow.hpp): the cell
+// rule, the sphere test, or — mixed with the default filter — fp64's decision (Fp64Touch).
+template <class Real, class Key, class Narrow, class Launch>
+void with_pair_test(const RunState<Real, Key, Narrow>& r, Launch&& launch) {
+  if (!candidates_touch(r.filter)) return launch(CellRule{});
+  if constexpr (!std::is_same_v<Real, Narrow>)
+    if (r.filter == CandidateFilter::spheres_touch)
+      return launch(Fp64Touch{{nullptr, r.d_pos, r.d_rad, r.origin}, float(r.g.radius_margin), r.d_perm});
+  launch(SpheresTouch{});
+}
+
+// count_pairs_kernel / fill_pairs_kernel instantiated for the call's pair test.
+template <class Real, class Key, class Narrow, class... Args>
+void launch_count_pairs(const RunState<Real, Key, Narrow>& r, std::uint32_t blocks, Args... args) {
+  with_pair_test(r, [&](auto test) {
+    cuda::count_pairs_kernel<Real, Key, decltype(test)><<<blocks, cuda::kBlock, 0, r.st>>>(args..., test);
+  });
   CG_CUDA_CHECK_LAUNCH("count_pairs");
 }
-template <class Real, class Key, class... Args>
-void launch_fill_pairs(CandidateFilter filter, std::uint32_t blocks, cudaStream_t st, Args... args) {
-  if (candidates_touch(filter))
-    cuda::fill_pairs_kernel<Real, Key, true><<<blocks, cuda::kBlock, 0, st>>>(args...);
-  else
-    cuda::fill_pairs_kernel<Real, Key, false><<<blocks, cuda::kBlock, 0, st>>>(args...);
+template <class Real, class Key, class Narrow, class... Args>
+void launch_fill_pairs(const RunState<Real, Key, Narrow>& r, std::uint32_t blocks, Args... args) {
+  with_pair_test(r, [&](auto test) {
+    cuda::fill_pairs_kernel<Real, Key, decltype(test)><<<blocks, cuda::kBlock, 0, r.st>>>(args..., test);
+  });
   CG_CUDA_CHECK_LAUNCH("fill_pairs");
 }
 
@@ -249,9 +258,9 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
   // cap = ne / 4 pairs each.
   const std::uint64_t direct_cap = ne / 4;
   std::uint32_t* d_direct = Workspace::direct_pairs(r.body);
-  launch_count_pairs<Real, Key>(r.filter, neb, st, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.d_perm,
-                                r.d_report, r.g.half_bits, 0u, d_pair_count, d_entry_totals, r.d_counters,
-                                d_direct, d_direct + direct_cap, direct_cap);
+  launch_count_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.d_perm, r.d_report,
+                     r.g.half_bits, 0u, d_pair_count, d_entry_totals, r.d_counters, d_direct,
+                     d_direct + direct_cap, direct_cap);
   r.read_counters();  // host needs the pairs total
   const std::uint64_t n_pairs = r.h_counters->pairs;
   r.stats.pair_tests = r.h_counters->tests;
@@ -275,9 +284,8 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
     cub_run(ws, "pairs", [&](void* t, std::size_t& b) {
       return cub::DeviceScan::ExclusiveSum(t, b, d_entry_totals, d_entry_offsets, int(neb), st);
     });
-    launch_fill_pairs<Real, Key>(r.filter, neb, st, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.d_perm,
-                                 r.d_report, r.g.half_bits, d_pair_count, d_entry_offsets, r.pair_a.Current(),
-                                 r.pair_b.Current());
+    launch_fill_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.d_perm, r.d_report,
+                      r.g.half_bits, d_pair_count, d_entry_offsets, r.pair_a.Current(), r.pair_b.Current());
   }
   r.events.mark(Stage::pairs, st);
 }

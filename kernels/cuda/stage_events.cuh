@@ -19,11 +19,14 @@ class StageEvents {
   void create() {
     for (auto& e : m_events) CG_CUDA_CHECK(cudaEventCreate(&e));
     for (auto& e : m_pass) CG_CUDA_CHECK(cudaEventCreate(&e));
+    for (auto& e : m_split) CG_CUDA_CHECK(cudaEventCreate(&e));
   }
   ~StageEvents() {
     for (auto& e : m_events)
       if (e) cudaEventDestroy(e);
     for (auto& e : m_pass)
+      if (e) cudaEventDestroy(e);
+    for (auto& e : m_split)
       if (e) cudaEventDestroy(e);
   }
   StageEvents(const StageEvents&) = delete;
@@ -34,6 +37,7 @@ class StageEvents {
     std::fill(std::begin(m_recorded), std::end(m_recorded), false);
     std::fill(std::begin(m_override), std::end(m_override), false);
     m_tail = false;
+    m_split_marks = 0;
     CG_CUDA_CHECK(cudaEventRecord(m_events[0], st));
   }
   cudaEvent_t start_event() const { return m_events[0]; }
@@ -53,6 +57,24 @@ class StageEvents {
   void add_tail(Stage s) {
     m_tail = true;
     m_tail_stage = s;
+  }
+
+  // The narrow stage's split (scenes with ellipsoids): marks 0, 1, 2 at its start, after the triage
+  // pass, after the hard pass (with its selection).
+  void mark_narrow_split(int i, cudaStream_t st) {
+    CG_CUDA_CHECK(cudaEventRecord(m_split[i], st));
+    m_split_marks = i + 1;
+  }
+  // Seconds of the triage and hard passes (EngineStats::narrow_triage_s, narrow_hard_s); 0 when the
+  // call did not mark them. After the stream's synchronisation.
+  void narrow_split(double& triage, double& hard) const {
+    triage = hard = 0;
+    if (m_split_marks < 3) return;
+    float t = 0, h = 0;
+    CG_CUDA_CHECK(cudaEventElapsedTime(&t, m_split[0], m_split[1]));
+    CG_CUDA_CHECK(cudaEventElapsedTime(&h, m_split[1], m_split[2]));
+    triage = t * 1e-3;
+    hard = h * 1e-3;
   }
 
   // Appends the recorded stages to `times` (all events complete: the stream was synchronised).
@@ -82,6 +104,8 @@ class StageEvents {
  private:
   cudaEvent_t m_events[kStageCount + 1] = {};
   cudaEvent_t m_pass[kPassEvents] = {};
+  cudaEvent_t m_split[3] = {};
+  int m_split_marks = 0;
   bool m_recorded[kStageCount] = {};
   bool m_override[kStageCount] = {};
   double m_override_ms[kStageCount] = {};

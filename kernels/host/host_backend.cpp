@@ -29,13 +29,19 @@ namespace cg::detail {
 namespace {
 
 // The bodies the narrow stage reads (core/narrow.hpp): fp32 the packed local floats, every mode the
-// world doubles of the input.
+// world doubles of the input; mixed also its broad phase's float spheres and their margin.
 template <class Broad, class Narrow>
 NarrowBodies<Narrow> narrow_bodies(const BodiesView& bodies, const host::PackedBodies<Broad>& packed,
-                                   const Vec3<double>& origin) {
-  const Sphere<Narrow>* spheres = nullptr;
-  if constexpr (std::is_same_v<Broad, Narrow>) spheres = packed.spheres.data();
-  return {spheres, reinterpret_cast<const double*>(bodies.position.data()), bodies.radius.data(), origin};
+                                   const Vec3<double>& origin, float broad_margin) {
+  NarrowBodies<Narrow> w{nullptr, reinterpret_cast<const double*>(bodies.position.data()),
+                         bodies.radius.data(), origin};
+  if constexpr (std::is_same_v<Broad, Narrow>) {
+    w.spheres = packed.spheres.data();
+  } else {  // mixed: its broad phase's floats settle most decisions (touch_fp64)
+    w.broad = packed.spheres.data();
+    w.broad_margin = broad_margin;
+  }
+  return w;
 }
 
 template <class Broad, class Narrow, class Key>
@@ -44,13 +50,13 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   const int nt = be.threads > 0 ? be.threads : omp_get_max_threads();
   HostStageTimer timer(times);
   // Scenes with ellipsoids: candidates are bounding-sphere overlaps (or the looser cell rule), the
-  // narrow stage decides per shape pair. Sphere-only scenes: exactly the sphere path. mixed: the fp32
-  // pair stage tests enlarged spheres, so the narrow stage decides (in fp64) there too; so does a
-  // list kept with a skin (inflated spheres).
+  // narrow stage decides per shape pair. Sphere-only scenes: exactly the sphere path; mixed's pair
+  // stage takes fp64's decision on its enlarged float spheres (Fp64Touch: the world doubles for the
+  // pairs within a few margins of touching), so its candidates are fp64's contacts. A list kept with a
+  // skin (inflated spheres): the narrow stage decides.
   const bool shapes = job.ellipsoids > 0;
   const bool skin = job.skin > 0;
-  constexpr bool mixed = !std::is_same_v<Broad, Narrow>;
-  const CandidateFilter filter = (shapes || mixed || skin) && be.candidates == CandidateFilter::spheres_touch
+  const CandidateFilter filter = (shapes || skin) && be.candidates == CandidateFilter::spheres_touch
                                      ? CandidateFilter::bounding_spheres
                                      : be.candidates;
   bool reuse = false;
@@ -69,6 +75,10 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   if (shapes) host::pack_shapes(job.bodies, nt, packed_shapes);
   timer.lap(Stage::pack);
 
+  const NarrowBodies<Narrow> world =
+      narrow_bodies<Broad, Narrow>(job.bodies, bodies, job.plan.frame.origin, float(job.grid.radius_margin));
+  const NarrowBodies<double> world_fp64{nullptr, world.position,    world.radius, world.origin,
+                                        nullptr, world.broad_margin};  // mixed's pair test (Fp64Touch)
   host::CandidatePairs built;
   if (!reuse) {
     host::Entries<Key> entries;
@@ -79,7 +89,8 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
     timer.lap(Stage::sort);
 
     stats.pair_tests =
-        host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter, nt, built);
+        host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter,
+                              !std::is_same_v<Broad, Narrow> ? &world_fp64 : nullptr, nt, built);
     entries = {};
     timer.lap(Stage::pairs);
 
@@ -91,7 +102,6 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   const host::CandidatePairs& candidates = reuse ? be.kept.pairs : built;
   stats.candidates = candidates.size();
 
-  const NarrowBodies<Narrow> world = narrow_bodies<Broad, Narrow>(job.bodies, bodies, job.plan.frame.origin);
   if (shapes) {
     const ShapeRowsView rows{reinterpret_cast<const double*>(job.bodies.semi_axes.data()),
                              reinterpret_cast<const double*>(job.bodies.orientation.data())};

@@ -16,7 +16,7 @@ namespace {
 // them (triage, solve for the hard ones, row_from the minimiser: the same bits).
 struct NarrowCounts {
   NarrowFlags flags;
-  std::uint64_t hard = 0;
+  std::uint64_t hard = 0, evaluations = 0;
 };
 
 template <class Real>
@@ -73,12 +73,13 @@ NarrowCounts narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& de
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 1) if (n_chunks > 1)
   for (std::size_t ch = 0; ch < n_chunks; ++ch) fill_chunk(ch);
   NarrowCounts total;
+  std::uint64_t evaluations = 0;  // the sum over chunks may pass 2^32
   for (std::size_t ch = 0; ch < n_chunks; ++ch) {
-    total.flags.fallbacks += chunk_flags[ch].fallbacks;
-    total.flags.unconverged += chunk_flags[ch].unconverged;
-    total.flags.fp64_rows += chunk_flags[ch].fp64_rows;
+    evaluations += chunk_flags[ch].evaluations;
+    total.flags.add(chunk_flags[ch]);
     total.hard += chunk_hard[ch];
   }
+  total.evaluations = evaluations;
   return total;
 }
 
@@ -95,6 +96,10 @@ void narrow_shapes(const CandidatePairs& c, const NarrowBodies<Real>& bodies,
   stats.narrow_unconverged += f.flags.unconverged;
   stats.fp64_rows += f.flags.fp64_rows;
   stats.narrow_hard += f.hard;
+  stats.narrow_solver_runs += f.flags.solver_runs;
+  stats.narrow_evaluations += f.evaluations;
+  stats.narrow_max_evaluations =
+      std::max<std::uint64_t>(stats.narrow_max_evaluations, f.flags.max_evaluations);
 }
 
 template void narrow_shapes(const CandidatePairs&, const NarrowBodies<float>&,

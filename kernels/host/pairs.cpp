@@ -8,12 +8,12 @@ namespace cg::detail::host {
 namespace {
 
 // Entry e tests the later entries f of its cell; within a cell the bodies ascend (stable sort of
-// entries made in body order), so body[e] < body[f]. `touch_only`: only pairs passing spheres_touch
-// are emitted (CandidateFilter::spheres_touch), else every pair the cell rule assigns to e.
-template <bool touch_only, class Real, class Key, class Emit>
+// entries made in body order), so body[e] < body[f]. `test`: the candidate filter's pair test
+// (core/narrow.hpp: SpheresTouch, CellRule, or mixed's Fp64Touch), on input indices.
+template <class Test, class Real, class Key, class Emit>
 std::uint64_t walk_entry(std::size_t e, const Entries<Key>& en, const Sphere<Real>* entry_sphere,
                          const std::uint8_t* entry_ctrl, const std::uint8_t* report, int half_bits,
-                         Emit&& emit) {
+                         const Test& test, Emit&& emit) {
   const std::size_t n_entries = en.size();
   const Key k = en.keys[e];
   const std::uint32_t a = en.body[e];
@@ -27,14 +27,14 @@ std::uint64_t walk_entry(std::size_t e, const Entries<Key>& en, const Sphere<Rea
     if ((pa & kPairedBit) && (report[en.body[f]] & kPairedBit)) continue;  // both paired elsewhere
     if (!test_in_cell(ca, entry_ctrl[f], type)) continue;
     ++tests;
-    if (!touch_only || spheres_touch(sa, entry_sphere[f])) emit(a, en.body[f]);
+    if (test(sa, entry_sphere[f], a, en.body[f])) emit(a, en.body[f]);
   }
   return tests;
 }
 
-template <bool touch_only, class Real, class Key>
+template <class Test, class Real, class Key>
 std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const std::uint8_t* report,
-                      int half_bits, int nt, CandidatePairs& out) {
+                      int half_bits, int nt, const Test& test, CandidatePairs& out) {
   const std::size_t n_entries = en.size();
   // The spheres (inflated by a skin) and control bytes are first gathered into entry order, so the
   // walk reads memory in sequence.
@@ -57,8 +57,8 @@ std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const
   for (std::size_t c = 0; c < n_chunks; ++c) {
     std::vector<std::uint64_t>& mine = chunk_pairs[c];
     for (std::size_t e = n_entries * c / n_chunks, end = n_entries * (c + 1) / n_chunks; e < end; ++e)
-      tests_total += walk_entry<touch_only>(
-          e, en, entry_sphere.data(), entry_ctrl.data(), report, half_bits,
+      tests_total += walk_entry(
+          e, en, entry_sphere.data(), entry_ctrl.data(), report, half_bits, test,
           [&](std::uint32_t a, std::uint32_t b) { mine.push_back((std::uint64_t(a) << id_bits) | b); });
   }
   std::vector<std::uint64_t> chunk_size(n_chunks), chunk_offset;
@@ -78,25 +78,28 @@ std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const
 template <class Real, class Key>
 std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p,
                               std::span<const std::uint8_t> report, int half_bits, CandidateFilter filter,
-                              int threads, CandidatePairs& out) {
+                              const NarrowBodies<double>* fp64, int threads, CandidatePairs& out) {
   out.id_bits = std::max(1, bits_for(p.spheres.size()));
   out.filter = filter;
   const std::uint8_t* r = report.empty() ? nullptr : report.data();
-  return candidates_touch(filter) ? collect<true>(e, p, r, half_bits, threads, out)
-                                  : collect<false>(e, p, r, half_bits, threads, out);
+  if (!candidates_touch(filter)) return collect(e, p, r, half_bits, threads, CellRule{}, out);
+  if constexpr (std::is_same_v<Real, float>)
+    if (fp64 != nullptr && filter == CandidateFilter::spheres_touch)  // mixed: fp64's decision
+      return collect(e, p, r, half_bits, threads, Fp64Touch{*fp64, fp64->broad_margin, nullptr}, out);
+  return collect(e, p, r, half_bits, threads, SpheresTouch{}, out);
 }
 
 template std::uint64_t find_candidates(const Entries<std::uint32_t>&, const PackedBodies<float>&,
-                                       std::span<const std::uint8_t>, int, CandidateFilter, int,
-                                       CandidatePairs&);
+                                       std::span<const std::uint8_t>, int, CandidateFilter,
+                                       const NarrowBodies<double>*, int, CandidatePairs&);
 template std::uint64_t find_candidates(const Entries<std::uint64_t>&, const PackedBodies<float>&,
-                                       std::span<const std::uint8_t>, int, CandidateFilter, int,
-                                       CandidatePairs&);
+                                       std::span<const std::uint8_t>, int, CandidateFilter,
+                                       const NarrowBodies<double>*, int, CandidatePairs&);
 template std::uint64_t find_candidates(const Entries<std::uint32_t>&, const PackedBodies<double>&,
-                                       std::span<const std::uint8_t>, int, CandidateFilter, int,
-                                       CandidatePairs&);
+                                       std::span<const std::uint8_t>, int, CandidateFilter,
+                                       const NarrowBodies<double>*, int, CandidatePairs&);
 template std::uint64_t find_candidates(const Entries<std::uint64_t>&, const PackedBodies<double>&,
-                                       std::span<const std::uint8_t>, int, CandidateFilter, int,
-                                       CandidatePairs&);
+                                       std::span<const std::uint8_t>, int, CandidateFilter,
+                                       const NarrowBodies<double>*, int, CandidatePairs&);
 
 }  // namespace cg::detail::host

@@ -99,12 +99,13 @@ void sort_entries(Entries<Key>& e, int key_bits, int threads);
 
 // pairs: per sorted entry, the later entries of its cell that the cell rule (test_in_cell) and the
 // report mask assign to it; those passing `filter` become candidates (chunks of entries collect
-// their pairs, chunk sizes → scan → fill: the same array for any thread count). Returns the number
-// of pairs tested (EngineStats::pair_tests).
+// their pairs, chunk sizes → scan → fill: the same array for any thread count). `fp64` (mixed, with
+// the spheres_touch filter: the world doubles, and broad_margin) makes the test fp64's decision
+// (Fp64Touch, core/narrow.hpp). Returns the number of pairs tested (EngineStats::pair_tests).
 template <class Real, class Key>
 std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p,
                               std::span<const std::uint8_t> report, int half_bits, CandidateFilter filter,
-                              int threads, CandidatePairs& out);
+                              const NarrowBodies<double>* fp64, int threads, CandidatePairs& out);
 
 // order: radix sort of the candidates by (a, b).
 void order_candidates(CandidatePairs& c, int threads);

@@ -238,6 +238,8 @@ TYPED_TEST(EngineShapesTest, ThreadInvariantAndStarvedSolverCounted) {
   Engine<Real> one({.backend = Backend::cpu, .fields = Fields::full, .threads = 1});
   Engine<Real> two({.backend = Backend::cpu, .fields = Fields::full, .threads = 2});
   expect_identical(one.detect(s.view()), two.detect(s.view()), "threads 1 vs 2");
+  EXPECT_EQ(one.stats().narrow_evaluations, two.stats().narrow_evaluations);
+  EXPECT_EQ(one.stats().narrow_max_evaluations, two.stats().narrow_max_evaluations);
   Engine<Real> starved({.backend = Backend::cpu, .ellipsoid_max_iterations = 1});
   starved.detect(s.view());
   EXPECT_GT(starved.stats().narrow_fallbacks + starved.stats().narrow_unconverged, 0u);
@@ -296,7 +298,8 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
   const ShapeRowsView rows{reinterpret_cast<const double*>(s.axes.data()),
                            reinterpret_cast<const double*>(s.q.data())};
   const ShapeDecide<Real> d{world, packed.data(), {}, rows};
-  int contacts = 0, hard = 0, certified = 0, fp64 = 0;
+  int contacts = 0, hard = 0, certified = 0, fp64 = 0, fp64_hard = 0;
+  NarrowFlags work;  // the solver's work over both passes, as the engine counts it
   for (std::uint32_t a = 0; a < sph.size(); ++a)
     for (std::uint32_t b = a + 1; b < sph.size(); ++b) {
       if (!spheres_touch(sph[a], sph[b])) continue;
@@ -306,11 +309,13 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
       Verdict v = d.triage(a, b, f2, n);
       if (v == Verdict::hard) {
         ++hard;
+        fp64_hard += d.in_fp64(a, b) ? 1 : 0;
         v = d.solve(a, b, f2, n) ? Verdict::accept : Verdict::reject;
       } else if (d.general_pair(a, b) && x) {
         ++certified;
       }
       ASSERT_EQ(x, v == Verdict::accept) << a << "," << b;
+      work.add(f2);
       EXPECT_EQ(f1.fallbacks, f2.fallbacks);
       EXPECT_EQ(f1.unconverged, f2.unconverged);
       EXPECT_EQ(f1.fp64_rows, f2.fp64_rows);
@@ -331,6 +336,19 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
     EXPECT_GE(fp64, 20) << "the nearly coincident pairs with an ellipsoid were not solved in fp64";
   else
     EXPECT_EQ(fp64, 0);
+  // The engine's work counters are these sums (fp64 solves from the world doubles, so in any frame).
+  // (a pair solved in fp64 runs once, in the second pass)
+  EXPECT_GE(work.solver_runs, std::uint32_t(certified + 2 * (hard - fp64_hard)));
+  EXPECT_GT(work.evaluations, 2 * work.solver_runs);
+  EXPECT_LE(work.max_evaluations, work.evaluations);
+  if constexpr (std::is_same_v<Real, double>) {
+    Engine<Real> e({.backend = Backend::cpu});
+    e.detect(s.view());
+    EXPECT_EQ(e.stats().narrow_hard, std::uint64_t(hard));
+    EXPECT_EQ(e.stats().narrow_solver_runs, work.solver_runs);
+    EXPECT_EQ(e.stats().narrow_evaluations, work.evaluations);
+    EXPECT_EQ(e.stats().narrow_max_evaluations, work.max_evaluations);
+  }
 }
 
 // Bad rows → InputError whose text names the body's id.
@@ -406,6 +424,10 @@ TYPED_TEST(EngineShapesTest, CudaBitIdenticalToCpu) {
       EXPECT_EQ(cpu.stats().narrow_fallbacks, gpu.stats().narrow_fallbacks) << s.name;
       EXPECT_EQ(cpu.stats().narrow_unconverged, gpu.stats().narrow_unconverged) << s.name;
       EXPECT_EQ(gpu.stats().ellipsoids, cpu.stats().ellipsoids) << s.name;
+      EXPECT_EQ(cpu.stats().narrow_hard, gpu.stats().narrow_hard) << s.name;
+      EXPECT_EQ(cpu.stats().narrow_solver_runs, gpu.stats().narrow_solver_runs) << s.name;
+      EXPECT_EQ(cpu.stats().narrow_evaluations, gpu.stats().narrow_evaluations) << s.name;
+      EXPECT_EQ(cpu.stats().narrow_max_evaluations, gpu.stats().narrow_max_evaluations) << s.name;
     }
 }
 

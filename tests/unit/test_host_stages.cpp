@@ -114,9 +114,9 @@ TYPED_TEST(HostStagesTest, StagesByHand) {
 
   detail::host::CandidatePairs exact, loose;
   const auto t_exact = detail::host::find_candidates(entries, bodies, {}, job.grid.half_bits,
-                                                     CandidateFilter::spheres_touch, nt, exact);
+                                                     CandidateFilter::spheres_touch, nullptr, nt, exact);
   const auto t_loose = detail::host::find_candidates(entries, bodies, {}, job.grid.half_bits,
-                                                     CandidateFilter::cells, nt, loose);
+                                                     CandidateFilter::cells, nullptr, nt, loose);
   EXPECT_EQ(t_exact, t_loose);
   EXPECT_EQ(loose.size(), t_loose);  // every tested pair is a loose candidate
   EXPECT_GT(loose.size(), exact.size()) << "the cell filter must propose non-contacts";

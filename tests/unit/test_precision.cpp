@@ -12,7 +12,9 @@
 #include <random>
 
 #include "backends.hpp"
+#include "core/narrow.hpp"
 #include "engine.hpp"
+#include "grid_plan.hpp"
 #include "reference/sphere_reference.hpp"
 #include "scenes.hpp"
 #include "support/contacts_equal.hpp"
@@ -239,6 +241,100 @@ TYPED_TEST(PrecisionTest, EveryModeIsBitIdenticalAcrossBackendsAndThreads) {
                                this->template run<double>(s, mode, other, threads)),
               "identical")
         << to_string(mode);
+}
+
+// mixed's float pre-test (touch_fp64, core/narrow.hpp), checked against its derivation: pairs placed
+// at ra + rb + k·m from each other (m = broad_margin, k from −8 to 8, and ±1 ulp of the touching
+// distance), at offsets 0 … 1e6 from the origin and radii 1e-3 … 1. With the broad phase's floats
+// (packed as pack does: float(world − origin), float(r) + float(m)) every decision is fp64's without
+// them; and the floats alone settle every pair farther than 5m from touching: with the world doubles
+// poisoned so that they would give the other answer (NaN: apart; all centres at 0: touching).
+TEST(MixedPreTest, FloatsSettleExactlyFp64sDecision) {
+  std::mt19937_64 rng(4243);
+  std::uniform_real_distribution<double> u01(0, 1);
+  std::normal_distribution<double> g;
+  const double ks[] = {-8, -6, -5, -4.5, -4, -3.5, -3, -2, -1, -0.5, 0, 0.5, 1, 2, 3, 3.5, 4, 4.5, 5, 6, 8};
+  std::size_t settled = 0, checked = 0;
+  for (double base : {0.0, 3.0, 1e3, 1e6}) {
+    for (double rmax : {1e-3, 0.1, 1.0}) {
+      const double extent = 200 * rmax;
+      // first the radii and centres of A, then B at the distances; m depends on the bounds
+      struct Pair {
+        Vec3<double> a, dir;
+        double ra, rb, k;
+        int ulp;
+      };
+      std::vector<Pair> pairs;
+      for (int rep = 0; rep < 40; ++rep)
+        for (int j = 0; j < int(std::size(ks)) + 2; ++j) {
+          Vec3<double> dir{g(rng), g(rng), g(rng)};
+          dir = (1 / std::sqrt(dot(dir, dir))) * dir;
+          const Vec3<double> a{base + extent * u01(rng), base + extent * u01(rng), base + extent * u01(rng)};
+          const bool ulp = j >= int(std::size(ks));
+          pairs.push_back({a, dir, rmax * (0.1 + 0.9 * u01(rng)), rmax * (0.1 + 0.9 * u01(rng)),
+                           ulp ? 0.0 : ks[j], ulp ? (j % 2 ? 1 : -1) : 0});
+        }
+      Bounds b;
+      b.lo = b.hi = pairs[0].a;
+      b.r_max = rmax;
+      b.count = 2 * pairs.size();
+      for (const Pair& p : pairs)
+        for (double sign : {-1.0, 1.0}) {
+          const Vec3<double> c = p.a + (sign * 2 * rmax) * p.dir;  // covers B
+          for (const Vec3<double>& v : {p.a, c}) {
+            b.lo = {std::min(b.lo.x, v.x), std::min(b.lo.y, v.y), std::min(b.lo.z, v.z)};
+            b.hi = {std::max(b.hi.x, v.x), std::max(b.hi.y, v.y), std::max(b.hi.z, v.z)};
+          }
+        }
+      const Vec3<double> origin = b.lo;
+      const double m = broad_margin(b, origin, Precision::mixed);
+      ASSERT_GT(m, 0);
+      std::vector<double> pos, rad;
+      for (const Pair& p : pairs) {
+        double d = p.ra + p.rb + p.k * m;
+        if (p.ulp) d = std::nextafter(p.ra + p.rb, p.ulp > 0 ? 1e300 : 0.0);
+        const Vec3<double> bc = p.a + d * p.dir;
+        for (const Vec3<double>& v : {p.a, bc}) {
+          ASSERT_TRUE(v.x >= b.lo.x && v.x <= b.hi.x && v.y >= b.lo.y && v.y <= b.hi.y && v.z >= b.lo.z &&
+                      v.z <= b.hi.z);
+          pos.insert(pos.end(), {v.x, v.y, v.z});
+        }
+        rad.insert(rad.end(), {p.ra, p.rb});
+      }
+      std::vector<Sphere<float>> broad;
+      for (std::size_t i = 0; i < rad.size(); ++i)
+        broad.push_back({float(pos[3 * i] - origin.x), float(pos[3 * i + 1] - origin.y),
+                         float(pos[3 * i + 2] - origin.z), float(rad[i]) + float(m)});
+      const std::vector<double> nan_pos(pos.size(), std::numeric_limits<double>::quiet_NaN()),
+          zero_pos(pos.size(), 0.0);
+      const NarrowBodies<double> plain{nullptr, pos.data(), rad.data(), origin};
+      NarrowBodies<double> with_floats = plain, nan_doubles = plain, zero_doubles = plain;
+      for (NarrowBodies<double>* w : {&with_floats, &nan_doubles, &zero_doubles}) {
+        w->broad = broad.data();
+        w->broad_margin = float(m);
+      }
+      nan_doubles.position = nan_pos.data();
+      zero_doubles.position = zero_pos.data();
+      for (std::size_t p = 0; p < pairs.size(); ++p) {
+        const auto a = std::uint32_t(2 * p), bb = std::uint32_t(2 * p + 1);
+        const bool fp64 = touch_fp64(plain, a, bb);
+        ASSERT_EQ(touch_fp64(with_floats, a, bb), fp64)
+            << "base " << base << " rmax " << rmax << " k " << pairs[p].k << " ulp " << pairs[p].ulp;
+        ++checked;
+        if (pairs[p].ulp || pairs[p].ra + pairs[p].rb <= 8 * m) continue;
+        if (pairs[p].k <= -5) {
+          EXPECT_TRUE(fp64);
+          EXPECT_TRUE(touch_fp64(nan_doubles, a, bb)) << "k " << pairs[p].k << " not settled on the floats";
+          ++settled;
+        } else if (pairs[p].k >= 5) {
+          EXPECT_FALSE(fp64);
+          EXPECT_FALSE(touch_fp64(zero_doubles, a, bb)) << "k " << pairs[p].k << " not settled on the floats";
+          ++settled;
+        }
+      }
+    }
+  }
+  EXPECT_GT(settled, checked / 10);
 }
 
 }  // namespace
