@@ -39,7 +39,8 @@ std::string describe(const ModeBounds& b, const PrecisionScene& s) {
 // Why `mode` cannot serve the request (empty: it can).
 std::string passed_over(Precision mode, const PrecisionScene& s, double position, double angle_deg) {
   if (!s.refusal[index_of(mode)].empty()) return "cannot run this scene (" + s.refusal[index_of(mode)] + ")";
-  if (mode == Precision::fp32 && s.ellipsoids) return "has no documented bound for ellipsoid contacts";
+  if (mode == Precision::fp32 && s.ellipsoids)  // (PrecisionScene::ellipsoids says why)
+    return "bounds ellipsoid normals only by its solver tolerance (5e-4·κ rad for axis ratio κ)";
   const ModeBounds b = mode_bounds(mode, s);
   if (b.position <= position && b.angle_deg <= angle_deg) return {};
   return "gives " + describe(b, s) + " here";

@@ -8,7 +8,8 @@
 //   tangent-ulp-double    exactly tangent pairs (integer Pythagorean offsets scaled by 1/8, so d = ra + rb
 //                         in binary), the second centre then moved by −1, 0 or +1 ulp of double per axis
 //   tangent-ulp-float     the same with coordinates that are floats, moved by ±1 ulp of float
-//   near-coincident       pairs whose centres are 0, 1e-3, 1e-6, 1e-9, 1e-12 apart, centres in [0, 100)³
+//   near-coincident       pairs whose centres are 0, 1e-3, 1e-6, 1e-9, 1e-12 apart, centres in [0, 100)³;
+//                         a quarter as many pairs with an ellipsoid, 1e-3 … 1e-12 apart
 //   dense-32-per-cell     radii uniform in [0.5, 1], 32 centres per cell of edge 2 (the largest diameter)
 //   ellipsoids-tangent    pairs of ellipsoids of aspect 1, 2, 5, 10 (random orientations), made to touch
 //                         at one point (support points of the exact reference), then moved apart along

@@ -63,6 +63,14 @@ struct PackedShape {
   std::uint32_t kind;  // Shape
 };
 
+// The bodies' shape rows as given, doubles by body index (semi-axes x y z at 3i, orientation w x y z
+// at 4i; read for ellipsoids only): what pack_shape packs. The narrow stage of fp32 reads them again
+// for the pairs it solves in fp64 (core/shape_narrow.hpp: ShapeDecide); fp64 and mixed leave them null.
+struct ShapeRowsView {
+  const double* semi_axes = nullptr;
+  const double* orientation = nullptr;
+};
+
 template <class Real>
 CG_HD PackedShape<Real> pack_shape(std::uint8_t kind, const double* semi, const double* q) {
   PackedShape<Real> p{};

@@ -9,7 +9,8 @@
 //   accept / row are the one whole solve per candidate that the two passes must reproduce bit for bit
 //   (EngineShapesTest.TwoPassNarrowEqualsOneWholeSolve), and row serves the closed-form pairs.
 // The bodies come as NarrowBodies (core/narrow.hpp): fp64 and mixed decide and compute from the world
-// doubles (pair_frame), fp32 from pack's local floats.
+// doubles (pair_frame), fp32 from pack's local floats — except the pairs whose float centres it does
+// not resolve, which it solves as fp64 does (ShapeDecide, "fp32's pairs in fp64").
 // SphereDecide: narrow_decide() on the bounding spheres (sphere-only scenes, looser filters).
 // ShapeDecide: scenes with ellipsoids: dispatch on the shape pair —
 //   sphere–sphere        the closed form (narrow_decide: exactly the sphere path's bits)
@@ -79,13 +80,29 @@ struct PairFrame {
   Vec3<double> origin;
 };
 template <class Real>
+CG_HD PairFrame<double> world_pair_frame(const NarrowBodies<Real>& w, std::uint32_t a, std::uint32_t b) {
+  const Sphere<double> wa = world_sphere(w, a), wb = world_sphere(w, b);
+  return {{wa.x - wb.x, wa.y - wb.y, wa.z - wb.z, wa.r}, {0, 0, 0, wb.r}, wb.centre()};
+}
+template <class Real>
 CG_HD PairFrame<Real> pair_frame(const NarrowBodies<Real>& w, std::uint32_t a, std::uint32_t b) {
-  if constexpr (std::is_same_v<Real, double>) {
-    const Sphere<double> wa = world_sphere(w, a), wb = world_sphere(w, b);
-    return {{wa.x - wb.x, wa.y - wb.y, wa.z - wb.z, wa.r}, {0, 0, 0, wb.r}, wb.centre()};
-  } else {
+  if constexpr (std::is_same_v<Real, double>)
+    return world_pair_frame(w, a, b);
+  else
     return {w.spheres[a], w.spheres[b], w.origin};
-  }
+}
+
+// The solver settings of fp32's fp64 solves: fp64's tolerance (its default: the pair is solved in
+// double for fp64's answer, which fp32's 2e-5 would leave a million times coarser; a tolerance the
+// user sets applies to the float solves), the start set and caps of the engine's settings.
+template <class Real>
+CG_HD SolverSettings<double> fp64_settings(const SolverSettings<Real>& s) {
+  SolverSettings<double> d;
+  d.max_iterations = s.max_iterations;
+  d.starts = s.starts;
+  d.screen = s.screen;
+  d.certify = s.certify;
+  return d;
 }
 
 // A pair with an ellipsoid is decided only when its bounding spheres touch, as narrow_decide decides
@@ -101,19 +118,42 @@ CG_HD bool bounding_spheres_touch(const NarrowBodies<Real>& w, std::uint32_t a, 
     return spheres_touch(w.spheres[a], w.spheres[b]);
 }
 
+// fp32's pairs in fp64: a pair with an ellipsoid whose local float centres fp32 does not resolve
+// (fp32_resolves, core/narrow.hpp: |a − b| < 2^-11·M, the sphere pairs' test) is decided and solved in
+// double as fp64 solves it — fp64's pair frame from the world centres (A's centre a − b, B's 0, points
+// back as b + offset) and fp64's packed shapes, rebuilt from the world shape rows (pack_shape<double>,
+// not the float rows promoted: a rotation rounded to float is orthonormal only to 2^-24, and semi-axes
+// equal in float may differ in double, so the promoted rows would be neither fp32's bodies nor fp64's)
+// — and its row is fp64's row rounded to float once (row_cast), counted in NarrowFlags::fp64_rows. In
+// float, the rounded a − b decides between the mirror normals ±n (f(−n) − f(n) = 2 n·(a − b)): below
+// that separation the normal could be reversed. Every entry point agrees: accept / row solve it so,
+// triage sends it to the hard pass (Verdict::hard: the triage kernel stays lean), solve solves it so,
+// row_from solves it again (the kept float normal is not the double minimiser): one-solve bits.
 template <class Real>
 struct ShapeDecide {
   NarrowBodies<Real> bodies;
   const PackedShape<Real>* shapes;  // by body index
   SolverSettings<Real> settings;
+  ShapeRowsView rows;  // fp32: the world shape rows (fp64 and mixed: not read)
 
   CG_HD bool both_spheres(std::uint32_t a, std::uint32_t b) const {
     return shapes[a].kind == static_cast<std::uint32_t>(Shape::sphere) &&
            shapes[b].kind == static_cast<std::uint32_t>(Shape::sphere);
   }
+  // fp32 only: pair (a, b) (with an ellipsoid) is solved in fp64 (above).
+  CG_HD bool in_fp64(std::uint32_t a, std::uint32_t b) const {
+    if constexpr (std::is_same_v<Real, float>) {
+      const Sphere<float> sa = bodies.spheres[a], sb = bodies.spheres[b];
+      const Vec3<float> dc = sa.centre() - sb.centre();
+      return !fp32_resolves(sa, sb, cg_sqrt(dot(dc, dc)));
+    } else {
+      return false;
+    }
+  }
   CG_HD bool accept(std::uint32_t a, std::uint32_t b, NarrowFlags& flags) const {
     if (both_spheres(a, b)) return narrow_decide(bodies, a, b, false, flags).contact;
     if (!bounding_spheres_touch(bodies, a, b)) return false;  // (above)
+    if (in_fp64(a, b)) return fp64_solve(a, b, flags).contact;
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
@@ -123,6 +163,7 @@ struct ShapeDecide {
   CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
     NarrowFlags unused;  // counted by accept()
     if (both_spheres(a, b)) return narrow_decide(bodies, a, b, full, unused).row;
+    if (in_fp64(a, b)) return fp64_row(a, b, full);
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
@@ -131,14 +172,15 @@ struct ShapeDecide {
   // The two-pass narrow of both backends (host/narrow_shapes.cpp, cuda/narrow.cuh): triage settles
   // each candidate cheaply — closed forms, the sphere–ellipsoid root find, the PW filter, the first
   // start with its certificate — and keeps the minimiser `n` of a general ellipsoid pair; the rest
-  // (Verdict::hard) take solve(), the whole start set, in a second pass over those candidates alone;
-  // row_from() rebuilds the row from the kept minimiser (contact_at_normal: the bits of row(), without
-  // solving again).
+  // (Verdict::hard, and fp32's pairs in fp64) take solve(), the whole start set, in a second pass over
+  // those candidates alone; row_from() rebuilds the row from the kept minimiser (contact_at_normal:
+  // the bits of row(), without solving again; fp32's pairs in fp64 are solved again).
   enum class Verdict : std::uint32_t { reject = 0, accept = 1, hard = 2 };
   CG_HD Verdict triage(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
     if (both_spheres(a, b))
       return narrow_decide(bodies, a, b, false, flags).contact ? Verdict::accept : Verdict::reject;
     if (!bounding_spheres_touch(bodies, a, b)) return Verdict::reject;  // (above)
+    if (in_fp64(a, b)) return Verdict::hard;
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     const bool contact =
@@ -152,6 +194,11 @@ struct ShapeDecide {
     return contact ? Verdict::accept : Verdict::reject;
   }
   CG_HD bool solve(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
+    if (in_fp64(a, b)) {
+      const Fp64Pair p = fp64_solve(a, b, flags);
+      n = vec_cast<Real>(p.c.geometry.normal_on_b);  // not read back (row_from solves again)
+      return p.contact;
+    }
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
@@ -161,13 +208,15 @@ struct ShapeDecide {
   }
   // The solver's flags of a settled pair, and its work (general pairs that reached the solve: the PW
   // filter's rejections and the closed forms make none).
-  CG_HD void note(std::uint32_t a, std::uint32_t b, const EllipsoidContact<Real>& c,
-                  NarrowFlags& flags) const {
+  // (R: Real, or double for fp32's pairs in fp64)
+  template <class R>
+  CG_HD void note(std::uint32_t a, std::uint32_t b, const EllipsoidContact<R>& c, NarrowFlags& flags) const {
     flags.fallbacks += c.fallback ? 1u : 0u;
     flags.unconverged += c.converged ? 0u : 1u;
     note_work(a, b, c, flags);
   }
-  CG_HD void note_work(std::uint32_t a, std::uint32_t b, const EllipsoidContact<Real>& c,
+  template <class R>
+  CG_HD void note_work(std::uint32_t a, std::uint32_t b, const EllipsoidContact<R>& c,
                        NarrowFlags& flags) const {
     if (c.iterations <= 0 || !general_pair(a, b)) return;
     const auto e = static_cast<std::uint32_t>(c.iterations);
@@ -185,6 +234,7 @@ struct ShapeDecide {
   }
   CG_HD ContactRow<Real> row_from(std::uint32_t a, std::uint32_t b, Vec3<Real> n, bool full) const {
     if (!general_pair(a, b)) return row(a, b, full);  // closed forms and root finds: cheap again
+    if (in_fp64(a, b)) return fp64_row(a, b, full);
     EllipsoidContact<Real> c{};
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     contact_at_normal(ellipsoid_of(f.a, shapes[a]), ellipsoid_of(f.b, shapes[b]), n, c);
@@ -203,6 +253,39 @@ struct ShapeDecide {
       plane_space(c.geometry.normal_on_b, row.lateral_friction_dir1, row.lateral_friction_dir2);
     }
     return row;
+  }
+
+  // ---- fp32's pairs in fp64 (above); out of line on the device, so that the kernels' common path
+  // keeps its registers (only the hard and fill kernels reach it) ----
+  struct Fp64Pair {
+    EllipsoidContact<double> c;
+    Vec3<double> origin;  // B's world centre: the frame's origin
+    bool contact;
+  };
+  // fp64's packed shape of body i, from the world shape rows.
+  CG_HD PackedShape<double> fp64_shape(std::uint32_t i) const {
+    return pack_shape<double>(static_cast<std::uint8_t>(shapes[i].kind), rows.semi_axes + 3 * std::size_t(i),
+                              rows.orientation + 4 * std::size_t(i));
+  }
+  // The whole solve of pair (a, b) in double, as fp64's ShapeDecide::accept / row run it.
+  CG_HD_OUTLINE Fp64Pair fp64_pair(std::uint32_t a, std::uint32_t b) const {
+    Fp64Pair p;
+    const PairFrame<double> f = world_pair_frame(bodies, a, b);
+    p.origin = f.origin;
+    p.contact = shape_pair_contact(f.a, f.b, fp64_shape(a), fp64_shape(b), fp64_settings(settings), p.c);
+    return p;
+  }
+  // The count pass's solve: the solver's flags, and the row counted as an fp64 row.
+  CG_HD Fp64Pair fp64_solve(std::uint32_t a, std::uint32_t b, NarrowFlags& flags) const {
+    const Fp64Pair p = fp64_pair(a, b);
+    note(a, b, p.c, flags);
+    flags.fp64_rows += p.contact ? 1u : 0u;
+    return p;
+  }
+  // fp64's row, rounded to Real once.
+  CG_HD_OUTLINE ContactRow<Real> fp64_row(std::uint32_t a, std::uint32_t b, bool full) const {
+    const Fp64Pair p = fp64_pair(a, b);
+    return row_cast<Real>(ShapeDecide<double>::row_of(p.c, p.origin, full), full);
   }
 };
 

@@ -40,6 +40,7 @@ struct RunState {
   // pack
   Sphere<Real>* d_spheres = nullptr;        // input order
   PackedShape<Narrow>* d_shapes = nullptr;  // input order; scenes with ellipsoids only (shapes.cuh)
+  ShapeRowsView shape_rows{};               // the world shape rows packed from (DEVICE): fp32's fp64 pairs
   Sphere<Real>* d_cell_spheres = nullptr;   // cell order
   std::uint32_t* d_perm = nullptr;          // cell order → input index
   std::uint8_t* d_ctrl = nullptr;           // cell order

@@ -120,6 +120,7 @@ void shapes_stage(RunState<Real, Key, Narrow>& r) {
     d_orient = reinterpret_cast<const double*>(ws.shape_orient.data());
   }
   r.d_shapes = ws.shapes.span_as<PackedShape<Narrow>>(r.n).data();
+  r.shape_rows = {d_semi, d_orient};  // read again by the narrow stage (fp32's pairs in fp64)
   cuda::pack_shapes_kernel<Narrow>
       <<<cuda::blocks_for(r.n), cuda::kBlock, 0, r.st>>>(d_kind, d_semi, d_orient, r.n, r.d_shapes);
   CG_CUDA_CHECK_LAUNCH("pack_shapes");

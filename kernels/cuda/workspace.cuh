@@ -22,8 +22,8 @@
 //   out                    narrow → download   the contact rows (ContactPtrs, 16-byte aligned fields)
 //   temp                   any CUB call        CUB temporary storage (cub_run)
 //   counters, partials     every stage         Counters of the call; bounds partials
-//   shape_kind, shape_semi, upload → pack      scenes with ellipsoids, host-array path: the shape rows
-//   shape_orient
+//   shape_kind, shape_semi, upload → narrow    scenes with ellipsoids, host-array path: the shape rows
+//   shape_orient                               (narrow: fp32's pairs solved in fp64 read semi, orient)
 //   shapes                 pack → narrow       scenes with ellipsoids: PackedShape<Narrow> per body, input
 //   order normals                narrow              scenes with ellipsoids: the minimiser kept per candidate
 //                                              (triage / hard pass → fill) and the hard count

@@ -102,10 +102,13 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   const host::CandidatePairs& candidates = reuse ? be.kept.pairs : built;
   stats.candidates = candidates.size();
 
-  if (shapes)
-    host::narrow_shapes(candidates, world, packed_shapes, job.solver, job.fields, nt, out, stats);
-  else
+  if (shapes) {
+    const ShapeRowsView rows{reinterpret_cast<const double*>(job.bodies.semi_axes.data()),
+                             reinterpret_cast<const double*>(job.bodies.orientation.data())};
+    host::narrow_shapes(candidates, world, packed_shapes, rows, job.solver, job.fields, nt, out, stats);
+  } else {
     host::narrow(candidates, world, job.fields, nt, out, stats);
+  }
   timer.lap(Stage::narrow);
 }
 

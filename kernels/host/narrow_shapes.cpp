@@ -87,10 +87,11 @@ NarrowCounts narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& de
 
 template <class Real>
 void narrow_shapes(const CandidatePairs& c, const NarrowBodies<Real>& bodies,
-                   const std::vector<PackedShape<Real>>& shapes, const SolverSettings<Real>& settings,
-                   Fields fields, int nt, Contacts<Real>& out, EngineStats& stats) {
-  const NarrowCounts f =
-      narrow_compact(c, ShapeDecide<Real>{bodies, shapes.data(), settings}, fields == Fields::full, nt, out);
+                   const std::vector<PackedShape<Real>>& shapes, ShapeRowsView rows,
+                   const SolverSettings<Real>& settings, Fields fields, int nt, Contacts<Real>& out,
+                   EngineStats& stats) {
+  const NarrowCounts f = narrow_compact(c, ShapeDecide<Real>{bodies, shapes.data(), settings, rows},
+                                        fields == Fields::full, nt, out);
   stats.narrow_fallbacks += f.flags.fallbacks;
   stats.narrow_unconverged += f.flags.unconverged;
   stats.fp64_rows += f.flags.fp64_rows;
@@ -102,10 +103,10 @@ void narrow_shapes(const CandidatePairs& c, const NarrowBodies<Real>& bodies,
 }
 
 template void narrow_shapes(const CandidatePairs&, const NarrowBodies<float>&,
-                            const std::vector<PackedShape<float>>&, const SolverSettings<float>&, Fields, int,
-                            Contacts<float>&, EngineStats&);
+                            const std::vector<PackedShape<float>>&, ShapeRowsView,
+                            const SolverSettings<float>&, Fields, int, Contacts<float>&, EngineStats&);
 template void narrow_shapes(const CandidatePairs&, const NarrowBodies<double>&,
-                            const std::vector<PackedShape<double>>&, const SolverSettings<double>&, Fields,
-                            int, Contacts<double>&, EngineStats&);
+                            const std::vector<PackedShape<double>>&, ShapeRowsView,
+                            const SolverSettings<double>&, Fields, int, Contacts<double>&, EngineStats&);
 
 }  // namespace cg::detail::host

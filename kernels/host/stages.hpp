@@ -121,10 +121,12 @@ void narrow(const CandidatePairs& c, const NarrowBodies<Real>& bodies, Fields fi
 
 // narrow for scenes with ellipsoids: ShapeDecide (core/shape_narrow.hpp) on every candidate, always
 // count → scan → fill (c.filter may reject); the solver's flags are added to stats.narrow_fallbacks
-// and stats.narrow_unconverged.
+// and stats.narrow_unconverged, fp32's pairs solved in fp64 to stats.fp64_rows (`rows`: the world
+// shape rows they are solved from).
 template <class Real>
 void narrow_shapes(const CandidatePairs& c, const NarrowBodies<Real>& bodies,
-                   const std::vector<PackedShape<Real>>& shapes, const SolverSettings<Real>& settings,
-                   Fields fields, int threads, Contacts<Real>& out, EngineStats& stats);
+                   const std::vector<PackedShape<Real>>& shapes, ShapeRowsView rows,
+                   const SolverSettings<Real>& settings, Fields fields, int threads, Contacts<Real>& out,
+                   EngineStats& stats);
 
 }  // namespace cg::detail::host

@@ -273,11 +273,18 @@ TYPED_TEST(EngineShapesTest, CellFilterGivesTheSameRows) {
 // Both backends run the narrow stage of shapes as the device does: triage (first start + certificate),
 // the whole solve for the hard candidates alone, and the row rebuilt from the kept minimiser
 // (row_from). That must give the decisions, flags and bits of one whole solve per candidate (accept(),
-// row()), and the scene must exercise both passes.
+// row()), and the scene must exercise both passes. fp32: the pairs with nearly coincident centres
+// (appended: partners 1e-5 … 1e-11 apart) are solved in fp64 on every path, counted alike.
 TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
   using Real = TypeParam;
   using Verdict = typename ShapeDecide<Real>::Verdict;
-  const ShapeScene s = make_scene("mixed", 37, 200, 0.6, 7.0);
+  ShapeScene s = make_scene("mixed", 37, 200, 0.6, 7.0);
+  for (std::size_t i = 0, n = s.p.size(); i < n && i < 28; ++i) {  // a partner for 28 bodies
+    const double delta = std::pow(10.0, -5 - int(i % 7));
+    s.p.push_back({s.p[i].x + delta, s.p[i].y - 0.6 * delta, s.p[i].z + 0.8 * delta});
+    const std::size_t j = (i * 7 + 3) % n;  // another body's shape (either kind)
+    s.r.push_back(s.r[j]), s.shape.push_back(s.shape[j]), s.axes.push_back(s.axes[j]), s.q.push_back(s.q[j]);
+  }
   std::vector<Sphere<Real>> sph;
   std::vector<PackedShape<Real>> packed;
   for (std::size_t i = 0; i < s.p.size(); ++i) {
@@ -288,8 +295,10 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
   }
   const NarrowBodies<Real> world{
       sph.data(), reinterpret_cast<const double*>(s.p.data()), s.r.data(), {1, 2, 3}};
-  const ShapeDecide<Real> d{world, packed.data(), {}};
-  int contacts = 0, hard = 0, certified = 0;
+  const ShapeRowsView rows{reinterpret_cast<const double*>(s.axes.data()),
+                           reinterpret_cast<const double*>(s.q.data())};
+  const ShapeDecide<Real> d{world, packed.data(), {}, rows};
+  int contacts = 0, hard = 0, certified = 0, fp64 = 0, fp64_hard = 0;
   NarrowFlags work;  // the solver's work over both passes, as the engine counts it
   for (std::uint32_t a = 0; a < sph.size(); ++a)
     for (std::uint32_t b = a + 1; b < sph.size(); ++b) {
@@ -300,6 +309,7 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
       Verdict v = d.triage(a, b, f2, n);
       if (v == Verdict::hard) {
         ++hard;
+        fp64_hard += d.in_fp64(a, b) ? 1 : 0;
         v = d.solve(a, b, f2, n) ? Verdict::accept : Verdict::reject;
       } else if (d.general_pair(a, b) && x) {
         ++certified;
@@ -308,6 +318,8 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
       work.add(f2);
       EXPECT_EQ(f1.fallbacks, f2.fallbacks);
       EXPECT_EQ(f1.unconverged, f2.unconverged);
+      EXPECT_EQ(f1.fp64_rows, f2.fp64_rows);
+      fp64 += d.both_spheres(a, b) ? 0 : int(f1.fp64_rows);
       if (!x) continue;
       ++contacts;
       const ContactRow<Real> kept = d.row_from(a, b, n, true), again = d.row(a, b, true);
@@ -320,8 +332,13 @@ TYPED_TEST(EngineShapesTest, TwoPassNarrowEqualsOneWholeSolve) {
   EXPECT_GT(contacts, 20);
   EXPECT_GT(hard, 0) << "no candidate took the second pass";
   EXPECT_GT(certified, 0) << "no ellipsoid contact was certified by the first start";
+  if (std::is_same_v<Real, float>)
+    EXPECT_GE(fp64, 20) << "the nearly coincident pairs with an ellipsoid were not solved in fp64";
+  else
+    EXPECT_EQ(fp64, 0);
   // The engine's work counters are these sums (fp64 solves from the world doubles, so in any frame).
-  EXPECT_GE(work.solver_runs, std::uint32_t(certified + 2 * hard));
+  // (a pair solved in fp64 runs once, in the second pass)
+  EXPECT_GE(work.solver_runs, std::uint32_t(certified + 2 * (hard - fp64_hard)));
   EXPECT_GT(work.evaluations, 2 * work.solver_runs);
   EXPECT_LE(work.max_evaluations, work.evaluations);
   if constexpr (std::is_same_v<Real, double>) {
