@@ -47,6 +47,19 @@ for k in ellipsoids mixed; do
   "$CG" detect "$W/v_$k.h5" -o "$W/v_$k.c.h5" --backend cuda -q
   "$CG" validate "$W/v_$k.h5" "$W/v_$k.c.h5" 2>&1 | tail -6
 done
+log "resident steps with shapes: 1 M mixed bodies, np 2, orientations refreshed; --spin turns them"
+{
+  "$CG" generate "$W/r.h5" -n 1000000 --seed 9 --kind mixed --ellipsoid-fraction 0.4 --rlow 0.3 --rhigh 1 \
+    --contacts-per-body 1 -q
+  "$CG" detect "$W/r.h5" -o "$W/r.one.h5" --backend cuda --precision fp64 --fields full -q
+  mpirun --bind-to none -np 2 "$CG" detect "$W/r.h5" -o "$W/r.steps.h5" --backend cuda --precision fp64 \
+    --fields full --steps 10
+  mpirun --bind-to none -np 2 "$CG" detect "$W/r.h5" -o "$W/r.spin.h5" --backend cuda --precision fp64 \
+    --fields full --steps 10 --spin 0.3
+  "$CG" detect "$W/r.h5" -o "$W/r.spin1.h5" --backend cuda --precision fp64 --fields full --steps 10 --spin 0.3
+  for f in steps spin spin1; do echo "compare one/$f: $("$CG" compare "$W/r.one.h5" "$W/r.$f.h5" 2>&1 | tail -1)"; done
+} >"$OUT/steps.log" 2>&1
+grep -E 'compare|contacts per step|turning|halo|rror' "$OUT/steps.log" | head -20
 log "cuda bench: spheres"
 "$BIN/contactgrid_cuda_bench" 20 24 4 10 auto spheres >"$OUT/bench_spheres.txt" 2>&1; grep -E '^\| 2' "$OUT/bench_spheres.txt"
 for s in ellipsoids mixed; do

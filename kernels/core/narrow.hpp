@@ -118,6 +118,13 @@ struct SpheresTouch {
     return spheres_touch(sa, sb);
   }
 };
+// fp64's decision for Fp64Touch's unsure pairs, out of line: rare, and the pair stage's hot loop keeps
+// its registers.
+CG_HD_OUTLINE bool touch_world(const double* position, const double* radius, Vec3<double> origin,
+                               std::uint32_t a, std::uint32_t b) {
+  const NarrowBodies<double> w{nullptr, position, radius, origin};
+  return spheres_touch(local_sphere_fp64(w, a), local_sphere_fp64(w, b));
+}
 struct Fp64Touch {
   NarrowBodies<double> world;  // broad unused: the stage passes its floats
   float margin;                // the packed radii's broad_margin
@@ -130,7 +137,7 @@ struct Fp64Touch {
       a = perm[a];
       b = perm[b];
     }
-    return spheres_touch(local_sphere_fp64(world, a), local_sphere_fp64(world, b));
+    return touch_world(world.position, world.radius, world.origin, a, b);
   }
 };
 
@@ -144,14 +151,16 @@ struct NarrowDecision {
 // the largest coordinate M of the pair (|error| <= 2^-24 M per coordinate), are far enough apart that
 // the normal's angle error, at most sqrt(3)·ε32·M / |d| radians, stays below sqrt(3)·2^-12 rad
 // (0.024°): |d| >= 2^12·ε32·M = 2^-11·M. Decided from local coordinates only (rank-independent).
-CG_HD bool fp32_resolves(const Sphere<float>& a, const Sphere<float>& b, float len) {
+// `fraction`: the threshold as a fraction of M (pairs with an ellipsoid take 2^-16: shape_narrow.hpp).
+CG_HD bool fp32_resolves(const Sphere<float>& a, const Sphere<float>& b, float len,
+                         float fraction = 0x1p-11f) {
   auto abs_max = [](float u, float v) {
     u = u < 0 ? -u : u;
     v = v < 0 ? -v : v;
     return u > v ? u : v;
   };
   const float m = abs_max(abs_max(abs_max(a.x, a.y), abs_max(a.z, b.x)), abs_max(b.y, b.z));
-  return len >= 0x1p-11f * m;
+  return len >= fraction * m;
 }
 
 // The decision and row of candidate (a, b) for the narrow stage's real type Real (see the file

@@ -39,6 +39,7 @@ struct SphereDecide {
     NarrowFlags unused;  // counted by accept()
     return narrow_decide(bodies, a, b, full, unused).row;
   }
+  template <bool = true>
   CG_HD ContactRow<Real> row_from(std::uint32_t a, std::uint32_t b, Vec3<Real>, bool full) const {
     return row(a, b, full);  // nothing kept: the closed form again
   }
@@ -118,17 +119,27 @@ CG_HD bool bounding_spheres_touch(const NarrowBodies<Real>& w, std::uint32_t a, 
     return spheres_touch(w.spheres[a], w.spheres[b]);
 }
 
-// fp32's pairs in fp64: a pair with an ellipsoid whose local float centres fp32 does not resolve
-// (fp32_resolves, core/narrow.hpp: |a − b| < 2^-11·M, the sphere pairs' test) is decided and solved in
-// double as fp64 solves it — fp64's pair frame from the world centres (A's centre a − b, B's 0, points
-// back as b + offset) and fp64's packed shapes, rebuilt from the world shape rows (pack_shape<double>,
-// not the float rows promoted: a rotation rounded to float is orthonormal only to 2^-24, and semi-axes
-// equal in float may differ in double, so the promoted rows would be neither fp32's bodies nor fp64's)
-// — and its row is fp64's row rounded to float once (row_cast), counted in NarrowFlags::fp64_rows. In
-// float, the rounded a − b decides between the mirror normals ±n (f(−n) − f(n) = 2 n·(a − b)): below
-// that separation the normal could be reversed. Every entry point agrees: accept / row solve it so,
-// triage sends it to the hard pass (Verdict::hard: the triage kernel stays lean), solve solves it so,
-// row_from solves it again (the kept float normal is not the double minimiser): one-solve bits.
+// fp32's pairs in fp64: a pair with an ellipsoid whose local float centres are closer than 2^-16·M
+// (fp32_resolves, core/narrow.hpp, M the largest |local coordinate| of the pair) is decided and solved
+// in double as fp64 solves it — fp64's pair frame from the world centres (A's centre a − b, B's 0,
+// points back as b + offset) and fp64's packed shapes, rebuilt from the world shape rows
+// (pack_shape<double>, not the float rows promoted: a rotation rounded to float is orthonormal only to
+// 2^-24, and semi-axes equal in float may differ in double, so the promoted rows would be neither
+// fp32's bodies nor fp64's) — and its row is fp64's row rounded to float once (row_cast), counted in
+// NarrowFlags::fp64_rows. Why 2^-16 (the sphere pairs take 2^-11, where the normal IS the direction of
+// a − b): the rounded a − b errs by δ ≤ √3·ε32·M, which perturbs f(n) = h_A(−n) + h_B(n) − n·(a − b)
+// by at most |δ| whatever |a − b| (so the minimiser's shift within its basin does not depend on the
+// threshold), and chooses between the mirror minima ±n (f(−n) − f(n) = 2 n·(a − b)) only where
+// |n·(a − b)| ≤ |δ|. Below the threshold the rounded difference may point anywhere (or be 0), and the
+// float solve took the mirror normal for 17 of 60 pairs near 10 before #13; above it, the direction of
+// a − b is right to √3·2^-8 rad, so a mirror is taken only where n is within that of perpendicular
+// to a − b — a pair with two exits deeper than each other by less than fp32's band, either normal
+// right. (At 2^-11 the pairs in fp64 were ~5e-4 of the candidates of a 2^20 random scene and their
+// serial double solves cost the H100 +33 % at 2^20 and +70 % at 2^24: BENCHMARKS §3.) Every entry
+// point agrees: accept / row solve it so, triage sends it to the hard pass (Verdict::hard: the triage
+// kernel stays lean), solve solves it so, row_from solves it again (the kept float normal is not the
+// double minimiser): one-solve bits. The device runs those solves in kernels of their own
+// (cuda/narrow.cuh: kFp64Pairs false keeps the double code out of the hard and fill kernels).
 template <class Real>
 struct ShapeDecide {
   NarrowBodies<Real> bodies;
@@ -145,7 +156,7 @@ struct ShapeDecide {
     if constexpr (std::is_same_v<Real, float>) {
       const Sphere<float> sa = bodies.spheres[a], sb = bodies.spheres[b];
       const Vec3<float> dc = sa.centre() - sb.centre();
-      return !fp32_resolves(sa, sb, cg_sqrt(dot(dc, dc)));
+      return !fp32_resolves(sa, sb, cg_sqrt(dot(dc, dc)), 0x1p-16f);
     } else {
       return false;
     }
@@ -160,10 +171,14 @@ struct ShapeDecide {
     note(a, b, c, flags);
     return contact;
   }
+  // kFp64Pairs false (the device's lean kernels): the caller has taken fp32's pairs in fp64 elsewhere
+  // (cuda/narrow.cuh), so the double solve's code is not in the kernel (row, solve, row_from).
+  template <bool kFp64Pairs = true>
   CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
     NarrowFlags unused;  // counted by accept()
     if (both_spheres(a, b)) return narrow_decide(bodies, a, b, full, unused).row;
-    if (in_fp64(a, b)) return fp64_row(a, b, full);
+    if constexpr (kFp64Pairs)
+      if (in_fp64(a, b)) return fp64_row(a, b, full);
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
@@ -193,11 +208,14 @@ struct ShapeDecide {
     n = c.geometry.normal_on_b;
     return contact ? Verdict::accept : Verdict::reject;
   }
+  template <bool kFp64Pairs = true>
   CG_HD bool solve(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
-    if (in_fp64(a, b)) {
-      const Fp64Pair p = fp64_solve(a, b, flags);
-      n = vec_cast<Real>(p.c.geometry.normal_on_b);  // not read back (row_from solves again)
-      return p.contact;
+    if constexpr (kFp64Pairs) {
+      if (in_fp64(a, b)) {
+        const Fp64Pair p = fp64_solve(a, b, flags);
+        n = vec_cast<Real>(p.c.geometry.normal_on_b);  // not read back (row_from solves again)
+        return p.contact;
+      }
     }
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
@@ -232,9 +250,11 @@ struct ShapeDecide {
     };
     return general(shapes[a]) && general(shapes[b]);
   }
+  template <bool kFp64Pairs = true>
   CG_HD ContactRow<Real> row_from(std::uint32_t a, std::uint32_t b, Vec3<Real> n, bool full) const {
-    if (!general_pair(a, b)) return row(a, b, full);  // closed forms and root finds: cheap again
-    if (in_fp64(a, b)) return fp64_row(a, b, full);
+    if (!general_pair(a, b)) return row<kFp64Pairs>(a, b, full);  // closed forms and root finds: cheap again
+    if constexpr (kFp64Pairs)
+      if (in_fp64(a, b)) return fp64_row(a, b, full);
     EllipsoidContact<Real> c{};
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     contact_at_normal(ellipsoid_of(f.a, shapes[a]), ellipsoid_of(f.b, shapes[b]), n, c);

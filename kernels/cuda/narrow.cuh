@@ -16,6 +16,7 @@
 
 #include <cub/device/device_scan.cuh>
 #include <cub/device/device_select.cuh>
+#include <limits>
 #include <type_traits>
 
 #include "core/narrow.hpp"
@@ -117,11 +118,42 @@ __global__ void __launch_bounds__(kBlock)
   NarrowFlags flags;
   if (i < count) {
     const std::uint32_t k = hard[i];
-    Vec3<Real> n{};
-    verdict[k] = decide.solve(pair_a[k], pair_b[k], flags, n) ? 1u : 0u;
-    normal[k] = n;
+    const std::uint32_t a = pair_a[k], b = pair_b[k];
+    if (!decide.in_fp64(a, b)) {  // fp32's pairs in fp64: narrow_hard_fp64_kernel
+      Vec3<Real> n{};
+      verdict[k] = decide.template solve<false>(a, b, flags, n) ? 1u : 0u;
+      normal[k] = n;
+    }
   }
   add_flags(flags, c);
+}
+
+// fp32's pairs in fp64 (core/shape_narrow.hpp: ShapeDecide::in_fp64, sent to the hard list by triage):
+// solved in double here, so that the double solve's registers and stack are this kernel's alone (in
+// the hard and fill kernels they doubled the registers: 2^20 ellipsoids, fp32, narrow 1.3 → 2.2 ms).
+// The kept normal is a NaN marker: the fill kernel leaves those rows to narrow_fill_fp64_kernel.
+// Both kernels are rare work behind a cheap test, with ~250 registers a thread: a fixed grid of
+// kRareBlocks walks the list (a grid of one thread per item spent ~0.3 ms at 2^20 in empty waves).
+inline constexpr std::uint32_t kRareBlocks = 256;
+template <class Real>
+__global__ void __launch_bounds__(kBlock)
+    narrow_hard_fp64_kernel(const std::uint32_t* __restrict__ pair_a,
+                            const std::uint32_t* __restrict__ pair_b, const std::uint32_t* __restrict__ hard,
+                            const unsigned long long* __restrict__ n_hard, ShapeDecide<Real> decide,
+                            std::uint32_t* __restrict__ verdict, Vec3<Real>* __restrict__ normal,
+                            Counters* __restrict__ c) {
+  const unsigned long long count = *n_hard;
+  NarrowFlags flags;
+  for (unsigned long long i = blockIdx.x * kBlock + threadIdx.x; i < count; i += kRareBlocks * kBlock) {
+    const std::uint32_t k = hard[i];
+    const std::uint32_t a = pair_a[k], b = pair_b[k];
+    if (decide.in_fp64(a, b)) {
+      verdict[k] = decide.fp64_solve(a, b, flags).contact ? 1u : 0u;
+      const Real nan = std::numeric_limits<Real>::quiet_NaN();
+      normal[k] = {nan, nan, nan};
+    }
+  }
+  add_flags(flags, c);  // every lane, after the walk
 }
 
 // narrow, rejecting path, fill: the row of each accepted candidate k at offset[k] (exclusive scan of
@@ -135,11 +167,35 @@ __global__ void __launch_bounds__(kBlock)
                        ContactPtrs<Real> out, bool full) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   if (k >= n_pairs || !accept[k]) return;
+  Vec3<Real> n{};
+  if (normal) {
+    n = normal[k];
+    if (n.x != n.x) return;  // fp32's pair in fp64: narrow_fill_fp64_kernel
+  }
   const std::uint32_t a = pair_a[k], b = pair_b[k], w = offset[k];
-  ContactRow<Real> row = decide.row_from(a, b, normal ? normal[k] : Vec3<Real>{}, full);
+  ContactRow<Real> row = decide.template row_from<false>(a, b, n, full);
   row.id_a = a;
   row.id_b = b;
   store_row(out, w, row, full);  // core/contact_fields.hpp: the one row store
+}
+
+// The rows of fp32's pairs in fp64 (NaN-marked by narrow_hard_fp64_kernel): fp64's row rounded once,
+// as row_from gives them on the host.
+template <class Real>
+__global__ void __launch_bounds__(kBlock)
+    narrow_fill_fp64_kernel(const std::uint32_t* __restrict__ pair_a,
+                            const std::uint32_t* __restrict__ pair_b, std::uint32_t n_pairs,
+                            ShapeDecide<Real> decide, const std::uint32_t* __restrict__ accept,
+                            const std::uint32_t* __restrict__ offset, const Vec3<Real>* __restrict__ normal,
+                            ContactPtrs<Real> out, bool full) {
+  for (std::uint32_t k = blockIdx.x * kBlock + threadIdx.x; k < n_pairs; k += kRareBlocks * kBlock) {
+    if (!accept[k] || !(normal[k].x != normal[k].x)) continue;
+    const std::uint32_t a = pair_a[k], b = pair_b[k];
+    ContactRow<Real> row = decide.fp64_row(a, b, full);
+    row.id_a = a;
+    row.id_b = b;
+    store_row(out, offset[k], row, full);
+  }
 }
 
 }  // namespace cg::cuda
@@ -194,6 +250,11 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
   cuda::narrow_hard_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
       r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, decide, d_verdict, d_normal, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_hard");
+  if constexpr (std::is_same_v<Narrow, float>) {
+    cuda::narrow_hard_fp64_kernel<Narrow><<<cuda::kRareBlocks, kBlock, 0, st>>>(
+        r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, decide, d_verdict, d_normal, r.d_counters);
+    CG_CUDA_CHECK_LAUNCH("narrow_hard_fp64");
+  }
   r.events.mark_narrow_split(2, st);
   return d_normal;
 }
@@ -239,6 +300,13 @@ void narrow_compact(RunState<Real, Key, Narrow>& r, const Decide& decide) {
   cuda::narrow_fill_kernel<Narrow, Decide><<<blocks_for(np), kBlock, 0, st>>>(
       r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept, d_offset, d_normal, r.cp, r.full);
   CG_CUDA_CHECK_LAUNCH("narrow_fill");
+  if constexpr (std::is_same_v<Decide, ShapeDecide<Narrow>> && std::is_same_v<Narrow, float>) {
+    if (r.stats.fp64_rows > 0) {  // (counted by the hard pass: a superset of the marked rows)
+      cuda::narrow_fill_fp64_kernel<Narrow><<<cuda::kRareBlocks, kBlock, 0, st>>>(
+          r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept, d_offset, d_normal, r.cp, r.full);
+      CG_CUDA_CHECK_LAUNCH("narrow_fill_fp64");
+    }
+  }
 }
 
 // The bodies the narrow stage reads (core/narrow.hpp): fp32 pack's local floats in input order,
@@ -272,8 +340,11 @@ void narrow_stage(RunState<Real, Key, Narrow>& r) {
   r.n_rows = r.np;
   r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.full, r.cp);
   if (r.np > 0) {
+    // every candidate is a contact: mixed's floats would only add reads to the row's world doubles
+    NarrowBodies<Narrow> one_row = bodies;
+    one_row.broad = nullptr;
     cuda::narrow_kernel<Narrow><<<cuda::blocks_for(r.np), cuda::kBlock, 0, r.st>>>(
-        r.pair_a.Current(), r.pair_b.Current(), r.np, bodies, r.cp, r.full, r.d_counters);
+        r.pair_a.Current(), r.pair_b.Current(), r.np, one_row, r.cp, r.full, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("narrow");
     // fp32's fp64 rows, read by the backend after the call's last synchronisation
     CG_CUDA_CHECK(

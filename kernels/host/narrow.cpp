@@ -24,14 +24,16 @@ void narrow(const CandidatePairs& c, const NarrowBodies<Real>& bodies, Fields fi
   const bool full = fields == Fields::full;
   const std::size_t n_cand = c.size();
   std::uint64_t fp64_rows = 0;
-  if (!narrow_may_reject(c.filter)) {  // every candidate is a contact: no scan
+  if (!narrow_may_reject(c.filter)) {     // every candidate is a contact: no scan
+    NarrowBodies<Real> one_row = bodies;  // (mixed's floats would only add reads, as on the device)
+    one_row.broad = nullptr;
     out.resize(n_cand, full);
     const ContactColumns<Real, Ptr> rows = columns_of(out);
 #pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : fp64_rows) if (n_cand > k_parallel_min)
     for (std::size_t k = 0; k < n_cand; ++k) {
       const std::uint32_t a = c.a(k), b = c.b(k);
       NarrowFlags flags;
-      write_row(rows, k, a, b, narrow_decide(bodies, a, b, full, flags).row, full);
+      write_row(rows, k, a, b, narrow_decide(one_row, a, b, full, flags).row, full);
       fp64_rows += flags.fp64_rows;
     }
     stats.fp64_rows += fp64_rows;
