@@ -35,8 +35,8 @@ struct SolverSettings {
   int max_iterations = 40;  // per start (trial evaluations)
   int starts = 11;          // how many of the fixed ordered starts to use (1 … 11)
   int screen = 3;           // Newton runs from the lowest of 20 screened directions (0 … 4)
-  // Stop after the first start when its minimum is certified global (ellipsoid_solve.hpp: the
-  // rolling-ball certificate); false runs the whole start set (tests compare the two).
+  // Stop as soon as a start's minimum is certified global (ellipsoid_solve.hpp: the inscribed-ball
+  // certificate); false runs the whole start set (tests compare the two).
   bool certify = true;
 };
 

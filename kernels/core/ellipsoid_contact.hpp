@@ -35,10 +35,12 @@
 //      n·(a − b) < 0: reflection), then 3 of 18 000 (antipodal pairs: antipode run), then 2 of 24 000
 //      (bisector starts), then 1 of 24 000 (screen); the final set missed none of 48 000 fresh pairs.
 //      5 axis starts alone miss deep overlaps routinely (A's centre inside B needs B's axes).
-//      The certificate: a converged minimum with f < ρ/2, ρ = Σ e_min²/e_max (the smallest radius of
-//      curvature of A ⊕ (−B)), is global (a rolling-ball argument, in ellipsoid_solve.hpp), and the
-//      rest of the set is skipped: separated and shallow pairs — nearly every contact of a packing — cost
-//      one start; SolverSettings::certify = false runs the whole set (tests compare the two bit for bit).
+//      The certificate: a converged minimum n with t = f(n) ≤ e_A²/h_A(n) + e_B²/h_B(n) (e the smallest
+//      semi-axis; the radii of the largest balls tangent inside at the two contact points) is global
+//      to within the solver tolerance (an inscribed-ball argument, in ellipsoid_solve.hpp), and the
+//      rest of the set is skipped: separated and shallow pairs — nearly every contact of a packing —
+//      and most deep overlaps cost one start; SolverSettings::certify = false runs the whole set
+//      (tests compare the two bit for bit).
 //   3. Safety net, never silently wrong: if the best minimum disagrees with the PW sign beyond rounding
 //      (a missed global minimum), or the winning start did not converge, 13 more fixed directions are
 //      tried and a continuation runs from the best point with 4× the iteration cap; `fallback` is set,

@@ -314,18 +314,20 @@ TYPED_TEST(EllipsoidContactTest, TouchingPairs) {
   }
 }
 
-// The globality certificate (ellipsoid_solve.hpp): a first minimum with f < ρ/2, ρ = Σ e_min²/e_max, is
-// the global one, so the rest of the start set is skipped. Over touching pairs pushed together by depths
-// from 0 to well past ρ, and random overlaps, the certified solve must give exactly the bits of the
-// whole start set (the other starts would only find the same minimum), and shallow pairs must stop
-// early (the point of the certificate).
+// The globality certificate (ellipsoid_solve.hpp): a converged minimum n with t = f(n) ≤ e_A²/h_A(n) +
+// e_B²/h_B(n) (the radii of the largest balls tangent inside at the two contact points) is the global
+// one, so the rest of the start set is skipped. That reach is at least ρ = Σ e_min²/e_max (the old
+// rolling-ball bound, which certified only t < ρ/2). Over touching pairs pushed together by depths from
+// 0 to well past ρ, and random overlaps, the certified solve must give exactly the bits of the whole
+// start set (the other starts would only find the same minimum); shallow pairs and pairs pushed in by
+// 0.8ρ (beyond the old bound, within the new one) must stop early (the point of the certificate).
 TYPED_TEST(EllipsoidContactTest, CertifiedFirstMinimumIsTheWholeSetsAnswer) {
   using Real = TypeParam;
   SolverSettings<Real> full;
   full.certify = false;
   for (double aspect : {1.5, 4.0, 10.0, 100.0}) {
     std::mt19937_64 rng(7000 + int(aspect));
-    int shallow = 0, shallow_early = 0;
+    int shallow = 0, shallow_early = 0, deep = 0, deep_early = 0;
     long evals_certified = 0, evals_full = 0;
     for (int i = 0; i < 240; ++i) {
       auto [a, b, n, off] = touching_pair<Real>(rng, aspect);
@@ -354,14 +356,77 @@ TYPED_TEST(EllipsoidContactTest, CertifiedFirstMinimumIsTheWholeSetsAnswer) {
       if (i % 6 < 4) {
         ++shallow;
         shallow_early += c.iterations < w.iterations;
+      } else if (i % 6 == 4) {
+        ++deep;
+        deep_early += c.iterations < w.iterations;
       }
     }
     std::printf(
-        "[ellipsoid] %s certificate 1:%-5g shallow pairs stopped early %d of %d; evaluations %ld vs %ld\n",
-        tag<Real>("").c_str(), aspect, shallow_early, shallow, evals_certified, evals_full);
+        "[ellipsoid] %s certificate 1:%-5g stopped early: shallow %d of %d, 0.8ρ deep %d of %d; evaluations "
+        "%ld vs %ld\n",
+        tag<Real>("").c_str(), aspect, shallow_early, shallow, deep_early, deep, evals_certified, evals_full);
     EXPECT_GE(shallow_early, shallow * 9 / 10)
         << "the certificate should stop shallow contacts after one start";
+    EXPECT_GE(deep_early, deep * 8 / 10) << "the certificate should stop overlaps 0.8ρ deep after one start";
   }
+}
+
+// The lemma under the certificate, checked in long double without the engine: for an ellipsoid with
+// semi-axes e (smallest e_min) and a boundary point x with outward normal u, the ball of radius
+// e_min²/h(u) tangent inside at x lies inside the ellipsoid (h(u) = |D u|, x = D²u/h(u)); and it is
+// the largest such ball at the tips (a ball 0.1 % larger pokes out next to the end of the longest axis),
+// so the certificate's reach cannot be stretched.
+TEST(EllipsoidCertificate, InscribedBallLemma) {
+  std::mt19937_64 rng(4242);
+  std::uniform_real_distribution<double> unit01(0, 1);
+  LD worst = -1;
+  int balls = 0;
+  for (double aspect : {1.0, 1.5, 4.0, 10.0, 100.0}) {
+    for (int k = 0; k < 200; ++k) {
+      const Vec3<double> lo = random_axes<double>(rng, aspect);
+      const LD e[3] = {LD(lo.x), LD(lo.y), LD(lo.z)};
+      const LD emin = std::min({e[0], e[1], e[2]});
+      const Vec3<double> ud = random_unit(rng);
+      const LD u[3] = {LD(ud.x), LD(ud.y), LD(ud.z)};
+      const LD h =
+          std::sqrt(e[0] * e[0] * u[0] * u[0] + e[1] * e[1] * u[1] * u[1] + e[2] * e[2] * u[2] * u[2]);
+      const LD radius = emin * emin / h;
+      LD c[3];
+      for (int i = 0; i < 3; ++i) c[i] = e[i] * e[i] * u[i] / h - radius * u[i];
+      // Ball points: random directions, and directions close to the tangent point (where it is tight).
+      for (int j = 0; j < 400; ++j) {
+        Vec3<double> w = random_unit(rng);
+        if (j % 2 == 1) {
+          const double s = std::pow(10.0, -4.0 * unit01(rng));
+          w = {ud.x + s * w.x, ud.y + s * w.y, ud.z + s * w.z};
+          const double l = std::sqrt(w.x * w.x + w.y * w.y + w.z * w.z);
+          w = {w.x / l, w.y / l, w.z / l};
+        }
+        const LD y[3] = {c[0] + radius * LD(w.x), c[1] + radius * LD(w.y), c[2] + radius * LD(w.z)};
+        const LD q = y[0] * y[0] / (e[0] * e[0]) + y[1] * y[1] / (e[1] * e[1]) + y[2] * y[2] / (e[2] * e[2]);
+        worst = std::max(worst, q - 1);
+      }
+      ++balls;
+      if (aspect > 1) {  // the tip of the longest axis: a 0.1 % larger tangent ball leaves the body
+        const int imax = int(std::max_element(e, e + 3) - e), imin = int(std::min_element(e, e + 3) - e);
+        const LD big = LD(1.001) * emin * emin / e[imax];
+        LD out = -1;
+        for (int j = 1; j <= 200; ++j) {
+          const LD phi = LD(j) * LD(1e-3);
+          LD y[3] = {0, 0, 0};
+          y[imax] = e[imax] - big + big * std::cos(phi);
+          y[imin] = big * std::sin(phi);
+          out = std::max(
+              out, y[imax] * y[imax] / (e[imax] * e[imax]) + y[imin] * y[imin] / (e[imin] * e[imin]) - 1);
+        }
+        EXPECT_GT(out, LD(0)) << "aspect " << aspect
+                              << ": a ball 0.1 % larger than e_min²/e_max at the tip fits";
+      }
+    }
+  }
+  std::printf("[ellipsoid] inscribed-ball lemma: %d balls, max (yᵀD⁻²y − 1) on their surfaces %.2Le\n", balls,
+              worst);
+  EXPECT_LE(worst, LD(1e-14)) << "a point of an inscribed ball lies outside the ellipsoid";
 }
 
 // A centre inside the other body.
