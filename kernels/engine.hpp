@@ -78,13 +78,14 @@ struct EngineStats {
   // ellipsoid core's safety net (extra starts, `fallback`) and those whose winning minimiser still
   // missed the tolerance (`converged` false: the row is the best minimum found, flagged here).
   std::uint64_t ellipsoids = 0, narrow_fallbacks = 0, narrow_unconverged = 0;
-  // Candidates whose first start was not certified global, so the whole start set ran (the device's
-  // second narrow pass; the same count on both backends).
-  std::uint64_t narrow_hard = 0;
-  // CUDA, scenes with ellipsoids: seconds of the narrow stage's triage pass (every candidate) and of its
-  // hard pass (the selection and the whole solves); the rest of the stage is the scan and the rows.
-  // The host runs both in one loop per candidate and leaves them 0.
-  double narrow_triage_s = 0, narrow_hard_s = 0;
+  // Candidates whose first start the cheap certificates did not settle, so the settle pass ran them
+  // (`narrow_unsettled`), and those no certificate settled, so the whole start set ran (`narrow_hard`;
+  // the device's second and third narrow passes; the same counts on both backends).
+  std::uint64_t narrow_unsettled = 0, narrow_hard = 0;
+  // CUDA, scenes with ellipsoids: seconds of the narrow stage's triage pass (every candidate), settle
+  // pass and hard pass (each with its selection); the rest of the stage is the scan and the rows. The
+  // host runs all three in one loop per candidate and leaves them 0.
+  double narrow_triage_s = 0, narrow_settle_s = 0, narrow_hard_s = 0;
   // Scenes with ellipsoids: runs of the general ellipsoid solve (each triage's first start, each hard
   // pair's whole set), the evaluations of f (value, gradient, Hessian at one normal) they made, and the
   // most one run made: mean = narrow_evaluations / narrow_solver_runs. The same on both backends.

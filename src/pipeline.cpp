@@ -349,6 +349,8 @@ void record_detection(const Session& session, const Engine<Real>& engine, const 
   result.stats.pair_tests = session.sum(result.stats.pair_tests);
   result.stats.narrow_fallbacks = session.sum(result.stats.narrow_fallbacks);
   result.stats.narrow_unconverged = session.sum(result.stats.narrow_unconverged);
+  result.stats.narrow_unsettled = session.sum(result.stats.narrow_unsettled);
+  result.stats.narrow_hard = session.sum(result.stats.narrow_hard);
   result.stats.narrow_solver_runs = session.sum(result.stats.narrow_solver_runs);
   result.stats.narrow_evaluations = session.sum(result.stats.narrow_evaluations);
   result.stats.narrow_max_evaluations =

@@ -48,13 +48,16 @@ struct EllipsoidContact {
   int iterations;                           // evaluations of f, all starts together
   bool converged;                           // the winning minimiser meets the tolerance
   bool fallback;                            // the fixed start set did not suffice (extra starts ran)
-  bool complete = true;  // false: a first-start-only solve stopped uncertified (SolveScope::first_start)
+  bool complete = true;  // false: a first-start-only solve stopped uncertified (SolveScope::first_start*)
 };
 
 // How much of the ellipsoid solve to run: all of it, or only the first start, stopping uncertified
-// (`complete` false, no geometry) so that a second pass runs the whole solve for those pairs alone —
-// the device's narrow stage, where one thread's full solve would idle the rest of its warp.
-enum class SolveScope { whole, first_start };
+// (`complete` false, no geometry) so that a later pass runs the rest for those pairs alone — the
+// device's narrow stage, where one thread's full solve would idle the rest of its warp.
+// first_start_cheap tries only the cheap certificates (separated, two inscribed balls): the triage
+// pass over every candidate; first_start adds the inner-ellipsoid one (ellipsoid_certificate.hpp),
+// which costs about five evaluations of f, over the few candidates triage leaves.
+enum class SolveScope { whole, first_start, first_start_cheap };
 
 namespace detail {
 

@@ -1,6 +1,7 @@
 #pragma once
 // The contact solve of two ellipsoids: the global minimum of f over the unit sphere by damped Newton
 // from a fixed ordered start set, with its safety net (core/ellipsoid_contact.hpp: the overview).
+#include "core/ellipsoid_certificate.hpp"
 #include "core/perram_wertheim.hpp"
 
 namespace cg {
@@ -184,7 +185,7 @@ CG_HD void contact_at_normal(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b,
 }
 
 // The general solve (no dispatch on spheres): see the file comment. `pw` is the result of
-// perram_wertheim(a, b) (the caller has it from the filter). SolveScope::first_start stops after the
+// perram_wertheim(a, b) (the caller has it from the filter). SolveScope::first_start* stops after the
 // first start unless it is certified (and consistent with the PW sign): `complete` false, no geometry;
 // where it is certified, the answer is the whole solve's, bit for bit. The scope is a template
 // parameter so that the first-start kernel does not carry the whole set's code (registers, stack).
@@ -206,6 +207,7 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
   const Real f_tie = Real(4) * std::numeric_limits<Real>::epsilon() * (scale + rlen);
   detail::LocalResult<Real> best{};
   bool have = false;
+  bool cert = false, cert_stale = true;  // the certificate of `best` (below), recomputed when it changes
   auto consider = [&](Vec3<Real> start, int cap) {
     detail::LocalResult<Real> res =
         detail::local_minimise(a, b, r, detail::towards(start, r), scale, settings.tolerance, cap,
@@ -220,37 +222,27 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
     if (!res.merged && (!have || res.f < best.f - f_tie)) {
       best = res;
       have = true;
+      cert_stale = true;
     }
   };
-  // The certificate of globality, for a converged local minimum n with value t = f(n):
-  //  - t < 0: the pair is separated and the problem is convex (f is convex and 1-homogeneous): global.
-  //  - t >= 0: the inscribed-ball lemma. For an ellipsoid with smallest semi-axis e, the ball of radius
-  //    e²/h(u) tangent inside at the boundary point with outward normal u lies inside it. (Body frame,
-  //    G = D⁻², boundary point x, u = Gx/|Gx| with |Gx| = 1/h(u): the quadratic
-  //    ψ(y) = yᵀGy − 1 − (|y − c|² − ρ²)/e² with c = x − e²Gx, ρ = |x − c| is concave since every
-  //    1/e_i² ≤ 1/e², and ∇ψ(x) = 0, ψ(x) = 0, so ψ ≤ 0: every point of the ball has yᵀGy ≤ 1.)
-  //    A's contact point p_A has outward normal −n, B's p_B has n. Split t = δA + δB with
-  //    δA ≤ eA²/h_A(n), δB ≤ eB²/h_B(n), and take the balls of those radii tangent inside at p_A and
-  //    p_B: centres q_A = p_A + δA·n, q_B = p_B − δB·n. For every unit m, h_A(−m) ≥ −m·(q_A − a) + δA and
-  //    h_B(m) ≥ m·(q_B − b) + δB, so f(m) ≥ t + m·(q_B − q_A); and q_B − q_A = ∇f(n) − t·n is the
-  //    tangential gradient (∇f = p_B − p_A, n·∇f = f by Euler). Hence min f ≥ t − |P∇f|: n is the
-  //    global minimiser to within the solver tolerance, whenever t ≤ eA²/h_A(n) + eB²/h_B(n).
-  //    This reach is at least ρ = Σ e_min²/e_max (the rolling-ball radius of A ⊕ (−B)) and is the whole
-  //    thin half-axis sum where the contact is on the flat sides, which is where deep overlaps meet.
-  //  The margin f_noise covers the rounding of t and of the reach; a violation by ε weakens the bound
-  //  by 2ε only (it is continuous), so the margin is not what makes the argument sound.
-  // Separated and shallow pairs — nearly every contact of a packing — and most deep overlaps (85 % of
-  // those beyond the old rolling-ball bound, U[0.25, 1] semi-axes) take one start.
+  // The certificates of globality (core/ellipsoid_certificate.hpp): a negative minimum (separated),
+  // two inscribed balls, an inner ellipsoid of A ⊕ (−B), in that order (the third costs about five
+  // evaluations of f; SolveScope::first_start_cheap leaves it out), once per new best. Each proves
+  // min f ≥ f(n) − |P∇f(n)|. Separated and shallow pairs — nearly every contact of a packing — and
+  // nearly all deep overlaps take one start; what is left runs the whole set.
   const Real f_noise = Real(16) * std::numeric_limits<Real>::epsilon() * (scale + rlen);
   auto certified = [&] {
-    if (!settings.certify || !have || !best.converged) return false;
-    if (best.f < Real(0)) return true;
-    const Real ea = detail::min_axis(a.semi_axes), eb = detail::min_axis(b.semi_axes);
-    const Real reach =
-        ea * ea / detail::support_value(a, best.n) + eb * eb / detail::support_value(b, best.n);
-    return best.f + f_noise <= reach;
+    if (cert_stale) {
+      cert_stale = false;
+      cert = settings.certify && have && best.converged &&
+             (best.f < Real(0) || best.f + f_noise <= detail::inscribed_ball_reach(a, b, best.n));
+      if constexpr (Scope != SolveScope::first_start_cheap)
+        if (!cert && settings.certify && have && best.converged)
+          cert = detail::inner_ellipsoid_certificate(a, b, best.n, best.f, f_noise);
+    }
+    return cert;
   };
-  if constexpr (Scope == SolveScope::first_start) {
+  if constexpr (Scope != SolveScope::whole) {
     consider(coincident ? Vec3<Real>{Real(1), Real(0), Real(0)} : pw.normal, settings.max_iterations);
     if (!certified()) {
       out.complete = false;  // the second pass runs the whole solve
@@ -319,6 +311,7 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
       out.iterations += res.evaluations;
       if (!(res.f < best.f - f_tie)) break;
       best = res;
+      cert_stale = true;
     }
   }  // whole set
 
@@ -327,7 +320,7 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
   const Real f_band = Real(64) * eps * (scale + rlen) + settings.tolerance * scale;
   const bool pw_overlap = pw.value<Real(1) - pw.band, pw_apart = pw.value> Real(1) + pw.band;
   const bool inconsistent = (pw_overlap && best.f < -f_band) || (pw_apart && best.f > f_band);
-  if constexpr (Scope == SolveScope::first_start) {
+  if constexpr (Scope != SolveScope::whole) {
     if (inconsistent || !best.converged) {
       out.complete = false;
       return out;

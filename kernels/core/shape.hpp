@@ -57,7 +57,7 @@ CG_HD ShapeFault shape_fault(std::uint8_t kind, double radius, const double* sem
 // kind, semi-axes in Real and the body → world rotation, built in double from the quaternion then
 // rounded once to Real. Spheres: kind only (the rest zero).
 template <class Real>
-struct PackedShape {
+struct alignas(16) PackedShape {
   Mat3<Real> rotation;
   Vec3<Real> semi_axes;
   std::uint32_t kind;  // Shape

@@ -7,7 +7,7 @@
 //   row(a, b, full)      the fill pass, for an accepted candidate: its row, world frame
 //   ShapeDecide only: triage / solve / row_from, the two-pass count both backends run (below); its
 //   accept / row are the one whole solve per candidate that the two passes must reproduce bit for bit
-//   (EngineShapesTest.TwoPassNarrowEqualsOneWholeSolve), and row serves the closed-form pairs.
+//   (EngineShapesTest.ThreePassNarrowEqualsOneWholeSolve), and row serves the closed-form pairs.
 // The bodies come as NarrowBodies (core/narrow.hpp): fp64 and mixed decide and compute from the world
 // doubles (pair_frame), fp32 from pack's local floats — except the pairs whose float centres it does
 // not resolve, which it solves as fp64 does (ShapeDecide, "fp32's pairs in fp64").
@@ -184,22 +184,20 @@ struct ShapeDecide {
     shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
     return row_of(c, f.origin, full);
   }
-  // The two-pass narrow of both backends (host/narrow_shapes.cpp, cuda/narrow.cuh): triage settles
+  // The three-pass narrow of both backends (host/narrow_shapes.cpp, cuda/narrow.cuh): triage settles
   // each candidate cheaply — closed forms, the sphere–ellipsoid root find, the PW filter, the first
-  // start with its certificate — and keeps the minimiser `n` of a general ellipsoid pair; the rest
-  // (Verdict::hard, and fp32's pairs in fp64) take solve(), the whole start set, in a second pass over
-  // those candidates alone; row_from() rebuilds the row from the kept minimiser (contact_at_normal:
-  // the bits of row(), without solving again; fp32's pairs in fp64 are solved again).
+  // start with the cheap certificates — and keeps the minimiser `n` of a general ellipsoid pair; the
+  // rest (Verdict::hard, and fp32's pairs in fp64) go to settle(), the first start again with every
+  // certificate (the inner ellipsoid settles nearly all deep overlaps), over those candidates alone;
+  // what is still hard takes solve(), the whole start set; row_from() rebuilds the row from the kept
+  // minimiser (contact_at_normal: the bits of row(), without solving again; fp32's pairs in fp64 are
+  // solved again). Each pass counts the work it does, on both backends alike.
   enum class Verdict : std::uint32_t { reject = 0, accept = 1, hard = 2 };
-  CG_HD Verdict triage(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
-    if (both_spheres(a, b))
-      return narrow_decide(bodies, a, b, false, flags).contact ? Verdict::accept : Verdict::reject;
-    if (!bounding_spheres_touch(bodies, a, b)) return Verdict::reject;  // (above)
-    if (in_fp64(a, b)) return Verdict::hard;
+  template <SolveScope Scope>
+  CG_HD Verdict first_start(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
-    const bool contact =
-        shape_pair_contact<SolveScope::first_start>(f.a, f.b, shapes[a], shapes[b], settings, c);
+    const bool contact = shape_pair_contact<Scope>(f.a, f.b, shapes[a], shapes[b], settings, c);
     if (!c.complete) {
       note_work(a, b, c, flags);
       return Verdict::hard;
@@ -207,6 +205,18 @@ struct ShapeDecide {
     note(a, b, c, flags);
     n = c.geometry.normal_on_b;
     return contact ? Verdict::accept : Verdict::reject;
+  }
+  CG_HD Verdict triage(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
+    if (both_spheres(a, b))
+      return narrow_decide(bodies, a, b, false, flags).contact ? Verdict::accept : Verdict::reject;
+    if (!bounding_spheres_touch(bodies, a, b)) return Verdict::reject;  // (above)
+    if (in_fp64(a, b)) return Verdict::hard;
+    return first_start<SolveScope::first_start_cheap>(a, b, flags, n);
+  }
+  // A candidate triage left hard.
+  CG_HD Verdict settle(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
+    if (in_fp64(a, b)) return Verdict::hard;
+    return first_start<SolveScope::first_start>(a, b, flags, n);
   }
   template <bool kFp64Pairs = true>
   CG_HD bool solve(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {

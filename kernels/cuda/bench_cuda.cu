@@ -186,7 +186,7 @@ struct Row {
   double cell;
   std::map<std::string, double> stage_ms;
   double gpu_sum_ms, total_ms, floor_ms, upload_ms, download_ms, bytes_per_sphere, bytes_no_contacts;
-  std::uint64_t candidates, fallbacks, unconverged, hard, solver_runs, evaluations,
+  std::uint64_t candidates, fallbacks, unconverged, unsettled, hard, solver_runs, evaluations,
       max_evaluations;  // narrow stage (shape scenes); over all runs
 };
 
@@ -234,11 +234,13 @@ Row bench(int log2n, std::uint64_t n, const DeviceScene& scene, int runs, Flushe
       row.contacts = c.count;
       if (engine.stats().device_allocations != 0) std::fprintf(stderr, "warning: a warm run allocated\n");
       stages["triage"].push_back(engine.stats().narrow_triage_s * 1e3);
+      stages["settle"].push_back(engine.stats().narrow_settle_s * 1e3);
       stages["hard"].push_back(engine.stats().narrow_hard_s * 1e3);
       row.fallbacks += engine.stats().narrow_fallbacks;
       row.unconverged += engine.stats().narrow_unconverged;
     }
     row.candidates = engine.stats().candidates;
+    row.unsettled = engine.stats().narrow_unsettled;
     row.hard = engine.stats().narrow_hard;
     row.solver_runs = engine.stats().narrow_solver_runs;
     row.evaluations = engine.stats().narrow_evaluations;
@@ -398,11 +400,11 @@ int main(int argc, char** argv) try {
       "| "
       "total | "
       "Mspheres/s | contacts/N | workspace B/N | excl. contacts B/N | sort floor | sort/floor | total/floor "
-      "| upload | download | candidates/N | fallbacks | unconverged | narrow: triage | narrow: hard | hard/N "
-      "| solver runs/N | evaluations/run | max evaluations |\n");
+      "| upload | download | candidates/N | fallbacks | unconverged | narrow: triage | narrow: settle | "
+      "narrow: hard | unsettled/N | hard/N | solver runs/N | evaluations/run | max evaluations |\n");
   std::printf(
       "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
-      "---|---|---|---|---|---|\n");
+      "---|---|---|---|---|---|---|---|\n");
   for (const Row& r : rows) {
     auto st = [&](const char* s) {
       auto it = r.stage_ms.find(s);
@@ -412,15 +414,16 @@ int main(int argc, char** argv) try {
         "| 2^%d | %s | %.3g | %.2f | %d | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.0f | "
         "%.3f | "
         "%.1f | %.1f | "
-        "%.3f | %.2f | %.2f | %.2f | %.2f | %.3f | %llu | %llu | %.3f | %.3f | %.4f | %.3f | %.2f | %llu |\n",
+        "%.3f | %.2f | %.2f | %.2f | %.2f | %.3f | %llu | %llu | %.3f | %.3f | %.3f | %.4f | %.4f | %.3f | "
+        "%.2f | %llu |\n",
         r.log2n, r.prec, r.cell, double(r.entries) / double(r.n), r.key_bits, st("pack"), st("entries"),
         st("sort"), st("pairs"), st("order"), st("narrow"), r.gpu_sum_ms, r.total_ms,
         double(r.n) / (r.total_ms * 1e-3) / 1e6, double(r.contacts) / double(r.n), r.bytes_per_sphere,
         r.bytes_no_contacts, r.floor_ms, r.floor_ms > 0 ? st("sort") / r.floor_ms : 0.0,
         r.floor_ms > 0 ? r.total_ms / r.floor_ms : 0.0, r.upload_ms, r.download_ms,
         double(r.candidates) / double(r.n), static_cast<unsigned long long>(r.fallbacks),
-        static_cast<unsigned long long>(r.unconverged), st("triage"), st("hard"),
-        double(r.hard) / double(r.n), double(r.solver_runs) / double(r.n),
+        static_cast<unsigned long long>(r.unconverged), st("triage"), st("settle"), st("hard"),
+        double(r.unsettled) / double(r.n), double(r.hard) / double(r.n), double(r.solver_runs) / double(r.n),
         r.solver_runs ? double(r.evaluations) / double(r.solver_runs) : 0.0,
         static_cast<unsigned long long>(r.max_evaluations));
   }

@@ -164,7 +164,7 @@ class CudaBackend {
     narrow_stage(r);
     const DownloadHostTimes host = download_stage(r, m_h_staging, out);
     m_events.collect(times, host.overlap_s, host.extra_s);  // all events complete: the stream synced
-    m_events.narrow_split(stats.narrow_triage_s, stats.narrow_hard_s);
+    m_events.narrow_split(stats.narrow_triage_s, stats.narrow_settle_s, stats.narrow_hard_s);
     stats.fp64_rows = r.h_counters->fp64_rows;  // copied after the narrow stage
     stats.peak_device_bytes = m_ws.held_bytes();
     stats.device_allocations = m_ws.allocations;

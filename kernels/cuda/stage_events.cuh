@@ -59,21 +59,23 @@ class StageEvents {
     m_tail_stage = s;
   }
 
-  // The narrow stage's split (scenes with ellipsoids): marks 0, 1, 2 at its start, after the triage
-  // pass, after the hard pass (with its selection).
+  // The narrow stage's split (scenes with ellipsoids): marks 0, 1, 2, 3 at its start, after the
+  // triage pass, after the settle pass, after the hard pass (each with its selection).
   void mark_narrow_split(int i, cudaStream_t st) {
     CG_CUDA_CHECK(cudaEventRecord(m_split[i], st));
     m_split_marks = i + 1;
   }
-  // Seconds of the triage and hard passes (EngineStats::narrow_triage_s, narrow_hard_s); 0 when the
-  // call did not mark them. After the stream's synchronisation.
-  void narrow_split(double& triage, double& hard) const {
-    triage = hard = 0;
-    if (m_split_marks < 3) return;
-    float t = 0, h = 0;
+  // Seconds of the triage, settle and hard passes (EngineStats::narrow_triage_s, …); 0 when the call
+  // did not mark them. After the stream's synchronisation.
+  void narrow_split(double& triage, double& settle, double& hard) const {
+    triage = settle = hard = 0;
+    if (m_split_marks < 4) return;
+    float t = 0, s = 0, h = 0;
     CG_CUDA_CHECK(cudaEventElapsedTime(&t, m_split[0], m_split[1]));
-    CG_CUDA_CHECK(cudaEventElapsedTime(&h, m_split[1], m_split[2]));
+    CG_CUDA_CHECK(cudaEventElapsedTime(&s, m_split[1], m_split[2]));
+    CG_CUDA_CHECK(cudaEventElapsedTime(&h, m_split[2], m_split[3]));
     triage = t * 1e-3;
+    settle = s * 1e-3;
     hard = h * 1e-3;
   }
 
@@ -104,7 +106,7 @@ class StageEvents {
  private:
   cudaEvent_t m_events[kStageCount + 1] = {};
   cudaEvent_t m_pass[kPassEvents] = {};
-  cudaEvent_t m_split[3] = {};
+  cudaEvent_t m_split[4] = {};
   int m_split_marks = 0;
   bool m_recorded[kStageCount] = {};
   bool m_override[kStageCount] = {};

@@ -16,7 +16,7 @@ namespace {
 // them (triage, solve for the hard ones, row_from the minimiser: the same bits).
 struct NarrowCounts {
   NarrowFlags flags;
-  std::uint64_t hard = 0, evaluations = 0;
+  std::uint64_t unsettled = 0, hard = 0, evaluations = 0;
 };
 
 template <class Real>
@@ -26,20 +26,24 @@ NarrowCounts narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& de
   const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(8192, n_cand / 64));
   std::vector<std::uint64_t> chunk_count(n_chunks, 0), chunk_offset;
   std::vector<NarrowFlags> chunk_flags(n_chunks);
-  std::vector<std::uint64_t> chunk_hard(n_chunks, 0);
+  std::vector<std::uint64_t> chunk_hard(n_chunks, 0), chunk_unsettled(n_chunks, 0);
   std::vector<std::uint8_t> accept(n_cand);
   // count: an accept flag per candidate, the accepted total and the solver's flags per chunk
   std::vector<std::vector<ContactRow<Real>>> chunk_rows(n_chunks);
   auto count_chunk = [&](std::size_t ch) {
     std::uint64_t count = 0;
     NarrowFlags flags;
-    std::uint64_t hard = 0;
+    std::uint64_t hard = 0, unsettled = 0;
     for (std::size_t k = n_cand * ch / n_chunks, end = n_cand * (ch + 1) / n_chunks; k < end; ++k) {
-      // the device's two passes, in one: triage, the whole solve where the first start is not
-      // certified, the row from the minimiser
+      // the device's passes, in one: triage, settle where the cheap certificates did not settle it,
+      // the whole solve where no certificate did, the row from the minimiser
       const std::uint32_t a = c.a(k), b = c.b(k);
       Vec3<Real> n{};
       auto verdict = decide.triage(a, b, flags, n);
+      if (verdict == ShapeDecide<Real>::Verdict::hard) {
+        ++unsettled;
+        verdict = decide.settle(a, b, flags, n);
+      }
       if (verdict == ShapeDecide<Real>::Verdict::hard) {
         ++hard;
         verdict = decide.solve(a, b, flags, n) ? ShapeDecide<Real>::Verdict::accept
@@ -52,6 +56,7 @@ NarrowCounts narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& de
     chunk_count[ch] = count;
     chunk_flags[ch] = flags;
     chunk_hard[ch] = hard;
+    chunk_unsettled[ch] = unsettled;
   };
   ContactColumns<Real, Ptr> rows;
   auto fill_chunk = [&](std::size_t ch) {
@@ -78,6 +83,7 @@ NarrowCounts narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& de
     evaluations += chunk_flags[ch].evaluations;
     total.flags.add(chunk_flags[ch]);
     total.hard += chunk_hard[ch];
+    total.unsettled += chunk_unsettled[ch];
   }
   total.evaluations = evaluations;
   return total;
@@ -95,6 +101,7 @@ void narrow_shapes(const CandidatePairs& c, const NarrowBodies<Real>& bodies,
   stats.narrow_fallbacks += f.flags.fallbacks;
   stats.narrow_unconverged += f.flags.unconverged;
   stats.fp64_rows += f.flags.fp64_rows;
+  stats.narrow_unsettled += f.unsettled;
   stats.narrow_hard += f.hard;
   stats.narrow_solver_runs += f.flags.solver_runs;
   stats.narrow_evaluations += f.evaluations;
