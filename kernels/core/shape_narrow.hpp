@@ -173,7 +173,7 @@ struct ShapeDecide {
   }
   // kFp64Pairs false (the device's lean kernels): the caller has taken fp32's pairs in fp64 elsewhere
   // (cuda/narrow.cuh), so the double solve's code is not in the kernel (row, solve, row_from).
-  template <bool kFp64Pairs = true>
+  template <bool kFp64Pairs = true, SolveScope Scope = SolveScope::whole>
   CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
     NarrowFlags unused;  // counted by accept()
     if (both_spheres(a, b)) return narrow_decide(bodies, a, b, full, unused).row;
@@ -181,18 +181,20 @@ struct ShapeDecide {
       if (in_fp64(a, b)) return fp64_row(a, b, full);
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
-    shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
+    shape_pair_contact<Scope>(f.a, f.b, shapes[a], shapes[b], settings, c);
     return row_of(c, f.origin, full);
   }
   // The three-pass narrow of both backends (host/narrow_shapes.cpp, cuda/narrow.cuh): triage settles
-  // each candidate cheaply — closed forms, the sphere–ellipsoid root find, the PW filter, the first
-  // start with the cheap certificates — and keeps the minimiser `n` of a general ellipsoid pair; the
-  // rest (Verdict::hard, and fp32's pairs in fp64) go to settle(), the first start again with every
-  // certificate (the inner ellipsoid settles nearly all deep overlaps), over those candidates alone;
-  // what is still hard takes solve(), the whole start set; row_from() rebuilds the row from the kept
-  // minimiser (contact_at_normal: the bits of row(), without solving again; fp32's pairs in fp64 are
-  // solved again). Each pass counts the work it does, on both backends alike.
-  enum class Verdict : std::uint32_t { reject = 0, accept = 1, hard = 2 };
+  // each candidate cheaply — screen(): closed forms, the sphere–ellipsoid root find, the centre line;
+  // then for the general pairs it leaves (Verdict::solve; on the device a list of their own, so that
+  // the Newton runs fill whole warps) first_pass(): the PW filter and the first start with the cheap
+  // certificates — and keeps the minimiser `n` of a general ellipsoid pair; the rest (Verdict::hard, and
+  // fp32's pairs in fp64) go to settle(), the first start again with every certificate (the inner ellipsoid
+  // settles nearly all deep overlaps), over those candidates alone; what is still hard takes solve(), the
+  // whole start set; row_from() rebuilds the row from the kept minimiser (contact_at_normal: the bits of
+  // row(), without solving again; fp32's pairs in fp64 are solved again). Each pass counts the work it does,
+  // on both backends alike.
+  enum class Verdict : std::uint32_t { reject = 0, accept = 1, hard = 2, solve = 3 };
   template <SolveScope Scope>
   CG_HD Verdict first_start(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
     EllipsoidContact<Real> c;
@@ -206,12 +208,23 @@ struct ShapeDecide {
     n = c.geometry.normal_on_b;
     return contact ? Verdict::accept : Verdict::reject;
   }
-  CG_HD Verdict triage(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
+  CG_HD Verdict screen(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
     if (both_spheres(a, b))
       return narrow_decide(bodies, a, b, false, flags).contact ? Verdict::accept : Verdict::reject;
     if (!bounding_spheres_touch(bodies, a, b)) return Verdict::reject;  // (above)
     if (in_fp64(a, b)) return Verdict::hard;
+    if (!general_pair(a, b)) return first_start<SolveScope::none>(a, b, flags, n);  // (complete)
+    const PairFrame<Real> f = pair_frame(bodies, a, b);
+    if (separated_along_centres(ellipsoid_of(f.a, shapes[a]), ellipsoid_of(f.b, shapes[b])))
+      return Verdict::reject;
+    return Verdict::solve;
+  }
+  CG_HD Verdict first_pass(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
     return first_start<SolveScope::first_start_cheap>(a, b, flags, n);
+  }
+  CG_HD Verdict triage(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
+    const Verdict v = screen(a, b, flags, n);
+    return v == Verdict::solve ? first_pass(a, b, flags, n) : v;
   }
   // A candidate triage left hard.
   CG_HD Verdict settle(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
@@ -262,7 +275,8 @@ struct ShapeDecide {
   }
   template <bool kFp64Pairs = true>
   CG_HD ContactRow<Real> row_from(std::uint32_t a, std::uint32_t b, Vec3<Real> n, bool full) const {
-    if (!general_pair(a, b)) return row<kFp64Pairs>(a, b, full);  // closed forms and root finds: cheap again
+    // closed forms and root finds: cheap again (and no general solve's code: SolveScope::none)
+    if (!general_pair(a, b)) return row<kFp64Pairs, SolveScope::none>(a, b, full);
     if constexpr (kFp64Pairs)
       if (in_fp64(a, b)) return fp64_row(a, b, full);
     EllipsoidContact<Real> c{};

@@ -45,10 +45,11 @@ struct Counters {
   // shapes (cuda/shapes.cuh, narrow.cuh): n - i of the first body with bad shape rows (atomicMax),
   // ellipsoids counted, and the ellipsoid solver's flags (narrow accept pass)
   unsigned long long bad_shape, ellipsoids, fallbacks, unconverged;
-  // narrow, scenes with ellipsoids: the candidates the triage pass left to the settle pass (`unsettled`)
+  // narrow, scenes with ellipsoids: the general pairs the screen left to the first start (`to_solve`),
+  // the candidates the triage pass left to the settle pass (`unsettled`)
   // and those the settle pass left to the whole solve (`hard`) (written by cub::DeviceSelect, read by
   // the next kernel on the device and by the host with the other counters)
-  unsigned long long unsettled, hard;
+  unsigned long long to_solve, unsettled, hard;
   unsigned long long fp64_rows;  // fp32 rows recomputed in fp64 (narrow.cuh)
   // the ellipsoid solver's work (narrow.cuh: NarrowFlags, summed; the largest by atomicMax)
   unsigned long long solver_runs, evaluations, max_evaluations;

@@ -78,41 +78,36 @@ __global__ void __launch_bounds__(kBlock)
   add_flags(flags, c);
 }
 
-// narrow, shapes, first pass: ShapeDecide::triage on every candidate — verdict[k] (reject, accept,
-// hard) and the kept minimiser normal[k] of a general ellipsoid pair. Cheap and nearly uniform per
-// thread: closed forms, root finds, the PW filter, one Newton run with its certificate.
+// narrow, shapes, first pass (triage), in two kernels: ShapeDecide::screen on every candidate —
+// verdict[k] (reject, accept, hard, or solve: a general pair for the first start) and the kept normal
+// of a settled pair: closed forms, root finds, the centre line, no solver code; then
+// ShapeDecide::first_pass over the `solve` list alone (the PW filter and one Newton run with the cheap
+// certificates; in one kernel the Newton lanes — half the candidates — made every warp pay for them).
 template <class Real>
 __global__ void __launch_bounds__(kBlock)
-    narrow_triage_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
+    narrow_screen_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
                          std::uint32_t n_pairs, ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
                          Vec3<Real>* __restrict__ normal, Counters* __restrict__ c) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   NarrowFlags flags;
   if (k < n_pairs) {
     Vec3<Real> n{};
-    verdict[k] = static_cast<std::uint32_t>(decide.triage(pair_a[k], pair_b[k], flags, n));
+    verdict[k] = static_cast<std::uint32_t>(decide.screen(pair_a[k], pair_b[k], flags, n));
     normal[k] = n;
   }
   add_flags(flags, c);
 }
 
-// Selects the hard candidates (verdict 2) for the settle pass, then for the whole solve.
-struct IsHard {
-  const std::uint32_t* verdict;
-  __device__ bool operator()(std::uint32_t k) const { return verdict[k] == 2u; }
-};
-
-// narrow, shapes, second pass: ShapeDecide::settle on the candidates triage left hard (listed in
-// `list`, their count on the device; launched like the hard kernel below): the first start again with
-// every certificate, in warps of such candidates alone (in the triage kernel the inner-ellipsoid
-// certificate idled the warps of its 3 % of lanes: 2^20 fp32 triage 0.235 → 0.340 ms on the H100).
-template <class Real>
+// Pass `Pass` of ShapeDecide (first_pass, settle) over the candidates listed in `list` (their count
+// on the device: launched over every candidate, the blocks past the count return at once, so the host
+// need not wait for it): verdict[k] and the kept minimiser where it settles the pair.
+enum class ListPass { first, settle };
+template <class Real, ListPass Pass>
 __global__ void __launch_bounds__(kBlock)
-    narrow_settle_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
-                         const std::uint32_t* __restrict__ list,
-                         const unsigned long long* __restrict__ n_list, ShapeDecide<Real> decide,
-                         std::uint32_t* __restrict__ verdict, Vec3<Real>* __restrict__ normal,
-                         Counters* __restrict__ c) {
+    narrow_list_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
+                       const std::uint32_t* __restrict__ list, const unsigned long long* __restrict__ n_list,
+                       ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
+                       Vec3<Real>* __restrict__ normal, Counters* __restrict__ c) {
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
   const unsigned long long count = *n_list;
   if (blockIdx.x * kBlock >= count) return;  // the whole block is past the count
@@ -120,14 +115,21 @@ __global__ void __launch_bounds__(kBlock)
   if (i < count) {
     const std::uint32_t k = list[i];
     Vec3<Real> n{};
-    const auto v = decide.settle(pair_a[k], pair_b[k], flags, n);
-    if (v != ShapeDecide<Real>::Verdict::hard) {
-      verdict[k] = static_cast<std::uint32_t>(v);
-      normal[k] = n;
-    }
+    const auto v = Pass == ListPass::first ? decide.first_pass(pair_a[k], pair_b[k], flags, n)
+                                           : decide.settle(pair_a[k], pair_b[k], flags, n);
+    verdict[k] = static_cast<std::uint32_t>(v);
+    normal[k] = n;
   }
   add_flags(flags, c);
 }
+
+// Selects the candidates of one verdict: solve (3) for the first pass, hard (2) for the settle pass,
+// then for the whole solve.
+struct HasVerdict {
+  const std::uint32_t* verdict;
+  std::uint32_t value;
+  __device__ bool operator()(std::uint32_t k) const { return verdict[k] == value; }
+};
 
 // narrow, shapes, third pass: the whole solve for the hard candidates alone (listed in `hard`, their
 // count on the device: launched over every candidate, the threads past the count return at once, so
@@ -266,24 +268,30 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
   Vec3<Narrow>* d_normal = r.ws.normals.template span_as<Vec3<Narrow>>(np).data();
   unsigned long long* d_n_hard = &r.d_counters->hard;
   unsigned long long* d_n_unsettled = &r.d_counters->unsettled;
-  r.events.mark_narrow_split(0, st);
-  cuda::narrow_triage_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
-      r.pair_a.Current(), r.pair_b.Current(), np, decide, d_verdict, d_normal, r.d_counters);
-  CG_CUDA_CHECK_LAUNCH("narrow_triage");
-  r.events.mark_narrow_split(1, st);
-  auto select_hard = [&](unsigned long long* d_count) {
+  unsigned long long* d_n_solve = &r.d_counters->to_solve;
+  using Verdict = typename ShapeDecide<Narrow>::Verdict;
+  auto select = [&](Verdict v, unsigned long long* d_count) {
     cub_run(r.ws, "narrow", [&](void* t, std::size_t& b) {
       return cub::DeviceSelect::If(t, b, thrust::counting_iterator<std::uint32_t>(0), d_hard, d_count,
-                                   int(np), cuda::IsHard{d_verdict}, st);
+                                   int(np), cuda::HasVerdict{d_verdict, static_cast<std::uint32_t>(v)}, st);
     });
   };
-  select_hard(d_n_unsettled);
-  cuda::narrow_settle_kernel<Narrow>
+  r.events.mark_narrow_split(0, st);
+  cuda::narrow_screen_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
+      r.pair_a.Current(), r.pair_b.Current(), np, decide, d_verdict, d_normal, r.d_counters);
+  CG_CUDA_CHECK_LAUNCH("narrow_screen");
+  select(Verdict::solve, d_n_solve);
+  cuda::narrow_list_kernel<Narrow, cuda::ListPass::first><<<blocks_for(np), kBlock, 0, st>>>(
+      r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_solve, decide, d_verdict, d_normal, r.d_counters);
+  CG_CUDA_CHECK_LAUNCH("narrow_first_pass");
+  r.events.mark_narrow_split(1, st);
+  select(Verdict::hard, d_n_unsettled);
+  cuda::narrow_list_kernel<Narrow, cuda::ListPass::settle>
       <<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_unsettled,
                                           decide, d_verdict, d_normal, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_settle");
   r.events.mark_narrow_split(2, st);
-  select_hard(d_n_hard);
+  select(Verdict::hard, d_n_hard);
   cuda::narrow_hard_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
       r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, decide, d_verdict, d_normal, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_hard");

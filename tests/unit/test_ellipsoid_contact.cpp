@@ -523,6 +523,42 @@ TYPED_TEST(EllipsoidContactTest, InnerEllipsoidCertifiesDeepOverlapsExactly) {
   }
 }
 
+// The centre-line pre-test (ellipsoid_contact.hpp: separated_along_centres) rejects only pairs that
+// are apart — by the exact long-double Perram–Wertheim function — and most of the apart ones among
+// bounding-sphere candidates, including pairs placed a hair apart along the centre line.
+TYPED_TEST(EllipsoidContactTest, CentreLineRejectsOnlyPairsApart) {
+  using Real = TypeParam;
+  std::mt19937_64 rng(2718);
+  std::uniform_real_distribution<double> u(-2, 2);
+  int candidates = 0, apart = 0, rejected = 0;
+  for (int i = 0; i < 4000; ++i) {
+    const double aspect = i % 2 ? 4.0 : 10.0;
+    Body<Real> a{{}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
+    Body<Real> b{
+        {Real(u(rng)), Real(u(rng)), Real(u(rng))}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
+    if (i % 8 == 0) {  // a hair apart along the centre line: |a − b| = h_A(u) + h_B(u) (1 + 1e-5)
+      const exact::Pair p = reference_pair(a, b);
+      const LD len = std::sqrt(exact::dotp(p.r, p.r));
+      const exact::V dir{p.r.x / len, p.r.y / len, p.r.z / len};
+      const LD reach = exact::support_value(p.a, dir) + exact::support_value(p.b, dir);
+      const LD s = reach * LD(1 + 1e-5) / len;
+      b.centre = {Real(LD(b.centre.x) * s), Real(LD(b.centre.y) * s), Real(LD(b.centre.z) * s)};
+    }
+    const Ellipsoid<Real> ea = engine_body(a), eb = engine_body(b);
+    const Vec3<Real> d = ea.centre - eb.centre;
+    if (std::sqrt(double(dot(d, d))) > double(scale_of(a, b))) continue;  // bounding spheres apart
+    ++candidates;
+    const LD pw = exact::pw_exact(reference_pair(a, b));
+    apart += pw > 1;
+    if (!separated_along_centres(ea, eb)) continue;
+    ++rejected;
+    EXPECT_GT(pw, LD(1)) << tag<Real>("") << " pair " << i << ": rejected but not apart";
+  }
+  std::printf("[ellipsoid] %s centre line: %d candidates, %d apart, %d rejected before PW\n",
+              tag<Real>("").c_str(), candidates, apart, rejected);
+  EXPECT_GE(rejected, apart * 3 / 4) << "the centre line should reject most pairs that are apart";
+}
+
 // A centre inside the other body.
 TYPED_TEST(EllipsoidContactTest, DeepPenetration) {
   using Real = TypeParam;
