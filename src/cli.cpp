@@ -166,6 +166,16 @@ int run_cli(int argc, char** argv, Session& session) {
        "Grid cell edge: auto (the edge a cost model of the sort and pair stages picks, 1-3x the "
        "smallest), min (the largest diameter + rounding margin, Le Grand's choice) or a length")
       ->default_str("auto");
+  d->add_option("--solver-tolerance", det.solver_tolerance,
+                "Ellipsoid solver: Newton stops when the tangential gradient is <= this x the pair's size "
+                "(0: the mode's default, fp32 2e-5, fp64 1e-11); larger is faster and less accurate")
+      ->check(CLI::NonNegativeNumber)
+      ->default_str("0");
+  d->add_option("--solver-iterations", det.solver_iterations,
+                "Ellipsoid solver: evaluations of f per Newton start, at most (0: the default, 40); a pair "
+                "that does not converge takes the safety net and is counted as unconverged")
+      ->check(CLI::NonNegativeNumber)
+      ->default_str("0");
   d->add_option("--csv", det.csv, "Also write the contacts as CSV (for small results)");
   d->add_option("--threads", det.threads, "CPU backend threads (0: all cores)")
       ->check(CLI::NonNegativeNumber);

@@ -449,6 +449,8 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.engine.cell_size = cmd.cell_size;
   o.engine.cell_choice = cmd.cell_choice;
   o.engine.threads = cmd.threads;
+  o.engine.ellipsoid_tolerance = cmd.solver_tolerance;
+  o.engine.ellipsoid_max_iterations = cmd.solver_iterations;
   o.engine.skin = cmd.skin;
   if (cmd.backend != Backend::cpu) o.engine.device = session.device_for(cuda_device_count());
   o.axis = cmd.axis;

@@ -164,6 +164,8 @@ struct DetectCommand {
   double cell_size = 0;                        // 0: chosen by cell_choice
   CellChoice cell_choice = CellChoice::tuned;  // --cell-size auto | min
   int threads = 0;
+  double solver_tolerance = 0;  // EngineOptions::ellipsoid_tolerance (--solver-tolerance; 0: default)
+  int solver_iterations = 0;    // EngineOptions::ellipsoid_max_iterations (--solver-iterations; 0: default)
   SlabAxis axis = SlabAxis::automatic;
   Balance balance = Balance::count;
   SceneRead read = SceneRead::automatic;

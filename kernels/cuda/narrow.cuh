@@ -98,27 +98,40 @@ __global__ void __launch_bounds__(kBlock)
   add_flags(flags, c);
 }
 
-// Pass `Pass` of ShapeDecide (first_pass, settle) over the candidates listed in `list` (their count
-// on the device: launched over every candidate, the blocks past the count return at once, so the host
-// need not wait for it): verdict[k] and the kept minimiser where it settles the pair.
-enum class ListPass { first, settle };
+// Pass `Pass` of ShapeDecide over the candidates listed in `list` (their count on the device: launched
+// over every candidate, the blocks past the count return at once, so the host need not wait for it),
+// so that every lane of a warp runs the same pass: first_pass (the general pairs the screen left),
+// settle (the ones triage left hard), whole (the start set for the ones still hard; fp32's pairs in
+// fp64 are left to narrow_hard_fp64_kernel). verdict[k] and the kept minimiser normal[k].
+enum class ListPass { first, settle, whole };
 template <class Real, ListPass Pass>
 __global__ void __launch_bounds__(kBlock)
     narrow_list_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
                        const std::uint32_t* __restrict__ list, const unsigned long long* __restrict__ n_list,
                        ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
                        Vec3<Real>* __restrict__ normal, Counters* __restrict__ c) {
+  using Verdict = typename ShapeDecide<Real>::Verdict;
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
   const unsigned long long count = *n_list;
   if (blockIdx.x * kBlock >= count) return;  // the whole block is past the count
   NarrowFlags flags;
   if (i < count) {
-    const std::uint32_t k = list[i];
+    const std::uint32_t k = list[i], a = pair_a[k], b = pair_b[k];
     Vec3<Real> n{};
-    const auto v = Pass == ListPass::first ? decide.first_pass(pair_a[k], pair_b[k], flags, n)
-                                           : decide.settle(pair_a[k], pair_b[k], flags, n);
-    verdict[k] = static_cast<std::uint32_t>(v);
-    normal[k] = n;
+    Verdict v;
+    if constexpr (Pass == ListPass::first) {
+      v = decide.first_pass(a, b, flags, n);
+    } else if constexpr (Pass == ListPass::settle) {
+      v = decide.settle(a, b, flags, n);
+    } else {
+      v = decide.in_fp64(a, b)
+              ? Verdict::hard
+              : (decide.template solve<false>(a, b, flags, n) ? Verdict::accept : Verdict::reject);
+    }
+    if (v != Verdict::hard || Pass != ListPass::whole) {
+      verdict[k] = static_cast<std::uint32_t>(v);
+      normal[k] = n;
+    }
   }
   add_flags(flags, c);
 }
@@ -130,32 +143,6 @@ struct HasVerdict {
   std::uint32_t value;
   __device__ bool operator()(std::uint32_t k) const { return verdict[k] == value; }
 };
-
-// narrow, shapes, third pass: the whole solve for the hard candidates alone (listed in `hard`, their
-// count on the device: launched over every candidate, the threads past the count return at once, so
-// the host need not wait for the count), so every lane of a warp runs one: verdict 0 / 1 and the
-// minimiser.
-template <class Real>
-__global__ void __launch_bounds__(kBlock)
-    narrow_hard_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
-                       const std::uint32_t* __restrict__ hard, const unsigned long long* __restrict__ n_hard,
-                       ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
-                       Vec3<Real>* __restrict__ normal, Counters* __restrict__ c) {
-  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
-  const unsigned long long count = *n_hard;
-  if (blockIdx.x * kBlock >= count) return;  // the whole block is past the count
-  NarrowFlags flags;
-  if (i < count) {
-    const std::uint32_t k = hard[i];
-    const std::uint32_t a = pair_a[k], b = pair_b[k];
-    if (!decide.in_fp64(a, b)) {  // fp32's pairs in fp64: narrow_hard_fp64_kernel
-      Vec3<Real> n{};
-      verdict[k] = decide.template solve<false>(a, b, flags, n) ? 1u : 0u;
-      normal[k] = n;
-    }
-  }
-  add_flags(flags, c);
-}
 
 // fp32's pairs in fp64 (core/shape_narrow.hpp: ShapeDecide::in_fp64, sent to the hard list by triage):
 // solved in double here, so that the double solve's registers and stack are this kernel's alone (in
@@ -292,7 +279,7 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
   CG_CUDA_CHECK_LAUNCH("narrow_settle");
   r.events.mark_narrow_split(2, st);
   select(Verdict::hard, d_n_hard);
-  cuda::narrow_hard_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
+  cuda::narrow_list_kernel<Narrow, cuda::ListPass::whole><<<blocks_for(np), kBlock, 0, st>>>(
       r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, decide, d_verdict, d_normal, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_hard");
   if constexpr (std::is_same_v<Narrow, float>) {

@@ -52,6 +52,37 @@ class Cli : public TempDirTest {
   }
 };
 
+// The ellipsoid solver's speed/accuracy knob on the command line: a looser tolerance makes fewer
+// evaluations of f per run; a starved iteration cap is never silent (the summary counts the
+// unconverged solves); a negative value is a usage error.
+TEST_F(Cli, SolverToleranceAndIterationsReachTheSolver) {
+  ASSERT_EQ(run("generate " + path("e.h5") + " --kind ellipsoids -n 3000 --seed 11 -q").code, 0);
+  auto per_run = [](const std::string& out) {
+    const auto at = out.find("runs, ");
+    return at == std::string::npos ? -1.0 : std::stod(out.substr(at + 6));
+  };
+  auto unconverged = [](const std::string& out) {
+    const auto at = out.find(" narrow solves unconverged");
+    if (at == std::string::npos) return -1L;
+    const auto from = out.rfind(' ', at - 1);
+    return std::stol(out.substr(from + 1, at - from - 1));
+  };
+  const Result base =
+      run("detect " + path("e.h5") + " -o " + path("d.h5") + " --backend cpu --precision fp64");
+  const Result loose = run("detect " + path("e.h5") + " -o " + path("l.h5") +
+                           " --backend cpu --precision fp64 --solver-tolerance 1e-3");
+  const Result starved = run("detect " + path("e.h5") + " -o " + path("s.h5") +
+                             " --backend cpu --precision fp64 --solver-iterations 2");
+  ASSERT_EQ(base.code, 0) << base.output;
+  ASSERT_EQ(loose.code, 0) << loose.output;
+  ASSERT_EQ(starved.code, 0) << starved.output;
+  EXPECT_GT(per_run(base.output), 0) << base.output;
+  EXPECT_LT(per_run(loose.output), per_run(base.output)) << loose.output;
+  EXPECT_EQ(unconverged(base.output), 0) << base.output;
+  EXPECT_GT(unconverged(starved.output), 0) << starved.output;
+  expect_detect_fails(path("e.h5"), 2, {"--solver-tolerance"}, "--backend cpu --solver-tolerance -1");
+}
+
 TEST_F(Cli, GenerateDetectRoundTrip) {
   Result g = run("generate " + path("s.h5") + " --count 3000 --seed 7 -q");
   ASSERT_EQ(g.code, 0) << g.output;
