@@ -5,8 +5,9 @@
 //   accept(a, b, flags)  the count pass: is candidate (a, b) a contact (and the solver's flags, counted
 //                        once per candidate into EngineStats)
 //   row(a, b, full)      the fill pass, for an accepted candidate: its row, world frame
-//   ShapeDecide only: triage / solve / row_from, the two-pass count both backends run (below); its
-//   accept / row are the one whole solve per candidate that the two passes must reproduce bit for bit
+//   ShapeDecide only: triage (screen + first_pass) / settle / solve / row_from, the three-pass count
+//   both backends run (below); its accept / row are the one whole solve per candidate that the passes
+//   must reproduce bit for bit
 //   (EngineShapesTest.ThreePassNarrowEqualsOneWholeSolve), and row serves the closed-form pairs.
 // The bodies come as NarrowBodies (core/narrow.hpp): fp64 and mixed decide and compute from the world
 // doubles (pair_frame), fp32 from pack's local floats — except the pairs whose float centres it does

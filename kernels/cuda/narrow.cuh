@@ -11,6 +11,9 @@
 // scene has ellipsoids (r.d_shapes set by shapes.cuh); the host backend uses the same structs. mixed
 // (fp32 broad phase, enlarged spheres): on sphere scenes its pair stage already takes fp64's decision
 // (Fp64Touch), so one row per candidate; with ellipsoids or a skin the fp64 narrow stage decides.
+// Scenes with ellipsoids count in passes (narrow_shapes_count): a screen of every candidate, then the
+// first start, the settle pass and the whole start set, each over a list of the candidates the previous
+// pass left (cub::DeviceSelect), so that a warp's lanes do the same work.
 // Flags and offsets live in the candidates' dead alternate buffers (pair_a / pair_b .Alternate()).
 #include <thrust/iterator/counting_iterator.h>
 

@@ -13,7 +13,8 @@ namespace {
 // offsets from the scan) do not depend on the chunking or the thread count. A candidate costs up to
 // ~100 sphere tests, and unevenly: small chunks (>= 64 candidates, up to 8192) handed out dynamically.
 // The rows of the accepted candidates are kept per chunk by the count pass, built as the device builds
-// them (triage, solve for the hard ones, row_from the minimiser: the same bits).
+// them (triage, settle for the candidates it leaves, solve for the ones still hard, row_from the
+// minimiser: the same bits).
 struct NarrowCounts {
   NarrowFlags flags;
   std::uint64_t unsettled = 0, hard = 0, evaluations = 0;
