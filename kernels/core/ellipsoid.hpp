@@ -101,6 +101,13 @@ CG_HD Vec3<Real> normalized(Vec3<Real> v) {
   return (Real(1) / cg_sqrt(dot(v, v))) * v;
 }
 
+// The support value h(n) = |D Rᵀ n| of an ellipsoid about its centre.
+template <class Real>
+CG_HD Real support_value(const Ellipsoid<Real>& e, Vec3<Real> n) {
+  const Vec3<Real> w = hadamard(e.semi_axes, mul_transpose(e.rotation, n));
+  return cg_sqrt(dot(w, w));
+}
+
 // Symmetric 3×3 matrix.
 template <class Real>
 struct Sym3 {

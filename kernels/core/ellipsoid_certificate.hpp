@@ -46,9 +46,7 @@ namespace cg::detail {
 template <class Real>
 CG_HD Real inscribed_ball_reach(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b, Vec3<Real> n) {
   const Real ea = min_axis(a.semi_axes), eb = min_axis(b.semi_axes);
-  const Vec3<Real> wa = hadamard(a.semi_axes, mul_transpose(a.rotation, n));
-  const Vec3<Real> wb = hadamard(b.semi_axes, mul_transpose(b.rotation, n));
-  return ea * ea / cg_sqrt(dot(wa, wa)) + eb * eb / cg_sqrt(dot(wb, wb));
+  return ea * ea / support_value(a, n) + eb * eb / support_value(b, n);
 }
 
 // A lower bound of the smallest eigenvalue of the symmetric positive semidefinite g, proved: on

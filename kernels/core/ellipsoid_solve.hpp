@@ -36,13 +36,6 @@ CG_HD void add_body(const Ellipsoid<Real>& e, Evaluation<Real>& ev) {
   ev.h22 += (dot(u2, u2) - g2 * g2) * inv;
 }
 
-// h(n) = |D Rᵀ n| alone.
-template <class Real>
-CG_HD Real support_value(const Ellipsoid<Real>& e, Vec3<Real> n) {
-  const Vec3<Real> w = hadamard(e.semi_axes, mul_transpose(e.rotation, n));
-  return cg_sqrt(dot(w, w));
-}
-
 template <class Real>
 CG_HD Evaluation<Real> evaluate(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b, Vec3<Real> r,
                                 Vec3<Real> n) {
