@@ -28,22 +28,24 @@
 //      then from the 3 lowest of a screen of 20 directions (cube and face diagonals of both body
 //      frames, f values only). Two cheap global moves: a local minimum with n·(a − b) < 0 is reflected
 //      (f(−n) = f(n) + 2 n·(a − b) is lower) and Newton continues from −n; and Newton runs once more
-//      from the antipode of the best (when a − b is short, minima come in near-antipodal pairs). A start
-//      whose iterate comes within 1e-4 rad of the converged best stops there (same minimum). The
-//      smallest f wins; a later candidate must be lower by more than the rounding of f (ties keep the
-//      earlier start). Each ingredient was added after a stress run against the exact reference
-//      (deep overlaps — a centre inside the other body — and random overlaps, axis ratios 3–100, double)
-//      showed misses; the unit tests keep those pairs: 8 axis starts missed 3 of 7 500 (all with
-//      n·(a − b) < 0: reflection), then 3 of 18 000 (antipodal pairs: antipode run), then 2 of 24 000
-//      (bisector starts), then 1 of 24 000 (screen); the final set missed none of 48 000 fresh pairs.
-//      5 axis starts alone miss deep overlaps routinely (A's centre inside B needs B's axes).
-//      The certificates (ellipsoid_certificate.hpp, with their proofs): a converged minimum n with
-//      t = f(n) is global to within the solver tolerance if t < 0 (separated), or
-//      t ≤ e_A²/h_A(n) + e_B²/h_B(n) (e the smallest semi-axis: two balls tangent inside at the contact
-//      points), or an inner ellipsoid of A ⊕ (−B) touching it at n holds the ball of radius t; then the
-//      rest of the set is skipped: separated and shallow pairs — nearly every contact of a packing —
-//      and nearly all deep overlaps cost one start (0.35 % of a random scene's candidates do not);
-//      SolverSettings::certify = false runs the whole set (tests compare the two bit for bit).
+//      from the antipode of the best (when a − b is short, minima come in near-antipodal pairs). Each
+//      start's run is a function of that start alone (newton_run), so a batch of them may run side by
+//      side — the device's whole-set kernel gives each start a lane of a warp (SerialRuns, WarpRuns;
+//      before, a run stopped within 1e-4 rad of the converged best, which chained every run to the one
+//      before it). The smallest f wins; a later candidate must be lower by more than the rounding of
+//      f (ties keep the earlier start). Each ingredient was added after a stress run against the exact
+//      reference (deep overlaps — a centre inside the other body — and random overlaps, axis ratios 3–100,
+//      double) showed misses; the unit tests keep those pairs: 8 axis starts missed 3 of 7 500 (all with n·(a
+//      − b) < 0: reflection), then 3 of 18 000 (antipodal pairs: antipode run), then 2 of 24 000 (bisector
+//      starts), then 1 of 24 000 (screen); the final set missed none of 48 000 fresh pairs. 5 axis starts
+//      alone miss deep overlaps routinely (A's centre inside B needs B's axes). The certificates
+//      (ellipsoid_certificate.hpp, with their proofs): a converged minimum n with t = f(n) is global to
+//      within the solver tolerance if t < 0 (separated), or t ≤ e_A²/h_A(n) + e_B²/h_B(n) (e the smallest
+//      semi-axis: two balls tangent inside at the contact points), or an inner ellipsoid of A ⊕ (−B) touching
+//      it at n holds the ball of radius t; then the rest of the set is skipped: separated and shallow pairs —
+//      nearly every contact of a packing — and nearly all deep overlaps cost one start (0.35 % of a random
+//      scene's candidates do not); SolverSettings::certify = false runs the whole set (tests compare the two
+//      bit for bit).
 //   3. Safety net, never silently wrong: if the best minimum disagrees with the PW sign beyond rounding
 //      (a missed global minimum), or the winning start did not converge, 13 more fixed directions are
 //      tried and a continuation runs from the best point with 4× the iteration cap; `fallback` is set,
@@ -99,9 +101,10 @@ CG_HD bool separated_along_centres(const Ellipsoid<Real>& a, const Ellipsoid<Rea
   return len - reach > noise;
 }
 
-template <SolveScope Scope = SolveScope::whole, class Real>
+template <SolveScope Scope = SolveScope::whole, class Real, class Runs = SerialRuns>
 CG_HD EllipsoidPairResult<Real> ellipsoid_contact(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b,
-                                                  const SolverSettings<Real>& settings = {}) {
+                                                  const SolverSettings<Real>& settings = {},
+                                                  const Runs& runs = {}) {
   const Vec3<Real> ea = a.semi_axes, eb = b.semi_axes;
   const bool sa = ea.x == ea.y && ea.y == ea.z, sb = eb.x == eb.y && eb.y == eb.z;
   EllipsoidPairResult<Real> res{};
@@ -130,7 +133,7 @@ CG_HD EllipsoidPairResult<Real> ellipsoid_contact(const Ellipsoid<Real>& a, cons
     if (separated_along_centres(a, b)) return apart(Real(-1));
     const PerramWertheim<Real> pw = perram_wertheim(a, b);
     if (!pw_may_touch(pw)) return apart(pw.value);
-    res.contact = ellipsoid_pair_contact<Scope>(a, b, pw, settings);
+    res.contact = ellipsoid_pair_contact<Scope>(a, b, pw, settings, runs);
     if (!res.contact.complete) {  // first start uncertified: no geometry yet
       res.in_contact = false;
       return res;

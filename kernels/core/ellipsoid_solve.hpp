@@ -59,7 +59,6 @@ struct LocalResult {
   Real f, grad;
   int evaluations;
   bool converged;
-  bool merged;  // stopped on reaching the neighbourhood of `known`: the same minimum, not a candidate
 };
 
 // Damped Newton from n0: the 2×2 Riemannian Hessian is shifted to be positive definite (λmin ≥ δ), the
@@ -69,8 +68,7 @@ struct LocalResult {
 // beyond rounding.
 template <class Real>
 CG_HD LocalResult<Real> local_minimise(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b, Vec3<Real> r,
-                                       Vec3<Real> n0, Real scale, Real tolerance, int max_evaluations,
-                                       const Vec3<Real>* known = nullptr) {
+                                       Vec3<Real> n0, Real scale, Real tolerance, int max_evaluations) {
   const Real eps = std::numeric_limits<Real>::epsilon();
   const Real gtol = tolerance * scale;
   const Real f_noise = Real(16) * eps * (scale + cg_sqrt(dot(r, r)));
@@ -102,23 +100,35 @@ CG_HD LocalResult<Real> local_minimise(const Ellipsoid<Real>& a, const Ellipsoid
       grad = next_grad;
       converged = grad <= gtol;
       radius = cg_min(Real(2) * radius, Real(1));
-      if (known != nullptr && !converged) {
-        // Within 1e-4 rad of a minimiser already found (and converged), Newton ends there: stop.
-        const Vec3<Real> d = ev.n - *known;
-        if (dot(d, d) < Real(1e-8)) return {ev.n, ev.f, grad, evaluations, false, true};
-      }
     } else {
       radius *= Real(0.25);
       if (radius < Real(4) * eps) break;  // stalled: no representable progress
     }
   }
-  return {ev.n, ev.f, grad, evaluations, converged, false};
+  return {ev.n, ev.f, grad, evaluations, converged};
 }
 
 // Puts a start on the side of a − b (where the global minimiser lies); a zero vector is left alone.
 template <class Real>
 CG_HD Vec3<Real> towards(Vec3<Real> v, Vec3<Real> r) {
   return dot(v, r) < Real(0) ? -v : v;
+}
+
+// One Newton run of the start set: the start put towards a − b, damped Newton, and a minimum on the far
+// side of a − b reflected — f(−n) = f(n) + 2 n·(a − b) < f(n), so it is never global; Newton continues
+// from its mirror image. `evaluations` counts both legs. A run is a function of its start alone (no run
+// stops at a minimum another found), so the runs of one solve may go one after the other or side by
+// side (SerialRuns, and the device's warp of lanes) with the same bits.
+template <class Real>
+CG_HD LocalResult<Real> newton_run(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b, Vec3<Real> r,
+                                   Vec3<Real> start, Real scale, Real tolerance, int max_evaluations) {
+  LocalResult<Real> res = local_minimise(a, b, r, towards(start, r), scale, tolerance, max_evaluations);
+  if (dot(res.n, r) < Real(0)) {
+    const int first = res.evaluations;
+    res = local_minimise(a, b, r, -res.n, scale, tolerance, max_evaluations);
+    res.evaluations += first;
+  }
+  return res;
 }
 
 // The 13 extra directions of the safety net: the 3 world axes, the 4 cube diagonals, the 6 face
@@ -158,6 +168,28 @@ CG_HD Vec3<Real> extra_start(int i) {
 
 }  // namespace detail
 
+// How a solve runs a batch of its Newton runs (newton_run from start j, j < count <= 32) and takes their
+// results in start order: before each, more() says whether the solve still wants one (the start set
+// stops at a certified minimum); start(j) gives start j (a zero vector: none, skipped); run(s) is the
+// run from s; take(result) folds it in. SerialRuns runs start j only when it is wanted (the host; the
+// device's one-thread-per-pair kernels); the device's one-warp-per-pair kernel runs the whole batch on its
+// lanes at once and hands the results over in the same order (cuda/narrow.cuh: WarpRuns) — the same bits, the
+// same counts (a run no one takes is not counted).
+template <class Real>
+CG_HD bool is_zero(const Vec3<Real>& v) {
+  return v.x == Real(0) && v.y == Real(0) && v.z == Real(0);
+}
+struct SerialRuns {
+  template <class Start, class Run, class More, class Take>
+  CG_HD void batch(int count, const Start& start, const Run& run, const More& more, const Take& take) const {
+    for (int j = 0; j < count; ++j) {
+      if (!more()) return;
+      const auto s = start(j);
+      if (!is_zero(s)) take(run(s));
+    }
+  }
+};
+
 // The contact at a given normal n (from B towards A; the solve's minimiser): the support points,
 // local points, distance and positions. The solve ends with it, and the device's fill pass calls it
 // on the stored minimiser: the same bits without solving again.
@@ -182,12 +214,13 @@ CG_HD void contact_at_normal(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b,
 // first start unless it is certified (and consistent with the PW sign): `complete` false, no geometry;
 // where it is certified, the answer is the whole solve's, bit for bit. The scope is a template
 // parameter so that the first-start kernel does not carry the whole set's code (registers, stack).
-template <SolveScope Scope = SolveScope::whole, class Real>
+template <SolveScope Scope = SolveScope::whole, class Real, class Runs = SerialRuns>
 CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b,
                                                     const PerramWertheim<Real>& pw,
-                                                    const SolverSettings<Real>& settings = {}) {
+                                                    const SolverSettings<Real>& settings = {},
+                                                    const Runs& runs = {}) {
   const Vec3<Real> r = a.centre - b.centre;
-  const bool coincident = r.x == Real(0) && r.y == Real(0) && r.z == Real(0);
+  const bool coincident = is_zero(r);
   const Real scale = detail::max_axis(a.semi_axes) + detail::max_axis(b.semi_axes);
   const Real rlen = cg_sqrt(dot(r, r));
   EllipsoidContact<Real> out{};
@@ -201,23 +234,18 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
   detail::LocalResult<Real> best{};
   bool have = false;
   bool cert = false, cert_stale = true;  // the certificate of `best` (below), recomputed when it changes
-  auto consider = [&](Vec3<Real> start, int cap) {
-    detail::LocalResult<Real> res =
-        detail::local_minimise(a, b, r, detail::towards(start, r), scale, settings.tolerance, cap,
-                               have && best.converged ? &best.n : nullptr);
+  auto run = [&](Vec3<Real> start) {
+    return detail::newton_run(a, b, r, start, scale, settings.tolerance, settings.max_iterations);
+  };
+  auto take = [&](const detail::LocalResult<Real>& res) {
     out.iterations += res.evaluations;
-    if (!res.merged && dot(res.n, r) < Real(0)) {
-      // Reflection: f(−n) = f(n) + 2 n·r < f(n), so a minimum on the far side of a − b is never global;
-      // its mirror image is a better point, and Newton continues from there.
-      res = detail::local_minimise(a, b, r, -res.n, scale, settings.tolerance, cap);
-      out.iterations += res.evaluations;
-    }
-    if (!res.merged && (!have || res.f < best.f - f_tie)) {
+    if (!have || res.f < best.f - f_tie) {
       best = res;
       have = true;
       cert_stale = true;
     }
   };
+  auto always = [] { return true; };
   // The certificates of globality (core/ellipsoid_certificate.hpp): a negative minimum (separated),
   // two inscribed balls, an inner ellipsoid of A ⊕ (−B), in that order (the third costs about five
   // evaluations of f; SolveScope::first_start_cheap leaves it out), once per new best. Each proves
@@ -235,38 +263,34 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
     }
     return cert;
   };
+  const Vec3<Real> first = coincident ? Vec3<Real>{Real(1), Real(0), Real(0)} : pw.normal;
   if constexpr (Scope != SolveScope::whole) {
-    consider(coincident ? Vec3<Real>{Real(1), Real(0), Real(0)} : pw.normal, settings.max_iterations);
+    take(run(first));
     if (!certified()) {
       out.complete = false;  // the second pass runs the whole solve
       return out;
     }
   } else {
-    // The fixed ordered start set.
+    // The fixed ordered start set, up to the first certified minimum.
     const int nstarts = settings.starts < 1 ? 1 : (settings.starts > 11 ? 11 : settings.starts);
-    for (int s = 0; s < nstarts && !certified(); ++s) {
-      Vec3<Real> start;
-      if (s == 0) {
-        start = coincident ? Vec3<Real>{Real(1), Real(0), Real(0)} : pw.normal;
-      } else if (s == 1) {
-        if (coincident) continue;  // (1,0,0) already ran
-        start = (Real(1) / rlen) * r;
-      } else if (s < 8) {
-        start = s < 5 ? column(a.rotation, s - 2) : column(b.rotation, s - 5);
-      } else if (s < 10) {  // the two bisectors of the thinnest axes of A and B
+    auto start_set = [&](int s) -> Vec3<Real> {
+      const Vec3<Real> none{};
+      if (s == 0) return first;
+      if (s == 1) return coincident ? none : (Real(1) / rlen) * r;  // (1,0,0) already ran
+      if (s < 8) return s < 5 ? column(a.rotation, s - 2) : column(b.rotation, s - 5);
+      Vec3<Real> v;
+      if (s < 10) {  // the two bisectors of the thinnest axes of A and B
         const Vec3<Real> ta = column(a.rotation, detail::min_index(a.semi_axes));
         const Vec3<Real> tb = detail::towards(column(b.rotation, detail::min_index(b.semi_axes)), ta);
-        const Vec3<Real> v = s == 8 ? ta + tb : ta - tb;
-        if (dot(v, v) < Real(1e-6)) continue;
-        start = detail::normalized(v);
+        v = s == 8 ? ta + tb : ta - tb;
       } else {  // the common normal of the longest axes (crossed needles)
-        const Vec3<Real> v = cross(column(a.rotation, detail::max_index(a.semi_axes)),
-                                   column(b.rotation, detail::max_index(b.semi_axes)));
-        if (dot(v, v) < Real(1e-6)) continue;
-        start = detail::normalized(v);
+        v = cross(column(a.rotation, detail::max_index(a.semi_axes)),
+                  column(b.rotation, detail::max_index(b.semi_axes)));
       }
-      consider(start, settings.max_iterations);
-    }
+      return dot(v, v) < Real(1e-6) ? none : detail::normalized(v);
+    };
+    runs.batch(
+        nstarts, start_set, run, [&] { return !certified(); }, take);
     // The screen: f (value only) at the 4 cube diagonals and 6 face diagonals of each body's frame (up
     // to sign, put towards a − b); Newton from the `screen` lowest. These in-between directions reach
     // basins that no axis start does (two comparable thin axes, one body's thin axis tilted by the other).
@@ -294,7 +318,8 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
         }
       }
       out.iterations += 20 / 4;  // 20 value-only evaluations ≈ 5 full ones
-      for (int k = 0; k < count; ++k) consider(top_n[k], settings.max_iterations);
+      runs.batch(
+          count, [&](int k) { return top_n[k]; }, run, always, take);
     }
     // The antipode of the best: where a − b is short against the bodies, minima come in near-antipodal
     // pairs (f(−n) = f(n) + 2 n·r) and the deeper one of a pair may be the one no start reached.
@@ -320,8 +345,10 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
     }
   } else if (inconsistent || !best.converged) {
     out.fallback = true;
-    for (int i = 0; i < 13; ++i) consider(detail::extra_start<Real>(i), settings.max_iterations);
-    if (!best.converged) consider(best.n, 4 * settings.max_iterations);  // continuation
+    runs.batch(
+        13, [](int i) { return detail::extra_start<Real>(i); }, run, always, take);
+    if (!best.converged)  // continuation
+      take(detail::newton_run(a, b, r, best.n, scale, settings.tolerance, 4 * settings.max_iterations));
   }
   out.converged = best.converged;
 

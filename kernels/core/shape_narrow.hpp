@@ -53,10 +53,10 @@ CG_HD Ellipsoid<Real> ellipsoid_of(const Sphere<Real>& s, const PackedShape<Real
 }
 
 // The contact of a pair with at least one ellipsoid (in the frame of sa, sb) and whether it is one.
-template <SolveScope Scope = SolveScope::whole, class Real>
+template <SolveScope Scope = SolveScope::whole, class Real, class Runs = SerialRuns>
 CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, const PackedShape<Real>& pa,
                               const PackedShape<Real>& pb, const SolverSettings<Real>& settings,
-                              EllipsoidContact<Real>& c) {
+                              EllipsoidContact<Real>& c, const Runs& runs = {}) {
   constexpr std::uint32_t sphere = static_cast<std::uint32_t>(Shape::sphere);
   if (pa.kind == sphere) {
     c = sphere_ellipsoid_contact(sa, ellipsoid_of(sb, pb), true);
@@ -67,7 +67,7 @@ CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, co
     return c.geometry.distance <= Real(0);
   }
   const EllipsoidPairResult<Real> r =
-      ellipsoid_contact<Scope>(ellipsoid_of(sa, pa), ellipsoid_of(sb, pb), settings);
+      ellipsoid_contact<Scope>(ellipsoid_of(sa, pa), ellipsoid_of(sb, pb), settings, runs);
   c = r.contact;
   return r.in_contact;
 }
@@ -232,8 +232,10 @@ struct ShapeDecide {
     if (in_fp64(a, b)) return Verdict::hard;
     return first_start<SolveScope::first_start>(a, b, flags, n);
   }
-  template <bool kFp64Pairs = true>
-  CG_HD bool solve(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
+  // `runs`: how the start set's runs go (SerialRuns; the device's warp kernel: WarpRuns, the same bits).
+  template <bool kFp64Pairs = true, class Runs = SerialRuns>
+  CG_HD bool solve(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n,
+                   const Runs& runs = {}) const {
     if constexpr (kFp64Pairs) {
       if (in_fp64(a, b)) {
         const Fp64Pair p = fp64_solve(a, b, flags);
@@ -243,7 +245,7 @@ struct ShapeDecide {
     }
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
-    const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c);
+    const bool contact = shape_pair_contact(f.a, f.b, shapes[a], shapes[b], settings, c, runs);
     note(a, b, c, flags);
     n = c.geometry.normal_on_b;
     return contact;

@@ -13,7 +13,8 @@
 // (Fp64Touch), so one row per candidate; with ellipsoids or a skin the fp64 narrow stage decides.
 // Scenes with ellipsoids count in passes (narrow_shapes_count): a screen of every candidate, then the
 // first start, the settle pass and the whole start set, each over a list of the candidates the previous
-// pass left (cub::DeviceSelect), so that a warp's lanes do the same work.
+// pass left (cub::DeviceSelect), so that a warp's lanes do the same work (the whole set of a short list:
+// one warp per pair, its starts on the lanes).
 // Flags and offsets live in the candidates' dead alternate buffers (pair_a / pair_b .Alternate()).
 #include <thrust/iterator/counting_iterator.h>
 
@@ -104,19 +105,22 @@ __global__ void __launch_bounds__(kBlock)
 // Pass `Pass` of ShapeDecide over the candidates listed in `list` (their count on the device: launched
 // over every candidate, the blocks past the count return at once, so the host need not wait for it),
 // so that every lane of a warp runs the same pass: first_pass (the general pairs the screen left),
-// settle (the ones triage left hard), whole (the start set for the ones still hard; fp32's pairs in
-// fp64 are left to narrow_hard_fp64_kernel). verdict[k] and the kept minimiser normal[k].
+// settle (the ones triage left hard), whole (the start set for the ones still hard, when there are more
+// than warp_limit: fewer go one warp each, narrow_whole_warp_kernel; fp32's pairs in fp64 are left to
+// narrow_hard_fp64_kernel). verdict[k] and the kept minimiser normal[k].
 enum class ListPass { first, settle, whole };
 template <class Real, ListPass Pass>
 __global__ void __launch_bounds__(kBlock)
     narrow_list_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
                        const std::uint32_t* __restrict__ list, const unsigned long long* __restrict__ n_list,
                        ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
-                       Vec3<Real>* __restrict__ normal, Counters* __restrict__ c) {
+                       Vec3<Real>* __restrict__ normal, Counters* __restrict__ c,
+                       unsigned long long warp_limit = 0) {
   using Verdict = typename ShapeDecide<Real>::Verdict;
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
   const unsigned long long count = *n_list;
-  if (blockIdx.x * kBlock >= count) return;  // the whole block is past the count
+  if (blockIdx.x * kBlock >= count) return;                    // the whole block is past the count
+  if (Pass == ListPass::whole && count <= warp_limit) return;  // narrow_whole_warp_kernel's
   NarrowFlags flags;
   if (i < count) {
     const std::uint32_t k = list[i], a = pair_a[k], b = pair_b[k];
@@ -146,6 +150,87 @@ struct HasVerdict {
   std::uint32_t value;
   __device__ bool operator()(std::uint32_t k) const { return verdict[k] == value; }
 };
+
+// The start set of one hard pair on a group of kSolveLanes lanes of a warp (core/ellipsoid_solve.hpp:
+// SerialRuns, whose bits and counts these are): lane j of the group runs start j of a round of the
+// batch, all at once, then every lane takes the results in start order, so the group's lanes agree on
+// each step of the solve after it (the same values, the same branches) — the pair's serial chain of
+// runs becomes the longest run of each round. Lanes per pair, measured on the H100 at 2^20 (3 400 hard
+// pairs, BENCHMARKS §3): fp32 16 (one round for the 11 starts, the screen's 4 and the safety net's 13;
+// hard pass 0.122 ms, 32 lanes 0.233, 8 lanes 0.139), fp64 8 (its kernel holds one block per SM, so
+// twice the resident groups: 0.189 ms, 16 lanes 0.284, 32 lanes 0.629).
+template <class Real>
+inline constexpr int kSolveLanes = sizeof(Real) == 8 ? 8 : 16;
+template <int kSolveLanes>
+struct WarpRuns {
+  unsigned mask;  // the group's lanes
+  int base;       // the group's first lane in the warp
+  template <class Real>
+  __device__ detail::LocalResult<Real> from_lane(const detail::LocalResult<Real>& v, int j) const {
+    detail::LocalResult<Real> o;
+    o.n = {__shfl_sync(mask, v.n.x, j, kSolveLanes), __shfl_sync(mask, v.n.y, j, kSolveLanes),
+           __shfl_sync(mask, v.n.z, j, kSolveLanes)};
+    o.f = __shfl_sync(mask, v.f, j, kSolveLanes);
+    o.grad = __shfl_sync(mask, v.grad, j, kSolveLanes);
+    o.evaluations = __shfl_sync(mask, v.evaluations, j, kSolveLanes);
+    o.converged = __shfl_sync(mask, v.converged ? 1 : 0, j, kSolveLanes) != 0;
+    return o;
+  }
+  template <class Start, class Run, class More, class Take>
+  __device__ void batch(int count, const Start& start, const Run& run, const More& more,
+                        const Take& take) const {
+    const int lane = static_cast<int>(threadIdx.x & 31u) - base;
+    for (int round = 0; round < count; round += kSolveLanes) {
+      const int j = round + lane;
+      const auto s = start(j < count ? j : round);
+      const bool mine = j < count && !is_zero(s);
+      decltype(run(s)) res{};
+      if (mine) res = run(s);
+      const unsigned valid = __ballot_sync(mask, mine) >> base;
+      for (int t = 0; t < kSolveLanes && round + t < count; ++t) {
+        if (!more()) return;
+        const auto rt = from_lane(res, t);  // every lane of the group shuffles
+        if (valid >> t & 1u) take(rt);
+      }
+    }
+  }
+};
+
+// The whole start set of the hard pairs, one group of kSolveLanes lanes per pair (WarpRuns), on a
+// fixed grid that walks the list: used when the list is short (*n_hard <= warp_limit, the host's bound
+// from the resident groups), where the one-thread-per-pair kernel waits on its slowest pair's serial
+// chain of ~17 runs; beyond it the list kernel (ListPass::whole) takes them (a group that must take
+// pairs one after the other loses to it: 2^22 fp32, ~3 pairs a group, 0.63 ms against 0.32). The same
+// bits either way.
+template <class Real, int kSolveLanes>
+__global__ void __launch_bounds__(kBlock)
+    narrow_whole_warp_kernel(const std::uint32_t* __restrict__ pair_a,
+                             const std::uint32_t* __restrict__ pair_b, const std::uint32_t* __restrict__ list,
+                             const unsigned long long* __restrict__ n_list, unsigned long long warp_limit,
+                             ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
+                             Vec3<Real>* __restrict__ normal, Counters* __restrict__ c) {
+  const unsigned long long count = *n_list;
+  if (count > warp_limit) return;  // the list kernel's
+  const int base = static_cast<int>(threadIdx.x & 31u) & ~(kSolveLanes - 1);
+  const WarpRuns<kSolveLanes> runs{unsigned((1ull << kSolveLanes) - 1u) << base, base};
+  const bool lead = (threadIdx.x & (kSolveLanes - 1)) == 0;
+  const unsigned long long groups = std::uint64_t(gridDim.x) * (kBlock / kSolveLanes);
+  NarrowFlags flags;  // the lead lane's: the other lanes solve the same pairs
+  for (unsigned long long i = (std::uint64_t(blockIdx.x) * kBlock + threadIdx.x) / kSolveLanes; i < count;
+       i += groups) {
+    const std::uint32_t k = list[i], a = pair_a[k], b = pair_b[k];
+    if (decide.in_fp64(a, b)) continue;  // narrow_hard_fp64_kernel's
+    NarrowFlags pair_flags;
+    Vec3<Real> n{};
+    const bool contact = decide.template solve<false>(a, b, pair_flags, n, runs);
+    if (lead) {
+      verdict[k] = contact ? 1u : 0u;
+      normal[k] = n;
+      flags.add(pair_flags);
+    }
+  }
+  add_flags(flags, c);  // every lane, after the walk
+}
 
 // fp32's pairs in fp64 (core/shape_narrow.hpp: ShapeDecide::in_fp64, sent to the hard list by triage):
 // solved in double here, so that the double solve's registers and stack are this kernel's alone (in
@@ -244,6 +329,22 @@ std::size_t layout_contacts(std::byte* o, std::size_t rows, bool full, cuda::Con
   return at;
 }
 
+// The warp kernel's grid (every resident block of it) and its limit: lists up to
+// Tuning::warp_solve_pairs pairs per resident lane group go a group per pair; 0 (the knob at 0): never.
+template <class Narrow>
+unsigned long long whole_warp_plan(const Tuning& tuning, int& blocks) {
+  constexpr int kLanes = cuda::kSolveLanes<Narrow>;
+  blocks = 0;
+  if (tuning.warp_solve_pairs == 0) return 0;
+  int device = 0, sms = 0, per_sm = 0;
+  CG_CUDA_CHECK(cudaGetDevice(&device));
+  CG_CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
+  CG_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(
+      &per_sm, cuda::narrow_whole_warp_kernel<Narrow, kLanes>, cuda::kBlock, 0));
+  blocks = sms * (per_sm > 0 ? per_sm : 1);
+  return static_cast<unsigned long long>(blocks) * (cuda::kBlock / kLanes) * tuning.warp_solve_pairs;
+}
+
 // The count pass of scenes with ellipsoids, in three: triage every candidate, settle the ones it left
 // hard, then the whole solve for the ones still hard (each list made by cub::DeviceSelect into
 // d_offset, dead until the scan). Returns the kept minimisers (ws.normals, one per candidate).
@@ -282,8 +383,20 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
   CG_CUDA_CHECK_LAUNCH("narrow_settle");
   r.events.mark_narrow_split(2, st);
   select(Verdict::hard, d_n_hard);
-  cuda::narrow_list_kernel<Narrow, cuda::ListPass::whole><<<blocks_for(np), kBlock, 0, st>>>(
-      r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, decide, d_verdict, d_normal, r.d_counters);
+  // the whole start set: a lane group per pair while the list is short (a few pairs per resident group),
+  // else one thread per pair; each kernel reads the count on the device and leaves the other's lists
+  constexpr int kLanes = cuda::kSolveLanes<Narrow>;
+  int warp_blocks = 0;
+  const unsigned long long warp_limit = whole_warp_plan<Narrow>(r.tuning, warp_blocks);
+  if (warp_limit > 0) {
+    cuda::narrow_whole_warp_kernel<Narrow, kLanes>
+        <<<warp_blocks, kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, warp_limit,
+                                         decide, d_verdict, d_normal, r.d_counters);
+    CG_CUDA_CHECK_LAUNCH("narrow_hard_warp");
+  }
+  cuda::narrow_list_kernel<Narrow, cuda::ListPass::whole>
+      <<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, decide,
+                                          d_verdict, d_normal, r.d_counters, warp_limit);
   CG_CUDA_CHECK_LAUNCH("narrow_hard");
   if constexpr (std::is_same_v<Narrow, float>) {
     cuda::narrow_hard_fp64_kernel<Narrow><<<cuda::kRareBlocks, kBlock, 0, st>>>(

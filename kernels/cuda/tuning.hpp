@@ -41,6 +41,11 @@ struct Tuning {
   // the narrow stage rejects the non-touching ones (count → scan → fill): the same contacts, slower;
   // a test knob for the rejecting path (default: spheres_touch, no compaction).
   CandidateFilter candidates = CandidateFilter::spheres_touch;
+  // CONTACTGRID_CUDA_WARP_SOLVE=K: the whole start set of the hard ellipsoid pairs goes one lane group
+  // per pair (its starts on the lanes) while there are at most K pairs per resident group, else one
+  // thread per pair (cuda/narrow.cuh); 0: always one thread per pair. The same contacts either way.
+  // Default 1: a group that takes pairs one after the other loses to a thread per pair (H100).
+  unsigned warp_solve_pairs = 1;
 };
 
 // `on` / `off` when the variable equals one of the two spellings, else automatic.
@@ -70,6 +75,8 @@ inline Tuning read_tuning() {
     t.renumber = renumber[0] == '1' ? Forced::on : Forced::off;
   t.counting_order = forced("CONTACTGRID_CUDA_ORDER", "counting", "radix");
   t.download_registered = forced("CONTACTGRID_CUDA_DOWNLOAD", "registered", "staged");
+  if (const char* w = std::getenv("CONTACTGRID_CUDA_WARP_SOLVE"))
+    t.warp_solve_pairs = static_cast<unsigned>(std::strtoul(w, nullptr, 10));
   if (forced("CONTACTGRID_CUDA_CANDIDATES", "cells", "spheres") == Forced::on)
     t.candidates = CandidateFilter::cells;
   return t;

@@ -896,6 +896,68 @@ TYPED_TEST(EllipsoidContactTest, StressRegressionsFindTheGlobalMinimum) {
   st.print();
 }
 
+// The start set's runs are functions of their starts alone (ellipsoid_solve.hpp: newton_run), so a
+// provider that runs every start of a batch before taking any — what the device's warp kernel does,
+// one start per lane (cuda/narrow.cuh: WarpRuns) — gives SerialRuns' bits and counts. Checked here on
+// the host with such a provider, over pairs that run the whole set: deep and crossed overlaps at
+// aspects 2–20, the certificates on and off, and a starved cap (the safety net's batch).
+struct BatchFirstRuns {
+  mutable int unused = 0;  // runs made that the solve did not take
+  template <class Start, class Run, class More, class Take>
+  void batch(int count, const Start& start, const Run& run, const More& more, const Take& take) const {
+    using Result = decltype(run(start(0)));
+    std::vector<Result> res(static_cast<std::size_t>(count));
+    std::vector<bool> valid(static_cast<std::size_t>(count));
+    for (int j = 0; j < count; ++j) {
+      const auto s = start(j);
+      valid[j] = !is_zero(s);
+      if (valid[j]) res[j] = run(s);
+    }
+    int j = 0;
+    for (; j < count && more(); ++j)
+      if (valid[j]) take(res[j]);
+    for (; j < count; ++j) unused += valid[j] ? 1 : 0;
+  }
+};
+
+TYPED_TEST(EllipsoidContactTest, RunsTakenInBatchesGiveTheSerialBits) {
+  using Real = TypeParam;
+  std::mt19937_64 rng(12000);
+  std::uniform_real_distribution<double> u(-0.9, 0.9);
+  SolverSettings<Real> certify, whole, starved;
+  whole.certify = false;
+  starved.max_iterations = 2;
+  int pairs = 0, fallbacks = 0, unused = 0;
+  for (double aspect : {2.0, 5.0, 20.0})
+    for (int i = 0; i < 60; ++i) {
+      Body<Real> a{{}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
+      Body<Real> b{
+          {Real(u(rng)), Real(u(rng)), Real(u(rng))}, random_axes<Real>(rng, aspect), random_quat<Real>(rng)};
+      const Ellipsoid<Real> ea = engine_body(a), eb = engine_body(b);
+      const PerramWertheim<Real> pw = perram_wertheim(ea, eb);
+      for (const SolverSettings<Real>* st : {&certify, &whole, &starved}) {
+        const EllipsoidContact<Real> s = ellipsoid_pair_contact(ea, eb, pw, *st);
+        const BatchFirstRuns batched;
+        const EllipsoidContact<Real> w = ellipsoid_pair_contact(ea, eb, pw, *st, batched);
+        const std::string what = "aspect " + std::to_string(aspect) + " pair " + std::to_string(i);
+        EXPECT_EQ(s.geometry.distance, w.geometry.distance) << what;
+        EXPECT_EQ(s.geometry.normal_on_b.x, w.geometry.normal_on_b.x) << what;
+        EXPECT_EQ(s.geometry.normal_on_b.y, w.geometry.normal_on_b.y) << what;
+        EXPECT_EQ(s.geometry.normal_on_b.z, w.geometry.normal_on_b.z) << what;
+        EXPECT_EQ(s.iterations, w.iterations) << what;
+        EXPECT_EQ(s.converged, w.converged) << what;
+        EXPECT_EQ(s.fallback, w.fallback) << what;
+        ++pairs;
+        fallbacks += s.fallback;
+        unused += batched.unused;
+      }
+    }
+  std::printf("[ellipsoid] %-28s %d solves, %d runs made and not taken, %d fallbacks\n",
+              tag<Real>("runs in batches").c_str(), pairs, unused, fallbacks);
+  EXPECT_GT(unused, 0) << "some batch should stop at a certified minimum";
+  EXPECT_GT(fallbacks, 0) << "the starved cap should reach the safety net's batch";
+}
+
 // Never silently wrong about convergence: with an iteration cap too small to converge (1 evaluation per
 // start, 4 in the continuation), a pair reports converged = false with `fallback` set. (Converged then
 // means a local minimum only: with starved starts it need not be the global one, and it is not checked.)

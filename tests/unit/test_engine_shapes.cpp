@@ -17,6 +17,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <map>
 #include <random>
@@ -416,28 +417,38 @@ TEST(EngineShapes, BadShapeInputNamesTheBody) {
 
 std::vector<ShapeScene> bit_scenes() {
   return {make_scene("ellipsoids", 51, 600, 1.0, 12.0), make_scene("mixed", 52, 800, 0.4, 13.0),
-          make_scene("sparse ellipsoids", 53, 300, 0.05, 14.0)};
+          make_scene("sparse ellipsoids", 53, 300, 0.05, 14.0),
+          make_scene("dense ellipsoids", 54, 1500, 1.0, 8.0)};  // deep overlaps: hard pairs
 }
 
+// Both ways of running the hard pairs' whole start set on the device (cuda/narrow.cuh: one warp per pair,
+// the default for short lists, and one thread per pair, CONTACTGRID_CUDA_WARP_SOLVE=0) give the CPU's bits.
 TYPED_TEST(EngineShapesTest, CudaBitIdenticalToCpu) {
   CG_SKIP_WITHOUT_CUDA();
   using Real = TypeParam;
-  for (const ShapeScene& s : bit_scenes())
-    for (Fields f : {Fields::basic, Fields::full}) {
-      Engine<Real> cpu({.backend = Backend::cpu, .fields = f});
-      Engine<Real> gpu({.backend = Backend::cuda, .fields = f});
-      const Contacts<Real> a = cpu.detect(s.view());
-      const Contacts<Real> b = gpu.detect(s.view());
-      expect_identical(a, b, s.name + " " + to_string(f));
-      EXPECT_EQ(cpu.stats().candidates, gpu.stats().candidates) << s.name;
-      EXPECT_EQ(cpu.stats().narrow_fallbacks, gpu.stats().narrow_fallbacks) << s.name;
-      EXPECT_EQ(cpu.stats().narrow_unconverged, gpu.stats().narrow_unconverged) << s.name;
-      EXPECT_EQ(gpu.stats().ellipsoids, cpu.stats().ellipsoids) << s.name;
-      EXPECT_EQ(cpu.stats().narrow_hard, gpu.stats().narrow_hard) << s.name;
-      EXPECT_EQ(cpu.stats().narrow_solver_runs, gpu.stats().narrow_solver_runs) << s.name;
-      EXPECT_EQ(cpu.stats().narrow_evaluations, gpu.stats().narrow_evaluations) << s.name;
-      EXPECT_EQ(cpu.stats().narrow_max_evaluations, gpu.stats().narrow_max_evaluations) << s.name;
-    }
+  std::uint64_t hard = 0;
+  for (const char* warp_solve : {"1", "0"}) {
+    ::setenv("CONTACTGRID_CUDA_WARP_SOLVE", warp_solve, 1);
+    for (const ShapeScene& s : bit_scenes())
+      for (Fields f : {Fields::basic, Fields::full}) {
+        Engine<Real> cpu({.backend = Backend::cpu, .fields = f});
+        Engine<Real> gpu({.backend = Backend::cuda, .fields = f});
+        const Contacts<Real> a = cpu.detect(s.view());
+        const Contacts<Real> b = gpu.detect(s.view());
+        hard += gpu.stats().narrow_hard;
+        expect_identical(a, b, s.name + " " + to_string(f) + " warp_solve " + warp_solve);
+        EXPECT_EQ(cpu.stats().candidates, gpu.stats().candidates) << s.name;
+        EXPECT_EQ(cpu.stats().narrow_fallbacks, gpu.stats().narrow_fallbacks) << s.name;
+        EXPECT_EQ(cpu.stats().narrow_unconverged, gpu.stats().narrow_unconverged) << s.name;
+        EXPECT_EQ(gpu.stats().ellipsoids, cpu.stats().ellipsoids) << s.name;
+        EXPECT_EQ(cpu.stats().narrow_hard, gpu.stats().narrow_hard) << s.name;
+        EXPECT_EQ(cpu.stats().narrow_solver_runs, gpu.stats().narrow_solver_runs) << s.name;
+        EXPECT_EQ(cpu.stats().narrow_evaluations, gpu.stats().narrow_evaluations) << s.name;
+        EXPECT_EQ(cpu.stats().narrow_max_evaluations, gpu.stats().narrow_max_evaluations) << s.name;
+      }
+  }
+  ::unsetenv("CONTACTGRID_CUDA_WARP_SOLVE");
+  EXPECT_GT(hard, 0u) << "the scenes should have pairs that take the whole start set";
 }
 
 #if defined(CONTACTGRID_HAVE_CUDA)
