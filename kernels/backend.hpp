@@ -109,11 +109,10 @@ void resident_copy(CudaBackend& backend, std::size_t first, std::size_t count, V
 // The same for the semi-axes and orientations of resident shape rows (a null pointer: skipped).
 void resident_shape_copy(CudaBackend& backend, std::size_t first, std::size_t count, Vec3<double>* semi_axes,
                          Quat<double>* orientation, bool to_device);
-// Validation and bounds of DEVICE bodies (same results and InputError texts as compute_bounds).
-Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies);
-// The shape rows of DEVICE bodies checked as validate_shapes (same InputError texts); returns the
-// number of ellipsoids. Call after device_bounds; bodies.shape must be non-null.
-std::size_t device_validate_shapes(CudaBackend& backend, const DeviceBodiesView& bodies);
+// Validation and bounds of DEVICE bodies (same results and InputError texts as compute_bounds), and
+// where bodies.shape is set their shape rows checked as validate_shapes (same texts, after the bodies'
+// own) and the ellipsoids counted into `ellipsoids` (0 without shapes); one wait for both.
+Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies, std::size_t& ellipsoids);
 
 }  // namespace cg::detail
 

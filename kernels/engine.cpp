@@ -76,10 +76,7 @@ void run_stages(CudaBackend&, const DetectJob<Broad, Narrow>&, Contacts<Narrow>&
   throw CudaError("this contactgrid was built without CUDA");
 }
 void destroy(CudaBackend* b) { delete b; }
-Bounds device_bounds(CudaBackend&, const DeviceBodiesView&) {
-  throw CudaError("this contactgrid was built without CUDA");
-}
-std::size_t device_validate_shapes(CudaBackend&, const DeviceBodiesView&) {
+Bounds device_bounds(CudaBackend&, const DeviceBodiesView&, std::size_t&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
 template <class Real>
@@ -362,9 +359,8 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
   auto t0 = clock::now();
   if (bodies.count > 0 && bodies.shape && (!bodies.semi_axes || !bodies.orientation))
     throw UsageError("detect_device: shape kinds without semi-axes or orientation pointers");
-  const Bounds b = detail::device_bounds(*s.cuda, bodies);
-  const std::size_t ellipsoids =
-      bodies.count > 0 && bodies.shape ? detail::device_validate_shapes(*s.cuda, bodies) : 0;
+  std::size_t ellipsoids = 0;
+  const Bounds b = detail::device_bounds(*s.cuda, bodies, ellipsoids);
   s.stats.bodies = b.count;
   s.stats.ellipsoids = ellipsoids;
   if (b.count == 0) return;

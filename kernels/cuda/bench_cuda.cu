@@ -404,20 +404,21 @@ int main(int argc, char** argv) try {
       "narrow: hard | unsettled/N | hard/N | solver runs/N | evaluations/run | max evaluations |\n");
   std::printf(
       "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
-      "---|---|---|---|---|---|---|---|\n");
+      "---|---|---|---|---|---|---|---|---|\n");
   for (const Row& r : rows) {
     auto st = [&](const char* s) {
       auto it = r.stage_ms.find(s);
       return it == r.stage_ms.end() ? 0.0 : it->second;
     };
     std::printf(
-        "| 2^%d | %s | %.3g | %.2f | %d | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.0f | "
+        "| 2^%d | %s | %.3g | %.2f | %d | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f | "
+        "%.0f | "
         "%.3f | "
         "%.1f | %.1f | "
         "%.3f | %.2f | %.2f | %.2f | %.2f | %.3f | %llu | %llu | %.3f | %.3f | %.3f | %.4f | %.4f | %.3f | "
         "%.2f | %llu |\n",
         r.log2n, r.prec, r.cell, double(r.entries) / double(r.n), r.key_bits, st("pack"), st("entries"),
-        st("sort"), st("pairs"), st("order"), st("narrow"), r.gpu_sum_ms, r.total_ms,
+        st("sort"), st("pairs"), st("order"), st("narrow"), r.gpu_sum_ms, st("plan"), r.total_ms,
         double(r.n) / (r.total_ms * 1e-3) / 1e6, double(r.contacts) / double(r.n), r.bytes_per_sphere,
         r.bytes_no_contacts, r.floor_ms, r.floor_ms > 0 ? st("sort") / r.floor_ms : 0.0,
         r.floor_ms > 0 ? r.total_ms / r.floor_ms : 0.0, r.upload_ms, r.download_ms,
@@ -430,8 +431,9 @@ int main(int argc, char** argv) try {
   std::printf(
       "\nAll times in ms. workspace B/N = device bytes held by the engine / N, including the contact "
       "output buffer, excluding the caller's input arrays (32 B/N; shape scenes 89 B/N). fallbacks, "
-      "unconverged: narrow-phase solver flags summed over the timed runs. total = wall time of "
-      "detect_device_resident (device bounds, plan, stages, 3 host syncs).\n");
+      "unconverged: narrow-phase solver flags summed over the timed runs. plan = host wall time before the "
+      "first stage (device bounds and shape check, each read back, and the grid plan). total = wall time of "
+      "detect_device_resident (plan, stages, host syncs).\n");
   if (!skin_rows.empty()) {
     std::printf(
         "\nSteps with a skin of %g (moves <= skin/10 per step, %d steps; wall ms per step of "

@@ -115,9 +115,12 @@ namespace cg::detail {
 }
 
 // Validation and bounds of DEVICE bodies (same results and InputError texts as compute_bounds):
-// partials per block, one folding block, one read back (synchronises the stream).
-inline Bounds bounds_stage(Workspace& ws, cuda::PinnedBuffer& h_staging, cudaStream_t st,
-                           const DeviceBodiesView& v) {
+// partials per block, one folding block, one read back (synchronises the stream). `also(d_counters)`
+// queues more checks of the bodies into the same counters before the read back (the shape rows:
+// shapes.cuh), so that the call waits once; `counters` is what they read back.
+template <class Also>
+Bounds bounds_stage(Workspace& ws, cuda::PinnedBuffer& h_staging, cudaStream_t st, const DeviceBodiesView& v,
+                    const Also& also, cuda::Counters& counters) {
   using cuda::BoundsPartial;
   using cuda::Counters;
   constexpr int kBoundsBlocks = 512;  // partials (<= cuda::kBoundsFold)
@@ -136,12 +139,13 @@ inline Bounds bounds_stage(Workspace& ws, cuda::PinnedBuffer& h_staging, cudaStr
   CG_CUDA_CHECK_LAUNCH("bounds_partial");
   cuda::bounds_final_kernel<<<1, cuda::kBoundsFold, 0, st>>>(d_partials, grid);
   CG_CUDA_CHECK_LAUNCH("bounds_final");
+  also(d_counters);
   std::byte* h = h_staging.data();
   CG_CUDA_CHECK(cudaMemcpyAsync(h, d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, st));
   CG_CUDA_CHECK(
       cudaMemcpyAsync(h + sizeof(Counters), d_partials, sizeof(BoundsPartial), cudaMemcpyDeviceToHost, st));
   CG_CUDA_CHECK(cudaStreamSynchronize(st));
-  Counters c;
+  Counters& c = counters;
   BoundsPartial p;
   std::memcpy(&c, h, sizeof(c));
   std::memcpy(&p, h + sizeof(Counters), sizeof(p));

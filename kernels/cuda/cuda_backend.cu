@@ -170,12 +170,21 @@ class CudaBackend {
     stats.device_allocations = m_ws.allocations;
   }
 
-  Bounds bounds(const DeviceBodiesView& v) {
-    if (v.count > 0) {  // (no bodies: nothing touched)
-      CG_CUDA_CHECK(cudaSetDevice(m_device));
-      refresh_tuning();
-    }
-    return bounds_stage(m_ws, m_h_counters, m_stream, v);
+  Bounds bounds(const DeviceBodiesView& v, std::size_t& ellipsoids) {
+    ellipsoids = 0;
+    if (v.count == 0)
+      return bounds_stage(
+          m_ws, m_h_counters, m_stream, v, [](cuda::Counters*) {}, m_counters);
+    CG_CUDA_CHECK(cudaSetDevice(m_device));
+    refresh_tuning();
+    const Bounds b = bounds_stage(
+        m_ws, m_h_counters, m_stream, v,
+        [&](cuda::Counters* d) {
+          if (v.shape) shape_check_queue(m_stream, v, d);
+        },
+        m_counters);
+    if (v.shape) ellipsoids = shape_check_result(m_counters, v);
+    return b;
   }
 
   int m_device = 0;
@@ -185,6 +194,7 @@ class CudaBackend {
   StageEvents m_events;
   Workspace m_ws;                                // DEVICE buffers (workspace.cuh)
   cuda::PinnedBuffer m_h_counters, m_h_staging;  // pinned HOST staging
+  cuda::Counters m_counters{};                   // the bounds stage's, read back
 };
 
 std::unique_ptr<CudaBackend> make_cuda_backend(int device) {
@@ -194,11 +204,8 @@ std::unique_ptr<CudaBackend> make_cuda_backend(int device) {
 
 void destroy(CudaBackend* backend) { delete backend; }
 
-Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies) { return backend.bounds(bodies); }
-
-std::size_t device_validate_shapes(CudaBackend& b, const DeviceBodiesView& bodies) {
-  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
-  return shape_check_stage(b.m_ws, b.m_h_counters, b.m_stream, bodies);
+Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies, std::size_t& ellipsoids) {
+  return backend.bounds(bodies, ellipsoids);
 }
 
 void resident_upload(CudaBackend& b, const BodiesView& bodies) {

@@ -14,11 +14,13 @@
 
 namespace cg::cuda {
 
-// Grid-stride: c->ellipsoids += the ellipsoids; c->bad_shape = n - i of the first bad body i.
+// Grid-stride: c->ellipsoids += the ellipsoids; c->bad_shape = n - i of the first bad body i. The count
+// is summed over the warp before its one atomic: an atomic per thread on one address (131 072 of them)
+// cost the device-array call ~0.14 ms (H100, 2^20 and 2^22 alike: BENCHMARKS §3).
 __global__ void shape_check_kernel(const Shape* __restrict__ kind, const double* __restrict__ rad,
                                    const double* __restrict__ semi, const double* __restrict__ orient,
                                    std::uint64_t n, Counters* __restrict__ c) {
-  unsigned long long ellipsoids = 0;
+  std::uint32_t ellipsoids = 0;
   for (std::uint64_t i = std::uint64_t(blockIdx.x) * kBlock + threadIdx.x; i < n;
        i += std::uint64_t(gridDim.x) * kBlock) {
     const std::uint8_t k = static_cast<std::uint8_t>(kind[i]);
@@ -27,7 +29,9 @@ __global__ void shape_check_kernel(const Shape* __restrict__ kind, const double*
     if (shape_fault(k, rad[i], semi + 3 * i, orient + 4 * i, norm) != ShapeFault::none)
       atomicMax(&c->bad_shape, static_cast<unsigned long long>(n - i));
   }
-  if (ellipsoids) atomicAdd(&c->ellipsoids, ellipsoids);
+  const std::uint32_t warp_sum = __reduce_add_sync(0xffffffffu, ellipsoids);  // every lane is here
+  if ((threadIdx.x & 31u) == 0 && warp_sum)
+    atomicAdd(&c->ellipsoids, static_cast<unsigned long long>(warp_sum));
 }
 
 // pack_shapes: pack_shape() of body i (input order).
@@ -46,23 +50,18 @@ __global__ void __launch_bounds__(kBlock)
 
 namespace cg::detail {
 
-// Shape check of DEVICE bodies (device_validate_shapes): one kernel, one read back (synchronises).
-// A bad body's rows are copied back and validate_shapes() throws its InputError.
-inline std::size_t shape_check_stage(Workspace& ws, cuda::PinnedBuffer& h_staging, cudaStream_t st,
-                                     const DeviceBodiesView& v) {
-  using cuda::Counters;
-  ws.reserve({{&ws.counters, sizeof(Counters)}}, "bounds");
-  h_staging.reserve(sizeof(Counters));
-  auto* d_counters = ws.counters.span_as<Counters>(1).data();
+// Shape check of DEVICE bodies (device_bounds): queued into the bounds stage's counters, read back
+// with them (bounds_stage's `also`: one wait for both).
+inline void shape_check_queue(cudaStream_t st, const DeviceBodiesView& v, cuda::Counters* d_counters) {
   const int grid = static_cast<int>(std::min<std::uint64_t>(512, cuda::blocks_for(v.count)));
-  CG_CUDA_CHECK(cudaMemsetAsync(d_counters, 0, sizeof(Counters), st));
   cuda::shape_check_kernel<<<grid, cuda::kBlock, 0, st>>>(v.shape, v.radius, v.semi_axes, v.orientation,
                                                           v.count, d_counters);
   CG_CUDA_CHECK_LAUNCH("shape_check");
-  CG_CUDA_CHECK(cudaMemcpyAsync(h_staging.data(), d_counters, sizeof(Counters), cudaMemcpyDeviceToHost, st));
-  CG_CUDA_CHECK(cudaStreamSynchronize(st));
-  Counters c;
-  std::memcpy(&c, h_staging.data(), sizeof(c));
+}
+
+// The read-back counters of shape_check_queue: the number of ellipsoids, or a bad body's rows copied
+// back and validate_shapes()'s InputError thrown.
+inline std::size_t shape_check_result(const cuda::Counters& c, const DeviceBodiesView& v) {
   if (c.bad_shape) {
     const std::uint64_t i = v.count - c.bad_shape;
     Shape kind{};
