@@ -54,14 +54,18 @@ CG_HD ShapeFault shape_fault(std::uint8_t kind, double radius, const double* sem
 }
 
 // A body's shape as the narrow phase reads it (mixed scenes only; index = body index, as the spheres):
-// kind, semi-axes in Real and the body → world rotation, built in double from the quaternion then
-// rounded once to Real. Spheres: kind only (the rest zero).
+// kind, semi-axes and the orientation quaternion in Real (the rows as given, rounded once); the narrow
+// phase builds the rotation from it where it needs one (ellipsoid_of, core/shape_narrow.hpp). 32 bytes
+// in fp32 and 64 in fp64: the narrow stage gathers two per candidate at random, and a packed rotation
+// matrix made them 64 and 112 (the fp64 matrix built from the double quaternion is the same bits either
+// way; fp32's is now built in float from the rounded quaternion). Spheres: kind only (the rest zero).
 template <class Real>
 struct alignas(16) PackedShape {
-  Mat3<Real> rotation;
+  Quat<Real> orientation;
   Vec3<Real> semi_axes;
   std::uint32_t kind;  // Shape
 };
+static_assert(sizeof(PackedShape<float>) == 32 && sizeof(PackedShape<double>) == 64);
 
 // The bodies' shape rows as given, doubles by body index (semi-axes x y z at 3i, orientation w x y z
 // at 4i; read for ellipsoids only): what pack_shape packs. The narrow stage of fp32 reads them again
@@ -76,8 +80,8 @@ CG_HD PackedShape<Real> pack_shape(std::uint8_t kind, const double* semi, const 
   PackedShape<Real> p{};
   p.kind = kind;
   if (kind != static_cast<std::uint8_t>(Shape::ellipsoid)) return p;
-  const Mat3<double> m = rotation_matrix(Quat<double>{q[0], q[1], q[2], q[3]});
-  p.rotation = {vec_cast<Real>(m.r0), vec_cast<Real>(m.r1), vec_cast<Real>(m.r2)};
+  p.orientation = {static_cast<Real>(q[0]), static_cast<Real>(q[1]), static_cast<Real>(q[2]),
+                   static_cast<Real>(q[3])};
   p.semi_axes = {static_cast<Real>(semi[0]), static_cast<Real>(semi[1]), static_cast<Real>(semi[2])};
   return p;
 }

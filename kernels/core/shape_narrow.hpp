@@ -46,10 +46,11 @@ struct SphereDecide {
   }
 };
 
-// The ellipsoid of body i: the centre of its bounding sphere, packed semi-axes and rotation.
+// The ellipsoid of body i: the centre of its bounding sphere, packed semi-axes, the rotation of its
+// packed orientation.
 template <class Real>
 CG_HD Ellipsoid<Real> ellipsoid_of(const Sphere<Real>& s, const PackedShape<Real>& p) {
-  return {s.centre(), p.semi_axes, p.rotation};
+  return {s.centre(), p.semi_axes, rotation_matrix(p.orientation)};
 }
 
 // The contact of a pair with at least one ellipsoid (in the frame of sa, sb) and whether it is one.
