@@ -268,8 +268,9 @@ __global__ void __launch_bounds__(kBlock)
     narrow_fill_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
                        std::uint32_t n_pairs, Decide decide, const std::uint32_t* __restrict__ accept,
                        const std::uint32_t* __restrict__ offset, const Vec3<Real>* __restrict__ normal,
-                       ContactPtrs<Real> out, bool full) {
+                       ContactPtrs<Real> out, bool full, Counters* __restrict__ c) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
+  if (k == n_pairs - 1) c->rows = offset[k] + accept[k];  // the row count, read with the counters
   if (k >= n_pairs || !accept[k]) return;
   Vec3<Real> n{};
   if (normal) {
@@ -291,7 +292,8 @@ __global__ void __launch_bounds__(kBlock)
                             const std::uint32_t* __restrict__ pair_b, std::uint32_t n_pairs,
                             ShapeDecide<Real> decide, const std::uint32_t* __restrict__ accept,
                             const std::uint32_t* __restrict__ offset, const Vec3<Real>* __restrict__ normal,
-                            ContactPtrs<Real> out, bool full) {
+                            ContactPtrs<Real> out, bool full, const Counters* __restrict__ c) {
+  if (c->fp64_rows == 0) return;  // (counted by the hard pass: a superset of the marked rows)
   for (std::uint32_t k = blockIdx.x * kBlock + threadIdx.x; k < n_pairs; k += kRareBlocks * kBlock) {
     if (!accept[k] || !(normal[k].x != normal[k].x)) continue;
     const std::uint32_t a = pair_a[k], b = pair_b[k];
@@ -407,7 +409,12 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
   return d_normal;
 }
 
-// The rejecting path: count → scan → fill (see the file comment).
+// The rejecting path: count → scan → fill (see the file comment). Rows that stay on the device
+// (job.device_out) go where the scan puts them in an out buffer laid out for every candidate (np rows:
+// ws.out holds them), so the fill follows the scan with no wait, and the counters — the row count
+// among them — come back with the call's last synchronisation (download_stage); waiting here for the
+// count cost each call a round trip of the host. Rows for host memory are laid out tight for their one
+// copy, so the host reads the count first, as before.
 template <class Real, class Key, class Narrow, class Decide>
 void narrow_compact(RunState<Real, Key, Narrow>& r, const Decide& decide) {
   using cuda::blocks_for;
@@ -427,35 +434,31 @@ void narrow_compact(RunState<Real, Key, Narrow>& r, const Decide& decide) {
   cub_run(r.ws, "narrow", [&](void* t, std::size_t& b) {
     return cub::DeviceScan::ExclusiveSum(t, b, d_accept, d_offset, int(np), st);
   });
-  std::uint32_t last[2] = {0, 0};  // offset and flag of the last candidate: the row count
-  CG_CUDA_CHECK(
-      cudaMemcpyAsync(&last[0], d_offset + np - 1, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, st));
-  CG_CUDA_CHECK(
-      cudaMemcpyAsync(&last[1], d_accept + np - 1, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, st));
-  // the solver's flags and the fp64 rows (accept pass)
-  CG_CUDA_CHECK(
-      cudaMemcpyAsync(r.h_counters, r.d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, st));
-  CG_CUDA_CHECK(cudaStreamSynchronize(st));
-  r.stats.narrow_fallbacks = r.h_counters->fallbacks;
-  r.stats.narrow_unconverged = r.h_counters->unconverged;
-  r.stats.fp64_rows = r.h_counters->fp64_rows;
-  r.stats.narrow_unsettled = r.h_counters->unsettled;
-  r.stats.narrow_hard = r.h_counters->hard;
-  r.stats.narrow_solver_runs = r.h_counters->solver_runs;
-  r.stats.narrow_evaluations = r.h_counters->evaluations;
-  r.stats.narrow_max_evaluations = r.h_counters->max_evaluations;
-  r.n_rows = last[0] + last[1];
-  r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.full, r.cp);  // n_rows <= np: ws.out holds them
-  cuda::narrow_fill_kernel<Narrow, Decide><<<blocks_for(np), kBlock, 0, st>>>(
-      r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept, d_offset, d_normal, r.cp, r.full);
+  if (r.job.device_out) {
+    r.out_bytes = layout_contacts(r.ws.out.data(), np, r.full, r.cp);  // rows at their scan offsets
+  } else {
+    std::uint32_t last[2] = {0, 0};  // offset and flag of the last candidate: the row count
+    CG_CUDA_CHECK(
+        cudaMemcpyAsync(&last[0], d_offset + np - 1, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, st));
+    CG_CUDA_CHECK(
+        cudaMemcpyAsync(&last[1], d_accept + np - 1, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, st));
+    CG_CUDA_CHECK(cudaStreamSynchronize(st));
+    r.out_bytes = layout_contacts(r.ws.out.data(), last[0] + last[1], r.full, r.cp);  // <= np rows
+  }
+  cuda::narrow_fill_kernel<Narrow, Decide>
+      <<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept,
+                                          d_offset, d_normal, r.cp, r.full, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_fill");
   if constexpr (std::is_same_v<Decide, ShapeDecide<Narrow>> && std::is_same_v<Narrow, float>) {
-    if (r.stats.fp64_rows > 0) {  // (counted by the hard pass: a superset of the marked rows)
-      cuda::narrow_fill_fp64_kernel<Narrow><<<cuda::kRareBlocks, kBlock, 0, st>>>(
-          r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept, d_offset, d_normal, r.cp, r.full);
-      CG_CUDA_CHECK_LAUNCH("narrow_fill_fp64");
-    }
+    cuda::narrow_fill_fp64_kernel<Narrow>
+        <<<cuda::kRareBlocks, kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept,
+                                               d_offset, d_normal, r.cp, r.full, r.d_counters);
+    CG_CUDA_CHECK_LAUNCH("narrow_fill_fp64");
   }
+  // the counters (the solver's flags, the fp64 rows, the row count), read after the next wait
+  CG_CUDA_CHECK(
+      cudaMemcpyAsync(r.h_counters, r.d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, st));
+  r.rows_pending = true;
 }
 
 // The bodies the narrow stage reads (core/narrow.hpp): fp32 pack's local floats in input order,

@@ -64,6 +64,9 @@ struct RunState {
   cuda::ContactPtrs<Narrow> cp{};
   std::size_t out_bytes = 0;
   std::uint32_t n_rows = 0;
+  // the rejecting narrow (narrow.cuh): n_rows and its stats are in h_counters once the stream has synced
+  // (take_narrow_counters)
+  bool rows_pending = false;
 
   // Bytes of the contact rows of `pairs` pairs (the layout of narrow_stage).
   std::size_t out_bytes_for(std::uint64_t pairs) const {
@@ -71,6 +74,22 @@ struct RunState {
                       ids = cuda::align16(pairs * sizeof(std::int64_t)),
                       reals = cuda::align16(pairs * sizeof(Narrow));
     return 2 * ids + 3 * v3 + reals + (full ? 4 * v3 : 0);
+  }
+  // After the stream has synced: the rejecting narrow's counters (queued by it) into the stats, and its
+  // row count into n_rows.
+  void take_narrow_counters() {
+    if (!rows_pending) return;
+    rows_pending = false;
+    const cuda::Counters& c = *h_counters;
+    stats.narrow_fallbacks = c.fallbacks;
+    stats.narrow_unconverged = c.unconverged;
+    stats.fp64_rows = c.fp64_rows;
+    stats.narrow_unsettled = c.unsettled;
+    stats.narrow_hard = c.hard;
+    stats.narrow_solver_runs = c.solver_runs;
+    stats.narrow_evaluations = c.evaluations;
+    stats.narrow_max_evaluations = c.max_evaluations;
+    n_rows = static_cast<std::uint32_t>(c.rows);
   }
   // The counters copied to h_counters (synchronises the stream).
   void read_counters() {

@@ -80,19 +80,22 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
                                  Contacts<Narrow>& out) {
   using clock_type = std::chrono::steady_clock;
   const cuda::ContactPtrs<Narrow>& cp = r.cp;
-  const std::uint32_t np = r.n_rows;
   const bool full = r.full;
   cudaStream_t st = r.st;
   DownloadHostTimes ht;
   if (r.job.device_out) {
+    CG_CUDA_CHECK(cudaStreamSynchronize(st));
+    r.take_narrow_counters();  // the row count of a rejecting narrow comes with this wait
     DeviceContactsView<Narrow>& v = *r.job.device_out;
     v = DeviceContactsView<Narrow>{};
-    v.count = np;
+    v.count = r.n_rows;
     v.full = full;
     zip_contact_fields(v, cp, full, [](auto, auto& view, auto* d_ptr) { view = d_ptr; });
-    CG_CUDA_CHECK(cudaStreamSynchronize(st));
     return ht;
   }
+  CG_CUDA_CHECK(cudaStreamSynchronize(st));  // (the counters' copy: queued before the rows')
+  r.take_narrow_counters();
+  const std::uint32_t np = r.n_rows;
   const std::size_t at = r.out_bytes;
   const std::byte* o = r.ws.out.data();
   bool registered = false;
