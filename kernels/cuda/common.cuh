@@ -50,8 +50,9 @@ struct Counters {
   // and those the settle pass left to the whole solve (`hard`) (written by cub::DeviceSelect, read by
   // the next kernel on the device and by the host with the other counters)
   unsigned long long to_solve, unsettled, hard;
-  unsigned long long fp64_rows;  // fp32 rows recomputed in fp64 (narrow.cuh)
-  unsigned long long rows;       // the rejecting narrow's accepted candidates: its row count (narrow.cuh)
+  unsigned long long fp64_rows;   // fp32 rows recomputed in fp64 (narrow.cuh)
+  unsigned long long fp64_pairs;  // fp32's pairs solved in fp64, listed for their rows (narrow.cuh)
+  unsigned long long rows;        // the rejecting narrow's accepted candidates: its row count (narrow.cuh)
   // the ellipsoid solver's work (narrow.cuh: NarrowFlags, summed; the largest by atomicMax)
   unsigned long long solver_runs, evaluations, max_evaluations;
   // skin check (cuda/skin.cuh): the bits of the largest squared displacement and radius growth

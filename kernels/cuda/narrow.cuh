@@ -13,13 +13,10 @@
 // (Fp64Touch), so one row per candidate; with ellipsoids or a skin the fp64 narrow stage decides.
 // Scenes with ellipsoids count in passes (narrow_shapes_count): a screen of every candidate, then the
 // first start, the settle pass and the whole start set, each over a list of the candidates the previous
-// pass left (cub::DeviceSelect), so that a warp's lanes do the same work (the whole set of a short list:
-// one warp per pair, its starts on the lanes).
+// pass left (appended by that pass), so that a warp's lanes do the same work (the whole set of a short
+// list: a lane group per pair, its starts on the lanes).
 // Flags and offsets live in the candidates' dead alternate buffers (pair_a / pair_b .Alternate()).
-#include <thrust/iterator/counting_iterator.h>
-
 #include <cub/device/device_scan.cuh>
-#include <cub/device/device_select.cuh>
 #include <limits>
 #include <type_traits>
 
@@ -67,6 +64,20 @@ __device__ inline void add_flags(const NarrowFlags& f, Counters* c) {
   if ((threadIdx.x & 31u) == 0 && most) atomicMax(&c->max_evaluations, static_cast<unsigned long long>(most));
 }
 
+// Candidate k onto `list` when `take` (its length in *count): one atomic per warp, the warp's items
+// in lane order. Every lane of the warp must call it. The lists' order depends on the warps' timing;
+// what each pass computes for a candidate does not, nor do the sums and maxima of the counters.
+__device__ inline void append(bool take, std::uint32_t k, std::uint32_t* list, unsigned long long* count) {
+  constexpr unsigned kAll = 0xffffffffu;
+  const unsigned takers = __ballot_sync(kAll, take);
+  if (takers == 0) return;
+  const unsigned lane = threadIdx.x & 31u, leader = __ffs(takers) - 1;
+  unsigned long long base = 0;
+  if (lane == leader) base = atomicAdd(count, static_cast<unsigned long long>(__popc(takers)));
+  base = __shfl_sync(kAll, base, leader);
+  if (take) list[base + __popc(takers & ((1u << lane) - 1u))] = k;
+}
+
 // narrow, rejecting path, count: accept[k] = 1 when candidate k is a contact. Decide: SphereDecide or
 // ShapeDecide (core/shape_narrow.hpp; one thread per candidate: in mixed scenes the warps diverge
 // between sphere pairs, sphere–ellipsoid root finds and ellipsoid solves, a known cost); the solver's
@@ -84,21 +95,29 @@ __global__ void __launch_bounds__(kBlock)
 
 // narrow, shapes, first pass (triage), in two kernels: ShapeDecide::screen on every candidate —
 // verdict[k] (reject, accept, hard, or solve: a general pair for the first start) and the kept normal
-// of a settled pair: closed forms, root finds, the centre line, no solver code; then
-// ShapeDecide::first_pass over the `solve` list alone (the PW filter and one Newton run with the cheap
-// certificates; in one kernel the Newton lanes — half the candidates — made every warp pay for them).
+// of a settled pair: closed forms, root finds, the centre line, no solver code; the `solve` ones onto
+// `to_solve` (c->to_solve), the `hard` ones onto `unsettled` (c->unsettled, where the first pass adds
+// its own); then ShapeDecide::first_pass over the `solve` list alone (the PW filter and one Newton run
+// with the cheap certificates; in one kernel the Newton lanes — half the candidates — made every warp
+// pay for them).
 template <class Real>
 __global__ void __launch_bounds__(kBlock)
     narrow_screen_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
                          std::uint32_t n_pairs, ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
-                         Vec3<Real>* __restrict__ normal, Counters* __restrict__ c) {
+                         Vec3<Real>* __restrict__ normal, std::uint32_t* __restrict__ to_solve,
+                         std::uint32_t* __restrict__ unsettled, Counters* __restrict__ c) {
+  using Verdict = typename ShapeDecide<Real>::Verdict;
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   NarrowFlags flags;
+  Verdict v = Verdict::reject;
   if (k < n_pairs) {
     Vec3<Real> n{};
-    verdict[k] = static_cast<std::uint32_t>(decide.screen(pair_a[k], pair_b[k], flags, n));
+    v = decide.screen(pair_a[k], pair_b[k], flags, n);
+    verdict[k] = static_cast<std::uint32_t>(v);
     normal[k] = n;
   }
+  append(v == Verdict::solve, k, to_solve, &c->to_solve);
+  append(v == Verdict::hard, k, unsettled, &c->unsettled);  // fp32's pairs in fp64: straight to settle
   add_flags(flags, c);
 }
 
@@ -107,14 +126,16 @@ __global__ void __launch_bounds__(kBlock)
 // so that every lane of a warp runs the same pass: first_pass (the general pairs the screen left),
 // settle (the ones triage left hard), whole (the start set for the ones still hard, when there are more
 // than warp_limit: fewer go one warp each, narrow_whole_warp_kernel; fp32's pairs in fp64 are left to
-// narrow_hard_fp64_kernel). verdict[k] and the kept minimiser normal[k].
+// narrow_hard_fp64_kernel). verdict[k] and the kept minimiser normal[k]; first and settle put the
+// candidates they leave hard onto `next` (*n_next), the next pass's list.
 enum class ListPass { first, settle, whole };
 template <class Real, ListPass Pass>
 __global__ void __launch_bounds__(kBlock)
     narrow_list_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
                        const std::uint32_t* __restrict__ list, const unsigned long long* __restrict__ n_list,
                        ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
-                       Vec3<Real>* __restrict__ normal, Counters* __restrict__ c,
+                       Vec3<Real>* __restrict__ normal, std::uint32_t* __restrict__ next,
+                       unsigned long long* __restrict__ n_next, Counters* __restrict__ c,
                        unsigned long long warp_limit = 0) {
   using Verdict = typename ShapeDecide<Real>::Verdict;
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
@@ -122,8 +143,11 @@ __global__ void __launch_bounds__(kBlock)
   if (blockIdx.x * kBlock >= count) return;                    // the whole block is past the count
   if (Pass == ListPass::whole && count <= warp_limit) return;  // narrow_whole_warp_kernel's
   NarrowFlags flags;
+  bool still_hard = false;
+  std::uint32_t k = 0;
   if (i < count) {
-    const std::uint32_t k = list[i], a = pair_a[k], b = pair_b[k];
+    k = list[i];
+    const std::uint32_t a = pair_a[k], b = pair_b[k];
     Vec3<Real> n{};
     Verdict v;
     if constexpr (Pass == ListPass::first) {
@@ -139,17 +163,11 @@ __global__ void __launch_bounds__(kBlock)
       verdict[k] = static_cast<std::uint32_t>(v);
       normal[k] = n;
     }
+    still_hard = v == Verdict::hard;
   }
+  if (Pass != ListPass::whole) append(still_hard, k, next, n_next);  // the next pass's list
   add_flags(flags, c);
 }
-
-// Selects the candidates of one verdict: solve (3) for the first pass, hard (2) for the settle pass,
-// then for the whole solve.
-struct HasVerdict {
-  const std::uint32_t* verdict;
-  std::uint32_t value;
-  __device__ bool operator()(std::uint32_t k) const { return verdict[k] == value; }
-};
 
 // The start set of one hard pair on a group of kSolveLanes lanes of a warp (core/ellipsoid_solve.hpp:
 // SerialRuns, whose bits and counts these are): lane j of the group runs start j of a round of the
@@ -245,7 +263,7 @@ __global__ void __launch_bounds__(kBlock)
                             const std::uint32_t* __restrict__ pair_b, const std::uint32_t* __restrict__ hard,
                             const unsigned long long* __restrict__ n_hard, ShapeDecide<Real> decide,
                             std::uint32_t* __restrict__ verdict, Vec3<Real>* __restrict__ normal,
-                            Counters* __restrict__ c) {
+                            std::uint32_t* __restrict__ fp64_list, Counters* __restrict__ c) {
   const unsigned long long count = *n_hard;
   NarrowFlags flags;
   for (unsigned long long i = blockIdx.x * kBlock + threadIdx.x; i < count; i += kRareBlocks * kBlock) {
@@ -255,6 +273,7 @@ __global__ void __launch_bounds__(kBlock)
       verdict[k] = decide.fp64_solve(a, b, flags).contact ? 1u : 0u;
       const Real nan = std::numeric_limits<Real>::quiet_NaN();
       normal[k] = {nan, nan, nan};
+      fp64_list[atomicAdd(&c->fp64_pairs, 1ull)] = k;  // for narrow_fill_fp64_kernel (rare: one atomic each)
     }
   }
   add_flags(flags, c);  // every lane, after the walk
@@ -284,18 +303,21 @@ __global__ void __launch_bounds__(kBlock)
   store_row(out, w, row, full);  // core/contact_fields.hpp: the one row store
 }
 
-// The rows of fp32's pairs in fp64 (NaN-marked by narrow_hard_fp64_kernel): fp64's row rounded once,
-// as row_from gives them on the host.
+// The rows of fp32's pairs in fp64 (NaN-marked and listed by narrow_hard_fp64_kernel): fp64's row
+// rounded once, as row_from gives them on the host. (It walked every candidate before, 0.4 ms at 2^24
+// for a few rows.)
 template <class Real>
 __global__ void __launch_bounds__(kBlock)
     narrow_fill_fp64_kernel(const std::uint32_t* __restrict__ pair_a,
-                            const std::uint32_t* __restrict__ pair_b, std::uint32_t n_pairs,
-                            ShapeDecide<Real> decide, const std::uint32_t* __restrict__ accept,
-                            const std::uint32_t* __restrict__ offset, const Vec3<Real>* __restrict__ normal,
-                            ContactPtrs<Real> out, bool full, const Counters* __restrict__ c) {
-  if (c->fp64_rows == 0) return;  // (counted by the hard pass: a superset of the marked rows)
-  for (std::uint32_t k = blockIdx.x * kBlock + threadIdx.x; k < n_pairs; k += kRareBlocks * kBlock) {
-    if (!accept[k] || !(normal[k].x != normal[k].x)) continue;
+                            const std::uint32_t* __restrict__ pair_b,
+                            const std::uint32_t* __restrict__ fp64_list, ShapeDecide<Real> decide,
+                            const std::uint32_t* __restrict__ accept,
+                            const std::uint32_t* __restrict__ offset, ContactPtrs<Real> out, bool full,
+                            const Counters* __restrict__ c) {
+  const unsigned long long count = c->fp64_pairs;
+  for (unsigned long long i = blockIdx.x * kBlock + threadIdx.x; i < count; i += kRareBlocks * kBlock) {
+    const std::uint32_t k = fp64_list[i];
+    if (!accept[k]) continue;
     const std::uint32_t a = pair_a[k], b = pair_b[k];
     ContactRow<Real> row = decide.fp64_row(a, b, full);
     row.id_a = a;
@@ -348,61 +370,55 @@ unsigned long long whole_warp_plan(const Tuning& tuning, int& blocks) {
 }
 
 // The count pass of scenes with ellipsoids, in three: triage every candidate, settle the ones it left
-// hard, then the whole solve for the ones still hard (each list made by cub::DeviceSelect into
-// d_offset, dead until the scan). Returns the kept minimisers (ws.normals, one per candidate).
+// hard, then the whole solve for the ones still hard (each list made by the pass before it: append;
+// d_list is d_offset, dead until the scan). Returns the kept minimisers (ws.normals, one per candidate).
 template <class Real, class Key, class Narrow>
 const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const ShapeDecide<Narrow>& decide,
-                                        std::uint32_t* d_verdict, std::uint32_t* d_hard) {
+                                        std::uint32_t* d_verdict, std::uint32_t* d_list) {
   using cuda::blocks_for;
   using cuda::kBlock;
   cudaStream_t st = r.st;
   const std::uint32_t np = r.np;
-  r.ws.reserve({{&r.ws.normals, std::size_t(np) * sizeof(Vec3<Narrow>)}}, "narrow");
+  r.ws.reserve({{&r.ws.normals, std::size_t(np) * sizeof(Vec3<Narrow>)},
+                {&r.ws.narrow_list, std::size_t(np) * sizeof(std::uint32_t)}},
+               "narrow");
   Vec3<Narrow>* d_normal = r.ws.normals.template span_as<Vec3<Narrow>>(np).data();
+  // the lists, each made by the pass before (append; the counters start at 0): solve → d_list,
+  // unsettled → ws.narrow_list, hard → d_list again (the solve list is done with by then)
+  std::uint32_t* d_list2 = r.ws.narrow_list.template span_as<std::uint32_t>(np).data();
   unsigned long long* d_n_hard = &r.d_counters->hard;
   unsigned long long* d_n_unsettled = &r.d_counters->unsettled;
   unsigned long long* d_n_solve = &r.d_counters->to_solve;
-  using Verdict = typename ShapeDecide<Narrow>::Verdict;
-  auto select = [&](Verdict v, unsigned long long* d_count) {
-    cub_run(r.ws, "narrow", [&](void* t, std::size_t& b) {
-      return cub::DeviceSelect::If(t, b, thrust::counting_iterator<std::uint32_t>(0), d_hard, d_count,
-                                   int(np), cuda::HasVerdict{d_verdict, static_cast<std::uint32_t>(v)}, st);
-    });
-  };
+  const std::uint32_t* a = r.pair_a.Current();
+  const std::uint32_t* b = r.pair_b.Current();
   r.events.mark_narrow_split(0, st);
-  cuda::narrow_screen_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
-      r.pair_a.Current(), r.pair_b.Current(), np, decide, d_verdict, d_normal, r.d_counters);
+  cuda::narrow_screen_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(a, b, np, decide, d_verdict, d_normal,
+                                                                        d_list, d_list2, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_screen");
-  select(Verdict::solve, d_n_solve);
   cuda::narrow_list_kernel<Narrow, cuda::ListPass::first><<<blocks_for(np), kBlock, 0, st>>>(
-      r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_solve, decide, d_verdict, d_normal, r.d_counters);
+      a, b, d_list, d_n_solve, decide, d_verdict, d_normal, d_list2, d_n_unsettled, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_first_pass");
   r.events.mark_narrow_split(1, st);
-  select(Verdict::hard, d_n_unsettled);
-  cuda::narrow_list_kernel<Narrow, cuda::ListPass::settle>
-      <<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_unsettled,
-                                          decide, d_verdict, d_normal, r.d_counters);
+  cuda::narrow_list_kernel<Narrow, cuda::ListPass::settle><<<blocks_for(np), kBlock, 0, st>>>(
+      a, b, d_list2, d_n_unsettled, decide, d_verdict, d_normal, d_list, d_n_hard, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_settle");
   r.events.mark_narrow_split(2, st);
-  select(Verdict::hard, d_n_hard);
   // the whole start set: a lane group per pair while the list is short (a few pairs per resident group),
   // else one thread per pair; each kernel reads the count on the device and leaves the other's lists
   constexpr int kLanes = cuda::kSolveLanes<Narrow>;
   int warp_blocks = 0;
   const unsigned long long warp_limit = whole_warp_plan<Narrow>(r.tuning, warp_blocks);
   if (warp_limit > 0) {
-    cuda::narrow_whole_warp_kernel<Narrow, kLanes>
-        <<<warp_blocks, kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, warp_limit,
-                                         decide, d_verdict, d_normal, r.d_counters);
+    cuda::narrow_whole_warp_kernel<Narrow, kLanes><<<warp_blocks, kBlock, 0, st>>>(
+        a, b, d_list, d_n_hard, warp_limit, decide, d_verdict, d_normal, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("narrow_hard_warp");
   }
-  cuda::narrow_list_kernel<Narrow, cuda::ListPass::whole>
-      <<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, decide,
-                                          d_verdict, d_normal, r.d_counters, warp_limit);
+  cuda::narrow_list_kernel<Narrow, cuda::ListPass::whole><<<blocks_for(np), kBlock, 0, st>>>(
+      a, b, d_list, d_n_hard, decide, d_verdict, d_normal, nullptr, nullptr, r.d_counters, warp_limit);
   CG_CUDA_CHECK_LAUNCH("narrow_hard");
   if constexpr (std::is_same_v<Narrow, float>) {
     cuda::narrow_hard_fp64_kernel<Narrow><<<cuda::kRareBlocks, kBlock, 0, st>>>(
-        r.pair_a.Current(), r.pair_b.Current(), d_hard, d_n_hard, decide, d_verdict, d_normal, r.d_counters);
+        a, b, d_list, d_n_hard, decide, d_verdict, d_normal, d_list2, r.d_counters);  // (list2 done with)
     CG_CUDA_CHECK_LAUNCH("narrow_hard_fp64");
   }
   r.events.mark_narrow_split(3, st);
@@ -450,9 +466,10 @@ void narrow_compact(RunState<Real, Key, Narrow>& r, const Decide& decide) {
                                           d_offset, d_normal, r.cp, r.full, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("narrow_fill");
   if constexpr (std::is_same_v<Decide, ShapeDecide<Narrow>> && std::is_same_v<Narrow, float>) {
+    const std::uint32_t* d_fp64_list = r.ws.narrow_list.template span_as<std::uint32_t>(np).data();
     cuda::narrow_fill_fp64_kernel<Narrow>
-        <<<cuda::kRareBlocks, kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept,
-                                               d_offset, d_normal, r.cp, r.full, r.d_counters);
+        <<<cuda::kRareBlocks, kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), d_fp64_list, decide,
+                                               d_accept, d_offset, r.cp, r.full, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("narrow_fill_fp64");
   }
   // the counters (the solver's flags, the fp64 rows, the row count), read after the next wait
