@@ -168,13 +168,13 @@ CG_HD Vec3<Real> extra_start(int i) {
 
 }  // namespace detail
 
-// How a solve runs a batch of its Newton runs (newton_run from start j, j < count <= 32) and takes their
+// How a solve runs a batch of its Newton runs (newton_run from start j, j < count) and takes their
 // results in start order: before each, more() says whether the solve still wants one (the start set
 // stops at a certified minimum); start(j) gives start j (a zero vector: none, skipped); run(s) is the
 // run from s; take(result) folds it in. SerialRuns runs start j only when it is wanted (the host; the
-// device's one-thread-per-pair kernels); the device's one-warp-per-pair kernel runs the whole batch on its
-// lanes at once and hands the results over in the same order (cuda/narrow.cuh: WarpRuns) — the same bits, the
-// same counts (a run no one takes is not counted).
+// device's one-thread-per-pair kernels); the device's lane-group-per-pair kernel runs the batch on its
+// lanes at once and hands the results over in the same order (cuda/narrow.cuh: WarpRuns) — the same
+// bits, the same counts (a run no one takes is not counted).
 template <class Real>
 CG_HD bool is_zero(const Vec3<Real>& v) {
   return v.x == Real(0) && v.y == Real(0) && v.z == Real(0);

@@ -125,7 +125,7 @@ __global__ void __launch_bounds__(kBlock)
 // over every candidate, the blocks past the count return at once, so the host need not wait for it),
 // so that every lane of a warp runs the same pass: first_pass (the general pairs the screen left),
 // settle (the ones triage left hard), whole (the start set for the ones still hard, when there are more
-// than warp_limit: fewer go one warp each, narrow_whole_warp_kernel; fp32's pairs in fp64 are left to
+// than warp_limit: fewer go one lane group each, narrow_whole_warp_kernel; fp32's pairs in fp64 are left to
 // narrow_hard_fp64_kernel). verdict[k] and the kept minimiser normal[k]; first and settle put the
 // candidates they leave hard onto `next` (*n_next), the next pass's list.
 enum class ListPass { first, settle, whole };
@@ -459,7 +459,8 @@ void narrow_compact(RunState<Real, Key, Narrow>& r, const Decide& decide) {
     CG_CUDA_CHECK(
         cudaMemcpyAsync(&last[1], d_accept + np - 1, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, st));
     CG_CUDA_CHECK(cudaStreamSynchronize(st));
-    r.out_bytes = layout_contacts(r.ws.out.data(), last[0] + last[1], r.full, r.cp);  // <= np rows
+    r.n_rows = last[0] + last[1];
+    r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.full, r.cp);  // <= np rows
   }
   cuda::narrow_fill_kernel<Narrow, Decide>
       <<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept,

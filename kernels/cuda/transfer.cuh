@@ -93,9 +93,7 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
     zip_contact_fields(v, cp, full, [](auto, auto& view, auto* d_ptr) { view = d_ptr; });
     return ht;
   }
-  CG_CUDA_CHECK(cudaStreamSynchronize(st));  // (the counters' copy: queued before the rows')
-  r.take_narrow_counters();
-  const std::uint32_t np = r.n_rows;
+  const std::uint32_t np = r.n_rows;  // (a rejecting narrow has read it for its tight layout)
   const std::size_t at = r.out_bytes;
   const std::byte* o = r.ws.out.data();
   bool registered = false;
@@ -154,6 +152,7 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
     ht.overlap_s = std::chrono::duration<double>(t1 - t0).count();
     ht.extra_s = std::chrono::duration<double>(t2 - t1).count();
   }
+  r.take_narrow_counters();  // the stream has synced (the counters were queued before the rows' copy)
   return ht;
 }
 
