@@ -47,8 +47,8 @@ struct Counters {
   unsigned long long bad_shape, ellipsoids, fallbacks, unconverged;
   // narrow, scenes with ellipsoids: the general pairs the screen left to the first start (`to_solve`),
   // the candidates the triage pass left to the settle pass (`unsettled`)
-  // and those the settle pass left to the whole solve (`hard`) (written by cub::DeviceSelect, read by
-  // the next kernel on the device and by the host with the other counters)
+  // and those the settle pass left to the whole solve (`hard`) (the lengths of the lists each pass
+  // appends to, read by the next kernel on the device and by the host with the other counters)
   unsigned long long to_solve, unsettled, hard;
   unsigned long long fp64_rows;   // fp32 rows recomputed in fp64 (narrow.cuh)
   unsigned long long fp64_pairs;  // fp32's pairs solved in fp64, listed for their rows (narrow.cuh)

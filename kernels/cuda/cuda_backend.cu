@@ -25,7 +25,8 @@
 // The persistent workspace grows geometrically and never shrinks: a caller that detects many frames
 // allocates nothing after the first (EngineStats::device_allocations). The host synchronises twice
 // per call, where it needs a count: after pack (entries total, bad-data status) and after the pair
-// count (pairs total); and once at the end.
+// count (pairs total); and once at the end (a rejecting narrow whose rows go to host memory waits once
+// more, for their count: narrow.cuh).
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
@@ -171,19 +172,18 @@ class CudaBackend {
   }
 
   Bounds bounds(const DeviceBodiesView& v, std::size_t& ellipsoids) {
-    ellipsoids = 0;
-    if (v.count == 0)
-      return bounds_stage(
-          m_ws, m_h_counters, m_stream, v, [](cuda::Counters*) {}, m_counters);
-    CG_CUDA_CHECK(cudaSetDevice(m_device));
-    refresh_tuning();
+    if (v.count > 0) {  // (no bodies: nothing touched)
+      CG_CUDA_CHECK(cudaSetDevice(m_device));
+      refresh_tuning();
+    }
+    cuda::Counters c{};  // the read-back counters (all zero without bodies)
     const Bounds b = bounds_stage(
         m_ws, m_h_counters, m_stream, v,
         [&](cuda::Counters* d) {
           if (v.shape) shape_check_queue(m_stream, v, d);
         },
-        m_counters);
-    if (v.shape) ellipsoids = shape_check_result(m_counters, v);
+        c);
+    ellipsoids = v.shape ? shape_check_result(c, v) : 0;
     return b;
   }
 
@@ -194,7 +194,6 @@ class CudaBackend {
   StageEvents m_events;
   Workspace m_ws;                                // DEVICE buffers (workspace.cuh)
   cuda::PinnedBuffer m_h_counters, m_h_staging;  // pinned HOST staging
-  cuda::Counters m_counters{};                   // the bounds stage's, read back
 };
 
 std::unique_ptr<CudaBackend> make_cuda_backend(int device) {
