@@ -144,9 +144,8 @@ class CudaBackend {
     reserve_pack(r);
     m_events.start(m_stream);
     upload_stage(r);
-    shapes_stage(r);                   // scenes with ellipsoids only
     const bool reuse = skin_stage(r);  // a skin: the kept candidates still hold every contact?
-    pack_stage(r, reuse);
+    pack_stage(r, reuse);              // (scenes with ellipsoids: their shapes packed first)
     if (reuse) {
       reuse_candidates(r);
     } else {
@@ -164,6 +163,7 @@ class CudaBackend {
     if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
     narrow_stage(r);
     const DownloadHostTimes host = download_stage(r, m_h_staging, out);
+    if (reuse) check_shapes_read(r);  // (read with the last counters: the reuse path has no other wait)
     m_events.collect(times, host.overlap_s, host.extra_s);  // all events complete: the stream synced
     m_events.narrow_split(stats.narrow_triage_s, stats.narrow_settle_s, stats.narrow_hard_s);
     stats.fp64_rows = r.h_counters->fp64_rows;  // copied after the narrow stage
@@ -180,7 +180,7 @@ class CudaBackend {
     const Bounds b = bounds_stage(
         m_ws, m_h_counters, m_stream, v,
         [&](cuda::Counters* d) {
-          if (v.shape) shape_check_queue(m_stream, v, d);
+          if (v.shape) shape_count_queue(m_stream, v, d);
         },
         c);
     ellipsoids = v.shape ? shape_check_result(c, v) : 0;

@@ -9,6 +9,7 @@
 #include "cuda/bounds.cuh"
 #include "cuda/common.cuh"
 #include "cuda/run_state.cuh"
+#include "cuda/shapes.cuh"
 
 namespace cg::cuda {
 
@@ -151,6 +152,7 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   r.d_base = r.type_passes ? ws.base.span_as<Key>(n).data() : nullptr;
   r.d_counters = ws.counters.span_as<cuda::Counters>(1).data();
   CG_CUDA_CHECK(cudaMemsetAsync(r.d_counters, 0, sizeof(cuda::Counters), st));
+  shapes_stage(r);  // scenes with ellipsoids: the packed shapes (and the device rows' check: shapes.cuh)
   // Renumbering sort of the bodies by z layer of cells (locality only; see home_layer_key): at most
   // 8 key bits, one radix pass.
   const int z_bits = std::max(1, bits_for(std::uint64_t(r.g.dims[2])));
@@ -202,6 +204,7 @@ void scan_body_blocks(RunState<Real, Key, Narrow>& r) {
     const std::int64_t id = !r.device_in && !r.job.bodies.id.empty() ? r.job.bodies.id[i] : std::int64_t(i);
     throw_bad_body(r.d_pos, r.d_rad, i, id);
   }
+  check_shapes_read(r);  // the device rows' shape check (pack_shapes)
   r.n_entries = r.h_counters->entries;
   r.stats.entries = r.n_entries;
   if (!r.type_passes && r.n_entries >= (std::uint64_t(1) << 31)) {

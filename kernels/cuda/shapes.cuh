@@ -14,19 +14,21 @@
 
 namespace cg::cuda {
 
-// Grid-stride: c->ellipsoids += the ellipsoids; c->bad_shape = n - i of the first bad body i. The count
-// is summed over the warp before its one atomic: an atomic per thread on one address (131 072 of them)
-// cost the device-array call ~0.14 ms (H100, 2^20 and 2^22 alike: BENCHMARKS §3).
-__global__ void shape_check_kernel(const Shape* __restrict__ kind, const double* __restrict__ rad,
-                                   const double* __restrict__ semi, const double* __restrict__ orient,
-                                   std::uint64_t n, Counters* __restrict__ c) {
+// The device-array path's shape check, in two parts that read each row once: here (before the call's
+// plan, which needs the count) the kind bytes alone — c->ellipsoids += the ellipsoids, c->bad_shape =
+// n - i of the first body i of no known kind (the sphere-only path packs no shapes) — grid-stride;
+// the rest of validate_shapes' predicate runs in pack_shapes, which reads the rows anyway (it read
+// them twice before: 0.37 ms of the 2^24 plan, BENCHMARKS §3). The count is summed over the warp
+// before its one atomic: an atomic per thread on one address (131 072 of them) cost the device-array
+// call ~0.14 ms (H100, 2^20 and 2^22 alike).
+__global__ void shape_count_kernel(const Shape* __restrict__ kind, std::uint64_t n,
+                                   Counters* __restrict__ c) {
   std::uint32_t ellipsoids = 0;
   for (std::uint64_t i = std::uint64_t(blockIdx.x) * kBlock + threadIdx.x; i < n;
        i += std::uint64_t(gridDim.x) * kBlock) {
     const std::uint8_t k = static_cast<std::uint8_t>(kind[i]);
     ellipsoids += k == static_cast<std::uint8_t>(Shape::ellipsoid) ? 1u : 0u;
-    double norm;
-    if (shape_fault(k, rad[i], semi + 3 * i, orient + 4 * i, norm) != ShapeFault::none)
+    if (k != static_cast<std::uint8_t>(Shape::ellipsoid) && k != static_cast<std::uint8_t>(Shape::sphere))
       atomicMax(&c->bad_shape, static_cast<unsigned long long>(n - i));
   }
   const std::uint32_t warp_sum = __reduce_add_sync(0xffffffffu, ellipsoids);  // every lane is here
@@ -34,33 +36,38 @@ __global__ void shape_check_kernel(const Shape* __restrict__ kind, const double*
     atomicAdd(&c->ellipsoids, static_cast<unsigned long long>(warp_sum));
 }
 
-// pack_shapes: pack_shape() of body i (input order).
+// pack_shapes: pack_shape() of body i (input order). check (the device-array path): shape_fault() of
+// each body as well, the first bad one's n - i into c->bad_shape (read with the pack stage's counters).
 template <class Real>
 __global__ void __launch_bounds__(kBlock)
-    pack_shapes_kernel(const Shape* __restrict__ kind, const double* __restrict__ semi,
-                       const double* __restrict__ orient, std::uint32_t n,
-                       PackedShape<Real>* __restrict__ out) {
+    pack_shapes_kernel(const Shape* __restrict__ kind, const double* __restrict__ rad,
+                       const double* __restrict__ semi, const double* __restrict__ orient, std::uint32_t n,
+                       bool check, PackedShape<Real>* __restrict__ out, Counters* __restrict__ c) {
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
   if (i >= n) return;
-  out[i] = pack_shape<Real>(static_cast<std::uint8_t>(kind[i]), semi + 3 * std::uint64_t(i),
-                            orient + 4 * std::uint64_t(i));
+  const std::uint8_t k = static_cast<std::uint8_t>(kind[i]);
+  const double* si = semi + 3 * std::uint64_t(i);
+  const double* qi = orient + 4 * std::uint64_t(i);
+  double norm;
+  if (check && shape_fault(k, rad[i], si, qi, norm) != ShapeFault::none)
+    atomicMax(&c->bad_shape, static_cast<unsigned long long>(n - i));
+  out[i] = pack_shape<Real>(k, si, qi);
 }
 
 }  // namespace cg::cuda
 
 namespace cg::detail {
 
-// Shape check of DEVICE bodies (device_bounds): queued into the bounds stage's counters, read back
-// with them (bounds_stage's `also`: one wait for both).
-inline void shape_check_queue(cudaStream_t st, const DeviceBodiesView& v, cuda::Counters* d_counters) {
+// The kinds of DEVICE bodies (device_bounds): queued into the bounds stage's counters, read back with
+// them (bounds_stage's `also`: one wait for both).
+inline void shape_count_queue(cudaStream_t st, const DeviceBodiesView& v, cuda::Counters* d_counters) {
   const int grid = static_cast<int>(std::min<std::uint64_t>(512, cuda::blocks_for(v.count)));
-  cuda::shape_check_kernel<<<grid, cuda::kBlock, 0, st>>>(v.shape, v.radius, v.semi_axes, v.orientation,
-                                                          v.count, d_counters);
-  CG_CUDA_CHECK_LAUNCH("shape_check");
+  cuda::shape_count_kernel<<<grid, cuda::kBlock, 0, st>>>(v.shape, v.count, d_counters);
+  CG_CUDA_CHECK_LAUNCH("shape_count");
 }
 
-// The read-back counters of shape_check_queue: the number of ellipsoids, or a bad body's rows copied
-// back and validate_shapes()'s InputError thrown.
+// The read-back counters of shape_count_queue or of the pack stage: the number of ellipsoids, or a bad
+// body's rows copied back and validate_shapes()'s InputError thrown.
 inline std::size_t shape_check_result(const cuda::Counters& c, const DeviceBodiesView& v) {
   if (c.bad_shape) {
     const std::uint64_t i = v.count - c.bad_shape;
@@ -120,9 +127,16 @@ void shapes_stage(RunState<Real, Key, Narrow>& r) {
   }
   r.d_shapes = ws.shapes.span_as<PackedShape<Narrow>>(r.n).data();
   r.shape_rows = {d_semi, d_orient};  // read again by the narrow stage (fp32's pairs in fp64)
-  cuda::pack_shapes_kernel<Narrow>
-      <<<cuda::blocks_for(r.n), cuda::kBlock, 0, r.st>>>(d_kind, d_semi, d_orient, r.n, r.d_shapes);
+  cuda::pack_shapes_kernel<Narrow><<<cuda::blocks_for(r.n), cuda::kBlock, 0, r.st>>>(
+      d_kind, r.d_rad, d_semi, d_orient, r.n, r.device_in, r.d_shapes, r.d_counters);
   CG_CUDA_CHECK_LAUNCH("pack_shapes");
+}
+
+// After a read of the counters that follows pack_shapes: the device rows' first bad shape, if any, as
+// validate_shapes' InputError.
+template <class Real, class Key, class Narrow>
+void check_shapes_read(const RunState<Real, Key, Narrow>& r) {
+  if (r.device_in && r.h_counters->bad_shape) shape_check_result(*r.h_counters, *r.job.device_bodies);
 }
 
 }  // namespace cg::detail

@@ -171,5 +171,30 @@ TYPED_TEST(ResidentShapesTest, SphereRowsAndMisuse) {
   }
 }
 
+// A bad row written between two steps that reuse the kept candidates (a skin: turning keeps the
+// bounding spheres, so the list is reused) is refused as on a step that rebuilds: InputError naming the
+// body, no contacts (the device checks the rows where it packs them: cuda/shapes.cuh).
+TYPED_TEST(ResidentShapesTest, BadRowOnAReuseStepIsRefused) {
+  CG_SKIP_WITHOUT_BACKEND(TypeParam);
+  using Real = typename TypeParam::Real;
+  ShapeScene s = make_scene("ellipsoids", 75, 400, 1.0, 9.0);
+  Engine<Real> e({.backend = TypeParam::backend, .fields = Fields::basic, .skin = 0.2});
+  e.set_resident(s.view());
+  e.detect_resident();  // builds the list
+  std::mt19937_64 rng(5);
+  const Quat<double> turned_q = turned(s.q[5], 0.3, rng);
+  e.write_resident_shapes(5, 1, nullptr, &turned_q);
+  e.detect_resident();  // reuses it
+  EXPECT_EQ(e.stats().candidate_reuses, 1u);
+  const Vec3<double> negative{0.5, -0.25, 0.5};
+  e.write_resident_shapes(23, 1, &negative, nullptr);
+  try {
+    e.detect_resident();
+    ADD_FAILURE() << "a negative semi-axis should be refused";
+  } catch (const InputError& err) {
+    EXPECT_NE(std::string(err.what()).find("23"), std::string::npos) << err.what();
+  }
+}
+
 }  // namespace
 }  // namespace cg::test
