@@ -103,7 +103,8 @@ CG_HD bool touch_fp64(const NarrowBodies<Real>& w, std::uint32_t a, std::uint32_
 // The pair stage's test of two packed spheres sa, sb (bodies a, b in the stage's own order; `perm`, if
 // set, maps it to input order), by candidate filter (below): every pair of the cell rule (CellRule),
 // the sphere test itself (SpheresTouch: the default filter, and the bounding or inflated spheres of
-// scenes with ellipsoids, mixed with a skin), or — mixed, default filter — fp64's decision (Fp64Touch:
+// scenes with a skin, mixed with a skin; scenes with ellipsoids: less the centre cut, CentreCut in
+// core/centre_cut.hpp), or — mixed, default filter — fp64's decision (Fp64Touch:
 // broad_says on the enlarged floats, the world doubles for the unsure pairs), so that mixed's
 // candidates are fp64's contacts exactly and its narrow stage writes one row per candidate, as fp64's.
 struct CellRule {
@@ -194,7 +195,9 @@ CG_HD NarrowDecision<Real> narrow_decide(const NarrowBodies<Real>& w, std::uint3
 // bounding_spheres: the sphere test on the bounding spheres of bodies that are not all spheres (scenes
 // with ellipsoids), or on the enlarged spheres of mixed's fp32 broad phase (GridParams::radius_margin):
 // the same pair-stage filter as spheres_touch, but the narrow stage decides.
-enum class CandidateFilter { spheres_touch, cells, bounding_spheres };
+// centre_cut: bounding_spheres less the general ellipsoid pairs that the centre line proves apart
+// (core/centre_cut.hpp): the default of scenes with ellipsoids without a skin; the same contacts.
+enum class CandidateFilter { spheres_touch, cells, bounding_spheres, centre_cut };
 
 // True when narrow_decide() may reject a candidate of this filter: the narrow stage then counts, scans
 // and compacts; else it writes one row per candidate (no scan).
@@ -202,5 +205,13 @@ CG_HD constexpr bool narrow_may_reject(CandidateFilter f) { return f != Candidat
 
 // True when the pair stage keeps only candidates whose (bounding) spheres touch (spheres_touch()).
 CG_HD constexpr bool candidates_touch(CandidateFilter f) { return f != CandidateFilter::cells; }
+
+// The filter a call runs (both backends): the requested one (spheres_touch unless a test or knob forces
+// another) made fit for the scene — with ellipsoids, bounding spheres less the centre cut; with a skin,
+// the (inflated) bounding spheres alone, whose list must outlast the bodies' motion and rotations.
+CG_HD constexpr CandidateFilter scene_filter(CandidateFilter requested, bool ellipsoids, bool skin) {
+  if (requested != CandidateFilter::spheres_touch || !(ellipsoids || skin)) return requested;
+  return skin ? CandidateFilter::bounding_spheres : CandidateFilter::centre_cut;
+}
 
 }  // namespace cg

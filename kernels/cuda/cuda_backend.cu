@@ -133,13 +133,13 @@ class CudaBackend {
     r.full = job.fields == Fields::full;
     r.type_passes = m_tuning.type_passes;
     r.filter = m_tuning.candidates;
-    // Scenes with ellipsoids: bounding-sphere candidates, the narrow stage decides (shapes.cuh); a skin
-    // (EngineOptions::skin): inflated bounding-sphere candidates, kept across calls. mixed, sphere
+    // Scenes with ellipsoids: bounding-sphere candidates less the centre cut (core/centre_cut.hpp), the
+    // narrow stage decides (shapes.cuh); a skin (EngineOptions::skin): inflated bounding-sphere
+    // candidates, kept across calls (scene_filter, core/narrow.hpp). mixed, sphere
     // scenes: the pair stage takes fp64's decision on its enlarged floats (Fp64Touch, pairs.cuh), so
     // the candidates are fp64's contacts and the narrow stage writes one row each.
     const bool skin = job.skin > 0;
-    if ((job.ellipsoids > 0 || skin) && r.filter == CandidateFilter::spheres_touch)
-      r.filter = CandidateFilter::bounding_spheres;
+    r.filter = scene_filter(r.filter, job.ellipsoids > 0, skin);
 
     reserve_pack(r);
     m_events.start(m_stream);

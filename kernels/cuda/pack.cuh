@@ -53,14 +53,17 @@ __global__ void __launch_bounds__(kBlock)
 // Type-pass path (base != nullptr): also the super-cell index of the body's lowest even cell
 // (cell_key of lo & ~1, type bits 0) and per block the number of bodies having a cell of each
 // type (type_blocks[t * gridDim.x + blockIdx.x]; totals added to c->type_entries[t]).
-template <class Real, class Key>
+// CandidateFilter::centre_cut (cut != null): also the cut shape of each body (core/centre_cut.hpp)
+// from its packed shape, in the same cell order.
+template <class Real, class Key, class Packed>
 __global__ void __launch_bounds__(kBlock)
     reorder_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n, GridParams<Real> g,
                    const std::uint32_t* __restrict__ sorted_index, Sphere<Real>* __restrict__ cell_spheres,
                    std::uint8_t* __restrict__ ctrl, std::uint32_t* __restrict__ perm,
                    std::uint32_t* __restrict__ block_entries, Counters* __restrict__ c,
                    Key* __restrict__ base, std::uint32_t* __restrict__ type_blocks,
-                   const std::uint8_t* __restrict__ report, Real inflation) {
+                   const std::uint8_t* __restrict__ report, Real inflation,
+                   const PackedShape<Packed>* __restrict__ shapes, CutShape* __restrict__ cut) {
   using Reduce = cub::BlockReduce<std::uint32_t, kBlock>;
   __shared__ typename Reduce::TempStorage tmp;
   __shared__ std::uint32_t s_types[8];
@@ -74,6 +77,7 @@ __global__ void __launch_bounds__(kBlock)
     s.r += inflation;  // a skin (EngineOptions::skin): cells and pair test of the inflated sphere
     cell_spheres[j] = s;
     perm[j] = i;
+    if (cut) cut[j] = cut_shape(shapes[i]);
     const BodyCells bc = body_cells(s, g);
     const std::uint32_t m = report ? report[i] : 0u;
     cb = control_bits(bc) | ((m & kReportedBit) ? kReportBit : 0u) | ((m & kPairedBit) ? kPairedCtrlBit : 0u);
@@ -175,10 +179,15 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
     cub_run(ws, "pack", [&](void* t, std::size_t& b) {
       return cub::DeviceRadixSort::SortPairs(t, b, home_key, home_index, int(n), 0, home_bits, st);
     });
-  cuda::reorder_kernel<Real, Key><<<nb, kBlock, 0, st>>>(
+  r.d_cell_cut = nullptr;
+  if (r.filter == CandidateFilter::centre_cut) {  // scenes with ellipsoids: the pair stage's cut shapes
+    ws.reserve({{&ws.cell_cut, r.n64 * sizeof(CutShape)}}, "pack");
+    r.d_cell_cut = ws.cell_cut.span_as<CutShape>(n).data();
+  }
+  cuda::reorder_kernel<Real, Key, Narrow><<<nb, kBlock, 0, st>>>(
       r.d_spheres, n, r.g, home_index.Current(), r.d_cell_spheres, r.d_ctrl, r.d_perm, r.d_body_totals,
       r.d_counters, r.d_base, r.type_passes ? r.d_type_totals : nullptr, r.d_report,
-      static_cast<Real>(r.job.inflation));
+      static_cast<Real>(r.job.inflation), r.d_shapes, r.d_cell_cut);
   CG_CUDA_CHECK_LAUNCH("reorder");
   r.events.mark(Stage::pack, st);
 }

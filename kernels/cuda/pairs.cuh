@@ -3,8 +3,10 @@
 // a < b. count_pairs counts per sorted entry (block-staged walk) and writes the pairs directly at a
 // block-aggregated atomic cursor into the dead alternate entry-body buffer; when they overflow the
 // space there: scan of the block totals → fill_pairs into ws.pairs. The candidate filter is
-// spheres_touch (every candidate is a contact: the narrow stage needs no compaction), or, forced by
-// Tuning::candidates, the cell rule alone (CandidateFilter::cells: the narrow stage rejects).
+// spheres_touch (every candidate is a contact: the narrow stage needs no compaction); scenes with
+// ellipsoids take the bounding spheres less the centre cut (core/centre_cut.hpp: its second part over
+// the pairs the walk found, after the walk) and the narrow stage rejects; forced by Tuning::candidates,
+// the cell rule alone (CandidateFilter::cells) or the bounding spheres alone.
 #include <cub/device/device_scan.cuh>
 
 #include "cuda/common.cuh"
@@ -36,6 +38,20 @@ __device__ __forceinline__ void visit(const EntryBody<Real>& x, std::uint32_t b,
   if (!test_in_cell(x.ca, cb, x.type)) return;
   ++tests;
   if (test(x.sa, sb, x.a, b)) emit(x.a, b);
+}
+
+// A pair test in two parts (CentreCut): `Coarse` in the staged walk's hot loop, `refine` over the
+// pairs it found, after it; the same decisions as the whole test.
+template <class Test>
+concept TwoPartTest = requires {
+  typename Test::Coarse;
+};
+template <class Test>
+__device__ __forceinline__ auto coarse_part(const Test& test) {
+  if constexpr (TwoPartTest<Test>)
+    return typename Test::Coarse{};
+  else
+    return test;
 }
 
 template <class Test, class Real, class Key, class Emit>
@@ -125,8 +141,18 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
       ++found;
       bits |= 1u << (f - t);
     };
+    const auto coarse = coarse_part(test);
     for (; f < lim && s_key[f] == k; ++f)
-      visit(x, s_body[f], s_ctrl[f], s_sphere[f], s_perm[f], report, tests, test, mark_one);
+      visit(x, s_body[f], s_ctrl[f], s_sphere[f], s_perm[f], report, tests, coarse, mark_one);
+    if constexpr (TwoPartTest<Test>) {  // the rest of the test over the pairs found
+      for (std::uint32_t m = bits; m != 0; m &= m - 1) {
+        const std::uint32_t j = __ffs(m) - 1, g = t + j;
+        if (!test.refine(x.sa, s_sphere[g], x.a, s_body[g])) {
+          bits &= ~(1u << j);
+          --found;
+        }
+      }
+    }
     if (f == lim) {  // the cell may go on past the staged window: walk the rest from memory
       const std::uint32_t before = found;
       tests += walk_from_memory(base + f, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test,
@@ -215,10 +241,12 @@ __global__ void __launch_bounds__(kBlock)
 namespace cg::detail {
 
 // Calls launch(test) with the pair test of the call's candidate filter (core/narrow.hpp): the cell
-// rule, the sphere test, or — mixed with the default filter — fp64's decision (Fp64Touch).
+// rule, the sphere test, scenes with ellipsoids the centre cut (core/centre_cut.hpp), or — mixed with
+// the default filter — fp64's decision (Fp64Touch).
 template <class Real, class Key, class Narrow, class Launch>
 void with_pair_test(const RunState<Real, Key, Narrow>& r, Launch&& launch) {
   if (!candidates_touch(r.filter)) return launch(CellRule{});
+  if (r.filter == CandidateFilter::centre_cut) return launch(CentreCut{r.d_cell_cut});
   if constexpr (!std::is_same_v<Real, Narrow>)
     if (r.filter == CandidateFilter::spheres_touch)
       return launch(Fp64Touch{{nullptr, r.d_pos, r.d_rad, r.origin}, float(r.g.radius_margin), r.d_perm});

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "backend.hpp"
+#include "core/centre_cut.hpp"
 #include "core/shape.hpp"
 #include "cuda/common.cuh"
 #include "cuda/stage_events.cuh"
@@ -42,6 +43,7 @@ struct RunState {
   PackedShape<Narrow>* d_shapes = nullptr;  // input order; scenes with ellipsoids only (shapes.cuh)
   ShapeRowsView shape_rows{};               // the world shape rows packed from (DEVICE): fp32's fp64 pairs
   Sphere<Real>* d_cell_spheres = nullptr;   // cell order
+  CutShape* d_cell_cut = nullptr;           // cell order; CandidateFilter::centre_cut only (pack.cuh)
   std::uint32_t* d_perm = nullptr;          // cell order → input index
   std::uint8_t* d_ctrl = nullptr;           // cell order
   std::uint32_t* d_body_totals = nullptr;

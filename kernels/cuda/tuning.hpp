@@ -39,7 +39,8 @@ struct Tuning {
   Forced download_registered = Forced::automatic;
   // CONTACTGRID_CUDA_CANDIDATES=cells: the pair stage proposes every pair the cell rule assigns and
   // the narrow stage rejects the non-touching ones (count → scan → fill): the same contacts, slower;
-  // a test knob for the rejecting path (default: spheres_touch, no compaction).
+  // a test knob for the rejecting path (default: spheres_touch, no compaction). =bounding: scenes with
+  // ellipsoids keep every bounding-sphere pair (no centre cut, core/centre_cut.hpp): the same contacts.
   CandidateFilter candidates = CandidateFilter::spheres_touch;
   // CONTACTGRID_CUDA_WARP_SOLVE=K: the whole start set of the hard ellipsoid pairs goes one lane group
   // per pair (its starts on the lanes) while there are at most K pairs per resident group, else one
@@ -77,8 +78,11 @@ inline Tuning read_tuning() {
   t.download_registered = forced("CONTACTGRID_CUDA_DOWNLOAD", "registered", "staged");
   if (const char* w = std::getenv("CONTACTGRID_CUDA_WARP_SOLVE"))
     t.warp_solve_pairs = static_cast<unsigned>(std::strtoul(w, nullptr, 10));
-  if (forced("CONTACTGRID_CUDA_CANDIDATES", "cells", "spheres") == Forced::on)
-    t.candidates = CandidateFilter::cells;
+  if (const char* c = std::getenv("CONTACTGRID_CUDA_CANDIDATES")) {
+    const std::string_view v = c;
+    if (v == "cells") t.candidates = CandidateFilter::cells;
+    if (v == "bounding") t.candidates = CandidateFilter::bounding_spheres;
+  }
   return t;
 }
 

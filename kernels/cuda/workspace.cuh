@@ -25,7 +25,10 @@
 //   shape_kind, shape_semi, upload → narrow    scenes with ellipsoids, host-array path: the shape rows
 //   shape_orient                               (narrow: fp32's pairs solved in fp64 read semi, orient)
 //   shapes                 pack → narrow       scenes with ellipsoids: PackedShape<Narrow> per body, input
-//   order normals                narrow              scenes with ellipsoids: the minimiser kept per candidate
+//                                              order
+//   cell_cut               pack → pairs        CandidateFilter::centre_cut: CutShape per body, cell
+//                                              order (core/centre_cut.hpp)
+//   normals                narrow              scenes with ellipsoids: the minimiser kept per candidate
 //                                              (triage / hard pass → fill) and the hard count
 //   narrow_list            narrow              scenes with ellipsoids: the settle pass's list of
 //                                              candidates (the other lists are in dead pair buffers),
@@ -68,7 +71,7 @@ struct Workspace {
   Bytes keys[2], bodies[2];
   Bytes entry_blocks, pairs, out, temp, counters, partials;
   Bytes res_pos, res_rad, res_report, res_shape, res_semi, res_orient;
-  Bytes shape_kind, shape_semi, shape_orient, shapes, normals, narrow_list;
+  Bytes shape_kind, shape_semi, shape_orient, shapes, cell_cut, normals, narrow_list;
   Bytes kept_pairs, ref_pos, ref_rad, ref_report;
   std::size_t res_count = 0;
   bool res_reported = false;     // resident report mask present
@@ -83,11 +86,12 @@ struct Workspace {
   std::uint64_t held_bytes() const {
     std::uint64_t s = 0;
     for (const Bytes* b :
-         {&pos,         &rad,       &report,      &spheres,    &cell_spheres, &perm,       &ctrl,
-          &body_blocks, &base,      &keys[0],     &keys[1],    &bodies[0],    &bodies[1],  &entry_blocks,
-          &pairs,       &out,       &temp,        &counters,   &partials,     &res_pos,    &res_rad,
-          &res_report,  &res_shape, &res_semi,    &res_orient, &shape_kind,   &shape_semi, &shape_orient,
-          &shapes,      &normals,   &narrow_list, &kept_pairs, &ref_pos,      &ref_rad,    &ref_report})
+         {&pos,        &rad,          &report,     &spheres,      &cell_spheres, &perm,
+          &ctrl,       &body_blocks,  &base,       &keys[0],      &keys[1],      &bodies[0],
+          &bodies[1],  &entry_blocks, &pairs,      &out,          &temp,         &counters,
+          &partials,   &res_pos,      &res_rad,    &res_report,   &res_shape,    &res_semi,
+          &res_orient, &shape_kind,   &shape_semi, &shape_orient, &shapes,       &cell_cut,
+          &normals,    &narrow_list,  &kept_pairs, &ref_pos,      &ref_rad,      &ref_report})
       s += b->bytes();
     return s;
   }

@@ -49,16 +49,14 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
                EngineStats& stats) {
   const int nt = be.threads > 0 ? be.threads : omp_get_max_threads();
   HostStageTimer timer(times);
-  // Scenes with ellipsoids: candidates are bounding-sphere overlaps (or the looser cell rule), the
-  // narrow stage decides per shape pair. Sphere-only scenes: exactly the sphere path; mixed's pair
-  // stage takes fp64's decision on its enlarged float spheres (Fp64Touch: the world doubles for the
-  // pairs within a few margins of touching), so its candidates are fp64's contacts. A list kept with a
-  // skin (inflated spheres): the narrow stage decides.
+  // Scenes with ellipsoids: candidates are bounding-sphere overlaps less the pairs the centre line
+  // proves apart (core/centre_cut.hpp; or the looser cell rule), the narrow stage decides per shape pair.
+  // Sphere-only scenes: exactly the sphere path; mixed's pair stage takes fp64's decision on its enlarged
+  // float spheres (Fp64Touch: the world doubles for the pairs within a few margins of touching), so its
+  // candidates are fp64's contacts. A list kept with a skin (inflated spheres): the narrow stage decides.
   const bool shapes = job.ellipsoids > 0;
   const bool skin = job.skin > 0;
-  const CandidateFilter filter = (shapes || skin) && be.candidates == CandidateFilter::spheres_touch
-                                     ? CandidateFilter::bounding_spheres
-                                     : be.candidates;
+  const CandidateFilter filter = scene_filter(be.candidates, shapes, skin);
   bool reuse = false;
   if (skin && job.check) {
     const Motion m = host::measure_motion(job.bodies, be.kept, nt);
@@ -73,6 +71,7 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Broad>(job.inflation), !reuse, nt,
              bodies);
   if (shapes) host::pack_shapes(job.bodies, nt, packed_shapes);
+  if (filter == CandidateFilter::centre_cut && !reuse) host::cut_shapes(packed_shapes, nt, bodies.cut);
   timer.lap(Stage::pack);
 
   const NarrowBodies<Narrow> world =

@@ -51,6 +51,16 @@ void pack_shapes(const BodiesView& bodies, int threads, std::vector<PackedShape<
   }
 }
 
+template <class Packed>
+void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, std::vector<CutShape>& out) {
+  const std::size_t n = shapes.size();
+  out.resize(n);
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
+  for (std::size_t i = 0; i < n; ++i) out[i] = cut_shape(shapes[i]);
+}
+
+template void cut_shapes(const std::vector<PackedShape<float>>&, int, std::vector<CutShape>&);
+template void cut_shapes(const std::vector<PackedShape<double>>&, int, std::vector<CutShape>&);
 template void pack_shapes(const BodiesView&, int, std::vector<PackedShape<float>>&);
 template void pack_shapes(const BodiesView&, int, std::vector<PackedShape<double>>&);
 

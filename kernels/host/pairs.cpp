@@ -9,7 +9,8 @@ namespace {
 
 // Entry e tests the later entries f of its cell; within a cell the bodies ascend (stable sort of
 // entries made in body order), so body[e] < body[f]. `test`: the candidate filter's pair test
-// (core/narrow.hpp: SpheresTouch, CellRule, or mixed's Fp64Touch), on input indices.
+// (core/narrow.hpp: SpheresTouch, CellRule, or mixed's Fp64Touch; core/centre_cut.hpp: CentreCut), on
+// input indices.
 template <class Test, class Real, class Key, class Emit>
 std::uint64_t walk_entry(std::size_t e, const Entries<Key>& en, const Sphere<Real>* entry_sphere,
                          const std::uint8_t* entry_ctrl, const std::uint8_t* report, int half_bits,
@@ -83,6 +84,8 @@ std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p
   out.filter = filter;
   const std::uint8_t* r = report.empty() ? nullptr : report.data();
   if (!candidates_touch(filter)) return collect(e, p, r, half_bits, threads, CellRule{}, out);
+  if (filter == CandidateFilter::centre_cut)  // scenes with ellipsoids (core/centre_cut.hpp)
+    return collect(e, p, r, half_bits, threads, CentreCut{p.cut.data()}, out);
   if constexpr (std::is_same_v<Real, float>)
     if (fp64 != nullptr && filter == CandidateFilter::spheres_touch)  // mixed: fp64's decision
       return collect(e, p, r, half_bits, threads, Fp64Touch{*fp64, fp64->broad_margin, nullptr}, out);

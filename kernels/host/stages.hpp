@@ -8,6 +8,7 @@
 #include <span>
 #include <vector>
 
+#include "core/centre_cut.hpp"
 #include "core/grid.hpp"
 #include "core/narrow.hpp"
 #include "core/shape_narrow.hpp"
@@ -40,6 +41,7 @@ struct PackedBodies {
   std::vector<BodyCells> cells;       // freed by fill_entries
   std::vector<std::uint8_t> ctrl;     // control_bits
   std::vector<std::uint32_t> count;   // entry_count; freed by fill_entries
+  std::vector<CutShape> cut;          // CandidateFilter::centre_cut: cut_shape() of every body
 };
 
 // (cell key, body) entries; body-ascending after fill_entries, key-ascending (stable) after sort.
@@ -87,6 +89,10 @@ void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams
 // pack_shapes (scenes with ellipsoids): pack_shape() of every body, input order.
 template <class Real>
 void pack_shapes(const BodiesView& bodies, int threads, std::vector<PackedShape<Real>>& out);
+
+// cut_shapes (CandidateFilter::centre_cut): cut_shape() of every packed shape, input order.
+template <class Packed>
+void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, std::vector<CutShape>& out);
 
 // entries: exclusive scan of the entry counts → fill (cell key, body) in body order. Returns the
 // number of entries; frees p.cells and p.count.

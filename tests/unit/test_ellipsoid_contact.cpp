@@ -28,9 +28,11 @@
 #include <string>
 #include <vector>
 
+#include "core/centre_cut.hpp"
 #include "core/contact.hpp"
 #include "core/ellipsoid_contact.hpp"
 #include "core/quat.hpp"
+#include "core/shape_narrow.hpp"
 #include "reference/ellipsoid_reference.hpp"
 
 namespace cg::test {
@@ -95,6 +97,11 @@ Vec3<double> random_unit(std::mt19937_64& rng) {
   std::normal_distribution<double> g;
   double x = g(rng), y = g(rng), z = g(rng), n = std::sqrt(x * x + y * y + z * z);
   return {x / n, y / n, z / n};
+}
+
+PackedShape<double> packed_double(const Body<double>& x) {
+  const double semi[3] = {x.axes.x, x.axes.y, x.axes.z}, q[4] = {x.q.w, x.q.x, x.q.y, x.q.z};
+  return pack_shape<double>(static_cast<std::uint8_t>(Shape::ellipsoid), semi, q);
 }
 
 // Per-suite statistics, printed and recorded.
@@ -557,6 +564,100 @@ TYPED_TEST(EllipsoidContactTest, CentreLineRejectsOnlyPairsApart) {
   std::printf("[ellipsoid] %s centre line: %d candidates, %d apart, %d rejected before PW\n",
               tag<Real>("").c_str(), candidates, apart, rejected);
   EXPECT_GE(rejected, apart * 3 / 4) << "the centre line should reject most pairs that are apart";
+}
+
+// The pair stage's centre cut (core/centre_cut.hpp) cuts only pairs that the narrow stage's own
+// centre-line test rejects in the narrow's frame — fp32: the same local floats; fp64 and mixed: the world
+// difference of the doubles and fp64's packed shapes (also fp32's pairs in fp64) — and that the exact
+// long-double PW function finds apart: in the three precision modes (Broad, Narrow), at aspect ratios
+// 1:4, 1:10 and 1:100, with large local coordinates (a big scene's far corner) and pairs placed a hair
+// apart along the centre line around the cut's margin. It must also cut most of what that test rejects.
+template <class Broad, class Narrow>
+void check_centre_cut(const char* mode, std::initializer_list<double> offsets) {
+  std::mt19937_64 rng(1618);
+  std::uniform_real_distribution<double> u(-2, 2);
+  const double hairs[] = {1e-5, 5e-4, 1.5e-3, 4e-3};
+  for (double offset : offsets) {
+    int candidates = 0, centre_line = 0, cut = 0, random_line = 0, random_cut = 0;  // random: no hairs
+    for (int i = 0; i < 3000; ++i) {
+      const double aspect = i % 3 == 0 ? 4.0 : (i % 3 == 1 ? 10.0 : 100.0);
+      Body<double> a{{offset + u(rng), offset * 0.5 + u(rng), -offset + u(rng)},
+                     random_axes<double>(rng, aspect),
+                     random_quat<double>(rng)};
+      Body<double> b{
+          {offset, offset * 0.5, -offset}, random_axes<double>(rng, aspect), random_quat<double>(rng)};
+      if (i % 4 == 0) {  // a hair apart along the centre line: |a − b| = reach (1 + hair)
+        const exact::Pair p = reference_pair(a, b);
+        const LD len = std::sqrt(exact::dotp(p.r, p.r));
+        const exact::V dir{p.r.x / len, p.r.y / len, p.r.z / len};
+        const LD reach = exact::support_value(p.a, dir) + exact::support_value(p.b, dir);
+        const LD s = reach * LD(1 + hairs[(i / 4) % 4]) / len;
+        a.centre = {double(LD(b.centre.x) + p.r.x * s), double(LD(b.centre.y) + p.r.y * s),
+                    double(LD(b.centre.z) + p.r.z * s)};
+      }
+      auto packed = [](const Body<double>& x) {
+        const double semi[3] = {x.axes.x, x.axes.y, x.axes.z}, q[4] = {x.q.w, x.q.x, x.q.y, x.q.z};
+        return pack_shape<Narrow>(static_cast<std::uint8_t>(Shape::ellipsoid), semi, q);
+      };
+      auto sphere = [](const Body<double>& x) {  // the pair stage's: local Broad centre, bounding radius
+        const double r = std::max(x.axes.x, std::max(x.axes.y, x.axes.z));
+        return Sphere<Broad>{Broad(x.centre.x), Broad(x.centre.y), Broad(x.centre.z), Broad(r)};
+      };
+      const PackedShape<Narrow> pa = packed(a), pb = packed(b);
+      const Sphere<Broad> sa = sphere(a), sb = sphere(b);
+      if (!spheres_touch(sa, sb)) continue;
+      ++candidates;
+      // the narrow's frame and its centre-line test (ShapeDecide::screen / ellipsoid_contact)
+      bool narrow_rejects;
+      if constexpr (std::is_same_v<Narrow, float>) {
+        narrow_rejects = separated_along_centres(ellipsoid_of(sa, pa), ellipsoid_of(sb, pb));
+      } else {
+        const Sphere<double> fa{a.centre.x - b.centre.x, a.centre.y - b.centre.y, a.centre.z - b.centre.z, 0},
+            fb{0, 0, 0, 0};
+        narrow_rejects = separated_along_centres(ellipsoid_of(fa, pa), ellipsoid_of(fb, pb));
+      }
+      // fp32's pairs in fp64 (any pair may be one): fp64's frame and packed shapes
+      const Sphere<double> wa{a.centre.x - b.centre.x, a.centre.y - b.centre.y, a.centre.z - b.centre.z, 0};
+      const bool fp64_rejects = separated_along_centres(
+          ellipsoid_of(wa, packed_double(a)), ellipsoid_of(Sphere<double>{0, 0, 0, 0}, packed_double(b)));
+      centre_line += narrow_rejects;
+      random_line += narrow_rejects && i % 4 != 0;
+      if (!cut_apart(sa, sb, cut_shape(pa), cut_shape(pb))) continue;
+      ++cut;
+      random_cut += i % 4 != 0;
+      EXPECT_TRUE(narrow_rejects) << mode << " offset " << offset << " pair " << i
+                                  << ": cut, narrow keeps it";
+      EXPECT_TRUE(fp64_rejects) << mode << " offset " << offset << " pair " << i << ": cut, fp64 keeps it";
+      EXPECT_GT(exact::pw_exact(reference_pair(a, b)), LD(1)) << mode << " pair " << i << ": cut, not apart";
+    }
+    std::printf(
+        "[ellipsoid] %s centre cut, offset %g: %d candidates, %d rejected by the narrow's centre line "
+        "(%d of them placed at random), %d cut (%d)\n",
+        mode, offset, candidates, centre_line, random_line, cut, random_cut);
+    // near the origin the margin costs little: nearly every random pair the centre line rejects is cut
+    if (offset == 0.0) EXPECT_GE(random_cut, random_line * 9 / 10) << mode << ": the cut should take most";
+  }
+}
+
+TEST(CentreCut, CutsOnlyPairsTheNarrowRejects) {
+  check_centre_cut<float, float>("fp32", {0.0, 1e2, 1e4});
+  check_centre_cut<float, double>("mixed", {0.0, 1e2, 1e4});
+  check_centre_cut<double, double>("fp64", {0.0, 1e6, 1e9});
+}
+
+// The cut leaves spheres, ellipsoids with three equal semi-axes (the sphere–ellipsoid path, which has no
+// centre-line test) and any pair with one of them alone, however far apart along the centre line.
+TEST(CentreCut, LeavesPairsWithoutTheGeneralSolve) {
+  const double semi[3] = {1, 0.5, 0.25}, round[3] = {0.5, 0.5, 0.5}, q[4] = {1, 0, 0, 0};
+  const PackedShape<float> ell = pack_shape<float>(1, semi, q), eq = pack_shape<float>(1, round, q),
+                           sph = pack_shape<float>(0, semi, q);
+  const Sphere<float> sa{0, 0, 0, 1}, sb{0, 0, 1.9f, 1};  // bounding spheres touch; the shapes are apart
+  EXPECT_TRUE(cut_apart(sa, sb, cut_shape(ell), cut_shape(ell)));
+  for (const PackedShape<float>& other : {eq, sph}) {
+    EXPECT_FALSE(cut_apart(sa, sb, cut_shape(ell), cut_shape(other)));
+    EXPECT_FALSE(cut_apart(sa, sb, cut_shape(other), cut_shape(ell)));
+  }
+  EXPECT_FALSE(cut_apart(sa, sa, cut_shape(ell), cut_shape(ell))) << "coincident centres";
 }
 
 // A centre inside the other body.

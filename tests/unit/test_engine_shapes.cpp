@@ -271,6 +271,63 @@ TYPED_TEST(EngineShapesTest, CellFilterGivesTheSameRows) {
   EXPECT_GT(sx.candidates, x.size()) << "some bounding spheres touch where the shapes do not";
 }
 
+// The centre cut (core/centre_cut.hpp, the default for scenes with ellipsoids) removes only candidates
+// the narrow stage rejects: the same rows, bit for bit, and the same solver work as every bounding-sphere
+// pair, on scenes with general, equal-axis and sphere bodies, deep overlaps, pairs with nearly
+// coincident centres (fp32: solved in fp64) and a scene far from the origin; and it removes many.
+TYPED_TEST(EngineShapesTest, CentreCutGivesTheSameRows) {
+  using Real = TypeParam;
+  constexpr Precision prec = sizeof(Real) == 4 ? Precision::fp32 : Precision::fp64;
+  std::vector<ShapeScene> scenes = {make_scene("ellipsoids", 71, 600, 1.0, 9.0),
+                                    make_scene("mixed", 72, 700, 0.5, 10.0),
+                                    make_scene("dense ellipsoids", 73, 900, 1.0, 7.0)};
+  ShapeScene partners = make_scene("ellipsoids", 74, 300, 1.0, 8.0);
+  for (std::size_t i = 0, n = partners.p.size(); i < 40; ++i) {  // near-coincident centres, equal axes
+    const double delta = std::pow(10.0, -3 - int(i % 8));
+    partners.p.push_back({partners.p[i].x + delta, partners.p[i].y, partners.p[i].z - delta});
+    const std::size_t j = (i * 5 + 1) % n;
+    partners.r.push_back(partners.r[j]), partners.shape.push_back(partners.shape[j]);
+    partners.axes.push_back(i % 3 ? partners.axes[j] : Vec3<double>{0.6, 0.6, 0.6});
+    partners.q.push_back(partners.q[j]);
+    if (i % 3 == 0) partners.r.back() = 0.6;
+  }
+  scenes.push_back(partners);
+  ShapeScene far = make_scene("ellipsoids", 75, 500, 1.0, 9.0);
+  for (Vec3<double>& p : far.p) p = {p.x + 3e5, p.y - 2e5, p.z + 1e5};
+  scenes.push_back(far);
+  std::uint64_t cut_candidates = 0, all_candidates = 0;
+  for (const ShapeScene& s : scenes) {
+    SCOPED_TRACE(s.name);
+    const BodiesView v = s.view();
+    const Bounds b = compute_bounds(v);
+    detail::DetectJob<Real> job{v, plan_grid(b, make_frame(b, 0, prec), prec), {}, Fields::full};
+    job.grid = detail::grid_params<Real>(job.plan);
+    job.ellipsoids = validate_shapes(v);
+    ASSERT_GT(job.ellipsoids, 0u);
+    detail::HostBackend cut{2}, bounding{2, CandidateFilter::bounding_spheres};
+    Contacts<Real> x, y;
+    StageTimes tx, ty;
+    EngineStats sx, sy;
+    detail::run_stages(cut, job, x, tx, sx);
+    detail::run_stages(bounding, job, y, ty, sy);
+    expect_identical(x, y, s.name + ": centre cut vs bounding spheres");
+    EXPECT_EQ(sx.pair_tests, sy.pair_tests);
+    EXPECT_LE(sx.candidates, sy.candidates);
+    EXPECT_GE(sx.candidates, x.size());
+    EXPECT_EQ(sx.narrow_fallbacks, sy.narrow_fallbacks);
+    EXPECT_EQ(sx.narrow_unconverged, sy.narrow_unconverged);
+    EXPECT_EQ(sx.narrow_solver_runs, sy.narrow_solver_runs);
+    EXPECT_EQ(sx.narrow_evaluations, sy.narrow_evaluations);
+    EXPECT_EQ(sx.fp64_rows, sy.fp64_rows);
+    cut_candidates += sx.candidates;
+    all_candidates += sy.candidates;
+  }
+  std::printf("[centre cut] %s: %llu of %llu bounding-sphere candidates kept\n", to_string(prec),
+              static_cast<unsigned long long>(cut_candidates),
+              static_cast<unsigned long long>(all_candidates));
+  EXPECT_LT(cut_candidates, all_candidates * 4 / 5) << "the cut should remove many candidates";
+}
+
 // Both backends run the narrow stage of shapes as the device does: triage (first start + the cheap
 // certificates), settle (the first start again with every certificate) for the candidates triage left,
 // the whole solve for the ones still hard, and the row rebuilt from the kept minimiser
@@ -449,6 +506,19 @@ TYPED_TEST(EngineShapesTest, CudaBitIdenticalToCpu) {
   }
   ::unsetenv("CONTACTGRID_CUDA_WARP_SOLVE");
   EXPECT_GT(hard, 0u) << "the scenes should have pairs that take the whole start set";
+  // without the centre cut (CONTACTGRID_CUDA_CANDIDATES=bounding): more candidates, the same rows
+  ::setenv("CONTACTGRID_CUDA_CANDIDATES", "bounding", 1);
+  for (const ShapeScene& s : bit_scenes()) {
+    Engine<Real> cpu({.backend = Backend::cpu, .fields = Fields::full});
+    Engine<Real> gpu({.backend = Backend::cuda, .fields = Fields::full});
+    const Contacts<Real> a = cpu.detect(s.view());
+    const Contacts<Real> b = gpu.detect(s.view());
+    expect_identical(a, b, s.name + " bounding spheres on the device");
+    EXPECT_LE(cpu.stats().candidates, gpu.stats().candidates) << s.name;
+    EXPECT_EQ(cpu.stats().narrow_solver_runs, gpu.stats().narrow_solver_runs) << s.name;
+    EXPECT_EQ(cpu.stats().narrow_evaluations, gpu.stats().narrow_evaluations) << s.name;
+  }
+  ::unsetenv("CONTACTGRID_CUDA_CANDIDATES");
 }
 
 #if defined(CONTACTGRID_HAVE_CUDA)

@@ -1,0 +1,109 @@
+#pragma once
+// The centre cut: the pair stage's shape test for scenes with ellipsoids (CandidateFilter::centre_cut),
+// shared by both backends. In a random scene of semi-axes U[0.25, 1] about 56 % of the bounding-sphere
+// candidates are apart, and the centre line alone proves 48 % of them apart (two support values:
+// separated_along_centres, core/ellipsoid_contact.hpp). Taken in the pair stage, where both bodies are
+// in cell order, it halves the candidates that the order stage sorts and the narrow stage screens at
+// random places in id order (0.905 → 0.470 per body; H100, 2^20 ellipsoids: order 0.079 → 0.056 ms,
+// narrow 0.453 → 0.411, the pair stage unchanged; its price is the cut shapes' gather into cell order,
+// +0.02 ms at 2^20 and +0.75 ms at 2^24, where it about breaks even in fp32: BENCHMARKS §3).
+//
+// It removes only pairs the narrow stage rejects anyway, so the contacts, their bits and the solver's
+// flags are the same with or without it: it cuts general ellipsoid pairs alone (the ones whose narrow
+// path starts with separated_along_centres: the screen, or fp32's pairs in fp64 through
+// ellipsoid_contact), and only when the gap it finds exceeds the screen's own gap by more than the
+// difference of the two evaluations can be:
+//   - the broad phase's centres (pack's local Broad) against the narrow's (the same floats for fp32;
+//     fp64 and mixed: the world difference of the doubles, correctly rounded), each coordinate off by
+//     at most ε_Broad·|c|: |δ| ≤ ε_Broad·(|a|₁ + |b|₁); the length moves by |δ|, the direction by
+//     2|δ|/len, so each support value by its largest semi-axis times that (h is Lipschitz with it);
+//   - the support values of R D² Rᵀ in float (here) and of the rotation the narrow builds (in Narrow,
+//     or fp32's pairs in fp64 from the double rows): relative errors of a few ε32 at most.
+// So the cut asks gap > 2^-10·(ra + rb + len) + 4·ε_Broad·(|a|₁ + |b|₁)·(1 + (ra + rb)/len), with ra, rb
+// the pair stage's (bounding) radii ≥ the largest semi-axes: a thousand times the rounding terms, and
+// still nearly every apart pair it could cut (the gap of a pair apart along the centre line is rarely
+// that thin). The narrow's rejections are thus unchanged, pair by pair
+// (tests: CentreCut.*, EngineShapesTest.CentreCutGivesTheSameRows, the device's CudaBitIdenticalToCpu).
+//
+// Spheres, ellipsoids with three equal semi-axes (the sphere–ellipsoid path, which has no centre-line
+// test), and sphere pairs are never cut: their CutShape is NaN, and a NaN gap is no gap.
+// A skin (EngineOptions::skin) keeps the bounding spheres: its candidates must outlast rotations.
+#include <cstdint>
+#include <limits>
+
+#include "core/contact.hpp"
+#include "core/narrow.hpp"
+#include "core/quat.hpp"
+#include "core/shape.hpp"
+
+namespace cg {
+
+// R D² Rᵀ of an ellipsoid in float (h(u)² = uᵀ C u), by the pair stage's body order: 24 bytes a body in
+// every precision mode — the cut's own rounding is far inside its margin (above). NaN for the bodies
+// the cut leaves alone.
+struct CutShape {
+  float xx, yy, zz, xy, xz, yz;
+};
+
+template <class Packed>
+CG_HD CutShape cut_shape(const PackedShape<Packed>& p) {
+  const Vec3<Packed> e = p.semi_axes;
+  if (p.kind != static_cast<std::uint32_t>(Shape::ellipsoid) || (e.x == e.y && e.y == e.z)) {
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    return {nan, nan, nan, nan, nan, nan};
+  }
+  const Mat3<Packed> r = rotation_matrix(p.orientation);
+  const Vec3<Packed> d2{e.x * e.x, e.y * e.y, e.z * e.z};
+  auto c = [&](const Vec3<Packed>& u, const Vec3<Packed>& v) {
+    return static_cast<float>(u.x * d2.x * v.x + u.y * d2.y * v.y + u.z * d2.z * v.z);
+  };
+  return {c(r.r0, r.r0), c(r.r1, r.r1), c(r.r2, r.r2), c(r.r0, r.r1), c(r.r0, r.r2), c(r.r1, r.r2)};
+}
+
+CG_HD float cut_support(const CutShape& c, float x, float y, float z) {
+  return cg_sqrt(x * (c.xx * x + c.xy * y + c.xz * z) + y * (c.xy * x + c.yy * y + c.yz * z) +
+                 z * (c.xz * x + c.yz * y + c.zz * z));
+}
+
+// True when the centre line proves the pair apart with the margin above (false for NaN shapes). The
+// centre difference is taken in Real (the broad phase's own), then the cut runs in float: its rounding
+// (relative, a few ε32) is covered by the 2^-10 term; the coordinate term is of the broad phase's
+// rounding, ε_Real.
+template <class Real>
+CG_HD bool cut_apart(const Sphere<Real>& sa, const Sphere<Real>& sb, const CutShape& ca, const CutShape& cb) {
+  const float x = static_cast<float>(sa.x - sb.x), y = static_cast<float>(sa.y - sb.y),
+              z = static_cast<float>(sa.z - sb.z);
+  const float len2 = x * x + y * y + z * z;
+  if (!(len2 > 0.0f)) return false;
+  const float len = cg_sqrt(len2), inv = 1.0f / len;
+  const float ux = x * inv, uy = y * inv, uz = z * inv;
+  const float gap = len - (cut_support(ca, ux, uy, uz) + cut_support(cb, ux, uy, uz));
+  if (!(gap > 0.0f)) return false;  // (NaN: not cut)
+  auto l1 = [](const Sphere<Real>& s) {
+    return (s.x < 0 ? -s.x : s.x) + (s.y < 0 ? -s.y : s.y) + (s.z < 0 ? -s.z : s.z);
+  };
+  const float size = static_cast<float>(sa.r + sb.r);
+  const float coords = static_cast<float>(Real(4) * std::numeric_limits<Real>::epsilon() * (l1(sa) + l1(sb)));
+  return gap > 0x1p-10f * (size + len) + coords * (1.0f + size / len);
+}
+
+// The pair stage's test for CandidateFilter::centre_cut (core/narrow.hpp's tests: the spheres of bodies
+// a, b in the stage's own order, `cut` in the same order): the bounding spheres touch (Coarse) and the
+// centre line does not prove the shapes apart (refine). The device's pair walk takes the two apart —
+// the coarse test in its hot loop, refine over the pairs it found after it (cuda/pairs.cuh): inside
+// the loop the cut's registers slowed every test (H100, 2^24: pair stage 2.9 → 4.8 ms).
+struct CentreCut {
+  using Coarse = SpheresTouch;
+  const CutShape* cut;
+  template <class Real>
+  CG_HD bool refine(const Sphere<Real>& sa, const Sphere<Real>& sb, std::uint32_t a, std::uint32_t b) const {
+    return !cut_apart(sa, sb, cut[a], cut[b]);
+  }
+  template <class Real>
+  CG_HD bool operator()(const Sphere<Real>& sa, const Sphere<Real>& sb, std::uint32_t a,
+                        std::uint32_t b) const {
+    return Coarse{}(sa, sb, a, b) && refine(sa, sb, a, b);
+  }
+};
+
+}  // namespace cg
