@@ -148,6 +148,11 @@ struct ShapeDecide {
   const PackedShape<Real>* shapes;  // by body index
   SolverSettings<Real> settings;
   ShapeRowsView rows;  // fp32: the world shape rows (fp64 and mixed: not read)
+  // The pair stage took the centre cut (CandidateFilter::centre_cut, core/centre_cut.hpp): the pairs
+  // apart along the centre line by more than the cut's margin are gone, so the screen leaves the test to
+  // the first pass's ellipsoid_contact (which starts with it: the same verdict, no solver work) instead
+  // of taking it for every general pair (H100, 2^20: triage 0.186 → see BENCHMARKS §3).
+  bool centre_cut = false;
 
   CG_HD bool both_spheres(std::uint32_t a, std::uint32_t b) const {
     return shapes[a].kind == static_cast<std::uint32_t>(Shape::sphere) &&
@@ -216,6 +221,7 @@ struct ShapeDecide {
     if (!bounding_spheres_touch(bodies, a, b)) return Verdict::reject;  // (above)
     if (in_fp64(a, b)) return Verdict::hard;
     if (!general_pair(a, b)) return first_start<SolveScope::none>(a, b, flags, n);  // (complete)
+    if (centre_cut) return Verdict::solve;                                          // (above)
     const PairFrame<Real> f = pair_frame(bodies, a, b);
     if (separated_along_centres(ellipsoid_of(f.a, shapes[a]), ellipsoid_of(f.b, shapes[b])))
       return Verdict::reject;

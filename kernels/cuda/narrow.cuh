@@ -501,7 +501,8 @@ void narrow_stage(RunState<Real, Key, Narrow>& r) {
   const NarrowBodies<Narrow> bodies = narrow_bodies(r);
   if (narrow_may_reject(r.filter) && r.np > 0) {
     if (r.d_shapes)  // scenes with ellipsoids (r.filter is then never spheres_touch)
-      narrow_compact(r, ShapeDecide<Narrow>{bodies, r.d_shapes, r.job.solver, r.shape_rows});
+      narrow_compact(r, ShapeDecide<Narrow>{bodies, r.d_shapes, r.job.solver, r.shape_rows,
+                                            r.filter == CandidateFilter::centre_cut});
     else
       narrow_compact(r, SphereDecide<Narrow>{bodies});
     r.events.mark(Stage::narrow, r.st);

@@ -97,8 +97,9 @@ void narrow_shapes(const CandidatePairs& c, const NarrowBodies<Real>& bodies,
                    const std::vector<PackedShape<Real>>& shapes, ShapeRowsView rows,
                    const SolverSettings<Real>& settings, Fields fields, int nt, Contacts<Real>& out,
                    EngineStats& stats) {
-  const NarrowCounts f = narrow_compact(c, ShapeDecide<Real>{bodies, shapes.data(), settings, rows},
-                                        fields == Fields::full, nt, out);
+  const NarrowCounts f = narrow_compact(
+      c, ShapeDecide<Real>{bodies, shapes.data(), settings, rows, c.filter == CandidateFilter::centre_cut},
+      fields == Fields::full, nt, out);
   stats.narrow_fallbacks += f.flags.fallbacks;
   stats.narrow_unconverged += f.flags.unconverged;
   stats.fp64_rows += f.flags.fp64_rows;
