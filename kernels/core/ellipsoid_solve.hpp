@@ -289,15 +289,20 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
       }
       return dot(v, v) < Real(1e-6) ? none : detail::normalized(v);
     };
-    runs.batch(
-        nstarts, start_set, run, [&] { return !certified(); }, take);
     // The screen: f (value only) at the 4 cube diagonals and 6 face diagonals of each body's frame (up
     // to sign, put towards a − b); Newton from the `screen` lowest. These in-between directions reach
     // basins that no axis start does (two comparable thin axes, one body's thin axis tilted by the other).
-    if (settings.screen > 0 && !certified()) {
-      const int keep = settings.screen > 4 ? 4 : settings.screen;
-      Real top_f[4];
-      Vec3<Real> top_n[4];
+    // They run only when no start of the set gave a certified minimum, and are taken in the same batch,
+    // after the set: a lane group runs set and screen side by side (one round of 16 lanes, not two:
+    // the hard pass waits on its slowest pair's chain of rounds), SerialRuns computes the screen only
+    // when the set is through uncertified. The same runs taken in the same order as one batch after the
+    // other, so the same bits.
+    const int keep = settings.screen > 4 ? 4 : (settings.screen > 0 ? settings.screen : 0);
+    Real top_f[4];
+    Vec3<Real> top_n[4];
+    bool screened = false;
+    auto screen = [&] {
+      screened = true;
       int count = 0;
       for (int i = 0; i < 20; ++i) {
         const Mat3<Real>& rot = i < 10 ? a.rotation : b.rotation;
@@ -317,10 +322,23 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
           if (count < keep) ++count;
         }
       }
-      out.iterations += 20 / 4;  // 20 value-only evaluations ≈ 5 full ones
-      runs.batch(
-          count, [&](int k) { return top_n[k]; }, run, always, take);
-    }
+    };
+    auto set_then_screen = [&](int s) -> Vec3<Real> {
+      if (s < nstarts) return start_set(s);
+      if (!screened) screen();
+      return top_n[s - nstarts];
+    };
+    int asked = 0;  // the batch asks `more` once before each start, in order
+    auto more = [&] {
+      const int s = asked++;
+      if (s < nstarts) return !certified();
+      if (s == nstarts) {
+        if (certified()) return false;
+        out.iterations += 20 / 4;  // the screen's 20 value-only evaluations ≈ 5 full ones
+      }
+      return true;  // every screened start is taken
+    };
+    runs.batch(nstarts + keep, set_then_screen, run, more, take);
     // The antipode of the best: where a − b is short against the bodies, minima come in near-antipodal
     // pairs (f(−n) = f(n) + 2 n·r) and the deeper one of a pair may be the one no start reached.
     for (int round = 0; round < 2 && !certified(); ++round) {
