@@ -53,8 +53,8 @@ __global__ void __launch_bounds__(kBlock)
 // Type-pass path (base != nullptr): also the super-cell index of the body's lowest even cell
 // (cell_key of lo & ~1, type bits 0) and per block the number of bodies having a cell of each
 // type (type_blocks[t * gridDim.x + blockIdx.x]; totals added to c->type_entries[t]).
-// CandidateFilter::centre_cut (cut != null): also the cut shape of each body (core/centre_cut.hpp)
-// from its packed shape, in the same cell order.
+// CandidateFilter::centre_cut with renumbered bodies (cut != null): also the cut shape of each body
+// (core/centre_cut.hpp) from its packed shape, in the same cell order.
 template <class Real, class Key, class Packed>
 __global__ void __launch_bounds__(kBlock)
     reorder_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n, GridParams<Real> g,
@@ -156,7 +156,18 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   r.d_base = r.type_passes ? ws.base.span_as<Key>(n).data() : nullptr;
   r.d_counters = ws.counters.span_as<cuda::Counters>(1).data();
   CG_CUDA_CHECK(cudaMemsetAsync(r.d_counters, 0, sizeof(cuda::Counters), st));
-  shapes_stage(r);  // scenes with ellipsoids: the packed shapes (and the device rows' check: shapes.cuh)
+  // The renumbering pays only when the spheres do not stay in L2 anyway (the pair stage's gathers hit
+  // it either way): when they outgrow the L2 (Tuning::renumber forces it). Without it, reorder reads
+  // the identity written by pack: the bodies keep their input order (no result changes).
+  const bool renumber = !spheres_only && tuned(r.tuning.renumber, r.n64 * sizeof(Sphere<Real>) > r.l2_bytes);
+  r.d_cell_cut = nullptr;
+  if (r.filter == CandidateFilter::centre_cut && !spheres_only) {  // the pair stage's cut shapes
+    ws.reserve({{&ws.cell_cut, r.n64 * sizeof(CutShape)}}, "pack");
+    r.d_cell_cut = ws.cell_cut.span_as<CutShape>(n).data();
+  }
+  // scenes with ellipsoids: the packed shapes (and the device rows' check), and without renumbering
+  // the cut shapes, in input order = cell order (shapes.cuh); else reorder gathers them
+  shapes_stage(r, !renumber);
   // Renumbering sort of the bodies by z layer of cells (locality only; see home_layer_key): at most
   // 8 key bits, one radix pass.
   const int z_bits = std::max(1, bits_for(std::uint64_t(r.g.dims[2])));
@@ -172,22 +183,14 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
     r.events.mark(Stage::pack, st);
     return;
   }
-  // The renumbering pays only when the spheres do not stay in L2 anyway (the pair stage's gathers hit
-  // it either way): when they outgrow the L2 (Tuning::renumber forces it). Without it, reorder reads
-  // the identity written by pack: the bodies keep their input order (no result changes).
-  if (tuned(r.tuning.renumber, r.n64 * sizeof(Sphere<Real>) > r.l2_bytes))
+  if (renumber)
     cub_run(ws, "pack", [&](void* t, std::size_t& b) {
       return cub::DeviceRadixSort::SortPairs(t, b, home_key, home_index, int(n), 0, home_bits, st);
     });
-  r.d_cell_cut = nullptr;
-  if (r.filter == CandidateFilter::centre_cut) {  // scenes with ellipsoids: the pair stage's cut shapes
-    ws.reserve({{&ws.cell_cut, r.n64 * sizeof(CutShape)}}, "pack");
-    r.d_cell_cut = ws.cell_cut.span_as<CutShape>(n).data();
-  }
   cuda::reorder_kernel<Real, Key, Narrow><<<nb, kBlock, 0, st>>>(
       r.d_spheres, n, r.g, home_index.Current(), r.d_cell_spheres, r.d_ctrl, r.d_perm, r.d_body_totals,
       r.d_counters, r.d_base, r.type_passes ? r.d_type_totals : nullptr, r.d_report,
-      static_cast<Real>(r.job.inflation), r.d_shapes, r.d_cell_cut);
+      static_cast<Real>(r.job.inflation), r.d_shapes, renumber ? r.d_cell_cut : nullptr);
   CG_CUDA_CHECK_LAUNCH("reorder");
   r.events.mark(Stage::pack, st);
 }

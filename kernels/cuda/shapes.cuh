@@ -39,11 +39,13 @@ __global__ void shape_count_kernel(const Shape* __restrict__ kind, std::uint64_t
 
 // pack_shapes: pack_shape() of body i (input order). check (the device-array path): shape_fault() of
 // each body as well, the first bad one's n - i into c->bad_shape (read with the pack stage's counters).
+// cut (the centre cut, bodies not renumbered: input order is the cell order): its cut shape too.
 template <class Real>
 __global__ void __launch_bounds__(kBlock)
     pack_shapes_kernel(const Shape* __restrict__ kind, const double* __restrict__ rad,
                        const double* __restrict__ semi, const double* __restrict__ orient, std::uint32_t n,
-                       bool check, PackedShape<Real>* __restrict__ out, Counters* __restrict__ c) {
+                       bool check, PackedShape<Real>* __restrict__ out, CutShape* __restrict__ cut,
+                       Counters* __restrict__ c) {
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
   if (i >= n) return;
   const std::uint8_t k = static_cast<std::uint8_t>(kind[i]);
@@ -52,7 +54,9 @@ __global__ void __launch_bounds__(kBlock)
   double norm;
   if (check && shape_fault(k, rad[i], si, qi, norm) != ShapeFault::none)
     atomicMax(&c->bad_shape, static_cast<unsigned long long>(n - i));
-  out[i] = pack_shape<Real>(k, si, qi);
+  const PackedShape<Real> p = pack_shape<Real>(k, si, qi);
+  out[i] = p;
+  if (cut) cut[i] = cut_shape(p);
 }
 
 }  // namespace cg::cuda
@@ -103,8 +107,9 @@ inline void upload_shape_rows(const BodiesView& b, Bytes& kind, Bytes& semi, Byt
 
 // Scenes with ellipsoids: the shape rows on the device (host-array path: uploaded) and the packed
 // shapes (r.d_shapes). Sphere-only scenes: nothing (r.d_shapes stays null).
+// cut_here: the cut shapes (r.d_cell_cut) in input order, which is the cell order (no renumbering).
 template <class Real, class Key, class Narrow>
-void shapes_stage(RunState<Real, Key, Narrow>& r) {
+void shapes_stage(RunState<Real, Key, Narrow>& r, bool cut_here) {
   if (r.job.ellipsoids == 0 || r.n == 0) return;
   Workspace& ws = r.ws;
   const std::uint64_t n64 = r.n64;
@@ -129,7 +134,8 @@ void shapes_stage(RunState<Real, Key, Narrow>& r) {
   r.d_shapes = ws.shapes.span_as<PackedShape<Narrow>>(r.n).data();
   r.shape_rows = {d_semi, d_orient};  // read again by the narrow stage (fp32's pairs in fp64)
   cuda::pack_shapes_kernel<Narrow><<<cuda::blocks_for(r.n), cuda::kBlock, 0, r.st>>>(
-      d_kind, r.d_rad, d_semi, d_orient, r.n, r.device_in, r.d_shapes, r.d_counters);
+      d_kind, r.d_rad, d_semi, d_orient, r.n, r.device_in, r.d_shapes, cut_here ? r.d_cell_cut : nullptr,
+      r.d_counters);
   CG_CUDA_CHECK_LAUNCH("pack_shapes");
 }
 

@@ -635,7 +635,9 @@ void check_centre_cut(const char* mode, std::initializer_list<double> offsets) {
         "(%d of them placed at random), %d cut (%d)\n",
         mode, offset, candidates, centre_line, random_line, cut, random_cut);
     // near the origin the margin costs little: nearly every random pair the centre line rejects is cut
-    if (offset == 0.0) EXPECT_GE(random_cut, random_line * 9 / 10) << mode << ": the cut should take most";
+    if (offset == 0.0) {
+      EXPECT_GE(random_cut, random_line * 9 / 10) << mode << ": the cut should take most";
+    }
   }
 }
 
