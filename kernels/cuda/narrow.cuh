@@ -121,6 +121,30 @@ __global__ void __launch_bounds__(kBlock)
   add_flags(flags, c);
 }
 
+// narrow, shapes, triage in one kernel (ShapeDecide::triage: the screen, then the first start for the
+// general pairs, on the candidate's own thread), the hard ones onto `unsettled`: for scenes of ellipsoids
+// alone whose pair stage took the centre cut, where the screen leaves nearly every candidate to the
+// first start and the two kernels above only add a list between them (H100 2^20: see BENCHMARKS §3).
+template <class Real>
+__global__ void __launch_bounds__(kBlock)
+    narrow_triage_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
+                         std::uint32_t n_pairs, ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
+                         Vec3<Real>* __restrict__ normal, std::uint32_t* __restrict__ unsettled,
+                         Counters* __restrict__ c) {
+  using Verdict = typename ShapeDecide<Real>::Verdict;
+  const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
+  NarrowFlags flags;
+  Verdict v = Verdict::reject;
+  if (k < n_pairs) {
+    Vec3<Real> n{};
+    v = decide.triage(pair_a[k], pair_b[k], flags, n);
+    verdict[k] = static_cast<std::uint32_t>(v);
+    normal[k] = n;
+  }
+  append(v == Verdict::hard, k, unsettled, &c->unsettled);
+  add_flags(flags, c);
+}
+
 // Pass `Pass` of ShapeDecide over the candidates listed in `list` (their count on the device: launched
 // over every candidate, the blocks past the count return at once, so the host need not wait for it),
 // so that every lane of a warp runs the same pass: first_pass (the general pairs the screen left),
@@ -392,12 +416,18 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
   const std::uint32_t* a = r.pair_a.Current();
   const std::uint32_t* b = r.pair_b.Current();
   r.events.mark_narrow_split(0, st);
-  cuda::narrow_screen_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(a, b, np, decide, d_verdict, d_normal,
-                                                                        d_list, d_list2, r.d_counters);
-  CG_CUDA_CHECK_LAUNCH("narrow_screen");
-  cuda::narrow_list_kernel<Narrow, cuda::ListPass::first><<<blocks_for(np), kBlock, 0, st>>>(
-      a, b, d_list, d_n_solve, decide, d_verdict, d_normal, d_list2, d_n_unsettled, r.d_counters);
-  CG_CUDA_CHECK_LAUNCH("narrow_first_pass");
+  if (decide.centre_cut && r.job.ellipsoids == r.n64) {  // ellipsoids alone, cut: one triage kernel
+    cuda::narrow_triage_kernel<Narrow>
+        <<<blocks_for(np), kBlock, 0, st>>>(a, b, np, decide, d_verdict, d_normal, d_list2, r.d_counters);
+    CG_CUDA_CHECK_LAUNCH("narrow_triage");
+  } else {
+    cuda::narrow_screen_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
+        a, b, np, decide, d_verdict, d_normal, d_list, d_list2, r.d_counters);
+    CG_CUDA_CHECK_LAUNCH("narrow_screen");
+    cuda::narrow_list_kernel<Narrow, cuda::ListPass::first><<<blocks_for(np), kBlock, 0, st>>>(
+        a, b, d_list, d_n_solve, decide, d_verdict, d_normal, d_list2, d_n_unsettled, r.d_counters);
+    CG_CUDA_CHECK_LAUNCH("narrow_first_pass");
+  }
   r.events.mark_narrow_split(1, st);
   cuda::narrow_list_kernel<Narrow, cuda::ListPass::settle><<<blocks_for(np), kBlock, 0, st>>>(
       a, b, d_list2, d_n_unsettled, decide, d_verdict, d_normal, d_list, d_n_hard, r.d_counters);
