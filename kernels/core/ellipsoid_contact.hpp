@@ -102,10 +102,13 @@ CG_HD bool separated_along_centres(const Ellipsoid<Real>& a, const Ellipsoid<Rea
   return len - reach > noise;
 }
 
+// `carry` (ellipsoid_solve.hpp: FirstStart): first_start_cheap keeps its first start there where it
+// leaves the pair incomplete; first_start given one goes on from it (the centre line and the PW filter
+// passed for it already: neither runs again).
 template <SolveScope Scope = SolveScope::whole, class Real, class Runs = SerialRuns>
 CG_HD EllipsoidPairResult<Real> ellipsoid_contact(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b,
                                                   const SolverSettings<Real>& settings = {},
-                                                  const Runs& runs = {}) {
+                                                  const Runs& runs = {}, FirstStart<Real>* carry = nullptr) {
   const Vec3<Real> ea = a.semi_axes, eb = b.semi_axes;
   const bool sa = ea.x == ea.y && ea.y == ea.z, sb = eb.x == eb.y && eb.y == eb.z;
   EllipsoidPairResult<Real> res{};
@@ -131,10 +134,16 @@ CG_HD EllipsoidPairResult<Real> ellipsoid_contact(const Ellipsoid<Real>& a, cons
       res.in_contact = false;
       return res;
     };
-    if (separated_along_centres(a, b)) return apart(Real(-1));
-    const PerramWertheim<Real> pw = perram_wertheim(a, b);
-    if (!pw_may_touch(pw)) return apart(pw.value);
-    res.contact = ellipsoid_pair_contact<Scope>(a, b, pw, settings, runs);
+    PerramWertheim<Real> pw{};
+    if (Scope == SolveScope::first_start && carry) {
+      pw.value = carry->pw_value;
+      pw.band = carry->pw_band;
+    } else {
+      if (separated_along_centres(a, b)) return apart(Real(-1));
+      pw = perram_wertheim(a, b);
+      if (!pw_may_touch(pw)) return apart(pw.value);
+    }
+    res.contact = ellipsoid_pair_contact<Scope>(a, b, pw, settings, runs, carry);
     if (!res.contact.complete) {  // first start uncertified: no geometry yet
       res.in_contact = false;
       return res;

@@ -209,16 +209,30 @@ CG_HD void contact_at_normal(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b,
   out.geometry.position_on_b = b.centre + mul(b.rotation, out.local_point_b);
 }
 
+// What SolveScope::first_start_cheap knew of a pair it left incomplete — the first start's run and the
+// PW filter's value and band — so that SolveScope::first_start (the settle pass) goes on from it with the
+// inner-ellipsoid certificate instead of running the filter and the start again: the same best, the same
+// counted evaluations, so the same bits and flags as running them again (the whole solve still starts
+// afresh). 36 bytes in fp32.
+template <class Real>
+struct FirstStart {
+  detail::LocalResult<Real> result;
+  Real pw_value, pw_band;
+};
+
 // The general solve (no dispatch on spheres): see the file comment. `pw` is the result of
 // perram_wertheim(a, b) (the caller has it from the filter). SolveScope::first_start* stops after the
 // first start unless it is certified (and consistent with the PW sign): `complete` false, no geometry;
 // where it is certified, the answer is the whole solve's, bit for bit. The scope is a template
 // parameter so that the first-start kernel does not carry the whole set's code (registers, stack).
+// `carry` (FirstStart, optional): first_start_cheap fills it where it leaves the pair incomplete;
+// first_start takes the first start's run from it instead of running it (`pw`: its value and band).
 template <SolveScope Scope = SolveScope::whole, class Real, class Runs = SerialRuns>
 CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, const Ellipsoid<Real>& b,
                                                     const PerramWertheim<Real>& pw,
                                                     const SolverSettings<Real>& settings = {},
-                                                    const Runs& runs = {}) {
+                                                    const Runs& runs = {},
+                                                    FirstStart<Real>* carry = nullptr) {
   const Vec3<Real> r = a.centre - b.centre;
   const bool coincident = is_zero(r);
   const Real scale = detail::max_axis(a.semi_axes) + detail::max_axis(b.semi_axes);
@@ -264,10 +278,18 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
     return cert;
   };
   const Vec3<Real> first = coincident ? Vec3<Real>{Real(1), Real(0), Real(0)} : pw.normal;
+  auto keep_first = [&] {  // first_start_cheap, incomplete: what first_start goes on from
+    if constexpr (Scope == SolveScope::first_start_cheap)
+      if (carry) *carry = {best, pw.value, pw.band};
+  };
   if constexpr (Scope != SolveScope::whole) {
-    take(run(first));
+    if (Scope == SolveScope::first_start && carry)
+      take(carry->result);
+    else
+      take(run(first));
     if (!certified()) {
       out.complete = false;  // the second pass runs the whole solve
+      keep_first();
       return out;
     }
   } else {
@@ -359,6 +381,7 @@ CG_HD EllipsoidContact<Real> ellipsoid_pair_contact(const Ellipsoid<Real>& a, co
   if constexpr (Scope != SolveScope::whole) {
     if (inconsistent || !best.converged) {
       out.complete = false;
+      keep_first();
       return out;
     }
   } else if (inconsistent || !best.converged) {

@@ -54,10 +54,12 @@ CG_HD Ellipsoid<Real> ellipsoid_of(const Sphere<Real>& s, const PackedShape<Real
 }
 
 // The contact of a pair with at least one ellipsoid (in the frame of sa, sb) and whether it is one.
+// `carry`: ellipsoid_contact's (a general pair's first start, kept or resumed).
 template <SolveScope Scope = SolveScope::whole, class Real, class Runs = SerialRuns>
 CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, const PackedShape<Real>& pa,
                               const PackedShape<Real>& pb, const SolverSettings<Real>& settings,
-                              EllipsoidContact<Real>& c, const Runs& runs = {}) {
+                              EllipsoidContact<Real>& c, const Runs& runs = {},
+                              FirstStart<Real>* carry = nullptr) {
   constexpr std::uint32_t sphere = static_cast<std::uint32_t>(Shape::sphere);
   if (pa.kind == sphere) {
     c = sphere_ellipsoid_contact(sa, ellipsoid_of(sb, pb), true);
@@ -68,7 +70,7 @@ CG_HD bool shape_pair_contact(const Sphere<Real>& sa, const Sphere<Real>& sb, co
     return c.geometry.distance <= Real(0);
   }
   const EllipsoidPairResult<Real> r =
-      ellipsoid_contact<Scope>(ellipsoid_of(sa, pa), ellipsoid_of(sb, pb), settings, runs);
+      ellipsoid_contact<Scope>(ellipsoid_of(sa, pa), ellipsoid_of(sb, pb), settings, runs, carry);
   c = r.contact;
   return r.in_contact;
 }
@@ -202,11 +204,15 @@ struct ShapeDecide {
   // row(), without solving again; fp32's pairs in fp64 are solved again). Each pass counts the work it does,
   // on both backends alike.
   enum class Verdict : std::uint32_t { reject = 0, accept = 1, hard = 2, solve = 3 };
+  // `carry` (FirstStart, optional): first_pass keeps a hard pair's first start there, settle goes on
+  // from it (the same bits and counts as running it again: ellipsoid_solve.hpp).
   template <SolveScope Scope>
-  CG_HD Verdict first_start(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
+  CG_HD Verdict first_start(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n,
+                            FirstStart<Real>* carry = nullptr) const {
     EllipsoidContact<Real> c;
     const PairFrame<Real> f = pair_frame(bodies, a, b);
-    const bool contact = shape_pair_contact<Scope>(f.a, f.b, shapes[a], shapes[b], settings, c);
+    const bool contact =
+        shape_pair_contact<Scope>(f.a, f.b, shapes[a], shapes[b], settings, c, SerialRuns{}, carry);
     if (!c.complete) {
       note_work(a, b, c, flags);
       return Verdict::hard;
@@ -227,17 +233,21 @@ struct ShapeDecide {
       return Verdict::reject;
     return Verdict::solve;
   }
-  CG_HD Verdict first_pass(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
-    return first_start<SolveScope::first_start_cheap>(a, b, flags, n);
+  CG_HD Verdict first_pass(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n,
+                           FirstStart<Real>* carry = nullptr) const {
+    return first_start<SolveScope::first_start_cheap>(a, b, flags, n, carry);
   }
-  CG_HD Verdict triage(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
+  CG_HD Verdict triage(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n,
+                       FirstStart<Real>* carry = nullptr) const {
     const Verdict v = screen(a, b, flags, n);
-    return v == Verdict::solve ? first_pass(a, b, flags, n) : v;
+    return v == Verdict::solve ? first_pass(a, b, flags, n, carry) : v;
   }
-  // A candidate triage left hard.
-  CG_HD Verdict settle(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n) const {
+  // A candidate triage left hard; `carry`: what its first pass kept (null: both run again; a pair the
+  // screen left hard, fp32's pair in fp64, has none and needs none).
+  CG_HD Verdict settle(std::uint32_t a, std::uint32_t b, NarrowFlags& flags, Vec3<Real>& n,
+                       FirstStart<Real>* carry = nullptr) const {
     if (in_fp64(a, b)) return Verdict::hard;
-    return first_start<SolveScope::first_start>(a, b, flags, n);
+    return first_start<SolveScope::first_start>(a, b, flags, n, carry);
   }
   // `runs`: how the start set's runs go (SerialRuns; the device's warp kernel: WarpRuns, the same bits).
   template <bool kFp64Pairs = true, class Runs = SerialRuns>

@@ -67,15 +67,20 @@ __device__ inline void add_flags(const NarrowFlags& f, Counters* c) {
 // Candidate k onto `list` when `take` (its length in *count): one atomic per warp, the warp's items
 // in lane order. Every lane of the warp must call it. The lists' order depends on the warps' timing;
 // what each pass computes for a candidate does not, nor do the sums and maxima of the counters.
-__device__ inline void append(bool take, std::uint32_t k, std::uint32_t* list, unsigned long long* count) {
+// Returns the candidate's place in the list (for what goes beside it), or ~0 when not taken.
+__device__ inline unsigned long long append(bool take, std::uint32_t k, std::uint32_t* list,
+                                            unsigned long long* count) {
   constexpr unsigned kAll = 0xffffffffu;
   const unsigned takers = __ballot_sync(kAll, take);
-  if (takers == 0) return;
+  if (takers == 0) return ~0ull;
   const unsigned lane = threadIdx.x & 31u, leader = __ffs(takers) - 1;
   unsigned long long base = 0;
   if (lane == leader) base = atomicAdd(count, static_cast<unsigned long long>(__popc(takers)));
   base = __shfl_sync(kAll, base, leader);
-  if (take) list[base + __popc(takers & ((1u << lane) - 1u))] = k;
+  if (!take) return ~0ull;
+  const unsigned long long at = base + __popc(takers & ((1u << lane) - 1u));
+  list[at] = k;
+  return at;
 }
 
 // narrow, rejecting path, count: accept[k] = 1 when candidate k is a contact. Decide: SphereDecide or
@@ -130,18 +135,20 @@ __global__ void __launch_bounds__(kBlock)
     narrow_triage_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
                          std::uint32_t n_pairs, ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
                          Vec3<Real>* __restrict__ normal, std::uint32_t* __restrict__ unsettled,
-                         Counters* __restrict__ c) {
+                         FirstStart<Real>* __restrict__ carry, Counters* __restrict__ c) {
   using Verdict = typename ShapeDecide<Real>::Verdict;
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   NarrowFlags flags;
   Verdict v = Verdict::reject;
+  FirstStart<Real> first;
   if (k < n_pairs) {
     Vec3<Real> n{};
-    v = decide.triage(pair_a[k], pair_b[k], flags, n);
+    v = decide.triage(pair_a[k], pair_b[k], flags, n, &first);
     verdict[k] = static_cast<std::uint32_t>(v);
     normal[k] = n;
   }
-  append(v == Verdict::hard, k, unsettled, &c->unsettled);
+  const unsigned long long at = append(v == Verdict::hard, k, unsettled, &c->unsettled);
+  if (at != ~0ull) carry[at] = first;  // for settle, beside the pair in its list
   add_flags(flags, c);
 }
 
@@ -160,7 +167,7 @@ __global__ void __launch_bounds__(kBlock)
                        ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
                        Vec3<Real>* __restrict__ normal, std::uint32_t* __restrict__ next,
                        unsigned long long* __restrict__ n_next, Counters* __restrict__ c,
-                       unsigned long long warp_limit = 0) {
+                       FirstStart<Real>* __restrict__ carry, unsigned long long warp_limit = 0) {
   using Verdict = typename ShapeDecide<Real>::Verdict;
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
   const unsigned long long count = *n_list;
@@ -169,15 +176,16 @@ __global__ void __launch_bounds__(kBlock)
   NarrowFlags flags;
   bool still_hard = false;
   std::uint32_t k = 0;
+  FirstStart<Real> first;  // ListPass::first: a hard pair's first start, kept for settle
   if (i < count) {
     k = list[i];
     const std::uint32_t a = pair_a[k], b = pair_b[k];
     Vec3<Real> n{};
     Verdict v;
     if constexpr (Pass == ListPass::first) {
-      v = decide.first_pass(a, b, flags, n);
+      v = decide.first_pass(a, b, flags, n, &first);
     } else if constexpr (Pass == ListPass::settle) {
-      v = decide.settle(a, b, flags, n);
+      v = decide.settle(a, b, flags, n, carry + i);  // (fp32's pairs in fp64: none kept, none read)
     } else {
       v = decide.in_fp64(a, b)
               ? Verdict::hard
@@ -189,7 +197,11 @@ __global__ void __launch_bounds__(kBlock)
     }
     still_hard = v == Verdict::hard;
   }
-  if (Pass != ListPass::whole) append(still_hard, k, next, n_next);  // the next pass's list
+  if (Pass != ListPass::whole) {
+    const unsigned long long at = append(still_hard, k, next, n_next);  // the next pass's list
+    if constexpr (Pass == ListPass::first)
+      if (at != ~0ull) carry[at] = first;  // for settle, beside it
+  }
   add_flags(flags, c);
 }
 
@@ -404,8 +416,11 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
   cudaStream_t st = r.st;
   const std::uint32_t np = r.np;
   r.ws.reserve({{&r.ws.normals, std::size_t(np) * sizeof(Vec3<Narrow>)},
-                {&r.ws.narrow_list, std::size_t(np) * sizeof(std::uint32_t)}},
+                {&r.ws.narrow_list, std::size_t(np) * sizeof(std::uint32_t)},
+                {&r.ws.narrow_carry, std::size_t(np) * sizeof(FirstStart<Narrow>)}},
                "narrow");
+  // beside the unsettled list: each pair's first start, kept by the first pass for settle
+  FirstStart<Narrow>* d_carry = r.ws.narrow_carry.template span_as<FirstStart<Narrow>>(np).data();
   Vec3<Narrow>* d_normal = r.ws.normals.template span_as<Vec3<Narrow>>(np).data();
   // the lists, each made by the pass before (append; the counters start at 0): solve → d_list,
   // unsettled → ws.narrow_list, hard → d_list again (the solve list is done with by then)
@@ -417,20 +432,20 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
   const std::uint32_t* b = r.pair_b.Current();
   r.events.mark_narrow_split(0, st);
   if (decide.centre_cut && r.job.ellipsoids == r.n64) {  // ellipsoids alone, cut: one triage kernel
-    cuda::narrow_triage_kernel<Narrow>
-        <<<blocks_for(np), kBlock, 0, st>>>(a, b, np, decide, d_verdict, d_normal, d_list2, r.d_counters);
+    cuda::narrow_triage_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
+        a, b, np, decide, d_verdict, d_normal, d_list2, d_carry, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("narrow_triage");
   } else {
     cuda::narrow_screen_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
         a, b, np, decide, d_verdict, d_normal, d_list, d_list2, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("narrow_screen");
     cuda::narrow_list_kernel<Narrow, cuda::ListPass::first><<<blocks_for(np), kBlock, 0, st>>>(
-        a, b, d_list, d_n_solve, decide, d_verdict, d_normal, d_list2, d_n_unsettled, r.d_counters);
+        a, b, d_list, d_n_solve, decide, d_verdict, d_normal, d_list2, d_n_unsettled, r.d_counters, d_carry);
     CG_CUDA_CHECK_LAUNCH("narrow_first_pass");
   }
   r.events.mark_narrow_split(1, st);
   cuda::narrow_list_kernel<Narrow, cuda::ListPass::settle><<<blocks_for(np), kBlock, 0, st>>>(
-      a, b, d_list2, d_n_unsettled, decide, d_verdict, d_normal, d_list, d_n_hard, r.d_counters);
+      a, b, d_list2, d_n_unsettled, decide, d_verdict, d_normal, d_list, d_n_hard, r.d_counters, d_carry);
   CG_CUDA_CHECK_LAUNCH("narrow_settle");
   r.events.mark_narrow_split(2, st);
   // the whole start set: a lane group per pair while the list is short (a few pairs per resident group),
@@ -443,8 +458,9 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
         a, b, d_list, d_n_hard, warp_limit, decide, d_verdict, d_normal, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("narrow_hard_warp");
   }
-  cuda::narrow_list_kernel<Narrow, cuda::ListPass::whole><<<blocks_for(np), kBlock, 0, st>>>(
-      a, b, d_list, d_n_hard, decide, d_verdict, d_normal, nullptr, nullptr, r.d_counters, warp_limit);
+  cuda::narrow_list_kernel<Narrow, cuda::ListPass::whole>
+      <<<blocks_for(np), kBlock, 0, st>>>(a, b, d_list, d_n_hard, decide, d_verdict, d_normal, nullptr,
+                                          nullptr, r.d_counters, nullptr, warp_limit);
   CG_CUDA_CHECK_LAUNCH("narrow_hard");
   if constexpr (std::is_same_v<Narrow, float>) {
     cuda::narrow_hard_fp64_kernel<Narrow><<<cuda::kRareBlocks, kBlock, 0, st>>>(

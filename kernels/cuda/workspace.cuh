@@ -33,6 +33,8 @@
 //   narrow_list            narrow              scenes with ellipsoids: the settle pass's list of
 //                                              candidates (the other lists are in dead pair buffers),
 //                                              then fp32's pairs solved in fp64 (their rows' fill)
+//   narrow_carry           narrow              scenes with ellipsoids: beside the settle pass's list, each
+//                                              pair's first start (FirstStart), kept by the first pass
 //   res_pos, res_rad,      between calls       resident bodies (Engine::set_resident); res_shape,
 //   res_report, res_shape,                     res_semi, res_orient: their shape rows (empty for a
 //   res_semi, res_orient                       sphere-only set); owned across calls, never aliased
@@ -71,7 +73,7 @@ struct Workspace {
   Bytes keys[2], bodies[2];
   Bytes entry_blocks, pairs, out, temp, counters, partials;
   Bytes res_pos, res_rad, res_report, res_shape, res_semi, res_orient;
-  Bytes shape_kind, shape_semi, shape_orient, shapes, cell_cut, normals, narrow_list;
+  Bytes shape_kind, shape_semi, shape_orient, shapes, cell_cut, normals, narrow_list, narrow_carry;
   Bytes kept_pairs, ref_pos, ref_rad, ref_report;
   std::size_t res_count = 0;
   bool res_reported = false;     // resident report mask present
@@ -86,12 +88,12 @@ struct Workspace {
   std::uint64_t held_bytes() const {
     std::uint64_t s = 0;
     for (const Bytes* b :
-         {&pos,        &rad,          &report,     &spheres,      &cell_spheres, &perm,
-          &ctrl,       &body_blocks,  &base,       &keys[0],      &keys[1],      &bodies[0],
-          &bodies[1],  &entry_blocks, &pairs,      &out,          &temp,         &counters,
-          &partials,   &res_pos,      &res_rad,    &res_report,   &res_shape,    &res_semi,
-          &res_orient, &shape_kind,   &shape_semi, &shape_orient, &shapes,       &cell_cut,
-          &normals,    &narrow_list,  &kept_pairs, &ref_pos,      &ref_rad,      &ref_report})
+         {&pos,         &rad,       &report,   &spheres,     &cell_spheres, &perm,       &ctrl,
+          &body_blocks, &base,      &keys[0],  &keys[1],     &bodies[0],    &bodies[1],  &entry_blocks,
+          &pairs,       &out,       &temp,     &counters,    &partials,     &res_pos,    &res_rad,
+          &res_report,  &res_shape, &res_semi, &res_orient,  &shape_kind,   &shape_semi, &shape_orient,
+          &shapes,      &cell_cut,  &normals,  &narrow_list, &narrow_carry, &kept_pairs, &ref_pos,
+          &ref_rad,     &ref_report})
       s += b->bytes();
     return s;
   }

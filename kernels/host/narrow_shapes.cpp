@@ -40,10 +40,11 @@ NarrowCounts narrow_compact(const CandidatePairs& c, const ShapeDecide<Real>& de
       // the whole solve where no certificate did, the row from the minimiser
       const std::uint32_t a = c.a(k), b = c.b(k);
       Vec3<Real> n{};
-      auto verdict = decide.triage(a, b, flags, n);
+      FirstStart<Real> first;  // a hard pair's first start, kept by triage for settle
+      auto verdict = decide.triage(a, b, flags, n, &first);
       if (verdict == ShapeDecide<Real>::Verdict::hard) {
         ++unsettled;
-        verdict = decide.settle(a, b, flags, n);
+        verdict = decide.settle(a, b, flags, n, &first);
       }
       if (verdict == ShapeDecide<Real>::Verdict::hard) {
         ++hard;

@@ -357,7 +357,7 @@ TYPED_TEST(EngineShapesTest, ThreePassNarrowEqualsOneWholeSolve) {
   const ShapeRowsView rows{reinterpret_cast<const double*>(s.axes.data()),
                            reinterpret_cast<const double*>(s.q.data())};
   const ShapeDecide<Real> d{world, packed.data(), {}, rows};
-  int contacts = 0, unsettled = 0, hard = 0, certified = 0, fp64 = 0, fp64_hard = 0;
+  int contacts = 0, unsettled = 0, hard = 0, certified = 0, fp64 = 0, fp64_hard = 0, resumed = 0;
   NarrowFlags work;  // the solver's work over both passes, as the engine counts it
   for (std::uint32_t a = 0; a < sph.size(); ++a)
     for (std::uint32_t b = a + 1; b < sph.size(); ++b) {
@@ -370,6 +370,21 @@ TYPED_TEST(EngineShapesTest, ThreePassNarrowEqualsOneWholeSolve) {
       if (!in_triage) {
         ++unsettled;
         v = d.settle(a, b, f2, n);
+        // settle going on from the first start that triage kept: the same verdict, normal and work
+        FirstStart<Real> first;
+        NarrowFlags f3;
+        Vec3<Real> n3{};
+        ASSERT_EQ(d.triage(a, b, f3, n3, &first), Verdict::hard);
+        NarrowFlags f4;
+        EXPECT_EQ(d.settle(a, b, f4, n3, &first), v) << a << "," << b;
+        NarrowFlags f5;
+        Vec3<Real> n5{};
+        d.settle(a, b, f5, n5);
+        EXPECT_EQ(std::memcmp(&n3, &n5, sizeof(n3)), 0) << a << "," << b;
+        EXPECT_EQ(f4.evaluations, f5.evaluations) << a << "," << b;
+        EXPECT_EQ(f4.solver_runs, f5.solver_runs) << a << "," << b;
+        EXPECT_EQ(f4.unconverged, f5.unconverged) << a << "," << b;
+        ++resumed;
       }
       if (v == Verdict::hard) {
         ++hard;
@@ -395,6 +410,7 @@ TYPED_TEST(EngineShapesTest, ThreePassNarrowEqualsOneWholeSolve) {
     }
   EXPECT_GT(contacts, 20);
   EXPECT_GT(unsettled, fp64_hard) << "no candidate took the settle pass";
+  EXPECT_EQ(resumed, unsettled);
   EXPECT_GT(hard, 0) << "no candidate took the whole solve";
   EXPECT_GT(certified, 0) << "no ellipsoid contact was certified by the first start";
   if (std::is_same_v<Real, float>)
