@@ -206,12 +206,17 @@ CG_HD constexpr bool narrow_may_reject(CandidateFilter f) { return f != Candidat
 // True when the pair stage keeps only candidates whose (bounding) spheres touch (spheres_touch()).
 CG_HD constexpr bool candidates_touch(CandidateFilter f) { return f != CandidateFilter::cells; }
 
-// The filter a call runs (both backends): the requested one (spheres_touch unless a test or knob forces
-// another) made fit for the scene — with ellipsoids, bounding spheres less the centre cut; with a skin,
+// The filter a call runs (both backends, from the same counts, so the same candidates): the requested
+// one (spheres_touch unless a test or knob forces another) made fit for the scene — with ellipsoids, the
+// bounding spheres, less the centre cut (core/centre_cut.hpp) where at least 4 bodies in 5 are
+// ellipsoids: it cuts pairs of two general ellipsoids alone, and its shapes cost every body a gather into
+// cell order (H100, 2^24: 0.75 ms; half-sphere scenes lost 0.7 ms with it, BENCHMARKS §3); with a skin,
 // the (inflated) bounding spheres alone, whose list must outlast the bodies' motion and rotations.
-CG_HD constexpr CandidateFilter scene_filter(CandidateFilter requested, bool ellipsoids, bool skin) {
-  if (requested != CandidateFilter::spheres_touch || !(ellipsoids || skin)) return requested;
-  return skin ? CandidateFilter::bounding_spheres : CandidateFilter::centre_cut;
+CG_HD constexpr CandidateFilter scene_filter(CandidateFilter requested, std::uint64_t ellipsoids,
+                                             std::uint64_t bodies, bool skin) {
+  if (requested != CandidateFilter::spheres_touch || !(ellipsoids > 0 || skin)) return requested;
+  return !skin && 5 * ellipsoids >= 4 * bodies ? CandidateFilter::centre_cut
+                                               : CandidateFilter::bounding_spheres;
 }
 
 }  // namespace cg

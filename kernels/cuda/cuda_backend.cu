@@ -139,7 +139,7 @@ class CudaBackend {
     // scenes: the pair stage takes fp64's decision on its enlarged floats (Fp64Touch, pairs.cuh), so
     // the candidates are fp64's contacts and the narrow stage writes one row each.
     const bool skin = job.skin > 0;
-    r.filter = scene_filter(r.filter, job.ellipsoids > 0, skin);
+    r.filter = scene_filter(r.filter, job.ellipsoids, n64, skin);
 
     reserve_pack(r);
     m_events.start(m_stream);

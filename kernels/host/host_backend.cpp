@@ -56,7 +56,7 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   // candidates are fp64's contacts. A list kept with a skin (inflated spheres): the narrow stage decides.
   const bool shapes = job.ellipsoids > 0;
   const bool skin = job.skin > 0;
-  const CandidateFilter filter = scene_filter(be.candidates, shapes, skin);
+  const CandidateFilter filter = scene_filter(be.candidates, job.ellipsoids, job.bodies.size(), skin);
   bool reuse = false;
   if (skin && job.check) {
     const Motion m = host::measure_motion(job.bodies, be.kept, nt);
