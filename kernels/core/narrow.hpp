@@ -196,7 +196,8 @@ CG_HD NarrowDecision<Real> narrow_decide(const NarrowBodies<Real>& w, std::uint3
 // with ellipsoids), or on the enlarged spheres of mixed's fp32 broad phase (GridParams::radius_margin):
 // the same pair-stage filter as spheres_touch, but the narrow stage decides.
 // centre_cut: bounding_spheres less the general ellipsoid pairs that the centre line proves apart
-// (core/centre_cut.hpp): the default of scenes with ellipsoids without a skin; the same contacts.
+// (core/centre_cut.hpp): the default where at least 4 bodies in 5 are ellipsoids and there is no skin
+// (scene_filter); the same contacts.
 enum class CandidateFilter { spheres_touch, cells, bounding_spheres, centre_cut };
 
 // True when narrow_decide() may reject a candidate of this filter: the narrow stage then counts, scans
