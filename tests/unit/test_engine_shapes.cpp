@@ -248,24 +248,32 @@ TYPED_TEST(EngineShapesTest, ThreadInvariantAndStarvedSolverCounted) {
   EXPECT_THROW(Engine<Real>({.backend = Backend::cpu, .ellipsoid_max_iterations = -2}), UsageError);
 }
 
-// The looser cell-rule filter (CUDA: forced by Tuning::candidates) proposes more candidates; the
-// shape narrow stage rejects them to the same rows as the bounding-sphere filter.
-TYPED_TEST(EngineShapesTest, CellFilterGivesTheSameRows) {
-  using Real = TypeParam;
+// One CPU detection of scene s with the candidate filter `filter` requested (the host backend's test
+// hook; spheres_touch: the scene's default), its stats in `stats`.
+template <class Real>
+Contacts<Real> host_detect(const ShapeScene& s, CandidateFilter filter, EngineStats& stats) {
   constexpr Precision prec = sizeof(Real) == 4 ? Precision::fp32 : Precision::fp64;
-  const ShapeScene s = make_scene("mixed", 35, 400, 0.5, 10.0);
   const BodiesView v = s.view();
   const Bounds b = compute_bounds(v);
   detail::DetectJob<Real> job{v, plan_grid(b, make_frame(b, 0, prec), prec), {}, Fields::full};
   job.grid = detail::grid_params<Real>(job.plan);
   job.ellipsoids = validate_shapes(v);
-  ASSERT_GT(job.ellipsoids, 0u);
-  detail::HostBackend touch{2}, cells{2, CandidateFilter::cells};
-  Contacts<Real> x, y;
-  StageTimes tx, ty;
+  EXPECT_GT(job.ellipsoids, 0u);
+  detail::HostBackend backend{2, filter};
+  Contacts<Real> out;
+  StageTimes times;
+  detail::run_stages(backend, job, out, times, stats);
+  return out;
+}
+
+// The looser cell-rule filter (CUDA: forced by Tuning::candidates) proposes more candidates; the
+// shape narrow stage rejects them to the same rows as the bounding-sphere filter.
+TYPED_TEST(EngineShapesTest, CellFilterGivesTheSameRows) {
+  using Real = TypeParam;
+  const ShapeScene s = make_scene("mixed", 35, 400, 0.5, 10.0);
   EngineStats sx, sy;
-  detail::run_stages(touch, job, x, tx, sx);
-  detail::run_stages(cells, job, y, ty, sy);
+  const Contacts<Real> x = host_detect<Real>(s, CandidateFilter::spheres_touch, sx);
+  const Contacts<Real> y = host_detect<Real>(s, CandidateFilter::cells, sy);
   expect_identical(x, y, "bounding spheres vs cells");
   EXPECT_GT(sy.candidates, sx.candidates);
   EXPECT_GT(sx.candidates, x.size()) << "some bounding spheres touch where the shapes do not";
@@ -298,18 +306,9 @@ TYPED_TEST(EngineShapesTest, CentreCutGivesTheSameRows) {
   std::uint64_t cut_candidates = 0, all_candidates = 0;
   for (const ShapeScene& s : scenes) {
     SCOPED_TRACE(s.name);
-    const BodiesView v = s.view();
-    const Bounds b = compute_bounds(v);
-    detail::DetectJob<Real> job{v, plan_grid(b, make_frame(b, 0, prec), prec), {}, Fields::full};
-    job.grid = detail::grid_params<Real>(job.plan);
-    job.ellipsoids = validate_shapes(v);
-    ASSERT_GT(job.ellipsoids, 0u);
-    detail::HostBackend cut{2}, bounding{2, CandidateFilter::bounding_spheres};
-    Contacts<Real> x, y;
-    StageTimes tx, ty;
     EngineStats sx, sy;
-    detail::run_stages(cut, job, x, tx, sx);
-    detail::run_stages(bounding, job, y, ty, sy);
+    const Contacts<Real> x = host_detect<Real>(s, CandidateFilter::spheres_touch, sx);
+    const Contacts<Real> y = host_detect<Real>(s, CandidateFilter::bounding_spheres, sy);
     expect_identical(x, y, s.name + ": centre cut vs bounding spheres");
     EXPECT_EQ(sx.pair_tests, sy.pair_tests);
     EXPECT_LE(sx.candidates, sy.candidates);
