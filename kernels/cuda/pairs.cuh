@@ -4,9 +4,10 @@
 // block-aggregated atomic cursor into the dead alternate entry-body buffer; when they overflow the
 // space there: scan of the block totals → fill_pairs into ws.pairs. The candidate filter is
 // spheres_touch (every candidate is a contact: the narrow stage needs no compaction); scenes with
-// ellipsoids take the bounding spheres less the centre cut (core/centre_cut.hpp: its second part over
-// the pairs the walk found, after the walk) and the narrow stage rejects; forced by Tuning::candidates,
-// the cell rule alone (CandidateFilter::cells) or the bounding spheres alone.
+// ellipsoids take the bounding spheres (where 4 bodies in 5 are ellipsoids, less the centre cut,
+// core/centre_cut.hpp: its second part over the pairs the walk found, after the walk) and the narrow
+// stage rejects; forced by Tuning::candidates, the cell rule alone (CandidateFilter::cells) or the
+// bounding spheres alone.
 #include <cub/device/device_scan.cuh>
 
 #include "cuda/common.cuh"

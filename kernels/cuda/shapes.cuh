@@ -2,8 +2,8 @@
 // CUDA shapes (scenes with ellipsoids; sphere-only scenes run none of this): the device-array path's
 // check of the shape rows (validate_shapes' predicate, core/shape.hpp, one thread per body), the
 // upload of the host arrays' shape rows and pack_shapes (a PackedShape per body, input order, read by
-// the narrow stage's ShapeDecide; pack's reorder makes the pair stage's cut shapes from them). Both run
-// inside the pack stage's timing.
+// the narrow stage's ShapeDecide; the pair stage's cut shapes are made here too, or, when the bodies
+// are renumbered, by pack's reorder from the packed shapes). Both run inside the pack stage's timing.
 #include <algorithm>
 #include <cstring>
 #include <string>

@@ -49,8 +49,9 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
                EngineStats& stats) {
   const int nt = be.threads > 0 ? be.threads : omp_get_max_threads();
   HostStageTimer timer(times);
-  // Scenes with ellipsoids: candidates are bounding-sphere overlaps less the pairs the centre line
-  // proves apart (core/centre_cut.hpp; or the looser cell rule), the narrow stage decides per shape pair.
+  // Scenes with ellipsoids: candidates are bounding-sphere overlaps (where 4 bodies in 5 are ellipsoids,
+  // less the pairs the centre line proves apart: core/centre_cut.hpp; or the looser cell rule), the
+  // narrow stage decides per shape pair.
   // Sphere-only scenes: exactly the sphere path; mixed's pair stage takes fp64's decision on its enlarged
   // float spheres (Fp64Touch: the world doubles for the pairs within a few margins of touching), so its
   // candidates are fp64's contacts. A list kept with a skin (inflated spheres): the narrow stage decides.
