@@ -129,7 +129,8 @@ __global__ void __launch_bounds__(kBlock)
 // narrow, shapes, triage in one kernel (ShapeDecide::triage: the screen, then the first start for the
 // general pairs, on the candidate's own thread), the hard ones onto `unsettled`: for scenes of ellipsoids
 // alone whose pair stage took the centre cut, where the screen leaves nearly every candidate to the
-// first start and the two kernels above only add a list between them (H100 2^20: see BENCHMARKS §3).
+// first start, and the screen kernel above and the list kernel's first pass below would only add a list
+// between them (H100 2^20: see BENCHMARKS §3).
 template <class Real>
 __global__ void __launch_bounds__(kBlock)
     narrow_triage_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
@@ -140,7 +141,7 @@ __global__ void __launch_bounds__(kBlock)
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   NarrowFlags flags;
   Verdict v = Verdict::reject;
-  FirstStart<Real> first;
+  FirstStart<Real> first{};  // a hard pair's first start, kept for settle (fp32's pairs in fp64: none)
   if (k < n_pairs) {
     Vec3<Real> n{};
     v = decide.triage(pair_a[k], pair_b[k], flags, n, &first);
@@ -176,7 +177,7 @@ __global__ void __launch_bounds__(kBlock)
   NarrowFlags flags;
   bool still_hard = false;
   std::uint32_t k = 0;
-  FirstStart<Real> first;  // ListPass::first: a hard pair's first start, kept for settle
+  FirstStart<Real> first{};  // ListPass::first: a hard pair's first start, kept for settle
   if (i < count) {
     k = list[i];
     const std::uint32_t a = pair_a[k], b = pair_b[k];
