@@ -98,45 +98,24 @@ __global__ void __launch_bounds__(kBlock)
   add_flags(flags, c);
 }
 
-// narrow, shapes, first pass (triage), in two kernels: ShapeDecide::screen on every candidate —
-// verdict[k] (reject, accept, hard, or solve: a general pair for the first start) and the kept normal
-// of a settled pair: closed forms, root finds, the centre line, no solver code; the `solve` ones onto
-// `to_solve` (c->to_solve), the `hard` ones onto `unsettled` (c->unsettled, where the first pass adds
-// its own); then ShapeDecide::first_pass over the `solve` list alone (the PW filter and one Newton run
-// with the cheap certificates; in one kernel the Newton lanes — half the candidates — made every warp
-// pay for them).
-template <class Real>
-__global__ void __launch_bounds__(kBlock)
-    narrow_screen_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
-                         std::uint32_t n_pairs, ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
-                         Vec3<Real>* __restrict__ normal, std::uint32_t* __restrict__ to_solve,
-                         std::uint32_t* __restrict__ unsettled, Counters* __restrict__ c) {
-  using Verdict = typename ShapeDecide<Real>::Verdict;
-  const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
-  NarrowFlags flags;
-  Verdict v = Verdict::reject;
-  if (k < n_pairs) {
-    Vec3<Real> n{};
-    v = decide.screen(pair_a[k], pair_b[k], flags, n);
-    verdict[k] = static_cast<std::uint32_t>(v);
-    normal[k] = n;
-  }
-  append(v == Verdict::solve, k, to_solve, &c->to_solve);
-  append(v == Verdict::hard, k, unsettled, &c->unsettled);  // fp32's pairs in fp64: straight to settle
-  add_flags(flags, c);
-}
-
-// narrow, shapes, triage in one kernel (ShapeDecide::triage: the screen, then the first start for the
-// general pairs, on the candidate's own thread), the hard ones onto `unsettled`: for scenes of ellipsoids
-// alone whose pair stage took the centre cut, where the screen leaves nearly every candidate to the
-// first start, and the screen kernel above and the list kernel's first pass below would only add a list
-// between them (H100 2^20: see BENCHMARKS §3).
-template <class Real>
+// narrow, shapes, first pass (triage) over every candidate. Two kernels in general: kFirstToo false,
+// ShapeDecide::screen — verdict[k] (reject, accept, hard, or solve: a general pair for the first start)
+// and the kept normal of a settled pair: closed forms, root finds, the centre line, no solver code; the
+// `solve` ones onto `to_solve` (c->to_solve), the `hard` ones onto `unsettled` (c->unsettled, where the
+// first pass adds its own); then ShapeDecide::first_pass over the `solve` list alone (the PW filter and
+// one Newton run with the cheap certificates; in one kernel the Newton lanes — half the candidates —
+// made every warp pay for them). kFirstToo true, ShapeDecide::triage (the screen, then the first start
+// on the candidate's own thread), the hard ones onto `unsettled` with their kept first start beside
+// them in `carry`: for scenes of ellipsoids alone whose pair stage took the centre cut, where the
+// screen leaves nearly every candidate to the first start and the list between the two kernels would
+// only gather them again (H100 2^24: triage 2.66 → 2.10 ms, BENCHMARKS §3).
+template <class Real, bool kFirstToo>
 __global__ void __launch_bounds__(kBlock)
     narrow_triage_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
                          std::uint32_t n_pairs, ShapeDecide<Real> decide, std::uint32_t* __restrict__ verdict,
-                         Vec3<Real>* __restrict__ normal, std::uint32_t* __restrict__ unsettled,
-                         FirstStart<Real>* __restrict__ carry, Counters* __restrict__ c) {
+                         Vec3<Real>* __restrict__ normal, std::uint32_t* __restrict__ to_solve,
+                         std::uint32_t* __restrict__ unsettled, FirstStart<Real>* __restrict__ carry,
+                         Counters* __restrict__ c) {
   using Verdict = typename ShapeDecide<Real>::Verdict;
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   NarrowFlags flags;
@@ -144,12 +123,18 @@ __global__ void __launch_bounds__(kBlock)
   FirstStart<Real> first{};  // a hard pair's first start, kept for settle (fp32's pairs in fp64: none)
   if (k < n_pairs) {
     Vec3<Real> n{};
-    v = decide.triage(pair_a[k], pair_b[k], flags, n, &first);
+    if constexpr (kFirstToo)
+      v = decide.triage(pair_a[k], pair_b[k], flags, n, &first);
+    else
+      v = decide.screen(pair_a[k], pair_b[k], flags, n);
     verdict[k] = static_cast<std::uint32_t>(v);
     normal[k] = n;
   }
+  if constexpr (!kFirstToo) append(v == Verdict::solve, k, to_solve, &c->to_solve);
+  // hard: fp32's pairs in fp64 (straight to settle), and with the first start the uncertified ones
   const unsigned long long at = append(v == Verdict::hard, k, unsettled, &c->unsettled);
-  if (at != ~0ull) carry[at] = first;  // for settle, beside the pair in its list
+  if constexpr (kFirstToo)
+    if (at != ~0ull) carry[at] = first;  // for settle, beside the pair in its list
   add_flags(flags, c);
 }
 
@@ -433,12 +418,12 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
   const std::uint32_t* b = r.pair_b.Current();
   r.events.mark_narrow_split(0, st);
   if (decide.centre_cut && r.job.ellipsoids == r.n64) {  // ellipsoids alone, cut: one triage kernel
-    cuda::narrow_triage_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
-        a, b, np, decide, d_verdict, d_normal, d_list2, d_carry, r.d_counters);
+    cuda::narrow_triage_kernel<Narrow, true><<<blocks_for(np), kBlock, 0, st>>>(
+        a, b, np, decide, d_verdict, d_normal, nullptr, d_list2, d_carry, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("narrow_triage");
   } else {
-    cuda::narrow_screen_kernel<Narrow><<<blocks_for(np), kBlock, 0, st>>>(
-        a, b, np, decide, d_verdict, d_normal, d_list, d_list2, r.d_counters);
+    cuda::narrow_triage_kernel<Narrow, false><<<blocks_for(np), kBlock, 0, st>>>(
+        a, b, np, decide, d_verdict, d_normal, d_list, d_list2, nullptr, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("narrow_screen");
     cuda::narrow_list_kernel<Narrow, cuda::ListPass::first><<<blocks_for(np), kBlock, 0, st>>>(
         a, b, d_list, d_n_solve, decide, d_verdict, d_normal, d_list2, d_n_unsettled, r.d_counters, d_carry);
