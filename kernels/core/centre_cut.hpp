@@ -25,6 +25,10 @@
 // that thin). The narrow's rejections are thus unchanged, pair by pair
 // (tests: CentreCut.*, EngineShapesTest.CentreCutGivesTheSameRows, the device's CudaBitIdenticalToCpu).
 //
+// The cut shapes also give each body its cells: the box of its shape instead of its bounding sphere's
+// (cut_cells, below): 2.12 instead of 2.53 entries a body and 28 % fewer pair tests (H100, 2^24: entries +
+// sort + pairs 4.5 → 3.8 ms), the same contacts.
+//
 // Spheres, ellipsoids with three equal semi-axes (the sphere–ellipsoid path, which has no centre-line
 // test), and sphere pairs are never cut: their CutShape is NaN, and a NaN gap is no gap.
 // A skin (EngineOptions::skin) keeps the bounding spheres: its candidates must outlast rotations.
@@ -32,6 +36,7 @@
 #include <limits>
 
 #include "core/contact.hpp"
+#include "core/grid.hpp"
 #include "core/narrow.hpp"
 #include "core/quat.hpp"
 #include "core/shape.hpp"
@@ -85,6 +90,36 @@ CG_HD bool cut_apart(const Sphere<Real>& sa, const Sphere<Real>& sb, const CutSh
   const float size = static_cast<float>(sa.r + sb.r);
   const float coords = static_cast<float>(Real(4) * std::numeric_limits<Real>::epsilon() * (l1(sa) + l1(sb)));
   return gap > 0x1p-10f * (size + len) + coords * (1.0f + size / len);
+}
+
+// The cells of a body in the scenes of the centre cut: the box of its shape, not of its bounding sphere.
+// Along axis k an ellipsoid reaches h(e_k) = √C_kk from its centre (C = R D² Rᵀ, its cut shape), on
+// average 0.64 against a bounding radius of 0.81 for semi-axes U[0.25, 1]: 2.12 instead of 2.53 entries
+// a body, and fewer bodies in each cell to test. Widened by the cut's margin — 2^-10 of the bounding
+// radius for the rounding of C and of the narrow's rotation (relative, a few ε32), and the broad
+// phase's coordinate rounding 4·ε_Real·|c|₁ (mixed: + its enlargement) — and never beyond the bounding
+// radius (spheres and bodies the cut leaves: NaN, the bounding radius). Two bodies whose boxes share no
+// cell are apart along an axis by more than the margins (cell_coord is monotone), so the narrow rejects
+// them: the centre line or PW before any solve (F ≥ (1 + 2^-10)², far outside PW's band up to aspect
+// 1:16), beyond it a converged solve of a separated pair (convex there). The same contacts, bit for
+// bit (EngineShapesTest.CentreCutGivesTheSameRows); fewer pair tests.
+// (cut_box: the half-extents of the box; `enlarge` is mixed's radius margin, else 0.)
+template <class Real>
+CG_HD Vec3<Real> cut_box(const Sphere<Real>& s, const CutShape& c, Real enlarge) {
+  auto abs = [](Real v) { return v < Real(0) ? -v : v; };
+  const Real margin = Real(0x1p-10) * s.r +
+                      Real(4) * std::numeric_limits<Real>::epsilon() * (abs(s.x) + abs(s.y) + abs(s.z)) +
+                      enlarge;
+  auto half = [&](float ckk) {
+    const Real e = static_cast<Real>(cg_sqrt(ckk)) + margin;
+    return e < s.r ? e : s.r;  // (NaN: the bounding radius)
+  };
+  return {half(c.xx), half(c.yy), half(c.zz)};
+}
+template <class Real>
+CG_HD BodyCells cut_cells(const Sphere<Real>& s, const CutShape& c, const GridParams<Real>& g) {
+  const Vec3<Real> e = cut_box(s, c, g.radius_margin);
+  return box_cells(s, e.x, e.y, e.z, g);
 }
 
 // The pair stage's test for CandidateFilter::centre_cut (core/narrow.hpp's tests: the spheres of bodies

@@ -54,18 +54,26 @@ CG_HD std::uint32_t cell_coord(Real v, Real inv_cell, std::uint32_t base, std::u
   return static_cast<std::uint32_t>(f) - base;  // truncation == floor for f >= 0
 }
 
+// The cells of the box [c − e, c + e] about the centre of s, half-extents e (each at most s.r).
 template <class Real>
-CG_HD BodyCells body_cells(const Sphere<Real>& s, const GridParams<Real>& g) {
+CG_HD BodyCells box_cells(const Sphere<Real>& s, Real ex, Real ey, Real ez, const GridParams<Real>& g) {
   BodyCells bc;
-  const Real c[3] = {s.x, s.y, s.z};
+  const Real c[3] = {s.x, s.y, s.z}, e[3] = {ex, ey, ez};
   bc.spill = 0;
   for (int k = 0; k < 3; ++k) {
-    std::uint32_t lo = cell_coord(c[k] - s.r, g.inv_cell, g.base[k], g.dims[k]);
-    std::uint32_t hi = cell_coord(c[k] + s.r, g.inv_cell, g.base[k], g.dims[k]);
+    std::uint32_t lo = cell_coord(c[k] - e[k], g.inv_cell, g.base[k], g.dims[k]);
+    std::uint32_t hi = cell_coord(c[k] + e[k], g.inv_cell, g.base[k], g.dims[k]);
     bc.lo[k] = lo;
     if (hi > lo) bc.spill |= 1u << k;  // hi <= lo + 1 by the cell-size margin of plan_grid()
   }
   return bc;
+}
+
+// The cells of a body's bounding sphere (its box [c − r, c + r]). Scenes of ellipsoids with the centre
+// cut take the box of each shape instead (core/centre_cut.hpp: cut_cells).
+template <class Real>
+CG_HD BodyCells body_cells(const Sphere<Real>& s, const GridParams<Real>& g) {
+  return box_cells(s, s.r, s.r, s.r, g);
 }
 
 CG_HD int popcount3(std::uint32_t m) { return int(m & 1u) + int((m >> 1) & 1u) + int((m >> 2) & 1u); }

@@ -42,11 +42,13 @@ __global__ void __launch_bounds__(kBlock)
 // entries: (cell key, body) of the cell-ordered bodies, body-ascending; body j's entries start at
 // its block's scanned total plus its exclusive rank in the block (same block layout as
 // reorder_kernel). Staged in shared memory so that the block writes its entries coalesced.
-template <class Real, class Key>
+// kShapeBoxes (CandidateFilter::centre_cut): the cells of each shape's box (cut_cells, from the cut
+// shapes in cell order), else of the bounding sphere.
+template <class Real, class Key, bool kShapeBoxes>
 __global__ void __launch_bounds__(kBlock)
-    fill_entries_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n, GridParams<Real> g,
-                        const std::uint32_t* __restrict__ block_offset, Key* __restrict__ keys,
-                        std::uint32_t* __restrict__ body) {
+    fill_entries_kernel(const Sphere<Real>* __restrict__ spheres, const CutShape* __restrict__ cut,
+                        std::uint32_t n, GridParams<Real> g, const std::uint32_t* __restrict__ block_offset,
+                        Key* __restrict__ keys, std::uint32_t* __restrict__ body) {
   using Scan = cub::BlockScan<std::uint32_t, kBlock>;
   __shared__ typename Scan::TempStorage tmp;
   __shared__ Key s_keys[8 * kBlock];
@@ -55,7 +57,11 @@ __global__ void __launch_bounds__(kBlock)
   BodyCells bc{};
   std::uint32_t count = 0;
   if (i < n) {
-    bc = body_cells(spheres[i], g);  // the same Real sphere and function as reorder: the same cells
+    // the same Real sphere (and cut shape) and function as reorder: the same cells
+    if constexpr (kShapeBoxes)
+      bc = cut_cells(spheres[i], cut[i], g);
+    else
+      bc = body_cells(spheres[i], g);
     count = entry_count(bc);
   }
   std::uint32_t rank, total;
@@ -89,8 +95,12 @@ void entries_stage(RunState<Real, Key, Narrow>& r) {
              "entries");
   r.keys = ws.entry_keys<Key>(ne);
   r.body = ws.entry_bodies(ne);
-  cuda::fill_entries_kernel<Real, Key><<<r.nb, cuda::kBlock, 0, r.st>>>(
-      r.d_cell_spheres, r.n, r.g, r.d_body_offsets, r.keys.Current(), r.body.Current());
+  if (r.d_cell_cut)  // CandidateFilter::centre_cut: the cells of the shapes' boxes (as reorder's)
+    cuda::fill_entries_kernel<Real, Key, true><<<r.nb, cuda::kBlock, 0, r.st>>>(
+        r.d_cell_spheres, r.d_cell_cut, r.n, r.g, r.d_body_offsets, r.keys.Current(), r.body.Current());
+  else
+    cuda::fill_entries_kernel<Real, Key, false><<<r.nb, cuda::kBlock, 0, r.st>>>(
+        r.d_cell_spheres, nullptr, r.n, r.g, r.d_body_offsets, r.keys.Current(), r.body.Current());
   CG_CUDA_CHECK_LAUNCH("fill_entries");
   r.events.mark(Stage::entries, r.st);
 }

@@ -53,8 +53,9 @@ __global__ void __launch_bounds__(kBlock)
 // Type-pass path (base != nullptr): also the super-cell index of the body's lowest even cell
 // (cell_key of lo & ~1, type bits 0) and per block the number of bodies having a cell of each
 // type (type_blocks[t * gridDim.x + blockIdx.x]; totals added to c->type_entries[t]).
-// CandidateFilter::centre_cut with renumbered bodies (cut != null): also the cut shape of each body
-// (core/centre_cut.hpp) from its packed shape, in the same cell order.
+// CandidateFilter::centre_cut (cut != null): the cells of the box of each body's shape (cut_cells,
+// core/centre_cut.hpp) from its cut shape in cell order — made here from its packed shape when the
+// bodies are renumbered (make_cut), else written by pack_shapes (input order is the cell order).
 template <class Real, class Key, class Packed>
 __global__ void __launch_bounds__(kBlock)
     reorder_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n, GridParams<Real> g,
@@ -63,7 +64,8 @@ __global__ void __launch_bounds__(kBlock)
                    std::uint32_t* __restrict__ block_entries, Counters* __restrict__ c,
                    Key* __restrict__ base, std::uint32_t* __restrict__ type_blocks,
                    const std::uint8_t* __restrict__ report, Real inflation,
-                   const PackedShape<Packed>* __restrict__ shapes, CutShape* __restrict__ cut) {
+                   const PackedShape<Packed>* __restrict__ shapes, CutShape* __restrict__ cut,
+                   bool make_cut) {
   using Reduce = cub::BlockReduce<std::uint32_t, kBlock>;
   __shared__ typename Reduce::TempStorage tmp;
   __shared__ std::uint32_t s_types[8];
@@ -77,8 +79,14 @@ __global__ void __launch_bounds__(kBlock)
     s.r += inflation;  // a skin (EngineOptions::skin): cells and pair test of the inflated sphere
     cell_spheres[j] = s;
     perm[j] = i;
-    if (cut) cut[j] = cut_shape(shapes[i]);
-    const BodyCells bc = body_cells(s, g);
+    BodyCells bc;
+    if (cut) {
+      const CutShape cs = make_cut ? cut_shape(shapes[i]) : cut[j];
+      if (make_cut) cut[j] = cs;
+      bc = cut_cells(s, cs, g);
+    } else {
+      bc = body_cells(s, g);
+    }
     const std::uint32_t m = report ? report[i] : 0u;
     cb = control_bits(bc) | ((m & kReportedBit) ? kReportBit : 0u) | ((m & kPairedBit) ? kPairedCtrlBit : 0u);
     ctrl[j] = static_cast<std::uint8_t>(cb);
@@ -190,7 +198,7 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   cuda::reorder_kernel<Real, Key, Narrow><<<nb, kBlock, 0, st>>>(
       r.d_spheres, n, r.g, home_index.Current(), r.d_cell_spheres, r.d_ctrl, r.d_perm, r.d_body_totals,
       r.d_counters, r.d_base, r.type_passes ? r.d_type_totals : nullptr, r.d_report,
-      static_cast<Real>(r.job.inflation), r.d_shapes, renumber ? r.d_cell_cut : nullptr);
+      static_cast<Real>(r.job.inflation), r.d_shapes, r.d_cell_cut, renumber);
   CG_CUDA_CHECK_LAUNCH("reorder");
   r.events.mark(Stage::pack, st);
 }

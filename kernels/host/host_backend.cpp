@@ -72,7 +72,10 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Broad>(job.inflation), !reuse, nt,
              bodies);
   if (shapes) host::pack_shapes(job.bodies, nt, packed_shapes);
-  if (filter == CandidateFilter::centre_cut && !reuse) host::cut_shapes(packed_shapes, nt, bodies.cut);
+  if (filter == CandidateFilter::centre_cut && !reuse) {  // the cut shapes, and the cells of their boxes
+    host::cut_shapes(packed_shapes, nt, bodies.cut);
+    host::shape_cells(job.grid, nt, bodies);
+  }
   timer.lap(Stage::pack);
 
   const NarrowBodies<Narrow> world =

@@ -59,6 +59,20 @@ void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, std
   for (std::size_t i = 0; i < n; ++i) out[i] = cut_shape(shapes[i]);
 }
 
+template <class Real>
+void shape_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& out) {
+  const std::size_t n = out.spheres.size();
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
+  for (std::size_t i = 0; i < n; ++i) {
+    const Sphere<Real> s = out.spheres[i];
+    out.cells[i] = cut_cells(Sphere<Real>{s.x, s.y, s.z, s.r + out.inflation}, out.cut[i], g);
+    out.ctrl[i] = control_bits(out.cells[i]);
+    out.count[i] = entry_count(out.cells[i]);
+  }
+}
+
+template void shape_cells(const GridParams<float>&, int, PackedBodies<float>&);
+template void shape_cells(const GridParams<double>&, int, PackedBodies<double>&);
 template void cut_shapes(const std::vector<PackedShape<float>>&, int, std::vector<CutShape>&);
 template void cut_shapes(const std::vector<PackedShape<double>>&, int, std::vector<CutShape>&);
 template void pack_shapes(const BodiesView&, int, std::vector<PackedShape<float>>&);

@@ -94,6 +94,11 @@ void pack_shapes(const BodiesView& bodies, int threads, std::vector<PackedShape<
 template <class Packed>
 void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, std::vector<CutShape>& out);
 
+// shape_cells (CandidateFilter::centre_cut, after cut_shapes): the cells, control byte and entry count of
+// each body from the box of its shape instead of its bounding sphere (core/centre_cut.hpp: cut_cells).
+template <class Real>
+void shape_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& bodies);
+
 // entries: exclusive scan of the entry counts → fill (cell key, body) in body order. Returns the
 // number of entries; frees p.cells and p.count.
 template <class Real, class Key>

@@ -647,6 +647,58 @@ TEST(CentreCut, CutsOnlyPairsTheNarrowRejects) {
   check_centre_cut<double, double>("fp64", {0.0, 1e6, 1e9});
 }
 
+// The box of each shape (cut_box, the half-extents of cut_cells: core/centre_cut.hpp) holds the body —
+// its exact reach along each axis from its exact centre — with room to spare for the narrow's own
+// rounding (2^-11 of the bounding radius beyond the broad phase's centre error) unless it is the bounding
+// sphere's box, in the three modes, at aspect ratios 1:4, 1:10 and 1:100 and far from the origin; never
+// wider than the bounding radius; and on average well inside it (the cells' gain).
+template <class Broad, class Narrow>
+void check_shape_boxes(const char* mode, std::initializer_list<double> offsets) {
+  std::mt19937_64 rng(2718);
+  std::uniform_real_distribution<double> u(-2, 2);
+  for (double offset : offsets) {
+    double share = 0;  // mean half-extent / bounding radius
+    int bodies = 0;
+    for (int i = 0; i < 3000; ++i) {
+      const double aspect = i % 3 == 0 ? 4.0 : (i % 3 == 1 ? 10.0 : 100.0);
+      const Body<double> x{{offset + u(rng), offset * 0.5 + u(rng), -offset + u(rng)},
+                           random_axes<double>(rng, aspect),
+                           random_quat<double>(rng)};
+      const double semi[3] = {x.axes.x, x.axes.y, x.axes.z}, q[4] = {x.q.w, x.q.x, x.q.y, x.q.z};
+      const PackedShape<Narrow> p = pack_shape<Narrow>(static_cast<std::uint8_t>(Shape::ellipsoid), semi, q);
+      const double r = std::max(x.axes.x, std::max(x.axes.y, x.axes.z));
+      const Sphere<Broad> s{Broad(x.centre.x), Broad(x.centre.y), Broad(x.centre.z), Broad(r)};
+      const Vec3<Broad> e = cut_box(s, cut_shape(p), Broad(0));
+      const exact::Body ex = reference_body(x);
+      const LD half[3] = {LD(e.x), LD(e.y), LD(e.z)};
+      const LD centre_error[3] = {std::fabs(LD(s.x) - LD(x.centre.x)), std::fabs(LD(s.y) - LD(x.centre.y)),
+                                  std::fabs(LD(s.z) - LD(x.centre.z))};
+      for (int k = 0; k < 3; ++k) {
+        const exact::V axis{LD(k == 0), LD(k == 1), LD(k == 2)};
+        const LD reach = exact::support_value(ex, axis);
+        if (half[k] < LD(s.r)) {  // (else the bounding sphere's box, as without the cut)
+          EXPECT_GE(half[k], reach + centre_error[k] + LD(r) * LD(0x1p-11))
+              << mode << " offset " << offset << " body " << i << " axis " << k;
+        }
+        EXPECT_LE(half[k], LD(s.r)) << mode << " body " << i;
+        share += double(half[k]) / r / 3;
+      }
+      ++bodies;
+    }
+    std::printf("[ellipsoid] %s shape boxes, offset %g: half-extent %.3f of the bounding radius\n", mode, offset,
+                share / bodies);
+    if (offset == 0.0) {
+      EXPECT_LT(share / bodies, 0.85) << mode << ": the boxes should be well inside the bounding spheres";
+    }
+  }
+}
+
+TEST(CentreCut, ShapeBoxesHoldTheShapes) {
+  check_shape_boxes<float, float>("fp32", {0.0, 1e2, 1e4});
+  check_shape_boxes<float, double>("mixed", {0.0, 1e2, 1e4});
+  check_shape_boxes<double, double>("fp64", {0.0, 1e6, 1e9});
+}
+
 // The cut leaves spheres, ellipsoids with three equal semi-axes (the sphere–ellipsoid path, which has no
 // centre-line test) and any pair with one of them alone, however far apart along the centre line.
 TEST(CentreCut, LeavesPairsWithoutTheGeneralSolve) {
@@ -660,6 +712,12 @@ TEST(CentreCut, LeavesPairsWithoutTheGeneralSolve) {
     EXPECT_FALSE(cut_apart(sa, sb, cut_shape(other), cut_shape(ell)));
   }
   EXPECT_FALSE(cut_apart(sa, sa, cut_shape(ell), cut_shape(ell))) << "coincident centres";
+  for (const PackedShape<float>& other : {eq, sph}) {  // their cells: the bounding sphere's box
+    const Vec3<float> e = cut_box(sb, cut_shape(other), 0.0f);
+    EXPECT_EQ(e.x, sb.r);
+    EXPECT_EQ(e.y, sb.r);
+    EXPECT_EQ(e.z, sb.r);
+  }
 }
 
 // A centre inside the other body.
