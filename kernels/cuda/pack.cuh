@@ -27,8 +27,8 @@ __device__ __forceinline__ Key home_layer_key(const BodyCells& bc, int shift) {
 }
 
 // pack: world (double) → local Real sphere `Real(p - origin)`, radius Real(r) + g.radius_margin (mixed's
-// enlarged spheres; + 0 otherwise) in input order, and the (locality key,
-// index) pairs of the renumbering sort. Invalid bodies → c->bad.
+// enlarged spheres; + 0 otherwise) in input order, and the (locality key, index) pairs of the
+// renumbering sort (home_key null: none, the bodies keep their order). Invalid bodies → c->bad.
 template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock)
     pack_kernel(const double* __restrict__ pos, const double* __restrict__ rad, std::uint32_t n,
@@ -43,13 +43,15 @@ __global__ void __launch_bounds__(kBlock)
   const Sphere<Real> s{static_cast<Real>(px - origin.x), static_cast<Real>(py - origin.y),
                        static_cast<Real>(pz - origin.z), static_cast<Real>(r) + g.radius_margin};
   spheres[i] = s;
+  if (!home_key) return;  // no renumbering
   home_key[i] = home_layer_key<Key>(body_cells(s, g), layer_shift);
   home_index[i] = i;
 }
 
-// reorder: cell-ordered copy of the spheres (body j = input body perm[j]; radii + `inflation`, the
-// pair stage's spheres: 0 without a skin), control bytes, and per block the sum of the entry counts
-// (block_entries[blockIdx.x]; total added to c->entries).
+// reorder: cell-ordered copy of the spheres (body j = input body perm[j] = sorted_index[j], or j when
+// sorted_index is null; radii + `inflation`, the pair stage's spheres: 0 without a skin; cell_spheres
+// null: the input-order spheres are those, no copy), control bytes, and per block the sum of the entry
+// counts (block_entries[blockIdx.x]; total added to c->entries).
 // Type-pass path (base != nullptr): also the super-cell index of the body's lowest even cell
 // (cell_key of lo & ~1, type bits 0) and per block the number of bodies having a cell of each
 // type (type_blocks[t * gridDim.x + blockIdx.x]; totals added to c->type_entries[t]).
@@ -74,10 +76,10 @@ __global__ void __launch_bounds__(kBlock)
   std::uint32_t count = 0, cb = 0;
   bool live = false;
   if (j < n) {
-    const std::uint32_t i = sorted_index[j];
+    const std::uint32_t i = sorted_index ? sorted_index[j] : j;
     Sphere<Real> s = spheres[i];
     s.r += inflation;  // a skin (EngineOptions::skin): cells and pair test of the inflated sphere
-    cell_spheres[j] = s;
+    if (cell_spheres) cell_spheres[j] = s;
     perm[j] = i;
     BodyCells bc;
     if (cut) {
@@ -165,9 +167,17 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   r.d_counters = ws.counters.span_as<cuda::Counters>(1).data();
   CG_CUDA_CHECK(cudaMemsetAsync(r.d_counters, 0, sizeof(cuda::Counters), st));
   // The renumbering pays only when the spheres do not stay in L2 anyway (the pair stage's gathers hit
-  // it either way): when they outgrow the L2 (Tuning::renumber forces it). Without it, reorder reads
-  // the identity written by pack: the bodies keep their input order (no result changes).
-  const bool renumber = !spheres_only && tuned(r.tuning.renumber, r.n64 * sizeof(Sphere<Real>) > r.l2_bytes);
+  // it either way): when they outgrow the L2 (Tuning::renumber forces it). Scenes of the centre cut pay
+  // it for the cut shapes too (their gather into cell order): with float spheres (fp32, mixed) it then
+  // costs more than the pair stage's locality saves (H100, 2^24 ellipsoids fp32: 10.55 ms renumbered,
+  // 10.28 not: pack −1.05, pairs +0.75), with fp64's 32-byte spheres less (16.96 against 17.14 ms).
+  // Without it the bodies keep their input order (no result changes).
+  const bool worth = r.n64 * sizeof(Sphere<Real>) > r.l2_bytes &&
+                     (r.filter != CandidateFilter::centre_cut || sizeof(Real) == 8);
+  const bool renumber = !spheres_only && tuned(r.tuning.renumber, worth);
+  r.renumbered = renumber;
+  // input order is cell order and no skin inflates them: the pair stage reads the spheres themselves
+  if (!renumber && r.job.inflation == 0) r.d_cell_spheres = r.d_spheres;
   r.d_cell_cut = nullptr;
   if (r.filter == CandidateFilter::centre_cut && !spheres_only) {  // the pair stage's cut shapes
     ws.reserve({{&ws.cell_cut, r.n64 * sizeof(CutShape)}}, "pack");
@@ -183,9 +193,9 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   const int home_bits = z_bits - layer_shift;
   cub::DoubleBuffer<Key> home_key = ws.home_keys<Key>(n);
   cub::DoubleBuffer<std::uint32_t> home_index = ws.home_index(n);
-  cuda::pack_kernel<Real, Key><<<nb, kBlock, 0, st>>>(r.d_pos, r.d_rad, n, r.origin, r.g, r.d_spheres,
-                                                      layer_shift, home_key.Current(), home_index.Current(),
-                                                      r.d_counters);
+  cuda::pack_kernel<Real, Key><<<nb, kBlock, 0, st>>>(
+      r.d_pos, r.d_rad, n, r.origin, r.g, r.d_spheres, layer_shift, renumber ? home_key.Current() : nullptr,
+      home_index.Current(), r.d_counters);
   CG_CUDA_CHECK_LAUNCH("pack");
   if (spheres_only) {
     r.events.mark(Stage::pack, st);
@@ -196,7 +206,8 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
       return cub::DeviceRadixSort::SortPairs(t, b, home_key, home_index, int(n), 0, home_bits, st);
     });
   cuda::reorder_kernel<Real, Key, Narrow><<<nb, kBlock, 0, st>>>(
-      r.d_spheres, n, r.g, home_index.Current(), r.d_cell_spheres, r.d_ctrl, r.d_perm, r.d_body_totals,
+      r.d_spheres, n, r.g, renumber ? home_index.Current() : nullptr,
+      r.d_cell_spheres == r.d_spheres ? nullptr : r.d_cell_spheres, r.d_ctrl, r.d_perm, r.d_body_totals,
       r.d_counters, r.d_base, r.type_passes ? r.d_type_totals : nullptr, r.d_report,
       static_cast<Real>(r.job.inflation), r.d_shapes, r.d_cell_cut, renumber);
   CG_CUDA_CHECK_LAUNCH("reorder");

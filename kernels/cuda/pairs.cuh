@@ -21,6 +21,12 @@ namespace cg::cuda {
 // 0; here the entry order within a cell follows the cell order, so the report flag of the smaller
 // input index of the two decides (kReportBit of its control byte, set by reorder from the mask). Both tests
 // are symmetric in the two bodies (bit for bit), so the decisions are the host's.
+// Input index of cell-ordered body j: perm[j], or j itself where the bodies were not renumbered (perm
+// null: the pair stage then reads no permutation).
+__device__ __forceinline__ std::uint32_t input_index(const std::uint32_t* __restrict__ perm, std::uint32_t j) {
+  return perm ? perm[j] : j;
+}
+
 template <class Real>
 struct EntryBody {  // what a visit needs of the first body of a pair
   std::uint32_t a, type, pa;
@@ -64,7 +70,7 @@ __device__ __forceinline__ std::uint32_t walk_from_memory(
   std::uint32_t tests = 0;
   for (std::uint32_t f = f0; f < n_entries && keys[f] == k; ++f) {
     const std::uint32_t b = body[f];
-    visit(x, b, ctrl[b], spheres[b], report ? perm[b] : 0u, report, tests, test, emit);
+    visit(x, b, ctrl[b], spheres[b], report ? input_index(perm, b) : 0u, report, tests, test, emit);
   }
   return tests;
 }
@@ -118,7 +124,7 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
     x.type = key_type(k, half_bits) | pass_type;  // type-pass path: keys hold no type bits
     x.ca = ctrl[x.a];
     x.sa = spheres[x.a];
-    x.pa = report ? perm[x.a] : 0u;
+    x.pa = report ? input_index(perm, x.a) : 0u;
     s_key[t] = k;
     s_body[t] = x.a;
     s_sphere[t] = x.sa;
@@ -131,7 +137,7 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
     s_body[h] = b;
     s_sphere[h] = spheres[b];
     s_ctrl[h] = ctrl[b];
-    s_perm[h] = report ? perm[b] : 0u;
+    s_perm[h] = report ? input_index(perm, b) : 0u;
   }
   __syncthreads();
   std::uint32_t found = 0, tests = 0, bits = 0;
@@ -175,9 +181,9 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
   __syncthreads();
   if (found == 0 || s_base + block_sum > cap) return;
   unsigned long long w = s_base + rank;
-  const std::uint32_t pa = report ? x.pa : perm[x.a];
+  const std::uint32_t pa = report ? x.pa : input_index(perm, x.a);
   auto emit = [&](std::uint32_t, std::uint32_t b) {
-    const std::uint32_t pb = perm[b];  // input indices, a < b as the host
+    const std::uint32_t pb = input_index(perm, b);  // input indices, a < b as the host
     pair_a[w] = pa < pb ? pa : pb;
     pair_b[w] = pa < pb ? pb : pa;
     ++w;
@@ -213,7 +219,7 @@ __global__ void __launch_bounds__(kBlock)
     x.type = key_type(k, half_bits);
     x.ca = ctrl[x.a];
     x.sa = spheres[x.a];
-    x.pa = report ? perm[x.a] : 0u;
+    x.pa = report ? input_index(perm, x.a) : 0u;
     walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test,
                      [&](std::uint32_t, std::uint32_t) { ++mine; });
   } else {
@@ -224,7 +230,7 @@ __global__ void __launch_bounds__(kBlock)
   if (mine == 0) return;
   std::uint32_t w = block_offset[blockIdx.x] + rank;
   auto emit = [&](std::uint32_t a, std::uint32_t b) {
-    const std::uint32_t pa = perm[a], pb = perm[b];  // input indices, a < b as the host
+    const std::uint32_t pa = input_index(perm, a), pb = input_index(perm, b);  // a < b as the host
     pair_a[w] = pa < pb ? pa : pb;
     pair_b[w] = pa < pb ? pb : pa;
     ++w;
@@ -287,7 +293,7 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
   // cap = ne / 4 pairs each.
   const std::uint64_t direct_cap = ne / 4;
   std::uint32_t* d_direct = Workspace::direct_pairs(r.body);
-  launch_count_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.d_perm, r.d_report,
+  launch_count_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.pair_perm(), r.d_report,
                      r.g.half_bits, 0u, d_pair_count, d_entry_totals, r.d_counters, d_direct,
                      d_direct + direct_cap, direct_cap);
   r.read_counters();  // host needs the pairs total
@@ -313,7 +319,7 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
     cub_run(ws, "pairs", [&](void* t, std::size_t& b) {
       return cub::DeviceScan::ExclusiveSum(t, b, d_entry_totals, d_entry_offsets, int(neb), st);
     });
-    launch_fill_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.d_perm, r.d_report,
+    launch_fill_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.pair_perm(), r.d_report,
                       r.g.half_bits, d_pair_count, d_entry_offsets, r.pair_a.Current(), r.pair_b.Current());
   }
   r.events.mark(Stage::pairs, st);

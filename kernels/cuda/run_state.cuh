@@ -45,6 +45,9 @@ struct RunState {
   Sphere<Real>* d_cell_spheres = nullptr;   // cell order
   CutShape* d_cell_cut = nullptr;           // cell order; CandidateFilter::centre_cut only (pack.cuh)
   std::uint32_t* d_perm = nullptr;          // cell order → input index
+  bool renumbered = false;                  // the bodies are in cell order (else d_perm is the identity)
+  // the pair stage's permutation: none where it is the identity (cuda/pairs.cuh: input_index)
+  const std::uint32_t* pair_perm() const { return renumbered ? d_perm : nullptr; }
   std::uint8_t* d_ctrl = nullptr;           // cell order
   std::uint32_t* d_body_totals = nullptr;
   std::uint32_t* d_body_offsets = nullptr;  // single-sort path
