@@ -112,6 +112,26 @@ CG_HD Key body_cell_key(const BodyCells& bc, std::uint32_t m, const GridParams<R
   return cell_key<Key>(bc.lo[0] + off[0], bc.lo[1] + off[1], bc.lo[2] + off[2], g);
 }
 
+// The same key from the key of the body's lowest cell and its control byte (control_bits: parity of
+// lo, spilled axes): along an axis the linear part grows by one only where lo is odd (lo + 1 starts the
+// next super-cell), and the type bit flips with the offset. (The device's entries stage: a key and a
+// byte per body instead of its sphere and shape.)
+template <class Key, class Real>
+CG_HD Key spilled_cell_key(Key lo_key, std::uint32_t ctrl, std::uint32_t m, const GridParams<Real>& g) {
+  const std::uint32_t parity = ctrl & 7u, spill = (ctrl >> 3) & 7u;
+  std::uint32_t off = 0;
+  for (int k = 0; k < 3; ++k) {
+    if (spill & (1u << k)) {
+      off |= (m & 1u) << k;
+      m >>= 1;
+    }
+  }
+  const std::uint32_t up = off & parity;
+  const Key lin = (lo_key & ((Key(1) << g.half_bits) - Key(1))) + Key(up & 1u) +
+                  ((up & 2u) ? Key(g.half[0]) : Key(0)) + ((up & 4u) ? Key(g.half[0]) * Key(g.half[1]) : Key(0));
+  return (Key(parity ^ off) << g.half_bits) | lin;
+}
+
 // True when the pair of bodies with control bytes ci, cj, both present in a cell of type `type`,
 // is tested in that cell (the common cell of smallest type). See the file comment.
 CG_HD bool test_in_cell(std::uint8_t ci, std::uint8_t cj, std::uint32_t type) {

@@ -41,33 +41,31 @@ __global__ void __launch_bounds__(kBlock)
 
 // entries: (cell key, body) of the cell-ordered bodies, body-ascending; body j's entries start at
 // its block's scanned total plus its exclusive rank in the block (same block layout as
-// reorder_kernel). Staged in shared memory so that the block writes its entries coalesced.
-// kShapeBoxes (CandidateFilter::centre_cut): the cells of each shape's box (cut_cells, from the cut
-// shapes in cell order), else of the bounding sphere.
-template <class Real, class Key, bool kShapeBoxes>
+// reorder_kernel). Each body's cells from the key of its lowest cell and its control byte, both
+// written by reorder (spilled_cell_key: the keys of body_cell_key, 5 bytes a body read instead of its
+// sphere and, in centre-cut scenes, its cut shape). Staged in shared memory so that the block writes
+// its entries coalesced.
+template <class Key, class Real>
 __global__ void __launch_bounds__(kBlock)
-    fill_entries_kernel(const Sphere<Real>* __restrict__ spheres, const CutShape* __restrict__ cut,
-                        std::uint32_t n, GridParams<Real> g, const std::uint32_t* __restrict__ block_offset,
+    fill_entries_kernel(const Key* __restrict__ lo_key, const std::uint8_t* __restrict__ ctrl, std::uint32_t n,
+                        GridParams<Real> g, const std::uint32_t* __restrict__ block_offset,
                         Key* __restrict__ keys, std::uint32_t* __restrict__ body) {
   using Scan = cub::BlockScan<std::uint32_t, kBlock>;
   __shared__ typename Scan::TempStorage tmp;
   __shared__ Key s_keys[8 * kBlock];
   __shared__ std::uint32_t s_body[8 * kBlock];
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
-  BodyCells bc{};
-  std::uint32_t count = 0;
+  Key k0{};
+  std::uint32_t cb = 0, count = 0;
   if (i < n) {
-    // the same Real sphere (and cut shape) and function as reorder: the same cells
-    if constexpr (kShapeBoxes)
-      bc = cut_cells(spheres[i], cut[i], g);
-    else
-      bc = body_cells(spheres[i], g);
-    count = entry_count(bc);
+    k0 = lo_key[i];
+    cb = ctrl[i];
+    count = 1u << popcount3((cb >> 3) & 7u);  // entry_count: one cell, or two per spilled axis
   }
   std::uint32_t rank, total;
   Scan(tmp).ExclusiveSum(count, rank, total);
   for (std::uint32_t m = 0; m < count; ++m) {
-    s_keys[rank + m] = body_cell_key<Key>(bc, m, g);
+    s_keys[rank + m] = spilled_cell_key<Key>(k0, cb, m, g);
     s_body[rank + m] = i;
   }
   __syncthreads();
@@ -95,12 +93,8 @@ void entries_stage(RunState<Real, Key, Narrow>& r) {
              "entries");
   r.keys = ws.entry_keys<Key>(ne);
   r.body = ws.entry_bodies(ne);
-  if (r.d_cell_cut)  // CandidateFilter::centre_cut: the cells of the shapes' boxes (as reorder's)
-    cuda::fill_entries_kernel<Real, Key, true><<<r.nb, cuda::kBlock, 0, r.st>>>(
-        r.d_cell_spheres, r.d_cell_cut, r.n, r.g, r.d_body_offsets, r.keys.Current(), r.body.Current());
-  else
-    cuda::fill_entries_kernel<Real, Key, false><<<r.nb, cuda::kBlock, 0, r.st>>>(
-        r.d_cell_spheres, nullptr, r.n, r.g, r.d_body_offsets, r.keys.Current(), r.body.Current());
+  cuda::fill_entries_kernel<Key><<<r.nb, cuda::kBlock, 0, r.st>>>(
+      r.d_lo_key, r.d_ctrl, r.n, r.g, r.d_body_offsets, r.keys.Current(), r.body.Current());
   CG_CUDA_CHECK_LAUNCH("fill_entries");
   r.events.mark(Stage::entries, r.st);
 }

@@ -26,9 +26,22 @@ __device__ __forceinline__ Key home_layer_key(const BodyCells& bc, int shift) {
   return Key(bc.lo[2] >> shift);
 }
 
-// pack: world (double) → local Real sphere `Real(p - origin)`, radius Real(r) + g.radius_margin (mixed's
-// enlarged spheres; + 0 otherwise) in input order, and the (locality key, index) pairs of the
-// renumbering sort (home_key null: none, the bodies keep their order). Invalid bodies → c->bad.
+// Body i as pack makes it: the local Real sphere Real(p - origin), radius Real(r) + g.radius_margin
+// (mixed's enlarged spheres; + 0 otherwise); an invalid body → c->bad.
+template <class Real>
+__device__ __forceinline__ Sphere<Real> packed_sphere(const double* __restrict__ pos,
+                                                      const double* __restrict__ rad, std::uint32_t i,
+                                                      std::uint32_t n, const Vec3<double>& origin,
+                                                      const GridParams<Real>& g, Counters* __restrict__ c) {
+  const std::uint64_t i3 = 3 * std::uint64_t(i);
+  const double px = pos[i3], py = pos[i3 + 1], pz = pos[i3 + 2], r = rad[i];
+  if (body_is_bad(px, py, pz, r)) atomicMax(&c->bad, static_cast<unsigned long long>(n - i));
+  return {static_cast<Real>(px - origin.x), static_cast<Real>(py - origin.y), static_cast<Real>(pz - origin.z),
+          static_cast<Real>(r) + g.radius_margin};
+}
+
+// pack (renumbered bodies, and the spheres alone of a skin's reuse step): the packed spheres in input
+// order, and the (locality key, index) pairs of the renumbering sort (home_key null: none).
 template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock)
     pack_kernel(const double* __restrict__ pos, const double* __restrict__ rad, std::uint32_t n,
@@ -37,37 +50,49 @@ __global__ void __launch_bounds__(kBlock)
                 Counters* __restrict__ c) {
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
   if (i >= n) return;
-  const std::uint64_t i3 = 3 * std::uint64_t(i);
-  const double px = pos[i3], py = pos[i3 + 1], pz = pos[i3 + 2], r = rad[i];
-  if (body_is_bad(px, py, pz, r)) atomicMax(&c->bad, static_cast<unsigned long long>(n - i));
-  const Sphere<Real> s{static_cast<Real>(px - origin.x), static_cast<Real>(py - origin.y),
-                       static_cast<Real>(pz - origin.z), static_cast<Real>(r) + g.radius_margin};
+  const Sphere<Real> s = packed_sphere(pos, rad, i, n, origin, g, c);
   spheres[i] = s;
-  if (!home_key) return;  // no renumbering
+  if (!home_key) return;
   home_key[i] = home_layer_key<Key>(body_cells(s, g), layer_shift);
   home_index[i] = i;
 }
 
-// reorder: cell-ordered copy of the spheres (body j = input body perm[j] = sorted_index[j], or j when
-// sorted_index is null; radii + `inflation`, the pair stage's spheres: 0 without a skin; cell_spheres
-// null: the input-order spheres are those, no copy), control bytes, and per block the sum of the entry
-// counts (block_entries[blockIdx.x]; total added to c->entries).
+// What reorder packs itself where the bodies keep their input order (kPack): the world rows, and the
+// shape rows of scenes with ellipsoids (shapes.cuh) — one pass over the bodies instead of three
+// (pack, pack_shapes, reorder: H100 2^24 ellipsoids, see BENCHMARKS §3).
+template <class Packed>
+struct PackInput {
+  const double* pos = nullptr;
+  const double* rad = nullptr;
+  Vec3<double> origin{};
+  ShapeInput<Packed> shape;
+};
+
+// reorder: cell-ordered copy of the spheres (body j = input body perm[j] = sorted_index[j]; radii +
+// `inflation`, the pair stage's spheres: 0 without a skin; cell_spheres null: the input-order spheres
+// are those, no copy), control bytes, and per block the sum of the entry counts
+// (block_entries[blockIdx.x]; total added to c->entries). kPack (the bodies keep their order, body j is
+// input body j): the spheres and packed shapes are made here from `in` (written to `spheres` and
+// in.shape.out), not read.
+// Single sort (lo_key != nullptr): the key of the body's lowest cell, from which the entries stage
+// makes its cells' keys with the control byte (spilled_cell_key).
 // Type-pass path (base != nullptr): also the super-cell index of the body's lowest even cell
 // (cell_key of lo & ~1, type bits 0) and per block the number of bodies having a cell of each
 // type (type_blocks[t * gridDim.x + blockIdx.x]; totals added to c->type_entries[t]).
-// CandidateFilter::centre_cut (cut != null): the cells of the box of each body's shape (cut_cells,
-// core/centre_cut.hpp) from its cut shape in cell order — made here from its packed shape when the
-// bodies are renumbered (make_cut), else written by pack_shapes (input order is the cell order).
-template <class Real, class Key, class Packed>
+// CandidateFilter::centre_cut (cut != null): the cut shape of each body (core/centre_cut.hpp) from its
+// packed shape, in cell order, and its cells from the box of its shape (cut_cells). (Made here also when
+// the bodies keep their order: reading the packed shape costs less than pack_shapes writing the cut
+// shape for this kernel to read.)
+template <class Real, class Key, class Packed, bool kPack>
 __global__ void __launch_bounds__(kBlock)
-    reorder_kernel(const Sphere<Real>* __restrict__ spheres, std::uint32_t n, GridParams<Real> g,
+    reorder_kernel(Sphere<Real>* __restrict__ spheres, std::uint32_t n, GridParams<Real> g,
                    const std::uint32_t* __restrict__ sorted_index, Sphere<Real>* __restrict__ cell_spheres,
                    std::uint8_t* __restrict__ ctrl, std::uint32_t* __restrict__ perm,
                    std::uint32_t* __restrict__ block_entries, Counters* __restrict__ c,
                    Key* __restrict__ base, std::uint32_t* __restrict__ type_blocks,
                    const std::uint8_t* __restrict__ report, Real inflation,
                    const PackedShape<Packed>* __restrict__ shapes, CutShape* __restrict__ cut,
-                   bool make_cut) {
+                   Key* __restrict__ lo_key, PackInput<Packed> in) {
   using Reduce = cub::BlockReduce<std::uint32_t, kBlock>;
   __shared__ typename Reduce::TempStorage tmp;
   __shared__ std::uint32_t s_types[8];
@@ -76,15 +101,28 @@ __global__ void __launch_bounds__(kBlock)
   std::uint32_t count = 0, cb = 0;
   bool live = false;
   if (j < n) {
-    const std::uint32_t i = sorted_index ? sorted_index[j] : j;
-    Sphere<Real> s = spheres[i];
+    std::uint32_t i = j;
+    Sphere<Real> s;
+    PackedShape<Packed> shape{};  // (the cut's)
+    if constexpr (kPack) {
+      s = packed_sphere(in.pos, in.rad, j, n, in.origin, g, c);
+      spheres[j] = s;
+      if (in.shape.kind) {
+        shape = packed_shape_of(in.shape, in.rad, j, n, c);
+        in.shape.out[j] = shape;
+      }
+    } else {
+      i = sorted_index[j];
+      s = spheres[i];
+      if (cut) shape = shapes[i];
+    }
     s.r += inflation;  // a skin (EngineOptions::skin): cells and pair test of the inflated sphere
     if (cell_spheres) cell_spheres[j] = s;
     perm[j] = i;
     BodyCells bc;
     if (cut) {
-      const CutShape cs = make_cut ? cut_shape(shapes[i]) : cut[j];
-      if (make_cut) cut[j] = cs;
+      const CutShape cs = cut_shape(shape);
+      cut[j] = cs;
       bc = cut_cells(s, cs, g);
     } else {
       bc = body_cells(s, g);
@@ -95,6 +133,7 @@ __global__ void __launch_bounds__(kBlock)
     count = entry_count(bc);
     live = true;
     if (base) base[j] = cell_key<Key>(bc.lo[0] & ~1u, bc.lo[1] & ~1u, bc.lo[2] & ~1u, g);
+    if (lo_key) lo_key[j] = cell_key<Key>(bc.lo[0], bc.lo[1], bc.lo[2], g);
   }
   const std::uint32_t total = Reduce(tmp).Sum(count);
   if (base) {
@@ -142,7 +181,7 @@ void reserve_pack(RunState<Real, Key, Narrow>& r) {
               {&ws.bodies[0], n64 * sizeof(std::uint32_t)},
               {&ws.bodies[1], n64 * sizeof(std::uint32_t)},
               {&ws.body_blocks, r.body_block_words * sizeof(std::uint32_t)},
-              {&ws.base, r.type_passes ? n64 * sizeof(Key) : 0},
+              {&ws.base, n64 * sizeof(Key)},  // type passes: base keys; else the lowest cells' keys
               {&ws.counters, sizeof(cuda::Counters)}},
              "pack");
 }
@@ -164,6 +203,7 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   r.d_type_totals = r.d_body_totals + nb;
   r.d_type_offsets = r.d_type_totals + 8 * std::size_t(nb);
   r.d_base = r.type_passes ? ws.base.span_as<Key>(n).data() : nullptr;
+  r.d_lo_key = r.type_passes ? nullptr : ws.base.span_as<Key>(n).data();
   r.d_counters = ws.counters.span_as<cuda::Counters>(1).data();
   CG_CUDA_CHECK(cudaMemsetAsync(r.d_counters, 0, sizeof(cuda::Counters), st));
   // The renumbering pays only when the spheres do not stay in L2 anyway (the pair stage's gathers hit
@@ -183,9 +223,11 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
     ws.reserve({{&ws.cell_cut, r.n64 * sizeof(CutShape)}}, "pack");
     r.d_cell_cut = ws.cell_cut.span_as<CutShape>(n).data();
   }
-  // scenes with ellipsoids: the packed shapes (and the device rows' check), and without renumbering
-  // the cut shapes, in input order = cell order (shapes.cuh); else reorder gathers them
-  shapes_stage(r, !renumber);
+  // Where the bodies keep their order reorder packs them (spheres and shapes) in its one pass; else
+  // pack and pack_shapes do, and reorder gathers them into cell order.
+  const bool pack_here = !renumber && !spheres_only;
+  // scenes with ellipsoids: the shape rows, their packed shapes (and the device rows' check; shapes.cuh)
+  const cuda::ShapeInput<Narrow> shape_in = shapes_stage(r, !pack_here);
   // Renumbering sort of the bodies by z layer of cells (locality only; see home_layer_key): at most
   // 8 key bits, one radix pass.
   const int z_bits = std::max(1, bits_for(std::uint64_t(r.g.dims[2])));
@@ -193,10 +235,12 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   const int home_bits = z_bits - layer_shift;
   cub::DoubleBuffer<Key> home_key = ws.home_keys<Key>(n);
   cub::DoubleBuffer<std::uint32_t> home_index = ws.home_index(n);
-  cuda::pack_kernel<Real, Key><<<nb, kBlock, 0, st>>>(
-      r.d_pos, r.d_rad, n, r.origin, r.g, r.d_spheres, layer_shift, renumber ? home_key.Current() : nullptr,
-      home_index.Current(), r.d_counters);
-  CG_CUDA_CHECK_LAUNCH("pack");
+  if (!pack_here) {
+    cuda::pack_kernel<Real, Key><<<nb, kBlock, 0, st>>>(
+        r.d_pos, r.d_rad, n, r.origin, r.g, r.d_spheres, layer_shift, renumber ? home_key.Current() : nullptr,
+        home_index.Current(), r.d_counters);
+    CG_CUDA_CHECK_LAUNCH("pack");
+  }
   if (spheres_only) {
     r.events.mark(Stage::pack, st);
     return;
@@ -205,11 +249,18 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
     cub_run(ws, "pack", [&](void* t, std::size_t& b) {
       return cub::DeviceRadixSort::SortPairs(t, b, home_key, home_index, int(n), 0, home_bits, st);
     });
-  cuda::reorder_kernel<Real, Key, Narrow><<<nb, kBlock, 0, st>>>(
-      r.d_spheres, n, r.g, renumber ? home_index.Current() : nullptr,
-      r.d_cell_spheres == r.d_spheres ? nullptr : r.d_cell_spheres, r.d_ctrl, r.d_perm, r.d_body_totals,
-      r.d_counters, r.d_base, r.type_passes ? r.d_type_totals : nullptr, r.d_report,
-      static_cast<Real>(r.job.inflation), r.d_shapes, r.d_cell_cut, renumber);
+  auto reorder = [&](auto kernel, const std::uint32_t* sorted, const cuda::PackInput<Narrow>& in) {
+    kernel<<<nb, kBlock, 0, st>>>(r.d_spheres, n, r.g, sorted,
+                                  r.d_cell_spheres == r.d_spheres ? nullptr : r.d_cell_spheres, r.d_ctrl,
+                                  r.d_perm, r.d_body_totals, r.d_counters, r.d_base,
+                                  r.type_passes ? r.d_type_totals : nullptr, r.d_report,
+                                  static_cast<Real>(r.job.inflation), r.d_shapes, r.d_cell_cut, r.d_lo_key, in);
+  };
+  if (pack_here)
+    reorder(cuda::reorder_kernel<Real, Key, Narrow, true>, nullptr,
+            cuda::PackInput<Narrow>{r.d_pos, r.d_rad, r.origin, shape_in});
+  else
+    reorder(cuda::reorder_kernel<Real, Key, Narrow, false>, home_index.Current(), cuda::PackInput<Narrow>{});
   CG_CUDA_CHECK_LAUNCH("reorder");
   r.events.mark(Stage::pack, st);
 }

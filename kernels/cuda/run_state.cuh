@@ -53,7 +53,8 @@ struct RunState {
   std::uint32_t* d_body_offsets = nullptr;  // single-sort path
   std::uint32_t* d_type_totals = nullptr;   // type-pass path: [8][nb] totals, then offsets
   std::uint32_t* d_type_offsets = nullptr;
-  Key* d_base = nullptr;
+  Key* d_base = nullptr;                    // type passes: super-cell index of each body's lowest even cell
+  Key* d_lo_key = nullptr;                  // single sort: key of each body's lowest cell (cell order)
   cuda::Counters* d_counters = nullptr;
   std::uint64_t n_entries = 0;
   std::uint64_t type_entries[8] = {};

@@ -2,8 +2,8 @@
 // CUDA shapes (scenes with ellipsoids; sphere-only scenes run none of this): the device-array path's
 // check of the shape rows (validate_shapes' predicate, core/shape.hpp, one thread per body), the
 // upload of the host arrays' shape rows and pack_shapes (a PackedShape per body, input order, read by
-// the narrow stage's ShapeDecide; the pair stage's cut shapes are made here too, or, when the bodies
-// are renumbered, by pack's reorder from the packed shapes). Both run inside the pack stage's timing.
+// the narrow stage's ShapeDecide and, in centre-cut scenes, by pack's reorder for the cut shapes; where
+// the bodies keep their order reorder packs them itself). Both run inside the pack stage's timing.
 #include <algorithm>
 #include <cstring>
 #include <string>
@@ -37,26 +37,41 @@ __global__ void shape_count_kernel(const Shape* __restrict__ kind, std::uint64_t
     atomicAdd(&c->ellipsoids, static_cast<unsigned long long>(warp_sum));
 }
 
-// pack_shapes: pack_shape() of body i (input order). check (the device-array path): shape_fault() of
-// each body as well, the first bad one's n - i into c->bad_shape (read with the pack stage's counters).
-// cut (the centre cut, bodies not renumbered: input order is the cell order): its cut shape too.
+// The shape rows pack reads (input order) and where their packed shapes go; kind null: a scene of
+// spheres alone. check (the device-array path): shape_fault() of each body as well.
+template <class Real>
+struct ShapeInput {
+  const Shape* kind = nullptr;
+  const double* semi = nullptr;
+  const double* orient = nullptr;
+  bool check = false;
+  PackedShape<Real>* out = nullptr;
+};
+
+// pack_shape() of body i; with in.check the first bad body's n - i into c->bad_shape (read with the
+// pack stage's counters).
+template <class Real>
+__device__ __forceinline__ PackedShape<Real> packed_shape_of(const ShapeInput<Real>& in,
+                                                             const double* __restrict__ rad, std::uint32_t i,
+                                                             std::uint32_t n, Counters* __restrict__ c) {
+  const std::uint8_t k = static_cast<std::uint8_t>(in.kind[i]);
+  const double* si = in.semi + 3 * std::uint64_t(i);
+  const double* qi = in.orient + 4 * std::uint64_t(i);
+  double norm;
+  if (in.check && shape_fault(k, rad[i], si, qi, norm) != ShapeFault::none)
+    atomicMax(&c->bad_shape, static_cast<unsigned long long>(n - i));
+  return pack_shape<Real>(k, si, qi);
+}
+
+// pack_shapes: the packed shape of each body, input order (renumbered bodies; else pack's reorder
+// packs them where it packs the spheres: pack.cuh).
 template <class Real>
 __global__ void __launch_bounds__(kBlock)
-    pack_shapes_kernel(const Shape* __restrict__ kind, const double* __restrict__ rad,
-                       const double* __restrict__ semi, const double* __restrict__ orient, std::uint32_t n,
-                       bool check, PackedShape<Real>* __restrict__ out, CutShape* __restrict__ cut,
+    pack_shapes_kernel(ShapeInput<Real> in, const double* __restrict__ rad, std::uint32_t n,
                        Counters* __restrict__ c) {
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
   if (i >= n) return;
-  const std::uint8_t k = static_cast<std::uint8_t>(kind[i]);
-  const double* si = semi + 3 * std::uint64_t(i);
-  const double* qi = orient + 4 * std::uint64_t(i);
-  double norm;
-  if (check && shape_fault(k, rad[i], si, qi, norm) != ShapeFault::none)
-    atomicMax(&c->bad_shape, static_cast<unsigned long long>(n - i));
-  const PackedShape<Real> p = pack_shape<Real>(k, si, qi);
-  out[i] = p;
-  if (cut) cut[i] = cut_shape(p);
+  in.out[i] = packed_shape_of(in, rad, i, n, c);
 }
 
 }  // namespace cg::cuda
@@ -105,20 +120,19 @@ inline void upload_shape_rows(const BodiesView& b, Bytes& kind, Bytes& semi, Byt
                                 cudaMemcpyHostToDevice, st));
 }
 
-// Scenes with ellipsoids: the shape rows on the device (host-array path: uploaded) and the packed
-// shapes (r.d_shapes). Sphere-only scenes: nothing (r.d_shapes stays null).
-// cut_here: the cut shapes (r.d_cell_cut) in input order, which is the cell order (no renumbering).
+// Scenes with ellipsoids: the shape rows on the device (host-array path: uploaded) and where their
+// packed shapes go (r.d_shapes); `launch`: pack them here (pack_shapes_kernel), else the caller does.
+// Sphere-only scenes: nothing (r.d_shapes stays null, the input's kind null).
 template <class Real, class Key, class Narrow>
-void shapes_stage(RunState<Real, Key, Narrow>& r, bool cut_here) {
-  if (r.job.ellipsoids == 0 || r.n == 0) return;
+cuda::ShapeInput<Narrow> shapes_stage(RunState<Real, Key, Narrow>& r, bool launch) {
+  cuda::ShapeInput<Narrow> in;
+  if (r.job.ellipsoids == 0 || r.n == 0) return in;
   Workspace& ws = r.ws;
   const std::uint64_t n64 = r.n64;
-  const Shape* d_kind = nullptr;
-  const double *d_semi = nullptr, *d_orient = nullptr;
   if (r.device_in) {
-    d_kind = r.job.device_bodies->shape;
-    d_semi = r.job.device_bodies->semi_axes;
-    d_orient = r.job.device_bodies->orientation;
+    in.kind = r.job.device_bodies->shape;
+    in.semi = r.job.device_bodies->semi_axes;
+    in.orient = r.job.device_bodies->orientation;
     ws.reserve({{&ws.shapes, n64 * sizeof(PackedShape<Narrow>)}}, "pack");
   } else {
     ws.reserve({{&ws.shape_kind, n64 * sizeof(Shape)},
@@ -127,16 +141,19 @@ void shapes_stage(RunState<Real, Key, Narrow>& r, bool cut_here) {
                 {&ws.shapes, n64 * sizeof(PackedShape<Narrow>)}},
                "pack");
     upload_shape_rows(r.job.bodies, ws.shape_kind, ws.shape_semi, ws.shape_orient, r.st);
-    d_kind = reinterpret_cast<const Shape*>(ws.shape_kind.data());
-    d_semi = reinterpret_cast<const double*>(ws.shape_semi.data());
-    d_orient = reinterpret_cast<const double*>(ws.shape_orient.data());
+    in.kind = reinterpret_cast<const Shape*>(ws.shape_kind.data());
+    in.semi = reinterpret_cast<const double*>(ws.shape_semi.data());
+    in.orient = reinterpret_cast<const double*>(ws.shape_orient.data());
   }
-  r.d_shapes = ws.shapes.span_as<PackedShape<Narrow>>(r.n).data();
-  r.shape_rows = {d_semi, d_orient};  // read again by the narrow stage (fp32's pairs in fp64)
-  cuda::pack_shapes_kernel<Narrow><<<cuda::blocks_for(r.n), cuda::kBlock, 0, r.st>>>(
-      d_kind, r.d_rad, d_semi, d_orient, r.n, r.device_in, r.d_shapes, cut_here ? r.d_cell_cut : nullptr,
-      r.d_counters);
-  CG_CUDA_CHECK_LAUNCH("pack_shapes");
+  in.check = r.device_in;
+  in.out = r.d_shapes = ws.shapes.span_as<PackedShape<Narrow>>(r.n).data();
+  r.shape_rows = {in.semi, in.orient};  // read again by the narrow stage (fp32's pairs in fp64)
+  if (launch) {
+    cuda::pack_shapes_kernel<Narrow><<<cuda::blocks_for(r.n), cuda::kBlock, 0, r.st>>>(in, r.d_rad, r.n,
+                                                                                        r.d_counters);
+    CG_CUDA_CHECK_LAUNCH("pack_shapes");
+  }
+  return in;
 }
 
 // After a read of the counters that follows pack_shapes: the device rows' first bad shape, if any, as

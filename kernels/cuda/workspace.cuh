@@ -14,7 +14,8 @@
 //   ctrl
 //   body_blocks            pack → entries      per block of bodies: entry totals, their scan (2 nb);
 //                                              type passes: entry totals, [8][nb] type totals, scan
-//   base                   pack → pairs        type passes: super-cell index per body
+//   base                   pack → entries/     single sort: the key of each body's lowest cell (entries);
+//                          pairs               type passes: super-cell index per body (pairs)
 //   keys[2], bodies[2]     entries → pairs     the entries, double-buffered for the CUB sort
 //   entry_blocks           pairs               per block of entries: pair totals and their scan
 //   pairs                  pairs → narrow      candidate pairs when they are not in the entries'

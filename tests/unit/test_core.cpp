@@ -30,8 +30,13 @@ void check_exactly_once(const Spheres& s, double cell) {
     Sphere<Real> sp{Real(s.p[i].x - f.origin.x), Real(s.p[i].y - f.origin.y), Real(s.p[i].z - f.origin.z),
                     Real(s.r[i])};
     bc[i] = body_cells(sp, g);
-    for (std::uint32_t m = 0; m < entry_count(bc[i]); ++m)
-      cells[body_cell_key<std::uint64_t>(bc[i], m, g)].push_back(i);
+    const auto lo_key = cell_key<std::uint64_t>(bc[i].lo[0], bc[i].lo[1], bc[i].lo[2], g);
+    for (std::uint32_t m = 0; m < entry_count(bc[i]); ++m) {
+      const std::uint64_t key = body_cell_key<std::uint64_t>(bc[i], m, g);
+      cells[key].push_back(i);
+      // the device's entries: from the lowest cell's key and the control byte (with the mask bits)
+      ASSERT_EQ(spilled_cell_key<std::uint64_t>(lo_key, control_bits(bc[i]) | 0xC0u, m, g), key) << s.name;
+    }
   }
   std::map<std::pair<std::uint32_t, std::uint32_t>, int> tested;
   for (auto& [key, members] : cells) {
