@@ -6,7 +6,8 @@
 // in the pair stage, where both bodies are in cell order, it halves the candidates that the order stage sorts
 // and the narrow stage screens at random places in id order (0.905 → 0.470 per body; H100, 2^20 ellipsoids:
 // order 0.079 → 0.056 ms, narrow 0.453 → 0.411, the pair stage unchanged; its price is the cut shapes in cell
-// order: +0.01 ms at 2^20, +0.75 ms at 2^24 where reorder gathers them at random: BENCHMARKS §3).
+// order: +0.01 ms at 2^20, +0.75 ms at 2^24 where reorder gathered them at random — which is why these
+// scenes with float spheres keep their input order now, cuda/pack.cuh: BENCHMARKS §3).
 //
 // It removes only pairs the narrow stage rejects anyway, so the contacts, their bits and the solver's
 // flags are the same with or without it: it cuts general ellipsoid pairs alone (the ones whose narrow

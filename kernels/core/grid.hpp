@@ -128,7 +128,8 @@ CG_HD Key spilled_cell_key(Key lo_key, std::uint32_t ctrl, std::uint32_t m, cons
   }
   const std::uint32_t up = off & parity;
   const Key lin = (lo_key & ((Key(1) << g.half_bits) - Key(1))) + Key(up & 1u) +
-                  ((up & 2u) ? Key(g.half[0]) : Key(0)) + ((up & 4u) ? Key(g.half[0]) * Key(g.half[1]) : Key(0));
+                  ((up & 2u) ? Key(g.half[0]) : Key(0)) +
+                  ((up & 4u) ? Key(g.half[0]) * Key(g.half[1]) : Key(0));
   return (Key(parity ^ off) << g.half_bits) | lin;
 }
 

@@ -47,8 +47,8 @@ __global__ void __launch_bounds__(kBlock)
 // its entries coalesced.
 template <class Key, class Real>
 __global__ void __launch_bounds__(kBlock)
-    fill_entries_kernel(const Key* __restrict__ lo_key, const std::uint8_t* __restrict__ ctrl, std::uint32_t n,
-                        GridParams<Real> g, const std::uint32_t* __restrict__ block_offset,
+    fill_entries_kernel(const Key* __restrict__ lo_key, const std::uint8_t* __restrict__ ctrl,
+                        std::uint32_t n, GridParams<Real> g, const std::uint32_t* __restrict__ block_offset,
                         Key* __restrict__ keys, std::uint32_t* __restrict__ body) {
   using Scan = cub::BlockScan<std::uint32_t, kBlock>;
   __shared__ typename Scan::TempStorage tmp;

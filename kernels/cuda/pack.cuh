@@ -36,8 +36,8 @@ __device__ __forceinline__ Sphere<Real> packed_sphere(const double* __restrict__
   const std::uint64_t i3 = 3 * std::uint64_t(i);
   const double px = pos[i3], py = pos[i3 + 1], pz = pos[i3 + 2], r = rad[i];
   if (body_is_bad(px, py, pz, r)) atomicMax(&c->bad, static_cast<unsigned long long>(n - i));
-  return {static_cast<Real>(px - origin.x), static_cast<Real>(py - origin.y), static_cast<Real>(pz - origin.z),
-          static_cast<Real>(r) + g.radius_margin};
+  return {static_cast<Real>(px - origin.x), static_cast<Real>(py - origin.y),
+          static_cast<Real>(pz - origin.z), static_cast<Real>(r) + g.radius_margin};
 }
 
 // pack (renumbered bodies, and the spheres alone of a skin's reuse step): the packed spheres in input
@@ -236,9 +236,9 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   cub::DoubleBuffer<Key> home_key = ws.home_keys<Key>(n);
   cub::DoubleBuffer<std::uint32_t> home_index = ws.home_index(n);
   if (!pack_here) {
-    cuda::pack_kernel<Real, Key><<<nb, kBlock, 0, st>>>(
-        r.d_pos, r.d_rad, n, r.origin, r.g, r.d_spheres, layer_shift, renumber ? home_key.Current() : nullptr,
-        home_index.Current(), r.d_counters);
+    cuda::pack_kernel<Real, Key><<<nb, kBlock, 0, st>>>(r.d_pos, r.d_rad, n, r.origin, r.g, r.d_spheres,
+                                                        layer_shift, renumber ? home_key.Current() : nullptr,
+                                                        home_index.Current(), r.d_counters);
     CG_CUDA_CHECK_LAUNCH("pack");
   }
   if (spheres_only) {
@@ -250,11 +250,10 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
       return cub::DeviceRadixSort::SortPairs(t, b, home_key, home_index, int(n), 0, home_bits, st);
     });
   auto reorder = [&](auto kernel, const std::uint32_t* sorted, const cuda::PackInput<Narrow>& in) {
-    kernel<<<nb, kBlock, 0, st>>>(r.d_spheres, n, r.g, sorted,
-                                  r.d_cell_spheres == r.d_spheres ? nullptr : r.d_cell_spheres, r.d_ctrl,
-                                  r.d_perm, r.d_body_totals, r.d_counters, r.d_base,
-                                  r.type_passes ? r.d_type_totals : nullptr, r.d_report,
-                                  static_cast<Real>(r.job.inflation), r.d_shapes, r.d_cell_cut, r.d_lo_key, in);
+    kernel<<<nb, kBlock, 0, st>>>(
+        r.d_spheres, n, r.g, sorted, r.d_cell_spheres == r.d_spheres ? nullptr : r.d_cell_spheres, r.d_ctrl,
+        r.d_perm, r.d_body_totals, r.d_counters, r.d_base, r.type_passes ? r.d_type_totals : nullptr,
+        r.d_report, static_cast<Real>(r.job.inflation), r.d_shapes, r.d_cell_cut, r.d_lo_key, in);
   };
   if (pack_here)
     reorder(cuda::reorder_kernel<Real, Key, Narrow, true>, nullptr,

@@ -23,7 +23,8 @@ namespace cg::cuda {
 // are symmetric in the two bodies (bit for bit), so the decisions are the host's.
 // Input index of cell-ordered body j: perm[j], or j itself where the bodies were not renumbered (perm
 // null: the pair stage then reads no permutation).
-__device__ __forceinline__ std::uint32_t input_index(const std::uint32_t* __restrict__ perm, std::uint32_t j) {
+__device__ __forceinline__ std::uint32_t input_index(const std::uint32_t* __restrict__ perm,
+                                                     std::uint32_t j) {
   return perm ? perm[j] : j;
 }
 

@@ -48,13 +48,13 @@ struct RunState {
   bool renumbered = false;                  // the bodies are in cell order (else d_perm is the identity)
   // the pair stage's permutation: none where it is the identity (cuda/pairs.cuh: input_index)
   const std::uint32_t* pair_perm() const { return renumbered ? d_perm : nullptr; }
-  std::uint8_t* d_ctrl = nullptr;           // cell order
+  std::uint8_t* d_ctrl = nullptr;  // cell order
   std::uint32_t* d_body_totals = nullptr;
   std::uint32_t* d_body_offsets = nullptr;  // single-sort path
   std::uint32_t* d_type_totals = nullptr;   // type-pass path: [8][nb] totals, then offsets
   std::uint32_t* d_type_offsets = nullptr;
-  Key* d_base = nullptr;                    // type passes: super-cell index of each body's lowest even cell
-  Key* d_lo_key = nullptr;                  // single sort: key of each body's lowest cell (cell order)
+  Key* d_base = nullptr;    // type passes: super-cell index of each body's lowest even cell
+  Key* d_lo_key = nullptr;  // single sort: key of each body's lowest cell (cell order)
   cuda::Counters* d_counters = nullptr;
   std::uint64_t n_entries = 0;
   std::uint64_t type_entries[8] = {};

@@ -149,8 +149,8 @@ cuda::ShapeInput<Narrow> shapes_stage(RunState<Real, Key, Narrow>& r, bool launc
   in.out = r.d_shapes = ws.shapes.span_as<PackedShape<Narrow>>(r.n).data();
   r.shape_rows = {in.semi, in.orient};  // read again by the narrow stage (fp32's pairs in fp64)
   if (launch) {
-    cuda::pack_shapes_kernel<Narrow><<<cuda::blocks_for(r.n), cuda::kBlock, 0, r.st>>>(in, r.d_rad, r.n,
-                                                                                        r.d_counters);
+    cuda::pack_shapes_kernel<Narrow>
+        <<<cuda::blocks_for(r.n), cuda::kBlock, 0, r.st>>>(in, r.d_rad, r.n, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("pack_shapes");
   }
   return in;

@@ -685,8 +685,8 @@ void check_shape_boxes(const char* mode, std::initializer_list<double> offsets) 
       }
       ++bodies;
     }
-    std::printf("[ellipsoid] %s shape boxes, offset %g: half-extent %.3f of the bounding radius\n", mode, offset,
-                share / bodies);
+    std::printf("[ellipsoid] %s shape boxes, offset %g: half-extent %.3f of the bounding radius\n", mode,
+                offset, share / bodies);
     if (offset == 0.0) {
       EXPECT_LT(share / bodies, 0.85) << mode << ": the boxes should be well inside the bounding spheres";
     }
