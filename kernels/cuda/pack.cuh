@@ -80,9 +80,8 @@ struct PackInput {
 // (cell_key of lo & ~1, type bits 0) and per block the number of bodies having a cell of each
 // type (type_blocks[t * gridDim.x + blockIdx.x]; totals added to c->type_entries[t]).
 // CandidateFilter::centre_cut (cut != null): the cut shape of each body (core/centre_cut.hpp) from its
-// packed shape, in cell order, and its cells from the box of its shape (cut_cells). (Made here also when
-// the bodies keep their order: reading the packed shape costs less than pack_shapes writing the cut
-// shape for this kernel to read.)
+// packed shape (gathered, or with kPack the one just made), in cell order, and its cells from the box
+// of its shape (cut_cells).
 template <class Real, class Key, class Packed, bool kPack>
 __global__ void __launch_bounds__(kBlock)
     reorder_kernel(Sphere<Real>* __restrict__ spheres, std::uint32_t n, GridParams<Real> g,
