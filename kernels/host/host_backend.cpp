@@ -69,10 +69,12 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
 
   host::PackedBodies<Broad> bodies;
   std::vector<PackedShape<Narrow>> packed_shapes;
-  host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Broad>(job.inflation), !reuse, nt,
-             bodies);
+  // the cells: of the bounding spheres (pack), or in centre-cut scenes of the shapes' boxes (shape_cells)
+  const bool shape_boxes = filter == CandidateFilter::centre_cut && !reuse;
+  host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Broad>(job.inflation),
+             !reuse && !shape_boxes, nt, bodies);
   if (shapes) host::pack_shapes(job.bodies, nt, packed_shapes);
-  if (filter == CandidateFilter::centre_cut && !reuse) {  // the cut shapes, and the cells of their boxes
+  if (shape_boxes) {
     host::cut_shapes(packed_shapes, nt, bodies.cut);
     host::shape_cells(job.grid, nt, bodies);
   }

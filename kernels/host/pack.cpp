@@ -62,6 +62,9 @@ void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, std
 template <class Real>
 void shape_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& out) {
   const std::size_t n = out.spheres.size();
+  out.cells.resize(n);
+  out.ctrl.resize(n);
+  out.count.resize(n);
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
     const Sphere<Real> s = out.spheres[i];

@@ -94,8 +94,9 @@ void pack_shapes(const BodiesView& bodies, int threads, std::vector<PackedShape<
 template <class Packed>
 void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, std::vector<CutShape>& out);
 
-// shape_cells (CandidateFilter::centre_cut, after cut_shapes): the cells, control byte and entry count of
-// each body from the box of its shape instead of its bounding sphere (core/centre_cut.hpp: cut_cells).
+// shape_cells (CandidateFilter::centre_cut, after cut_shapes; pack made the spheres only): the cells,
+// control byte and entry count of each body from the box of its shape instead of its bounding sphere
+// (core/centre_cut.hpp: cut_cells).
 template <class Real>
 void shape_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& bodies);
 
