@@ -5,7 +5,7 @@
 #include <new>
 #include <optional>
 
-#include "cli.hpp"
+#include "cli/cli.hpp"
 #include "errors.hpp"
 #include "session.hpp"
 

@@ -9,7 +9,7 @@
 
 #include "io/hdf5_handle.hpp"
 #include "io/raw_attributes.hpp"
-#include "scene.hpp"
+#include "scene/scene.hpp"
 
 namespace cg::h5 {
 

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "engine.hpp"
-#include "scene.hpp"
+#include "scene/scene.hpp"
 
 namespace cg {
 

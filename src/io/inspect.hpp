@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "scene.hpp"
+#include "scene/scene.hpp"
 
 namespace cg {
 

@@ -20,7 +20,7 @@
 #include <set>
 #include <string>
 
-#include "scene.hpp"
+#include "scene/scene.hpp"
 
 namespace cg::h5 {
 

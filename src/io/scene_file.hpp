@@ -14,7 +14,7 @@
 #include <string>
 
 #include "engine.hpp"
-#include "scene.hpp"
+#include "scene/scene.hpp"
 
 namespace cg {
 

@@ -12,7 +12,9 @@
 #include <string>
 
 #include "errors.hpp"
-#include "hdf5_io.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
 
 namespace cg {
 // (kernels/engine.cpp is not linked into the harness)

@@ -39,7 +39,9 @@
 #include <thread>
 #include <vector>
 
-#include "hdf5_io.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
 
 extern char** environ;
 

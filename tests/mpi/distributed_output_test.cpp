@@ -16,10 +16,12 @@
 #include <string>
 #include <vector>
 
-#include "contact_file_shared.hpp"
-#include "hdf5_io.hpp"
+#include "run/contact_file_shared.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
 #include "mpi/mpi_test_env.hpp"
-#include "pipeline.hpp"
+#include "run/pipeline.hpp"
 #include "support/contacts_equal.hpp"
 
 namespace cg {

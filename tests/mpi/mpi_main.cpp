@@ -10,7 +10,9 @@
 #include <filesystem>
 #include <iostream>
 
-#include "hdf5_io.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
 #include "mpi/mpi_test_env.hpp"
 
 namespace cg::testing {

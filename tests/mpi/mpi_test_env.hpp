@@ -3,7 +3,7 @@
 // temporary directory shared by all ranks (created by rank 0, removed at the end).
 #include <string>
 
-#include "scene.hpp"
+#include "scene/scene.hpp"
 #include "session.hpp"
 
 namespace cg::testing {

@@ -10,10 +10,10 @@
 #include <algorithm>
 #include <string>
 
-#include "generate.hpp"
+#include "scene/generate.hpp"
 #include "io/scene_file.hpp"
 #include "mpi/mpi_test_env.hpp"
-#include "pipeline.hpp"
+#include "run/pipeline.hpp"
 
 namespace cg {
 namespace {

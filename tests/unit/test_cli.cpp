@@ -13,8 +13,10 @@
 #include <vector>
 
 #include "engine.hpp"
-#include "hdf5_io.hpp"
-#include "pipeline.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
+#include "run/pipeline.hpp"
 #include "resident_steps.hpp"
 #include "support/run_cli.hpp"
 #include "temp_dir.hpp"

@@ -1,4 +1,4 @@
-// Unit tests of the scene generators (src/generate.cpp): the density model (P(t), box edges against
+// Unit tests of the scene generators (src/scene/generate.cpp): the density model (P(t), box edges against
 // independent closed forms and Monte Carlo), determinism and chunk independence, the achieved
 // density, the polydisperse radius law, option validation and the test-scene builders.
 #include <gtest/gtest.h>
@@ -15,8 +15,10 @@
 #include <utility>
 #include <vector>
 
-#include "generate.hpp"
-#include "hdf5_io.hpp"
+#include "scene/generate.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
 #include "temp_dir.hpp"
 
 namespace {

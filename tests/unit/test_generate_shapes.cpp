@@ -7,8 +7,10 @@
 #include <string>
 #include <variant>
 
-#include "generate.hpp"
-#include "hdf5_io.hpp"
+#include "scene/generate.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
 #include "temp_dir.hpp"
 
 namespace {

@@ -14,7 +14,9 @@
 #include <string>
 #include <vector>
 
-#include "hdf5_io.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
 #include "temp_dir.hpp"
 
 namespace {

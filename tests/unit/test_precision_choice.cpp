@@ -12,7 +12,7 @@
 #include <string>
 
 #include "backends.hpp"
-#include "cli.hpp"
+#include "cli/cli.hpp"
 #include "engine.hpp"
 #include "precision_choice.hpp"
 #include "reference/sphere_reference.hpp"

@@ -6,7 +6,9 @@
 #include <limits>
 #include <string>
 
-#include "hdf5_io.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
 #include "temp_dir.hpp"
 
 namespace {

@@ -16,8 +16,8 @@
 #include <string>
 #include <vector>
 
-#include "study.hpp"
-#include "study_families.hpp"
+#include "study/study.hpp"
+#include "study/study_families.hpp"
 #include "support/run_cli.hpp"
 #include "temp_dir.hpp"
 

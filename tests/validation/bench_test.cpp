@@ -1,6 +1,6 @@
-// Tests of `contactgrid bench` (src/bench.hpp) on tiny N: the CSV has the documented columns, one
+// Tests of `contactgrid bench` (src/bench/bench.hpp) on tiny N: the CSV has the documented columns, one
 // row per N, contact counts that agree with Bullet; and the log-log slope fit.
-#include "bench.hpp"
+#include "bench/bench.hpp"
 
 #include <gtest/gtest.h>
 #include <unistd.h>

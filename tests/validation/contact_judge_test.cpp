@@ -1,9 +1,9 @@
-// Tests of the validation judge (src/contact_judge.hpp) on pairs whose contact is known by
+// Tests of the validation judge (src/validate/contact_judge.hpp) on pairs whose contact is known by
 // construction, never from the engine: B is placed so that a chosen point of A's surface and its
 // normal coincide with B's support point along n, so the pair touches exactly (distance 0) with that
 // n the global minimiser; then each condition is broken one at a time. Crossed bodies (a needle through
 // a plate) give f a local minimum that is not the global one, which the judge must reject.
-#include "contact_judge.hpp"
+#include "validate/contact_judge.hpp"
 
 #include <gtest/gtest.h>
 

@@ -6,8 +6,10 @@
 #include <cmath>
 #include <string>
 
-#include "bullet_oracle.hpp"
-#include "hdf5_io.hpp"
+#include "validate/bullet_oracle.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
 #include "support/run_cli.hpp"
 #include "temp_dir.hpp"
 

@@ -1,14 +1,14 @@
-// Tests of `contactgrid validate` (src/validate.hpp) and of the Bullet oracle it stands on.
+// Tests of `contactgrid validate` (src/validate/validate.hpp) and of the Bullet oracle it stands on.
 // Contacts are built by brute force with the CONTRACT §3 formulas (validation_helpers.hpp), never by
 // the engine, then corrupted one way at a time; each corruption must FAIL for its own reason.
-#include "validate.hpp"
+#include "validate/validate.hpp"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <string>
 
-#include "bullet_oracle.hpp"
+#include "validate/bullet_oracle.hpp"
 #include "validation/validation_helpers.hpp"
 
 namespace cg {

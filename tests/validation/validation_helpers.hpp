@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "engine.hpp"
-#include "scene.hpp"
+#include "scene/scene.hpp"
 
 namespace cg::testing {
 

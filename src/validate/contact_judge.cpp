@@ -5,7 +5,7 @@
 // H n = 0; with ∇²h(u) = (Mᵀ M − s(u) s(u)ᵀ) / h(u) (M = D Rᵀ), H(n) = ∇²h_A(−n) + ∇²h_B(n), and
 // the Riemannian Hessian in a tangent basis (e1, e2) is e_iᵀ H e_j − f δ_ij. Each Newton step solves
 // that 2×2 system (shifted to be positive definite), moves n by at most 0.5 rad and backtracks on f.
-#include "contact_judge.hpp"
+#include "validate/contact_judge.hpp"
 
 #include <fmt/format.h>
 

@@ -33,7 +33,7 @@
 //   collect_contacts  [gather | exchange, merge] (DistributedOptions::output, comm/contact_collect):
 //                     gathered to rank 0, or exchanged by id_a range, then k-way merged; rank r's rows
 //                     are rows [first_row, first_row + size) of the single-rank result, which
-//                     src/contact_file_shared writes into one file at once.
+//                     src/run/contact_file_shared writes into one file at once.
 // One rank takes the same stages with nothing to send: reading all rows, its one slab owns every row,
 // so the rows as read are the engine's input (ids implied, all pairs reported), and its single run of
 // contacts is the result (moved, not merged).
@@ -49,7 +49,7 @@
 #include <vector>
 
 #include "engine.hpp"
-#include "generate.hpp"
+#include "scene/generate.hpp"
 #include "precision_choice.hpp"
 #include "resident_steps.hpp"
 #include "session.hpp"
@@ -90,7 +90,7 @@ struct RunTime {
 };
 using RunTimes = std::vector<RunTime>;
 
-// The times as the contact file records them (src/hdf5_io: RunInfo::times).
+// The times as the contact file records them (src/io/contact_file: RunInfo::times).
 StageTimes file_stage_times(const RunTimes& times);
 
 struct DistributedOptions {

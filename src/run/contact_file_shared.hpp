@@ -5,7 +5,7 @@
 // Each rank holds rows [first_row, first_row + slice.size()) of the K sorted contacts (what
 // distributed_detect leaves, either mode; with ContactOutput::ranks every rank has a share):
 //   (a) rank 0 creates "<path>.tmp.<pid>" with every /contacts dataset of K rows, allocated and
-//       unwritten (src/hdf5_io: create_contact_file), and broadcasts its layout (the file's name and
+//       unwritten (src/io/contact_file: create_contact_file), and broadcasts its layout (the file's name and
 //       each dataset's offset);
 //   (b) every rank writes its rows at their offsets with pwrite, by `threads` threads
 //       (write_contact_rows) — no rank waits for another's data, no HDF5 call;
@@ -19,7 +19,9 @@
 #include <string>
 
 #include "engine.hpp"
-#include "hdf5_io.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
 #include "session.hpp"
 
 namespace cg {

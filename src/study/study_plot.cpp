@@ -9,7 +9,7 @@
 #include <cmath>
 #include <map>
 
-#include "study.hpp"
+#include "study/study.hpp"
 
 namespace cg {
 namespace {

@@ -3,7 +3,7 @@
 //   build the scene → its rounding bands → exact reference (once, at the widest band)
 //   → for each mode (× tolerance) × backend: detect (timed) → compare with the reference → a row
 // then the table, the CSV and the plot.
-#include "study.hpp"
+#include "study/study.hpp"
 
 #include <fmt/format.h>
 
@@ -17,7 +17,7 @@
 #include "errors.hpp"
 #include "io/text_file.hpp"
 #include "reference/scene_reference.hpp"
-#include "study_families.hpp"
+#include "study/study_families.hpp"
 
 namespace cg {
 namespace {

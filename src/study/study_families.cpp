@@ -1,13 +1,13 @@
 // The scene families of `contactgrid study` (study_families.hpp). Generated families reuse
 // generate_scene (the same scenes `contactgrid generate` writes); the adversarial ones are built here
 // from a seeded std::mt19937_64, pair by pair, with the geometry stated in each builder.
-#include "study_families.hpp"
+#include "study/study_families.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <random>
 
-#include "generate.hpp"
+#include "scene/generate.hpp"
 #include "reference/ellipsoid_reference.hpp"
 
 namespace cg {

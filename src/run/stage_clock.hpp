@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "collectives.hpp"
-#include "pipeline.hpp"
+#include "run/pipeline.hpp"
 
 namespace cg {
 

@@ -1,6 +1,6 @@
 // One contact file from every rank's rows (see contact_file_shared.hpp): create (rank 0) → broadcast
 // the layout → pwrite own rows (every rank) → attributes and rename (rank 0), agreeing after each.
-#include "contact_file_shared.hpp"
+#include "run/contact_file_shared.hpp"
 
 #include <chrono>
 #include <exception>

@@ -8,7 +8,7 @@
 #include <utility>
 #include <vector>
 
-#include "validate.hpp"
+#include "validate/validate.hpp"
 
 namespace cg::validate_detail {
 

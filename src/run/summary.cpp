@@ -1,5 +1,5 @@
 // The summary stage of `contactgrid detect` (summary.hpp).
-#include "summary.hpp"
+#include "run/summary.hpp"
 
 #include <fmt/format.h>
 

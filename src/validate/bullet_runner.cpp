@@ -18,7 +18,7 @@
 #include <string>
 #include <vector>
 
-#include "bullet_oracle.hpp"
+#include "validate/bullet_oracle.hpp"
 #include "errors.hpp"
 
 extern char** environ;

@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <string>
 
-#include "scene.hpp"
+#include "scene/scene.hpp"
 
 namespace cg {
 

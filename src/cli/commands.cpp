@@ -4,8 +4,10 @@
 #include <chrono>
 #include <string>
 
-#include "hdf5_io.hpp"
-#include "pipeline.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
+#include "run/pipeline.hpp"
 
 namespace cg {
 namespace {

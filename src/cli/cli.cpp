@@ -1,5 +1,5 @@
 // Command-line parsing. Every option is validated here, before any file is read or any rank talks.
-#include "cli.hpp"
+#include "cli/cli.hpp"
 
 #include <fmt/format.h>
 
@@ -8,14 +8,14 @@
 #include <iostream>
 #include <map>
 
-#include "pipeline.hpp"
+#include "run/pipeline.hpp"
 #if defined(CONTACTGRID_HAVE_BULLET)
-#include "bench.hpp"
-#include "validate.hpp"
+#include "bench/bench.hpp"
+#include "validate/validate.hpp"
 #endif
 #include "session.hpp"
-#include "study.hpp"
-#include "study_families.hpp"
+#include "study/study.hpp"
+#include "study/study_families.hpp"
 
 namespace cg {
 namespace {

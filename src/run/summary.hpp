@@ -3,8 +3,10 @@
 // per-stage times (maximum over ranks).
 #include <cstdint>
 
-#include "hdf5_io.hpp"
-#include "pipeline.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
+#include "run/pipeline.hpp"
 
 namespace cg {
 

@@ -5,7 +5,7 @@
 // whole scene, or K disjoint sub-boxes → per region: Bullet on the bodies there (ids ascending; in a
 // frame centred on them when the scene has ellipsoids), the contacts of pairs inside the region,
 // merge-join by (id_a, id_b) (validate_compare.cpp) → aggregate → PASS/FAIL.
-#include "validate.hpp"
+#include "validate/validate.hpp"
 
 #include <fmt/format.h>
 
@@ -17,10 +17,12 @@
 #include <random>
 #include <utility>
 
-#include "bullet_oracle.hpp"
+#include "validate/bullet_oracle.hpp"
 #include "errors.hpp"
-#include "hdf5_io.hpp"
-#include "validate_detail.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
+#include "validate/validate_detail.hpp"
 
 namespace cg {
 namespace {

@@ -7,7 +7,7 @@
 // the first added, is the smaller id); one performDiscreteCollisionDetection() gives the contacts; the world
 // is torn down in O(pairs + n) (Bullet's own teardown removes each proxy by scanning every pair: O(n ·
 // pairs), minutes at 2^20).
-#include "bullet_oracle.hpp"
+#include "validate/bullet_oracle.hpp"
 
 #include <btBulletCollisionCommon.h>
 
@@ -19,7 +19,7 @@
 #include <string>
 #include <vector>
 
-#include "bullet_ellipsoid_shape.hpp"
+#include "validate/bullet_ellipsoid_shape.hpp"
 #include "errors.hpp"
 
 namespace cg::bullet_native {
@@ -180,7 +180,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "usage: %s INPUT OUTPUT\n"
                  "Runs Bullet (%s precision) on the bodies of INPUT (contactgrid's oracle exchange\n"
-                 "format, see src/bullet_oracle.hpp) and writes the contacts to OUTPUT.\n"
+                 "format, see src/validate/bullet_oracle.hpp) and writes the contacts to OUTPUT.\n"
                  "Started by `contactgrid validate --bullet float`; not meant to be run by hand.\n",
                  argv[0], sizeof(btScalar) == 8 ? "double" : "single");
     return 2;

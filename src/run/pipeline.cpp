@@ -1,6 +1,6 @@
 // Sequencing of a contactgrid run. Reads like the data flow; each stage is one call:
 //   read → frame → slabs → distribute → exchange ghosts → detect → collect contacts → write → summary
-#include "pipeline.hpp"
+#include "run/pipeline.hpp"
 
 #include <fmt/format.h>
 
@@ -17,18 +17,20 @@
 #include "assemble.hpp"
 #include "collectives.hpp"
 #include "contact_collect.hpp"
-#include "contact_file_shared.hpp"
+#include "run/contact_file_shared.hpp"
 #include "distribute.hpp"
 #include "halo_exchange.hpp"
-#include "hdf5_io.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
 #include "io/contacts_csv.hpp"
 #include "node_threads.hpp"
 #include "precision_choice.hpp"
 #include "routing.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
-#include "stage_clock.hpp"
-#include "summary.hpp"
+#include "run/stage_clock.hpp"
+#include "run/summary.hpp"
 
 namespace cg {
 
@@ -466,7 +468,7 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   return o;
 }
 
-// Every rank writes its rows of the one file (src/contact_file_shared.hpp); the file records the
+// Every rank writes its rows of the one file (src/run/contact_file_shared.hpp); the file records the
 // times so far and the write's. Returns the write's time.
 template <class Real>
 RunTime write_output(Session& session, const DetectCommand& cmd, const DistributedResult<Real>& r,

@@ -13,7 +13,7 @@
 // the box edge is well defined even for tiny n (where t > 1 matters). E[P((r1+r2)/L)] over the
 // radius law is a 128×128-node composite Gauss–Legendre quadrature in the law's uniform variable.
 // The edge solves (n−1)/2 · E[P] = c by bisection in log L (E decreases in L).
-#include "generate.hpp"
+#include "scene/generate.hpp"
 
 #include <fmt/format.h>
 
@@ -26,7 +26,9 @@
 #include <vector>
 
 #include "errors.hpp"
-#include "hdf5_io.hpp"
+#include "io/contact_file.hpp"
+#include "io/inspect.hpp"
+#include "io/scene_file.hpp"
 
 namespace cg {
 namespace {

@@ -3,7 +3,7 @@
 // Invariants: every row's scene is generated from (seed + log2 N) alone, so a row can be re-run by
 // itself; the CSV is written to "<csv>.tmp.<pid>" and renamed (as every output of contactgrid);
 // the plot is a separate step that can be re-run by hand from the CSV.
-#include "bench.hpp"
+#include "bench/bench.hpp"
 
 #include <fmt/format.h>
 #include <spawn.h>
@@ -22,9 +22,9 @@
 #include <numeric>
 #include <ostream>
 
-#include "bullet_oracle.hpp"
+#include "validate/bullet_oracle.hpp"
 #include "errors.hpp"
-#include "generate.hpp"
+#include "scene/generate.hpp"
 #include "io/scene_file.hpp"
 #include "stage.hpp"
 

@@ -12,7 +12,7 @@
 #include <memory>
 #include <string>
 
-#include "bullet_oracle.hpp"
+#include "validate/bullet_oracle.hpp"
 #include "errors.hpp"
 
 namespace cg {

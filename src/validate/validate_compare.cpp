@@ -11,8 +11,8 @@
 #include <limits>
 #include <optional>
 
-#include "contact_judge.hpp"
-#include "validate_detail.hpp"
+#include "validate/contact_judge.hpp"
+#include "validate/validate_detail.hpp"
 
 namespace cg::validate_detail {
 namespace {
