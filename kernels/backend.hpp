@@ -39,6 +39,10 @@ struct DetectJob {
   // bound; engine.cpp): measure the motion since its build, reuse it when skin_covers(), else build.
   double skin = 0, inflation = 0;
   bool check = false;
+  // EngineOptions::history on DEVICE bodies (CUDA): the history stage runs on the device after the
+  // narrow stage, keyed by device_bodies->id (or the indices), against the backend's device history
+  // (history_upload / history_download move it between host and device).
+  bool history = false;
   std::size_t body_count() const { return device_bodies ? device_bodies->count : bodies.size(); }
 };
 
@@ -109,6 +113,10 @@ void resident_copy(CudaBackend& backend, std::size_t first, std::size_t count, V
 // The same for the semi-axes and orientations of resident shape rows (a null pointer: skipped).
 void resident_shape_copy(CudaBackend& backend, std::size_t first, std::size_t count, Vec3<double>* semi_axes,
                          Quat<double>* orientation, bool to_device);
+// The contact history of the device path (EngineOptions::history): the previous step's keys and ages
+// copied into the backend's DEVICE history, or out of it.
+void history_upload(CudaBackend& backend, const ContactHistory& history);
+void history_download(CudaBackend& backend, ContactHistory& history);
 // Validation and bounds of DEVICE bodies (same results and InputError texts as compute_bounds), and
 // where bodies.shape is set their shape rows checked as validate_shapes (same texts, after the bodies'
 // own) and the ellipsoids counted into `ellipsoids` (0 without shapes); one wait for both.

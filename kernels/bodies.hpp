@@ -58,6 +58,9 @@ struct DeviceBodiesView {
   const Shape* shape = nullptr;         // DEVICE, count bytes
   const double* semi_axes = nullptr;    // DEVICE
   const double* orientation = nullptr;  // DEVICE
+  // Global ids of the bodies (DEVICE, count int64, strictly ascending), or null: body i has id i. Read
+  // only as the keys of the contact history (EngineOptions::history); the contacts' ids stay local.
+  const std::int64_t* id = nullptr;
 };
 
 }  // namespace cg

@@ -4,24 +4,25 @@
 namespace cg {
 
 template <class Real>
-void Contacts<Real>::reserve(std::size_t k, bool with_full) {
-  for_each_contact_field(*this, with_full, [k](auto, auto& column) { column.reserve(k); });
+void Contacts<Real>::reserve(std::size_t k, FieldSet set) {
+  for_each_contact_field(*this, set, [k](auto, auto& column) { column.reserve(k); });
 }
 
 template <class Real>
-void Contacts<Real>::resize(std::size_t k, bool with_full) {
-  reserve(k, with_full);  // exact: growing by resize alone may over-allocate a non-empty vector
-  full = with_full;
-  for_each_contact_field(*this, true, [&](auto index, auto& column) {
-    const ContactField& f = kContactFields[index];
-    column.resize(f.optional && !with_full ? 0 : k);
+void Contacts<Real>::resize(std::size_t k, FieldSet set) {
+  reserve(k, set);  // exact: growing by resize alone may over-allocate a non-empty vector
+  full = set.full;
+  history = set.history;
+  for_each_contact_field(*this, FieldSet::all(), [&](auto index, auto& column) {
+    column.resize(set.has(kContactFields[index].group) ? k : 0);
   });
 }
 
 template <class Real>
 bool Contacts<Real>::consistent() const {
   bool ok = true;
-  for_each_contact_field(*this, full, [&](auto, const auto& column) { ok = ok && column.size() == size(); });
+  for_each_contact_field(*this, fields(),
+                         [&](auto, const auto& column) { ok = ok && column.size() == size(); });
   return ok;
 }
 

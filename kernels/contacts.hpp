@@ -16,24 +16,28 @@ namespace cg {
 // engine or a receive overwrites them) and large arrays sit on huge pages.
 template <class Real>
 struct Contacts : ContactColumns<Real, HostVector> {
-  bool full = false;  // the optional fields (kContactFields[k].optional) are filled
+  bool full = false;     // the fields of FieldGroup::full are filled
+  bool history = false;  // the fields of FieldGroup::history are filled
 
   std::size_t size() const { return this->id_a.size(); }
-  // Room for k rows in every field (the optional ones when with_full).
-  void reserve(std::size_t k, bool with_full);
-  // k rows, each field allocated exactly once (reserve first); the optional fields empty unless with_full.
-  void resize(std::size_t k, bool with_full);
-  // True when every field present has size() rows (and the optional ones are there when full).
+  FieldSet fields() const { return {full, history}; }
+  // Room for k rows in every field of `set`.
+  void reserve(std::size_t k, FieldSet set);
+  // k rows, each field allocated exactly once (reserve first); the optional fields not in `set` empty.
+  void resize(std::size_t k, FieldSet set);
+  // True when every field present has size() rows (and the optional ones are there when flagged).
   bool consistent() const;
 };
 
 // Contacts left in DEVICE memory, owned by the engine: valid until the engine's next detect call or
 // its destruction. Same rows and order as Contacts (sorted by (id_a, id_b)); ids are local indices.
-// The optional arrays are null unless the engine runs with Fields::full.
+// The optional arrays are null unless the engine runs with Fields::full (EngineOptions::history).
 template <class Real>
 struct DeviceContactsView : ContactColumns<Real, ConstPtr> {
   std::size_t count = 0;
   bool full = false;
+  bool history = false;  // EngineOptions::history: age and previous_row are set
+  FieldSet fields() const { return {full, history}; }
 };
 
 // The columns of `c` as pointers (null for an empty field): what the narrow stage's row store
@@ -41,14 +45,14 @@ struct DeviceContactsView : ContactColumns<Real, ConstPtr> {
 template <class Real>
 ContactColumns<Real, Ptr> columns_of(Contacts<Real>& c) {
   ContactColumns<Real, Ptr> p;
-  zip_contact_fields(p, c, true,
+  zip_contact_fields(p, c, FieldSet::all(),
                      [](auto, auto*& ptr, auto& column) { ptr = column.empty() ? nullptr : column.data(); });
   return p;
 }
 template <class Real>
 ContactColumns<Real, ConstPtr> columns_of(const Contacts<Real>& c) {
   ContactColumns<Real, ConstPtr> p;
-  zip_contact_fields(p, c, true, [](auto, auto*& ptr, const auto& column) {
+  zip_contact_fields(p, c, FieldSet::all(), [](auto, auto*& ptr, const auto& column) {
     ptr = column.empty() ? nullptr : column.data();
   });
   return p;

@@ -101,6 +101,12 @@ void resident_copy(CudaBackend&, std::size_t, std::size_t, Vec3<double>*, double
 void resident_shape_copy(CudaBackend&, std::size_t, std::size_t, Vec3<double>*, Quat<double>*, bool) {
   throw CudaError("this contactgrid was built without CUDA");
 }
+void history_upload(CudaBackend&, const ContactHistory&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+void history_download(CudaBackend&, ContactHistory&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
 }  // namespace detail
 #endif
 
@@ -119,6 +125,7 @@ struct Engine<Real>::Impl {
   HostVector<Shape> resident_shape;  // shape rows (empty: all spheres)
   HostVector<Vec3<double>> resident_semi_axes;
   HostVector<Quat<double>> resident_orientation;
+  HostVector<std::int64_t> resident_id;  // the rows' global ids (history keys); empty: row indices
   std::size_t resident_rows = 0;
   bool resident_shapes = false;  // set_resident had shape rows (either backend)
   Contacts<Real> resident_contacts;
@@ -136,6 +143,24 @@ struct Engine<Real>::Impl {
   void forget_resident_view() {  // before any detection: the view's storage is reused
     if (resident_on_device) resident_overwritten = true;
     resident_on_device.reset();
+  }
+  // EngineOptions::history: the previous call's keys and ages, on the host (`history`) or in the
+  // CUDA backend's device history (after a device-path call); moved where the next call needs them.
+  ContactHistory history;
+  bool history_on_device = false;
+  void history_to_host() {
+    if (history_on_device) detail::history_download(*cuda, history);
+    history_on_device = false;
+  }
+  void history_to_device() {
+    if (!history_on_device) detail::history_upload(*cuda, history);
+    history_on_device = true;
+  }
+  // A call without bodies: no contacts, so every pair of the previous call has ended.
+  void history_end_all(Contacts<Real>& out) {
+    history.clear();
+    history_on_device = false;
+    out.history = true;
   }
   ~Impl() { detail::destroy(cuda); }
 };
@@ -182,6 +207,11 @@ const EngineStats& Engine<Real>::stats() const {
 template <class Real>
 const EngineOptions& Engine<Real>::options() const {
   return m_impl->options;
+}
+template <class Real>
+void Engine<Real>::reset_history() {
+  m_impl->history.clear();
+  m_impl->history_on_device = false;
 }
 
 namespace {
@@ -298,10 +328,12 @@ static void remember_build(typename Engine<Real>::Impl& s, const Bounds& b, std:
   k.coordinate_bound = p.bound;
 }
 
+// The host-array path. `history_ids`: the keys of the contact history (EngineOptions::history) when
+// the contacts' ids are row indices (resident bodies with ids); empty: the contacts' ids.
 template <class Real>
-Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Frame> frame) {
+static Contacts<Real> detect_host(typename Engine<Real>::Impl& s, const BodiesView& bodies,
+                                  std::optional<Frame> frame, std::span<const std::int64_t> history_ids) {
   using clock = std::chrono::steady_clock;
-  Impl& s = *m_impl;
   s.forget_resident_view();
   s.times.clear();
   reset_stats(s.stats);
@@ -311,7 +343,10 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
   const std::size_t ellipsoids = validate_shapes(bodies);
   s.stats.bodies = b.count;
   s.stats.ellipsoids = ellipsoids;
-  if (b.count == 0) return out;
+  if (b.count == 0) {
+    if (s.options.history) s.history_end_all(out);
+    return out;
+  }
   const SkinPlan skin = plan_skin<Real>(s, b, frame, bodies.id, ellipsoids);
   run_job<Real>(s.options, b, frame, skin.inflation, s.stats, [&](auto job) {
     job.bodies = bodies;
@@ -339,8 +374,20 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
       b2[k] = id[static_cast<std::size_t>(b2[k])];
     }
   }
+  if (s.options.history) {
+    const auto t1 = clock::now();
+    s.history_to_host();
+    step_history(out, s.history, history_ids, s.options.threads);
+    s.times.push_back(
+        {detail::name(detail::Stage::history), std::chrono::duration<double>(clock::now() - t1).count()});
+  }
   s.stats.contacts = out.size();
   return out;
+}
+
+template <class Real>
+Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Frame> frame) {
+  return detect_host<Real>(*m_impl, bodies, frame, {});
 }
 
 // Device-array path: bounds on the device, the same plan, the same CUDA stages. `device_out` set:
@@ -363,12 +410,19 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
   const Bounds b = detail::device_bounds(*s.cuda, bodies, ellipsoids);
   s.stats.bodies = b.count;
   s.stats.ellipsoids = ellipsoids;
-  if (b.count == 0) return;
+  if (device_out) *device_out = DeviceContactsView<Real>{};
+  if (b.count == 0) {
+    if (s.options.history) s.history_end_all(out);
+    if (device_out) device_out->history = s.options.history;
+    return;
+  }
+  if (s.options.history) s.history_to_device();
   const SkinPlan skin = plan_skin<Real>(s, b, frame, {}, ellipsoids);
   run_job<Real>(s.options, b, frame, skin.inflation, s.stats, [&](auto job) {
     job.device_bodies = &bodies;
     job.ellipsoids = ellipsoids;
     job.device_out = device_out;
+    job.history = s.options.history;
     skin.apply(job);
     s.times.push_back(
         {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
@@ -381,13 +435,16 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
 template <class Real>
 void Engine<Real>::set_resident(const BodiesView& b) {
   Impl& s = *m_impl;
-  if (!b.id.empty()) throw UsageError("set_resident: ids are implied (row i is body i)");
   const bool shapes = !b.shape.empty();
   if (b.position.size() != b.size() || (!b.report.empty() && b.report.size() != b.size()) ||
+      (!b.id.empty() && b.id.size() != b.size()) ||
       (shapes &&
        (b.shape.size() != b.size() || b.semi_axes.size() != b.size() || b.orientation.size() != b.size())) ||
       (!shapes && (!b.semi_axes.empty() || !b.orientation.empty())))
     throw UsageError("set_resident: the arrays differ in length");
+  for (std::size_t i = 1; i < b.id.size(); ++i)
+    if (!(b.id[i] > b.id[i - 1]))
+      throw InputError("set_resident: ids are not strictly ascending at row " + std::to_string(i));
   s.resident_rows = b.size();
   s.resident_shapes = shapes;
   s.resident_contacts = Contacts<Real>{};
@@ -403,6 +460,7 @@ void Engine<Real>::set_resident(const BodiesView& b) {
   s.resident_shape.assign(b.shape.begin(), b.shape.end());
   s.resident_semi_axes.assign(b.semi_axes.begin(), b.semi_axes.end());
   s.resident_orientation.assign(b.orientation.begin(), b.orientation.end());
+  s.resident_id.assign(b.id.begin(), b.id.end());
 }
 
 template <class Real>
@@ -490,14 +548,15 @@ std::size_t Engine<Real>::detect_resident(std::optional<Frame> frame) {
     return view.count;
   }
   const std::size_t n = s.resident_rows;
-  s.resident_contacts = detect(BodiesView{{s.resident_position.data(), n},
-                                          {s.resident_radius.data(), n},
-                                          {},
-                                          {s.resident_report.data(), s.resident_report.size()},
-                                          s.resident_shape,
-                                          s.resident_semi_axes,
-                                          s.resident_orientation},
-                               frame);
+  s.resident_contacts = detect_host<Real>(s,
+                                          BodiesView{{s.resident_position.data(), n},
+                                                     {s.resident_radius.data(), n},
+                                                     {},
+                                                     {s.resident_report.data(), s.resident_report.size()},
+                                                     s.resident_shape,
+                                                     s.resident_semi_axes,
+                                                     s.resident_orientation},
+                                          frame, s.resident_id);
   return s.resident_contacts.size();
 }
 
@@ -538,6 +597,14 @@ DeviceContactsView<Real> Engine<Real>::detect_device_resident(const DeviceBodies
   DeviceContactsView<Real> view;
   detect_on_device<Real>(*m_impl, bodies, frame, unused, &view);
   return view;
+}
+
+template <class Real>
+Contacts<Real> Engine<Real>::download(const DeviceContactsView<Real>& view) {
+  if (m_impl->resolved != Backend::cuda) throw UsageError("download: device contacts need the CUDA backend");
+  Contacts<Real> out;
+  detail::download_contacts(*m_impl->cuda, view, out);
+  return out;
 }
 
 template class Engine<float>;

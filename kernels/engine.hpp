@@ -20,6 +20,7 @@
 #include "core/vec3.hpp"
 #include "errors.hpp"
 #include "grid_plan.hpp"
+#include "history.hpp"
 
 namespace cg {
 
@@ -63,6 +64,13 @@ struct EngineOptions {
   // since that build, 2·(d + g) <= skin, skips entries/sort/pairs/order and runs pack + narrow over
   // the kept list. Either way the contacts are those of a skin-0 detection, bit for bit.
   double skin = 0;
+  // Contact identity across calls (CONTRACT §2's history fields; core/history.hpp): every call's
+  // contacts carry age and previous_row against this engine's previous call (the first call, and the
+  // first after reset_history(): every pair new). Pairs are keyed by global ids: the contacts' ids
+  // (BodiesView::id), or for device and resident bodies their `id` rows where given (row indices
+  // otherwise). Computed where the contacts are delivered: the host for host bodies, the device for
+  // device bodies (detect_device*, CUDA resident bodies).
+  bool history = false;
 };
 
 // Counters of one run (for tests and the summary).
@@ -128,12 +136,16 @@ class Engine {
   Contacts<Real> detect_device(const DeviceBodiesView& bodies, std::optional<Frame> frame = std::nullopt);
   DeviceContactsView<Real> detect_device_resident(const DeviceBodiesView& bodies,
                                                   std::optional<Frame> frame = std::nullopt);
+  // The rows of a view of this engine's last detection copied to host memory (CUDA backend).
+  Contacts<Real> download(const DeviceContactsView<Real>& view);
 
   // Resident bodies: a simulation's state kept where the backend computes (host memory for the CPU
   // backend, DEVICE memory for CUDA) between detect calls, refreshed in row ranges (a halo exchange)
   // without moving the rest. set_resident copies `bodies` (ids implied: row i is body i; report as in
   // BodiesView; shape rows as in BodiesView, all three or none); read_resident / write_resident copy
   // the positions and radii of rows [first, first + count) out and in (UsageError outside the rows);
+  // BodiesView::id, when given to set_resident, is the rows' global ids (strictly ascending): the keys
+  // of the contact history (EngineOptions::history) only; the contacts' ids stay row indices;
   // read_resident_shapes / write_resident_shapes the semi-axes and orientations of rows (a null
   // pointer: that field is left alone; UsageError when the rows were set without shape rows; a body's
   // kind stays the one set, and an ellipsoid whose semi-axes change needs its bounding radius, the
@@ -172,6 +184,9 @@ class Engine {
   // driver refuses (the copies stay pageable). unpin_host before that memory is freed.
   bool pin_host(void* p, std::size_t bytes);
   void unpin_host(void* p);
+
+  // EngineOptions::history: the next call's pairs are all new (a new simulation on this engine).
+  void reset_history();
 
   Backend backend() const;      // the resolved backend (never automatic)
   Precision precision() const;  // fp32, fp64, or mixed (Engine<double> with fp32_broad_phase)

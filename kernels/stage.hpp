@@ -10,9 +10,10 @@ namespace cg::detail {
 
 // In pipeline order. plan: the engine's (bounds, frame, grid plan; engine.cpp); upload and download:
 // CUDA backend only (the host reads and writes in place); skin: the check of candidates kept across
-// calls (EngineOptions::skin > 0, when the bodies match the kept list's: the displacement reduction).
-enum class Stage : int { plan, upload, skin, pack, entries, sort, pairs, order, narrow, download };
-inline constexpr int kStageCount = 10;
+// calls (EngineOptions::skin > 0, when the bodies match the kept list's: the displacement reduction);
+// history: the contact identity (EngineOptions::history), where the contacts are delivered.
+enum class Stage : int { plan, upload, skin, pack, entries, sort, pairs, order, narrow, history, download };
+inline constexpr int kStageCount = 11;
 
 constexpr const char* name(Stage s) {
   switch (s) {
@@ -34,6 +35,8 @@ constexpr const char* name(Stage s) {
       return "order";
     case Stage::narrow:
       return "narrow";
+    case Stage::history:
+      return "history";
     case Stage::download:
       return "download";
   }

@@ -18,6 +18,8 @@
 //   narrow.cuh     narrow_decide + contact rows of the requested fields, world frame (scenes with
 //                  ellipsoids and precision mixed: count → scan → fill; fp64 and mixed read the world
 //                  doubles of the upload buffer or the caller's DeviceBodiesView)
+//   history.cuh    EngineOptions::history on device bodies: age and previous_row of each row from the
+//                  previous step's keys (Thrust's lower_bound), which it then replaces
 // Around them: workspace.cuh (the named DEVICE buffers, their aliases, cub_run), tuning.hpp (the
 // environment knobs, read in one place), stage_events.cuh (event timing by typed Stage).
 //
@@ -37,6 +39,7 @@
 #include "cuda/bounds.cuh"
 #include "cuda/device_buffer.cuh"
 #include "cuda/entries.cuh"
+#include "cuda/history.cuh"
 #include "cuda/narrow.cuh"
 #include "cuda/order.cuh"
 #include "cuda/pack.cuh"
@@ -46,6 +49,7 @@
 #include "cuda/skin.cuh"
 #include "cuda/sort.cuh"
 #include "cuda/stage_events.cuh"
+#include "cuda/thrust_alloc.cuh"
 #include "cuda/transfer.cuh"
 #include "cuda/tuning.hpp"
 #include "cuda/type_passes.cuh"
@@ -113,6 +117,7 @@ class CudaBackend {
     CG_CUDA_CHECK(cudaSetDevice(m_device));
     refresh_tuning();
     m_ws.allocations = 0;
+    m_thrust.allocations = 0;
     const std::uint64_t n64 = job.body_count();
     if (n64 >= (std::uint64_t(1) << 32))
       throw InputError("more than 2^32 - 1 bodies on one rank; use more MPI ranks");
@@ -131,6 +136,7 @@ class CudaBackend {
     r.origin = job.plan.frame.origin;
     r.device_in = job.device_bodies != nullptr;
     r.full = job.fields == Fields::full;
+    r.history = job.history && job.device_bodies;
     r.type_passes = m_tuning.type_passes;
     r.filter = m_tuning.candidates;
     // Scenes with ellipsoids: bounding-sphere candidates less the centre cut (core/centre_cut.hpp), the
@@ -162,13 +168,14 @@ class CudaBackend {
     }
     if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
     narrow_stage(r);
+    history_stage(r, m_thrust);
     const DownloadHostTimes host = download_stage(r, m_h_staging, out);
     if (reuse) check_shapes_read(r);  // (read with the last counters: the reuse path has no other wait)
     m_events.collect(times, host.overlap_s, host.extra_s);  // all events complete: the stream synced
     m_events.narrow_split(stats.narrow_triage_s, stats.narrow_settle_s, stats.narrow_hard_s);
     stats.fp64_rows = r.h_counters->fp64_rows;  // copied after the narrow stage
-    stats.peak_device_bytes = m_ws.held_bytes();
-    stats.device_allocations = m_ws.allocations;
+    stats.peak_device_bytes = m_ws.held_bytes() + m_thrust.held_bytes();
+    stats.device_allocations = m_ws.allocations + m_thrust.allocations;
   }
 
   Bounds bounds(const DeviceBodiesView& v, std::size_t& ellipsoids) {
@@ -193,6 +200,7 @@ class CudaBackend {
   Tuning m_tuning;
   StageEvents m_events;
   Workspace m_ws;                                // DEVICE buffers (workspace.cuh)
+  ThrustAllocator m_thrust;                      // DEVICE temporary storage of Thrust calls
   cuda::PinnedBuffer m_h_counters, m_h_staging;  // pinned HOST staging
 };
 
@@ -218,9 +226,11 @@ void resident_upload(CudaBackend& b, const BodiesView& bodies) {
               {&ws.res_report, bodies.report.empty() ? 0 : n},
               {&ws.res_shape, shapes ? n * sizeof(Shape) : 0},
               {&ws.res_semi, shapes ? n * sizeof(Vec3<double>) : 0},
-              {&ws.res_orient, shapes ? n * sizeof(Quat<double>) : 0}},
+              {&ws.res_orient, shapes ? n * sizeof(Quat<double>) : 0},
+              {&ws.res_id, bodies.id.empty() ? 0 : n * sizeof(std::int64_t)}},
              "resident bodies");
   ws.res_count = n;
+  ws.res_ided = !bodies.id.empty();
   ws.res_reported = !bodies.report.empty();
   ws.res_shaped = shapes;
   if (n == 0) return;
@@ -232,6 +242,41 @@ void resident_upload(CudaBackend& b, const BodiesView& bodies) {
   if (!bodies.report.empty())
     CG_CUDA_CHECK(
         cudaMemcpyAsync(ws.res_report.data(), bodies.report.data(), n, cudaMemcpyHostToDevice, b.m_stream));
+  if (!bodies.id.empty())
+    CG_CUDA_CHECK(cudaMemcpyAsync(ws.res_id.data(), bodies.id.data(), n * sizeof(std::int64_t),
+                                  cudaMemcpyHostToDevice, b.m_stream));
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+}
+
+void history_upload(CudaBackend& b, const ContactHistory& h) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  Workspace& ws = b.m_ws;
+  const std::size_t m = h.size();
+  const int at = ws.hist_current;
+  ws.reserve({{&ws.hist_keys[at], m * sizeof(PairKey)}, {&ws.hist_age[at], m * sizeof(std::int64_t)}},
+             "history");
+  if (m > 0) {
+    CG_CUDA_CHECK(cudaMemcpyAsync(ws.hist_keys[at].data(), h.keys.data(), m * sizeof(PairKey),
+                                  cudaMemcpyHostToDevice, b.m_stream));
+    CG_CUDA_CHECK(cudaMemcpyAsync(ws.hist_age[at].data(), h.age.data(), m * sizeof(std::int64_t),
+                                  cudaMemcpyHostToDevice, b.m_stream));
+  }
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+  ws.hist_count = m;
+}
+
+void history_download(CudaBackend& b, ContactHistory& h) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  const Workspace& ws = b.m_ws;
+  const std::size_t m = ws.hist_count;
+  h.keys.resize(m);
+  h.age.resize(m);
+  if (m > 0) {
+    CG_CUDA_CHECK(cudaMemcpyAsync(h.keys.data(), ws.hist_keys[ws.hist_current].data(), m * sizeof(PairKey),
+                                  cudaMemcpyDeviceToHost, b.m_stream));
+    CG_CUDA_CHECK(cudaMemcpyAsync(h.age.data(), ws.hist_age[ws.hist_current].data(), m * sizeof(std::int64_t),
+                                  cudaMemcpyDeviceToHost, b.m_stream));
+  }
   CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
 }
 
@@ -239,13 +284,13 @@ template <class Real>
 void download_contacts(CudaBackend& b, const DeviceContactsView<Real>& v, Contacts<Real>& out) {
   CG_CUDA_CHECK(cudaSetDevice(b.m_device));
   out = Contacts<Real>{};
-  out.resize(v.count, v.full);
+  out.resize(v.count, v.fields());
   if (v.count == 0) return;
   cuda::ContactPtrs<Real> cp;  // the view's arrays (read only here)
-  zip_contact_fields(cp, v, v.full, [](auto, auto*& ptr, auto* d_ptr) {
+  zip_contact_fields(cp, v, v.fields(), [](auto, auto*& ptr, auto* d_ptr) {
     ptr = const_cast<std::remove_reference_t<decltype(ptr)>>(d_ptr);
   });
-  for_each_field(out, cp, v.full, [&](auto& vec, const void* d_ptr) {
+  for_each_field(out, cp, v.fields(), [&](auto& vec, const void* d_ptr) {
     CG_CUDA_CHECK(
         cudaMemcpyAsync(vec.data(), d_ptr, vec.size() * sizeof(vec[0]), cudaMemcpyDeviceToHost, b.m_stream));
   });
@@ -277,6 +322,7 @@ DeviceBodiesView resident_view(const CudaBackend& b) {
     v.semi_axes = reinterpret_cast<const double*>(b.m_ws.res_semi.data());
     v.orientation = reinterpret_cast<const double*>(b.m_ws.res_orient.data());
   }
+  if (b.m_ws.res_ided) v.id = reinterpret_cast<const std::int64_t*>(b.m_ws.res_id.data());
   return v;
 }
 

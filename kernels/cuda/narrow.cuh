@@ -354,7 +354,7 @@ namespace cg::detail {
 
 // The contact arrays of `rows` rows in the workspace's out buffer; returns their bytes.
 template <class Real>
-std::size_t layout_contacts(std::byte* o, std::size_t rows, bool full, cuda::ContactPtrs<Real>& cp) {
+std::size_t layout_contacts(std::byte* o, std::size_t rows, FieldSet fields, cuda::ContactPtrs<Real>& cp) {
   const std::size_t v3 = cuda::align16(rows * sizeof(Vec3<Real>));
   const std::size_t ids = cuda::align16(rows * sizeof(std::int64_t));
   const std::size_t reals = cuda::align16(rows * sizeof(Real));
@@ -365,10 +365,10 @@ std::size_t layout_contacts(std::byte* o, std::size_t rows, bool full, cuda::Con
     return p;
   };
   cp = {};
-  for_each_contact_field(cp, full, [&](auto index, auto*& column) {
+  for_each_contact_field(cp, fields, [&](auto index, auto*& column) {
     const ContactField& f = kContactFields[index];
     using T = std::remove_reference_t<decltype(*column)>;
-    column = reinterpret_cast<T*>(take(f.kind == FieldKind::id       ? ids
+    column = reinterpret_cast<T*>(take(f.kind == FieldKind::integer  ? ids
                                        : f.kind == FieldKind::vector ? v3
                                                                      : reals));
   });
@@ -483,7 +483,7 @@ void narrow_compact(RunState<Real, Key, Narrow>& r, const Decide& decide) {
     return cub::DeviceScan::ExclusiveSum(t, b, d_accept, d_offset, int(np), st);
   });
   if (r.job.device_out) {
-    r.out_bytes = layout_contacts(r.ws.out.data(), np, r.full, r.cp);  // rows at their scan offsets
+    r.out_bytes = layout_contacts(r.ws.out.data(), np, r.fields(), r.cp);  // rows at their scan offsets
   } else {
     std::uint32_t last[2] = {0, 0};  // offset and flag of the last candidate: the row count
     CG_CUDA_CHECK(
@@ -492,7 +492,7 @@ void narrow_compact(RunState<Real, Key, Narrow>& r, const Decide& decide) {
         cudaMemcpyAsync(&last[1], d_accept + np - 1, sizeof(std::uint32_t), cudaMemcpyDeviceToHost, st));
     CG_CUDA_CHECK(cudaStreamSynchronize(st));
     r.n_rows = last[0] + last[1];
-    r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.full, r.cp);  // <= np rows
+    r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.fields(), r.cp);  // <= np rows
   }
   cuda::narrow_fill_kernel<Narrow, Decide>
       <<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), np, decide, d_accept,
@@ -541,7 +541,7 @@ void narrow_stage(RunState<Real, Key, Narrow>& r) {
     return;
   }
   r.n_rows = r.np;
-  r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.full, r.cp);
+  r.out_bytes = layout_contacts(r.ws.out.data(), r.n_rows, r.fields(), r.cp);
   if (r.np > 0) {
     // every candidate is a contact: mixed's floats would only add reads to the row's world doubles
     NarrowBodies<Narrow> one_row = bodies;

@@ -33,6 +33,8 @@ struct RunState {
   GridParams<Real> g{};
   Vec3<double> origin{};
   bool device_in = false, full = false, type_passes = false;
+  bool history = false;  // the history stage runs (DetectJob::history): its two columns are laid out
+  FieldSet fields() const { return {full, history}; }  // the columns of the output rows
   std::size_t body_block_words = 0;
   // upload: the bodies (DEVICE; read again by the narrow stage, NarrowBodies)
   const double* d_pos = nullptr;
@@ -79,7 +81,7 @@ struct RunState {
     const std::size_t v3 = cuda::align16(pairs * sizeof(Vec3<Narrow>)),
                       ids = cuda::align16(pairs * sizeof(std::int64_t)),
                       reals = cuda::align16(pairs * sizeof(Narrow));
-    return 2 * ids + 3 * v3 + reals + (full ? 4 * v3 : 0);
+    return 2 * ids + 3 * v3 + reals + (full ? 4 * v3 : 0) + (history ? 2 * ids : 0);
   }
   // After the stream has synced: the rejecting narrow's counters (queued by it) into the stats, and its
   // row count into n_rows.

@@ -11,10 +11,10 @@
 namespace cg::detail {
 
 // f(host vector, device array) for each contact field the run produces (the optional ones only
-// with Fields::full), in table order: the order of the device layout (layout_contacts).
+// in `fields`), in table order: the order of the device layout (layout_contacts).
 template <class Real, class F>
-void for_each_field(Contacts<Real>& out, const cuda::ContactPtrs<Real>& cp, bool full, F&& f) {
-  zip_contact_fields(out, cp, full,
+void for_each_field(Contacts<Real>& out, const cuda::ContactPtrs<Real>& cp, FieldSet fields, F&& f) {
+  zip_contact_fields(out, cp, fields,
                      [&](auto, auto& vec, auto* d_ptr) { f(vec, static_cast<const void*>(d_ptr)); });
 }
 
@@ -80,7 +80,7 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
                                  Contacts<Narrow>& out) {
   using clock_type = std::chrono::steady_clock;
   const cuda::ContactPtrs<Narrow>& cp = r.cp;
-  const bool full = r.full;
+  const FieldSet set = r.fields();
   cudaStream_t st = r.st;
   DownloadHostTimes ht;
   if (r.job.device_out) {
@@ -89,8 +89,9 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
     DeviceContactsView<Narrow>& v = *r.job.device_out;
     v = DeviceContactsView<Narrow>{};
     v.count = r.n_rows;
-    v.full = full;
-    zip_contact_fields(v, cp, full, [](auto, auto& view, auto* d_ptr) { view = d_ptr; });
+    v.full = set.full;
+    v.history = set.history;
+    zip_contact_fields(v, cp, set, [](auto, auto& view, auto* d_ptr) { view = d_ptr; });
     return ht;
   }
   const std::uint32_t np = r.n_rows;  // (a rejecting narrow has read it for its tight layout)
@@ -99,10 +100,10 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
   bool registered = false;
   if (tuned(r.tuning.download_registered, at >= (std::size_t(64) << 20)) && np > 0) {
     const auto t0 = clock_type::now();
-    out.resize(np, full);
+    out.resize(np, set);
     std::vector<std::pair<void*, const void*>> fields;  // (host, device)
     std::vector<std::size_t> sizes;
-    for_each_field(out, cp, full, [&](auto& vec, const void* d_ptr) {
+    for_each_field(out, cp, set, [&](auto& vec, const void* d_ptr) {
       fields.push_back({vec.data(), d_ptr});
       sizes.push_back(vec.size() * sizeof(vec[0]));
     });
@@ -138,13 +139,13 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
     r.events.mark(Stage::download, st);
     // The result vectors are sized (no fill: HostVector) while the transfer runs.
     const auto t0 = clock_type::now();
-    out.resize(np, full);
+    out.resize(np, set);
     CG_CUDA_CHECK(cudaStreamSynchronize(st));
     const auto t1 = clock_type::now();
     const std::byte* h = h_staging.data();
     auto from = [&](const void* d_ptr) { return h + (static_cast<const std::byte*>(d_ptr) - o); };
     std::vector<CopyBlock> blocks;
-    for_each_field(out, cp, full, [&](auto& vec, const void* d_ptr) {
+    for_each_field(out, cp, set, [&](auto& vec, const void* d_ptr) {
       if (np) blocks.push_back({vec.data(), from(d_ptr), vec.size() * sizeof(vec[0])});
     });
     parallel_copy(blocks.data(), blocks.size(), 0);  // pinned staging → result vectors, all host threads

@@ -16,6 +16,9 @@ namespace cg::detail {
 
 enum class Forced { automatic, off, on };
 
+// How the history stage (cuda/history.cuh) searches the previous step's keys.
+enum class HistorySearch { thrust, kernel };
+
 struct Tuning {
   // CONTACTGRID_CUDA_TYPE_PASSES=1: Le Grand's 8 passes by cell type (opt-in; =0 or unset: the single
   // sort of all entries). Measured on an H200 (kernels/cuda/BENCH.md, h-cudaperf2): 65 instead of 125
@@ -47,6 +50,10 @@ struct Tuning {
   // thread per pair (cuda/narrow.cuh); 0: always one thread per pair. The same contacts either way.
   // Default 1: a group that takes pairs one after the other loses to a thread per pair (H100).
   unsigned warp_solve_pairs = 1;
+  // CONTACTGRID_CUDA_HISTORY=kernel: the history stage searches with its own kernel (a binary search
+  // per row, the fields written in the same kernel); default: Thrust's vectorised lower_bound, then
+  // a kernel for the fields. The same fields either way.
+  HistorySearch history_search = HistorySearch::thrust;
 };
 
 // `on` / `off` when the variable equals one of the two spellings, else automatic.
@@ -78,6 +85,8 @@ inline Tuning read_tuning() {
   t.download_registered = forced("CONTACTGRID_CUDA_DOWNLOAD", "registered", "staged");
   if (const char* w = std::getenv("CONTACTGRID_CUDA_WARP_SOLVE"))
     t.warp_solve_pairs = static_cast<unsigned>(std::strtoul(w, nullptr, 10));
+  if (const char* h = std::getenv("CONTACTGRID_CUDA_HISTORY"))
+    t.history_search = std::string_view(h) == "kernel" ? HistorySearch::kernel : HistorySearch::thrust;
   if (const char* c = std::getenv("CONTACTGRID_CUDA_CANDIDATES")) {
     const std::string_view v = c;
     if (v == "cells") t.candidates = CandidateFilter::cells;

@@ -42,6 +42,10 @@
 //   kept_pairs, ref_pos,   between calls       EngineOptions::skin: the kept candidate list (a then b,
 //   ref_rad, ref_report                        kept_count each) and the bodies' state it was built
 //                                              from (cuda/skin.cuh); owned across calls, never aliased
+//   res_id                 between calls       resident bodies' global ids (the history's keys)
+//   hist_keys[2],          between calls       EngineOptions::history on the device: the previous
+//   hist_age[2]                                step's pair keys and ages (hist_current), and the
+//                                              step being made (cuda/history.cuh); never aliased
 //
 // Aliases (a buffer seen under another name once its first use is dead):
 //   view                 storage                  when
@@ -76,7 +80,11 @@ struct Workspace {
   Bytes res_pos, res_rad, res_report, res_shape, res_semi, res_orient;
   Bytes shape_kind, shape_semi, shape_orient, shapes, cell_cut, normals, narrow_list, narrow_carry;
   Bytes kept_pairs, ref_pos, ref_rad, ref_report;
+  Bytes res_id, hist_keys[2], hist_age[2];
   std::size_t res_count = 0;
+  bool res_ided = false;       // resident global ids present
+  std::size_t hist_count = 0;  // rows of the previous step in hist_keys/hist_age[hist_current]
+  int hist_current = 0;
   bool res_reported = false;     // resident report mask present
   bool res_shaped = false;       // resident shape rows present
   std::uint32_t kept_count = 0;  // kept candidate pairs
@@ -89,12 +97,12 @@ struct Workspace {
   std::uint64_t held_bytes() const {
     std::uint64_t s = 0;
     for (const Bytes* b :
-         {&pos,         &rad,       &report,   &spheres,     &cell_spheres, &perm,       &ctrl,
-          &body_blocks, &base,      &keys[0],  &keys[1],     &bodies[0],    &bodies[1],  &entry_blocks,
-          &pairs,       &out,       &temp,     &counters,    &partials,     &res_pos,    &res_rad,
-          &res_report,  &res_shape, &res_semi, &res_orient,  &shape_kind,   &shape_semi, &shape_orient,
-          &shapes,      &cell_cut,  &normals,  &narrow_list, &narrow_carry, &kept_pairs, &ref_pos,
-          &ref_rad,     &ref_report})
+         {&pos,         &rad,        &report,   &spheres,      &cell_spheres, &perm,        &ctrl,
+          &body_blocks, &base,       &keys[0],  &keys[1],      &bodies[0],    &bodies[1],   &entry_blocks,
+          &pairs,       &out,        &temp,     &counters,     &partials,     &res_pos,     &res_rad,
+          &res_report,  &res_shape,  &res_semi, &res_orient,   &shape_kind,   &shape_semi,  &shape_orient,
+          &shapes,      &cell_cut,   &normals,  &narrow_list,  &narrow_carry, &kept_pairs,  &ref_pos,
+          &ref_rad,     &ref_report, &res_id,   &hist_keys[0], &hist_keys[1], &hist_age[0], &hist_age[1]})
       s += b->bytes();
     return s;
   }

@@ -22,11 +22,12 @@
 #include <numeric>
 #include <ostream>
 
-#include "validate/bullet_oracle.hpp"
 #include "errors.hpp"
-#include "scene/generate.hpp"
 #include "io/scene_file.hpp"
+#include "run/subprocess.hpp"
+#include "scene/generate.hpp"
 #include "stage.hpp"
+#include "validate/bullet_oracle.hpp"
 
 extern char** environ;
 
@@ -44,34 +45,6 @@ double median(std::vector<double> v) {
 
 std::string field(double v, const char* f = "{:.6g}") {
   return v >= 0 && std::isfinite(v) ? fmt::format(fmt::runtime(f), v) : std::string();
-}
-
-std::string find_on_path(const std::string& name) {
-  const char* path = std::getenv("PATH");
-  if (!path) return {};
-  std::string p = path;
-  for (std::size_t start = 0; start <= p.size();) {
-    const std::size_t end = std::min(p.find(':', start), p.size());
-    const fs::path cand =
-        fs::path(p.substr(start, end - start).empty() ? "." : p.substr(start, end - start)) / name;
-    if (::access(cand.c_str(), X_OK) == 0) return cand.string();
-    start = end + 1;
-  }
-  return {};
-}
-
-// Runs argv (no shell) and returns its exit status (-1 if it could not start or was killed).
-int run_program(const std::vector<std::string>& args) {
-  std::vector<std::string> a = args;
-  std::vector<char*> argv;
-  for (auto& s : a) argv.push_back(s.data());
-  argv.push_back(nullptr);
-  pid_t pid = 0;
-  if (::posix_spawn(&pid, a[0].c_str(), nullptr, nullptr, argv.data(), environ) != 0) return -1;
-  int status = 0;
-  while (::waitpid(pid, &status, 0) < 0)
-    if (errno != EINTR) return -1;
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
 void check_options(const BenchOptions& o) {

@@ -14,6 +14,7 @@
 #include "validate/validate.hpp"
 #endif
 #include "session.hpp"
+#include "simulate/simulate.hpp"
 #include "study/study.hpp"
 #include "study/study_families.hpp"
 
@@ -81,8 +82,10 @@ int run_cli(int argc, char** argv, Session& session) {
   g->add_option(
        "--kind", gen.kind,
        "uniform | polydisperse | ellipsoids (semi-axes uniform in [Rlow, Rhigh], random orientations) "
-       "| mixed (spheres then ellipsoids)")
-      ->check(CLI::IsMember({"uniform", "polydisperse", "ellipsoids", "mixed"}))
+       "| mixed (spheres then ellipsoids) | pour, pour-ellipsoids (a column of bodies above a floor in an "
+       "open "
+       "box, ready for simulate, which takes its walls from the file)")
+      ->check(CLI::IsMember({"uniform", "polydisperse", "ellipsoids", "mixed", "pour", "pour-ellipsoids"}))
       ->capture_default_str();
   g->add_option("--ellipsoid-fraction", gen.ellipsoid_fraction, "mixed: share F of ellipsoids, in [0, 1]")
       ->check(CLI::Range(0.0, 1.0))
@@ -213,6 +216,88 @@ int run_cli(int argc, char** argv, Session& session) {
                 "contacts are then checked against the turned bodies detected from scratch")
       ->needs(steps);
   d->add_flag("-q,--quiet", det.quiet, "No summary");
+
+  // simulate
+  SimulateCommand sim;
+  std::vector<double> sim_gravity;
+  auto* sm = app.add_subcommand(
+      "simulate",
+      "Granular dynamics of a scene (Hertz-Mindlin, friction, walls, gravity): frames, contacts and a log "
+      "in a run directory (CONTRACT §6)");
+  sm->add_option("scene", sim.input, "Scene file (.h5), with velocities if it has them (CONTRACT §5)")
+      ->required();
+  sm->add_option("-o,--output", sim.output, "Run directory to create (must not exist or be empty)")
+      ->required();
+  sm->add_option("--steps", sim.steps, "Time steps to take")->capture_default_str();
+  sm->add_option_function<std::string>(
+        "--dt",
+        [&sim](const std::string& v) {
+          if (v == "auto") {
+            sim.dt.reset();
+            return;
+          }
+          const std::optional<double> x = positive_number(v);
+          if (!x) throw CLI::ValidationError("--dt", "'" + v + "' is not auto or a time > 0");
+          sim.dt = *x;
+        },
+        "Time step (s): auto (0.2 x the Rayleigh time of the smallest body, at most the Hertz contact time / "
+        "40 "
+        "at the fastest expected impact) or a time (warned when above twice auto, refused above the Rayleigh "
+        "time)")
+      ->default_str("auto");
+  sm->add_option("--output-every", sim.output_every, "A frame every K steps (default: steps / 10)");
+  sm->add_option("--log-every", sim.log_every, "A log.csv row every K steps (default: output-every / 10)");
+  sm->add_option("--gravity", sim_gravity, "Gravity GX GY GZ (default 0 0 -9.81)")->expected(3);
+  sm->add_option(
+      "--walls", sim.walls,
+      "A wall (repeatable): plane:PX,PY,PZ,NX,NY,NZ | box:X0,Y0,Z0,X1,Y1,Z1 | open-box:X0,Y0,Z0,X1,Y1,Z1 "
+      "(sides only) | cylinder:CX,CY,R | orifice:CX,CY,Z,H | hopper:CX,CY,R,Z,H (cylinder on a plate "
+      "with a hole); default: the scene's simulate_walls (generate --kind pour)");
+  sm->add_option("--young", sim.material.young, "Young's modulus E (Pa)")->capture_default_str();
+  sm->add_option("--poisson", sim.material.poisson, "Poisson ratio")->capture_default_str();
+  sm->add_option("--density", sim.material.density, "Density (kg/m^3)")->capture_default_str();
+  sm->add_option("--restitution", sim.material.restitution, "Coefficient of restitution, (0, 1]")
+      ->capture_default_str();
+  sm->add_option("--friction", sim.material.friction, "Sliding friction coefficient")->capture_default_str();
+  sm->add_option("--rolling-friction", sim.material.rolling_friction,
+                 "Rolling friction coefficient (0: none)")
+      ->capture_default_str();
+  sm->add_flag("--write-contacts", sim.write_contacts,
+               "Also write contacts_<step>.h5 with each frame (CONTRACT §2 with the history fields)");
+  sm->add_option("--backend", sim.backend, "cpu | cuda | auto")
+      ->transform(CLI::CheckedTransformer(k_backends))
+      ->default_str("auto");
+  sm->add_option("--precision", sim.precision,
+                 "fp32 | fp64: the contact detection's precision (dynamics: fp64)")
+      ->transform(CLI::CheckedTransformer(k_precisions))
+      ->default_str("fp64");
+  sm->add_option_function<std::string>(
+        "--skin",
+        [&sim](const std::string& v) {
+          if (v == "auto") {
+            sim.skin.reset();
+            return;
+          }
+          std::size_t used = 0;
+          double x = -1;
+          try {
+            x = std::stod(v, &used);
+          } catch (const std::exception&) {
+          }
+          if (used != v.size() || !(x >= 0) || !std::isfinite(x))
+            throw CLI::ValidationError("--skin", "'" + v + "' is not auto or a length >= 0");
+          sim.skin = x;
+        },
+        "Verlet skin of the contact detection: auto (a tenth of the smallest radius) or a length")
+      ->default_str("auto");
+  sm->add_option("--threads", sim.threads, "CPU backend threads (0: all cores)")
+      ->check(CLI::NonNegativeNumber);
+  sm->add_flag(
+      "--plain-verlet", [&sim](std::int64_t) { sim.synchronized = false; },
+      "Integrate with plain velocity Verlet instead of the synchronised one (for comparison)");
+  sm->add_flag(
+      "--no-plot", [&sim](std::int64_t) { sim.plots = false; }, "Do not run gnuplot at the end");
+  sm->add_flag("-q,--quiet", sim.quiet, "No summary");
 
   // compare
   std::string cmp_a, cmp_b;
@@ -346,13 +431,17 @@ int run_cli(int argc, char** argv, Session& session) {
     if (!offset.empty()) gen.offset = {offset[0], offset[1], offset[2]};
     if (gen.kind == "polydisperse" && rlow_opt->count() == 0) gen.radius_low = gen.radius_high / gen_ratio;
     if (aspect_opt->count() > 0) {
-      if (gen.kind != "ellipsoids" && gen.kind != "mixed")
-        throw UsageError("--max-aspect applies to --kind ellipsoids or mixed");
+      if (gen.kind != "ellipsoids" && gen.kind != "mixed" && gen.kind != "pour-ellipsoids")
+        throw UsageError("--max-aspect applies to --kind ellipsoids, mixed or pour-ellipsoids");
       gen.radius_low = gen.radius_high / gen_max_aspect;
     }
     return run_generate(gen_out, gen, gen_quiet);
   }
   if (d->parsed()) return run_detect(det, session);
+  if (sm->parsed()) {
+    if (!sim_gravity.empty()) sim.gravity = {sim_gravity[0], sim_gravity[1], sim_gravity[2]};
+    return run_simulate(sim, session);
+  }
   if (c->parsed()) return session.rank() == 0 ? run_compare(cmp_a, cmp_b) : 0;
   if (st->parsed()) {
     if (session.rank() != 0) return 0;

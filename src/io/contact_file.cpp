@@ -45,7 +45,7 @@ namespace {
 // Columns of a field's dataset (0: rank 1) and its HDF5 type in a file of this precision.
 hsize_t dataset_columns(const ContactField& f) { return f.kind == FieldKind::vector ? 3 : 0; }
 hid_t dataset_type(const ContactField& f, bool fp32) {
-  return f.kind == FieldKind::id ? H5T_STD_I64LE : fp32 ? H5T_IEEE_F32LE : H5T_IEEE_F64LE;
+  return f.kind == FieldKind::integer ? H5T_STD_I64LE : fp32 ? H5T_IEEE_F32LE : H5T_IEEE_F64LE;
 }
 
 }  // namespace
@@ -53,8 +53,8 @@ hid_t dataset_type(const ContactField& f, bool fp32) {
 std::string ContactFileLayout::to_text() const {
   // One header line, one line per dataset, then the paths (each prefixed by its length: a path may
   // hold any character).
-  std::string t = fmt::format("{} {} {} {}\n", rows, precision == Precision::fp32 ? 32 : 64, full ? 1 : 0,
-                              datasets.size());
+  std::string t = fmt::format("{} {} {} {} {}\n", rows, precision == Precision::fp32 ? 32 : 64,
+                              fields.full ? 1 : 0, fields.history ? 1 : 0, datasets.size());
   for (const Dataset& d : datasets) t += fmt::format("{} {} {}\n", d.offset, d.row_bytes, d.name);
   t += fmt::format("{}\n{}\n{}\n{}", path.size(), path, temp.size(), temp);
   return t;
@@ -78,13 +78,13 @@ ContactFileLayout ContactFileLayout::from_text(const std::string& text) {
     return s;
   };
   unsigned long long rows = 0, count = 0;
-  int bits = 0, full = 0;
-  if (std::sscanf(line().c_str(), "%llu %d %d %llu", &rows, &bits, &full, &count) != 4 ||
-      (bits != 32 && bits != 64) || count > 10)
+  int bits = 0, full = 0, history = 0;
+  if (std::sscanf(line().c_str(), "%llu %d %d %d %llu", &rows, &bits, &full, &history, &count) != 5 ||
+      (bits != 32 && bits != 64) || count > kContactFieldCount)
     throw Error("ContactFileLayout::from_text: bad header");
   l.rows = rows;
   l.precision = bits == 32 ? Precision::fp32 : Precision::fp64;
-  l.full = full != 0;
+  l.fields = FieldSet{full != 0, history != 0};
   for (unsigned long long k = 0; k < count; ++k) {
     const std::string s = line();
     unsigned long long offset = 0, row_bytes = 0;
@@ -101,21 +101,21 @@ ContactFileLayout ContactFileLayout::from_text(const std::string& text) {
 }
 
 ContactFileLayout create_contact_file(const std::string& path, std::uint64_t rows, Precision precision,
-                                      bool full) {
+                                      FieldSet fields) {
   LibraryLock lock;
   ContactFileLayout layout;
   layout.path = path;
   layout.temp = temp_name(path);
   layout.rows = rows;
   layout.precision = precision;
-  layout.full = full;
+  layout.fields = fields;
   const bool fp32 = precision == Precision::fp32;
   Where where(path, true);
   try {
     Handle file = create_file(where, layout.temp);
     create_group(where, file, "/contacts");
     for (const ContactField& field : kContactFields) {
-      if (field.optional && !full) continue;
+      if (!fields.has(field.group)) continue;
       const hsize_t cols = dataset_columns(field);
       std::vector<hsize_t> dims{rows};
       if (cols) dims.push_back(cols);
@@ -152,11 +152,11 @@ void write_contact_rows(const ContactFileLayout& layout, std::uint64_t first_row
   constexpr Precision precision = precision_of<Real>();
   if (!c.consistent())
     throw Error(fmt::format("{}: write_contact_rows: the contact arrays differ in length", layout.path));
-  if (precision != layout.precision || c.full != layout.full ||
-      layout.datasets.size() != (layout.full ? kContactFieldCount : kBasicContactFieldCount))
+  if (precision != layout.precision || c.fields() != layout.fields ||
+      layout.datasets.size() != field_count(layout.fields))
     throw Error(fmt::format("{}: write_contact_rows: the rows ({}, {} fields) do not match the file ({}, {})",
-                            layout.path, to_string(precision), c.full ? "full" : "basic",
-                            to_string(layout.precision), layout.full ? "full" : "basic"));
+                            layout.path, to_string(precision), field_count(c.fields()),
+                            to_string(layout.precision), layout.datasets.size()));
   if (first_row > layout.rows || n > layout.rows - first_row)
     throw Error(fmt::format("{}: write_contact_rows: rows {} + {} are outside the file's {} rows",
                             layout.path, first_row, n, layout.rows));
@@ -169,7 +169,7 @@ void write_contact_rows(const ContactFileLayout& layout, std::uint64_t first_row
     std::uint64_t offset, bytes, row;
   };
   std::vector<const unsigned char*> src;  // the rows of dataset k, in layout order (kContactFields)
-  for_each_contact_field(c, c.full, [&](auto, const auto& column) {
+  for_each_contact_field(c, c.fields(), [&](auto, const auto& column) {
     src.push_back(reinterpret_cast<const unsigned char*>(column.data()));
   });
   std::vector<Block> blocks;
@@ -287,7 +287,7 @@ template <class Real>
 void write_contacts(const std::string& path, const Contacts<Real>& c, const RunInfo& info, int threads) {
   if (!c.consistent())
     throw Error(fmt::format("{}: write_contacts: the contact arrays differ in length", path));
-  const ContactFileLayout layout = create_contact_file(path, c.size(), precision_of<Real>(), c.full);
+  const ContactFileLayout layout = create_contact_file(path, c.size(), precision_of<Real>(), c.fields());
   try {
     write_contact_rows(layout, 0, c, threads);
   } catch (...) {
@@ -320,32 +320,40 @@ ContactFile read_contacts(const std::string& path) {
 
   if (!group_exists(where, file, "/contacts")) where.bad("/contacts: missing group");
   // Every field of the table: its shape and element kind checked, its rows read (reals as double).
-  // The basic fields first; the optional ones must be all present or none.
+  // The basic fields first; the optional ones must be all present or none, group by group.
   Dataset id_a = open_dataset(where, file, kContactFields[0].path, 0, Element::integer);  // K rows
   const hsize_t k = id_a.rows;
   Contacts<double>& c = out.contacts;
-  auto read_fields = [&](bool optional) {
-    for_each_contact_field(c, optional, [&](auto index, auto& column) {
+  auto read_fields = [&](FieldSet set, bool optional) {
+    for_each_contact_field(c, set, [&](auto index, auto& column) {
       const ContactField& f = kContactFields[index];
-      if (f.optional != optional) return;
-      const bool ids = f.kind == FieldKind::id;
+      if (f.optional() != optional) return;
+      const bool integers = f.kind == FieldKind::integer;
       Dataset d =
-          open_dataset(where, file, f.path, dataset_columns(f), ids ? Element::integer : Element::real);
+          open_dataset(where, file, f.path, dataset_columns(f), integers ? Element::integer : Element::real);
       require_rows(where, d, id_a);
       column.resize(k);
-      read_rows(where, d, 0, k, ids ? H5T_NATIVE_INT64 : H5T_NATIVE_DOUBLE, column.data());
-      if (!ids && out.precision.empty()) out.precision = d.element_size == 4 ? "fp32" : "fp64";
+      read_rows(where, d, 0, k, integers ? H5T_NATIVE_INT64 : H5T_NATIVE_DOUBLE, column.data());
+      if (!integers && out.precision.empty()) out.precision = d.element_size == 4 ? "fp32" : "fp64";
     });
   };
-  read_fields(false);
-  int present = 0;
-  for (const ContactField& f : kContactFields)
-    present += f.optional && path_exists(where, file, f.path) ? 1 : 0;
-  if (present != 0 && present != int(kContactFieldCount - kBasicContactFieldCount))
-    where.bad(
-        "/contacts: the optional datasets (local points, friction directions) must be all present or none");
-  c.full = present != 0;
-  if (c.full) read_fields(true);
+  read_fields(FieldSet{}, false);
+  auto group_present = [&](FieldGroup group, const char* what) {
+    int present = 0, fields = 0;
+    for (const ContactField& f : kContactFields) {
+      if (f.group != group) continue;
+      ++fields;
+      present += path_exists(where, file, f.path) ? 1 : 0;
+    }
+    if (present != 0 && present != fields)
+      where.bad(fmt::format("/contacts: the optional datasets ({}) must be all present or none", what));
+    return present != 0;
+  };
+  const FieldSet set{group_present(FieldGroup::full, "local points, friction directions"),
+                     group_present(FieldGroup::history, "age, previous_row")};
+  read_fields(set, true);
+  c.full = set.full;
+  c.history = set.history;
   return out;
 }
 

@@ -58,9 +58,10 @@ struct ContactFileLayout {
   std::string temp;        // the file being written ("<path>.tmp.<pid of the creator>")
   std::uint64_t rows = 0;  // K
   Precision precision = Precision::fp64;
-  bool full = false;              // the four optional datasets exist
+  FieldSet fields;                // the optional groups whose datasets exist
   std::vector<Dataset> datasets;  // id_a, id_b, position_on_a, position_on_b, normal_on_b, distance,
-                                  // then (full) local_point_a, local_point_b, dir1, dir2
+                                  // then (full) local_point_a, local_point_b, dir1, dir2, then
+                                  // (history) age, previous_row: kContactFields order
   // Text form, to hand the layout to other processes (from_text(to_text()) == *this).
   std::string to_text() const;
   static ContactFileLayout from_text(const std::string& text);
@@ -68,7 +69,7 @@ struct ContactFileLayout {
 
 // Phase (a). IoError on failure, nothing left behind.
 ContactFileLayout create_contact_file(const std::string& path, std::uint64_t rows, Precision precision,
-                                      bool full);
+                                      FieldSet fields);
 
 // Phase (b): rows [first_row, first_row + slice.size()) of every dataset from `slice` (its precision
 // and fields must match the layout; Error otherwise, before anything is written). `threads` writers

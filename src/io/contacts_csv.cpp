@@ -20,7 +20,7 @@ void write_contacts_csv(const std::string& path, const Contacts<Real>& c) {
     if (!f) throw IoError(path + ": cannot open for writing");
     // every field the run produced (kContactFields order); a vector field is three columns
     std::string header;
-    for_each_contact_field(c, c.full, [&](auto index, const auto&) {
+    for_each_contact_field(c, c.fields(), [&](auto index, const auto&) {
       const ContactField& field = kContactFields[index];
       const std::string name = field.name();
       header += header.empty() ? "" : ",";
@@ -30,7 +30,7 @@ void write_contacts_csv(const std::string& path, const Contacts<Real>& c) {
     fmt::memory_buffer row;
     for (std::size_t k = 0; k < c.size(); ++k) {
       row.clear();
-      for_each_contact_field(c, c.full, [&](auto, const auto& column) {
+      for_each_contact_field(c, c.fields(), [&](auto, const auto& column) {
         if constexpr (requires { column[k].x; })
           fmt::format_to(std::back_inserter(row), "{},{},{},", column[k].x, column[k].y, column[k].z);
         else

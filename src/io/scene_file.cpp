@@ -36,6 +36,9 @@ struct SceneSource {
   bool has_spheres = false, has_ellipsoids = false;
   Dataset sphere_position, sphere_radius;
   Dataset ellipsoid_position, ellipsoid_semi_axes, ellipsoid_orientation;
+  // CONTRACT §5 (absent: nullopt)
+  std::optional<Dataset> sphere_velocity, sphere_angular_velocity, ellipsoid_velocity,
+      ellipsoid_angular_velocity;
   std::size_t spheres = 0, ellipsoids = 0;
   std::optional<double> radius_low, radius_high;
   Attributes attributes;
@@ -50,6 +53,14 @@ std::optional<double> radius_bound(const Where& where, hid_t file, const RawAttr
   if (value && !(std::isfinite(*value) && *value >= 0))
     where.bad(fmt::format("root attribute {} = {} is not a finite number >= 0", name, *value));
   return value;
+}
+
+// A motion dataset (CONTRACT §5) when present: (N, 3) reals with the rows of its group.
+std::optional<Dataset> open_motion(const Where& w, hid_t file, const char* name, const Dataset& rows_of) {
+  if (!path_exists(w, file, name)) return std::nullopt;
+  Dataset d = open_dataset(w, file, name, 3, Element::real);
+  require_rows(w, d, rows_of);
+  return d;
 }
 
 void open_scene(SceneSource& s) {
@@ -68,6 +79,8 @@ void open_scene(SceneSource& s) {
     s.sphere_radius = open_dataset(w, s.file, "/spheres/radius", 0, Element::real);
     require_rows(w, s.sphere_radius, s.sphere_position);
     s.spheres = s.sphere_position.rows;
+    s.sphere_velocity = open_motion(w, s.file, "/spheres/velocity", s.sphere_position);
+    s.sphere_angular_velocity = open_motion(w, s.file, "/spheres/angular_velocity", s.sphere_position);
   }
   s.has_ellipsoids = group_exists(w, s.file, "/ellipsoids");
   if (s.has_ellipsoids) {
@@ -77,6 +90,9 @@ void open_scene(SceneSource& s) {
     require_rows(w, s.ellipsoid_semi_axes, s.ellipsoid_position);
     require_rows(w, s.ellipsoid_orientation, s.ellipsoid_position);
     s.ellipsoids = s.ellipsoid_position.rows;
+    s.ellipsoid_velocity = open_motion(w, s.file, "/ellipsoids/velocity", s.ellipsoid_position);
+    s.ellipsoid_angular_velocity =
+        open_motion(w, s.file, "/ellipsoids/angular_velocity", s.ellipsoid_position);
   }
   if (s.spheres + s.ellipsoids == 0) w.bad("scene has no bodies");
   // (the generator's parameters mean nothing here: only what raw_attributes decoded)
@@ -97,6 +113,15 @@ void check_bounds(const SceneSource& s, const Dataset& d, hsize_t row, double r,
                             what, r, s.radius_low ? fmt::format("{}", *s.radius_low) : std::string("-inf"),
                             s.radius_high ? fmt::format("{}", *s.radius_high) : std::string("inf")));
   }
+}
+
+// Rows [first, first + count) of a motion dataset, when present, into `out` (checked finite).
+void read_motion(const SceneSource& s, const std::optional<Dataset>& d, hsize_t first, hsize_t count,
+                 std::vector<Vec3<double>>& out) {
+  if (!d) return;
+  out.resize(count);
+  if (count > 0) read_rows_f64(s.where, *d, first, count, &out[0].x);
+  for (hsize_t i = 0; i < count; ++i) check_finite(s, *d, first + i, &out[i].x, 3);
 }
 
 // Reads and validates sphere rows [first, first + count) into out (appended), chunk by chunk, into
@@ -195,10 +220,18 @@ Scene read_scene_range(const std::string& path, std::size_t first, std::size_t c
   scene.radius_high = s.radius_high;
   scene.attributes = s.attributes;
   std::size_t end = first + count;
-  if (first < s.spheres) read_spheres(s, first, std::min(end, s.spheres) - first, scene);
+  if (first < s.spheres) {
+    const std::size_t rows = std::min(end, s.spheres) - first;
+    read_spheres(s, first, rows, scene);
+    read_motion(s, s.sphere_velocity, first, rows, scene.sphere_velocity);
+    read_motion(s, s.sphere_angular_velocity, first, rows, scene.sphere_angular_velocity);
+  }
   if (end > s.spheres) {
     std::size_t e_first = std::max(first, s.spheres) - s.spheres;
     read_ellipsoids(s, e_first, end - s.spheres - e_first, scene);
+    read_motion(s, s.ellipsoid_velocity, e_first, end - s.spheres - e_first, scene.ellipsoid_velocity);
+    read_motion(s, s.ellipsoid_angular_velocity, e_first, end - s.spheres - e_first,
+                scene.ellipsoid_angular_velocity);
   }
   return scene;
 }
@@ -214,6 +247,7 @@ struct SceneFileWriter::Impl {
   Handle file;
   Handle sphere_position, sphere_radius;
   Handle ellipsoid_position, ellipsoid_semi_axes, ellipsoid_orientation;
+  Handle sphere_velocity, sphere_angular_velocity, ellipsoid_velocity, ellipsoid_angular_velocity;
   bool committed = false;
 
   Impl(const std::string& path, const SceneFileHeader& h) : temp(path), where(path, true), header(h) {}
@@ -229,6 +263,11 @@ SceneFileWriter::SceneFileWriter(const std::string& path, const SceneFileHeader&
     create_group(m.where, m.file, "/spheres");
     m.sphere_position = create_dataset(m.where, m.file, "/spheres/position", H5T_IEEE_F64LE, {n, 3});
     m.sphere_radius = create_dataset(m.where, m.file, "/spheres/radius", H5T_IEEE_F64LE, {n});
+    if (header.sphere_motion) {
+      m.sphere_velocity = create_dataset(m.where, m.file, "/spheres/velocity", H5T_IEEE_F64LE, {n, 3});
+      m.sphere_angular_velocity =
+          create_dataset(m.where, m.file, "/spheres/angular_velocity", H5T_IEEE_F64LE, {n, 3});
+    }
   }
   if (e > 0) {
     create_group(m.where, m.file, "/ellipsoids");
@@ -236,6 +275,11 @@ SceneFileWriter::SceneFileWriter(const std::string& path, const SceneFileHeader&
     m.ellipsoid_semi_axes = create_dataset(m.where, m.file, "/ellipsoids/semi_axes", H5T_IEEE_F64LE, {e, 3});
     m.ellipsoid_orientation =
         create_dataset(m.where, m.file, "/ellipsoids/orientation", H5T_IEEE_F64LE, {e, 4});
+    if (header.ellipsoid_motion) {
+      m.ellipsoid_velocity = create_dataset(m.where, m.file, "/ellipsoids/velocity", H5T_IEEE_F64LE, {e, 3});
+      m.ellipsoid_angular_velocity =
+          create_dataset(m.where, m.file, "/ellipsoids/angular_velocity", H5T_IEEE_F64LE, {e, 3});
+    }
   }
   Handle root = checked(H5Gopen2(m.file, "/", H5P_DEFAULT), H5Gclose, m.where, "cannot open the root group");
   if (header.radius_low) write_attribute(m.where, root, "radius_low", *header.radius_low);
@@ -295,6 +339,31 @@ void SceneFileWriter::write_ellipsoids(std::size_t first, std::span<const Vec3<d
              orientation.data());
 }
 
+void SceneFileWriter::write_sphere_motion(std::size_t first, std::span<const Vec3<double>> velocity,
+                                          std::span<const Vec3<double>> angular_velocity) {
+  LibraryLock lock;
+  Impl& m = *m_impl;
+  if (!m.header.sphere_motion) throw Error(fmt::format("{}: /spheres: no motion datasets", m.where.file()));
+  check_block(m.where, "/spheres", first, velocity.size(), m.header.spheres, {angular_velocity.size()});
+  write_rows(m.where, m.sphere_velocity, "/spheres/velocity", first, velocity.size(), 3, H5T_NATIVE_DOUBLE,
+             velocity.data());
+  write_rows(m.where, m.sphere_angular_velocity, "/spheres/angular_velocity", first, velocity.size(), 3,
+             H5T_NATIVE_DOUBLE, angular_velocity.data());
+}
+
+void SceneFileWriter::write_ellipsoid_motion(std::size_t first, std::span<const Vec3<double>> velocity,
+                                             std::span<const Vec3<double>> angular_velocity) {
+  LibraryLock lock;
+  Impl& m = *m_impl;
+  if (!m.header.ellipsoid_motion)
+    throw Error(fmt::format("{}: /ellipsoids: no motion datasets", m.where.file()));
+  check_block(m.where, "/ellipsoids", first, velocity.size(), m.header.ellipsoids, {angular_velocity.size()});
+  write_rows(m.where, m.ellipsoid_velocity, "/ellipsoids/velocity", first, velocity.size(), 3,
+             H5T_NATIVE_DOUBLE, velocity.data());
+  write_rows(m.where, m.ellipsoid_angular_velocity, "/ellipsoids/angular_velocity", first, velocity.size(), 3,
+             H5T_NATIVE_DOUBLE, angular_velocity.data());
+}
+
 void SceneFileWriter::commit() {
   LibraryLock lock;
   Impl& m = *m_impl;
@@ -304,6 +373,10 @@ void SceneFileWriter::commit() {
   m.ellipsoid_position.close(m.where, "cannot close /ellipsoids/position");
   m.ellipsoid_semi_axes.close(m.where, "cannot close /ellipsoids/semi_axes");
   m.ellipsoid_orientation.close(m.where, "cannot close /ellipsoids/orientation");
+  m.sphere_velocity.close(m.where, "cannot close /spheres/velocity");
+  m.sphere_angular_velocity.close(m.where, "cannot close /spheres/angular_velocity");
+  m.ellipsoid_velocity.close(m.where, "cannot close /ellipsoids/velocity");
+  m.ellipsoid_angular_velocity.close(m.where, "cannot close /ellipsoids/angular_velocity");
   m.file.close(m.where, "cannot close (flush) the file");
   m.temp.commit();
   m.committed = true;
@@ -367,13 +440,21 @@ SceneShape read_scene_shape(const std::string& path) {
 
 void write_scene(const std::string& path, const Scene& scene) {
   const std::size_t n = scene.sphere_count(), e = scene.ellipsoid_count();
+  const bool sphere_motion = !scene.sphere_velocity.empty() || !scene.sphere_angular_velocity.empty();
+  const bool ellipsoid_motion =
+      !scene.ellipsoid_velocity.empty() || !scene.ellipsoid_angular_velocity.empty();
   if (scene.sphere_position.size() != n || scene.ellipsoid_position.size() != e ||
-      scene.ellipsoid_orientation.size() != e) {
+      scene.ellipsoid_orientation.size() != e ||
+      (sphere_motion && (scene.sphere_velocity.size() != n || scene.sphere_angular_velocity.size() != n)) ||
+      (ellipsoid_motion &&
+       (scene.ellipsoid_velocity.size() != e || scene.ellipsoid_angular_velocity.size() != e))) {
     throw Error(fmt::format("{}: write_scene: the scene's arrays differ in length", path));
   }
   SceneFileHeader header;
   header.spheres = n;
   header.ellipsoids = e;
+  header.sphere_motion = sphere_motion && (n > 0 || e == 0);
+  header.ellipsoid_motion = ellipsoid_motion && e > 0;
   header.radius_low = scene.radius_low;
   header.radius_high = scene.radius_high;
   header.attributes = scene.attributes;
@@ -381,6 +462,10 @@ void write_scene(const std::string& path, const Scene& scene) {
   writer.write_spheres(0, scene.sphere_position, scene.sphere_radius);
   writer.write_ellipsoids(0, scene.ellipsoid_position, scene.ellipsoid_semi_axes,
                           scene.ellipsoid_orientation);
+  if (header.sphere_motion)
+    writer.write_sphere_motion(0, scene.sphere_velocity, scene.sphere_angular_velocity);
+  if (header.ellipsoid_motion)
+    writer.write_ellipsoid_motion(0, scene.ellipsoid_velocity, scene.ellipsoid_angular_velocity);
   writer.commit();
 }
 

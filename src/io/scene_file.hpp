@@ -19,7 +19,8 @@
 namespace cg {
 
 // Whole scene into memory (double), validated. Rows [first, first+count) of each group can be read
-// with read_scene_rows for parallel readers.
+// with read_scene_rows for parallel readers. The motion datasets (CONTRACT §5) are read when present
+// (each checked for its shape and finite rows); absent ones leave their vector empty.
 Scene read_scene(const std::string& path);
 
 // Counts of bodies in a scene file without reading the data (datasets' types and shapes are checked;
@@ -51,8 +52,9 @@ struct BodyRows {
 };
 BodyRows body_rows(Scene&& scene, bool shapes);
 
-// Writes float64 datasets ((N,3) / (N)), root attributes radius_low/radius_high when set and every
-// entry of scene.attributes (keys "radius_low"/"radius_high" there are ignored: the optionals rule).
+// Writes float64 datasets ((N,3) / (N)) — the motion datasets of a group (CONTRACT §5) when its
+// vectors are non-empty — root attributes radius_low/radius_high when set and every entry of
+// scene.attributes (keys "radius_low"/"radius_high" there are ignored: the optionals rule).
 // Writing does not validate the values (tests write bad scenes on purpose). A scene without bodies
 // is written as an empty /spheres group. IoError on failure, no file left behind.
 void write_scene(const std::string& path, const Scene& scene);
@@ -61,6 +63,7 @@ void write_scene(const std::string& path, const Scene& scene);
 // attributes.
 struct SceneFileHeader {
   std::size_t spheres = 0, ellipsoids = 0;
+  bool sphere_motion = false, ellipsoid_motion = false;  // CONTRACT §5 datasets of the group
   std::optional<double> radius_low, radius_high;
   Attributes attributes;
 };
@@ -81,6 +84,11 @@ class SceneFileWriter {
   void write_ellipsoids(std::size_t first, std::span<const Vec3<double>> position,
                         std::span<const Vec3<double>> semi_axes,
                         std::span<const std::array<double, 4>> orientation);
+  // The motion rows of a group whose header asked for them (CONTRACT §5).
+  void write_sphere_motion(std::size_t first, std::span<const Vec3<double>> velocity,
+                           std::span<const Vec3<double>> angular_velocity);
+  void write_ellipsoid_motion(std::size_t first, std::span<const Vec3<double>> velocity,
+                              std::span<const Vec3<double>> angular_velocity);
   void commit();
 
   struct Impl;

@@ -377,17 +377,22 @@ double polydisperse_box_edge(std::uint64_t n, double r_low, double r_high, doubl
   return box_edge(n, RadiusLaw::log_uniform, r_low, r_high, contacts_per_body);
 }
 
+bool is_pour(const GenerateOptions& o) { return o.kind == "pour" || o.kind == "pour-ellipsoids"; }
+
 std::uint64_t generated_ellipsoids(const GenerateOptions& o) {
-  if (o.kind == "ellipsoids") return o.count;
+  if (o.kind == "ellipsoids" || o.kind == "pour-ellipsoids") return o.count;
   if (o.kind != "mixed") return 0;
   const double m = std::round(o.ellipsoid_fraction * static_cast<double>(o.count));
   return std::min(o.count, static_cast<std::uint64_t>(std::max(0.0, m)));
 }
 
 void validate_generate_options(const GenerateOptions& o) {
-  if (o.kind != "uniform" && o.kind != "polydisperse" && o.kind != "ellipsoids" && o.kind != "mixed")
-    throw UsageError(fmt::format(
-        "generator kind must be uniform, polydisperse, ellipsoids or mixed (got \"{}\")", o.kind));
+  if (o.kind != "uniform" && o.kind != "polydisperse" && o.kind != "ellipsoids" && o.kind != "mixed" &&
+      !is_pour(o))
+    throw UsageError(
+        fmt::format("generator kind must be uniform, polydisperse, ellipsoids, mixed, pour or "
+                    "pour-ellipsoids (got \"{}\")",
+                    o.kind));
   if (o.kind == "mixed" && !(o.ellipsoid_fraction >= 0 && o.ellipsoid_fraction <= 1))
     throw UsageError(fmt::format("ellipsoid fraction must be in [0, 1] (got {})", o.ellipsoid_fraction));
   if (o.count < 1 || o.count > kMaxGenerateCount)
@@ -446,7 +451,58 @@ Scene generate_scene(const GenerateOptions& options) {
   return scene;
 }
 
+// A granular pour (generate.hpp): a column of bodies on a jittered cubic lattice above a floor, in an
+// open box whose walls the scene names for contactgrid simulate.
+Scene generate_pour(const GenerateOptions& o) {
+  validate_generate_options(o);
+  const CounterRng rng(o.seed);
+  const bool ellipsoids = o.kind == "pour-ellipsoids";
+  const double s = 2.1 * o.radius_high;  // lattice spacing: no two bodies touch
+  const std::uint64_t m = std::max<std::uint64_t>(
+      1, static_cast<std::uint64_t>(std::ceil(std::cbrt(static_cast<double>(o.count) / 2))));
+  const std::uint64_t layers = (o.count + m * m - 1) / (m * m);
+  const double width = static_cast<double>(m) * s, height = static_cast<double>(layers + 1) * s;
+  Scene scene;
+  for (std::uint64_t i = 0; i < o.count; ++i) {
+    const std::uint64_t ix = i % m, iy = (i / m) % m, iz = i / (m * m);
+    auto jitter = [&](unsigned stream) { return 0.02 * s * (2 * rng.unit(i, stream) - 1); };
+    const Vec3<double> p{o.offset.x + (double(ix) + 0.5) * s + jitter(kX),
+                         o.offset.y + (double(iy) + 0.5) * s + jitter(kY),
+                         o.offset.z + (double(iz) + 1.0) * s + jitter(kZ)};
+    auto between = [&](unsigned stream) {
+      return std::clamp(o.radius_low + (o.radius_high - o.radius_low) * rng.unit(i, stream), o.radius_low,
+                        o.radius_high);
+    };
+    if (ellipsoids) {
+      scene.ellipsoid_position.push_back(p);
+      scene.ellipsoid_semi_axes.push_back({between(kAxisA), between(kAxisB), between(kAxisC)});
+      scene.ellipsoid_orientation.push_back(random_quaternion(rng, i));
+    } else {
+      scene.sphere_position.push_back(p);
+      scene.sphere_radius.push_back(between(kRadius));
+    }
+  }
+  scene.radius_low = o.radius_low;
+  scene.radius_high = o.radius_high;
+  Attributes& a = scene.attributes;
+  a["generator"] = o.kind;
+  a["count"] = static_cast<std::int64_t>(o.count);
+  a["seed"] = std::bit_cast<std::int64_t>(o.seed);
+  a["offset_x"] = o.offset.x;
+  a["offset_y"] = o.offset.y;
+  a["offset_z"] = o.offset.z;
+  // the container: an open box of the column's footprint, reaching above it, and its floor
+  a["simulate_walls"] =
+      fmt::format("open-box:{},{},{},{},{},{};plane:0,0,{},0,0,1", o.offset.x, o.offset.y, o.offset.z - s,
+                  o.offset.x + width, o.offset.y + width, o.offset.z + 2 * height, o.offset.z);
+  return scene;
+}
+
 void generate_scene_file(const std::string& path, const GenerateOptions& options) {
+  if (is_pour(options)) {
+    write_scene(path, generate_pour(options));
+    return;
+  }
   const double edge = scene_box_edge(options);
   const BodyLaw law = body_law(options, edge);
   const std::uint64_t e = generated_ellipsoids(options), spheres = options.count - e;

@@ -11,7 +11,7 @@
 namespace cg {
 
 struct GenerateOptions {
-  std::string kind = "uniform";  // uniform | polydisperse | ellipsoids | mixed
+  std::string kind = "uniform";  // uniform | polydisperse | ellipsoids | mixed | pour | pour-ellipsoids
   std::uint64_t count = 1024;    // N, 1 … 2^28
   std::uint64_t seed = 1;
   double radius_low = 0.5;          // Rlow
@@ -21,8 +21,18 @@ struct GenerateOptions {
   double ellipsoid_fraction = 0.5;  // mixed: share of ellipsoids, in [0, 1]
 };
 
-// How many of options.count bodies are ellipsoids: ellipsoids: all; mixed: round(F·count); else 0.
+// How many of options.count bodies are ellipsoids: ellipsoids, pour-ellipsoids: all; mixed:
+// round(F·count); else 0.
 std::uint64_t generated_ellipsoids(const GenerateOptions& options);
+
+// kind pour / pour-ellipsoids: a ready granular pour for contactgrid simulate — `count` bodies (spheres
+// with radii uniform in [Rlow, Rhigh], or ellipsoids with semi-axes so and random orientations) on a
+// cubic lattice of spacing 2.1·Rhigh, jittered by 2 % of it, in a column twice as high as wide, above
+// a floor at z = offset.z; the root attribute simulate_walls names its container (an open box of the
+// column's footprint and the floor: simulate's --walls specs, ';'-separated), which simulate uses
+// when given no --walls. Written whole (generate_scene_file).
+bool is_pour(const GenerateOptions& options);
+Scene generate_pour(const GenerateOptions& options);
 
 inline constexpr std::uint64_t kMaxGenerateCount = std::uint64_t(1) << 28;
 inline constexpr double kMaxPolydisperseRatio = 1000;  // radius_high / radius_low

@@ -24,8 +24,11 @@ struct Scene {
   std::vector<Vec3<double>> ellipsoid_position;
   std::vector<Vec3<double>> ellipsoid_semi_axes;
   std::vector<std::array<double, 4>> ellipsoid_orientation;  // (w, x, y, z)
-  std::optional<double> radius_low, radius_high;             // as promised by the file's root attributes
-  Attributes attributes;                                     // other root attributes (generator parameters)
+  // Motion (CONTRACT §5), world frame: one row per body of the group, or empty (absent: zero).
+  std::vector<Vec3<double>> sphere_velocity, sphere_angular_velocity;
+  std::vector<Vec3<double>> ellipsoid_velocity, ellipsoid_angular_velocity;
+  std::optional<double> radius_low, radius_high;  // as promised by the file's root attributes
+  Attributes attributes;                          // other root attributes (generator parameters)
 
   std::size_t sphere_count() const { return sphere_radius.size(); }
   std::size_t ellipsoid_count() const { return ellipsoid_semi_axes.size(); }

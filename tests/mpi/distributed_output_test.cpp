@@ -222,6 +222,7 @@ void write_and_compare(const std::string& name, const Scene& scene) {
   EXPECT_EQ(info.times.back().name, "write");
   if (session().rank() == 0) {
     for (const ContactField& field : kContactFields) {
+      if (field.group == FieldGroup::history) continue;  // a detection's files carry no history
       const std::string ds = field.path;
       EXPECT_EQ(read_dataset_bytes(out_a, ds), read_dataset_bytes(out_1, ds)) << name << " " << ds;
       EXPECT_EQ(read_dataset_bytes(out_b, ds), read_dataset_bytes(out_1, ds)) << name << " " << ds;

@@ -17,9 +17,9 @@ std::vector<std::string> differing_fields(const Contacts<Real>& got, const Conta
                                           std::size_t first = 0) {
   std::vector<std::string> differ;
   if (first + got.size() > want.size()) differ.push_back("rows");
-  zip_contact_fields(got, want, true, [&](auto index, const auto& g, const auto& w) {
+  zip_contact_fields(got, want, FieldSet::all(), [&](auto index, const auto& g, const auto& w) {
     const ContactField& field = kContactFields[index];
-    const bool present = field.optional ? got.full : true, w_present = field.optional ? want.full : true;
+    const bool present = got.fields().has(field.group), w_present = want.fields().has(field.group);
     bool same = present == w_present && (!present || g.size() == got.size());
     if (same && !g.empty())
       same = first + g.size() <= w.size() &&

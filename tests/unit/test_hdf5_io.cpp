@@ -516,14 +516,14 @@ TEST_F(Hdf5Io, ContactFileLayoutTextRoundTrip) {
   l.temp = l.path + ".tmp.17";
   l.rows = (std::uint64_t(1) << 40) + 3;
   l.precision = cg::Precision::fp32;
-  l.full = true;
+  l.fields = {true, true};
   l.datasets = {{"/contacts/id_a", 4096, 8}, {"/contacts/normal_on_b", (std::uint64_t(1) << 50), 12}};
   const cg::ContactFileLayout b = cg::ContactFileLayout::from_text(l.to_text());
   EXPECT_EQ(b.path, l.path);
   EXPECT_EQ(b.temp, l.temp);
   EXPECT_EQ(b.rows, l.rows);
   EXPECT_EQ(b.precision, l.precision);
-  EXPECT_EQ(b.full, l.full);
+  EXPECT_EQ(b.fields, l.fields);
   ASSERT_EQ(b.datasets.size(), 2u);
   EXPECT_EQ(b.datasets[1].name, "/contacts/normal_on_b");
   EXPECT_EQ(b.datasets[1].offset, std::uint64_t(1) << 50);

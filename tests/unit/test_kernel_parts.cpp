@@ -15,8 +15,8 @@ namespace {
 TEST(StageIds, NamesInPipelineOrder) {
   std::vector<std::string> names;
   for (int i = 0; i < detail::kStageCount; ++i) names.push_back(detail::name(detail::stage_at(i)));
-  const std::vector<std::string> expect{"plan", "upload", "skin",  "pack",   "entries",
-                                        "sort", "pairs",  "order", "narrow", "download"};
+  const std::vector<std::string> expect{"plan",  "upload", "skin",   "pack",    "entries", "sort",
+                                        "pairs", "order",  "narrow", "history", "download"};
   EXPECT_EQ(names, expect);
 }
 

@@ -1,0 +1,219 @@
+#pragma once
+// One step of the granular dynamics as per-item functions over plain arrays, shared by both
+// backends (kernels/host/dem_*.cpp loop over them with OpenMP, kernels/cuda/dem_*.cuh call them one
+// thread per item), so the CPU backend is the CUDA backend's oracle bit for bit:
+//   contact_terms(k)  contact row k: its force, torques and spring (core/dem_contact.hpp)
+//   body_terms(i)     body i: the sum of its contacts' terms in a fixed order (the rows where it is A
+//                     in row order, then the rows where it is B in the order of the rows sorted by
+//                     B, stably), then its walls in wall order, then gravity; the walls' springs
+//   kick_drift / kick (core/dem_body.hpp)
+// No floating-point atomics anywhere: the order of every sum is fixed, whatever the threads.
+#include <cstddef>
+#include <cstdint>
+
+#include "core/dem_body.hpp"
+#include "core/dem_contact.hpp"
+#include "core/dem_walls.hpp"
+
+namespace cg::dem {
+
+// The bodies' arrays (host or DEVICE), index = body (local) id.
+struct BodyArrays {
+  Vec3<double>* position;
+  Vec3<double>* velocity;
+  Vec3<double>* omega;
+  Vec3<double>* momentum;
+  Quat<double>* orientation;
+  Vec3<double>* force;
+  Vec3<double>* torque;
+  const BodyProps* props;
+  const Shape* shape;             // null: all spheres
+  const Vec3<double>* semi_axes;  // ellipsoids' (rows of spheres unread)
+  const double* radius;           // bounding radius (a sphere's radius)
+  std::size_t count;
+
+  CG_HD bool ellipsoid(std::size_t i) const { return shape && shape[i] == Shape::ellipsoid; }
+  CG_HD BodyState state(std::size_t i) const {
+    return {position[i], velocity[i], omega[i], momentum[i], orientation[i], force[i], torque[i]};
+  }
+  CG_HD void store(std::size_t i, const BodyState& b) const {
+    position[i] = b.position;
+    velocity[i] = b.velocity;
+    omega[i] = b.omega;
+    momentum[i] = b.momentum;
+    orientation[i] = b.orientation;
+    force[i] = b.force;
+    torque[i] = b.torque;
+  }
+};
+
+// The contact rows of the step (the engine's output, local ids; host or DEVICE), Real as detected.
+template <class Real>
+struct ContactRows {
+  const std::int64_t* id_a;
+  const std::int64_t* id_b;
+  const Vec3<Real>* position_on_a;
+  const Vec3<Real>* position_on_b;
+  const Vec3<Real>* normal_on_b;
+  const Real* distance;
+  const std::int64_t* previous_row;
+  std::size_t count;
+};
+
+// Each contact's terms (row order) and the springs carried between steps: `xi` and `normal` of this
+// step (written by contact_terms), `old_xi` and `old_normal` the previous step's (read through
+// previous_row).
+struct ContactTerms {
+  Vec3<double>* force;     // on A (B: −force)
+  Vec3<double>* torque_a;  // on A
+  Vec3<double>* torque_b;  // on B
+  double* energy;
+  Vec3<double>* xi;
+  Vec3<double>* normal;
+  const Vec3<double>* old_xi;
+  const Vec3<double>* old_normal;
+};
+
+// The step's constants.
+struct StepConstants {
+  ContactLaw law;
+  Vec3<double> gravity;
+  const Wall* walls;  // host or DEVICE
+  int wall_count;
+  double dt;
+  bool synchronized;  // false: plain velocity Verlet (damping and the spring's plane at the half step)
+};
+
+CG_HD Vec3<double> unit(Vec3<double> v) {
+  const double n = cg_sqrt(dot(v, v));
+  return n > 0 ? (1.0 / n) * v : v;
+}
+
+// Contact row k (file comment).
+template <class Real>
+CG_HD void contact_terms(std::size_t k, const ContactRows<Real>& rows, const BodyArrays& b,
+                         const StepConstants& c, const ContactTerms& t) {
+  const std::size_t ia = static_cast<std::size_t>(rows.id_a[k]), ib = static_cast<std::size_t>(rows.id_b[k]);
+  const Vec3<double> pa = vec_cast<double>(rows.position_on_a[k]),
+                     pb = vec_cast<double>(rows.position_on_b[k]);
+  const Vec3<double> point = 0.5 * (pa + pb);
+  const Vec3<double> n = vec_cast<double>(rows.normal_on_b[k]);
+  const std::int64_t prev = rows.previous_row[k];
+  const BodyState sa = b.state(ia), sb = b.state(ib);
+  const BodyProps& qa = b.props[ia];
+  const BodyProps& qb = b.props[ib];
+  const bool ea = b.ellipsoid(ia), eb = b.ellipsoid(ib);
+  const Vec3<double> ra = point - sa.position, rb = point - sb.position;
+  // the contact point's relative velocity at the half step (the state's) and at the step
+  const Vec3<double> v_half = (sa.velocity + cross(sa.omega, ra)) - (sb.velocity + cross(sb.omega, rb));
+  ContactInput in;
+  in.normal = n;
+  in.overlap = -double(rows.distance[k]);
+  in.v_half = v_half;
+  in.dt = c.dt;
+  if (c.synchronized) {
+    const Vec3<double> wa = synced_omega(sa, qa, ea, c.dt), wb = synced_omega(sb, qb, eb, c.dt);
+    in.v_sync =
+        (synced_velocity(sa, qa, c.dt) + cross(wa, ra)) - (synced_velocity(sb, qb, c.dt) + cross(wb, rb));
+    in.w_rel = wa - wb;
+    in.half_normal = prev >= 0 ? unit(t.old_normal[prev] + n) : n;
+  } else {
+    in.v_sync = v_half;
+    in.w_rel = sa.omega - sb.omega;
+    in.half_normal = n;
+  }
+  const Pair pair = pair_of(qa.radius, qa.mass, qa.fixed, qb.radius, qb.mass, qb.fixed);
+  const double ia_mean = (qa.inertia.x + qa.inertia.y + qa.inertia.z) / 3.0;
+  const double ib_mean = (qb.inertia.x + qb.inertia.y + qb.inertia.z) / 3.0;
+  const Vec3<double> old = prev >= 0 ? t.old_xi[prev] : Vec3<double>{0, 0, 0};
+  const double inertia = qa.fixed ? ib_mean : (qb.fixed ? ia_mean : ia_mean * ib_mean / (ia_mean + ib_mean));
+  const ContactOutput o = contact_force(c.law, pair, inertia, in, old);
+  t.force[k] = o.force;
+  t.torque_a[k] = cross(ra, o.force) + o.rolling_torque;
+  t.torque_b[k] = cross(rb, -o.force) - o.rolling_torque;
+  t.energy[k] = o.energy;
+  t.xi[k] = o.xi;
+  t.normal[k] = n;
+}
+
+// Where body i's terms lie: rows [a_begin[i], a_begin[i + 1]) (it is A; rows sorted by A), and
+// by_b[j] for j in [b_begin[i], b_begin[i + 1]) (it is B; by_b: the rows stably sorted by B).
+struct BodyRowIndex {
+  const std::uint32_t* a_begin;  // count + 1
+  const std::uint32_t* b_begin;  // count + 1
+  const std::uint32_t* by_b;     // rows
+};
+
+// Each body's wall springs (count × wall_count, body-major) and the energy of its wall contacts.
+struct WallTerms {
+  Vec3<double>* xi;
+  double* energy;  // count
+};
+
+// Body i's force and torque of the step into b.force[i], b.torque[i] (file comment).
+CG_HD void body_terms(std::size_t i, const BodyArrays& b, const StepConstants& c, const ContactTerms& t,
+                      const BodyRowIndex& index, const WallTerms& w) {
+  Vec3<double> f{0, 0, 0}, tau{0, 0, 0};
+  for (std::uint32_t k = index.a_begin[i]; k < index.a_begin[i + 1]; ++k) {
+    f = f + t.force[k];
+    tau = tau + t.torque_a[k];
+  }
+  for (std::uint32_t j = index.b_begin[i]; j < index.b_begin[i + 1]; ++j) {
+    const std::uint32_t k = index.by_b[j];
+    f = f - t.force[k];
+    tau = tau + t.torque_b[k];
+  }
+  const BodyState s = b.state(i);
+  const BodyProps& p = b.props[i];
+  const bool ell = b.ellipsoid(i);
+  double energy = 0;
+  if (c.wall_count > 0) {
+    const Quat<double> q = ell ? s.orientation : Quat<double>{1, 0, 0, 0};
+    const Vec3<double> axes = ell ? b.semi_axes[i] : Vec3<double>{0, 0, 0};
+    const BodyShape shape =
+        body_shape(ell ? Shape::ellipsoid : Shape::sphere, s.position, b.radius[i], axes, q);
+    const Vec3<double> w_sync = c.synchronized ? synced_omega(s, p, ell, c.dt) : s.omega;
+    const Vec3<double> v_sync = c.synchronized ? synced_velocity(s, p, c.dt) : s.velocity;
+    for (int k = 0; k < c.wall_count; ++k) {
+      Vec3<double>& xi = w.xi[i * std::size_t(c.wall_count) + std::size_t(k)];
+      const WallContact wc = wall_contact(c.walls[k], shape);
+      if (!(wc.overlap > 0)) {
+        xi = {0, 0, 0};
+        continue;
+      }
+      const Vec3<double> r = wc.point - s.position;
+      ContactInput in;
+      in.normal = wc.normal;
+      in.half_normal = wc.normal;
+      in.overlap = wc.overlap;
+      in.v_half = s.velocity + cross(s.omega, r);
+      in.v_sync = v_sync + cross(w_sync, r);
+      in.w_rel = w_sync;
+      in.dt = c.dt;
+      const Pair pair{p.radius, p.mass};
+      const double inertia = (p.inertia.x + p.inertia.y + p.inertia.z) / 3.0;
+      const ContactOutput o = contact_force(c.law, pair, inertia, in, xi);
+      xi = o.xi;
+      f = f + o.force;
+      tau = tau + cross(r, o.force) + o.rolling_torque;
+      energy = energy + o.energy;
+    }
+  }
+  f = f + p.mass * c.gravity;
+  b.force[i] = f;
+  b.torque[i] = tau;
+  w.energy[i] = energy;
+}
+
+// Body i's energies: kinetic, and potential of gravity (−m g·x; the walls' elastic energy is in
+// WallTerms::energy, the contacts' in ContactTerms::energy).
+struct BodyEnergy {
+  double kinetic, gravity;
+};
+CG_HD BodyEnergy body_energy(std::size_t i, const BodyArrays& b, Vec3<double> gravity) {
+  const BodyState s = b.state(i);
+  const BodyProps& p = b.props[i];
+  return {kinetic_energy(s, p, b.ellipsoid(i)), -p.mass * dot(gravity, s.position)};
+}
+
+}  // namespace cg::dem

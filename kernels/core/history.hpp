@@ -1,0 +1,58 @@
+#pragma once
+// Contact identity across steps (CONTRACT §2's history fields), shared by both backends: each contact
+// row of a step carries `age` (steps the pair has touched without a break, 0 on its first: Bullet's
+// lifeTime) and `previous_row` (the pair's row in the previous step's contacts, -1 when new).
+//
+// A pair is keyed by the GLOBAL ids of its bodies (a < b), so the identity does not depend on which
+// rank found the pair or on the bodies' local rows. Both steps' rows are sorted by key (the engine's
+// (id_a, id_b) order, mapped monotonically to global ids), so the row of a pair in the previous step
+// is a binary search of its key in the previous keys: lower_bound_key here (host, the device's own
+// kernel) or Thrust's vectorised lower_bound (cuda/history.cuh) — the same position either way, then
+// history_of turns that position into the two fields. Integers only: the backends agree exactly.
+#include <cstddef>
+#include <cstdint>
+
+#include "core/config.hpp"
+
+namespace cg {
+
+// (a, b) global ids of a pair, a < b, in the rows' lexicographic order.
+struct PairKey {
+  std::int64_t a = 0, b = 0;
+};
+CG_HD bool operator<(const PairKey& x, const PairKey& y) { return x.a < y.a || (x.a == y.a && x.b < y.b); }
+CG_HD bool operator==(const PairKey& x, const PairKey& y) { return x.a == y.a && x.b == y.b; }
+
+// The key of a contact row whose ids are `a`, `b`: the rows' ids themselves, or, when `global` is
+// given, global[a], global[b] (the rows' ids are then local indices into it, ascending with it).
+CG_HD PairKey pair_key(std::int64_t a, std::int64_t b, const std::int64_t* global) {
+  return global ? PairKey{global[a], global[b]} : PairKey{a, b};
+}
+
+// The first position p in the sorted keys[0, m) with !(keys[p] < key) (m when none).
+CG_HD std::size_t lower_bound_key(const PairKey* keys, std::size_t m, const PairKey& key) {
+  std::size_t lo = 0, hi = m;
+  while (lo < hi) {
+    const std::size_t mid = lo + (hi - lo) / 2;
+    if (keys[mid] < key)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
+// A row's history fields.
+struct RowHistory {
+  std::int64_t age = 0, previous_row = -1;
+};
+
+// The history of a row with key `key` whose lower bound in the previous keys[0, m) is `p`, given the
+// previous rows' ages: continued (age + 1, row p) when the previous step has the pair, else new.
+CG_HD RowHistory history_of(const PairKey* keys, const std::int64_t* ages, std::size_t m, std::size_t p,
+                            const PairKey& key) {
+  if (p < m && keys[p] == key) return {ages[p] + 1, static_cast<std::int64_t>(p)};
+  return {};
+}
+
+}  // namespace cg

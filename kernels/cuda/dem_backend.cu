@@ -1,0 +1,130 @@
+// The CUDA backend of the granular dynamics (kernels/dem_backend.hpp): its state on the device and
+// the stages in order, one header each (dem_integrate.cuh, dem_forces.cuh, dem_sums.cuh,
+// dem_energy.cuh), over the same core math as the CPU backend (core/dem_step.hpp), so the two agree
+// bit for bit. The engine detects between the stages on the bodies' device arrays and leaves its
+// contacts there (detect_device_resident); nothing crosses to the host in a step.
+#include <algorithm>
+
+#include "cuda/dem_energy.cuh"
+#include "cuda/dem_forces.cuh"
+#include "cuda/dem_integrate.cuh"
+#include "cuda/dem_state.cuh"
+#include "cuda/dem_sums.cuh"
+#include "dem_backend.hpp"
+
+namespace cg::detail {
+
+namespace {
+template <class T>
+void upload(DemBuffer<T>& d, const std::vector<T>& h) {
+  d.reserve(std::max<std::size_t>(h.size(), 1), false);
+  if (!h.empty()) CG_CUDA_CHECK(cudaMemcpy(d.data(), h.data(), h.size() * sizeof(T), cudaMemcpyHostToDevice));
+}
+template <class T>
+void download(std::vector<T>& h, const DemBuffer<T>& d, std::size_t n) {
+  h.resize(n);
+  if (n > 0) CG_CUDA_CHECK(cudaMemcpy(h.data(), d.data(), n * sizeof(T), cudaMemcpyDeviceToHost));
+}
+}  // namespace
+
+std::unique_ptr<CudaDem> make_cuda_dem(int device, const DemBodies& b,
+                                       const std::vector<dem::BodyProps>& props,
+                                       const std::vector<dem::Wall>& walls) {
+  if (!cuda_available()) throw CudaError("no CUDA device is available to this process");
+  auto d = std::make_unique<CudaDem>();
+  if (device < 0) CG_CUDA_CHECK(cudaGetDevice(&device));
+  d->device = device;
+  CG_CUDA_CHECK(cudaSetDevice(device));
+  const std::size_t n = b.size();
+  d->count = n;
+  d->shapes = !b.shape.empty();
+  upload(d->position, b.position);
+  upload(d->velocity, b.velocity);
+  upload(d->omega, b.angular_velocity);
+  upload(d->radius, b.radius);
+  upload(d->props, props);
+  std::vector<Vec3<double>> momentum(n), zero(n, Vec3<double>{0, 0, 0});
+  std::vector<Quat<double>> orientation =
+      d->shapes ? b.orientation : std::vector<Quat<double>>(n, {1, 0, 0, 0});
+  for (std::size_t i = 0; i < n; ++i)  // L = R I Rᵀ ω (as the CPU backend)
+    if (d->shapes && b.shape[i] == Shape::ellipsoid) {
+      const Mat3<double> r = rotation_matrix(orientation[i]);
+      const Vec3<double> l = mul_transpose(r, b.angular_velocity[i]);
+      momentum[i] =
+          mul(r, Vec3<double>{props[i].inertia.x * l.x, props[i].inertia.y * l.y, props[i].inertia.z * l.z});
+    } else {
+      momentum[i] = props[i].inertia.x * b.angular_velocity[i];
+    }
+  upload(d->momentum, momentum);
+  upload(d->orientation, orientation);
+  upload(d->force, zero);
+  upload(d->torque, zero);
+  if (d->shapes) {
+    upload(d->shape, b.shape);
+    upload(d->semi_axes, b.semi_axes);
+  } else {
+    upload(d->semi_axes, zero);
+  }
+  upload(d->walls, walls);
+  d->wall_count = static_cast<int>(walls.size());
+  d->wall_xi.reserve(std::max<std::size_t>(n * walls.size(), 1), false);
+  if (n * walls.size() > 0)
+    CG_CUDA_CHECK(cudaMemset(d->wall_xi.data(), 0, n * walls.size() * sizeof(Vec3<double>)));
+  d->wall_energy.reserve(std::max<std::size_t>(n, 1), false);
+  CG_CUDA_CHECK(cudaMemset(d->wall_energy.data(), 0, std::max<std::size_t>(n, 1) * sizeof(double)));
+  return d;
+}
+
+void destroy(CudaDem* d) {
+  if (d) cudaSetDevice(d->device);
+  delete d;
+}
+
+DeviceBodiesView cuda_dem_bodies(CudaDem& d) {
+  DeviceBodiesView v;
+  v.position = reinterpret_cast<const double*>(d.position.data());
+  v.radius = d.radius.data();
+  v.count = d.count;
+  if (d.shapes) {
+    v.shape = d.shape.data();
+    v.semi_axes = reinterpret_cast<const double*>(d.semi_axes.data());
+    v.orientation = reinterpret_cast<const double*>(d.orientation.data());
+  }
+  return v;
+}
+
+void cuda_dem_kick_drift(CudaDem& d, double dt) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  dem_integrate_stage<true>(d, dt);
+}
+
+void cuda_dem_kick(CudaDem& d, double dt) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  dem_integrate_stage<false>(d, dt);
+}
+
+template <class Real>
+void cuda_dem_forces(CudaDem& d, const DeviceContactsView<Real>& contacts, const dem::StepConstants& c) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  const dem::ContactRows<Real> rows = contact_rows(contacts);
+  dem_contact_stage(d, rows, c);
+  dem_body_stage(d, rows, c);
+}
+template void cuda_dem_forces(CudaDem&, const DeviceContactsView<float>&, const dem::StepConstants&);
+template void cuda_dem_forces(CudaDem&, const DeviceContactsView<double>&, const dem::StepConstants&);
+
+DemEnergies cuda_dem_energies(CudaDem& d, std::size_t contacts, Vec3<double> gravity) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  return dem_energy_stage(d, contacts, gravity);
+}
+
+void cuda_dem_download(CudaDem& d, DemBodies& out) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  CG_CUDA_CHECK(cudaDeviceSynchronize());
+  download(out.position, d.position, d.count);
+  download(out.velocity, d.velocity, d.count);
+  download(out.angular_velocity, d.omega, d.count);
+  if (d.shapes) download(out.orientation, d.orientation, d.count);
+}
+
+}  // namespace cg::detail

@@ -1,0 +1,407 @@
+// The granular dynamics' host side (kernels/dem.hpp): the restitution's damping, the time scales,
+// the checks of a setup, and the sequence of a step on either backend (host/dem_stages.hpp,
+// cuda/dem_backend.cu), with the engine detecting the contacts in between.
+#include "dem.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <string>
+#include <type_traits>
+
+#include "core/dem_step.hpp"
+#include "dem_backend.hpp"
+#include "host/dem_stages.hpp"
+
+namespace cg {
+
+#if !defined(CONTACTGRID_HAVE_CUDA)
+namespace detail {
+class CudaDem {};
+std::unique_ptr<CudaDem> make_cuda_dem(int, const DemBodies&, const std::vector<dem::BodyProps>&,
+                                       const std::vector<dem::Wall>&) {
+  throw CudaError("this contactgrid was built without CUDA (rebuild with nvcc present)");
+}
+void destroy(CudaDem* d) { delete d; }
+DeviceBodiesView cuda_dem_bodies(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
+void cuda_dem_kick_drift(CudaDem&, double) { throw CudaError("this contactgrid was built without CUDA"); }
+void cuda_dem_kick(CudaDem&, double) { throw CudaError("this contactgrid was built without CUDA"); }
+template <class Real>
+void cuda_dem_forces(CudaDem&, const DeviceContactsView<Real>&, const dem::StepConstants&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+template void cuda_dem_forces(CudaDem&, const DeviceContactsView<float>&, const dem::StepConstants&);
+template void cuda_dem_forces(CudaDem&, const DeviceContactsView<double>&, const dem::StepConstants&);
+DemEnergies cuda_dem_energies(CudaDem&, std::size_t, Vec3<double>) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+void cuda_dem_download(CudaDem&, DemBodies&) { throw CudaError("this contactgrid was built without CUDA"); }
+}  // namespace detail
+#endif
+
+bool DemBodies::has_ellipsoids() const {
+  return std::any_of(shape.begin(), shape.end(), [](Shape s) { return s == Shape::ellipsoid; });
+}
+
+// ---- the restitution's damping ---------------------------------------------------------------------
+
+// One dimensionless collision x'' = −max(0, x^{3/2} + α x^{1/4} x'), x(0) = 0, x'(0) = 1 (m* = K =
+// v₀ = 1), integrated by classical Runge–Kutta until x returns to 0; the restitution is −x'(end).
+// The step (1e-4 of a collision lasting about 3.2) resolves it to about 1e-8.
+double restitution_for_damping(double alpha) {
+  auto accel = [alpha](double x, double v) {
+    if (!(x > 0)) return 0.0;
+    const double f = x * std::sqrt(x) + alpha * std::sqrt(std::sqrt(x)) * v;
+    return f > 0 ? -f : 0.0;
+  };
+  const double h = 1e-4;
+  double x = 0, v = 1;
+  for (int step = 0; step < 10000000; ++step) {
+    const double k1x = v, k1v = accel(x, v);
+    const double k2x = v + 0.5 * h * k1v, k2v = accel(x + 0.5 * h * k1x, v + 0.5 * h * k1v);
+    const double k3x = v + 0.5 * h * k2v, k3v = accel(x + 0.5 * h * k2x, v + 0.5 * h * k2v);
+    const double k4x = v + h * k3v, k4v = accel(x + h * k3x, v + h * k3v);
+    const double nx = x + h / 6 * (k1x + 2 * k2x + 2 * k3x + k4x);
+    const double nv = v + h / 6 * (k1v + 2 * k2v + 2 * k3v + k4v);
+    if (nx <= 0 && step > 0) {
+      // the crossing of x = 0 within the step, linearly: the speed there
+      const double s = x / (x - nx);
+      return -(v + s * (nv - v));
+    }
+    x = nx;
+    v = nv;
+    if (v < 0 && !(accel(x, v) < 0)) return -v;  // no force left: it leaves at this speed
+  }
+  return 0;
+}
+
+double damping_for_restitution(double e) {
+  if (!(e > 0 && e <= 1)) throw UsageError("--restitution must be in (0, 1]");
+  if (e == 1) return 0;
+  double lo = 0, hi = 1;
+  while (restitution_for_damping(hi) > e) {
+    hi *= 2;
+    if (hi > 1e3)
+      throw UsageError("--restitution " + std::to_string(e) +
+                       " is below what the damping of the force law reaches");
+  }
+  for (int i = 0; i < 60 && hi - lo > 1e-12 * hi; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (restitution_for_damping(mid) > e ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+// ---- time scales and checks ------------------------------------------------------------------------
+
+namespace {
+double smallest_radius(const DemBodies& b) {
+  double r = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const bool ell = !b.shape.empty() && b.shape[i] == Shape::ellipsoid;
+    r = std::min(r, ell ? std::min({b.semi_axes[i].x, b.semi_axes[i].y, b.semi_axes[i].z}) : b.radius[i]);
+  }
+  return r;
+}
+
+dem::ContactLaw law_of(const dem::Material& m, double alpha) {
+  return {m.young / (2 * (1 - m.poisson * m.poisson)), m.young / (4 * (2 - m.poisson) * (1 + m.poisson)),
+          alpha, m.friction, m.rolling_friction};
+}
+
+std::vector<dem::BodyProps> props_of(const DemBodies& b, double density) {
+  std::vector<dem::BodyProps> p(b.size());
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const Shape s = b.shape.empty() ? Shape::sphere : b.shape[i];
+    p[i] = dem::body_props(s, b.radius[i], b.semi_axes.empty() ? Vec3<double>{0, 0, 0} : b.semi_axes[i],
+                           density);
+    p[i].fixed = !b.fixed.empty() && b.fixed[i] != 0;
+  }
+  return p;
+}
+
+bool finite(Vec3<double> v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+}  // namespace
+
+TimeStepLimits time_step_limits(const DemBodies& bodies, const dem::Material& m, double speed) {
+  TimeStepLimits t;
+  if (bodies.size() == 0) return t;
+  const double r = smallest_radius(bodies);
+  const double g = m.young / (2 * (1 + m.poisson));
+  t.rayleigh = dem::kPi * r * std::sqrt(m.density / g) / (0.1631 * m.poisson + 0.8766);
+  const double mass = m.density * 4.0 / 3.0 * dem::kPi * r * r * r;
+  const double m_star = mass / 2, r_star = r / 2, e_star = m.young / (2 * (1 - m.poisson * m.poisson));
+  t.hertz = speed > 0 ? 2.87 * std::pow(m_star * m_star / (r_star * e_star * e_star * speed), 0.2)
+                      : std::numeric_limits<double>::infinity();
+  t.automatic = std::min(0.2 * t.rayleigh, t.hertz / 40);
+  return t;
+}
+
+void check_dem_setup(const DemBodies& b, const DemOptions& o) {
+  const dem::Material& m = o.material;
+  auto need = [](bool ok, const std::string& what) {
+    if (!ok) throw UsageError(what);
+  };
+  need(m.young > 0 && std::isfinite(m.young), "--young must be a finite number > 0");
+  need(m.poisson > -1 && m.poisson < 0.5, "--poisson must be in (-1, 0.5)");
+  need(m.density > 0 && std::isfinite(m.density), "--density must be a finite number > 0");
+  need(m.restitution > 0 && m.restitution <= 1, "--restitution must be in (0, 1]");
+  need(m.friction >= 0 && std::isfinite(m.friction), "--friction must be a finite number >= 0");
+  need(m.rolling_friction >= 0 && std::isfinite(m.rolling_friction),
+       "--rolling-friction must be a finite number >= 0");
+  need(o.dt > 0 && std::isfinite(o.dt), "--dt must be a finite time > 0");
+  need(finite(o.gravity), "--gravity must be finite");
+  for (std::size_t k = 0; k < o.walls.size(); ++k) {
+    const dem::Wall& w = o.walls[k];
+    const std::string name = "wall " + std::to_string(k);
+    need(finite(w.point), name + ": its point is not finite");
+    if (w.kind == dem::WallKind::plane)
+      need(finite(w.normal) && std::abs(dot(w.normal, w.normal) - 1) < 1e-12,
+           name + ": its normal is not a unit vector");
+    if (w.kind == dem::WallKind::cylinder)
+      need(w.radius > 0 && std::isfinite(w.radius), name + ": radius must be > 0");
+    if (w.kind == dem::WallKind::orifice)
+      need(w.hole >= 0 && std::isfinite(w.hole), name + ": hole must be >= 0");
+  }
+  const std::size_t n = b.size();
+  if (b.radius.size() != n || (!b.velocity.empty() && b.velocity.size() != n) ||
+      (!b.angular_velocity.empty() && b.angular_velocity.size() != n) ||
+      (!b.fixed.empty() && b.fixed.size() != n) ||
+      (!b.shape.empty() && (b.shape.size() != n || b.semi_axes.size() != n || b.orientation.size() != n)))
+    throw UsageError("simulate: the body arrays differ in length");
+  for (std::size_t i = 0; i < n; ++i) {
+    if ((!b.velocity.empty() && !finite(b.velocity[i])) ||
+        (!b.angular_velocity.empty() && !finite(b.angular_velocity[i])))
+      throw InputError("body " + std::to_string(i) + ": its velocity or angular velocity is not finite");
+  }
+  // a body starting inside a wall (its centre beyond it, or deeper than half its size)
+  for (std::size_t i = 0; i < n; ++i) {
+    const bool ell = !b.shape.empty() && b.shape[i] == Shape::ellipsoid;
+    const dem::BodyShape s = dem::body_shape(ell ? Shape::ellipsoid : Shape::sphere, b.position[i],
+                                             b.radius[i], ell ? b.semi_axes[i] : Vec3<double>{0, 0, 0},
+                                             ell ? b.orientation[i] : Quat<double>{1, 0, 0, 0});
+    const double size = ell ? std::min({b.semi_axes[i].x, b.semi_axes[i].y, b.semi_axes[i].z}) : b.radius[i];
+    for (std::size_t k = 0; k < o.walls.size(); ++k) {
+      const dem::WallContact c = dem::wall_contact(o.walls[k], s);
+      if (c.overlap > 0.5 * size) {
+        std::ostringstream msg;
+        msg << "body " << i << " starts inside wall " << k << " (overlap " << c.overlap << ", size " << size
+            << ")";
+        throw InputError(msg.str());
+      }
+    }
+  }
+}
+
+// ---- the simulation --------------------------------------------------------------------------------
+
+template <class Real>
+struct Simulation<Real>::Impl {
+  DemOptions options;
+  double alpha = 0;
+  dem::StepConstants constants{};
+  Engine<Real> engine;
+  Backend resolved = Backend::cpu;
+  int threads = 1;
+  detail::host::HostDem host;
+  std::unique_ptr<detail::CudaDem> cuda;
+  DemBodies start;  // the bodies as given (shape rows, radii: what the state does not change)
+  std::uint64_t steps = 0;
+  std::size_t contact_count = 0;
+  Contacts<Real> contacts;  // CPU: the last step's; CUDA: downloaded on request
+  bool contacts_downloaded = false;
+  DeviceContactsView<Real> device_contacts{};
+
+  static EngineOptions engine_options(EngineOptions e) {
+    e.history = true;
+    e.fields = Fields::basic;
+    return e;
+  }
+  explicit Impl(const DemOptions& o) : options(o), engine(engine_options(o.engine)) {}
+
+  BodiesView host_view() {
+    BodiesView v{host.position, host.radius, {}, {}};
+    if (!host.shape.empty()) {
+      v.shape = host.shape;
+      v.semi_axes = host.semi_axes;
+      v.orientation = host.orientation;
+    }
+    return v;
+  }
+
+  // The contacts at the current positions and the forces from them (no integration).
+  void forces() {
+    if (resolved == Backend::cuda) {
+      device_contacts = engine.detect_device_resident(detail::cuda_dem_bodies(*cuda));
+      contact_count = device_contacts.count;
+      contacts_downloaded = false;
+      detail::cuda_dem_forces(*cuda, device_contacts, constants);
+      return;
+    }
+    contacts = engine.detect(host_view());
+    contact_count = contacts.size();
+    const dem::ContactRows<Real> rows{contacts.id_a.data(),          contacts.id_b.data(),
+                                      contacts.position_on_a.data(), contacts.position_on_b.data(),
+                                      contacts.normal_on_b.data(),   contacts.distance.data(),
+                                      contacts.previous_row.data(),  contacts.size()};
+    detail::host::dem_contact_forces(host, rows, constants, threads);
+    detail::host::dem_body_forces(host, rows, constants, threads);
+  }
+
+  void step() {
+    const double dt = options.dt;
+    if (resolved == Backend::cuda) {
+      detail::cuda_dem_kick_drift(*cuda, dt);
+      forces();
+      detail::cuda_dem_kick(*cuda, dt);
+    } else {
+      detail::host::dem_kick_drift(host, dt, threads);
+      forces();
+      detail::host::dem_kick(host, dt, threads);
+    }
+    ++steps;
+  }
+};
+
+template <class Real>
+Simulation<Real>::Simulation(const DemBodies& bodies, const DemOptions& options)
+    : m_impl(std::make_unique<Impl>(options)) {
+  Impl& s = *m_impl;
+  check_dem_setup(bodies, options);
+  s.alpha = damping_for_restitution(options.material.restitution);
+  s.constants.law = law_of(options.material, s.alpha);
+  s.constants.gravity = options.gravity;
+  s.constants.walls = options.walls.data();
+  s.constants.wall_count = static_cast<int>(options.walls.size());
+  s.constants.dt = options.dt;
+  s.constants.synchronized = options.synchronized;
+  s.resolved = s.engine.backend();
+  s.threads = options.engine.threads > 0 ? options.engine.threads : omp_get_max_threads();
+  s.start = bodies;
+  const std::size_t n = bodies.size();
+  const bool shapes = bodies.has_ellipsoids();
+  DemBodies& st = s.start;
+  if (st.velocity.empty()) st.velocity.assign(n, {0, 0, 0});
+  if (st.angular_velocity.empty()) st.angular_velocity.assign(n, {0, 0, 0});
+  if (!shapes) {  // the sphere-only path: no shape rows
+    st.shape.clear();
+    st.semi_axes.clear();
+    st.orientation.clear();
+  }
+  const std::vector<dem::BodyProps> props = props_of(st, options.material.density);
+  if (s.resolved == Backend::cuda) {
+    s.cuda = detail::make_cuda_dem(options.engine.device, st, props, options.walls);
+  } else {
+    detail::host::HostDem& h = s.host;
+    h.position = st.position;
+    h.velocity = st.velocity;
+    h.omega = st.angular_velocity;
+    h.radius = st.radius;
+    h.props = props;
+    h.shape = st.shape;
+    h.semi_axes = st.semi_axes;
+    h.orientation = shapes ? st.orientation : std::vector<Quat<double>>(n, Quat<double>{1, 0, 0, 0});
+    h.momentum.resize(n);
+    for (std::size_t i = 0; i < n; ++i)  // L = R I Rᵀ ω
+      if (shapes && st.shape[i] == Shape::ellipsoid) {
+        const Mat3<double> r = rotation_matrix(h.orientation[i]);
+        const Vec3<double> l = mul_transpose(r, h.omega[i]);
+        h.momentum[i] = mul(
+            r, Vec3<double>{props[i].inertia.x * l.x, props[i].inertia.y * l.y, props[i].inertia.z * l.z});
+      } else {
+        h.momentum[i] = props[i].inertia.x * h.omega[i];
+      }
+    h.force.assign(n, {0, 0, 0});
+    h.torque.assign(n, {0, 0, 0});
+  }
+  s.forces();  // the forces of the start: the first half kick's
+}
+
+template <class Real>
+Simulation<Real>::~Simulation() = default;
+template <class Real>
+Simulation<Real>::Simulation(Simulation&&) noexcept = default;
+template <class Real>
+Simulation<Real>& Simulation<Real>::operator=(Simulation&&) noexcept = default;
+
+template <class Real>
+void Simulation<Real>::run(std::uint64_t steps) {
+  for (std::uint64_t k = 0; k < steps; ++k) {
+    try {
+      m_impl->step();
+    } catch (const InputError& e) {  // a body's state stopped being finite: say when
+      throw InputError(std::string(e.what()) + " (at step " + std::to_string(m_impl->steps + 1) + ")");
+    }
+  }
+}
+
+template <class Real>
+std::uint64_t Simulation<Real>::steps() const {
+  return m_impl->steps;
+}
+template <class Real>
+double Simulation<Real>::time() const {
+  return double(m_impl->steps) * m_impl->options.dt;
+}
+template <class Real>
+std::size_t Simulation<Real>::contact_count() const {
+  return m_impl->contact_count;
+}
+template <class Real>
+const EngineStats& Simulation<Real>::engine_stats() const {
+  return m_impl->engine.stats();
+}
+template <class Real>
+const StageTimes& Simulation<Real>::engine_times() const {
+  return m_impl->engine.times();
+}
+template <class Real>
+Backend Simulation<Real>::backend() const {
+  return m_impl->resolved;
+}
+template <class Real>
+double Simulation<Real>::alpha() const {
+  return m_impl->alpha;
+}
+
+template <class Real>
+DemBodies Simulation<Real>::bodies() {
+  Impl& s = *m_impl;
+  DemBodies out = s.start;
+  if (s.resolved == Backend::cuda) {
+    detail::cuda_dem_download(*s.cuda, out);
+    return out;
+  }
+  out.position = s.host.position;
+  out.velocity = s.host.velocity;
+  out.angular_velocity = s.host.omega;
+  if (!out.shape.empty()) out.orientation = s.host.orientation;
+  return out;
+}
+
+template <class Real>
+const Contacts<Real>& Simulation<Real>::contacts() {
+  Impl& s = *m_impl;
+  if (s.resolved == Backend::cuda && !s.contacts_downloaded) {
+    s.contacts = s.engine.download(s.device_contacts);
+    s.contacts_downloaded = true;
+  }
+  return s.contacts;
+}
+
+template <class Real>
+DemEnergies Simulation<Real>::energies() {
+  Impl& s = *m_impl;
+  if (s.resolved == Backend::cuda)
+    return detail::cuda_dem_energies(*s.cuda, s.contact_count, s.options.gravity);
+  return detail::host::dem_energies(s.host, s.contact_count, s.options.gravity, s.threads);
+}
+
+template class Simulation<float>;
+template class Simulation<double>;
+
+}  // namespace cg

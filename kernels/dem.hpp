@@ -1,0 +1,105 @@
+#pragma once
+// Granular dynamics on the engine (contactgrid simulate): spheres and ellipsoids of one material,
+// Hertz–Mindlin contacts with a tangential spring carried by the contact identity, gravity and walls,
+// the synchronised velocity-Verlet step (core/dem_body.hpp), on the CPU or CUDA backend over the same
+// core math (core/dem_step.hpp), CPU = CUDA bit for bit. g++-safe public header.
+//
+// A step: kick_drift (bodies) → detect (the engine, with EngineOptions::history: contacts carry
+// their previous row) → contact_terms (per contact) → order by B + body_terms (per body, sums in a
+// fixed order, walls, gravity) → kick (bodies). On the CUDA backend every array stays on the device
+// (the engine's device-resident contacts); the host sees the state only when it asks (bodies(),
+// contacts(), energies()).
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/dem_contact.hpp"
+#include "core/dem_walls.hpp"
+#include "engine.hpp"
+
+namespace cg {
+
+// Bodies in id order (host): spheres have Shape::sphere (or `shape` empty: all spheres), ellipsoids
+// their semi-axes and orientation; radius: a sphere's radius, an ellipsoid's largest semi-axis.
+// velocity, angular_velocity: world frame (empty: zero). fixed: 1 for a body that does not move (an
+// obstacle; empty: none).
+struct DemBodies {
+  std::vector<Vec3<double>> position, velocity, angular_velocity;
+  std::vector<double> radius;
+  std::vector<Shape> shape;
+  std::vector<Vec3<double>> semi_axes;
+  std::vector<Quat<double>> orientation;
+  std::vector<std::uint8_t> fixed;
+  std::size_t size() const { return position.size(); }
+  bool has_ellipsoids() const;
+};
+
+struct DemOptions {
+  dem::Material material;
+  Vec3<double> gravity{0, 0, 0};
+  std::vector<dem::Wall> walls;
+  double dt = 0;             // > 0 (time_step_limits says what is stable)
+  bool synchronized = true;  // false: plain velocity Verlet (for comparison)
+  EngineOptions engine;      // backend, skin, threads, device (history is set on)
+};
+
+// The time scales of a scene (dt auto and the warning for a given dt): Rayleigh's wave time of the
+// smallest body, T_R = π r √(ρ/G) / (0.1631 ν + 0.8766), and Hertz's contact time of two smallest
+// bodies meeting at `speed` (2.87 (m*²/(R* E*² v))^{1/5}). auto: min(0.2 T_R, t_H / 40).
+struct TimeStepLimits {
+  double rayleigh = 0, hertz = 0, automatic = 0;
+};
+TimeStepLimits time_step_limits(const DemBodies& bodies, const dem::Material& m, double speed);
+
+// The restitution of the force law with damping α (core/dem_contact.hpp: one dimensionless
+// collision integrated numerically), and its inverse (bisection). UsageError when e is outside
+// (0, 1] or below what the damping can reach.
+double restitution_for_damping(double alpha);
+double damping_for_restitution(double restitution);
+
+// Checks a material, a time step and walls (UsageError naming the option) and the bodies (InputError
+// naming the body: non-finite motion, a body inside a wall at the start).
+void check_dem_setup(const DemBodies& bodies, const DemOptions& options);
+
+// Energies of the current state: kinetic (translation + rotation), potential of gravity (−Σ m g·x)
+// and elastic (contacts and walls), each summed in a fixed order (CPU = CUDA).
+struct DemEnergies {
+  double kinetic = 0, gravity = 0, elastic = 0;
+  double potential() const { return gravity + elastic; }
+  double total() const { return kinetic + gravity + elastic; }
+};
+
+template <class Real>
+class Simulation {
+ public:
+  Simulation(const DemBodies& bodies, const DemOptions& options);
+  ~Simulation();
+  Simulation(Simulation&&) noexcept;
+  Simulation& operator=(Simulation&&) noexcept;
+
+  // `steps` steps. InputError naming the body and step when a body's state stops being finite.
+  void run(std::uint64_t steps);
+  std::uint64_t steps() const;  // taken since the start
+  double time() const;          // steps() · dt
+
+  DemBodies bodies();                 // the current state (CUDA: downloaded)
+  const Contacts<Real>& contacts();   // the last step's contacts, with history (CUDA: downloaded)
+  std::size_t contact_count() const;  // of the last step
+  DemEnergies energies();             // of the current state (after the last step's forces)
+  const EngineStats& engine_stats() const;
+  const StageTimes& engine_times() const;
+  Backend backend() const;
+  double alpha() const;  // the damping of the restitution
+
+  struct Impl;
+
+ private:
+  std::unique_ptr<Impl> m_impl;
+};
+
+extern template class Simulation<float>;
+extern template class Simulation<double>;
+
+}  // namespace cg

@@ -1,0 +1,36 @@
+#pragma once
+// Internal interface between the granular dynamics (dem.cpp: setup, the sequence of a step, the
+// engine's calls) and its CUDA backend (cuda/dem_backend.cu; the CPU backend is host/dem_stages.hpp).
+// The CUDA backend keeps every array in DEVICE memory; the engine detects on them through
+// detect_device_resident, and its contacts never leave the device.
+#include <memory>
+
+#include "core/dem_step.hpp"
+#include "dem.hpp"
+
+namespace cg::detail {
+
+class CudaDem;
+// The bodies and their properties uploaded to `device` (-1: current): CudaError without CUDA.
+std::unique_ptr<CudaDem> make_cuda_dem(int device, const DemBodies& bodies,
+                                       const std::vector<dem::BodyProps>& props,
+                                       const std::vector<dem::Wall>& walls);
+void destroy(CudaDem* dem);
+// The bodies as the engine reads them (DEVICE).
+DeviceBodiesView cuda_dem_bodies(CudaDem& dem);
+void cuda_dem_kick_drift(CudaDem& dem, double dt);
+void cuda_dem_kick(CudaDem& dem, double dt);
+// contact_terms then the order by B and body_terms, on the device, over the engine's device contacts
+// (c.walls is replaced by the device copy of the walls).
+template <class Real>
+void cuda_dem_forces(CudaDem& dem, const DeviceContactsView<Real>& contacts, const dem::StepConstants& c);
+DemEnergies cuda_dem_energies(CudaDem& dem, std::size_t contacts, Vec3<double> gravity);
+// The current state into `out` (positions, velocities, spins, orientations; the rest kept).
+void cuda_dem_download(CudaDem& dem, DemBodies& out);
+
+}  // namespace cg::detail
+
+template <>
+struct std::default_delete<cg::detail::CudaDem> {
+  void operator()(cg::detail::CudaDem* p) const { cg::detail::destroy(p); }
+};

@@ -1,0 +1,38 @@
+// The energies of the granular dynamics on the CPU, in the fixed order of core/dem_sum.hpp (chunks,
+// then the chunks in order), so they equal the device's.
+#include <omp.h>
+
+#include "core/dem_sum.hpp"
+#include "host/dem_stages.hpp"
+
+namespace cg::detail::host {
+
+namespace {
+template <class F>
+double fixed_sum(std::size_t n, int threads, F&& value) {
+  const std::size_t chunks = dem::energy_chunks(n);
+  std::vector<double> part(chunks);
+  const std::ptrdiff_t nc = static_cast<std::ptrdiff_t>(chunks);
+#pragma omp parallel for num_threads(threads) schedule(static) if (chunks > 1)
+  for (std::ptrdiff_t c = 0; c < nc; ++c) part[std::size_t(c)] = dem::chunk_sum(std::size_t(c), n, value);
+  double s = 0;
+  for (double p : part) s = s + p;
+  return s;
+}
+}  // namespace
+
+DemEnergies dem_energies(HostDem& s, std::size_t contacts, Vec3<double> gravity, int threads) {
+  const dem::BodyArrays b = s.arrays();
+  DemEnergies e;
+  e.kinetic =
+      fixed_sum(b.count, threads, [&](std::size_t i) { return dem::body_energy(i, b, gravity).kinetic; });
+  e.gravity =
+      fixed_sum(b.count, threads, [&](std::size_t i) { return dem::body_energy(i, b, gravity).gravity; });
+  const double* ce = s.contact_energy.data();
+  const double* we = s.wall_energy.data();
+  e.elastic = fixed_sum(contacts, threads, [ce](std::size_t k) { return ce[k]; }) +
+              fixed_sum(s.wall_energy.size(), threads, [we](std::size_t i) { return we[i]; });
+  return e;
+}
+
+}  // namespace cg::detail::host

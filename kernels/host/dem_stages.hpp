@@ -1,0 +1,54 @@
+#pragma once
+// The CPU backend of the granular dynamics (kernels/dem.hpp): its state in HOST memory and its
+// stages, one file each (dem_integrate.cpp, dem_forces.cpp, dem_sums.cpp, dem_energy.cpp), loops of
+// OpenMP threads over the per-item functions of core/dem_step.hpp — the oracle of the CUDA backend.
+#include <cstdint>
+#include <vector>
+
+#include "core/dem_step.hpp"
+#include "dem.hpp"
+
+namespace cg::detail::host {
+
+struct HostDem {
+  // bodies
+  std::vector<Vec3<double>> position, velocity, omega, momentum, force, torque;
+  std::vector<Quat<double>> orientation;
+  std::vector<dem::BodyProps> props;
+  std::vector<Shape> shape;  // empty: all spheres
+  std::vector<Vec3<double>> semi_axes;
+  std::vector<double> radius;
+  // the contacts' terms (row order) and the springs carried between steps (this step's and the last)
+  std::vector<Vec3<double>> contact_force, torque_a, torque_b;
+  std::vector<double> contact_energy;
+  std::vector<Vec3<double>> xi[2], normal[2];
+  int current = 0;  // xi[current], normal[current]: the last step's
+  // walls: springs (body-major) and energies; the rows' order by B
+  std::vector<Vec3<double>> wall_xi;
+  std::vector<double> wall_energy;
+  std::vector<std::uint32_t> a_begin, b_begin, by_b;
+
+  std::size_t size() const { return position.size(); }
+  dem::BodyArrays arrays();
+  dem::ContactTerms terms();  // this step's (writes the other xi/normal buffer)
+};
+
+// kick_drift / kick of every body (core/dem_body.hpp).
+void dem_kick_drift(HostDem& s, double dt, int threads);
+void dem_kick(HostDem& s, double dt, int threads);
+
+// contact_terms of every row; then the rows' springs are the last step's (current flips).
+template <class Real>
+void dem_contact_forces(HostDem& s, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
+                        int threads);
+
+// The rows' order by B (a stable counting sort) and where each body's rows begin, then body_terms of
+// every body (its force and torque of the step).
+template <class Real>
+void dem_body_forces(HostDem& s, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
+                     int threads);
+
+// The energies, summed in chunks of kEnergyChunk items, then the chunks in order (as the device).
+DemEnergies dem_energies(HostDem& s, std::size_t contacts, Vec3<double> gravity, int threads);
+
+}  // namespace cg::detail::host

@@ -1,0 +1,244 @@
+// contactgrid simulate (simulate.hpp): the scene and its motion in, the run directory out.
+#include "simulate/simulate.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <sstream>
+
+#include "io/scene_file.hpp"
+#include "run/progress.hpp"
+#include "session.hpp"
+#include "simulate/run_output.hpp"
+#include "simulate/simulate_plot.hpp"
+
+namespace cg {
+
+namespace {
+
+// The scene's bodies in id order (spheres, then ellipsoids) with their motion.
+DemBodies bodies_of(const Scene& s) {
+  DemBodies b;
+  const std::size_t n = s.sphere_count(), e = s.ellipsoid_count();
+  const bool shapes = e > 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    b.position.push_back(s.sphere_position[i]);
+    b.radius.push_back(s.sphere_radius[i]);
+    b.velocity.push_back(s.sphere_velocity.empty() ? Vec3<double>{0, 0, 0} : s.sphere_velocity[i]);
+    b.angular_velocity.push_back(s.sphere_angular_velocity.empty() ? Vec3<double>{0, 0, 0}
+                                                                   : s.sphere_angular_velocity[i]);
+    if (shapes) {
+      b.shape.push_back(Shape::sphere);
+      b.semi_axes.push_back({s.sphere_radius[i], s.sphere_radius[i], s.sphere_radius[i]});
+      b.orientation.push_back({1, 0, 0, 0});
+    }
+  }
+  for (std::size_t j = 0; j < e; ++j) {
+    const Vec3<double> a = s.ellipsoid_semi_axes[j];
+    const auto& q = s.ellipsoid_orientation[j];
+    const double len = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    b.position.push_back(s.ellipsoid_position[j]);
+    b.radius.push_back(std::max({a.x, a.y, a.z}));
+    b.velocity.push_back(s.ellipsoid_velocity.empty() ? Vec3<double>{0, 0, 0} : s.ellipsoid_velocity[j]);
+    b.angular_velocity.push_back(s.ellipsoid_angular_velocity.empty() ? Vec3<double>{0, 0, 0}
+                                                                      : s.ellipsoid_angular_velocity[j]);
+    b.shape.push_back(Shape::ellipsoid);
+    b.semi_axes.push_back(a);
+    b.orientation.push_back({q[0] / len, q[1] / len, q[2] / len, q[3] / len});
+  }
+  return b;
+}
+
+// The walls: --walls, else the scene's simulate_walls attribute (generate --kind pour), else none.
+std::vector<dem::Wall> walls_of(const SimulateCommand& cmd, const Scene& scene) {
+  std::vector<std::string> specs = cmd.walls;
+  if (specs.empty()) {
+    if (auto it = scene.attributes.find("simulate_walls"); it != scene.attributes.end()) {
+      if (const auto* text = std::get_if<std::string>(&it->second)) {
+        std::stringstream ss(*text);
+        std::string spec;
+        while (std::getline(ss, spec, ';'))
+          if (!spec.empty()) specs.push_back(spec);
+      }
+    }
+  }
+  std::vector<dem::Wall> walls;
+  for (const std::string& spec : specs)
+    for (const dem::Wall& w : parse_wall(spec)) walls.push_back(w);
+  return walls;
+}
+
+// The largest speed the run should resolve: the bodies' own, or a fall over the scene's height.
+double expected_speed(const DemBodies& b, Vec3<double> g) {
+  double v = 0, lo = 1e300, hi = -1e300;
+  const double gl = std::sqrt(dot(g, g));
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    v = std::max(v, std::sqrt(dot(b.velocity[i], b.velocity[i])));
+    if (gl > 0) {
+      const double h = -dot(b.position[i], g) / gl;
+      lo = std::min(lo, h - b.radius[i]);
+      hi = std::max(hi, h + b.radius[i]);
+    }
+  }
+  if (gl > 0 && hi > lo) v = std::max(v, std::sqrt(2 * gl * (hi - lo)));
+  return v;
+}
+
+template <class Real>
+int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies& bodies, DemOptions options,
+                const TimeStepLimits& limits) {
+  using clock_type = std::chrono::steady_clock;
+  const std::uint64_t every =
+      cmd.output_every > 0 ? cmd.output_every : std::max<std::uint64_t>(1, cmd.steps / 10);
+  const std::uint64_t log_every = cmd.log_every > 0 ? cmd.log_every : std::max<std::uint64_t>(1, every / 10);
+  Attributes parameters;
+  parameters["source"] = scene.source;
+  parameters["dt"] = options.dt;
+  parameters["young"] = options.material.young;
+  parameters["poisson"] = options.material.poisson;
+  parameters["density"] = options.material.density;
+  parameters["restitution"] = options.material.restitution;
+  parameters["friction"] = options.material.friction;
+  parameters["rolling_friction"] = options.material.rolling_friction;
+  parameters["gravity_x"] = options.gravity.x;
+  parameters["gravity_y"] = options.gravity.y;
+  parameters["gravity_z"] = options.gravity.z;
+  parameters["integrator"] = std::string(options.synchronized ? "synchronized-verlet" : "verlet");
+  parameters["software_version"] = std::string(CONTACTGRID_VERSION);
+  std::string walls;
+  for (const std::string& w : cmd.walls) walls += (walls.empty() ? "" : ";") + w;
+  if (walls.empty())
+    if (auto it = scene.attributes.find("simulate_walls"); it != scene.attributes.end())
+      if (const auto* t = std::get_if<std::string>(&it->second)) walls = *t;
+  parameters["simulate_walls"] = walls;  // a frame continues the run with its walls
+
+  RunOutput out(cmd.output, parameters);
+  try {
+    Simulation<Real> sim(bodies, options);
+    const std::size_t spheres = scene.sphere_count();
+    RunInfo info;
+    info.bodies = bodies.size();
+    info.precision = to_string(precision_of<Real>());
+    info.backend = to_string(sim.backend());
+    info.input = cmd.input;
+    auto write_frame = [&](double seconds_per_step) {
+      out.frame(sim.steps(), sim.time(), sim.bodies(), spheres);
+      if (cmd.write_contacts) {
+        info.cell_size = sim.engine_stats().cell_size;
+        out.contacts(sim.steps(), sim.contacts(), info);
+      }
+      (void)seconds_per_step;
+    };
+    auto log_row = [&](double seconds_per_step) {
+      LogRow row;
+      row.step = sim.steps();
+      row.time = sim.time();
+      row.energy = sim.energies();
+      row.contacts = sim.contact_count();
+      row.rebuilds = sim.engine_stats().candidate_builds;
+      row.seconds_per_step = seconds_per_step;
+      out.log(row);
+    };
+    write_frame(0);
+    log_row(0);
+    Progress progress("simulate", "steps", cmd.steps, !cmd.quiet);
+    const auto t0 = clock_type::now();
+    std::uint64_t done = 0;
+    while (done < cmd.steps) {
+      const std::uint64_t next_log = (done / log_every + 1) * log_every;
+      const std::uint64_t next_frame = (done / every + 1) * every;
+      const std::uint64_t to = std::min({next_log, next_frame, cmd.steps});
+      const auto t1 = clock_type::now();
+      sim.run(to - done);
+      const double per_step =
+          std::chrono::duration<double>(clock_type::now() - t1).count() / double(to - done);
+      done = to;
+      if (done % log_every == 0 || done == cmd.steps) log_row(per_step);
+      if (done % every == 0 || done == cmd.steps) write_frame(per_step);
+      progress.update(done);
+    }
+    progress.finish();
+    out.finish();
+    const double seconds = std::chrono::duration<double>(clock_type::now() - t0).count();
+    if (!cmd.quiet) {
+      fmt::print(
+          "contactgrid simulate: {} bodies, {} steps of {:.4g} s ({:.4g} s simulated) in {:.3f} s: {:.1f} "
+          "steps/s, "
+          "{:.3g} body-steps/s\n",
+          bodies.size(), cmd.steps, options.dt, sim.time(), seconds, double(cmd.steps) / seconds,
+          double(cmd.steps) * double(bodies.size()) / seconds);
+      fmt::print(
+          "  backend {}, precision {}, dt auto would be {:.4g} s (Rayleigh {:.4g} s, Hertz {:.4g} s), skin "
+          "{:.4g}, "
+          "candidate lists built {} / reused {}\n",
+          to_string(sim.backend()), to_string(precision_of<Real>()), limits.automatic, limits.rayleigh,
+          limits.hertz, options.engine.skin, sim.engine_stats().candidate_builds,
+          sim.engine_stats().candidate_reuses);
+      std::string stages;
+      for (const StageTime& t : sim.engine_times())
+        stages += fmt::format(" {} {:.3f}", t.name, t.seconds * 1e3);
+      fmt::print("  last step: {:.2f} contacts/body; its detection (ms):{}\n",
+                 2.0 * double(sim.contact_count()) / double(std::max<std::size_t>(bodies.size(), 1)), stages);
+      fmt::print("  -> {}/ (frame_*.h5, {}run.xdmf, log.csv)\n", cmd.output,
+                 cmd.write_contacts ? "contacts_*.h5, " : "");
+    }
+    if (cmd.plots) {
+      plot_run_log(out.path("log.csv"), out.path("energy"), cmd.quiet);
+      plot_final_state(sim.bodies(), out.path("final"), cmd.quiet);
+    }
+  } catch (const std::exception& e) {
+    out.fail(e.what());
+    throw;
+  }
+  return 0;
+}
+
+}  // namespace
+
+int run_simulate(const SimulateCommand& cmd, Session& session) {
+  if (session.size() > 1)
+    throw UsageError("simulate runs on one rank for now (start it without mpirun, or with -np 1)");
+  if (cmd.precision == Precision::mixed) throw UsageError("simulate: --precision is fp32 or fp64");
+  const Scene scene = read_scene(cmd.input);
+  DemBodies bodies = bodies_of(scene);
+  DemOptions options;
+  options.material = cmd.material;
+  options.gravity = cmd.gravity;
+  options.walls = walls_of(cmd, scene);
+  options.synchronized = cmd.synchronized;
+  options.engine.backend = cmd.backend;
+  options.engine.threads = cmd.threads;
+  double r_min = 1e300;
+  for (std::size_t i = 0; i < bodies.size(); ++i)
+    r_min = std::min(r_min,
+                     bodies.shape.empty() || bodies.shape[i] == Shape::sphere
+                         ? bodies.radius[i]
+                         : std::min({bodies.semi_axes[i].x, bodies.semi_axes[i].y, bodies.semi_axes[i].z}));
+  // skin auto: a tenth of the smallest radius (the engine rebuilds when the motion passes half of it)
+  options.engine.skin = cmd.skin ? *cmd.skin : 0.1 * r_min;
+  const TimeStepLimits limits = time_step_limits(bodies, cmd.material, expected_speed(bodies, cmd.gravity));
+  if (cmd.dt) {
+    options.dt = *cmd.dt;
+    if (*cmd.dt > limits.rayleigh)
+      throw UsageError(
+          fmt::format("--dt {} exceeds the Rayleigh time {:.4g} s of the smallest body: refused (auto "
+                      "would take {:.4g} s)",
+                      *cmd.dt, limits.rayleigh, limits.automatic));
+    if (*cmd.dt > 2 * limits.automatic)
+      fmt::print(stderr,
+                 "contactgrid simulate: warning: --dt {} is more than twice what auto takes ({:.4g} s: 0.2 x "
+                 "Rayleigh "
+                 "{:.4g} s, Hertz contact time {:.4g} s / 40); contacts may be under-resolved\n",
+                 *cmd.dt, limits.automatic, limits.rayleigh, limits.hertz);
+  } else {
+    options.dt = limits.automatic;
+  }
+  check_dem_setup(bodies, options);
+  if (cmd.precision == Precision::fp32) return simulate_as<float>(cmd, scene, bodies, options, limits);
+  return simulate_as<double>(cmd, scene, bodies, options, limits);
+}
+
+}  // namespace cg

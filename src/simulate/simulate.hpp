@@ -1,0 +1,49 @@
+#pragma once
+// contactgrid simulate: granular dynamics of a scene file on the engine (kernels/dem.hpp), one rank,
+// written to a run directory (CONTRACT §6: run_output.hpp).
+//
+//   read scene (with §5 motion) → walls, material, time step (auto: time_step_limits) → Simulation
+//   → every --output-every steps a frame (and contacts), every --log-every a log row → complete
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "dem.hpp"
+#include "engine.hpp"
+
+namespace cg {
+
+class Session;
+
+struct SimulateCommand {
+  std::string input, output;  // scene file, run directory
+  std::uint64_t steps = 1000;
+  std::optional<double> dt;                       // absent: auto
+  std::uint64_t output_every = 0, log_every = 0;  // 0: steps / 10 frames, 10 log rows per frame
+  Vec3<double> gravity{0, 0, -9.81};
+  std::vector<std::string> walls;  // --walls specs (parse_wall)
+  dem::Material material;
+  bool write_contacts = false;
+  Backend backend = Backend::automatic;
+  Precision precision = Precision::fp64;
+  std::optional<double> skin;  // absent: auto
+  int threads = 0;
+  bool synchronized = true;
+  bool quiet = false;
+  bool plots = true;  // gnuplot PNG/SVG of the log at the end, when gnuplot is present
+};
+
+// One --walls spec into walls (UsageError naming it):
+//   plane:PX,PY,PZ,NX,NY,NZ            a plane through P, normal N (into the domain; normalised)
+//   box:X0,Y0,Z0,X1,Y1,Z1              the six faces of an axis-aligned box, inside
+//   open-box:X0,Y0,Z0,X1,Y1,Z1         its four sides only (x and y): open top and bottom
+//   cylinder:CX,CY,R                   the inside of a vertical cylinder of radius R, axis (CX, CY)
+//   orifice:CX,CY,Z,H                  a horizontal plate at height Z with a hole of radius H at (CX, CY)
+//   hopper:CX,CY,R,Z,H                 cylinder + orifice: a cylinder of radius R on a plate at Z with a
+//                                      central hole of radius H
+std::vector<dem::Wall> parse_wall(const std::string& spec);
+
+int run_simulate(const SimulateCommand& cmd, Session& session);
+
+}  // namespace cg

@@ -1,0 +1,413 @@
+// Granular dynamics (kernels/dem.hpp) against analytic solutions, on the CPU (the CUDA backend is
+// compared with it bit for bit at the end; skipped, visibly, without a GPU):
+//   - the damping of a restitution: the dimensionless collision gives back the restitution asked for;
+//   - a sphere dropped on a wall rebounds with the set restitution (0.3, 0.7, 0.9) within 1 %;
+//   - two equal spheres head on (elastic): Hertz's contact duration and largest overlap within 2 %;
+//   - restitution 1, no friction, no gravity, bodies in a closed box: total energy drifts < 0.1 % over
+//     10^4 steps (1000 spheres, scaled down from "a few thousand" to keep CI short; 150 spinning
+//     ellipsoids);
+//   - an oblique impact on a wall: in gross sliding (incidence above the (7/2) μ (1 + e) limit) the
+//     rebound's tangential velocity and spin are Walton's, v_t − μ(1+e)v_n and 5μ(1+e)v_n/(2R), within
+//     2 % (Chung & Ooi 2011, test 6: aluminium oxide, R = 2.55 mm, 3.9 m/s); below that limit (the
+//     contact sticks for part of the impact, where the published curves depend on the tangential
+//     model) only what holds for any model: the tangential impulse within Coulomb's bound and no
+//     energy gained;
+//   - static friction at size ratios 3 and 10: a sphere held between two fixed spheres against gravity
+//     hangs still, sunk and turned by what the two tangential springs need;
+//   - a single ellipsoid on a plane settles on its longest axis (its shortest semi-axis vertical).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "dem.hpp"
+#include "support/contacts_equal.hpp"
+
+namespace cg::test {
+namespace {
+
+using dem::Material;
+using dem::Wall;
+using dem::WallKind;
+
+Wall plane(Vec3<double> point, Vec3<double> normal) {
+  Wall w;
+  w.kind = WallKind::plane;
+  w.point = point;
+  w.normal = normal;
+  return w;
+}
+
+DemBodies one_sphere(Vec3<double> p, double r, Vec3<double> v, Vec3<double> w = {0, 0, 0}) {
+  DemBodies b;
+  b.position = {p};
+  b.radius = {r};
+  b.velocity = {v};
+  b.angular_velocity = {w};
+  return b;
+}
+
+DemOptions cpu_options(const Material& m, double dt) {
+  DemOptions o;
+  o.material = m;
+  o.dt = dt;
+  o.engine.backend = Backend::cpu;
+  o.engine.threads = 2;
+  return o;
+}
+
+TEST(DemDamping, RestitutionRoundTrip) {
+  EXPECT_EQ(damping_for_restitution(1.0), 0.0);
+  EXPECT_NEAR(restitution_for_damping(0.0), 1.0, 1e-6);
+  double last = 1;
+  for (double e : {0.95, 0.9, 0.7, 0.5, 0.3, 0.1}) {
+    const double a = damping_for_restitution(e);
+    EXPECT_GT(a, 0);
+    EXPECT_NEAR(restitution_for_damping(a), e, 1e-7) << "e " << e;
+    EXPECT_LT(restitution_for_damping(a), last) << "more damping, less restitution";
+    last = restitution_for_damping(a);
+  }
+  EXPECT_THROW(damping_for_restitution(0), UsageError);
+  EXPECT_THROW(damping_for_restitution(1.5), UsageError);
+}
+
+// The rebound velocity of a sphere that meets the floor at 1 m/s (no gravity: the velocities before
+// and after the contact are the collision's own).
+double rebound(double e, bool synchronized) {
+  Material m;
+  m.young = 1e8;
+  m.restitution = e;
+  m.friction = 0.3;
+  const double r = 0.01;
+  DemBodies b = one_sphere({0, 0, r + 0.0005}, r, {0, 0, -1});
+  const double dt = time_step_limits(b, m, 1.0).automatic;
+  DemOptions o = cpu_options(m, dt);
+  o.synchronized = synchronized;
+  o.walls = {plane({0, 0, 0}, {0, 0, 1})};
+  Simulation<double> s(b, o);
+  double vz = -1;
+  for (int step = 0; step < 20000; ++step) {
+    s.run(1);
+    const DemBodies now = s.bodies();
+    vz = now.velocity[0].z;
+    if (vz > 0 && now.position[0].z > r + 1e-6) break;  // left the floor
+  }
+  return vz;
+}
+
+TEST(DemPhysics, SphereReboundsWithTheRestitution) {
+  for (double e : {0.3, 0.7, 0.9}) {
+    const double v = rebound(e, true);
+    EXPECT_NEAR(v / e, 1.0, 0.01) << "restitution " << e << ": rebound " << v << " m/s";
+  }
+}
+
+// Two equal spheres head on, elastic: Hertz's largest overlap δ = (5 m* v² / (4 K))^{2/5} and duration
+// 2.94328 δ / v (v the approach speed, K = 4/3 E* √R*), within 2 %; the contact's start and end are
+// interpolated between steps.
+TEST(DemPhysics, HertzHeadOnDurationAndOverlap) {
+  Material m;
+  m.young = 5e7;
+  m.poisson = 0.25;
+  m.density = 2000;
+  m.restitution = 1;
+  m.friction = 0;
+  const double r = 0.02, v = 0.5;  // each at v/2
+  DemBodies b;
+  b.position = {{-r - 1e-4, 0, 0}, {r + 1e-4, 0, 0}};
+  b.radius = {r, r};
+  b.velocity = {{v / 2, 0, 0}, {-v / 2, 0, 0}};
+  const double e_star = m.young / (2 * (1 - m.poisson * m.poisson));
+  const double mass = m.density * 4.0 / 3.0 * dem::kPi * r * r * r;
+  const double m_star = mass / 2, r_star = r / 2, k = 4.0 / 3.0 * e_star * std::sqrt(r_star);
+  const double delta_max = std::pow(5 * m_star * v * v / (4 * k), 0.4);
+  const double duration = 2.94328 * delta_max / v;
+  const double dt = duration / 400;
+  Simulation<double> s(b, cpu_options(m, dt));
+  double prev_gap = 2e-4, start = -1, end = -1, deepest = 0;
+  for (int step = 1; step < 4000 && end < 0; ++step) {
+    s.run(1);
+    const DemBodies now = s.bodies();
+    const double gap = (now.position[1].x - now.position[0].x) - 2 * r;
+    const double t = step * dt;
+    if (start < 0 && gap < 0) start = t - dt * gap / (gap - prev_gap);  // where the gap crossed 0
+    if (start >= 0 && gap > 0) end = t - dt * gap / (gap - prev_gap);
+    deepest = std::max(deepest, -gap);
+    prev_gap = gap;
+  }
+  ASSERT_GT(start, 0);
+  ASSERT_GT(end, start);
+  EXPECT_NEAR((end - start) / duration, 1.0, 0.02) << "contact duration " << end - start << " s";
+  EXPECT_NEAR(deepest / delta_max, 1.0, 0.02) << "largest overlap " << deepest;
+}
+
+// Elastic, frictionless bodies in a closed box, no gravity: the total energy (kinetic, with rotation,
+// + elastic) drifts by less than 0.1 % over 10^4 steps. Spheres (1000) or ellipsoids (150, semi-axes
+// r, 0.6 r, 0.4 r, spinning: their contacts exchange rotation and translation).
+void elastic_gas(bool ellipsoids) {
+  Material m;
+  m.young = 1e7;
+  m.density = 1000;
+  m.restitution = 1;
+  m.friction = 0;
+  std::mt19937_64 rng(ellipsoids ? 4402 : 4401);
+  std::uniform_real_distribution<double> u(0, 1);
+  const int n = ellipsoids ? 150 : 1000;
+  const double r = 0.01, box = ellipsoids ? 0.14 : 0.4;  // volume fraction ≈ 0.23 · 0.24 / 6.5 %
+  DemBodies b;
+  for (int i = 0; i < n; ++i) {
+    Vec3<double> p;
+    bool ok = false;
+    while (!ok) {
+      p = {r + (box - 2 * r) * u(rng), r + (box - 2 * r) * u(rng), r + (box - 2 * r) * u(rng)};
+      ok = true;
+      for (const auto& q : b.position)
+        if (dot(p - q, p - q) < 4.4 * r * r) ok = false;
+    }
+    b.position.push_back(p);
+    b.radius.push_back(r);
+    b.velocity.push_back({u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5});
+    if (ellipsoids) {
+      b.angular_velocity.push_back({20 * (u(rng) - 0.5), 20 * (u(rng) - 0.5), 20 * (u(rng) - 0.5)});
+      b.shape.push_back(Shape::ellipsoid);
+      b.semi_axes.push_back({r, 0.6 * r, 0.4 * r});
+      Quat<double> q{u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5};
+      const double len = std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
+      b.orientation.push_back({q.w / len, q.x / len, q.y / len, q.z / len});
+    }
+  }
+  DemOptions o = cpu_options(m, time_step_limits(b, m, 1.0).automatic);
+  o.walls = {plane({0, 0, 0}, {1, 0, 0}),    plane({box, 0, 0}, {-1, 0, 0}), plane({0, 0, 0}, {0, 1, 0}),
+             plane({0, box, 0}, {0, -1, 0}), plane({0, 0, 0}, {0, 0, 1}),    plane({0, 0, box}, {0, 0, -1})};
+  o.engine.skin = 0.1 * r;
+  Simulation<double> s(b, o);
+  const double e0 = s.energies().total();
+  double worst = 0;
+  std::size_t touching = 0;
+  for (int chunk = 0; chunk < 100; ++chunk) {
+    s.run(100);
+    worst = std::max(worst, std::abs(s.energies().total() - e0) / e0);
+    touching += s.contact_count();
+  }
+  EXPECT_LT(worst, 1e-3) << "largest relative drift of the total energy";
+  EXPECT_GT(touching, 100u) << "the bodies collide";
+  EXPECT_GT(s.engine_stats().candidate_reuses, 1000u) << "the skin keeps most candidate lists";
+}
+
+TEST(DemPhysics, ElasticGasConservesEnergy) { elastic_gas(false); }
+TEST(DemPhysics, ElasticEllipsoidGasConservesEnergy) { elastic_gas(true); }
+
+// Oblique impact on a wall (Chung & Ooi 2011, test 6): aluminium oxide sphere, 3.9 m/s.
+struct Impact {
+  double vt, vn, spin;
+};
+Impact oblique(double degrees) {
+  Material m;
+  m.young = 3.8e11;
+  m.poisson = 0.23;
+  m.density = 4000;
+  m.restitution = 0.98;
+  m.friction = 0.092;
+  const double r = 0.00255, speed = 3.9, a = degrees * dem::kPi / 180;
+  DemBodies b = one_sphere({0, 0, r + 1e-5}, r, {speed * std::sin(a), 0, -speed * std::cos(a)});
+  DemOptions o = cpu_options(m, time_step_limits(b, m, speed).automatic / 2);
+  o.walls = {plane({0, 0, 0}, {0, 0, 1})};
+  Simulation<double> s(b, o);
+  for (int step = 0; step < 100000; ++step) {
+    s.run(1);
+    const DemBodies now = s.bodies();
+    if (now.velocity[0].z > 0 && now.position[0].z > r + 1e-7)
+      return {now.velocity[0].x, now.velocity[0].z, now.angular_velocity[0].y};
+  }
+  return {0, 0, 0};
+}
+
+TEST(DemPhysics, ObliqueImpactFollowsWaltonInGrossSliding) {
+  const double mu = 0.092, e = 0.98, r = 0.00255, speed = 3.9;
+  for (double degrees : {60.0, 80.0}) {
+    const double a = degrees * dem::kPi / 180;
+    const double vt = speed * std::sin(a), vn = speed * std::cos(a);
+    const Impact got = oblique(degrees);
+    EXPECT_NEAR(got.vn / (e * vn), 1.0, 0.02) << degrees << "°: normal rebound";
+    const double want_vt = vt - mu * (1 + e) * vn, want_spin = 2.5 * mu * (1 + e) * vn / r;
+    EXPECT_NEAR(got.vt / want_vt, 1.0, 0.02) << degrees << "°: tangential rebound " << got.vt;
+    EXPECT_NEAR(got.spin / want_spin, 1.0, 0.02) << degrees << "°: spin " << got.spin;
+  }
+  for (double degrees : {5.0, 20.0}) {  // below the gross-sliding limit (32.5°)
+    const double a = degrees * dem::kPi / 180;
+    const double vt = speed * std::sin(a), vn = speed * std::cos(a);
+    const Impact got = oblique(degrees);
+    EXPECT_LE(vt - got.vt, 1.0001 * mu * (1 + e) * vn)
+        << degrees << "°: the tangential impulse is within Coulomb's";
+    const double inertia = 0.4 * r * r;  // per unit mass
+    const double before = vt * vt + vn * vn,
+                 after = got.vt * got.vt + got.vn * got.vn + inertia * got.spin * got.spin;
+    EXPECT_LT(after, before) << degrees << "°: no energy gained";
+    EXPECT_GT(got.spin, 0.0) << degrees << "°: friction spins it forward";
+  }
+}
+
+// A sphere (radius 1) held by friction between two fixed spheres of radii 3 and 10 on either side,
+// against gravity: it settles still, its tangential forces each carry half its weight (torques
+// balance), so it sinks by s = (ξ₁ + ξ₂)/2 and turns by φ = (ξ₁ − ξ₂)/(2r), ξᵢ = m g / (2 kᵢ) with
+// Mindlin's kᵢ = 8 G* √(R*ᵢ δᵢ) (its turn: the integral of its spin).
+struct Hanging {
+  double sink, want_sink, turn, want_turn, speed;
+};
+Hanging hanging_sphere(bool synchronized) {
+  Material m;
+  m.young = 1e8;  // the normal force μ N is 7× the half weight each contact carries
+  m.poisson = 0.3;
+  m.density = 1000;
+  m.restitution = 0.5;
+  m.friction = 0.8;
+  const double r = 1, r1 = 3, r2 = 10, d1 = 0.02;
+  // the right overlap that balances the left's normal force: K₁ δ₁^{3/2} = K₂ δ₂^{3/2}, K ∝ √R*
+  const double rs1 = r * r1 / (r + r1), rs2 = r * r2 / (r + r2);
+  const double d2 = d1 * std::pow(std::sqrt(rs1 / rs2), 2.0 / 3.0);
+  DemBodies b;
+  b.position = {{0, 0, 0}, {-(r + r1 - d1), 0, 0}, {r + r2 - d2, 0, 0}};
+  b.radius = {r, r1, r2};
+  b.fixed = {0, 1, 1};
+  const double g = 9.81;
+  DemOptions o = cpu_options(m, time_step_limits(b, m, 1.0).automatic);
+  o.synchronized = synchronized;
+  o.gravity = {0, 0, -g};
+  Simulation<double> s(b, o);
+  Hanging h{};
+  for (int step = 0; step < 20000; ++step) {
+    s.run(1);
+    h.turn += s.bodies().angular_velocity[0].y * o.dt;
+  }
+  const DemBodies now = s.bodies();
+  const double mass = m.density * 4.0 / 3.0 * dem::kPi * r * r * r;
+  const double g_star = m.young / (4 * (2 - m.poisson) * (1 + m.poisson));
+  const double k1 = 8 * g_star * std::sqrt(rs1 * d1), k2 = 8 * g_star * std::sqrt(rs2 * d2);
+  const double xi1 = mass * g / (2 * k1), xi2 = mass * g / (2 * k2);
+  h.sink = -now.position[0].z;
+  h.want_sink = 0.5 * (xi1 + xi2);
+  h.want_turn = 0.5 * (xi1 - xi2) / r;
+  h.speed = std::sqrt(dot(now.velocity[0], now.velocity[0]));
+  return h;
+}
+
+TEST(DemPhysics, StaticFrictionHoldsAtSizeRatiosThreeAndTen) {
+  const Hanging h = hanging_sphere(true);
+  EXPECT_NEAR(h.sink / h.want_sink, 1.0, 0.02) << "sink " << h.sink << " want " << h.want_sink;
+  EXPECT_NEAR(std::abs(h.turn) / std::abs(h.want_turn), 1.0, 0.05)
+      << "turn " << h.turn << " want " << h.want_turn;
+  EXPECT_LT(h.speed, 1e-3 * h.want_sink) << "it hangs still";
+}
+
+// A single ellipsoid (semi-axes 2, 1, 0.5) dropped tilted on a floor comes to rest lying on its
+// longest axis: its shortest axis vertical, its centre 0.5 above the floor (less the contact's
+// overlap). Rolling friction stops its spin about the vertical (a point contact has no other).
+TEST(DemPhysics, EllipsoidSettlesOnItsLongestAxis) {
+  Material m;
+  m.young = 1e8;
+  m.density = 1000;
+  m.restitution = 0.3;
+  m.friction = 0.5;
+  m.rolling_friction = 0.1;
+  DemBodies b;
+  b.position = {{0, 0, 2.5}};
+  b.radius = {2};
+  b.shape = {Shape::ellipsoid};
+  b.semi_axes = {{2, 1, 0.5}};
+  const double c = std::cos(0.6), s = std::sin(0.6);  // tilted about an axis in the floor's plane
+  b.orientation = {{c, s * 0.6, s * 0.8, 0}};
+  DemOptions o = cpu_options(m, time_step_limits(b, m, 7.0).automatic);
+  o.gravity = {0, 0, -9.81};
+  o.walls = {plane({0, 0, 0}, {0, 0, 1})};
+  Simulation<double> sim(b, o);
+  const double steps_per_second = 1 / o.dt;
+  sim.run(static_cast<std::uint64_t>(10 * steps_per_second));
+  const DemBodies now = sim.bodies();
+  const Vec3<double> shortest = column(rotation_matrix(now.orientation[0]), 2);
+  EXPECT_GT(std::abs(shortest.z), 0.999) << "the shortest axis is vertical";
+  EXPECT_NEAR(now.position[0].z, 0.5, 0.01) << "resting on its flat side";
+  EXPECT_LT(std::sqrt(dot(now.velocity[0], now.velocity[0])), 1e-3) << "at rest";
+}
+
+}  // namespace
+}  // namespace cg::test
+
+namespace cg::test {
+namespace {
+
+// CPU = CUDA bit for bit: a pour of spheres and ellipsoids in a box with friction, rolling friction
+// and gravity, both precisions; every body's state and every contact (with its history) after each
+// block of steps. Skipped, visibly, without a GPU.
+template <class Real>
+void cpu_equals_cuda(bool ellipsoids) {
+  std::mt19937_64 rng(ellipsoids ? 4411 : 4412);
+  std::uniform_real_distribution<double> u(0, 1);
+  DemBodies b;
+  const int side = 8;
+  for (int i = 0; i < side * side * 12; ++i) {
+    const double r = 0.4 + 0.1 * u(rng);
+    b.position.push_back(
+        {1.1 * (i % side) + 0.6, 1.1 * ((i / side) % side) + 0.6, 1.1 * (i / (side * side)) + 0.6});
+    b.radius.push_back(r);
+    b.velocity.push_back({u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5});
+    if (ellipsoids) {
+      const bool ell = i % 3 != 0;
+      b.shape.push_back(ell ? Shape::ellipsoid : Shape::sphere);
+      b.semi_axes.push_back(ell ? Vec3<double>{r, 0.6 * r, 0.35 * r} : Vec3<double>{r, r, r});
+      const double c = std::cos(0.3 * i), s = std::sin(0.3 * i);
+      b.orientation.push_back(ell ? Quat<double>{c, s * 0.6, 0, s * 0.8} : Quat<double>{1, 0, 0, 0});
+    }
+  }
+  Material m;
+  m.young = 1e7;
+  m.restitution = 0.6;
+  m.friction = 0.4;
+  m.rolling_friction = 0.02;
+  DemOptions o;
+  o.material = m;
+  o.dt = time_step_limits(b, m, 5.0).automatic;
+  o.gravity = {0, 0, -9.81};
+  o.walls = {plane({0, 0, 0}, {0, 0, 1}), plane({0, 0, 0}, {1, 0, 0}), plane({9, 0, 0}, {-1, 0, 0}),
+             plane({0, 0, 0}, {0, 1, 0}), plane({0, 9, 0}, {0, -1, 0})};
+  o.engine.skin = 0.05;
+  DemOptions oc = o, og = o;
+  oc.engine.backend = Backend::cpu;
+  og.engine.backend = Backend::cuda;
+  Simulation<Real> cpu(b, oc), gpu(b, og);
+  for (int block = 0; block < 6; ++block) {
+    cpu.run(50);
+    gpu.run(50);
+    const std::string at =
+        std::string(ellipsoids ? "ellipsoids" : "spheres") + " step " + std::to_string(cpu.steps());
+    const DemBodies x = cpu.bodies(), y = gpu.bodies();
+    ASSERT_EQ(std::memcmp(x.position.data(), y.position.data(), x.size() * sizeof(Vec3<double>)), 0) << at;
+    ASSERT_EQ(std::memcmp(x.velocity.data(), y.velocity.data(), x.size() * sizeof(Vec3<double>)), 0) << at;
+    ASSERT_EQ(
+        std::memcmp(x.angular_velocity.data(), y.angular_velocity.data(), x.size() * sizeof(Vec3<double>)), 0)
+        << at;
+    if (ellipsoids) {
+      ASSERT_EQ(std::memcmp(x.orientation.data(), y.orientation.data(), x.size() * sizeof(Quat<double>)), 0)
+          << at;
+    }
+    ASSERT_EQ(compare_contacts(gpu.contacts(), cpu.contacts()), "identical") << at;
+    const DemEnergies ec = cpu.energies(), eg = gpu.energies();
+    EXPECT_EQ(ec.kinetic, eg.kinetic) << at;
+    EXPECT_EQ(ec.elastic, eg.elastic) << at;
+    EXPECT_EQ(ec.gravity, eg.gravity) << at;
+    EXPECT_GT(cpu.contact_count(), 100u) << at;
+  }
+}
+
+TEST(DemBackends, CpuEqualsCudaBitForBit) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  cpu_equals_cuda<double>(false);
+  cpu_equals_cuda<float>(false);
+  cpu_equals_cuda<double>(true);
+  cpu_equals_cuda<float>(true);
+}
+
+}  // namespace
+}  // namespace cg::test
