@@ -537,7 +537,7 @@ void narrow_stage(RunState<Real, Key, Narrow>& r) {
                                             r.filter == CandidateFilter::centre_cut});
     else
       narrow_compact(r, SphereDecide<Narrow>{bodies});
-    r.events.mark(Stage::narrow, r.st);
+    r.events.mark(EngineStage::narrow, r.st);
     return;
   }
   r.n_rows = r.np;
@@ -553,7 +553,7 @@ void narrow_stage(RunState<Real, Key, Narrow>& r) {
     CG_CUDA_CHECK(
         cudaMemcpyAsync(r.h_counters, r.d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, r.st));
   }
-  r.events.mark(Stage::narrow, r.st);
+  r.events.mark(EngineStage::narrow, r.st);
 }
 
 }  // namespace cg::detail

@@ -90,7 +90,7 @@ void order_stage(RunState<Real, Key, Narrow>& r) {
     cuda::sort_runs_kernel<<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), np);
     CG_CUDA_CHECK_LAUNCH("sort_runs");
   }
-  r.events.mark(Stage::order, st);
+  r.events.mark(EngineStage::order, st);
 }
 
 }  // namespace cg::detail

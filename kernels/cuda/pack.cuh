@@ -241,7 +241,7 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
     CG_CUDA_CHECK_LAUNCH("pack");
   }
   if (spheres_only) {
-    r.events.mark(Stage::pack, st);
+    r.events.mark(EngineStage::pack, st);
     return;
   }
   if (renumber)
@@ -260,7 +260,7 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   else
     reorder(cuda::reorder_kernel<Real, Key, Narrow, false>, home_index.Current(), cuda::PackInput<Narrow>{});
   CG_CUDA_CHECK_LAUNCH("reorder");
-  r.events.mark(Stage::pack, st);
+  r.events.mark(EngineStage::pack, st);
 }
 
 // The scan of the block totals (timed with the entries stage) and the host's read of the entries

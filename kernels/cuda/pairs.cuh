@@ -323,7 +323,7 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
     launch_fill_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.pair_perm(), r.d_report,
                       r.g.half_bits, d_pair_count, d_entry_offsets, r.pair_a.Current(), r.pair_b.Current());
   }
-  r.events.mark(Stage::pairs, st);
+  r.events.mark(EngineStage::pairs, st);
 }
 
 }  // namespace cg::detail

@@ -57,7 +57,7 @@ void upload_stage(RunState<Real, Key, Narrow>& r) {
     upload(ws.report.data(), r.job.bodies.report.data(), n64);
     r.d_report = reinterpret_cast<const std::uint8_t*>(ws.report.data());
   }
-  r.events.mark(Stage::upload, r.st);
+  r.events.mark(EngineStage::upload, r.st);
   if (!locked.empty()) {
     CG_CUDA_CHECK(cudaStreamSynchronize(r.st));  // the copies read the locked ranges until here
     for (void* p : locked) CG_CUDA_CHECK(cudaHostUnregister(p));
@@ -122,7 +122,7 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
       for (std::size_t f = 0; f < fields.size(); ++f)
         CG_CUDA_CHECK(
             cudaMemcpyAsync(fields[f].first, fields[f].second, sizes[f], cudaMemcpyDeviceToHost, st));
-      r.events.mark(Stage::download, st);
+      r.events.mark(EngineStage::download, st);
       CG_CUDA_CHECK(cudaStreamSynchronize(st));
       ht.overlap_s = std::chrono::duration<double>(t1 - t0).count();  // registering, before the copy
     } else {
@@ -135,7 +135,7 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
   if (!registered) {
     h_staging.reserve(std::max<std::size_t>(at, 1));
     if (at > 0) CG_CUDA_CHECK(cudaMemcpyAsync(h_staging.data(), o, at, cudaMemcpyDeviceToHost, st));
-    r.events.mark(Stage::download, st);
+    r.events.mark(EngineStage::download, st);
     // The result vectors are sized (no fill: HostVector) while the transfer runs.
     const auto t0 = clock_type::now();
     out.resize(np, full);

@@ -17,11 +17,10 @@
 #include <random>
 #include <utility>
 
-#include "validate/bullet_oracle.hpp"
 #include "errors.hpp"
 #include "io/contact_file.hpp"
-#include "io/inspect.hpp"
 #include "io/scene_file.hpp"
+#include "validate/bullet_oracle.hpp"
 #include "validate/validate_detail.hpp"
 
 namespace cg {
