@@ -128,8 +128,8 @@ struct ValidateReport {
 // have inconsistent lengths, UsageError for bad options, IoError when float Bullet cannot be run.
 ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, const ValidateOptions& options);
 
-// read_scene + read_contacts (src/io/scene_file.hpp, src/io/contact_file.hpp), then validate(); contacts_precision is taken from the
-// contact file's `precision` attribute.
+// read_scene + read_contacts (src/io/scene_file.hpp, src/io/contact_file.hpp), then validate();
+// contacts_precision is taken from the contact file's `precision` attribute.
 ValidateReport validate_files(const std::string& scene_path, const std::string& contacts_path,
                               ValidateOptions options);
 
