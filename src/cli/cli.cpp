@@ -76,7 +76,7 @@ int run_cli(int argc, char** argv, Session& session) {
   std::string gen_out;
   bool gen_quiet = false;
   std::vector<double> offset;
-  auto* g = app.add_subcommand("generate", "Make a seeded, reproducible scene (CONTRACT §1 HDF5)");
+  auto* g = app.add_subcommand("generate", "Make a seeded, reproducible scene (docs/FORMAT.md §1 HDF5)");
   g->add_option("output", gen_out, "Scene file to write (.h5)")->required();
   g->add_option(
        "--kind", gen.kind,
@@ -113,7 +113,8 @@ int run_cli(int argc, char** argv, Session& session) {
 
   // detect
   DetectCommand det;
-  auto* d = app.add_subcommand("detect", "Every contact of a scene (CONTRACT §2/§3), sorted by (id_a, id_b)");
+  auto* d =
+      app.add_subcommand("detect", "Every contact of a scene (docs/FORMAT.md §2/§3), sorted by (id_a, id_b)");
   d->add_option("scene", det.input, "Scene file (.h5)")
       ->required();  // existence is checked by the reader (exit 3, names the file)
   d->add_option("-o,--output", det.output, "Contacts file to write (.h5)")->required();
@@ -135,7 +136,7 @@ int run_cli(int argc, char** argv, Session& session) {
        "auto | fp32 | fp64 | mixed: auto (default) picks the cheapest mode whose documented bounds meet "
        "--accuracy for this scene (default accuracy: fp64's, so fp64's answers); fp32 and fp64 run every "
        "stage and write their real type; mixed runs the broad phase in fp32 and the narrow phase in fp64 "
-       "from the world coordinates (float64 output, fp64's contacts); README 'Choosing a precision'")
+       "from the world coordinates (float64 output, fp64's contacts); docs/PRECISION.md")
       ->default_str("auto");
   d->add_option_function<std::string>(
       "--accuracy",
@@ -260,7 +261,7 @@ int run_cli(int argc, char** argv, Session& session) {
   std::string val_scene, val_contacts, val_bullet = "auto";
   ValidateOptions val;
   auto* v = app.add_subcommand(
-      "validate", "Compare a contacts file with Bullet 3.24 (CONTRACT §4); PASS exits 0, FAIL 1");
+      "validate", "Compare a contacts file with Bullet 3.24 (docs/FORMAT.md §4); PASS exits 0, FAIL 1");
   v->add_option("scene", val_scene, "Scene file (.h5)")->required();
   v->add_option("contacts", val_contacts, "Contacts file (.h5) written by detect")->required();
   v->add_option("--pos-eps", val.pos_eps,

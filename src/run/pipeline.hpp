@@ -49,9 +49,9 @@
 #include <vector>
 
 #include "engine.hpp"
-#include "scene/generate.hpp"
 #include "precision_choice.hpp"
 #include "resident_steps.hpp"
+#include "scene/generate.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
 
@@ -116,7 +116,7 @@ void check_options(const DistributedOptions& options);
 
 template <class Real>
 struct DistributedResult {
-  // gather: rank 0 holds all contacts in CONTRACT §2 order, the others none. ranks: this rank's
+  // gather: rank 0 holds all contacts in docs/FORMAT.md §2 order, the others none. ranks: this rank's
   // rows [first_row, first_row + contacts.size()) of that order: every contact with id_a in
   // [id_begin, id_end).
   Contacts<Real> contacts;
@@ -159,7 +159,7 @@ struct DetectCommand {
   std::string csv;  // optional text copy
   Backend backend = Backend::automatic;
   std::optional<Precision> precision;  // --precision; empty: auto (the default), chosen by accuracy
-  Accuracy accuracy;                   // --accuracy (auto only; unset: fp64's, README "Choosing a precision")
+  Accuracy accuracy;                   // --accuracy (auto only; unset: fp64's, docs/PRECISION.md)
   Fields fields = Fields::basic;
   double cell_size = 0;                        // 0: chosen by cell_choice
   CellChoice cell_choice = CellChoice::tuned;  // --cell-size auto | min

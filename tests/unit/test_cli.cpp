@@ -1,5 +1,6 @@
 // End-to-end tests of the contactgrid executable: exit codes, messages and the no-partial-output rule.
-// Exit codes (README): 0 ok, 1 validation FAIL, 2 usage, 3 bad input, 4 CUDA, 5 MPI, 6 I/O.
+// Exit codes (docs/USAGE.md): 0 ok, 1 validation FAIL, 2 usage, 3 bad input, 4 CUDA, 5 MPI, 6 I/O,
+// 7 out of memory, 8 internal.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -16,8 +17,8 @@
 #include "io/contact_file.hpp"
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
-#include "run/pipeline.hpp"
 #include "resident_steps.hpp"
+#include "run/pipeline.hpp"
 #include "support/run_cli.hpp"
 #include "temp_dir.hpp"
 
