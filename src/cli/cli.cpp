@@ -66,8 +66,9 @@ Accuracy parse_accuracy(const std::string& text) {
 
 int run_cli(int argc, char** argv, Session& session) {
   CLI::App app{
-      "contactgrid: every touching or overlapping pair of spheres, with Bullet's contact data.\n"
-      "Le Grand's uniform grid on a CPU or CUDA backend; MPI slabs under mpirun."};
+      "contactgrid: every touching or overlapping pair of spheres and ellipsoids, with Bullet's contact\n"
+      "data. Le Grand's uniform grid on a CPU or CUDA backend; MPI slabs under mpirun.\n"
+      "Files and conventions: docs/FORMAT.md; commands and exit codes: docs/USAGE.md."};
   app.require_subcommand(1);
   app.set_version_flag("--version", "contactgrid " CONTACTGRID_VERSION);
 
@@ -117,7 +118,9 @@ int run_cli(int argc, char** argv, Session& session) {
       app.add_subcommand("detect", "Every contact of a scene (docs/FORMAT.md §2/§3), sorted by (id_a, id_b)");
   d->add_option("scene", det.input, "Scene file (.h5)")
       ->required();  // existence is checked by the reader (exit 3, names the file)
-  d->add_option("-o,--output", det.output, "Contacts file to write (.h5)")->required();
+  d->add_option("-o,--output", det.output,
+                "Contacts file to write (.h5); its directory must exist and be writable (checked first)")
+      ->required();
   d->add_option("--backend", det.backend, "cpu | cuda | auto (cuda when a GPU is present)")
       ->transform(CLI::CheckedTransformer(k_backends))
       ->default_str("auto");
@@ -213,7 +216,11 @@ int run_cli(int argc, char** argv, Session& session) {
                 "axis drawn from its id, and the ghosts' orientations refresh through MPI; the last step's "
                 "contacts are then checked against the turned bodies detected from scratch")
       ->needs(steps);
-  d->add_flag("-q,--quiet", det.quiet, "No summary");
+  auto* det_quiet = d->add_flag("-q,--quiet", det.quiet, "No summary");
+  d->add_flag("-v,--verbose", det.verbose,
+              "Also the run's info lines: the merge of the ranks' contacts, with the duplicates removed "
+              "(expected 0; removed duplicates are reported without -v too)")
+      ->excludes(det_quiet);
 
   // compare
   std::string cmp_a, cmp_b;

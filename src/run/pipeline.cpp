@@ -3,11 +3,15 @@
 #include "run/pipeline.hpp"
 
 #include <fmt/format.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <numeric>
@@ -17,20 +21,20 @@
 #include "assemble.hpp"
 #include "collectives.hpp"
 #include "contact_collect.hpp"
-#include "run/contact_file_shared.hpp"
 #include "distribute.hpp"
 #include "halo_exchange.hpp"
 #include "io/contact_file.hpp"
+#include "io/contacts_csv.hpp"
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
-#include "io/contacts_csv.hpp"
 #include "node_threads.hpp"
 #include "precision_choice.hpp"
 #include "routing.hpp"
-#include "session.hpp"
-#include "slab_decomposition.hpp"
+#include "run/contact_file_shared.hpp"
 #include "run/stage_clock.hpp"
 #include "run/summary.hpp"
+#include "session.hpp"
+#include "slab_decomposition.hpp"
 
 namespace cg {
 
@@ -458,7 +462,8 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.axis = cmd.axis;
   o.balance = cmd.balance;
   o.read = cmd.read;
-  if (!cmd.quiet && session.rank() == 0) o.log = [](const std::string& line) { fmt::print("{}\n", line); };
+  if (cmd.verbose && !cmd.quiet && session.rank() == 0)
+    o.log = [](const std::string& line) { fmt::print("{}\n", line); };
   // The design card's shape by default: rank 0 gathers, deduplicates and writes the sorted contacts
   // (--write gather). --write ranks: each rank keeps the contacts of its id_a range and writes them
   // into the one output file. A CSV copy is written by rank 0 alone, so it always gathers.
@@ -571,6 +576,41 @@ template DistributedResult<float> distributed_detect<float>(Session&, const std:
 template DistributedResult<double> distributed_detect<double>(Session&, const std::string&,
                                                               const DistributedOptions&);
 
+namespace {
+
+// The directory `file` goes into exists and this process may create files there, and `file` is not
+// itself a directory; IoError naming `option`, the file and the directory otherwise. Checked before the
+// scene is read, so that a mistyped output path fails at once rather than after the whole run.
+void require_writable_directory(const std::string& option, const std::string& file) {
+  namespace fs = std::filesystem;
+  const fs::path parent = fs::path(file).parent_path();
+  const std::string dir = parent.empty() ? std::string(".") : parent.string();
+  std::error_code ec;
+  const fs::file_status status = fs::status(dir, ec);
+  auto fail = [&](const std::string& why) {
+    throw IoError(fmt::format("{} {}: cannot write into the directory {}: {}", option, file, dir, why));
+  };
+  if (status.type() == fs::file_type::none) fail(ec.message());  // e.g. a parent not searchable
+  if (!fs::exists(status)) fail("it does not exist");
+  if (!fs::is_directory(status)) fail("it is not a directory");
+  if (::access(dir.c_str(), W_OK | X_OK) != 0) fail(std::strerror(errno));
+  if (fs::is_directory(fs::status(file, ec)))
+    throw IoError(fmt::format("{} {}: is a directory, not a file name", option, file));
+}
+
+// Every rank that writes checks its files' directories: rank 0 the output file and the CSV copy,
+// with --write ranks every rank the output file (each writes its rows into it).
+void check_output_directories(const Session& session, const DetectCommand& cmd,
+                              const DistributedOptions& options) {
+  agreed_stage(session, "output", [&] {
+    if (session.rank() == 0 || options.output == ContactOutput::ranks)
+      require_writable_directory("-o", cmd.output);
+    if (session.rank() == 0 && !cmd.csv.empty()) require_writable_directory("--csv", cmd.csv);
+  });
+}
+
+}  // namespace
+
 // read → (--precision auto: choose the mode) → the run in that mode → write → summary
 int run_detect(const DetectCommand& cmd, Session& session) {
   if (cmd.output.empty()) throw UsageError("detect: -o/--output is required");
@@ -578,6 +618,7 @@ int run_detect(const DetectCommand& cmd, Session& session) {
     throw UsageError(std::string("--accuracy: only with --precision auto (the default), not --precision ") +
                      to_string(*cmd.precision));
   DistributedOptions options = run_options(cmd, session);
+  check_output_directories(session, cmd, options);
   const int threads = host_threads(options.engine.threads, session);
   const DefaultTeam team(threads);
   ReadScene in = or_abort(session, [&] { return read_scene(session, cmd.input, options); });

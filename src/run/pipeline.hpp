@@ -174,11 +174,13 @@ struct DetectCommand {
   double skin = 0;  // EngineOptions::skin: candidates kept across the resident steps
   double spin = 0;  // StepMotion::spin: radians per step the ellipsoids turn in the resident steps
   bool quiet = false;
+  bool verbose = false;  // also the info lines of the run (the merge line with its duplicate count)
 };
 
 // Runs one detection over all ranks of `session`; returns the process exit code (0). Rank 0 writes the
 // output file (--write ranks: every rank writes its rows of it); the summary comes from rank 0. Errors are
-// agreed on by all ranks and thrown on every rank.
+// agreed on by all ranks and thrown on every rank. Before the scene is read, every rank that will write
+// checks that its output files' directories exist and are writable (IoError naming the directory).
 int run_detect(const DetectCommand& cmd, Session& session);
 
 // Compares the /contacts datasets of two contact files byte for byte (what `mpirun -np P` must
