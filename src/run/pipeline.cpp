@@ -380,18 +380,104 @@ void record_contacts(CollectedContacts<Real>&& c, DistributedResult<Real>& resul
   result.duplicates_removed = c.duplicates_removed;
 }
 
-// The resident steps from the run's engine input, checked against the run's contacts (count and
-// an order-free hash of the pairs; with a spin, against the turned bodies: resident_steps.hpp).
+// The --spin check: the last step's contacts (count and pair hash, summed over ranks) against a
+// detection from scratch of the turned bodies: each rank detects its run's rows (owned + ghosts)
+// with every orientation computed by the spin's rule from the body's id, never received, so a stale
+// ghost orientation in the steps makes the two differ. Collective; Error on every rank otherwise.
 template <class Real>
-StepStats run_resident_steps(Session& session, Engine<Real>& engine, const SharedFrame& f,
-                             const SlabDecomposition& slabs, const EngineInput& input,
-                             const DistributedResult<Real>& result, const DistributedOptions& options,
-                             int threads) {
+void check_spin(const Session& session, const EngineOptions& engine_options, const Frame& frame,
+                const EngineInput& input, const StepMotion& motion, const StepStats& steps, int threads) {
+  std::uint64_t want = 0, want_hash = 0;
+  agreed_stage(session, "steps", [&] {
+    if (input.owned == 0) return;  // as the run: a rank without owned bodies detects nothing
+    const std::size_t n = input.radius.size();
+    const double angle = motion.spin * steps.steps;
+    HostVector<Quat<double>> q(n);
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::int64_t id = input.implied() ? static_cast<std::int64_t>(i) : input.id[i];
+      q[i] = input.shapes.shape[i] == Shape::ellipsoid
+                 ? spun_orientation(id, input.shapes.orientation[i], angle)
+                 : input.shapes.orientation[i];
+    }
+    EngineOptions options = engine_options;
+    options.skin = 0;
+    BodiesView bodies = input.view();
+    bodies.orientation = q;
+    const Contacts<Real> c = Engine<Real>(options).detect(bodies, frame);
+    want = c.size();
+    for (std::size_t j = 0; j < c.size(); ++j) want_hash += pair_hash(c.id_a[j], c.id_b[j]);
+  });
+  want = session.sum(want);
+  want_hash = session.sum(want_hash);
+  agreed_stage(session, "steps", [&] {
+    if ((steps.contacts != want || steps.hash != want_hash) && session.rank() == 0)
+      throw Error("resident steps: the last step's " + std::to_string(steps.contacts) +
+                  " contacts over the ranks differ from a detection of the turned bodies from scratch (" +
+                  std::to_string(want) + (steps.contacts == want ? ", other pairs" : "") +
+                  "): a stale orientation; internal error");
+  });
+}
+
+// Bodies that do not move: every step's contacts are the run's K, and the last step's pairs hash to
+// the run's (an order-free sum, so a missed pair and a duplicate cannot cancel out in the count).
+template <class Real>
+void check_unmoved(const Session& session, const DistributedResult<Real>& result,
+                   const std::vector<std::uint64_t>& per_step, const StepStats& steps) {
   std::uint64_t hash = 0;
   for (std::size_t k = 0; k < result.contacts.size(); ++k)
     hash += pair_hash(result.contacts.id_a[k], result.contacts.id_b[k]);
-  return resident_steps(session, engine, f.frame, slabs, f.width, input, options.resident_steps,
-                        options.step_motion, result.total_contacts, session.sum(hash), threads);
+  hash = session.sum(hash);
+  agreed_stage(session, "steps", [&] {
+    if (session.rank() != 0) return;
+    for (std::size_t k = 0; k < per_step.size(); ++k)
+      if (per_step[k] != result.total_contacts)
+        throw Error("resident step " + std::to_string(k) + ": " + std::to_string(per_step[k]) +
+                    " contacts over the ranks, the run found " + std::to_string(result.total_contacts) +
+                    ": internal error");
+    if (steps.steps > 0 && steps.hash != hash)
+      throw Error("resident steps: the last step's pairs differ from the run's: internal error");
+  });
+}
+
+// The resident steps from the run's engine input, sequenced as the run is (resident_steps.hpp):
+// the rows laid out once, then per step the motion (the owners turn their ellipsoids: the
+// integrator's part, before the step's clock), interior detection, ghost refresh, boundary
+// detection, collection. Then the checks (check_spin, check_unmoved).
+template <class Real>
+StepStats run_steps(Session& session, Engine<Real>& engine, const SharedFrame& f,
+                    const SlabDecomposition& slabs, const EngineInput& input,
+                    const DistributedResult<Real>& result, const DistributedOptions& options, int threads) {
+  const StepMotion& motion = options.step_motion;
+  StepStats st;
+  std::vector<std::uint64_t> per_step;
+  {
+    StepLoop<Real> loop(session, engine, f.frame, slabs, f.width, motion, threads);
+    StepBodies bodies;
+    agreed_stage(session, "steps", [&] {
+      bodies = owned_bodies(input, threads);
+      attach_file_poses(bodies, threads);
+    });
+    loop.lay_out(std::move(bodies));
+    for (int step = 1; step <= options.resident_steps; ++step) {
+      bool turned = false;
+      agreed_stage(session, "steps", [&] { turned = move_bodies(loop.bodies(), motion, step, threads); });
+      loop.commit(false, turned);
+      loop.detect_interior();
+      loop.refresh_ghosts();
+      loop.detect_boundary();
+      loop.collect();
+    }
+    st = loop.stats();
+    per_step = loop.contacts_per_step();
+    st.hash = loop.pair_hash_sum();
+    if (!per_step.empty()) st.contacts = per_step.back();
+  }  // engine B's memory is free for check_spin's engine
+  if (st.turned)
+    check_spin<Real>(session, engine.options(), f.frame, input, motion, st, threads);
+  else
+    check_unmoved(session, result, per_step, st);
+  return st;
 }
 
 // The stages frame … collect after the read stage (read_scene), with their times (max over ranks)
@@ -443,7 +529,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   record_contacts(std::move(c), result);
 
   if (options.resident_steps > 0)
-    result.steps = run_resident_steps(session, *engine, f, slabs, held.input, result, options, threads);
+    result.steps = run_steps(session, *engine, f, slabs, held.input, result, options, threads);
   result.times = clock.times(session, transfer);
   return result;
 }
