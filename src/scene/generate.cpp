@@ -26,8 +26,6 @@
 #include <vector>
 
 #include "errors.hpp"
-#include "io/contact_file.hpp"
-#include "io/inspect.hpp"
 #include "io/scene_file.hpp"
 
 namespace cg {

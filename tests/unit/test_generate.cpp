@@ -15,10 +15,9 @@
 #include <utility>
 #include <vector>
 
-#include "scene/generate.hpp"
-#include "io/contact_file.hpp"
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
+#include "scene/generate.hpp"
 #include "temp_dir.hpp"
 
 namespace {
