@@ -8,6 +8,7 @@
 #include <iostream>
 #include <map>
 
+#include "io/xdmf.hpp"
 #include "run/pipeline.hpp"
 #if defined(CONTACTGRID_HAVE_BULLET)
 #include "bench/bench.hpp"
@@ -110,6 +111,8 @@ int run_cli(int argc, char** argv, Session& session) {
       ->capture_default_str();
   g->add_option("--offset", offset, "Translate the scene by (x, y, z)")->expected(3);
   g->add_flag("-q,--quiet", gen_quiet, "No summary");
+  bool gen_xdmf = false;
+  g->add_flag("--xdmf", gen_xdmf, "Also write XDMF beside the scene for ParaView (<scene>.spheres.xmf, ...)");
 
   // detect
   DetectCommand det;
@@ -213,6 +216,10 @@ int run_cli(int argc, char** argv, Session& session) {
                 "contacts are then checked against the turned bodies detected from scratch")
       ->needs(steps);
   d->add_flag("-q,--quiet", det.quiet, "No summary");
+  bool det_xdmf = false;
+  d->add_flag("--xdmf", det_xdmf,
+              "Also write XDMF beside the contacts for ParaView: <output>.xmf (contacts) and the bodies' "
+              "<output>.spheres.xmf, <output>.ellipsoids.xmf");
 
   // compare
   std::string cmp_a, cmp_b;
@@ -350,9 +357,15 @@ int run_cli(int argc, char** argv, Session& session) {
         throw UsageError("--max-aspect applies to --kind ellipsoids or mixed");
       gen.radius_low = gen.radius_high / gen_max_aspect;
     }
-    return run_generate(gen_out, gen, gen_quiet);
+    const int code = run_generate(gen_out, gen, gen_quiet);
+    if (gen_xdmf) write_xdmf(gen_out, "", xdmf_base(gen_out));
+    return code;
   }
-  if (d->parsed()) return run_detect(det, session);
+  if (d->parsed()) {
+    const int code = run_detect(det, session);
+    if (det_xdmf && session.rank() == 0) write_xdmf(det.input, det.output, xdmf_base(det.output));
+    return code;
+  }
   if (c->parsed()) return session.rank() == 0 ? run_compare(cmp_a, cmp_b) : 0;
   if (st->parsed()) {
     if (session.rank() != 0) return 0;
