@@ -408,6 +408,7 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
     times[4 * k + 2] = t_boundary;
     times[4 * k + 3] = seconds_since(s0);
     found[k] = found_a + found_b;
+    if (motion.on_step) motion.on_step(static_cast<int>(k + 1));
     for (const StageTime& t : engine.times())
       for (std::size_t j = 0; j < n_stages; ++j)
         if (t.name == engine_stage_names()[j]) stage_times[k * n_stages + j] = t.seconds;

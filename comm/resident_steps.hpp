@@ -33,6 +33,7 @@
 // detects its file-run rows (owned + ghosts) with every orientation computed by the rule from the
 // body's id, never received, so a stale ghost orientation in B makes the two differ.
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -54,6 +55,8 @@ struct StepMotion {
   // Off only to show that the check catches stale ghosts (tests): B's shape rows keep the first
   // exchange's, as if the steps refreshed positions and radii alone.
   bool refresh_shapes = true;
+  // Called on every rank after each step with the number of steps done (a progress line; empty: none).
+  std::function<void(int)> on_step;
 };
 
 // Per step the maximum over ranks, then the median over the steps.

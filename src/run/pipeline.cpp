@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <fstream>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <optional>
 
@@ -17,20 +18,21 @@
 #include "assemble.hpp"
 #include "collectives.hpp"
 #include "contact_collect.hpp"
-#include "run/contact_file_shared.hpp"
 #include "distribute.hpp"
 #include "halo_exchange.hpp"
 #include "io/contact_file.hpp"
+#include "io/contacts_csv.hpp"
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
-#include "io/contacts_csv.hpp"
 #include "node_threads.hpp"
 #include "precision_choice.hpp"
 #include "routing.hpp"
-#include "session.hpp"
-#include "slab_decomposition.hpp"
+#include "run/contact_file_shared.hpp"
+#include "run/progress.hpp"
 #include "run/stage_clock.hpp"
 #include "run/summary.hpp"
+#include "session.hpp"
+#include "slab_decomposition.hpp"
 
 namespace cg {
 
@@ -465,6 +467,14 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.output = cmd.csv.empty() ? cmd.write : ContactOutput::gather;
   o.resident_steps = cmd.steps;
   o.step_motion.spin = cmd.spin;
+  if (cmd.steps > 0) {  // a progress line on rank 0's terminal (run/progress.hpp)
+    auto bar = std::make_shared<Progress>("detect: resident steps", "steps", std::uint64_t(cmd.steps),
+                                          !cmd.quiet && session.rank() == 0);
+    o.step_motion.on_step = [bar, steps = cmd.steps](int done) {
+      bar->update(std::uint64_t(done));
+      if (done == steps) bar->finish();
+    };
+  }
   return o;
 }
 
