@@ -546,6 +546,20 @@ DeviceContactsView<Real> Engine<Real>::detect_device_resident(const DeviceBodies
   return view;
 }
 
+template <class Real>
+Bounds Engine<Real>::device_bounds(const DeviceBodiesView& bodies, std::size_t* ellipsoids) {
+  Impl& s = *m_impl;
+  if (s.resolved != Backend::cuda) throw UsageError("device_bounds needs the CUDA backend");
+  if (bodies.count > 0 && (!bodies.position || !bodies.radius))
+    throw UsageError("device_bounds: null position or radius pointer");
+  if (bodies.count > 0 && bodies.shape && (!bodies.semi_axes || !bodies.orientation))
+    throw UsageError("device_bounds: shape kinds without semi-axes or orientation pointers");
+  std::size_t count = 0;
+  const Bounds b = detail::device_bounds(*s.cuda, bodies, count);
+  if (ellipsoids) *ellipsoids = count;
+  return b;
+}
+
 template class Engine<float>;
 template class Engine<double>;
 

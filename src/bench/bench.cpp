@@ -24,6 +24,7 @@
 
 #include "errors.hpp"
 #include "io/scene_file.hpp"
+#include "run/progress.hpp"
 #include "scene/generate.hpp"
 #include "stage.hpp"
 #include "timing.hpp"
@@ -357,6 +358,7 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
                                    : fmt::format("{}, aspect <= 1:{:g}, ", to_string(o.kind), o.max_aspect),
       o.lo, hi, o.kind == BenchKind::spheres ? "double" : "float, exact ellipsoid support", o.bullet_hi,
       to_string(o.precision), o.engine_hi, o.repetitions, o.seed);
+  Progress bar("bench", "sizes", std::uint64_t(std::max(0, hi - o.lo + 1)));
   for (int e = o.lo; e <= hi; ++e) {
     BenchRow row;
     row.n = std::uint64_t(1) << e;
@@ -386,10 +388,13 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
     }
     judge_agreement(row, o.kind);
     result.rows.push_back(row);
+    bar.finish();
     out << fmt::format("  N = 2^{}: done", e);
     if (row.bullet_scratch_s >= 0) out << fmt::format(" (Bullet {:.3g} s)", row.bullet_scratch_s);
     out << '\n' << std::flush;
+    bar.add(1);
   }
+  bar.finish();
 
   // Slopes over N >= 2^14.
   auto series = [&](auto get) {

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "cli/commands.hpp"
+#include "io/xdmf.hpp"
 #include "run/pipeline.hpp"
 #if defined(CONTACTGRID_HAVE_BULLET)
 #include "bench/bench.hpp"
@@ -83,6 +84,7 @@ Subcommand add_generate(CLI::App& app) {
     GenerateOptions options;
     std::string output;
     bool quiet = false;
+    bool xdmf = false;
     std::vector<double> offset;
     double ratio = 10;
     double max_aspect = 0;
@@ -121,6 +123,7 @@ Subcommand add_generate(CLI::App& app) {
       ->capture_default_str();
   g->add_option("--offset", args->offset, "Translate the scene by (x, y, z)")->expected(3);
   g->add_flag("-q,--quiet", args->quiet, "No summary");
+  g->add_flag("--xdmf", args->xdmf, "Also write XDMF beside the scene for ParaView (<scene>.spheres.xmf, ...)");
 
   return {g, [args, rlow_opt, aspect_opt](Session& session) {
             if (session.rank() != 0) return 0;  // one writer
@@ -134,7 +137,9 @@ Subcommand add_generate(CLI::App& app) {
                 throw UsageError("--max-aspect applies to --kind ellipsoids or mixed");
               gen.radius_low = gen.radius_high / args->max_aspect;
             }
-            return run_generate(args->output, gen, args->quiet);
+            const int code = run_generate(args->output, gen, args->quiet);
+            if (args->xdmf) write_xdmf(args->output, "", xdmf_base(args->output));
+            return code;
           }};
 }
 
@@ -248,8 +253,15 @@ Subcommand add_detect(CLI::App& app) {
               "Also the run's info lines: the merge of the ranks' contacts, with the duplicates removed "
               "(expected 0; removed duplicates are reported without -v too)")
       ->excludes(det_quiet);
+  d->add_flag("--xdmf", det.xdmf,
+              "Also write XDMF beside the contacts for ParaView: <output>.xmf (contacts) and the bodies' "
+              "<output>.spheres.xmf, <output>.ellipsoids.xmf");
 
-  return {d, [args](Session& session) { return run_detect(*args, session); }};
+  return {d, [args](Session& session) {
+            const int code = run_detect(*args, session);
+            if (args->xdmf && session.rank() == 0) write_xdmf(args->input, args->output, xdmf_base(args->output));
+            return code;
+          }};
 }
 
 // compare: are two contact files' /contacts byte-identical (rank 0)?

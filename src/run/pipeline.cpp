@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <optional>
 
@@ -25,11 +26,13 @@
 #include "halo_exchange.hpp"
 #include "io/contact_file.hpp"
 #include "io/contacts_csv.hpp"
+#include "io/inspect.hpp"
 #include "io/scene_file.hpp"
 #include "node_threads.hpp"
 #include "precision_choice.hpp"
 #include "routing.hpp"
 #include "run/contact_file_shared.hpp"
+#include "run/progress.hpp"
 #include "run/stage_clock.hpp"
 #include "run/summary.hpp"
 #include "session.hpp"
@@ -448,6 +451,7 @@ StepStats run_steps(Session& session, Engine<Real>& engine, const SharedFrame& f
       loop.refresh_ghosts();
       loop.detect_boundary();
       loop.collect();
+      if (motion.on_step) motion.on_step(step);
     }
     st = loop.stats();
     per_step = loop.contacts_per_step();
@@ -537,6 +541,14 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.output = cmd.csv.empty() ? cmd.write : ContactOutput::gather;
   o.resident_steps = cmd.steps;
   o.step_motion.spin = cmd.spin;
+  if (cmd.steps > 0) {  // a progress line on rank 0's terminal (run/progress.hpp)
+    auto bar = std::make_shared<Progress>("detect: resident steps", "steps", std::uint64_t(cmd.steps),
+                                          !cmd.quiet && session.rank() == 0);
+    o.step_motion.on_step = [bar, steps = cmd.steps](int done) {
+      bar->update(std::uint64_t(done));
+      if (done == steps) bar->finish();
+    };
+  }
   return o;
 }
 

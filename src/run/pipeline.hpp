@@ -32,6 +32,7 @@ struct DetectCommand {
   double skin = 0;  // EngineOptions::skin: candidates kept across the resident steps
   double spin = 0;  // StepMotion::spin: radians per step the ellipsoids turn in the resident steps
   bool quiet = false;
+  bool xdmf = false;     // --xdmf: ParaView files beside the output (src/cli, io/xdmf)
   bool verbose = false;  // also the info lines of the run (the merge line with its duplicate count)
 };
 
