@@ -17,20 +17,22 @@
 #include "assemble.hpp"
 #include "collectives.hpp"
 #include "contact_collect.hpp"
-#include "run/contact_file_shared.hpp"
 #include "distribute.hpp"
 #include "halo_exchange.hpp"
 #include "io/contact_file.hpp"
+#include "io/contacts_csv.hpp"
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
-#include "io/contacts_csv.hpp"
 #include "node_threads.hpp"
 #include "precision_choice.hpp"
 #include "routing.hpp"
+#include "run/contact_file_shared.hpp"
+#include "run/stage_clock.hpp"
+#include "run/stop.hpp"
+#include "run/summary.hpp"
+#include "run/test_fault.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
-#include "run/stage_clock.hpp"
-#include "run/summary.hpp"
 
 namespace cg {
 
@@ -154,6 +156,7 @@ ReadScene read_scene(const Session& session, const std::string& path, const Dist
   in.all_rows = ranks == 1 || options.read == SceneRead::all_rows ||
                 (options.read == SceneRead::automatic && session.local_size() == ranks);
   in.part = read_partition(session, path, in.all_rows);
+  fault_point("read", session.rank());
   in.global = allgather_bounds(session, in.part.bounds);
   in.seconds = seconds_since(t0);
   return in;
@@ -414,7 +417,9 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   result.cell_size = f.frame.cell_size;
   result.axis = f.axis;
 
+  stop_point();
   clock.start();
+  fault_point("exchange", session.rank());
   const SlabDecomposition slabs = make_slabs(session, part, f, options);
   HeldBodies held = distribute(session, std::move(part), slabs, f, all_rows, threads);
   clock.stop(Stage::redistribute);
@@ -424,7 +429,9 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   exchange_ghosts(session, held, slabs, f, all_rows, threads);
   clock.stop(Stage::halo);
 
+  stop_point();
   clock.start();
+  fault_point("detect", session.rank());
   Contacts<Real> local =
       detect_local(session, *engine, held, f.frame, options.engine.fields == Fields::full, threads);
   clock.stop(Stage::detect);
@@ -432,6 +439,8 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   record_detection(session, *engine, held.input, result);
   if (options.resident_steps == 0) held.input = {};  // else the steps start from it
 
+  stop_point();
+  fault_point("gather", session.rank());
   CollectedContacts<Real> c = collect_contacts(session, std::move(local), result.bodies, options, threads);
   const Stage transfer = options.output == ContactOutput::gather ? Stage::gather : Stage::exchange;
   clock.add(transfer, c.transfer_seconds);
@@ -506,12 +515,13 @@ RunTime write_csv(const Session& session, const std::string& path, const Contact
 }
 
 // A failing MPI call (CommFailure) leaves other ranks possibly waiting in a collective this rank will
-// never join: it ends the job (Session::abort, exit code 5).
+// never join: it ends the job (Session::abort, exit code 5), its registered temporaries removed first.
 template <class F>
 auto or_abort(Session& session, F&& f) -> decltype(f()) {
   try {
     return f();
   } catch (const CommFailure& e) {
+    run_cleanup_actions();
     session.abort(e.exit_code(), e.what());
   }
 }
@@ -548,6 +558,7 @@ int detect(const DetectCommand& cmd, Session& session, const DistributedOptions&
   RunInfo info;
   info.precision = to_string(choice.mode);
   info.precision_choice = choice.reason;
+  stop_point();
   times.push_back(write_output(session, cmd, r, info));
   if (!cmd.csv.empty()) times.push_back(write_csv(session, cmd.csv, r.contacts));
   if (!cmd.quiet && session.rank() == 0) print_summary(info, times, r.total_contacts, r);
