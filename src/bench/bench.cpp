@@ -24,6 +24,7 @@
 
 #include "errors.hpp"
 #include "io/scene_file.hpp"
+#include "io/text_file.hpp"
 #include "run/progress.hpp"
 #include "scene/generate.hpp"
 #include "stage.hpp"
@@ -262,23 +263,9 @@ void print_shape_table(const BenchResult& r, const std::vector<Backend>& backend
 }
 
 void write_csv(const std::string& path, const std::vector<std::string>& lines) {
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  {
-    std::ofstream f(tmp);
-    for (const auto& l : lines) f << l << '\n';
-    f.close();
-    if (!f) {
-      std::error_code ec;
-      fs::remove(tmp, ec);
-      throw IoError("bench: cannot write " + path);
-    }
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) {
-    fs::remove(tmp, ec);
-    throw IoError("bench: cannot write " + path + ": " + ec.message());
-  }
+  std::string text;
+  for (const auto& l : lines) text += l + '\n';
+  write_text_file(path, text);
 }
 
 void print_table(const BenchResult& r, const std::vector<Backend>& backends, std::ostream& out) {

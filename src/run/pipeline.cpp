@@ -34,7 +34,9 @@
 #include "run/contact_file_shared.hpp"
 #include "run/progress.hpp"
 #include "run/stage_clock.hpp"
+#include "run/stop.hpp"
 #include "run/summary.hpp"
+#include "run/test_fault.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
 
@@ -142,6 +144,7 @@ ReadScene read_scene(const Session& session, const std::string& path, const Dist
   in.all_rows = ranks == 1 || options.read == SceneRead::all_rows ||
                 (options.read == SceneRead::automatic && session.local_size() == ranks);
   in.part = read_partition(session, path, in.all_rows);
+  fault_point("read", session.rank());
   in.global = allgather_bounds(session, in.part.bounds);
   in.seconds = seconds_since(t0);
   return in;
@@ -489,7 +492,9 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
   result.cell_size = f.frame.cell_size;
   result.axis = f.axis;
 
+  stop_point();
   clock.start();
+  fault_point("exchange", session.rank());
   const SlabDecomposition slabs = make_slabs(session, part, f, options);
   HeldBodies held = distribute(session, std::move(part), slabs, f, all_rows, threads);
   clock.stop(RunStage::redistribute);
@@ -499,7 +504,9 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
   exchange_ghosts(session, held, slabs, f, all_rows, threads);
   clock.stop(RunStage::halo);
 
+  stop_point();
   clock.start();
+  fault_point("detect", session.rank());
   Contacts<Real> local =
       detect_local(session, *engine, held, f.frame, options.engine.fields == Fields::full, threads);
   clock.stop(RunStage::detect);
@@ -507,6 +514,8 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
   record_detection(session, *engine, held.input, result);
   if (options.resident_steps == 0) held.input = {};  // else the steps start from it
 
+  stop_point();
+  fault_point("gather", session.rank());
   CollectedContacts<Real> c = collect_contacts(session, std::move(local), result.bodies, options, threads);
   const RunStage transfer = options.output == ContactOutput::gather ? RunStage::gather : RunStage::exchange;
   clock.add(transfer, c.transfer_seconds);
@@ -590,12 +599,13 @@ RunTime write_csv(const Session& session, const std::string& path, const Contact
 }
 
 // A failing MPI call (CommFailure) leaves other ranks possibly waiting in a collective this rank will
-// never join: it ends the job (Session::abort, exit code 5).
+// never join: it ends the job (Session::abort, exit code 5), its registered temporaries removed first.
 template <class F>
 auto or_abort(Session& session, F&& f) -> decltype(f()) {
   try {
     return f();
   } catch (const CommFailure& e) {
+    run_cleanup_actions();
     session.abort(e.exit_code(), e.what());
   }
 }
@@ -632,6 +642,7 @@ int run_in_mode(const DetectCommand& cmd, Session& session, const DistributedOpt
   RunInfo info;
   info.precision = to_string(choice.mode);
   info.precision_choice = choice.reason;
+  stop_point();
   times.push_back(write_output(session, cmd, r, info));
   if (!cmd.csv.empty()) times.push_back(write_csv(session, cmd.csv, r.contacts));
   if (!cmd.quiet && session.rank() == 0) print_summary(info, times, r.total_contacts, r);
