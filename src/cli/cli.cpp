@@ -81,11 +81,20 @@ int run_cli(int argc, char** argv, Session& session) {
   g->add_option(
        "--kind", gen.kind,
        "uniform | polydisperse | ellipsoids (semi-axes uniform in [Rlow, Rhigh], random orientations) "
-       "| mixed (spheres then ellipsoids)")
-      ->check(CLI::IsMember({"uniform", "polydisperse", "ellipsoids", "mixed"}))
+       "| mixed (spheres then ellipsoids) | bimodal (radii Rlow and Rhigh, --large-fraction of the volume "
+       "in the large) | intruders (--intruders bodies of Rhigh among grains of Rlow at the uniform "
+       "scene's density)")
+      ->check(CLI::IsMember({"uniform", "polydisperse", "ellipsoids", "mixed", "bimodal", "intruders"}))
       ->capture_default_str();
   g->add_option("--ellipsoid-fraction", gen.ellipsoid_fraction, "mixed: share F of ellipsoids, in [0, 1]")
       ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  g->add_option("--large-fraction", gen.large_fraction,
+                "bimodal: share of the bodies' volume in the large ones (radius Rhigh), in [0, 1]")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  g->add_option("--intruders", gen.intruders, "intruders: how many large bodies (radius Rhigh), 1 … count")
+      ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1) << 28))
       ->capture_default_str();
   g->add_option("-n,--count", gen.count, "Number of bodies, 1 … 2^28")
       ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1) << 28))
@@ -94,7 +103,8 @@ int run_cli(int argc, char** argv, Session& session) {
   double gen_ratio = 10;
   auto* rlow_opt =
       g->add_option("--rlow", gen.radius_low, "Smallest radius Rlow (length units)")->capture_default_str();
-  g->add_option("--ratio", gen_ratio, "polydisperse: Rhigh / Rlow when --rlow is not given (up to 1000)")
+  g->add_option("--ratio", gen_ratio,
+                "polydisperse, bimodal, intruders: Rhigh / Rlow when --rlow is not given (up to 1000)")
       ->check(CLI::Range(1.0, 1000.0))
       ->capture_default_str();
   g->add_option("--rhigh", gen.radius_high, "Largest radius Rhigh (length units)")->capture_default_str();
@@ -344,7 +354,9 @@ int run_cli(int argc, char** argv, Session& session) {
   if (g->parsed()) {
     if (session.rank() != 0) return 0;  // one writer
     if (!offset.empty()) gen.offset = {offset[0], offset[1], offset[2]};
-    if (gen.kind == "polydisperse" && rlow_opt->count() == 0) gen.radius_low = gen.radius_high / gen_ratio;
+    if ((gen.kind == "polydisperse" || gen.kind == "bimodal" || gen.kind == "intruders") &&
+        rlow_opt->count() == 0)
+      gen.radius_low = gen.radius_high / gen_ratio;
     if (aspect_opt->count() > 0) {
       if (gen.kind != "ellipsoids" && gen.kind != "mixed")
         throw UsageError("--max-aspect applies to --kind ellipsoids or mixed");
