@@ -96,11 +96,20 @@ Subcommand add_generate(CLI::App& app) {
   g->add_option(
        "--kind", gen.kind,
        "uniform | polydisperse | ellipsoids (semi-axes uniform in [Rlow, Rhigh], random orientations) "
-       "| mixed (spheres then ellipsoids)")
-      ->check(CLI::IsMember({"uniform", "polydisperse", "ellipsoids", "mixed"}))
+       "| mixed (spheres then ellipsoids) | bimodal (radii Rlow and Rhigh, --large-fraction of the volume "
+       "in the large) | intruders (--intruders bodies of Rhigh among grains of Rlow at the uniform "
+       "scene's density)")
+      ->check(CLI::IsMember({"uniform", "polydisperse", "ellipsoids", "mixed", "bimodal", "intruders"}))
       ->capture_default_str();
   g->add_option("--ellipsoid-fraction", gen.ellipsoid_fraction, "mixed: share F of ellipsoids, in [0, 1]")
       ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  g->add_option("--large-fraction", gen.large_fraction,
+                "bimodal: share of the bodies' volume in the large ones (radius Rhigh), in [0, 1]")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  g->add_option("--intruders", gen.intruders, "intruders: how many large bodies (radius Rhigh), 1 … count")
+      ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1) << 28))
       ->capture_default_str();
   g->add_option("-n,--count", gen.count, "Number of bodies, 1 … 2^28")
       ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1) << 28))
@@ -108,7 +117,8 @@ Subcommand add_generate(CLI::App& app) {
   g->add_option("--seed", gen.seed, "Random seed")->capture_default_str();
   auto* rlow_opt =
       g->add_option("--rlow", gen.radius_low, "Smallest radius Rlow (length units)")->capture_default_str();
-  g->add_option("--ratio", args->ratio, "polydisperse: Rhigh / Rlow when --rlow is not given (up to 1000)")
+  g->add_option("--ratio", args->ratio,
+                "polydisperse, bimodal, intruders: Rhigh / Rlow when --rlow is not given (up to 1000)")
       ->check(CLI::Range(1.0, 1000.0))
       ->capture_default_str();
   g->add_option("--rhigh", gen.radius_high, "Largest radius Rhigh (length units)")->capture_default_str();
@@ -130,7 +140,8 @@ Subcommand add_generate(CLI::App& app) {
             GenerateOptions& gen = args->options;
             const std::vector<double>& offset = args->offset;
             if (!offset.empty()) gen.offset = {offset[0], offset[1], offset[2]};
-            if (gen.kind == "polydisperse" && rlow_opt->count() == 0)
+            if ((gen.kind == "polydisperse" || gen.kind == "bimodal" || gen.kind == "intruders") &&
+                rlow_opt->count() == 0)
               gen.radius_low = gen.radius_high / args->ratio;
             if (aspect_opt->count() > 0) {
               if (gen.kind != "ellipsoids" && gen.kind != "mixed")
