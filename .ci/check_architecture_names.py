@@ -69,6 +69,7 @@ def main():
                 missing.append(f"`{span}`: {m.group(2)} is not in {', '.join(hits)}")
             continue
         for token in re.split(r"[\s,()]+", span):
+            token = token.strip("\"'<>")  # #include "io/scene_file.hpp", <mpi.h>
             if not re.search(r"[A-Za-z0-9_]", token) or token.startswith((".", "-")):
                 continue  # a separator, an extension (`.cu`) or a command-line option
             if is_path(token):

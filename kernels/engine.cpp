@@ -16,6 +16,7 @@
 #include "backend.hpp"
 #include "host_vector.hpp"
 #include "stage.hpp"
+#include "stage_names.hpp"
 #include "timing.hpp"
 
 namespace cg {
@@ -32,6 +33,15 @@ const char* to_string(Backend b) {
   return "?";
 }
 const char* to_string(Fields f) { return f == Fields::full ? "full" : "basic"; }
+
+const std::vector<std::string>& engine_stage_names() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> v;
+    for (int i = 0; i < detail::kStageCount; ++i) v.emplace_back(detail::name(detail::stage_at(i)));
+    return v;
+  }();
+  return names;
+}
 
 namespace detail {
 void parallel_copy(const CopyBlock* blocks, std::size_t count, int threads) {
@@ -534,6 +544,20 @@ DeviceContactsView<Real> Engine<Real>::detect_device_resident(const DeviceBodies
   DeviceContactsView<Real> view;
   detect_on_device<Real>(*m_impl, bodies, frame, unused, &view);
   return view;
+}
+
+template <class Real>
+Bounds Engine<Real>::device_bounds(const DeviceBodiesView& bodies, std::size_t* ellipsoids) {
+  Impl& s = *m_impl;
+  if (s.resolved != Backend::cuda) throw UsageError("device_bounds needs the CUDA backend");
+  if (bodies.count > 0 && (!bodies.position || !bodies.radius))
+    throw UsageError("device_bounds: null position or radius pointer");
+  if (bodies.count > 0 && bodies.shape && (!bodies.semi_axes || !bodies.orientation))
+    throw UsageError("device_bounds: shape kinds without semi-axes or orientation pointers");
+  std::size_t count = 0;
+  const Bounds b = detail::device_bounds(*s.cuda, bodies, count);
+  if (ellipsoids) *ellipsoids = count;
+  return b;
 }
 
 template class Engine<float>;

@@ -39,7 +39,7 @@ double min_cell_size(const Bounds& b, Precision p);
 
 // mixed: what the fp32 broad phase adds to every radius so that its float test keeps every pair that
 // touches in exact arithmetic (and every pair fp64 decides is a contact): 4·ε32·(L + 2·r_max), L the
-// largest |coordinate| of the bodies relative to `origin` (README "Choosing a precision" derives it).
+// largest |coordinate| of the bodies relative to `origin` (docs/PRECISION.md derives it).
 // 0 for fp32 and fp64.
 double broad_margin(const Bounds& b, const Vec3<double>& origin, Precision p);
 

@@ -5,7 +5,7 @@
 
 namespace cg {
 
-// The precision modes (README "Choosing a precision"): fp32 and fp64 run every stage in one real
+// The precision modes (docs/PRECISION.md): fp32 and fp64 run every stage in one real
 // type; mixed runs the broad phase (pack … order) in float and the narrow phase in double from the
 // world coordinates, with float64 output (Engine<double> with EngineOptions::fp32_broad_phase).
 enum class Precision { fp32, fp64, mixed };

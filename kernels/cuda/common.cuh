@@ -32,7 +32,7 @@ constexpr std::uint32_t kPairedCtrlBit = 0x80u;  // the mask's kPairedBit, likew
 #define CG_PAIRS_MIN_BLOCKS 6
 #endif
 // count_pairs: resident blocks per SM asked of ptxas (6: at most 40 registers, 75 % occupancy, a few
-// bytes of spill; the fastest pair stage on the H100, kernels/cuda/BENCH.md).
+// bytes of spill; the fastest pair stage on the H100, BENCHMARKS.md §11).
 constexpr int kPairsMinBlocks = CG_PAIRS_MIN_BLOCKS;
 
 // DEVICE counters of one call; zeroed (cudaMemsetAsync) before the first kernel that adds to them.

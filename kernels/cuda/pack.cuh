@@ -18,7 +18,7 @@ namespace cg::cuda {
 // pass. The pair stage walks the cells in key order, z slowest, so the bodies it reads at any moment
 // lie in a few consecutive layers, a few MiB that stay in L2 (the order within a layer matters
 // little then: a 4x4x4-cell block key with its two-pass sort gains no time overall, BENCHMARKS.md §3,
-// kernels/cuda/BENCH.md). It changes no result:
+// BENCHMARKS.md §11). It changes no result:
 // decisions are symmetric in the two bodies, and pairs are emitted and sorted by their original
 // indices.
 template <class Key>

@@ -19,7 +19,7 @@ enum class Forced { automatic, off, on };
 struct Tuning {
   // CONTACTGRID_CUDA_TYPE_PASSES=1: Le Grand's 8 passes by cell type (opt-in; =0 or unset: the single
   // sort of all entries). About half the device memory a sphere, but slower at every size: 8 compaction
-  // fills and 8 sorts cost more than the radix pass they save (kernels/cuda/BENCH.md).
+  // fills and 8 sorts cost more than the radix pass they save (BENCHMARKS.md §11).
   bool type_passes = false;
   // CONTACTGRID_DEVICE_MEMORY_LIMIT (bytes) caps the engine's workspace: a smaller GPU, or a GPU
   // shared with a simulation, can be imitated (and the out-of-memory path tested).

@@ -24,6 +24,8 @@
 
 #include "errors.hpp"
 #include "io/scene_file.hpp"
+#include "io/text_file.hpp"
+#include "run/progress.hpp"
 #include "scene/generate.hpp"
 #include "stage.hpp"
 #include "timing.hpp"
@@ -261,23 +263,9 @@ void print_shape_table(const BenchResult& r, const std::vector<Backend>& backend
 }
 
 void write_csv(const std::string& path, const std::vector<std::string>& lines) {
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  {
-    std::ofstream f(tmp);
-    for (const auto& l : lines) f << l << '\n';
-    f.close();
-    if (!f) {
-      std::error_code ec;
-      fs::remove(tmp, ec);
-      throw IoError("bench: cannot write " + path);
-    }
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) {
-    fs::remove(tmp, ec);
-    throw IoError("bench: cannot write " + path + ": " + ec.message());
-  }
+  std::string text;
+  for (const auto& l : lines) text += l + '\n';
+  write_text_file(path, text);
 }
 
 void print_table(const BenchResult& r, const std::vector<Backend>& backends, std::ostream& out) {
@@ -357,6 +345,7 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
                                    : fmt::format("{}, aspect <= 1:{:g}, ", to_string(o.kind), o.max_aspect),
       o.lo, hi, o.kind == BenchKind::spheres ? "double" : "float, exact ellipsoid support", o.bullet_hi,
       to_string(o.precision), o.engine_hi, o.repetitions, o.seed);
+  Progress bar("bench", "sizes", std::uint64_t(std::max(0, hi - o.lo + 1)));
   for (int e = o.lo; e <= hi; ++e) {
     BenchRow row;
     row.n = std::uint64_t(1) << e;
@@ -386,10 +375,13 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
     }
     judge_agreement(row, o.kind);
     result.rows.push_back(row);
+    bar.finish();
     out << fmt::format("  N = 2^{}: done", e);
     if (row.bullet_scratch_s >= 0) out << fmt::format(" (Bullet {:.3g} s)", row.bullet_scratch_s);
     out << '\n' << std::flush;
+    bar.add(1);
   }
+  bar.finish();
 
   // Slopes over N >= 2^14.
   auto series = [&](auto get) {

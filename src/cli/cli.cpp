@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "cli/commands.hpp"
+#include "io/xdmf.hpp"
 #include "run/pipeline.hpp"
 #if defined(CONTACTGRID_HAVE_BULLET)
 #include "bench/bench.hpp"
@@ -83,22 +84,32 @@ Subcommand add_generate(CLI::App& app) {
     GenerateOptions options;
     std::string output;
     bool quiet = false;
+    bool xdmf = false;
     std::vector<double> offset;
     double ratio = 10;
     double max_aspect = 0;
   };
   const auto args = std::make_shared<Args>();
   GenerateOptions& gen = args->options;
-  auto* g = app.add_subcommand("generate", "Make a seeded, reproducible scene (CONTRACT §1 HDF5)");
+  auto* g = app.add_subcommand("generate", "Make a seeded, reproducible scene (docs/FORMAT.md §1 HDF5)");
   g->add_option("output", args->output, "Scene file to write (.h5)")->required();
   g->add_option(
        "--kind", gen.kind,
        "uniform | polydisperse | ellipsoids (semi-axes uniform in [Rlow, Rhigh], random orientations) "
-       "| mixed (spheres then ellipsoids)")
-      ->check(CLI::IsMember({"uniform", "polydisperse", "ellipsoids", "mixed"}))
+       "| mixed (spheres then ellipsoids) | bimodal (radii Rlow and Rhigh, --large-fraction of the volume "
+       "in the large) | intruders (--intruders bodies of Rhigh among grains of Rlow at the uniform "
+       "scene's density)")
+      ->check(CLI::IsMember({"uniform", "polydisperse", "ellipsoids", "mixed", "bimodal", "intruders"}))
       ->capture_default_str();
   g->add_option("--ellipsoid-fraction", gen.ellipsoid_fraction, "mixed: share F of ellipsoids, in [0, 1]")
       ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  g->add_option("--large-fraction", gen.large_fraction,
+                "bimodal: share of the bodies' volume in the large ones (radius Rhigh), in [0, 1]")
+      ->check(CLI::Range(0.0, 1.0))
+      ->capture_default_str();
+  g->add_option("--intruders", gen.intruders, "intruders: how many large bodies (radius Rhigh), 1 … count")
+      ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1) << 28))
       ->capture_default_str();
   g->add_option("-n,--count", gen.count, "Number of bodies, 1 … 2^28")
       ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1) << 28))
@@ -106,7 +117,8 @@ Subcommand add_generate(CLI::App& app) {
   g->add_option("--seed", gen.seed, "Random seed")->capture_default_str();
   auto* rlow_opt =
       g->add_option("--rlow", gen.radius_low, "Smallest radius Rlow (length units)")->capture_default_str();
-  g->add_option("--ratio", args->ratio, "polydisperse: Rhigh / Rlow when --rlow is not given (up to 1000)")
+  g->add_option("--ratio", args->ratio,
+                "polydisperse, bimodal, intruders: Rhigh / Rlow when --rlow is not given (up to 1000)")
       ->check(CLI::Range(1.0, 1000.0))
       ->capture_default_str();
   g->add_option("--rhigh", gen.radius_high, "Largest radius Rhigh (length units)")->capture_default_str();
@@ -121,20 +133,25 @@ Subcommand add_generate(CLI::App& app) {
       ->capture_default_str();
   g->add_option("--offset", args->offset, "Translate the scene by (x, y, z)")->expected(3);
   g->add_flag("-q,--quiet", args->quiet, "No summary");
+  g->add_flag("--xdmf", args->xdmf,
+              "Also write XDMF beside the scene for ParaView (<scene>.spheres.xmf, ...)");
 
   return {g, [args, rlow_opt, aspect_opt](Session& session) {
             if (session.rank() != 0) return 0;  // one writer
             GenerateOptions& gen = args->options;
             const std::vector<double>& offset = args->offset;
             if (!offset.empty()) gen.offset = {offset[0], offset[1], offset[2]};
-            if (gen.kind == "polydisperse" && rlow_opt->count() == 0)
+            if ((gen.kind == "polydisperse" || gen.kind == "bimodal" || gen.kind == "intruders") &&
+                rlow_opt->count() == 0)
               gen.radius_low = gen.radius_high / args->ratio;
             if (aspect_opt->count() > 0) {
               if (gen.kind != "ellipsoids" && gen.kind != "mixed")
                 throw UsageError("--max-aspect applies to --kind ellipsoids or mixed");
               gen.radius_low = gen.radius_high / args->max_aspect;
             }
-            return run_generate(args->output, gen, args->quiet);
+            const int code = run_generate(args->output, gen, args->quiet);
+            if (args->xdmf) write_xdmf(args->output, "", xdmf_base(args->output));
+            return code;
           }};
 }
 
@@ -142,10 +159,13 @@ Subcommand add_generate(CLI::App& app) {
 Subcommand add_detect(CLI::App& app) {
   const auto args = std::make_shared<DetectCommand>();
   DetectCommand& det = *args;
-  auto* d = app.add_subcommand("detect", "Every contact of a scene (CONTRACT §2/§3), sorted by (id_a, id_b)");
+  auto* d =
+      app.add_subcommand("detect", "Every contact of a scene (docs/FORMAT.md §2/§3), sorted by (id_a, id_b)");
   d->add_option("scene", det.input, "Scene file (.h5)")
       ->required();  // existence is checked by the reader (exit 3, names the file)
-  d->add_option("-o,--output", det.output, "Contacts file to write (.h5)")->required();
+  d->add_option("-o,--output", det.output,
+                "Contacts file to write (.h5); its directory must exist and be writable (checked first)")
+      ->required();
   d->add_option("--backend", det.backend, "cpu | cuda | auto (cuda when a GPU is present)")
       ->transform(CLI::CheckedTransformer(k_backends))
       ->default_str("auto");
@@ -164,7 +184,7 @@ Subcommand add_detect(CLI::App& app) {
        "auto | fp32 | fp64 | mixed: auto (default) picks the cheapest mode whose documented bounds meet "
        "--accuracy for this scene (default accuracy: fp64's, so fp64's answers); fp32 and fp64 run every "
        "stage and write their real type; mixed runs the broad phase in fp32 and the narrow phase in fp64 "
-       "from the world coordinates (float64 output, fp64's contacts); README 'Choosing a precision'")
+       "from the world coordinates (float64 output, fp64's contacts); docs/PRECISION.md")
       ->default_str("auto");
   d->add_option_function<std::string>(
       "--accuracy",
@@ -241,9 +261,21 @@ Subcommand add_detect(CLI::App& app) {
                 "axis drawn from its id, and the ghosts' orientations refresh through MPI; the last step's "
                 "contacts are then checked against the turned bodies detected from scratch")
       ->needs(steps);
-  d->add_flag("-q,--quiet", det.quiet, "No summary");
+  auto* det_quiet = d->add_flag("-q,--quiet", det.quiet, "No summary");
+  d->add_flag("-v,--verbose", det.verbose,
+              "Also the run's info lines: the merge of the ranks' contacts, with the duplicates removed "
+              "(expected 0; removed duplicates are reported without -v too)")
+      ->excludes(det_quiet);
+  d->add_flag("--xdmf", det.xdmf,
+              "Also write XDMF beside the contacts for ParaView: <output>.xmf (contacts) and the bodies' "
+              "<output>.spheres.xmf, <output>.ellipsoids.xmf");
 
-  return {d, [args](Session& session) { return run_detect(*args, session); }};
+  return {d, [args](Session& session) {
+            const int code = run_detect(*args, session);
+            if (args->xdmf && session.rank() == 0)
+              write_xdmf(args->input, args->output, xdmf_base(args->output));
+            return code;
+          }};
 }
 
 // compare: are two contact files' /contacts byte-identical (rank 0)?
@@ -318,7 +350,7 @@ Subcommand add_validate(CLI::App& app) {
   const auto args = std::make_shared<Args>();
   ValidateOptions& val = args->options;
   auto* v = app.add_subcommand(
-      "validate", "Compare a contacts file with Bullet 3.24 (CONTRACT §4); PASS exits 0, FAIL 1");
+      "validate", "Compare a contacts file with Bullet 3.24 (docs/FORMAT.md §4); PASS exits 0, FAIL 1");
   v->add_option("scene", args->scene, "Scene file (.h5)")->required();
   v->add_option("contacts", args->contacts, "Contacts file (.h5) written by detect")->required();
   v->add_option("--pos-eps", val.pos_eps,
@@ -413,8 +445,9 @@ Subcommand add_bench(CLI::App& app) {
 
 int run_cli(int argc, char** argv, Session& session) {
   CLI::App app{
-      "contactgrid: every touching or overlapping pair of spheres, with Bullet's contact data.\n"
-      "Le Grand's uniform grid on a CPU or CUDA backend; MPI slabs under mpirun."};
+      "contactgrid: every touching or overlapping pair of spheres and ellipsoids, with Bullet's contact\n"
+      "data. Le Grand's uniform grid on a CPU or CUDA backend; MPI slabs under mpirun.\n"
+      "Files and conventions: docs/FORMAT.md; commands and exit codes: docs/USAGE.md."};
   app.require_subcommand(1);
   app.set_version_flag("--version", "contactgrid " CONTACTGRID_VERSION);
   std::vector<Subcommand> commands{add_generate(app), add_detect(app), add_compare(app), add_study(app)};

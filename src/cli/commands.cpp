@@ -40,7 +40,7 @@ int run_compare(const std::string& a, const std::string& b) {
 
 int run_generate(const std::string& path, const GenerateOptions& options, bool quiet) {
   const auto t = WallClock::now();
-  generate_scene_file(path, options);
+  generate_scene_file(path, options, !quiet);
   if (!quiet)
     fmt::print("contactgrid generate: {} {} bodies (seed {}) -> {} in {:.3f} s\n", options.count,
                options.kind, options.seed, path, seconds_since(t));

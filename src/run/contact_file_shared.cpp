@@ -5,11 +5,24 @@
 #include <exception>
 #include <optional>
 
+#include "io/temp_output.hpp"
+#include "run/stop.hpp"
+#include "run/test_fault.hpp"
 #include "timing.hpp"
 
 namespace cg {
 
 namespace {
+
+// A temporary another rank writes, registered for removal should this rank end at once (remove_on_stop),
+// unregistered on leaving.
+struct ForgetOnReturn {
+  explicit ForgetOnReturn(std::string path) : m_path(std::move(path)) { remove_on_stop(m_path); }
+  ~ForgetOnReturn() { forget_on_stop(m_path); }
+  ForgetOnReturn(const ForgetOnReturn&) = delete;
+  ForgetOnReturn& operator=(const ForgetOnReturn&) = delete;
+  std::string m_path;
+};
 
 // Runs `work` where `here` holds, then every rank agrees on the outcome (stage "write").
 template <class F>
@@ -32,6 +45,13 @@ double write_all(Session& session, const std::string& path, const Contacts<Real>
   const bool root = session.rank() == 0;
   constexpr Precision precision = precision_of<Real>();
   const bool full = slice.full;
+
+  // The temporary's name first: every other rank registers it for removal should the job end at once
+  // (a rank killed: the launcher's SIGTERM reaches the others), and the collectives below make sure
+  // that every rank has, before rank 0 creates it (rank 0 registers it in create_contact_file).
+  const std::string temp = session.broadcast(root ? temp_name(path) : std::string());
+  std::optional<ForgetOnReturn> registered;
+  if (!root) registered.emplace(temp);
 
   // The slices tile [0, K): checked before anything is created.
   write_stage(session, true, [&] {
@@ -56,6 +76,7 @@ double write_all(Session& session, const std::string& path, const Contacts<Real>
   try {
     write_stage(session, true, [&] {
       if (!root) layout = ContactFileLayout::from_text(text);
+      fault_point("write", session.rank());
       // (b) every rank its rows
       write_contact_rows(*layout, first_row, slice, threads);
     });
@@ -82,6 +103,7 @@ double write_contacts_distributed(Session& session, const std::string& path, con
     return write_all(session, path, slice, first_row, total_rows, info, threads);
   } catch (const CommFailure& e) {
     // Other ranks may be waiting in a collective this rank will never join.
+    run_cleanup_actions();
     session.abort(e.exit_code(), e.what());
   }
 }

@@ -97,7 +97,7 @@ void check_options(const DistributedOptions& options);
 
 template <class Real>
 struct DistributedResult {
-  // gather: rank 0 holds all contacts in CONTRACT §2 order, the others none. ranks: this rank's
+  // gather: rank 0 holds all contacts in docs/FORMAT.md §2 order, the others none. ranks: this rank's
   // rows [first_row, first_row + contacts.size()) of that order: every contact with id_a in
   // [id_begin, id_end).
   Contacts<Real> contacts;

@@ -17,7 +17,7 @@ struct DetectCommand {
   std::string csv;  // optional text copy
   Backend backend = Backend::automatic;
   std::optional<Precision> precision;  // --precision; empty: auto (the default), chosen by accuracy
-  Accuracy accuracy;                   // --accuracy (auto only; unset: fp64's, README "Choosing a precision")
+  Accuracy accuracy;                   // --accuracy (auto only; unset: fp64's, docs/PRECISION.md)
   Fields fields = Fields::basic;
   double cell_size = 0;                        // 0: chosen by cell_choice
   CellChoice cell_choice = CellChoice::tuned;  // --cell-size auto | min
@@ -32,11 +32,14 @@ struct DetectCommand {
   double skin = 0;  // EngineOptions::skin: candidates kept across the resident steps
   double spin = 0;  // StepMotion::spin: radians per step the ellipsoids turn in the resident steps
   bool quiet = false;
+  bool xdmf = false;     // --xdmf: ParaView files beside the output (src/cli, io/xdmf)
+  bool verbose = false;  // also the info lines of the run (the merge line with its duplicate count)
 };
 
 // Runs one detection over all ranks of `session`; returns the process exit code (0). Rank 0 writes the
 // output file (--write ranks: every rank writes its rows of it); the summary comes from rank 0. Errors are
-// agreed on by all ranks and thrown on every rank.
+// agreed on by all ranks and thrown on every rank. Before the scene is read, every rank that will write
+// checks that its output files' directories exist and are writable (IoError naming the directory).
 int run_detect(const DetectCommand& cmd, Session& session);
 
 }  // namespace cg

@@ -16,6 +16,7 @@
 #include "errors.hpp"
 #include "io/text_file.hpp"
 #include "reference/scene_reference.hpp"
+#include "run/progress.hpp"
 #include "study/study_families.hpp"
 #include "timing.hpp"
 
@@ -226,6 +227,7 @@ std::vector<StudyRow> run_study(const StudyOptions& o, std::ostream& out, std::o
     const auto reference = exact::reference_contacts(bodies, {widest, o.ellipsoid_samples});
     progress << fmt::format("  {} ({} bodies): exact reference {} pairs in {:.2f} s\n", family->name,
                             bodies.size(), reference.size(), seconds_since(t0));
+    Progress bar("study: " + family->name, "runs", points.size() * backends.size());
     for (const Point& p : points)
       for (Backend b : backends) {
         StudyRow row;
@@ -249,13 +251,16 @@ std::vector<StudyRow> run_study(const StudyOptions& o, std::ostream& out, std::o
           row.errors = exact::compare_with_reference(m.found, reference, bodies.radius, p.band);
         } catch (const InputError& e) {
           row.refused = true;
+          bar.finish();
           progress << fmt::format("    {} {}: refused: {}\n", row.mode, row.backend, e.what());
         }
+        bar.finish();
         progress << fmt::format("    {} {}{}: {:.4g} ms, missed {}, extra {}\n", row.mode, row.backend,
                                 p.tolerance < 0 ? "" : " tol " + number(p.tolerance), row.seconds * 1e3,
                                 row.errors.missed, row.errors.extra)
                  << std::flush;
         rows.push_back(std::move(row));
+        bar.add(1);
       }
   }
 
