@@ -14,7 +14,8 @@ case $mode in
     mkdir -p "$dir/lib"
     cp build/kernels/libcontactgrid.a build/src/libcg_io.a build/src/contactgrid "$dir/"
     cp build/kernels/contactgrid_cuda_bench "$dir/" 2>/dev/null || true
-    { ldd build/src/python/contactgrid/_contactgrid*.so; ldd build/src/contactgrid; } | awk '/=>/{print $3}' |
+    cmake --build build --target detect_call_bench && cp build/tests/detect_call_bench "$dir/"
+    { ldd build/src/python/contactgrid/_contactgrid*.so; ldd build/src/contactgrid; ldd "$dir/detect_call_bench"; } | awk '/=>/{print $3}' |
       grep -v -E 'libc\.so|libm\.so|libstdc|libgcc_s|ld-linux|libpython|libgomp' | sort -u |
       xargs -I{} cp -L {} "$dir/lib/"
     du -sh "$dir" ;;
@@ -39,6 +40,9 @@ case $mode in
     (cd tests/python && $py -m pytest -q -rs -p no:cacheprovider test_gpu.py test_detect.py test_engine_and_files.py \
       2>&1 | tee "$out/pytest.log" | tail -15)
     $py tests/bench/python_gpu_bench.py --min 20 --max 24 --runs 20 2>&1 | tee "$out/python_gpu_bench.log"
+    # CUDA from NumPy arrays (host memory: upload and download included) against the same call from C++
+    $py tests/bench/python_bench.py --log2n 24 --backend cuda --repetitions 10 --no-scipy \
+      --binary "$dir/contactgrid" --cxx "$dir/detect_call_bench" 2>&1 | tee "$out/python_bench_cuda.log"
     if [ -x "$dir/contactgrid_cuda_bench" ]; then
       "$dir/contactgrid_cuda_bench" 20 24 2 20 2>&1 | tee "$out/cuda_bench.log" | tail -40
     fi ;;

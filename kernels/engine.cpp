@@ -17,6 +17,7 @@
 #include "backend.hpp"
 #include "host/huge_pages.hpp"
 #include "stage.hpp"
+#include "stage_names.hpp"
 
 namespace cg {
 
@@ -32,6 +33,15 @@ const char* to_string(Backend b) {
   return "?";
 }
 const char* to_string(Fields f) { return f == Fields::full ? "full" : "basic"; }
+
+const std::vector<std::string>& engine_stage_names() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> v;
+    for (int i = 0; i < detail::kStageCount; ++i) v.emplace_back(detail::name(detail::stage_at(i)));
+    return v;
+  }();
+  return names;
+}
 
 namespace detail {
 void parallel_copy(const CopyBlock* blocks, std::size_t count, int threads) {

@@ -11,7 +11,7 @@
 
 namespace cg {
 
-// The precision modes (README "Choosing a precision"): fp32 and fp64 run every stage in one real
+// The precision modes (docs/PRECISION.md): fp32 and fp64 run every stage in one real
 // type; mixed runs the broad phase (pack … order) in float and the narrow phase in double from the
 // world coordinates, with float64 output (Engine<double> with EngineOptions::fp32_broad_phase).
 enum class Precision { fp32, fp64, mixed };
@@ -60,7 +60,7 @@ double min_cell_size(const Bounds& b, Precision p);
 
 // mixed: what the fp32 broad phase adds to every radius so that its float test keeps every pair that
 // touches in exact arithmetic (and every pair fp64 decides is a contact): 4·ε32·(L + 2·r_max), L the
-// largest |coordinate| of the bodies relative to `origin` (README "Choosing a precision" derives it).
+// largest |coordinate| of the bodies relative to `origin` (docs/PRECISION.md derives it).
 // 0 for fp32 and fp64.
 double broad_margin(const Bounds& b, const Vec3<double>& origin, Precision p);
 

@@ -1,7 +1,7 @@
 #pragma once
 // Narrow phase for ellipsoid pairs and sphere–ellipsoid pairs (issue #12), shared by both backends.
 //
-// Semantics (CONTRACT §3, Bullet's convex–convex contacts). For a unit direction n (from B towards A)
+// Semantics (docs/FORMAT.md §3, Bullet's convex–convex contacts). For a unit direction n (from B towards A)
 //   f(n) = h_A(−n) + h_B(n) − n·(a − b),   h_X(u) = |D_X R_Xᵀ u|  (support function about the centre),
 // distance = −min_{|n|=1} f, n = the GLOBAL minimiser, position_on_b = b + ∇h_B(n),
 // position_on_a = a + ∇h_A(−n), so position_on_a = position_on_b + n·distance (at the minimiser; to the

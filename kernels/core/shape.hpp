@@ -1,5 +1,5 @@
 #pragma once
-// Body shapes (CONTRACT §1), shared by host and device: the shape kind of a body, the input check of
+// Body shapes (docs/FORMAT.md §1), shared by host and device: the shape kind of a body, the input check of
 // its shape data (the same predicate on the host path, compute/validate_shapes, and on the device-array
 // path, a kernel), and the packed form the narrow phase reads (local Real semi-axes and the rotation
 // built once per body).

@@ -17,7 +17,7 @@
 //   sphere–sphere        the closed form (narrow_decide: exactly the sphere path's bits)
 //   sphere–ellipsoid     sphere_ellipsoid_contact (the sphere's `radius` is its radius)
 //   ellipsoid–ellipsoid  ellipsoid_contact (Perram–Wertheim filter, then the solve)
-// Contact iff distance <= 0 (CONTRACT §3). Local points of an ellipsoid are in its body frame,
+// Contact iff distance <= 0 (docs/FORMAT.md §3). Local points of an ellipsoid are in its body frame,
 // R_Xᵀ(p − x); of a sphere p − x. Both backends split the count pass in two (triage, then solve for
 // the hard pairs alone) and keep each general ellipsoid pair's minimiser, from which the row is
 // rebuilt (row_from()): the host at once, the device in its fill pass.

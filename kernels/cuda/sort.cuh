@@ -1,6 +1,6 @@
 #pragma once
 // CUDA stage sort: the entries by cell key, cub::DeviceRadixSort::SortPairs over bits [0, key_bits)
-// (CUB's radix sort: measured faster than the alternatives, kernels/cuda/BENCH.md).
+// (CUB's radix sort: measured faster than the alternatives, BENCHMARKS.md §11).
 #include <cub/device/device_radix_sort.cuh>
 
 #include "cuda/run_state.cuh"

@@ -18,7 +18,7 @@ enum class Forced { automatic, off, on };
 
 struct Tuning {
   // CONTACTGRID_CUDA_TYPE_PASSES=1: Le Grand's 8 passes by cell type (opt-in; =0 or unset: the single
-  // sort of all entries). Measured on an H200 (kernels/cuda/BENCH.md, h-cudaperf2): 65 instead of 125
+  // sort of all entries). Measured on an H200 (BENCHMARKS.md §11, h-cudaperf2): 65 instead of 125
   // B/sphere (fp32, excl. contacts) but slower at every size measured (2^24 fp32: 7.55 vs 6.86 ms;
   // 2^20: 0.99 vs 0.59 ms: 8 compaction fills and 8 sorts cost more than the radix pass they save).
   bool type_passes = false;

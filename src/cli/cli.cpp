@@ -67,8 +67,9 @@ Accuracy parse_accuracy(const std::string& text) {
 
 int run_cli(int argc, char** argv, Session& session) {
   CLI::App app{
-      "contactgrid: every touching or overlapping pair of spheres, with Bullet's contact data.\n"
-      "Le Grand's uniform grid on a CPU or CUDA backend; MPI slabs under mpirun."};
+      "contactgrid: every touching or overlapping pair of spheres and ellipsoids, with Bullet's contact\n"
+      "data. Le Grand's uniform grid on a CPU or CUDA backend; MPI slabs under mpirun.\n"
+      "Files and conventions: docs/FORMAT.md; commands and exit codes: docs/USAGE.md."};
   app.require_subcommand(1);
   app.set_version_flag("--version", "contactgrid " CONTACTGRID_VERSION);
 
@@ -77,7 +78,7 @@ int run_cli(int argc, char** argv, Session& session) {
   std::string gen_out;
   bool gen_quiet = false;
   std::vector<double> offset;
-  auto* g = app.add_subcommand("generate", "Make a seeded, reproducible scene (CONTRACT §1 HDF5)");
+  auto* g = app.add_subcommand("generate", "Make a seeded, reproducible scene (docs/FORMAT.md §1 HDF5)");
   g->add_option("output", gen_out, "Scene file to write (.h5)")->required();
   g->add_option(
        "--kind", gen.kind,
@@ -116,10 +117,13 @@ int run_cli(int argc, char** argv, Session& session) {
 
   // detect
   DetectCommand det;
-  auto* d = app.add_subcommand("detect", "Every contact of a scene (CONTRACT §2/§3), sorted by (id_a, id_b)");
+  auto* d =
+      app.add_subcommand("detect", "Every contact of a scene (docs/FORMAT.md §2/§3), sorted by (id_a, id_b)");
   d->add_option("scene", det.input, "Scene file (.h5)")
       ->required();  // existence is checked by the reader (exit 3, names the file)
-  d->add_option("-o,--output", det.output, "Contacts file to write (.h5)")->required();
+  d->add_option("-o,--output", det.output,
+                "Contacts file to write (.h5); its directory must exist and be writable (checked first)")
+      ->required();
   d->add_option("--backend", det.backend, "cpu | cuda | auto (cuda when a GPU is present)")
       ->transform(CLI::CheckedTransformer(k_backends))
       ->default_str("auto");
@@ -138,7 +142,7 @@ int run_cli(int argc, char** argv, Session& session) {
        "auto | fp32 | fp64 | mixed: auto (default) picks the cheapest mode whose documented bounds meet "
        "--accuracy for this scene (default accuracy: fp64's, so fp64's answers); fp32 and fp64 run every "
        "stage and write their real type; mixed runs the broad phase in fp32 and the narrow phase in fp64 "
-       "from the world coordinates (float64 output, fp64's contacts); README 'Choosing a precision'")
+       "from the world coordinates (float64 output, fp64's contacts); docs/PRECISION.md")
       ->default_str("auto");
   d->add_option_function<std::string>(
       "--accuracy",
@@ -215,7 +219,11 @@ int run_cli(int argc, char** argv, Session& session) {
                 "axis drawn from its id, and the ghosts' orientations refresh through MPI; the last step's "
                 "contacts are then checked against the turned bodies detected from scratch")
       ->needs(steps);
-  d->add_flag("-q,--quiet", det.quiet, "No summary");
+  auto* det_quiet = d->add_flag("-q,--quiet", det.quiet, "No summary");
+  d->add_flag("-v,--verbose", det.verbose,
+              "Also the run's info lines: the merge of the ranks' contacts, with the duplicates removed "
+              "(expected 0; removed duplicates are reported without -v too)")
+      ->excludes(det_quiet);
   bool det_xdmf = false;
   d->add_flag("--xdmf", det_xdmf,
               "Also write XDMF beside the contacts for ParaView: <output>.xmf (contacts) and the bodies' "
@@ -267,7 +275,7 @@ int run_cli(int argc, char** argv, Session& session) {
   std::string val_scene, val_contacts, val_bullet = "auto";
   ValidateOptions val;
   auto* v = app.add_subcommand(
-      "validate", "Compare a contacts file with Bullet 3.24 (CONTRACT §4); PASS exits 0, FAIL 1");
+      "validate", "Compare a contacts file with Bullet 3.24 (docs/FORMAT.md §4); PASS exits 0, FAIL 1");
   v->add_option("scene", val_scene, "Scene file (.h5)")->required();
   v->add_option("contacts", val_contacts, "Contacts file (.h5) written by detect")->required();
   v->add_option("--pos-eps", val.pos_eps,

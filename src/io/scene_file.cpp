@@ -1,4 +1,4 @@
-// scene_file.cpp: scene files (CONTRACT §1) through the HDF5 C API (see scene_file.hpp).
+// scene_file.cpp: scene files (docs/FORMAT.md §1) through the HDF5 C API (see scene_file.hpp).
 #include "io/scene_file.hpp"
 
 #include <fmt/format.h>
@@ -43,7 +43,7 @@ struct SceneSource {
   explicit SceneSource(const std::string& path) : where(path, false) {}
 };
 
-// radius_low / radius_high (CONTRACT §1): a finite number >= 0 when present.
+// radius_low / radius_high (docs/FORMAT.md §1): a finite number >= 0 when present.
 std::optional<double> radius_bound(const Where& where, hid_t file, const RawAttributes& raw,
                                    const char* name) {
   const std::optional<double> value = number_attribute(where, file, raw, name);

@@ -1,4 +1,4 @@
-// read_scene, write_scene, read_contacts (module.hpp): the HDF5 files of CONTRACT §1 and §2 through the
+// read_scene, write_scene, read_contacts (module.hpp): the HDF5 files of docs/FORMAT.md §1 and §2 through the
 // readers and writers the CLI uses (src/io), so the messages are the CLI's.
 #include "io/contact_file.hpp"
 #include "io/scene_file.hpp"
@@ -82,7 +82,7 @@ void write_scene_file(const std::string& path, const py::object& positions, cons
                               " is a sphere (equal semi-axes) after "
                               "ellipsoid " +
                               std::to_string(spheres) +
-                              ": a scene file numbers its spheres first (CONTRACT §1)");
+                              ": a scene file numbers its spheres first (docs/FORMAT.md §1)");
   }
   py::gil_scoped_release release;
   scene.sphere_position.assign(v.position.begin(), v.position.begin() + spheres);

@@ -17,7 +17,7 @@ Engine(*, backend="auto", precision="auto", accuracy=None, fields="basic", threa
 
 backend    "auto" (CUDA when a GPU is usable, else the CPU), "cpu" or "cuda".
 precision  "auto", "fp32", "fp64" or "mixed". "auto" chooses on the first call from that call's bodies
-           (the cheapest mode whose documented bounds meet `accuracy`; README "Choosing a precision")
+           (the cheapest mode whose documented bounds meet `accuracy`; docs/PRECISION.md)
            and keeps that mode for the engine's life.
 accuracy   precision "auto" only: None (what fp64 gives), a number (position error relative to the
            smallest radius) or a pair (position, normal angle in degrees).
@@ -36,7 +36,7 @@ __cuda_array_interface__ for the CUDA backend, whose contacts then stay on the G
 are valid until this engine detects again. The GIL is released while the engine runs.)";
 
 const char* const k_contacts_doc =
-    R"(The contacts of one detection (CONTRACT §2), sorted by (id_a, id_b) with id_a < id_b.
+    R"(The contacts of one detection (docs/FORMAT.md §2), sorted by (id_a, id_b) with id_a < id_b.
 
 Fields, as attributes or items (contacts.id_a, contacts["id_a"]):
   id_a, id_b (K,) int64; position_on_a, position_on_b, normal_on_b (K, 3); distance (K,)
@@ -102,7 +102,7 @@ DeviceArray views of the engine's memory. copy_to_host() returns a NumPy copy.)"
                if (n == name) return true;
              return false;
            })
-      .def("keys", &PyContacts::names, "The fields present, in CONTRACT §2 order.")
+      .def("keys", &PyContacts::names, "The fields present, in docs/FORMAT.md §2 order.")
       .def("__iter__", [](const PyContacts& c) { return py::iter(py::cast(c.names())); })
       .def("__dir__",
            [](const py::object& self) {

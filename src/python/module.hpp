@@ -116,14 +116,14 @@ class PyContacts {
   bool on_device() const { return !std::holds_alternative<std::monostate>(m_device); }
   bool full() const;
   const RunRecord& record() const { return m_record; }
-  std::vector<std::string> names() const;  // the fields present, in CONTRACT §2 order
+  std::vector<std::string> names() const;  // the fields present, in docs/FORMAT.md §2 order
 
   // A field by name (KeyError for an unknown one or an optional one not computed): a NumPy array
   // viewing this object's storage (base: self) or, on the device, a DeviceArray viewing the engine's.
   py::object field(const py::object& self, const std::string& name) const;
   // Host contacts: self. Device: one copy of every field to host memory.
   py::object to_host(const py::object& self) const;
-  // The file a `detect -o` run writes (CONTRACT §2), with this run's record.
+  // The file a `detect -o` run writes (docs/FORMAT.md §2), with this run's record.
   void write(const std::string& path) const;
 
  private:
@@ -165,7 +165,7 @@ class DeviceArray {
 py::dict stats_dict(const EngineStats& stats);
 py::dict times_dict(const StageTimes& times);
 
-// ---- files (CONTRACT §1, §2) ----------------------------------------------------------------------
+// ---- files (docs/FORMAT.md §1, §2) ----------------------------------------------------------------------
 // read_scene: a dict of positions, radii (every body, in id order: spheres, then ellipsoids) and, for
 // scenes with ellipsoids, semi_axes and orientations (spheres: (r, r, r) and identity), the root
 // attributes, radius_low/radius_high, and the sphere and ellipsoid counts. Arrays own the rows read

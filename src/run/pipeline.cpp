@@ -3,14 +3,17 @@
 #include "run/pipeline.hpp"
 
 #include <fmt/format.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <limits>
-#include <memory>
 #include <numeric>
 #include <optional>
 
@@ -378,18 +381,107 @@ void record_contacts(CollectedContacts<Real>&& c, DistributedResult<Real>& resul
   result.duplicates_removed = c.duplicates_removed;
 }
 
-// The resident steps from the run's engine input, checked against the run's contacts (count and
-// an order-free hash of the pairs; with a spin, against the turned bodies: resident_steps.hpp).
+// The --spin check: the last step's contacts (count and pair hash, summed over ranks) against a
+// detection from scratch of the turned bodies: each rank detects its run's rows (owned + ghosts)
+// with every orientation computed by the spin's rule from the body's id, never received, so a stale
+// ghost orientation in the steps makes the two differ. Collective; Error on every rank otherwise.
 template <class Real>
-StepStats run_resident_steps(Session& session, Engine<Real>& engine, const SharedFrame& f,
-                             const SlabDecomposition& slabs, const EngineInput& input,
-                             const DistributedResult<Real>& result, const DistributedOptions& options,
-                             int threads) {
+void check_spin(const Session& session, const EngineOptions& engine_options, const Frame& frame,
+                const EngineInput& input, const StepMotion& motion, const StepStats& steps, int threads) {
+  std::uint64_t want = 0, want_hash = 0;
+  agreed_stage(session, "steps", [&] {
+    if (input.owned == 0) return;  // as the run: a rank without owned bodies detects nothing
+    const std::size_t n = input.radius.size();
+    const double angle = motion.spin * steps.steps;
+    HostVector<Quat<double>> q(n);
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::int64_t id = input.implied() ? static_cast<std::int64_t>(i) : input.id[i];
+      q[i] = input.shapes.shape[i] == Shape::ellipsoid
+                 ? spun_orientation(id, input.shapes.orientation[i], angle)
+                 : input.shapes.orientation[i];
+    }
+    EngineOptions options = engine_options;
+    options.skin = 0;
+    BodiesView bodies = input.view();
+    bodies.orientation = q;
+    const Contacts<Real> c = Engine<Real>(options).detect(bodies, frame);
+    want = c.size();
+    for (std::size_t j = 0; j < c.size(); ++j) want_hash += pair_hash(c.id_a[j], c.id_b[j]);
+  });
+  want = session.sum(want);
+  want_hash = session.sum(want_hash);
+  agreed_stage(session, "steps", [&] {
+    if ((steps.contacts != want || steps.hash != want_hash) && session.rank() == 0)
+      throw Error("resident steps: the last step's " + std::to_string(steps.contacts) +
+                  " contacts over the ranks differ from a detection of the turned bodies from scratch (" +
+                  std::to_string(want) + (steps.contacts == want ? ", other pairs" : "") +
+                  "): a stale orientation; internal error");
+  });
+}
+
+// Bodies that do not move: every step's contacts are the run's K, and the last step's pairs hash to
+// the run's (an order-free sum, so a missed pair and a duplicate cannot cancel out in the count).
+template <class Real>
+void check_unmoved(const Session& session, const DistributedResult<Real>& result,
+                   const std::vector<std::uint64_t>& per_step, const StepStats& steps) {
   std::uint64_t hash = 0;
   for (std::size_t k = 0; k < result.contacts.size(); ++k)
     hash += pair_hash(result.contacts.id_a[k], result.contacts.id_b[k]);
-  return resident_steps(session, engine, f.frame, slabs, f.width, input, options.resident_steps,
-                        options.step_motion, result.total_contacts, session.sum(hash), threads);
+  hash = session.sum(hash);
+  agreed_stage(session, "steps", [&] {
+    if (session.rank() != 0) return;
+    for (std::size_t k = 0; k < per_step.size(); ++k)
+      if (per_step[k] != result.total_contacts)
+        throw Error("resident step " + std::to_string(k) + ": " + std::to_string(per_step[k]) +
+                    " contacts over the ranks, the run found " + std::to_string(result.total_contacts) +
+                    ": internal error");
+    if (steps.steps > 0 && steps.hash != hash)
+      throw Error("resident steps: the last step's pairs differ from the run's: internal error");
+  });
+}
+
+// The resident steps from the run's engine input, sequenced as the run is (resident_steps.hpp):
+// the rows laid out once, then per step the motion (the owners turn their ellipsoids: the
+// integrator's part, before the step's clock), interior detection, ghost refresh, boundary
+// detection, collection. Then the checks (check_spin, check_unmoved).
+template <class Real>
+StepStats run_steps(Session& session, Engine<Real>& engine, const SharedFrame& f,
+                    const SlabDecomposition& slabs, const EngineInput& input,
+                    const DistributedResult<Real>& result, const DistributedOptions& options, int threads) {
+  const StepMotion& motion = options.step_motion;
+  StepStats st;
+  std::vector<std::uint64_t> per_step;
+  {
+    StepLoop<Real> loop(session, engine, f.frame, slabs, f.width, motion, threads);
+    StepBodies bodies;
+    agreed_stage(session, "steps", [&] {
+      bodies = owned_bodies(input, threads);
+      attach_file_poses(bodies, threads);
+    });
+    loop.lay_out(std::move(bodies));
+    Progress bar("detect: resident steps", "steps", std::uint64_t(options.resident_steps), options.progress);
+    for (int step = 1; step <= options.resident_steps; ++step) {
+      bool turned = false;
+      agreed_stage(session, "steps", [&] { turned = move_bodies(loop.bodies(), motion, step, threads); });
+      loop.commit(false, turned);
+      loop.detect_interior();
+      loop.refresh_ghosts();
+      loop.detect_boundary();
+      loop.collect();
+      bar.update(std::uint64_t(step));
+    }
+    bar.finish();
+    st = loop.stats();
+    per_step = loop.contacts_per_step();
+    st.hash = loop.pair_hash_sum();
+    if (!per_step.empty()) st.contacts = per_step.back();
+  }  // engine B's memory is free for check_spin's engine
+  if (st.turned)
+    check_spin<Real>(session, engine.options(), f.frame, input, motion, st, threads);
+  else
+    check_unmoved(session, result, per_step, st);
+  return st;
 }
 
 // The stages frame … collect after the read stage (read_scene), with their times (max over ranks)
@@ -441,7 +533,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   record_contacts(std::move(c), result);
 
   if (options.resident_steps > 0)
-    result.steps = run_resident_steps(session, *engine, f, slabs, held.input, result, options, threads);
+    result.steps = run_steps(session, *engine, f, slabs, held.input, result, options, threads);
   result.times = clock.times(session, transfer);
   return result;
 }
@@ -460,21 +552,15 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.axis = cmd.axis;
   o.balance = cmd.balance;
   o.read = cmd.read;
-  if (!cmd.quiet && session.rank() == 0) o.log = [](const std::string& line) { fmt::print("{}\n", line); };
+  if (cmd.verbose && !cmd.quiet && session.rank() == 0)
+    o.log = [](const std::string& line) { fmt::print("{}\n", line); };
   // The design card's shape by default: rank 0 gathers, deduplicates and writes the sorted contacts
   // (--write gather). --write ranks: each rank keeps the contacts of its id_a range and writes them
   // into the one output file. A CSV copy is written by rank 0 alone, so it always gathers.
   o.output = cmd.csv.empty() ? cmd.write : ContactOutput::gather;
   o.resident_steps = cmd.steps;
   o.step_motion.spin = cmd.spin;
-  if (cmd.steps > 0) {  // a progress line on rank 0's terminal (run/progress.hpp)
-    auto bar = std::make_shared<Progress>("detect: resident steps", "steps", std::uint64_t(cmd.steps),
-                                          !cmd.quiet && session.rank() == 0);
-    o.step_motion.on_step = [bar, steps = cmd.steps](int done) {
-      bar->update(std::uint64_t(done));
-      if (done == steps) bar->finish();
-    };
-  }
+  o.progress = !cmd.quiet && session.rank() == 0;
   return o;
 }
 
@@ -581,6 +667,41 @@ template DistributedResult<float> distributed_detect<float>(Session&, const std:
 template DistributedResult<double> distributed_detect<double>(Session&, const std::string&,
                                                               const DistributedOptions&);
 
+namespace {
+
+// The directory `file` goes into exists and this process may create files there, and `file` is not
+// itself a directory; IoError naming `option`, the file and the directory otherwise. Checked before the
+// scene is read, so that a mistyped output path fails at once rather than after the whole run.
+void require_writable_directory(const std::string& option, const std::string& file) {
+  namespace fs = std::filesystem;
+  const fs::path parent = fs::path(file).parent_path();
+  const std::string dir = parent.empty() ? std::string(".") : parent.string();
+  std::error_code ec;
+  const fs::file_status status = fs::status(dir, ec);
+  auto fail = [&](const std::string& why) {
+    throw IoError(fmt::format("{} {}: cannot write into the directory {}: {}", option, file, dir, why));
+  };
+  if (status.type() == fs::file_type::none) fail(ec.message());  // e.g. a parent not searchable
+  if (!fs::exists(status)) fail("it does not exist");
+  if (!fs::is_directory(status)) fail("it is not a directory");
+  if (::access(dir.c_str(), W_OK | X_OK) != 0) fail(std::strerror(errno));
+  if (fs::is_directory(fs::status(file, ec)))
+    throw IoError(fmt::format("{} {}: is a directory, not a file name", option, file));
+}
+
+// Every rank that writes checks its files' directories: rank 0 the output file and the CSV copy,
+// with --write ranks every rank the output file (each writes its rows into it).
+void check_output_directories(const Session& session, const DetectCommand& cmd,
+                              const DistributedOptions& options) {
+  agreed_stage(session, "output", [&] {
+    if (session.rank() == 0 || options.output == ContactOutput::ranks)
+      require_writable_directory("-o", cmd.output);
+    if (session.rank() == 0 && !cmd.csv.empty()) require_writable_directory("--csv", cmd.csv);
+  });
+}
+
+}  // namespace
+
 // read → (--precision auto: choose the mode) → the run in that mode → write → summary
 int run_detect(const DetectCommand& cmd, Session& session) {
   if (cmd.output.empty()) throw UsageError("detect: -o/--output is required");
@@ -588,6 +709,7 @@ int run_detect(const DetectCommand& cmd, Session& session) {
     throw UsageError(std::string("--accuracy: only with --precision auto (the default), not --precision ") +
                      to_string(*cmd.precision));
   DistributedOptions options = run_options(cmd, session);
+  check_output_directories(session, cmd, options);
   const int threads = host_threads(options.engine.threads, session);
   const DefaultTeam team(threads);
   ReadScene in = or_abort(session, [&] { return read_scene(session, cmd.input, options); });

@@ -49,9 +49,9 @@
 #include <vector>
 
 #include "engine.hpp"
-#include "scene/generate.hpp"
 #include "precision_choice.hpp"
 #include "resident_steps.hpp"
+#include "scene/generate.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
 
@@ -108,6 +108,9 @@ struct DistributedOptions {
   // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
   // printed to stderr as a warning only if duplicates were removed.
   std::function<void(const std::string&)> log;
+  // A progress line of the resident steps on this process's terminal (run/progress.hpp; the CLI: rank 0
+  // without -q).
+  bool progress = false;
 };
 
 // Throws UsageError naming the bad option (for library callers; the CLI has typed them already).
@@ -116,7 +119,7 @@ void check_options(const DistributedOptions& options);
 
 template <class Real>
 struct DistributedResult {
-  // gather: rank 0 holds all contacts in CONTRACT §2 order, the others none. ranks: this rank's
+  // gather: rank 0 holds all contacts in docs/FORMAT.md §2 order, the others none. ranks: this rank's
   // rows [first_row, first_row + contacts.size()) of that order: every contact with id_a in
   // [id_begin, id_end).
   Contacts<Real> contacts;
@@ -159,7 +162,7 @@ struct DetectCommand {
   std::string csv;  // optional text copy
   Backend backend = Backend::automatic;
   std::optional<Precision> precision;  // --precision; empty: auto (the default), chosen by accuracy
-  Accuracy accuracy;                   // --accuracy (auto only; unset: fp64's, README "Choosing a precision")
+  Accuracy accuracy;                   // --accuracy (auto only; unset: fp64's, docs/PRECISION.md)
   Fields fields = Fields::basic;
   double cell_size = 0;                        // 0: chosen by cell_choice
   CellChoice cell_choice = CellChoice::tuned;  // --cell-size auto | min
@@ -174,11 +177,13 @@ struct DetectCommand {
   double skin = 0;  // EngineOptions::skin: candidates kept across the resident steps
   double spin = 0;  // StepMotion::spin: radians per step the ellipsoids turn in the resident steps
   bool quiet = false;
+  bool verbose = false;  // also the info lines of the run (the merge line with its duplicate count)
 };
 
 // Runs one detection over all ranks of `session`; returns the process exit code (0). Rank 0 writes the
 // output file (--write ranks: every rank writes its rows of it); the summary comes from rank 0. Errors are
-// agreed on by all ranks and thrown on every rank.
+// agreed on by all ranks and thrown on every rank. Before the scene is read, every rank that will write
+// checks that its output files' directories exist and are writable (IoError naming the directory).
 int run_detect(const DetectCommand& cmd, Session& session);
 
 // Compares the /contacts datasets of two contact files byte for byte (what `mpirun -np P` must

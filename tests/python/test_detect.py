@@ -15,7 +15,7 @@ def test_two_spheres_as_the_readme_shows():
     assert len(contacts) == 1
     assert contacts.id_a.tolist() == [0] and contacts.id_b.tolist() == [1]
     assert contacts.distance.tolist() == [-0.5]
-    assert contacts.normal_on_b.tolist() == [[-1.0, 0.0, 0.0]]  # from B towards A (CONTRACT §3)
+    assert contacts.normal_on_b.tolist() == [[-1.0, 0.0, 0.0]]  # from B towards A (docs/FORMAT.md §3)
     assert contacts.position_on_a.tolist() == [[1.0, 0.0, 0.0]]
     assert contacts.position_on_b.tolist() == [[0.5, 0.0, 0.0]]
     assert contacts.precision in ("fp64", "mixed") and contacts.precision_reason
@@ -27,7 +27,7 @@ def test_two_spheres_as_the_readme_shows():
 @pytest.mark.parametrize("seed", [1, 2])
 def test_random_spheres_match_the_exact_pairs(precision, seed):
     positions, radii = random_spheres(3000, seed)
-    # fp32 may decide either way within its band (README "Choosing a precision"); these seeded scenes
+    # fp32 may decide either way within its band (docs/PRECISION.md); these seeded scenes
     # have no pair that close to touching, so every mode must give the exact pairs.
     contacts = contactgrid.detect(positions, radii, backend="cpu", precision=precision, threads=2)
     a, b = sphere_pairs(positions, radii)
@@ -35,7 +35,7 @@ def test_random_spheres_match_the_exact_pairs(precision, seed):
     np.testing.assert_array_equal(contacts.id_b, b)
     real = np.float32 if precision == "fp32" else np.float64
     assert contacts.distance.dtype == real and contacts.normal_on_b.dtype == real
-    # CONTRACT §3: n = (a − b)/d, position_on_b = b + rb·n, position_on_a = a − ra·n, distance = d − (ra + rb)
+    # docs/FORMAT.md §3: n = (a − b)/d, position_on_b = b + rb·n, position_on_a = a − ra·n, distance = d − (ra + rb)
     pa, pb = positions[contacts.id_a], positions[contacts.id_b]
     d = np.linalg.norm(pa - pb, axis=1)
     tol = 1e-4 if precision == "fp32" else 1e-12

@@ -1,7 +1,7 @@
 // The engine against the exact reference (src/reference/sphere_reference.hpp) on random and adversarial
 // scenes, in both precisions and on both backends (CUDA cases skip without a GPU).
 //
-// Borderline band (CONTRACT §3): a pair whose exact |distance| is below
+// Borderline band (docs/FORMAT.md §3): a pair whose exact |distance| is below
 //   tol = 16 · eps(Real) · (largest local coordinate + 2 · r_max)
 // may be decided either way (local coordinates are rounded to Real once); every other decision must
 // equal the reference, and contact values must agree within tolerances of the same order.

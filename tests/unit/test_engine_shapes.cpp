@@ -223,7 +223,7 @@ TYPED_TEST(EngineShapesTest, SphereOnlyScenesUnchanged) {
     EXPECT_EQ(plain_stats.candidates, a.size());
     EXPECT_EQ(e.stats().ellipsoids, 0u);
     ASSERT_GT(a.size(), 0u);
-    for (std::size_t k = 0; k < a.size(); ++k) {  // the closed form in double (CONTRACT §3)
+    for (std::size_t k = 0; k < a.size(); ++k) {  // the closed form in double (docs/FORMAT.md §3)
       const std::size_t i = std::size_t(a.id_a[k]), j = std::size_t(a.id_b[k]);
       const double dx = s.p[i].x - s.p[j].x, dy = s.p[i].y - s.p[j].y, dz = s.p[i].z - s.p[j].z;
       const double d = std::sqrt(dx * dx + dy * dy + dz * dz) - (s.r[i] + s.r[j]);

@@ -1,5 +1,5 @@
 // fp32 pairs with an ellipsoid whose centres are nearly coincident (issue #13's last correctness gap,
-// README "Choosing a precision"), one body over both backends (CUDA cases skip without a GPU): a pair
+// docs/PRECISION.md), one body over both backends (CUDA cases skip without a GPU): a pair
 // whose local float centres fp32 does not resolve (fp32_resolves, core/narrow.hpp) is decided and
 // solved in double from the world coordinates, as fp64 solves it, and its row rounded to float once
 // and counted (EngineStats::fp64_rows). Before, such a pair was solved on the rounded float centres,
@@ -112,7 +112,7 @@ exact::Body reference_body(const ShapeScene& s, std::size_t i) {
 // bound for the pair's axis ratio κ ≤ 1/0.3 (5e-4·κ rad, tests/unit/test_ellipsoid_contact.cpp: the
 // rows come from double, no input-rounding term), points within that bound plus ½ ulp32 of the world
 // coordinate. Returns the largest normal angle (degrees). Pairs whose world doubles coincide take the
-// canonical normal (CONTRACT §3: first non-zero component positive), the reference either of ±n.
+// canonical normal (docs/FORMAT.md §3: first non-zero component positive), the reference either of ±n.
 double expect_near_pairs_exact(const NearScene& n, const Contacts<float>& c) {
   const ShapeScene& s = n.s;
   double worst = 0;

@@ -136,14 +136,14 @@ class Scene(Mapping):
 
 
 def read_scene(path):
-    """The bodies of a scene file (CONTRACT §1) as a Scene: float64 arrays holding the rows read
+    """The bodies of a scene file (docs/FORMAT.md §1) as a Scene: float64 arrays holding the rows read
     (no further copy). InputError (a ValueError) names the file, dataset and first bad row."""
     return Scene(**_read_scene(os.fspath(path)))
 
 
 def write_scene(path, positions, radii=None, *, semi_axes=None, orientations=None, attributes=None,
                 radius_low=None, radius_high=None):
-    """Writes a scene file (CONTRACT §1): bodies as detect() takes them, spheres (equal semi-axes)
+    """Writes a scene file (docs/FORMAT.md §1): bodies as detect() takes them, spheres (equal semi-axes)
     before ellipsoids, since a file numbers its spheres first. `attributes`: root attributes
     (int, float or str values); radius_low / radius_high: the radius bounds the file promises.
     Written to a temporary name and renamed when complete; IoError (an OSError) on failure.
@@ -153,14 +153,14 @@ def write_scene(path, positions, radii=None, *, semi_axes=None, orientations=Non
 
 
 def read_contacts(path):
-    """The contacts of a contact file (CONTRACT §2) as Contacts of float64 arrays, whatever precision
+    """The contacts of a contact file (docs/FORMAT.md §2) as Contacts of float64 arrays, whatever precision
     wrote them (contacts.precision says which); contacts.attributes holds the file's root
     attributes. InputError (a ValueError) names the file and dataset of bad data."""
     return _read_contacts(os.fspath(path))
 
 
 def write_contacts(path, contacts):
-    """Writes host contacts as `contactgrid detect -o` does (CONTRACT §2, the run's record as root
+    """Writes host contacts as `contactgrid detect -o` does (docs/FORMAT.md §2, the run's record as root
     attributes), to a temporary name renamed over `path` when complete. IoError (an OSError) when
     the file cannot be written. Device contacts: write contacts.to_host()."""
     _write_contacts(os.fspath(path), contacts)
