@@ -31,7 +31,7 @@ case $mode in
       -Ikernels -Isrc -DCONTACTGRID_HAVE_CUDA=1 -DCONTACTGRID_VERSION="\"$version\"" src/python/*.cpp \
       -o "/tmp/cgpy/contactgrid/_contactgrid$ext" "$dir/libcg_io.a" "$dir/libcontactgrid.a" \
       -L/usr/local/cuda/lib64 -lcudart_static -ldl -lrt -lpthread -fopenmp -L"$dir/lib" -lhdf5_serial -lfmt \
-      -Wl,--exclude-libs,ALL -Wl,-rpath,"$dir/lib" 2>&1 | tail -20
+      -Wl,--exclude-libs,ALL -Wl,-rpath,"$dir/lib" -Wl,-rpath-link,"$dir/lib" 2>&1 | tail -20
     export PYTHONPATH=/tmp/cgpy CG_BINARY="$dir/contactgrid" LD_LIBRARY_PATH="$dir/lib"
     { date -u; nvidia-smi --query-gpu=name,driver_version --format=csv,noheader; $py --version;
       $py -c "import numpy, contactgrid; print('numpy', numpy.__version__, 'cuda', contactgrid.cuda_available())"
