@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <functional>
 
 #include "assemble.hpp"
 #include "engine.hpp"
@@ -42,6 +43,8 @@ struct StepMotion {
   // Off only to show that the check catches stale ghosts (tests): B's shape rows keep the first
   // exchange's, as if the steps refreshed positions and radii alone.
   bool refresh_shapes = true;
+  // Called on every rank after each step with the number of steps done (a progress line; empty: none).
+  std::function<void(int)> on_step;
 };
 
 // An order-free fingerprint of a contact pair; a contact set's is the sum over its pairs.

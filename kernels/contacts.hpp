@@ -7,7 +7,7 @@
 #include <cstdint>
 
 #include "core/contact_fields.hpp"
-#include "host/huge_pages.hpp"
+#include "host_vector.hpp"
 
 namespace cg {
 

@@ -211,7 +211,7 @@ CG_HD constexpr bool candidates_touch(CandidateFilter f) { return f != Candidate
 // one (spheres_touch unless a test or knob forces another) made fit for the scene — with ellipsoids, the
 // bounding spheres, less the centre cut (core/centre_cut.hpp) where at least 4 bodies in 5 are
 // ellipsoids: it cuts pairs of two general ellipsoids alone, and its shapes cost every body a gather into
-// cell order (H100, 2^24: 0.75 ms; half-sphere scenes lost 0.7 ms with it, BENCHMARKS §3); with a skin,
+// cell order, more than half-sphere scenes gain (BENCHMARKS.md §3); with a skin,
 // the (inflated) bounding spheres alone, whose list must outlast the bodies' motion and rotations.
 CG_HD constexpr CandidateFilter scene_filter(CandidateFilter requested, std::uint64_t ellipsoids,
                                              std::uint64_t bodies, bool skin) {

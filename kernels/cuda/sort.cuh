@@ -13,7 +13,7 @@ void sort_stage(RunState<Real, Key, Narrow>& r) {
   cub_run(r.ws, "sort", [&](void* t, std::size_t& b) {
     return cub::DeviceRadixSort::SortPairs(t, b, r.keys, r.body, ne, 0, key_bits, r.st);
   });
-  r.events.mark(Stage::sort, r.st);
+  r.events.mark(EngineStage::sort, r.st);
 }
 
 }  // namespace cg::detail

@@ -106,8 +106,7 @@ void read_spheres(const SceneSource& s, hsize_t first, hsize_t count, Scene& out
   out.sphere_position.resize(count);
   out.sphere_radius.resize(count);
   // kReadChunkRows per thread: a chunk of 2^20 rows is only 6 + 2 blocks of 4 MiB for read_rows_f64,
-  // so chunks of that size left most of a large team idle (2^26 rows on the 2×H200 host, 32 threads:
-  // read stage 0.32 → 0.10 s).
+  // so chunks of that size would leave most of a large team idle (BENCHMARKS.md §4).
   const hsize_t chunk_rows = kReadChunkRows * static_cast<hsize_t>(std::max(1, omp_get_max_threads()));
   for (hsize_t done = 0; done < count; done += chunk_rows) {
     hsize_t n = std::min(chunk_rows, count - done);

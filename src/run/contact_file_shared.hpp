@@ -20,8 +20,6 @@
 
 #include "engine.hpp"
 #include "io/contact_file.hpp"
-#include "io/inspect.hpp"
-#include "io/scene_file.hpp"
 #include "session.hpp"
 
 namespace cg {

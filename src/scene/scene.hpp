@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "core/vec3.hpp"
-#include "host/huge_pages.hpp"
+#include "host_vector.hpp"
 
 namespace cg {
 

@@ -19,7 +19,6 @@
 
 #include "errors.hpp"
 #include "io/contact_file.hpp"
-#include "io/inspect.hpp"
 #include "io/scene_file.hpp"
 #include "validate/bullet_oracle.hpp"
 #include "validate/validate_detail.hpp"

@@ -15,9 +15,9 @@
 
 #include "engine.hpp"
 #include "io/contact_file.hpp"
-#include "io/inspect.hpp"
 #include "io/scene_file.hpp"
 #include "resident_steps.hpp"
+#include "run/distributed_detect.hpp"
 #include "run/pipeline.hpp"
 #include "support/run_cli.hpp"
 #include "temp_dir.hpp"
@@ -407,11 +407,11 @@ TEST_F(Cli, ResidentStepsOnAMixedScene) {
 TEST(StageTimes, NamesOfTheSummaryAndTheFile) {
   const auto& engine = engine_stage_names();
   const auto pack = std::find(engine.begin(), engine.end(), "pack") - engine.begin();
-  const RunTimes times{{Stage::read, -1, 1.0},
-                       {Stage::detect, -1, 2.0},
-                       {Stage::detect, static_cast<int>(pack), 0.5},
-                       {Stage::exchange, -1, 0.25},
-                       {Stage::write, -1, 0.125}};
+  const RunTimes times{{RunStage::read, -1, 1.0},
+                       {RunStage::detect, -1, 2.0},
+                       {RunStage::detect, static_cast<int>(pack), 0.5},
+                       {RunStage::exchange, -1, 0.25},
+                       {RunStage::write, -1, 0.125}};
   const StageTimes file = file_stage_times(times);
   ASSERT_EQ(file.size(), times.size());
   const char* want[] = {"read", "detect", "detect.pack", "exchange", "write"};
@@ -419,8 +419,8 @@ TEST(StageTimes, NamesOfTheSummaryAndTheFile) {
     EXPECT_EQ(file[k].name, want[k]);
     EXPECT_EQ(file[k].seconds, times[k].seconds);
   }
-  EXPECT_STREQ(stage_name(Stage::redistribute), "redistribute");
-  EXPECT_STREQ(stage_name(Stage::csv), "csv");
+  EXPECT_STREQ(stage_name(RunStage::redistribute), "redistribute");
+  EXPECT_STREQ(stage_name(RunStage::csv), "csv");
 }
 
 TEST_F(Cli, MissingFile) { expect_detect_fails(path("nope.h5"), 3, {"nope.h5"}); }

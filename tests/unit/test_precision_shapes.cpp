@@ -167,19 +167,8 @@ void expect_fp64_rows_rounded(const NearScene& n, const Contacts<float>& f32, co
     const auto it = rows.find({f32.id_a[k], f32.id_b[k]});
     ASSERT_TRUE(it != rows.end());
     const std::size_t m = it->second;
-    auto same = [](Vec3<float> a, Vec3<double> b) {
-      const Vec3<float> r = vec_cast<float>(b);
-      return a.x == r.x && a.y == r.y && a.z == r.z;
-    };
     const std::string what = n.s.name + ": pair " + std::to_string(f32.id_a[k]);
-    EXPECT_TRUE(same(f32.normal_on_b[k], f64.normal_on_b[m])) << what;
-    EXPECT_TRUE(same(f32.position_on_a[k], f64.position_on_a[m])) << what;
-    EXPECT_TRUE(same(f32.position_on_b[k], f64.position_on_b[m])) << what;
-    EXPECT_TRUE(same(f32.local_point_a[k], f64.local_point_a[m])) << what;
-    EXPECT_TRUE(same(f32.local_point_b[k], f64.local_point_b[m])) << what;
-    EXPECT_TRUE(same(f32.lateral_friction_dir1[k], f64.lateral_friction_dir1[m])) << what;
-    EXPECT_TRUE(same(f32.lateral_friction_dir2[k], f64.lateral_friction_dir2[m])) << what;
-    EXPECT_EQ(f32.distance[k], float(f64.distance[m])) << what;
+    EXPECT_EQ(test::compare_rows(f32, k, f64, m), "identical") << what;
     ++compared;
   }
   EXPECT_EQ(compared, n.near_pairs) << n.s.name;

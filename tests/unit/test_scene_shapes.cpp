@@ -6,7 +6,6 @@
 #include <limits>
 #include <string>
 
-#include "io/contact_file.hpp"
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
 #include "temp_dir.hpp"
