@@ -64,7 +64,7 @@ struct EngineOptions {
   // since that build, 2·(d + g) <= skin, skips entries/sort/pairs/order and runs pack + narrow over
   // the kept list. Either way the contacts are those of a skin-0 detection, bit for bit.
   double skin = 0;
-  // Contact identity across calls (CONTRACT §2's history fields; core/history.hpp): every call's
+  // Contact identity across calls (docs/FORMAT.md §2's history fields; core/history.hpp): every call's
   // contacts carry age and previous_row against this engine's previous call (the first call, and the
   // first after reset_history(): every pair new). Pairs are keyed by global ids: the contacts' ids
   // (BodiesView::id), or for device and resident bodies their `id` rows where given (row indices
@@ -138,6 +138,10 @@ class Engine {
                                                   std::optional<Frame> frame = std::nullopt);
   // The rows of a view of this engine's last detection copied to host memory (CUDA backend).
   Contacts<Real> download(const DeviceContactsView<Real>& view);
+  // The bounds of bodies on the GPU (CUDA backend only, else UsageError), validated as detect_device
+  // validates them (same InputError texts): what a caller chooses a precision mode from
+  // (precision_choice.hpp) before it makes the engine of that mode. `ellipsoids`: their number.
+  Bounds device_bounds(const DeviceBodiesView& bodies, std::size_t* ellipsoids = nullptr);
 
   // Resident bodies: a simulation's state kept where the backend computes (host memory for the CPU
   // backend, DEVICE memory for CUDA) between detect calls, refreshed in row ranges (a halo exchange)

@@ -1,5 +1,5 @@
 #pragma once
-// The per-contact fields of CONTRACT §2, stated once. Every other spelling of the contact schema
+// The per-contact fields of docs/FORMAT.md §2, stated once. Every other spelling of the contact schema
 // derives from this file: Contacts (host vectors), DeviceContactsView and the CUDA row pointers, the
 // narrow stage's row store (both backends), the merge of the ranks' runs, the HDF5 datasets, the CSV
 // and the tests' comparers.
@@ -28,7 +28,7 @@ enum class FieldKind : std::uint8_t {
 };
 
 // Which rows a field belongs to: basic (always), full (EngineOptions::fields == Fields::full) or
-// history (EngineOptions::history). CONTRACT §2: the optional ones exist only when the user asked.
+// history (EngineOptions::history). docs/FORMAT.md §2: the optional ones exist only when the user asked.
 enum class FieldGroup : std::uint8_t { basic, full, history };
 
 struct ContactField {

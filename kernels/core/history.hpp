@@ -1,5 +1,5 @@
 #pragma once
-// Contact identity across steps (CONTRACT §2's history fields), shared by both backends: each contact
+// Contact identity across steps (docs/FORMAT.md §2's history fields), shared by both backends: each contact
 // row of a step carries `age` (steps the pair has touched without a break, 0 on its first: Bullet's
 // lifeTime) and `previous_row` (the pair's row in the previous step's contacts, -1 when new).
 //

@@ -21,7 +21,7 @@
 //   history.cuh    EngineOptions::history on device bodies: age and previous_row of each row from the
 //                  previous step's keys (Thrust's lower_bound), which it then replaces
 // Around them: workspace.cuh (the named DEVICE buffers, their aliases, cub_run), tuning.hpp (the
-// environment knobs, read in one place), stage_events.cuh (event timing by typed Stage).
+// environment knobs, read in one place), stage_events.cuh (event timing by typed EngineStage).
 //
 // One stream, owned by the backend (blocking: ordered after work on the legacy default stream).
 // The persistent workspace grows geometrically and never shrinks: a caller that detects many frames

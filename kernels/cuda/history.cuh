@@ -91,7 +91,7 @@ void history_stage(RunState<Real, Key, Narrow>& r, ThrustAllocator& alloc) {
   }
   ws.hist_current = next;
   ws.hist_count = k;
-  r.events.mark(Stage::history, r.st);
+  r.events.mark(EngineStage::history, r.st);
 }
 
 }  // namespace cg::detail

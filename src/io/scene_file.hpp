@@ -1,5 +1,5 @@
 #pragma once
-// Scene files (CONTRACT §1): reading (validated, whole or by rows) and writing (whole or streamed).
+// Scene files (docs/FORMAT.md §1): reading (validated, whole or by rows) and writing (whole or streamed).
 //
 // Reading validates everything it reads and throws InputError with one message naming the file, the
 // dataset and the first bad row ("scene.h5: /spheres/radius row 17: radius -1 is not > 0"); a file
@@ -19,7 +19,7 @@
 namespace cg {
 
 // Whole scene into memory (double), validated. Rows [first, first+count) of each group can be read
-// with read_scene_rows for parallel readers. The motion datasets (CONTRACT §5) are read when present
+// with read_scene_rows for parallel readers. The motion datasets (docs/FORMAT.md §5) are read when present
 // (each checked for its shape and finite rows); absent ones leave their vector empty.
 Scene read_scene(const std::string& path);
 
@@ -52,7 +52,7 @@ struct BodyRows {
 };
 BodyRows body_rows(Scene&& scene, bool shapes);
 
-// Writes float64 datasets ((N,3) / (N)) — the motion datasets of a group (CONTRACT §5) when its
+// Writes float64 datasets ((N,3) / (N)) — the motion datasets of a group (docs/FORMAT.md §5) when its
 // vectors are non-empty — root attributes radius_low/radius_high when set and every entry of
 // scene.attributes (keys "radius_low"/"radius_high" there are ignored: the optionals rule).
 // Writing does not validate the values (tests write bad scenes on purpose). A scene without bodies
@@ -63,7 +63,7 @@ void write_scene(const std::string& path, const Scene& scene);
 // attributes.
 struct SceneFileHeader {
   std::size_t spheres = 0, ellipsoids = 0;
-  bool sphere_motion = false, ellipsoid_motion = false;  // CONTRACT §5 datasets of the group
+  bool sphere_motion = false, ellipsoid_motion = false;  // docs/FORMAT.md §5 datasets of the group
   std::optional<double> radius_low, radius_high;
   Attributes attributes;
 };
@@ -84,7 +84,7 @@ class SceneFileWriter {
   void write_ellipsoids(std::size_t first, std::span<const Vec3<double>> position,
                         std::span<const Vec3<double>> semi_axes,
                         std::span<const std::array<double, 4>> orientation);
-  // The motion rows of a group whose header asked for them (CONTRACT §5).
+  // The motion rows of a group whose header asked for them (docs/FORMAT.md §5).
   void write_sphere_motion(std::size_t first, std::span<const Vec3<double>> velocity,
                            std::span<const Vec3<double>> angular_velocity);
   void write_ellipsoid_motion(std::size_t first, std::span<const Vec3<double>> velocity,

@@ -1,5 +1,5 @@
 #pragma once
-// Host-side data model of CONTRACT §1 (scenes) and the run record written with contacts (§2).
+// Host-side data model of docs/FORMAT.md §1 (scenes) and the run record written with contacts (§2).
 #include <array>
 #include <cstdint>
 #include <map>
@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "core/vec3.hpp"
-#include "host/huge_pages.hpp"
+#include "host_vector.hpp"
 
 namespace cg {
 
@@ -24,7 +24,7 @@ struct Scene {
   std::vector<Vec3<double>> ellipsoid_position;
   std::vector<Vec3<double>> ellipsoid_semi_axes;
   std::vector<std::array<double, 4>> ellipsoid_orientation;  // (w, x, y, z)
-  // Motion (CONTRACT §5), world frame: one row per body of the group, or empty (absent: zero).
+  // Motion (docs/FORMAT.md §5), world frame: one row per body of the group, or empty (absent: zero).
   std::vector<Vec3<double>> sphere_velocity, sphere_angular_velocity;
   std::vector<Vec3<double>> ellipsoid_velocity, ellipsoid_angular_velocity;
   std::optional<double> radius_low, radius_high;  // as promised by the file's root attributes

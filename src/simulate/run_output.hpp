@@ -1,5 +1,5 @@
 #pragma once
-// The run directory of contactgrid simulate (CONTRACT §6):
+// The run directory of contactgrid simulate (docs/FORMAT.md §6):
 //   frame_<step>.h5     a scene file (§1 with §5's motion) of the bodies at that step, in id order,
 //                       root attributes step, time and the run's parameters
 //   contacts_<step>.h5  (--write-contacts) that step's contacts with the history fields (§2)

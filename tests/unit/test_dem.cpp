@@ -1,5 +1,6 @@
-// Granular dynamics (kernels/dem.hpp) against analytic solutions, on the CPU (the CUDA backend is
-// compared with it bit for bit at the end; skipped, visibly, without a GPU):
+// Granular dynamics (kernels/dem.hpp) against analytic solutions, one test body per backend (the CUDA
+// cases skip, visibly, without a GPU; the CUDA backend is also compared with the CPU bit for bit at the
+// end):
 //   - the damping of a restitution: the dimensionless collision gives back the restitution asked for;
 //   - a sphere dropped on a wall rebounds with the set restitution (0.3, 0.7, 0.9) within 1 %;
 //   - two equal spheres head on (elastic): Hertz's contact duration and largest overlap within 2 %;
@@ -14,15 +15,18 @@
 //     energy gained;
 //   - static friction at size ratios 3 and 10: a sphere held between two fixed spheres against gravity
 //     hangs still, sunk and turned by what the two tangential springs need;
-//   - a single ellipsoid on a plane settles on its longest axis (its shortest semi-axis vertical).
+//   - a single ellipsoid on a plane settles on its longest axis (its shortest semi-axis vertical);
+//   - a heap of spheres is steeper with more friction (the angle of repose rises with it).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <random>
 #include <string>
 #include <vector>
 
+#include "backends.hpp"
 #include "dem.hpp"
 #include "support/contacts_equal.hpp"
 
@@ -50,14 +54,22 @@ DemBodies one_sphere(Vec3<double> p, double r, Vec3<double> v, Vec3<double> w = 
   return b;
 }
 
-DemOptions cpu_options(const Material& m, double dt) {
+DemOptions options_on(Backend backend, const Material& m, double dt) {
   DemOptions o;
   o.material = m;
   o.dt = dt;
-  o.engine.backend = Backend::cpu;
+  o.engine.backend = backend;
   o.engine.threads = 2;
   return o;
 }
+
+// The physics cases: one test body per backend (CUDA skips, visibly, without a GPU).
+template <class B>
+class DemPhysics : public ::testing::Test {
+ protected:
+  void SetUp() override { CG_SKIP_WITHOUT_BACKEND(B); }
+};
+TYPED_TEST_SUITE(DemPhysics, BackendTypes, BackendTypeNames);
 
 TEST(DemDamping, RestitutionRoundTrip) {
   EXPECT_EQ(damping_for_restitution(1.0), 0.0);
@@ -76,7 +88,7 @@ TEST(DemDamping, RestitutionRoundTrip) {
 
 // The rebound velocity of a sphere that meets the floor at 1 m/s (no gravity: the velocities before
 // and after the contact are the collision's own).
-double rebound(double e, bool synchronized) {
+double rebound(Backend backend, double e, bool synchronized) {
   Material m;
   m.young = 1e8;
   m.restitution = e;
@@ -84,7 +96,7 @@ double rebound(double e, bool synchronized) {
   const double r = 0.01;
   DemBodies b = one_sphere({0, 0, r + 0.0005}, r, {0, 0, -1});
   const double dt = time_step_limits(b, m, 1.0).automatic;
-  DemOptions o = cpu_options(m, dt);
+  DemOptions o = options_on(backend, m, dt);
   o.synchronized = synchronized;
   o.walls = {plane({0, 0, 0}, {0, 0, 1})};
   Simulation<double> s(b, o);
@@ -98,9 +110,9 @@ double rebound(double e, bool synchronized) {
   return vz;
 }
 
-TEST(DemPhysics, SphereReboundsWithTheRestitution) {
+TYPED_TEST(DemPhysics, SphereReboundsWithTheRestitution) {
   for (double e : {0.3, 0.7, 0.9}) {
-    const double v = rebound(e, true);
+    const double v = rebound(TypeParam::backend, e, true);
     EXPECT_NEAR(v / e, 1.0, 0.01) << "restitution " << e << ": rebound " << v << " m/s";
   }
 }
@@ -108,7 +120,8 @@ TEST(DemPhysics, SphereReboundsWithTheRestitution) {
 // Two equal spheres head on, elastic: Hertz's largest overlap δ = (5 m* v² / (4 K))^{2/5} and duration
 // 2.94328 δ / v (v the approach speed, K = 4/3 E* √R*), within 2 %; the contact's start and end are
 // interpolated between steps.
-TEST(DemPhysics, HertzHeadOnDurationAndOverlap) {
+TYPED_TEST(DemPhysics, HertzHeadOnDurationAndOverlap) {
+  const Backend backend = TypeParam::backend;
   Material m;
   m.young = 5e7;
   m.poisson = 0.25;
@@ -126,7 +139,7 @@ TEST(DemPhysics, HertzHeadOnDurationAndOverlap) {
   const double delta_max = std::pow(5 * m_star * v * v / (4 * k), 0.4);
   const double duration = 2.94328 * delta_max / v;
   const double dt = duration / 400;
-  Simulation<double> s(b, cpu_options(m, dt));
+  Simulation<double> s(b, options_on(backend, m, dt));
   double prev_gap = 2e-4, start = -1, end = -1, deepest = 0;
   for (int step = 1; step < 4000 && end < 0; ++step) {
     s.run(1);
@@ -147,7 +160,7 @@ TEST(DemPhysics, HertzHeadOnDurationAndOverlap) {
 // Elastic, frictionless bodies in a closed box, no gravity: the total energy (kinetic, with rotation,
 // + elastic) drifts by less than 0.1 % over 10^4 steps. Spheres (1000) or ellipsoids (150, semi-axes
 // r, 0.6 r, 0.4 r, spinning: their contacts exchange rotation and translation).
-void elastic_gas(bool ellipsoids) {
+void elastic_gas(Backend backend, bool ellipsoids) {
   Material m;
   m.young = 1e7;
   m.density = 1000;
@@ -179,7 +192,7 @@ void elastic_gas(bool ellipsoids) {
       b.orientation.push_back({q.w / len, q.x / len, q.y / len, q.z / len});
     }
   }
-  DemOptions o = cpu_options(m, time_step_limits(b, m, 1.0).automatic);
+  DemOptions o = options_on(backend, m, time_step_limits(b, m, 1.0).automatic);
   o.walls = {plane({0, 0, 0}, {1, 0, 0}),    plane({box, 0, 0}, {-1, 0, 0}), plane({0, 0, 0}, {0, 1, 0}),
              plane({0, box, 0}, {0, -1, 0}), plane({0, 0, 0}, {0, 0, 1}),    plane({0, 0, box}, {0, 0, -1})};
   o.engine.skin = 0.1 * r;
@@ -197,14 +210,14 @@ void elastic_gas(bool ellipsoids) {
   EXPECT_GT(s.engine_stats().candidate_reuses, 1000u) << "the skin keeps most candidate lists";
 }
 
-TEST(DemPhysics, ElasticGasConservesEnergy) { elastic_gas(false); }
-TEST(DemPhysics, ElasticEllipsoidGasConservesEnergy) { elastic_gas(true); }
+TYPED_TEST(DemPhysics, ElasticGasConservesEnergy) { elastic_gas(TypeParam::backend, false); }
+TYPED_TEST(DemPhysics, ElasticEllipsoidGasConservesEnergy) { elastic_gas(TypeParam::backend, true); }
 
 // Oblique impact on a wall (Chung & Ooi 2011, test 6): aluminium oxide sphere, 3.9 m/s.
 struct Impact {
   double vt, vn, spin;
 };
-Impact oblique(double degrees) {
+Impact oblique(Backend backend, double degrees) {
   Material m;
   m.young = 3.8e11;
   m.poisson = 0.23;
@@ -213,7 +226,7 @@ Impact oblique(double degrees) {
   m.friction = 0.092;
   const double r = 0.00255, speed = 3.9, a = degrees * dem::kPi / 180;
   DemBodies b = one_sphere({0, 0, r + 1e-5}, r, {speed * std::sin(a), 0, -speed * std::cos(a)});
-  DemOptions o = cpu_options(m, time_step_limits(b, m, speed).automatic / 2);
+  DemOptions o = options_on(backend, m, time_step_limits(b, m, speed).automatic / 2);
   o.walls = {plane({0, 0, 0}, {0, 0, 1})};
   Simulation<double> s(b, o);
   for (int step = 0; step < 100000; ++step) {
@@ -225,12 +238,12 @@ Impact oblique(double degrees) {
   return {0, 0, 0};
 }
 
-TEST(DemPhysics, ObliqueImpactFollowsWaltonInGrossSliding) {
+TYPED_TEST(DemPhysics, ObliqueImpactFollowsWaltonInGrossSliding) {
   const double mu = 0.092, e = 0.98, r = 0.00255, speed = 3.9;
   for (double degrees : {60.0, 80.0}) {
     const double a = degrees * dem::kPi / 180;
     const double vt = speed * std::sin(a), vn = speed * std::cos(a);
-    const Impact got = oblique(degrees);
+    const Impact got = oblique(TypeParam::backend, degrees);
     EXPECT_NEAR(got.vn / (e * vn), 1.0, 0.02) << degrees << "°: normal rebound";
     const double want_vt = vt - mu * (1 + e) * vn, want_spin = 2.5 * mu * (1 + e) * vn / r;
     EXPECT_NEAR(got.vt / want_vt, 1.0, 0.02) << degrees << "°: tangential rebound " << got.vt;
@@ -239,7 +252,7 @@ TEST(DemPhysics, ObliqueImpactFollowsWaltonInGrossSliding) {
   for (double degrees : {5.0, 20.0}) {  // below the gross-sliding limit (32.5°)
     const double a = degrees * dem::kPi / 180;
     const double vt = speed * std::sin(a), vn = speed * std::cos(a);
-    const Impact got = oblique(degrees);
+    const Impact got = oblique(TypeParam::backend, degrees);
     EXPECT_LE(vt - got.vt, 1.0001 * mu * (1 + e) * vn)
         << degrees << "°: the tangential impulse is within Coulomb's";
     const double inertia = 0.4 * r * r;  // per unit mass
@@ -257,7 +270,7 @@ TEST(DemPhysics, ObliqueImpactFollowsWaltonInGrossSliding) {
 struct Hanging {
   double sink, want_sink, turn, want_turn, speed;
 };
-Hanging hanging_sphere(bool synchronized) {
+Hanging hanging_sphere(Backend backend, bool synchronized) {
   Material m;
   m.young = 1e8;  // the normal force μ N is 7× the half weight each contact carries
   m.poisson = 0.3;
@@ -273,7 +286,7 @@ Hanging hanging_sphere(bool synchronized) {
   b.radius = {r, r1, r2};
   b.fixed = {0, 1, 1};
   const double g = 9.81;
-  DemOptions o = cpu_options(m, time_step_limits(b, m, 1.0).automatic);
+  DemOptions o = options_on(backend, m, time_step_limits(b, m, 1.0).automatic);
   o.synchronized = synchronized;
   o.gravity = {0, 0, -g};
   Simulation<double> s(b, o);
@@ -294,8 +307,8 @@ Hanging hanging_sphere(bool synchronized) {
   return h;
 }
 
-TEST(DemPhysics, StaticFrictionHoldsAtSizeRatiosThreeAndTen) {
-  const Hanging h = hanging_sphere(true);
+TYPED_TEST(DemPhysics, StaticFrictionHoldsAtSizeRatiosThreeAndTen) {
+  const Hanging h = hanging_sphere(TypeParam::backend, true);
   EXPECT_NEAR(h.sink / h.want_sink, 1.0, 0.02) << "sink " << h.sink << " want " << h.want_sink;
   EXPECT_NEAR(std::abs(h.turn) / std::abs(h.want_turn), 1.0, 0.05)
       << "turn " << h.turn << " want " << h.want_turn;
@@ -305,7 +318,8 @@ TEST(DemPhysics, StaticFrictionHoldsAtSizeRatiosThreeAndTen) {
 // A single ellipsoid (semi-axes 2, 1, 0.5) dropped tilted on a floor comes to rest lying on its
 // longest axis: its shortest axis vertical, its centre 0.5 above the floor (less the contact's
 // overlap). Rolling friction stops its spin about the vertical (a point contact has no other).
-TEST(DemPhysics, EllipsoidSettlesOnItsLongestAxis) {
+TYPED_TEST(DemPhysics, EllipsoidSettlesOnItsLongestAxis) {
+  const Backend backend = TypeParam::backend;
   Material m;
   m.young = 1e8;
   m.density = 1000;
@@ -319,7 +333,7 @@ TEST(DemPhysics, EllipsoidSettlesOnItsLongestAxis) {
   b.semi_axes = {{2, 1, 0.5}};
   const double c = std::cos(0.6), s = std::sin(0.6);  // tilted about an axis in the floor's plane
   b.orientation = {{c, s * 0.6, s * 0.8, 0}};
-  DemOptions o = cpu_options(m, time_step_limits(b, m, 7.0).automatic);
+  DemOptions o = options_on(backend, m, time_step_limits(b, m, 7.0).automatic);
   o.gravity = {0, 0, -9.81};
   o.walls = {plane({0, 0, 0}, {0, 0, 1})};
   Simulation<double> sim(b, o);
@@ -330,6 +344,65 @@ TEST(DemPhysics, EllipsoidSettlesOnItsLongestAxis) {
   EXPECT_GT(std::abs(shortest.z), 0.999) << "the shortest axis is vertical";
   EXPECT_NEAR(now.position[0].z, 0.5, 0.01) << "resting on its flat side";
   EXPECT_LT(std::sqrt(dot(now.velocity[0], now.velocity[0])), 1e-3) << "at rest";
+}
+
+// A heap: 400 spheres (radii 4.5–5.5 mm) released from a narrow column onto a floor spread into a
+// heap whose slope rises with the sliding friction (the angle of repose; rolling friction 0.1 in both,
+// so that spheres do not roll away). The slope is atan(height / base radius): the height of the
+// highest tenth of the bodies over the floor, the radius that holds 90 % of them about the heap's
+// axis. A few seconds per backend on the CPU.
+double heap_slope_degrees(Backend backend, double friction) {
+  std::mt19937_64 rng(4421);
+  std::uniform_real_distribution<double> u(0, 1);
+  DemBodies b;
+  const int side = 6;
+  const double s = 0.0115;
+  for (int i = 0; i < 400; ++i) {
+    const double jitter_x = 0.0004 * (u(rng) - 0.5), jitter_y = 0.0004 * (u(rng) - 0.5);
+    b.position.push_back({(i % side - 2.5) * s + jitter_x, ((i / side) % side - 2.5) * s + jitter_y,
+                          (i / (side * side) + 1) * s});
+    b.radius.push_back(0.0045 + 0.001 * u(rng));
+  }
+  Material m;
+  m.young = 1e6;
+  m.density = 2500;
+  m.restitution = 0.3;
+  m.friction = friction;
+  m.rolling_friction = 0.1;
+  DemOptions o = options_on(backend, m, time_step_limits(b, m, 2.0).automatic);
+  o.gravity = {0, 0, -9.81};
+  o.walls = {plane({0, 0, 0}, {0, 0, 1})};
+  o.engine.skin = 0.0005;
+  Simulation<double> sim(b, o);
+  sim.run(static_cast<std::uint64_t>(1.5 / o.dt));
+  const DemBodies now = sim.bodies();
+  Vec3<double> centre{0, 0, 0};
+  for (const auto& p : now.position) centre = centre + (1.0 / double(now.size())) * p;
+  std::vector<double> heights, radii;
+  for (const auto& p : now.position) {
+    heights.push_back(p.z);
+    radii.push_back(std::hypot(p.x - centre.x, p.y - centre.y));
+  }
+  std::sort(heights.begin(), heights.end());
+  std::sort(radii.begin(), radii.end());
+  double top = 0;
+  for (std::size_t k = heights.size() * 9 / 10; k < heights.size(); ++k) top += heights[k];
+  top /= double(heights.size() - heights.size() * 9 / 10);
+  const double base = radii[radii.size() * 9 / 10];
+  double speed = 0;
+  for (const auto& v : now.velocity) speed += std::sqrt(dot(v, v)) / double(now.size());
+  EXPECT_LT(speed, 0.02) << "friction " << friction << ": the heap has settled (mean speed, m/s)";
+  return std::atan2(top, base) * 180 / dem::kPi;
+}
+
+TYPED_TEST(DemPhysics, HeapSlopeRisesWithFriction) {
+  const double low = heap_slope_degrees(TypeParam::backend, 0.1);
+  const double high = heap_slope_degrees(TypeParam::backend, 0.7);
+  // a collapsing column, not a slow pour: low slopes, but friction must make the heap clearly steeper
+  // (at friction 0 the spheres spread to a layer; this heap has about 1° at 0.1 and 5.5° at 0.7)
+  EXPECT_GT(high, 2 * low) << "slope " << low << "° at friction 0.1, " << high << "° at 0.7";
+  EXPECT_GT(high - low, 2.0) << "slope " << low << "° at friction 0.1, " << high << "° at 0.7";
+  EXPECT_GT(low, 0.3) << "even low friction leaves a heap";
 }
 
 }  // namespace
