@@ -11,6 +11,7 @@
 
 #include "io/scene_file.hpp"
 #include "run/progress.hpp"
+#include "run/stop.hpp"
 #include "session.hpp"
 #include "simulate/run_output.hpp"
 #include "simulate/simulate_plot.hpp"
@@ -116,6 +117,10 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
   parameters["simulate_walls"] = walls;  // a frame continues the run with its walls
 
   RunOutput out(cmd.output, parameters);
+  // a run ended at once by a signal (src/run/stop.hpp) still says in its log that it did not finish;
+  // a stop at a stop point (between blocks of steps) unwinds to out.fail below
+  CleanupAction incomplete =
+      CleanupAction::append_file(out.path("log.csv"), "# status: failed: stopped by a signal\n");
   try {
     Simulation<Real> sim(bodies, options);
     const std::size_t spheres = scene.sphere_count();
@@ -151,6 +156,7 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
       const std::uint64_t next_log = (done / log_every + 1) * log_every;
       const std::uint64_t next_frame = (done / every + 1) * every;
       const std::uint64_t to = std::min({next_log, next_frame, cmd.steps});
+      stop_point();
       const auto t1 = clock_type::now();
       sim.run(to - done);
       const double per_step =
@@ -161,6 +167,7 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
       progress.update(done);
     }
     progress.finish();
+    incomplete.release();
     out.finish();
     const double seconds = std::chrono::duration<double>(clock_type::now() - t0).count();
     if (!cmd.quiet) {
