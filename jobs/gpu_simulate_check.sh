@@ -24,7 +24,7 @@ log() { echo "[$(date -u +%H:%M:%S)] $*"; }
 cat "$OUT/device.txt"
 
 log "1. unit: history, physics on CUDA, CPU = CUDA (library and CLI)"
-filter='EngineHistory*:StepHistory*:HistoryFiles*:Dem*:SimulateCli*:SimulateWalls*'
+filter='EngineHistory*:StepHistory*:HistoryFiles*:DemDamping*:DemPhysics/cuda.*:DemBackends*:SimulateCli*:SimulateWalls*'
 "$BIN/contactgrid_tests" --gtest_filter="$filter" >"$OUT/unit.log" 2>&1 || failed+=("unit tests ($filter)")
 grep -E '^\[  (PASSED|FAILED) |^\[  SKIPPED|^\[       OK \].*(cuda|Cuda|CUDA|Device)' "$OUT/unit.log" | head -40
 if grep -q '^\[  SKIPPED \].*cuda' "$OUT/unit.log"; then failed+=("CUDA cases skipped: no GPU seen by the tests"); fi

@@ -103,7 +103,8 @@ std::vector<std::string> PyContacts::names() const {
   std::vector<std::string> out;
   const bool with_optional = full();
   for (const ContactField& f : kContactFields)
-    if (!f.optional() || with_optional) out.emplace_back(f.name());
+    if (f.group == FieldGroup::basic || (f.group == FieldGroup::full && with_optional))
+      out.emplace_back(f.name());
   return out;
 }
 

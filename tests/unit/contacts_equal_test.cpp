@@ -14,12 +14,12 @@
 namespace cg::test {
 namespace {
 
-// k rows with distinct values in every field (the optional ones when `full`).
+// k rows with distinct values in every field of `set` (the optional groups: full, history).
 template <class Real>
-Contacts<Real> rows(std::size_t k, bool full) {
+Contacts<Real> rows(std::size_t k, FieldSet set) {
   Contacts<Real> c;
-  c.resize(k, full);
-  for_each_contact_field(c, full, [&](auto index, auto& column) {
+  c.resize(k, set);
+  for_each_contact_field(c, set, [&](auto index, auto& column) {
     for (std::size_t i = 0; i < k; ++i) {
       const double v = 0.1 * double(index) + 1.7 * double(i) + 1;
       using T = std::decay_t<decltype(column[i])>;
@@ -36,7 +36,7 @@ Contacts<Real> rows(std::size_t k, bool full) {
 // Flips the lowest bit of row `row`'s first byte in field `field` of c.
 template <class Real>
 void flip(Contacts<Real>& c, std::size_t field, std::size_t row) {
-  for_each_contact_field(c, true, [&](auto index, auto& column) {
+  for_each_contact_field(c, FieldSet::all(), [&](auto index, auto& column) {
     if (index != field) return;
     unsigned char byte;
     std::memcpy(&byte, &column[row], 1);
@@ -46,7 +46,7 @@ void flip(Contacts<Real>& c, std::size_t field, std::size_t row) {
 }
 
 TEST(ContactsEqual, NamesEveryFieldOfTheTable) {
-  const Contacts<double> want = rows<double>(5, true);
+  const Contacts<double> want = rows<double>(5, FieldSet::all());
   EXPECT_EQ(compare_contacts(want, want), "identical");
   for (std::size_t f = 0; f < kContactFieldCount; ++f) {
     for (std::size_t row : {0u, 4u}) {
@@ -62,19 +62,19 @@ TEST(ContactsEqual, NamesEveryFieldOfTheTable) {
 }
 
 TEST(ContactsEqual, PresenceAndRowRanges) {
-  const Contacts<float> full = rows<float>(6, true), basic = rows<float>(6, false);
+  const Contacts<float> full = rows<float>(6, FieldSet::all()), basic = rows<float>(6, false);
   EXPECT_EQ(compare_contacts(basic, basic), "identical");
   const std::vector<std::string> optional = differing_fields(basic, full);
   EXPECT_EQ(optional.size(), kContactFieldCount - kBasicContactFieldCount);
   EXPECT_EQ(compare_rows(basic, 0, full, 0), "differ in full");
-  Contacts<float> tail = rows<float>(6, true);
+  Contacts<float> tail = rows<float>(6, FieldSet::all());
   EXPECT_EQ(compare_contacts(tail, full, 0), "identical");
   EXPECT_NE(compare_contacts(tail, full, 1), "identical");  // rows 1 … 6 of a 6-row set: past the end
 }
 
 TEST(ContactsEqual, WiderRowsCompareRounded) {
-  const Contacts<double> wide = rows<double>(4, true);
-  Contacts<float> narrow = rows<float>(4, true);  // the same values rounded to float
+  const Contacts<double> wide = rows<double>(4, FieldSet::all());
+  Contacts<float> narrow = rows<float>(4, FieldSet::all());  // the same values rounded to float
   EXPECT_EQ(compare_contacts(narrow, wide), "identical");
   EXPECT_EQ(compare_rows(narrow, 3, wide, 3), "identical");
   narrow.distance[2] = std::nextafter(narrow.distance[2], 1e9f);
