@@ -37,6 +37,24 @@ const std::map<std::string, SceneRead> k_reads{
 const std::map<std::string, ContactOutput> k_writes{{"gather", ContactOutput::gather},
                                                     {"ranks", ContactOutput::ranks}};
 
+// An enum option by name: the names are what --help and the error of a wrong word show (CLI11's
+// CheckedTransformer shows the enum's internal numbers too). The word becomes the enum's number for
+// CLI11 to store.
+template <class E>
+CLI::Validator enum_names(const std::map<std::string, E>& names) {
+  std::string list;
+  for (const auto& entry : names) list += (list.empty() ? "" : "|") + entry.first;
+  CLI::Validator v(
+      [names, list](std::string& word) -> std::string {
+        const auto it = names.find(word);
+        if (it == names.end()) return "'" + word + "' is not one of " + list;
+        word = std::to_string(static_cast<long long>(it->second));
+        return {};
+      },
+      list);
+  return v;
+}
+
 }  // namespace
 
 std::optional<double> positive_number(const std::string& word) {
@@ -87,9 +105,9 @@ int run_cli(int argc, char** argv, Session& session) {
   g->add_option("--ellipsoid-fraction", gen.ellipsoid_fraction, "mixed: share F of ellipsoids, in [0, 1]")
       ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
-  g->add_option("-n,--count", gen.count, "Number of bodies, 1 … 2^28")
-      ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1) << 28))
-      ->capture_default_str();
+  // (checked after parsing: CLI11 names an option by its long name, and the user typed -n)
+  long long gen_count = static_cast<long long>(gen.count);
+  g->add_option("-n,--count", gen_count, "Number of bodies, 1 … 2^28")->capture_default_str();
   g->add_option("--seed", gen.seed, "Random seed")->capture_default_str();
   double gen_ratio = 10;
   auto* rlow_opt =
@@ -118,7 +136,7 @@ int run_cli(int argc, char** argv, Session& session) {
       ->required();  // existence is checked by the reader (exit 3, names the file)
   d->add_option("-o,--output", det.output, "Contacts file to write (.h5)")->required();
   d->add_option("--backend", det.backend, "cpu | cuda | auto (cuda when a GPU is present)")
-      ->transform(CLI::CheckedTransformer(k_backends))
+      ->transform(enum_names(k_backends))
       ->default_str("auto");
   d->add_option_function<std::string>(
        "--precision",
@@ -149,7 +167,7 @@ int run_cli(int argc, char** argv, Session& session) {
       "POS[,ANGLE] for --precision auto: the position error accepted, relative to the smallest radius, "
       "and the normal angle in degrees (default: what fp64 gives)");
   d->add_option("--fields", det.fields, "basic | full (adds local points and friction directions)")
-      ->transform(CLI::CheckedTransformer(k_fields))
+      ->transform(enum_names(k_fields))
       ->default_str("basic");
   d->add_option_function<std::string>(
        "--cell-size",
@@ -180,21 +198,21 @@ int run_cli(int argc, char** argv, Session& session) {
   d->add_option("--threads", det.threads, "CPU backend threads (0: all cores)")
       ->check(CLI::NonNegativeNumber);
   d->add_option("--axis", det.axis, "MPI slab axis: auto (largest extent) | x | y | z")
-      ->transform(CLI::CheckedTransformer(k_axes))
+      ->transform(enum_names(k_axes))
       ->default_str("auto");
   d->add_option("--balance", det.balance, "MPI slab bounds: count (equal bodies) | width (equal widths)")
-      ->transform(CLI::CheckedTransformer(k_balances))
+      ->transform(enum_names(k_balances))
       ->default_str("count");
   d->add_option("--read", det.read,
                 "MPI scene read: auto (all when every rank is on one node, else own) | own (each rank its "
                 "rows, bodies then move to their owners) | all (every rank reads every row and keeps its "
                 "own bodies and ghosts: no body moves)")
-      ->transform(CLI::CheckedTransformer(k_reads))
+      ->transform(enum_names(k_reads))
       ->default_str("auto");
   d->add_option("--write", det.write,
                 "MPI output: gather (rank 0 gathers, deduplicates and writes the sorted contacts) | ranks "
                 "(each rank merges the contacts of its id_a range and writes them into the same file)")
-      ->transform(CLI::CheckedTransformer(k_writes))
+      ->transform(enum_names(k_writes))
       ->default_str("gather");
   auto* steps =
       d->add_option("--steps", det.steps,
@@ -264,10 +282,14 @@ int run_cli(int argc, char** argv, Session& session) {
   v->add_option("scene", val_scene, "Scene file (.h5)")->required();
   v->add_option("contacts", val_contacts, "Contacts file (.h5) written by detect")->required();
   v->add_option("--pos-eps", val.pos_eps,
-                "Largest position error allowed (length units; for pairs with an ellipsoid, times the pair's "
-                "larger bounding radius, and also the largest distance error)")
+                "Largest position error allowed, as a fraction of L, the pair's larger bounding radius (also "
+                "the largest distance error of pairs with an ellipsoid)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  v->add_option_function<double>(
+       "--pos-abs", [&val](double x) { val.pos_abs = x; },
+       "Largest position error allowed as a length (scene units), instead of --pos-eps")
+      ->check(CLI::PositiveNumber);
   v->add_option("--angle-deg", val.angle_deg, "Largest angle between normals allowed (degrees)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
@@ -278,11 +300,20 @@ int run_cli(int argc, char** argv, Session& session) {
        "wrong far from the origin and for nearly coincident centres)")
       ->check(CLI::IsMember({"auto", "double", "float"}))
       ->capture_default_str();
-  v->add_option("--shallow", val.shallow_threshold,
-                "Ellipsoid pairs only we report, judged correct and shallower than this, are shallow Bullet "
-                "misses (accepted; length units; default: a quarter of Bullet's ellipsoid margin 0.04)")
+  v->add_option("--shallow", val.shallow,
+                "Ellipsoid pairs only we report, judged correct and shallower than this x L, are shallow "
+                "Bullet misses (accepted; a quarter of Bullet's ellipsoid margin in its frame)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  v->add_option_function<double>(
+       "--shallow-abs", [&val](double x) { val.shallow_abs = x; },
+       "The shallow threshold as a length (scene units), instead of --shallow")
+      ->check(CLI::NonNegativeNumber);
+  v->add_option_function<std::string>(
+       "--memory", [&val](const std::string& t) { val.memory_limit = parse_memory(t); },
+       "Peak memory to stay under (e.g. 8G, 512M): Bullet runs on the scene in pieces that fit; "
+       "default: 4G or half the machine's memory, whichever is smaller")
+      ->default_str(fmt::format("{:.3g}G", double(default_memory_limit()) / double(1 << 30)));
   v->add_option("--sample", val.sample,
                 "Validate K random sub-boxes instead of the whole scene (large scenes)");
   v->add_option("--seed", val.seed, "Seed of the sub-box choice")->capture_default_str();
@@ -296,7 +327,7 @@ int run_cli(int argc, char** argv, Session& session) {
   b->add_option("--kind", bench.kind,
                 "spheres (double Bullet, warm step) | ellipsoids | mixed (float Bullet with the exact "
                 "ellipsoid support, from scratch; narrow-phase counters)")
-      ->transform(CLI::CheckedTransformer(k_bench_kinds))
+      ->transform(enum_names(k_bench_kinds))
       ->default_str("spheres");
   b->add_option("--max-aspect", bench.max_aspect,
                 "ellipsoids, mixed: semi-axes U[1/K, 1], so no body is longer than 1:K (issue #12: 4)")
@@ -320,7 +351,7 @@ int run_cli(int argc, char** argv, Session& session) {
       ->check(CLI::IsMember({"cpu", "cuda"}));
   b->add_option("--threads", bench.threads, "CPU backend threads (0: all cores)");
   b->add_option("--precision", bench.precision, "fp32 | fp64 | mixed: the engine's precision mode")
-      ->transform(CLI::CheckedTransformer(k_precisions))
+      ->transform(enum_names(k_precisions))
       ->default_str("fp64");
   b->add_option("--seed", bench.seed, "Scene seed")->capture_default_str();
   b->add_option("--csv", bench.csv, "CSV output")->capture_default_str();
@@ -342,6 +373,9 @@ int run_cli(int argc, char** argv, Session& session) {
   }
 
   if (g->parsed()) {
+    if (gen_count < 1 || gen_count > (1LL << 28))
+      throw UsageError(fmt::format("-n (--count) {}: the number of bodies must be 1 … 2^28", gen_count));
+    gen.count = static_cast<std::uint64_t>(gen_count);
     if (session.rank() != 0) return 0;  // one writer
     if (!offset.empty()) gen.offset = {offset[0], offset[1], offset[2]};
     if (gen.kind == "polydisperse" && rlow_opt->count() == 0) gen.radius_low = gen.radius_high / gen_ratio;
@@ -365,6 +399,7 @@ int run_cli(int argc, char** argv, Session& session) {
   if (v->parsed()) {
     if (session.rank() != 0) return 0;
     val.bullet = parse_bullet_precision(val_bullet);
+    val.progress = true;
     const ValidateReport report = validate_files(val_scene, val_contacts, val);
     fmt::print("{}", report.text());
     return report.pass ? 0 : 1;

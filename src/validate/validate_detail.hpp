@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -13,6 +14,73 @@
 namespace cg::validate_detail {
 
 using Key = std::pair<std::int64_t, std::int64_t>;
+
+// A half-open box [lo, hi) (bounds may be infinite).
+struct Box {
+  Vec3<double> lo, hi;
+  bool contains(Vec3<double> c) const {
+    return c.x >= lo.x && c.x < hi.x && c.y >= lo.y && c.y < hi.y && c.z >= lo.z && c.z < hi.z;
+  }
+  Box grown(double m) const { return {lo - Vec3<double>{m, m, m}, hi + Vec3<double>{m, m, m}}; }
+};
+
+inline Vec3<double> centre(const Scene& s, std::size_t id) {
+  return id < s.sphere_count() ? s.sphere_position[id] : s.ellipsoid_position[id - s.sphere_count()];
+}
+
+// A sphere's radius, an ellipsoid's largest semi-axis.
+inline double bounding_radius(const Scene& s, std::size_t id) {
+  if (id < s.sphere_count()) return s.sphere_radius[id];
+  const Vec3<double> e = s.ellipsoid_semi_axes[id - s.sphere_count()];
+  return std::max({e.x, e.y, e.z});
+}
+
+// A piece of the validation (validate.hpp, "Pieces and memory"): the bodies it owns (centres in
+// `box`) and its Bullet world (centres in the box grown by 2·r_max), both ids ascending.
+struct Piece {
+  Box box;
+  std::vector<std::int64_t> inside, world;
+};
+
+// Bullet's memory per overlapping pair and per body, whole process (measured: validate.cpp).
+struct BulletCost {
+  double per_pair, per_body;
+};
+
+// Cuts the regions into pieces whose Bullet world fits `budget` bytes (validate.hpp, "Pieces and
+// memory"). The expected Bullet pairs of a world are the larger of pairs_per_contact × the contacts
+// of its bodies (our contacts, by body: `degree`) and pairs_per_body × its bodies; both ratios start
+// from measurements and grow with what Bullet is seen to do (observe).
+class PiecePlanner {
+ public:
+  PiecePlanner(const Scene& scene, const std::vector<std::uint32_t>& degree, double margin, BulletCost cost,
+               double budget);
+  // A region to validate: its box and every body that may lie in its grown box (ids ascending).
+  void add_region(const Box& box, const std::vector<std::int64_t>& candidates);
+  // The next piece whose world fits the budget (halving regions that do not); nothing when done.
+  std::optional<Piece> next();
+  // Bullet found `pairs` overlapping pairs in this piece's world.
+  void observe(const Piece& piece, std::uint64_t pairs);
+  // The bytes a world of these bodies is expected to take.
+  double estimate(const std::vector<std::int64_t>& world) const;
+  double budget() const { return m_budget; }
+
+  static constexpr std::size_t kMinPieceBodies = 32;  // never split below this many owned bodies
+  // Nor run Bullet on more bodies at once: its time from scratch grows faster than N (BENCHMARKS §1:
+  // slope 1.3), and a piece is the step of the progress line.
+  static constexpr std::size_t kMaxPieceBodies = std::size_t(1) << 17;
+
+ private:
+  Piece make_piece(const Box& box, const std::vector<std::int64_t>& inside_of,
+                   const std::vector<std::int64_t>& world_of) const;
+  const Scene& m_scene;
+  const std::vector<std::uint32_t>& m_degree;
+  double m_margin;
+  BulletCost m_cost;
+  double m_budget;
+  double m_pairs_per_contact, m_pairs_per_body = 0;
+  std::vector<Piece> m_pending;  // a stack: the last pushed is split or run first
+};
 
 inline double norm(Vec3<double> v) { return std::sqrt(dot(v, v)); }
 
@@ -128,8 +196,7 @@ struct CompareContext {
   Precision contacts_precision;
   Precision bullet_precision;
   double magnitude;      // largest |world coordinate| of the scene's centres
-  double bullet_extent;  // largest |coordinate| Bullet saw in its frame (this region)
-  double shallow_threshold;
+  double bullet_extent;  // largest |centre − origin| of Bullet's frame (this piece), scene units
 };
 
 // Compares one region: `mine` are positions in the ContactIndex (sorted by key), `ref_rows` rows of

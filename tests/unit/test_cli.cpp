@@ -16,8 +16,8 @@
 #include "io/contact_file.hpp"
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
-#include "run/pipeline.hpp"
 #include "resident_steps.hpp"
+#include "run/pipeline.hpp"
 #include "support/run_cli.hpp"
 #include "temp_dir.hpp"
 
@@ -170,11 +170,21 @@ TEST_F(Cli, ValidatePassesAndFails) {
   Result ok = run("validate " + path("s.h5") + " " + path("c.h5"));
   EXPECT_EQ(ok.code, 0) << ok.output;
   EXPECT_NE(ok.output.find("PASS"), std::string::npos) << ok.output;
-  // the same contacts against a different scene: FAIL, exit 1
+  // the same contacts against a different scene: refused (exit 3), saying so
   ASSERT_EQ(run("generate " + path("t.h5") + " --count 2000 --seed 4 -q").code, 0);
   Result bad = run("validate " + path("t.h5") + " " + path("c.h5"));
-  EXPECT_EQ(bad.code, 1) << bad.output;
-  EXPECT_NE(bad.output.find("FAIL"), std::string::npos) << bad.output;
+  EXPECT_EQ(bad.code, 3) << bad.output;
+  EXPECT_NE(bad.output.find("not from " + path("t.h5")), std::string::npos) << bad.output;
+  // a contact taken away: FAIL, exit 1
+  Contacts<double> fewer = read_contacts(path("c.h5")).contacts;
+  for (auto* v : {&fewer.position_on_a, &fewer.position_on_b, &fewer.normal_on_b}) v->pop_back();
+  fewer.id_a.pop_back(), fewer.id_b.pop_back(), fewer.distance.pop_back();
+  RunInfo info;
+  info.precision = "fp64";
+  write_contacts(path("fewer.h5"), fewer, info);
+  Result fail = run("validate " + path("s.h5") + " " + path("fewer.h5"));
+  EXPECT_EQ(fail.code, 1) << fail.output;
+  EXPECT_NE(fail.output.find("FAIL missing: 1 pairs"), std::string::npos) << fail.output;
 }
 
 TEST_F(Cli, BenchWritesTheTable) {
