@@ -4,20 +4,24 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <iterator>
 
 #include "errors.hpp"
+#include "io/hdf5_handle.hpp"
 
 namespace cg {
 
 template <class Real>
 void write_contacts_csv(const std::string& path, const Contacts<Real>& c) {
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  const std::string tmp = h5::temp_name(path);
+  h5::check_output_directory(path);
   {
     std::FILE* f = std::fopen(tmp.c_str(), "w");
-    if (!f) throw IoError(path + ": cannot open for writing");
+    if (!f) throw IoError(path + ": cannot write: " + std::strerror(errno));
     // every field the run produced (kContactFields order); a vector field is three columns
     std::string header;
     for_each_contact_field(c, c.full, [&](auto index, const auto&) {

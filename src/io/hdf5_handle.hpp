@@ -144,7 +144,12 @@ class TempOutput {
   bool m_done = false;
 };
 
+// The directory an output file `path` goes into exists and is writable; else an IoError naming it
+// (not the temporary name the file is first written under).
+void check_output_directory(const std::string& path);
 Handle creation_properties(const Where& where, hid_t plist_class);  // object times off
+// Creates `name` (the temporary of where.file()): check_output_directory, then a failure is an
+// IoError naming where.file() with the system's reason only.
 Handle create_file(const Where& where, const std::string& name);
 Handle create_group(const Where& where, hid_t file, const std::string& name);  // with intermediates
 // A contiguous dataset of the given file type and shape (no fill writes: every row gets written).
