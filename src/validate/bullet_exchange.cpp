@@ -120,6 +120,7 @@ void write_oracle_input(const std::string& path, const OracleBodies& s, bool war
     f.write(row, sizeof row);
   }
   f.write(s.id.data(), s.id.size() * sizeof(std::int64_t));
+  for (std::size_t i = 0; i < s.size(); ++i) f.put<std::uint8_t>(s.partner.empty() ? 0 : s.partner[i]);
   f.close();
 }
 
@@ -147,6 +148,8 @@ OracleBodies read_oracle_input(const std::string& path, bool& warm_step) {
     s.orientation[i] = {row[7], row[8], row[9], row[10]};
   }
   f.read(s.id.data(), n * sizeof(std::int64_t));
+  s.partner.resize(n);
+  f.read(s.partner.data(), n);
   f.expect_end();
   return s;
 }

@@ -60,7 +60,9 @@ class BulletWorld {
       m_objects.push_back(std::make_unique<btCollisionObject>());
       m_objects.back()->setWorldTransform(transform(s, i, s.position[i]));
       m_objects.back()->setCollisionShape(m_shapes.back().get());
-      m_world.addCollisionObject(m_objects.back().get());  // world array index == i
+      // Partners (a piece's margin) are never paired with each other: group 2 collides with group 1 only.
+      const bool partner = !s.partner.empty() && s.partner[i] != 0;
+      m_world.addCollisionObject(m_objects.back().get(), partner ? 2 : 1, partner ? 1 : -1);  // index == i
     }
   }
   ~BulletWorld() {

@@ -14,7 +14,7 @@
 //   - every contact has id_a < id_b (Bullet's body A is the body added first; bodies are added in
 //     id order; a pair Bullet ever reports the other way round is swapped: points swapped, normal
 //     negated), one row per pair (the deepest manifold point), rows sorted by (id_a, id_b);
-//   - only manifold points with distance <= 0 are reported;
+//   - only manifold points with distance <= 0 are reported, and no pair of two partners;
 //   - positions, normals and distances are Bullet's own values (btManifoldPoint positionWorldOnA/B,
 //     normalWorldOnB, distance1) converted to double and brought back from Bullet's frame (below) to
 //     the scene's: positions / scale + origin, distances / scale.
@@ -36,7 +36,7 @@
 //
 // Exchange format (native endianness; both processes run on the same host):
 //   input : "CGBOIN03", u64 n, u8 warm, f64 origin[3], f64 scale,
-//           n × {f64 x, y, z, r, semi_a, semi_b, semi_c, qw, qx, qy, qz}, n × i64 id
+//           n × {f64 x, y, z, r, semi_a, semi_b, semi_c, qw, qx, qy, qz}, n × i64 id, n × u8 partner
 //           (a sphere has semi-axes 0; an ellipsoid has r = its largest semi-axis)
 //   output: "CGBOOUT2", u32 sizeof(btScalar), f64 scratch_s, f64 warm_s (-1: not run), u64 pairs,
 //           u64 peak resident bytes of the writer, u64 k,
@@ -70,7 +70,10 @@ struct OracleBodies {
   std::vector<std::array<double, 4>> orientation;
   std::vector<std::int64_t> id;
   Vec3<double> origin{0, 0, 0};
-  double scale = 1;  // a power of two (bullet_scale)
+  double scale = 1;                   // a power of two (bullet_scale)
+  std::vector<std::uint8_t> partner;  // empty, or per body 1: a partner only, which Bullet pairs with
+                                      // the other bodies but never with another partner (its collision
+                                      // filter group): the margin of a piece
   std::size_t size() const { return radius.size(); }
   bool is_ellipsoid(std::size_t i) const { return !semi_axes.empty() && semi_axes[i].x > 0; }
 };

@@ -135,15 +135,16 @@ void check_lengths(const Contacts<double>& c) {
 // K distinct cells, drawn at random, of a lattice over the centres' box whose cells hold about
 // `per_box` centres each: disjoint by construction. Cells are half-open [lo, hi); the last cell of
 // each axis is open above so every centre lies in exactly one cell. Empty: check the whole scene.
-std::vector<Box> pick_boxes(const SceneStats& st, std::size_t bodies, const ValidateOptions& o,
-                            ValidateReport& rep) {
+constexpr std::uint64_t kContactsPerBox = 4000;  // a sampled sub-box's pairs, about (bodies_per_box 0)
+
+std::vector<Box> pick_boxes(const SceneStats& st, std::size_t bodies, std::uint64_t per_box,
+                            const ValidateOptions& o, ValidateReport& rep) {
   std::vector<Box> boxes;
   if (o.sample == 0) return boxes;
   const Vec3<double> e = st.centres.hi - st.centres.lo;
   const double floor = 2 * st.r_max;  // a box thinner than a contact is meaningless
   const double ex = std::max(e.x, floor), ey = std::max(e.y, floor), ez = std::max(e.z, floor);
-  const double edge =
-      std::max(std::cbrt(ex * ey * ez * double(o.bodies_per_box) / double(bodies)), 4 * st.r_max);
+  const double edge = std::max(std::cbrt(ex * ey * ez * double(per_box) / double(bodies)), 4 * st.r_max);
   auto cells = [&](double span) { return std::max<std::uint64_t>(1, std::uint64_t(span / edge)); };
   const std::uint64_t mx = cells(e.x), my = cells(e.y), mz = cells(e.z);
   const std::uint64_t total = mx * my * mz;
@@ -188,7 +189,7 @@ std::vector<Box> pick_boxes(const SceneStats& st, std::size_t bodies, const Vali
 // with our copy of its contacts; per body the collision object, its shape, the broadphase proxy and
 // tree nodes, and our copy of the body.
 BulletCost bullet_cost(Precision bullet) {
-  return bullet == Precision::fp64 ? BulletCost{2400, 1300} : BulletCost{1500, 900};
+  return bullet == Precision::fp64 ? BulletCost{2000, 1300} : BulletCost{1300, 900};
 }
 
 std::uint64_t page_bytes() { return std::uint64_t(::sysconf(_SC_PAGESIZE)); }
@@ -340,7 +341,8 @@ ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, co
   if (!(o.angle_deg > 0) || !(o.angle_deg <= 180)) throw UsageError("--angle-deg must be in (0, 180]");
   if (!(o.shallow >= 0) || !std::isfinite(o.shallow)) throw UsageError("--shallow must be >= 0");
   if (o.shallow_abs && !(*o.shallow_abs >= 0)) throw UsageError("--shallow-abs must be >= 0");
-  if (o.bodies_per_box < 16) throw UsageError("validate: bodies per sub-box must be >= 16");
+  if (o.bodies_per_box != 0 && o.bodies_per_box < 16)
+    throw UsageError("validate: bodies per sub-box must be >= 16 (or 0: automatic)");
   if (scene.size() == 0) throw InputError("validate: the scene has no bodies");
   check_lengths(contacts);
 
@@ -391,8 +393,19 @@ ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, co
   const double margin = 2 * st.r_max;
   std::vector<std::pair<Box, std::vector<std::int64_t>>> regions;
   std::uint64_t owned_total = 0;
-  const std::vector<Box> boxes = pick_boxes(st, std::size_t(bodies), o, rep);
+  // Sub-boxes of 4000 bodies, or fewer where the bodies touch more: about kContactsPerBox pairs
+  // owned each, so a sample costs Bullet the same at any density.
+  std::uint64_t per_box = o.bodies_per_box;
+  if (per_box == 0) {
+    const double per_body = double(index.size()) / double(bodies);  // pairs by their id_a
+    per_box = std::uint64_t(std::clamp(double(kContactsPerBox) / std::max(per_body, 1.0), 64.0, 4000.0));
+  }
+  const std::vector<Box> boxes = pick_boxes(st, std::size_t(bodies), per_box, o, rep);
   rep.sample_boxes = boxes.size();
+  if (!boxes.empty())
+    rep.notes.push_back(
+        fmt::format("sub-boxes of about {} bodies{}", per_box,
+                    o.bodies_per_box ? "" : fmt::format(" (about {} contacts each)", kContactsPerBox)));
   if (boxes.empty()) {
     const double inf = std::numeric_limits<double>::infinity();
     std::vector<std::int64_t> all(static_cast<std::size_t>(bodies));
@@ -417,7 +430,7 @@ ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, co
   const BulletCost cost = bullet_cost(rep.bullet);
   const double held = double(resident_bytes()) + 16.0 * double(bodies);
   const double budget = o.piece_bytes ? double(o.piece_bytes) : double(rep.memory_limit) - held;
-  PiecePlanner planner(scene, degree, margin, cost, budget);
+  PiecePlanner planner(scene, index, degree, margin, cost, budget);
   const double smallest = cost.per_body * 64 + cost.per_pair * 64 * 8;
   if (budget < smallest)
     throw UsageError(fmt::format(
@@ -430,40 +443,48 @@ ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, co
     near = {};
   }
 
-  // A probe before the whole scene: Bullet on one sub-box of a few thousand bodies measures its pairs
-  // per body, so that the pieces fit even when the contacts given are far fewer than Bullet's.
+  // Bullet on a piece: its world, the bodies outside its box being partners only (never paired with
+  // each other: Bullet's pairs follow the owned bodies, whatever the margin).
+  std::vector<char> owned(scene.size(), 0);
+  auto run_bullet = [&](const Piece& p, double& extent) {
+    OracleBodies b = oracle_bodies(scene, p.world, rep.bullet_scale, extent);
+    for (const std::int64_t id : p.inside) owned[std::size_t(id)] = 1;
+    b.partner.resize(b.size());
+    for (std::size_t k = 0; k < b.size(); ++k) b.partner[k] = owned[std::size_t(b.id[k])] ? 0 : 1;
+    for (const std::int64_t id : p.inside) owned[std::size_t(id)] = 0;
+    OracleResult r = bullet_collide(b, rep.bullet);
+    planner.observe(p, r.pairs);
+    rep.bullet_seconds += r.scratch_seconds;
+    rep.child_peak_bytes = std::max(rep.child_peak_bytes, r.child_peak_bytes);
+    return r;
+  };
+
+  // A probe before the whole scene: Bullet on one sub-box of a couple of thousand bodies measures its
+  // pairs per body, so that the pieces fit even when the contacts given are far fewer than Bullet's.
   if (boxes.empty() && bodies > 8000) {
     ValidateOptions probe_options = o;
     probe_options.sample = 1;
-    probe_options.bodies_per_box = 2000;
     ValidateReport scratch;
-    const std::vector<Box> probe = pick_boxes(st, std::size_t(bodies), probe_options, scratch);
+    const std::vector<Box> probe = pick_boxes(st, std::size_t(bodies), 2000, probe_options, scratch);
     if (!probe.empty()) {
-      std::vector<std::int64_t> near;
+      Piece p{probe[0], {}, {}};
       const Box outer = probe[0].grown(margin);
-      for (std::int64_t i = 0; i < bodies; ++i)
-        if (outer.contains(centre(scene, std::size_t(i)))) near.push_back(i);
-      Piece p{probe[0], {}, std::move(near)};
+      for (std::int64_t i = 0; i < bodies; ++i) {
+        const Vec3<double> c = centre(scene, std::size_t(i));
+        if (outer.contains(c)) p.world.push_back(i);
+        if (probe[0].contains(c)) p.inside.push_back(i);
+      }
       double extent = 0;
-      const OracleResult r =
-          bullet_collide(oracle_bodies(scene, p.world, rep.bullet_scale, extent), rep.bullet);
-      planner.observe(p, r.pairs);
-      rep.bullet_seconds += r.scratch_seconds;
-      rep.child_peak_bytes = std::max(rep.child_peak_bytes, r.child_peak_bytes);
+      run_bullet(p, extent);
     }
   }
 
   Offenders off(o.max_offenders);
   CompareContext ctx{scene, rep.band, o.contacts_precision, rep.bullet, st.magnitude, /*bullet_extent=*/0.};
-  std::vector<char> owned(scene.size(), 0);
   Progress progress("validate", "bodies", owned_total, o.progress);
   std::uint64_t done = 0;
   while (std::optional<Piece> piece = planner.next()) {
-    const OracleResult bullet =
-        bullet_collide(oracle_bodies(scene, piece->world, rep.bullet_scale, ctx.bullet_extent), rep.bullet);
-    planner.observe(*piece, bullet.pairs);
-    rep.bullet_seconds += bullet.scratch_seconds;
-    rep.child_peak_bytes = std::max(rep.child_peak_bytes, bullet.child_peak_bytes);
+    const OracleResult bullet = run_bullet(*piece, ctx.bullet_extent);
     ++rep.pieces;
     rep.largest_piece = std::max<std::uint64_t>(rep.largest_piece, piece->world.size());
     rep.bullet_pairs += bullet.pairs;

@@ -34,9 +34,10 @@
 // the limit, the pieces and the peak resident memory (this process, and the float Bullet subprocess).
 //
 // Sampling (sample = K > 0): the centres' box is cut into a lattice of cells holding about
-// bodies_per_box body centres each, and K distinct cells are drawn at random (seeded): disjoint
-// sub-boxes, each a piece as above (so pairs reaching out of the box are checked too). The report
-// gives the fraction of the contacts checked. A scene smaller than one box is checked whole.
+// bodies_per_box body centres each (by default 4000, or fewer in dense scenes: about 4000 contacts), and K
+// distinct cells are drawn at random (seeded): disjoint sub-boxes, each a piece as above (so pairs reaching
+// out of the box are checked too). The report gives the fraction of the contacts checked. A scene smaller
+// than one box is checked whole.
 //
 // Pairs with an ellipsoid (README, "Validating ellipsoids"): Bullet collides ellipsoids as a convex
 // shape with the exact support and a margin of kEllipsoidMargin in its frame
@@ -74,7 +75,8 @@ struct ValidateOptions {
                                                    // float for scenes with ellipsoids, else double
   std::uint64_t sample = 0;                        // --sample K: K random sub-boxes; 0 = whole scene
   std::uint64_t seed = 1;                          // --seed: picks the sub-boxes
-  std::uint64_t bodies_per_box = 4000;             // target body count of one sub-box
+  std::uint64_t bodies_per_box = 0;                // target body count of one sub-box; 0: 4000, or
+                                                   // fewer so that a box owns about 4000 contacts
   Precision contacts_precision = Precision::fp64;  // precision the contacts were computed in
                                                    // (validate_files takes it from the file)
   std::size_t max_offenders = 8;                   // listed per kind in the report

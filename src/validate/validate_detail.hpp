@@ -42,46 +42,6 @@ struct Piece {
   std::vector<std::int64_t> inside, world;
 };
 
-// Bullet's memory per overlapping pair and per body, whole process (measured: validate.cpp).
-struct BulletCost {
-  double per_pair, per_body;
-};
-
-// Cuts the regions into pieces whose Bullet world fits `budget` bytes (validate.hpp, "Pieces and
-// memory"). The expected Bullet pairs of a world are the larger of pairs_per_contact × the contacts
-// of its bodies (our contacts, by body: `degree`) and pairs_per_body × its bodies; both ratios start
-// from measurements and grow with what Bullet is seen to do (observe).
-class PiecePlanner {
- public:
-  PiecePlanner(const Scene& scene, const std::vector<std::uint32_t>& degree, double margin, BulletCost cost,
-               double budget);
-  // A region to validate: its box and every body that may lie in its grown box (ids ascending).
-  void add_region(const Box& box, const std::vector<std::int64_t>& candidates);
-  // The next piece whose world fits the budget (halving regions that do not); nothing when done.
-  std::optional<Piece> next();
-  // Bullet found `pairs` overlapping pairs in this piece's world.
-  void observe(const Piece& piece, std::uint64_t pairs);
-  // The bytes a world of these bodies is expected to take.
-  double estimate(const std::vector<std::int64_t>& world) const;
-  double budget() const { return m_budget; }
-
-  static constexpr std::size_t kMinPieceBodies = 32;  // never split below this many owned bodies
-  // Nor run Bullet on more bodies at once: its time from scratch grows faster than N (BENCHMARKS §1:
-  // slope 1.3), and a piece is the step of the progress line.
-  static constexpr std::size_t kMaxPieceBodies = std::size_t(1) << 17;
-
- private:
-  Piece make_piece(const Box& box, const std::vector<std::int64_t>& inside_of,
-                   const std::vector<std::int64_t>& world_of) const;
-  const Scene& m_scene;
-  const std::vector<std::uint32_t>& m_degree;
-  double m_margin;
-  BulletCost m_cost;
-  double m_budget;
-  double m_pairs_per_contact, m_pairs_per_body = 0;
-  std::vector<Piece> m_pending;  // a stack: the last pushed is split or run first
-};
-
 inline double norm(Vec3<double> v) { return std::sqrt(dot(v, v)); }
 
 inline bool finite(Vec3<double> v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
@@ -187,6 +147,52 @@ class Offenders {
   }
   std::size_t m_limit;
   std::vector<ValidateOffender> m_by_kind[ValidateOffender::kinds];
+};
+
+// Bullet's memory per overlapping pair and per body, whole process (measured: validate.cpp).
+struct BulletCost {
+  double per_pair, per_body;
+};
+
+// Cuts the regions into pieces whose Bullet world fits `budget` bytes (validate.hpp, "Pieces and
+// memory"). Bullet pairs the owned bodies with every body of the world and never two margin bodies
+// (OracleBodies::partner), so its pairs follow the owned bodies: the larger of pairs_per_contact ×
+// our contacts with an owned body (by body: `degree`; `index` tells those between two owned bodies)
+// and pairs_per_body × the owned bodies. The ratios start from measurements and follow what Bullet
+// is seen to do (observe).
+class PiecePlanner {
+ public:
+  PiecePlanner(const Scene& scene, const ContactIndex& index, const std::vector<std::uint32_t>& degree,
+               double margin, BulletCost cost, double budget);
+  // A region to validate: its box and every body that may lie in its grown box (ids ascending).
+  void add_region(const Box& box, const std::vector<std::int64_t>& candidates);
+  // The next piece whose world fits the budget (halving regions that do not); nothing when done.
+  std::optional<Piece> next();
+  // Bullet found `pairs` overlapping pairs in this piece's world.
+  void observe(const Piece& piece, std::uint64_t pairs);
+  // The bytes Bullet's world of this piece is expected to take.
+  double estimate(const Piece& piece);
+  double budget() const { return m_budget; }
+
+  static constexpr std::size_t kMinPieceBodies = 32;  // never split below this many owned bodies
+  // Nor run Bullet on more bodies at once: its time from scratch grows faster than N (BENCHMARKS §1:
+  // slope 1.3), and a piece is the step of the progress line.
+  static constexpr std::size_t kMaxPieceBodies = std::size_t(1) << 17;
+
+ private:
+  Piece make_piece(const Box& box, const std::vector<std::int64_t>& inside_of,
+                   const std::vector<std::int64_t>& world_of) const;
+  double contacts_of(const Piece& piece);  // our contacts with an owned body
+  const Scene& m_scene;
+  const ContactIndex& m_index;
+  const std::vector<std::uint32_t>& m_degree;
+  std::vector<char> m_owned;  // scratch marks, one per body
+  double m_margin;
+  BulletCost m_cost;
+  double m_budget;
+  double m_pairs_per_contact, m_pairs_per_body = 0;
+  bool m_observed = false;       // the ratios come from Bullet, no longer from the initial guess
+  std::vector<Piece> m_pending;  // a stack: the last pushed is split or run first
 };
 
 // What the comparison of a region needs besides the two contact lists.

@@ -19,17 +19,22 @@ void set_component(Vec3<double>& v, int axis, double x) { (axis == 0 ? v.x : axi
 // Bullet pairs per contact before any piece has run: Bullet grows every box by its contact breaking
 // threshold and pairs every two overlapping boxes, so it holds more pairs than there are contacts
 // (about 1.9 for spheres scattered at random: a cube's volume over a ball's; more for packed grains,
-// whose neighbours nearly touch). Measured up to 2.6 in our scenes; observe() raises it as it goes.
+// whose neighbours nearly touch). Measured 2.1–2.7 in our scenes; observe() replaces it.
 constexpr double kInitialPairsPerContact = 3.0;
 // Margin on the ratios Bullet is seen to reach, for the pieces still to run.
 constexpr double kObservedSafety = 1.25;
+// A piece tells the ratio when it holds this many contacts.
+constexpr double kObservedContacts = 256;
 
 }  // namespace
 
-PiecePlanner::PiecePlanner(const Scene& scene, const std::vector<std::uint32_t>& degree, double margin,
-                           BulletCost cost, double budget)
+PiecePlanner::PiecePlanner(const Scene& scene, const ContactIndex& index,
+                           const std::vector<std::uint32_t>& degree, double margin, BulletCost cost,
+                           double budget)
     : m_scene(scene),
+      m_index(index),
       m_degree(degree),
+      m_owned(scene.size(), 0),
       m_margin(margin),
       m_cost(cost),
       m_budget(budget),
@@ -51,23 +56,36 @@ void PiecePlanner::add_region(const Box& box, const std::vector<std::int64_t>& c
   m_pending.push_back(make_piece(box, candidates, candidates));
 }
 
-double PiecePlanner::estimate(const std::vector<std::int64_t>& world) const {
-  double contacts = 0;  // pairs with a body in the world, each counted from both ends
-  for (const std::int64_t id : world) contacts += m_degree[std::size_t(id)];
-  const double n = double(world.size());
-  const double pairs = std::max(m_pairs_per_contact * contacts / 2, m_pairs_per_body * n);
-  return m_cost.per_body * n + m_cost.per_pair * pairs;
+double PiecePlanner::contacts_of(const Piece& piece) {
+  // Σ degree over the owned bodies counts a pair between two owned bodies twice: once less.
+  double contacts = 0;
+  for (const std::int64_t id : piece.inside) {
+    contacts += m_degree[std::size_t(id)];
+    m_owned[std::size_t(id)] = 1;
+  }
+  for (const std::int64_t a : piece.inside)
+    for (std::size_t k = m_index.lower_bound_a(a); k < m_index.size() && m_index.key(k).first == a; ++k)
+      if (m_owned[std::size_t(m_index.key(k).second)]) contacts -= 1;
+  for (const std::int64_t id : piece.inside) m_owned[std::size_t(id)] = 0;
+  return contacts;
+}
+
+double PiecePlanner::estimate(const Piece& piece) {
+  const double pairs =
+      std::max(m_pairs_per_contact * contacts_of(piece), m_pairs_per_body * double(piece.inside.size()));
+  return m_cost.per_body * double(piece.world.size()) + m_cost.per_pair * pairs;
 }
 
 void PiecePlanner::observe(const Piece& piece, std::uint64_t pairs) {
-  double contacts = 0;
-  for (const std::int64_t id : piece.world) contacts += m_degree[std::size_t(id)];
-  contacts /= 2;
-  if (contacts >= 64)
-    m_pairs_per_contact = std::max(m_pairs_per_contact, kObservedSafety * double(pairs) / contacts);
-  if (piece.world.size() >= 64)
+  const double contacts = contacts_of(piece);
+  if (contacts >= kObservedContacts) {
+    const double ratio = kObservedSafety * double(pairs) / contacts;
+    m_pairs_per_contact = m_observed ? std::max(m_pairs_per_contact, ratio) : ratio;
+    m_observed = true;
+  }
+  if (piece.inside.size() >= 64)
     m_pairs_per_body =
-        std::max(m_pairs_per_body, kObservedSafety * double(pairs) / double(piece.world.size()));
+        std::max(m_pairs_per_body, kObservedSafety * double(pairs) / double(piece.inside.size()));
 }
 
 std::optional<Piece> PiecePlanner::next() {
@@ -75,7 +93,7 @@ std::optional<Piece> PiecePlanner::next() {
     Piece p = std::move(m_pending.back());
     m_pending.pop_back();
     if (p.inside.empty()) continue;
-    const bool fits = estimate(p.world) <= m_budget && p.world.size() <= kMaxPieceBodies;
+    const bool fits = p.world.size() <= kMaxPieceBodies && estimate(p) <= m_budget;
     if (p.inside.size() <= kMinPieceBodies || fits) return p;
     // Halve at the median centre of the owned bodies' longest axis (the first axis, by extent, along
     // which the median leaves bodies on both sides).
