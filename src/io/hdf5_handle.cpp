@@ -151,44 +151,10 @@ Handle open_file_for_reading(const Where& where) {
 
 // ---- writing ---------------------------------------------------------------------------------
 
-std::string temp_name(const std::string& path) { return path + ".tmp." + std::to_string(::getpid()); }
-
-void remove_quietly(const std::string& file) noexcept {
-  std::error_code ec;
-  std::filesystem::remove(file, ec);
-}
-
-TempOutput::~TempOutput() {
-  if (!m_done) remove_quietly(m_temp);
-}
-
-void TempOutput::commit() {
-  if (std::rename(m_temp.c_str(), m_path.c_str()) != 0) {
-    int error = errno;
-    throw IoError(fmt::format("{}: cannot rename {} over it: {}", m_path, m_temp, std::strerror(error)));
-  }
-  m_done = true;
-}
-
 Handle creation_properties(const Where& where, hid_t plist_class) {
   Handle plist = checked(H5Pcreate(plist_class), H5Pclose, where, "cannot create a property list");
   check(H5Pset_obj_track_times(plist, 0), where, "cannot set object properties");
   return plist;
-}
-
-void check_output_directory(const std::string& path) {
-  namespace fs = std::filesystem;
-  const fs::path parent = fs::path(path).parent_path();
-  const std::string dir = parent.empty() ? std::string(".") : parent.string();
-  std::error_code ec;
-  const fs::file_status st = fs::status(dir, ec);
-  if (!fs::exists(st))
-    throw IoError(fmt::format("{}: cannot write: the directory {} does not exist", path, dir));
-  if (!fs::is_directory(st)) throw IoError(fmt::format("{}: cannot write: {} is not a directory", path, dir));
-  if (::access(dir.c_str(), W_OK | X_OK) != 0) {
-    const int error = errno;
-    throw IoError(fmt::format("{}: cannot write in the directory {}: {}", path, dir, std::strerror(error)));
-  }
 }
 
 Handle create_file(const Where& where, const std::string& name) {

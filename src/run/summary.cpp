@@ -38,11 +38,11 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
   // left out of its table. Reading every row (--read all), a rank selects its owned bodies and its
   // ghosts in one pass ("select"), and no halo is exchanged.
   const bool all_rows = r.read == SceneRead::all_rows;
-  auto shown = [&](Stage s) {
+  auto shown = [&](RunStage s) {
     if (r.ranks == 1)
-      return s != Stage::redistribute && s != Stage::halo && s != Stage::gather && s != Stage::exchange &&
-             s != Stage::merge;
-    return !(all_rows && s == Stage::halo);
+      return s != RunStage::redistribute && s != RunStage::halo && s != RunStage::gather &&
+             s != RunStage::exchange && s != RunStage::merge;
+    return !(all_rows && s == RunStage::halo);
   };
   double total = 0;
   fmt::print("  {:<16} {:>12}\n", "stage", "seconds");
@@ -51,7 +51,7 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
     if (!sub) total += t.seconds;
     if (!shown(t.stage)) continue;
     const std::string name = sub ? "  " + engine_stage_names()[static_cast<std::size_t>(t.engine_stage)]
-                             : r.ranks > 1 && all_rows && t.stage == Stage::redistribute
+                             : r.ranks > 1 && all_rows && t.stage == RunStage::redistribute
                                  ? std::string("select")
                                  : std::string(stage_name(t.stage));
     fmt::print("  {:<16} {:>12.6f}\n", name, t.seconds);

@@ -1,5 +1,5 @@
 #pragma once
-// `contactgrid validate`: compares a contact set with Bullet on the same scene (CONTRACT §4).
+// `contactgrid validate`: compares a contact set with Bullet on the same scene (docs/FORMAT.md §4).
 //
 // Comparison: pairs are matched by (id_a, id_b). A pair found by one side only is "missing" (only
 // Bullet found it) or "extra" (only the contacts given found it) unless it is borderline: its exact
@@ -15,7 +15,7 @@
 // Tolerances are relative to the bodies' size: a pair's position limit is pos_eps·L (L: the pair's
 // larger bounding radius; the course's 0.1 was for radii of order 1), or pos_abs (scene units) when
 // given; the report prints the rule with the verdict.
-// PASS iff the contacts obey CONTRACT §2 (id_a < id_b, sorted, each pair once, ids in range), no pair
+// PASS iff the contacts obey docs/FORMAT.md §2 (id_a < id_b, sorted, each pair once, ids in range), no pair
 // is missing or extra outside the band, every position error is within its limit and every angle
 // <= angle_deg. The distance error is reported, not judged (it is bounded by the position errors).
 //
@@ -39,8 +39,8 @@
 // out of the box are checked too). The report gives the fraction of the contacts checked. A scene smaller
 // than one box is checked whole.
 //
-// Pairs with an ellipsoid (README, "Validating ellipsoids"): Bullet collides ellipsoids as a convex
-// shape with the exact support and a margin of kEllipsoidMargin in its frame
+// Pairs with an ellipsoid (docs/VALIDATION.md, "Validating ellipsoids"): Bullet collides ellipsoids as a
+// convex shape with the exact support and a margin of kEllipsoidMargin in its frame
 // (bullet_ellipsoid_shape.hpp), by default in float (double Bullet's EPA is degenerate on 17–20 % of
 // ellipsoid pairs). A matched pair agrees when its positions and distances differ by at most its
 // position limit and its normals by <= angle_deg. Where they disagree, or one side lacks the pair,
@@ -136,7 +136,7 @@ struct ValidateReport {
   double shallow_deepest = 0;                                    // the largest |distance| among them
   double shape_max_position_error = 0, shape_max_angle_deg = 0;  // matched, relative / degrees
 
-  // Contract violations of the contacts given (CONTRACT §2).
+  // Contract violations of the contacts given (docs/FORMAT.md §2).
   std::uint64_t bad_id_order = 0, unsorted = 0, duplicates = 0, bad_ids = 0, non_finite = 0;
 
   // Geometry of the matched pairs.

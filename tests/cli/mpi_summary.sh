@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # What detect prints about ranks (issue #36): under mpirun with every rank reading every row the stage
 # table shows the ghost selection where it happens ("select", no halo row); reading own rows it shows
-# redistribute and halo; one rank prints no MPI-only line. Then jobs/mpirun_local.sh from another
-# working directory, with more ranks than cores: it finds the binary (CONTACTGRID, or the build
-# beside it when that is the binary under test) and adds --oversubscribe, saying so.
+# redistribute and halo; one rank prints no MPI-only line, not even with -v (the merge line). Then
+# jobs/mpirun_local.sh from another working directory, with more ranks than cores: it finds the
+# binary (CONTACTGRID, or the build beside it when that is the binary under test) and adds
+# --oversubscribe, saying so.
 # Usage: mpi_summary.sh CONTACTGRID MPIEXEC WORKDIR
 set -euo pipefail
 CG=$1; MPIEXEC=$2; W=$3
@@ -14,16 +15,16 @@ fail() { echo "FAIL: $*"; exit 1; }
 "$CG" generate "$W/s.h5" -n 4000 --seed 2 -q
 run=("$MPIEXEC" --oversubscribe --allow-run-as-root -np 2 "$CG" detect "$W/s.h5" --backend cpu --threads 1)
 
-"${run[@]}" -o "$W/all.h5" --read all >"$W/all.txt"
+"${run[@]}" -o "$W/all.h5" --read all -v >"$W/all.txt"
 grep -q "^  select " "$W/all.txt" || fail "--read all: no select row"
 ! grep -q -e '^  halo ' -e '^  redistribute ' "$W/all.txt" || fail "--read all: halo or redistribute row"
-grep -q 'merge: .* from 2 rank(s)' "$W/all.txt" || fail "--read all: no merge line"
+grep -q 'merge: .* from 2 rank(s)' "$W/all.txt" || fail "--read all -v: no merge line"
 
 "${run[@]}" -o "$W/own.h5" --read own >"$W/own.txt"
 grep -q '^  redistribute ' "$W/own.txt" && grep -q '^  halo ' "$W/own.txt" || fail "--read own: rows missing"
 ! grep -q '^  select ' "$W/own.txt" || fail "--read own: a select row"
 
-"$CG" detect "$W/s.h5" -o "$W/one.h5" --backend cpu >"$W/one.txt"
+"$CG" detect "$W/s.h5" -o "$W/one.h5" --backend cpu -v >"$W/one.txt"
 ! grep -q -e merge -e redistribute -e halo -e gather -e select -e 'over ranks' "$W/one.txt" \
   || fail "one rank printed an MPI-only line: $(cat "$W/one.txt")"
 

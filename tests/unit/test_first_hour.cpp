@@ -23,7 +23,7 @@ class FirstHour : public TempDirTest {
 // One rank sends nothing: no merge line, no rows for redistribute, halo, gather or merge, and no
 // "maximum over ranks".
 TEST_F(FirstHour, OneRankPrintsNoMpiLines) {
-  const CliResult d = run_cli("detect " + path("s.h5") + " -o " + path("c.h5") + " --backend cpu");
+  const CliResult d = run_cli("detect " + path("s.h5") + " -o " + path("c.h5") + " --backend cpu -v");
   ASSERT_EQ(d.code, 0) << d.output;
   EXPECT_NE(d.output.find("1 rank(s)"), std::string::npos) << d.output;
   EXPECT_NE(d.output.find("  detect "), std::string::npos) << d.output;
@@ -68,21 +68,28 @@ TEST_F(FirstHour, CountZeroIsReportedAsDashN) {
   }
 }
 
-// An output directory that does not exist: detect (exit 6, I/O) names it, without the temporary
-// name or HDF5's flags; so does the CSV copy.
+// An output directory that does not exist: detect (exit 6, I/O, before it reads the scene) and
+// generate name it, without the temporary name or HDF5's flags; so does the CSV copy.
 TEST_F(FirstHour, UnwritableOutputNamesTheDirectory) {
   const std::string dir = path("missing");
   const CliResult d = run_cli("detect " + path("s.h5") + " -o " + dir + "/c.h5 --backend cpu");
   EXPECT_EQ(d.code, 6) << d.output;
-  EXPECT_NE(d.output.find(dir + "/c.h5: cannot write: the directory " + dir + " does not exist"),
-            std::string::npos)
+  EXPECT_NE(d.output.find("cannot write into the directory " + dir + ": it does not exist"), std::string::npos)
       << d.output;
-  EXPECT_EQ(d.output.find(".tmp."), std::string::npos) << d.output;
-  EXPECT_EQ(d.output.find("flags"), std::string::npos) << d.output;
+  const CliResult g = run_cli("generate " + dir + "/s.h5 -n 10 -q");
+  EXPECT_EQ(g.code, 6) << g.output;
+  EXPECT_NE(g.output.find(dir + "/s.h5: cannot write into the directory " + dir + ": it does not exist"),
+            std::string::npos)
+      << g.output;
+  for (const std::string& out : {d.output, g.output}) {
+    EXPECT_EQ(out.find(".tmp."), std::string::npos) << out;
+    EXPECT_EQ(out.find("flags"), std::string::npos) << out;
+  }
   const CliResult csv =
       run_cli("detect " + path("s.h5") + " -o " + path("c.h5") + " --backend cpu --csv " + dir + "/c.csv");
   EXPECT_EQ(csv.code, 6) << csv.output;
-  EXPECT_NE(csv.output.find("the directory " + dir + " does not exist"), std::string::npos) << csv.output;
+  EXPECT_NE(csv.output.find("cannot write into the directory " + dir + ": it does not exist"), std::string::npos)
+      << csv.output;
 }
 
 }  // namespace
