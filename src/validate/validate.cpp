@@ -402,9 +402,10 @@ ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, co
   const std::vector<Box> boxes = pick_boxes(st, std::size_t(bodies), per_box, o, rep);
   rep.sample_boxes = boxes.size();
   if (!boxes.empty())
-    rep.notes.push_back(
-        fmt::format("sub-boxes of about {} bodies{}", per_box,
-                    o.bodies_per_box ? "" : fmt::format(" (about {} contacts each)", kContactsPerBox)));
+    rep.notes.push_back(fmt::format("sub-boxes of about {} bodies{}", per_box,
+                                    o.bodies_per_box == 0 && per_box < 4000
+                                        ? fmt::format(" (about {} contacts each)", kContactsPerBox)
+                                        : std::string()));
   if (boxes.empty()) {
     const double inf = std::numeric_limits<double>::infinity();
     std::vector<std::int64_t> all(static_cast<std::size_t>(bodies));
