@@ -3,21 +3,16 @@
 
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <optional>
 #include <thread>
 
 #include "agreed_stage.hpp"
 #include "step_plan.hpp"
+#include "timing.hpp"
 #include "transport.hpp"
 
 namespace cg {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 // Page-locked host memory for an engine's copies (released before the memory is).
 template <class Real>
@@ -40,12 +35,6 @@ struct OrientedRecord {
   double radius;
   Quat<double> orientation;
 };
-
-double median_of(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
 
 }  // namespace
 
@@ -95,7 +84,7 @@ struct StepLoop<Real>::State {
   // the step in flight
   std::thread interior;
   std::exception_ptr error, interior_error;
-  Clock::time_point s0;
+  WallClock::time_point s0;
   std::uint64_t found_a = 0, found_b = 0;
   std::array<double, kStepStageCount> t{};
 
@@ -136,7 +125,7 @@ StepBodies& StepLoop<Real>::bodies() {
 template <class Real>
 void StepLoop<Real>::lay_out(StepBodies&& bodies) {
   State& s = *m;
-  const auto t0 = Clock::now();
+  const auto t0 = WallClock::now();
   s.bodies = std::move(bodies);
   // Scenes with ellipsoids: the shape rows go into A and B (the ghosts' with the first exchange).
   // Agreed over the ranks, as a rank without rows has none.
@@ -265,9 +254,9 @@ void StepLoop<Real>::detect_interior() {
   s.t = {};
   s.found_a = s.found_b = 0;
   s.interior_error = nullptr;
-  s.s0 = Clock::now();
+  s.s0 = WallClock::now();
   auto run = [&s] {
-    const auto i0 = Clock::now();
+    const auto i0 = WallClock::now();
     try {
       s.found_a = s.a.detect_resident(s.frame);
     } catch (...) {
@@ -291,7 +280,7 @@ template <class Real>
 void StepLoop<Real>::refresh_ghosts() {
   State& s = *m;
   if (s.session.size() == 1) return;
-  const auto h0 = Clock::now();
+  const auto h0 = WallClock::now();
   const StepBodies& o = s.bodies;
   const auto& halo = s.plan.halo.rows;
   const auto& of_ghost = s.rows.of_ghost;
@@ -347,7 +336,7 @@ template <class Real>
 void StepLoop<Real>::detect_boundary() {
   State& s = *m;
   if (s.b && !s.error) {
-    const auto b0 = Clock::now();
+    const auto b0 = WallClock::now();
     try {
       s.found_b = s.b->detect_resident(s.frame);
     } catch (...) {
@@ -410,10 +399,10 @@ StepStats StepLoop<Real>::stats() {
   }
   s.comm.allreduce_max(all);
   const std::size_t row = kStepStageCount + n_engine;
-  auto median = [&](std::size_t j) {
+  auto step_median = [&](std::size_t j) {
     std::vector<double> v(n);
     for (std::size_t k = 0; k < n; ++k) v[k] = all[k * row + j];
-    return median_of(std::move(v));
+    return median(std::move(v));
   };
   StepStats st;
   st.steps = static_cast<int>(n);
@@ -422,12 +411,12 @@ StepStats StepLoop<Real>::stats() {
   st.oriented = s.refresh && s.session.size() > 1;
   st.halo_rows = s.session.sum(s.halo_rows);
   st.setup = s.session.max(s.setup);
-  st.halo = median(static_cast<std::size_t>(StepStage::halo));
-  st.interior = median(static_cast<std::size_t>(StepStage::interior));
-  st.boundary = median(static_cast<std::size_t>(StepStage::boundary));
-  st.step = median(static_cast<std::size_t>(StepStage::step));
+  st.halo = step_median(static_cast<std::size_t>(StepStage::halo));
+  st.interior = step_median(static_cast<std::size_t>(StepStage::interior));
+  st.boundary = step_median(static_cast<std::size_t>(StepStage::boundary));
+  st.step = step_median(static_cast<std::size_t>(StepStage::step));
   for (std::size_t j = 0; j < n_engine && n > 0; ++j) {
-    const double t = median(kStepStageCount + j);
+    const double t = step_median(kStepStageCount + j);
     if (t > 0) st.stages.push_back({engine_stage_names()[j], t});
   }
   return st;

@@ -24,10 +24,11 @@
 // A rank holds its bodies in ascending id in both engines (the engines' contacts then come out in
 // (id_a, id_b) order with the bits of a run from scratch). Scenes with ellipsoids: A and B hold the
 // shape rows too, the ghosts' from the first exchange; every step refreshes the ghosts' orientations
-// with their positions (64 bytes a row instead of 40; a second message per neighbour measured slower,
-// BENCHMARKS §10). Semi-axes stay fixed (set once); StepMotion::send_semi_axes sends them every step,
-// in a message of their own, for a simulation whose shapes grow. One rank (or a rank without
-// neighbours within the ghost width) has no boundary rows and no engine B.
+// with their positions, in the same message (64 bytes a row instead of 40: cheaper than a second
+// message per neighbour, BENCHMARKS.md §10). Semi-axes stay fixed (set once);
+// StepMotion::send_semi_axes sends them every step, in a message of their own, for a simulation whose
+// shapes grow. One rank (or a rank without neighbours within the ghost width) has no boundary rows and
+// no engine B.
 #include <cstdint>
 #include <memory>
 #include <string>

@@ -154,27 +154,28 @@ Subcommand add_generate(CLI::App& app) {
   g->add_flag("--xdmf", args->xdmf,
               "Also write XDMF beside the scene for ParaView (<scene>.spheres.xmf, ...)");
 
-  return {g, [args, rlow_opt, aspect_opt](Session& session) {
-            if (args->count < 1 || args->count > (1LL << 28))
-              throw UsageError(
-                  fmt::format("-n (--count) {}: the number of bodies must be 1 … 2^28", args->count));
-            if (session.rank() != 0) return 0;  // one writer
-            GenerateOptions& gen = args->options;
-            gen.count = static_cast<std::uint64_t>(args->count);
-            const std::vector<double>& offset = args->offset;
-            if (!offset.empty()) gen.offset = {offset[0], offset[1], offset[2]};
-            if ((gen.kind == "polydisperse" || gen.kind == "bimodal" || gen.kind == "intruders") &&
-                rlow_opt->count() == 0)
-              gen.radius_low = gen.radius_high / args->ratio;
-            if (aspect_opt->count() > 0) {
-              if (gen.kind != "ellipsoids" && gen.kind != "mixed")
-                throw UsageError("--max-aspect applies to --kind ellipsoids or mixed");
-              gen.radius_low = gen.radius_high / args->max_aspect;
-            }
-            const int code = run_generate(args->output, gen, args->quiet);
-            if (args->xdmf) write_xdmf(args->output, "", xdmf_base(args->output));
-            return code;
-          }};
+  return {
+      g, [args, rlow_opt, aspect_opt](Session& session) {
+        if (args->count < 1 || args->count > (1LL << 28))
+          throw UsageError(
+              fmt::format("-n (--count) {}: the number of bodies must be 1 … 2^28", args->count));
+        if (session.rank() != 0) return 0;  // one writer
+        GenerateOptions& options = args->options;
+        options.count = static_cast<std::uint64_t>(args->count);
+        const std::vector<double>& offset = args->offset;
+        if (!offset.empty()) options.offset = {offset[0], offset[1], offset[2]};
+        if ((options.kind == "polydisperse" || options.kind == "bimodal" || options.kind == "intruders") &&
+            rlow_opt->count() == 0)
+          options.radius_low = options.radius_high / args->ratio;
+        if (aspect_opt->count() > 0) {
+          if (options.kind != "ellipsoids" && options.kind != "mixed")
+            throw UsageError("--max-aspect applies to --kind ellipsoids or mixed");
+          options.radius_low = options.radius_high / args->max_aspect;
+        }
+        const int code = run_generate(args->output, options, args->quiet);
+        if (args->xdmf) write_xdmf(args->output, "", xdmf_base(args->output));
+        return code;
+      }};
 }
 
 // detect: every contact of a scene, over all ranks (run/pipeline.hpp).
