@@ -74,7 +74,8 @@ TEST_F(FirstHour, UnwritableOutputNamesTheDirectory) {
   const std::string dir = path("missing");
   const CliResult d = run_cli("detect " + path("s.h5") + " -o " + dir + "/c.h5 --backend cpu");
   EXPECT_EQ(d.code, 6) << d.output;
-  EXPECT_NE(d.output.find("cannot write into the directory " + dir + ": it does not exist"), std::string::npos)
+  EXPECT_NE(d.output.find("cannot write into the directory " + dir + ": it does not exist"),
+            std::string::npos)
       << d.output;
   const CliResult g = run_cli("generate " + dir + "/s.h5 -n 10 -q");
   EXPECT_EQ(g.code, 6) << g.output;
@@ -88,7 +89,8 @@ TEST_F(FirstHour, UnwritableOutputNamesTheDirectory) {
   const CliResult csv =
       run_cli("detect " + path("s.h5") + " -o " + path("c.h5") + " --backend cpu --csv " + dir + "/c.csv");
   EXPECT_EQ(csv.code, 6) << csv.output;
-  EXPECT_NE(csv.output.find("cannot write into the directory " + dir + ": it does not exist"), std::string::npos)
+  EXPECT_NE(csv.output.find("cannot write into the directory " + dir + ": it does not exist"),
+            std::string::npos)
       << csv.output;
 }
 
