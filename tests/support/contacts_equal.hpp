@@ -57,13 +57,15 @@ std::vector<std::string> differing_fields(const Contacts<Real>& got, const Conta
 }
 
 // The names of the fields whose row k of `got` differs from row m of `want` (want rounded to got's
-// real type); "full" when one has the optional fields and the other not. Empty: identical.
+// real type); "full" ("history") when one has that optional group and the other not. Empty: identical.
 template <class Real, class Wide = Real>
 std::vector<std::string> differing_fields_at(const Contacts<Real>& got, std::size_t k,
                                              const Contacts<Wide>& want, std::size_t m) {
   std::vector<std::string> differ;
   if (got.full != want.full) differ.push_back("full");
-  zip_contact_fields(got, want, got.full && want.full, [&](auto index, const auto& g, const auto& w) {
+  if (got.history != want.history) differ.push_back("history");
+  const FieldSet both{got.full && want.full, got.history && want.history};
+  zip_contact_fields(got, want, both, [&](auto index, const auto& g, const auto& w) {
     if (k >= g.size() || m >= w.size() || !same_row(g, k, w, m))
       differ.push_back(kContactFields[index].name());
   });

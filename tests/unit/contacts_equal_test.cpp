@@ -66,7 +66,7 @@ TEST(ContactsEqual, PresenceAndRowRanges) {
   EXPECT_EQ(compare_contacts(basic, basic), "identical");
   const std::vector<std::string> optional = differing_fields(basic, full);
   EXPECT_EQ(optional.size(), kContactFieldCount - kBasicContactFieldCount);
-  EXPECT_EQ(compare_rows(basic, 0, full, 0), "differ in full");
+  EXPECT_EQ(compare_rows(basic, 0, full, 0), "differ in full history");
   Contacts<float> tail = rows<float>(6, FieldSet::all());
   EXPECT_EQ(compare_contacts(tail, full, 0), "identical");
   EXPECT_NE(compare_contacts(tail, full, 1), "identical");  // rows 1 … 6 of a 6-row set: past the end
