@@ -4,7 +4,8 @@
 set -euo pipefail
 pkgs=(build-essential cmake ninja-build pkg-config
       libopenmpi-dev openmpi-bin libhdf5-dev hdf5-tools libbullet-dev
-      libgtest-dev libcli11-dev libfmt-dev gnuplot-nox clang-format)
+      libgtest-dev libcli11-dev libfmt-dev gnuplot-nox clang-format
+      clang-14 libclang-rt-14-dev)  # the fuzz harness (tests/fuzz: libFuzzer, sanitizers)
 missing=()
 for p in "${pkgs[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
 if ((${#missing[@]})); then

@@ -39,6 +39,9 @@ struct DetectJob {
   // bound; engine.cpp): measure the motion since its build, reuse it when skin_covers(), else build.
   double skin = 0, inflation = 0;
   bool check = false;
+  // What the broad phase does with its estimate of the pair tests before its pair stage
+  // (check_pair_estimate, pair_estimate.hpp; from EngineOptions).
+  PairLimits pair_limits{};
   std::size_t body_count() const { return device_bodies ? device_bodies->count : bodies.size(); }
 };
 

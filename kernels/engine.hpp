@@ -9,6 +9,7 @@
 //   → radix sort by cell key → pair count → scan → pair fill → sort pairs by (a, b)
 //   → narrow phase (requested fields) → contacts in world frame, sorted by (id_a, id_b)
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <span>
@@ -20,6 +21,7 @@
 #include "core/vec3.hpp"
 #include "errors.hpp"
 #include "grid_plan.hpp"
+#include "pair_estimate.hpp"
 
 namespace cg {
 
@@ -63,6 +65,11 @@ struct EngineOptions {
   // since that build, 2·(d + g) <= skin, skips entries/sort/pairs/order and runs pack + narrow over
   // the kept list. Either way the contacts are those of a skin-0 detection, bit for bit.
   double skin = 0;
+  // Runaway work (pair_estimate.hpp): before its pair stage the broad phase estimates the pair tests
+  // from the cells' occupancy; on_pair_estimate (when set) sees the estimate, and one above
+  // max_pair_tests (0: no limit) throws LimitError (exit code 9) before the pair stage runs.
+  std::uint64_t max_pair_tests = 0;
+  std::function<void(const PairEstimate&)> on_pair_estimate{};
 };
 
 // Counters of one run (for tests and the summary).

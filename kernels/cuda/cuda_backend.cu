@@ -10,6 +10,8 @@
 //                  only, when the spheres outgrow the L2); control bytes, per-block entry totals
 //   entries.cuh    scan of the block totals → fill (cell key, body) in body order
 //   sort.cuh       cub::DeviceRadixSort::SortPairs over bits [0, key_bits)
+//   pair_estimate.cuh  the pair tests estimated from the sorted keys (a max-scan and a reduction, one
+//                  wait), checked before the pair stage (pair_estimate.hpp); counted in pairs
 //   pairs.cuh      candidate pairs: count per sorted entry (block-staged walk) and direct write of
 //                  the (a, b) u32 pairs at a block-aggregated atomic cursor; on overflow scan → fill
 //   type_passes.cuh  opt-in (Tuning::type_passes): entries, sort and pairs as Le Grand's 8 passes
@@ -23,9 +25,9 @@
 //
 // One stream, owned by the backend (blocking: ordered after work on the legacy default stream).
 // The persistent workspace grows geometrically and never shrinks: a caller that detects many frames
-// allocates nothing after the first (EngineStats::device_allocations). The host synchronises twice
-// per call, where it needs a count: after pack (entries total, bad-data status) and after the pair
-// count (pairs total); and once at the end (a rejecting narrow whose rows go to host memory waits once
+// allocates nothing after the first (EngineStats::device_allocations). The host synchronises three
+// times per call, where it needs a count: after pack (entries total, bad-data status), after the
+// pair stage's estimate (pair_estimate.cuh) and after the pair count (pairs total); and once at the end (a rejecting narrow whose rows go to host memory waits once
 // more, for their count: narrow.cuh).
 #include <algorithm>
 #include <cstdint>
@@ -40,6 +42,7 @@
 #include "cuda/narrow.cuh"
 #include "cuda/order.cuh"
 #include "cuda/pack.cuh"
+#include "cuda/pair_estimate.cuh"
 #include "cuda/pairs.cuh"
 #include "cuda/run_state.cuh"
 #include "cuda/shapes.cuh"
@@ -153,6 +156,7 @@ class CudaBackend {
       if (!r.type_passes) {
         entries_stage(r);
         sort_stage(r);
+        estimate_stage(r);  // may refuse the scene (EngineOptions::max_pair_tests)
         pairs_stage(r);
       } else {
         type_pass_stages(r);

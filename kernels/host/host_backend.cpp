@@ -6,6 +6,7 @@
 //   pack      world (double) → local frame Broad spheres; per body: cells, entry count, control byte
 //   entries   exclusive scan of entry counts → fill (cell key, body) entries in body order
 //   sort      stable radix sort of the entries by cell key over plan.key_bits bits
+//             (then the pair stage's estimate and its check: pair_estimate.hpp, counted in pairs)
 //   pairs     per entry: tests against later entries of its cell (cells of type 0 first: Le Grand's
 //             8 passes); candidate pairs (a < b, local indices) collected per chunk of entries,
 //             then chunk sizes → scan → fill
@@ -92,6 +93,8 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
 
     host::sort_entries(entries, job.plan.key_bits, nt);
     timer.lap(Stage::sort);
+
+    check_pair_estimate(host::estimate_pair_tests(entries, job.bodies.size(), nt), job.pair_limits);
 
     stats.pair_tests =
         host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter,

@@ -76,6 +76,33 @@ std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const
 
 }  // namespace
 
+template <class Key>
+PairEstimate estimate_pair_tests(const Entries<Key>& en, std::uint64_t bodies, int threads) {
+  const std::size_t n = en.size();
+  const Key* keys = en.keys.data();
+  const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(256, n / 16384));
+  std::uint64_t tests = 0, largest = 0;
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) reduction(+ : tests) \
+    reduction(max : largest) if (n_chunks > 1)
+  for (std::size_t c = 0; c < n_chunks; ++c) {
+    const std::size_t end = n * (c + 1) / n_chunks;
+    std::size_t e = n * c / n_chunks;
+    while (e > 0 && e < end && keys[e] == keys[e - 1]) ++e;  // that cell is the earlier chunk's
+    while (e < end) {
+      std::size_t f = e + 1;
+      while (f < n && keys[f] == keys[e]) ++f;
+      const std::uint64_t m = f - e;
+      tests += m * (m - 1) / 2;
+      largest = std::max(largest, m);
+      e = f;
+    }
+  }
+  return {tests, bodies, n, largest};
+}
+
+template PairEstimate estimate_pair_tests(const Entries<std::uint32_t>&, std::uint64_t, int);
+template PairEstimate estimate_pair_tests(const Entries<std::uint64_t>&, std::uint64_t, int);
+
 template <class Real, class Key>
 std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p,
                               std::span<const std::uint8_t> report, int half_bits, CandidateFilter filter,

@@ -119,6 +119,12 @@ std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p
                               std::span<const std::uint8_t> report, int half_bits, CandidateFilter filter,
                               const NarrowBodies<double>* fp64, int threads, CandidatePairs& out);
 
+// The pair stage's estimate (pair_estimate.hpp) from the sorted entries: Σ over cells of m·(m − 1)/2
+// and the fullest cell, in one parallel pass over the keys (each cell counted by the chunk where it
+// starts). `bodies`: the call's, for the estimate's per-body figure.
+template <class Key>
+PairEstimate estimate_pair_tests(const Entries<Key>& e, std::uint64_t bodies, int threads);
+
 // order: radix sort of the candidates by (a, b).
 void order_candidates(CandidatePairs& c, int threads);
 

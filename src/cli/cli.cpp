@@ -177,6 +177,11 @@ int run_cli(int argc, char** argv, Session& session) {
       ->check(CLI::NonNegativeNumber)
       ->default_str("0");
   d->add_option("--csv", det.csv, "Also write the contacts as CSV (for small results)");
+  d->add_option("--max-pair-tests", det.max_pair_tests,
+                "Refuse a scene whose pair stage would test more than N pairs on a rank (estimated from "
+                "the cells' occupancy before the pair stage; exit code 9; 0: no limit)")
+      ->check(CLI::NonNegativeNumber)
+      ->default_str("0");
   d->add_option("--threads", det.threads, "CPU backend threads (0: all cores)")
       ->check(CLI::NonNegativeNumber);
   d->add_option("--axis", det.axis, "MPI slab axis: auto (largest extent) | x | y | z")

@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -22,6 +23,7 @@
 #include "io/contact_file.hpp"
 #include "io/contacts_csv.hpp"
 #include "io/inspect.hpp"
+#include "io/temp_output.hpp"
 #include "io/scene_file.hpp"
 #include "node_threads.hpp"
 #include "precision_choice.hpp"
@@ -453,6 +455,18 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   return result;
 }
 
+// A pair stage far above the usual (pair_work_unusual) is said once per process, on any rank, before
+// it runs: a run that would take hours says so instead of running without a word.
+void warn_unusual_pair_work(const PairEstimate& e, const std::string& prefix) {
+  static std::atomic<bool> said{false};
+  if (!pair_work_unusual(e) || said.exchange(true)) return;
+  fmt::print(stderr,
+             "contactgrid: warning: {}the pair stage will make {}, far more than usual (a few to a few hundred "
+             "per body): expect a long run; --max-pair-tests N refuses such scenes\n",
+             prefix, describe(e));
+  std::fflush(stderr);
+}
+
 DistributedOptions run_options(const DetectCommand& cmd, const Session& session) {
   DistributedOptions o;
   o.engine.backend = cmd.backend;
@@ -463,6 +477,9 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.engine.ellipsoid_tolerance = cmd.solver_tolerance;
   o.engine.ellipsoid_max_iterations = cmd.solver_iterations;
   o.engine.skin = cmd.skin;
+  o.engine.max_pair_tests = cmd.max_pair_tests;
+  o.engine.on_pair_estimate = [prefix = session.uses_mpi() ? session.prefix() : std::string()](
+                                  const PairEstimate& e) { warn_unusual_pair_work(e, prefix); };
   if (cmd.backend != Backend::cpu) o.engine.device = session.device_for(cuda_device_count());
   o.axis = cmd.axis;
   o.balance = cmd.balance;
@@ -559,8 +576,16 @@ int detect(const DetectCommand& cmd, Session& session, const DistributedOptions&
   info.precision = to_string(choice.mode);
   info.precision_choice = choice.reason;
   stop_point();
+  // The contact file and its CSV copy appear both or neither (rank 0 renames them into place).
+  FinishedOutputs outputs;
   times.push_back(write_output(session, cmd, r, info));
-  if (!cmd.csv.empty()) times.push_back(write_csv(session, cmd.csv, r.contacts));
+  if (session.rank() == 0) outputs.add(cmd.output);
+  if (!cmd.csv.empty()) {
+    times.push_back(write_csv(session, cmd.csv, r.contacts));
+    if (session.rank() == 0) outputs.add(cmd.csv);
+  }
+  stop_point();
+  outputs.keep();
   if (!cmd.quiet && session.rank() == 0) print_summary(info, times, r.total_contacts, r);
   return 0;
 }

@@ -173,6 +173,7 @@ struct DetectCommand {
   int steps = 0;    // resident steps after the run (a simulation's per-step cost)
   double skin = 0;  // EngineOptions::skin: candidates kept across the resident steps
   double spin = 0;  // StepMotion::spin: radians per step the ellipsoids turn in the resident steps
+  std::uint64_t max_pair_tests = 0;  // EngineOptions::max_pair_tests (0: no limit)
   bool quiet = false;
 };
 
