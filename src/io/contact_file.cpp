@@ -1,4 +1,5 @@
-// contact_file.cpp: contact files (CONTRACT §2) through the HDF5 C API and pwrite (see contact_file.hpp).
+// contact_file.cpp: contact files (docs/FORMAT.md §2) through the HDF5 C API and pwrite (see
+// contact_file.hpp).
 #include "io/contact_file.hpp"
 
 #include <fcntl.h>
@@ -234,7 +235,7 @@ template void write_contact_rows<double>(const ContactFileLayout&, std::uint64_t
                                          int);
 
 void commit_contact_file(const ContactFileLayout& layout, const RunInfo& info) {
-  // The precision attribute is the run's mode (CONTRACT §2: mixed writes float64 datasets).
+  // The precision attribute is the run's mode (docs/FORMAT.md §2: mixed writes float64 datasets).
   const std::string precision = info.precision.empty() ? to_string(layout.precision) : info.precision;
   try {
     const bool fp32 = precision == "fp32";

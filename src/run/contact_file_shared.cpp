@@ -2,13 +2,13 @@
 // the layout → pwrite own rows (every rank) → attributes and rename (rank 0), agreeing after each.
 #include "run/contact_file_shared.hpp"
 
-#include <chrono>
 #include <exception>
 #include <optional>
 
 #include "io/temp_output.hpp"
 #include "run/stop.hpp"
 #include "run/test_fault.hpp"
+#include "timing.hpp"
 
 namespace cg {
 
@@ -41,8 +41,7 @@ void write_stage(const Session& session, bool here, F&& work) {
 template <class Real>
 double write_all(Session& session, const std::string& path, const Contacts<Real>& slice,
                  std::uint64_t first_row, std::uint64_t total_rows, RunInfo& info, int threads) {
-  using Clock = std::chrono::steady_clock;
-  const auto t0 = Clock::now();
+  const auto t0 = WallClock::now();
   const bool root = session.rank() == 0;
   constexpr Precision precision = precision_of<Real>();
   const bool full = slice.full;
@@ -82,7 +81,7 @@ double write_all(Session& session, const std::string& path, const Contacts<Real>
       write_contact_rows(*layout, first_row, slice, threads);
     });
     // (c) rank 0: attributes (with the write time) and rename
-    const double seconds = session.max(std::chrono::duration<double>(Clock::now() - t0).count());
+    const double seconds = session.max(seconds_since(t0));
     info.times.push_back({"write", seconds});
     write_stage(session, root, [&] { commit_contact_file(*layout, info); });
     return seconds;

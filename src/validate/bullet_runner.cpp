@@ -18,9 +18,9 @@
 #include <string>
 #include <vector>
 
-#include "validate/bullet_oracle.hpp"
 #include "errors.hpp"
 #include "run/stop.hpp"
+#include "validate/bullet_oracle.hpp"
 
 extern char** environ;
 
