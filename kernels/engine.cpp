@@ -231,7 +231,8 @@ detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> 
   if (options.ellipsoid_tolerance > 0)
     job.solver.tolerance = static_cast<Narrow>(options.ellipsoid_tolerance);
   if (options.ellipsoid_max_iterations > 0) job.solver.max_iterations = options.ellipsoid_max_iterations;
-  job.pair_limits = {options.max_pair_tests, &options.on_pair_estimate};
+  job.pair_limits = {options.max_pair_tests, options.on_pair_estimate ? &options.on_pair_estimate : nullptr,
+                     options.on_pair_progress ? &options.on_pair_progress : nullptr};
   stats.key_bits = job.plan.key_bits;
   stats.cell_size = f.cell_size;
   return job;

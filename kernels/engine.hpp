@@ -70,6 +70,8 @@ struct EngineOptions {
   // max_pair_tests (0: no limit) throws LimitError (exit code 9) before the pair stage runs.
   std::uint64_t max_pair_tests = 0;
   std::function<void(const PairEstimate&)> on_pair_estimate{};
+  // The host pair stage's progress (PairLimits::on_progress): tests done so far, then finished.
+  std::function<void(std::uint64_t done, bool finished)> on_pair_progress{};
 };
 
 // Counters of one run (for tests and the summary).

@@ -18,23 +18,40 @@
 namespace cg {
 
 struct PairEstimate {
-  std::uint64_t tests = 0;    // pair tests the pair stage would make, at most
-  std::uint64_t bodies = 0;   // bodies of the call (owned and ghosts)
-  std::uint64_t entries = 0;  // cell entries (a grid: home and phantom cells), or the broad phase's items
-  std::uint64_t largest = 0;  // the most entries in one cell (or bucket)
+  std::uint64_t tests = 0;      // pair tests the pair stage would make, at most
+  std::uint64_t bodies = 0;     // bodies of the call (owned and ghosts)
+  std::uint64_t entries = 0;    // cell entries (a grid: home and phantom cells), or the broad phase's items
+  std::uint64_t largest = 0;    // the most entries in one cell (or bucket)
+  double tests_per_second = 0;  // the backend's rate for such tests (below); 0: no time estimate
 };
+
+// The rates behind the time estimate: pair tests a second of a pile (bodies stacked in one cell,
+// every test a candidate and a contact), the stage's slowest case; the host's per thread
+// (BENCHMARKS.md "Runaway scenes" gives the measurements).
+constexpr double kHostPairTestsPerSecondPerThread = 2e7;
+constexpr double kDevicePairTestsPerSecond = 2e9;
 
 // What the engine does with an estimate (EngineOptions::max_pair_tests, on_pair_estimate).
 struct PairLimits {
-  std::uint64_t max_tests = 0;                                // 0: no limit
+  std::uint64_t max_tests = 0;                                            // 0: no limit
   const std::function<void(const PairEstimate&)>* on_estimate = nullptr;  // may be null
+  // The pair stage's progress (host backend): tests done so far, from one thread at a time, and once
+  // more with finished = true at the stage's end. May be null.
+  const std::function<void(std::uint64_t done, bool finished)>* on_progress = nullptr;
+  // Whether anyone looks at the estimate: a broad phase makes none otherwise (the library's default
+  // costs nothing; on the GPU the estimate is a scan, a reduction and a wait).
+  bool wanted() const { return max_tests > 0 || (on_estimate != nullptr && *on_estimate); }
 };
 
 // Far above the usual: at least 1e9 tests (seconds of work) and 1000 per body.
 bool pair_work_unusual(const PairEstimate& e);
 
-// "about 5.0e+11 pair tests (5.0e+05 per body; the fullest cell holds 1000000 entries)"
+// "about 5e+11 pair tests (5e+05 per body; the fullest cell holds 1000000 entries)", and with a rate
+// "…; about 4.2 min at 2e+09 tests a second)"
 std::string describe(const PairEstimate& e);
+
+// "42 s", "12 min", "3.5 h", "2.1 days"
+std::string describe_seconds(double seconds);
 
 // Before a pair stage: hands the estimate to limits.on_estimate (when set), then throws LimitError
 // ("... exceeds --max-pair-tests N ...") when it is above limits.max_tests (when set).

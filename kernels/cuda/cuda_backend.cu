@@ -25,9 +25,10 @@
 //
 // One stream, owned by the backend (blocking: ordered after work on the legacy default stream).
 // The persistent workspace grows geometrically and never shrinks: a caller that detects many frames
-// allocates nothing after the first (EngineStats::device_allocations). The host synchronises three
-// times per call, where it needs a count: after pack (entries total, bad-data status), after the
-// pair stage's estimate (pair_estimate.cuh) and after the pair count (pairs total); and once at the end (a rejecting narrow whose rows go to host memory waits once
+// allocates nothing after the first (EngineStats::device_allocations). The host synchronises twice
+// per call, where it needs a count: after pack (entries total, bad-data status) and after the pair
+// count (pairs total), once more after the pair stage's estimate when it is wanted (pair_estimate.cuh:
+// a limit or a callback); and once at the end (a rejecting narrow whose rows go to host memory waits once
 // more, for their count: narrow.cuh).
 #include <algorithm>
 #include <cstdint>
@@ -156,7 +157,7 @@ class CudaBackend {
       if (!r.type_passes) {
         entries_stage(r);
         sort_stage(r);
-        estimate_stage(r);  // may refuse the scene (EngineOptions::max_pair_tests)
+        if (r.job.pair_limits.wanted()) estimate_stage(r);  // may refuse the scene (max_pair_tests)
         pairs_stage(r);
       } else {
         type_pass_stages(r);

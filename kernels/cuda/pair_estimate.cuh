@@ -49,7 +49,7 @@ namespace cg::detail {
 template <class Real, class Key, class Narrow>
 void estimate_stage(RunState<Real, Key, Narrow>& r) {
   const auto ne = static_cast<std::uint32_t>(r.n_entries);
-  PairEstimate e{0, r.n64, r.n_entries, r.n_entries > 0 ? 1u : 0u};
+  PairEstimate e{0, r.n64, r.n_entries, r.n_entries > 0 ? 1u : 0u, kDevicePairTestsPerSecond};
   if (ne > 1) {
     std::uint32_t* d_start = Workspace::pair_masks(r.keys);
     const auto starts = thrust::make_transform_iterator(thrust::counting_iterator<std::uint32_t>(0),

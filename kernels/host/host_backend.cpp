@@ -94,11 +94,15 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
     host::sort_entries(entries, job.plan.key_bits, nt);
     timer.lap(EngineStage::sort);
 
-    check_pair_estimate(host::estimate_pair_tests(entries, job.bodies.size(), nt), job.pair_limits);
+    if (job.pair_limits.wanted()) {
+      PairEstimate estimate = host::estimate_pair_tests(entries, job.bodies.size(), nt);
+      estimate.tests_per_second = kHostPairTestsPerSecondPerThread * nt;
+      check_pair_estimate(estimate, job.pair_limits);
+    }
 
-    stats.pair_tests =
-        host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter,
-                              !std::is_same_v<Broad, Narrow> ? &world_fp64 : nullptr, nt, built);
+    stats.pair_tests = host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter,
+                                             !std::is_same_v<Broad, Narrow> ? &world_fp64 : nullptr, nt,
+                                             built, job.pair_limits.on_progress);
     entries = {};
     timer.lap(EngineStage::pairs);
 

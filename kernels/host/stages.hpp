@@ -5,6 +5,7 @@
 // CUDA kernels use, so this backend is the oracle of the CUDA one.
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -117,7 +118,8 @@ void sort_entries(Entries<Key>& e, int key_bits, int threads);
 template <class Real, class Key>
 std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p,
                               std::span<const std::uint8_t> report, int half_bits, CandidateFilter filter,
-                              const NarrowBodies<double>* fp64, int threads, CandidatePairs& out);
+                              const NarrowBodies<double>* fp64, int threads, CandidatePairs& out,
+                              const std::function<void(std::uint64_t, bool)>* progress = nullptr);
 
 // The pair stage's estimate (pair_estimate.hpp) from the sorted entries: Σ over cells of m·(m − 1)/2
 // and the fullest cell, in one parallel pass over the keys (each cell counted by the chunk where it

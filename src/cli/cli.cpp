@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "cli/commands.hpp"
+#include "io/temp_output.hpp"
 #include "io/xdmf.hpp"
 #include "run/pipeline.hpp"
 #if defined(CONTACTGRID_HAVE_BULLET)
@@ -151,7 +152,12 @@ Subcommand add_generate(CLI::App& app) {
           options.radius_low = options.radius_high / args->max_aspect;
         }
         const int code = run_generate(args->output, options, args->quiet);
-        if (args->xdmf) write_xdmf(args->output, "", xdmf_base(args->output));
+        if (args->xdmf) {  // the scene and its XDMF files appear all or none
+          FinishedOutputs done;
+          done.add(args->output);
+          write_xdmf(args->output, "", xdmf_base(args->output));
+          done.keep();
+        }
         return code;
       }};
 }
@@ -278,8 +284,13 @@ Subcommand add_detect(CLI::App& app) {
 
   return {d, [args](Session& session) {
             const int code = run_detect(*args, session);
-            if (args->xdmf && session.rank() == 0)
+            if (args->xdmf && session.rank() == 0) {  // the outputs appear all or none
+              FinishedOutputs done;
+              done.add(args->output);
+              if (!args->csv.empty()) done.add(args->csv);
               write_xdmf(args->input, args->output, xdmf_base(args->output));
+              done.keep();
+            }
             return code;
           }};
 }

@@ -28,8 +28,8 @@
 #include "io/contact_file.hpp"
 #include "io/contacts_csv.hpp"
 #include "io/inspect.hpp"
-#include "io/temp_output.hpp"
 #include "io/scene_file.hpp"
+#include "io/temp_output.hpp"
 #include "node_threads.hpp"
 #include "precision_choice.hpp"
 #include "routing.hpp"
@@ -535,10 +535,11 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
 void warn_unusual_pair_work(const PairEstimate& e, const std::string& prefix) {
   static std::atomic<bool> said{false};
   if (!pair_work_unusual(e) || said.exchange(true)) return;
-  fmt::print(stderr,
-             "contactgrid: warning: {}the pair stage will make {}, far more than usual (a few to a few hundred "
-             "per body): expect a long run; --max-pair-tests N refuses such scenes\n",
-             prefix, describe(e));
+  fmt::print(
+      stderr,
+      "contactgrid: warning: {}the pair stage will make {}, far more than usual (a few to a few hundred "
+      "per body): expect a long run; --max-pair-tests N refuses such scenes\n",
+      prefix, describe(e));
   std::fflush(stderr);
 }
 
@@ -553,8 +554,21 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.engine.ellipsoid_max_iterations = cmd.solver_iterations;
   o.engine.skin = cmd.skin;
   o.engine.max_pair_tests = cmd.max_pair_tests;
-  o.engine.on_pair_estimate = [prefix = session.uses_mpi() ? session.prefix() : std::string()](
-                                  const PairEstimate& e) { warn_unusual_pair_work(e, prefix); };
+  // A pair stage far above the usual is said before it runs (any rank) and, on rank 0's terminal,
+  // shows its progress in pair tests (run/progress.hpp; the host backend reports it).
+  auto pair_bar = std::make_shared<std::unique_ptr<Progress>>();
+  o.engine.on_pair_estimate = [pair_bar, draw = !cmd.quiet && session.rank() == 0,
+                               prefix = session.uses_mpi() ? session.prefix()
+                                                           : std::string()](const PairEstimate& e) {
+    warn_unusual_pair_work(e, prefix);
+    if (pair_work_unusual(e))
+      *pair_bar = std::make_unique<Progress>("detect: pair stage", "pair tests", e.tests, draw);
+  };
+  o.engine.on_pair_progress = [pair_bar](std::uint64_t done, bool finished) {
+    if (!*pair_bar) return;
+    (*pair_bar)->update(done);
+    if (finished) pair_bar->reset();
+  };
   if (cmd.backend != Backend::cpu) o.engine.device = session.device_for(cuda_device_count());
   o.axis = cmd.axis;
   o.balance = cmd.balance;

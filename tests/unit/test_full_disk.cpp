@@ -52,6 +52,38 @@ TEST_F(FullDisk, NoSpaceLeftEndsWithExit6AndLeavesNothing) {
   EXPECT_NE(ok.output.find("LEFT:out.csv out.h5"), std::string::npos) << ok.output;
 }
 
+// --xdmf: the XDMF sidecar (<out>.xdmf.h5) and XMF files are written after the contact file and its CSV
+// copy. A filesystem with room for those two but not for the XDMF files ends with exit 6 and removes
+// all of them; with room, all appear. generate --xdmf likewise: the scene goes with its XDMF files.
+TEST_F(FullDisk, XdmfFilesAppearWithTheOutputsOrNothingDoes) {
+  const std::string detect = detect_into(path("disk")) + " --xdmf";
+  const ShellResult roomy = run_on_small_tmpfs(path("disk"), 8192, detect + " && du -k " + path("disk") + "/*");
+  if (roomy.code == -1 && roomy.output.empty()) GTEST_SKIP() << "no tmpfs in a user namespace here (unshare -rm)";
+  ASSERT_EQ(roomy.code, 0) << roomy.output;
+  EXPECT_NE(roomy.output.find("LEFT:out.csv out.h5 out.spheres.xmf out.xdmf.h5 out.xmf"), std::string::npos)
+      << roomy.output;
+  for (int kib : {kXdmfDoesNotFitKiB}) {
+    SCOPED_TRACE(std::to_string(kib) + " KiB");
+    const ShellResult r = run_on_small_tmpfs(path("disk"), kib, detect);
+    EXPECT_EQ(r.code, 6) << r.output;
+    EXPECT_NE(r.output.find("No space left on device"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("xdmf"), std::string::npos) << "not the XDMF write that failed: " << r.output;
+    EXPECT_NE(r.output.find("LEFT:\n"), std::string::npos) << "files left on the full filesystem:\n" << r.output;
+  }
+  const std::string generate =
+      std::string(CG_BINARY) + " generate " + path("disk") + "/s.h5 -n 20000 --seed 4 -q --xdmf";
+  for (int kib : {16, kSceneOnlyKiB}) {
+    SCOPED_TRACE("generate, " + std::to_string(kib) + " KiB");
+    const ShellResult r = run_on_small_tmpfs(path("disk"), kib, generate);
+    EXPECT_EQ(r.code, 6) << r.output;
+    EXPECT_NE(r.output.find("No space left on device"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("LEFT:\n"), std::string::npos) << "files left on the full filesystem:\n" << r.output;
+  }
+  const ShellResult scene = run_on_small_tmpfs(path("disk"), 8192, generate);
+  EXPECT_EQ(scene.code, 0) << scene.output;
+  EXPECT_NE(scene.output.find("LEFT:s.h5 s.spheres.xdmf.h5"), std::string::npos) << scene.output;
+}
+
 // The file size limit: below the contact file's size, and above it but below the CSV's. The kernel's
 // SIGXFSZ stops the run (exit status 153 = 128 + SIGXFSZ), the failed write says why, nothing is left.
 TEST_F(FullDisk, FileSizeLimitEndsWithStatus153AndLeavesNothing) {
