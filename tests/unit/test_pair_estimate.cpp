@@ -67,7 +67,7 @@ TYPED_TEST(PairEstimateTest, StackedBodiesAreRefusedAboveTheLimit) {
   std::uniform_real_distribution<double> u(-0.01, 0.01);
   Spheres s;
   const std::size_t n = 1500;
-  for (std::size_t i = 0; i < n; ++i) s.add(u(rng), u(rng), u(rng), 0.001);
+  for (std::size_t i = 0; i < n; ++i) s.add(u(rng), u(rng), u(rng), 0.02);  // every pair touches
   s.add(10, 10, 10, 0.5);  // the cells are sized for this one, so the rest share one cell
   std::vector<PairEstimate> seen;
   EngineStats stats;
