@@ -103,7 +103,8 @@ std::string plot_all_or_none(const std::string& gnuplot, const std::string& scri
   std::error_code ec;
   if (rc != 0) {
     discard();
-    return rc < 0 ? "gnuplot was killed (a signal, a file size limit?)" : fmt::format("gnuplot failed (status {})", rc);
+    return rc < 0 ? "gnuplot was killed (a signal, a file size limit?)"
+                  : fmt::format("gnuplot failed (status {})", rc);
   }
   for (const auto& f : files) {
     if (!plot_complete(f.first)) {  // gnuplot exits 0 when its writes fail

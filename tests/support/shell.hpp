@@ -35,8 +35,8 @@ inline ShellResult run_shell(const std::string& script, const std::string& shell
 inline ShellResult run_on_small_tmpfs(const std::string& dir, int kib, const std::string& script) {
   const std::string mount = "mount -t tmpfs -o size=" + std::to_string(kib) + "k tmpfs " + dir;
   if (run_shell("unshare -rm sh -c '" + mount + "' >/dev/null 2>&1").code != 0) return {-1, {}};
-  return run_shell("unshare -rm sh -c '" + mount + " && { " + script +
-                   "; }; rc=$?; echo LEFT:$(ls -A " + dir + "); exit $rc'");
+  return run_shell("unshare -rm sh -c '" + mount + " && { " + script + "; }; rc=$?; echo LEFT:$(ls -A " +
+                   dir + "); exit $rc'");
 }
 
 }  // namespace cg::test

@@ -17,10 +17,12 @@ class BenchFullDisk : public TempDirTest {};
 
 TEST_F(BenchFullDisk, PlotsAppearAllOrNone) {
   std::filesystem::create_directories(path("disk"));
-  const std::string bench = std::string(CG_BINARY) + " bench --lo 8 --bullet-hi 9 --engine-hi 9 --repetitions 1 " +
+  const std::string bench = std::string(CG_BINARY) +
+                            " bench --lo 8 --bullet-hi 9 --engine-hi 9 --repetitions 1 " +
                             "--backend cpu --csv " + path("disk") + "/b.csv";
   const ShellResult full = run_on_small_tmpfs(path("disk"), 16, bench);
-  if (full.code == -1 && full.output.empty()) GTEST_SKIP() << "no tmpfs in a user namespace here (unshare -rm)";
+  if (full.code == -1 && full.output.empty())
+    GTEST_SKIP() << "no tmpfs in a user namespace here (unshare -rm)";
   if (full.output.find("gnuplot is not on PATH") != std::string::npos) GTEST_SKIP() << "no gnuplot";
   EXPECT_EQ(full.code, 0) << full.output;
   EXPECT_NE(full.output.find("plot: gnuplot did not write all of"), std::string::npos) << full.output;
@@ -28,7 +30,8 @@ TEST_F(BenchFullDisk, PlotsAppearAllOrNone) {
 
   const ShellResult roomy = run_on_small_tmpfs(path("disk"), 4096, bench);
   EXPECT_EQ(roomy.code, 0) << roomy.output;
-  EXPECT_NE(roomy.output.find("LEFT:b.csv b_loglog.png b_loglog.svg b_time.png b_time.svg\n"), std::string::npos)
+  EXPECT_NE(roomy.output.find("LEFT:b.csv b_loglog.png b_loglog.svg b_time.png b_time.svg\n"),
+            std::string::npos)
       << roomy.output;
 }
 
