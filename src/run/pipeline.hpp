@@ -103,8 +103,9 @@ struct DistributedOptions {
   std::uint64_t max_message_bytes = 1u << 30;  // per-message gather/exchange size (tests make it tiny)
   ContactOutput output = ContactOutput::gather;
   SceneRead read = SceneRead::automatic;
-  int resident_steps = 0;  // > 0: then that many resident steps (comm/resident_steps.hpp)
-  StepMotion step_motion;  // how the bodies change between those steps (--spin)
+  int resident_steps = 0;   // > 0: then that many resident steps (comm/resident_steps.hpp)
+  StepMotion step_motion;   // how the bodies change between those steps (--spin, --drift)
+  std::string final_scene;  // not empty: the last step's bodies written there as a scene (rank 0)
   // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
   // printed to stderr as a warning only if duplicates were removed.
   std::function<void(const std::string&)> log;
@@ -170,9 +171,12 @@ struct DetectCommand {
   Balance balance = Balance::count;
   SceneRead read = SceneRead::automatic;
   ContactOutput write = ContactOutput::gather;
-  int steps = 0;    // resident steps after the run (a simulation's per-step cost)
-  double skin = 0;  // EngineOptions::skin: candidates kept across the resident steps
-  double spin = 0;  // StepMotion::spin: radians per step the ellipsoids turn in the resident steps
+  int steps = 0;            // resident steps after the run (a simulation's per-step cost)
+  double skin = 0;          // EngineOptions::skin: candidates kept across the resident steps
+  bool skin_auto = false;   // --skin auto: EngineOptions::skin_auto
+  double spin = 0;          // StepMotion::spin: radians per step the ellipsoids turn in the resident steps
+  double drift = 0;         // StepMotion::drift: world length per step every centre moves
+  std::string final_scene;  // --final-scene: the last step's bodies as a scene file
   bool quiet = false;
 };
 
