@@ -3,7 +3,6 @@
 
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -16,15 +15,11 @@
 #include "routing.hpp"
 #include "skin_tuner.hpp"
 #include "step_plan.hpp"
+#include "timing.hpp"
 #include "transport.hpp"
 
 namespace cg {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 constexpr int k_body_gather_tag = 7600;  // + field index
 
@@ -49,12 +44,6 @@ struct OrientedRecord {
   double radius;
   Quat<double> orientation;
 };
-
-double median_of(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-  return v[v.size() / 2];
-}
 
 // Bodies with room for n rows (shape rows and state as `like`'s).
 StepBodies sized_like(const StepBodies& like, std::size_t n, bool shapes) {
@@ -138,7 +127,7 @@ struct StepLoop<Real>::State {
   // the step in flight
   std::thread interior;
   std::exception_ptr error, interior_error;
-  Clock::time_point s0;
+  WallClock::time_point s0;
   std::uint64_t found_a = 0, found_b = 0;
   std::array<double, kStepStageCount> t{};
   std::uint64_t builds_before = 0;
@@ -204,7 +193,7 @@ const Frame& StepLoop<Real>::frame() const {
 template <class Real>
 void StepLoop<Real>::update_frame(int step) {
   State& s = *m;
-  const auto f0 = Clock::now();
+  const auto f0 = WallClock::now();
   Bounds mine;
   agreed_stage(s.session, "steps", [&] {
     if (s.bodies.size() == 0) return;
@@ -230,7 +219,7 @@ void StepLoop<Real>::update_frame(int step) {
 template <class Real>
 bool StepLoop<Real>::rebuild_due() {
   State& s = *m;
-  const auto t0 = Clock::now();
+  const auto t0 = WallClock::now();
   const std::size_t n = s.bodies.size();
   double moved_sq = 0;
   const Vec3<double>* x = s.bodies.position.data();
@@ -251,7 +240,7 @@ bool StepLoop<Real>::rebuild_due() {
 template <class Real>
 void StepLoop<Real>::rebalance() {
   State& s = *m;
-  const auto t0 = Clock::now();
+  const auto t0 = WallClock::now();
   const int ranks = s.session.size();
   const std::vector<std::uint64_t> counts = allgather_counts(s.session, s.bodies.size());
   const std::uint64_t total = std::accumulate(counts.begin(), counts.end(), std::uint64_t(0));
@@ -287,7 +276,7 @@ template <class Real>
 void StepLoop<Real>::migrate() {
   State& s = *m;
   if (s.session.size() == 1) return;
-  const auto t0 = Clock::now();
+  const auto t0 = WallClock::now();
   const int me = s.session.rank();
   const std::size_t p = static_cast<std::size_t>(s.session.size()), stride = s.bodies.state_bytes;
   StepBodies& b = s.bodies;
@@ -382,7 +371,7 @@ void StepLoop<Real>::migrate() {
 template <class Real>
 void StepLoop<Real>::lay_out() {
   State& s = *m;
-  const auto t0 = Clock::now();
+  const auto t0 = WallClock::now();
   const bool first = s.layouts == 0;
   // Scenes with ellipsoids: the shape rows go into A and B (the ghosts' with the exchange). Agreed
   // over the ranks, as a rank without rows has none.
@@ -530,9 +519,9 @@ void StepLoop<Real>::detect_interior() {
   s.found_a = s.found_b = 0;
   s.interior_error = nullptr;
   s.builds_before = s.a.stats().candidate_builds;
-  s.s0 = Clock::now();
+  s.s0 = WallClock::now();
   auto run = [&s] {
-    const auto i0 = Clock::now();
+    const auto i0 = WallClock::now();
     try {
       s.found_a = s.a.detect_resident(s.frame);
     } catch (...) {
@@ -556,7 +545,7 @@ template <class Real>
 void StepLoop<Real>::refresh_ghosts() {
   State& s = *m;
   if (s.session.size() == 1) return;
-  const auto h0 = Clock::now();
+  const auto h0 = WallClock::now();
   const StepBodies& o = s.bodies;
   const auto& halo = s.plan.halo.rows;
   const auto& of_ghost = s.rows.of_ghost;
@@ -614,7 +603,7 @@ template <class Real>
 void StepLoop<Real>::detect_boundary() {
   State& s = *m;
   if (s.b_active && !s.error) {
-    const auto b0 = Clock::now();
+    const auto b0 = WallClock::now();
     try {
       s.found_b = s.b->detect_resident(s.frame);
     } catch (...) {
@@ -764,10 +753,10 @@ StepStats StepLoop<Real>::stats() {
   s.comm.allreduce_max(all);
   const std::size_t row = kStepStageCount + n_engine + 2;
   auto at = [&](std::size_t k, StepStage stage) { return all[k * row + static_cast<std::size_t>(stage)]; };
-  auto median = [&](std::size_t j) {
+  auto median_at = [&](std::size_t j) {
     std::vector<double> v(n);
     for (std::size_t k = 0; k < n; ++k) v[k] = all[k * row + j];
-    return median_of(std::move(v));
+    return cg::median(std::move(v));
   };
   StepStats st;
   st.steps = static_cast<int>(n);
@@ -777,11 +766,11 @@ StepStats StepLoop<Real>::stats() {
   st.oriented = s.refresh && s.session.size() > 1;
   st.halo_rows = s.session.sum(s.halo_rows);
   st.setup = s.session.max(s.setup);
-  st.frame = median(static_cast<std::size_t>(StepStage::frame));
-  st.halo = median(static_cast<std::size_t>(StepStage::halo));
-  st.interior = median(static_cast<std::size_t>(StepStage::interior));
-  st.boundary = median(static_cast<std::size_t>(StepStage::boundary));
-  st.step = median(static_cast<std::size_t>(StepStage::step));
+  st.frame = median_at(static_cast<std::size_t>(StepStage::frame));
+  st.halo = median_at(static_cast<std::size_t>(StepStage::halo));
+  st.interior = median_at(static_cast<std::size_t>(StepStage::interior));
+  st.boundary = median_at(static_cast<std::size_t>(StepStage::boundary));
+  st.step = median_at(static_cast<std::size_t>(StepStage::step));
   std::vector<double> rebuild, build, reuse;
   double total = 0;
   for (std::size_t k = 0; k < n; ++k) {
@@ -790,12 +779,12 @@ StepStats StepLoop<Real>::stats() {
     const double detect = at(k, StepStage::interior) + at(k, StepStage::boundary);
     (all[k * row + row - 2] > 0 ? build : reuse).push_back(detect);
   }
-  st.rebuild = median_of(rebuild);
+  st.rebuild = median(rebuild);
   st.step_mean = n > 0 ? total / double(n) : 0;
-  st.detect_build = median_of(build);
-  st.detect_reuse = median_of(reuse);
+  st.detect_build = median(build);
+  st.detect_reuse = median(reuse);
   for (std::size_t j = 0; j < n_engine && n > 0; ++j) {
-    const double t = median(kStepStageCount + j);
+    const double t = median_at(kStepStageCount + j);
     if (t > 0) st.stages.push_back({engine_stage_names()[j], t});
   }
   st.rebuilds = static_cast<std::uint64_t>(std::max(0, s.layouts - 1));

@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <functional>
 
 #include "assemble.hpp"
 #include "engine.hpp"
@@ -49,6 +50,8 @@ struct StepMotion {
   // Every step's contacts hashed (contacts_hash, summed over ranks: StepStats::step_hashes), so that
   // tests compare every step with a detection from scratch. CUDA: a download per step.
   bool hash_every_step = false;
+  // Called on every rank after each step with the number of steps done (a progress line; empty: none).
+  std::function<void(int)> on_step;
 };
 
 // An order-free fingerprint of a contact pair; a contact set's is the sum over its pairs.

@@ -64,7 +64,7 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
     stats.skin_displacement = m.displacement;
     stats.skin_growth = m.growth;
     reuse = skin_covers(m, job.skin);
-    timer.lap(Stage::skin);
+    timer.lap(EngineStage::skin);
   }
 
   host::PackedBodies<Broad> bodies;
@@ -78,7 +78,7 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
     host::cut_shapes(packed_shapes, nt, bodies.cut);
     host::shape_cells(job.grid, nt, bodies);
   }
-  timer.lap(Stage::pack);
+  timer.lap(EngineStage::pack);
 
   const NarrowBodies<Narrow> world =
       narrow_bodies<Broad, Narrow>(job.bodies, bodies, job.plan.frame.origin, float(job.grid.radius_margin));
@@ -88,20 +88,20 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   if (!reuse) {
     host::Entries<Key> entries;
     stats.entries = host::fill_entries(bodies, job.grid, nt, entries);
-    timer.lap(Stage::entries);
+    timer.lap(EngineStage::entries);
 
     host::sort_entries(entries, job.plan.key_bits, nt);
-    timer.lap(Stage::sort);
+    timer.lap(EngineStage::sort);
 
     stats.pair_tests =
         host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter,
                               !std::is_same_v<Broad, Narrow> ? &world_fp64 : nullptr, nt, built);
     entries = {};
-    timer.lap(Stage::pairs);
+    timer.lap(EngineStage::pairs);
 
     host::order_candidates(built, nt);
     if (skin) host::keep_candidates(job.bodies, built, be.kept);
-    timer.lap(Stage::order);
+    timer.lap(EngineStage::order);
   }
   if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
   const host::CandidatePairs& candidates = reuse ? be.kept.pairs : built;
@@ -114,7 +114,7 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   } else {
     host::narrow(candidates, world, job.fields, nt, out, stats);
   }
-  timer.lap(Stage::narrow);
+  timer.lap(EngineStage::narrow);
 }
 
 }  // namespace

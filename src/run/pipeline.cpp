@@ -3,13 +3,18 @@
 #include "run/pipeline.hpp"
 
 #include <fmt/format.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <optional>
 
@@ -27,30 +32,15 @@
 #include "precision_choice.hpp"
 #include "routing.hpp"
 #include "run/contact_file_shared.hpp"
+#include "run/progress.hpp"
 #include "run/stage_clock.hpp"
+#include "run/stop.hpp"
 #include "run/summary.hpp"
+#include "run/test_fault.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
 
 namespace cg {
-
-const char* stage_name(Stage stage) {
-  static constexpr const char* names[] = {"read",     "redistribute", "halo",  "detect", "gather",
-                                          "exchange", "merge",        "write", "csv"};
-  static_assert(std::size(names) == static_cast<std::size_t>(Stage::csv) + 1);
-  return names[static_cast<std::size_t>(stage)];
-}
-
-std::string RunTime::name() const {
-  if (engine_stage < 0) return stage_name(stage);
-  return std::string(stage_name(stage)) + "." + engine_stage_names()[static_cast<std::size_t>(engine_stage)];
-}
-
-StageTimes file_stage_times(const RunTimes& times) {
-  StageTimes out;
-  for (const RunTime& t : times) out.push_back({t.name(), t.seconds});
-  return out;
-}
 
 void check_options(const DistributedOptions& options) {
   const EngineOptions& e = options.engine;
@@ -149,7 +139,7 @@ ReadScene read_scene(const Session& session, const std::string& path, const Dist
     check_options(options);
     if (path.empty()) throw UsageError("no scene file given");
   });
-  const auto t0 = clock_type::now();
+  const auto t0 = WallClock::now();
   const int ranks = session.size();
   ReadScene in;
   // All rows when the ranks share one node (one page cache). One rank's own rows are all rows: the
@@ -157,6 +147,7 @@ ReadScene read_scene(const Session& session, const std::string& path, const Dist
   in.all_rows = ranks == 1 || options.read == SceneRead::all_rows ||
                 (options.read == SceneRead::automatic && session.local_size() == ranks);
   in.part = read_partition(session, path, in.all_rows);
+  fault_point("read", session.rank());
   in.global = allgather_bounds(session, in.part.bounds);
   in.seconds = seconds_since(t0);
   return in;
@@ -286,8 +277,8 @@ void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecompo
                              [&](std::size_t i) { return shapes[i]; });
     }
   });
-  held.ghosts = exchange_ghosts(session, exports);
-  if (held.has_shapes) held.ghost_shapes = exchange_ghosts(session, shape_exports);
+  held.ghosts = exchange_with_ghost_ranks(session, exports);
+  if (held.has_shapes) held.ghost_shapes = exchange_with_ghost_ranks(session, shape_exports);
 }
 
 // Owned + ghosts in id order (own rows: merged by id), then the engine with the shared frame; the
@@ -532,6 +523,7 @@ StepStats run_steps(Session& session, Engine<Real>& engine, const SlabDecomposit
       loop.refresh_ghosts();
       loop.detect_boundary();
       loop.collect();
+      if (motion.on_step) motion.on_step(step);
     }
     st = loop.stats();
     st.hash = loop.pair_hash_sum();
@@ -554,8 +546,8 @@ StepStats run_steps(Session& session, Engine<Real>& engine, const SlabDecomposit
 // The stages frame … collect after the read stage (read_scene), with their times (max over ranks)
 // and the run's statistics. Called inside the rank's DefaultTeam of `threads`.
 template <class Real>
-DistributedResult<Real> run(Session& session, const std::string& path, const DistributedOptions& options,
-                            ReadScene&& in, int threads) {
+DistributedResult<Real> distributed_run(Session& session, const std::string& path,
+                                        const DistributedOptions& options, ReadScene&& in, int threads) {
   const bool all_rows = in.all_rows;
   Partition& part = in.part;
   DistributedResult<Real> result;
@@ -563,12 +555,12 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   result.threads = threads;
   result.read = all_rows ? SceneRead::all_rows : SceneRead::own_rows;
   StageClock clock;
-  clock.add(Stage::read, in.seconds);
+  clock.add(RunStage::read, in.seconds);
 
   clock.start();
   const SharedFrame f = agree_frame<Real>(session, path, in.global, options);
   check_drift_range<Real>(session, path, f.global, options);
-  clock.stop(Stage::read);
+  clock.stop(RunStage::read);
   std::optional<Engine<Real>> engine = make_engine<Real>(session, options, threads);
   result.bodies = part.bodies;
   result.ellipsoids = part.ellipsoids;
@@ -576,28 +568,34 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   result.cell_size = f.frame.cell_size;
   result.axis = f.axis;
 
+  stop_point();
   clock.start();
+  fault_point("exchange", session.rank());
   const SlabDecomposition slabs = make_slabs(session, part, f, options);
   HeldBodies held = distribute(session, std::move(part), slabs, f, all_rows, threads);
-  clock.stop(Stage::redistribute);
+  clock.stop(RunStage::redistribute);
   result.cuts = slabs.cuts();
 
   clock.start();
   exchange_ghosts(session, held, slabs, f, all_rows, threads);
-  clock.stop(Stage::halo);
+  clock.stop(RunStage::halo);
 
+  stop_point();
   clock.start();
+  fault_point("detect", session.rank());
   Contacts<Real> local =
       detect_local(session, *engine, held, f.frame, options.engine.fields == Fields::full, threads);
-  clock.stop(Stage::detect);
+  clock.stop(RunStage::detect);
   if (held.input.owned > 0) clock.add_engine(engine->times());
   record_detection(session, *engine, held.input, result);
   if (options.resident_steps == 0) held.input = {};  // else the steps start from it
 
+  stop_point();
+  fault_point("gather", session.rank());
   CollectedContacts<Real> c = collect_contacts(session, std::move(local), result.bodies, options, threads);
-  const Stage transfer = options.output == ContactOutput::gather ? Stage::gather : Stage::exchange;
+  const RunStage transfer = options.output == ContactOutput::gather ? RunStage::gather : RunStage::exchange;
   clock.add(transfer, c.transfer_seconds);
-  clock.add(Stage::merge, c.merge_seconds);
+  clock.add(RunStage::merge, c.merge_seconds);
   record_contacts(std::move(c), result);
 
   if (options.resident_steps > 0)
@@ -620,7 +618,8 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.axis = cmd.axis;
   o.balance = cmd.balance;
   o.read = cmd.read;
-  if (!cmd.quiet && session.rank() == 0) o.log = [](const std::string& line) { fmt::print("{}\n", line); };
+  if (cmd.verbose && !cmd.quiet && session.rank() == 0)
+    o.log = [](const std::string& line) { fmt::print("{}\n", line); };
   // The design card's shape by default: rank 0 gathers, deduplicates and writes the sorted contacts
   // (--write gather). --write ranks: each rank keeps the contacts of its id_a range and writes them
   // into the one output file. A CSV copy is written by rank 0 alone, so it always gathers.
@@ -630,6 +629,14 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.step_motion.drift = cmd.drift;
   o.engine.skin_auto = cmd.skin_auto;
   o.final_scene = cmd.final_scene;
+  if (cmd.steps > 0) {  // a progress line on rank 0's terminal (run/progress.hpp)
+    auto bar = std::make_shared<Progress>("detect: resident steps", "steps", std::uint64_t(cmd.steps),
+                                          !cmd.quiet && session.rank() == 0);
+    o.step_motion.on_step = [bar, steps = cmd.steps](int done) {
+      bar->update(std::uint64_t(done));
+      if (done == steps) bar->finish();
+    };
+  }
   return o;
 }
 
@@ -649,7 +656,7 @@ RunTime write_output(Session& session, const DetectCommand& cmd, const Distribut
   info.narrow_unconverged = r.stats.narrow_unconverged;
   const double seconds = write_contacts_distributed(session, cmd.output, r.contacts, r.first_row,
                                                     r.total_contacts, info, r.threads);
-  return {Stage::write, -1, seconds};
+  return {RunStage::write, -1, seconds};
 }
 
 // The CSV copy, by rank 0 (which holds every contact: --csv gathers). Returns its time (rank 0).
@@ -659,7 +666,7 @@ RunTime write_csv(const Session& session, const std::string& path, const Contact
   double seconds = 0;
   if (session.rank() == 0) {
     try {
-      auto t = clock_type::now();
+      auto t = WallClock::now();
       write_contacts_csv(path, contacts);
       seconds = seconds_since(t);
     } catch (...) {
@@ -667,16 +674,17 @@ RunTime write_csv(const Session& session, const std::string& path, const Contact
     }
   }
   session.agree(error, "csv");
-  return {Stage::csv, -1, seconds};
+  return {RunStage::csv, -1, seconds};
 }
 
 // A failing MPI call (CommFailure) leaves other ranks possibly waiting in a collective this rank will
-// never join: it ends the job (Session::abort, exit code 5).
+// never join: it ends the job (Session::abort, exit code 5), its registered temporaries removed first.
 template <class F>
 auto or_abort(Session& session, F&& f) -> decltype(f()) {
   try {
     return f();
   } catch (const CommFailure& e) {
+    run_cleanup_actions();
     session.abort(e.exit_code(), e.what());
   }
 }
@@ -702,17 +710,18 @@ PrecisionChoice choose_mode(const Session& session, const DetectCommand& cmd, co
   return pick;
 }
 
-// frame → slabs → distribute → exchange ghosts → detect → collect contacts (run) → write → summary, in
-// the chosen mode.
+// frame → slabs → distribute → exchange ghosts → detect → collect contacts (distributed_run) → write →
+// summary, in the chosen mode.
 template <class Real>
-int detect(const DetectCommand& cmd, Session& session, const DistributedOptions& options, ReadScene&& in,
-           const PrecisionChoice& choice, int threads) {
-  DistributedResult<Real> r =
-      or_abort(session, [&] { return run<Real>(session, cmd.input, options, std::move(in), threads); });
+int run_in_mode(const DetectCommand& cmd, Session& session, const DistributedOptions& options, ReadScene&& in,
+                const PrecisionChoice& choice, int threads) {
+  DistributedResult<Real> r = or_abort(
+      session, [&] { return distributed_run<Real>(session, cmd.input, options, std::move(in), threads); });
   RunTimes times = r.times;
   RunInfo info;
   info.precision = to_string(choice.mode);
   info.precision_choice = choice.reason;
+  stop_point();
   times.push_back(write_output(session, cmd, r, info));
   if (!cmd.csv.empty()) times.push_back(write_csv(session, cmd.csv, r.contacts));
   if (!cmd.quiet && session.rank() == 0) print_summary(info, times, r.total_contacts, r);
@@ -727,7 +736,8 @@ DistributedResult<Real> distributed_detect(Session& session, const std::string& 
   return or_abort(session, [&] {
     const int threads = host_threads(options.engine.threads, session);
     const DefaultTeam team(threads);
-    return run<Real>(session, scene_path, options, read_scene(session, scene_path, options), threads);
+    return distributed_run<Real>(session, scene_path, options, read_scene(session, scene_path, options),
+                                 threads);
   });
 }
 
@@ -736,6 +746,41 @@ template DistributedResult<float> distributed_detect<float>(Session&, const std:
 template DistributedResult<double> distributed_detect<double>(Session&, const std::string&,
                                                               const DistributedOptions&);
 
+namespace {
+
+// The directory `file` goes into exists and this process may create files there, and `file` is not
+// itself a directory; IoError naming `option`, the file and the directory otherwise. Checked before the
+// scene is read, so that a mistyped output path fails at once rather than after the whole run.
+void require_writable_directory(const std::string& option, const std::string& file) {
+  namespace fs = std::filesystem;
+  const fs::path parent = fs::path(file).parent_path();
+  const std::string dir = parent.empty() ? std::string(".") : parent.string();
+  std::error_code ec;
+  const fs::file_status status = fs::status(dir, ec);
+  auto fail = [&](const std::string& why) {
+    throw IoError(fmt::format("{} {}: cannot write into the directory {}: {}", option, file, dir, why));
+  };
+  if (status.type() == fs::file_type::none) fail(ec.message());  // e.g. a parent not searchable
+  if (!fs::exists(status)) fail("it does not exist");
+  if (!fs::is_directory(status)) fail("it is not a directory");
+  if (::access(dir.c_str(), W_OK | X_OK) != 0) fail(std::strerror(errno));
+  if (fs::is_directory(fs::status(file, ec)))
+    throw IoError(fmt::format("{} {}: is a directory, not a file name", option, file));
+}
+
+// Every rank that writes checks its files' directories: rank 0 the output file and the CSV copy,
+// with --write ranks every rank the output file (each writes its rows into it).
+void check_output_directories(const Session& session, const DetectCommand& cmd,
+                              const DistributedOptions& options) {
+  agreed_stage(session, "output", [&] {
+    if (session.rank() == 0 || options.output == ContactOutput::ranks)
+      require_writable_directory("-o", cmd.output);
+    if (session.rank() == 0 && !cmd.csv.empty()) require_writable_directory("--csv", cmd.csv);
+  });
+}
+
+}  // namespace
+
 // read → (--precision auto: choose the mode) → the run in that mode → write → summary
 int run_detect(const DetectCommand& cmd, Session& session) {
   if (cmd.output.empty()) throw UsageError("detect: -o/--output is required");
@@ -743,14 +788,15 @@ int run_detect(const DetectCommand& cmd, Session& session) {
     throw UsageError(std::string("--accuracy: only with --precision auto (the default), not --precision ") +
                      to_string(*cmd.precision));
   DistributedOptions options = run_options(cmd, session);
+  check_output_directories(session, cmd, options);
   const int threads = host_threads(options.engine.threads, session);
   const DefaultTeam team(threads);
   ReadScene in = or_abort(session, [&] { return read_scene(session, cmd.input, options); });
   const PrecisionChoice choice = or_abort(session, [&] { return choose_mode(session, cmd, in); });
   options.engine.fp32_broad_phase = choice.mode == Precision::mixed;
   return choice.mode == Precision::fp32
-             ? detect<float>(cmd, session, options, std::move(in), choice, threads)
-             : detect<double>(cmd, session, options, std::move(in), choice, threads);
+             ? run_in_mode<float>(cmd, session, options, std::move(in), choice, threads)
+             : run_in_mode<double>(cmd, session, options, std::move(in), choice, threads);
 }
 
 }  // namespace cg

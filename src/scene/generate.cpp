@@ -26,9 +26,8 @@
 #include <vector>
 
 #include "errors.hpp"
-#include "io/contact_file.hpp"
-#include "io/inspect.hpp"
 #include "io/scene_file.hpp"
+#include "run/progress.hpp"
 
 namespace cg {
 namespace {
@@ -226,6 +225,8 @@ double box_edge_of(std::uint64_t n, const RadiusNodes& nodes, double r_low, doub
 struct BodyLaw {
   CounterRng rng;
   bool log_uniform = false;
+  bool two_sizes = false;  // bimodal, intruders: r_high for `large` of the `count` bodies, else r_low
+  std::uint64_t large = 0, count = 0;
   double edge = 1, r_low = 0.5, r_high = 1, log_ratio = 0;
   Vec3<double> offset{0, 0, 0};
 
@@ -237,15 +238,24 @@ struct BodyLaw {
                  std::array<double, 4>& orientation) const;
   void body(std::uint64_t i, Vec3<double>& centre, double& radius) const {
     centre = {coordinate(i, kX, offset.x), coordinate(i, kY, offset.y), coordinate(i, kZ, offset.z)};
+    if (two_sizes) {
+      radius = generated_is_large(i, large, count) ? r_high : r_low;
+      return;
+    }
     double u = rng.unit(i, kRadius);
     double r = log_uniform ? r_low * std::exp(u * log_ratio) : r_low + (r_high - r_low) * u;
     radius = std::clamp(r, r_low, r_high);
   }
 };
 
+bool two_size_kind(const std::string& kind) { return kind == "bimodal" || kind == "intruders"; }
+
 BodyLaw body_law(const GenerateOptions& o, double edge) {
   BodyLaw law{CounterRng(o.seed)};
   law.log_uniform = o.kind == "polydisperse";
+  law.two_sizes = two_size_kind(o.kind);
+  law.large = generated_large(o);
+  law.count = o.count;
   law.edge = edge;
   law.r_low = o.radius_low;
   law.r_high = o.radius_high;
@@ -272,6 +282,9 @@ Attributes generator_attributes(const GenerateOptions& o, double edge) {
     a["ellipsoids"] = static_cast<std::int64_t>(e);
   }
   if (o.kind == "mixed") a["ellipsoid_fraction"] = o.ellipsoid_fraction;
+  if (two_size_kind(o.kind)) a["large"] = static_cast<std::int64_t>(generated_large(o));
+  if (o.kind == "bimodal") a["large_fraction"] = o.large_fraction;
+  if (o.kind == "intruders") a["intruders"] = static_cast<std::int64_t>(o.intruders);
   a["generator"] = o.kind;
   a["count"] = static_cast<std::int64_t>(o.count);
   a["seed"] = std::bit_cast<std::int64_t>(o.seed);  // seeds >= 2^63 read back negative: bit-cast
@@ -384,18 +397,40 @@ std::uint64_t generated_ellipsoids(const GenerateOptions& o) {
   return std::min(o.count, static_cast<std::uint64_t>(std::max(0.0, m)));
 }
 
+std::uint64_t generated_large(const GenerateOptions& o) {
+  if (o.kind == "intruders") return std::min(o.intruders, o.count);
+  if (o.kind != "bimodal" || !(o.large_fraction > 0)) return 0;
+  if (!(o.large_fraction < 1)) return o.count;
+  const double size = o.radius_low / o.radius_high;
+  const double x = o.large_fraction / (1 - o.large_fraction) * size * size * size;
+  const double k = std::round(static_cast<double>(o.count) * (x / (1 + x)));
+  return std::min(o.count, static_cast<std::uint64_t>(std::max(0.0, k)));
+}
+
+bool generated_is_large(std::uint64_t i, std::uint64_t large, std::uint64_t count) {
+  // i, large, count <= 2^28: the products stay below 2^57
+  return (i + 1) * large / count > i * large / count;
+}
+
 void validate_generate_options(const GenerateOptions& o) {
-  if (o.kind != "uniform" && o.kind != "polydisperse" && o.kind != "ellipsoids" && o.kind != "mixed")
+  if (o.kind != "uniform" && o.kind != "polydisperse" && o.kind != "ellipsoids" && o.kind != "mixed" &&
+      !two_size_kind(o.kind))
     throw UsageError(fmt::format(
-        "generator kind must be uniform, polydisperse, ellipsoids or mixed (got \"{}\")", o.kind));
+        "generator kind must be uniform, polydisperse, ellipsoids, mixed, bimodal or intruders (got \"{}\")",
+        o.kind));
   if (o.kind == "mixed" && !(o.ellipsoid_fraction >= 0 && o.ellipsoid_fraction <= 1))
     throw UsageError(fmt::format("ellipsoid fraction must be in [0, 1] (got {})", o.ellipsoid_fraction));
+  if (o.kind == "bimodal" && !(o.large_fraction >= 0 && o.large_fraction <= 1))
+    throw UsageError(fmt::format("large fraction must be in [0, 1] (got {})", o.large_fraction));
   if (o.count < 1 || o.count > kMaxGenerateCount)
     throw UsageError(
         fmt::format("body count must be in [1, 2^28 = {}] (got {})", kMaxGenerateCount, o.count));
+  if (o.kind == "intruders" && (o.intruders < 1 || o.intruders > o.count))
+    throw UsageError(fmt::format("intruders must be in [1, count = {}] (got {})", o.count, o.intruders));
   check_radius_law(o.radius_low, o.radius_high);
-  if (o.kind == "polydisperse" && o.radius_high / o.radius_low > kMaxPolydisperseRatio) {
-    throw UsageError(fmt::format("polydisperse radius ratio {} / {} = {} exceeds {}", o.radius_high,
+  if ((o.kind == "polydisperse" || two_size_kind(o.kind)) &&
+      o.radius_high / o.radius_low > kMaxPolydisperseRatio) {
+    throw UsageError(fmt::format("{} radius ratio {} / {} = {} exceeds {}", o.kind, o.radius_high,
                                  o.radius_low, o.radius_high / o.radius_low, kMaxPolydisperseRatio));
   }
   if (!(std::isfinite(o.contacts_per_body) && o.contacts_per_body > 0))
@@ -416,6 +451,17 @@ double scene_box_edge(const GenerateOptions& o) {
       nodes.r.push_back(e.r[k]);
       nodes.w.push_back(f * e.w[k]);
     }
+    return box_edge_of(o.count, nodes, o.radius_low, o.contacts_per_body);
+  }
+  if (o.kind == "intruders") {  // the grains' own density; the intruders add their contacts
+    const std::uint64_t small = o.count - generated_large(o);
+    return small > 0
+               ? box_edge(small, RadiusLaw::uniform, o.radius_low, o.radius_low, o.contacts_per_body)
+               : box_edge(o.count, RadiusLaw::uniform, o.radius_high, o.radius_high, o.contacts_per_body);
+  }
+  if (o.kind == "bimodal") {  // two point masses: the share of large bodies by count
+    const double q = static_cast<double>(generated_large(o)) / static_cast<double>(o.count);
+    const RadiusNodes nodes{{o.radius_low, o.radius_high}, {1 - q, q}};
     return box_edge_of(o.count, nodes, o.radius_low, o.contacts_per_body);
   }
   RadiusLaw law = o.kind == "polydisperse" ? RadiusLaw::log_uniform
@@ -446,7 +492,7 @@ Scene generate_scene(const GenerateOptions& options) {
   return scene;
 }
 
-void generate_scene_file(const std::string& path, const GenerateOptions& options) {
+void generate_scene_file(const std::string& path, const GenerateOptions& options, bool progress) {
   const double edge = scene_box_edge(options);
   const BodyLaw law = body_law(options, edge);
   const std::uint64_t e = generated_ellipsoids(options), spheres = options.count - e;
@@ -457,6 +503,7 @@ void generate_scene_file(const std::string& path, const GenerateOptions& options
   header.radius_high = options.radius_high;
   header.attributes = generator_attributes(options, edge);
   SceneFileWriter writer(path, header);
+  Progress bar("generate", "bodies", options.count, progress);
   const std::size_t block = std::min<std::size_t>(kWriteChunk, options.count);
   std::vector<Vec3<double>> position(block);
   std::vector<double> radius(spheres > 0 ? block : 0);
@@ -464,6 +511,7 @@ void generate_scene_file(const std::string& path, const GenerateOptions& options
     std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(block, spheres - first));
     for (std::size_t k = 0; k < n; ++k) law.body(first + k, position[k], radius[k]);
     writer.write_spheres(first, std::span(position).first(n), std::span(radius).first(n));
+    bar.add(n);
   }
   std::vector<Vec3<double>> semi_axes(e > 0 ? block : 0);
   std::vector<std::array<double, 4>> orientation(e > 0 ? block : 0);
@@ -473,7 +521,9 @@ void generate_scene_file(const std::string& path, const GenerateOptions& options
       law.ellipsoid(spheres + first + k, position[k], semi_axes[k], orientation[k]);
     writer.write_ellipsoids(first, std::span(position).first(n), std::span(semi_axes).first(n),
                             std::span(orientation).first(n));
+    bar.add(n);
   }
+  bar.finish();
   writer.commit();
 }
 

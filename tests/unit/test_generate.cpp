@@ -15,10 +15,10 @@
 #include <utility>
 #include <vector>
 
-#include "scene/generate.hpp"
 #include "io/contact_file.hpp"
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
+#include "scene/generate.hpp"
 #include "temp_dir.hpp"
 
 namespace {
@@ -356,6 +356,126 @@ TEST_F(Generate, UnknownKindAndBadDensityAreUsageErrors) {
   o.contacts_per_body = 0.4;
   o.offset.y = INFINITY;
   EXPECT_THROW(cg::generate_scene(o), cg::UsageError);
+}
+
+// ---- two-size scenes (bimodal, intruders) ---------------------------------------------------------
+
+TEST_F(Generate, LargeBodiesAreCountedAndSpreadEvenly) {
+  for (std::uint64_t n : {std::uint64_t(1), std::uint64_t(7), std::uint64_t(1000), std::uint64_t(65537)})
+    for (std::uint64_t k : {std::uint64_t(0), std::uint64_t(1), std::uint64_t(3), n / 2, n}) {
+      if (k > n) continue;
+      std::uint64_t large = 0, first = n;
+      for (std::uint64_t i = 0; i < n; ++i)
+        if (cg::generated_is_large(i, k, n)) {
+          ++large;
+          first = std::min(first, i);
+        }
+      EXPECT_EQ(large, k) << n << " " << k;
+      if (k > 0) EXPECT_LT(first, (n + k - 1) / k) << n << " " << k;  // one in each run of n / k ids
+    }
+}
+
+TEST_F(Generate, BimodalHasTheLargeShareOfTheVolume) {
+  GenerateOptions o;
+  o.kind = "bimodal";
+  o.count = 1u << 16;
+  o.radius_low = 0.25;
+  o.radius_high = 1.0;  // 1:4, 114 large bodies
+  o.large_fraction = 0.1;
+  Scene s = cg::generate_scene(o);
+  double v_large = 0, v_all = 0;
+  std::uint64_t large = 0;
+  for (double r : s.sphere_radius) {
+    ASSERT_TRUE(r == 0.25 || r == 1.0) << r;
+    v_all += r * r * r;
+    if (r == 1.0) v_large += r * r * r, ++large;
+  }
+  EXPECT_EQ(large, cg::generated_large(o));
+  EXPECT_NEAR(v_large / v_all, 0.1, 0.001);  // the count is rounded to whole bodies
+  EXPECT_EQ(std::get<std::int64_t>(s.attributes.at("large")), std::int64_t(large));
+  EXPECT_EQ(std::get<double>(s.attributes.at("large_fraction")), 0.1);
+  o.large_fraction = 0;
+  EXPECT_EQ(cg::generated_large(o), 0u);
+  o.large_fraction = 1;
+  EXPECT_EQ(cg::generated_large(o), o.count);
+}
+
+TEST_F(Generate, BimodalSceneHasTheTargetDensity) {
+  GenerateOptions o;
+  o.kind = "bimodal";
+  o.count = 4096;
+  o.radius_low = 0.25;
+  o.radius_high = 1.0;
+  o.large_fraction = 0.5;  // 1.5 % of the bodies large: most contacts still among the small
+  std::uint64_t pairs = 0;
+  for (std::uint64_t seed = 1; seed <= 4; ++seed) {
+    o.seed = seed;
+    pairs += count_pairs(cg::generate_scene(o));
+  }
+  EXPECT_NEAR(double(pairs) / double(4 * o.count), 0.4, 0.4 * 0.15);
+}
+
+TEST_F(Generate, IntrudersKeepTheGrainsDensity) {
+  GenerateOptions o;
+  o.kind = "intruders";
+  o.count = 8192;
+  o.intruders = 3;
+  o.radius_low = 0.1;
+  o.radius_high = 10;  // 1:100
+  Scene s = cg::generate_scene(o);
+  Scene grains;
+  std::uint64_t large = 0;
+  for (std::size_t i = 0; i < s.sphere_count(); ++i) {
+    if (s.sphere_radius[i] == 10) {
+      ++large;
+      continue;
+    }
+    ASSERT_EQ(s.sphere_radius[i], 0.1) << i;
+    grains.sphere_position.push_back(s.sphere_position[i]);
+    grains.sphere_radius.push_back(s.sphere_radius[i]);
+  }
+  EXPECT_EQ(large, 3u);
+  EXPECT_EQ(std::get<std::int64_t>(s.attributes.at("intruders")), 3);
+  EXPECT_EQ(std::get<double>(s.attributes.at("box_edge")), cg::uniform_box_edge(8189, 0.1, 0.1, 0.4));
+  EXPECT_NEAR(double(count_pairs(grains)) / double(grains.sphere_count()), 0.4, 0.4 * 0.15);
+  EXPECT_GT(count_pairs(s), count_pairs(grains) + 3);  // the intruders add theirs
+}
+
+TEST_F(Generate, TwoSizeFilesMatchMemory) {
+  for (const char* kind : {"bimodal", "intruders"}) {
+    GenerateOptions o;
+    o.kind = kind;
+    o.count = (std::uint64_t(1) << 20) + 77;  // two streamed blocks
+    o.radius_low = 0.001;
+    o.radius_high = 1.0;  // 1:1000: allowed
+    o.intruders = 5;
+    cg::generate_scene_file(path(std::string(kind) + ".h5"), o);
+    Scene from_file = cg::read_scene(path(std::string(kind) + ".h5"));
+    expect_same_bodies(cg::generate_scene(o), from_file);
+    EXPECT_EQ(from_file.attributes, cg::generate_scene(o).attributes);
+  }
+}
+
+TEST_F(Generate, TwoSizeOptionsAreChecked) {
+  GenerateOptions o;
+  o.count = 100;
+  o.kind = "bimodal";
+  o.radius_low = 0.0009;
+  o.radius_high = 1.0;  // 1:1111
+  EXPECT_THROW(cg::generate_scene(o), cg::UsageError);
+  o.radius_low = 0.001;
+  o.large_fraction = 1.5;
+  EXPECT_THROW(cg::generate_scene(o), cg::UsageError);
+  o.large_fraction = std::nan("");
+  EXPECT_THROW(cg::generate_scene(o), cg::UsageError);
+  o.kind = "intruders";
+  o.intruders = 101;
+  EXPECT_THROW(cg::generate_scene_file(path("i.h5"), o), cg::UsageError);
+  o.intruders = 0;
+  EXPECT_THROW(cg::generate_scene(o), cg::UsageError);
+  EXPECT_TRUE(empty_dir());
+  o.intruders = 100;  // all large: the box of the large ones
+  EXPECT_EQ(cg::generate_scene(o).size(), 100u);
 }
 
 // ---- builders ------------------------------------------------------------------------------------
