@@ -44,8 +44,8 @@
 // A rank holds its bodies in ascending id in both engines (the engines' contacts then come out in
 // (id_a, id_b) order with the bits of a run from scratch). Scenes with ellipsoids: A and B hold the
 // shape rows too, the ghosts' from the layout's exchange; every step refreshes the ghosts'
-// orientations with their positions (64 bytes a row instead of 40; a second message per neighbour
-// measured slower, BENCHMARKS §10). Semi-axes and bounding radii stay as laid out
+// orientations with their positions, in the same message (64 bytes a row instead of 40: cheaper than
+// a second message per neighbour, BENCHMARKS.md §10). Semi-axes and bounding radii stay as laid out
 // (StepMotion::send_semi_axes sends the semi-axes every step, in a message of their own). One rank
 // has no boundary rows, no engine B and nothing to send.
 #include <cstdint>

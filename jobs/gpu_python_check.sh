@@ -14,14 +14,16 @@ case $mode in
     mkdir -p "$dir/lib"
     cp build/kernels/libcontactgrid.a build/src/libcg_io.a build/src/contactgrid "$dir/"
     cp build/kernels/contactgrid_cuda_bench "$dir/" 2>/dev/null || true
-    { ldd build/src/python/contactgrid/_contactgrid*.so; ldd build/src/contactgrid; } | awk '/=>/{print $3}' |
+    cmake --build build --target detect_call_bench && cp build/tests/detect_call_bench "$dir/"
+    { ldd build/src/python/contactgrid/_contactgrid*.so; ldd build/src/contactgrid; ldd "$dir/detect_call_bench"; } | awk '/=>/{print $3}' |
       grep -v -E 'libc\.so|libm\.so|libstdc|libgcc_s|ld-linux|libpython|libgomp' | sort -u |
       xargs -I{} cp -L {} "$dir/lib/"
     du -sh "$dir" ;;
   run)
+    set +e  # every step runs and reports, whatever an earlier one did
     out=$(realpath -m "${3:-/tmp/out}")
     mkdir -p "$out" /tmp/cgpy/contactgrid
-    py=python3
+    py=${PYTHON:-python3}
     ext=$($py -c "import sysconfig; print(sysconfig.get_config_var('EXT_SUFFIX'))")
     cp src/python/contactgrid/__init__.py src/python/contactgrid/__init__.pyi /tmp/cgpy/contactgrid/
     version=$(sed -n 's/^project(contactgrid VERSION \([0-9.]*\).*/\1/p' CMakeLists.txt)
@@ -30,15 +32,18 @@ case $mode in
       -Ikernels -Isrc -DCONTACTGRID_HAVE_CUDA=1 -DCONTACTGRID_VERSION="\"$version\"" src/python/*.cpp \
       -o "/tmp/cgpy/contactgrid/_contactgrid$ext" "$dir/libcg_io.a" "$dir/libcontactgrid.a" \
       -L/usr/local/cuda/lib64 -lcudart_static -ldl -lrt -lpthread -fopenmp -L"$dir/lib" -lhdf5_serial -lfmt \
-      -Wl,--exclude-libs,ALL -Wl,-rpath,"$dir/lib" 2>&1 | tail -20
+      -Wl,--exclude-libs,ALL -Wl,-rpath,"$dir/lib" -Wl,-rpath-link,"$dir/lib" 2>&1 | tail -20
     export PYTHONPATH=/tmp/cgpy CG_BINARY="$dir/contactgrid" LD_LIBRARY_PATH="$dir/lib"
-    { date -u; nvidia-smi --query-gpu=name,driver_version --format=csv,noheader; $py --version;
-      $py -c "import numpy, contactgrid; print('numpy', numpy.__version__, 'cuda', contactgrid.cuda_available())"
+    { date -u; nvidia-smi --query-gpu=name,driver_version --format=csv,noheader || true; $py --version;
+      $py -c "import numpy, contactgrid; print('numpy', numpy.__version__, 'cuda', contactgrid.cuda_available())" || true
     } >"$out/device.txt" 2>&1
     cat "$out/device.txt"
     (cd tests/python && $py -m pytest -q -rs -p no:cacheprovider test_gpu.py test_detect.py test_engine_and_files.py \
       2>&1 | tee "$out/pytest.log" | tail -15)
     $py tests/bench/python_gpu_bench.py --min 20 --max 24 --runs 20 2>&1 | tee "$out/python_gpu_bench.log"
+    # CUDA from NumPy arrays (host memory: upload and download included) against the same call from C++
+    $py tests/bench/python_bench.py --log2n 24 --backend cuda --repetitions 10 --no-scipy \
+      --binary "$dir/contactgrid" --cxx "$dir/detect_call_bench" 2>&1 | tee "$out/python_bench_cuda.log"
     if [ -x "$dir/contactgrid_cuda_bench" ]; then
       "$dir/contactgrid_cuda_bench" 20 24 2 20 2>&1 | tee "$out/cuda_bench.log" | tail -40
     fi ;;
