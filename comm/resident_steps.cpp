@@ -67,6 +67,8 @@ const char* to_string(StepStage stage) {
   switch (stage) {
     case StepStage::frame:
       return "frame";
+    case StepStage::migrate:
+      return "migrate";
     case StepStage::rebuild:
       return "rebuild";
     case StepStage::halo:
@@ -247,7 +249,7 @@ void StepLoop<Real>::rebalance() {
   const std::uint64_t most = *std::max_element(counts.begin(), counts.end());
   const double mean = double(total) / ranks;
   if (ranks == 1 || total == 0 || double(most) / mean - 1 <= s.balance.threshold) {
-    s.t[static_cast<std::size_t>(StepStage::rebuild)] += seconds_since(t0);
+    s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
     return;
   }
   // a regular sample of the owned centres (every stride-th body in rank order), on every rank
@@ -269,7 +271,7 @@ void StepLoop<Real>::rebalance() {
     s.slabs = SlabDecomposition(s.slabs.axis(), std::move(cuts));
   });
   ++s.rebalances;
-  s.t[static_cast<std::size_t>(StepStage::rebuild)] += seconds_since(t0);
+  s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
 }
 
 template <class Real>
@@ -293,7 +295,7 @@ void StepLoop<Real>::migrate() {
   const std::uint64_t leaving = std::accumulate(send_counts.begin(), send_counts.end(), std::uint64_t(0));
   const std::uint64_t moving = s.session.sum(leaving);
   if (moving == 0) {
-    s.t[static_cast<std::size_t>(StepStage::rebuild)] += seconds_since(t0);
+    s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
     return;
   }
   agreed_stage(s.session, "steps", [&] {
@@ -365,7 +367,7 @@ void StepLoop<Real>::migrate() {
     b = std::move(next);
   });
   s.migrated += moving;
-  s.t[static_cast<std::size_t>(StepStage::rebuild)] += seconds_since(t0);
+  s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
 }
 
 template <class Real>
@@ -640,7 +642,8 @@ void StepLoop<Real>::collect() {
   }
   if (s.skin_auto) {  // the same observation on every rank
     using I = std::size_t;
-    const double seconds = s.session.max(s.t[I(StepStage::rebuild)] + s.t[I(StepStage::step)]);
+    const double seconds =
+        s.session.max(s.t[I(StepStage::migrate)] + s.t[I(StepStage::rebuild)] + s.t[I(StepStage::step)]);
     const bool built = s.session.max(s.built.back()) > 0;
     s.tuner.observe(built, seconds, s.tuner_displacement, s.tuner_steps);
   }
@@ -771,14 +774,19 @@ StepStats StepLoop<Real>::stats() {
   st.interior = median_at(static_cast<std::size_t>(StepStage::interior));
   st.boundary = median_at(static_cast<std::size_t>(StepStage::boundary));
   st.step = median_at(static_cast<std::size_t>(StepStage::step));
-  std::vector<double> rebuild, build, reuse;
+  std::vector<double> migrate, rebuild, build, reuse;
   double total = 0;
   for (std::size_t k = 0; k < n; ++k) {
-    if (all[k * row + row - 1] > 0) rebuild.push_back(at(k, StepStage::rebuild));
-    total += at(k, StepStage::frame) + at(k, StepStage::rebuild) + at(k, StepStage::step);
+    if (all[k * row + row - 1] > 0) {
+      migrate.push_back(at(k, StepStage::migrate));
+      rebuild.push_back(at(k, StepStage::rebuild));
+    }
+    total += at(k, StepStage::frame) + at(k, StepStage::migrate) + at(k, StepStage::rebuild) +
+             at(k, StepStage::step);
     const double detect = at(k, StepStage::interior) + at(k, StepStage::boundary);
     (all[k * row + row - 2] > 0 ? build : reuse).push_back(detect);
   }
+  st.migrate = median(migrate);
   st.rebuild = median(rebuild);
   st.step_mean = n > 0 ? total / double(n) : 0;
   st.detect_build = median(build);

@@ -62,10 +62,11 @@
 namespace cg {
 
 // The stages of a step, as timed (this rank's seconds; StepStats: the median over the steps of the
-// maximum over ranks). rebuild: rebalance + migrate + lay_out of the steps that rebuilt (0 on the
-// others); step: the wall time from update_frame to the end of detect_boundary.
-enum class StepStage : int { frame, rebuild, halo, interior, boundary, step };
-inline constexpr int kStepStageCount = 6;
+// maximum over ranks). migrate: rebalance + migrate, rebuild: the rebuild check and lay_out, of the
+// steps that rebuilt (0 on the others); step: the wall time from update_frame to the end of
+// detect_boundary.
+enum class StepStage : int { frame, migrate, rebuild, halo, interior, boundary, step };
+inline constexpr int kStepStageCount = 7;
 const char* to_string(StepStage stage);
 
 // Per step the maximum over ranks, then the median over the steps.
@@ -80,7 +81,8 @@ struct StepStats {
   std::uint64_t halo_rows = 0;  // ghost rows refreshed per step (the last layout's), summed over ranks
   double setup = 0;             // the first lay_out (max over ranks)
   double frame = 0;             // update_frame: bounds over the ranks, the frame
-  double rebuild = 0;           // per step that rebuilt: rebalance + migrate + lay_out (median)
+  double migrate = 0;           // per step that rebuilt: rebalance + migrate (median)
+  double rebuild = 0;           // per step that rebuilt: the rebuild check + lay_out (median)
   double halo = 0;              // refresh_ghosts: boundary rows (and orientations) through MPI, into B
   double interior = 0;          // the owned bodies alone (all their pairs), overlapping the halo
   double boundary = 0;          // the boundary rows against the ghosts, after the halo

@@ -29,7 +29,11 @@ void print_steps(const StepStats& s, int ranks) {
       "setup {:.6f} s; per step, median of the maxima over ranks:\n",
       s.steps, checked, s.halo_rows, s.oriented ? " (with orientations)" : "", s.setup);
   if (s.drift != 0) fmt::print("  {:<16} {:>12.6f}\n", "frame", s.frame);
-  if (s.rebuilds > 0) fmt::print("  {:<16} {:>12.6f}  (the steps that rebuilt)\n", "rebuild", s.rebuild);
+  if (s.rebuilds > 0 && ranks > 1)
+    fmt::print("  {:<16} {:>12.6f}  (the steps that rebuilt: rebalance and migration)\n", "migrate",
+               s.migrate);
+  if (s.rebuilds > 0)
+    fmt::print("  {:<16} {:>12.6f}  (the steps that rebuilt: check and layout)\n", "rebuild", s.rebuild);
   fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "halo", s.halo, "interior", s.interior);
   for (const StageTime& t : s.stages) fmt::print("    {:<14} {:>12.6f}\n", t.name, t.seconds);
   fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "boundary", s.boundary, "step", s.step);

@@ -54,6 +54,7 @@ Contacts<Real> from_scratch(const Scene& scene, const EngineOptions& options, co
       rows.orientation[i] = spun_orientation(id, rows.orientation[i], motion.spin * step);
   }
   EngineOptions o = options;
+  o.backend = Backend::cpu;  // the CUDA runs too are checked against the CPU's bits
   o.skin = 0;
   o.skin_auto = false;
   return Engine<Real>(o).detect(
@@ -69,13 +70,14 @@ struct Case {
 // Every step's contacts (hash of every field) and the last step's rows equal the one-rank detection
 // from scratch of the drifted (and turned) bodies, for fixed skins, no skin and the automatic one.
 template <class Real>
-void check_drifting(const std::string& name, const Scene& scene, double drift, double spin) {
+void check_drifting(const std::string& name, const Scene& scene, double drift, double spin,
+                    Backend backend = Backend::cpu) {
   const std::string path = write_shared(name, scene);
   // skin 1: lists (and the ghost set) kept over 7 steps, while pairs close by up to 1 across the cuts
   for (const Case& c : {Case{0, false, SceneRead::own_rows}, Case{0.25, false, SceneRead::all_rows},
                         Case{1.0, false, SceneRead::own_rows}, Case{0, true, SceneRead::own_rows}}) {
     DistributedOptions o;
-    o.engine.backend = Backend::cpu;
+    o.engine.backend = backend;
     o.engine.threads = 1;
     o.engine.fields = Fields::full;
     o.engine.skin = c.skin;
@@ -85,7 +87,8 @@ void check_drifting(const std::string& name, const Scene& scene, double drift, d
     o.step_motion.drift = drift;
     o.step_motion.spin = spin;
     o.step_motion.hash_every_step = true;
-    const std::string label = name + (std::is_same_v<Real, float> ? " fp32" : " fp64") + ", skin " +
+    const std::string label = name + (backend == Backend::cuda ? " cuda" : " cpu") +
+                              (std::is_same_v<Real, float> ? " fp32" : " fp64") + ", skin " +
                               (c.automatic ? std::string("auto") : std::to_string(c.skin)) + " at " +
                               std::to_string(session().size()) + " rank(s)";
     const DistributedResult<Real> got = distributed_detect<Real>(session(), path, o);
@@ -126,6 +129,16 @@ TEST(MovingSteps, DriftingSpheresEqualOneRankFromScratchEveryStep) {
 
 TEST(MovingSteps, DriftingTurningEllipsoidsEqualOneRankFromScratchEveryStep) {
   check_drifting<double>("drift_mixed", generated("mixed", 1500, 62), 0.07, 0.2);
+}
+
+// The same steps on the GPU (device-resident engines, host-staged halo and migration): every step's
+// bits equal the CPU's one-rank detection from scratch.
+TEST(MovingSteps, CudaDriftingBodiesEqualTheCpuFromScratchEveryStep) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  const Scene spheres = generated("uniform", 2500, 61);
+  check_drifting<double>("drift_spheres", spheres, 0.07, 0, Backend::cuda);
+  check_drifting<float>("drift_spheres", spheres, 0.07, 0, Backend::cuda);
+  check_drifting<double>("drift_mixed", generated("mixed", 1500, 62), 0.07, 0.2, Backend::cuda);
 }
 
 // ---- the loop as a library: a caller's integrator, its per-body state, the slabs rebalanced -------
