@@ -72,6 +72,10 @@ struct EngineOptions {
   std::function<void(const PairEstimate&)> on_pair_estimate{};
   // The host pair stage's progress (PairLimits::on_progress): tests done so far, then finished.
   std::function<void(std::uint64_t done, bool finished)> on_pair_progress{};
+  // The skin chosen by the engine (skin is then ignored): from the largest displacement per call it
+  // observes and the measured cost of its builds and reuses, the skin whose mean cost per call is
+  // lowest (kernels/skin_tuner.hpp). For an engine called once per step of a simulation.
+  bool skin_auto = false;
 };
 
 // Counters of one run (for tests and the summary).
@@ -107,6 +111,7 @@ struct EngineStats {
   // measured (0 when the call rebuilt without a check: first call, other bodies).
   std::uint64_t candidate_builds = 0, candidate_reuses = 0;
   double skin_displacement = 0, skin_growth = 0;
+  double skin = 0;  // the skin of the kept list (its build's; 0: none kept)
 };
 
 template <class Real>
@@ -185,6 +190,10 @@ class Engine {
   // driver refuses (the copies stay pageable). unpin_host before that memory is freed.
   bool pin_host(void* p, std::size_t bytes);
   void unpin_host(void* p);
+
+  // The skin of the next build (>= 0, finite; UsageError otherwise); a kept list is checked with the
+  // skin it was built with until then. Turns EngineOptions::skin_auto off: the caller chooses.
+  void set_skin(double skin);
 
   Backend backend() const;      // the resolved backend (never automatic)
   Precision precision() const;  // fp32, fp64, or mixed (Engine<double> with fp32_broad_phase)

@@ -21,6 +21,7 @@
 #include <omp.h>
 
 #include <type_traits>
+#include <utility>
 
 #include "backend.hpp"
 #include "host/stages.hpp"
@@ -107,11 +108,11 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
     timer.lap(EngineStage::pairs);
 
     host::order_candidates(built, nt);
-    if (skin) host::keep_candidates(job.bodies, built, be.kept);
+    if (skin) host::keep_candidates(job.bodies, std::move(built), be.kept);
     timer.lap(EngineStage::order);
   }
   if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
-  const host::CandidatePairs& candidates = reuse ? be.kept.pairs : built;
+  const host::CandidatePairs& candidates = skin ? be.kept.pairs : built;  // a build moved its list there
   stats.candidates = candidates.size();
 
   if (shapes) {

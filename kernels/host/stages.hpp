@@ -76,9 +76,10 @@ struct KeptCandidates {
 };
 
 // skin: what moved since `kept` was built (same body count): max |x − x_ref|, max radius growth,
-// whether the report mask changed. keep_candidates: `c` and the state of `bodies` into `kept`.
+// whether the report mask changed. keep_candidates: `c` (moved, not copied: the narrow stage then
+// reads the kept list) and the state of `bodies` into `kept`.
 Motion measure_motion(const BodiesView& bodies, const KeptCandidates& kept, int threads);
-void keep_candidates(const BodiesView& bodies, const CandidatePairs& c, KeptCandidates& kept);
+void keep_candidates(const BodiesView& bodies, CandidatePairs&& c, KeptCandidates& kept);
 
 // pack: world (double) → local Real spheres; per body its cells (of the sphere inflated by
 // `inflation`, 0 without a skin), control byte and entry count. cells_too false: the spheres only

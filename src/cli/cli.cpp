@@ -285,15 +285,32 @@ Subcommand add_detect(CLI::App& app) {
                     "refreshes its ghosts through MPI and detects again, contacts left in place (checked "
                     "against the file's count); prints the median step")
           ->check(CLI::NonNegativeNumber);
-  d->add_option("--skin", det.skin,
-                "Verlet skin (world length, default 0): the engines keep their candidate pairs across the "
-                "--steps and reuse them while the bodies moved less than skin/2 (stage skin in the step "
-                "times); contacts unchanged")
-      ->check(CLI::NonNegativeNumber);
+  d->add_option_function<std::string>(
+       "--skin",
+       [&det](const std::string& v) {
+         det.skin_auto = v == "auto";
+         if (det.skin_auto) return;
+         const std::optional<double> x = v == "0" ? std::optional<double>(0.0) : positive_number(v);
+         if (!x) throw CLI::ValidationError("--skin", "'" + v + "' is not auto or a length >= 0");
+         det.skin = *x;
+       },
+       "Verlet skin: a world length (default 0) or auto. The engines keep their candidate pairs across "
+       "the --steps and reuse them while the bodies moved less than skin/2 (stage skin in the step "
+       "times); auto picks the skin from the observed motion for the lowest mean step; contacts unchanged")
+      ->default_str("0");
   d->add_option("--spin", det.spin,
                 "Radians per step (default 0): in the --steps every ellipsoid turns by W·step about a fixed "
                 "axis drawn from its id, and the ghosts' orientations refresh through MPI; the last step's "
                 "contacts are then checked against the turned bodies detected from scratch")
+      ->needs(steps);
+  d->add_option("--drift", det.drift,
+                "World length per step (default 0): in the --steps every body's centre moves by V·step along "
+                "a unit direction drawn from its id, so bodies cross the slabs (migrating between ranks) and "
+                "leave the box; -o then receives the last step's contacts")
+      ->needs(steps);
+  d->add_option("--final-scene", det.final_scene,
+                "With --steps: write the last step's bodies as a scene file (a plain detect of it gives the "
+                "last step's contacts)")
       ->needs(steps);
   auto* det_quiet = d->add_flag("-q,--quiet", det.quiet, "No summary");
   d->add_flag("-v,--verbose", det.verbose,
