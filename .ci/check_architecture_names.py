@@ -51,6 +51,8 @@ def main():
         hits = []
         for c in candidates:
             hits += [f for f in files if fnmatch.fnmatch(f, c) or fnmatch.fnmatch(f, "*/" + c)]
+        if not hits:  # a folder cited without its slash: `src/python`
+            hits = [d for d in folders if d == pattern + "/" or d.endswith("/" + pattern + "/")]
         return hits
 
     def is_path(token):

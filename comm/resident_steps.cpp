@@ -3,16 +3,25 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
+#include <limits>
+#include <numeric>
 #include <optional>
 #include <thread>
 
 #include "agreed_stage.hpp"
+#include "collectives.hpp"
+#include "contact_merge.hpp"
+#include "routing.hpp"
+#include "skin_tuner.hpp"
 #include "step_plan.hpp"
 #include "timing.hpp"
 #include "transport.hpp"
 
 namespace cg {
 namespace {
+
+constexpr int k_body_gather_tag = 7600;  // + field index
 
 // Page-locked host memory for an engine's copies (released before the memory is).
 template <class Real>
@@ -36,10 +45,32 @@ struct OrientedRecord {
   Quat<double> orientation;
 };
 
+// Bodies with room for n rows (shape rows and state as `like`'s).
+StepBodies sized_like(const StepBodies& like, std::size_t n, bool shapes) {
+  StepBodies b;
+  b.position = HostVector<Vec3<double>>(n);
+  b.radius = HostVector<double>(n);
+  b.id = HostVector<std::int64_t>(n);
+  if (shapes) {
+    b.shapes.shape = HostVector<Shape>(n);
+    b.shapes.semi_axes = HostVector<Vec3<double>>(n);
+    b.shapes.orientation = HostVector<Quat<double>>(n);
+  }
+  b.state_bytes = like.state_bytes;
+  b.state = HostVector<std::byte>(n * like.state_bytes);
+  return b;
+}
+
 }  // namespace
 
 const char* to_string(StepStage stage) {
   switch (stage) {
+    case StepStage::frame:
+      return "frame";
+    case StepStage::migrate:
+      return "migrate";
+    case StepStage::rebuild:
+      return "rebuild";
     case StepStage::halo:
       return "halo";
     case StepStage::interior:
@@ -57,29 +88,43 @@ struct StepLoop<Real>::State {
   Session& session;
   detail::Comm comm;
   Engine<Real>& a;  // engine A: the owned bodies
-  Frame frame;
   SlabDecomposition slabs;
-  double width;
   StepMotion motion;
   int threads;
+  StepBalance balance;
+  Bounds global;         // the bodies' bounds over the ranks (update_frame)
+  Frame frame;           // the frame of a run from scratch of them
+  double width = 0;      // its ghost width
   bool shapes = false;   // the scene has ellipsoids (agreed over the ranks)
   bool refresh = false;  // every step refreshes the ghosts' orientations
   bool grow = false;     // ... and their semi-axes
+
+  // the skin: fixed (EngineOptions::skin) or chosen (skin_auto) at each layout
+  bool skin_auto = false;
+  double skin = 0;
+  SkinTuner tuner;
 
   StepBodies bodies;  // owned, ascending id
   StepPlan plan;      // of the owned rows: interior or boundary, and the halo
   BoundaryRows rows;  // engine B's row of each boundary row and each ghost
   std::vector<std::uint64_t> send_counts, recv_counts;
-  // engine B's rows, host side (page-locked while B lives)
+  HostVector<Vec3<double>> laid;  // the owned centres at the layout
+  int steps_since_layout = 0;
+  double displacement = 0;  // the largest since the layout (rebuild_due; max over ranks)
+  int layouts = 0;
+  std::uint64_t migrated = 0, rebalances = 0;
+  // engine B's rows, host side (page-locked while laid out)
   HostVector<Vec3<double>> b_p;
   HostVector<double> b_r;
   HostVector<std::int64_t> b_id;
   HostVector<Quat<double>> b_q;     // scenes with ellipsoids
   HostVector<Vec3<double>> b_semi;  // when the semi-axes travel (StepMotion::send_semi_axes)
-  std::optional<Engine<Real>> b;    // engine B: only when this rank has boundary rows
+  std::optional<Engine<Real>> b;    // engine B, made at the first layout with boundary rows
+  bool b_active = false;            // this layout has boundary rows
   std::optional<Pin<Real>> pin_p, pin_r, pin_q;
   std::uint64_t halo_rows = 0;  // ghosts received per step
   double setup = 0;
+  std::uint64_t builds0 = 0, reuses0 = 0;  // engine A's counters before the steps
 
   // the step in flight
   std::thread interior;
@@ -87,16 +132,27 @@ struct StepLoop<Real>::State {
   WallClock::time_point s0;
   std::uint64_t found_a = 0, found_b = 0;
   std::array<double, kStepStageCount> t{};
+  std::uint64_t builds_before = 0;
+  double tuner_displacement = 0;
+  int tuner_steps = 0;
 
   // every step's
   std::vector<std::array<double, kStepStageCount>> times;
   std::vector<std::vector<double>> engine_times;  // engine A's stages, by engine_stage_names()
   std::vector<std::uint64_t> found;               // this rank's contacts
-  std::vector<std::uint64_t> found_all;           // summed over ranks (contacts_per_step)
+  std::vector<std::uint64_t> hashes;              // this rank's contacts_hash (hash_every_step)
+  std::vector<double> built;                      // 1: engine A built its candidates this step
+  std::vector<double> relaid;                     // 1: the step rebuilt the rows (lay_out)
+  bool relaid_now = false;
 
-  State(Session& s, Engine<Real>& e, const Frame& f, const SlabDecomposition& sl, double w,
-        const StepMotion& m, int th)
-      : session(s), comm(s), a(e), frame(f), slabs(sl), width(w), motion(m), threads(th) {}
+  State(Session& s, Engine<Real>& e, const SlabDecomposition& sl, const StepMotion& m, int th,
+        const StepBalance& bal)
+      : session(s), comm(s), a(e), slabs(sl), motion(m), threads(th), balance(bal) {
+    skin_auto = e.options().skin_auto;
+    skin = skin_auto ? 0 : e.options().skin;
+    builds0 = e.stats().candidate_builds;
+    reuses0 = e.stats().candidate_reuses;
+  }
   ~State() {
     if (interior.joinable()) interior.join();
   }
@@ -105,14 +161,20 @@ struct StepLoop<Real>::State {
     if (!error) error = std::current_exception();
   }
 
-  // Engine B's rows from the bodies' boundary rows and the ghosts' records (the first exchange).
+  std::vector<double> coordinates() const {
+    std::vector<double> x(bodies.size());
+    for (std::size_t k = 0; k < x.size(); ++k) x[k] = component(bodies.position[k], slabs.axis());
+    return x;
+  }
+
+  // Engine B's rows from the bodies' boundary rows and the ghosts' records (the layout's exchange).
   void make_engine_b(const HostVector<BodyRecord>& ghosts, const HostVector<ShapeRecord>& ghost_shapes);
 };
 
 template <class Real>
-StepLoop<Real>::StepLoop(Session& session, Engine<Real>& engine, const Frame& frame,
-                         const SlabDecomposition& slabs, double width, const StepMotion& motion, int threads)
-    : m(std::make_unique<State>(session, engine, frame, slabs, width, motion, threads)) {}
+StepLoop<Real>::StepLoop(Session& session, Engine<Real>& engine, const SlabDecomposition& slabs,
+                         const StepMotion& motion, int threads, const StepBalance& balance)
+    : m(std::make_unique<State>(session, engine, slabs, motion, threads, balance)) {}
 
 template <class Real>
 StepLoop<Real>::~StepLoop() = default;
@@ -121,25 +183,219 @@ template <class Real>
 StepBodies& StepLoop<Real>::bodies() {
   return m->bodies;
 }
+template <class Real>
+const SlabDecomposition& StepLoop<Real>::slabs() const {
+  return m->slabs;
+}
+template <class Real>
+const Frame& StepLoop<Real>::frame() const {
+  return m->frame;
+}
 
 template <class Real>
-void StepLoop<Real>::lay_out(StepBodies&& bodies) {
+void StepLoop<Real>::update_frame(int step) {
+  State& s = *m;
+  const auto f0 = WallClock::now();
+  Bounds mine;
+  agreed_stage(s.session, "steps", [&] {
+    if (s.bodies.size() == 0) return;
+    try {
+      mine = compute_bounds(s.bodies.view());
+    } catch (const InputError& e) {
+      throw InputError("step " + std::to_string(step) + ": " + e.what());
+    }
+  });
+  s.global = allgather_bounds(s.session, mine);
+  agreed_stage(s.session, "steps", [&] {
+    const EngineOptions& o = s.a.options();
+    try {
+      s.frame = make_frame(s.global, o.cell_size, s.a.precision(), o.cell_choice);
+    } catch (const InputError& e) {
+      throw InputError("step " + std::to_string(step) + ": " + e.what());
+    }
+    s.width = frame_ghost_width(s.global, s.frame.origin, std::numeric_limits<Real>::epsilon());
+  });
+  s.t[static_cast<std::size_t>(StepStage::frame)] = seconds_since(f0);
+}
+
+template <class Real>
+bool StepLoop<Real>::rebuild_due() {
   State& s = *m;
   const auto t0 = WallClock::now();
-  s.bodies = std::move(bodies);
-  // Scenes with ellipsoids: the shape rows go into A and B (the ghosts' with the first exchange).
-  // Agreed over the ranks, as a rank without rows has none.
-  s.shapes = s.session.sum(std::uint64_t(s.bodies.shapes.empty() ? 0 : 1)) > 0;
-  s.refresh = s.shapes && s.motion.refresh_shapes;
-  s.grow = s.refresh && s.motion.send_semi_axes;
+  const std::size_t n = s.bodies.size();
+  double moved_sq = 0;
+  const Vec3<double>* x = s.bodies.position.data();
+  const Vec3<double>* x0 = s.laid.data();
+#pragma omp parallel for num_threads(s.threads) schedule(static) reduction(max : moved_sq) if (n > (1u << 15))
+  for (std::size_t k = 0; k < n; ++k) {
+    const Vec3<double> d = x[k] - x0[k];
+    moved_sq = std::max(moved_sq, d.x * d.x + d.y * d.y + d.z * d.z);
+  }
+  s.displacement = s.session.max(std::sqrt(moved_sq));
+  ++s.steps_since_layout;
+  s.tuner_displacement = s.displacement;
+  s.tuner_steps = s.steps_since_layout;
+  s.t[static_cast<std::size_t>(StepStage::rebuild)] += seconds_since(t0);
+  return 2 * s.displacement > s.skin;
+}
+
+template <class Real>
+void StepLoop<Real>::rebalance() {
+  State& s = *m;
+  const auto t0 = WallClock::now();
+  const int ranks = s.session.size();
+  const std::vector<std::uint64_t> counts = allgather_counts(s.session, s.bodies.size());
+  const std::uint64_t total = std::accumulate(counts.begin(), counts.end(), std::uint64_t(0));
+  const std::uint64_t most = *std::max_element(counts.begin(), counts.end());
+  const double mean = double(total) / ranks;
+  if (ranks == 1 || total == 0 || double(most) / mean - 1 <= s.balance.threshold) {
+    s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
+    return;
+  }
+  // a regular sample of the owned centres (every stride-th body in rank order), on every rank
+  const std::uint64_t stride =
+      std::max<std::uint64_t>(1, (total + s.balance.max_sample - 1) / s.balance.max_sample);
+  std::uint64_t first = 0;
+  for (int r = 0; r < s.session.rank(); ++r) first += counts[static_cast<std::size_t>(r)];
+  std::vector<double> sample;
+  for (std::uint64_t g = first + (stride - first % stride) % stride; g < first + s.bodies.size(); g += stride)
+    sample.push_back(component(s.bodies.position[static_cast<std::size_t>(g - first)], s.slabs.axis()));
+  sample = allgather_values(s.session, sample);
+  agreed_stage(s.session, "steps", [&] {
+    const std::vector<double> target = SlabDecomposition::from_sample(s.slabs.axis(), sample, ranks).cuts();
+    std::vector<double> cuts = s.slabs.cuts();
+    for (std::size_t i = 0; i < cuts.size(); ++i) {
+      cuts[i] += s.balance.fraction * (target[i] - cuts[i]);
+      if (i > 0) cuts[i] = std::max(cuts[i], cuts[i - 1]);  // rounding keeps the order
+    }
+    s.slabs = SlabDecomposition(s.slabs.axis(), std::move(cuts));
+  });
+  ++s.rebalances;
+  s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
+}
+
+template <class Real>
+void StepLoop<Real>::migrate() {
+  State& s = *m;
+  if (s.session.size() == 1) return;
+  const auto t0 = WallClock::now();
+  const int me = s.session.rank();
+  const std::size_t p = static_cast<std::size_t>(s.session.size()), stride = s.bodies.state_bytes;
+  StepBodies& b = s.bodies;
+  ExportPlan plan;
+  std::vector<std::uint64_t> send_counts(p, 0);
+  HostVector<BodyRecord> send;
+  HostVector<ShapeRecord> send_shapes;
+  HostVector<std::byte> send_state;
+  agreed_stage(s.session, "steps", [&] {
+    plan = make_owner_plan(s.slabs, s.coordinates(), s.threads);
+    for (std::size_t r = 0; r < p; ++r)
+      if (static_cast<int>(r) != me) send_counts[r] = plan.count(static_cast<int>(r));
+  });
+  const std::uint64_t leaving = std::accumulate(send_counts.begin(), send_counts.end(), std::uint64_t(0));
+  const std::uint64_t moving = s.session.sum(leaving);
+  if (moving == 0) {
+    s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
+    return;
+  }
+  agreed_stage(s.session, "steps", [&] {
+    send = HostVector<BodyRecord>(leaving);
+    if (s.shapes) send_shapes = HostVector<ShapeRecord>(leaving);
+    send_state = HostVector<std::byte>(leaving * stride);
+    std::size_t w = 0;
+    for (std::size_t r = 0; r < p; ++r) {
+      if (static_cast<int>(r) == me) continue;
+      for (std::size_t k : plan.to(static_cast<int>(r))) {
+        send[w] = BodyRecord{b.position[k], b.radius[k], b.id[k]};
+        if (s.shapes)
+          send_shapes[w] = ShapeRecord{b.shapes.orientation[k], b.shapes.semi_axes[k], b.shapes.shape[k]};
+        std::copy_n(b.state.data() + k * stride, stride, send_state.data() + w * stride);
+        ++w;
+      }
+    }
+  });
+  const std::vector<std::uint64_t> recv_counts = s.comm.alltoall_counts(send_counts);
+  HostVector<BodyRecord> got = s.comm.alltoallv(std::move(send), send_counts, recv_counts);
+  HostVector<ShapeRecord> got_shapes;
+  if (s.shapes) got_shapes = s.comm.alltoallv(std::move(send_shapes), send_counts, recv_counts);
+  HostVector<std::byte> got_state;
+  if (stride > 0) {
+    std::vector<std::uint64_t> sb(p), rb(p);
+    for (std::size_t r = 0; r < p; ++r) sb[r] = send_counts[r] * stride, rb[r] = recv_counts[r] * stride;
+    got_state = s.comm.alltoallv(std::move(send_state), sb, rb);
+  }
+  agreed_stage(s.session, "steps", [&] {
+    // the bodies that stay (ascending id) and the arrivals (sorted by id), merged by id
+    const std::span<const std::size_t> stay = plan.to(me);
+    std::vector<std::size_t> arrival(got.size());
+    std::iota(arrival.begin(), arrival.end(), std::size_t(0));
+    std::sort(arrival.begin(), arrival.end(),
+              [&](std::size_t x, std::size_t y) { return got[x].id < got[y].id; });
+    StepBodies next =
+        sized_like(b, stay.size() + got.size(), s.shapes && (!b.shapes.empty() || !got_shapes.empty()));
+    const bool with_shapes = !next.shapes.empty();
+    std::size_t i = 0, j = 0;
+    for (std::size_t row = 0; row < next.size(); ++row) {
+      const bool from_stay = j == arrival.size() || (i < stay.size() && b.id[stay[i]] < got[arrival[j]].id);
+      if (from_stay) {
+        const std::size_t k = stay[i++];
+        next.position[row] = b.position[k];
+        next.radius[row] = b.radius[k];
+        next.id[row] = b.id[k];
+        if (with_shapes) {
+          next.shapes.shape[row] = b.shapes.shape[k];
+          next.shapes.semi_axes[row] = b.shapes.semi_axes[k];
+          next.shapes.orientation[row] = b.shapes.orientation[k];
+        }
+        std::copy_n(b.state.data() + k * stride, stride, next.state.data() + row * stride);
+      } else {
+        const std::size_t g = arrival[j++];
+        next.position[row] = got[g].position;
+        next.radius[row] = got[g].radius;
+        next.id[row] = got[g].id;
+        if (with_shapes) {
+          next.shapes.shape[row] = got_shapes[g].shape;
+          next.shapes.semi_axes[row] = got_shapes[g].semi_axes;
+          next.shapes.orientation[row] = got_shapes[g].orientation;
+        }
+        std::copy_n(got_state.data() + g * stride, stride, next.state.data() + row * stride);
+      }
+      if (row > 0 && !(next.id[row - 1] < next.id[row]))
+        throw Error("steps: body " + std::to_string(next.id[row]) +
+                    " is held twice after migration: internal error");
+    }
+    b = std::move(next);
+  });
+  s.migrated += moving;
+  s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
+}
+
+template <class Real>
+void StepLoop<Real>::lay_out() {
+  State& s = *m;
+  const auto t0 = WallClock::now();
+  const bool first = s.layouts == 0;
+  // Scenes with ellipsoids: the shape rows go into A and B (the ghosts' with the exchange). Agreed
+  // over the ranks, as a rank without rows has none.
+  if (first) {
+    s.shapes = s.session.sum(std::uint64_t(s.bodies.shapes.empty() ? 0 : 1)) > 0;
+    s.refresh = s.shapes && s.motion.refresh_shapes;
+    s.grow = s.refresh && s.motion.send_semi_axes;
+  }
+  if (s.skin_auto) {
+    s.tuner.set_length(s.global.r_max);
+    s.skin = s.tuner.skin();
+  }
   const int me = s.session.rank();
   const StepBodies& b = s.bodies;
   Exports<BodyRecord> exports;
   Exports<ShapeRecord> shape_exports;
   agreed_stage(s.session, "steps", [&] {
-    std::vector<double> x(b.size());
-    for (std::size_t k = 0; k < b.size(); ++k) x[k] = component(b.position[k], s.slabs.axis());
-    s.plan = make_step_plan(s.slabs, me, x, s.width, s.threads);
+    // the ghost width of the layout: the frame's, over coordinates that may still grow by the skin,
+    // plus the skin (each of two bodies moves by at most skin/2 before the next layout)
+    const double width =
+        frame_ghost_width(s.global, s.frame.origin, std::numeric_limits<Real>::epsilon(), s.skin) + s.skin;
+    s.plan = make_step_plan(s.slabs, me, s.coordinates(), width, s.threads);
     if (s.plan.owned.size() != b.size()) {
       const std::size_t k = static_cast<std::size_t>(
           std::find(s.plan.role.begin(), s.plan.role.end(), RowRole::ghost) - s.plan.role.begin());
@@ -160,17 +416,26 @@ void StepLoop<Real>::lay_out(StepBodies&& bodies) {
         shape_exports.rows[w] =
             ShapeRecord{b.shapes.orientation[k], b.shapes.semi_axes[k], b.shapes.shape[k]};
     }
+    s.a.set_skin(s.skin);
     s.a.set_resident(
         BodiesView{b.position, b.radius, {}, {}, b.shapes.shape, b.shapes.semi_axes, b.shapes.orientation});
+    s.laid.assign(b.position.begin(), b.position.end());
   });
   s.recv_counts = s.comm.alltoall_counts(s.send_counts);
-  // the first exchange carries the ghosts' records (ids too); the steps refresh their rows
+  // the exchange carries the ghosts' records (ids too); the steps refresh their rows
   const HostVector<BodyRecord> ghosts = s.comm.exchange(exports.rows, s.send_counts, s.recv_counts);
   HostVector<ShapeRecord> ghost_shapes;  // the same ghosts' shape rows, in the same order
   if (s.shapes) ghost_shapes = s.comm.exchange(shape_exports.rows, s.send_counts, s.recv_counts);
   agreed_stage(s.session, "steps", [&] { s.make_engine_b(ghosts, ghost_shapes); });
   s.halo_rows = ghosts.size();
-  s.setup = seconds_since(t0);
+  s.steps_since_layout = 0;
+  ++s.layouts;
+  if (first) {
+    s.setup = seconds_since(t0);
+  } else {
+    s.t[static_cast<std::size_t>(StepStage::rebuild)] += seconds_since(t0);
+    s.relaid_now = true;
+  }
 }
 
 template <class Real>
@@ -179,7 +444,7 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
   pin_p.reset();
   pin_r.reset();
   pin_q.reset();
-  b.reset();
+  b_active = false;
   const StepBodies& o = bodies;
   const std::size_t nb = plan.boundary.size();
   std::vector<std::int64_t> boundary_ids(nb), ghost_ids(ghosts.size());
@@ -222,8 +487,10 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
       b_s.orientation[row] = ghost_shapes[g].orientation;
     }
   }
-  b.emplace(a.options());
+  if (!b) b.emplace(a.options());  // kept across layouts: its workspace stays allocated
+  b->set_skin(skin);
   b->set_resident(BodiesView{b_p, b_r, {}, mask, b_s.shape, b_s.semi_axes, b_s.orientation});
+  b_active = true;
   pin_p.emplace(a, b_p.data(), b_p.size() * sizeof(Vec3<double>));
   pin_r.emplace(a, b_r.data(), b_r.size() * sizeof(double));
   b_q = {};
@@ -236,12 +503,12 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
 }
 
 template <class Real>
-void StepLoop<Real>::commit(bool positions, bool orientations) {
+void StepLoop<Real>::commit(Moved moved) {
   State& s = *m;
   StepBodies& b = s.bodies;
   try {
-    if (positions) s.a.write_resident(0, b.size(), b.position.data(), b.radius.data());
-    if (orientations && !b.shapes.empty())
+    if (moved.positions) s.a.write_resident(0, b.size(), b.position.data(), b.radius.data());
+    if (moved.orientations && !b.shapes.empty())
       s.a.write_resident_shapes(0, b.size(), nullptr, b.shapes.orientation.data());
   } catch (...) {
     s.fail();
@@ -251,9 +518,9 @@ void StepLoop<Real>::commit(bool positions, bool orientations) {
 template <class Real>
 void StepLoop<Real>::detect_interior() {
   State& s = *m;
-  s.t = {};
   s.found_a = s.found_b = 0;
   s.interior_error = nullptr;
+  s.builds_before = s.a.stats().candidate_builds;
   s.s0 = WallClock::now();
   auto run = [&s] {
     const auto i0 = WallClock::now();
@@ -284,13 +551,14 @@ void StepLoop<Real>::refresh_ghosts() {
   const StepBodies& o = s.bodies;
   const auto& halo = s.plan.halo.rows;
   const auto& of_ghost = s.rows.of_ghost;
+  const bool into = s.b_active;
   // every rank exchanges, whatever its error: its neighbours wait for its messages
   if (s.refresh) {
     HostVector<OrientedRecord> send(halo.size());
     for (std::size_t w = 0; w < halo.size(); ++w)
       send[w] = OrientedRecord{o.position[halo[w]], o.radius[halo[w]], o.shapes.orientation[halo[w]]};
     const HostVector<OrientedRecord> got = s.comm.exchange(send, s.send_counts, s.recv_counts);
-    if (s.b)
+    if (into)
       for (std::size_t g = 0; g < got.size(); ++g) {
         s.b_p[of_ghost[g]] = got[g].position;
         s.b_r[of_ghost[g]] = got[g].radius;
@@ -301,7 +569,7 @@ void StepLoop<Real>::refresh_ghosts() {
     for (std::size_t w = 0; w < halo.size(); ++w)
       send[w] = BodyRecord{o.position[halo[w]], o.radius[halo[w]], 0};
     const HostVector<BodyRecord> got = s.comm.exchange(send, s.send_counts, s.recv_counts);
-    if (s.b)
+    if (into)
       for (std::size_t g = 0; g < got.size(); ++g) {
         s.b_p[of_ghost[g]] = got[g].position;
         s.b_r[of_ghost[g]] = got[g].radius;
@@ -311,23 +579,24 @@ void StepLoop<Real>::refresh_ghosts() {
     HostVector<Vec3<double>> send(halo.size());
     for (std::size_t w = 0; w < halo.size(); ++w) send[w] = o.shapes.semi_axes[halo[w]];
     const HostVector<Vec3<double>> got = s.comm.exchange(send, s.send_counts, s.recv_counts);
-    if (s.b)
+    if (into)
       for (std::size_t g = 0; g < got.size(); ++g) s.b_semi[of_ghost[g]] = got[g];
   }
-  if (!s.b || s.error) return;
-  try {  // the boundary rows as the caller moved them, then B's rows into B
-    for (std::size_t k = 0; k < s.plan.boundary.size(); ++k) {
-      const std::size_t i = s.plan.boundary[k], row = s.rows.of_boundary[k];
-      s.b_p[row] = o.position[i];
-      s.b_r[row] = o.radius[i];
-      if (s.refresh) s.b_q[row] = o.shapes.orientation[i];
-      if (s.grow) s.b_semi[row] = o.shapes.semi_axes[i];
+  if (into && !s.error) {
+    try {  // the boundary rows as the caller moved them, then B's rows into B
+      for (std::size_t k = 0; k < s.plan.boundary.size(); ++k) {
+        const std::size_t i = s.plan.boundary[k], row = s.rows.of_boundary[k];
+        s.b_p[row] = o.position[i];
+        s.b_r[row] = o.radius[i];
+        if (s.refresh) s.b_q[row] = o.shapes.orientation[i];
+        if (s.grow) s.b_semi[row] = o.shapes.semi_axes[i];
+      }
+      s.b->write_resident(0, s.b_r.size(), s.b_p.data(), s.b_r.data());
+      if (s.refresh)
+        s.b->write_resident_shapes(0, s.b_q.size(), s.grow ? s.b_semi.data() : nullptr, s.b_q.data());
+    } catch (...) {
+      s.fail();
     }
-    s.b->write_resident(0, s.b_r.size(), s.b_p.data(), s.b_r.data());
-    if (s.refresh)
-      s.b->write_resident_shapes(0, s.b_q.size(), s.grow ? s.b_semi.data() : nullptr, s.b_q.data());
-  } catch (...) {
-    s.fail();
   }
   s.t[static_cast<std::size_t>(StepStage::halo)] = seconds_since(h0);
 }
@@ -335,7 +604,7 @@ void StepLoop<Real>::refresh_ghosts() {
 template <class Real>
 void StepLoop<Real>::detect_boundary() {
   State& s = *m;
-  if (s.b && !s.error) {
+  if (s.b_active && !s.error) {
     const auto b0 = WallClock::now();
     try {
       s.found_b = s.b->detect_resident(s.frame);
@@ -363,6 +632,48 @@ void StepLoop<Real>::collect() {
     for (std::size_t j = 0; j < names.size(); ++j)
       if (t.name == names[j]) e[j] = t.seconds;
   s.engine_times.push_back(std::move(e));
+  s.built.push_back(s.a.stats().candidate_builds > s.builds_before || !(s.skin > 0) ? 1.0 : 0.0);
+  s.relaid.push_back(s.relaid_now ? 1.0 : 0.0);
+  s.relaid_now = false;
+  if (s.motion.hash_every_step) {
+    std::uint64_t h = 0;
+    agreed_stage(s.session, "steps", [&] { h = contacts_hash(contacts()); });
+    s.hashes.push_back(h);
+  }
+  if (s.skin_auto) {  // the same observation on every rank
+    using I = std::size_t;
+    const double seconds =
+        s.session.max(s.t[I(StepStage::migrate)] + s.t[I(StepStage::rebuild)] + s.t[I(StepStage::step)]);
+    const bool built = s.session.max(s.built.back()) > 0;
+    s.tuner.observe(built, seconds, s.tuner_displacement, s.tuner_steps);
+  }
+  s.t = {};
+}
+
+template <class Real>
+Contacts<Real> StepLoop<Real>::contacts() {
+  State& s = *m;
+  const bool full = s.a.options().fields == Fields::full;
+  auto with_ids = [full](const Contacts<Real>& c, const std::int64_t* ids) {
+    Contacts<Real> out = c;
+    out.full = full;
+    for (std::size_t k = 0; k < out.size(); ++k) {
+      out.id_a[k] = ids[out.id_a[k]];
+      out.id_b[k] = ids[out.id_b[k]];
+    }
+    return out;
+  };
+  if (s.found.empty()) {
+    Contacts<Real> none;
+    none.full = full;
+    return none;
+  }
+  Contacts<Real> a = with_ids(s.a.resident_contacts(), s.bodies.id.data());
+  if (!s.b_active) return a;
+  std::vector<Contacts<Real>> runs;
+  runs.push_back(std::move(a));
+  runs.push_back(with_ids(s.b->resident_contacts(), s.b_id.data()));
+  return merge_contact_runs<Real>(runs, full).contacts;
 }
 
 template <class Real>
@@ -375,50 +686,130 @@ std::uint64_t StepLoop<Real>::pair_hash_sum() {
       for (std::size_t k = 0; k < c.size(); ++k) hash += pair_hash(ids[c.id_a[k]], ids[c.id_b[k]]);
     };
     add(s.a.resident_contacts(), s.bodies.id.data());
-    if (s.b) add(s.b->resident_contacts(), s.b_id.data());
+    if (s.b_active) add(s.b->resident_contacts(), s.b_id.data());
   });
   return s.session.sum(hash);
 }
 
 template <class Real>
-const std::vector<std::uint64_t>& StepLoop<Real>::contacts_per_step() {
+StepBodies StepLoop<Real>::gather_bodies() {
   State& s = *m;
-  s.found_all = s.found;
-  s.comm.allreduce_sum(s.found_all);
-  return s.found_all;
+  const StepBodies& b = s.bodies;
+  const std::vector<std::uint64_t> counts = allgather_counts(s.session, b.size());
+  const bool root = s.session.rank() == 0;
+  const std::uint64_t total = std::accumulate(counts.begin(), counts.end(), std::uint64_t(0));
+  StepBodies all;
+  agreed_stage(s.session, "steps", [&] {
+    if (root) all = sized_like(StepBodies{}, total, s.shapes);
+  });
+  auto gather = [&](const auto* local, auto* into, int field) {
+    using T = std::remove_cv_t<std::remove_pointer_t<decltype(local)>>;
+    std::vector<T*> at(counts.size(), nullptr);
+    std::uint64_t offset = 0;
+    for (std::size_t r = 0; r < counts.size(); ++r) {
+      if (root) at[r] = into + offset;
+      offset += counts[r];
+    }
+    if (root && counts[0] > 0) std::copy_n(local, counts[0], into);
+    s.comm.gather_to_root(local, counts, at, std::uint64_t(1) << 30, k_body_gather_tag + field);
+  };
+  gather(b.position.data(), all.position.data(), 0);
+  gather(b.radius.data(), all.radius.data(), 1);
+  gather(b.id.data(), all.id.data(), 2);
+  if (s.shapes) {
+    // a rank without rows has no shape rows to send: it sends nothing (its count is 0)
+    gather(b.shapes.shape.data(), all.shapes.shape.data(), 3);
+    gather(b.shapes.semi_axes.data(), all.shapes.semi_axes.data(), 4);
+    gather(b.shapes.orientation.data(), all.shapes.orientation.data(), 5);
+  }
+  if (!root) return {};
+  std::vector<std::size_t> order(total);
+  std::iota(order.begin(), order.end(), std::size_t(0));
+  std::sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) { return all.id[x] < all.id[y]; });
+  StepBodies sorted = sized_like(StepBodies{}, total, s.shapes);
+  for (std::size_t k = 0; k < total; ++k) {
+    const std::size_t i = order[k];
+    sorted.position[k] = all.position[i];
+    sorted.radius[k] = all.radius[i];
+    sorted.id[k] = all.id[i];
+    if (s.shapes) {
+      sorted.shapes.shape[k] = all.shapes.shape[i];
+      sorted.shapes.semi_axes[k] = all.shapes.semi_axes[i];
+      sorted.shapes.orientation[k] = all.shapes.orientation[i];
+    }
+  }
+  return sorted;
 }
 
 template <class Real>
 StepStats StepLoop<Real>::stats() {
   State& s = *m;
   const std::size_t n = s.times.size(), n_engine = engine_stage_names().size();
-  std::vector<double> all;  // per step: the step stages, then engine A's
+  // per step: the step stages, then engine A's, whether A built, whether the rows were rebuilt
+  std::vector<double> all;
   for (std::size_t k = 0; k < n; ++k) {
     all.insert(all.end(), s.times[k].begin(), s.times[k].end());
     all.insert(all.end(), s.engine_times[k].begin(), s.engine_times[k].end());
+    all.push_back(s.built[k]);
+    all.push_back(s.relaid[k]);
   }
   s.comm.allreduce_max(all);
-  const std::size_t row = kStepStageCount + n_engine;
-  auto step_median = [&](std::size_t j) {
+  const std::size_t row = kStepStageCount + n_engine + 2;
+  auto at = [&](std::size_t k, StepStage stage) { return all[k * row + static_cast<std::size_t>(stage)]; };
+  auto median_at = [&](std::size_t j) {
     std::vector<double> v(n);
     for (std::size_t k = 0; k < n; ++k) v[k] = all[k * row + j];
-    return median(std::move(v));
+    return cg::median(std::move(v));
   };
   StepStats st;
   st.steps = static_cast<int>(n);
   st.spin = s.motion.spin;
+  st.drift = s.motion.drift;
   st.turned = s.shapes && s.motion.spin != 0;
   st.oriented = s.refresh && s.session.size() > 1;
   st.halo_rows = s.session.sum(s.halo_rows);
   st.setup = s.session.max(s.setup);
-  st.halo = step_median(static_cast<std::size_t>(StepStage::halo));
-  st.interior = step_median(static_cast<std::size_t>(StepStage::interior));
-  st.boundary = step_median(static_cast<std::size_t>(StepStage::boundary));
-  st.step = step_median(static_cast<std::size_t>(StepStage::step));
+  st.frame = median_at(static_cast<std::size_t>(StepStage::frame));
+  st.halo = median_at(static_cast<std::size_t>(StepStage::halo));
+  st.interior = median_at(static_cast<std::size_t>(StepStage::interior));
+  st.boundary = median_at(static_cast<std::size_t>(StepStage::boundary));
+  st.step = median_at(static_cast<std::size_t>(StepStage::step));
+  std::vector<double> migrate, rebuild, build, reuse;
+  double total = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    if (all[k * row + row - 1] > 0) {
+      migrate.push_back(at(k, StepStage::migrate));
+      rebuild.push_back(at(k, StepStage::rebuild));
+    }
+    total += at(k, StepStage::frame) + at(k, StepStage::migrate) + at(k, StepStage::rebuild) +
+             at(k, StepStage::step);
+    const double detect = at(k, StepStage::interior) + at(k, StepStage::boundary);
+    (all[k * row + row - 2] > 0 ? build : reuse).push_back(detect);
+  }
+  st.migrate = median(migrate);
+  st.rebuild = median(rebuild);
+  st.step_mean = n > 0 ? total / double(n) : 0;
+  st.detect_build = median(build);
+  st.detect_reuse = median(reuse);
   for (std::size_t j = 0; j < n_engine && n > 0; ++j) {
-    const double t = step_median(kStepStageCount + j);
+    const double t = median_at(kStepStageCount + j);
     if (t > 0) st.stages.push_back({engine_stage_names()[j], t});
   }
+  st.rebuilds = static_cast<std::uint64_t>(std::max(0, s.layouts - 1));
+  st.migrated = s.migrated;
+  st.rebalances = s.rebalances;
+  const std::vector<std::uint64_t> owned = allgather_counts(s.session, s.bodies.size());
+  st.owned_min = *std::min_element(owned.begin(), owned.end());
+  st.owned_max = *std::max_element(owned.begin(), owned.end());
+  st.builds = s.a.stats().candidate_builds - s.builds0;
+  st.reuses = s.a.stats().candidate_reuses - s.reuses0;
+  st.skin = s.skin;
+  st.skin_auto = s.skin_auto;
+  st.step_contacts = s.found;
+  s.comm.allreduce_sum(st.step_contacts);
+  if (!st.step_contacts.empty()) st.contacts = st.step_contacts.back();
+  st.step_hashes = s.hashes;
+  s.comm.allreduce_sum(st.step_hashes);
   return st;
 }
 

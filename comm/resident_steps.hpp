@@ -1,15 +1,27 @@
 #pragma once
-// The resident steps (--steps, after the run): what a simulation that keeps its bodies in its engines
-// pays per step for the same decomposition. g++-safe public header.
+// The resident steps (--steps, after the run): a simulation's bodies kept in each rank's engines and
+// detected again every step, bodies moving between ranks as they cross the slabs' cuts. g++-safe
+// public header.
 //
 // The step loop is an object whose methods are the stages of a step; src/run/pipeline.cpp sequences
 // them, as it sequences the stages of a run:
 //
-//   lay_out            the rows of the steps (setup): the plan of the held rows (decomposition/
-//                      step_plan: interior, boundary, ghost, and which rank needs which boundary row,
-//                      by the run's routing rules), the first exchange of the ghosts' whole records,
-//                      engine A's rows (the owned bodies) and engine B's (boundary rows + ghosts)
-//   (the caller moves the bodies: bodies(), then commit: the integrator's part, before the clock)
+//   lay_out            the rows of the steps (setup, and every rebuild): the plan of the owned rows
+//                      (decomposition/step_plan: interior or boundary, and which rank needs which
+//                      boundary row, by the run's routing rules over the ghost width plus the skin),
+//                      the exchange of the ghosts' whole records, engine A's rows (the owned bodies)
+//                      and engine B's (boundary rows + ghosts)
+//   (the caller moves bodies(): the integrator's part, before the step's clock)
+//   update_frame       the moved bodies' bounds over the ranks (a centre that is not finite stops the
+//                      run: InputError naming the body and the step), the frame of a run from scratch
+//                      of them (so the contacts are its bits), the ghost width
+//   rebuild_due        whether a body moved by more than skin/2 since the layout (the rows' ghost set
+//                      no longer covers every contact); then, before lay_out:
+//     rebalance        slab cuts moved part of the way to the owned counts' quantiles, when the
+//                      imbalance of the owned counts passes a threshold
+//     migrate          every body whose centre left its slab to its new owner (its rows, shape rows
+//                      and the caller's state)
+//   commit             otherwise: the moved rows into engine A
 //   detect_interior    engine A, all pairs of the owned bodies, on a second thread ...
 //   refresh_ghosts     ... while this thread sends every boundary row's position and bounding radius
 //                      (scenes with ellipsoids: and orientation, in the same message) to the ranks
@@ -17,18 +29,25 @@
 //                      CUDA-aware) and writes engine B's rows
 //   detect_boundary    engine B (the pairs of a boundary row with a ghost: step_plan.hpp's report
 //                      rule), then the wait for A; every rank agrees on the step's errors
-//   collect            this step's contacts (their count over the rank's two engines) and times
-// and after the steps, pair_hash_sum (the last step's pairs: CUDA downloads them now, after the
-// timing) and stats (per stage, the median over the steps of the maximum over ranks).
+//   collect            this step's contacts (their count, their hash when asked) and times
+// and after the steps: contacts (the last step's, this rank's, sorted, global ids), pair_hash_sum,
+// gather_bodies (every body on rank 0, for the final scene) and stats.
+//
+// Between rebuilds a body stays with the rank that owned it at the layout, even when its centre has
+// crossed a cut (by less than skin/2): the layout's ghost width is the run's plus the skin, so every
+// pair that touches now was within it then, and the ghosts are refreshed every step. With skin 0 a
+// step that moved anything rebuilds. The engines keep their candidate lists with the same skin
+// (EngineOptions::skin; Engine::set_skin), so their builds fall on the rebuilds. --skin auto
+// (EngineOptions::skin_auto): the loop picks the skin with kernels/skin_tuner.hpp from the largest
+// displacement per step and the measured cost of its steps (the same on every rank).
 //
 // A rank holds its bodies in ascending id in both engines (the engines' contacts then come out in
 // (id_a, id_b) order with the bits of a run from scratch). Scenes with ellipsoids: A and B hold the
-// shape rows too, the ghosts' from the first exchange; every step refreshes the ghosts' orientations
-// with their positions, in the same message (64 bytes a row instead of 40: cheaper than a second
-// message per neighbour, BENCHMARKS.md §10). Semi-axes stay fixed (set once);
-// StepMotion::send_semi_axes sends them every step, in a message of their own, for a simulation whose
-// shapes grow. One rank (or a rank without neighbours within the ghost width) has no boundary rows and
-// no engine B.
+// shape rows too, the ghosts' from the layout's exchange; every step refreshes the ghosts'
+// orientations with their positions, in the same message (64 bytes a row instead of 40: cheaper than
+// a second message per neighbour, BENCHMARKS.md §10). Semi-axes and bounding radii stay as laid out
+// (StepMotion::send_semi_axes sends the semi-axes every step, in a message of their own). One rank
+// has no boundary rows, no engine B and nothing to send.
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -43,61 +62,97 @@
 namespace cg {
 
 // The stages of a step, as timed (this rank's seconds; StepStats: the median over the steps of the
-// maximum over ranks). step: the wall time from detect_interior to the end of detect_boundary.
-enum class StepStage : int { halo, interior, boundary, step };
-inline constexpr int kStepStageCount = 4;
+// maximum over ranks). migrate: rebalance + migrate, rebuild: the rebuild check and lay_out, of the
+// steps that rebuilt (0 on the others); step: the wall time from update_frame to the end of
+// detect_boundary.
+enum class StepStage : int { frame, migrate, rebuild, halo, interior, boundary, step };
+inline constexpr int kStepStageCount = 7;
 const char* to_string(StepStage stage);
 
 // Per step the maximum over ranks, then the median over the steps.
 struct StepStats {
   int steps = 0;
-  std::uint64_t contacts = 0;   // per step, summed over ranks (checked equal to the file's K; with a
-                                // spin the last step's, checked equal to a detection from scratch)
+  std::uint64_t contacts = 0;   // the last step's, summed over ranks (checked: pipeline.cpp)
   std::uint64_t hash = 0;       // the last step's pairs, pair_hash summed over ranks (checked likewise)
   double spin = 0;              // StepMotion::spin of the steps (0: the bodies did not turn)
+  double drift = 0;             // StepMotion::drift (0: the centres did not move)
   bool turned = false;          // the ellipsoids turned (a spin and a scene with ellipsoids)
   bool oriented = false;        // the halo carried the ghosts' orientations (a scene with ellipsoids)
-  std::uint64_t halo_rows = 0;  // ghost rows refreshed per step, summed over ranks
-  double setup = 0;             // lay_out: plan, first exchange, engines' rows (once, max over ranks)
+  std::uint64_t halo_rows = 0;  // ghost rows refreshed per step (the last layout's), summed over ranks
+  double setup = 0;             // the first lay_out (max over ranks)
+  double frame = 0;             // update_frame: bounds over the ranks, the frame
+  double migrate = 0;           // per step that rebuilt: rebalance + migrate (median)
+  double rebuild = 0;           // per step that rebuilt: the rebuild check + lay_out (median)
   double halo = 0;              // refresh_ghosts: boundary rows (and orientations) through MPI, into B
   double interior = 0;          // the owned bodies alone (all their pairs), overlapping the halo
   double boundary = 0;          // the boundary rows against the ghosts, after the halo
-  double step = 0;              // wall time of a step
-  StageTimes stages;            // the engine's stages of the interior detection
+  double step = 0;              // wall time of a step (every step)
+  double step_mean = 0;         // ... its mean over the steps (rebuilds and reuses together)
+  double detect_build = 0, detect_reuse = 0;  // interior + boundary: median of the steps that built
+                                              // the candidate lists, of those that reused them
+  StageTimes stages;                          // the engine's stages of the interior detection
+  // rebuilds of the rows (the first layout not counted), bodies that changed rank (summed), slab
+  // rebalances, the owned bodies per rank at the end
+  std::uint64_t rebuilds = 0, migrated = 0, rebalances = 0, owned_min = 0, owned_max = 0;
+  // engine A's candidate lists built and reused over the steps (rank 0's), and the skin of the last
+  // layout (auto: the one chosen)
+  std::uint64_t builds = 0, reuses = 0;
+  double skin = 0;
+  bool skin_auto = false;
+  std::vector<std::uint64_t> step_contacts;  // per step, summed over ranks
+  std::vector<std::uint64_t> step_hashes;    // StepMotion::hash_every_step: contacts_hash, summed
+};
+
+// How the loop rebalances the slabs at a rebuild.
+struct StepBalance {
+  double threshold = 0.1;  // rebalance when max owned / mean owned - 1 exceeds it
+  double fraction = 0.5;   // move each cut this far toward its quantile of the owned centres
+  std::uint64_t max_sample = 1u << 20;
 };
 
 // The steps of one rank: engine A (the run's engine), engine B, the bodies and their plan.
 template <class Real>
 class StepLoop {
  public:
-  // `engine`: the rank's engine (A; the loop sets its resident rows); `frame`, `slabs`, `width`: the
-  // run's. Every rank constructs one; the stages below are collective, in the order above.
-  StepLoop(Session& session, Engine<Real>& engine, const Frame& frame, const SlabDecomposition& slabs,
-           double width, const StepMotion& motion, int threads);
+  // `engine`: the rank's engine (A; the loop sets its rows and its skin: EngineOptions::skin, or
+  // skin_auto for the loop's choice); `slabs`: the run's. Every rank constructs one; the stages below
+  // are collective, in the order above, update_frame first (the frame of the bodies set).
+  StepLoop(Session& session, Engine<Real>& engine, const SlabDecomposition& slabs, const StepMotion& motion,
+           int threads, const StepBalance& balance = {});
   ~StepLoop();
   StepLoop(const StepLoop&) = delete;
   StepLoop& operator=(const StepLoop&) = delete;
 
-  // Collective. `bodies`: this rank's owned bodies, ascending id (InputError naming the first body that
-  // this rank does not own). Times the setup.
-  void lay_out(StepBodies&& bodies);
-
-  // This rank's owned bodies, ascending id: the caller moves them between steps, then commits.
+  // This rank's owned bodies, ascending id: the caller sets them before the first lay_out and moves
+  // them (with the state it attached) between steps; they migrate at rebuilds.
   StepBodies& bodies();
+  const SlabDecomposition& slabs() const;
+  const Frame& frame() const;
+
+  // Collective. InputError naming the first body that this rank does not own.
+  void lay_out();
+  // Collective. `step`: the step's number (for the messages).
+  void update_frame(int step);
+  bool rebuild_due();  // collective
+  void rebalance();    // collective
+  void migrate();      // collective
   // The caller changed the positions (and bounding radii) and/or the orientations of bodies():
   // written into engine A's rows (the integrator's part, before the step's clock).
-  void commit(bool positions, bool orientations);
+  void commit(Moved moved);
 
   void detect_interior();  // collective (with refresh_ghosts and detect_boundary: one step)
   void refresh_ghosts();
   void detect_boundary();
-  void collect();  // this step's contacts (their count) and times
+  void collect();  // collective
 
+  // This rank's contacts of the last step: its engines' rows with global ids, sorted by (id_a, id_b)
+  // (CUDA: downloaded now). The run's collect stage gathers them.
+  Contacts<Real> contacts();
   // Collective, after the steps: the order-free hash of the last step's pairs summed over ranks.
   std::uint64_t pair_hash_sum();
-  // Collective: per-step contacts summed over ranks (one per step) and the statistics.
-  const std::vector<std::uint64_t>& contacts_per_step();
-  StepStats stats();
+  // Collective: every rank's bodies on rank 0 in ascending id (the others: none).
+  StepBodies gather_bodies();
+  StepStats stats();  // collective
 
  private:
   struct State;

@@ -33,6 +33,15 @@ double ghost_width(double r_max, double extent, double epsilon) {
   return 2.0 * r_max * (1.0 + 16.0 * epsilon) + 16.0 * epsilon * std::abs(extent);
 }
 
+double frame_ghost_width(const Bounds& global, const Vec3<double>& origin, double epsilon, double reach) {
+  double extent = 0;
+  for (int k = 0; k < 3; ++k) {
+    const double o = component(origin, k);
+    extent = std::max({extent, std::abs(component(global.hi, k) - o), std::abs(component(global.lo, k) - o)});
+  }
+  return ghost_width(global.r_max, extent + reach, epsilon);
+}
+
 SlabDecomposition::SlabDecomposition(int axis, std::vector<double> cuts)
     : m_axis(axis), m_cuts(std::move(cuts)) {
   if (axis < 0 || axis > 2) throw UsageError("slab axis " + std::to_string(axis) + " is not 0, 1 or 2");

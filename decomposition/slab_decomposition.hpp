@@ -43,6 +43,11 @@ int choose_axis(const Bounds& global, int forced);
 // `extent` bounds |world - origin| of every centre.
 double ghost_width(double r_max, double extent, double epsilon);
 
+// The ghost width of a frame with this origin over the bodies' `global` bounds: ghost_width of their
+// largest radius and of the largest distance of their boxes from the origin, grown by `reach` (bodies
+// that may still move by reach/2 each, the origin with them).
+double frame_ghost_width(const Bounds& global, const Vec3<double>& origin, double epsilon, double reach = 0);
+
 // The slabs of a run.
 //
 // Invariants: cuts().size() == ranks() - 1; cuts are finite and non-decreasing; every finite

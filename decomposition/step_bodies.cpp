@@ -49,13 +49,53 @@ std::uint64_t pair_hash(std::int64_t a, std::int64_t b) {
   return x ^ (x >> 31);
 }
 
-Vec3<double> spin_axis(std::int64_t id) {
+namespace {
+// A unit vector uniform on the sphere from the id and two hash keys (z uniform in [-1, 1), the
+// azimuth uniform).
+Vec3<double> unit_from_id(std::int64_t id, std::int64_t key_z, std::int64_t key_phi) {
   constexpr double k_unit = 0x1.0p-53;  // 53 random bits → [0, 1)
-  const double z = 2 * static_cast<double>(pair_hash(id, 1) >> 11) * k_unit - 1;
-  const double phi = 2 * std::numbers::pi * static_cast<double>(pair_hash(id, 2) >> 11) * k_unit;
+  const double z = 2 * static_cast<double>(pair_hash(id, key_z) >> 11) * k_unit - 1;
+  const double phi = 2 * std::numbers::pi * static_cast<double>(pair_hash(id, key_phi) >> 11) * k_unit;
   const double s = std::sqrt(std::max(0.0, 1 - z * z));
   return {s * std::cos(phi), s * std::sin(phi), z};
 }
+}  // namespace
+
+Vec3<double> spin_axis(std::int64_t id) { return unit_from_id(id, 1, 2); }
+
+Vec3<double> drift_direction(std::int64_t id) { return unit_from_id(id, 3, 4); }
+
+Vec3<double> drifted_position(std::int64_t id, Vec3<double> c0, double drift, int step) {
+  const Vec3<double> u = drift_direction(id);
+  const double d = drift * step;
+  return {c0.x + u.x * d, c0.y + u.y * d, c0.z + u.z * d};
+}
+
+template <class Real>
+std::uint64_t contacts_hash(const Contacts<Real>& c) {
+  std::uint64_t sum = 0;
+  for (std::size_t k = 0; k < c.size(); ++k) {
+    std::uint64_t h = pair_hash(c.id_a[k], c.id_b[k]);
+    auto mix = [&h](Real v) {
+      std::uint64_t bits = 0;
+      std::memcpy(&bits, &v, sizeof(Real));
+      h = pair_hash(static_cast<std::int64_t>(h), static_cast<std::int64_t>(bits));
+    };
+    for_each_contact_field(c, c.full, [&](auto index, const auto& column) {
+      if constexpr (kContactFields[decltype(index)::value].kind == FieldKind::vector) {
+        mix(column[k].x);
+        mix(column[k].y);
+        mix(column[k].z);
+      } else if constexpr (kContactFields[decltype(index)::value].kind == FieldKind::scalar) {
+        mix(column[k]);
+      }
+    });
+    sum += h;
+  }
+  return sum;
+}
+template std::uint64_t contacts_hash(const Contacts<float>&);
+template std::uint64_t contacts_hash(const Contacts<double>&);
 
 namespace {
 // a ⊗ b: the rotation b, then a.
@@ -84,23 +124,28 @@ void attach_file_poses(StepBodies& b, int threads) {
   b.state = HostVector<std::byte>(n * sizeof(FilePose));
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (std::size_t k = 0; k < n; ++k) {
-    const FilePose p{shapes ? b.shapes.orientation[k] : Quat<double>{1, 0, 0, 0}};
+    const FilePose p{b.position[k], shapes ? b.shapes.orientation[k] : Quat<double>{1, 0, 0, 0}};
     std::memcpy(b.state.data() + k * sizeof(FilePose), &p, sizeof(FilePose));
   }
 }
 
-bool move_bodies(StepBodies& b, const StepMotion& motion, int step, int threads) {
+Moved move_bodies(StepBodies& b, const StepMotion& motion, int step, int threads) {
   if (b.state_bytes != sizeof(FilePose))
     throw Error("move_bodies: the bodies carry no file pose: internal error");
-  const bool turn = motion.spin != 0 && !b.shapes.empty();
-  if (!turn) return false;
+  Moved moved;
+  moved.positions = motion.drift != 0;
+  moved.orientations = motion.spin != 0 && !b.shapes.empty();
+  if (!moved.positions && !moved.orientations) return moved;
   const double angle = motion.spin * step;
   const std::size_t n = b.size();
 #pragma omp parallel for num_threads(threads) schedule(static)
-  for (std::size_t k = 0; k < n; ++k)
-    if (b.shapes.shape[k] == Shape::ellipsoid)
-      b.shapes.orientation[k] = spun_orientation(b.id[k], pose_of(b, k).orientation, angle);
-  return true;
+  for (std::size_t k = 0; k < n; ++k) {
+    const FilePose pose = pose_of(b, k);
+    if (moved.positions) b.position[k] = drifted_position(b.id[k], pose.position, motion.drift, step);
+    if (moved.orientations && b.shapes.shape[k] == Shape::ellipsoid)
+      b.shapes.orientation[k] = spun_orientation(b.id[k], pose.orientation, angle);
+  }
+  return moved;
 }
 
 }  // namespace cg

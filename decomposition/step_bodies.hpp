@@ -37,12 +37,19 @@ struct StepMotion {
   // Radians per step: at step s (1 … N) every ellipsoid's orientation is spun_orientation(id, q0,
   // spin·s); spheres do not turn. 0: the bodies keep the file's orientations.
   double spin = 0;
+  // World length per step: at step s every body's centre is drifted_position(id, c0, drift, s) = its
+  // file centre c0 + s·drift·u(id), u the unit vector drift_direction(id): bodies cross the slabs'
+  // cuts and leave the box. 0: the bodies keep the file's centres.
+  double drift = 0;
   // The ghosts' semi-axes travel with their orientations every step (a simulation whose shapes grow;
   // its bounding radii travel already). Here they never change: off, they go once, at setup.
   bool send_semi_axes = false;
   // Off only to show that the check catches stale ghosts (tests): B's shape rows keep the first
   // exchange's, as if the steps refreshed positions and radii alone.
   bool refresh_shapes = true;
+  // Every step's contacts hashed (contacts_hash, summed over ranks: StepStats::step_hashes), so that
+  // tests compare every step with a detection from scratch. CUDA: a download per step.
+  bool hash_every_step = false;
   // Called on every rank after each step with the number of steps done (a progress line; empty: none).
   std::function<void(int)> on_step;
 };
@@ -56,17 +63,34 @@ std::uint64_t pair_hash(std::int64_t a, std::int64_t b);
 Vec3<double> spin_axis(std::int64_t id);
 Quat<double> spun_orientation(std::int64_t id, Quat<double> q0, double angle);
 
+// The drift's rule: body `id`'s centre at step `step` from its file centre `c0`: c0 + u·(drift·step),
+// u = drift_direction(id) a unit vector uniform on the sphere as a pure function of the id (pair_hash
+// of (id, 3) and (id, 4)). Any rank computes any body's centre at any step from the id alone.
+Vec3<double> drift_direction(std::int64_t id);
+Vec3<double> drifted_position(std::int64_t id, Vec3<double> c0, double drift, int step);
+
+// An order-free fingerprint of a contact set that covers every field: the sum over the rows of a
+// hash of the row's ids and the bits of its other fields (the optional ones when `c.full`).
+template <class Real>
+std::uint64_t contacts_hash(const Contacts<Real>& c);
+
 // The pose a body had in the file: the state the CLI's steps attach to every body, from which
 // move_bodies computes the pose of any step.
 struct FilePose {
+  Vec3<double> position;
   Quat<double> orientation;
 };
 
 // Attaches each body's current pose as its state (state_bytes = sizeof(FilePose)).
 void attach_file_poses(StepBodies& bodies, int threads);
 
-// The bodies' poses at step `step` of `motion` from their attached FilePose. Returns whether the
-// orientations changed (ellipsoids and a spin).
-bool move_bodies(StepBodies& bodies, const StepMotion& motion, int step, int threads);
+// What a motion changed.
+struct Moved {
+  bool positions = false, orientations = false;
+};
+
+// The bodies' poses at step `step` of `motion` from their attached FilePose (a drift moves every
+// centre; a spin turns the ellipsoids).
+Moved move_bodies(StepBodies& bodies, const StepMotion& motion, int step, int threads);
 
 }  // namespace cg

@@ -7,7 +7,8 @@ set -euo pipefail
 pkgs=(build-essential cmake ninja-build pkg-config
       libopenmpi-dev openmpi-bin libhdf5-dev hdf5-tools libbullet-dev
       libgtest-dev libcli11-dev libfmt-dev gnuplot-nox clang-format python3
-      python3-dev pybind11-dev python3-numpy python3-pytest python3-pip python3-h5py python3-meshio)
+      python3-dev pybind11-dev python3-numpy python3-pytest python3-pip python3-h5py python3-meshio
+      clang-14 libclang-rt-14-dev)  # the fuzz harness and the sanitizer build (tests/fuzz, jobs/sanitize.sh)
 missing=()
 for p in "${pkgs[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
 if ((${#missing[@]})); then

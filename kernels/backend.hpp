@@ -43,6 +43,9 @@ struct DetectJob {
   // narrow stage, keyed by device_bodies->id (or the indices), against the backend's device history
   // (history_upload / history_download move it between host and device).
   bool history = false;
+  // What the broad phase does with its estimate of the pair tests before its pair stage
+  // (check_pair_estimate, pair_estimate.hpp; from EngineOptions).
+  PairLimits pair_limits{};
   std::size_t body_count() const { return device_bodies ? device_bodies->count : bodies.size(); }
 };
 

@@ -15,6 +15,7 @@
 
 #include "backend.hpp"
 #include "host_vector.hpp"
+#include "skin_tuner.hpp"
 #include "stage.hpp"
 #include "stage_names.hpp"
 #include "timing.hpp"
@@ -149,7 +150,11 @@ struct Engine<Real>::Impl {
     std::vector<std::int64_t> id;  // the bodies' ids (empty: implied, as for device bodies)
     bool shapes = false;           // the scene had ellipsoids
     double coordinate_bound = 0;   // core/skin.hpp: a later call's coordinates must stay within
+    double skin = 0;               // the skin it was built with (its check's)
   } kept;
+  // EngineOptions::skin_auto: the tuner, and the calls since the last build (this one included)
+  SkinTuner tuner;
+  int calls_since_build = 0;
   void forget_resident_view() {  // before any detection: the view's storage is reused
     if (resident_on_device) resident_overwritten = true;
     resident_on_device.reset();
@@ -261,6 +266,8 @@ detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> 
   if (options.ellipsoid_tolerance > 0)
     job.solver.tolerance = static_cast<Narrow>(options.ellipsoid_tolerance);
   if (options.ellipsoid_max_iterations > 0) job.solver.max_iterations = options.ellipsoid_max_iterations;
+  job.pair_limits = {options.max_pair_tests, options.on_pair_estimate ? &options.on_pair_estimate : nullptr,
+                     options.on_pair_progress ? &options.on_pair_progress : nullptr};
   stats.key_bits = job.plan.key_bits;
   stats.cell_size = f.cell_size;
   return job;
@@ -287,13 +294,15 @@ void reset_stats(EngineStats& stats) {
   EngineStats fresh;
   fresh.candidate_builds = stats.candidate_builds;
   fresh.candidate_reuses = stats.candidate_reuses;
+  fresh.skin = stats.skin;
   stats = fresh;
 }
 
 // EngineOptions::skin of one call (core/skin.hpp): whether it checks the kept list, the coordinate
 // bound it is built or checked for, the inflation of a build.
 struct SkinPlan {
-  double skin = 0, bound = 0, inflation = 0;
+  double skin = 0, bound = 0, inflation = 0;  // skin: the check's (0: no list kept or checked)
+  double next = 0;                            // the skin of a build
   bool check = false;
   template <class Job>
   void apply(Job& job) const {
@@ -311,16 +320,22 @@ template <class Real>
 static SkinPlan plan_skin(typename Engine<Real>::Impl& s, const Bounds& b, std::optional<Frame> frame,
                           std::span<const std::int64_t> id, std::size_t ellipsoids) {
   SkinPlan p;
-  p.skin = s.options.skin;
-  if (!(p.skin > 0)) return p;
+  p.next = s.options.skin;
+  if (!(p.next > 0)) {
+    s.kept.valid = false;
+    s.stats.skin = 0;
+    return p;
+  }
   auto& k = s.kept;
   const double now = coordinate_magnitude(b, frame ? frame->origin : b.lo);
   p.check = k.valid && k.count == b.count && std::equal(id.begin(), id.end(), k.id.begin(), k.id.end()) &&
             k.shapes == (ellipsoids > 0) && now <= k.coordinate_bound;
-  p.bound = p.check ? k.coordinate_bound : now + p.skin;
+  // a check uses the kept list's skin; a build (now, or after a failed check) the next skin
+  p.skin = p.check ? k.skin : p.next;
+  p.bound = p.check ? k.coordinate_bound : now + p.next;
   const double eps = s.options.fp32_broad_phase ? double(std::numeric_limits<float>::epsilon())
                                                 : double(std::numeric_limits<Real>::epsilon());
-  p.inflation = skin_inflation(p.skin, p.bound, b.r_max, eps);
+  p.inflation = skin_inflation(p.next, p.bound, b.r_max, eps);
   k.valid = false;
   return p;
 }
@@ -328,7 +343,7 @@ static SkinPlan plan_skin(typename Engine<Real>::Impl& s, const Bounds& b, std::
 // After a call that ran with a skin: the kept list is what this call used (reused or built).
 template <class Real>
 static void remember_build(typename Engine<Real>::Impl& s, const Bounds& b, std::span<const std::int64_t> id,
-                           std::size_t ellipsoids, const SkinPlan& p) {
+                           std::size_t ellipsoids, const SkinPlan& p, bool reused) {
   if (!(p.skin > 0)) return;
   auto& k = s.kept;
   k.valid = true;
@@ -336,6 +351,24 @@ static void remember_build(typename Engine<Real>::Impl& s, const Bounds& b, std:
   k.id.assign(id.begin(), id.end());
   k.shapes = ellipsoids > 0;
   k.coordinate_bound = p.bound;
+  if (!reused) k.skin = p.next;
+  s.stats.skin = k.skin;
+}
+
+// EngineOptions::skin_auto: the tuner's skin for this call's build, and after the call what it saw.
+template <class Real>
+static void choose_skin(typename Engine<Real>::Impl& s, const Bounds& b) {
+  if (!s.options.skin_auto) return;
+  s.tuner.set_length(b.r_max);
+  s.options.skin = s.tuner.skin();
+}
+template <class Real>
+static void observe_skin(typename Engine<Real>::Impl& s, std::uint64_t builds_before, double seconds) {
+  if (!s.options.skin_auto) return;
+  const bool built = s.stats.candidate_builds > builds_before || !(s.stats.skin > 0);
+  ++s.calls_since_build;
+  s.tuner.observe(built, seconds, s.stats.skin_displacement, s.calls_since_build);
+  if (built) s.calls_since_build = 0;
 }
 
 // The host-array path. `history_ids`: the keys of the contact history (EngineOptions::history) when
@@ -356,6 +389,8 @@ static Contacts<Real> detect_host(typename Engine<Real>::Impl& s, const BodiesVi
     if (s.options.history) s.history_end_all(out);
     return out;
   }
+  choose_skin<Real>(s, b);
+  const std::uint64_t builds = s.stats.candidate_builds, reuses = s.stats.candidate_reuses;
   const SkinPlan skin = plan_skin<Real>(s, b, frame, bodies.id, ellipsoids);
   run_job<Real>(s.options, b, frame, skin.inflation, s.stats, [&](auto job) {
     job.bodies = bodies;
@@ -367,7 +402,7 @@ static Contacts<Real> detect_host(typename Engine<Real>::Impl& s, const BodiesVi
     else
       detail::run_stages(s.host, job, out, s.times, s.stats);
   });
-  remember_build<Real>(s, b, bodies.id, ellipsoids, skin);
+  remember_build<Real>(s, b, bodies.id, ellipsoids, skin, s.stats.candidate_reuses > reuses);
 
   // Local indices → global ids (monotone, so the (id_a, id_b) order is kept).
   if (!bodies.id.empty()) {
@@ -389,6 +424,7 @@ static Contacts<Real> detect_host(typename Engine<Real>::Impl& s, const BodiesVi
     s.times.push_back({detail::name(detail::EngineStage::history), seconds_since(t1)});
   }
   s.stats.contacts = out.size();
+  observe_skin<Real>(s, builds, seconds_since(t0));
   return out;
 }
 
@@ -423,6 +459,8 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
     return;
   }
   if (s.options.history) s.history_to_device();
+  choose_skin<Real>(s, b);
+  const std::uint64_t builds = s.stats.candidate_builds, reuses = s.stats.candidate_reuses;
   const SkinPlan skin = plan_skin<Real>(s, b, frame, {}, ellipsoids);
   run_job<Real>(s.options, b, frame, skin.inflation, s.stats, [&](auto job) {
     job.device_bodies = &bodies;
@@ -433,8 +471,9 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
     s.times.push_back({detail::name(detail::EngineStage::plan), seconds_since(t0)});
     detail::run_stages(*s.cuda, job, out, s.times, s.stats);
   });
-  remember_build<Real>(s, b, {}, ellipsoids, skin);
+  remember_build<Real>(s, b, {}, ellipsoids, skin, s.stats.candidate_reuses > reuses);
   s.stats.contacts = device_out ? device_out->count : out.size();
+  observe_skin<Real>(s, builds, seconds_since(t0));
 }
 
 template <class Real>
@@ -452,6 +491,7 @@ void Engine<Real>::set_resident(const BodiesView& b) {
       throw InputError("set_resident: ids are not strictly ascending at row " + std::to_string(i));
   s.resident_rows = b.size();
   s.resident_shapes = shapes;
+  s.kept.valid = false;  // other rows: the next detection builds
   s.resident_contacts = Contacts<Real>{};
   s.resident_on_device.reset();
   s.resident_overwritten = false;
@@ -466,6 +506,14 @@ void Engine<Real>::set_resident(const BodiesView& b) {
   s.resident_semi_axes.assign(b.semi_axes.begin(), b.semi_axes.end());
   s.resident_orientation.assign(b.orientation.begin(), b.orientation.end());
   s.resident_id.assign(b.id.begin(), b.id.end());
+}
+
+template <class Real>
+void Engine<Real>::set_skin(double skin) {
+  if (!(skin >= 0) || !std::isfinite(skin))
+    throw UsageError("skin must be a finite length >= 0 (0: no candidates kept across calls)");
+  m_impl->options.skin = skin;
+  m_impl->options.skin_auto = false;
 }
 
 template <class Real>

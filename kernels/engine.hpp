@@ -9,6 +9,7 @@
 //   → radix sort by cell key → pair count → scan → pair fill → sort pairs by (a, b)
 //   → narrow phase (requested fields) → contacts in world frame, sorted by (id_a, id_b)
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <span>
@@ -21,6 +22,7 @@
 #include "errors.hpp"
 #include "grid_plan.hpp"
 #include "history.hpp"
+#include "pair_estimate.hpp"
 
 namespace cg {
 
@@ -71,6 +73,17 @@ struct EngineOptions {
   // otherwise). Computed where the contacts are delivered: the host for host bodies, the device for
   // device bodies (detect_device*, CUDA resident bodies).
   bool history = false;
+  // Runaway work (pair_estimate.hpp): before its pair stage the broad phase estimates the pair tests
+  // from the cells' occupancy; on_pair_estimate (when set) sees the estimate, and one above
+  // max_pair_tests (0: no limit) throws LimitError (exit code 9) before the pair stage runs.
+  std::uint64_t max_pair_tests = 0;
+  std::function<void(const PairEstimate&)> on_pair_estimate{};
+  // The host pair stage's progress (PairLimits::on_progress): tests done so far, then finished.
+  std::function<void(std::uint64_t done, bool finished)> on_pair_progress{};
+  // The skin chosen by the engine (skin is then ignored): from the largest displacement per call it
+  // observes and the measured cost of its builds and reuses, the skin whose mean cost per call is
+  // lowest (kernels/skin_tuner.hpp). For an engine called once per step of a simulation.
+  bool skin_auto = false;
 };
 
 // Counters of one run (for tests and the summary).
@@ -106,6 +119,7 @@ struct EngineStats {
   // measured (0 when the call rebuilt without a check: first call, other bodies).
   std::uint64_t candidate_builds = 0, candidate_reuses = 0;
   double skin_displacement = 0, skin_growth = 0;
+  double skin = 0;  // the skin of the kept list (its build's; 0: none kept)
 };
 
 template <class Real>
@@ -191,6 +205,10 @@ class Engine {
 
   // EngineOptions::history: the next call's pairs are all new (a new simulation on this engine).
   void reset_history();
+
+  // The skin of the next build (>= 0, finite; UsageError otherwise); a kept list is checked with the
+  // skin it was built with until then. Turns EngineOptions::skin_auto off: the caller chooses.
+  void set_skin(double skin);
 
   Backend backend() const;      // the resolved backend (never automatic)
   Precision precision() const;  // fp32, fp64, or mixed (Engine<double> with fp32_broad_phase)

@@ -12,6 +12,7 @@
 
 #include "cli/cli.hpp"
 #include "errors.hpp"
+#include "io/hdf5_library.hpp"
 #include "run/stop.hpp"
 #include "session.hpp"
 
@@ -61,6 +62,7 @@ void on_early_exit() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  cg::skip_hdf5_cleanup_at_exit();  // before any HDF5 call (io/hdf5_library.hpp)
   std::set_terminate(on_terminate);
   std::atexit(on_early_exit);
   int code = 0;

@@ -35,6 +35,11 @@ constexpr std::uint32_t kPairedCtrlBit = 0x80u;  // the mask's kPairedBit, likew
 // bytes of spill; the fastest pair stage on the H100, BENCHMARKS.md §11).
 constexpr int kPairsMinBlocks = CG_PAIRS_MIN_BLOCKS;
 
+// The pair stage's estimate on the device (pair_estimate.cuh): Σ m·(m − 1)/2 and the fullest cell.
+struct CellWork {
+  unsigned long long tests, largest;
+};
+
 // DEVICE counters of one call; zeroed (cudaMemsetAsync) before the first kernel that adds to them.
 struct Counters {
   unsigned long long entries;          // sum of entry counts (pack)
@@ -58,6 +63,7 @@ struct Counters {
   // skin check (cuda/skin.cuh): the bits of the largest squared displacement and radius growth
   // (non-negative doubles order as their bits), and whether a report byte changed
   unsigned long long skin_moved_sq, skin_growth, skin_report_changed;
+  CellWork cell_work;  // written (not added to) by the estimate's reduction
 };
 
 // Pointers of the contact arrays in DEVICE memory (core/contact_fields.hpp); the optional ones are

@@ -10,6 +10,8 @@
 //                  only, when the spheres outgrow the L2); control bytes, per-block entry totals
 //   entries.cuh    scan of the block totals → fill (cell key, body) in body order
 //   sort.cuh       cub::DeviceRadixSort::SortPairs over bits [0, key_bits)
+//   pair_estimate.cuh  the pair tests estimated from the sorted keys (a max-scan and a reduction, one
+//                  wait), checked before the pair stage (pair_estimate.hpp); counted in pairs
 //   pairs.cuh      candidate pairs: count per sorted entry (block-staged walk) and direct write of
 //                  the (a, b) u32 pairs at a block-aggregated atomic cursor; on overflow scan → fill
 //   type_passes.cuh  opt-in (Tuning::type_passes): entries, sort and pairs as Le Grand's 8 passes
@@ -27,11 +29,13 @@
 // The persistent workspace grows geometrically and never shrinks: a caller that detects many frames
 // allocates nothing after the first (EngineStats::device_allocations). The host synchronises twice
 // per call, where it needs a count: after pack (entries total, bad-data status) and after the pair
-// count (pairs total); and once at the end (a rejecting narrow whose rows go to host memory waits once
+// count (pairs total), once more after the pair stage's estimate when it is wanted (pair_estimate.cuh:
+// a limit or a callback); and once at the end (a rejecting narrow whose rows go to host memory waits once
 // more, for their count: narrow.cuh).
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
+#include <map>
 #include <sstream>
 #include <type_traits>
 
@@ -43,6 +47,7 @@
 #include "cuda/narrow.cuh"
 #include "cuda/order.cuh"
 #include "cuda/pack.cuh"
+#include "cuda/pair_estimate.cuh"
 #include "cuda/pairs.cuh"
 #include "cuda/run_state.cuh"
 #include "cuda/shapes.cuh"
@@ -62,6 +67,18 @@ void throw_cuda_error(cudaError_t e, const char* call, const char* file, int lin
   std::ostringstream m;
   m << file << ":" << line << ": " << call << ": " << cudaGetErrorString(e);
   throw CudaError(m.str());
+}
+}  // namespace cuda
+
+namespace cuda {
+PinnedRing& pinned_ring(int device) {
+  static std::mutex mutex;
+  static std::map<int, PinnedRing*>* rings = new std::map<int, PinnedRing*>;  // never freed: the
+  // process's pinned memory goes with it, after the CUDA context (no teardown-order hazard)
+  const std::lock_guard<std::mutex> lock(mutex);
+  PinnedRing*& ring = (*rings)[device];
+  if (!ring) ring = new PinnedRing;
+  return *ring;
 }
 }  // namespace cuda
 
@@ -149,7 +166,7 @@ class CudaBackend {
 
     reserve_pack(r);
     m_events.start(m_stream);
-    upload_stage(r);
+    upload_stage(r, cuda::pinned_ring(m_device));
     const bool reuse = skin_stage(r);  // a skin: the kept candidates still hold every contact?
     pack_stage(r, reuse);              // (scenes with ellipsoids: their shapes packed first)
     if (reuse) {
@@ -159,6 +176,7 @@ class CudaBackend {
       if (!r.type_passes) {
         entries_stage(r);
         sort_stage(r);
+        if (r.job.pair_limits.wanted()) estimate_stage(r);  // may refuse the scene (max_pair_tests)
         pairs_stage(r);
       } else {
         type_pass_stages(r);
@@ -169,7 +187,7 @@ class CudaBackend {
     if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
     narrow_stage(r);
     history_stage(r, m_thrust);
-    const DownloadHostTimes host = download_stage(r, m_h_staging, out);
+    const DownloadHostTimes host = download_stage(r, m_h_staging, cuda::pinned_ring(m_device), out);
     if (reuse) check_shapes_read(r);  // (read with the last counters: the reuse path has no other wait)
     m_events.collect(times, host.overlap_s, host.extra_s);  // all events complete: the stream synced
     m_events.narrow_split(stats.narrow_triage_s, stats.narrow_settle_s, stats.narrow_hard_s);

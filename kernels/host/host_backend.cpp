@@ -6,6 +6,7 @@
 //   pack      world (double) → local frame Broad spheres; per body: cells, entry count, control byte
 //   entries   exclusive scan of entry counts → fill (cell key, body) entries in body order
 //   sort      stable radix sort of the entries by cell key over plan.key_bits bits
+//             (then the pair stage's estimate and its check: pair_estimate.hpp, counted in pairs)
 //   pairs     per entry: tests against later entries of its cell (cells of type 0 first: Le Grand's
 //             8 passes); candidate pairs (a < b, local indices) collected per chunk of entries,
 //             then chunk sizes → scan → fill
@@ -20,6 +21,7 @@
 #include <omp.h>
 
 #include <type_traits>
+#include <utility>
 
 #include "backend.hpp"
 #include "host/stages.hpp"
@@ -93,18 +95,24 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
     host::sort_entries(entries, job.plan.key_bits, nt);
     timer.lap(EngineStage::sort);
 
-    stats.pair_tests =
-        host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter,
-                              !std::is_same_v<Broad, Narrow> ? &world_fp64 : nullptr, nt, built);
+    if (job.pair_limits.wanted()) {
+      PairEstimate estimate = host::estimate_pair_tests(entries, job.bodies.size(), nt);
+      estimate.tests_per_second = kHostPairTestsPerSecondPerThread * nt;
+      check_pair_estimate(estimate, job.pair_limits);
+    }
+
+    stats.pair_tests = host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter,
+                                             !std::is_same_v<Broad, Narrow> ? &world_fp64 : nullptr, nt,
+                                             built, job.pair_limits.on_progress);
     entries = {};
     timer.lap(EngineStage::pairs);
 
     host::order_candidates(built, nt);
-    if (skin) host::keep_candidates(job.bodies, built, be.kept);
+    if (skin) host::keep_candidates(job.bodies, std::move(built), be.kept);
     timer.lap(EngineStage::order);
   }
   if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
-  const host::CandidatePairs& candidates = reuse ? be.kept.pairs : built;
+  const host::CandidatePairs& candidates = skin ? be.kept.pairs : built;  // a build moved its list there
   stats.candidates = candidates.size();
 
   if (shapes) {

@@ -2,6 +2,7 @@
 // core/skin.hpp), and the keeping of a freshly built list with the state it was built from.
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 #include "host/stages.hpp"
 
@@ -28,8 +29,8 @@ Motion measure_motion(const BodiesView& bodies, const KeptCandidates& kept, int 
   return m;
 }
 
-void keep_candidates(const BodiesView& bodies, const CandidatePairs& c, KeptCandidates& kept) {
-  kept.pairs = c;
+void keep_candidates(const BodiesView& bodies, CandidatePairs&& c, KeptCandidates& kept) {
+  kept.pairs = std::move(c);
   kept.position.assign(bodies.position.begin(), bodies.position.end());
   kept.radius.assign(bodies.radius.begin(), bodies.radius.end());
   kept.report.assign(bodies.report.begin(), bodies.report.end());

@@ -5,6 +5,7 @@
 // CUDA kernels use, so this backend is the oracle of the CUDA one.
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -75,9 +76,10 @@ struct KeptCandidates {
 };
 
 // skin: what moved since `kept` was built (same body count): max |x − x_ref|, max radius growth,
-// whether the report mask changed. keep_candidates: `c` and the state of `bodies` into `kept`.
+// whether the report mask changed. keep_candidates: `c` (moved, not copied: the narrow stage then
+// reads the kept list) and the state of `bodies` into `kept`.
 Motion measure_motion(const BodiesView& bodies, const KeptCandidates& kept, int threads);
-void keep_candidates(const BodiesView& bodies, const CandidatePairs& c, KeptCandidates& kept);
+void keep_candidates(const BodiesView& bodies, CandidatePairs&& c, KeptCandidates& kept);
 
 // pack: world (double) → local Real spheres; per body its cells (of the sphere inflated by
 // `inflation`, 0 without a skin), control byte and entry count. cells_too false: the spheres only
@@ -117,7 +119,14 @@ void sort_entries(Entries<Key>& e, int key_bits, int threads);
 template <class Real, class Key>
 std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p,
                               std::span<const std::uint8_t> report, int half_bits, CandidateFilter filter,
-                              const NarrowBodies<double>* fp64, int threads, CandidatePairs& out);
+                              const NarrowBodies<double>* fp64, int threads, CandidatePairs& out,
+                              const std::function<void(std::uint64_t, bool)>* progress = nullptr);
+
+// The pair stage's estimate (pair_estimate.hpp) from the sorted entries: Σ over cells of m·(m − 1)/2
+// and the fullest cell, in one parallel pass over the keys (each cell counted by the chunk where it
+// starts). `bodies`: the call's, for the estimate's per-body figure.
+template <class Key>
+PairEstimate estimate_pair_tests(const Entries<Key>& e, std::uint64_t bodies, int threads);
 
 // order: radix sort of the candidates by (a, b).
 void order_candidates(CandidatePairs& c, int threads);

@@ -24,8 +24,10 @@
 
 #include "errors.hpp"
 #include "io/scene_file.hpp"
+#include "io/temp_output.hpp"
 #include "io/text_file.hpp"
 #include "run/progress.hpp"
+#include "run/stop.hpp"
 #include "run/subprocess.hpp"
 #include "scene/generate.hpp"
 #include "stage.hpp"
@@ -40,6 +42,59 @@ namespace {
 namespace fs = std::filesystem;
 std::string field(double v, const char* f = "{:.6g}") {
   return v >= 0 && std::isfinite(v) ? fmt::format(fmt::runtime(f), v) : std::string();
+}
+
+// Whether a plot file ends as a whole one does: a PNG with its IEND chunk, an SVG with </svg>.
+bool plot_complete(const std::string& path) {
+  std::ifstream f(path, std::ios::binary | std::ios::ate);
+  const std::streamoff size = f ? std::streamoff(f.tellg()) : 0;
+  if (size < 16) return false;
+  const std::streamoff tail = std::min<std::streamoff>(size, 64);
+  std::string end(static_cast<std::size_t>(tail), '\0');
+  f.seekg(size - tail);
+  f.read(end.data(), tail);
+  const bool png = path.size() > 4 && path.compare(path.size() - 4, 4, ".png") == 0;
+  return f && end.find(png ? "IEND" : "</svg>") != std::string::npos;
+}
+
+// gnuplot draws the four plots of `prefix` under a temporary prefix; they are renamed into place only
+// when it succeeded and wrote every one (a full disk, a file size limit: none appears). Returns ""
+// on success, else why not.
+std::string plot_all_or_none(const std::string& gnuplot, const std::string& script, const std::string& csv,
+                             const std::string& prefix) {
+  const std::string temp_prefix = temp_name(prefix);
+  std::vector<std::pair<std::string, std::string>> files;  // (temporary, final)
+  std::vector<CleanupAction> cleanup;
+  for (const char* suffix : {"_time.png", "_time.svg", "_loglog.png", "_loglog.svg"}) {
+    files.emplace_back(temp_prefix + suffix, prefix + suffix);
+    cleanup.push_back(CleanupAction::remove_file(files.back().first));
+  }
+  auto discard = [&] {
+    for (const auto& f : files) remove_quietly(f.first);
+  };
+  const int rc = run_program({gnuplot, "-e", fmt::format("csv='{}'; out='{}'", csv, temp_prefix), script});
+  std::error_code ec;
+  if (rc != 0) {
+    discard();
+    return rc < 0 ? "gnuplot was killed (a signal, a file size limit?)"
+                  : fmt::format("gnuplot failed (status {})", rc);
+  }
+  for (const auto& f : files) {
+    if (!plot_complete(f.first)) {  // gnuplot exits 0 when its writes fail
+      discard();
+      return "gnuplot did not write all of " + f.second + " (a full disk?)";
+    }
+  }
+  stop_point();
+  for (std::size_t k = 0; k < files.size(); ++k) {
+    fs::rename(files[k].first, files[k].second, ec);
+    if (ec) {
+      discard();
+      for (std::size_t j = 0; j < k; ++j) remove_quietly(files[j].second);
+      return "cannot rename " + files[k].first + " over " + files[k].second + ": " + ec.message();
+    }
+  }
+  return "";
 }
 
 void check_options(const BenchOptions& o) {
@@ -405,9 +460,8 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
     } else if (gnuplot.empty()) {
       out << "plot: gnuplot is not on PATH; to plot later:\n  gnuplot -e \"" << vars << "\" " << script
           << '\n';
-    } else if (int rc = run_program({gnuplot, "-e", vars, script}); rc != 0) {
-      out << "plot: gnuplot failed (status " << rc << "); command: gnuplot -e \"" << vars << "\" " << script
-          << '\n';
+    } else if (std::string why = plot_all_or_none(gnuplot, script, o.csv, prefix); !why.empty()) {
+      out << "plot: " << why << "; command: gnuplot -e \"" << vars << "\" " << script << '\n';
     } else {
       result.plotted = true;
       out << fmt::format("plot: {0}_time.png/.svg, {0}_loglog.png/.svg\n", prefix);

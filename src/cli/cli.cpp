@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "cli/commands.hpp"
+#include "io/temp_output.hpp"
 #include "io/xdmf.hpp"
 #include "run/pipeline.hpp"
 #include "simulate/simulate.hpp"
@@ -181,7 +182,12 @@ Subcommand add_generate(CLI::App& app) {
           options.radius_low = options.radius_high / args->max_aspect;
         }
         const int code = run_generate(args->output, options, args->quiet);
-        if (args->xdmf) write_xdmf(args->output, "", xdmf_base(args->output));
+        if (args->xdmf) {  // the scene and its XDMF files appear all or none
+          FinishedOutputs done;
+          done.add(args->output);
+          write_xdmf(args->output, "", xdmf_base(args->output));
+          done.keep();
+        }
         return code;
       }};
 }
@@ -257,6 +263,11 @@ Subcommand add_detect(CLI::App& app) {
       ->check(CLI::NonNegativeNumber)
       ->default_str("0");
   d->add_option("--csv", det.csv, "Also write the contacts as CSV (for small results)");
+  d->add_option("--max-pair-tests", det.max_pair_tests,
+                "Refuse a scene whose pair stage would test more than N pairs on a rank (estimated from "
+                "the cells' occupancy before the pair stage; exit code 9; 0: no limit)")
+      ->check(CLI::NonNegativeNumber)
+      ->default_str("0");
   d->add_option("--threads", det.threads, "CPU backend threads (0: all cores)")
       ->check(CLI::NonNegativeNumber);
   d->add_option("--axis", det.axis, "MPI slab axis: auto (largest extent) | x | y | z")
@@ -282,15 +293,32 @@ Subcommand add_detect(CLI::App& app) {
                     "refreshes its ghosts through MPI and detects again, contacts left in place (checked "
                     "against the file's count); prints the median step")
           ->check(CLI::NonNegativeNumber);
-  d->add_option("--skin", det.skin,
-                "Verlet skin (world length, default 0): the engines keep their candidate pairs across the "
-                "--steps and reuse them while the bodies moved less than skin/2 (stage skin in the step "
-                "times); contacts unchanged")
-      ->check(CLI::NonNegativeNumber);
+  d->add_option_function<std::string>(
+       "--skin",
+       [&det](const std::string& v) {
+         det.skin_auto = v == "auto";
+         if (det.skin_auto) return;
+         const std::optional<double> x = v == "0" ? std::optional<double>(0.0) : positive_number(v);
+         if (!x) throw CLI::ValidationError("--skin", "'" + v + "' is not auto or a length >= 0");
+         det.skin = *x;
+       },
+       "Verlet skin: a world length (default 0) or auto. The engines keep their candidate pairs across "
+       "the --steps and reuse them while the bodies moved less than skin/2 (stage skin in the step "
+       "times); auto picks the skin from the observed motion for the lowest mean step; contacts unchanged")
+      ->default_str("0");
   d->add_option("--spin", det.spin,
                 "Radians per step (default 0): in the --steps every ellipsoid turns by W·step about a fixed "
                 "axis drawn from its id, and the ghosts' orientations refresh through MPI; the last step's "
                 "contacts are then checked against the turned bodies detected from scratch")
+      ->needs(steps);
+  d->add_option("--drift", det.drift,
+                "World length per step (default 0): in the --steps every body's centre moves by V·step along "
+                "a unit direction drawn from its id, so bodies cross the slabs (migrating between ranks) and "
+                "leave the box; -o then receives the last step's contacts")
+      ->needs(steps);
+  d->add_option("--final-scene", det.final_scene,
+                "With --steps: write the last step's bodies as a scene file (a plain detect of it gives the "
+                "last step's contacts)")
       ->needs(steps);
   auto* det_quiet = d->add_flag("-q,--quiet", det.quiet, "No summary");
   d->add_flag("-v,--verbose", det.verbose,
@@ -303,8 +331,13 @@ Subcommand add_detect(CLI::App& app) {
 
   return {d, [args](Session& session) {
             const int code = run_detect(*args, session);
-            if (args->xdmf && session.rank() == 0)
+            if (args->xdmf && session.rank() == 0) {  // the outputs appear all or none
+              FinishedOutputs done;
+              done.add(args->output);
+              if (!args->csv.empty()) done.add(args->csv);
               write_xdmf(args->input, args->output, xdmf_base(args->output));
+              done.keep();
+            }
             return code;
           }};
 }

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 
+#include "io/hdf5_library.hpp"
 #include "io/raw_attributes.hpp"
 
 namespace cg::h5 {
@@ -213,3 +214,9 @@ void write_rows(const Where& where, hid_t dataset, const std::string& name, hsiz
 }
 
 }  // namespace cg::h5
+
+namespace cg {
+
+void skip_hdf5_cleanup_at_exit() { H5dont_atexit(); }
+
+}  // namespace cg

@@ -54,4 +54,20 @@ void TempOutput::commit() {
   m_cleanup.release();
 }
 
+FinishedOutputs::~FinishedOutputs() {
+  for (auto& [path, cleanup] : m_files) {
+    remove_quietly(path);
+    cleanup.release();
+  }
+}
+
+void FinishedOutputs::add(const std::string& path) {
+  m_files.emplace_back(path, CleanupAction::remove_file(path));
+}
+
+void FinishedOutputs::keep() noexcept {
+  for (auto& file : m_files) file.second.release();
+  m_files.clear();
+}
+
 }  // namespace cg

@@ -3,6 +3,8 @@
 // is complete, so a failed or stopped run leaves no partial file. While it exists, the temporary is
 // registered for removal should the process end at once (a signal: src/run/stop.hpp).
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "run/stop.hpp"
 
@@ -37,6 +39,23 @@ class TempOutput {
   std::string m_path, m_temp;
   CleanupAction m_cleanup;
   bool m_done = false;
+};
+
+// The outputs a command has renamed into place so far, removed again unless the command keeps them
+// (keep(), at its successful end) — also when a signal ends the process at once — so that a command
+// that fails after its first output leaves none (a contact file whose CSV copy did not fit).
+class FinishedOutputs {
+ public:
+  FinishedOutputs() = default;
+  ~FinishedOutputs();
+  FinishedOutputs(const FinishedOutputs&) = delete;
+  FinishedOutputs& operator=(const FinishedOutputs&) = delete;
+
+  void add(const std::string& path);
+  void keep() noexcept;
+
+ private:
+  std::vector<std::pair<std::string, CleanupAction>> m_files;
 };
 
 }  // namespace cg

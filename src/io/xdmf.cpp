@@ -10,6 +10,7 @@
 #include "io/hdf5_handle.hpp"
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
+#include "io/temp_output.hpp"
 #include "io/text_file.hpp"
 
 namespace cg {
@@ -206,8 +207,15 @@ void write_xdmf(const std::string& scene, const std::string& contacts, const std
     }
     files.emplace_back(base + ".xmf", grid_file("contacts", points, vertex, attributes));
   }
+  // The sidecar and the XMF files appear all or none (a full disk on the last one removes the rest).
+  FinishedOutputs done;
   side.commit();
-  for (const auto& [path, text] : files) write_text_file(path, text);
+  done.add(sidecar_path);
+  for (const auto& [path, text] : files) {
+    write_text_file(path, text);
+    done.add(path);
+  }
+  done.keep();
 }
 
 }  // namespace cg

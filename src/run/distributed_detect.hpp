@@ -84,8 +84,9 @@ struct DistributedOptions {
   std::uint64_t max_message_bytes = 1u << 30;  // per-message gather/exchange size (tests make it tiny)
   ContactOutput output = ContactOutput::gather;
   SceneRead read = SceneRead::automatic;
-  int resident_steps = 0;  // > 0: then that many resident steps (comm/resident_steps.hpp)
-  StepMotion step_motion;  // how the bodies change between those steps (--spin)
+  int resident_steps = 0;   // > 0: then that many resident steps (comm/resident_steps.hpp)
+  StepMotion step_motion;   // how the bodies change between those steps (--spin, --drift)
+  std::string final_scene;  // not empty: the last step's bodies written there as a scene (rank 0)
   // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
   // printed to stderr as a warning only if duplicates were removed.
   std::function<void(const std::string&)> log;

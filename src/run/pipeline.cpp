@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
@@ -28,6 +29,7 @@
 #include "io/contacts_csv.hpp"
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
+#include "io/temp_output.hpp"
 #include "node_threads.hpp"
 #include "precision_choice.hpp"
 #include "routing.hpp"
@@ -59,6 +61,9 @@ void check_options(const DistributedOptions& options) {
   if (options.max_message_bytes < 64) throw UsageError("max_message_bytes: must be >= 64");
   if (options.resident_steps < 0) throw UsageError("--steps: must be >= 0");
   if (!std::isfinite(options.step_motion.spin)) throw UsageError("--spin: must be a finite angle (radians)");
+  if (!std::isfinite(options.step_motion.drift)) throw UsageError("--drift: must be a finite length");
+  if (!options.final_scene.empty() && options.resident_steps == 0)
+    throw UsageError("--final-scene: only with --steps N (the last step's bodies)");
 }
 
 namespace {
@@ -172,13 +177,7 @@ SharedFrame agree_frame(const Session& session, const std::string& path, const B
       throw InputError(path + ": " + e.what());
     }
     f.axis = choose_axis(f.global, static_cast<int>(options.axis));
-    double extent = 0;
-    for (int k = 0; k < 3; ++k) {
-      const double o = component(f.frame.origin, k);
-      extent = std::max(
-          {extent, std::abs(component(f.global.hi, k) - o), std::abs(component(f.global.lo, k) - o)});
-    }
-    f.width = ghost_width(f.global.r_max, extent, std::numeric_limits<Real>::epsilon());
+    f.width = frame_ghost_width(f.global, f.frame.origin, std::numeric_limits<Real>::epsilon());
   });
   return f;
 }
@@ -389,6 +388,7 @@ void check_spin(const Session& session, const EngineOptions& engine_options, con
     }
     EngineOptions options = engine_options;
     options.skin = 0;
+    options.skin_auto = false;
     BodiesView bodies = input.view();
     bodies.orientation = q;
     const Contacts<Real> c = Engine<Real>(options).detect(bodies, frame);
@@ -409,17 +409,16 @@ void check_spin(const Session& session, const EngineOptions& engine_options, con
 // Bodies that do not move: every step's contacts are the run's K, and the last step's pairs hash to
 // the run's (an order-free sum, so a missed pair and a duplicate cannot cancel out in the count).
 template <class Real>
-void check_unmoved(const Session& session, const DistributedResult<Real>& result,
-                   const std::vector<std::uint64_t>& per_step, const StepStats& steps) {
+void check_unmoved(const Session& session, const DistributedResult<Real>& result, const StepStats& steps) {
   std::uint64_t hash = 0;
   for (std::size_t k = 0; k < result.contacts.size(); ++k)
     hash += pair_hash(result.contacts.id_a[k], result.contacts.id_b[k]);
   hash = session.sum(hash);
   agreed_stage(session, "steps", [&] {
     if (session.rank() != 0) return;
-    for (std::size_t k = 0; k < per_step.size(); ++k)
-      if (per_step[k] != result.total_contacts)
-        throw Error("resident step " + std::to_string(k) + ": " + std::to_string(per_step[k]) +
+    for (std::size_t k = 0; k < steps.step_contacts.size(); ++k)
+      if (steps.step_contacts[k] != result.total_contacts)
+        throw Error("resident step " + std::to_string(k + 1) + ": " + std::to_string(steps.step_contacts[k]) +
                     " contacts over the ranks, the run found " + std::to_string(result.total_contacts) +
                     ": internal error");
     if (steps.steps > 0 && steps.hash != hash)
@@ -427,29 +426,101 @@ void check_unmoved(const Session& session, const DistributedResult<Real>& result
   });
 }
 
-// The resident steps from the run's engine input, sequenced as the run is (resident_steps.hpp):
-// the rows laid out once, then per step the motion (the owners turn their ellipsoids: the
-// integrator's part, before the step's clock), interior detection, ghost refresh, boundary
-// detection, collection. Then the checks (check_spin, check_unmoved).
+// --drift: the bodies reach at most steps·|drift| beyond the file's bounds. A reach that takes them
+// out of the coordinate range of the run's mode (fp32's world check, the float grid's cells per axis)
+// is refused before any step, naming the modes that hold it. Collective.
 template <class Real>
-StepStats run_steps(Session& session, Engine<Real>& engine, const SharedFrame& f,
-                    const SlabDecomposition& slabs, const EngineInput& input,
-                    const DistributedResult<Real>& result, const DistributedOptions& options, int threads) {
+void check_drift_range(const Session& session, const std::string& path, const Bounds& global,
+                       const DistributedOptions& options) {
+  const StepMotion& motion = options.step_motion;
+  if (motion.drift == 0 || options.resident_steps == 0) return;
+  agreed_stage(session, "steps", [&] {
+    const double reach = std::abs(motion.drift) * options.resident_steps;
+    Bounds b = global;
+    b.lo = {b.lo.x - reach, b.lo.y - reach, b.lo.z - reach};
+    b.hi = {b.hi.x + reach, b.hi.y + reach, b.hi.z + reach};
+    std::string why;  // the mode's own refusal
+    auto holds = [&](Precision p) {
+      if (!std::isfinite(b.lo.x + b.lo.y + b.lo.z + b.hi.x + b.hi.y + b.hi.z)) {
+        why = "coordinates beyond the largest double";
+        return false;
+      }
+      try {
+        const Frame f = make_frame(b, options.engine.cell_size, p, options.engine.cell_choice);
+        plan_grid(b, f, p);
+        return true;
+      } catch (const InputError& e) {
+        why = e.what();
+        return false;
+      }
+    };
+    const Precision mode = options.engine.fp32_broad_phase ? Precision::mixed : precision_of<Real>();
+    if (holds(mode)) return;
+    const std::string reason = why;
+    std::string others;
+    for (Precision p : {Precision::mixed, Precision::fp64})
+      if (p != mode && holds(p)) others += std::string(others.empty() ? "" : " or ") + to_string(p);
+    throw InputError(path + ": --drift " + fmt::format("{:g}", motion.drift) + " over " +
+                     std::to_string(options.resident_steps) + " steps carries the bodies up to " +
+                     fmt::format("{:g}", reach) +
+                     " beyond the scene's bounds, out of the coordinate range of " + to_string(mode) + " (" +
+                     reason + ")" +
+                     (others.empty() ? "; no mode holds it: use a smaller drift or fewer steps"
+                                     : "; use --precision " + others));
+  });
+}
+
+// The last step's bodies as a scene file (rank 0; ids: the file's, spheres first): `detect` of it
+// gives the last step's contacts. Collective.
+void write_final_scene(const Session& session, const StepBodies& all, std::uint64_t ellipsoids,
+                       const std::string& path) {
+  agreed_stage(session, "final scene", [&] {
+    if (session.rank() != 0) return;
+    const std::size_t n = all.size(), spheres = n - static_cast<std::size_t>(ellipsoids);
+    Scene scene;
+    scene.sphere_position = HostVector<Vec3<double>>(all.position.begin(), all.position.begin() + spheres);
+    scene.sphere_radius = HostVector<double>(all.radius.begin(), all.radius.begin() + spheres);
+    for (std::size_t k = spheres; k < n; ++k) {
+      const Quat<double>& q = all.shapes.orientation[k];
+      scene.ellipsoid_position.push_back(all.position[k]);
+      scene.ellipsoid_semi_axes.push_back(all.shapes.semi_axes[k]);
+      scene.ellipsoid_orientation.push_back({q.w, q.x, q.y, q.z});
+    }
+    write_scene(path, scene);
+  });
+}
+
+// The resident steps from the run's engine input, sequenced as the run is (resident_steps.hpp): the
+// rows laid out, then per step the motion (the integrator's part, before the step's clock: --drift
+// moves every centre, --spin turns the ellipsoids), the frame of the moved bodies and, when they moved
+// beyond the skin, a rebuild (rebalance, migrate, lay out), the interior detection, the ghost refresh,
+// the boundary detection and the collection. Then: with a drift the last step's contacts become the
+// run's result (collected as the run's are), else the checks (check_spin, check_unmoved).
+template <class Real>
+StepStats run_steps(Session& session, Engine<Real>& engine, const SlabDecomposition& slabs,
+                    const EngineInput& input, DistributedResult<Real>& result,
+                    const DistributedOptions& options, int threads) {
   const StepMotion& motion = options.step_motion;
   StepStats st;
-  std::vector<std::uint64_t> per_step;
   {
-    StepLoop<Real> loop(session, engine, f.frame, slabs, f.width, motion, threads);
-    StepBodies bodies;
+    StepLoop<Real> loop(session, engine, slabs, motion, threads);
     agreed_stage(session, "steps", [&] {
-      bodies = owned_bodies(input, threads);
-      attach_file_poses(bodies, threads);
+      loop.bodies() = owned_bodies(input, threads);
+      attach_file_poses(loop.bodies(), threads);
     });
-    loop.lay_out(std::move(bodies));
+    loop.update_frame(0);
+    loop.lay_out();
     for (int step = 1; step <= options.resident_steps; ++step) {
-      bool turned = false;
-      agreed_stage(session, "steps", [&] { turned = move_bodies(loop.bodies(), motion, step, threads); });
-      loop.commit(false, turned);
+      Moved moved;
+      agreed_stage(session, "steps", [&] { moved = move_bodies(loop.bodies(), motion, step, threads); });
+      if (moved.positions) loop.update_frame(step);
+      if (moved.positions && loop.rebuild_due()) {
+        loop.rebalance();
+        loop.migrate();
+        loop.lay_out();
+      } else {
+        loop.commit(moved);
+      }
       loop.detect_interior();
       loop.refresh_ghosts();
       loop.detect_boundary();
@@ -457,14 +528,20 @@ StepStats run_steps(Session& session, Engine<Real>& engine, const SharedFrame& f
       if (motion.on_step) motion.on_step(step);
     }
     st = loop.stats();
-    per_step = loop.contacts_per_step();
     st.hash = loop.pair_hash_sum();
-    if (!per_step.empty()) st.contacts = per_step.back();
+    if (motion.drift != 0 && options.resident_steps > 0) {
+      Contacts<Real> local;
+      agreed_stage(session, "steps", [&] { local = loop.contacts(); });
+      record_contacts(collect_contacts(session, std::move(local), result.bodies, options, threads), result);
+    }
+    if (!options.final_scene.empty())
+      write_final_scene(session, loop.gather_bodies(), result.ellipsoids, options.final_scene);
   }  // engine B's memory is free for check_spin's engine
+  if (motion.drift != 0) return st;
   if (st.turned)
-    check_spin<Real>(session, engine.options(), f.frame, input, motion, st, threads);
+    check_spin<Real>(session, engine.options(), result.frame, input, motion, st, threads);
   else
-    check_unmoved(session, result, per_step, st);
+    check_unmoved(session, result, st);
   return st;
 }
 
@@ -484,6 +561,7 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
 
   clock.start();
   const SharedFrame f = agree_frame<Real>(session, path, in.global, options);
+  check_drift_range<Real>(session, path, f.global, options);
   clock.stop(RunStage::read);
   std::optional<Engine<Real>> engine = make_engine<Real>(session, options, threads);
   result.bodies = part.bodies;
@@ -523,9 +601,22 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
   record_contacts(std::move(c), result);
 
   if (options.resident_steps > 0)
-    result.steps = run_steps(session, *engine, f, slabs, held.input, result, options, threads);
+    result.steps = run_steps(session, *engine, slabs, held.input, result, options, threads);
   result.times = clock.times(session, transfer);
   return result;
+}
+
+// A pair stage far above the usual (pair_work_unusual) is said once per process, on any rank, before
+// it runs: a run that would take hours says so instead of running without a word.
+void warn_unusual_pair_work(const PairEstimate& e, const std::string& prefix) {
+  static std::atomic<bool> said{false};
+  if (!pair_work_unusual(e) || said.exchange(true)) return;
+  fmt::print(
+      stderr,
+      "contactgrid: warning: {}the pair stage will make {}, far more than usual (a few to a few hundred "
+      "per body): expect a long run; --max-pair-tests N refuses such scenes\n",
+      prefix, describe(e));
+  std::fflush(stderr);
 }
 
 DistributedOptions run_options(const DetectCommand& cmd, const Session& session) {
@@ -538,6 +629,22 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.engine.ellipsoid_tolerance = cmd.solver_tolerance;
   o.engine.ellipsoid_max_iterations = cmd.solver_iterations;
   o.engine.skin = cmd.skin;
+  o.engine.max_pair_tests = cmd.max_pair_tests;
+  // A pair stage far above the usual is said before it runs (any rank) and, on rank 0's terminal,
+  // shows its progress in pair tests (run/progress.hpp; the host backend reports it).
+  auto pair_bar = std::make_shared<std::unique_ptr<Progress>>();
+  o.engine.on_pair_estimate = [pair_bar, draw = !cmd.quiet && session.rank() == 0,
+                               prefix = session.uses_mpi() ? session.prefix()
+                                                           : std::string()](const PairEstimate& e) {
+    warn_unusual_pair_work(e, prefix);
+    if (pair_work_unusual(e))
+      *pair_bar = std::make_unique<Progress>("detect: pair stage", "pair tests", e.tests, draw);
+  };
+  o.engine.on_pair_progress = [pair_bar](std::uint64_t done, bool finished) {
+    if (!*pair_bar) return;
+    (*pair_bar)->update(done);
+    if (finished) pair_bar->reset();
+  };
   if (cmd.backend != Backend::cpu) o.engine.device = session.device_for(cuda_device_count());
   o.axis = cmd.axis;
   o.balance = cmd.balance;
@@ -551,6 +658,9 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.output = cmd.csv.empty() ? cmd.write : ContactOutput::gather;
   o.resident_steps = cmd.steps;
   o.step_motion.spin = cmd.spin;
+  o.step_motion.drift = cmd.drift;
+  o.engine.skin_auto = cmd.skin_auto;
+  o.final_scene = cmd.final_scene;
   if (cmd.steps > 0) {  // a progress line on rank 0's terminal (run/progress.hpp)
     auto bar = std::make_shared<Progress>("detect: resident steps", "steps", std::uint64_t(cmd.steps),
                                           !cmd.quiet && session.rank() == 0);
@@ -644,8 +754,16 @@ int run_in_mode(const DetectCommand& cmd, Session& session, const DistributedOpt
   info.precision = to_string(choice.mode);
   info.precision_choice = choice.reason;
   stop_point();
+  // The contact file and its CSV copy appear both or neither (rank 0 renames them into place).
+  FinishedOutputs outputs;
   times.push_back(write_output(session, cmd, r, info));
-  if (!cmd.csv.empty()) times.push_back(write_csv(session, cmd.csv, r.contacts));
+  if (session.rank() == 0) outputs.add(cmd.output);
+  if (!cmd.csv.empty()) {
+    times.push_back(write_csv(session, cmd.csv, r.contacts));
+    if (session.rank() == 0) outputs.add(cmd.csv);
+  }
+  stop_point();
+  outputs.keep();
   if (!cmd.quiet && session.rank() == 0) print_summary(info, times, r.total_contacts, r);
   return 0;
 }

@@ -28,9 +28,13 @@ struct DetectCommand {
   Balance balance = Balance::count;
   SceneRead read = SceneRead::automatic;
   ContactOutput write = ContactOutput::gather;
-  int steps = 0;    // resident steps after the run (a simulation's per-step cost)
-  double skin = 0;  // EngineOptions::skin: candidates kept across the resident steps
-  double spin = 0;  // StepMotion::spin: radians per step the ellipsoids turn in the resident steps
+  int steps = 0;            // resident steps after the run (a simulation's per-step cost)
+  double skin = 0;          // EngineOptions::skin: candidates kept across the resident steps
+  bool skin_auto = false;   // --skin auto: EngineOptions::skin_auto
+  double spin = 0;          // StepMotion::spin: radians per step the ellipsoids turn in the resident steps
+  double drift = 0;         // StepMotion::drift: world length per step every centre moves
+  std::string final_scene;  // --final-scene: the last step's bodies as a scene file
+  std::uint64_t max_pair_tests = 0;  // EngineOptions::max_pair_tests (0: no limit)
   bool quiet = false;
   bool xdmf = false;     // --xdmf: ParaView files beside the output (src/cli, io/xdmf)
   bool verbose = false;  // also the info lines of the run (the merge line with its duplicate count)

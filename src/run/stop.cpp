@@ -22,7 +22,7 @@ namespace {
 // owner). Only the owner frees a slot it registered, so a slot is never reused under an owner that
 // still holds its index.
 enum SlotState : int { kFree = 0, kFilling, kActive, kRunning, kDone };
-enum class Kind : int { remove, write, append };
+enum class Kind : int { remove, write, append, remove_directory };
 
 struct Slot {
   std::atomic<int> state{kFree};
@@ -81,6 +81,10 @@ void write_all(int fd, const char* data, std::size_t bytes) noexcept {
 void run_slot(const Slot& s) noexcept {
   if (s.kind == Kind::remove) {
     ::unlink(s.path);
+    return;
+  }
+  if (s.kind == Kind::remove_directory) {
+    ::rmdir(s.path);
     return;
   }
   const int flags = O_WRONLY | O_CREAT | O_CLOEXEC | (s.kind == Kind::append ? O_APPEND : O_TRUNC);
@@ -202,6 +206,9 @@ void stop_point() {
 CleanupAction CleanupAction::remove_file(const std::string& path) {
   return CleanupAction(claim(Kind::remove, path, {}));
 }
+CleanupAction CleanupAction::remove_directory(const std::string& path) {
+  return CleanupAction(claim(Kind::remove_directory, path, {}));
+}
 CleanupAction CleanupAction::write_file(const std::string& path, const std::string& text) {
   return CleanupAction(claim(Kind::write, path, text));
 }
@@ -239,12 +246,16 @@ void forget_on_stop(const std::string& path) noexcept {
 
 std::size_t run_cleanup_actions() noexcept {
   std::size_t ran = 0;
-  for (Slot& s : g_slots) {
-    int expected = kActive;
-    if (!s.state.compare_exchange_strong(expected, kRunning, std::memory_order_acq_rel)) continue;
-    run_slot(s);
-    s.state.store(kDone, std::memory_order_release);
-    ++ran;
+  for (const bool directories : {false, true}) {  // a directory once its files are gone
+    for (Slot& s : g_slots) {
+      if (s.state.load(std::memory_order_acquire) != kActive) continue;
+      if ((s.kind == Kind::remove_directory) != directories) continue;
+      int expected = kActive;
+      if (!s.state.compare_exchange_strong(expected, kRunning, std::memory_order_acq_rel)) continue;
+      run_slot(s);
+      s.state.store(kDone, std::memory_order_release);
+      ++ran;
+    }
   }
   return ran;
 }

@@ -55,6 +55,8 @@ class CleanupAction {
  public:
   // unlink(path): a temporary the process writes.
   static CleanupAction remove_file(const std::string& path);
+  // rmdir(path), after every file action: a private temporary directory (its files registered too).
+  static CleanupAction remove_directory(const std::string& path);
   // path created or truncated, then `text` written: a marker ("this run did not finish").
   static CleanupAction write_file(const std::string& path, const std::string& text);
   // `text` appended to path (created if missing): a last line for a log.

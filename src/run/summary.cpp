@@ -7,6 +7,48 @@
 
 namespace cg {
 
+namespace {
+
+// The resident steps' lines: what moved and what was checked, the per-step stage times, the candidate
+// lists (builds, reuses, the skin) and, with moving bodies on several ranks, the rebuilds.
+void print_steps(const StepStats& s, int ranks) {
+  std::string checked;
+  if (s.drift != 0)
+    checked =
+        fmt::format("the bodies drifting {} per step{}, {} contacts on the last step (the output)", s.drift,
+                    s.turned ? fmt::format(" and the ellipsoids turning {} rad", s.spin) : "", s.contacts);
+  else if (s.turned)
+    checked = fmt::format(
+        "the ellipsoids turning {} rad per step, {} contacts on the last step (= the turned bodies detected "
+        "from scratch)",
+        s.spin, s.contacts);
+  else
+    checked = fmt::format("{} contacts per step (= the file's)", s.contacts);
+  fmt::print(
+      "resident steps: {} (bodies kept in each rank's engine), {}, {} ghost rows{} refreshed per step; "
+      "setup {:.6f} s; per step, median of the maxima over ranks:\n",
+      s.steps, checked, s.halo_rows, s.oriented ? " (with orientations)" : "", s.setup);
+  if (s.drift != 0) fmt::print("  {:<16} {:>12.6f}\n", "frame", s.frame);
+  if (s.rebuilds > 0 && ranks > 1)
+    fmt::print("  {:<16} {:>12.6f}  (the steps that rebuilt: rebalance and migration)\n", "migrate",
+               s.migrate);
+  if (s.rebuilds > 0)
+    fmt::print("  {:<16} {:>12.6f}  (the steps that rebuilt: check and layout)\n", "rebuild", s.rebuild);
+  fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "halo", s.halo, "interior", s.interior);
+  for (const StageTime& t : s.stages) fmt::print("    {:<14} {:>12.6f}\n", t.name, t.seconds);
+  fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "boundary", s.boundary, "step", s.step);
+  fmt::print(
+      "  candidate lists: {} builds, {} reuses, skin {:.6g}{}; mean step {:.6f} s, detection {:.6f} s "
+      "building, {:.6f} s reusing\n",
+      s.builds, s.reuses, s.skin, s.skin_auto ? " (auto)" : "", s.step_mean, s.detect_build, s.detect_reuse);
+  if (ranks > 1 && s.drift != 0)
+    fmt::print(
+        "  {} rebuilds, {} bodies migrated, {} slab rebalances; owned bodies per rank at the end {} … {}\n",
+        s.rebuilds, s.migrated, s.rebalances, s.owned_min, s.owned_max);
+}
+
+}  // namespace
+
 template <class Real>
 void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t contacts,
                    const DistributedResult<Real>& r) {
@@ -60,22 +102,7 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
   if (r.ranks > 1 && all_rows)
     fmt::print(
         "  (select: every rank read every row and kept its owned bodies and its ghosts; no halo exchange)\n");
-  if (r.steps.steps > 0) {
-    const StepStats& s = r.steps;
-    const std::string checked =
-        s.turned ? fmt::format(
-                       "the ellipsoids turning {} rad per step, {} contacts on the last step (= the "
-                       "turned bodies detected from scratch)",
-                       s.spin, s.contacts)
-                 : fmt::format("{} contacts per step (= the file's)", s.contacts);
-    fmt::print(
-        "resident steps: {} (bodies kept in each rank's engine), {}, {} ghost rows{} refreshed per step; "
-        "setup {:.6f} s; per step, median of the maxima over ranks:\n",
-        s.steps, checked, s.halo_rows, s.oriented ? " (with orientations)" : "", s.setup);
-    fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "halo", s.halo, "interior", s.interior);
-    for (const StageTime& t : s.stages) fmt::print("    {:<14} {:>12.6f}\n", t.name, t.seconds);
-    fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "boundary", s.boundary, "step", s.step);
-  }
+  if (r.steps.steps > 0) print_steps(r.steps, r.ranks);
 }
 
 template void print_summary<float>(const RunInfo&, const RunTimes&, std::uint64_t,

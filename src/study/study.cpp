@@ -14,6 +14,7 @@
 
 #include "core/ellipsoid.hpp"
 #include "errors.hpp"
+#include "io/temp_output.hpp"
 #include "io/text_file.hpp"
 #include "reference/scene_reference.hpp"
 #include "run/progress.hpp"
@@ -265,16 +266,20 @@ std::vector<StudyRow> run_study(const StudyOptions& o, std::ostream& out, std::o
   }
 
   print_table(rows, out);
+  FinishedOutputs outputs;  // the CSV and the plot appear both or neither
   if (!o.csv.empty()) {
     std::string text = study_csv_header() + '\n';
     for (const StudyRow& r : rows) text += study_csv_line(r) + '\n';
     write_text_file(o.csv, text);
-    out << "wrote " << o.csv << '\n';
+    outputs.add(o.csv);
   }
   if (!o.svg.empty()) {
     write_text_file(o.svg, study_svg(rows));
-    out << "wrote " << o.svg << '\n';
+    outputs.add(o.svg);
   }
+  outputs.keep();
+  if (!o.csv.empty()) out << "wrote " << o.csv << '\n';
+  if (!o.svg.empty()) out << "wrote " << o.svg << '\n';
   return rows;
 }
 

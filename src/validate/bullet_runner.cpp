@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "errors.hpp"
+#include "run/stop.hpp"
 #include "validate/bullet_oracle.hpp"
 
 extern char** environ;
@@ -44,6 +45,7 @@ class TempDir {
     if (!::mkdtemp(buf.data()))
       throw IoError("cannot create a temporary directory " + templ + ": " + std::strerror(errno));
     m_path = buf.data();
+    m_cleanup.push_back(CleanupAction::remove_directory(m_path.string()));
   }
   ~TempDir() {
     std::error_code ec;
@@ -52,16 +54,23 @@ class TempDir {
   TempDir(const TempDir&) = delete;
   TempDir& operator=(const TempDir&) = delete;
   const fs::path& path() const { return m_path; }
+  // A file in the directory, removed with it should a signal end the process at once.
+  std::string file(const std::string& name) {
+    const std::string f = (m_path / name).string();
+    m_cleanup.push_back(CleanupAction::remove_file(f));
+    return f;
+  }
 
  private:
   fs::path m_path;
+  std::vector<CleanupAction> m_cleanup;
 };
 
 OracleResult run_float_executable(const OracleBodies& bodies, bool warm_step) {
   const std::string exe = bullet_float_executable();
   TempDir dir;
-  const std::string in = (dir.path() / "bodies.bin").string();
-  const std::string out = (dir.path() / "contacts.bin").string();
+  const std::string in = dir.file("bodies.bin");
+  const std::string out = dir.file("contacts.bin");
   write_oracle_input(in, bodies, warm_step);
 
   std::vector<std::string> args{exe, in, out};

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <map>
 #include <numeric>
@@ -204,15 +205,30 @@ TEST(StepBodies, OwnedRowsAndTheirMotion) {
   EXPECT_EQ(b.radius[1], 0.8);
   attach_file_poses(b, 1);
   StepMotion m;
-  EXPECT_FALSE(move_bodies(b, m, 3, 1));  // no spin: nothing turns
+  Moved moved = move_bodies(b, m, 3, 1);
+  EXPECT_FALSE(moved.positions || moved.orientations);  // no spin, no drift: nothing moves
   m.spin = 0.25;
-  EXPECT_TRUE(move_bodies(b, m, 3, 1));
+  moved = move_bodies(b, m, 3, 1);
+  EXPECT_TRUE(moved.orientations);
+  EXPECT_FALSE(moved.positions);
   const Quat<double> q = spun_orientation(8, {1, 0, 0, 0}, 0.75);
   EXPECT_EQ(b.shapes.orientation[0].w, q.w);
   EXPECT_EQ(b.shapes.orientation[0].z, q.z);
-  EXPECT_EQ(b.shapes.orientation[1].w, 1.0);  // a sphere keeps its orientation
-  EXPECT_TRUE(move_bodies(b, m, 3, 1));       // from the file pose: the same turn again, not twice
+  EXPECT_EQ(b.shapes.orientation[1].w, 1.0);          // a sphere keeps its orientation
+  EXPECT_TRUE(move_bodies(b, m, 3, 1).orientations);  // from the file pose: the same turn again, not twice
   EXPECT_EQ(b.shapes.orientation[0].x, q.x);
+  // the drift: from the file centre, s·V along the body's own unit direction
+  m.drift = 0.5;
+  EXPECT_TRUE(move_bodies(b, m, 4, 1).positions);
+  const Vec3<double> u = drift_direction(12);
+  EXPECT_NEAR(std::sqrt(u.x * u.x + u.y * u.y + u.z * u.z), 1.0, 1e-15);
+  EXPECT_EQ(b.position[1].x, 3 + u.x * 2.0);
+  EXPECT_EQ(b.position[1].y, 0 + u.y * 2.0);
+  EXPECT_EQ(b.position[0].z, drifted_position(8, {1, 0, 0}, 0.5, 4).z);
+  move_bodies(b, m, 1, 1);
+  EXPECT_EQ(b.position[1].x, drifted_position(12, {3, 0, 0}, 0.5, 1).x);  // not accumulated
+  const Vec3<double> u8 = drift_direction(8), a8 = spin_axis(8);
+  EXPECT_NE(u8.x, a8.x);  // the drift's direction is not the spin's axis
 }
 
 }  // namespace

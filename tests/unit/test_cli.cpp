@@ -380,6 +380,45 @@ TEST_F(Cli, UsageErrorsExitTwo) {
   expect_detect_fails(path("s.h5"), 2, {"--skin"}, "--skin -0.5");
 }
 
+// Bodies that move (issue #31): --steps N --drift V writes the last step's contacts to -o and its
+// bodies to --final-scene, whose plain detection writes the same /contacts bytes, with no skin, a fixed
+// one and the automatic one (the summary says builds, reuses and the skin); the option errors, and a
+// drift out of the mode's coordinate range refused before any step, naming the modes that hold it.
+TEST_F(Cli, DriftingStepsWriteTheLastStep) {
+  ASSERT_EQ(run("generate " + path("s.h5") + " -n 3000 --seed 13 --contacts-per-body 1 -q").code, 0);
+  const std::string opts = " --backend cpu --precision fp64 --fields full";
+  ASSERT_EQ(run("detect " + path("s.h5") + " -o " + path("file.h5") + opts + " -q").code, 0);
+  for (const std::string skin : {"0", "0.15", "auto"}) {
+    const auto r = run("detect " + path("s.h5") + " -o " + path("last.h5") + opts +
+                       " --steps 6 --drift 0.05 --skin " + skin + " --final-scene " + path("final.h5"));
+    ASSERT_EQ(r.code, 0) << skin << r.output;
+    EXPECT_NE(r.output.find("the bodies drifting 0.05 per step"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("candidate lists: "), std::string::npos) << r.output;
+    if (skin == "auto") {
+      EXPECT_NE(r.output.find(" (auto)"), std::string::npos) << r.output;
+    }
+    if (skin == "0.15") {
+      EXPECT_EQ(r.output.find(" 0 reuses"), std::string::npos) << r.output;
+    }
+    ASSERT_EQ(run("detect " + path("final.h5") + " -o " + path("plain.h5") + opts + " -q").code, 0);
+    EXPECT_EQ(run("compare " + path("last.h5") + " " + path("plain.h5")).code, 0) << "skin " << skin;
+    EXPECT_EQ(run("compare " + path("file.h5") + " " + path("last.h5")).code, 1) << "the drift moved nothing";
+  }
+  expect_detect_fails(path("s.h5"), 2, {"--drift"}, "--backend cpu --steps 2 --drift inf");
+  expect_detect_fails(path("s.h5"), 2, {"--drift", "--steps"}, "--backend cpu --drift 0.1");
+  expect_detect_fails(path("s.h5"), 2, {"--final-scene", "--steps"}, "--final-scene " + path("f.h5"));
+  expect_detect_fails(path("s.h5"), 2, {"--skin", "'fast' is not auto or a length >= 0"},
+                      "--steps 2 --skin fast");
+  expect_detect_fails(path("s.h5"), 3,
+                      {"--drift", "out of the coordinate range of fp32", "use --precision mixed or fp64"},
+                      "--backend cpu --precision fp32 --steps 2 --drift 1.5e6");
+  expect_detect_fails(path("s.h5"), 3, {"--drift", "of fp64", "cell", "use --precision mixed"},
+                      "--backend cpu --precision fp64 --steps 2 --drift 1e8");
+  expect_detect_fails(path("s.h5"), 3, {"--drift", "no mode holds it"},
+                      "--backend cpu --precision mixed --steps 2 --drift 1e308");
+  EXPECT_FALSE(fs::exists(path("f.h5")));
+}
+
 // The resident steps on a mixed scene (issue #12): every step finds the file's contacts (the run checks
 // the count and the pairs' hash per step, else exit 1), with and without a skin, and the file is the one
 // a run without --steps writes.

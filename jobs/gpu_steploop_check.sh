@@ -1,0 +1,163 @@
+#!/usr/bin/env bash
+# Bodies that move (issue #31) on the GPU: the step loop's CUDA tests, the CLI's drifting steps against
+# a plain detection of the final scene, and the issue's Performance figures as one compact table.
+#   BIN=dir OUT=dir jobs/gpu_steploop_check.sh one   one H100 (~4 min): tests, CLI, 2^24 spheres and
+#                                                    2^24 ellipsoids (aspect <= 1:4), fp32, 6 contacts
+#                                                    per body, drift 1 % of r_max per step, skin auto
+#   BIN=dir OUT=dir jobs/gpu_steploop_check.sh two   a 2-GPU host (~4 min): the MPI tests at np 2, then
+#                                                    2^26 spheres and 2^24 ellipsoids at np 1 and np 2
+#                                                    (one rank per GPU): per-step migration, halo and
+#                                                    rebuild, and the np 2 / np 1 speed-up
+# BIN holds the CUDA build's contactgrid, contactgrid_tests and contactgrid_mpi_tests. Every check
+# runs whatever an earlier one did; the script exits non-zero naming each failed check.
+# Columns: fresh = a detection from scratch per step (--skin 0: every step builds), mean = the mean
+# step with skin auto (frame + migrate + rebuild + detection, reuses and rebuilds together), build =
+# the detection of a step that built its candidate lists, reuse = one that reused them, layout = the
+# rebuild's layout (ghost set, rows), migrate = rebalance + migration, halo = the ghost refresh; all in
+# ms, medians over the steps of the maxima over ranks. Targets (#31): mean/fresh <= 0.20, (build +
+# layout)/fresh <= 1.0; np 2 / np 1 >= 1.8.
+# A dry run of the script itself on a machine without a GPU: BACKEND=cpu SCALE=8 (2^8 times fewer
+# bodies; the CUDA test checks then fail, as they must there).
+set -u
+MODE=${1:-one}
+BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}; W=${WORK:-/tmp/cgwork}
+mkdir -p "$OUT" "$W"
+[ -f .devrt/env.sh ] && source .devrt/env.sh
+CG="$BIN/contactgrid"
+BACKEND=${BACKEND:-cuda}; SCALE=${SCALE:-0}
+N24=$((16777216 >> SCALE)); N26=$((67108864 >> SCALE))
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_btl_vader_single_copy_mechanism=cma
+MPI=(mpirun --bind-to none --allow-run-as-root)
+log() { echo "[$(date -u +%H:%M:%S)] $*"; }
+failed=()
+check() {  # NAME COMMAND…: runs it, records the failure by name
+  local name=$1; shift
+  if "$@"; then echo "  ok    $name"; else echo "  FAIL  $name"; failed+=("$name"); fi
+}
+{ date -u; nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader; } >"$OUT/device.txt"
+cat "$OUT/device.txt"
+
+# gtest: passed, nothing failed, and no CUDA case skipped (the device has a GPU)
+gtest_ok() {  # LOG
+  grep -q '^\[  PASSED  \]' "$1" && ! grep -q '^\[  FAILED  \]' "$1" && ! grep -q 'no CUDA device' "$1"
+}
+
+# steps SCENE NP SKIN STEPS TAG: one drifting run; its summary in $OUT/TAG.log
+steps() {
+  local scene=$1 np=$2 skin=$3 n=$4 tag=$5
+  "${MPI[@]}" -np "$np" "$CG" detect "$W/$scene.h5" -o "$W/$tag.h5" --backend "$BACKEND" --precision fp32 \
+    --steps "$n" --drift 0.01 --skin "$skin" >"$OUT/$tag.log" 2>&1
+  local rc=$?
+  rm -f "$W/$tag.h5"
+  return $rc
+}
+# field TAG WHAT: a figure of a run's summary in ms (WHAT: fresh|mean|build|reuse|layout|migrate|halo)
+field() {
+  local f=$OUT/$1.log
+  case $2 in
+    mean) sed -nE 's/.*mean step ([0-9.e+-]+) s.*/\1/p' "$f" ;;
+    fresh | build) sed -nE 's/.*detection ([0-9.e+-]+) s building.*/\1/p' "$f" ;;
+    reuse) sed -nE 's/.*building, ([0-9.e+-]+) s reusing.*/\1/p' "$f" ;;
+    layout) sed -nE 's/^  rebuild +([0-9.e+-]+).*/\1/p' "$f" ;;
+    migrate) sed -nE 's/^  migrate +([0-9.e+-]+).*/\1/p' "$f" ;;
+    halo) sed -nE 's/^  halo +([0-9.e+-]+).*/\1/p' "$f" ;;
+  esac | head -1 | awk '{ printf "%.3f", $1 * 1000 }'
+}
+lists() { sed -nE 's/.*candidate lists: ([0-9]+) builds, ([0-9]+) reuses, skin ([0-9.e+-]+).*/\1\/\2 skin \3/p' "$OUT/$1.log"; }
+same() { "$CG" compare "$1" "$2" >>"$OUT/compare.log" 2>&1; }  # byte-identical /contacts
+ratio() { awk -v a="$1" -v b="$2" 'BEGIN { if (b > 0) printf "%.3f", a / b; else print "-" }'; }
+
+table_one() {  # SCENE…: fresh and auto runs at np 1
+  printf '| scene | fresh | mean | build | reuse | layout | builds/reuses | mean/fresh | (build+layout)/fresh |\n'
+  printf '|---|---|---|---|---|---|---|---|---|\n'
+  for sc in "$@"; do
+    local fr mean build
+    fr=$(field "$sc.fresh" fresh); mean=$(field "$sc.auto" mean); build=$(field "$sc.auto" build)
+    printf '| %s | %s | %s | %s | %s | %s | %s | %s | %s |\n' "$sc" "$fr" "$mean" "$build" \
+      "$(field "$sc.auto" reuse)" "$(field "$sc.auto" layout)" "$(lists "$sc.auto")" "$(ratio "$mean" "$fr")" \
+      "$(ratio "$(awk -v a="$build" -v b="$(field "$sc.auto" layout)" 'BEGIN { print a + b }')" "$fr")"
+  done
+}
+
+case $MODE in
+  one)
+    log "CUDA tests of the step loop (skin, tuner, resident engines; MPI moving steps at np 1 and 2 on one GPU)"
+    "$BIN/contactgrid_tests" --gtest_color=no --gtest_filter='*Skin*:*Resident*:*Tuner*' >"$OUT/tests.log" 2>&1
+    check "contactgrid_tests (skin, resident)" gtest_ok "$OUT/tests.log"
+    for np in 1 2; do
+      "${MPI[@]}" -np $np "$BIN/contactgrid_mpi_tests" --gtest_color=no --gtest_filter='MovingSteps.*:StepLoop.*' \
+        >"$OUT/mpi_tests.np$np.log" 2>&1
+      check "contactgrid_mpi_tests MovingSteps np $np" gtest_ok "$OUT/mpi_tests.np$np.log"
+    done
+
+    log "CLI: drifting steps on cuda, -o = plain detect of --final-scene (cuda and cpu), np 1 and 2"
+    "$CG" generate "$W/u.h5" -n $((200000 >> SCALE)) --seed 21 --contacts-per-body 1 -q
+    "$CG" generate "$W/m.h5" -n $((100000 >> SCALE)) --seed 22 --kind mixed --ellipsoid-fraction 0.4 --rlow 0.3 --rhigh 0.6 \
+      --contacts-per-body 1 -q
+    for sc in u m; do
+      for np in 1 2; do
+        for skin in 0 auto; do
+          t=$sc.np$np.$skin
+          spin=(); [ $sc = m ] && spin=(--spin 0.2)
+          "${MPI[@]}" -np $np "$CG" detect "$W/$sc.h5" -o "$W/$t.last.h5" --backend "$BACKEND" --precision fp64 \
+            --fields full --steps 8 --drift 0.12 --skin $skin "${spin[@]}" --final-scene "$W/$t.final.h5" \
+            >"$OUT/cli.$t.log" 2>&1
+          "$CG" detect "$W/$t.final.h5" -o "$W/$t.plain.h5" --backend "$BACKEND" --precision fp64 --fields full -q
+          check "cli $t: last step = $BACKEND detect of the final scene" same "$W/$t.last.h5" "$W/$t.plain.h5"
+          "$CG" detect "$W/$t.final.h5" -o "$W/$t.cpu.h5" --backend cpu --precision fp64 --fields full -q
+          check "cli $t: last step = cpu detect of the final scene" same "$W/$t.last.h5" "$W/$t.cpu.h5"
+        done
+      done
+    done
+
+    log "bench: 2^24, fp32, 6 contacts per body, drift 0.01 (1 % of r_max) per step"
+    "$CG" generate "$W/s24.h5" -n $N24 --seed 24 --contacts-per-body 6 -q
+    "$CG" generate "$W/e24.h5" -n $N24 --seed 25 --kind ellipsoids --max-aspect 4 --contacts-per-body 6 -q
+    for sc in s24 e24; do
+      check "bench $sc fresh" steps $sc 1 0 6 $sc.fresh
+      check "bench $sc auto" steps $sc 1 auto 40 $sc.auto
+    done
+    table_one s24 e24 | tee "$OUT/table.md"
+    if [ -x "$BIN/contactgrid_cuda_bench" ]; then
+      log "engine alone, bodies on the GPU: 2^24 spheres, fresh / reuse / rebuild at skin 0.1 (BENCHMARKS §10's table)"
+      "$BIN/contactgrid_cuda_bench" 24 24 1 10 auto spheres 0.1 >"$OUT/cuda_bench_skin.md" 2>&1
+      check "contactgrid_cuda_bench skin 0.1: every step's count = from scratch" \
+        bash -c "grep -q 'skin: rebuild' '$OUT/cuda_bench_skin.md' && ! grep -q '| NO |' '$OUT/cuda_bench_skin.md'"
+      sed -n '/skin: rebuild/,$p' "$OUT/cuda_bench_skin.md"
+    fi
+    ;;
+  two)
+    log "MPI moving steps at np 2 (one rank per GPU)"
+    "${MPI[@]}" -np 2 "$BIN/contactgrid_mpi_tests" --gtest_color=no --gtest_filter='MovingSteps.*:StepLoop.*' \
+      >"$OUT/mpi_tests.np2.log" 2>&1
+    check "contactgrid_mpi_tests MovingSteps np 2" gtest_ok "$OUT/mpi_tests.np2.log"
+
+    log "bench: 2^26 spheres and 2^24 ellipsoids, fp32, 6 contacts per body, drift 0.01, skin auto, np 1 and 2"
+    "$CG" generate "$W/s26.h5" -n $N26 --seed 26 --contacts-per-body 6 -q
+    "$CG" generate "$W/e24.h5" -n $N24 --seed 25 --kind ellipsoids --max-aspect 4 --contacts-per-body 6 -q
+    for sc in s26 e24; do
+      for np in 1 2; do check "bench $sc np $np" steps $sc $np auto 24 $sc.np$np; done
+    done
+    {
+      printf '| scene | np | mean | build | reuse | layout | migrate | halo | builds/reuses | np1/np2 (mean) |\n'
+      printf '|---|---|---|---|---|---|---|---|---|---|\n'
+      for sc in s26 e24; do
+        for np in 1 2; do
+          t=$sc.np$np
+          sp=; [ $np = 2 ] && sp=$(ratio "$(field $sc.np1 mean)" "$(field $t mean)")
+          printf '| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n' $sc $np "$(field $t mean)" \
+            "$(field $t build)" "$(field $t reuse)" "$(field $t layout)" "$(field $t migrate)" \
+            "$(field $t halo)" "$(lists $t)" "$sp"
+        done
+      done
+    } | tee "$OUT/table.md"
+    ;;
+  *) echo "usage: BIN=dir OUT=dir $0 one|two"; exit 2 ;;
+esac
+
+log "done"
+if [ ${#failed[@]} -gt 0 ]; then
+  printf 'FAILED: %s\n' "${failed[@]}"
+  exit 1
+fi
+echo "all checks passed"
