@@ -13,6 +13,10 @@
 //   pairs.cuh      candidate pairs: count per sorted entry (block-staged walk) and direct write of
 //                  the (a, b) u32 pairs at a block-aggregated atomic cursor; on overflow scan → fill
 //   type_passes.cuh  opt-in (Tuning::type_passes): entries, sort and pairs as Le Grand's 8 passes
+//   levels.cuh     BroadPhase::levels: a grid per size class (entries, sort and the pair walk above),
+//                  then the pairs across levels from the smaller body's side
+//   sweep.cuh      BroadPhase::sweep: the boxes sorted along an axis, a warp sweeps each
+//   brute.cuh      BroadPhase::brute: every pair, tiled (broad.cuh: what these three share)
 //   order.cuh      candidates in (a, b) order: grouped by a (counting or radix sort), runs by b
 //   shapes.cuh     scenes with ellipsoids: shape check (device-array API), shape upload, pack_shapes
 //   narrow.cuh     narrow_decide + contact rows of the requested fields, world frame (scenes with
@@ -35,8 +39,10 @@
 
 #include "backend.hpp"
 #include "cuda/bounds.cuh"
+#include "cuda/brute.cuh"
 #include "cuda/device_buffer.cuh"
 #include "cuda/entries.cuh"
+#include "cuda/levels.cuh"
 #include "cuda/narrow.cuh"
 #include "cuda/order.cuh"
 #include "cuda/pack.cuh"
@@ -46,6 +52,7 @@
 #include "cuda/skin.cuh"
 #include "cuda/sort.cuh"
 #include "cuda/stage_events.cuh"
+#include "cuda/sweep.cuh"
 #include "cuda/transfer.cuh"
 #include "cuda/tuning.hpp"
 #include "cuda/type_passes.cuh"
@@ -131,7 +138,7 @@ class CudaBackend {
     r.origin = job.plan.frame.origin;
     r.device_in = job.device_bodies != nullptr;
     r.full = job.fields == Fields::full;
-    r.type_passes = m_tuning.type_passes;
+    r.type_passes = m_tuning.type_passes && job.broad == BroadPhase::grid;
     r.filter = m_tuning.candidates;
     // Scenes with ellipsoids: bounding-sphere candidates less the centre cut (core/centre_cut.hpp), the
     // narrow stage decides (shapes.cuh); a skin (EngineOptions::skin): inflated bounding-sphere
@@ -145,17 +152,27 @@ class CudaBackend {
     m_events.start(m_stream);
     upload_stage(r);
     const bool reuse = skin_stage(r);  // a skin: the kept candidates still hold every contact?
-    pack_stage(r, reuse);              // (scenes with ellipsoids: their shapes packed first)
+    // (scenes with ellipsoids: their shapes packed first; the broad phases but the grid: the spheres
+    // alone, in input order, broad.cuh)
+    pack_stage(r, reuse || job.broad != BroadPhase::grid);
     if (reuse) {
       reuse_candidates(r);
     } else {
-      scan_body_blocks(r);
-      if (!r.type_passes) {
-        entries_stage(r);
-        sort_stage(r);
-        pairs_stage(r);
+      if (job.broad == BroadPhase::grid) {
+        scan_body_blocks(r);
+        if (!r.type_passes) {
+          entries_stage(r);
+          sort_stage(r);
+          pairs_stage(r);
+        } else {
+          type_pass_stages(r);
+        }
+      } else if (job.broad == BroadPhase::levels) {
+        levels_stages(r);
+      } else if (job.broad == BroadPhase::sweep) {
+        sweep_stages(r);
       } else {
-        type_pass_stages(r);
+        brute_stages(r);
       }
       order_stage(r);
       if (skin) keep_candidates(r);

@@ -10,6 +10,8 @@
 //             8 passes); candidate pairs (a < b, local indices) collected per chunk of entries,
 //             then chunk sizes → scan → fill
 //   order     radix sort of the candidates by (a, b)
+// (BroadPhase::levels: entries, sort and pairs of a grid per level, then the pairs across levels;
+// sweep: sort (of the boxes along the axis) and pairs; brute: pairs alone; stages.hpp)
 //   narrow    narrow_decide() per candidate, in Narrow (fp64 and mixed: from the world doubles);
 //             contact rows in the requested fields, world frame
 //             (scenes with ellipsoids: pack also packs the shapes, the pair stage keeps bounding-sphere
@@ -69,15 +71,15 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
 
   host::PackedBodies<Broad> bodies;
   std::vector<PackedShape<Narrow>> packed_shapes;
-  // the cells: of the bounding spheres (pack), or in centre-cut scenes of the shapes' boxes (shape_cells)
-  const bool shape_boxes = filter == CandidateFilter::centre_cut && !reuse;
+  // the grid's cells: of the bounding spheres (pack), or in centre-cut scenes of the shapes' boxes
+  // (shape_cells); the other broad phases make their own (levels) or none
+  const bool grid = job.broad == BroadPhase::grid;
+  const bool cut = filter == CandidateFilter::centre_cut && !reuse;
   host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Broad>(job.inflation),
-             !reuse && !shape_boxes, nt, bodies);
+             !reuse && !cut && grid, nt, bodies);
   if (shapes) host::pack_shapes(job.bodies, nt, packed_shapes);
-  if (shape_boxes) {
-    host::cut_shapes(packed_shapes, nt, bodies.cut);
-    host::shape_cells(job.grid, nt, bodies);
-  }
+  if (cut) host::cut_shapes(packed_shapes, nt, bodies.cut);
+  if (cut && grid) host::shape_cells(job.grid, nt, bodies);
   timer.lap(Stage::pack);
 
   const NarrowBodies<Narrow> world =
@@ -86,18 +88,48 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
                                         nullptr, world.broad_margin};  // mixed's pair test (Fp64Touch)
   host::CandidatePairs built;
   if (!reuse) {
-    host::Entries<Key> entries;
-    stats.entries = host::fill_entries(bodies, job.grid, nt, entries);
-    timer.lap(Stage::entries);
+    const NarrowBodies<double>* fp64 = !std::is_same_v<Broad, Narrow> ? &world_fp64 : nullptr;
+    built.id_bits = std::max(1, bits_for(bodies.spheres.size()));
+    built.filter = filter;
+    if (grid) {
+      host::Entries<Key> entries;
+      stats.entries = host::fill_entries(bodies, job.grid, nt, entries);
+      timer.lap(Stage::entries);
 
-    host::sort_entries(entries, job.plan.key_bits, nt);
-    timer.lap(Stage::sort);
+      host::sort_entries(entries, job.plan.key_bits, nt);
+      timer.lap(Stage::sort);
 
-    stats.pair_tests =
-        host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter,
-                              !std::is_same_v<Broad, Narrow> ? &world_fp64 : nullptr, nt, built);
-    entries = {};
-    timer.lap(Stage::pairs);
+      stats.pair_tests = host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter,
+                                               fp64, nt, built);
+      entries = {};
+      timer.lap(Stage::pairs);
+    } else if (job.broad == BroadPhase::levels) {  // a grid per level, then the pairs across levels
+      host::Entries<Key> entries;
+      host::level_cells(job.levels, nt, bodies);
+      stats.entries = host::level_entries(bodies, job.levels, nt, entries);
+      timer.lap(Stage::entries);
+
+      host::sort_entries(entries, job.plan.key_bits, nt);
+      timer.lap(Stage::sort);
+
+      stats.pair_tests = host::find_candidates(entries, bodies, job.bodies.report, job.levels.key_shift - 3,
+                                               filter, fp64, nt, built);
+      stats.pair_tests += host::cross_level_candidates(entries, bodies, job.levels, job.bodies.report, filter,
+                                                       fp64, nt, built);
+      entries = {};
+      timer.lap(Stage::pairs);
+    } else if (job.broad == BroadPhase::sweep) {
+      host::SweepOrder order;
+      host::sweep_sort(bodies, job.sweep_axis, nt, order);
+      timer.lap(Stage::sort);
+
+      stats.pair_tests =
+          host::sweep_candidates(order, bodies, job.sweep_axis, job.bodies.report, filter, fp64, nt, built);
+      timer.lap(Stage::pairs);
+    } else {
+      stats.pair_tests = host::brute_candidates(bodies, job.bodies.report, filter, fp64, nt, built);
+      timer.lap(Stage::pairs);
+    }
 
     host::order_candidates(built, nt);
     if (skin) host::keep_candidates(job.bodies, built, be.kept);

@@ -83,13 +83,8 @@ std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p
   out.id_bits = std::max(1, bits_for(p.spheres.size()));
   out.filter = filter;
   const std::uint8_t* r = report.empty() ? nullptr : report.data();
-  if (!candidates_touch(filter)) return collect(e, p, r, half_bits, threads, CellRule{}, out);
-  if (filter == CandidateFilter::centre_cut)  // scenes with ellipsoids (core/centre_cut.hpp)
-    return collect(e, p, r, half_bits, threads, CentreCut{p.cut.data()}, out);
-  if constexpr (std::is_same_v<Real, float>)
-    if (fp64 != nullptr && filter == CandidateFilter::spheres_touch)  // mixed: fp64's decision
-      return collect(e, p, r, half_bits, threads, Fp64Touch{*fp64, fp64->broad_margin, nullptr}, out);
-  return collect(e, p, r, half_bits, threads, SpheresTouch{}, out);
+  return with_pair_test(filter, p, fp64,
+                        [&](const auto& test) { return collect(e, p, r, half_bits, threads, test, out); });
 }
 
 template std::uint64_t find_candidates(const Entries<std::uint32_t>&, const PackedBodies<float>&,

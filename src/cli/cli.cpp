@@ -13,6 +13,7 @@
 #include "bench/bench.hpp"
 #include "validate/validate.hpp"
 #endif
+#include "bench/broad_bench.hpp"
 #include "session.hpp"
 #include "study/study.hpp"
 #include "study/study_families.hpp"
@@ -29,6 +30,11 @@ const std::map<std::string, BenchKind> k_bench_kinds{
 const std::map<std::string, Precision> k_precisions{
     {"fp32", Precision::fp32}, {"fp64", Precision::fp64}, {"mixed", Precision::mixed}};
 const std::map<std::string, Fields> k_fields{{"basic", Fields::basic}, {"full", Fields::full}};
+const std::map<std::string, BroadPhase> k_broad_phases{{"auto", BroadPhase::automatic},
+                                                       {"grid", BroadPhase::grid},
+                                                       {"levels", BroadPhase::levels},
+                                                       {"sweep", BroadPhase::sweep},
+                                                       {"brute", BroadPhase::brute}};
 const std::map<std::string, SlabAxis> k_axes{
     {"auto", SlabAxis::automatic}, {"x", SlabAxis::x}, {"y", SlabAxis::y}, {"z", SlabAxis::z}};
 const std::map<std::string, Balance> k_balances{{"count", Balance::count}, {"width", Balance::width}};
@@ -176,6 +182,13 @@ int run_cli(int argc, char** argv, Session& session) {
        "Grid cell edge: auto (the edge a cost model of the sort and pair stages picks, 1-3x the "
        "smallest), min (the largest diameter + rounding margin, Le Grand's choice) or a length")
       ->default_str("auto");
+  d->add_option("--broad-phase", det.broad_phase,
+                "auto | grid (Le Grand's uniform grid) | levels (a grid per size class: any size "
+                "distribution) | sweep (Baraff's sort and sweep) | brute (every pair): auto picks brute for "
+                "a few dozen bodies, levels where the largest radius exceeds 4x the mean, else grid; the "
+                "contacts are the same bits whichever runs")
+      ->transform(CLI::CheckedTransformer(k_broad_phases))
+      ->default_str("auto");
   d->add_option("--solver-tolerance", det.solver_tolerance,
                 "Ellipsoid solver: Newton stops when the tangential gradient is <= this x the pair's size "
                 "(0: the mode's default, fp32 2e-5, fp64 1e-11); larger is faster and less accurate")
@@ -264,6 +277,39 @@ int run_cli(int argc, char** argv, Session& session) {
       ->check(CLI::NonNegativeNumber);
   st->add_option("--csv", study.csv, "Write the rows as CSV");
   st->add_option("--svg", study.svg, "Write the time-vs-error plot (Pareto front) as SVG");
+
+  // bench-broad
+  BroadBenchOptions bb;
+  auto* bbc = app.add_subcommand(
+      "bench-broad",
+      "Timing of the broad phases (grid, levels, sweep, brute, auto) x scene families x N on one backend: "
+      "table and CSV; no Bullet needed");
+  bbc->add_option("--families", bb.families, "Families to run (default: all)")
+      ->delimiter(',')
+      ->check(CLI::IsMember(broad_bench_families()));
+  bbc->add_option("--lo", bb.lo, "First N = 2^lo")->capture_default_str();
+  bbc->add_option("--hi", bb.hi, "Last N = 2^hi")->capture_default_str();
+  bbc->add_option("--step", bb.step, "log2 N step")->check(CLI::PositiveNumber)->capture_default_str();
+  bbc->add_option("--backend", bb.backend, "cpu | cuda")
+      ->transform(CLI::CheckedTransformer(
+          std::map<std::string, Backend>{{"cpu", Backend::cpu}, {"cuda", Backend::cuda}}))
+      ->default_str("cpu");
+  bbc->add_option("--precision", bb.precision, "fp32 | fp64 | mixed")
+      ->transform(CLI::CheckedTransformer(k_precisions))
+      ->default_str("fp64");
+  bbc->add_option("--repetitions", bb.repetitions, "Time = median of this many warm detections")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  bbc->add_option("--threads", bb.threads, "CPU backend threads (0: all cores)")
+      ->check(CLI::NonNegativeNumber);
+  bbc->add_option("--brute-hi", bb.brute_hi, "brute runs while N <= 2^brute-hi")->capture_default_str();
+  bbc->add_option("--sweep-hi", bb.sweep_hi, "sweep runs while N <= 2^sweep-hi")->capture_default_str();
+  bbc->add_option("--budget", bb.budget_s,
+                  "Seconds: a broad phase slower than this at some N is not run at larger N of the family")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  bbc->add_option("--seed", bb.seed, "Scene seed")->capture_default_str();
+  bbc->add_option("--csv", bb.csv, "Also write the runs as CSV");
 
 #if defined(CONTACTGRID_HAVE_BULLET)
   // validate
@@ -371,6 +417,11 @@ int run_cli(int argc, char** argv, Session& session) {
     for (const auto& name : study_backends)
       study.backends.push_back(name == "cuda" ? Backend::cuda : Backend::cpu);
     run_study(study, std::cout, std::cerr);
+    return 0;
+  }
+  if (bbc->parsed()) {
+    if (session.rank() != 0) return 0;
+    run_broad_bench(bb, std::cout);
     return 0;
   }
 #if defined(CONTACTGRID_HAVE_BULLET)

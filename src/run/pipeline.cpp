@@ -17,20 +17,20 @@
 #include "assemble.hpp"
 #include "collectives.hpp"
 #include "contact_collect.hpp"
-#include "run/contact_file_shared.hpp"
 #include "distribute.hpp"
 #include "halo_exchange.hpp"
 #include "io/contact_file.hpp"
+#include "io/contacts_csv.hpp"
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
-#include "io/contacts_csv.hpp"
 #include "node_threads.hpp"
 #include "precision_choice.hpp"
 #include "routing.hpp"
-#include "session.hpp"
-#include "slab_decomposition.hpp"
+#include "run/contact_file_shared.hpp"
 #include "run/stage_clock.hpp"
 #include "run/summary.hpp"
+#include "session.hpp"
+#include "slab_decomposition.hpp"
 
 namespace cg {
 
@@ -159,13 +159,15 @@ ReadScene read_scene(const Session& session, const std::string& path, const Dist
   return in;
 }
 
-// The frame every rank shares: make_frame of the global bounds, the slab axis and the ghost width
-// (2·r_max + the rounding margin of Real).
+// The frame every rank shares: make_frame of the global bounds, the slab axis, the ghost width
+// (2·r_max + the rounding margin of Real) and the broad phase (`auto`: chosen once, from the global
+// bounds, for every rank's engine).
 struct SharedFrame {
   Bounds global;
   Frame frame;
   int axis = 0;
   double width = 0;
+  BroadPhase broad = BroadPhase::grid;
 };
 
 template <class Real>
@@ -188,6 +190,8 @@ SharedFrame agree_frame(const Session& session, const std::string& path, const B
           {extent, std::abs(component(f.global.hi, k) - o), std::abs(component(f.global.lo, k) - o)});
     }
     f.width = ghost_width(f.global.r_max, extent, std::numeric_limits<Real>::epsilon());
+    f.broad = options.engine.broad_phase == BroadPhase::automatic ? choose_broad_phase(f.global, precision)
+                                                                  : options.engine.broad_phase;
   });
   return f;
 }
@@ -330,11 +334,12 @@ CollectedContacts<Real> collect_contacts(const Session& session, Contacts<Real>&
 // chooses the mode from the agreed bounds).
 template <class Real>
 std::optional<Engine<Real>> make_engine(const Session& session, const DistributedOptions& options,
-                                        int threads) {
+                                        int threads, BroadPhase broad) {
   std::optional<Engine<Real>> engine;
   agreed_stage(session, "engine", [&] {
     EngineOptions engine_options = options.engine;
     engine_options.threads = threads;
+    engine_options.broad_phase = broad;
     engine.emplace(engine_options);
   });
   return engine;
@@ -360,6 +365,7 @@ void record_detection(const Session& session, const Engine<Real>& engine, const 
   result.stats.fp64_rows = session.sum(result.stats.fp64_rows);
   result.stats.ellipsoids = result.ellipsoids;  // the scene's (the engines' counts include ghosts)
   result.stats.key_bits = int(session.max(double(result.stats.key_bits)));
+  result.stats.levels = int(session.max(double(result.stats.levels)));
   const std::vector<std::uint64_t> owned = allgather_counts(session, input.owned);
   result.owned_min = *std::min_element(owned.begin(), owned.end());
   result.owned_max = *std::max_element(owned.begin(), owned.end());
@@ -407,7 +413,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   clock.start();
   const SharedFrame f = agree_frame<Real>(session, path, in.global, options);
   clock.stop(Stage::read);
-  std::optional<Engine<Real>> engine = make_engine<Real>(session, options, threads);
+  std::optional<Engine<Real>> engine = make_engine<Real>(session, options, threads, f.broad);
   result.bodies = part.bodies;
   result.ellipsoids = part.ellipsoids;
   result.frame = f.frame;
@@ -450,6 +456,7 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.engine.fields = cmd.fields;
   o.engine.cell_size = cmd.cell_size;
   o.engine.cell_choice = cmd.cell_choice;
+  o.engine.broad_phase = cmd.broad_phase;
   o.engine.threads = cmd.threads;
   o.engine.ellipsoid_tolerance = cmd.solver_tolerance;
   o.engine.ellipsoid_max_iterations = cmd.solver_iterations;

@@ -49,9 +49,9 @@
 #include <vector>
 
 #include "engine.hpp"
-#include "scene/generate.hpp"
 #include "precision_choice.hpp"
 #include "resident_steps.hpp"
+#include "scene/generate.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
 
@@ -161,8 +161,9 @@ struct DetectCommand {
   std::optional<Precision> precision;  // --precision; empty: auto (the default), chosen by accuracy
   Accuracy accuracy;                   // --accuracy (auto only; unset: fp64's, README "Choosing a precision")
   Fields fields = Fields::basic;
-  double cell_size = 0;                        // 0: chosen by cell_choice
-  CellChoice cell_choice = CellChoice::tuned;  // --cell-size auto | min
+  double cell_size = 0;                            // 0: chosen by cell_choice
+  CellChoice cell_choice = CellChoice::tuned;      // --cell-size auto | min
+  BroadPhase broad_phase = BroadPhase::automatic;  // --broad-phase
   int threads = 0;
   double solver_tolerance = 0;  // EngineOptions::ellipsoid_tolerance (--solver-tolerance; 0: default)
   int solver_iterations = 0;    // EngineOptions::ellipsoid_max_iterations (--solver-iterations; 0: default)

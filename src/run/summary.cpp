@@ -32,8 +32,12 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
         "\n  {} fp32 rows recomputed in fp64 (centres closer than fp32 resolves a normal; summed over "
         "ranks)",
         r.stats.fp64_rows);
-  fmt::print("\n  {}-bit cell keys, {} (cell, body) entries, {} pair tests; times: maximum over ranks\n",
-             r.stats.key_bits, r.stats.entries, r.stats.pair_tests);
+  fmt::print(
+      "\n  broad phase {}{}, {}-bit cell keys, {} (cell, body) entries, {} pair tests; times: maximum "
+      "over ranks\n",
+      to_string(r.stats.broad_phase),
+      r.stats.broad_phase == BroadPhase::levels ? fmt::format(" ({} levels)", r.stats.levels) : "",
+      r.stats.key_bits, r.stats.entries, r.stats.pair_tests);
   double total = 0;
   fmt::print("  {:<16} {:>12}\n", "stage", "seconds");
   for (const RunTime& t : times) {
