@@ -203,7 +203,7 @@ StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& fr
         std::vector<char> mine(p, 0);
 #pragma omp for schedule(static)
         for (std::size_t i = 0; i < n; ++i) {
-          if (!in.implied() && !report[i]) {
+          if (!in.implied() && !(report[i] & kReportedBit)) {
             cls[i] = 4;  // a ghost of the file run
             continue;
           }

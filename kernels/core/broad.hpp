@@ -29,12 +29,15 @@ CG_HD bool boxes_overlap(const Sphere<Real>& a, const Sphere<Real>& b) {
          a.z + ea >= b.z - eb && b.z + eb >= a.z - ea;
 }
 
-// The report rule of a pair of input indices a != b (bodies.hpp): reported when the smaller one's
-// mask has kReportedBit and not both have kPairedBit; every pair without a mask (report null).
+// The report rule of a pair of input indices a != b (bodies.hpp): reported when its anchor's mask has
+// kReportedBit and not both have kPairedBit; every pair without a mask (report null). The anchor is
+// the smaller of the two in (kWideBit, index) order: the smaller index, or the narrow body of a wide
+// and a narrow one.
 CG_HD bool pair_reported(const std::uint8_t* report, std::uint32_t a, std::uint32_t b) {
   if (report == nullptr) return true;
   const std::uint8_t ra = report[a], rb = report[b];
-  return ((a < b ? ra : rb) & kReportedBit) && !((ra & kPairedBit) && (rb & kPairedBit));
+  const bool a_first = (ra & kWideBit) != (rb & kWideBit) ? !(ra & kWideBit) : a < b;
+  return ((a_first ? ra : rb) & kReportedBit) && !((ra & kPairedBit) && (rb & kPairedBit));
 }
 
 // ---- levels: a hierarchy of grids (kernels/broad_phase.hpp: plan_levels) ---------------------------

@@ -18,14 +18,14 @@ std::uint64_t walk_entry(std::size_t e, const Entries<Key>& en, const Sphere<Rea
   const std::size_t n_entries = en.size();
   const Key k = en.keys[e];
   const std::uint32_t a = en.body[e];
-  if (report && !(report[a] & kReportedBit)) return 0;  // pairs (a, b > a) belong to a's owner
+  // pairs (a, b > a) belong to a's owner, but a wide a's with narrow bodies to theirs (pair_reported)
+  if (report && !(report[a] & (kReportedBit | kWideBit))) return 0;
   const std::uint32_t type = key_type(k, half_bits);
   const Sphere<Real> sa = entry_sphere[e];
   const std::uint8_t ca = entry_ctrl[e];
   std::uint64_t tests = 0;
-  const std::uint8_t pa = report ? report[a] : 0;
   for (std::size_t f = e + 1; f < n_entries && en.keys[f] == k; ++f) {
-    if ((pa & kPairedBit) && (report[en.body[f]] & kPairedBit)) continue;  // both paired elsewhere
+    if (report && !pair_reported(report, a, en.body[f])) continue;
     if (!test_in_cell(ca, entry_ctrl[f], type)) continue;
     ++tests;
     if (test(sa, entry_sphere[f], a, en.body[f])) emit(a, en.body[f]);

@@ -159,13 +159,15 @@ ReadScene read_scene(const Session& session, const std::string& path, const Dist
   return in;
 }
 
-// The frame every rank shares: make_frame of the global bounds, the slab axis, the ghost width
+// The frame every rank shares: make_frame of the global bounds, the slab axis, the ghost rule (each
+// body's ghost width from its radius: GhostRule), the uniform ghost width of the resident steps
 // (2·r_max + the rounding margin of Real) and the broad phase (`auto`: chosen once, from the global
 // bounds, for every rank's engine).
 struct SharedFrame {
   Bounds global;
   Frame frame;
   int axis = 0;
+  GhostRule ghosts;
   double width = 0;
   BroadPhase broad = BroadPhase::grid;
 };
@@ -190,6 +192,7 @@ SharedFrame agree_frame(const Session& session, const std::string& path, const B
           {extent, std::abs(component(f.global.hi, k) - o), std::abs(component(f.global.lo, k) - o)});
     }
     f.width = ghost_width(f.global.r_max, extent, std::numeric_limits<Real>::epsilon());
+    f.ghosts = ghost_rule(f.global, extent, std::numeric_limits<Real>::epsilon());
     f.broad = options.engine.broad_phase == BroadPhase::automatic ? choose_broad_phase(f.global, precision)
                                                                   : options.engine.broad_phase;
   });
@@ -243,7 +246,7 @@ HeldBodies distribute(const Session& session, Partition&& part, const SlabDecomp
   Exports<ShapeRecord> shape_exports;
   agreed_stage(session, "redistribute", [&] {
     if (all_rows) {
-      held.input = select_owned_and_ghosts(std::move(part.position), std::move(part.radius), slabs, f.width,
+      held.input = select_owned_and_ghosts(std::move(part.position), std::move(part.radius), slabs, f.ghosts,
                                            session.rank(), threads, std::move(part.shapes));
       return;
     }
@@ -274,7 +277,8 @@ HeldBodies distribute(const Session& session, Partition&& part, const SlabDecomp
   return held;
 }
 
-// Ghosts to every rank whose slab is within the ghost width (own rows; every row has them already).
+// Ghosts to every rank whose slab is within the body's ghost width (f.ghosts; own rows: every row has
+// them already).
 void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecomposition& slabs,
                      const SharedFrame& f, bool all_rows, int threads) {
   if (all_rows) return;
@@ -283,13 +287,14 @@ void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecompo
   agreed_stage(session, "halo", [&] {
     const auto& owned = held.owned;
     auto x = [&](std::size_t i) { return component(owned[i].position, f.axis); };
-    check_halo_rows(slabs, session.rank(), owned.size(), x, f.width, threads);
-    exports = route<BodyRecord>(owned.size(), session.size(), threads, to_ghost_ranks(slabs, x, f.width),
+    auto width = [&](std::size_t i) { return f.ghosts.width(owned[i].radius); };
+    check_halo_rows(slabs, session.rank(), owned.size(), x, f.ghosts.max_width(f.global.r_max), threads);
+    exports = route<BodyRecord>(owned.size(), session.size(), threads, to_ghost_ranks_by(slabs, x, width),
                                 [&](std::size_t i) { return owned[i]; });
     if (held.has_shapes) {  // the same rule, so the same order as the BodyRecords
       const auto& shapes = held.owned_shapes;
       shape_exports =
-          route<ShapeRecord>(owned.size(), session.size(), threads, to_ghost_ranks(slabs, x, f.width),
+          route<ShapeRecord>(owned.size(), session.size(), threads, to_ghost_ranks_by(slabs, x, width),
                              [&](std::size_t i) { return shapes[i]; });
     }
   });
@@ -298,22 +303,23 @@ void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecompo
 }
 
 // Owned + ghosts in id order (own rows: merged by id), then the engine with the shared frame; the
-// owner of the smaller id reports a pair. A rank that owns nothing reports nothing.
+// owner of a pair's anchor reports it (the smaller id, or the narrow body of a wide and a narrow one:
+// bodies.hpp). A rank that owns nothing reports nothing.
 template <class Real>
 Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBodies& held,
-                            const Frame& frame, bool full, int threads) {
+                            const SharedFrame& f, bool full, int threads) {
   Contacts<Real> local;
   local.full = full;
   agreed_stage(session, "detect", [&] {
     if (held.input.position.empty()) {  // own rows (every row: selected by distribute)
       held.input = merge_by_id(held.owned, held.ghosts.rows, held.ghosts.counts, threads, held.owned_shapes,
-                               held.ghost_shapes.rows);
+                               held.ghost_shapes.rows, f.ghosts);
     }
     held.owned = {};
     held.ghosts = {};
     held.owned_shapes = {};
     held.ghost_shapes = {};
-    if (held.input.owned > 0) local = engine.detect(held.input.view(), frame);
+    if (held.input.owned > 0) local = engine.detect(held.input.view(), f.frame);
   });
   return local;
 }
@@ -432,7 +438,7 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
 
   clock.start();
   Contacts<Real> local =
-      detect_local(session, *engine, held, f.frame, options.engine.fields == Fields::full, threads);
+      detect_local(session, *engine, held, f, options.engine.fields == Fields::full, threads);
   clock.stop(Stage::detect);
   if (held.input.owned > 0) clock.add_engine(engine->times());
   record_detection(session, *engine, held.input, result);

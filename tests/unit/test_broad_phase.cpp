@@ -168,6 +168,48 @@ TYPED_TEST(BroadPhaseTest, ReportMaskIsObeyed) {
   }
 }
 
+// The wide bit (bodies.hpp): of a wide and a narrow body, the narrow one's report flag decides; of
+// two alike, the smaller id's (and never two paired bodies). Every broad phase, every mode, against
+// the rule applied to all the contacts.
+TYPED_TEST(BroadPhaseTest, WideBitsGiveThePairToTheNarrowBody) {
+  CG_SKIP_WITHOUT_BACKEND(TypeParam);
+  constexpr Backend B = TypeParam::backend;
+  TestScene s = generated("intruders", 3000, 0.01, 1, 404, 12);
+  std::mt19937_64 rng(404);
+  s.report.resize(s.r.size());
+  for (std::size_t i = 0; i < s.r.size(); ++i)
+    s.report[i] =
+        static_cast<std::uint8_t>((rng() % 3 != 0 ? kReportedBit : 0) | (rng() % 7 == 0 ? kPairedBit : 0) |
+                                  (s.r[i] > 0.5 ? kWideBit : 0));
+  TestScene plain = s;
+  plain.report.clear();
+  for (Precision mode : kModes) {
+    const Run all = detect<B>(plain, mode, BroadPhase::grid);
+    const auto& ia = mode == Precision::fp32 ? all.contacts32.id_a : all.contacts.id_a;
+    const auto& ib = mode == Precision::fp32 ? all.contacts32.id_b : all.contacts.id_b;
+    std::vector<std::pair<std::int64_t, std::int64_t>> want;
+    std::size_t by_narrow = 0;
+    for (std::size_t k = 0; k < ia.size(); ++k) {
+      const std::uint8_t ra = s.report[std::size_t(ia[k])], rb = s.report[std::size_t(ib[k])];
+      const bool wa = ra & kWideBit, wb = rb & kWideBit;
+      const std::uint8_t anchor = wa != wb ? (wa ? rb : ra) : ra;
+      if (!(anchor & kReportedBit) || ((ra & kPairedBit) && (rb & kPairedBit))) continue;
+      by_narrow += wa && !wb;
+      want.emplace_back(ia[k], ib[k]);
+    }
+    ASSERT_GT(by_narrow, 100u) << "the scene exercises the rule";
+    for (BroadPhase bp : {BroadPhase::grid, BroadPhase::levels, BroadPhase::sweep, BroadPhase::brute}) {
+      SCOPED_TRACE(std::string(to_string(mode)) + ", " + to_string(bp));
+      const Run got = detect<B>(s, mode, bp);
+      const auto& ga = mode == Precision::fp32 ? got.contacts32.id_a : got.contacts.id_a;
+      const auto& gb = mode == Precision::fp32 ? got.contacts32.id_b : got.contacts.id_b;
+      std::vector<std::pair<std::int64_t, std::int64_t>> have;
+      for (std::size_t k = 0; k < ga.size(); ++k) have.emplace_back(ga[k], gb[k]);
+      EXPECT_EQ(have, want);
+    }
+  }
+}
+
 // A skin: the inflated spheres make the candidates, the contacts stay a skin-0 detection's.
 TYPED_TEST(BroadPhaseTest, SkinKeepsTheContacts) {
   CG_SKIP_WITHOUT_BACKEND(TypeParam);
