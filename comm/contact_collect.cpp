@@ -2,22 +2,17 @@
 // id_a range; then the k-way merge of the sorted runs (decomposition/contact_merge.hpp).
 #include "contact_collect.hpp"
 
-#include <chrono>
 #include <cstdio>
 #include <numeric>
 #include <type_traits>
 
 #include "agreed_stage.hpp"
 #include "contact_merge.hpp"
+#include "timing.hpp"
 #include "transport.hpp"
 
 namespace cg {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 // Element pointers of every field of `c`, in table order (the optional ones when `full`).
 template <class Real>
@@ -63,7 +58,7 @@ CollectedContacts<Real> gather_contacts(const Session& session, Contacts<Real>&&
   const bool full = local.full, root = me == 0;
   CollectedContacts<Real> result;
   // ---- gather: each field to rank 0, straight into per-rank receive buffers ---------------------
-  auto t0 = Clock::now();
+  auto t0 = WallClock::now();
   const std::vector<std::uint64_t> counts = comm.allgather<std::uint64_t>(local.size());
   const std::size_t p = counts.size();
   std::vector<ContactRunView<Real>> runs;
@@ -92,7 +87,7 @@ CollectedContacts<Real> gather_contacts(const Session& session, Contacts<Real>&&
   result.transfer_seconds = seconds_since(t0);
 
   // ---- merge (rank 0): k-way merge of the sorted runs, duplicates removed and counted -----------
-  t0 = Clock::now();
+  t0 = WallClock::now();
   agreed_stage(session, "merge", [&] {
     if (!root) return;
     result.duplicates_removed = merge_runs(runs, local, result.contacts, threads);
@@ -128,7 +123,7 @@ CollectedContacts<Real> exchange_contacts(const Session& session, Contacts<Real>
   result.id_end = id_begin(mine + 1);
 
   // ---- exchange: each destination's slice of every field, straight from the arrays --------------
-  auto t0 = Clock::now();
+  auto t0 = WallClock::now();
   std::vector<std::uint64_t> split(p + 1, 0), send_counts(p, 0);
   agreed_stage(session, "exchange", [&] {
     // sorted by (id_a, id_b), so rank d's rows are one sub-range
@@ -170,7 +165,7 @@ CollectedContacts<Real> exchange_contacts(const Session& session, Contacts<Real>
   result.transfer_seconds = seconds_since(t0);
 
   // ---- merge: the P sorted runs of this rank's id range, duplicates removed and counted ----------
-  t0 = Clock::now();
+  t0 = WallClock::now();
   std::uint64_t duplicates = 0;
   agreed_stage(session, "merge", [&] { duplicates = merge_runs(runs, local, result.contacts, threads); });
   result.merge_seconds = seconds_since(t0);

@@ -17,11 +17,11 @@ Imports<T> exchange_records(const Session& session, const Exports<T>& exports) {
 }
 }  // namespace
 
-Imports<BodyRecord> exchange_ghosts(const Session& session, const Exports<BodyRecord>& exports) {
+Imports<BodyRecord> exchange_with_ghost_ranks(const Session& session, const Exports<BodyRecord>& exports) {
   return exchange_records(session, exports);
 }
 
-Imports<ShapeRecord> exchange_ghosts(const Session& session, const Exports<ShapeRecord>& exports) {
+Imports<ShapeRecord> exchange_with_ghost_ranks(const Session& session, const Exports<ShapeRecord>& exports) {
   return exchange_records(session, exports);
 }
 

@@ -20,8 +20,8 @@ struct Imports {
 // Collective. `exports`: this rank's owned records grouped by destination (route with
 // to_ghost_ranks); returns this rank's ghosts. Counts by MPI_Alltoall, then every Irecv posted,
 // every Isend, one Waitall (only ranks with something to send or receive take part).
-Imports<BodyRecord> exchange_ghosts(const Session& session, const Exports<BodyRecord>& exports);
+Imports<BodyRecord> exchange_with_ghost_ranks(const Session& session, const Exports<BodyRecord>& exports);
 // The shape rows of the same ghosts (routed by the same rule: received in the same order).
-Imports<ShapeRecord> exchange_ghosts(const Session& session, const Exports<ShapeRecord>& exports);
+Imports<ShapeRecord> exchange_with_ghost_ranks(const Session& session, const Exports<ShapeRecord>& exports);
 
 }  // namespace cg

@@ -1,60 +1,52 @@
 #pragma once
-// Resident steps (--steps, after the run): what a simulation that keeps its bodies on the GPUs pays
-// per step for the same decomposition. g++-safe public header.
+// The resident steps (--steps, after the run): what a simulation that keeps its bodies in its engines
+// pays per step for the same decomposition. g++-safe public header.
 //
-// Each rank keeps its owned bodies in its engine (A: Engine::set_resident, its GPU), ordered
-// [sent down only][sent both ways][sent up only][interior], so that every halo message is one
-// contiguous range, and a second engine (B) holds [ghosts from lower ranks][the boundary owned bodies
-// (those sent anywhere)][ghosts from higher ranks]. A step: the boundary rows come out of A (device →
-// host); A detects all pairs of the owned bodies on a second thread while this thread exchanges the
-// halo (host-staged: Debian's Open MPI is not CUDA-aware) and writes B's rows (host → device); then B
-// detects its pairs with the report mask "first of the pair in (owner rank, row) order is owned" and
-// kPairedBit on the boundary owned bodies (their mutual pairs are A's). An interior body is farther
-// than the ghost width from every other slab, so it touches no ghost: A + B find every contact of the
-// rank exactly once. Every step checks that the contacts summed over ranks equal K, and the last
-// step's pairs the run's (an order-free hash; CUDA: downloaded after the timing). A rank sends its
-// whole downward set to every lower rank that needs any of it (upward likewise): with slabs thinner
-// than the ghost width a superset of the ghosts, which changes no contact. Bodies do not move between
-// steps (no migration), so a step is the "everything recomputed, halo refreshed" cost; contacts stay
-// where they were computed. One rank has no halo and no engine B.
+// The step loop is an object whose methods are the stages of a step; src/run/pipeline.cpp sequences
+// them, as it sequences the stages of a run:
 //
-// Scenes with ellipsoids: A and B hold the shape rows too (the ghosts' travel with the first
-// exchange), and every step refreshes the orientations as it does the positions: the boundary rows'
-// quaternions come out of A (read_resident_shapes), go to the neighbours in the same message as the
-// position and radius (64 bytes a row instead of 40; a second message per neighbour measured slower,
-// BENCHMARKS §10) and into B's rows (write_resident_shapes), inside the halo time, so the step costs
-// what a simulation that rotates its bodies pays. Sphere-only scenes send and call nothing more.
-// Semi-axes stay fixed (set once); a simulation whose shapes grow sets StepMotion::send_semi_axes:
-// they then go out of A and into B with the orientations, in a message of their own.
-// StepMotion::spin makes the steps rotate the ellipsoids (spun_orientation, written into A on the
-// owning rank before the step's clock starts, as an integrator would): the contacts then change
-// from step to step, so instead of the file's K the last step's contacts (count and pair hash,
-// summed over ranks) are checked against a detection from scratch of the turned bodies: each rank
-// detects its file-run rows (owned + ghosts) with every orientation computed by the rule from the
-// body's id, never received, so a stale ghost orientation in B makes the two differ.
+//   lay_out            the rows of the steps (setup): the plan of the held rows (decomposition/
+//                      step_plan: interior, boundary, ghost, and which rank needs which boundary row,
+//                      by the run's routing rules), the first exchange of the ghosts' whole records,
+//                      engine A's rows (the owned bodies) and engine B's (boundary rows + ghosts)
+//   (the caller moves the bodies: bodies(), then commit: the integrator's part, before the clock)
+//   detect_interior    engine A, all pairs of the owned bodies, on a second thread ...
+//   refresh_ghosts     ... while this thread sends every boundary row's position and bounding radius
+//                      (scenes with ellipsoids: and orientation, in the same message) to the ranks
+//                      that hold it as a ghost (MPI, host-staged: Debian's Open MPI is not
+//                      CUDA-aware) and writes engine B's rows
+//   detect_boundary    engine B (the pairs of a boundary row with a ghost: step_plan.hpp's report
+//                      rule), then the wait for A; every rank agrees on the step's errors
+//   collect            this step's contacts (their count over the rank's two engines) and times
+// and after the steps, pair_hash_sum (the last step's pairs: CUDA downloads them now, after the
+// timing) and stats (per stage, the median over the steps of the maximum over ranks).
+//
+// A rank holds its bodies in ascending id in both engines (the engines' contacts then come out in
+// (id_a, id_b) order with the bits of a run from scratch). Scenes with ellipsoids: A and B hold the
+// shape rows too, the ghosts' from the first exchange; every step refreshes the ghosts' orientations
+// with their positions, in the same message (64 bytes a row instead of 40: cheaper than a second
+// message per neighbour, BENCHMARKS.md §10). Semi-axes stay fixed (set once);
+// StepMotion::send_semi_axes sends them every step, in a message of their own, for a simulation whose
+// shapes grow. One rank (or a rank without neighbours within the ghost width) has no boundary rows and
+// no engine B.
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
-#include "assemble.hpp"
 #include "engine.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
+#include "stage_names.hpp"
+#include "step_bodies.hpp"
 
 namespace cg {
 
-// How the bodies change between the steps. Default: not at all (the file's contacts every step).
-struct StepMotion {
-  // Radians per step: at step s (1 … N) every ellipsoid's orientation is spun_orientation(id, q0,
-  // spin·s); spheres do not turn. 0: the bodies keep the file's orientations.
-  double spin = 0;
-  // The ghosts' semi-axes travel with their orientations every step (a simulation whose shapes grow;
-  // its bounding radii travel already). Here they never change: off, they go once, at setup.
-  bool send_semi_axes = false;
-  // Off only to show that the check catches stale ghosts (tests): B's shape rows keep the first
-  // exchange's, as if the steps refreshed positions and radii alone.
-  bool refresh_shapes = true;
-};
+// The stages of a step, as timed (this rank's seconds; StepStats: the median over the steps of the
+// maximum over ranks). step: the wall time from detect_interior to the end of detect_boundary.
+enum class StepStage : int { halo, interior, boundary, step };
+inline constexpr int kStepStageCount = 4;
+const char* to_string(StepStage stage);
 
 // Per step the maximum over ranks, then the median over the steps.
 struct StepStats {
@@ -66,33 +58,53 @@ struct StepStats {
   bool turned = false;          // the ellipsoids turned (a spin and a scene with ellipsoids)
   bool oriented = false;        // the halo carried the ghosts' orientations (a scene with ellipsoids)
   std::uint64_t halo_rows = 0;  // ghost rows refreshed per step, summed over ranks
-  double setup = 0;             // layout, first exchange, upload (once, max over ranks)
-  double halo = 0;              // ghost refresh: boundary rows (and orientations) out of the GPU, MPI, into B
+  double setup = 0;             // lay_out: plan, first exchange, engines' rows (once, max over ranks)
+  double halo = 0;              // refresh_ghosts: boundary rows (and orientations) through MPI, into B
   double interior = 0;          // the owned bodies alone (all their pairs), overlapping the halo
-  double boundary = 0;          // the boundary owned bodies against the ghosts, after the halo
+  double boundary = 0;          // the boundary rows against the ghosts, after the halo
   double step = 0;              // wall time of a step
   StageTimes stages;            // the engine's stages of the interior detection
 };
 
-// The engine's stage names (both backends), in pipeline order ("upload": CUDA only).
-const std::vector<std::string>& engine_stage_names();
-
-// An order-free fingerprint of a contact pair; a contact set's is the sum over its pairs.
-std::uint64_t pair_hash(std::int64_t a, std::int64_t b);
-
-// The spin's rule: body `id`'s orientation `q0` turned by `angle` radians (world frame) about a unit
-// axis fixed per body, uniform on the sphere as a pure function of the id (pair_hash of (id, 1) and
-// (id, 2)). Any rank computes any body's orientation at any step from the id alone.
-Vec3<double> spin_axis(std::int64_t id);
-Quat<double> spun_orientation(std::int64_t id, Quat<double> q0, double angle);
-
-// Collective. `in`: this rank's engine input of the run (owned + ghosts, report mask = owned);
-// `expected`, `expected_hash`: the run's K and the sum over ranks of its pairs' hashes (pair_hash of
-// (id_a, id_b)). A mismatch is an Error on every rank.
+// The steps of one rank: engine A (the run's engine), engine B, the bodies and their plan.
 template <class Real>
-StepStats resident_steps(Session& session, Engine<Real>& engine, const Frame& frame,
-                         const SlabDecomposition& slabs, double width, const EngineInput& in, int steps,
-                         const StepMotion& motion, std::uint64_t expected, std::uint64_t expected_hash,
-                         int threads);
+class StepLoop {
+ public:
+  // `engine`: the rank's engine (A; the loop sets its resident rows); `frame`, `slabs`, `width`: the
+  // run's. Every rank constructs one; the stages below are collective, in the order above.
+  StepLoop(Session& session, Engine<Real>& engine, const Frame& frame, const SlabDecomposition& slabs,
+           double width, const StepMotion& motion, int threads);
+  ~StepLoop();
+  StepLoop(const StepLoop&) = delete;
+  StepLoop& operator=(const StepLoop&) = delete;
+
+  // Collective. `bodies`: this rank's owned bodies, ascending id (InputError naming the first body that
+  // this rank does not own). Times the setup.
+  void lay_out(StepBodies&& bodies);
+
+  // This rank's owned bodies, ascending id: the caller moves them between steps, then commits.
+  StepBodies& bodies();
+  // The caller changed the positions (and bounding radii) and/or the orientations of bodies():
+  // written into engine A's rows (the integrator's part, before the step's clock).
+  void commit(bool positions, bool orientations);
+
+  void detect_interior();  // collective (with refresh_ghosts and detect_boundary: one step)
+  void refresh_ghosts();
+  void detect_boundary();
+  void collect();  // this step's contacts (their count) and times
+
+  // Collective, after the steps: the order-free hash of the last step's pairs summed over ranks.
+  std::uint64_t pair_hash_sum();
+  // Collective: per-step contacts summed over ranks (one per step) and the statistics.
+  const std::vector<std::uint64_t>& contacts_per_step();
+  StepStats stats();
+
+ private:
+  struct State;
+  std::unique_ptr<State> m;
+};
+
+extern template class StepLoop<float>;
+extern template class StepLoop<double>;
 
 }  // namespace cg

@@ -49,7 +49,10 @@ bool launched_by_mpi() {
       throw IoError(message);
     case 7:
       throw ResourceError(message);
+    case 9:
+      throw LimitError(message);
     default:
+      if (exit_code > 128 && exit_code < 192) throw Stopped(exit_code - 128, message);
       throw Error(message);
   }
 }

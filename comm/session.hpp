@@ -60,7 +60,8 @@ class Session {
   void barrier() const;
   // Every rank learns whether any rank failed a stage. No rank failed: returns. Otherwise every rank
   // throws the same exception: the type of the lowest failing rank's error (by its exit code:
-  // UsageError, InputError, CudaError, MpiError, IoError, ResourceError, else Error) with the message
+  // UsageError, InputError, CudaError, MpiError, IoError, ResourceError, LimitError, Stopped, else
+  // Error) with the message
   // "[rank r/N] <stage>: <what>". In laptop mode the error itself is rethrown.
   // Throws CommFailure if the agreement itself cannot be communicated.
   void agree(std::exception_ptr error, const std::string& stage) const;

@@ -202,6 +202,12 @@ class Comm {
     }
   }
 
+  void allreduce_sum(std::vector<std::uint64_t>& values) const {
+    if (!m_s.mpi) return;
+    CG_MPI(MPI_Allreduce(MPI_IN_PLACE, values.data(), static_cast<int>(values.size()), MPI_UINT64_T, MPI_SUM,
+                         m_s.comm));
+  }
+
   void allreduce_max(std::vector<double>& values) const {
     if (!m_s.mpi) return;
     CG_MPI(MPI_Allreduce(MPI_IN_PLACE, values.data(), static_cast<int>(values.size()), MPI_DOUBLE, MPI_MAX,

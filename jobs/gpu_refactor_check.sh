@@ -35,14 +35,29 @@ log "CLI: cpu vs cuda, np 1 vs 2 vs 3 (cuda)"
 } >"$OUT/cli.log" 2>&1
 grep -E 'compare|IDENTICAL|DIFFERENT|error' "$OUT/cli.log"
 
-log "bench: baseline vs change, interleaved (2^20 … 2^24, tuned cell, 20 runs)"
+log "bench: baseline vs change, interleaved (2^20 and 2^24, spheres and ellipsoids, tuned cell, 10 runs)"
 for round in 1 2; do
-  for which in base new; do
-    dir=$BASE; [ $which = new ] && dir=$BIN
-    "$dir/contactgrid_cuda_bench" 20 24 2 20 auto 2>&1 | sed "s/^/$which$round /"
+  for scene in spheres ellipsoids; do
+    for which in base new; do
+      dir=$BASE; [ $which = new ] && dir=$BIN
+      "$dir/contactgrid_cuda_bench" 20 24 4 10 auto $scene 2>&1 | sed "s/^/$which$round $scene /"
+    done
   done
 done >"$OUT/bench.md"
 grep -E '\| 2\^(20|24) ' "$OUT/bench.md" | cut -d'|' -f1-14
+
+log "resident steps (the step loop): np 1 and np 2, cuda, 20 steps, spheres and ellipsoids"
+{
+  "$CG" generate "$W/e20.h5" -n 1048576 --seed 20 --kind ellipsoids -q
+  for np in 1 2; do
+    for sc in s22 e20; do
+      echo "=== steps $sc np=$np"
+      mpirun --bind-to none -np $np "$CG" detect "$W/$sc.h5" -o "$W/steps.$sc.np$np.h5" --backend cuda --steps 20
+    done
+  done
+  for sc in s22 e20; do echo "compare steps $sc np1/np2: $("$CG" compare "$W/steps.$sc.np1.h5" "$W/steps.$sc.np2.h5" 2>&1 | tail -1)"; done
+} >"$OUT/steps.log" 2>&1
+grep -E '===|^compare|error|step|resident' "$OUT/steps.log" | head -40
 
 log "memcheck (CUDA cases)"
 timeout 200 compute-sanitizer --tool memcheck --leak-check full "$BIN/contactgrid_tests" \

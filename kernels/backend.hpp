@@ -29,7 +29,7 @@ struct DetectJob {
   // device_out set: leave the contacts on the device and describe them there (out stays empty).
   const DeviceBodiesView* device_bodies = nullptr;
   DeviceContactsView<Narrow>* device_out = nullptr;
-  // Shapes: the number of ellipsoids (0: the sphere-only path, exactly as before shapes existed) and
+  // Shapes: the number of ellipsoids (0: the sphere-only path, which runs no shape code) and
   // the ellipsoid solver's settings (from EngineOptions).
   std::size_t ellipsoids = 0;
   SolverSettings<Narrow> solver{};

@@ -28,7 +28,7 @@ struct BodiesView {
   std::span<const double> radius;
   std::span<const std::int64_t> id;      // empty: ids are 0 … n-1
   std::span<const std::uint8_t> report;  // empty: all pairs; else see kReportedBit, kPairedBit
-  // Shapes (CONTRACT §1). Empty `shape`: every body is a sphere of `radius` (the sphere-only fast
+  // Shapes (docs/FORMAT.md §1). Empty `shape`: every body is a sphere of `radius` (the sphere-only fast
   // path). Else one row per body in each of the three (semi_axes and orientation are read for
   // ellipsoids only: a sphere's rows may hold anything) and `radius` is the bounding radius, for an
   // ellipsoid exactly its largest semi-axis. Layout: per-body rows (not an index into ellipsoid

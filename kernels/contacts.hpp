@@ -7,11 +7,11 @@
 #include <cstdint>
 
 #include "core/contact_fields.hpp"
-#include "host/huge_pages.hpp"
+#include "host_vector.hpp"
 
 namespace cg {
 
-// Contacts as CONTRACT §2: sorted by (id_a, id_b), id_a < id_b, world frame.
+// Contacts as docs/FORMAT.md §2: sorted by (id_a, id_b), id_a < id_b, world frame.
 // HostVector: a resize leaves new elements uninitialised (no zero sweep of gigabytes before the
 // engine or a receive overwrites them) and large arrays sit on huge pages.
 template <class Real>

@@ -6,7 +6,6 @@
 #include <omp.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -15,8 +14,10 @@
 #include <vector>
 
 #include "backend.hpp"
-#include "host/huge_pages.hpp"
+#include "host_vector.hpp"
 #include "stage.hpp"
+#include "stage_names.hpp"
+#include "timing.hpp"
 
 namespace cg {
 
@@ -32,6 +33,15 @@ const char* to_string(Backend b) {
   return "?";
 }
 const char* to_string(Fields f) { return f == Fields::full ? "full" : "basic"; }
+
+const std::vector<std::string>& engine_stage_names() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> v;
+    for (int i = 0; i < detail::kStageCount; ++i) v.emplace_back(detail::name(detail::stage_at(i)));
+    return v;
+  }();
+  return names;
+}
 
 namespace detail {
 void parallel_copy(const CopyBlock* blocks, std::size_t count, int threads) {
@@ -311,13 +321,12 @@ static void remember_build(typename Engine<Real>::Impl& s, const Bounds& b, std:
 
 template <class Real>
 Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Frame> frame) {
-  using clock = std::chrono::steady_clock;
   Impl& s = *m_impl;
   s.forget_resident_view();
   s.times.clear();
   reset_stats(s.stats);
   Contacts<Real> out;
-  auto t0 = clock::now();
+  const auto t0 = WallClock::now();
   const Bounds b = compute_bounds(bodies);
   const std::size_t ellipsoids = validate_shapes(bodies);
   s.stats.bodies = b.count;
@@ -328,8 +337,7 @@ Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Fram
     job.bodies = bodies;
     job.ellipsoids = ellipsoids;
     skin.apply(job);
-    s.times.push_back(
-        {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
+    s.times.push_back({detail::name(detail::EngineStage::plan), seconds_since(t0)});
     if (s.resolved == Backend::cuda)
       detail::run_stages(*s.cuda, job, out, s.times, s.stats);
     else
@@ -360,14 +368,13 @@ template <class Real>
 static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesView& bodies,
                              std::optional<Frame> frame, Contacts<Real>& out,
                              DeviceContactsView<Real>* device_out) {
-  using clock = std::chrono::steady_clock;
   s.forget_resident_view();
   s.times.clear();
   reset_stats(s.stats);
   if (s.resolved != Backend::cuda) throw UsageError("detect_device needs the CUDA backend");
   if (bodies.count > 0 && (!bodies.position || !bodies.radius))
     throw UsageError("detect_device: null position or radius pointer");
-  auto t0 = clock::now();
+  const auto t0 = WallClock::now();
   if (bodies.count > 0 && bodies.shape && (!bodies.semi_axes || !bodies.orientation))
     throw UsageError("detect_device: shape kinds without semi-axes or orientation pointers");
   std::size_t ellipsoids = 0;
@@ -381,8 +388,7 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
     job.ellipsoids = ellipsoids;
     job.device_out = device_out;
     skin.apply(job);
-    s.times.push_back(
-        {detail::name(detail::Stage::plan), std::chrono::duration<double>(clock::now() - t0).count()});
+    s.times.push_back({detail::name(detail::EngineStage::plan), seconds_since(t0)});
     detail::run_stages(*s.cuda, job, out, s.times, s.stats);
   });
   remember_build<Real>(s, b, {}, ellipsoids, skin);
@@ -549,6 +555,20 @@ DeviceContactsView<Real> Engine<Real>::detect_device_resident(const DeviceBodies
   DeviceContactsView<Real> view;
   detect_on_device<Real>(*m_impl, bodies, frame, unused, &view);
   return view;
+}
+
+template <class Real>
+Bounds Engine<Real>::device_bounds(const DeviceBodiesView& bodies, std::size_t* ellipsoids) {
+  Impl& s = *m_impl;
+  if (s.resolved != Backend::cuda) throw UsageError("device_bounds needs the CUDA backend");
+  if (bodies.count > 0 && (!bodies.position || !bodies.radius))
+    throw UsageError("device_bounds: null position or radius pointer");
+  if (bodies.count > 0 && bodies.shape && (!bodies.semi_axes || !bodies.orientation))
+    throw UsageError("device_bounds: shape kinds without semi-axes or orientation pointers");
+  std::size_t count = 0;
+  const Bounds b = detail::device_bounds(*s.cuda, bodies, count);
+  if (ellipsoids) *ellipsoids = count;
+  return b;
 }
 
 template class Engine<float>;

@@ -134,6 +134,10 @@ class Engine {
   Contacts<Real> detect_device(const DeviceBodiesView& bodies, std::optional<Frame> frame = std::nullopt);
   DeviceContactsView<Real> detect_device_resident(const DeviceBodiesView& bodies,
                                                   std::optional<Frame> frame = std::nullopt);
+  // The bounds of bodies on the GPU (CUDA backend only, else UsageError), validated as detect_device
+  // validates them (same InputError texts): what a caller chooses a precision mode from
+  // (precision_choice.hpp) before it makes the engine of that mode. `ellipsoids`: their number.
+  Bounds device_bounds(const DeviceBodiesView& bodies, std::size_t* ellipsoids = nullptr);
 
   // Resident bodies: a simulation's state kept where the backend computes (host memory for the CPU
   // backend, DEVICE memory for CUDA) between detect calls, refreshed in row ranges (a halo exchange)

@@ -1,6 +1,7 @@
 #pragma once
-// Typed exceptions used across the project; main() maps them to documented exit codes:
-// 0 ok, 1 validation FAIL, 2 usage, 3 input, 4 CUDA, 5 MPI, 6 I/O, 7 resources (memory), 8 internal.
+// Typed exceptions used across the project; main() maps them to documented exit codes
+// (docs/ERRORS.md): 0 ok, 1 validation FAIL, 2 usage, 3 input, 4 CUDA, 5 MPI, 6 I/O, 7 resources
+// (memory), 8 internal, 9 a limit the user set (--max-pair-tests), 128 + N stopped by signal N.
 #include <stdexcept>
 #include <string>
 
@@ -40,6 +41,20 @@ class ResourceError : public Error {  // not enough (device) memory: says how mu
  public:
   using Error::Error;
   int exit_code() const override { return 7; }
+};
+class LimitError : public Error {  // the work would exceed a limit the user set: says how much
+ public:
+  using Error::Error;
+  int exit_code() const override { return 9; }
+};
+class Stopped : public Error {  // a signal stopped the run (src/run/stop.hpp)
+ public:
+  Stopped(int signal, const std::string& what) : Error(what), m_signal(signal) {}
+  int signal() const { return m_signal; }
+  int exit_code() const override { return 128 + m_signal; }
+
+ private:
+  int m_signal;
 };
 
 }  // namespace cg

@@ -14,18 +14,6 @@
 
 namespace cg {
 
-const char* to_string(Precision p) {
-  switch (p) {
-    case Precision::fp32:
-      return "fp32";
-    case Precision::fp64:
-      return "fp64";
-    case Precision::mixed:
-      return "mixed";
-  }
-  return "?";
-}
-
 void Bounds::merge(const Bounds& o) {
   if (o.count == 0) return;
   if (count == 0) {

@@ -4,33 +4,12 @@
 // g++-safe public header (part of engine.hpp).
 #include <cstddef>
 #include <cstdint>
-#include <type_traits>
 
 #include "bodies.hpp"
 #include "core/vec3.hpp"
+#include "precision.hpp"
 
 namespace cg {
-
-// The precision modes (README "Choosing a precision"): fp32 and fp64 run every stage in one real
-// type; mixed runs the broad phase (pack … order) in float and the narrow phase in double from the
-// world coordinates, with float64 output (Engine<double> with EngineOptions::fp32_broad_phase).
-enum class Precision { fp32, fp64, mixed };
-const char* to_string(Precision p);
-
-// The precision mode of the stage types Broad (pack … order) and Narrow (narrow, output): the one
-// conversion from the templates to the enum.
-template <class Broad, class Narrow = Broad>
-constexpr Precision precision_of() {
-  static_assert(std::is_same_v<Broad, float> || std::is_same_v<Broad, double>, "Real is float or double");
-  static_assert(std::is_same_v<Narrow, double> || std::is_same_v<Broad, Narrow>,
-                "no fp64 broad, fp32 narrow");
-  return !std::is_same_v<Broad, Narrow> ? Precision::mixed
-         : std::is_same_v<Broad, float> ? Precision::fp32
-                                        : Precision::fp64;
-}
-
-// The real type of the broad phase's local coordinates is float (fp32, mixed).
-constexpr bool float_broad_phase(Precision p) { return p != Precision::fp64; }
 
 // Axis-aligned bounds of the bounding spheres' boxes, and the largest and smallest radius.
 struct Bounds {
@@ -60,7 +39,7 @@ double min_cell_size(const Bounds& b, Precision p);
 
 // mixed: what the fp32 broad phase adds to every radius so that its float test keeps every pair that
 // touches in exact arithmetic (and every pair fp64 decides is a contact): 4·ε32·(L + 2·r_max), L the
-// largest |coordinate| of the bodies relative to `origin` (README "Choosing a precision" derives it).
+// largest |coordinate| of the bodies relative to `origin` (docs/PRECISION.md derives it).
 // 0 for fp32 and fp64.
 double broad_margin(const Bounds& b, const Vec3<double>& origin, Precision p);
 

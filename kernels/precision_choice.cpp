@@ -79,12 +79,9 @@ ModeBounds mode_bounds(Precision mode, const PrecisionScene& s) {
 }
 
 const std::array<Precision, 3>& cost_order(Backend backend) {
-  // CUDA: fp32 < mixed < fp64 is issue #13's target (mixed: fp64's answers at <= 1.2x fp32's time);
-  // no H100 measurement of mixed yet (BENCHMARKS §9's H100 slot is empty), so the target order stands.
+  // Both backends: fp32 <= mixed < fp64, the order their measured times take (BENCHMARKS.md §9, "The
+  // cost order of --precision auto"; CUDA: §3, device-resident).
   static constexpr std::array<Precision, 3> cuda{Precision::fp32, Precision::mixed, Precision::fp64};
-  // CPU: dev machine (2 cores, shared), `contactgrid study --modes fp32,mixed,fp64 --families uniform`
-  // (2^18 spheres), 2026-11-25 01:36-01:40 UTC, medians in ms over three quiet runs: fp32 23.1 23.6 24.4,
-  // mixed 23.3 24.3 24.7, fp64 27.8 28.5 29.8 (BENCHMARKS §9).
   static constexpr std::array<Precision, 3> cpu{Precision::fp32, Precision::mixed, Precision::fp64};
   return backend == Backend::cuda ? cuda : cpu;
 }

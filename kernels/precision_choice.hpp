@@ -1,5 +1,5 @@
 #pragma once
-// --precision auto (issue #13 item 2, README "Choosing a precision"): the cheapest precision mode
+// --precision auto (issue #13 item 2, docs/PRECISION.md): the cheapest precision mode
 // whose documented bounds hold for this scene at the accuracy the user accepts (--accuracy). Pure host
 // code on the run's agreed global bounds, so every rank of an MPI run picks the same mode.
 #include <array>
@@ -45,20 +45,20 @@ struct PrecisionScene {
 // From the global bounds and the run's cell-size request: make_frame and plan_grid tried per mode.
 PrecisionScene precision_scene(const Bounds& global, bool ellipsoids, double cell_size, CellChoice choice);
 
-// A mode's documented bounds for a scene (README "Choosing a precision", "a few" set to 4), for the
+// A mode's documented bounds for a scene (docs/PRECISION.md, "a few" set to 4), for the
 // point's Euclidean error (√3 × the per-coordinate bound) and the normal's angle:
 //   fp64, mixed  position √3·(½ ulp64(X) + 4·ε64·r_max);                          normal 4·ε64 rad
 //   fp32         position √3·(½ ulp32(X) + 4·ε32·(L + r_max)) + r_max·θ32;  normal θ32 = √3·2^−12 rad
 // fp32's r_max·θ32: a normal off by θ32 moves the point centre ± r·n by r·θ32 (centres just above the
 // separation below which the normal is recomputed in fp64). Centres within ε of the precision take
-// the normal (1, 0, 0) (CONTRACT §3): those pairs are the contract's, not these bounds'.
+// the normal (1, 0, 0) (docs/FORMAT.md §3): those pairs are the contract's, not these bounds'.
 struct ModeBounds {
   double position = 0;   // absolute length
   double angle_deg = 0;  // degrees
 };
 ModeBounds mode_bounds(Precision mode, const PrecisionScene& scene);
 
-// The modes from the cheapest, per backend (measured: README "Choosing a precision", BENCHMARKS §9).
+// The modes from the cheapest, per backend (measured: docs/PRECISION.md, BENCHMARKS §9).
 const std::array<Precision, 3>& cost_order(Backend backend);
 
 struct PrecisionChoice {

@@ -11,44 +11,44 @@ namespace cg::detail {
 // In pipeline order. plan: the engine's (bounds, frame, grid plan; engine.cpp); upload and download:
 // CUDA backend only (the host reads and writes in place); skin: the check of candidates kept across
 // calls (EngineOptions::skin > 0, when the bodies match the kept list's: the displacement reduction).
-enum class Stage : int { plan, upload, skin, pack, entries, sort, pairs, order, narrow, download };
+enum class EngineStage : int { plan, upload, skin, pack, entries, sort, pairs, order, narrow, download };
 inline constexpr int kStageCount = 10;
 
-constexpr const char* name(Stage s) {
+constexpr const char* name(EngineStage s) {
   switch (s) {
-    case Stage::plan:
+    case EngineStage::plan:
       return "plan";
-    case Stage::upload:
+    case EngineStage::upload:
       return "upload";
-    case Stage::skin:
+    case EngineStage::skin:
       return "skin";
-    case Stage::pack:
+    case EngineStage::pack:
       return "pack";
-    case Stage::entries:
+    case EngineStage::entries:
       return "entries";
-    case Stage::sort:
+    case EngineStage::sort:
       return "sort";
-    case Stage::pairs:
+    case EngineStage::pairs:
       return "pairs";
-    case Stage::order:
+    case EngineStage::order:
       return "order";
-    case Stage::narrow:
+    case EngineStage::narrow:
       return "narrow";
-    case Stage::download:
+    case EngineStage::download:
       return "download";
   }
   return "?";
 }
 
-constexpr int index(Stage s) { return static_cast<int>(s); }
-constexpr Stage stage_at(int i) { return static_cast<Stage>(i); }
+constexpr int index(EngineStage s) { return static_cast<int>(s); }
+constexpr EngineStage stage_at(int i) { return static_cast<EngineStage>(i); }
 
 // Wall-clock laps of the host backend: lap(s) appends {name(s), seconds since the previous lap}.
 class HostStageTimer {
  public:
   using clock_type = std::chrono::steady_clock;
   explicit HostStageTimer(StageTimes& times) : m_times(times), m_t(clock_type::now()) {}
-  void lap(Stage s) {
+  void lap(EngineStage s) {
     const auto now = clock_type::now();
     m_times.push_back({name(s), std::chrono::duration<double>(now - m_t).count()});
     m_t = now;

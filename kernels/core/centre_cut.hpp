@@ -4,10 +4,9 @@
 // semi-axes U[0.25, 1] about 56 % of the bounding-sphere candidates are apart, and the centre line alone
 // proves 48 % of them apart (two support values: separated_along_centres, core/ellipsoid_contact.hpp). Taken
 // in the pair stage, where both bodies are in cell order, it halves the candidates that the order stage sorts
-// and the narrow stage screens at random places in id order (0.905 → 0.470 per body; H100, 2^20 ellipsoids:
-// order 0.079 → 0.056 ms, narrow 0.453 → 0.411, the pair stage unchanged; its price is the cut shapes in cell
-// order: +0.01 ms at 2^20, +0.75 ms at 2^24 where reorder gathered them at random — which is why these
-// scenes with float spheres keep their input order now, cuda/pack.cuh: BENCHMARKS §3).
+// and the narrow stage screens at random places in id order. Its price is the cut shapes in cell order,
+// which a reorder would gather at random: so these scenes with float spheres keep their input order
+// (cuda/pack.cuh; the figures: BENCHMARKS.md §3, "the centre cut").
 //
 // It removes only pairs the narrow stage rejects anyway, so the contacts, their bits and the solver's
 // flags are the same with or without it: it cuts general ellipsoid pairs alone (the ones whose narrow
@@ -27,8 +26,8 @@
 // (tests: CentreCut.*, EngineShapesTest.CentreCutGivesTheSameRows, the device's CudaBitIdenticalToCpu).
 //
 // The cut shapes also give each body its cells: the box of its shape instead of its bounding sphere's
-// (cut_cells, below): 2.12 instead of 2.53 entries a body and 28 % fewer pair tests (H100, 2^24: entries +
-// sort + pairs 4.5 → 3.8 ms), the same contacts.
+// (cut_cells, below): fewer entries a body and fewer pair tests, the same contacts (BENCHMARKS.md §3, "the
+// cells of the shapes' boxes").
 //
 // Spheres, ellipsoids with three equal semi-axes (the sphere–ellipsoid path, which has no centre-line
 // test), and sphere pairs are never cut: their CutShape is NaN, and a NaN gap is no gap.
@@ -127,7 +126,7 @@ CG_HD BodyCells cut_cells(const Sphere<Real>& s, const CutShape& c, const GridPa
 // a, b in the stage's own order, `cut` in the same order): the bounding spheres touch (Coarse) and the
 // centre line does not prove the shapes apart (refine). The device's pair walk takes the two apart —
 // the coarse test in its hot loop, refine over the pairs it found after it (cuda/pairs.cuh): inside
-// the loop the cut's registers slowed every test (H100, 2^24: pair stage 2.9 → 4.8 ms).
+// the loop the cut's registers would slow every test (BENCHMARKS.md §3).
 struct CentreCut {
   using Coarse = SpheresTouch;
   const CutShape* cut;

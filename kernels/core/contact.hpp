@@ -1,5 +1,5 @@
 #pragma once
-// Narrow phase for sphere pairs, exactly as CONTRACT §3 (Bullet's btSphereSphereCollisionAlgorithm
+// Narrow phase for sphere pairs, exactly as docs/FORMAT.md §3 (Bullet's btSphereSphereCollisionAlgorithm
 // semantics), shared by both backends. sphere_contact_row: points in the engine's local frame, moved
 // to the world by to_world (fp32); world_sphere_row: from the world doubles (fp64, mixed).
 #include <limits>
@@ -80,7 +80,7 @@ CG_HD Vec3<Real> to_world(const Vec3<double>& origin, const Vec3<Real>& local) {
           static_cast<Real>(origin.z + double(local.z))};
 }
 
-// One row of the contact output (CONTRACT §2), world frame: ContactRow (core/contact_fields.hpp). The
+// One row of the contact output (docs/FORMAT.md §2), world frame: ContactRow (core/contact_fields.hpp). The
 // optional members are computed only when asked for (Fields::full): local points (R = identity for
 // spheres) and Bullet's friction directions. The ids are set by the narrow stage.
 template <class Real>

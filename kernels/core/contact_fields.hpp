@@ -1,5 +1,5 @@
 #pragma once
-// The per-contact fields of CONTRACT §2, stated once. Every other spelling of the contact schema
+// The per-contact fields of docs/FORMAT.md §2, stated once. Every other spelling of the contact schema
 // derives from this file: Contacts (host vectors), DeviceContactsView and the CUDA row pointers, the
 // narrow stage's row store (both backends), the merge of the ranks' runs, the HDF5 datasets, the CSV
 // and the tests' comparers.
@@ -25,7 +25,7 @@ enum class FieldKind : std::uint8_t {
 struct ContactField {
   const char* path;  // HDF5 dataset of a contact file
   FieldKind kind;
-  bool optional;  // present only with Fields::full (CONTRACT §2: only when the user asked)
+  bool optional;  // present only with Fields::full (docs/FORMAT.md §2: only when the user asked)
   constexpr const char* name() const { return path + 10; }  // path without "/contacts/"
   constexpr int columns() const { return kind == FieldKind::vector ? 3 : 1; }
 };

@@ -1,7 +1,7 @@
 #pragma once
 // Narrow phase for ellipsoid pairs and sphere–ellipsoid pairs (issue #12), shared by both backends.
 //
-// Semantics (CONTRACT §3, Bullet's convex–convex contacts). For a unit direction n (from B towards A)
+// Semantics (docs/FORMAT.md §3, Bullet's convex–convex contacts). For a unit direction n (from B towards A)
 //   f(n) = h_A(−n) + h_B(n) − n·(a − b),   h_X(u) = |D_X R_Xᵀ u|  (support function about the centre),
 // distance = −min_{|n|=1} f, n = the GLOBAL minimiser, position_on_b = b + ∇h_B(n),
 // position_on_a = a + ∇h_A(−n), so position_on_a = position_on_b + n·distance (at the minimiser; to the
@@ -31,15 +31,14 @@
 //      from the antipode of the best (when a − b is short, minima come in near-antipodal pairs). Each
 //      start's run is a function of that start alone (newton_run), so a batch of them may run side by
 //      side — the device's whole-set kernel gives each start a lane of a lane group (SerialRuns,
-//      WarpRuns; before, a run stopped within 1e-4 rad of the converged best, which chained every run
-//      to the one before it). The smallest f wins; a later candidate must be lower by more than the
-//      rounding of f (ties keep the earlier start). Each ingredient was added after a stress run
-//      against the exact reference (deep overlaps — a centre inside the other body — and random
-//      overlaps, axis ratios 3–100, double) showed misses; the unit tests keep those pairs: 8 axis
-//      starts missed 3 of 7 500 (all with n·(a − b) < 0: reflection), then 3 of 18 000 (antipodal
-//      pairs: antipode run), then 2 of 24 000 (bisector starts), then 1 of 24 000 (screen); the final
-//      set missed none of 48 000 fresh pairs. 5 axis starts alone miss deep overlaps routinely (A's
-//      centre inside B needs B's axes).
+//      WarpRuns; no run stops on another's result, which would chain every run to the one before it).
+//      The smallest f wins; a later candidate must be lower by more than the rounding of f (ties keep
+//      the earlier start). Each ingredient closes a class of misses of a stress run against the exact
+//      reference (deep overlaps — a centre inside the other body — and random overlaps, axis ratios
+//      3–100, double): reflection the minima with n·(a − b) < 0, the antipode run antipodal pairs, then
+//      the bisector starts and the screen; the unit tests keep those pairs, and the whole set misses
+//      none of 48 000 fresh ones. 5 axis starts alone miss deep overlaps routinely (A's centre inside B
+//      needs B's axes).
 //      The certificates (ellipsoid_certificate.hpp, with their proofs): a converged minimum n with
 //      t = f(n) is global to within the solver tolerance if t < 0 (separated), or
 //      t ≤ e_A²/h_A(n) + e_B²/h_B(n) (e the smallest semi-axis: two balls tangent inside at the contact

@@ -3,7 +3,7 @@
 // The one place a shape- or precision-specific test slots in: the pair stage only proposes candidates,
 // narrow_decide() decides.
 //
-// Where each precision mode takes its numbers (README "Choosing a precision"):
+// Where each precision mode takes its numbers (docs/PRECISION.md):
 //   fp64, mixed  decision: spheres_touch on the frame-local doubles Real(world − origin), exactly the
 //                bits of fp64's pack, so fp64's pair stage and mixed's narrow stage decide alike
 //                (mixed settles most candidates on its broad phase's floats first: touch_fp64);
@@ -72,7 +72,7 @@ CG_HD Sphere<double> local_sphere_fp64(const NarrowBodies<Real>& w, std::uint32_
 // What two of mixed's float broad-phase spheres say of fp64's decision (spheres_touch on the
 // frame-local doubles). With m = broad_margin = 4·ε32·(L + 2·r_max) (grid_plan.cpp), each packed radius
 // is r + m, and the float distance errs by less than 1.74·ε32·L + 7.1·ε32·r_max from the rounded
-// centres, the test's arithmetic and the radii's rounding together (README "Choosing a precision",
+// centres, the test's arithmetic and the radii's rounding together (docs/PRECISION.md,
 // mixed), which is < m. So a float distance <= (r_a + m) + (r_b + m) − 4m puts the exact distance below
 // r_a + r_b − m, and one above the sum + 2m puts it beyond r_a + r_b + m; fp64's own rounding is ~2^29
 // times smaller than m, so fp64 decides the same. Only a pair within a few m of touching is `unsure`.
@@ -211,7 +211,7 @@ CG_HD constexpr bool candidates_touch(CandidateFilter f) { return f != Candidate
 // one (spheres_touch unless a test or knob forces another) made fit for the scene — with ellipsoids, the
 // bounding spheres, less the centre cut (core/centre_cut.hpp) where at least 4 bodies in 5 are
 // ellipsoids: it cuts pairs of two general ellipsoids alone, and its shapes cost every body a gather into
-// cell order (H100, 2^24: 0.75 ms; half-sphere scenes lost 0.7 ms with it, BENCHMARKS §3); with a skin,
+// cell order, more than half-sphere scenes gain (BENCHMARKS.md §3); with a skin,
 // the (inflated) bounding spheres alone, whose list must outlast the bodies' motion and rotations.
 CG_HD constexpr CandidateFilter scene_filter(CandidateFilter requested, std::uint64_t ellipsoids,
                                              std::uint64_t bodies, bool skin) {

@@ -1,6 +1,6 @@
 #pragma once
 // Quaternions and 3×3 rotation matrices for the ellipsoid narrow phase, shared by host and device.
-// A quaternion (w, x, y, z) rotates body-local to world (CONTRACT §1). The matrix is built once per
+// A quaternion (w, x, y, z) rotates body-local to world (docs/FORMAT.md §1). The matrix is built once per
 // body, not once per pair: R v takes a local vector to the world, Rᵀ v (mul_transpose) a world vector
 // to the body frame.
 #include "core/config.hpp"

@@ -1,5 +1,5 @@
 #pragma once
-// Body shapes (CONTRACT §1), shared by host and device: the shape kind of a body, the input check of
+// Body shapes (docs/FORMAT.md §1), shared by host and device: the shape kind of a body, the input check of
 // its shape data (the same predicate on the host path, compute/validate_shapes, and on the device-array
 // path, a kernel), and the packed form the narrow phase reads (local Real semi-axes and the rotation
 // built once per body).
@@ -56,9 +56,9 @@ CG_HD ShapeFault shape_fault(std::uint8_t kind, double radius, const double* sem
 // A body's shape as the narrow phase reads it (mixed scenes only; index = body index, as the spheres):
 // kind, semi-axes and the orientation quaternion in Real (the rows as given, rounded once); the narrow
 // phase builds the rotation from it where it needs one (ellipsoid_of, core/shape_narrow.hpp). 32 bytes
-// in fp32 and 64 in fp64: the narrow stage gathers two per candidate at random, and a packed rotation
-// matrix made them 64 and 112 (the fp64 matrix built from the double quaternion is the same bits either
-// way; fp32's is now built in float from the rounded quaternion). Spheres: kind only (the rest zero).
+// in fp32 and 64 in fp64 (a packed rotation matrix would make them 64 and 112): the narrow stage
+// gathers two per candidate at random. fp32's rotation is built in float from the rounded quaternion;
+// fp64's from the double quaternion. Spheres: kind only (the rest zero).
 template <class Real>
 struct alignas(16) PackedShape {
   Quat<Real> orientation;

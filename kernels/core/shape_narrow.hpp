@@ -17,7 +17,7 @@
 //   sphere–sphere        the closed form (narrow_decide: exactly the sphere path's bits)
 //   sphere–ellipsoid     sphere_ellipsoid_contact (the sphere's `radius` is its radius)
 //   ellipsoid–ellipsoid  ellipsoid_contact (Perram–Wertheim filter, then the solve)
-// Contact iff distance <= 0 (CONTRACT §3). Local points of an ellipsoid are in its body frame,
+// Contact iff distance <= 0 (docs/FORMAT.md §3). Local points of an ellipsoid are in its body frame,
 // R_Xᵀ(p − x); of a sphere p − x. Both backends split the count pass in two (triage, then solve for
 // the hard pairs alone) and keep each general ellipsoid pair's minimiser, from which the row is
 // rebuilt (row_from()): the host at once, the device in its fill pass.
@@ -134,12 +134,12 @@ CG_HD bool bounding_spheres_touch(const NarrowBodies<Real>& w, std::uint32_t a, 
 // a − b): the rounded a − b errs by δ ≤ √3·ε32·M, which perturbs f(n) = h_A(−n) + h_B(n) − n·(a − b)
 // by at most |δ| whatever |a − b| (so the minimiser's shift within its basin does not depend on the
 // threshold), and chooses between the mirror minima ±n (f(−n) − f(n) = 2 n·(a − b)) only where
-// |n·(a − b)| ≤ |δ|. Below the threshold the rounded difference may point anywhere (or be 0), and the
-// float solve took the mirror normal for 17 of 60 pairs near 10 before #13; above it, the direction of
+// |n·(a − b)| ≤ |δ|. Below the threshold the rounded difference may point anywhere (or be 0), so the
+// float solve may take the mirror normal; above it, the direction of
 // a − b is right to √3·2^-8 rad, so a mirror is taken only where n is within that of perpendicular
 // to a − b — a pair with two exits deeper than each other by less than fp32's band, either normal
-// right. (At 2^-11 the pairs in fp64 were ~5e-4 of the candidates of a 2^20 random scene and their
-// serial double solves cost the H100 +33 % at 2^20 and +70 % at 2^24: BENCHMARKS §3.) Every entry
+// right. (A larger threshold such as 2^-11 sends many more pairs of a random scene to serial double
+// solves, at a large cost on the GPU: BENCHMARKS.md §3.) Every entry
 // point agrees: accept / row solve it so, triage sends it to the hard pass (Verdict::hard: the triage
 // kernel stays lean), solve solves it so, row_from solves it again (the kept float normal is not the
 // double minimiser): one-solve bits. The device runs those solves in kernels of their own
@@ -153,7 +153,7 @@ struct ShapeDecide {
   // The pair stage took the centre cut (CandidateFilter::centre_cut, core/centre_cut.hpp): the pairs
   // apart along the centre line by more than the cut's margin are gone, so the screen leaves the test to
   // the first pass's ellipsoid_contact (which starts with it: the same verdict, no solver work) instead
-  // of taking it for every general pair (H100, 2^20: triage 0.186 → see BENCHMARKS §3).
+  // of taking it for every general pair, which the cut leaves few to reject (BENCHMARKS.md §3).
   bool centre_cut = false;
 
   CG_HD bool both_spheres(std::uint32_t a, std::uint32_t b) const {

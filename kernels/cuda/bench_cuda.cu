@@ -34,6 +34,7 @@
 
 #include "cuda/device_buffer.cuh"
 #include "engine.hpp"
+#include "timing.hpp"
 
 namespace {
 
@@ -41,6 +42,7 @@ namespace {
 double g_cell_size = 0.0;
 cg::CellChoice g_cell_choice = cg::CellChoice::tuned;
 
+using cg::median;
 using cg::cuda::DeviceBuffer;
 
 constexpr std::size_t kFlushBytes = std::size_t(256) << 20;
@@ -52,13 +54,6 @@ std::uint64_t splitmix64(std::uint64_t& s) {
   return x ^ (x >> 31);
 }
 double unit(std::uint64_t& s) { return double(splitmix64(s) >> 11) * 0x1.0p-53; }
-
-double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const std::size_t m = v.size() / 2;
-  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
-}
 
 struct Flusher {
   DeviceBuffer<std::byte> buf;

@@ -24,15 +24,15 @@ constexpr int kBlock = 256;
 constexpr int kStaged = kBlock + 32;  // count_pairs: a block's entries and the halo of its windows
 // Bit 6 of a body's control byte (bits 0-5: control_bits) is its report flag when a report mask is
 // given: the pair walk then reads the flag with the control byte it already holds, instead of a
-// random read of the mask by input index per visit (at 2^26 on 2 H200 ranks the pairs stage took
-// 5.5 ms per rank instead of about half of the single rank's 6.5 ms).
+// random read of the mask by input index per visit, which would cost a rank of a multi-GPU run most
+// of its share of the pair stage (BENCHMARKS.md §4).
 constexpr std::uint32_t kReportBit = 0x40u;
 constexpr std::uint32_t kPairedCtrlBit = 0x80u;  // the mask's kPairedBit, likewise
 #ifndef CG_PAIRS_MIN_BLOCKS
 #define CG_PAIRS_MIN_BLOCKS 6
 #endif
 // count_pairs: resident blocks per SM asked of ptxas (6: at most 40 registers, 75 % occupancy, a few
-// bytes of spill; measured on the H100 at 2^24: pairs 1.84 -> 1.67 ms fp32, 2.41 -> 2.11 ms fp64).
+// bytes of spill; the fastest pair stage on the H100, BENCHMARKS.md §11).
 constexpr int kPairsMinBlocks = CG_PAIRS_MIN_BLOCKS;
 
 // DEVICE counters of one call; zeroed (cudaMemsetAsync) before the first kernel that adds to them.

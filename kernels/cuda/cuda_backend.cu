@@ -23,7 +23,7 @@
 //                  ellipsoids and precision mixed: count → scan → fill; fp64 and mixed read the world
 //                  doubles of the upload buffer or the caller's DeviceBodiesView)
 // Around them: workspace.cuh (the named DEVICE buffers, their aliases, cub_run), tuning.hpp (the
-// environment knobs, read in one place), stage_events.cuh (event timing by typed Stage).
+// environment knobs, read in one place), stage_events.cuh (event timing by typed EngineStage).
 //
 // One stream, owned by the backend (blocking: ordered after work on the legacy default stream).
 // The persistent workspace grows geometrically and never shrinks: a caller that detects many frames

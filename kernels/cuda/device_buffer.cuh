@@ -21,9 +21,15 @@ namespace cg::cuda {
     if (cg_err_ != cudaSuccess) ::cg::cuda::throw_cuda_error(cg_err_, #call, __FILE__, __LINE__); \
   } while (0)
 
-// After every kernel launch: launch-configuration errors surface here, asynchronous faults at the
-// next synchronising call (which is checked too).
-#define CG_CUDA_CHECK_LAUNCH(name) CG_CUDA_CHECK(cudaGetLastError())
+// After every kernel launch (`kernel`: its name, a string literal): launch-configuration errors surface
+// here as "file:line: launch of <kernel>: <error>", asynchronous faults at the next synchronising call
+// (which is checked too).
+#define CG_CUDA_CHECK_LAUNCH(kernel)                                                  \
+  do {                                                                                \
+    const cudaError_t cg_err_ = cudaGetLastError();                                   \
+    if (cg_err_ != cudaSuccess)                                                       \
+      ::cg::cuda::throw_cuda_error(cg_err_, "launch of " kernel, __FILE__, __LINE__); \
+  } while (0)
 
 // Trivially copyable view of `size` elements in DEVICE memory; passed by value to kernels.
 template <class T>

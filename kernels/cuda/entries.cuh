@@ -96,7 +96,7 @@ void entries_stage(RunState<Real, Key, Narrow>& r) {
   cuda::fill_entries_kernel<Key><<<r.nb, cuda::kBlock, 0, r.st>>>(
       r.d_lo_key, r.d_ctrl, r.n, r.g, r.d_body_offsets, r.keys.Current(), r.body.Current());
   CG_CUDA_CHECK_LAUNCH("fill_entries");
-  r.events.mark(Stage::entries, r.st);
+  r.events.mark(EngineStage::entries, r.st);
 }
 
 }  // namespace cg::detail

@@ -3,18 +3,20 @@
 // contact rows of the requested fields, world frame, laid out in ws.out (16-byte aligned fields).
 // With the default filter (spheres_touch) every candidate is a contact (narrow_may_reject() false):
 // each candidate's row is written at its own index, no scan. A filter that may reject (cells, forced
-// by Tuning::candidates; bounding_spheres, scenes with ellipsoids; later a candidate list kept across
-// calls) takes count → scan → fill as the CPU backend's narrow: an accept flag per candidate, an
-// exclusive scan, the host reads the row count (one more synchronisation), the accepted rows written
-// compacted.
+// by Tuning::candidates; bounding_spheres, scenes with ellipsoids or a skin; centre_cut) takes count →
+// scan → fill as the CPU backend's narrow: an accept flag per candidate, an exclusive scan, the host
+// reads the row count (one more synchronisation), the accepted rows written compacted.
+//
 // The rejecting kernels take a decider (core/shape_narrow.hpp): SphereDecide, or ShapeDecide when the
 // scene has ellipsoids (r.d_shapes set by shapes.cuh); the host backend uses the same structs. mixed
 // (fp32 broad phase, enlarged spheres): on sphere scenes its pair stage already takes fp64's decision
 // (Fp64Touch), so one row per candidate; with ellipsoids or a skin the fp64 narrow stage decides.
+//
 // Scenes with ellipsoids count in passes (narrow_shapes_count): a screen of every candidate, then the
 // first start, the settle pass and the whole start set, each over a list of the candidates the previous
 // pass left (appended by that pass), so that a warp's lanes do the same work (the whole set of a short
 // list: a lane group per pair, its starts on the lanes).
+//
 // Flags and offsets live in the candidates' dead alternate buffers (pair_a / pair_b .Alternate()).
 #include <cub/device/device_scan.cuh>
 #include <limits>
@@ -104,11 +106,11 @@ __global__ void __launch_bounds__(kBlock)
 // `solve` ones onto `to_solve` (c->to_solve), the `hard` ones onto `unsettled` (c->unsettled, where the
 // first pass adds its own); then ShapeDecide::first_pass over the `solve` list alone (the PW filter and
 // one Newton run with the cheap certificates; in one kernel the Newton lanes — half the candidates —
-// made every warp pay for them). kFirstToo true, ShapeDecide::triage (the screen, then the first start
+// would make every warp pay for them). kFirstToo true, ShapeDecide::triage (the screen, then the first start
 // on the candidate's own thread), the hard ones onto `unsettled` with their kept first start beside
 // them in `carry`: for scenes of ellipsoids alone whose pair stage took the centre cut, where the
 // screen leaves nearly every candidate to the first start and the list between the two kernels would
-// only gather them again (H100 2^24: triage 2.66 → 2.10 ms, BENCHMARKS §3).
+// only gather them again (BENCHMARKS.md §3).
 template <class Real, bool kFirstToo>
 __global__ void __launch_bounds__(kBlock)
     narrow_triage_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
@@ -195,10 +197,9 @@ __global__ void __launch_bounds__(kBlock)
 // SerialRuns, whose bits and counts these are): lane j of the group runs start j of a round of the
 // batch, all at once, then every lane takes the results in start order, so the group's lanes agree on
 // each step of the solve after it (the same values, the same branches) — the pair's serial chain of
-// runs becomes the longest run of each round. Lanes per pair, measured on the H100 at 2^20 (3 400 hard
-// pairs, BENCHMARKS §3): fp32 16 (one round for the 11 starts, the screen's 4 and the safety net's 13;
-// hard pass 0.122 ms, 32 lanes 0.233, 8 lanes 0.139), fp64 8 (its kernel holds one block per SM, so
-// twice the resident groups: 0.189 ms, 16 lanes 0.284, 32 lanes 0.629).
+// runs becomes the longest run of each round. Lanes per pair: fp32 16 (one round for the 11 starts, the
+// screen's 4 and the safety net's 13), fp64 8 (its kernel holds one block per SM, so twice the resident
+// groups); the fastest of 8, 16 and 32 on the H100 (BENCHMARKS.md §3).
 template <class Real>
 inline constexpr int kSolveLanes = sizeof(Real) == 8 ? 8 : 16;
 template <int kSolveLanes>
@@ -240,8 +241,7 @@ struct WarpRuns {
 // fixed grid that walks the list: used when the list is short (*n_hard <= warp_limit, the host's bound
 // from the resident groups), where the one-thread-per-pair kernel waits on its slowest pair's serial
 // chain of ~17 runs; beyond it the list kernel (ListPass::whole) takes them (a group that must take
-// pairs one after the other loses to it: 2^22 fp32, ~3 pairs a group, 0.63 ms against 0.32). The same
-// bits either way.
+// pairs one after the other loses to it, BENCHMARKS.md §3). The same bits either way.
 template <class Real, int kSolveLanes>
 __global__ void __launch_bounds__(kBlock)
     narrow_whole_warp_kernel(const std::uint32_t* __restrict__ pair_a,
@@ -274,10 +274,10 @@ __global__ void __launch_bounds__(kBlock)
 
 // fp32's pairs in fp64 (core/shape_narrow.hpp: ShapeDecide::in_fp64, sent to the hard list by triage):
 // solved in double here, so that the double solve's registers and stack are this kernel's alone (in
-// the hard and fill kernels they doubled the registers: 2^20 ellipsoids, fp32, narrow 1.3 → 2.2 ms).
+// the hard and fill kernels they would double the registers and slow the narrow stage, BENCHMARKS.md §3).
 // The kept normal is a NaN marker: the fill kernel leaves those rows to narrow_fill_fp64_kernel.
 // Both kernels are rare work behind a cheap test, with ~250 registers a thread: a fixed grid of
-// kRareBlocks walks the list (a grid of one thread per item spent ~0.3 ms at 2^20 in empty waves).
+// kRareBlocks walks the list (a grid of one thread per item would spend its time in empty waves).
 inline constexpr std::uint32_t kRareBlocks = 256;
 template <class Real>
 __global__ void __launch_bounds__(kBlock)
@@ -326,8 +326,7 @@ __global__ void __launch_bounds__(kBlock)
 }
 
 // The rows of fp32's pairs in fp64 (NaN-marked and listed by narrow_hard_fp64_kernel): fp64's row
-// rounded once, as row_from gives them on the host. (It walked every candidate before, 0.4 ms at 2^24
-// for a few rows.)
+// rounded once, as row_from gives them on the host. It walks the list, not every candidate: a few rows.
 template <class Real>
 __global__ void __launch_bounds__(kBlock)
     narrow_fill_fp64_kernel(const std::uint32_t* __restrict__ pair_a,
@@ -460,9 +459,9 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
 // The rejecting path: count → scan → fill (see the file comment). Rows that stay on the device
 // (job.device_out) go where the scan puts them in an out buffer laid out for every candidate (np rows:
 // ws.out holds them), so the fill follows the scan with no wait, and the counters — the row count
-// among them — come back with the call's last synchronisation (download_stage); waiting here for the
-// count cost each call a round trip of the host. Rows for host memory are laid out tight for their one
-// copy, so the host reads the count first, as before.
+// among them — come back with the call's last synchronisation (download_stage): waiting here for the
+// count would cost each call a round trip of the host. Rows for host memory are laid out tight for their
+// one copy, so the host reads the count first.
 template <class Real, class Key, class Narrow, class Decide>
 void narrow_compact(RunState<Real, Key, Narrow>& r, const Decide& decide) {
   using cuda::blocks_for;
@@ -537,7 +536,7 @@ void narrow_stage(RunState<Real, Key, Narrow>& r) {
                                             r.filter == CandidateFilter::centre_cut});
     else
       narrow_compact(r, SphereDecide<Narrow>{bodies});
-    r.events.mark(Stage::narrow, r.st);
+    r.events.mark(EngineStage::narrow, r.st);
     return;
   }
   r.n_rows = r.np;
@@ -553,7 +552,7 @@ void narrow_stage(RunState<Real, Key, Narrow>& r) {
     CG_CUDA_CHECK(
         cudaMemcpyAsync(r.h_counters, r.d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, r.st));
   }
-  r.events.mark(Stage::narrow, r.st);
+  r.events.mark(EngineStage::narrow, r.st);
 }
 
 }  // namespace cg::detail

@@ -1,9 +1,9 @@
 #pragma once
 // CUDA stage order: the candidate pairs in (a, b) order. Grouped by a with a counting sort over the
 // bodies (count → scan → scatter; the two dead key buffers of the entry sort hold the counts and the
-// offsets: ws.a_counts / a_offsets) while those counters stay in half the L2 (2^20 bodies: 0.055 vs
-// 0.076 ms on an H100), else by a radix sort of (a, b) by a (the counters' random atomics in DRAM
-// cost 5× the sort at 2^24: 1.5 vs 0.32 ms); Tuning::counting_order forces one. Then each run of
+// offsets: ws.a_counts / a_offsets) while those counters stay in half the L2 (there it beats the radix
+// sort), else by a radix sort of (a, b) by a (the counters' random atomics in DRAM cost several times
+// the sort; BENCHMARKS.md §3); Tuning::counting_order forces one. Then each run of
 // equal a is sorted by b (sort_runs_kernel).
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
@@ -90,7 +90,7 @@ void order_stage(RunState<Real, Key, Narrow>& r) {
     cuda::sort_runs_kernel<<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), np);
     CG_CUDA_CHECK_LAUNCH("sort_runs");
   }
-  r.events.mark(Stage::order, st);
+  r.events.mark(EngineStage::order, st);
 }
 
 }  // namespace cg::detail

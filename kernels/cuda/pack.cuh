@@ -17,8 +17,8 @@ namespace cg::cuda {
 // lowest cell, coarsened by `shift` to at most 256 layers so that the renumbering sort is one radix
 // pass. The pair stage walks the cells in key order, z slowest, so the bodies it reads at any moment
 // lie in a few consecutive layers, a few MiB that stay in L2 (the order within a layer matters
-// little then: against a 4x4x4-cell block key and its two-pass sort, H100 2^24 cell 5, the pair stage
-// was 3 % slower, 1.83 vs 1.78 ms, and pack 0.16 ms faster, 1.12 vs 1.28 ms). It changes no result:
+// little then: a 4x4x4-cell block key with its two-pass sort gains no time overall, BENCHMARKS.md §3,
+// BENCHMARKS.md §11). It changes no result:
 // decisions are symmetric in the two bodies, and pairs are emitted and sorted by their original
 // indices.
 template <class Key>
@@ -59,7 +59,7 @@ __global__ void __launch_bounds__(kBlock)
 
 // What reorder packs itself where the bodies keep their input order (kPack): the world rows, and the
 // shape rows of scenes with ellipsoids (shapes.cuh) — one pass over the bodies instead of three
-// (pack, pack_shapes, reorder: H100 2^24 ellipsoids, see BENCHMARKS §3).
+// (pack, pack_shapes, reorder; BENCHMARKS.md §3).
 template <class Packed>
 struct PackInput {
   const double* pos = nullptr;
@@ -208,8 +208,7 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   // The renumbering pays only when the spheres do not stay in L2 anyway (the pair stage's gathers hit
   // it either way): when they outgrow the L2 (Tuning::renumber forces it). Scenes of the centre cut pay
   // it for the cut shapes too (their gather into cell order): with float spheres (fp32, mixed) it then
-  // costs more than the pair stage's locality saves (H100, 2^24 ellipsoids fp32: 10.55 ms renumbered,
-  // 10.28 not: pack −1.05, pairs +0.75), with fp64's 32-byte spheres less (16.96 against 17.14 ms).
+  // costs more than the pair stage's locality saves, with fp64's 32-byte spheres less (BENCHMARKS.md §3).
   // Without it the bodies keep their input order (no result changes).
   const bool worth = r.n64 * sizeof(Sphere<Real>) > r.l2_bytes &&
                      (r.filter != CandidateFilter::centre_cut || sizeof(Real) == 8);
@@ -241,7 +240,7 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
     CG_CUDA_CHECK_LAUNCH("pack");
   }
   if (spheres_only) {
-    r.events.mark(Stage::pack, st);
+    r.events.mark(EngineStage::pack, st);
     return;
   }
   if (renumber)
@@ -260,7 +259,7 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   else
     reorder(cuda::reorder_kernel<Real, Key, Narrow, false>, home_index.Current(), cuda::PackInput<Narrow>{});
   CG_CUDA_CHECK_LAUNCH("reorder");
-  r.events.mark(Stage::pack, st);
+  r.events.mark(EngineStage::pack, st);
 }
 
 // After the counters were read: the InputError of compute_bounds for an invalid body, and the device

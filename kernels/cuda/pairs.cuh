@@ -59,6 +59,24 @@ __device__ __forceinline__ void visit(const EntryBody<Real>& x, std::uint32_t b,
   if (test(x.sa, sb, x.a, b)) emit(x.a, b);
 }
 
+// The pair writer of count_pairs' direct write and of fill_pairs: the pair (a, b) of cell-ordered
+// bodies, a fixed for the entry, as input indices (pa = a's), smaller first as the host's, at w; then
+// w + 1.
+template <class Index>
+struct PairWriter {
+  std::uint32_t* pair_a;
+  std::uint32_t* pair_b;
+  const std::uint32_t* perm;
+  std::uint32_t pa;
+  Index w;
+  __device__ __forceinline__ void operator()(std::uint32_t, std::uint32_t b) {
+    const std::uint32_t pb = input_index(perm, b);
+    pair_a[w] = pa < pb ? pa : pb;
+    pair_b[w] = pa < pb ? pb : pa;
+    ++w;
+  }
+};
+
 // A pair test in two parts (CentreCut): `Coarse` in the staged walk's hot loop, `refine` over the
 // pairs it found, after it; the same decisions as the whole test.
 template <class Test>
@@ -94,8 +112,8 @@ __device__ __forceinline__ std::uint32_t walk_from_memory(
 // sphere, input index when a report mask is given) in shared memory once; each thread then walks
 // only its own cell's later entries there (a few shared loads per step, no warp-wide shuffles: the
 // walk is issue-light), and walks from memory only a cell that goes on past e + 31 (or past the
-// last entry). Without the halo, the cell that straddles the block's end was walked from memory by
-// up to a cell's worth of threads, a chain of dependent global loads that kept the whole block
+// last entry). Without the halo, the cell that straddles the block's end would be walked from memory
+// by up to a cell's worth of threads, a chain of dependent global loads that keeps the whole block
 // resident (the block's tail).
 // Direct write: the block takes the range [base, base + block total) of the pair cursor c->pairs (one
 // atomicAdd) and, when the range ends at or below `cap`, writes its pairs (pair_a[w], pair_b[w]) of
@@ -192,14 +210,8 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
   }
   __syncthreads();
   if (found == 0 || s_base + block_sum > cap) return;
-  unsigned long long w = s_base + rank;
-  const std::uint32_t pa = report ? x.pa & ~kWideKey : input_index(perm, x.a);
-  auto emit = [&](std::uint32_t, std::uint32_t b) {
-    const std::uint32_t pb = input_index(perm, b);  // input indices, a < b as the host
-    pair_a[w] = pa < pb ? pa : pb;
-    pair_b[w] = pa < pb ? pb : pa;
-    ++w;
-  };
+  PairWriter<unsigned long long> emit{pair_a, pair_b, perm,
+                                      report ? x.pa & ~kWideKey : input_index(perm, x.a), s_base + rank};
   if (bits & 1u) {
     walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test, emit);
   } else {
@@ -240,17 +252,11 @@ __global__ void __launch_bounds__(kBlock)
   std::uint32_t rank;
   Scan(tmp).ExclusiveSum(mine, rank);
   if (mine == 0) return;
-  std::uint32_t w = block_offset[blockIdx.x] + rank;
-  auto emit = [&](std::uint32_t a, std::uint32_t b) {
-    const std::uint32_t pa = input_index(perm, a), pb = input_index(perm, b);  // a < b as the host
-    pair_a[w] = pa < pb ? pa : pb;
-    pair_b[w] = pa < pb ? pb : pa;
-    ++w;
-  };
+  const std::uint32_t a = body[e];
+  PairWriter<std::uint32_t> emit{pair_a, pair_b, perm, input_index(perm, a), block_offset[blockIdx.x] + rank};
   if (bits & 1u) {
     walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test, emit);
   } else {
-    const std::uint32_t a = body[e];
     for (std::uint32_t m = bits; m != 0; m &= m - 1) emit(a, body[e + __ffs(m) - 1]);
   }
 }
@@ -334,7 +340,7 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
     launch_fill_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.pair_perm(), r.d_report,
                       r.g.half_bits, d_pair_count, d_entry_offsets, r.pair_a.Current(), r.pair_b.Current());
   }
-  r.events.mark(Stage::pairs, st);
+  r.events.mark(EngineStage::pairs, st);
 }
 
 }  // namespace cg::detail

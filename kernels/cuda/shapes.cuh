@@ -18,10 +18,9 @@ namespace cg::cuda {
 // The device-array path's shape check, in two parts that read each row once: here (before the call's
 // plan, which needs the count) the kind bytes alone — c->ellipsoids += the ellipsoids, c->bad_shape =
 // n - i of the first body i of no known kind (the sphere-only path packs no shapes) — grid-stride;
-// the rest of validate_shapes' predicate runs in pack_shapes, which reads the rows anyway (it read
-// them twice before: 0.37 ms of the 2^24 plan, BENCHMARKS §3). The count is summed over the warp
-// before its one atomic: an atomic per thread on one address (131 072 of them) cost the device-array
-// call ~0.14 ms (H100, 2^20 and 2^22 alike).
+// the rest of validate_shapes' predicate runs in pack_shapes, which reads the rows anyway (so the rows
+// are read once, BENCHMARKS.md §3). The count is summed over the warp before its one atomic: an atomic
+// per thread on one address would serialise on it.
 __global__ void shape_count_kernel(const Shape* __restrict__ kind, std::uint64_t n,
                                    Counters* __restrict__ c) {
   std::uint32_t ellipsoids = 0;

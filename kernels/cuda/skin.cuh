@@ -79,7 +79,7 @@ bool skin_stage(RunState<Real, Key, Narrow>& r) {
   m.report_changed = r.h_counters->skin_report_changed != 0 || (r.d_report != nullptr) != ws.kept_reported;
   r.stats.skin_displacement = m.displacement;
   r.stats.skin_growth = m.growth;
-  r.events.mark(Stage::skin, st);
+  r.events.mark(EngineStage::skin, st);
   return skin_covers(m, r.job.skin);
 }
 
@@ -106,7 +106,7 @@ void keep_candidates(RunState<Real, Key, Narrow>& r) {
   if (r.d_report) copy(ws.ref_report.data(), r.d_report, n);
   ws.kept_count = r.np;
   ws.kept_reported = r.d_report != nullptr;
-  r.events.mark(Stage::order, st);
+  r.events.mark(EngineStage::order, st);
 }
 
 // The reuse: the kept list as the candidates (Current; the narrow stage's accept flags and offsets

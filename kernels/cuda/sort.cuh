@@ -1,6 +1,6 @@
 #pragma once
 // CUDA stage sort: the entries by cell key, cub::DeviceRadixSort::SortPairs over bits [0, key_bits)
-// (CUB's radix sort: measured faster than the alternatives, kernels/cuda/BENCH.md).
+// (CUB's radix sort: measured faster than the alternatives, BENCHMARKS.md §11).
 #include <cub/device/device_radix_sort.cuh>
 
 #include "cuda/run_state.cuh"
@@ -13,7 +13,7 @@ void sort_stage(RunState<Real, Key, Narrow>& r) {
   cub_run(r.ws, "sort", [&](void* t, std::size_t& b) {
     return cub::DeviceRadixSort::SortPairs(t, b, r.keys, r.body, ne, 0, key_bits, r.st);
   });
-  r.events.mark(Stage::sort, r.st);
+  r.events.mark(EngineStage::sort, r.st);
 }
 
 }  // namespace cg::detail

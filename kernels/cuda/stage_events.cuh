@@ -42,19 +42,19 @@ class StageEvents {
   }
   cudaEvent_t start_event() const { return m_events[0]; }
   // The end of stage s.
-  void mark(Stage s, cudaStream_t st) {
+  void mark(EngineStage s, cudaStream_t st) {
     CG_CUDA_CHECK(cudaEventRecord(m_events[index(s) + 1], st));
     m_recorded[index(s)] = true;
   }
-  cudaEvent_t end_event(Stage s) const { return m_events[index(s) + 1]; }
+  cudaEvent_t end_event(EngineStage s) const { return m_events[index(s) + 1]; }
   cudaEvent_t pass_event(int i) const { return m_pass[i]; }
   // Stage s takes `ms` instead of its event span (type passes).
-  void set_time(Stage s, double ms) {
+  void set_time(EngineStage s, double ms) {
     m_override[index(s)] = true;
     m_override_ms[index(s)] = ms;
   }
   // Stage s's set time also gets the span from the last pass event to its end event.
-  void add_tail(Stage s) {
+  void add_tail(EngineStage s) {
     m_tail = true;
     m_tail_stage = s;
   }
@@ -97,7 +97,7 @@ class StageEvents {
         }
         sec = o * 1e-3;
       }
-      if (i == index(Stage::download)) sec = std::max(sec, download_overlap_s) + download_extra_s;
+      if (i == index(EngineStage::download)) sec = std::max(sec, download_overlap_s) + download_extra_s;
       times.push_back({name(stage_at(i)), sec});
       prev = m_events[i + 1];
     }
@@ -112,7 +112,7 @@ class StageEvents {
   bool m_override[kStageCount] = {};
   double m_override_ms[kStageCount] = {};
   bool m_tail = false;
-  Stage m_tail_stage = Stage::pairs;
+  EngineStage m_tail_stage = EngineStage::pairs;
 };
 
 }  // namespace cg::detail

@@ -21,7 +21,7 @@ void for_each_field(Contacts<Real>& out, const cuda::ContactPtrs<Real>& cp, bool
 // upload: the DEVICE bodies of the call: the caller's arrays (device-array API), or the host arrays
 // copied into ws.pos / rad / report (stage "upload"). Large input arrays are page-locked in place for
 // the copy (they are already resident, so that only pins them) and unpinned once it is done: a
-// pageable copy is staged by the driver on one thread (2^26 bodies, 2 GB: 0.29 s on the H200 host).
+// pageable copy is staged by the driver on one thread.
 // A range the driver refuses (e.g. a page shared with an array already registered) is copied
 // pageable. Tuning::upload_registered forces one.
 template <class Real, class Key, class Narrow>
@@ -57,7 +57,7 @@ void upload_stage(RunState<Real, Key, Narrow>& r) {
     upload(ws.report.data(), r.job.bodies.report.data(), n64);
     r.d_report = reinterpret_cast<const std::uint8_t*>(ws.report.data());
   }
-  r.events.mark(Stage::upload, r.st);
+  r.events.mark(EngineStage::upload, r.st);
   if (!locked.empty()) {
     CG_CUDA_CHECK(cudaStreamSynchronize(r.st));  // the copies read the locked ranges until here
     for (void* p : locked) CG_CUDA_CHECK(cudaHostUnregister(p));
@@ -73,8 +73,8 @@ struct DownloadHostTimes {
 // download: the contact rows described in DEVICE memory (job.device_out), or copied into `out`.
 // Large results go straight into the result vectors, page-locked in place (cudaHostRegister: that is
 // their first touch); small ones, and any range the driver will not register, through the pinned
-// staging buffer and a parallel host copy. At 2^26 contacts the staged path paid a first touch of
-// the staging buffer and another of the vectors. Tuning::download_registered forces one.
+// staging buffer and a parallel host copy (for large results the staged path pays a first touch of
+// the staging buffer and another of the vectors). Tuning::download_registered forces one.
 template <class Real, class Key, class Narrow>
 DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuffer& h_staging,
                                  Contacts<Narrow>& out) {
@@ -106,9 +106,8 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
       fields.push_back({vec.data(), d_ptr});
       sizes.push_back(vec.size() * sizeof(vec[0]));
     });
-    // First touch on every host thread: registering faults the pages in on one thread (1.5 GB on
-    // the 2×H200 host: touch 0.05 s on 32 threads, then register 0.06 s and copy 0.03 s; the
-    // download of 2^26 contacts took 0.36–0.41 s without it).
+    // First touch on every host thread: registering would fault the pages in on one thread, several
+    // times slower than the parallel touch (BENCHMARKS.md §4).
     std::vector<CopyBlock> touch;
     for (std::size_t f = 0; f < fields.size(); ++f) touch.push_back({fields[f].first, nullptr, sizes[f]});
     parallel_copy(touch.data(), touch.size(), 0);
@@ -122,7 +121,7 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
       for (std::size_t f = 0; f < fields.size(); ++f)
         CG_CUDA_CHECK(
             cudaMemcpyAsync(fields[f].first, fields[f].second, sizes[f], cudaMemcpyDeviceToHost, st));
-      r.events.mark(Stage::download, st);
+      r.events.mark(EngineStage::download, st);
       CG_CUDA_CHECK(cudaStreamSynchronize(st));
       ht.overlap_s = std::chrono::duration<double>(t1 - t0).count();  // registering, before the copy
     } else {
@@ -135,7 +134,7 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
   if (!registered) {
     h_staging.reserve(std::max<std::size_t>(at, 1));
     if (at > 0) CG_CUDA_CHECK(cudaMemcpyAsync(h_staging.data(), o, at, cudaMemcpyDeviceToHost, st));
-    r.events.mark(Stage::download, st);
+    r.events.mark(EngineStage::download, st);
     // The result vectors are sized (no fill: HostVector) while the transfer runs.
     const auto t0 = clock_type::now();
     out.resize(np, full);

@@ -2,8 +2,8 @@
 // The CUDA backend's tuning knobs, read from the environment in one place (read_tuning()). They
 // choose among paths that give the same results (measurement and test knobs) or cap the device
 // memory the workspace may use. The backend reads them at construction and again at the start of each
-// call (CudaBackend::refresh_tuning), so a knob set between two calls on one engine takes effect, as
-// before the knobs were gathered here. g++-safe.
+// call (CudaBackend::refresh_tuning), so a knob set between two calls on one engine takes effect.
+// g++-safe.
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -18,9 +18,8 @@ enum class Forced { automatic, off, on };
 
 struct Tuning {
   // CONTACTGRID_CUDA_TYPE_PASSES=1: Le Grand's 8 passes by cell type (opt-in; =0 or unset: the single
-  // sort of all entries). Measured on an H200 (kernels/cuda/BENCH.md, h-cudaperf2): 65 instead of 125
-  // B/sphere (fp32, excl. contacts) but slower at every size measured (2^24 fp32: 7.55 vs 6.86 ms;
-  // 2^20: 0.99 vs 0.59 ms: 8 compaction fills and 8 sorts cost more than the radix pass they save).
+  // sort of all entries). About half the device memory a sphere, but slower at every size: 8 compaction
+  // fills and 8 sorts cost more than the radix pass they save (BENCHMARKS.md §11).
   bool type_passes = false;
   // CONTACTGRID_DEVICE_MEMORY_LIMIT (bytes) caps the engine's workspace: a smaller GPU, or a GPU
   // shared with a simulation, can be imitated (and the out-of-memory path tested).

@@ -82,7 +82,7 @@ void type_pass_stages(RunState<Real, Key, Narrow>& r) {
   run_passes(d_pair_store, cap);
   {
     float ms = 0;  // the scan and the host sync after pack, as in the single-sort path's entries stage
-    CG_CUDA_CHECK(cudaEventElapsedTime(&ms, ev_all.end_event(Stage::pack), ev_all.pass_event(0)));
+    CG_CUDA_CHECK(cudaEventElapsedTime(&ms, ev_all.end_event(EngineStage::pack), ev_all.pass_event(0)));
     pass_ms[0] += ms;
   }
   if (r.h_counters->pairs > cap) {
@@ -102,12 +102,12 @@ void type_pass_stages(RunState<Real, Key, Narrow>& r) {
   r.pair_a = cub::DoubleBuffer<std::uint32_t>(d_pair_store, d_pair_store + 2 * cap);
   r.pair_b = cub::DoubleBuffer<std::uint32_t>(d_pair_store + cap, d_pair_store + 3 * cap);
   // Stage times: the passes' fill / sort / count times, summed (the marks only close the chain).
-  ev_all.mark(Stage::entries, st);
-  ev_all.mark(Stage::sort, st);
-  ev_all.mark(Stage::pairs, st);
-  const Stage timed[3] = {Stage::entries, Stage::sort, Stage::pairs};
+  ev_all.mark(EngineStage::entries, st);
+  ev_all.mark(EngineStage::sort, st);
+  ev_all.mark(EngineStage::pairs, st);
+  const EngineStage timed[3] = {EngineStage::entries, EngineStage::sort, EngineStage::pairs};
   for (int s = 0; s < 3; ++s) ev_all.set_time(timed[s], pass_ms[s]);
-  ev_all.add_tail(Stage::pairs);  // + the host sync after the last pass, to the pairs mark
+  ev_all.add_tail(EngineStage::pairs);  // + the host sync after the last pass, to the pairs mark
 }
 
 }  // namespace cg::detail

@@ -175,7 +175,7 @@ struct Workspace {
 // CUB's two-phase calls, wrapped once: `call(temp, bytes)` is queried with temp == nullptr, the
 // workspace's temp grows to the answer (memory-checked as `what`), then the call runs. The radix sorts
 // stay CUB's (cub::DeviceRadixSort over begin_bit..end_bit with double buffers): measured faster than
-// the alternatives for the entry and pair sorts (kernels/cuda/BENCH.md).
+// the alternatives for the entry and pair sorts (BENCHMARKS.md §11).
 template <class F>
 std::size_t cub_temp_bytes(F&& call) {
   std::size_t bytes = 0;

@@ -66,7 +66,7 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
     stats.skin_displacement = m.displacement;
     stats.skin_growth = m.growth;
     reuse = skin_covers(m, job.skin);
-    timer.lap(Stage::skin);
+    timer.lap(EngineStage::skin);
   }
 
   host::PackedBodies<Broad> bodies;
@@ -80,7 +80,7 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   if (shapes) host::pack_shapes(job.bodies, nt, packed_shapes);
   if (cut) host::cut_shapes(packed_shapes, nt, bodies.cut);
   if (cut && grid) host::shape_cells(job.grid, nt, bodies);
-  timer.lap(Stage::pack);
+  timer.lap(EngineStage::pack);
 
   const NarrowBodies<Narrow> world =
       narrow_bodies<Broad, Narrow>(job.bodies, bodies, job.plan.frame.origin, float(job.grid.radius_margin));
@@ -94,46 +94,46 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
     if (grid) {
       host::Entries<Key> entries;
       stats.entries = host::fill_entries(bodies, job.grid, nt, entries);
-      timer.lap(Stage::entries);
+      timer.lap(EngineStage::entries);
 
       host::sort_entries(entries, job.plan.key_bits, nt);
-      timer.lap(Stage::sort);
+      timer.lap(EngineStage::sort);
 
       stats.pair_tests = host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter,
                                                fp64, nt, built);
       entries = {};
-      timer.lap(Stage::pairs);
+      timer.lap(EngineStage::pairs);
     } else if (job.broad == BroadPhase::levels) {  // a grid per level, then the pairs across levels
       host::Entries<Key> entries;
       host::level_cells(job.levels, nt, bodies);
       stats.entries = host::level_entries(bodies, job.levels, nt, entries);
-      timer.lap(Stage::entries);
+      timer.lap(EngineStage::entries);
 
       host::sort_entries(entries, job.plan.key_bits, nt);
-      timer.lap(Stage::sort);
+      timer.lap(EngineStage::sort);
 
       stats.pair_tests = host::find_candidates(entries, bodies, job.bodies.report, job.levels.key_shift - 3,
                                                filter, fp64, nt, built);
       stats.pair_tests += host::cross_level_candidates(entries, bodies, job.levels, job.bodies.report, filter,
                                                        fp64, nt, built);
       entries = {};
-      timer.lap(Stage::pairs);
+      timer.lap(EngineStage::pairs);
     } else if (job.broad == BroadPhase::sweep) {
       host::SweepOrder order;
       host::sweep_sort(bodies, job.sweep_axis, nt, order);
-      timer.lap(Stage::sort);
+      timer.lap(EngineStage::sort);
 
       stats.pair_tests =
           host::sweep_candidates(order, bodies, job.sweep_axis, job.bodies.report, filter, fp64, nt, built);
-      timer.lap(Stage::pairs);
+      timer.lap(EngineStage::pairs);
     } else {
       stats.pair_tests = host::brute_candidates(bodies, job.bodies.report, filter, fp64, nt, built);
-      timer.lap(Stage::pairs);
+      timer.lap(EngineStage::pairs);
     }
 
     host::order_candidates(built, nt);
     if (skin) host::keep_candidates(job.bodies, built, be.kept);
-    timer.lap(Stage::order);
+    timer.lap(EngineStage::order);
   }
   if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
   const host::CandidatePairs& candidates = reuse ? be.kept.pairs : built;
@@ -146,7 +146,7 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   } else {
     host::narrow(candidates, world, job.fields, nt, out, stats);
   }
-  timer.lap(Stage::narrow);
+  timer.lap(EngineStage::narrow);
 }
 
 }  // namespace

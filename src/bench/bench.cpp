@@ -22,11 +22,14 @@
 #include <numeric>
 #include <ostream>
 
-#include "validate/bullet_oracle.hpp"
 #include "errors.hpp"
-#include "scene/generate.hpp"
 #include "io/scene_file.hpp"
+#include "io/text_file.hpp"
+#include "run/progress.hpp"
+#include "scene/generate.hpp"
 #include "stage.hpp"
+#include "timing.hpp"
+#include "validate/bullet_oracle.hpp"
 
 extern char** environ;
 
@@ -34,14 +37,6 @@ namespace cg {
 namespace {
 
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
-
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t m = v.size() / 2;
-  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
-}
-
 std::string field(double v, const char* f = "{:.6g}") {
   return v >= 0 && std::isfinite(v) ? fmt::format(fmt::runtime(f), v) : std::string();
 }
@@ -121,14 +116,14 @@ void time_engine(const BenchOptions& o, Backend b, const BodiesView& view, Bench
     Engine<decltype(real)> engine(eo);
     count = std::int64_t(engine.detect(view).size());  // warm-up, untimed
     for (int r = 0; r < o.repetitions; ++r) {
-      const auto t0 = Clock::now();
+      const auto t0 = WallClock::now();
       const auto c = engine.detect(view);
-      times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+      times.push_back(seconds_since(t0));
       if (std::int64_t(c.size()) != count)
         throw Error(fmt::format("bench: engine ({}) gave {} then {} contacts at N = {}", to_string(b), count,
                                 c.size(), row.n));
       for (const StageTime& t : engine.times())
-        if (t.name == detail::name(detail::Stage::narrow)) narrow_times.push_back(t.seconds);
+        if (t.name == detail::name(detail::EngineStage::narrow)) narrow_times.push_back(t.seconds);
     }
     const EngineStats& st = engine.stats();
     nc = {st.candidates, st.narrow_hard, st.narrow_fallbacks, st.narrow_unconverged, -1};
@@ -268,23 +263,9 @@ void print_shape_table(const BenchResult& r, const std::vector<Backend>& backend
 }
 
 void write_csv(const std::string& path, const std::vector<std::string>& lines) {
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  {
-    std::ofstream f(tmp);
-    for (const auto& l : lines) f << l << '\n';
-    f.close();
-    if (!f) {
-      std::error_code ec;
-      fs::remove(tmp, ec);
-      throw IoError("bench: cannot write " + path);
-    }
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) {
-    fs::remove(tmp, ec);
-    throw IoError("bench: cannot write " + path + ": " + ec.message());
-  }
+  std::string text;
+  for (const auto& l : lines) text += l + '\n';
+  write_text_file(path, text);
 }
 
 void print_table(const BenchResult& r, const std::vector<Backend>& backends, std::ostream& out) {
@@ -364,6 +345,7 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
                                    : fmt::format("{}, aspect <= 1:{:g}, ", to_string(o.kind), o.max_aspect),
       o.lo, hi, o.kind == BenchKind::spheres ? "double" : "float, exact ellipsoid support", o.bullet_hi,
       to_string(o.precision), o.engine_hi, o.repetitions, o.seed);
+  Progress bar("bench", "sizes", std::uint64_t(std::max(0, hi - o.lo + 1)));
   for (int e = o.lo; e <= hi; ++e) {
     BenchRow row;
     row.n = std::uint64_t(1) << e;
@@ -393,10 +375,13 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
     }
     judge_agreement(row, o.kind);
     result.rows.push_back(row);
+    bar.finish();
     out << fmt::format("  N = 2^{}: done", e);
     if (row.bullet_scratch_s >= 0) out << fmt::format(" (Bullet {:.3g} s)", row.bullet_scratch_s);
     out << '\n' << std::flush;
+    bar.add(1);
   }
+  bar.finish();
 
   // Slopes over N >= 2^14.
   auto series = [&](auto get) {

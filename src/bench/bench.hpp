@@ -23,7 +23,7 @@
 // "agree": spheres: every contact count measured at that N (engine backends, Bullet) is the same.
 // Ellipsoids and mixed: the engine backends' counts are the same and Bullet's differs from them by
 // at most bullet_count_allowance() (float Bullet misses 0.2–0.3 % of the contacts, all shallow:
-// README "Validating ellipsoids", BENCHMARKS.md §8).
+// docs/VALIDATION.md, BENCHMARKS.md §8).
 //
 // CSV columns, spheres (fixed; an empty field means "not run"):
 //   n, log2n, contacts, bullet_contacts, agree, bullet_scratch_s, bullet_warm_s, engine_cpu_s,

@@ -107,10 +107,10 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
   }
   fmt::print(out, "bench-broad: backend {}, precision {}, median of {} (seconds; '-': not run)\n",
              to_string(o.backend), to_string(o.precision), o.repetitions);
-  fmt::print(out, "{:<15} {:>9} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}  {:<7} {:>9} {:>8} {:>9}\n",
+  fmt::print(out, "{:<15} {:>9} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}  {:<7} {:>9} {:>8} {:>9} {:>9}\n",
              "family", "N", "contacts", "grid", "levels", "sweep", "brute", "auto", "best", "auto/best",
-             "ns/cont", "/uniform");
-  std::map<int, double> uniform_best;  // log2 N → the uniform row's best
+             "ns/cont", "/uniform", "/unif/c");
+  std::map<int, double> uniform_best, uniform_per_contact;  // log2 N → the uniform row's best (per contact)
   const std::uint64_t total = std::uint64_t(run.size()) * std::uint64_t((o.hi - o.lo) / o.step + 1);
   Progress progress("bench-broad", "rows", total);
   std::uint64_t done = 0;
@@ -153,21 +153,29 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
       for (const auto& [bp, tm] : t)
         if (bp != BroadPhase::automatic && (best_s == 0 || tm.seconds < best_s))
           best = bp, best_s = tm.seconds;
-      if (f.name == "uniform") uniform_best[lg] = best_s;
+      const double per_contact = best_s / double(std::max<std::uint64_t>(1, contacts.value_or(0)));
+      if (f.name == "uniform") {
+        uniform_best[lg] = best_s;
+        uniform_per_contact[lg] = per_contact;
+      }
       auto cell = [&](BroadPhase bp) {
         return t.count(bp) ? fmt::format("{:.4f}", t[bp].seconds) : std::string("-");
       };
       const std::string vs_uniform =
           uniform_best.count(lg) ? fmt::format("{:.2f}", best_s / uniform_best[lg]) : std::string("-");
+      const std::string vs_uniform_per_contact =
+          uniform_per_contact.count(lg) ? fmt::format("{:.2f}", per_contact / uniform_per_contact[lg])
+                                        : std::string("-");
       fmt::print(
-          out, "{:<15} {:>9} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}  {:<7} {:>9.2f} {:>8.1f} {:>9}\n",
+          out,
+          "{:<15} {:>9} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}  {:<7} {:>9.2f} {:>8.1f} {:>9} {:>9}\n",
           f.name, g.count, contacts.value_or(0), cell(BroadPhase::grid), cell(BroadPhase::levels),
           cell(BroadPhase::sweep), cell(BroadPhase::brute),
           t.count(BroadPhase::automatic)
               ? fmt::format("{}:{}", to_string(t[BroadPhase::automatic].ran)[0], cell(BroadPhase::automatic))
               : std::string("-"),
           to_string(best), t.count(BroadPhase::automatic) ? t[BroadPhase::automatic].seconds / best_s : 0.0,
-          1e9 * best_s / double(std::max<std::uint64_t>(1, contacts.value_or(0))), vs_uniform);
+          1e9 * per_contact, vs_uniform, vs_uniform_per_contact);
       out.flush();
       progress.update(++done);
     }

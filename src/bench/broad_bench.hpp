@@ -14,8 +14,8 @@
 // device). A broad phase whose run at some N took longer than `budget_s` is not run at larger N of
 // that family ("-"); brute runs while N <= 2^brute_hi, sweep while N <= 2^sweep_hi. Every broad phase
 // of a row must find the same number of contacts (else the command fails: they are the same bits).
-// Columns: seconds per broad phase; best = the fastest; auto/best; ns per contact of the best; and
-// best / uniform's best at that N.
+// Columns: seconds per broad phase; best = the fastest; auto/best; ns per contact of the best; the
+// best against the uniform row's best at that N (/uniform: time; /unif/c: time per contact).
 #include <cstdint>
 #include <iosfwd>
 #include <string>

@@ -5,9 +5,14 @@
 
 #include <CLI/CLI.hpp>
 #include <cmath>
+#include <functional>
 #include <iostream>
 #include <map>
+#include <memory>
+#include <vector>
 
+#include "cli/commands.hpp"
+#include "io/xdmf.hpp"
 #include "run/pipeline.hpp"
 #if defined(CONTACTGRID_HAVE_BULLET)
 #include "bench/bench.hpp"
@@ -70,20 +75,30 @@ Accuracy parse_accuracy(const std::string& text) {
   return a;
 }
 
-int run_cli(int argc, char** argv, Session& session) {
-  CLI::App app{
-      "contactgrid: every touching or overlapping pair of spheres, with Bullet's contact data.\n"
-      "Le Grand's uniform grid on a CPU or CUDA backend; MPI slabs under mpirun."};
-  app.require_subcommand(1);
-  app.set_version_flag("--version", "contactgrid " CONTACTGRID_VERSION);
+namespace {
 
-  // generate
-  GenerateOptions gen;
-  std::string gen_out;
-  bool gen_quiet = false;
-  std::vector<double> offset;
-  auto* g = app.add_subcommand("generate", "Make a seeded, reproducible scene (CONTRACT §1 HDF5)");
-  g->add_option("output", gen_out, "Scene file to write (.h5)")->required();
+// One subcommand: its options, defined on the app (their values live as long as `run`), and what
+// runs once they are parsed.
+struct Subcommand {
+  CLI::App* app = nullptr;
+  std::function<int(Session&)> run;
+};
+
+// generate: a seeded scene file (rank 0 writes it).
+Subcommand add_generate(CLI::App& app) {
+  struct Args {
+    GenerateOptions options;
+    std::string output;
+    bool quiet = false;
+    bool xdmf = false;
+    std::vector<double> offset;
+    double ratio = 10;
+    double max_aspect = 0;
+  };
+  const auto args = std::make_shared<Args>();
+  GenerateOptions& gen = args->options;
+  auto* g = app.add_subcommand("generate", "Make a seeded, reproducible scene (docs/FORMAT.md §1 HDF5)");
+  g->add_option("output", args->output, "Scene file to write (.h5)")->required();
   g->add_option(
        "--kind", gen.kind,
        "uniform | polydisperse | ellipsoids (semi-axes uniform in [Rlow, Rhigh], random orientations) "
@@ -106,17 +121,15 @@ int run_cli(int argc, char** argv, Session& session) {
       ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1) << 28))
       ->capture_default_str();
   g->add_option("--seed", gen.seed, "Random seed")->capture_default_str();
-  double gen_ratio = 10;
   auto* rlow_opt =
       g->add_option("--rlow", gen.radius_low, "Smallest radius Rlow (length units)")->capture_default_str();
-  g->add_option("--ratio", gen_ratio,
+  g->add_option("--ratio", args->ratio,
                 "polydisperse, bimodal, intruders: Rhigh / Rlow when --rlow is not given (up to 1000)")
       ->check(CLI::Range(1.0, 1000.0))
       ->capture_default_str();
   g->add_option("--rhigh", gen.radius_high, "Largest radius Rhigh (length units)")->capture_default_str();
-  double gen_max_aspect = 0;
   auto* aspect_opt =
-      g->add_option("--max-aspect", gen_max_aspect,
+      g->add_option("--max-aspect", args->max_aspect,
                     "ellipsoids, mixed: semi-axes U[Rhigh/K, Rhigh], no body longer than 1:K (sets Rlow)")
           ->check(CLI::Range(1.0, 1000.0))
           ->excludes(rlow_opt);
@@ -124,15 +137,42 @@ int run_cli(int argc, char** argv, Session& session) {
                 "Target mean contacts per sphere; sets the box edge (course: 0.4)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  g->add_option("--offset", offset, "Translate the scene by (x, y, z)")->expected(3);
-  g->add_flag("-q,--quiet", gen_quiet, "No summary");
+  g->add_option("--offset", args->offset, "Translate the scene by (x, y, z)")->expected(3);
+  g->add_flag("-q,--quiet", args->quiet, "No summary");
+  g->add_flag("--xdmf", args->xdmf,
+              "Also write XDMF beside the scene for ParaView (<scene>.spheres.xmf, ...)");
 
-  // detect
-  DetectCommand det;
-  auto* d = app.add_subcommand("detect", "Every contact of a scene (CONTRACT §2/§3), sorted by (id_a, id_b)");
+  return {
+      g, [args, rlow_opt, aspect_opt](Session& session) {
+        if (session.rank() != 0) return 0;  // one writer
+        GenerateOptions& options = args->options;
+        const std::vector<double>& offset = args->offset;
+        if (!offset.empty()) options.offset = {offset[0], offset[1], offset[2]};
+        if ((options.kind == "polydisperse" || options.kind == "bimodal" || options.kind == "intruders") &&
+            rlow_opt->count() == 0)
+          options.radius_low = options.radius_high / args->ratio;
+        if (aspect_opt->count() > 0) {
+          if (options.kind != "ellipsoids" && options.kind != "mixed")
+            throw UsageError("--max-aspect applies to --kind ellipsoids or mixed");
+          options.radius_low = options.radius_high / args->max_aspect;
+        }
+        const int code = run_generate(args->output, options, args->quiet);
+        if (args->xdmf) write_xdmf(args->output, "", xdmf_base(args->output));
+        return code;
+      }};
+}
+
+// detect: every contact of a scene, over all ranks (run/pipeline.hpp).
+Subcommand add_detect(CLI::App& app) {
+  const auto args = std::make_shared<DetectCommand>();
+  DetectCommand& det = *args;
+  auto* d =
+      app.add_subcommand("detect", "Every contact of a scene (docs/FORMAT.md §2/§3), sorted by (id_a, id_b)");
   d->add_option("scene", det.input, "Scene file (.h5)")
       ->required();  // existence is checked by the reader (exit 3, names the file)
-  d->add_option("-o,--output", det.output, "Contacts file to write (.h5)")->required();
+  d->add_option("-o,--output", det.output,
+                "Contacts file to write (.h5); its directory must exist and be writable (checked first)")
+      ->required();
   d->add_option("--backend", det.backend, "cpu | cuda | auto (cuda when a GPU is present)")
       ->transform(CLI::CheckedTransformer(k_backends))
       ->default_str("auto");
@@ -151,7 +191,7 @@ int run_cli(int argc, char** argv, Session& session) {
        "auto | fp32 | fp64 | mixed: auto (default) picks the cheapest mode whose documented bounds meet "
        "--accuracy for this scene (default accuracy: fp64's, so fp64's answers); fp32 and fp64 run every "
        "stage and write their real type; mixed runs the broad phase in fp32 and the narrow phase in fp64 "
-       "from the world coordinates (float64 output, fp64's contacts); README 'Choosing a precision'")
+       "from the world coordinates (float64 output, fp64's contacts); docs/PRECISION.md")
       ->default_str("auto");
   d->add_option_function<std::string>(
       "--accuracy",
@@ -235,18 +275,45 @@ int run_cli(int argc, char** argv, Session& session) {
                 "axis drawn from its id, and the ghosts' orientations refresh through MPI; the last step's "
                 "contacts are then checked against the turned bodies detected from scratch")
       ->needs(steps);
-  d->add_flag("-q,--quiet", det.quiet, "No summary");
+  auto* det_quiet = d->add_flag("-q,--quiet", det.quiet, "No summary");
+  d->add_flag("-v,--verbose", det.verbose,
+              "Also the run's info lines: the merge of the ranks' contacts, with the duplicates removed "
+              "(expected 0; removed duplicates are reported without -v too)")
+      ->excludes(det_quiet);
+  d->add_flag("--xdmf", det.xdmf,
+              "Also write XDMF beside the contacts for ParaView: <output>.xmf (contacts) and the bodies' "
+              "<output>.spheres.xmf, <output>.ellipsoids.xmf");
 
-  // compare
-  std::string cmp_a, cmp_b;
+  return {d, [args](Session& session) {
+            const int code = run_detect(*args, session);
+            if (args->xdmf && session.rank() == 0)
+              write_xdmf(args->input, args->output, xdmf_base(args->output));
+            return code;
+          }};
+}
+
+// compare: are two contact files' /contacts byte-identical (rank 0)?
+Subcommand add_compare(CLI::App& app) {
+  struct Args {
+    std::string a, b;
+  };
+  const auto args = std::make_shared<Args>();
   auto* c = app.add_subcommand(
       "compare", "Are the /contacts datasets of two contact files byte-identical? (0 yes, 1 no)");
-  c->add_option("a", cmp_a, "Contacts file")->required();
-  c->add_option("b", cmp_b, "Contacts file")->required();
+  c->add_option("a", args->a, "Contacts file")->required();
+  c->add_option("b", args->b, "Contacts file")->required();
 
-  // study
-  StudyOptions study;
-  std::vector<std::string> study_backends;
+  return {c, [args](Session& session) { return session.rank() == 0 ? run_compare(args->a, args->b) : 0; }};
+}
+
+// study: speed against accuracy of the precision modes (rank 0).
+Subcommand add_study(CLI::App& app) {
+  struct Args {
+    StudyOptions options;
+    std::vector<std::string> backends;
+  };
+  const auto args = std::make_shared<Args>();
+  StudyOptions& study = args->options;
   std::vector<std::string> family_names;
   for (const auto& f : study_families()) family_names.push_back(f.name);
   auto* st = app.add_subcommand(
@@ -259,7 +326,7 @@ int run_cli(int argc, char** argv, Session& session) {
   st->add_option("--modes", study.modes, "Precision modes to run (default: all)")
       ->delimiter(',')
       ->check(CLI::IsMember(study_mode_names()));
-  st->add_option("--backends", study_backends, "cpu, cuda (default: cpu, and cuda when a GPU is present)")
+  st->add_option("--backends", args->backends, "cpu, cuda (default: cpu, and cuda when a GPU is present)")
       ->delimiter(',')
       ->check(CLI::IsMember({"cpu", "cuda"}));
   st->add_option("--tolerances", study.tolerances,
@@ -278,47 +345,68 @@ int run_cli(int argc, char** argv, Session& session) {
   st->add_option("--csv", study.csv, "Write the rows as CSV");
   st->add_option("--svg", study.svg, "Write the time-vs-error plot (Pareto front) as SVG");
 
-  // bench-broad
-  BroadBenchOptions bb;
+  return {st, [args](Session& session) {
+            if (session.rank() != 0) return 0;
+            for (const auto& name : args->backends)
+              args->options.backends.push_back(name == "cuda" ? Backend::cuda : Backend::cpu);
+            run_study(args->options, std::cout, std::cerr);
+            return 0;
+          }};
+}
+
+// bench-broad: the broad phases' timings (rank 0).
+Subcommand add_bench_broad(CLI::App& app) {
+  const auto args = std::make_shared<BroadBenchOptions>();
   auto* bbc = app.add_subcommand(
       "bench-broad",
       "Timing of the broad phases (grid, levels, sweep, brute, auto) x scene families x N on one backend: "
       "table and CSV; no Bullet needed");
-  bbc->add_option("--families", bb.families, "Families to run (default: all)")
+  bbc->add_option("--families", args->families, "Families to run (default: all)")
       ->delimiter(',')
       ->check(CLI::IsMember(broad_bench_families()));
-  bbc->add_option("--lo", bb.lo, "First N = 2^lo")->capture_default_str();
-  bbc->add_option("--hi", bb.hi, "Last N = 2^hi")->capture_default_str();
-  bbc->add_option("--step", bb.step, "log2 N step")->check(CLI::PositiveNumber)->capture_default_str();
-  bbc->add_option("--backend", bb.backend, "cpu | cuda")
+  bbc->add_option("--lo", args->lo, "First N = 2^lo")->capture_default_str();
+  bbc->add_option("--hi", args->hi, "Last N = 2^hi")->capture_default_str();
+  bbc->add_option("--step", args->step, "log2 N step")->check(CLI::PositiveNumber)->capture_default_str();
+  bbc->add_option("--backend", args->backend, "cpu | cuda")
       ->transform(CLI::CheckedTransformer(
           std::map<std::string, Backend>{{"cpu", Backend::cpu}, {"cuda", Backend::cuda}}))
       ->default_str("cpu");
-  bbc->add_option("--precision", bb.precision, "fp32 | fp64 | mixed")
+  bbc->add_option("--precision", args->precision, "fp32 | fp64 | mixed")
       ->transform(CLI::CheckedTransformer(k_precisions))
       ->default_str("fp64");
-  bbc->add_option("--repetitions", bb.repetitions, "Time = median of this many warm detections")
+  bbc->add_option("--repetitions", args->repetitions, "Time = median of this many warm detections")
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
-  bbc->add_option("--threads", bb.threads, "CPU backend threads (0: all cores)")
+  bbc->add_option("--threads", args->threads, "CPU backend threads (0: all cores)")
       ->check(CLI::NonNegativeNumber);
-  bbc->add_option("--brute-hi", bb.brute_hi, "brute runs while N <= 2^brute-hi")->capture_default_str();
-  bbc->add_option("--sweep-hi", bb.sweep_hi, "sweep runs while N <= 2^sweep-hi")->capture_default_str();
-  bbc->add_option("--budget", bb.budget_s,
+  bbc->add_option("--brute-hi", args->brute_hi, "brute runs while N <= 2^brute-hi")->capture_default_str();
+  bbc->add_option("--sweep-hi", args->sweep_hi, "sweep runs while N <= 2^sweep-hi")->capture_default_str();
+  bbc->add_option("--budget", args->budget_s,
                   "Seconds: a broad phase slower than this at some N is not run at larger N of the family")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  bbc->add_option("--seed", bb.seed, "Scene seed")->capture_default_str();
-  bbc->add_option("--csv", bb.csv, "Also write the runs as CSV");
+  bbc->add_option("--seed", args->seed, "Scene seed")->capture_default_str();
+  bbc->add_option("--csv", args->csv, "Also write the runs as CSV");
+  return {bbc, [args](Session& session) {
+            if (session.rank() != 0) return 0;
+            run_broad_bench(*args, std::cout);
+            return 0;
+          }};
+}
 
 #if defined(CONTACTGRID_HAVE_BULLET)
-  // validate
-  std::string val_scene, val_contacts, val_bullet = "auto";
-  ValidateOptions val;
+// validate: a contact file against Bullet (rank 0).
+Subcommand add_validate(CLI::App& app) {
+  struct Args {
+    std::string scene, contacts, bullet = "auto";
+    ValidateOptions options;
+  };
+  const auto args = std::make_shared<Args>();
+  ValidateOptions& val = args->options;
   auto* v = app.add_subcommand(
-      "validate", "Compare a contacts file with Bullet 3.24 (CONTRACT §4); PASS exits 0, FAIL 1");
-  v->add_option("scene", val_scene, "Scene file (.h5)")->required();
-  v->add_option("contacts", val_contacts, "Contacts file (.h5) written by detect")->required();
+      "validate", "Compare a contacts file with Bullet 3.24 (docs/FORMAT.md §4); PASS exits 0, FAIL 1");
+  v->add_option("scene", args->scene, "Scene file (.h5)")->required();
+  v->add_option("contacts", args->contacts, "Contacts file (.h5) written by detect")->required();
   v->add_option("--pos-eps", val.pos_eps,
                 "Largest position error allowed (length units; for pairs with an ellipsoid, times the pair's "
                 "larger bounding radius, and also the largest distance error)")
@@ -328,7 +416,7 @@ int run_cli(int argc, char** argv, Session& session) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   v->add_option(
-       "--bullet-precision,--bullet", val_bullet,
+       "--bullet-precision,--bullet", args->bullet,
        "auto | double | float: Bullet build to compare with; auto: float for scenes with ellipsoids "
        "(double Bullet's EPA is degenerate on many ellipsoid pairs), double otherwise (float Bullet is "
        "wrong far from the origin and for nearly coincident centres)")
@@ -343,10 +431,24 @@ int run_cli(int argc, char** argv, Session& session) {
                 "Validate K random sub-boxes instead of the whole scene (large scenes)");
   v->add_option("--seed", val.seed, "Seed of the sub-box choice")->capture_default_str();
 
-  // bench
-  BenchOptions bench;
-  std::vector<std::string> bench_backends;
-  bool bench_no_plot = false;
+  return {v, [args](Session& session) {
+            if (session.rank() != 0) return 0;
+            args->options.bullet = parse_bullet_precision(args->bullet);
+            const ValidateReport report = validate_files(args->scene, args->contacts, args->options);
+            fmt::print("{}", report.text());
+            return report.pass ? 0 : 1;
+          }};
+}
+
+// bench: the engine against Bullet over N (rank 0).
+Subcommand add_bench(CLI::App& app) {
+  struct Args {
+    BenchOptions options;
+    std::vector<std::string> backends;
+    bool no_plot = false;
+  };
+  const auto args = std::make_shared<Args>();
+  BenchOptions& bench = args->options;
   auto* b =
       app.add_subcommand("bench", "Timing study: engine vs Bullet for N = 2^lo … 2^hi (table, CSV, plots)");
   b->add_option("--kind", bench.kind,
@@ -372,7 +474,7 @@ int run_cli(int argc, char** argv, Session& session) {
   b->add_option("--repetitions", bench.repetitions, "Engine time = median of this many warm runs")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  b->add_option("--backend", bench_backends, "cpu | cuda (repeatable; default: cpu, and cuda when present)")
+  b->add_option("--backend", args->backends, "cpu | cuda (repeatable; default: cpu, and cuda when present)")
       ->check(CLI::IsMember({"cpu", "cuda"}));
   b->add_option("--threads", bench.threads, "CPU backend threads (0: all cores)");
   b->add_option("--precision", bench.precision, "fp32 | fp64 | mixed: the engine's precision mode")
@@ -381,7 +483,32 @@ int run_cli(int argc, char** argv, Session& session) {
   b->add_option("--seed", bench.seed, "Scene seed")->capture_default_str();
   b->add_option("--csv", bench.csv, "CSV output")->capture_default_str();
   b->add_option("--plot-prefix", bench.plot_prefix, "Plot file prefix (PNG and SVG); default: the CSV name");
-  b->add_flag("--no-plot", bench_no_plot, "Do not run gnuplot");
+  b->add_flag("--no-plot", args->no_plot, "Do not run gnuplot");
+  return {b, [args](Session& session) {
+            if (session.rank() != 0) return 0;
+            for (const auto& name : args->backends)
+              args->options.backends.push_back(name == "cuda" ? Backend::cuda : Backend::cpu);
+            args->options.plot = !args->no_plot;
+            run_bench(args->options);
+            return 0;
+          }};
+}
+#endif
+
+}  // namespace
+
+int run_cli(int argc, char** argv, Session& session) {
+  CLI::App app{
+      "contactgrid: every touching or overlapping pair of spheres and ellipsoids, with Bullet's contact\n"
+      "data. Le Grand's uniform grid on a CPU or CUDA backend; MPI slabs under mpirun.\n"
+      "Files and conventions: docs/FORMAT.md; commands and exit codes: docs/USAGE.md."};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "contactgrid " CONTACTGRID_VERSION);
+  std::vector<Subcommand> commands{add_generate(app), add_detect(app), add_compare(app), add_study(app),
+                                   add_bench_broad(app)};
+#if defined(CONTACTGRID_HAVE_BULLET)
+  commands.push_back(add_validate(app));
+  commands.push_back(add_bench(app));
 #endif
 
   try {
@@ -396,51 +523,8 @@ int run_cli(int argc, char** argv, Session& session) {
     app.exit(e);
     return 2;
   }
-
-  if (g->parsed()) {
-    if (session.rank() != 0) return 0;  // one writer
-    if (!offset.empty()) gen.offset = {offset[0], offset[1], offset[2]};
-    if ((gen.kind == "polydisperse" || gen.kind == "bimodal" || gen.kind == "intruders") &&
-        rlow_opt->count() == 0)
-      gen.radius_low = gen.radius_high / gen_ratio;
-    if (aspect_opt->count() > 0) {
-      if (gen.kind != "ellipsoids" && gen.kind != "mixed")
-        throw UsageError("--max-aspect applies to --kind ellipsoids or mixed");
-      gen.radius_low = gen.radius_high / gen_max_aspect;
-    }
-    return run_generate(gen_out, gen, gen_quiet);
-  }
-  if (d->parsed()) return run_detect(det, session);
-  if (c->parsed()) return session.rank() == 0 ? run_compare(cmp_a, cmp_b) : 0;
-  if (st->parsed()) {
-    if (session.rank() != 0) return 0;
-    for (const auto& name : study_backends)
-      study.backends.push_back(name == "cuda" ? Backend::cuda : Backend::cpu);
-    run_study(study, std::cout, std::cerr);
-    return 0;
-  }
-  if (bbc->parsed()) {
-    if (session.rank() != 0) return 0;
-    run_broad_bench(bb, std::cout);
-    return 0;
-  }
-#if defined(CONTACTGRID_HAVE_BULLET)
-  if (v->parsed()) {
-    if (session.rank() != 0) return 0;
-    val.bullet = parse_bullet_precision(val_bullet);
-    const ValidateReport report = validate_files(val_scene, val_contacts, val);
-    fmt::print("{}", report.text());
-    return report.pass ? 0 : 1;
-  }
-  if (b->parsed()) {
-    if (session.rank() != 0) return 0;
-    for (const auto& name : bench_backends)
-      bench.backends.push_back(name == "cuda" ? Backend::cuda : Backend::cpu);
-    bench.plot = !bench_no_plot;
-    run_bench(bench);
-    return 0;
-  }
-#endif
+  for (const Subcommand& command : commands)
+    if (command.app->parsed()) return command.run(session);
   return 2;
 }
 

@@ -1,22 +1,15 @@
-// The small commands of the executable (pipeline.hpp declares them): compare and generate.
+// The small commands of the executable: compare and generate (commands.hpp).
+#include "cli/commands.hpp"
+
 #include <fmt/format.h>
 
-#include <chrono>
 #include <string>
 
-#include "io/contact_file.hpp"
+#include "contacts.hpp"
 #include "io/inspect.hpp"
-#include "io/scene_file.hpp"
-#include "run/pipeline.hpp"
+#include "timing.hpp"
 
 namespace cg {
-namespace {
-using clock_type = std::chrono::steady_clock;
-double seconds_since(clock_type::time_point t) {
-  return std::chrono::duration<double>(clock_type::now() - t).count();
-}
-}  // namespace
-
 int run_compare(const std::string& a, const std::string& b) {
   int differ = 0;
   for (const ContactField& field : kContactFields) {
@@ -46,8 +39,8 @@ int run_compare(const std::string& a, const std::string& b) {
 }
 
 int run_generate(const std::string& path, const GenerateOptions& options, bool quiet) {
-  auto t = clock_type::now();
-  generate_scene_file(path, options);
+  const auto t = WallClock::now();
+  generate_scene_file(path, options, !quiet);
   if (!quiet)
     fmt::print("contactgrid generate: {} {} bodies (seed {}) -> {} in {:.3f} s\n", options.count,
                options.kind, options.seed, path, seconds_since(t));

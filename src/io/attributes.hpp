@@ -24,7 +24,7 @@ RawAttributes root_attributes(const Where& where, hid_t file);
 // Whether the root attribute exists (HDF5 is asked only where raw.status is unsupported).
 bool has_root_attribute(const Where& where, hid_t file, const RawAttributes& raw, const std::string& name);
 
-// A root attribute CONTRACT §1 gives meaning to (radius_low, radius_high): nullopt when absent; a
+// A root attribute docs/FORMAT.md §1 gives meaning to (radius_low, radius_high): nullopt when absent; a
 // string, another type or more than one value is an InputError naming it.
 std::optional<double> number_attribute(const Where& where, hid_t file, const RawAttributes& raw,
                                        const std::string& name);

@@ -1,4 +1,5 @@
-// contact_file.cpp: contact files (CONTRACT §2) through the HDF5 C API and pwrite (see contact_file.hpp).
+// contact_file.cpp: contact files (docs/FORMAT.md §2) through the HDF5 C API and pwrite (see
+// contact_file.hpp).
 #include "io/contact_file.hpp"
 
 #include <fcntl.h>
@@ -111,6 +112,7 @@ ContactFileLayout create_contact_file(const std::string& path, std::uint64_t row
   layout.full = full;
   const bool fp32 = precision == Precision::fp32;
   Where where(path, true);
+  remove_on_stop(layout.temp);  // until commit_contact_file or discard_contact_file
   try {
     Handle file = create_file(where, layout.temp);
     create_group(where, file, "/contacts");
@@ -139,7 +141,7 @@ ContactFileLayout create_contact_file(const std::string& path, std::uint64_t row
     }
     file.close(where, "cannot close (flush) the file");
   } catch (...) {
-    remove_quietly(layout.temp);
+    discard_contact_file(layout);
     throw;
   }
   return layout;
@@ -233,7 +235,7 @@ template void write_contact_rows<double>(const ContactFileLayout&, std::uint64_t
                                          int);
 
 void commit_contact_file(const ContactFileLayout& layout, const RunInfo& info) {
-  // The precision attribute is the run's mode (CONTRACT §2: mixed writes float64 datasets).
+  // The precision attribute is the run's mode (docs/FORMAT.md §2: mixed writes float64 datasets).
   const std::string precision = info.precision.empty() ? to_string(layout.precision) : info.precision;
   try {
     const bool fp32 = precision == "fp32";
@@ -270,18 +272,23 @@ void commit_contact_file(const ContactFileLayout& layout, const RunInfo& info) {
       for (const auto& [name, value] : attributes) write_attribute(where, root, name, value);
     }
     file.close(where, "cannot close (flush) the file");
+    stop_point();  // the last one before the output appears
     if (std::rename(layout.temp.c_str(), layout.path.c_str()) != 0) {
       const int error = errno;
       throw IoError(
           fmt::format("{}: cannot rename {} over it: {}", layout.path, layout.temp, std::strerror(error)));
     }
+    forget_on_stop(layout.temp);
   } catch (...) {
-    remove_quietly(layout.temp);
+    discard_contact_file(layout);
     throw;
   }
 }
 
-void discard_contact_file(const ContactFileLayout& layout) noexcept { remove_quietly(layout.temp); }
+void discard_contact_file(const ContactFileLayout& layout) noexcept {
+  remove_quietly(layout.temp);
+  forget_on_stop(layout.temp);
+}
 
 template <class Real>
 void write_contacts(const std::string& path, const Contacts<Real>& c, const RunInfo& info, int threads) {

@@ -1,5 +1,5 @@
 #pragma once
-// Contact files (CONTRACT §2): written whole or in phases (by many processes at once), read back.
+// Contact files (docs/FORMAT.md §2): written whole or in phases (by many processes at once), read back.
 //
 // Writing goes to "<path>.tmp.<pid>" and is renamed over <path> only after the file is closed, so an
 // output file exists only for a successful run (IoError otherwise, temporary removed). Contact files
@@ -15,7 +15,7 @@
 
 namespace cg {
 
-// Everything recorded about a run in the contact file's root attributes (CONTRACT §2).
+// Everything recorded about a run in the contact file's root attributes (docs/FORMAT.md §2).
 struct RunInfo {
   std::uint64_t bodies = 0;
   std::string precision;         // "fp32" | "fp64" | "mixed" (float64 datasets); empty: the contacts' type
@@ -38,13 +38,13 @@ void write_contacts(const std::string& path, const Contacts<Real>& contacts, con
 
 // ---- a contact file written in phases, by one process or by many --------------------------------
 // (a) create_contact_file (one process): "<path>.tmp.<pid>" with every /contacts dataset of K rows
-//     (CONTRACT §2 types and shapes; contiguous, space allocated at creation, never filled), closed;
+//     (docs/FORMAT.md §2 types and shapes; contiguous, space allocated at creation, never filled), closed;
 //     the layout says where each dataset's rows lie in the file.
 // (b) write_contact_rows (any process that can see the file, once per row, slices in any order and
 //     of any size): plain pwrite of the rows at offset + first_row · row_bytes, by several threads.
 //     No HDF5 involved, so processes and threads write at once.
 // (c) commit_contact_file (the creating process, after every (b) has returned): the root attributes
-//     (CONTRACT §2), then the temporary is renamed over path. On a failure anywhere,
+//     (docs/FORMAT.md §2), then the temporary is renamed over path. On a failure anywhere,
 //     discard_contact_file removes the temporary: no output appears.
 // The bytes of the datasets are the same whoever wrote which rows (and equal write_contacts').
 // Memory and file are little-endian (checked at compile time): rows are copied as they are.

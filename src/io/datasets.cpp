@@ -123,7 +123,7 @@ void read_rows(const Where& where, const Dataset& d, hsize_t first, hsize_t coun
 // The same rows as read_rows into float64 memory, read straight from the file with pread on all
 // threads when the dataset is stored as plain bytes of that type: contiguous layout (no chunks, no
 // filters, no external file), IEEE float64 little-endian, allocated. HDF5's own read runs on one thread
-// (3 times slower than the page cache at 2^26 rows on the GPU host); anything else goes through it.
+// (well below the page cache's bandwidth); anything else goes through it.
 void read_rows_f64(const Where& where, const Dataset& d, hsize_t first, hsize_t count, double* out) {
   if (count == 0) return;
   static_assert(std::endian::native == std::endian::little, "direct reads assume a little-endian host");

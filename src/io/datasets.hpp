@@ -1,5 +1,5 @@
 #pragma once
-// Internal to src/io: opening a dataset of CONTRACT §1/§2 with its type and shape checked, and reading
+// Internal to src/io: opening a dataset of docs/FORMAT.md §1/§2 with its type and shape checked, and reading
 // rows of it (through HDF5, or by pread for plain float64 storage).
 #include <hdf5.h>
 

@@ -151,25 +151,6 @@ Handle open_file_for_reading(const Where& where) {
 
 // ---- writing ---------------------------------------------------------------------------------
 
-std::string temp_name(const std::string& path) { return path + ".tmp." + std::to_string(::getpid()); }
-
-void remove_quietly(const std::string& file) noexcept {
-  std::error_code ec;
-  std::filesystem::remove(file, ec);
-}
-
-TempOutput::~TempOutput() {
-  if (!m_done) remove_quietly(m_temp);
-}
-
-void TempOutput::commit() {
-  if (std::rename(m_temp.c_str(), m_path.c_str()) != 0) {
-    int error = errno;
-    throw IoError(fmt::format("{}: cannot rename {} over it: {}", m_path, m_temp, std::strerror(error)));
-  }
-  m_done = true;
-}
-
 Handle creation_properties(const Where& where, hid_t plist_class) {
   Handle plist = checked(H5Pcreate(plist_class), H5Pclose, where, "cannot create a property list");
   check(H5Pset_obj_track_times(plist, 0), where, "cannot set object properties");

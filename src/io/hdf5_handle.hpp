@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "errors.hpp"
+#include "io/temp_output.hpp"
 
 namespace cg::h5 {
 
@@ -123,26 +124,10 @@ Handle open_file_for_reading(const Where& where);
 
 // ---- writing ---------------------------------------------------------------------------------
 
-// "<path>.tmp.<pid of this process>"
-std::string temp_name(const std::string& path);
-// Removes a file, ignoring errors. Never throws.
-void remove_quietly(const std::string& file) noexcept;
-
-// "<path>.tmp.<pid>": removed on destruction unless renamed over path by commit().
-class TempOutput {
- public:
-  explicit TempOutput(std::string path) : m_path(std::move(path)), m_temp(temp_name(m_path)) {}
-  ~TempOutput();
-  TempOutput(const TempOutput&) = delete;
-  TempOutput& operator=(const TempOutput&) = delete;
-
-  const std::string& temp() const { return m_temp; }
-  void commit();
-
- private:
-  std::string m_path, m_temp;
-  bool m_done = false;
-};
+// The temporary of an output (io/temp_output.hpp).
+using cg::remove_quietly;
+using cg::temp_name;
+using cg::TempOutput;
 
 Handle creation_properties(const Where& where, hid_t plist_class);  // object times off
 Handle create_file(const Where& where, const std::string& name);

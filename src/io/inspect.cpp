@@ -121,7 +121,7 @@ std::vector<unsigned char> read_dataset_bytes(const std::string& path, const std
                      fmt::format("{}: cannot open the dataset", dataset));
   Handle type = checked(H5Dget_type(d), H5Tclose, where, fmt::format("{}: cannot read the type", dataset));
   Handle space = checked(H5Dget_space(d), H5Sclose, where, fmt::format("{}: cannot read the shape", dataset));
-  // Numbers only (what CONTRACT §2 stores): other types go through conversions that read the global
+  // Numbers only (what docs/FORMAT.md §2 stores): other types go through conversions that read the global
   // heap (variable-length) or references, which a damaged file can make crash.
   if (!standard_number(type))
     where.bad(fmt::format("{}: element type is {}; expected an integer or float", dataset, type_text(type)));

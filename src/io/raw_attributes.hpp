@@ -8,7 +8,7 @@
 // collection's objects, an object longer than the string's stored length, a free-space object of
 // size 0 on which H5HG__cache_heap_deserialize never advances) segfault or loop. Newer releases
 // check some of this; this one does not. The attributes other than radius_low/radius_high mean
-// nothing to the readers (CONTRACT §1), so HDF5 is never asked for them.
+// nothing to the readers (docs/FORMAT.md §1), so HDF5 is never asked for them.
 //
 // What is decoded (HDF5 File Format Specification 3.0, IV.A object headers v1/v2 with continuation
 // chunks, IV.A.2.d datatype, IV.A.2.m attribute, III.E global heap): one-element attributes of

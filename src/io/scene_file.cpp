@@ -1,4 +1,4 @@
-// scene_file.cpp: scene files (CONTRACT §1) through the HDF5 C API (see scene_file.hpp).
+// scene_file.cpp: scene files (docs/FORMAT.md §1) through the HDF5 C API (see scene_file.hpp).
 #include "io/scene_file.hpp"
 
 #include <fmt/format.h>
@@ -43,7 +43,7 @@ struct SceneSource {
   explicit SceneSource(const std::string& path) : where(path, false) {}
 };
 
-// radius_low / radius_high (CONTRACT §1): a finite number >= 0 when present.
+// radius_low / radius_high (docs/FORMAT.md §1): a finite number >= 0 when present.
 std::optional<double> radius_bound(const Where& where, hid_t file, const RawAttributes& raw,
                                    const char* name) {
   const std::optional<double> value = number_attribute(where, file, raw, name);
@@ -106,8 +106,7 @@ void read_spheres(const SceneSource& s, hsize_t first, hsize_t count, Scene& out
   out.sphere_position.resize(count);
   out.sphere_radius.resize(count);
   // kReadChunkRows per thread: a chunk of 2^20 rows is only 6 + 2 blocks of 4 MiB for read_rows_f64,
-  // so chunks of that size left most of a large team idle (2^26 rows on the 2×H200 host, 32 threads:
-  // read stage 0.32 → 0.10 s).
+  // so chunks of that size would leave most of a large team idle (BENCHMARKS.md §4).
   const hsize_t chunk_rows = kReadChunkRows * static_cast<hsize_t>(std::max(1, omp_get_max_threads()));
   for (hsize_t done = 0; done < count; done += chunk_rows) {
     hsize_t n = std::min(chunk_rows, count - done);

@@ -1,5 +1,5 @@
 #pragma once
-// Scene files (CONTRACT §1): reading (validated, whole or by rows) and writing (whole or streamed).
+// Scene files (docs/FORMAT.md §1): reading (validated, whole or by rows) and writing (whole or streamed).
 //
 // Reading validates everything it reads and throws InputError with one message naming the file, the
 // dataset and the first bad row ("scene.h5: /spheres/radius row 17: radius -1 is not > 0"); a file

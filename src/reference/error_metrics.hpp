@@ -1,5 +1,5 @@
 #pragma once
-// How far a set of contacts is from the exact reference, judged with a rounding band (CONTRACT §3):
+// How far a set of contacts is from the exact reference, judged with a rounding band (docs/FORMAT.md §3):
 // a pair whose exact |distance| <= band may be reported or not; outside the band every decision must
 // equal the reference's. The numbers `contactgrid study` reports and its tests check.
 //

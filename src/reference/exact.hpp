@@ -8,7 +8,7 @@
 //   - Arithmetic in long double, which on x86-64 is the 80-bit extended format: a 64-bit mantissa,
 //     ε = 2^-63 ≈ 1.1e-19 (2048 times finer than double). Inputs are doubles (or floats), so each
 //     input converts without rounding.
-//   - Spheres: the closed form of CONTRACT §3 on the world doubles. A centre difference a − b of two
+//   - Spheres: the closed form of docs/FORMAT.md §3 on the world doubles. A centre difference a − b of two
 //     doubles is exact in long double when their exponents differ by at most 10 (and in double
 //     already when they are within a factor 2, Sterbenz); otherwise it is rounded once, 2^-64 relative
 //     to the larger. So the decision d² ≤ (ra + rb)² and the normal (a − b)/d carry ~1e-19 relative
@@ -19,7 +19,7 @@
 //     the principal axes, refined by Newton in long double; cross-checked in tests by the
 //     Perram–Wertheim function. Converged to ~1e-17 of the bodies' size, not to the last bit.
 //   - The rounding band: a pair whose exact |distance| is within the band of a precision mode may be
-//     decided either way by that mode (CONTRACT §3: 16·ε_mode·(largest local coordinate + 2·r_max)).
+//     decided either way by that mode (docs/FORMAT.md §3: 16·ε_mode·(largest local coordinate + 2·r_max)).
 //     Outside the band, every decision must equal the reference's. The reference's own error is
 //     orders of magnitude below every mode's band.
 #include <cmath>

@@ -1,7 +1,7 @@
 #pragma once
 // The exact reference for spheres (and the reference contact every comparison uses): every pair with
 // d <= ra + rb + slack, decided in long double from the double input (exact.hpp says how exact), by a
-// sweep along x. Contact data by CONTRACT §3 in long double.
+// sweep along x. Contact data by docs/FORMAT.md §3 in long double.
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -26,7 +26,7 @@ struct RefContact {
 std::vector<RefContact> reference_contacts(std::span<const Vec3<double>> p, std::span<const double> r,
                                            LD slack = 0);
 
-// The contact of spheres a and b (ids a < b): CONTRACT §3 in long double.
+// The contact of spheres a and b (ids a < b): docs/FORMAT.md §3 in long double.
 RefContact sphere_contact(std::int64_t a, std::int64_t b, const Vec3<double>& pa, double ra,
                           const Vec3<double>& pb, double rb);
 

@@ -2,13 +2,27 @@
 // the layout → pwrite own rows (every rank) → attributes and rename (rank 0), agreeing after each.
 #include "run/contact_file_shared.hpp"
 
-#include <chrono>
 #include <exception>
 #include <optional>
+
+#include "io/temp_output.hpp"
+#include "run/stop.hpp"
+#include "run/test_fault.hpp"
+#include "timing.hpp"
 
 namespace cg {
 
 namespace {
+
+// A temporary another rank writes, registered for removal should this rank end at once (remove_on_stop),
+// unregistered on leaving.
+struct ForgetOnReturn {
+  explicit ForgetOnReturn(std::string path) : m_path(std::move(path)) { remove_on_stop(m_path); }
+  ~ForgetOnReturn() { forget_on_stop(m_path); }
+  ForgetOnReturn(const ForgetOnReturn&) = delete;
+  ForgetOnReturn& operator=(const ForgetOnReturn&) = delete;
+  std::string m_path;
+};
 
 // Runs `work` where `here` holds, then every rank agrees on the outcome (stage "write").
 template <class F>
@@ -27,11 +41,17 @@ void write_stage(const Session& session, bool here, F&& work) {
 template <class Real>
 double write_all(Session& session, const std::string& path, const Contacts<Real>& slice,
                  std::uint64_t first_row, std::uint64_t total_rows, RunInfo& info, int threads) {
-  using Clock = std::chrono::steady_clock;
-  const auto t0 = Clock::now();
+  const auto t0 = WallClock::now();
   const bool root = session.rank() == 0;
   constexpr Precision precision = precision_of<Real>();
   const bool full = slice.full;
+
+  // The temporary's name first: every other rank registers it for removal should the job end at once
+  // (a rank killed: the launcher's SIGTERM reaches the others), and the collectives below make sure
+  // that every rank has, before rank 0 creates it (rank 0 registers it in create_contact_file).
+  const std::string temp = session.broadcast(root ? temp_name(path) : std::string());
+  std::optional<ForgetOnReturn> registered;
+  if (!root) registered.emplace(temp);
 
   // The slices tile [0, K): checked before anything is created.
   write_stage(session, true, [&] {
@@ -56,11 +76,12 @@ double write_all(Session& session, const std::string& path, const Contacts<Real>
   try {
     write_stage(session, true, [&] {
       if (!root) layout = ContactFileLayout::from_text(text);
+      fault_point("write", session.rank());
       // (b) every rank its rows
       write_contact_rows(*layout, first_row, slice, threads);
     });
     // (c) rank 0: attributes (with the write time) and rename
-    const double seconds = session.max(std::chrono::duration<double>(Clock::now() - t0).count());
+    const double seconds = session.max(seconds_since(t0));
     info.times.push_back({"write", seconds});
     write_stage(session, root, [&] { commit_contact_file(*layout, info); });
     return seconds;
@@ -82,6 +103,7 @@ double write_contacts_distributed(Session& session, const std::string& path, con
     return write_all(session, path, slice, first_row, total_rows, info, threads);
   } catch (const CommFailure& e) {
     // Other ranks may be waiting in a collective this rank will never join.
+    run_cleanup_actions();
     session.abort(e.exit_code(), e.what());
   }
 }

@@ -9,7 +9,7 @@
 //       each dataset's offset);
 //   (b) every rank writes its rows at their offsets with pwrite, by `threads` threads
 //       (write_contact_rows) — no rank waits for another's data, no HDF5 call;
-//   (c) rank 0 records the root attributes (CONTRACT §2, with info.times plus "write": the maximum
+//   (c) rank 0 records the root attributes (docs/FORMAT.md §2, with info.times plus "write": the maximum
 //       over ranks of phases a–b) and renames the file over `path` (commit_contact_file).
 // Every phase ends with Session::agree (stage "write"): a failure on any rank makes every rank throw
 // the same exception, rank 0 removes the temporary, and no output appears. The slices must tile
@@ -20,8 +20,6 @@
 
 #include "engine.hpp"
 #include "io/contact_file.hpp"
-#include "io/inspect.hpp"
-#include "io/scene_file.hpp"
 #include "session.hpp"
 
 namespace cg {

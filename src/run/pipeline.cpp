@@ -3,13 +3,18 @@
 #include "run/pipeline.hpp"
 
 #include <fmt/format.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <limits>
+#include <memory>
 #include <numeric>
 #include <optional>
 
@@ -27,30 +32,15 @@
 #include "precision_choice.hpp"
 #include "routing.hpp"
 #include "run/contact_file_shared.hpp"
+#include "run/progress.hpp"
 #include "run/stage_clock.hpp"
+#include "run/stop.hpp"
 #include "run/summary.hpp"
+#include "run/test_fault.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
 
 namespace cg {
-
-const char* stage_name(Stage stage) {
-  static constexpr const char* names[] = {"read",     "redistribute", "halo",  "detect", "gather",
-                                          "exchange", "merge",        "write", "csv"};
-  static_assert(std::size(names) == static_cast<std::size_t>(Stage::csv) + 1);
-  return names[static_cast<std::size_t>(stage)];
-}
-
-std::string RunTime::name() const {
-  if (engine_stage < 0) return stage_name(stage);
-  return std::string(stage_name(stage)) + "." + engine_stage_names()[static_cast<std::size_t>(engine_stage)];
-}
-
-StageTimes file_stage_times(const RunTimes& times) {
-  StageTimes out;
-  for (const RunTime& t : times) out.push_back({t.name(), t.seconds});
-  return out;
-}
 
 void check_options(const DistributedOptions& options) {
   const EngineOptions& e = options.engine;
@@ -146,7 +136,7 @@ ReadScene read_scene(const Session& session, const std::string& path, const Dist
     check_options(options);
     if (path.empty()) throw UsageError("no scene file given");
   });
-  const auto t0 = clock_type::now();
+  const auto t0 = WallClock::now();
   const int ranks = session.size();
   ReadScene in;
   // All rows when the ranks share one node (one page cache). One rank's own rows are all rows: the
@@ -154,6 +144,7 @@ ReadScene read_scene(const Session& session, const std::string& path, const Dist
   in.all_rows = ranks == 1 || options.read == SceneRead::all_rows ||
                 (options.read == SceneRead::automatic && session.local_size() == ranks);
   in.part = read_partition(session, path, in.all_rows);
+  fault_point("read", session.rank());
   in.global = allgather_bounds(session, in.part.bounds);
   in.seconds = seconds_since(t0);
   return in;
@@ -298,8 +289,8 @@ void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecompo
                              [&](std::size_t i) { return shapes[i]; });
     }
   });
-  held.ghosts = exchange_ghosts(session, exports);
-  if (held.has_shapes) held.ghost_shapes = exchange_ghosts(session, shape_exports);
+  held.ghosts = exchange_with_ghost_ranks(session, exports);
+  if (held.has_shapes) held.ghost_shapes = exchange_with_ghost_ranks(session, shape_exports);
 }
 
 // Owned + ghosts in id order (own rows: merged by id), then the engine with the shared frame; the
@@ -388,25 +379,112 @@ void record_contacts(CollectedContacts<Real>&& c, DistributedResult<Real>& resul
   result.duplicates_removed = c.duplicates_removed;
 }
 
-// The resident steps from the run's engine input, checked against the run's contacts (count and
-// an order-free hash of the pairs; with a spin, against the turned bodies: resident_steps.hpp).
+// The --spin check: the last step's contacts (count and pair hash, summed over ranks) against a
+// detection from scratch of the turned bodies: each rank detects its run's rows (owned + ghosts)
+// with every orientation computed by the spin's rule from the body's id, never received, so a stale
+// ghost orientation in the steps makes the two differ. Collective; Error on every rank otherwise.
 template <class Real>
-StepStats run_resident_steps(Session& session, Engine<Real>& engine, const SharedFrame& f,
-                             const SlabDecomposition& slabs, const EngineInput& input,
-                             const DistributedResult<Real>& result, const DistributedOptions& options,
-                             int threads) {
+void check_spin(const Session& session, const EngineOptions& engine_options, const Frame& frame,
+                const EngineInput& input, const StepMotion& motion, const StepStats& steps, int threads) {
+  std::uint64_t want = 0, want_hash = 0;
+  agreed_stage(session, "steps", [&] {
+    if (input.owned == 0) return;  // as the run: a rank without owned bodies detects nothing
+    const std::size_t n = input.radius.size();
+    const double angle = motion.spin * steps.steps;
+    HostVector<Quat<double>> q(n);
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::int64_t id = input.implied() ? static_cast<std::int64_t>(i) : input.id[i];
+      q[i] = input.shapes.shape[i] == Shape::ellipsoid
+                 ? spun_orientation(id, input.shapes.orientation[i], angle)
+                 : input.shapes.orientation[i];
+    }
+    EngineOptions options = engine_options;
+    options.skin = 0;
+    BodiesView bodies = input.view();
+    bodies.orientation = q;
+    const Contacts<Real> c = Engine<Real>(options).detect(bodies, frame);
+    want = c.size();
+    for (std::size_t j = 0; j < c.size(); ++j) want_hash += pair_hash(c.id_a[j], c.id_b[j]);
+  });
+  want = session.sum(want);
+  want_hash = session.sum(want_hash);
+  agreed_stage(session, "steps", [&] {
+    if ((steps.contacts != want || steps.hash != want_hash) && session.rank() == 0)
+      throw Error("resident steps: the last step's " + std::to_string(steps.contacts) +
+                  " contacts over the ranks differ from a detection of the turned bodies from scratch (" +
+                  std::to_string(want) + (steps.contacts == want ? ", other pairs" : "") +
+                  "): a stale orientation; internal error");
+  });
+}
+
+// Bodies that do not move: every step's contacts are the run's K, and the last step's pairs hash to
+// the run's (an order-free sum, so a missed pair and a duplicate cannot cancel out in the count).
+template <class Real>
+void check_unmoved(const Session& session, const DistributedResult<Real>& result,
+                   const std::vector<std::uint64_t>& per_step, const StepStats& steps) {
   std::uint64_t hash = 0;
   for (std::size_t k = 0; k < result.contacts.size(); ++k)
     hash += pair_hash(result.contacts.id_a[k], result.contacts.id_b[k]);
-  return resident_steps(session, engine, f.frame, slabs, f.width, input, options.resident_steps,
-                        options.step_motion, result.total_contacts, session.sum(hash), threads);
+  hash = session.sum(hash);
+  agreed_stage(session, "steps", [&] {
+    if (session.rank() != 0) return;
+    for (std::size_t k = 0; k < per_step.size(); ++k)
+      if (per_step[k] != result.total_contacts)
+        throw Error("resident step " + std::to_string(k) + ": " + std::to_string(per_step[k]) +
+                    " contacts over the ranks, the run found " + std::to_string(result.total_contacts) +
+                    ": internal error");
+    if (steps.steps > 0 && steps.hash != hash)
+      throw Error("resident steps: the last step's pairs differ from the run's: internal error");
+  });
+}
+
+// The resident steps from the run's engine input, sequenced as the run is (resident_steps.hpp):
+// the rows laid out once, then per step the motion (the owners turn their ellipsoids: the
+// integrator's part, before the step's clock), interior detection, ghost refresh, boundary
+// detection, collection. Then the checks (check_spin, check_unmoved).
+template <class Real>
+StepStats run_steps(Session& session, Engine<Real>& engine, const SharedFrame& f,
+                    const SlabDecomposition& slabs, const EngineInput& input,
+                    const DistributedResult<Real>& result, const DistributedOptions& options, int threads) {
+  const StepMotion& motion = options.step_motion;
+  StepStats st;
+  std::vector<std::uint64_t> per_step;
+  {
+    StepLoop<Real> loop(session, engine, f.frame, slabs, f.width, motion, threads);
+    StepBodies bodies;
+    agreed_stage(session, "steps", [&] {
+      bodies = owned_bodies(input, threads);
+      attach_file_poses(bodies, threads);
+    });
+    loop.lay_out(std::move(bodies));
+    for (int step = 1; step <= options.resident_steps; ++step) {
+      bool turned = false;
+      agreed_stage(session, "steps", [&] { turned = move_bodies(loop.bodies(), motion, step, threads); });
+      loop.commit(false, turned);
+      loop.detect_interior();
+      loop.refresh_ghosts();
+      loop.detect_boundary();
+      loop.collect();
+      if (motion.on_step) motion.on_step(step);
+    }
+    st = loop.stats();
+    per_step = loop.contacts_per_step();
+    st.hash = loop.pair_hash_sum();
+    if (!per_step.empty()) st.contacts = per_step.back();
+  }  // engine B's memory is free for check_spin's engine
+  if (st.turned)
+    check_spin<Real>(session, engine.options(), f.frame, input, motion, st, threads);
+  else
+    check_unmoved(session, result, per_step, st);
+  return st;
 }
 
 // The stages frame … collect after the read stage (read_scene), with their times (max over ranks)
 // and the run's statistics. Called inside the rank's DefaultTeam of `threads`.
 template <class Real>
-DistributedResult<Real> run(Session& session, const std::string& path, const DistributedOptions& options,
-                            ReadScene&& in, int threads) {
+DistributedResult<Real> distributed_run(Session& session, const std::string& path,
+                                        const DistributedOptions& options, ReadScene&& in, int threads) {
   const bool all_rows = in.all_rows;
   Partition& part = in.part;
   DistributedResult<Real> result;
@@ -414,11 +492,11 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   result.threads = threads;
   result.read = all_rows ? SceneRead::all_rows : SceneRead::own_rows;
   StageClock clock;
-  clock.add(Stage::read, in.seconds);
+  clock.add(RunStage::read, in.seconds);
 
   clock.start();
   const SharedFrame f = agree_frame<Real>(session, path, in.global, options);
-  clock.stop(Stage::read);
+  clock.stop(RunStage::read);
   std::optional<Engine<Real>> engine = make_engine<Real>(session, options, threads, f.broad);
   result.bodies = part.bodies;
   result.ellipsoids = part.ellipsoids;
@@ -426,32 +504,38 @@ DistributedResult<Real> run(Session& session, const std::string& path, const Dis
   result.cell_size = f.frame.cell_size;
   result.axis = f.axis;
 
+  stop_point();
   clock.start();
+  fault_point("exchange", session.rank());
   const SlabDecomposition slabs = make_slabs(session, part, f, options);
   HeldBodies held = distribute(session, std::move(part), slabs, f, all_rows, threads);
-  clock.stop(Stage::redistribute);
+  clock.stop(RunStage::redistribute);
   result.cuts = slabs.cuts();
 
   clock.start();
   exchange_ghosts(session, held, slabs, f, all_rows, threads);
-  clock.stop(Stage::halo);
+  clock.stop(RunStage::halo);
 
+  stop_point();
   clock.start();
+  fault_point("detect", session.rank());
   Contacts<Real> local =
       detect_local(session, *engine, held, f, options.engine.fields == Fields::full, threads);
-  clock.stop(Stage::detect);
+  clock.stop(RunStage::detect);
   if (held.input.owned > 0) clock.add_engine(engine->times());
   record_detection(session, *engine, held.input, result);
   if (options.resident_steps == 0) held.input = {};  // else the steps start from it
 
+  stop_point();
+  fault_point("gather", session.rank());
   CollectedContacts<Real> c = collect_contacts(session, std::move(local), result.bodies, options, threads);
-  const Stage transfer = options.output == ContactOutput::gather ? Stage::gather : Stage::exchange;
+  const RunStage transfer = options.output == ContactOutput::gather ? RunStage::gather : RunStage::exchange;
   clock.add(transfer, c.transfer_seconds);
-  clock.add(Stage::merge, c.merge_seconds);
+  clock.add(RunStage::merge, c.merge_seconds);
   record_contacts(std::move(c), result);
 
   if (options.resident_steps > 0)
-    result.steps = run_resident_steps(session, *engine, f, slabs, held.input, result, options, threads);
+    result.steps = run_steps(session, *engine, f, slabs, held.input, result, options, threads);
   result.times = clock.times(session, transfer);
   return result;
 }
@@ -471,13 +555,22 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.axis = cmd.axis;
   o.balance = cmd.balance;
   o.read = cmd.read;
-  if (!cmd.quiet && session.rank() == 0) o.log = [](const std::string& line) { fmt::print("{}\n", line); };
+  if (cmd.verbose && !cmd.quiet && session.rank() == 0)
+    o.log = [](const std::string& line) { fmt::print("{}\n", line); };
   // The design card's shape by default: rank 0 gathers, deduplicates and writes the sorted contacts
   // (--write gather). --write ranks: each rank keeps the contacts of its id_a range and writes them
   // into the one output file. A CSV copy is written by rank 0 alone, so it always gathers.
   o.output = cmd.csv.empty() ? cmd.write : ContactOutput::gather;
   o.resident_steps = cmd.steps;
   o.step_motion.spin = cmd.spin;
+  if (cmd.steps > 0) {  // a progress line on rank 0's terminal (run/progress.hpp)
+    auto bar = std::make_shared<Progress>("detect: resident steps", "steps", std::uint64_t(cmd.steps),
+                                          !cmd.quiet && session.rank() == 0);
+    o.step_motion.on_step = [bar, steps = cmd.steps](int done) {
+      bar->update(std::uint64_t(done));
+      if (done == steps) bar->finish();
+    };
+  }
   return o;
 }
 
@@ -497,7 +590,7 @@ RunTime write_output(Session& session, const DetectCommand& cmd, const Distribut
   info.narrow_unconverged = r.stats.narrow_unconverged;
   const double seconds = write_contacts_distributed(session, cmd.output, r.contacts, r.first_row,
                                                     r.total_contacts, info, r.threads);
-  return {Stage::write, -1, seconds};
+  return {RunStage::write, -1, seconds};
 }
 
 // The CSV copy, by rank 0 (which holds every contact: --csv gathers). Returns its time (rank 0).
@@ -507,7 +600,7 @@ RunTime write_csv(const Session& session, const std::string& path, const Contact
   double seconds = 0;
   if (session.rank() == 0) {
     try {
-      auto t = clock_type::now();
+      auto t = WallClock::now();
       write_contacts_csv(path, contacts);
       seconds = seconds_since(t);
     } catch (...) {
@@ -515,16 +608,17 @@ RunTime write_csv(const Session& session, const std::string& path, const Contact
     }
   }
   session.agree(error, "csv");
-  return {Stage::csv, -1, seconds};
+  return {RunStage::csv, -1, seconds};
 }
 
 // A failing MPI call (CommFailure) leaves other ranks possibly waiting in a collective this rank will
-// never join: it ends the job (Session::abort, exit code 5).
+// never join: it ends the job (Session::abort, exit code 5), its registered temporaries removed first.
 template <class F>
 auto or_abort(Session& session, F&& f) -> decltype(f()) {
   try {
     return f();
   } catch (const CommFailure& e) {
+    run_cleanup_actions();
     session.abort(e.exit_code(), e.what());
   }
 }
@@ -550,17 +644,18 @@ PrecisionChoice choose_mode(const Session& session, const DetectCommand& cmd, co
   return pick;
 }
 
-// frame → slabs → distribute → exchange ghosts → detect → collect contacts (run) → write → summary, in
-// the chosen mode.
+// frame → slabs → distribute → exchange ghosts → detect → collect contacts (distributed_run) → write →
+// summary, in the chosen mode.
 template <class Real>
-int detect(const DetectCommand& cmd, Session& session, const DistributedOptions& options, ReadScene&& in,
-           const PrecisionChoice& choice, int threads) {
-  DistributedResult<Real> r =
-      or_abort(session, [&] { return run<Real>(session, cmd.input, options, std::move(in), threads); });
+int run_in_mode(const DetectCommand& cmd, Session& session, const DistributedOptions& options, ReadScene&& in,
+                const PrecisionChoice& choice, int threads) {
+  DistributedResult<Real> r = or_abort(
+      session, [&] { return distributed_run<Real>(session, cmd.input, options, std::move(in), threads); });
   RunTimes times = r.times;
   RunInfo info;
   info.precision = to_string(choice.mode);
   info.precision_choice = choice.reason;
+  stop_point();
   times.push_back(write_output(session, cmd, r, info));
   if (!cmd.csv.empty()) times.push_back(write_csv(session, cmd.csv, r.contacts));
   if (!cmd.quiet && session.rank() == 0) print_summary(info, times, r.total_contacts, r);
@@ -575,7 +670,8 @@ DistributedResult<Real> distributed_detect(Session& session, const std::string& 
   return or_abort(session, [&] {
     const int threads = host_threads(options.engine.threads, session);
     const DefaultTeam team(threads);
-    return run<Real>(session, scene_path, options, read_scene(session, scene_path, options), threads);
+    return distributed_run<Real>(session, scene_path, options, read_scene(session, scene_path, options),
+                                 threads);
   });
 }
 
@@ -584,6 +680,41 @@ template DistributedResult<float> distributed_detect<float>(Session&, const std:
 template DistributedResult<double> distributed_detect<double>(Session&, const std::string&,
                                                               const DistributedOptions&);
 
+namespace {
+
+// The directory `file` goes into exists and this process may create files there, and `file` is not
+// itself a directory; IoError naming `option`, the file and the directory otherwise. Checked before the
+// scene is read, so that a mistyped output path fails at once rather than after the whole run.
+void require_writable_directory(const std::string& option, const std::string& file) {
+  namespace fs = std::filesystem;
+  const fs::path parent = fs::path(file).parent_path();
+  const std::string dir = parent.empty() ? std::string(".") : parent.string();
+  std::error_code ec;
+  const fs::file_status status = fs::status(dir, ec);
+  auto fail = [&](const std::string& why) {
+    throw IoError(fmt::format("{} {}: cannot write into the directory {}: {}", option, file, dir, why));
+  };
+  if (status.type() == fs::file_type::none) fail(ec.message());  // e.g. a parent not searchable
+  if (!fs::exists(status)) fail("it does not exist");
+  if (!fs::is_directory(status)) fail("it is not a directory");
+  if (::access(dir.c_str(), W_OK | X_OK) != 0) fail(std::strerror(errno));
+  if (fs::is_directory(fs::status(file, ec)))
+    throw IoError(fmt::format("{} {}: is a directory, not a file name", option, file));
+}
+
+// Every rank that writes checks its files' directories: rank 0 the output file and the CSV copy,
+// with --write ranks every rank the output file (each writes its rows into it).
+void check_output_directories(const Session& session, const DetectCommand& cmd,
+                              const DistributedOptions& options) {
+  agreed_stage(session, "output", [&] {
+    if (session.rank() == 0 || options.output == ContactOutput::ranks)
+      require_writable_directory("-o", cmd.output);
+    if (session.rank() == 0 && !cmd.csv.empty()) require_writable_directory("--csv", cmd.csv);
+  });
+}
+
+}  // namespace
+
 // read → (--precision auto: choose the mode) → the run in that mode → write → summary
 int run_detect(const DetectCommand& cmd, Session& session) {
   if (cmd.output.empty()) throw UsageError("detect: -o/--output is required");
@@ -591,14 +722,15 @@ int run_detect(const DetectCommand& cmd, Session& session) {
     throw UsageError(std::string("--accuracy: only with --precision auto (the default), not --precision ") +
                      to_string(*cmd.precision));
   DistributedOptions options = run_options(cmd, session);
+  check_output_directories(session, cmd, options);
   const int threads = host_threads(options.engine.threads, session);
   const DefaultTeam team(threads);
   ReadScene in = or_abort(session, [&] { return read_scene(session, cmd.input, options); });
   const PrecisionChoice choice = or_abort(session, [&] { return choose_mode(session, cmd, in); });
   options.engine.fp32_broad_phase = choice.mode == Precision::mixed;
   return choice.mode == Precision::fp32
-             ? detect<float>(cmd, session, options, std::move(in), choice, threads)
-             : detect<double>(cmd, session, options, std::move(in), choice, threads);
+             ? run_in_mode<float>(cmd, session, options, std::move(in), choice, threads)
+             : run_in_mode<double>(cmd, session, options, std::move(in), choice, threads);
 }
 
 }  // namespace cg

@@ -4,9 +4,7 @@
 #include <cstdint>
 
 #include "io/contact_file.hpp"
-#include "io/inspect.hpp"
-#include "io/scene_file.hpp"
-#include "run/pipeline.hpp"
+#include "run/distributed_detect.hpp"
 
 namespace cg {
 

@@ -26,9 +26,8 @@
 #include <vector>
 
 #include "errors.hpp"
-#include "io/contact_file.hpp"
-#include "io/inspect.hpp"
 #include "io/scene_file.hpp"
+#include "run/progress.hpp"
 
 namespace cg {
 namespace {
@@ -493,7 +492,7 @@ Scene generate_scene(const GenerateOptions& options) {
   return scene;
 }
 
-void generate_scene_file(const std::string& path, const GenerateOptions& options) {
+void generate_scene_file(const std::string& path, const GenerateOptions& options, bool progress) {
   const double edge = scene_box_edge(options);
   const BodyLaw law = body_law(options, edge);
   const std::uint64_t e = generated_ellipsoids(options), spheres = options.count - e;
@@ -504,6 +503,7 @@ void generate_scene_file(const std::string& path, const GenerateOptions& options
   header.radius_high = options.radius_high;
   header.attributes = generator_attributes(options, edge);
   SceneFileWriter writer(path, header);
+  Progress bar("generate", "bodies", options.count, progress);
   const std::size_t block = std::min<std::size_t>(kWriteChunk, options.count);
   std::vector<Vec3<double>> position(block);
   std::vector<double> radius(spheres > 0 ? block : 0);
@@ -511,6 +511,7 @@ void generate_scene_file(const std::string& path, const GenerateOptions& options
     std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(block, spheres - first));
     for (std::size_t k = 0; k < n; ++k) law.body(first + k, position[k], radius[k]);
     writer.write_spheres(first, std::span(position).first(n), std::span(radius).first(n));
+    bar.add(n);
   }
   std::vector<Vec3<double>> semi_axes(e > 0 ? block : 0);
   std::vector<std::array<double, 4>> orientation(e > 0 ? block : 0);
@@ -520,7 +521,9 @@ void generate_scene_file(const std::string& path, const GenerateOptions& options
       law.ellipsoid(spheres + first + k, position[k], semi_axes[k], orientation[k]);
     writer.write_ellipsoids(first, std::span(position).first(n), std::span(semi_axes).first(n),
                             std::span(orientation).first(n));
+    bar.add(n);
   }
+  bar.finish();
   writer.commit();
 }
 

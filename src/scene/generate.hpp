@@ -87,7 +87,8 @@ Scene generate_scene(const GenerateOptions& options);
 
 // Streams the scene to an HDF5 file in chunks (any N up to 2^28 within bounded host memory),
 // written to a temporary name and renamed. Root attributes record every option and the seed.
-void generate_scene_file(const std::string& path, const GenerateOptions& options);
+// `progress`: a progress line of the bodies written (run/progress.hpp: on a terminal only).
+void generate_scene_file(const std::string& path, const GenerateOptions& options, bool progress = false);
 
 // ---- small deterministic builders for tests -------------------------------------------------------
 

@@ -1,5 +1,5 @@
 #pragma once
-// Host-side data model of CONTRACT §1 (scenes) and the run record written with contacts (§2).
+// Host-side data model of docs/FORMAT.md §1 (scenes) and the run record written with contacts (§2).
 #include <array>
 #include <cstdint>
 #include <map>
@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "core/vec3.hpp"
-#include "host/huge_pages.hpp"
+#include "host_vector.hpp"
 
 namespace cg {
 

@@ -8,7 +8,6 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <limits>
 #include <ostream>
@@ -17,12 +16,12 @@
 #include "errors.hpp"
 #include "io/text_file.hpp"
 #include "reference/scene_reference.hpp"
+#include "run/progress.hpp"
 #include "study/study_families.hpp"
+#include "timing.hpp"
 
 namespace cg {
 namespace {
-
-using Clock = std::chrono::steady_clock;
 
 // One mode × tolerance × backend run: the judged contacts (the first, untimed detect) and the median
 // time of the timed ones.
@@ -46,12 +45,6 @@ std::vector<exact::FoundContact> found_contacts(const Contacts<Real>& c) {
   return out;
 }
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t m = v.size() / 2;
-  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
-}
-
 template <class Real>
 Measured measure(const BodiesView& bodies, const EngineOptions& options, int repetitions) {
   Engine<Real> engine(options);
@@ -59,9 +52,9 @@ Measured measure(const BodiesView& bodies, const EngineOptions& options, int rep
   Measured m{found_contacts(judged), 0, engine.stats().narrow_unconverged};
   std::vector<double> times;
   for (int r = 0; r < repetitions; ++r) {
-    const auto t0 = Clock::now();
+    const auto t0 = WallClock::now();
     engine.detect(bodies);
-    times.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+    times.push_back(seconds_since(t0));
   }
   m.seconds = median(times);
   return m;
@@ -230,11 +223,11 @@ std::vector<StudyRow> run_study(const StudyOptions& o, std::ostream& out, std::o
     const std::vector<Point> points = points_of(*family, modes, o, extent_of(bodies));
     double widest = 0;
     for (const Point& p : points) widest = std::max(widest, p.band);
-    const auto t0 = Clock::now();
+    const auto t0 = WallClock::now();
     const auto reference = exact::reference_contacts(bodies, {widest, o.ellipsoid_samples});
     progress << fmt::format("  {} ({} bodies): exact reference {} pairs in {:.2f} s\n", family->name,
-                            bodies.size(), reference.size(),
-                            std::chrono::duration<double>(Clock::now() - t0).count());
+                            bodies.size(), reference.size(), seconds_since(t0));
+    Progress bar("study: " + family->name, "runs", points.size() * backends.size());
     for (const Point& p : points)
       for (Backend b : backends) {
         StudyRow row;
@@ -258,13 +251,16 @@ std::vector<StudyRow> run_study(const StudyOptions& o, std::ostream& out, std::o
           row.errors = exact::compare_with_reference(m.found, reference, bodies.radius, p.band);
         } catch (const InputError& e) {
           row.refused = true;
+          bar.finish();
           progress << fmt::format("    {} {}: refused: {}\n", row.mode, row.backend, e.what());
         }
+        bar.finish();
         progress << fmt::format("    {} {}{}: {:.4g} ms, missed {}, extra {}\n", row.mode, row.backend,
                                 p.tolerance < 0 ? "" : " tol " + number(p.tolerance), row.seconds * 1e3,
                                 row.errors.missed, row.errors.extra)
                  << std::flush;
         rows.push_back(std::move(row));
+        bar.add(1);
       }
   }
 

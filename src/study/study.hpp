@@ -5,7 +5,7 @@
 // of `repetitions` detect() calls after one untimed call whose contacts are judged), and compares the
 // contacts with the exact reference (src/reference: long double) within the mode's rounding band:
 //
-//   band = 16·ε_mode·(largest local coordinate + 2·r_max)        (CONTRACT §3; ε of the decision type)
+//   band = 16·ε_mode·(largest local coordinate + 2·r_max)        (docs/FORMAT.md §3; ε of the decision type)
 //        + tolerance·2·r_max                                        (families with ellipsoids: the solver
 //                                                                    stops at that tangential gradient)
 //

@@ -7,8 +7,8 @@
 #include <cmath>
 #include <random>
 
-#include "scene/generate.hpp"
 #include "reference/ellipsoid_reference.hpp"
+#include "scene/generate.hpp"
 
 namespace cg {
 namespace {

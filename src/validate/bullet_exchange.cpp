@@ -12,8 +12,8 @@
 #include <memory>
 #include <string>
 
-#include "validate/bullet_oracle.hpp"
 #include "errors.hpp"
+#include "validate/bullet_oracle.hpp"
 
 namespace cg {
 namespace {

@@ -12,24 +12,18 @@
 #include <btBulletCollisionCommon.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <memory>
 #include <numeric>
 #include <string>
 #include <vector>
 
-#include "validate/bullet_ellipsoid_shape.hpp"
 #include "errors.hpp"
+#include "timing.hpp"
+#include "validate/bullet_ellipsoid_shape.hpp"
 
 namespace cg::bullet_native {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-
-double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 btVector3 to_bt(const Vec3<double>& v) { return btVector3(btScalar(v.x), btScalar(v.y), btScalar(v.z)); }
 Vec3<double> from_bt(const btVector3& v) { return {double(v.x()), double(v.y()), double(v.z())}; }
@@ -70,7 +64,7 @@ class BulletWorld {
   BulletWorld(const BulletWorld&) = delete;
   BulletWorld& operator=(const BulletWorld&) = delete;
 
-  void detect() { m_world.performDiscreteCollisionDetection(); }
+  void collide() { m_world.performDiscreteCollisionDetection(); }
 
   void move_all(const OracleBodies& s) {
     for (std::size_t i = 0; i < m_objects.size(); ++i)
@@ -156,15 +150,15 @@ OracleResult collide(const OracleBodies& bodies, bool warm_step) {
       throw InputError("Bullet oracle: body ids must be strictly ascending (row " + std::to_string(i) + ")");
   OracleResult result;
   result.scalar_bytes = int(sizeof(btScalar));
-  const auto t0 = Clock::now();
+  const auto t0 = WallClock::now();
   BulletWorld world(bodies);
-  world.detect();
+  world.collide();
   result.scratch_seconds = seconds_since(t0);
   result.contacts = world.contacts(bodies);
   if (warm_step) {
-    const auto t1 = Clock::now();
+    const auto t1 = WallClock::now();
     world.move_all(bodies);
-    world.detect();
+    world.collide();
     result.warm_seconds = seconds_since(t1);
   }
   return result;

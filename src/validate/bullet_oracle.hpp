@@ -1,5 +1,5 @@
 #pragma once
-// Bullet 3 as the oracle for sphere and ellipsoid contacts (CONTRACT §4), behind an interface without
+// Bullet 3 as the oracle for sphere and ellipsoid contacts (docs/FORMAT.md §4), behind an interface without
 // Bullet types. A sphere is a btSphereShape; an ellipsoid is an EllipsoidShape
 // (bullet_ellipsoid_shape.hpp): the exact support R D² Rᵀ u / |D Rᵀ u| with a collision margin of
 // kEllipsoidMargin folded into it, so Bullet's margin-inflated shape is the ellipsoid itself.
@@ -50,7 +50,7 @@ inline constexpr double kEllipsoidMargin = 0.04;
 // Bodies handed to Bullet, in world coordinates. Invariant: ids strictly ascending. `semi_axes` and
 // `orientation` are empty (every body a sphere) or one row per body; a row with semi-axes (0, 0, 0)
 // is a sphere of `radius`, any other an ellipsoid (radius = its largest semi-axis, orientation the
-// unit quaternion (w, x, y, z) of CONTRACT §1). Bullet sees `position − origin`, and the points it
+// unit quaternion (w, x, y, z) of docs/FORMAT.md §1). Bullet sees `position − origin`, and the points it
 // returns are moved back by `origin` (in double): float Bullet is exact only near its origin.
 struct OracleBodies {
   std::vector<Vec3<double>> position;

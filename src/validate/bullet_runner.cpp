@@ -18,8 +18,8 @@
 #include <string>
 #include <vector>
 
-#include "validate/bullet_oracle.hpp"
 #include "errors.hpp"
+#include "validate/bullet_oracle.hpp"
 
 extern char** environ;
 

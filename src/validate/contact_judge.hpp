@@ -4,12 +4,12 @@
 // can decide between the engine and Bullet when they disagree.
 //
 // A body X (sphere or ellipsoid) has centre x, world axes R_X (columns: q e_k q* for its unit
-// quaternion q, CONTRACT §1) and semi-axes D_X = diag(s_0, s_1, s_2) (a sphere: D = r·I, R = I).
+// quaternion q, docs/FORMAT.md §1) and semi-axes D_X = diag(s_0, s_1, s_2) (a sphere: D = r·I, R = I).
 // Its support function about the centre is h_X(u) = |D_X R_Xᵀ u|, with gradient (the support offset)
 // s_X(u) = R_X D_X² R_Xᵀ u / h_X(u). For a pair (A, B) and unit n (from B towards A)
 //     f(n) = h_A(−n) + h_B(n) − n·(a − b),
 // distance = −min f over unit n (the global minimum), n = the minimiser, and the points are the
-// support points position_on_a = a + s_A(−n), position_on_b = b + s_B(n) (README, "detect").
+// support points position_on_a = a + s_A(−n), position_on_b = b + s_B(n) (docs/FORMAT.md §3).
 //
 // An answer (position_on_a, position_on_b, normal_on_b, distance) passes when, within `tol` (a length):
 //   1. n is a unit vector (|1 − |n|| ≤ 1e-6 + tol / L, L the larger bounding radius);

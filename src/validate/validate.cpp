@@ -1,6 +1,6 @@
 // Validation of a contact set against Bullet (see validate.hpp for the rules and the band).
 //
-// Data flow: check the contacts against CONTRACT §2 → index them in canonical form (id_a < id_b,
+// Data flow: check the contacts against docs/FORMAT.md §2 → index them in canonical form (id_a < id_b,
 // sorted; duplicates skipped) without copying when they already are → choose the region(s): the
 // whole scene, or K disjoint sub-boxes → per region: Bullet on the bodies there (ids ascending; in a
 // frame centred on them when the scene has ellipsoids), the contacts of pairs inside the region,
@@ -17,11 +17,10 @@
 #include <random>
 #include <utility>
 
-#include "validate/bullet_oracle.hpp"
 #include "errors.hpp"
 #include "io/contact_file.hpp"
-#include "io/inspect.hpp"
 #include "io/scene_file.hpp"
+#include "validate/bullet_oracle.hpp"
 #include "validate/validate_detail.hpp"
 
 namespace cg {
@@ -88,7 +87,7 @@ double tolerance(Precision p, double scale, double span) {
              : std::max(1e-4 * scale, 16 * double(std::numeric_limits<float>::epsilon()) * span);
 }
 
-// Checks CONTRACT §2 on the rows as given; fills the violation counters and failure lines.
+// Checks docs/FORMAT.md §2 on the rows as given; fills the violation counters and failure lines.
 // Returns true when the rows are already canonical, sorted and unique.
 bool check_contract(const Contacts<double>& c, std::int64_t bodies, ValidateReport& rep) {
   std::int64_t first_order = -1, first_unsorted = -1, first_dup = -1, first_bad = -1, first_nf = -1;
@@ -119,12 +118,12 @@ bool check_contract(const Contacts<double>& c, std::int64_t bodies, ValidateRepo
         rep.bad_ids, bodies - 1, row_ids(first_bad)));
   if (rep.bad_id_order)
     rep.failures.push_back(fmt::format(
-        "id order: {} rows have id_a > id_b (first: {}); CONTRACT §2 requires id_a < id_b, A being the "
+        "id order: {} rows have id_a > id_b (first: {}); docs/FORMAT.md §2 requires id_a < id_b, A being the "
         "body with the smaller id",
         rep.bad_id_order, row_ids(first_order)));
   if (rep.unsorted)
     rep.failures.push_back(fmt::format(
-        "not sorted: {} rows come before their predecessor (first: {}); CONTRACT §2 requires rows "
+        "not sorted: {} rows come before their predecessor (first: {}); docs/FORMAT.md §2 requires rows "
         "sorted by (id_a, id_b)",
         rep.unsorted, row_ids(first_unsorted)));
   if (rep.duplicates)

@@ -1,5 +1,5 @@
 #pragma once
-// `contactgrid validate`: compares a contact set with Bullet on the same scene (CONTRACT §4).
+// `contactgrid validate`: compares a contact set with Bullet on the same scene (docs/FORMAT.md §4).
 //
 // Comparison: pairs are matched by (id_a, id_b). A pair found by one side only is "missing" (only
 // Bullet found it) or "extra" (only the contacts given found it) unless it is borderline: its exact
@@ -12,7 +12,7 @@
 //                                       far from the origin it is simply wrong, and that must show)
 // where either decision is correct. For matched pairs: position error = max(|Δposition_on_a|,
 // |Δposition_on_b|), normal angle in degrees, |Δdistance|.
-// PASS iff the contacts obey CONTRACT §2 (id_a < id_b, sorted, each pair once, ids in range), no pair
+// PASS iff the contacts obey docs/FORMAT.md §2 (id_a < id_b, sorted, each pair once, ids in range), no pair
 // is missing or extra outside the band, every position error <= pos_eps and every angle <= angle_deg.
 // The distance error is reported, not judged (it is bounded by the position errors).
 //
@@ -22,8 +22,8 @@
 // 2·r_max (bounding radii), and only pairs whose two centres lie inside the box itself are compared. The
 // report gives the fraction of the contacts checked. A scene smaller than one box is checked whole.
 //
-// Pairs with an ellipsoid (README, "Validating ellipsoids"): Bullet collides ellipsoids as a convex
-// shape with the exact support and a margin of kEllipsoidMargin (bullet_ellipsoid_shape.hpp), by
+// Pairs with an ellipsoid (docs/VALIDATION.md, "Validating ellipsoids"): Bullet collides ellipsoids as a
+// convex shape with the exact support and a margin of kEllipsoidMargin (bullet_ellipsoid_shape.hpp), by
 // default in float (double Bullet's EPA is degenerate on 17–20 % of ellipsoid pairs), in a frame
 // centred on the bodies it is given (float Bullet is exact only near its origin). A matched pair agrees
 // when its positions and distances differ by <= pos_eps·L (L: the pair's larger bounding radius) and
@@ -106,7 +106,7 @@ struct ValidateReport {
   double shallow_deepest = 0;                                    // the largest |distance| among them
   double shape_max_position_error = 0, shape_max_angle_deg = 0;  // matched, relative / degrees
 
-  // Contract violations of the contacts given (CONTRACT §2).
+  // Contract violations of the contacts given (docs/FORMAT.md §2).
   std::uint64_t bad_id_order = 0, unsorted = 0, duplicates = 0, bad_ids = 0, non_finite = 0;
 
   // Geometry of the matched pairs.
@@ -128,8 +128,8 @@ struct ValidateReport {
 // have inconsistent lengths, UsageError for bad options, IoError when float Bullet cannot be run.
 ValidateReport validate(const Scene& scene, const Contacts<double>& contacts, const ValidateOptions& options);
 
-// read_scene + read_contacts (src/io/scene_file.hpp, src/io/contact_file.hpp), then validate(); contacts_precision is taken from the
-// contact file's `precision` attribute.
+// read_scene + read_contacts (src/io/scene_file.hpp, src/io/contact_file.hpp), then validate();
+// contacts_precision is taken from the contact file's `precision` attribute.
 ValidateReport validate_files(const std::string& scene_path, const std::string& contacts_path,
                               ValidateOptions options);
 

@@ -33,7 +33,7 @@ judge::Body body(const Scene& s, std::int64_t id) {
   return judge::ellipsoid(s.ellipsoid_position[e], s.ellipsoid_semi_axes[e], s.ellipsoid_orientation[e]);
 }
 
-// Exact signed distance of two spheres (long double), as CONTRACT §3.
+// Exact signed distance of two spheres (long double), as docs/FORMAT.md §3.
 double sphere_distance(const Scene& s, std::int64_t a, std::int64_t b) {
   const Vec3<double> ca = s.sphere_position[std::size_t(a)], cb = s.sphere_position[std::size_t(b)];
   const long double dx = (long double)ca.x - cb.x, dy = (long double)ca.y - cb.y,

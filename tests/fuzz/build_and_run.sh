@@ -20,7 +20,7 @@ if [[ ! -x $OUT/fuzz_readers || tests/fuzz/fuzz_readers.cpp -nt $OUT/fuzz_reader
       -n $(find src/io -newer "$OUT/fuzz_readers" 2>/dev/null) ]]; then
   clang++-14 -std=c++20 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
     -DCONTACTGRID_VERSION="\"${VERSION:-0}\"" -Wno-unknown-pragmas \
-    -Itests/fuzz/stub -Isrc -Ikernels src/io/*.cpp kernels/contacts.cpp tests/fuzz/fuzz_readers.cpp \
+    -Itests/fuzz/stub -Isrc -Ikernels src/io/*.cpp src/run/stop.cpp kernels/contacts.cpp tests/fuzz/fuzz_readers.cpp \
     $HDF5_FLAGS -lfmt -o "$OUT/fuzz_readers"
 fi
 if [[ -x $CG && -z $(ls -A "$OUT/seeds") ]]; then

@@ -16,11 +16,6 @@
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
 
-namespace cg {
-// (kernels/engine.cpp is not linked into the harness)
-const char* to_string(Precision p) { return p == Precision::fp32 ? "fp32" : "fp64"; }
-}  // namespace cg
-
 namespace {
 
 const std::string& input_path() {

@@ -39,9 +39,7 @@
 #include <thread>
 #include <vector>
 
-#include "io/contact_file.hpp"
 #include "io/inspect.hpp"
-#include "io/scene_file.hpp"
 
 extern char** environ;
 

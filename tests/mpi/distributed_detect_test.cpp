@@ -4,6 +4,8 @@
 //
 // Every test is collective: all ranks run it; comparisons happen on rank 0 after the last collective
 // (so a failed assertion never leaves a rank behind in a collective).
+#include "run/distributed_detect.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -14,11 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "io/contact_file.hpp"
-#include "io/inspect.hpp"
-#include "io/scene_file.hpp"
 #include "mpi/mpi_test_env.hpp"
-#include "run/pipeline.hpp"
 #include "support/contacts_equal.hpp"
 
 namespace cg {

@@ -16,12 +16,11 @@
 #include <string>
 #include <vector>
 
-#include "run/contact_file_shared.hpp"
 #include "io/contact_file.hpp"
 #include "io/inspect.hpp"
-#include "io/scene_file.hpp"
 #include "mpi/mpi_test_env.hpp"
-#include "run/pipeline.hpp"
+#include "run/contact_file_shared.hpp"
+#include "run/distributed_detect.hpp"
 #include "support/contacts_equal.hpp"
 
 namespace cg {

@@ -10,8 +10,6 @@
 #include <filesystem>
 #include <iostream>
 
-#include "io/contact_file.hpp"
-#include "io/inspect.hpp"
 #include "io/scene_file.hpp"
 #include "mpi/mpi_test_env.hpp"
 

@@ -10,10 +10,10 @@
 #include <algorithm>
 #include <string>
 
-#include "scene/generate.hpp"
 #include "io/scene_file.hpp"
 #include "mpi/mpi_test_env.hpp"
-#include "run/pipeline.hpp"
+#include "run/distributed_detect.hpp"
+#include "scene/generate.hpp"
 
 namespace cg {
 namespace {

@@ -1,5 +1,6 @@
 // End-to-end tests of the contactgrid executable: exit codes, messages and the no-partial-output rule.
-// Exit codes (README): 0 ok, 1 validation FAIL, 2 usage, 3 bad input, 4 CUDA, 5 MPI, 6 I/O.
+// Exit codes (docs/USAGE.md): 0 ok, 1 validation FAIL, 2 usage, 3 bad input, 4 CUDA, 5 MPI, 6 I/O,
+// 7 out of memory, 8 internal.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -14,9 +15,9 @@
 
 #include "engine.hpp"
 #include "io/contact_file.hpp"
-#include "io/inspect.hpp"
 #include "io/scene_file.hpp"
 #include "resident_steps.hpp"
+#include "run/distributed_detect.hpp"
 #include "run/pipeline.hpp"
 #include "support/run_cli.hpp"
 #include "temp_dir.hpp"
@@ -437,11 +438,11 @@ TEST_F(Cli, ResidentStepsOnAMixedScene) {
 TEST(StageTimes, NamesOfTheSummaryAndTheFile) {
   const auto& engine = engine_stage_names();
   const auto pack = std::find(engine.begin(), engine.end(), "pack") - engine.begin();
-  const RunTimes times{{Stage::read, -1, 1.0},
-                       {Stage::detect, -1, 2.0},
-                       {Stage::detect, static_cast<int>(pack), 0.5},
-                       {Stage::exchange, -1, 0.25},
-                       {Stage::write, -1, 0.125}};
+  const RunTimes times{{RunStage::read, -1, 1.0},
+                       {RunStage::detect, -1, 2.0},
+                       {RunStage::detect, static_cast<int>(pack), 0.5},
+                       {RunStage::exchange, -1, 0.25},
+                       {RunStage::write, -1, 0.125}};
   const StageTimes file = file_stage_times(times);
   ASSERT_EQ(file.size(), times.size());
   const char* want[] = {"read", "detect", "detect.pack", "exchange", "write"};
@@ -449,8 +450,8 @@ TEST(StageTimes, NamesOfTheSummaryAndTheFile) {
     EXPECT_EQ(file[k].name, want[k]);
     EXPECT_EQ(file[k].seconds, times[k].seconds);
   }
-  EXPECT_STREQ(stage_name(Stage::redistribute), "redistribute");
-  EXPECT_STREQ(stage_name(Stage::csv), "csv");
+  EXPECT_STREQ(stage_name(RunStage::redistribute), "redistribute");
+  EXPECT_STREQ(stage_name(RunStage::csv), "csv");
 }
 
 TEST_F(Cli, MissingFile) { expect_detect_fails(path("nope.h5"), 3, {"nope.h5"}); }
@@ -505,7 +506,71 @@ TEST_F(Cli, UnwritableOutputIsAnIoError) {
   write_scene(path("s.h5"), small_scene());
   Result r = run("detect " + path("s.h5") + " -o " + path("no/such/dir/out.h5"));
   EXPECT_EQ(r.code, 6) << r.output;
+  EXPECT_NE(r.output.find("cannot write into the directory " + path("no/such/dir") + ": it does not exist"),
+            std::string::npos)
+      << r.output;
   EXPECT_FALSE(fs::exists(path("no")));
+}
+
+// detect checks the output's directory before it reads the scene: with a scene that does not exist, a
+// bad output directory is still the error (exit 6, naming the directory), not the missing scene (3).
+// The same for a parent that is a file, an output that is a directory, and the --csv copy's directory.
+TEST_F(Cli, OutputDirectoryIsCheckedBeforeTheScene) {
+  const std::string absent = path("absent.h5");
+  auto expect_io_error = [&](const std::string& args, const std::string& needle) {
+    Result r = run("detect " + absent + " " + args);
+    EXPECT_EQ(r.code, 6) << args << ": " << r.output;
+    EXPECT_NE(r.output.find(needle), std::string::npos) << "missing '" << needle << "' in: " << r.output;
+    EXPECT_EQ(r.output.find("absent.h5:"), std::string::npos) << "the scene was read first: " << r.output;
+  };
+  expect_io_error("-o " + path("missing/out.h5"),
+                  "-o " + path("missing/out.h5") + ": cannot write into the directory " + path("missing"));
+  std::ofstream(path("plain")) << "a file, not a directory\n";
+  expect_io_error("-o " + path("plain/out.h5"),
+                  "cannot write into the directory " + path("plain") + ": it is not a directory");
+  fs::create_directory(path("taken.h5"));
+  expect_io_error("-o " + path("taken.h5"), "-o " + path("taken.h5") + ": is a directory, not a file name");
+  expect_io_error("-o " + path("ok.h5") + " --csv " + path("missing/c.csv"),
+                  "--csv " + path("missing/c.csv") + ": cannot write into the directory " + path("missing"));
+  EXPECT_FALSE(fs::exists(path("ok.h5")));
+  // a writable directory lets the run go on to the scene, whose absence is then the error
+  Result r = run("detect " + absent + " -o " + path("ok.h5"));
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("absent.h5"), std::string::npos) << r.output;
+}
+
+// The merge line (contacts merged, duplicates removed) is an info line: printed only with --verbose;
+// --verbose with --quiet is a usage error.
+TEST_F(Cli, MergeLineOnlyWhenVerbose) {
+  write_scene(path("s.h5"), small_scene());
+  const Result plain = run("detect " + path("s.h5") + " -o " + path("a.h5") + " --backend cpu");
+  ASSERT_EQ(plain.code, 0) << plain.output;
+  EXPECT_NE(plain.output.find("10 bodies"), std::string::npos) << plain.output;  // the summary is there
+  EXPECT_EQ(plain.output.find("merge:"), std::string::npos) << plain.output;
+  const Result verbose = run("detect " + path("s.h5") + " -o " + path("b.h5") + " --backend cpu --verbose");
+  ASSERT_EQ(verbose.code, 0) << verbose.output;
+  EXPECT_NE(verbose.output.find("merge: "), std::string::npos) << verbose.output;
+  EXPECT_NE(verbose.output.find("0 duplicate(s) removed"), std::string::npos) << verbose.output;
+  EXPECT_EQ(run("compare " + path("a.h5") + " " + path("b.h5")).code, 0);
+  expect_detect_fails(path("s.h5"), 2, {"--verbose", "--quiet"}, "-v -q");
+}
+
+// --help says what the tool is for (spheres and ellipsoids) and where the formats are written down;
+// --version is CMake's project version, which is the first version of the changelog.
+TEST_F(Cli, HelpAndVersion) {
+  const Result help = run("--help");
+  EXPECT_EQ(help.code, 0) << help.output;
+  EXPECT_NE(help.output.find("spheres and ellipsoids"), std::string::npos) << help.output;
+  EXPECT_NE(help.output.find("docs/FORMAT.md"), std::string::npos) << help.output;
+  const Result version = run("--version");
+  EXPECT_EQ(version.code, 0) << version.output;
+  EXPECT_EQ(version.output, "contactgrid " CONTACTGRID_VERSION "\n");
+  std::ifstream changelog(std::string(CG_SOURCE_DIR) + "/docs/CHANGELOG.md");
+  ASSERT_TRUE(changelog);
+  std::string first;  // the first "## <version> ..." heading
+  for (std::string line; first.empty() && std::getline(changelog, line);)
+    if (line.rfind("## ", 0) == 0) first = line.substr(3, line.find(' ', 3) - 3);
+  EXPECT_EQ(first, CONTACTGRID_VERSION) << "docs/CHANGELOG.md's first version";
 }
 
 TEST_F(Cli, CudaBackendWithoutGpuIsAClearError) {

@@ -1,5 +1,5 @@
 // Unit tests of the shared host/device math: cell coordinates, keys, the exactly-once pair rule, the
-// grid plan's encoding limits, and the sphere contact formulas of CONTRACT §3.
+// grid plan's encoding limits, and the sphere contact formulas of docs/FORMAT.md §3.
 #include <gtest/gtest.h>
 
 #include <map>

@@ -237,16 +237,8 @@ TYPED_TEST(CudaBackendTest, DeviceArrayApiExample) {
   ASSERT_TRUE(dc.full);
   Contacts<Real> back;
   back.full = true;
-  back.id_a = to_host(dc.id_a, dc.count);
-  back.id_b = to_host(dc.id_b, dc.count);
-  back.position_on_a = to_host(dc.position_on_a, dc.count);
-  back.position_on_b = to_host(dc.position_on_b, dc.count);
-  back.normal_on_b = to_host(dc.normal_on_b, dc.count);
-  back.distance = to_host(dc.distance, dc.count);
-  back.local_point_a = to_host(dc.local_point_a, dc.count);
-  back.local_point_b = to_host(dc.local_point_b, dc.count);
-  back.lateral_friction_dir1 = to_host(dc.lateral_friction_dir1, dc.count);
-  back.lateral_friction_dir2 = to_host(dc.lateral_friction_dir2, dc.count);
+  zip_contact_fields(back, dc, true,
+                     [&](auto, auto& column, const auto* d) { column = to_host(d, dc.count); });
   expect_identical(ref, back, "detect_device_resident");
   std::vector<std::string> names;
   for (const auto& t : engine.times()) names.push_back(t.name);

@@ -1,7 +1,7 @@
 // The engine against the exact reference (src/reference/sphere_reference.hpp) on random and adversarial
 // scenes, in both precisions and on both backends (CUDA cases skip without a GPU).
 //
-// Borderline band (CONTRACT §3): a pair whose exact |distance| is below
+// Borderline band (docs/FORMAT.md §3): a pair whose exact |distance| is below
 //   tol = 16 · eps(Real) · (largest local coordinate + 2 · r_max)
 // may be decided either way (local coordinates are rounded to Real once); every other decision must
 // equal the reference, and contact values must agree within tolerances of the same order.
@@ -17,6 +17,7 @@
 #include "engine.hpp"
 #include "reference/sphere_reference.hpp"
 #include "scenes.hpp"
+#include "support/contacts_equal.hpp"
 
 namespace cg::test {
 namespace {
@@ -303,10 +304,7 @@ TYPED_TEST(EngineTest, ResidentBodiesRefreshInRanges) {
     ASSERT_GT(c.size(), 0u);
     EXPECT_EQ(e.detect_resident(), c.size());
     const Contacts<R>& r = e.resident_contacts();  // CUDA: downloaded here
-    EXPECT_EQ(r.id_a, c.id_a);
-    EXPECT_EQ(r.id_b, c.id_b);
-    EXPECT_EQ(r.distance, c.distance);
-    EXPECT_TRUE(r.position_on_b == c.position_on_b);
+    EXPECT_EQ(test::compare_contacts(r, c), "identical");
   };
   expect_same();
   // rows 1000 … 1999 move (and shrink) on the host and are written back; the rest stay resident
@@ -345,13 +343,7 @@ TYPED_TEST(EngineTest, CellSizeChangesSpeedNotContacts) {
     const auto c =
         cell < 0 ? this->run(s, Fields::full, 0, CellChoice::tuned) : this->run(s, Fields::full, cell);
     ASSERT_EQ(c.size(), ref.size()) << "cell " << cell;
-    for (std::size_t k = 0; k < c.size(); ++k) {
-      ASSERT_EQ(c.id_a[k], ref.id_a[k]);
-      ASSERT_EQ(c.id_b[k], ref.id_b[k]);
-      ASSERT_EQ(c.distance[k], ref.distance[k]);
-      ASSERT_TRUE(c.position_on_a[k] == ref.position_on_a[k] && c.normal_on_b[k] == ref.normal_on_b[k] &&
-                  c.lateral_friction_dir2[k] == ref.lateral_friction_dir2[k]);
-    }
+    ASSERT_EQ(test::compare_contacts(c, ref), "identical") << "cell " << cell;
   }
 }
 

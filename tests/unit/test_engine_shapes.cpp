@@ -30,6 +30,7 @@
 #include "engine.hpp"
 #include "reference/ellipsoid_reference.hpp"
 #include "scenes.hpp"
+#include "support/contacts_equal.hpp"
 
 #if defined(CONTACTGRID_HAVE_CUDA)
 #include <cuda_runtime.h>
@@ -187,24 +188,11 @@ TYPED_TEST(EngineShapesTest, CpuMatchesBruteForceReference) {
   }
 }
 
-template <class T>
-bool same_bits(const HostVector<T>& a, const HostVector<T>& b) {
-  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
-}
 template <class Real>
 void expect_identical(const Contacts<Real>& x, const Contacts<Real>& y, const std::string& what) {
   ASSERT_EQ(x.size(), y.size()) << what;
   ASSERT_EQ(x.full, y.full) << what;
-  EXPECT_TRUE(same_bits(x.id_a, y.id_a)) << what << ": id_a";
-  EXPECT_TRUE(same_bits(x.id_b, y.id_b)) << what << ": id_b";
-  EXPECT_TRUE(same_bits(x.position_on_a, y.position_on_a)) << what << ": position_on_a";
-  EXPECT_TRUE(same_bits(x.position_on_b, y.position_on_b)) << what << ": position_on_b";
-  EXPECT_TRUE(same_bits(x.normal_on_b, y.normal_on_b)) << what << ": normal_on_b";
-  EXPECT_TRUE(same_bits(x.distance, y.distance)) << what << ": distance";
-  EXPECT_TRUE(same_bits(x.local_point_a, y.local_point_a)) << what << ": local_point_a";
-  EXPECT_TRUE(same_bits(x.local_point_b, y.local_point_b)) << what << ": local_point_b";
-  EXPECT_TRUE(same_bits(x.lateral_friction_dir1, y.lateral_friction_dir1)) << what << ": dir1";
-  EXPECT_TRUE(same_bits(x.lateral_friction_dir2, y.lateral_friction_dir2)) << what << ": dir2";
+  EXPECT_EQ(test::compare_contacts(x, y), "identical") << what;
 }
 
 // Shape rows that hold only spheres select the sphere path: the same bits as no shape rows, every
@@ -223,7 +211,7 @@ TYPED_TEST(EngineShapesTest, SphereOnlyScenesUnchanged) {
     EXPECT_EQ(plain_stats.candidates, a.size());
     EXPECT_EQ(e.stats().ellipsoids, 0u);
     ASSERT_GT(a.size(), 0u);
-    for (std::size_t k = 0; k < a.size(); ++k) {  // the closed form in double (CONTRACT §3)
+    for (std::size_t k = 0; k < a.size(); ++k) {  // the closed form in double (docs/FORMAT.md §3)
       const std::size_t i = std::size_t(a.id_a[k]), j = std::size_t(a.id_b[k]);
       const double dx = s.p[i].x - s.p[j].x, dy = s.p[i].y - s.p[j].y, dz = s.p[i].z - s.p[j].z;
       const double d = std::sqrt(dx * dx + dy * dy + dz * dz) - (s.r[i] + s.r[j]);

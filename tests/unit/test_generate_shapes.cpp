@@ -7,10 +7,8 @@
 #include <string>
 #include <variant>
 
-#include "scene/generate.hpp"
-#include "io/contact_file.hpp"
-#include "io/inspect.hpp"
 #include "io/scene_file.hpp"
+#include "scene/generate.hpp"
 #include "temp_dir.hpp"
 
 namespace {

@@ -8,6 +8,7 @@
 #include "backend.hpp"
 #include "host/stages.hpp"
 #include "scenes.hpp"
+#include "support/contacts_equal.hpp"
 
 namespace cg::test {
 namespace {
@@ -23,22 +24,10 @@ detail::DetectJob<Real> make_job(const Spheres& s, Fields fields, std::span<cons
   return job;
 }
 
-template <class T>
-bool same_bits(const HostVector<T>& a, const HostVector<T>& b) {
-  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
-}
-
 template <class Real>
 void expect_same(const Contacts<Real>& a, const Contacts<Real>& b) {
   ASSERT_EQ(a.size(), b.size());
-  EXPECT_TRUE(same_bits(a.id_a, b.id_a));
-  EXPECT_TRUE(same_bits(a.id_b, b.id_b));
-  EXPECT_TRUE(same_bits(a.position_on_a, b.position_on_a));
-  EXPECT_TRUE(same_bits(a.position_on_b, b.position_on_b));
-  EXPECT_TRUE(same_bits(a.normal_on_b, b.normal_on_b));
-  EXPECT_TRUE(same_bits(a.distance, b.distance));
-  EXPECT_TRUE(same_bits(a.local_point_a, b.local_point_a));
-  EXPECT_TRUE(same_bits(a.lateral_friction_dir2, b.lateral_friction_dir2));
+  EXPECT_EQ(test::compare_contacts(a, b), "identical");
 }
 
 template <class Real>

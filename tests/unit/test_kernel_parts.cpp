@@ -23,8 +23,8 @@ TEST(StageIds, NamesInPipelineOrder) {
 TEST(StageIds, HostTimerAppendsLapsByName) {
   StageTimes times;
   detail::HostStageTimer t(times);
-  t.lap(detail::Stage::pack);
-  t.lap(detail::Stage::narrow);
+  t.lap(detail::EngineStage::pack);
+  t.lap(detail::EngineStage::narrow);
   ASSERT_EQ(times.size(), 2u);
   EXPECT_EQ(times[0].name, "pack");
   EXPECT_EQ(times[1].name, "narrow");

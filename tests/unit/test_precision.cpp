@@ -1,4 +1,4 @@
-// The precision modes (issue #13, README "Choosing a precision") against the exact long-double
+// The precision modes (issue #13, docs/PRECISION.md) against the exact long-double
 // reference (src/reference, cg_reference), one body over both backends (CUDA cases skip without a GPU):
 //   fp64   decisions on the frame-local doubles, rows from the world doubles: normals and points
 //          exact to a few ulps even for centres 1e-12 apart at 1e6;

@@ -187,7 +187,7 @@ Spheres close_pairs(double base, std::uint64_t seed) {
 
 // The largest |p − p_exact| (both points, Euclidean) and normal angle (degrees) over the pairs both
 // the engine and the reference hold, but those whose centres are within the mode's ε: there the
-// normal is (1, 0, 0) by CONTRACT §3, not the direction of a difference it cannot resolve.
+// normal is (1, 0, 0) by docs/FORMAT.md §3, not the direction of a difference it cannot resolve.
 template <class Real>
 ModeBounds measured_errors(const Spheres& s, const Contacts<Real>& c, double coincident) {
   const auto ref = exact::reference_contacts(s.p, s.r);

@@ -1,5 +1,5 @@
 // fp32 pairs with an ellipsoid whose centres are nearly coincident (issue #13's last correctness gap,
-// README "Choosing a precision"), one body over both backends (CUDA cases skip without a GPU): a pair
+// docs/PRECISION.md), one body over both backends (CUDA cases skip without a GPU): a pair
 // whose local float centres fp32 does not resolve (fp32_resolves, core/narrow.hpp) is decided and
 // solved in double from the world coordinates, as fp64 solves it, and its row rounded to float once
 // and counted (EngineStats::fp64_rows). Before, such a pair was solved on the rounded float centres,
@@ -112,7 +112,7 @@ exact::Body reference_body(const ShapeScene& s, std::size_t i) {
 // bound for the pair's axis ratio κ ≤ 1/0.3 (5e-4·κ rad, tests/unit/test_ellipsoid_contact.cpp: the
 // rows come from double, no input-rounding term), points within that bound plus ½ ulp32 of the world
 // coordinate. Returns the largest normal angle (degrees). Pairs whose world doubles coincide take the
-// canonical normal (CONTRACT §3: first non-zero component positive), the reference either of ±n.
+// canonical normal (docs/FORMAT.md §3: first non-zero component positive), the reference either of ±n.
 double expect_near_pairs_exact(const NearScene& n, const Contacts<float>& c) {
   const ShapeScene& s = n.s;
   double worst = 0;
@@ -167,19 +167,8 @@ void expect_fp64_rows_rounded(const NearScene& n, const Contacts<float>& f32, co
     const auto it = rows.find({f32.id_a[k], f32.id_b[k]});
     ASSERT_TRUE(it != rows.end());
     const std::size_t m = it->second;
-    auto same = [](Vec3<float> a, Vec3<double> b) {
-      const Vec3<float> r = vec_cast<float>(b);
-      return a.x == r.x && a.y == r.y && a.z == r.z;
-    };
     const std::string what = n.s.name + ": pair " + std::to_string(f32.id_a[k]);
-    EXPECT_TRUE(same(f32.normal_on_b[k], f64.normal_on_b[m])) << what;
-    EXPECT_TRUE(same(f32.position_on_a[k], f64.position_on_a[m])) << what;
-    EXPECT_TRUE(same(f32.position_on_b[k], f64.position_on_b[m])) << what;
-    EXPECT_TRUE(same(f32.local_point_a[k], f64.local_point_a[m])) << what;
-    EXPECT_TRUE(same(f32.local_point_b[k], f64.local_point_b[m])) << what;
-    EXPECT_TRUE(same(f32.lateral_friction_dir1[k], f64.lateral_friction_dir1[m])) << what;
-    EXPECT_TRUE(same(f32.lateral_friction_dir2[k], f64.lateral_friction_dir2[m])) << what;
-    EXPECT_EQ(f32.distance[k], float(f64.distance[m])) << what;
+    EXPECT_EQ(test::compare_rows(f32, k, f64, m), "identical") << what;
     ++compared;
   }
   EXPECT_EQ(compared, n.near_pairs) << n.s.name;

@@ -1,10 +1,13 @@
-// The README's library examples, compiled and run. The regions between the markers must appear
-// verbatim in README.md (checked below), so the documentation cannot drift from code that works.
+// The library examples of the README and docs/LIBRARY.md, compiled and run. The regions between the
+// markers must appear verbatim in those files (checked below), so the documentation cannot drift from
+// code that works.
 #include <gtest/gtest.h>
 
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <utility>
+#include <vector>
 
 // EXAMPLE-BEGIN
 #include <vector>
@@ -49,21 +52,29 @@ TEST(Readme, LibraryExampleRuns) { EXPECT_EQ(count_contacts_example(), 1u); }
 
 TEST(Readme, SkinExampleRuns) { EXPECT_EQ(skin_steps_example(), 6u); }
 
-TEST(Readme, LibraryExampleIsInTheReadme) {
+TEST(Readme, LibraryExamplesAreInTheDocs) {
   // By CG_SOURCE_DIR, not __FILE__: with CCACHE_BASEDIR set, ccache makes __FILE__ relative to the
   // build directory, which is not CTest's working directory.
-  std::ifstream self(std::string(CG_SOURCE_DIR) + "/tests/unit/test_readme_example.cpp"),
-      readme(std::string(CG_SOURCE_DIR) + "/README.md");
-  ASSERT_TRUE(self && readme);
-  std::stringstream a, b;
-  a << self.rdbuf();
-  b << readme.rdbuf();
-  const std::string src = a.str();
-  for (const std::string marker : {"EXAMPLE", "SKIN-EXAMPLE"}) {
-    const std::string open = "// " + marker + "-BEGIN\n";
-    const auto begin = src.find(open) + open.size(), end = src.find("// " + marker + "-END");
+  auto text = [](const std::string& relative) {
+    std::ifstream in(std::string(CG_SOURCE_DIR) + "/" + relative);
+    std::stringstream all;
+    all << in.rdbuf();
+    return std::make_pair(static_cast<bool>(in), all.str());
+  };
+  const auto [self_read, src] = text("tests/unit/test_readme_example.cpp");
+  ASSERT_TRUE(self_read);
+  // Each example and the pages that show it: the README's front page and the library page.
+  const std::pair<const char*, std::vector<std::string>> examples[] = {
+      {"EXAMPLE", {"README.md", "docs/LIBRARY.md"}}, {"SKIN-EXAMPLE", {"docs/LIBRARY.md"}}};
+  for (const auto& [marker, pages] : examples) {
+    const std::string open = std::string("// ") + marker + "-BEGIN\n";
+    const auto begin = src.find(open) + open.size(), end = src.find(std::string("// ") + marker + "-END");
     const std::string example = src.substr(begin, end - begin);
-    EXPECT_NE(b.str().find(example), std::string::npos)
-        << "README.md does not contain the " << marker << " of tests/unit/test_readme_example.cpp";
+    for (const std::string& page : pages) {
+      const auto [read, doc] = text(page);
+      ASSERT_TRUE(read) << page;
+      EXPECT_NE(doc.find(example), std::string::npos)
+          << page << " does not contain the " << marker << " of tests/unit/test_readme_example.cpp";
+    }
   }
 }

@@ -1,4 +1,4 @@
-// Ellipsoid scene files (CONTRACT §1): every bad ellipsoid row is an InputError naming the file, the
+// Ellipsoid scene files (docs/FORMAT.md §1): every bad ellipsoid row is an InputError naming the file, the
 // dataset and the row; body_rows builds the engine's shape rows in id order.
 #include <gtest/gtest.h>
 
@@ -6,7 +6,6 @@
 #include <limits>
 #include <string>
 
-#include "io/contact_file.hpp"
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
 #include "temp_dir.hpp"

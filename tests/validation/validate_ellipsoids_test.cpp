@@ -6,12 +6,10 @@
 #include <cmath>
 #include <string>
 
-#include "validate/bullet_oracle.hpp"
 #include "io/contact_file.hpp"
-#include "io/inspect.hpp"
-#include "io/scene_file.hpp"
 #include "support/run_cli.hpp"
 #include "temp_dir.hpp"
+#include "validate/bullet_oracle.hpp"
 
 namespace cg {
 namespace {

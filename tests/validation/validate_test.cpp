@@ -1,5 +1,5 @@
 // Tests of `contactgrid validate` (src/validate/validate.hpp) and of the Bullet oracle it stands on.
-// Contacts are built by brute force with the CONTRACT §3 formulas (validation_helpers.hpp), never by
+// Contacts are built by brute force with the docs/FORMAT.md §3 formulas (validation_helpers.hpp), never by
 // the engine, then corrupted one way at a time; each corruption must FAIL for its own reason.
 #include "validate/validate.hpp"
 
@@ -117,7 +117,7 @@ TEST_F(ValidateTest, MovedPointFailsPosition) {
 
 TEST_F(ValidateTest, SwappedBodiesFailIdOrder) {
   // A and B exchanged in one row, consistently (points swapped, normal negated): the geometry still
-  // matches Bullet, only CONTRACT §2's id order is broken.
+  // matches Bullet, only docs/FORMAT.md §2's id order is broken.
   const std::size_t row = deep_row(exact);
   std::swap(exact.id_a[row], exact.id_b[row]);
   std::swap(exact.position_on_a[row], exact.position_on_b[row]);

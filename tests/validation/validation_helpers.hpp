@@ -1,6 +1,6 @@
 #pragma once
 // Test helpers for the validation suite: seeded random sphere scenes and their exact contacts by a
-// brute-force sweep with the CONTRACT §3 formulas, independent of the engine.
+// brute-force sweep with the docs/FORMAT.md §3 formulas, independent of the engine.
 // Invariant: contacts come out sorted by (id_a, id_b), id_a < id_b, each pair once.
 #include <algorithm>
 #include <cmath>
@@ -34,7 +34,7 @@ inline double edge_for(std::size_t n, double per_body = 0.4) {
   return std::cbrt(double(n - 1) / 2 * 4.0 / 3 * 3.141592653589793 * mean_s3 / per_body);
 }
 
-// Appends the contact of spheres a < b per CONTRACT §3.
+// Appends the contact of spheres a < b per docs/FORMAT.md §3.
 inline void push_contact(Contacts<double>& c, const Scene& s, std::int64_t a, std::int64_t b) {
   const Vec3<double> ca = s.sphere_position[std::size_t(a)], cb = s.sphere_position[std::size_t(b)];
   const double ra = s.sphere_radius[std::size_t(a)], rb = s.sphere_radius[std::size_t(b)];

@@ -1,6 +1,7 @@
 #pragma once
-// Host vectors of millions of elements.
-// - HostAllocator: elements are default-initialised, so a resize does not sweep the memory with zeros
+// HostVector: the host vector of the engine's inputs and outputs, for arrays of millions of elements.
+// g++-safe public header (part of engine.hpp through contacts.hpp).
+// HostAllocator: elements are default-initialised, so a resize does not sweep the memory with zeros
 //   (the writer that follows — a parallel copy, a file read — is the first touch, in parallel where it
 //   runs in parallel), and storage of 4 MiB or more is 2 MiB-aligned and offered to transparent huge
 //   pages (madvise, where the kernel has them), so that first touch takes few page faults.

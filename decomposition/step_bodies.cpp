@@ -1,0 +1,106 @@
+// The bodies of the resident steps and their motion rule (see step_bodies.hpp).
+#include "step_bodies.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace cg {
+
+StepBodies owned_bodies(const EngineInput& in, int threads) {
+  const std::size_t n = in.radius.size();
+  std::vector<std::size_t> rows;
+  rows.reserve(static_cast<std::size_t>(in.owned));
+  for (std::size_t i = 0; i < n; ++i)
+    if (in.implied() || (in.report[i] & kReportedBit)) rows.push_back(i);  // owned (ghosts may be wide)
+  const bool shapes = !in.shapes.empty();
+  const std::size_t m = rows.size();
+  StepBodies b;
+  b.position = HostVector<Vec3<double>>(m);
+  b.radius = HostVector<double>(m);
+  b.id = HostVector<std::int64_t>(m);
+  if (shapes) {
+    b.shapes.shape = HostVector<Shape>(m);
+    b.shapes.semi_axes = HostVector<Vec3<double>>(m);
+    b.shapes.orientation = HostVector<Quat<double>>(m);
+  }
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (std::size_t k = 0; k < m; ++k) {
+    const std::size_t i = rows[k];
+    b.position[k] = in.position[i];
+    b.radius[k] = in.radius[i];
+    b.id[k] = in.implied() ? static_cast<std::int64_t>(i) : in.id[i];
+    if (shapes) {
+      b.shapes.shape[k] = in.shapes.shape[i];
+      b.shapes.semi_axes[k] = in.shapes.semi_axes[i];
+      b.shapes.orientation[k] = in.shapes.orientation[i];
+    }
+  }
+  return b;
+}
+
+// An order-free fingerprint of a contact set: the sum over its pairs (splitmix64 of the two ids).
+std::uint64_t pair_hash(std::int64_t a, std::int64_t b) {
+  std::uint64_t x = static_cast<std::uint64_t>(a) * 0x9E3779B97F4A7C15ull ^ static_cast<std::uint64_t>(b);
+  x ^= x >> 30;
+  x *= 0xBF58476D1CE4E5B9ull;
+  x ^= x >> 27;
+  x *= 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
+Vec3<double> spin_axis(std::int64_t id) {
+  constexpr double k_unit = 0x1.0p-53;  // 53 random bits → [0, 1)
+  const double z = 2 * static_cast<double>(pair_hash(id, 1) >> 11) * k_unit - 1;
+  const double phi = 2 * std::numbers::pi * static_cast<double>(pair_hash(id, 2) >> 11) * k_unit;
+  const double s = std::sqrt(std::max(0.0, 1 - z * z));
+  return {s * std::cos(phi), s * std::sin(phi), z};
+}
+
+namespace {
+// a ⊗ b: the rotation b, then a.
+Quat<double> product(const Quat<double>& a, const Quat<double>& b) {
+  return {a.w * b.w - a.x * b.x - a.y * b.y - a.z * b.z, a.w * b.x + a.x * b.w + a.y * b.z - a.z * b.y,
+          a.w * b.y - a.x * b.z + a.y * b.w + a.z * b.x, a.w * b.z + a.x * b.y - a.y * b.x + a.z * b.w};
+}
+
+FilePose pose_of(const StepBodies& b, std::size_t k) {
+  FilePose p;
+  std::memcpy(&p, b.state.data() + k * sizeof(FilePose), sizeof(FilePose));
+  return p;
+}
+}  // namespace
+
+Quat<double> spun_orientation(std::int64_t id, Quat<double> q0, double angle) {
+  const Vec3<double> a = spin_axis(id);
+  const double c = std::cos(angle / 2), s = std::sin(angle / 2);
+  return product({c, s * a.x, s * a.y, s * a.z}, q0);
+}
+
+void attach_file_poses(StepBodies& b, int threads) {
+  const std::size_t n = b.size();
+  const bool shapes = !b.shapes.empty();
+  b.state_bytes = sizeof(FilePose);
+  b.state = HostVector<std::byte>(n * sizeof(FilePose));
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (std::size_t k = 0; k < n; ++k) {
+    const FilePose p{shapes ? b.shapes.orientation[k] : Quat<double>{1, 0, 0, 0}};
+    std::memcpy(b.state.data() + k * sizeof(FilePose), &p, sizeof(FilePose));
+  }
+}
+
+bool move_bodies(StepBodies& b, const StepMotion& motion, int step, int threads) {
+  if (b.state_bytes != sizeof(FilePose))
+    throw Error("move_bodies: the bodies carry no file pose: internal error");
+  const bool turn = motion.spin != 0 && !b.shapes.empty();
+  if (!turn) return false;
+  const double angle = motion.spin * step;
+  const std::size_t n = b.size();
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (std::size_t k = 0; k < n; ++k)
+    if (b.shapes.shape[k] == Shape::ellipsoid)
+      b.shapes.orientation[k] = spun_orientation(b.id[k], pose_of(b, k).orientation, angle);
+  return true;
+}
+
+}  // namespace cg

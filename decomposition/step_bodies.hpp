@@ -1,0 +1,72 @@
+#pragma once
+// The bodies of the resident steps (comm/resident_steps): a rank's owned bodies in ascending id, with
+// any per-body state the caller attaches, and the steps' motion rule (detect --steps N --spin W).
+// Pure host code (no MPI, no CUDA).
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <functional>
+
+#include "assemble.hpp"
+#include "engine.hpp"
+
+namespace cg {
+
+// A rank's owned bodies, ascending id: the state of a simulation between steps. The caller moves
+// them (position, orientation) between steps; each body's `state_bytes` bytes of `state` (the
+// caller's: a velocity, a reference pose) stay with it.
+struct StepBodies {
+  HostVector<Vec3<double>> position;
+  HostVector<double> radius;  // the bounding radius (an ellipsoid's largest semi-axis)
+  HostVector<std::int64_t> id;
+  ShapeRows shapes;  // empty: every body is a sphere
+  std::size_t state_bytes = 0;
+  HostVector<std::byte> state;  // body k's at [k·state_bytes, (k+1)·state_bytes)
+
+  std::size_t size() const { return radius.size(); }
+  BodiesView view() const {
+    return BodiesView{position, radius, id, {}, shapes.shape, shapes.semi_axes, shapes.orientation};
+  }
+};
+
+// The owned rows (report mask set, or every row when ids are implied) of an engine input.
+StepBodies owned_bodies(const EngineInput& in, int threads);
+
+// How the CLI's steps move the bodies. Default: not at all (the file's contacts every step).
+struct StepMotion {
+  // Radians per step: at step s (1 … N) every ellipsoid's orientation is spun_orientation(id, q0,
+  // spin·s); spheres do not turn. 0: the bodies keep the file's orientations.
+  double spin = 0;
+  // The ghosts' semi-axes travel with their orientations every step (a simulation whose shapes grow;
+  // its bounding radii travel already). Here they never change: off, they go once, at setup.
+  bool send_semi_axes = false;
+  // Off only to show that the check catches stale ghosts (tests): B's shape rows keep the first
+  // exchange's, as if the steps refreshed positions and radii alone.
+  bool refresh_shapes = true;
+  // Called on every rank after each step with the number of steps done (a progress line; empty: none).
+  std::function<void(int)> on_step;
+};
+
+// An order-free fingerprint of a contact pair; a contact set's is the sum over its pairs.
+std::uint64_t pair_hash(std::int64_t a, std::int64_t b);
+
+// The spin's rule: body `id`'s orientation `q0` turned by `angle` radians (world frame) about a unit
+// axis fixed per body, uniform on the sphere as a pure function of the id (pair_hash of (id, 1) and
+// (id, 2)). Any rank computes any body's orientation at any step from the id alone.
+Vec3<double> spin_axis(std::int64_t id);
+Quat<double> spun_orientation(std::int64_t id, Quat<double> q0, double angle);
+
+// The pose a body had in the file: the state the CLI's steps attach to every body, from which
+// move_bodies computes the pose of any step.
+struct FilePose {
+  Quat<double> orientation;
+};
+
+// Attaches each body's current pose as its state (state_bytes = sizeof(FilePose)).
+void attach_file_poses(StepBodies& bodies, int threads);
+
+// The bodies' poses at step `step` of `motion` from their attached FilePose. Returns whether the
+// orientations changed (ellipsoids and a spin).
+bool move_bodies(StepBodies& bodies, const StepMotion& motion, int step, int threads);
+
+}  // namespace cg

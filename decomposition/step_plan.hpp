@@ -1,0 +1,68 @@
+#pragma once
+// The plan of the resident steps (comm/resident_steps): what each row a rank holds is for in a step,
+// and which rank needs which row. Pure host code (no MPI, no CUDA), unit-tested; made from the run's
+// own routing rules (routing.hpp), so the steps hold exactly the ghosts a run from scratch would:
+//   to_owner        a row is owned by this rank iff it is the owner of the row's centre coordinate;
+//   to_ghost_ranks  an owned row goes, as a ghost, to every other rank within the ghost width.
+//
+// A rank detects with two engines. Engine A holds its owned rows (interior and boundary) and reports
+// all their pairs. Engine B holds the boundary rows and the ghosts, merged in ascending id, and reports
+// a pair when the first of it (by id) is owned and not both are boundary rows (A found those):
+// report mask kReportedBit | kPairedBit on the boundary rows, 0 on the ghosts. An interior row is
+// farther than the ghost width from every other slab, so it touches no ghost: A + B find every contact
+// of the rank exactly once, and the owner of the smaller id reports a pair that crosses a cut, as in
+// the run (routing.hpp: make_halo_plan's invariant).
+//
+//        rank 0                 rank 1                  rank 2
+//   ... interior ... [boundary | ghosts of 1]  [ghosts of 0 | boundary ... interior ... boundary] ...
+//                            cut 1 ± width
+//
+// Rows are held in ascending id (the engine's order: contacts come out sorted by (id_a, id_b), the bits
+// of a run from scratch), so engine B's rows interleave boundary rows and ghosts: BoundaryRows says
+// where each lands.
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "routing.hpp"
+#include "slab_decomposition.hpp"
+
+namespace cg {
+
+// What a held row is for in a step.
+enum class RowRole : std::uint8_t {
+  interior,  // owned; no other rank's slab within the ghost width: engine A only
+  boundary,  // owned; a ghost of at least one other rank: engine A, engine B, and the halo
+  ghost,     // owned by another rank (its owner sends it each step): engine B only
+};
+const char* to_string(RowRole role);
+
+// The roles of a rank's held rows and its halo.
+struct StepPlan {
+  std::vector<RowRole> role;          // per held row
+  std::vector<std::size_t> owned;     // held rows that are owned (interior or boundary), ascending
+  std::vector<std::size_t> boundary;  // held rows that are boundary rows, ascending
+  ExportPlan halo;                    // held rows to each other rank (to_ghost_ranks of the owned rows)
+  std::size_t count(RowRole r) const;
+};
+
+// The plan of rank `self` for its held rows, `coordinate[i]` being row i's centre coordinate along the
+// slab axis (finite) and `width` the ghost width (finite, >= 0; InputError otherwise). Parallel
+// count → scan → fill (route); the result does not depend on the threads.
+StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
+                        double width, int threads = 1);
+
+// Engine B's rows: the boundary rows (ids ascending) and the ghosts (ids grouped by source rank, each
+// group ascending, as the halo delivers them) merged in ascending id.
+struct BoundaryRows {
+  std::vector<std::size_t> of_boundary;  // engine B's row of boundary row k
+  std::vector<std::size_t> of_ghost;     // engine B's row of ghost g (in delivery order)
+  std::size_t size() const { return of_boundary.size() + of_ghost.size(); }
+};
+
+// Throws Error (internal) when an id is held twice or a run is not ascending.
+BoundaryRows merge_boundary_rows(std::span<const std::int64_t> boundary_ids,
+                                 std::span<const std::int64_t> ghost_ids);
+
+}  // namespace cg

@@ -1,0 +1,219 @@
+// Unit tests of decomposition/step_plan and step_bodies: the roles of a rank's rows in the resident
+// steps and its halo, against brute force on seeded random bodies; the two engines of every rank
+// together find each contact exactly once. Pure host code, no MPI.
+#include "step_plan.hpp"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <limits>
+#include <map>
+#include <numeric>
+#include <random>
+#include <set>
+#include <vector>
+
+#include "step_bodies.hpp"
+
+namespace cg {
+namespace {
+
+std::vector<double> random_coordinates(std::size_t n, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> x(0, 100);
+  std::vector<double> v(n);
+  for (double& c : v) c = x(rng);
+  return v;
+}
+
+// P-1 sorted random cuts, some of them equal (empty slabs) or closer than the ghost width.
+SlabDecomposition random_slabs(int ranks, std::mt19937_64& rng) {
+  std::uniform_real_distribution<double> x(0, 100);
+  std::vector<double> cuts(static_cast<std::size_t>(ranks - 1));
+  for (double& c : cuts) c = x(rng);
+  if (cuts.size() > 2) cuts[1] = cuts[0];
+  std::sort(cuts.begin(), cuts.end());
+  return SlabDecomposition(0, cuts);
+}
+
+// The ranks other than owner(x) with a non-empty slab within w of x (brute force).
+std::vector<int> ghost_ranks(const SlabDecomposition& s, double x, double w) {
+  std::vector<int> r;
+  for (int q = 0; q < s.ranks(); ++q)
+    if (q != s.owner(x) && !s.empty(q) && s.lower(q) <= x + w && x - w <= s.upper(q)) r.push_back(q);
+  return r;
+}
+
+// Roles and halo against brute force, for every rank of random slabs, whatever the threads.
+TEST(StepPlan, RolesAndHaloAreTheRoutingRules) {
+  std::mt19937_64 rng(41);
+  for (int trial = 0; trial < 6; ++trial) {
+    const int ranks = 1 + trial % 5;
+    const std::size_t n = trial < 3 ? 3000 : 40000;  // above the one-chunk threshold: threads split
+    const std::vector<double> x = random_coordinates(n, rng);
+    const SlabDecomposition s = random_slabs(ranks, rng);
+    const double w = trial == 5 ? 30.0 : 2.5;  // thin slabs: ghosts from further ranks
+    for (int self = 0; self < ranks; ++self) {
+      const StepPlan plan = make_step_plan(s, self, x, w, 1);
+      ASSERT_EQ(plan.role.size(), n);
+      std::vector<std::vector<std::size_t>> want(static_cast<std::size_t>(ranks));
+      std::vector<std::size_t> owned, boundary;
+      for (std::size_t i = 0; i < n; ++i) {
+        const std::vector<int> g = ghost_ranks(s, x[i], w);
+        const RowRole role = s.owner(x[i]) != self ? RowRole::ghost
+                             : g.empty()           ? RowRole::interior
+                                                   : RowRole::boundary;
+        ASSERT_EQ(plan.role[i], role)
+            << "row " << i << " of rank " << self << ": " << to_string(plan.role[i]);
+        if (role == RowRole::ghost) continue;
+        owned.push_back(i);
+        if (role == RowRole::boundary) boundary.push_back(i);
+        for (int q : g) want[static_cast<std::size_t>(q)].push_back(i);
+      }
+      EXPECT_EQ(plan.owned, owned);
+      EXPECT_EQ(plan.boundary, boundary);
+      EXPECT_EQ(plan.count(RowRole::interior) + plan.count(RowRole::boundary), owned.size());
+      for (int q = 0; q < ranks; ++q) {
+        const auto got = plan.halo.to(q);
+        EXPECT_EQ(std::vector<std::size_t>(got.begin(), got.end()), want[static_cast<std::size_t>(q)])
+            << "to rank " << q << " from " << self;
+      }
+      const StepPlan threaded = make_step_plan(s, self, x, w, 3);
+      EXPECT_EQ(threaded.role, plan.role);
+      EXPECT_EQ(threaded.halo.offsets, plan.halo.offsets);
+      EXPECT_EQ(threaded.halo.rows, plan.halo.rows);
+    }
+  }
+}
+
+// Every rank's two engines, as the steps run them: A all pairs of the owned rows, B the boundary
+// rows + the ghosts the others' halos deliver (ascending id), reporting a pair when its first by id is
+// owned and not both are boundary rows. Every pair within the ghost width (a superset of the
+// contacts) is then found exactly once over all ranks, whatever the slabs.
+TEST(StepPlan, TheTwoEnginesOfAllRanksFindEveryPairOnce) {
+  std::mt19937_64 rng(42);
+  for (int trial = 0; trial < 8; ++trial) {
+    const int ranks = 1 + trial % 4;
+    const std::size_t n = 700;
+    std::vector<double> x = random_coordinates(n, rng);
+    const SlabDecomposition s = random_slabs(ranks, rng);
+    const double w = trial % 2 ? 1.5 : 9.0;
+    // ids: a random permutation, so id order is not coordinate order
+    std::vector<std::int64_t> id(n);
+    std::iota(id.begin(), id.end(), 0);
+    std::shuffle(id.begin(), id.end(), rng);
+    std::vector<std::vector<std::size_t>> held(static_cast<std::size_t>(ranks));  // rows by id
+    std::vector<std::size_t> by_id(n);
+    for (std::size_t i = 0; i < n; ++i) by_id[static_cast<std::size_t>(id[i])] = i;
+    for (std::size_t k = 0; k < n; ++k)
+      held[static_cast<std::size_t>(s.owner(x[by_id[k]]))].push_back(by_id[k]);
+    std::vector<StepPlan> plans;
+    for (int p = 0; p < ranks; ++p) {
+      std::vector<double> xs;
+      for (std::size_t i : held[static_cast<std::size_t>(p)]) xs.push_back(x[i]);
+      plans.push_back(make_step_plan(s, p, xs, w));
+      EXPECT_EQ(plans.back().count(RowRole::ghost), 0u);
+    }
+    std::map<std::pair<std::int64_t, std::int64_t>, int> found;
+    auto report = [&](std::size_t i, std::size_t j) {
+      if (std::abs(x[i] - x[j]) > w) return;
+      ++found[{std::min(id[i], id[j]), std::max(id[i], id[j])}];
+    };
+    for (int p = 0; p < ranks; ++p) {
+      const auto& rows = held[static_cast<std::size_t>(p)];
+      const StepPlan& plan = plans[static_cast<std::size_t>(p)];
+      for (std::size_t a = 0; a < rows.size(); ++a)  // engine A
+        for (std::size_t b = a + 1; b < rows.size(); ++b) report(rows[a], rows[b]);
+      // engine B: the boundary rows and the ghosts sent to p (grouped by source, as delivered)
+      std::vector<std::int64_t> boundary_ids, ghost_ids;
+      std::vector<std::size_t> ghost_rows;
+      for (std::size_t k : plan.boundary) boundary_ids.push_back(id[rows[k]]);
+      for (int q = 0; q < ranks; ++q)
+        for (std::size_t k : plans[static_cast<std::size_t>(q)].halo.to(p)) {
+          ghost_rows.push_back(held[static_cast<std::size_t>(q)][k]);
+          ghost_ids.push_back(id[ghost_rows.back()]);
+        }
+      const BoundaryRows b = merge_boundary_rows(boundary_ids, ghost_ids);
+      std::vector<std::size_t> row_of(b.size());
+      std::vector<std::uint8_t> mask(b.size());
+      for (std::size_t k = 0; k < plan.boundary.size(); ++k) {
+        row_of[b.of_boundary[k]] = rows[plan.boundary[k]];
+        mask[b.of_boundary[k]] = kReportedBit | kPairedBit;
+      }
+      for (std::size_t g = 0; g < ghost_rows.size(); ++g) row_of[b.of_ghost[g]] = ghost_rows[g];
+      for (std::size_t r = 1; r < b.size(); ++r) ASSERT_LT(id[row_of[r - 1]], id[row_of[r]]);
+      for (std::size_t a = 0; a < b.size(); ++a)
+        for (std::size_t c = a + 1; c < b.size(); ++c)
+          if ((mask[a] & kReportedBit) && !((mask[a] & kPairedBit) && (mask[c] & kPairedBit)))
+            report(row_of[a], row_of[c]);
+    }
+    std::size_t pairs = 0;
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t j = i + 1; j < n; ++j)
+        if (std::abs(x[i] - x[j]) <= w) {
+          ++pairs;
+          const auto it = found.find({std::min(id[i], id[j]), std::max(id[i], id[j])});
+          ASSERT_TRUE(it != found.end())
+              << "pair " << id[i] << ", " << id[j] << " missed at " << ranks << " ranks";
+          ASSERT_EQ(it->second, 1) << "pair " << id[i] << ", " << id[j] << " found twice";
+        }
+    EXPECT_EQ(found.size(), pairs);
+    EXPECT_GT(pairs, n);
+  }
+}
+
+TEST(StepPlan, MergesBoundaryRowsAndGhostsById) {
+  const std::vector<std::int64_t> boundary{2, 5, 9, 40};
+  const std::vector<std::int64_t> ghosts{7, 30, 1, 3, 41};  // two sources: [7, 30], [1, 3, 41]
+  const BoundaryRows r = merge_boundary_rows(boundary, ghosts);
+  EXPECT_EQ(r.of_boundary, (std::vector<std::size_t>{1, 3, 5, 7}));
+  EXPECT_EQ(r.of_ghost, (std::vector<std::size_t>{4, 6, 0, 2, 8}));
+  EXPECT_EQ(r.size(), 9u);
+  EXPECT_THROW(merge_boundary_rows(boundary, std::vector<std::int64_t>{5}), Error);
+  EXPECT_THROW(merge_boundary_rows(std::vector<std::int64_t>{3, 2}, {}), Error);
+}
+
+TEST(StepPlan, RefusesBadWidthsAndCoordinates) {
+  const SlabDecomposition s(0, {50.0});
+  const std::vector<double> x{1, 2, 60};
+  EXPECT_THROW(make_step_plan(s, 0, x, -1), InputError);
+  EXPECT_THROW(make_step_plan(s, 0, x, std::numeric_limits<double>::infinity()), InputError);
+  EXPECT_THROW(make_step_plan(s, 2, x, 1), UsageError);
+  const std::vector<double> bad{1, std::numeric_limits<double>::quiet_NaN()};
+  EXPECT_THROW(make_step_plan(s, 0, bad, 1), InputError);
+  const StepPlan one = make_step_plan(SlabDecomposition::single(0), 0, x, 5);
+  EXPECT_EQ(one.count(RowRole::interior), 3u);  // one rank: no other slab, no halo
+  EXPECT_EQ(one.halo.total(), 0u);
+}
+
+// The owned rows of a run's engine input, ascending id, and the spin's motion from the attached poses.
+TEST(StepBodies, OwnedRowsAndTheirMotion) {
+  EngineInput in;
+  in.position = HostVector<Vec3<double>>{{0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {3, 0, 0}};
+  in.radius = HostVector<double>{0.5, 0.6, 0.7, 0.8};
+  in.id = HostVector<std::int64_t>{3, 8, 9, 12};
+  in.report = HostVector<std::uint8_t>{0, 1, 0, 1};
+  in.shapes.shape = HostVector<Shape>{Shape::sphere, Shape::ellipsoid, Shape::sphere, Shape::sphere};
+  in.shapes.semi_axes = HostVector<Vec3<double>>(4, Vec3<double>{0.6, 0.3, 0.2});
+  in.shapes.orientation = HostVector<Quat<double>>(4, Quat<double>{1, 0, 0, 0});
+  in.owned = 2;
+  in.ghosts = 2;
+  StepBodies b = owned_bodies(in, 2);
+  ASSERT_EQ(b.size(), 2u);
+  EXPECT_EQ(b.id[0], 8);
+  EXPECT_EQ(b.id[1], 12);
+  EXPECT_EQ(b.radius[1], 0.8);
+  attach_file_poses(b, 1);
+  StepMotion m;
+  EXPECT_FALSE(move_bodies(b, m, 3, 1));  // no spin: nothing turns
+  m.spin = 0.25;
+  EXPECT_TRUE(move_bodies(b, m, 3, 1));
+  const Quat<double> q = spun_orientation(8, {1, 0, 0, 0}, 0.75);
+  EXPECT_EQ(b.shapes.orientation[0].w, q.w);
+  EXPECT_EQ(b.shapes.orientation[0].z, q.z);
+  EXPECT_EQ(b.shapes.orientation[1].w, 1.0);  // a sphere keeps its orientation
+  EXPECT_TRUE(move_bodies(b, m, 3, 1));       // from the file pose: the same turn again, not twice
+  EXPECT_EQ(b.shapes.orientation[0].x, q.x);
+}
+
+}  // namespace
+}  // namespace cg
