@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <fstream>
 #include <map>
 #include <optional>
@@ -50,6 +51,16 @@ double median(std::vector<double> v) {
   return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
 }
 
+// Seconds now: wall clock, or the process's CPU time (every thread's; BroadBenchOptions::cpu_time).
+double now(bool cpu_time) {
+  if (cpu_time) {
+    timespec t{};
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+    return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
+  }
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
 template <class Real>
 Timing time_engine(const BroadBenchOptions& o, const BodiesView& bodies, BroadPhase bp) {
   EngineOptions e;
@@ -63,9 +74,9 @@ Timing time_engine(const BroadBenchOptions& o, const BodiesView& bodies, BroadPh
   t.contacts = engine.detect_resident();  // warm-up (the workspace grows once)
   std::vector<double> s;
   for (int k = 0; k < o.repetitions; ++k) {
-    const auto t0 = std::chrono::steady_clock::now();
+    const double t0 = now(o.cpu_time);
     const std::size_t c = engine.detect_resident();
-    s.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    s.push_back(now(o.cpu_time) - t0);
     if (c != t.contacts) throw std::runtime_error("bench-broad: a repeated detection found other contacts");
   }
   t.seconds = median(s);
@@ -95,6 +106,8 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
   if (o.lo < 1 || o.hi > 28 || o.lo > o.hi || o.step < 1)
     throw UsageError("bench-broad: need 1 <= lo <= hi <= 28 and step >= 1");
   if (o.repetitions < 1) throw UsageError("bench-broad: repetitions must be >= 1");
+  if (o.cpu_time && o.backend != Backend::cpu)
+    throw UsageError("bench-broad: --cpu-time times the CPU backend only (a GPU's work is not CPU time)");
   std::vector<Family> run;
   for (const Family& f : families())
     if (o.families.empty() || std::find(o.families.begin(), o.families.end(), f.name) != o.families.end())
@@ -105,8 +118,8 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
     if (!csv) throw IoError("bench-broad: cannot write " + o.csv);
     csv << "family,n,log2n,broad_phase,ran,levels,seconds,contacts,pair_tests,ns_per_contact\n";
   }
-  fmt::print(out, "bench-broad: backend {}, precision {}, median of {} (seconds; '-': not run)\n",
-             to_string(o.backend), to_string(o.precision), o.repetitions);
+  fmt::print(out, "bench-broad: backend {}, precision {}, median of {} ({} seconds; '-': not run)\n",
+             to_string(o.backend), to_string(o.precision), o.repetitions, o.cpu_time ? "CPU" : "wall");
   fmt::print(out, "{:<15} {:>9} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}  {:<7} {:>9} {:>8} {:>9} {:>9}\n",
              "family", "N", "contacts", "grid", "levels", "sweep", "brute", "auto", "best", "auto/best",
              "ns/cont", "/uniform", "/unif/c");

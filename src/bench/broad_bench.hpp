@@ -10,11 +10,11 @@
 //   intruder1        one body of r = 1 among grains of r = 0.01 (issue #34's CPU case)
 //   intruders64      64 bodies of r = 100 among grains of r = 1 (issue #34's GPU case)
 // Timing: per (family, N) the bodies are made resident (Engine::set_resident), one untimed warm-up,
-// then the median of `repetitions` detect_resident() calls (wall clock; CUDA: the contacts stay on the
-// device). A broad phase whose run at some N took longer than `budget_s` is not run at larger N of
-// that family ("-"); brute runs while N <= 2^brute_hi, sweep while N <= 2^sweep_hi. Every broad phase
-// of a row must find the same number of contacts (else the command fails: they are the same bits).
-// Columns: seconds per broad phase; best = the fastest; auto/best; ns per contact of the best; the
+// then the median of `repetitions` detect_resident() calls (wall clock, or CPU time: cpu_time; CUDA:
+// the contacts stay on the device). A broad phase whose run at some N took longer than `budget_s` is not run
+// at larger N of that family ("-"); brute runs while N <= 2^brute_hi, sweep while N <= 2^sweep_hi. Every
+// broad phase of a row must find the same number of contacts (else the command fails: they are the same
+// bits). Columns: seconds per broad phase; best = the fastest; auto/best; ns per contact of the best; the
 // best against the uniform row's best at that N (/uniform: time; /unif/c: time per contact).
 #include <cstdint>
 #include <iosfwd>
@@ -35,6 +35,9 @@ struct BroadBenchOptions {
   int threads = 0;
   int brute_hi = 14, sweep_hi = 16;
   double budget_s = 30;
+  // Time the process's CPU time (all threads) instead of the wall clock: on a machine shared with
+  // other work, with threads = 1, the work itself rather than the waits (CPU backend only).
+  bool cpu_time = false;
   std::uint64_t seed = 1;
   std::string csv;
 };

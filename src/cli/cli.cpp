@@ -386,6 +386,9 @@ Subcommand add_bench_broad(CLI::App& app) {
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
   bbc->add_option("--seed", args->seed, "Scene seed")->capture_default_str();
+  bbc->add_flag("--cpu-time", args->cpu_time,
+                "Time the process's CPU time, not the wall clock (CPU backend on a shared machine; with "
+                "--threads 1 the work itself)");
   bbc->add_option("--csv", args->csv, "Also write the runs as CSV");
   return {bbc, [args](Session& session) {
             if (session.rank() != 0) return 0;

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "mpi/mpi_test_env.hpp"
+#include "scene/generate.hpp"
 #include "support/contacts_equal.hpp"
 
 namespace cg {
