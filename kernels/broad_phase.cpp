@@ -118,10 +118,19 @@ int sweep_axis(const Bounds& b) {
   return e[0] >= e[1] && e[0] >= e[2] ? 0 : (e[1] >= e[2] ? 1 : 2);
 }
 
+double grid_occupancy(const Bounds& b) {
+  const double d = 2 * b.r_max;
+  const double volume =
+      std::max(b.hi.x - b.lo.x, d) * std::max(b.hi.y - b.lo.y, d) * std::max(b.hi.z - b.lo.z, d);
+  return volume > 0 ? double(b.count) * d * d * d / volume : double(b.count);
+}
+
 BroadPhase choose_broad_phase(const Bounds& b, Precision) {
   if (b.count <= kBruteBodies) return BroadPhase::brute;
   const double mean = b.count > 0 ? b.r_sum[0] / double(b.count) : b.r_max;
-  return mean > 0 && b.r_max > kLevelsSpread * mean ? BroadPhase::levels : BroadPhase::grid;
+  if (!(mean > 0 && b.r_max > kLevelsSpread * mean)) return BroadPhase::grid;
+  const double levels = std::log2(2 * b.r_max / std::max(b.r_min, b.r_max * 1e-300));
+  return grid_occupancy(b) > kOccupancyPerLevel * levels ? BroadPhase::levels : BroadPhase::grid;
 }
 
 }  // namespace cg

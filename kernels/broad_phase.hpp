@@ -49,12 +49,18 @@ LevelParams<Real> level_params(const LevelsPlan& plan, double radius_margin);
 // The sweep's axis: the largest extent of the bounds (x, y, z = 0, 1, 2; the first of equal ones).
 int sweep_axis(const Bounds& b);
 
-// `auto`: the broad phase for bodies of these bounds (measured: BENCHMARKS.md, "Broad phases"):
-// brute for at most kBruteBodies bodies; levels where the largest radius exceeds kLevelsSpread times
-// the mean one (the grid's cells, sized for the largest, then hold many of the typical bodies);
-// else the grid.
+// The bodies a cell of edge 2·r_max would hold on average: count · (2·r_max)³ over the volume of the
+// bounds (each extent at least 2·r_max). The grid's pair tests grow with it.
+double grid_occupancy(const Bounds& b);
+
+// `auto`: the broad phase for bodies of these bounds (measured: BENCHMARKS.md §14): brute for at most
+// kBruteBodies bodies; levels where the largest radius exceeds kLevelsSpread times the mean one and
+// the grid's cells, sized for the largest, would hold more than kOccupancyPerLevel bodies per level
+// of the hierarchy (log2(2·r_max / r_min) levels: each costs every smaller body a lookup); else the
+// grid (a wide radius law in a sparse scene, log-uniform 1:1000 among them, is the grid's).
 BroadPhase choose_broad_phase(const Bounds& b, Precision p);
 inline constexpr std::uint64_t kBruteBodies = 32;
 inline constexpr double kLevelsSpread = 4;
+inline constexpr double kOccupancyPerLevel = 64;
 
 }  // namespace cg

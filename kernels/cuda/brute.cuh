@@ -92,7 +92,7 @@ void brute_stages(RunState<Real, Key, Narrow>& r) {
     });
     CG_CUDA_CHECK_LAUNCH("brute_fill");
   }
-  r.events.mark(Stage::pairs, st);
+  r.events.mark(EngineStage::pairs, st);
 }
 
 }  // namespace cg::detail

@@ -210,7 +210,7 @@ void levels_stages(RunState<Real, Key, Narrow>& r) {
   cuda::level_entries_kernel<Key><<<r.nb, kBlock, 0, st>>>(r.d_lo_key, r.d_ctrl, r.n, lp, r.d_body_offsets,
                                                            r.keys.Current(), r.body.Current());
   CG_CUDA_CHECK_LAUNCH("level_entries");
-  r.events.mark(Stage::entries, st);
+  r.events.mark(EngineStage::entries, st);
   sort_stage(r);
 
   // the pairs within each level: the grid's walk (its cell type sits below the common key_shift)
@@ -252,7 +252,7 @@ void levels_stages(RunState<Real, Key, Narrow>& r) {
     });
     CG_CUDA_CHECK_LAUNCH("cross_level_fill");
   }
-  r.events.mark(Stage::pairs, st);
+  r.events.mark(EngineStage::pairs, st);
 }
 
 }  // namespace cg::detail

@@ -109,7 +109,7 @@ void sweep_stages(RunState<Real, Key, Narrow>& r) {
   });
   cuda::sweep_gather_kernel<Real><<<r.nb, kBlock, 0, st>>>(r.d_cell_spheres, index.Current(), n, sorted);
   CG_CUDA_CHECK_LAUNCH("sweep_gather");
-  r.events.mark(Stage::sort, st);
+  r.events.mark(EngineStage::sort, st);
 
   const std::uint32_t warps = cuda::blocks_for(32 * r.n64);
   const ItemCounts ic = item_counts(ws, r.n64);
@@ -131,7 +131,7 @@ void sweep_stages(RunState<Real, Key, Narrow>& r) {
     });
     CG_CUDA_CHECK_LAUNCH("sweep_fill");
   }
-  r.events.mark(Stage::pairs, st);
+  r.events.mark(EngineStage::pairs, st);
 }
 
 }  // namespace cg::detail

@@ -258,6 +258,10 @@ TYPED_TEST(BroadPhaseTest, AutoPicksByTheRadii) {
   EXPECT_EQ(detect<B>(generated("uniform", 20, 0.5, 1, 9), Precision::fp64, BroadPhase::automatic)
                 .stats.broad_phase,
             BroadPhase::brute);
+  // radii log-uniform over 1:1000 at the generator's density: cells of edge 2·r_max hold a few bodies
+  EXPECT_EQ(detect<B>(generated("polydisperse", 3000, 0.001, 1, 9), Precision::fp64, BroadPhase::automatic)
+                .stats.broad_phase,
+            BroadPhase::grid);
 }
 
 // ---- plans and keys ---------------------------------------------------------------------------------
@@ -366,9 +370,22 @@ TEST(AutoBroadPhase, Rule) {
   Bounds uniform = bounds_of(0.5, 1, 100, 100000);
   uniform.r_sum[0] = 0.75 * 100000;
   EXPECT_EQ(choose_broad_phase(uniform, Precision::fp64), BroadPhase::grid);
-  Bounds intruder = bounds_of(0.01, 1, 100, 100000);
+  // one r = 1 among 10^5 grains of r = 0.01 at a granular density (a cube of edge 1.6): a cell of the
+  // grid holds 2·10^5 grains
+  Bounds intruder = bounds_of(0.01, 1, 1.6, 100000);
   intruder.r_sum[0] = 0.01 * 99999 + 1;
+  EXPECT_GT(grid_occupancy(intruder), 1e5);
   EXPECT_EQ(choose_broad_phase(intruder, Precision::fp64), BroadPhase::levels);
+  // the same radii spread over a cube of edge 100: cells of edge 2 hold one body in a hundred, the
+  // grid stays cheap and the levels' lookups would cost more
+  Bounds sparse = bounds_of(0.01, 1, 100, 100000);
+  sparse.r_sum[0] = 0.01 * 99999 + 1;
+  EXPECT_LT(grid_occupancy(sparse), 1.0);
+  EXPECT_EQ(choose_broad_phase(sparse, Precision::fp64), BroadPhase::grid);
+  // a flat scene: the extents are at least the cell
+  Bounds flat = bounds_of(0.01, 1, 100, 100000);
+  flat.hi.z = 0;
+  EXPECT_NEAR(grid_occupancy(flat), 100000 * 8.0 / (100 * 100 * 2), 1e-9);
 }
 
 }  // namespace
