@@ -222,11 +222,13 @@ Subcommand add_detect(CLI::App& app) {
        "Grid cell edge: auto (the edge a cost model of the sort and pair stages picks, 1-3x the "
        "smallest), min (the largest diameter + rounding margin, Le Grand's choice) or a length")
       ->default_str("auto");
-  d->add_option("--broad-phase", det.broad_phase,
-                "auto | grid (Le Grand's uniform grid) | levels (a grid per size class: any size "
-                "distribution) | sweep (Baraff's sort and sweep) | brute (every pair): auto picks brute for "
-                "a few dozen bodies, levels where the largest radius exceeds 4x the mean, else grid; the "
-                "contacts are the same bits whichever runs")
+  d->add_option(
+       "--broad-phase", det.broad_phase,
+       "auto | grid (Le Grand's uniform grid) | levels (a grid per size class: any size "
+       "distribution) | sweep (Baraff's sort and sweep) | brute (every pair): auto picks brute for "
+       "a few dozen bodies, levels where the largest radius exceeds 4x the mean and the grid's cells "
+       "would be crowded, else grid; the "
+       "contacts are the same bits whichever runs")
       ->transform(CLI::CheckedTransformer(k_broad_phases))
       ->default_str("auto");
   d->add_option("--solver-tolerance", det.solver_tolerance,
