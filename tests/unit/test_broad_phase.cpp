@@ -370,11 +370,11 @@ TEST(AutoBroadPhase, Rule) {
   Bounds uniform = bounds_of(0.5, 1, 100, 100000);
   uniform.r_sum[0] = 0.75 * 100000;
   EXPECT_EQ(choose_broad_phase(uniform, Precision::fp64), BroadPhase::grid);
-  // one r = 1 among 10^5 grains of r = 0.01 at a granular density (a cube of edge 1.6): a cell of the
-  // grid holds 2·10^5 grains
-  Bounds intruder = bounds_of(0.01, 1, 1.6, 100000);
+  // one r = 1 among 10^5 grains of r = 0.01 in a cube of edge 3.2: a cell of the grid (edge 2) holds
+  // 2.4·10^4 grains
+  Bounds intruder = bounds_of(0.01, 1, 3.2, 100000);
   intruder.r_sum[0] = 0.01 * 99999 + 1;
-  EXPECT_GT(grid_occupancy(intruder), 1e5);
+  EXPECT_NEAR(grid_occupancy(intruder), 100000 * 8.0 / (3.2 * 3.2 * 3.2), 1e-6);
   EXPECT_EQ(choose_broad_phase(intruder, Precision::fp64), BroadPhase::levels);
   // the same radii spread over a cube of edge 100: cells of edge 2 hold one body in a hundred, the
   // grid stays cheap and the levels' lookups would cost more
