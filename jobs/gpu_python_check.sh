@@ -44,6 +44,13 @@ case $mode in
     # CUDA from NumPy arrays (host memory: upload and download included) against the same call from C++
     $py tests/bench/python_bench.py --log2n 24 --backend cuda --repetitions 10 --no-scipy \
       --binary "$dir/contactgrid" --cxx "$dir/detect_call_bench" 2>&1 | tee "$out/python_bench_cuda.log"
+    # The laptop figure on a quiet machine: two of the host's cores, the CPU backend against SciPy
+    if $py -c "import scipy" 2>/dev/null; then
+      taskset -c 0,1 $py tests/bench/python_bench.py --log2n 20 --backend cpu --threads 2 --repetitions 7 \
+        --binary "$dir/contactgrid" --cxx "$dir/detect_call_bench" 2>&1 | tee "$out/python_bench_cpu2.log"
+    else
+      echo "no SciPy for $py: the quiet CPU comparison did not run" | tee "$out/python_bench_cpu2.log"
+    fi
     if [ -x "$dir/contactgrid_cuda_bench" ]; then
       "$dir/contactgrid_cuda_bench" 20 24 2 20 2>&1 | tee "$out/cuda_bench.log" | tail -40
     fi ;;

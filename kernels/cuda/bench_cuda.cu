@@ -25,6 +25,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <cub/device/device_radix_sort.cuh>
 #include <functional>
 #include <map>
@@ -331,6 +332,92 @@ SkinRow bench_skin(int log2n, std::uint64_t n, const DeviceScene& d, double skin
   return row;
 }
 
+// The pinned bandwidth of this host, each way (GB/s): 256 MiB between cudaMallocHost memory and the
+// device, median of 5. The floor of a host path is its bytes over these.
+struct PinnedBandwidth {
+  double h2d = 0, d2h = 0;
+};
+PinnedBandwidth pinned_bandwidth() {
+  const std::size_t bytes = std::size_t(256) << 20;
+  void* h = nullptr;
+  CG_CUDA_CHECK(cudaMallocHost(&h, bytes));
+  std::memset(h, 1, bytes);
+  DeviceBuffer<std::byte> d;
+  d.reserve(bytes, false);
+  auto time = [&](cudaMemcpyKind kind) {
+    std::vector<double> t;
+    for (int r = 0; r < 5; ++r) {
+      const auto t0 = std::chrono::steady_clock::now();
+      if (kind == cudaMemcpyHostToDevice)
+        CG_CUDA_CHECK(cudaMemcpy(d.data(), h, bytes, kind));
+      else
+        CG_CUDA_CHECK(cudaMemcpy(h, d.data(), bytes, kind));
+      t.push_back(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    }
+    return double(bytes) / median(t) / 1e9;
+  };
+  PinnedBandwidth bw{time(cudaMemcpyHostToDevice), time(cudaMemcpyDeviceToHost)};
+  CG_CUDA_CHECK(cudaFreeHost(h));
+  return bw;
+}
+
+struct HostPathRow {
+  int log2n;
+  const char* transfer;
+  std::uint64_t contacts;
+  double up_bytes, down_bytes, upload_ms, download_ms, total_ms, floor_ms;
+};
+
+// Host arrays → host contacts (basic fields, fp32, one engine reused: Engine::detect on the scene's
+// host arrays), for each transfer path of tuning.hpp forced through its knobs; median wall time of
+// `runs` calls and of the upload and download stages. floor = the bytes moved over the pinned
+// bandwidth each way plus the device-resident total of the same scene (`resident_ms`).
+std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs, const PinnedBandwidth& bw,
+                                         double resident_ms) {
+  const std::uint64_t n = h.rad.size();
+  cg::BodiesView v{{reinterpret_cast<const cg::Vec3<double>*>(h.pos.data()), n}, {h.rad.data(), n}, {}, {}};
+  if (!h.shape.empty()) {
+    v.shape = h.shape;
+    v.semi_axes = {reinterpret_cast<const cg::Vec3<double>*>(h.semi.data()), n};
+    v.orientation = {reinterpret_cast<const cg::Quat<double>*>(h.quat.data()), n};
+  }
+  std::vector<HostPathRow> rows;
+  const std::pair<const char*, const char*> paths[] = {
+      {"streamed", "streamed"}, {"registered", "registered"}, {"pageable", "staged"}};
+  for (const auto& [up, down] : paths) {
+    ::setenv("CONTACTGRID_CUDA_UPLOAD", up, 1);
+    ::setenv("CONTACTGRID_CUDA_DOWNLOAD", down, 1);
+    cg::Engine<float> engine(
+        {.backend = cg::Backend::cuda, .cell_size = g_cell_size, .cell_choice = g_cell_choice});
+    std::vector<double> total, upload_ms, download_ms;
+    HostPathRow row{log2n, up, 0, 0, 0, 0, 0, 0, 0};
+    for (int r = 0; r < runs + 2; ++r) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const cg::Contacts<float> c = engine.detect(v);
+      const double ms =
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+      if (r < 2) continue;  // warm-up: the workspace and the pinned ring are allocated
+      total.push_back(ms);
+      for (const auto& st : engine.times()) {
+        if (st.name == "upload") upload_ms.push_back(st.seconds * 1e3);
+        if (st.name == "download") download_ms.push_back(st.seconds * 1e3);
+      }
+      row.contacts = c.size();
+      row.down_bytes =
+          double(c.size()) * (2 * sizeof(c.id_a[0]) + 3 * sizeof(c.normal_on_b[0]) + sizeof(float));
+    }
+    row.up_bytes = double(n) * 32 + (h.shape.empty() ? 0.0 : double(n) * (sizeof(cg::Shape) + 56));
+    row.total_ms = median(total);
+    row.upload_ms = median(upload_ms);
+    row.download_ms = median(download_ms);
+    row.floor_ms = row.up_bytes / (bw.h2d * 1e6) + row.down_bytes / (bw.d2h * 1e6) + resident_ms;
+    rows.push_back(row);
+  }
+  ::unsetenv("CONTACTGRID_CUDA_UPLOAD");
+  ::unsetenv("CONTACTGRID_CUDA_DOWNLOAD");
+  return rows;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) try {
@@ -369,6 +456,8 @@ int main(int argc, char** argv) try {
   Flusher flush;
   std::vector<Row> rows;
   std::vector<SkinRow> skin_rows;
+  std::vector<HostPathRow> host_rows;
+  const PinnedBandwidth bw = pinned_bandwidth();
   for (int p = lo; p <= hi; p += step) {
     const std::uint64_t n = std::uint64_t(1) << p;
     const HostScene h = make_scene(kind, n, scale, 0x5EED0000ull + p);
@@ -382,6 +471,8 @@ int main(int argc, char** argv) try {
     }
     d.upload_ms = median(up);
     rows.push_back(bench<float>(p, n, d, runs, flush));
+    for (const HostPathRow& r : bench_host_path(p, h, std::min(runs, 10), bw, rows.back().total_ms))
+      host_rows.push_back(r);
     rows.push_back(bench<double>(p, n, d, runs, flush, true));
     rows.push_back(bench<double>(p, n, d, runs, flush));
     if (skin > 0) {
@@ -429,6 +520,18 @@ int main(int argc, char** argv) try {
       "unconverged: narrow-phase solver flags summed over the timed runs. plan = host wall time before the "
       "first stage (device bounds and shape check, each read back, and the grid plan). total = wall time of "
       "detect_device_resident (plan, stages, host syncs).\n");
+  std::printf(
+      "\nHost arrays -> host contacts, fp32, basic fields, one engine reused (Engine::detect), median of up "
+      "to "
+      "10 warm calls; pinned bandwidth here %.1f GB/s up, %.1f GB/s down. floor = bytes up / bandwidth up + "
+      "bytes down / bandwidth down + the device-resident total above.\n\n| N | transfer | contacts | MB up | "
+      "MB down | upload | download | total | floor | total/floor "
+      "|\n|---|---|---|---|---|---|---|---|---|---|\n",
+      bw.h2d, bw.d2h);
+  for (const HostPathRow& r : host_rows)
+    std::printf("| 2^%d | %s | %llu | %.1f | %.1f | %.3f | %.3f | %.3f | %.3f | %.2f |\n", r.log2n,
+                r.transfer, static_cast<unsigned long long>(r.contacts), r.up_bytes / 1e6, r.down_bytes / 1e6,
+                r.upload_ms, r.download_ms, r.total_ms, r.floor_ms, r.total_ms / r.floor_ms);
   if (!skin_rows.empty()) {
     std::printf(
         "\nSteps with a skin of %g (moves <= skin/10 per step, %d steps; wall ms per step of "

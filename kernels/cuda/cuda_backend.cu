@@ -34,6 +34,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
+#include <map>
 #include <sstream>
 #include <type_traits>
 
@@ -65,6 +66,18 @@ void throw_cuda_error(cudaError_t e, const char* call, const char* file, int lin
   std::ostringstream m;
   m << file << ":" << line << ": " << call << ": " << cudaGetErrorString(e);
   throw CudaError(m.str());
+}
+}  // namespace cuda
+
+namespace cuda {
+PinnedRing& pinned_ring(int device) {
+  static std::mutex mutex;
+  static std::map<int, PinnedRing*>* rings = new std::map<int, PinnedRing*>;  // never freed: the
+  // process's pinned memory goes with it, after the CUDA context (no teardown-order hazard)
+  const std::lock_guard<std::mutex> lock(mutex);
+  PinnedRing*& ring = (*rings)[device];
+  if (!ring) ring = new PinnedRing;
+  return *ring;
 }
 }  // namespace cuda
 
@@ -150,7 +163,7 @@ class CudaBackend {
 
     reserve_pack(r);
     m_events.start(m_stream);
-    upload_stage(r);
+    upload_stage(r, cuda::pinned_ring(m_device));
     const bool reuse = skin_stage(r);  // a skin: the kept candidates still hold every contact?
     // (scenes with ellipsoids: their shapes packed first; the broad phases but the grid: the spheres
     // alone, in input order, broad.cuh)
@@ -179,7 +192,7 @@ class CudaBackend {
     }
     if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
     narrow_stage(r);
-    const DownloadHostTimes host = download_stage(r, m_h_staging, out);
+    const DownloadHostTimes host = download_stage(r, m_h_staging, cuda::pinned_ring(m_device), out);
     if (reuse) check_shapes_read(r);  // (read with the last counters: the reuse path has no other wait)
     m_events.collect(times, host.overlap_s, host.extra_s);  // all events complete: the stream synced
     m_events.narrow_split(stats.narrow_triage_s, stats.narrow_settle_s, stats.narrow_hard_s);

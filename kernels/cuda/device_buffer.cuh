@@ -3,8 +3,10 @@
 // Included by .cu files only (needs cuda_runtime.h).
 #include <cuda_runtime.h>
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
+#include <mutex>
 #include <string>
 #include <utility>
 
@@ -125,5 +127,51 @@ class PinnedBuffer {
   void* m_data = nullptr;
   std::size_t m_bytes = 0;
 };
+
+// A ring of pinned HOST slots for streamed transfers (transfer.cuh): the host fills or drains one slot
+// while the copy engine moves another, and each slot's event says when its last copy is done. One ring
+// per device for the whole process (pinned_ring), allocated at the first streamed transfer and reused
+// by every later one, whatever engine makes it: pinning memory per call, or per engine (Python's
+// detect() makes one a call), costs more than the pinned copy saves. A transfer holds `mutex()` while
+// it fills or drains slots; the events keep a slot from being refilled while a copy still reads it.
+class PinnedRing {
+ public:
+  static constexpr std::size_t kSlots = 8;
+
+  PinnedRing() = default;
+  ~PinnedRing() {
+    for (cudaEvent_t e : m_done)
+      if (e) cudaEventDestroy(e);
+  }
+  PinnedRing(const PinnedRing&) = delete;
+  PinnedRing& operator=(const PinnedRing&) = delete;
+
+  // Slots of `slot_bytes` (Tuning::transfer_slot_bytes), their events created. Waits for every slot's
+  // last copy first: a transfer may start while the previous one's copies still run.
+  void ready(std::size_t slot_bytes) {
+    for (cudaEvent_t& e : m_done) {
+      if (!e) CG_CUDA_CHECK(cudaEventCreateWithFlags(&e, cudaEventDisableTiming));
+      if (slot_bytes != m_slot_bytes) CG_CUDA_CHECK(cudaEventSynchronize(e));
+    }
+    m_slots.reserve(kSlots * slot_bytes);
+    m_slot_bytes = slot_bytes;
+  }
+  std::size_t slot_bytes() const { return m_slot_bytes; }
+  std::mutex& mutex() { return m_mutex; }
+  // Slot k of a transfer (k counts on; slots are reused in turn) and the event of its last copy.
+  std::byte* slot(std::size_t k) const { return m_slots.data() + (k % kSlots) * m_slot_bytes; }
+  cudaEvent_t done(std::size_t k) const { return m_done[k % kSlots]; }
+  // Waits until slot k's previous copy is done (an event never recorded is done).
+  void wait(std::size_t k) const { CG_CUDA_CHECK(cudaEventSynchronize(done(k))); }
+
+ private:
+  std::mutex m_mutex;
+  PinnedBuffer m_slots;
+  std::size_t m_slot_bytes = 0;
+  std::array<cudaEvent_t, kSlots> m_done{};
+};
+
+// The process's ring for `device` (the current device when the call is made; kept until exit).
+PinnedRing& pinned_ring(int device);
 
 }  // namespace cg::cuda

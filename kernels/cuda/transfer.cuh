@@ -18,14 +18,61 @@ void for_each_field(Contacts<Real>& out, const cuda::ContactPtrs<Real>& cp, bool
                      [&](auto, auto& vec, auto* d_ptr) { f(vec, static_cast<const void*>(d_ptr)); });
 }
 
+// A host range and the device range it is copied to or from.
+struct HostDevice {
+  std::byte* host;
+  std::byte* device;
+  std::size_t bytes;
+};
+
+// The parts of `ranges`, laid end to end, that fall in bytes [from, from + len) of the stream: f(host
+// part, device part, bytes, offset of the part in the window).
+template <class F>
+void for_each_in_window(const std::vector<HostDevice>& ranges, std::size_t from, std::size_t len, F&& f) {
+  std::size_t at = 0;
+  for (const HostDevice& h : ranges) {
+    const std::size_t lo = std::max(from, at), hi = std::min(from + len, at + h.bytes);
+    if (lo < hi) f(h.host + (lo - at), h.device + (lo - at), hi - lo, lo - from);
+    at += h.bytes;
+    if (at >= from + len) break;
+  }
+}
+
+// Host → device through the pinned ring: slot k is filled by all host threads (parallel_copy) and
+// its copies queued on `st`, while the copy engine still moves slot k − 1. The host returns when the
+// last slot is queued; the ring's events guard the slots against the next transfer.
+inline void streamed_upload(cuda::PinnedRing& ring, std::size_t slot_bytes,
+                            const std::vector<HostDevice>& ranges, cudaStream_t st) {
+  const std::lock_guard<std::mutex> lock(ring.mutex());
+  ring.ready(slot_bytes);
+  std::size_t total = 0;
+  for (const HostDevice& h : ranges) total += h.bytes;
+  std::vector<CopyBlock> fill;
+  for (std::size_t k = 0, from = 0; from < total; ++k, from += slot_bytes) {
+    const std::size_t len = std::min(slot_bytes, total - from);
+    ring.wait(k);  // the slot's previous copy has left it
+    std::byte* slot = ring.slot(k);
+    fill.clear();
+    for_each_in_window(ranges, from, len,
+                       [&](std::byte* host, std::byte*, std::size_t bytes, std::size_t at) {
+                         fill.push_back({slot + at, host, bytes});
+                       });
+    parallel_copy(fill.data(), fill.size(), 0);
+    for_each_in_window(ranges, from, len,
+                       [&](std::byte*, std::byte* device, std::size_t bytes, std::size_t at) {
+                         CG_CUDA_CHECK(cudaMemcpyAsync(device, slot + at, bytes, cudaMemcpyHostToDevice, st));
+                       });
+    CG_CUDA_CHECK(cudaEventRecord(ring.done(k), st));
+  }
+}
+
 // upload: the DEVICE bodies of the call: the caller's arrays (device-array API), or the host arrays
-// copied into ws.pos / rad / report (stage "upload"). Large input arrays are page-locked in place for
-// the copy (they are already resident, so that only pins them) and unpinned once it is done: a
-// pageable copy is staged by the driver on one thread.
-// A range the driver refuses (e.g. a page shared with an array already registered) is copied
-// pageable. Tuning::upload_registered forces one.
+// copied into ws.pos / rad / report (stage "upload"), by Tuning::upload: streamed through the pinned
+// ring (automatic from 1 MiB), the arrays page-locked in place for the copy and unpinned once it is
+// done (registered), or one pageable copy that the driver stages on one thread (below 1 MiB). A range
+// the driver refuses to page-lock is copied pageable.
 template <class Real, class Key, class Narrow>
-void upload_stage(RunState<Real, Key, Narrow>& r) {
+void upload_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedRing& ring) {
   if (r.device_in) {
     r.d_pos = r.job.device_bodies->position;
     r.d_rad = r.job.device_bodies->radius;
@@ -34,28 +81,38 @@ void upload_stage(RunState<Real, Key, Narrow>& r) {
   }
   Workspace& ws = r.ws;
   const std::uint64_t n64 = r.n64;
-  const std::size_t lock_from = r.tuning.upload_registered == Forced::on    ? 1
-                                : r.tuning.upload_registered == Forced::off ? SIZE_MAX
-                                                                            : std::size_t(64) << 20;
-  std::vector<void*> locked;
-  auto upload = [&](void* dst, const void* src, std::size_t bytes) {
-    if (bytes >= lock_from) {
-      void* p = const_cast<void*>(src);  // page-locking does not write to the range
-      if (cudaHostRegister(p, bytes, cudaHostRegisterDefault) == cudaSuccess)
-        locked.push_back(p);
-      else
-        (void)cudaGetLastError();  // refused: the copy below is pageable
-    }
-    if (bytes > 0) CG_CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyHostToDevice, r.st));
+  auto range = [](void* device, const void* host, std::size_t bytes) {
+    return HostDevice{static_cast<std::byte*>(const_cast<void*>(host)), static_cast<std::byte*>(device),
+                      bytes};
   };
-  upload(ws.pos.data(), r.job.bodies.position.data(), n64 * sizeof(Vec3<double>));
-  upload(ws.rad.data(), r.job.bodies.radius.data(), n64 * sizeof(double));
+  std::vector<HostDevice> ranges{
+      range(ws.pos.data(), r.job.bodies.position.data(), n64 * sizeof(Vec3<double>)),
+      range(ws.rad.data(), r.job.bodies.radius.data(), n64 * sizeof(double))};
   r.d_pos = reinterpret_cast<const double*>(ws.pos.data());
   r.d_rad = reinterpret_cast<const double*>(ws.rad.data());
   r.d_report = nullptr;
   if (!r.job.bodies.report.empty()) {
-    upload(ws.report.data(), r.job.bodies.report.data(), n64);
+    ranges.push_back(range(ws.report.data(), r.job.bodies.report.data(), n64));
     r.d_report = reinterpret_cast<const std::uint8_t*>(ws.report.data());
+  }
+  std::size_t total = 0;
+  for (const HostDevice& h : ranges) total += h.bytes;
+  const HostTransfer how = upload_transfer(r.tuning, total);
+  if (how == HostTransfer::streamed) {
+    streamed_upload(ring, r.tuning.transfer_slot_bytes, ranges, r.st);
+    r.events.mark(EngineStage::upload, r.st);
+    return;
+  }
+  std::vector<void*> locked;
+  for (const HostDevice& h : ranges) {
+    if (h.bytes == 0) continue;
+    if (how == HostTransfer::registered) {  // page-locking does not write to the range
+      if (cudaHostRegister(h.host, h.bytes, cudaHostRegisterDefault) == cudaSuccess)
+        locked.push_back(h.host);
+      else
+        (void)cudaGetLastError();  // refused: the copy below is pageable
+    }
+    CG_CUDA_CHECK(cudaMemcpyAsync(h.device, h.host, h.bytes, cudaMemcpyHostToDevice, r.st));
   }
   r.events.mark(EngineStage::upload, r.st);
   if (!locked.empty()) {
@@ -70,14 +127,57 @@ struct DownloadHostTimes {
   double extra_s = 0;    // host work after it
 };
 
-// download: the contact rows described in DEVICE memory (job.device_out), or copied into `out`.
-// Large results go straight into the result vectors, page-locked in place (cudaHostRegister: that is
-// their first touch); small ones, and any range the driver will not register, through the pinned
-// staging buffer and a parallel host copy (for large results the staged path pays a first touch of
-// the staging buffer and another of the vectors). Tuning::download_registered forces one.
+// Device → host through the pinned ring: the copies of the first slots are queued at once; as each
+// slot's copy completes, all host threads move it into the ranges' host parts and the slot takes the
+// next window. `queued_all` is called once the last copy is queued (the stage's event goes there).
+// Returns the host seconds spent moving the last slot, after every copy is done.
+template <class F>
+double streamed_download(cuda::PinnedRing& ring, std::size_t slot_bytes,
+                         const std::vector<HostDevice>& ranges, cudaStream_t st, F&& queued_all) {
+  using clock_type = std::chrono::steady_clock;
+  const std::lock_guard<std::mutex> lock(ring.mutex());
+  ring.ready(slot_bytes);
+  std::size_t total = 0;
+  for (const HostDevice& h : ranges) total += h.bytes;
+  const std::size_t slots = (total + slot_bytes - 1) / slot_bytes;
+  auto queue = [&](std::size_t k) {
+    const std::size_t from = k * slot_bytes, len = std::min(slot_bytes, total - from);
+    std::byte* slot = ring.slot(k);
+    for_each_in_window(ranges, from, len,
+                       [&](std::byte*, std::byte* device, std::size_t bytes, std::size_t at) {
+                         CG_CUDA_CHECK(cudaMemcpyAsync(slot + at, device, bytes, cudaMemcpyDeviceToHost, st));
+                       });
+    CG_CUDA_CHECK(cudaEventRecord(ring.done(k), st));
+    if (k + 1 == slots) queued_all();
+  };
+  for (std::size_t k = 0; k < std::min(slots, cuda::PinnedRing::kSlots); ++k) queue(k);
+  std::vector<CopyBlock> drain;
+  double last_s = 0;
+  for (std::size_t k = 0; k < slots; ++k) {
+    ring.wait(k);
+    const auto t0 = clock_type::now();
+    const std::size_t from = k * slot_bytes, len = std::min(slot_bytes, total - from);
+    const std::byte* slot = ring.slot(k);
+    drain.clear();
+    for_each_in_window(ranges, from, len,
+                       [&](std::byte* host, std::byte*, std::size_t bytes, std::size_t at) {
+                         drain.push_back({host, slot + at, bytes});
+                       });
+    parallel_copy(drain.data(), drain.size(), 0);
+    if (k + cuda::PinnedRing::kSlots < slots) queue(k + cuda::PinnedRing::kSlots);
+    last_s = std::chrono::duration<double>(clock_type::now() - t0).count();
+  }
+  return last_s;
+}
+
+// download: the contact rows described in DEVICE memory (job.device_out), or copied into `out` by
+// Tuning::download: through one whole pinned staging buffer and a parallel host copy (single, the
+// automatic choice, and where the driver refuses to register), streamed through the pinned ring (the
+// host copy out of one slot overlaps the transfer of the next), or straight into the result vectors
+// page-locked in place (registered: a parallel first touch, then cudaHostRegister).
 template <class Real, class Key, class Narrow>
 DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuffer& h_staging,
-                                 Contacts<Narrow>& out) {
+                                 cuda::PinnedRing& ring, Contacts<Narrow>& out) {
   using clock_type = std::chrono::steady_clock;
   const cuda::ContactPtrs<Narrow>& cp = r.cp;
   const bool full = r.full;
@@ -96,8 +196,23 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
   const std::uint32_t np = r.n_rows;  // (a rejecting narrow has read it for its tight layout)
   const std::size_t at = r.out_bytes;
   const std::byte* o = r.ws.out.data();
+  const HostTransfer how = download_transfer(r.tuning);
+  if (how == HostTransfer::streamed && np > 0) {
+    const auto t0 = clock_type::now();
+    out.resize(np, full);
+    std::vector<HostDevice> ranges;
+    for_each_field(out, cp, full, [&](auto& vec, const void* d_ptr) {
+      ranges.push_back({reinterpret_cast<std::byte*>(vec.data()),
+                        static_cast<std::byte*>(const_cast<void*>(d_ptr)), vec.size() * sizeof(vec[0])});
+    });
+    ht.extra_s = streamed_download(ring, r.tuning.transfer_slot_bytes, ranges, st,
+                                   [&] { r.events.mark(EngineStage::download, st); });
+    ht.overlap_s = std::chrono::duration<double>(clock_type::now() - t0).count() - ht.extra_s;
+    r.take_narrow_counters();  // every copy is done (the counters were queued before the rows')
+    return ht;
+  }
   bool registered = false;
-  if (tuned(r.tuning.download_registered, at >= (std::size_t(64) << 20)) && np > 0) {
+  if (how == HostTransfer::registered && np > 0) {
     const auto t0 = clock_type::now();
     out.resize(np, full);
     std::vector<std::pair<void*, const void*>> fields;  // (host, device)

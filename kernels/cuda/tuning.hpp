@@ -16,6 +16,12 @@ namespace cg::detail {
 
 enum class Forced { automatic, off, on };
 
+// How host arrays cross PCIe (transfer.cuh). streamed: through the engine's ring of pinned slots, the
+// host copying one slot while the copy engine moves another; registered: the caller's arrays
+// page-locked in place for one copy; single: one copy as it comes (upload: pageable, staged by the
+// driver; download: through one whole pinned buffer, then a parallel host copy).
+enum class HostTransfer { automatic, streamed, registered, single };
+
 struct Tuning {
   // CONTACTGRID_CUDA_TYPE_PASSES=1: Le Grand's 8 passes by cell type (opt-in; =0 or unset: the single
   // sort of all entries). About half the device memory a sphere, but slower at every size: 8 compaction
@@ -24,18 +30,21 @@ struct Tuning {
   // CONTACTGRID_DEVICE_MEMORY_LIMIT (bytes) caps the engine's workspace: a smaller GPU, or a GPU
   // shared with a simulation, can be imitated (and the out-of-memory path tested).
   std::optional<std::size_t> memory_limit;
-  // CONTACTGRID_CUDA_UPLOAD=registered / pageable: page-lock the host input arrays for the upload
-  // always / never (automatic: from 64 MiB an array).
-  Forced upload_registered = Forced::automatic;
+  // CONTACTGRID_CUDA_UPLOAD=streamed / registered / pageable: how the host input arrays go up
+  // (automatic: streamed from 1 MiB in all, single below).
+  HostTransfer upload = HostTransfer::automatic;
   // CONTACTGRID_CUDA_RENUMBER=1 / 0: the renumbering of the bodies by z layer on / off (automatic:
   // when the spheres outgrow the L2).
   Forced renumber = Forced::automatic;
   // CONTACTGRID_CUDA_ORDER=counting / radix: group the pairs by a with a counting sort / a radix sort
   // (automatic: counting while its counters fit in half the L2).
   Forced counting_order = Forced::automatic;
-  // CONTACTGRID_CUDA_DOWNLOAD=registered / staged: contacts straight into page-locked result vectors /
-  // through the pinned staging buffer (automatic: registered from 64 MiB of contacts).
-  Forced download_registered = Forced::automatic;
+  // CONTACTGRID_CUDA_DOWNLOAD=streamed / registered / staged: how the contact rows come down
+  // (automatic: single, see download_transfer).
+  HostTransfer download = HostTransfer::automatic;
+  // CONTACTGRID_CUDA_TRANSFER_SLOT=bytes: the size of a slot of the streamed transfers' pinned ring
+  // (default 4 MiB; tests use small slots to make a transfer wrap around the ring).
+  std::size_t transfer_slot_bytes = std::size_t(4) << 20;
   // CONTACTGRID_CUDA_CANDIDATES=cells: the pair stage proposes every pair the cell rule assigns and
   // the narrow stage rejects the non-touching ones (count → scan → fill): the same contacts, slower;
   // a test knob for the rejecting path (default: spheres_touch, no compaction). =bounding: scenes with
@@ -57,6 +66,32 @@ inline Forced forced(const char* variable, std::string_view on, std::string_view
   return Forced::automatic;
 }
 
+// A transfer knob: the spelling of each choice, else automatic.
+inline HostTransfer host_transfer(const char* variable, std::string_view registered,
+                                  std::string_view single) {
+  const char* v = std::getenv(variable);
+  if (!v) return HostTransfer::automatic;
+  const std::string_view s(v);
+  if (s == "streamed") return HostTransfer::streamed;
+  if (s == registered) return HostTransfer::registered;
+  if (s == single) return HostTransfer::single;
+  return HostTransfer::automatic;
+}
+
+// The upload a knob asks for, or the automatic one for `bytes`: streamed from 1 MiB, single below.
+inline HostTransfer upload_transfer(const Tuning& t, std::size_t bytes) {
+  if (t.upload != HostTransfer::automatic) return t.upload;
+  return bytes >= (std::size_t(1) << 20) ? HostTransfer::streamed : HostTransfer::single;
+}
+
+// The download a knob asks for, or the automatic one: single (one whole pinned buffer, then all host
+// threads copy into the result vectors). Streamed and registered downloads are slower on the H100 host
+// at every size (BENCHMARKS.md §15): the time goes to the first touch of the fresh result vectors,
+// which a streamed download pays in many small parallel copies.
+inline HostTransfer download_transfer(const Tuning& t) {
+  return t.download != HostTransfer::automatic ? t.download : HostTransfer::single;
+}
+
 // The answer of a knob: forced, or `automatic_choice`.
 inline bool tuned(Forced f, bool automatic_choice) {
   return f == Forced::automatic ? automatic_choice : f == Forced::on;
@@ -68,13 +103,17 @@ inline Tuning read_tuning() {
   t.type_passes = passes && passes[0] == '1';
   if (const char* cap = std::getenv("CONTACTGRID_DEVICE_MEMORY_LIMIT"))
     t.memory_limit = std::strtoull(cap, nullptr, 10);
-  t.upload_registered = forced("CONTACTGRID_CUDA_UPLOAD", "registered", "pageable");
+  t.upload = host_transfer("CONTACTGRID_CUDA_UPLOAD", "registered", "pageable");
   // only the first character counts, as before: "1..." on, "0..." off
   const char* renumber = std::getenv("CONTACTGRID_CUDA_RENUMBER");
   if (renumber && (renumber[0] == '0' || renumber[0] == '1'))
     t.renumber = renumber[0] == '1' ? Forced::on : Forced::off;
   t.counting_order = forced("CONTACTGRID_CUDA_ORDER", "counting", "radix");
-  t.download_registered = forced("CONTACTGRID_CUDA_DOWNLOAD", "registered", "staged");
+  t.download = host_transfer("CONTACTGRID_CUDA_DOWNLOAD", "registered", "staged");
+  if (const char* slot = std::getenv("CONTACTGRID_CUDA_TRANSFER_SLOT")) {
+    const std::size_t bytes = std::strtoull(slot, nullptr, 10);
+    if (bytes >= 4096) t.transfer_slot_bytes = bytes;
+  }
   if (const char* w = std::getenv("CONTACTGRID_CUDA_WARP_SOLVE"))
     t.warp_solve_pairs = static_cast<unsigned>(std::strtoul(w, nullptr, 10));
   if (const char* c = std::getenv("CONTACTGRID_CUDA_CANDIDATES")) {

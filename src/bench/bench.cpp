@@ -356,7 +356,7 @@ BenchResult run_bench(const BenchOptions& o, std::ostream& out) {
       std::vector<std::int64_t> ids(scene.size());
       std::iota(ids.begin(), ids.end(), std::int64_t(0));
       double extent = 0;
-      bullet_bodies = oracle_bodies(scene, ids, /*framed=*/o.kind != BenchKind::spheres, extent);
+      bullet_bodies = oracle_bodies(scene, ids, bullet_scale_of(scene), extent);
     }
     if (e <= o.engine_hi) {
       const BodyRows rows = body_rows(std::move(scene), o.kind != BenchKind::spheres);

@@ -48,6 +48,23 @@ const std::map<std::string, SceneRead> k_reads{
 const std::map<std::string, ContactOutput> k_writes{{"gather", ContactOutput::gather},
                                                     {"ranks", ContactOutput::ranks}};
 
+// An enum option by name: the names are what --help and the error of a wrong word show (CLI11's
+// CheckedTransformer shows the enum's internal numbers too). The word becomes the enum's number for
+// CLI11 to store.
+template <class E>
+CLI::Validator enum_names(const std::map<std::string, E>& names) {
+  std::string list;
+  for (const auto& entry : names) list += (list.empty() ? "" : "|") + entry.first;
+  return CLI::Validator(
+      [names, list](std::string& word) -> std::string {
+        const auto it = names.find(word);
+        if (it == names.end()) return "'" + word + "' is not one of " + list;
+        word = std::to_string(static_cast<long long>(it->second));
+        return {};
+      },
+      list);
+}
+
 }  // namespace
 
 std::optional<double> positive_number(const std::string& word) {
@@ -94,9 +111,11 @@ Subcommand add_generate(CLI::App& app) {
     std::vector<double> offset;
     double ratio = 10;
     double max_aspect = 0;
+    long long count = 0;  // -n, signed: -n -3 is named as typed
   };
   const auto args = std::make_shared<Args>();
   GenerateOptions& gen = args->options;
+  args->count = static_cast<long long>(gen.count);
   auto* g = app.add_subcommand("generate", "Make a seeded, reproducible scene (docs/FORMAT.md §1 HDF5)");
   g->add_option("output", args->output, "Scene file to write (.h5)")->required();
   g->add_option(
@@ -117,9 +136,8 @@ Subcommand add_generate(CLI::App& app) {
   g->add_option("--intruders", gen.intruders, "intruders: how many large bodies (radius Rhigh), 1 … count")
       ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1) << 28))
       ->capture_default_str();
-  g->add_option("-n,--count", gen.count, "Number of bodies, 1 … 2^28")
-      ->check(CLI::Range(std::uint64_t(1), std::uint64_t(1) << 28))
-      ->capture_default_str();
+  // (checked when it runs: CLI11 names an option by its long name, and the user typed -n)
+  g->add_option("-n,--count", args->count, "Number of bodies, 1 … 2^28")->capture_default_str();
   g->add_option("--seed", gen.seed, "Random seed")->capture_default_str();
   auto* rlow_opt =
       g->add_option("--rlow", gen.radius_low, "Smallest radius Rlow (length units)")->capture_default_str();
@@ -144,8 +162,12 @@ Subcommand add_generate(CLI::App& app) {
 
   return {
       g, [args, rlow_opt, aspect_opt](Session& session) {
+        if (args->count < 1 || args->count > (1LL << 28))
+          throw UsageError(
+              fmt::format("-n (--count) {}: the number of bodies must be 1 … 2^28", args->count));
         if (session.rank() != 0) return 0;  // one writer
         GenerateOptions& options = args->options;
+        options.count = static_cast<std::uint64_t>(args->count);
         const std::vector<double>& offset = args->offset;
         if (!offset.empty()) options.offset = {offset[0], offset[1], offset[2]};
         if ((options.kind == "polydisperse" || options.kind == "bimodal" || options.kind == "intruders") &&
@@ -174,7 +196,7 @@ Subcommand add_detect(CLI::App& app) {
                 "Contacts file to write (.h5); its directory must exist and be writable (checked first)")
       ->required();
   d->add_option("--backend", det.backend, "cpu | cuda | auto (cuda when a GPU is present)")
-      ->transform(CLI::CheckedTransformer(k_backends))
+      ->transform(enum_names(k_backends))
       ->default_str("auto");
   d->add_option_function<std::string>(
        "--precision",
@@ -205,7 +227,7 @@ Subcommand add_detect(CLI::App& app) {
       "POS[,ANGLE] for --precision auto: the position error accepted, relative to the smallest radius, "
       "and the normal angle in degrees (default: what fp64 gives)");
   d->add_option("--fields", det.fields, "basic | full (adds local points and friction directions)")
-      ->transform(CLI::CheckedTransformer(k_fields))
+      ->transform(enum_names(k_fields))
       ->default_str("basic");
   d->add_option_function<std::string>(
        "--cell-size",
@@ -245,21 +267,21 @@ Subcommand add_detect(CLI::App& app) {
   d->add_option("--threads", det.threads, "CPU backend threads (0: all cores)")
       ->check(CLI::NonNegativeNumber);
   d->add_option("--axis", det.axis, "MPI slab axis: auto (largest extent) | x | y | z")
-      ->transform(CLI::CheckedTransformer(k_axes))
+      ->transform(enum_names(k_axes))
       ->default_str("auto");
   d->add_option("--balance", det.balance, "MPI slab bounds: count (equal bodies) | width (equal widths)")
-      ->transform(CLI::CheckedTransformer(k_balances))
+      ->transform(enum_names(k_balances))
       ->default_str("count");
   d->add_option("--read", det.read,
                 "MPI scene read: auto (all when every rank is on one node, else own) | own (each rank its "
                 "rows, bodies then move to their owners) | all (every rank reads every row and keeps its "
                 "own bodies and ghosts: no body moves)")
-      ->transform(CLI::CheckedTransformer(k_reads))
+      ->transform(enum_names(k_reads))
       ->default_str("auto");
   d->add_option("--write", det.write,
                 "MPI output: gather (rank 0 gathers, deduplicates and writes the sorted contacts) | ranks "
                 "(each rank merges the contacts of its id_a range and writes them into the same file)")
-      ->transform(CLI::CheckedTransformer(k_writes))
+      ->transform(enum_names(k_writes))
       ->default_str("gather");
   auto* steps =
       d->add_option("--steps", det.steps,
@@ -413,32 +435,47 @@ Subcommand add_validate(CLI::App& app) {
   v->add_option("scene", args->scene, "Scene file (.h5)")->required();
   v->add_option("contacts", args->contacts, "Contacts file (.h5) written by detect")->required();
   v->add_option("--pos-eps", val.pos_eps,
-                "Largest position error allowed (length units; for pairs with an ellipsoid, times the pair's "
-                "larger bounding radius, and also the largest distance error)")
+                "Largest position error allowed, as a fraction of L, the pair's larger bounding radius (also "
+                "the largest distance error of pairs with an ellipsoid)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  v->add_option_function<double>(
+       "--pos-abs", [&val](double x) { val.pos_abs = x; },
+       "Largest position error allowed as a length (scene units), instead of --pos-eps")
+      ->check(CLI::PositiveNumber);
   v->add_option("--angle-deg", val.angle_deg, "Largest angle between normals allowed (degrees)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  v->add_option(
-       "--bullet-precision,--bullet", args->bullet,
-       "auto | double | float: Bullet build to compare with; auto: float for scenes with ellipsoids "
-       "(double Bullet's EPA is degenerate on many ellipsoid pairs), double otherwise (float Bullet is "
-       "wrong far from the origin and for nearly coincident centres)")
+  v->add_option("--bullet-precision,--bullet", args->bullet,
+                "auto | double | float: Bullet build to compare with; auto: float for scenes with ellipsoids "
+                "(double Bullet's EPA is degenerate on many ellipsoid pairs), double otherwise (its sphere "
+                "contacts are "
+                "exact formulas in double)")
       ->check(CLI::IsMember({"auto", "double", "float"}))
       ->capture_default_str();
-  v->add_option("--shallow", val.shallow_threshold,
-                "Ellipsoid pairs only we report, judged correct and shallower than this, are shallow Bullet "
-                "misses (accepted; length units; default: a quarter of Bullet's ellipsoid margin 0.04)")
+  v->add_option("--shallow", val.shallow,
+                "Ellipsoid pairs only we report, judged correct and shallower than this x L, are shallow "
+                "Bullet misses (accepted; a quarter of Bullet's ellipsoid margin in its frame)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  v->add_option_function<double>(
+       "--shallow-abs", [&val](double x) { val.shallow_abs = x; },
+       "The shallow threshold as a length (scene units), instead of --shallow")
+      ->check(CLI::NonNegativeNumber);
+  v->add_option_function<std::string>(
+       "--memory", [&val](const std::string& t) { val.memory_limit = parse_memory(t); },
+       "Peak memory to stay under (e.g. 8G, 512M): Bullet runs on the scene in pieces that fit; "
+       "default: 4G or half the machine's memory, whichever is smaller")
+      ->default_str(fmt::format("{:.3g}G", double(default_memory_limit()) / double(1 << 30)));
   v->add_option("--sample", val.sample,
-                "Validate K random sub-boxes instead of the whole scene (large scenes)");
+                "Validate K random sub-boxes instead of the whole scene (large scenes): each about 4000 "
+                "bodies, or fewer where they touch more (about 4000 contacts a box)");
   v->add_option("--seed", val.seed, "Seed of the sub-box choice")->capture_default_str();
 
   return {v, [args](Session& session) {
             if (session.rank() != 0) return 0;
             args->options.bullet = parse_bullet_precision(args->bullet);
+            args->options.progress = true;
             const ValidateReport report = validate_files(args->scene, args->contacts, args->options);
             fmt::print("{}", report.text());
             return report.pass ? 0 : 1;
@@ -459,7 +496,7 @@ Subcommand add_bench(CLI::App& app) {
   b->add_option("--kind", bench.kind,
                 "spheres (double Bullet, warm step) | ellipsoids | mixed (float Bullet with the exact "
                 "ellipsoid support, from scratch; narrow-phase counters)")
-      ->transform(CLI::CheckedTransformer(k_bench_kinds))
+      ->transform(enum_names(k_bench_kinds))
       ->default_str("spheres");
   b->add_option("--max-aspect", bench.max_aspect,
                 "ellipsoids, mixed: semi-axes U[1/K, 1], so no body is longer than 1:K (issue #12: 4)")
@@ -483,7 +520,7 @@ Subcommand add_bench(CLI::App& app) {
       ->check(CLI::IsMember({"cpu", "cuda"}));
   b->add_option("--threads", bench.threads, "CPU backend threads (0: all cores)");
   b->add_option("--precision", bench.precision, "fp32 | fp64 | mixed: the engine's precision mode")
-      ->transform(CLI::CheckedTransformer(k_precisions))
+      ->transform(enum_names(k_precisions))
       ->default_str("fp64");
   b->add_option("--seed", bench.seed, "Scene seed")->capture_default_str();
   b->add_option("--csv", bench.csv, "CSV output")->capture_default_str();

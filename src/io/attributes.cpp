@@ -88,6 +88,40 @@ std::optional<double> number_attribute(const Where& where, hid_t file, const Raw
   return std::get<double>(it->second);
 }
 
+std::optional<std::string> string_attribute(const Where& where, hid_t file, const RawAttributes& raw,
+                                            const std::string& name) {
+  if (raw.status == RawAttributes::Status::ok) {
+    if (raw.names.count(name) == 0) return std::nullopt;
+    const auto it = raw.values.find(name);
+    const auto* text = it == raw.values.end() ? nullptr : std::get_if<std::string>(&it->second);
+    if (text == nullptr) where.bad(fmt::format("root attribute {} is not a string", name));
+    return *text;
+  }
+  // A header raw_attributes does not follow (dense or shared storage; not a damaged one): HDF5 reads it.
+  Handle root = checked(H5Gopen2(file, "/", H5P_DEFAULT), H5Gclose, where, "cannot open the root group");
+  const std::string what = fmt::format("root attribute {}: cannot read", name);
+  const htri_t exists = H5Aexists(root, name.c_str());
+  if (exists < 0) where.fail(what);
+  if (exists == 0) return std::nullopt;
+  Handle attr = checked(H5Aopen(root, name.c_str(), H5P_DEFAULT), H5Aclose, where, what);
+  Handle space = checked(H5Aget_space(attr), H5Sclose, where, what);
+  Handle type = checked(H5Aget_type(attr), H5Tclose, where, what);
+  if (H5Tget_class(type) != H5T_STRING || H5Sget_simple_extent_npoints(space) != 1)
+    where.bad(fmt::format("root attribute {} is not a string", name));
+  if (H5Tis_variable_str(type) > 0) {
+    Handle memory = string_type(where);
+    char* text = nullptr;
+    check(H5Aread(attr, memory, &text), where, what);
+    std::string value = text ? text : "";
+    H5free_memory(text);
+    return value;
+  }
+  std::string value(H5Tget_size(type), '\0');
+  Handle memory = checked(H5Tcopy(type), H5Tclose, where, what);
+  check(H5Aread(attr, memory, value.data()), where, what);
+  return value.substr(0, value.find('\0'));
+}
+
 Attributes other_attributes(const RawAttributes& raw, std::initializer_list<const char*> skip) {
   if (raw.status != RawAttributes::Status::ok) return {};
   Attributes attributes = raw.values;

@@ -29,6 +29,11 @@ bool has_root_attribute(const Where& where, hid_t file, const RawAttributes& raw
 std::optional<double> number_attribute(const Where& where, hid_t file, const RawAttributes& raw,
                                        const std::string& name);
 
+// A root attribute that is one string (quaternion_order): nullopt when absent; another type is an
+// InputError naming it.
+std::optional<std::string> string_attribute(const Where& where, hid_t file, const RawAttributes& raw,
+                                            const std::string& name);
+
 // The other root attributes (generator parameters, run record), except those named in `skip`: they
 // mean nothing to the readers, so HDF5 is never asked for them; what raw_attributes could decode
 // (nothing unless raw.status is ok).

@@ -307,28 +307,57 @@ void write_contacts(const std::string& path, const Contacts<Real>& c, const RunI
 template void write_contacts<float>(const std::string&, const Contacts<float>&, const RunInfo&, int);
 template void write_contacts<double>(const std::string&, const Contacts<double>&, const RunInfo&, int);
 
-ContactFile read_contacts(const std::string& path) {
-  LibraryLock lock;
-  Where where(path, false);
-  Handle file = open_file_for_reading(where);
-  ContactFile out;
-  // The run record is decoded from the file's bytes (attributes.hpp); when the precision attribute
-  // is not a string we could decode, the real datasets' element type says it.
-  const RawAttributes raw = root_attributes(where, file);
-  if (!has_root_attribute(where, file, raw, "precision")) where.bad("root attribute precision is missing");
-  out.attributes = other_attributes(raw);
-  if (auto precision = out.attributes.find("precision"); precision != out.attributes.end()) {
+namespace {
+
+// The run record (precision, root attributes) of an open contact file, and its /contacts/id_a.
+// The run record is decoded from the file's bytes (attributes.hpp); when the precision attribute is
+// not a string we could decode, the real datasets' element type says it (read_contacts).
+struct OpenContacts {
+  Where where;
+  Handle file;
+  ContactFileHeader header;
+  Dataset id_a;
+};
+
+void open_contacts(OpenContacts& o) {
+  const Where& where = o.where;
+  o.file = open_file_for_reading(where);
+  const RawAttributes raw = root_attributes(where, o.file);
+  if (!has_root_attribute(where, o.file, raw, "precision")) where.bad("root attribute precision is missing");
+  o.header.attributes = other_attributes(raw);
+  if (auto precision = o.header.attributes.find("precision"); precision != o.header.attributes.end()) {
     const auto* precision_text = std::get_if<std::string>(&precision->second);
     if (precision_text == nullptr ||
         (*precision_text != "fp32" && *precision_text != "fp64" && *precision_text != "mixed"))
       where.bad("root attribute precision is not \"fp32\", \"fp64\" or \"mixed\"");
-    out.precision = *precision_text;
+    o.header.precision = *precision_text;
   }
+  if (!group_exists(where, o.file, "/contacts")) where.bad("/contacts: missing group");
+  o.id_a = open_dataset(where, o.file, kContactFields[0].path, 0, Element::integer);  // K rows
+  o.header.rows = o.id_a.rows;
+}
 
-  if (!group_exists(where, file, "/contacts")) where.bad("/contacts: missing group");
+}  // namespace
+
+ContactFileHeader read_contact_header(const std::string& path) {
+  LibraryLock lock;
+  OpenContacts o{Where(path, false), {}, {}, {}};
+  open_contacts(o);
+  return o.header;
+}
+
+ContactFile read_contacts(const std::string& path, bool optional_fields) {
+  LibraryLock lock;
+  OpenContacts o{Where(path, false), {}, {}, {}};
+  open_contacts(o);
+  const Where& where = o.where;
+  const Handle& file = o.file;
+  const Dataset& id_a = o.id_a;
+  ContactFile out;
+  out.precision = o.header.precision;
+  out.attributes = std::move(o.header.attributes);
   // Every field of the table: its shape and element kind checked, its rows read (reals as double).
   // The basic fields first; the optional ones must be all present or none.
-  Dataset id_a = open_dataset(where, file, kContactFields[0].path, 0, Element::integer);  // K rows
   const hsize_t k = id_a.rows;
   Contacts<double>& c = out.contacts;
   auto read_fields = [&](bool optional) {
@@ -351,7 +380,7 @@ ContactFile read_contacts(const std::string& path) {
   if (present != 0 && present != int(kContactFieldCount - kBasicContactFieldCount))
     where.bad(
         "/contacts: the optional datasets (local points, friction directions) must be all present or none");
-  c.full = present != 0;
+  c.full = present != 0 && optional_fields;
   if (c.full) read_fields(true);
   return out;
 }

@@ -84,12 +84,22 @@ void commit_contact_file(const ContactFileLayout& layout, const RunInfo& info);
 // Removes the temporary (no error if it is gone). Never throws.
 void discard_contact_file(const ContactFileLayout& layout) noexcept;
 
-// Reads a contact file back in double (whatever precision it was written in).
+// Reads a contact file back in double (whatever precision it was written in). Without
+// `optional_fields` the optional datasets are checked (all or none) but not read (contacts.full false).
 struct ContactFile {
   Contacts<double> contacts;
   std::string precision;
   Attributes attributes;
 };
-ContactFile read_contacts(const std::string& path);
+ContactFile read_contacts(const std::string& path, bool optional_fields = true);
+
+// A contact file's run record without its rows: the precision attribute ("" when the file has none
+// we could decode), the root attributes and the number of rows (checked as read_contacts checks them).
+struct ContactFileHeader {
+  std::string precision;
+  Attributes attributes;
+  std::uint64_t rows = 0;
+};
+ContactFileHeader read_contact_header(const std::string& path);
 
 }  // namespace cg

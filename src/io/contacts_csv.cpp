@@ -18,7 +18,7 @@ template <class Real>
 void write_contacts_csv(const std::string& path, const Contacts<Real>& c) {
   TempOutput out(path);
   std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(out.temp().c_str(), "w"), std::fclose);
-  if (!file) throw IoError(path + ": cannot open " + out.temp() + " for writing: " + std::strerror(errno));
+  if (!file) throw IoError(path + ": cannot write: " + std::strerror(errno));
   std::FILE* f = file.get();
   // every field the run produced (kContactFields order); a vector field is three columns
   std::string header;

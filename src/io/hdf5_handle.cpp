@@ -158,9 +158,21 @@ Handle creation_properties(const Where& where, hid_t plist_class) {
 }
 
 Handle create_file(const Where& where, const std::string& name) {
+  check_output_directory(where.file());
   Handle fcpl = creation_properties(where, H5P_FILE_CREATE);
-  return checked(H5Fcreate(name.c_str(), H5F_ACC_TRUNC, fcpl, H5P_DEFAULT), H5Fclose, where,
-                 fmt::format("cannot create {}", name));
+  const hid_t id = H5Fcreate(name.c_str(), H5F_ACC_TRUNC, fcpl, H5P_DEFAULT);
+  if (id < 0) {
+    // HDF5's message names the temporary and its internal flags; only the system's reason is the user's.
+    const std::string detail = hdf5_detail();
+    const std::size_t at = detail.find("error message = '");
+    std::string reason = "the file cannot be created";
+    if (at != std::string::npos) {
+      const std::size_t from = at + 17, to = detail.find('\'', from);
+      reason = detail.substr(from, to == std::string::npos ? std::string::npos : to - from);
+    }
+    throw IoError(fmt::format("{}: cannot write: {}", where.file(), reason));
+  }
+  return Handle(id, H5Fclose);
 }
 
 Handle create_group(const Where& where, hid_t file, const std::string& name) {

@@ -125,11 +125,14 @@ Handle open_file_for_reading(const Where& where);
 // ---- writing ---------------------------------------------------------------------------------
 
 // The temporary of an output (io/temp_output.hpp).
+using cg::check_output_directory;
 using cg::remove_quietly;
 using cg::temp_name;
 using cg::TempOutput;
 
 Handle creation_properties(const Where& where, hid_t plist_class);  // object times off
+// Creates `name` (the temporary of where.file()): check_output_directory, then a failure is an
+// IoError naming where.file() with the system's reason only.
 Handle create_file(const Where& where, const std::string& name);
 Handle create_group(const Where& where, hid_t file, const std::string& name);  // with intermediates
 // A contiguous dataset of the given file type and shape (no fill writes: every row gets written).

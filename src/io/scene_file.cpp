@@ -8,8 +8,10 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <string>
 #include <type_traits>
 #include <utility>
+#include <vector>
 
 #include "io/attributes.hpp"
 #include "io/datasets.hpp"
@@ -38,10 +40,64 @@ struct SceneSource {
   Dataset ellipsoid_position, ellipsoid_semi_axes, ellipsoid_orientation;
   std::size_t spheres = 0, ellipsoids = 0;
   std::optional<double> radius_low, radius_high;
+  bool xyzw = false;  // root attribute quaternion_order = "xyzw": orientations stored scalar last
   Attributes attributes;
 
   explicit SceneSource(const std::string& path) : where(path, false) {}
 };
+
+// The members of a group for messages: "position (2000, 3), radius (2000), params (group)" (at most
+// a dozen; "" for an empty group).
+herr_t collect_link_name(hid_t, const char* name, const H5L_info_t*, void* names) {
+  static_cast<std::vector<std::string>*>(names)->push_back(name);
+  return 0;
+}
+
+std::string group_listing(const Where& where, hid_t file, const std::string& group) {
+  std::vector<std::string> names;
+  {
+    Handle g = checked(H5Gopen2(file, group.c_str(), H5P_DEFAULT), H5Gclose, where,
+                       fmt::format("{}: cannot open the group", group));
+    if (H5Literate(g, H5_INDEX_NAME, H5_ITER_INC, nullptr, collect_link_name, &names) < 0)
+      where.fail(fmt::format("{}: cannot list the group", group));
+  }
+  std::string out;
+  const std::size_t shown = std::min<std::size_t>(names.size(), 12);
+  for (std::size_t k = 0; k < shown; ++k) {
+    const std::string path = (group == "/" ? "/" : group + "/") + names[k];
+    std::string what = "(not readable)";
+    if (path_exists(where, file, path)) {
+      const H5I_type_t type = object_type(where, file, path);
+      if (type == H5I_GROUP) {
+        what = "(group)";
+      } else if (type == H5I_DATASET) {
+        Handle d = checked(H5Dopen2(file, path.c_str(), H5P_DEFAULT), H5Dclose, where,
+                           fmt::format("{}: cannot open the dataset", path));
+        Handle space =
+            checked(H5Dget_space(d), H5Sclose, where, fmt::format("{}: cannot read the shape", path));
+        const int rank = H5Sget_simple_extent_ndims(space);
+        std::vector<hsize_t> dims(static_cast<std::size_t>(std::max(rank, 0)));
+        if (rank > 0) H5Sget_simple_extent_dims(space, dims.data(), nullptr);
+        what = rank >= 0 ? shape_text(dims) : "(dataset)";
+      }
+    }
+    out += fmt::format("{}{} {}", k ? ", " : "", path, what);
+  }
+  if (names.size() > shown) out += fmt::format(" and {} more", names.size() - shown);
+  return out;
+}
+
+// A dataset the scene needs inside `group`: missing, the message names what the group holds.
+Dataset scene_dataset(const Where& where, hid_t file, const std::string& group, const char* name,
+                      hsize_t cols) {
+  const std::string path = group + "/" + name;
+  if (!path_exists(where, file, path)) {
+    const std::string held = group_listing(where, file, group);
+    where.bad(fmt::format("{}: missing dataset ({} holds {})", path, group,
+                          held.empty() ? std::string("nothing") : held));
+  }
+  return open_dataset(where, file, path, cols, Element::real);
+}
 
 // radius_low / radius_high (docs/FORMAT.md §1): a finite number >= 0 when present.
 std::optional<double> radius_bound(const Where& where, hid_t file, const RawAttributes& raw,
@@ -62,25 +118,42 @@ void open_scene(SceneSource& s) {
     w.bad(fmt::format("root attributes radius_low = {} > radius_high = {}", *s.radius_low, *s.radius_high));
   }
 
+  if (const std::optional<std::string> order = string_attribute(w, s.file, raw, "quaternion_order")) {
+    if (*order != "wxyz" && *order != "xyzw")
+      w.bad(
+          fmt::format("root attribute quaternion_order = \"{}\": expected \"wxyz\" (the default) or \"xyzw\" "
+                      "(SciPy's Rotation.as_quat order)",
+                      *order));
+    s.xyzw = *order == "xyzw";
+  }
+
   s.has_spheres = group_exists(w, s.file, "/spheres");
   if (s.has_spheres) {
-    s.sphere_position = open_dataset(w, s.file, "/spheres/position", 3, Element::real);
-    s.sphere_radius = open_dataset(w, s.file, "/spheres/radius", 0, Element::real);
+    s.sphere_position = scene_dataset(w, s.file, "/spheres", "position", 3);
+    s.sphere_radius = scene_dataset(w, s.file, "/spheres", "radius", 0);
     require_rows(w, s.sphere_radius, s.sphere_position);
     s.spheres = s.sphere_position.rows;
   }
   s.has_ellipsoids = group_exists(w, s.file, "/ellipsoids");
   if (s.has_ellipsoids) {
-    s.ellipsoid_position = open_dataset(w, s.file, "/ellipsoids/position", 3, Element::real);
-    s.ellipsoid_semi_axes = open_dataset(w, s.file, "/ellipsoids/semi_axes", 3, Element::real);
-    s.ellipsoid_orientation = open_dataset(w, s.file, "/ellipsoids/orientation", 4, Element::real);
+    s.ellipsoid_position = scene_dataset(w, s.file, "/ellipsoids", "position", 3);
+    s.ellipsoid_semi_axes = scene_dataset(w, s.file, "/ellipsoids", "semi_axes", 3);
+    s.ellipsoid_orientation = scene_dataset(w, s.file, "/ellipsoids", "orientation", 4);
     require_rows(w, s.ellipsoid_semi_axes, s.ellipsoid_position);
     require_rows(w, s.ellipsoid_orientation, s.ellipsoid_position);
     s.ellipsoids = s.ellipsoid_position.rows;
   }
-  if (s.spheres + s.ellipsoids == 0) w.bad("scene has no bodies");
+  if (s.spheres + s.ellipsoids == 0) {
+    if (s.has_spheres || s.has_ellipsoids) w.bad("scene has no bodies (its datasets have 0 rows)");
+    const std::string held = group_listing(w, s.file, "/");
+    w.bad(fmt::format(
+        "scene has no bodies: no /spheres or /ellipsoids group; the file holds {}. A scene keeps spheres in "
+        "/spheres/position (N, 3) and /spheres/radius (N), ellipsoids in /ellipsoids/position, "
+        "/ellipsoids/semi_axes and /ellipsoids/orientation",
+        held.empty() ? std::string("nothing") : held));
+  }
   // (the generator's parameters mean nothing here: only what raw_attributes decoded)
-  s.attributes = other_attributes(raw, {"radius_low", "radius_high"});
+  s.attributes = other_attributes(raw, {"radius_low", "radius_high", "quaternion_order"});
 }
 
 // Row checks; `row` is the row number in the file.
@@ -173,6 +246,7 @@ void read_ellipsoids(const SceneSource& s, hsize_t first, hsize_t count, Scene& 
                                 s.ellipsoid_orientation.name, row, q[0], q[1], q[2], q[3], norm,
                                 kQuaternionTolerance));
       }
+      if (s.xyzw) orientation[i] = {q[3], q[0], q[1], q[2]};  // to docs/FORMAT.md §1's (w, x, y, z)
     }
   }
 }

@@ -10,10 +10,14 @@ namespace cg {
 
 // "<path>.tmp.<pid of this process>"
 std::string temp_name(const std::string& path);
+// The directory an output file `path` goes into exists and is writable; else an IoError naming it
+// (not the temporary name the file is first written under).
+void check_output_directory(const std::string& path);
 // Removes a file, ignoring errors. Never throws.
 void remove_quietly(const std::string& file) noexcept;
 
-// The temporary of one output: registered at construction; removed on destruction unless renamed over
+// The temporary of one output: its directory checked (check_output_directory) and registered at
+// construction; removed on destruction unless renamed over
 // the path by commit(), which is the run's last stop point before the rename (a run asked to stop
 // leaves no output).
 class TempOutput {

@@ -555,7 +555,8 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.axis = cmd.axis;
   o.balance = cmd.balance;
   o.read = cmd.read;
-  if (cmd.verbose && !cmd.quiet && session.rank() == 0)
+  // The merge line says how many runs were merged: something only under mpirun.
+  if (cmd.verbose && !cmd.quiet && session.rank() == 0 && session.size() > 1)
     o.log = [](const std::string& line) { fmt::print("{}\n", line); };
   // The design card's shape by default: rank 0 gathers, deduplicates and writes the sorted contacts
   // (--write gather). --write ranks: each rank keeps the contacts of its id_a range and writes them

@@ -32,23 +32,37 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
         "\n  {} fp32 rows recomputed in fp64 (centres closer than fp32 resolves a normal; summed over "
         "ranks)",
         r.stats.fp64_rows);
-  fmt::print(
-      "\n  broad phase {}{}, {}-bit cell keys, {} (cell, body) entries, {} pair tests; times: maximum "
-      "over ranks\n",
-      to_string(r.stats.broad_phase),
-      r.stats.broad_phase == BroadPhase::levels ? fmt::format(" ({} levels)", r.stats.levels) : "",
-      r.stats.key_bits, r.stats.entries, r.stats.pair_tests);
+  fmt::print("\n  broad phase {}{}, {}-bit cell keys, {} (cell, body) entries, {} pair tests{}\n",
+             to_string(r.stats.broad_phase),
+             r.stats.broad_phase == BroadPhase::levels ? fmt::format(" ({} levels)", r.stats.levels) : "",
+             r.stats.key_bits, r.stats.entries, r.stats.pair_tests,
+             r.ranks > 1 ? "; times: maximum over ranks" : "");
+  // One rank moves nothing: the stages that send (redistribute, halo, gather or exchange, merge) are
+  // left out of its table. Reading every row (--read all), a rank selects its owned bodies and its
+  // ghosts in one pass ("select"), and no halo is exchanged.
+  const bool all_rows = r.read == SceneRead::all_rows;
+  auto shown = [&](RunStage s) {
+    if (r.ranks == 1)
+      return s != RunStage::redistribute && s != RunStage::halo && s != RunStage::gather &&
+             s != RunStage::exchange && s != RunStage::merge;
+    return !(all_rows && s == RunStage::halo);
+  };
   double total = 0;
   fmt::print("  {:<16} {:>12}\n", "stage", "seconds");
   for (const RunTime& t : times) {
     const bool sub = t.engine_stage >= 0;  // the engine's stages, inside "detect"
     if (!sub) total += t.seconds;
-    fmt::print("  {:<16} {:>12.6f}\n",
-               sub ? "  " + engine_stage_names()[static_cast<std::size_t>(t.engine_stage)]
-                   : std::string(stage_name(t.stage)),
-               t.seconds);
+    if (!shown(t.stage)) continue;
+    const std::string name = sub ? "  " + engine_stage_names()[static_cast<std::size_t>(t.engine_stage)]
+                             : r.ranks > 1 && all_rows && t.stage == RunStage::redistribute
+                                 ? std::string("select")
+                                 : std::string(stage_name(t.stage));
+    fmt::print("  {:<16} {:>12.6f}\n", name, t.seconds);
   }
   fmt::print("  {:<16} {:>12.6f}\n", "total", total);
+  if (r.ranks > 1 && all_rows)
+    fmt::print(
+        "  (select: every rank read every row and kept its owned bodies and its ghosts; no halo exchange)\n");
   if (r.steps.steps > 0) {
     const StepStats& s = r.steps;
     const std::string checked =

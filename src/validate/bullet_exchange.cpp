@@ -18,8 +18,8 @@
 namespace cg {
 namespace {
 
-constexpr char kInputMagic[8] = {'C', 'G', 'B', 'O', 'I', 'N', '0', '2'};
-constexpr char kOutputMagic[8] = {'C', 'G', 'B', 'O', 'O', 'U', 'T', '1'};
+constexpr char kInputMagic[8] = {'C', 'G', 'B', 'O', 'I', 'N', '0', '3'};
+constexpr char kOutputMagic[8] = {'C', 'G', 'B', 'O', 'O', 'U', 'T', '2'};
 
 struct FileCloser {
   void operator()(std::FILE* f) const { std::fclose(f); }
@@ -74,6 +74,17 @@ std::uint64_t checked_count(std::uint64_t n, const std::string& path) {
 
 }  // namespace
 
+std::uint64_t peak_resident_bytes() {
+  std::FILE* f = std::fopen("/proc/self/status", "r");
+  if (!f) return 0;
+  char line[256];
+  unsigned long long kib = 0;
+  bool found = false;
+  while (!found && std::fgets(line, sizeof line, f)) found = std::sscanf(line, "VmHWM: %llu kB", &kib) == 1;
+  std::fclose(f);
+  return found ? std::uint64_t(kib) * 1024 : 0;
+}
+
 Vec3<double> warm_step_displacement(std::size_t index, double radius) {
   // A fixed direction per body from a golden-ratio sequence on the sphere: no RNG, same in both
   // flavours, never zero.
@@ -91,6 +102,7 @@ void write_oracle_input(const std::string& path, const OracleBodies& s, bool war
   f.put<std::uint64_t>(s.size());
   f.put<std::uint8_t>(warm_step ? 1 : 0);
   f.put(s.origin);
+  f.put(s.scale);
   for (std::size_t i = 0; i < s.size(); ++i) {
     const Vec3<double> e = s.is_ellipsoid(i) ? s.semi_axes[i] : Vec3<double>{0, 0, 0};
     const std::array<double, 4> q = s.is_ellipsoid(i) ? s.orientation[i] : std::array<double, 4>{1, 0, 0, 0};
@@ -108,6 +120,7 @@ void write_oracle_input(const std::string& path, const OracleBodies& s, bool war
     f.write(row, sizeof row);
   }
   f.write(s.id.data(), s.id.size() * sizeof(std::int64_t));
+  for (std::size_t i = 0; i < s.size(); ++i) f.put<std::uint8_t>(s.partner.empty() ? 0 : s.partner[i]);
   f.close();
 }
 
@@ -118,6 +131,9 @@ OracleBodies read_oracle_input(const std::string& path, bool& warm_step) {
   warm_step = f.get<std::uint8_t>() != 0;
   OracleBodies s;
   s.origin = f.get<Vec3<double>>();
+  s.scale = f.get<double>();
+  if (!(s.scale > 0) || !std::isfinite(s.scale))
+    throw IoError("oracle exchange: " + path + " has a bad scale");
   s.position.resize(n);
   s.radius.resize(n);
   s.semi_axes.resize(n);
@@ -132,6 +148,8 @@ OracleBodies read_oracle_input(const std::string& path, bool& warm_step) {
     s.orientation[i] = {row[7], row[8], row[9], row[10]};
   }
   f.read(s.id.data(), n * sizeof(std::int64_t));
+  s.partner.resize(n);
+  f.read(s.partner.data(), n);
   f.expect_end();
   return s;
 }
@@ -142,6 +160,8 @@ void write_oracle_output(const std::string& path, const OracleResult& r) {
   f.put<std::uint32_t>(std::uint32_t(r.scalar_bytes));
   f.put<double>(r.scratch_seconds);
   f.put<double>(r.warm_seconds);
+  f.put<std::uint64_t>(r.pairs);
+  f.put<std::uint64_t>(peak_resident_bytes());  // the writer's own: the float executable's
   const Contacts<double>& c = r.contacts;
   f.put<std::uint64_t>(c.size());
   for (std::size_t i = 0; i < c.size(); ++i) {
@@ -162,6 +182,8 @@ OracleResult read_oracle_output(const std::string& path) {
   r.scalar_bytes = int(f.get<std::uint32_t>());
   r.scratch_seconds = f.get<double>();
   r.warm_seconds = f.get<double>();
+  r.pairs = f.get<std::uint64_t>();
+  r.child_peak_bytes = f.get<std::uint64_t>();
   const std::uint64_t k = checked_count(f.get<std::uint64_t>(), path);
   Contacts<double>& c = r.contacts;
   for (std::uint64_t i = 0; i < k; ++i) {

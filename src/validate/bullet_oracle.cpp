@@ -3,10 +3,10 @@
 // CG_BULLET_ORACLE_MAIN defined, into the executable `contactgrid-bullet-float`. Nothing here may
 // depend on which flavour it is, except through btScalar.
 //
-// Invariants: bodies are added in id order, each at its centre minus the bodies' origin (so Bullet's body A,
-// the first added, is the smaller id); one performDiscreteCollisionDetection() gives the contacts; the world
-// is torn down in O(pairs + n) (Bullet's own teardown removes each proxy by scanning every pair: O(n ·
-// pairs), minutes at 2^20).
+// Invariants: bodies are added in id order, each at (centre − origin) · scale with its lengths · scale
+// (Bullet's frame, bullet_oracle.hpp; Bullet's body A, the first added, is the smaller id); one
+// performDiscreteCollisionDetection() gives the contacts; the world is torn down in O(pairs + n) (Bullet's
+// own teardown removes each proxy by scanning every pair: O(n · pairs), minutes at 2^20).
 #include "validate/bullet_oracle.hpp"
 
 #include <btBulletCollisionCommon.h>
@@ -45,16 +45,18 @@ class BulletWorld {
     m_objects.reserve(n);
     for (std::size_t i = 0; i < n; ++i) {
       if (s.is_ellipsoid(i)) {
-        const Vec3<double> e = s.semi_axes[i];
+        const Vec3<double> e = s.scale * s.semi_axes[i];
         m_shapes.push_back(std::make_unique<EllipsoidShape>(btScalar(e.x), btScalar(e.y), btScalar(e.z),
                                                             btScalar(kEllipsoidMargin)));
       } else {
-        m_shapes.push_back(std::make_unique<btSphereShape>(btScalar(s.radius[i])));
+        m_shapes.push_back(std::make_unique<btSphereShape>(btScalar(s.scale * s.radius[i])));
       }
       m_objects.push_back(std::make_unique<btCollisionObject>());
       m_objects.back()->setWorldTransform(transform(s, i, s.position[i]));
       m_objects.back()->setCollisionShape(m_shapes.back().get());
-      m_world.addCollisionObject(m_objects.back().get());  // world array index == i
+      // Partners (a piece's margin) are never paired with each other: group 2 collides with group 1 only.
+      const bool partner = !s.partner.empty() && s.partner[i] != 0;
+      m_world.addCollisionObject(m_objects.back().get(), partner ? 2 : 1, partner ? 1 : -1);  // index == i
     }
   }
   ~BulletWorld() {
@@ -65,6 +67,9 @@ class BulletWorld {
   BulletWorld& operator=(const BulletWorld&) = delete;
 
   void collide() { m_world.performDiscreteCollisionDetection(); }
+  std::uint64_t pairs() {
+    return std::uint64_t(m_broadphase.getOverlappingPairCache()->getNumOverlappingPairs());
+  }
 
   void move_all(const OracleBodies& s) {
     for (std::size_t i = 0; i < m_objects.size(); ++i)
@@ -93,12 +98,13 @@ class BulletWorld {
       }
       if (best < 0) continue;
       const btManifoldPoint& p = pm->getContactPoint(best);
+      const double to_scene = 1 / s.scale;  // exact: the scale is a power of two
       Row r{s.id[std::size_t(pm->getBody0()->getWorldArrayIndex())],
             s.id[std::size_t(pm->getBody1()->getWorldArrayIndex())],
-            from_bt(p.getPositionWorldOnA()) + s.origin,
-            from_bt(p.getPositionWorldOnB()) + s.origin,
+            to_scene * from_bt(p.getPositionWorldOnA()) + s.origin,
+            to_scene * from_bt(p.getPositionWorldOnB()) + s.origin,
             from_bt(p.m_normalWorldOnB),
-            double(p.getDistance())};
+            to_scene * double(p.getDistance())};
       if (r.a > r.b) {  // express the contact with A = the smaller id
         std::swap(r.a, r.b);
         std::swap(r.pa, r.pb);
@@ -121,11 +127,11 @@ class BulletWorld {
   }
 
  private:
-  // Body i at `centre` (world), seen by Bullet relative to the bodies' origin, rotated by its quaternion.
+  // Body i at `centre` (scene), in Bullet's frame, rotated by its quaternion.
   static btTransform transform(const OracleBodies& s, std::size_t i, Vec3<double> centre) {
     btTransform t;
     t.setIdentity();
-    t.setOrigin(to_bt(centre - s.origin));
+    t.setOrigin(to_bt(s.scale * (centre - s.origin)));
     if (s.is_ellipsoid(i)) {
       const auto& q = s.orientation[i];  // (w, x, y, z); btQuaternion takes (x, y, z, w)
       const btQuaternion r{btScalar(q[1]), btScalar(q[2]), btScalar(q[3]), btScalar(q[0])};
@@ -154,6 +160,7 @@ OracleResult collide(const OracleBodies& bodies, bool warm_step) {
   BulletWorld world(bodies);
   world.collide();
   result.scratch_seconds = seconds_since(t0);
+  result.pairs = world.pairs();
   result.contacts = world.contacts(bodies);
   if (warm_step) {
     const auto t1 = WallClock::now();

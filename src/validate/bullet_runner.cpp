@@ -5,7 +5,7 @@
 //
 // Invariants: the child gets an argv (no shell); a child that fails, crashes or writes a malformed
 // file is an IoError quoting its exit status; the result says which btScalar produced it and it is
-// checked against the flavour asked for.
+// checked against the flavour asked for; the child's peak resident memory comes back in its output.
 #include <spawn.h>
 #include <sys/stat.h>
 #include <sys/wait.h>

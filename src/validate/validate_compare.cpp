@@ -73,13 +73,14 @@ class RegionComparison {
 
   void only_ours(Key k, const Geometry& g) {
     if (both_spheres(k)) return sphere_one_sided(k, true, g.d);
-    const std::optional<judge::Verdict> verdict = one_sided_verdict(k, g, /*ours=*/true);
+    const ShapePair pair(m_ctx, k);
+    const std::optional<judge::Verdict> verdict = one_sided_verdict(pair, g, /*ours=*/true);
     if (!verdict) return;
     const judge::Verdict& v = *verdict;
     if (!v.ok) {
       ++m_rep.our_errors;
       add(Kind::ours_wrong, k, std::abs(v.distance - g.d), v.distance, g.d, kNaN, "ours: " + v.reason);
-    } else if (std::abs(g.d) < m_ctx.shallow_threshold) {
+    } else if (std::abs(g.d) < m_rep.shallow_limit(pair.size())) {
       ++m_rep.shallow_misses;
       m_rep.shallow_deepest = std::max(m_rep.shallow_deepest, std::abs(g.d));
       add(Kind::shallow_miss, k, std::abs(g.d), v.distance, g.d, kNaN, "Bullet missed a shallow contact");
@@ -92,7 +93,7 @@ class RegionComparison {
 
   void only_bullet(Key k, const Geometry& g) {
     if (both_spheres(k)) return sphere_one_sided(k, false, g.d);
-    const std::optional<judge::Verdict> verdict = one_sided_verdict(k, g, /*ours=*/false);
+    const std::optional<judge::Verdict> verdict = one_sided_verdict(ShapePair(m_ctx, k), g, /*ours=*/false);
     if (!verdict) return;
     const judge::Verdict& v = *verdict;
     if (v.distance < 0) {  // a real contact we do not report
@@ -114,7 +115,7 @@ class RegionComparison {
     if (both_spheres(k)) return sphere_matched(k, mine, ref, pos, ang, dist);
     const ShapePair pair(m_ctx, k);
     ++m_rep.shape_matched;
-    const double lim = m_rep.pos_eps * pair.size();
+    const double lim = m_rep.position_limit(pair.size());
     m_rep.shape_max_position_error = std::max(m_rep.shape_max_position_error, pos / pair.size());
     m_rep.shape_max_angle_deg = std::max(m_rep.shape_max_angle_deg, ang);
     if (pos <= lim && dist <= lim && ang <= m_rep.angle_deg) {
@@ -150,8 +151,7 @@ class RegionComparison {
 
   // The verdict on the answer of the one side that reports a pair with an ellipsoid; nothing (and
   // counted as borderline) when the judge's exact distance lies within the band.
-  std::optional<judge::Verdict> one_sided_verdict(Key k, const Geometry& g, bool ours) {
-    const ShapePair pair(m_ctx, k);
+  std::optional<judge::Verdict> one_sided_verdict(const ShapePair& pair, const Geometry& g, bool ours) {
     ++m_rep.judged;
     judge::Verdict v = ours ? pair.ours(g) : pair.bullet(g);
     if (std::abs(v.distance) > m_ctx.band) return v;
@@ -176,11 +176,14 @@ class RegionComparison {
   }
 
   void sphere_matched(Key k, const Geometry& g, const Geometry& ref, double pos, double ang, double dist) {
+    const double size = std::max(m_ctx.scene.sphere_radius[std::size_t(k.first)],
+                                 m_ctx.scene.sphere_radius[std::size_t(k.second)]);
     m_rep.max_position_error = std::max(m_rep.max_position_error, pos);
+    m_rep.max_position_rel = std::max(m_rep.max_position_rel, pos / size);
     m_rep.max_angle_deg = std::max(m_rep.max_angle_deg, ang);
     m_rep.max_distance_error = std::max(m_rep.max_distance_error, dist);
     const double ed = sphere_distance(m_ctx.scene, k.first, k.second);
-    if (pos > m_rep.pos_eps) add(Kind::position, k, pos, ed, g.d, ref.d);
+    if (pos > m_rep.position_limit(size)) add(Kind::position, k, pos, ed, g.d, ref.d);
     if (ang > m_rep.angle_deg) add(Kind::angle, k, ang, ed, g.d, ref.d);
     if (dist > m_rep.band) add(Kind::distance, k, dist, ed, g.d, ref.d);
   }

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -13,6 +14,33 @@
 namespace cg::validate_detail {
 
 using Key = std::pair<std::int64_t, std::int64_t>;
+
+// A half-open box [lo, hi) (bounds may be infinite).
+struct Box {
+  Vec3<double> lo, hi;
+  bool contains(Vec3<double> c) const {
+    return c.x >= lo.x && c.x < hi.x && c.y >= lo.y && c.y < hi.y && c.z >= lo.z && c.z < hi.z;
+  }
+  Box grown(double m) const { return {lo - Vec3<double>{m, m, m}, hi + Vec3<double>{m, m, m}}; }
+};
+
+inline Vec3<double> centre(const Scene& s, std::size_t id) {
+  return id < s.sphere_count() ? s.sphere_position[id] : s.ellipsoid_position[id - s.sphere_count()];
+}
+
+// A sphere's radius, an ellipsoid's largest semi-axis.
+inline double bounding_radius(const Scene& s, std::size_t id) {
+  if (id < s.sphere_count()) return s.sphere_radius[id];
+  const Vec3<double> e = s.ellipsoid_semi_axes[id - s.sphere_count()];
+  return std::max({e.x, e.y, e.z});
+}
+
+// A piece of the validation (validate.hpp, "Pieces and memory"): the bodies it owns (centres in
+// `box`) and its Bullet world (centres in the box grown by 2·r_max), both ids ascending.
+struct Piece {
+  Box box;
+  std::vector<std::int64_t> inside, world;
+};
 
 inline double norm(Vec3<double> v) { return std::sqrt(dot(v, v)); }
 
@@ -121,6 +149,52 @@ class Offenders {
   std::vector<ValidateOffender> m_by_kind[ValidateOffender::kinds];
 };
 
+// Bullet's memory per overlapping pair and per body, whole process (measured: validate.cpp).
+struct BulletCost {
+  double per_pair, per_body;
+};
+
+// Cuts the regions into pieces whose Bullet world fits `budget` bytes (validate.hpp, "Pieces and
+// memory"). Bullet pairs the owned bodies with every body of the world and never two margin bodies
+// (OracleBodies::partner), so its pairs follow the owned bodies: the larger of pairs_per_contact ×
+// our contacts with an owned body (by body: `degree`; `index` tells those between two owned bodies)
+// and pairs_per_body × the owned bodies. The ratios start from measurements and follow what Bullet
+// is seen to do (observe).
+class PiecePlanner {
+ public:
+  PiecePlanner(const Scene& scene, const ContactIndex& index, const std::vector<std::uint32_t>& degree,
+               double margin, BulletCost cost, double budget);
+  // A region to validate: its box and every body that may lie in its grown box (ids ascending).
+  void add_region(const Box& box, const std::vector<std::int64_t>& candidates);
+  // The next piece whose world fits the budget (halving regions that do not); nothing when done.
+  std::optional<Piece> next();
+  // Bullet found `pairs` overlapping pairs in this piece's world.
+  void observe(const Piece& piece, std::uint64_t pairs);
+  // The bytes Bullet's world of this piece is expected to take.
+  double estimate(const Piece& piece);
+  double budget() const { return m_budget; }
+
+  static constexpr std::size_t kMinPieceBodies = 32;  // never split below this many owned bodies
+  // Nor run Bullet on more bodies at once: its time from scratch grows faster than N (BENCHMARKS §1:
+  // slope 1.3), and a piece is the step of the progress line.
+  static constexpr std::size_t kMaxPieceBodies = std::size_t(1) << 17;
+
+ private:
+  Piece make_piece(const Box& box, const std::vector<std::int64_t>& inside_of,
+                   const std::vector<std::int64_t>& world_of) const;
+  double contacts_of(const Piece& piece);  // our contacts with an owned body
+  const Scene& m_scene;
+  const ContactIndex& m_index;
+  const std::vector<std::uint32_t>& m_degree;
+  std::vector<char> m_owned;  // scratch marks, one per body
+  double m_margin;
+  BulletCost m_cost;
+  double m_budget;
+  double m_pairs_per_contact, m_pairs_per_body = 0;
+  bool m_observed = false;       // the ratios come from Bullet, no longer from the initial guess
+  std::vector<Piece> m_pending;  // a stack: the last pushed is split or run first
+};
+
 // What the comparison of a region needs besides the two contact lists.
 struct CompareContext {
   const Scene& scene;
@@ -128,8 +202,7 @@ struct CompareContext {
   Precision contacts_precision;
   Precision bullet_precision;
   double magnitude;      // largest |world coordinate| of the scene's centres
-  double bullet_extent;  // largest |coordinate| Bullet saw in its frame (this region)
-  double shallow_threshold;
+  double bullet_extent;  // largest |centre − origin| of Bullet's frame (this piece), scene units
 };
 
 // Compares one region: `mine` are positions in the ContactIndex (sorted by key), `ref_rows` rows of

@@ -99,7 +99,9 @@ TYPED_TEST(CudaBackendTest, EveryPathIsBitIdentical) {
        {Knob{"CONTACTGRID_CUDA_TYPE_PASSES", "1"}, Knob{"CONTACTGRID_CUDA_RENUMBER", "0"},
         Knob{"CONTACTGRID_CUDA_RENUMBER", "1"}, Knob{"CONTACTGRID_CUDA_ORDER", "radix"},
         Knob{"CONTACTGRID_CUDA_ORDER", "counting"}, Knob{"CONTACTGRID_CUDA_DOWNLOAD", "registered"},
-        Knob{"CONTACTGRID_CUDA_DOWNLOAD", "staged"}}) {
+        Knob{"CONTACTGRID_CUDA_DOWNLOAD", "staged"}, Knob{"CONTACTGRID_CUDA_DOWNLOAD", "streamed"},
+        Knob{"CONTACTGRID_CUDA_UPLOAD", "registered"}, Knob{"CONTACTGRID_CUDA_UPLOAD", "pageable"},
+        Knob{"CONTACTGRID_CUDA_UPLOAD", "streamed"}}) {
     SCOPED_TRACE(std::string(k.name) + "=" + k.value);
     ::setenv(k.name, k.value, 1);
     Unset unset{k.name};
@@ -109,6 +111,29 @@ TYPED_TEST(CudaBackendTest, EveryPathIsBitIdentical) {
     this->compare(one_cell(300, 1035), Fields::full);
     this->compare(masked, Fields::full, 0, ids, report);
   }
+}
+
+// Streamed transfers through slots of 64 KiB: every upload and download wraps around the pinned ring
+// several times (8 slots), one engine reused over scenes of growing and shrinking size, so a slot is
+// refilled while the previous call's copies may still use it. The same bits as the CPU.
+TYPED_TEST(CudaBackendTest, StreamedTransfersWrapAroundTheRing) {
+  const char* knobs[] = {"CONTACTGRID_CUDA_UPLOAD", "CONTACTGRID_CUDA_DOWNLOAD",
+                         "CONTACTGRID_CUDA_TRANSFER_SLOT"};
+  struct Unset {  // the knobs are removed even when an assertion fails
+    const char* const* names;
+    ~Unset() {
+      for (int i = 0; i < 3; ++i) ::unsetenv(names[i]);
+    }
+  } unset{knobs};
+  ::setenv("CONTACTGRID_CUDA_UPLOAD", "streamed", 1);
+  ::setenv("CONTACTGRID_CUDA_DOWNLOAD", "streamed", 1);
+  ::setenv("CONTACTGRID_CUDA_TRANSFER_SLOT", "65536", 1);
+  this->compare(random_spheres(60000, 0.5, 1.0, 1041), Fields::full);  // 1.9 MB up: 30 slots
+  this->compare(random_spheres(3, 0.5, 1.0, 1042), Fields::full);
+  this->compare(clustered(20000, 1043), Fields::basic);
+  this->compare(one_cell(700, 1044), Fields::full);
+  ::setenv("CONTACTGRID_CUDA_TRANSFER_SLOT", "4096", 1);  // another slot size: the ring is remade
+  this->compare(random_spheres(30000, 0.5, 1.0, 1045), Fields::basic);
 }
 
 TYPED_TEST(CudaBackendTest, BitIdenticalWithIdsAndReportMask) {

@@ -724,7 +724,85 @@ TEST_F(Hdf5Io, ZeroBodies) {
 TEST_F(Hdf5Io, FileWithoutGroupsHasNoBodies) {
   cg::write_raw_attribute(path("s.h5"), "note", AttrValue{std::string("nothing here")});
   std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
-  EXPECT_EQ(msg, path("s.h5") + ": scene has no bodies");
+  EXPECT_CONTAINS(
+      msg, path("s.h5") + ": scene has no bodies: no /spheres or /ellipsoids group; the file holds nothing");
+}
+
+// A user's first file, h5py style, with the datasets at the root: the message names what it found and
+// where they belong.
+TEST_F(Hdf5Io, DatasetsAtTheRootAreNamed) {
+  cg::write_raw_dataset(path("s.h5"), "/position", RawType::float64, {4, 3}, std::vector<double>(12, 1.0));
+  cg::write_raw_dataset(path("s.h5"), "/radius", RawType::float64, {4}, std::vector<double>(4, 0.5));
+  for (const std::string& msg : {error_of<InputError>([&] { cg::read_scene(path("s.h5")); }),
+                                 error_of<InputError>([&] { cg::read_scene_shape(path("s.h5")); })}) {
+    EXPECT_CONTAINS(msg, path("s.h5") + ": scene has no bodies");
+    EXPECT_CONTAINS(msg, "/position (4, 3), /radius (4)");
+    EXPECT_CONTAINS(msg, "/spheres/position (N, 3) and /spheres/radius (N)");
+  }
+}
+
+TEST_F(Hdf5Io, MisnamedDatasetInTheGroupIsNamed) {
+  cg::write_raw_dataset(path("s.h5"), "/spheres/positions", RawType::float64, {4, 3},
+                        std::vector<double>(12));
+  cg::write_raw_dataset(path("s.h5"), "/spheres/radius", RawType::float64, {4}, std::vector<double>(4, 0.5));
+  const std::string msg = error_of<InputError>([&] { cg::read_scene(path("s.h5")); });
+  EXPECT_CONTAINS(
+      msg,
+      "/spheres/position: missing dataset (/spheres holds /spheres/positions (4, 3), /spheres/radius (4))");
+}
+
+// Orientations stored scalar last (SciPy's Rotation.as_quat), said so by the root attribute
+// quaternion_order = "xyzw": read as (w, x, y, z); the attribute is consumed (a scene written back
+// holds (w, x, y, z) and no attribute). Any other value is refused, naming it.
+TEST_F(Hdf5Io, QuaternionOrderXyzwIsReadAsWxyz) {
+  Scene s = mixed_scene();
+  Scene stored = s;
+  for (auto& q : stored.ellipsoid_orientation) q = {q[1], q[2], q[3], q[0]};
+  stored.attributes["quaternion_order"] = std::string("xyzw");
+  cg::write_scene(path("xyzw.h5"), stored);
+  const Scene read = cg::read_scene(path("xyzw.h5"));
+  ASSERT_EQ(read.ellipsoid_count(), s.ellipsoid_count());
+  for (std::size_t i = 0; i < s.ellipsoid_count(); ++i)
+    EXPECT_EQ(read.ellipsoid_orientation[i], s.ellipsoid_orientation[i]) << "ellipsoid " << i;
+  EXPECT_EQ(read.attributes.count("quaternion_order"), 0u);
+  const Scene rows = cg::read_scene_rows(path("xyzw.h5"), 1, s.size() - 1);  // the ranks' reader too
+  EXPECT_EQ(rows.ellipsoid_orientation.back(), s.ellipsoid_orientation.back());
+
+  stored.attributes["quaternion_order"] = std::string("wxyz");
+  stored.ellipsoid_orientation = s.ellipsoid_orientation;
+  cg::write_scene(path("wxyz.h5"), stored);
+  EXPECT_EQ(cg::read_scene(path("wxyz.h5")).ellipsoid_orientation, s.ellipsoid_orientation);
+
+  stored.attributes["quaternion_order"] = std::string("zyxw");
+  cg::write_scene(path("bad.h5"), stored);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("bad.h5")); });
+  EXPECT_CONTAINS(msg, "root attribute quaternion_order = \"zyxw\"");
+  EXPECT_CONTAINS(msg, "\"xyzw\"");
+  stored.attributes["quaternion_order"] = std::int64_t{4};
+  cg::write_scene(path("number.h5"), stored);
+  msg = error_of<InputError>([&] { cg::read_scene(path("number.h5")); });
+  EXPECT_CONTAINS(msg, "root attribute quaternion_order is not a string");
+}
+
+// An output directory that does not exist: the message names it, not the temporary name nor HDF5's
+// internal flags, and nothing is left behind.
+TEST_F(Hdf5Io, MissingOutputDirectoryIsNamed) {
+  const std::string dir = path("no_such_dir");
+  for (const std::string& msg :
+       {error_of<IoError>([&] { cg::write_scene(dir + "/s.h5", mixed_scene()); }), error_of<IoError>([&] {
+          Contacts<double> c;
+          cg::RunInfo info;
+          info.precision = "fp64";
+          cg::write_contacts(dir + "/c.h5", c, info);
+        })}) {
+    EXPECT_CONTAINS(msg, "cannot write into the directory " + dir + ": it does not exist");
+    EXPECT_EQ(msg.find(".tmp."), std::string::npos) << msg;
+    EXPECT_EQ(msg.find("flags"), std::string::npos) << msg;
+  }
+  ASSERT_TRUE(fs::create_directory(dir));
+  { std::ofstream(dir + "/file") << "x"; }
+  const std::string msg = error_of<IoError>([&] { cg::write_scene(dir + "/file/s.h5", mixed_scene()); });
+  EXPECT_CONTAINS(msg, "cannot write into the directory " + dir + "/file: it is not a directory");
 }
 
 TEST_F(Hdf5Io, EmptySceneWrittenIsRejectedOnRead) {

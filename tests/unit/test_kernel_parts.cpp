@@ -32,13 +32,14 @@ TEST(StageIds, HostTimerAppendsLapsByName) {
 }
 
 TEST(CudaTuning, KnobsReadInOnePlace) {
-  const char* knobs[] = {"CONTACTGRID_CUDA_TYPE_PASSES", "CONTACTGRID_DEVICE_MEMORY_LIMIT",
-                         "CONTACTGRID_CUDA_UPLOAD",      "CONTACTGRID_CUDA_RENUMBER",
-                         "CONTACTGRID_CUDA_ORDER",       "CONTACTGRID_CUDA_DOWNLOAD"};
+  const char* knobs[] = {"CONTACTGRID_CUDA_TYPE_PASSES",  "CONTACTGRID_DEVICE_MEMORY_LIMIT",
+                         "CONTACTGRID_CUDA_UPLOAD",       "CONTACTGRID_CUDA_RENUMBER",
+                         "CONTACTGRID_CUDA_ORDER",        "CONTACTGRID_CUDA_DOWNLOAD",
+                         "CONTACTGRID_CUDA_TRANSFER_SLOT"};
   struct Unset {  // the knobs are removed even when an assertion fails
     const char* const* names;
     ~Unset() {
-      for (int i = 0; i < 6; ++i) ::unsetenv(names[i]);
+      for (int i = 0; i < 7; ++i) ::unsetenv(names[i]);
     }
   } unset{knobs};
   for (const char* k : knobs) ::unsetenv(k);
@@ -47,7 +48,10 @@ TEST(CudaTuning, KnobsReadInOnePlace) {
   EXPECT_FALSE(t.memory_limit.has_value());
   EXPECT_EQ(t.renumber, detail::Forced::automatic);
   EXPECT_TRUE(detail::tuned(t.counting_order, true));
-  EXPECT_FALSE(detail::tuned(t.download_registered, false));
+  EXPECT_EQ(detail::upload_transfer(t, std::size_t(1) << 20), detail::HostTransfer::streamed);
+  EXPECT_EQ(detail::upload_transfer(t, 1000), detail::HostTransfer::single);
+  EXPECT_EQ(detail::download_transfer(t), detail::HostTransfer::single);
+  EXPECT_EQ(t.transfer_slot_bytes, std::size_t(4) << 20);
 
   ::setenv("CONTACTGRID_CUDA_TYPE_PASSES", "1", 1);
   ::setenv("CONTACTGRID_DEVICE_MEMORY_LIMIT", "73400320", 1);
@@ -55,20 +59,24 @@ TEST(CudaTuning, KnobsReadInOnePlace) {
   ::setenv("CONTACTGRID_CUDA_RENUMBER", "0", 1);
   ::setenv("CONTACTGRID_CUDA_ORDER", "radix", 1);
   ::setenv("CONTACTGRID_CUDA_DOWNLOAD", "registered", 1);
+  ::setenv("CONTACTGRID_CUDA_TRANSFER_SLOT", "65536", 1);
   t = detail::read_tuning();
   EXPECT_TRUE(t.type_passes);
   ASSERT_TRUE(t.memory_limit.has_value());
   EXPECT_EQ(*t.memory_limit, std::size_t(70) << 20);
-  EXPECT_EQ(t.upload_registered, detail::Forced::off);
+  EXPECT_EQ(t.upload, detail::HostTransfer::single);
   EXPECT_EQ(t.renumber, detail::Forced::off);
   EXPECT_FALSE(detail::tuned(t.counting_order, true));
-  EXPECT_TRUE(detail::tuned(t.download_registered, false));
+  EXPECT_EQ(detail::download_transfer(t), detail::HostTransfer::registered);
+  EXPECT_EQ(t.transfer_slot_bytes, std::size_t(65536));
 
   ::setenv("CONTACTGRID_CUDA_TYPE_PASSES", "0", 1);
   ::setenv("CONTACTGRID_CUDA_ORDER", "something", 1);  // unknown spelling: automatic
+  ::setenv("CONTACTGRID_CUDA_UPLOAD", "streamed", 1);
   t = detail::read_tuning();
   EXPECT_FALSE(t.type_passes);
   EXPECT_EQ(t.counting_order, detail::Forced::automatic);
+  EXPECT_EQ(t.upload, detail::HostTransfer::streamed);
 }
 
 }  // namespace
