@@ -10,7 +10,7 @@
 namespace cg {
 
 EngineInput select_owned_and_ghosts(HostVector<Vec3<double>>&& position, HostVector<double>&& radius,
-                                    const SlabDecomposition& s, double width, int me, int threads,
+                                    const SlabDecomposition& s, const GhostRule& rule, int me, int threads,
                                     ShapeRows&& shapes) {
   const std::size_t n = position.size();
   const int axis = s.axis();
@@ -29,7 +29,7 @@ EngineInput select_owned_and_ghosts(HostVector<Vec3<double>>&& position, HostVec
     const double x = component(position[i], axis);
     if (s.owner(x) == me) return 2;
     int h = 0;
-    s.for_each_ghost_rank(x, width, [&](int r) { h |= r == me; });
+    s.for_each_ghost_rank(x, rule.width(radius[i]), [&](int r) { h |= r == me; });
     return h;
   };
   const Chunks c(n, threads);
@@ -50,6 +50,7 @@ EngineInput select_owned_and_ghosts(HostVector<Vec3<double>>&& position, HostVec
   in.owned = owned.back();
   in.ghosts = total - in.owned;
   if (in.owned == n) {  // every row is owned here (so none is a ghost): the rows as read, ids implied
+    // (all pairs reported: no mask, so no wide bits either — they only move pairs between owners)
     in.position = std::move(position);
     in.radius = std::move(radius);
     in.shapes = std::move(shapes);
@@ -74,7 +75,7 @@ EngineInput select_owned_and_ghosts(HostVector<Vec3<double>>&& position, HostVec
       in.position[w] = position[i];
       in.radius[w] = radius[i];
       in.id[w] = static_cast<std::int64_t>(i);
-      in.report[w] = h == 2;
+      in.report[w] = static_cast<std::uint8_t>((h == 2 ? kReportedBit : 0) | rule.wide_bit(radius[i]));
       if (with_shapes) {
         in.shapes.shape[w] = shapes.shape[i];
         in.shapes.semi_axes[w] = shapes.semi_axes[i];
@@ -91,8 +92,8 @@ EngineInput select_owned_and_ghosts(HostVector<Vec3<double>>&& position, HostVec
 
 EngineInput merge_by_id(std::span<const BodyRecord> owned, std::span<const BodyRecord> ghosts,
                         const std::vector<std::uint64_t>& ghost_counts, int threads,
-                        std::span<const ShapeRecord> owned_shapes,
-                        std::span<const ShapeRecord> ghost_shapes) {
+                        std::span<const ShapeRecord> owned_shapes, std::span<const ShapeRecord> ghost_shapes,
+                        const GhostRule& rule) {
   const bool with_shapes = !owned_shapes.empty() || !ghost_shapes.empty();
   if (with_shapes && (owned_shapes.size() != owned.size() || ghost_shapes.size() != ghosts.size()))
     throw Error("merge_by_id: shape rows and body records differ in count: internal error");
@@ -155,7 +156,7 @@ EngineInput merge_by_id(std::span<const BodyRecord> owned, std::span<const BodyR
       in.position[k] = x.position;
       in.radius[k] = x.radius;
       in.id[k] = x.id;
-      in.report[k] = mine;
+      in.report[k] = static_cast<std::uint8_t>(mine | rule.wide_bit(x.radius));
       if (shape) {
         in.shapes.shape[k] = shape->shape;
         in.shapes.semi_axes[k] = shape->semi_axes;

@@ -22,4 +22,20 @@ ExportPlan make_halo_plan(const SlabDecomposition& slabs, int self, std::span<co
                                                          [](std::size_t i) { return i; });
 }
 
+ExportPlan make_halo_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
+                          std::span<const double> radius, const GhostRule& rule, int threads) {
+  if (self < 0 || self >= slabs.ranks()) {
+    throw UsageError("halo plan: rank " + std::to_string(self) + " is not in [0, " +
+                     std::to_string(slabs.ranks()) + ")");
+  }
+  if (radius.size() != coordinate.size()) throw UsageError("halo plan: one radius per coordinate");
+  auto x = [coordinate](std::size_t i) { return coordinate[i]; };
+  const double r_max = radius.empty() ? 0.0 : *std::max_element(radius.begin(), radius.end());
+  check_halo_rows(slabs, self, coordinate.size(), x, rule.max_width(r_max), threads);
+  return route<std::size_t, std::allocator<std::size_t>>(
+      coordinate.size(), slabs.ranks(), threads,
+      to_ghost_ranks_by(slabs, x, [&rule, radius](std::size_t i) { return rule.width(radius[i]); }),
+      [](std::size_t i) { return i; });
+}
+
 }  // namespace cg

@@ -144,6 +144,15 @@ auto to_ghost_ranks(const SlabDecomposition& slabs, Coordinate coordinate, doubl
   };
 }
 
+// The halo's rule with a width per row (GhostRule): row i goes to every other rank within width(i)
+// of coordinate(i).
+template <class Coordinate, class Width>
+auto to_ghost_ranks_by(const SlabDecomposition& slabs, Coordinate coordinate, Width width) {
+  return [&slabs, coordinate, width](std::size_t i, auto&& emit) {
+    slabs.for_each_ghost_rank(coordinate(i), width(i), emit);
+  };
+}
+
 // The halo plan's preconditions (InputError otherwise): `width` finite and >= 0, and every row
 // 0 … n-1 owned by `self` ("halo plan: body <row> at <x> is not owned by rank <self>"). Parallel.
 template <class Coordinate>
@@ -175,5 +184,10 @@ ExportPlan make_owner_plan(const SlabDecomposition& slabs, std::span<const doubl
 // owned) and every contact is found exactly once.
 ExportPlan make_halo_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
                           double ghost_width, int threads = 1);
+
+// The same with a ghost width per body (GhostRule: rule.width of its radius): every contacting pair is
+// held by its anchor's owner (bodies.hpp), which reports it.
+ExportPlan make_halo_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
+                          std::span<const double> radius, const GhostRule& rule, int threads = 1);
 
 }  // namespace cg

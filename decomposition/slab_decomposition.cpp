@@ -42,6 +42,25 @@ double frame_ghost_width(const Bounds& global, const Vec3<double>& origin, doubl
   return ghost_width(global.r_max, extent + reach, epsilon);
 }
 
+GhostRule GhostRule::uniform(double w) {
+  GhostRule g;
+  g.narrow = std::numeric_limits<double>::infinity();
+  g.narrow_reach = w;
+  g.wide_reach = w;
+  g.per_radius = false;
+  return g;
+}
+
+GhostRule ghost_rule(const Bounds& global, double extent, double epsilon) {
+  const double r_max = global.r_max, margin = ghost_width(r_max, extent, epsilon) - 2 * r_max;
+  const double mean = global.count > 0 ? global.r_sum[0] / double(global.count) : r_max;
+  GhostRule g;
+  g.narrow = mean > 0 ? std::min(r_max, kLevelsSpread * mean) : r_max;
+  g.narrow_reach = g.narrow + margin;
+  g.wide_reach = r_max + margin;
+  return g;
+}
+
 SlabDecomposition::SlabDecomposition(int axis, std::vector<double> cuts)
     : m_axis(axis), m_cuts(std::move(cuts)) {
   if (axis < 0 || axis > 2) throw UsageError("slab axis " + std::to_string(axis) + " is not 0, 1 or 2");

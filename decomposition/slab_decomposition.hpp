@@ -48,6 +48,33 @@ double ghost_width(double r_max, double extent, double epsilon);
 // that may still move by reach/2 each, the origin with them).
 double frame_ghost_width(const Bounds& global, const Vec3<double>& origin, double epsilon, double reach = 0);
 
+// How far from its centre, along the slab axis, a body must be held (owned or as a ghost) so that
+// every contact is found by one rank: the ghost width of each body. A pair is reported by its
+// anchor's owner (bodies.hpp: the smaller id, or the narrow body of a wide and a narrow one), which
+// must hold the other body. Narrow bodies (r <= narrow) anchor every pair they are in but the ones with
+// a narrow body of smaller id; a body's partner across a slab lies within r + r_partner of its centre.
+// So a narrow body goes to the slabs within r + narrow (its anchors are narrow), a wide one to those
+// within r + r_max (any body may anchor its pairs), each plus the rounding margin of ghost_width():
+// the few large bodies of a scene go to every slab they reach, the small ones' halos stay small.
+// uniform(w): every body within w, none wide (the resident steps' rule; tests).
+struct GhostRule {
+  double narrow = 0;        // largest radius of a narrow body (+inf: none is wide)
+  double narrow_reach = 0;  // a narrow body's width, beyond its radius (uniform: the whole width)
+  double wide_reach = 0;    // a wide body's width, beyond its radius
+  bool per_radius = true;   // the width grows with the body's radius (false: uniform)
+  bool wide(double r) const { return r > narrow; }
+  double width(double r) const { return (per_radius ? r : 0.0) + (wide(r) ? wide_reach : narrow_reach); }
+  std::uint8_t wide_bit(double r) const { return wide(r) ? kWideBit : 0; }
+  // The largest width of any body of radius <= r_max (the halo plan's sanity check).
+  double max_width(double r_max) const { return width(r_max); }
+  static GhostRule uniform(double w);
+};
+
+// The rule of a run from its global bounds: narrow = min(r_max, kLevelsSpread × the mean radius)
+// (the bodies auto's levels treat as large are the wide ones; a scene of similar radii has none), the
+// reaches narrow and r_max plus the margin of ghost_width(r_max, extent, epsilon) beyond 2·r_max.
+GhostRule ghost_rule(const Bounds& global, double extent, double epsilon);
+
 // The slabs of a run.
 //
 // Invariants: cuts().size() == ranks() - 1; cuts are finite and non-decreasing; every finite

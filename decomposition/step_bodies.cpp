@@ -12,7 +12,7 @@ StepBodies owned_bodies(const EngineInput& in, int threads) {
   std::vector<std::size_t> rows;
   rows.reserve(static_cast<std::size_t>(in.owned));
   for (std::size_t i = 0; i < n; ++i)
-    if (in.implied() || in.report[i]) rows.push_back(i);
+    if (in.implied() || (in.report[i] & kReportedBit)) rows.push_back(i);  // owned (ghosts may be wide)
   const bool shapes = !in.shapes.empty();
   const std::size_t m = rows.size();
   StepBodies b;

@@ -21,9 +21,9 @@ template <class Broad, class Narrow = Broad>
 struct DetectJob {
   using BroadReal = Broad;
   using NarrowReal = Narrow;
-  BodiesView bodies;  // host, world frame, ascending ids
-  GridPlan plan;
-  GridParams<Broad> grid;
+  BodiesView bodies;       // host, world frame, ascending ids
+  GridPlan plan;           // the frame's grid (BroadPhase::levels: key_bits and key64 are the levels')
+  GridParams<Broad> grid;  // of plan (its radius_margin is every broad phase's)
   Fields fields = Fields::basic;
   // CUDA only. device_bodies set: read the bodies from DEVICE memory (bodies is then empty).
   // device_out set: leave the contacts on the device and describe them there (out stays empty).
@@ -46,6 +46,10 @@ struct DetectJob {
   // What the broad phase does with its estimate of the pair tests before its pair stage
   // (check_pair_estimate, pair_estimate.hpp; from EngineOptions).
   PairLimits pair_limits{};
+  // The broad phase (resolved: never automatic) and what levels and sweep need.
+  BroadPhase broad = BroadPhase::grid;
+  LevelParams<Broad> levels{};
+  int sweep_axis = 0;
   std::size_t body_count() const { return device_bodies ? device_bodies->count : bodies.size(); }
 };
 

@@ -15,10 +15,13 @@ namespace cg {
 // The bodies handed to the engine: bounding spheres in the world frame (host memory).
 // Invariant: ids strictly ascending (so local index order == id order).
 // A report mask byte per body (BodiesView::report, DeviceBodiesView::report): a pair (a < b) is
-// reported iff report[a] has kReportedBit (the owner of the smaller id reports) and not both
-// report[a] and report[b] have kPairedBit (their pairs were found elsewhere: a rank's boundary bodies
-// against its ghosts, after its owned bodies were detected alone).
-constexpr std::uint8_t kReportedBit = 1, kPairedBit = 2;
+// reported iff its anchor's byte has kReportedBit (its owner reports it) and not both report[a] and
+// report[b] have kPairedBit (their pairs were found elsewhere: a rank's boundary bodies against its
+// ghosts, after its owned bodies were detected alone). The anchor is the smaller id a, unless exactly
+// one of the two has kWideBit: then it is the other one, the narrow body (a distributed run sends wide
+// bodies, the few large ones, to every slab they reach, and narrow ones only as far as narrow partners
+// need them: decomposition/slab_decomposition.hpp, GhostRule). core/broad.hpp: pair_reported.
+constexpr std::uint8_t kReportedBit = 1, kPairedBit = 2, kWideBit = 4;
 
 struct BodiesView {
   std::span<const Vec3<double>> position;

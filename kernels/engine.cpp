@@ -263,6 +263,17 @@ detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> 
                       : make_frame(grid_bounds, 0, prec, options.cell_choice).cell_size;
   detail::DetectJob<Broad, Narrow> job{{}, plan_grid(grid_bounds, f, prec), {}, options.fields};
   job.grid = detail::grid_params<Broad>(job.plan, margin);
+  job.broad =
+      options.broad_phase == BroadPhase::automatic ? choose_broad_phase(b, prec) : options.broad_phase;
+  stats.broad_phase = job.broad;
+  if (job.broad == BroadPhase::levels) {
+    const LevelsPlan levels = plan_levels(b, f, prec, margin + inflation);
+    job.levels = level_params<Broad>(levels, margin);
+    job.plan.key_bits = levels.key_bits;
+    job.plan.key64 = levels.key64;
+    stats.levels = levels.count;
+  }
+  if (job.broad == BroadPhase::sweep) job.sweep_axis = sweep_axis(grid_bounds);
   if (options.ellipsoid_tolerance > 0)
     job.solver.tolerance = static_cast<Narrow>(options.ellipsoid_tolerance);
   if (options.ellipsoid_max_iterations > 0) job.solver.max_iterations = options.ellipsoid_max_iterations;

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "bodies.hpp"
+#include "broad_phase.hpp"
 #include "contacts.hpp"
 #include "core/vec3.hpp"
 #include "errors.hpp"
@@ -48,8 +49,11 @@ struct EngineOptions {
   Fields fields = Fields::basic;
   double cell_size = 0;                        // 0: chosen by cell_choice
   CellChoice cell_choice = CellChoice::tuned;  // how, when cell_size is 0
-  int threads = 0;                             // CPU backend threads; 0: all hardware threads
-  int device = -1;                             // CUDA device; -1: current
+  // The broad phase (broad_phase.hpp): automatic picks one per call from the bodies' radii
+  // (choose_broad_phase); every one gives the same contacts, bit for bit.
+  BroadPhase broad_phase = BroadPhase::automatic;
+  int threads = 0;  // CPU backend threads; 0: all hardware threads
+  int device = -1;  // CUDA device; -1: current
   // Ellipsoid narrow phase (scenes with ellipsoids only; core/ellipsoid_contact.hpp SolverSettings):
   // Newton stops when the tangential gradient is <= tolerance × (largest semi-axis of A + of B);
   // iteration cap per start. 0: the precision's default (fp32 2e-5, fp64 1e-11; 40 iterations).
@@ -92,9 +96,11 @@ struct EngineStats {
   std::uint64_t candidates =
       0;  // candidate pairs the narrow phase decided (>= contacts; = with the default filter)
   int key_bits = 0;
-  double cell_size = 0;                  // the cell edge used
-  std::uint64_t peak_device_bytes = 0;   // CUDA: device workspace held after the call (never shrinks)
-  std::uint64_t device_allocations = 0;  // CUDA: cudaMalloc calls made by this call (0 once warm)
+  double cell_size = 0;                       // the cell edge used (levels: of the top level)
+  BroadPhase broad_phase = BroadPhase::grid;  // the broad phase that ran (never automatic)
+  int levels = 0;                             // BroadPhase::levels: the levels of the hierarchy
+  std::uint64_t peak_device_bytes = 0;        // CUDA: device workspace held after the call (never shrinks)
+  std::uint64_t device_allocations = 0;       // CUDA: cudaMalloc calls made by this call (0 once warm)
   // Scenes with ellipsoids: how many bodies are ellipsoids; candidates whose solve needed the
   // ellipsoid core's safety net (extra starts, `fallback`) and those whose winning minimiser still
   // missed the tolerance (`converged` false: the row is the best minimum found, flagged here).

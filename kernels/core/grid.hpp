@@ -22,6 +22,7 @@
 // touching spheres can share only a cell that is home to neither (spheres near a cell corner, see the
 // test PhantomOnlyCellHoldsContact), so skipping phantom-only cells loses contacts.
 #include <cstdint>
+#include <limits>
 
 #include "core/config.hpp"
 #include "core/vec3.hpp"
@@ -69,11 +70,25 @@ CG_HD BodyCells box_cells(const Sphere<Real>& s, Real ex, Real ey, Real ez, cons
   return bc;
 }
 
-// The cells of a body's bounding sphere (its box [c − r, c + r]). Scenes of ellipsoids with the centre
-// cut take the box of each shape instead (core/centre_cut.hpp: cut_cells).
+// The half-extent of a body's box in every broad phase: its radius widened by 16 units of rounding
+// (8·ε of Real), so that every pair the pair stage's sphere test accepts has overlapping boxes. That
+// test, d² <= (ra + rb)² in Real on the packed centres, accepts only |Δ| <= (ra + rb)(1 + 4.1u) per
+// axis (u = ε/2: one rounding of each difference, square, sum and of the radii's sum), and the boxes'
+// faces c ± box_radius(r), rounded, keep the order of the exact ones (rounding is monotone). So the
+// grid finds every accepted pair in a shared cell, whatever the cell edge, and every broad phase
+// (core/broad.hpp) finds the same candidates. The cell edge's margin (grid_plan.cpp: min_cell_size,
+// 16·ε relative) covers it: a box still spans at most two cells per axis.
+template <class Real>
+CG_HD Real box_radius(Real r) {
+  return r + r * (Real(8) * std::numeric_limits<Real>::epsilon());
+}
+
+// The cells of a body's bounding sphere (its box [c − R, c + R], R = box_radius(r)). Scenes of
+// ellipsoids with the centre cut take the box of each shape instead (core/centre_cut.hpp: cut_cells).
 template <class Real>
 CG_HD BodyCells body_cells(const Sphere<Real>& s, const GridParams<Real>& g) {
-  return box_cells(s, s.r, s.r, s.r, g);
+  const Real e = box_radius(s.r);
+  return box_cells(s, e, e, e, g);
 }
 
 CG_HD int popcount3(std::uint32_t m) { return int(m & 1u) + int((m >> 1) & 1u) + int((m >> 2) & 1u); }

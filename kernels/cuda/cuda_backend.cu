@@ -15,6 +15,10 @@
 //   pairs.cuh      candidate pairs: count per sorted entry (block-staged walk) and direct write of
 //                  the (a, b) u32 pairs at a block-aggregated atomic cursor; on overflow scan → fill
 //   type_passes.cuh  opt-in (Tuning::type_passes): entries, sort and pairs as Le Grand's 8 passes
+//   levels.cuh     BroadPhase::levels: a grid per size class (entries, sort and the pair walk above),
+//                  then the pairs across levels from the smaller body's side
+//   sweep.cuh      BroadPhase::sweep: the boxes sorted along an axis, a warp sweeps each
+//   brute.cuh      BroadPhase::brute: every pair, tiled (broad.cuh: what these three share)
 //   order.cuh      candidates in (a, b) order: grouped by a (counting or radix sort), runs by b
 //   shapes.cuh     scenes with ellipsoids: shape check (device-array API), shape upload, pack_shapes
 //   narrow.cuh     narrow_decide + contact rows of the requested fields, world frame (scenes with
@@ -41,9 +45,11 @@
 
 #include "backend.hpp"
 #include "cuda/bounds.cuh"
+#include "cuda/brute.cuh"
 #include "cuda/device_buffer.cuh"
 #include "cuda/entries.cuh"
 #include "cuda/history.cuh"
+#include "cuda/levels.cuh"
 #include "cuda/narrow.cuh"
 #include "cuda/order.cuh"
 #include "cuda/pack.cuh"
@@ -54,6 +60,7 @@
 #include "cuda/skin.cuh"
 #include "cuda/sort.cuh"
 #include "cuda/stage_events.cuh"
+#include "cuda/sweep.cuh"
 #include "cuda/thrust_alloc.cuh"
 #include "cuda/transfer.cuh"
 #include "cuda/tuning.hpp"
@@ -154,7 +161,7 @@ class CudaBackend {
     r.device_in = job.device_bodies != nullptr;
     r.full = job.fields == Fields::full;
     r.history = job.history && job.device_bodies;
-    r.type_passes = m_tuning.type_passes;
+    r.type_passes = m_tuning.type_passes && job.broad == BroadPhase::grid;
     r.filter = m_tuning.candidates;
     // Scenes with ellipsoids: bounding-sphere candidates less the centre cut (core/centre_cut.hpp), the
     // narrow stage decides (shapes.cuh); a skin (EngineOptions::skin): inflated bounding-sphere
@@ -168,18 +175,33 @@ class CudaBackend {
     m_events.start(m_stream);
     upload_stage(r, cuda::pinned_ring(m_device));
     const bool reuse = skin_stage(r);  // a skin: the kept candidates still hold every contact?
-    pack_stage(r, reuse);              // (scenes with ellipsoids: their shapes packed first)
+    // (scenes with ellipsoids: their shapes packed first; the broad phases but the grid: the spheres
+    // alone, in input order, broad.cuh)
+    pack_stage(r, reuse || job.broad != BroadPhase::grid);
     if (reuse) {
       reuse_candidates(r);
     } else {
-      scan_body_blocks(r);
-      if (!r.type_passes) {
-        entries_stage(r);
-        sort_stage(r);
-        if (r.job.pair_limits.wanted()) estimate_stage(r);  // may refuse the scene (max_pair_tests)
-        pairs_stage(r);
+      if (job.broad == BroadPhase::grid) {
+        scan_body_blocks(r);
+        if (!r.type_passes) {
+          entries_stage(r);
+          sort_stage(r);
+          if (r.job.pair_limits.wanted()) estimate_stage(r);  // may refuse the scene (max_pair_tests)
+          pairs_stage(r);
+        } else {
+          type_pass_stages(r);
+        }
+      } else if (job.broad == BroadPhase::levels) {
+        levels_stages(r);
+      } else if (job.broad == BroadPhase::sweep) {
+        sweep_stages(r);
       } else {
-        type_pass_stages(r);
+        if (r.job.pair_limits.wanted()) {  // brute force tests every pair
+          const std::uint64_t n = r.n64;
+          check_pair_estimate(PairEstimate{n * (n - 1) / 2, n, n, n, kDevicePairTestsPerSecond},
+                              r.job.pair_limits);
+        }
+        brute_stages(r);
       }
       order_stage(r);
       if (skin) keep_candidates(r);

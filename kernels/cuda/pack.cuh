@@ -262,6 +262,18 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   r.events.mark(EngineStage::pack, st);
 }
 
+// After the counters were read: the InputError of compute_bounds for an invalid body, and the device
+// rows' shape check (pack_shapes).
+template <class Real, class Key, class Narrow>
+void check_packed(RunState<Real, Key, Narrow>& r) {
+  if (r.h_counters->bad) {
+    const std::uint64_t i = r.n64 - r.h_counters->bad;
+    const std::int64_t id = !r.device_in && !r.job.bodies.id.empty() ? r.job.bodies.id[i] : std::int64_t(i);
+    throw_bad_body(r.d_pos, r.d_rad, i, id);
+  }
+  check_shapes_read(r);
+}
+
 // The scan of the block totals (timed with the entries stage) and the host's read of the entries
 // total and the bad-data status (throws the InputError of compute_bounds for an invalid body).
 template <class Real, class Key, class Narrow>
@@ -278,12 +290,7 @@ void scan_body_blocks(RunState<Real, Key, Narrow>& r) {
     });
   }
   r.read_counters();  // host needs the entries total and the status
-  if (r.h_counters->bad) {
-    const std::uint64_t i = r.n64 - r.h_counters->bad;
-    const std::int64_t id = !r.device_in && !r.job.bodies.id.empty() ? r.job.bodies.id[i] : std::int64_t(i);
-    throw_bad_body(r.d_pos, r.d_rad, i, id);
-  }
-  check_shapes_read(r);  // the device rows' shape check (pack_shapes)
+  check_packed(r);
   r.n_entries = r.h_counters->entries;
   r.stats.entries = r.n_entries;
   if (!r.type_passes && r.n_entries >= (std::uint64_t(1) << 31)) {

@@ -28,6 +28,17 @@ __device__ __forceinline__ std::uint32_t input_index(const std::uint32_t* __rest
   return perm ? perm[j] : j;
 }
 
+// With a report mask, the order key of cell-ordered body j that decides which of a pair reports it:
+// its input index, the top bit set for a wide body (kWideBit), so that the smaller key is the pair's
+// anchor (core/broad.hpp: pair_reported; indices are below 2^31 on one GPU).
+constexpr std::uint32_t kWideKey = 0x80000000u;
+__device__ __forceinline__ std::uint32_t report_key(const std::uint32_t* __restrict__ perm,
+                                                    const std::uint8_t* __restrict__ report,
+                                                    std::uint32_t j) {
+  const std::uint32_t i = input_index(perm, j);
+  return i | ((report[i] & kWideBit) ? kWideKey : 0u);
+}
+
 template <class Real>
 struct EntryBody {  // what a visit needs of the first body of a pair
   std::uint32_t a, type, pa;
@@ -41,7 +52,7 @@ template <class Test, class Real, class Emit>
 __device__ __forceinline__ void visit(const EntryBody<Real>& x, std::uint32_t b, std::uint8_t cb,
                                       const Sphere<Real>& sb, std::uint32_t pb, const std::uint8_t* report,
                                       std::uint32_t& tests, const Test& test, Emit& emit) {
-  // the report flag of the smaller input index; no pair of two bodies paired elsewhere
+  // the report flag of the pair's anchor (the smaller report key); no pair of two bodies paired elsewhere
   if (report && (!((x.pa < pb ? x.ca : cb) & kReportBit) || (x.ca & cb & kPairedCtrlBit))) return;
   if (!test_in_cell(x.ca, cb, x.type)) return;
   ++tests;
@@ -89,7 +100,7 @@ __device__ __forceinline__ std::uint32_t walk_from_memory(
   std::uint32_t tests = 0;
   for (std::uint32_t f = f0; f < n_entries && keys[f] == k; ++f) {
     const std::uint32_t b = body[f];
-    visit(x, b, ctrl[b], spheres[b], report ? input_index(perm, b) : 0u, report, tests, test, emit);
+    visit(x, b, ctrl[b], spheres[b], report ? report_key(perm, report, b) : 0u, report, tests, test, emit);
   }
   return tests;
 }
@@ -143,7 +154,7 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
     x.type = key_type(k, half_bits) | pass_type;  // type-pass path: keys hold no type bits
     x.ca = ctrl[x.a];
     x.sa = spheres[x.a];
-    x.pa = report ? input_index(perm, x.a) : 0u;
+    x.pa = report ? report_key(perm, report, x.a) : 0u;
     s_key[t] = k;
     s_body[t] = x.a;
     s_sphere[t] = x.sa;
@@ -156,7 +167,7 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
     s_body[h] = b;
     s_sphere[h] = spheres[b];
     s_ctrl[h] = ctrl[b];
-    s_perm[h] = report ? input_index(perm, b) : 0u;
+    s_perm[h] = report ? report_key(perm, report, b) : 0u;
   }
   __syncthreads();
   std::uint32_t found = 0, tests = 0, bits = 0;
@@ -199,8 +210,8 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
   }
   __syncthreads();
   if (found == 0 || s_base + block_sum > cap) return;
-  PairWriter<unsigned long long> emit{pair_a, pair_b, perm, report ? x.pa : input_index(perm, x.a),
-                                      s_base + rank};
+  PairWriter<unsigned long long> emit{pair_a, pair_b, perm,
+                                      report ? x.pa & ~kWideKey : input_index(perm, x.a), s_base + rank};
   if (bits & 1u) {
     walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test, emit);
   } else {
@@ -232,7 +243,7 @@ __global__ void __launch_bounds__(kBlock)
     x.type = key_type(k, half_bits);
     x.ca = ctrl[x.a];
     x.sa = spheres[x.a];
-    x.pa = report ? input_index(perm, x.a) : 0u;
+    x.pa = report ? report_key(perm, report, x.a) : 0u;
     walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test,
                      [&](std::uint32_t, std::uint32_t) { ++mine; });
   } else {

@@ -19,7 +19,8 @@
 //   keys[2], bodies[2]     entries → pairs     the entries, double-buffered for the CUB sort
 //   entry_blocks           pairs               per block of entries: pair totals and their scan
 //   pairs                  pairs → narrow      candidate pairs when they are not in the entries'
-//                                              dead buffer (see below); type passes: always
+//                                              dead buffer (see below); type passes, sweep and
+//                                              brute: always
 //   out                    narrow → download   the contact rows (ContactPtrs, 16-byte aligned fields)
 //   temp                   any CUB call        CUB temporary storage (cub_run)
 //   counters, partials     every stage         Counters of the call; bounds partials
@@ -39,6 +40,11 @@
 //   res_pos, res_rad,      between calls       resident bodies (Engine::set_resident); res_shape,
 //   res_report, res_shape,                     res_semi, res_orient: their shape rows (empty for a
 //   res_semi, res_orient                       sphere-only set); owned across calls, never aliased
+//   broad_counts           pairs               BroadPhase levels, sweep, brute (broad.cuh): per item
+//                                              (body, or tile pair) its candidates, then their scan
+//   broad_pairs            pairs → narrow      levels: the candidates of one level and across levels
+//                                              together (a, b and the order sort's second copies);
+//                          sort → pairs        sweep: the spheres in the sweep's order
 //   kept_pairs, ref_pos,   between calls       EngineOptions::skin: the kept candidate list (a then b,
 //   ref_rad, ref_report                        kept_count each) and the bodies' state it was built
 //                                              from (cuda/skin.cuh); owned across calls, never aliased
@@ -81,6 +87,7 @@ struct Workspace {
   Bytes shape_kind, shape_semi, shape_orient, shapes, cell_cut, normals, narrow_list, narrow_carry;
   Bytes kept_pairs, ref_pos, ref_rad, ref_report;
   Bytes res_id, hist_keys[2], hist_age[2];
+  Bytes broad_counts, broad_pairs;
   std::size_t res_count = 0;
   bool res_ided = false;       // resident global ids present
   std::size_t hist_count = 0;  // rows of the previous step in hist_keys/hist_age[hist_current]
@@ -97,12 +104,13 @@ struct Workspace {
   std::uint64_t held_bytes() const {
     std::uint64_t s = 0;
     for (const Bytes* b :
-         {&pos,         &rad,        &report,   &spheres,      &cell_spheres, &perm,        &ctrl,
-          &body_blocks, &base,       &keys[0],  &keys[1],      &bodies[0],    &bodies[1],   &entry_blocks,
-          &pairs,       &out,        &temp,     &counters,     &partials,     &res_pos,     &res_rad,
-          &res_report,  &res_shape,  &res_semi, &res_orient,   &shape_kind,   &shape_semi,  &shape_orient,
-          &shapes,      &cell_cut,   &normals,  &narrow_list,  &narrow_carry, &kept_pairs,  &ref_pos,
-          &ref_rad,     &ref_report, &res_id,   &hist_keys[0], &hist_keys[1], &hist_age[0], &hist_age[1]})
+         {&pos,          &rad,        &report,   &spheres,      &cell_spheres, &perm,        &ctrl,
+          &body_blocks,  &base,       &keys[0],  &keys[1],      &bodies[0],    &bodies[1],   &entry_blocks,
+          &pairs,        &out,        &temp,     &counters,     &partials,     &res_pos,     &res_rad,
+          &res_report,   &res_shape,  &res_semi, &res_orient,   &shape_kind,   &shape_semi,  &shape_orient,
+          &shapes,       &cell_cut,   &normals,  &narrow_list,  &narrow_carry, &kept_pairs,  &ref_pos,
+          &ref_rad,      &ref_report, &res_id,   &hist_keys[0], &hist_keys[1], &hist_age[0], &hist_age[1],
+          &broad_counts, &broad_pairs})
       s += b->bytes();
     return s;
   }

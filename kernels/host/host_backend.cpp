@@ -11,6 +11,8 @@
 //             8 passes); candidate pairs (a < b, local indices) collected per chunk of entries,
 //             then chunk sizes → scan → fill
 //   order     radix sort of the candidates by (a, b)
+// (BroadPhase::levels: entries, sort and pairs of a grid per level, then the pairs across levels;
+// sweep: sort (of the boxes along the axis) and pairs; brute: pairs alone; stages.hpp)
 //   narrow    narrow_decide() per candidate, in Narrow (fp64 and mixed: from the world doubles);
 //             contact rows in the requested fields, world frame
 //             (scenes with ellipsoids: pack also packs the shapes, the pair stage keeps bounding-sphere
@@ -71,15 +73,15 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
 
   host::PackedBodies<Broad> bodies;
   std::vector<PackedShape<Narrow>> packed_shapes;
-  // the cells: of the bounding spheres (pack), or in centre-cut scenes of the shapes' boxes (shape_cells)
-  const bool shape_boxes = filter == CandidateFilter::centre_cut && !reuse;
+  // the grid's cells: of the bounding spheres (pack), or in centre-cut scenes of the shapes' boxes
+  // (shape_cells); the other broad phases make their own (levels) or none
+  const bool grid = job.broad == BroadPhase::grid;
+  const bool cut = filter == CandidateFilter::centre_cut && !reuse;
   host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Broad>(job.inflation),
-             !reuse && !shape_boxes, nt, bodies);
+             !reuse && !cut && grid, nt, bodies);
   if (shapes) host::pack_shapes(job.bodies, nt, packed_shapes);
-  if (shape_boxes) {
-    host::cut_shapes(packed_shapes, nt, bodies.cut);
-    host::shape_cells(job.grid, nt, bodies);
-  }
+  if (cut) host::cut_shapes(packed_shapes, nt, bodies.cut);
+  if (cut && grid) host::shape_cells(job.grid, nt, bodies);
   timer.lap(EngineStage::pack);
 
   const NarrowBodies<Narrow> world =
@@ -88,24 +90,58 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
                                         nullptr, world.broad_margin};  // mixed's pair test (Fp64Touch)
   host::CandidatePairs built;
   if (!reuse) {
-    host::Entries<Key> entries;
-    stats.entries = host::fill_entries(bodies, job.grid, nt, entries);
-    timer.lap(EngineStage::entries);
+    const NarrowBodies<double>* fp64 = !std::is_same_v<Broad, Narrow> ? &world_fp64 : nullptr;
+    built.id_bits = std::max(1, bits_for(bodies.spheres.size()));
+    built.filter = filter;
+    if (grid) {
+      host::Entries<Key> entries;
+      stats.entries = host::fill_entries(bodies, job.grid, nt, entries);
+      timer.lap(EngineStage::entries);
 
-    host::sort_entries(entries, job.plan.key_bits, nt);
-    timer.lap(EngineStage::sort);
+      host::sort_entries(entries, job.plan.key_bits, nt);
+      timer.lap(EngineStage::sort);
 
-    if (job.pair_limits.wanted()) {
-      PairEstimate estimate = host::estimate_pair_tests(entries, job.bodies.size(), nt);
-      estimate.tests_per_second = kHostPairTestsPerSecondPerThread * nt;
-      check_pair_estimate(estimate, job.pair_limits);
+      if (job.pair_limits.wanted()) {
+        PairEstimate estimate = host::estimate_pair_tests(entries, job.bodies.size(), nt);
+        estimate.tests_per_second = kHostPairTestsPerSecondPerThread * nt;
+        check_pair_estimate(estimate, job.pair_limits);
+      }
+      stats.pair_tests = host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter,
+                                               fp64, nt, built, job.pair_limits.on_progress);
+      entries = {};
+      timer.lap(EngineStage::pairs);
+    } else if (job.broad == BroadPhase::levels) {  // a grid per level, then the pairs across levels
+      host::Entries<Key> entries;
+      host::level_cells(job.levels, nt, bodies);
+      stats.entries = host::level_entries(bodies, job.levels, nt, entries);
+      timer.lap(EngineStage::entries);
+
+      host::sort_entries(entries, job.plan.key_bits, nt);
+      timer.lap(EngineStage::sort);
+
+      stats.pair_tests = host::find_candidates(entries, bodies, job.bodies.report, job.levels.key_shift - 3,
+                                               filter, fp64, nt, built);
+      stats.pair_tests += host::cross_level_candidates(entries, bodies, job.levels, job.bodies.report, filter,
+                                                       fp64, nt, built);
+      entries = {};
+      timer.lap(EngineStage::pairs);
+    } else if (job.broad == BroadPhase::sweep) {
+      host::SweepOrder order;
+      host::sweep_sort(bodies, job.sweep_axis, nt, order);
+      timer.lap(EngineStage::sort);
+
+      stats.pair_tests =
+          host::sweep_candidates(order, bodies, job.sweep_axis, job.bodies.report, filter, fp64, nt, built);
+      timer.lap(EngineStage::pairs);
+    } else {
+      if (job.pair_limits.wanted()) {  // brute force tests every pair
+        const std::uint64_t n = job.bodies.size();
+        PairEstimate estimate{n * (n - 1) / 2, n, n, n, kHostPairTestsPerSecondPerThread * nt};
+        check_pair_estimate(estimate, job.pair_limits);
+      }
+      stats.pair_tests = host::brute_candidates(bodies, job.bodies.report, filter, fp64, nt, built);
+      timer.lap(EngineStage::pairs);
     }
-
-    stats.pair_tests = host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter,
-                                             !std::is_same_v<Broad, Narrow> ? &world_fp64 : nullptr, nt,
-                                             built, job.pair_limits.on_progress);
-    entries = {};
-    timer.lap(EngineStage::pairs);
 
     host::order_candidates(built, nt);
     if (skin) host::keep_candidates(job.bodies, std::move(built), be.kept);

@@ -20,14 +20,14 @@ std::uint64_t walk_entry(std::size_t e, const Entries<Key>& en, const Sphere<Rea
   const std::size_t n_entries = en.size();
   const Key k = en.keys[e];
   const std::uint32_t a = en.body[e];
-  if (report && !(report[a] & kReportedBit)) return 0;  // pairs (a, b > a) belong to a's owner
+  // pairs (a, b > a) belong to a's owner, but a wide a's with narrow bodies to theirs (pair_reported)
+  if (report && !(report[a] & (kReportedBit | kWideBit))) return 0;
   const std::uint32_t type = key_type(k, half_bits);
   const Sphere<Real> sa = entry_sphere[e];
   const std::uint8_t ca = entry_ctrl[e];
   std::uint64_t tests = 0;
-  const std::uint8_t pa = report ? report[a] : 0;
   for (std::size_t f = e + 1; f < n_entries && en.keys[f] == k; ++f) {
-    if ((pa & kPairedBit) && (report[en.body[f]] & kPairedBit)) continue;  // both paired elsewhere
+    if (report && !pair_reported(report, a, en.body[f])) continue;
     if (!test_in_cell(ca, entry_ctrl[f], type)) continue;
     ++tests;
     if (test(sa, entry_sphere[f], a, en.body[f])) emit(a, en.body[f]);
@@ -147,14 +147,9 @@ std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p
   out.id_bits = std::max(1, bits_for(p.spheres.size()));
   out.filter = filter;
   const std::uint8_t* r = report.empty() ? nullptr : report.data();
-  if (!candidates_touch(filter)) return collect(e, p, r, half_bits, threads, CellRule{}, out, progress);
-  if (filter == CandidateFilter::centre_cut)  // scenes with ellipsoids (core/centre_cut.hpp)
-    return collect(e, p, r, half_bits, threads, CentreCut{p.cut.data()}, out, progress);
-  if constexpr (std::is_same_v<Real, float>)
-    if (fp64 != nullptr && filter == CandidateFilter::spheres_touch)  // mixed: fp64's decision
-      return collect(e, p, r, half_bits, threads, Fp64Touch{*fp64, fp64->broad_margin, nullptr}, out,
-                     progress);
-  return collect(e, p, r, half_bits, threads, SpheresTouch{}, out, progress);
+  return with_pair_test(filter, p, fp64, [&](const auto& test) {
+    return collect(e, p, r, half_bits, threads, test, out, progress);
+  });
 }
 
 template std::uint64_t find_candidates(const Entries<std::uint32_t>&, const PackedBodies<float>&,

@@ -3,12 +3,15 @@
 // narrow.cpp), sequenced by host_backend.cpp. All memory is HOST memory; `threads` OpenMP threads
 // (> 0). Every decision and value comes from the CG_HD functions of kernels/core/, in the order the
 // CUDA kernels use, so this backend is the oracle of the CUDA one.
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <span>
+#include <type_traits>
 #include <vector>
 
+#include "core/broad.hpp"
 #include "core/centre_cut.hpp"
 #include "core/grid.hpp"
 #include "core/narrow.hpp"
@@ -43,6 +46,7 @@ struct PackedBodies {
   std::vector<std::uint8_t> ctrl;     // control_bits
   std::vector<std::uint32_t> count;   // entry_count; freed by fill_entries
   std::vector<CutShape> cut;          // CandidateFilter::centre_cut: cut_shape() of every body
+  std::vector<std::uint8_t> level;    // BroadPhase::levels: the level of every body (level_cells)
 };
 
 // (cell key, body) entries; body-ascending after fill_entries, key-ascending (stable) after sort.
@@ -127,6 +131,88 @@ std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p
 // starts). `bodies`: the call's, for the estimate's per-body figure.
 template <class Key>
 PairEstimate estimate_pair_tests(const Entries<Key>& e, std::uint64_t bodies, int threads);
+
+// The pair test of the candidate filter (core/narrow.hpp: CellRule, SpheresTouch, mixed's Fp64Touch;
+// core/centre_cut.hpp: CentreCut), on input indices, handed to `f`: every broad phase tests with it.
+template <class Real, class F>
+decltype(auto) with_pair_test(CandidateFilter filter, const PackedBodies<Real>& p,
+                              const NarrowBodies<double>* fp64, F&& f) {
+  if (!candidates_touch(filter)) return f(CellRule{});
+  if (filter == CandidateFilter::centre_cut) return f(CentreCut{p.cut.data()});
+  if constexpr (std::is_same_v<Real, float>)
+    if (fp64 != nullptr && filter == CandidateFilter::spheres_touch)  // mixed: fp64's decision
+      return f(Fp64Touch{*fp64, fp64->broad_margin, nullptr});
+  return f(SpheresTouch{});
+}
+
+// count → scan → fill of the pairs of items [0, n): `visit(i, emit)` emits item i's pairs (a, b),
+// a < b, and returns how many pairs it tested. Fixed chunks of items (their number depends on n and
+// `per_chunk` alone) collect their pairs once, the chunk sizes are scanned, the chunks copied in order:
+// the same array for any thread count. Appends to out.ab; returns the tests.
+template <class Visit>
+std::uint64_t collect_pairs(std::size_t n, std::size_t per_chunk, int threads, CandidatePairs& out,
+                            Visit&& visit) {
+  const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(256, n / per_chunk));
+  std::vector<std::vector<std::uint64_t>> chunk_pairs(n_chunks);
+  const int id_bits = out.id_bits;
+  std::uint64_t tests = 0;
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) reduction(+ : tests) if (n_chunks > 1)
+  for (std::size_t c = 0; c < n_chunks; ++c) {
+    std::vector<std::uint64_t>& mine = chunk_pairs[c];
+    auto emit = [&](std::uint32_t a, std::uint32_t b) { mine.push_back((std::uint64_t(a) << id_bits) | b); };
+    for (std::size_t i = n * c / n_chunks, end = n * (c + 1) / n_chunks; i < end; ++i)
+      tests += visit(i, emit);
+  }
+  std::vector<std::uint64_t> chunk_size(n_chunks), chunk_offset;
+  for (std::size_t c = 0; c < n_chunks; ++c) chunk_size[c] = chunk_pairs[c].size();
+  const std::size_t before = out.ab.size();
+  out.ab.resize(before + exclusive_scan_into(chunk_size, chunk_offset));
+#pragma omp parallel for num_threads(threads) schedule(static) if (n_chunks > 1)
+  for (std::size_t c = 0; c < n_chunks; ++c) {
+    std::copy(chunk_pairs[c].begin(), chunk_pairs[c].end(),
+              out.ab.begin() + std::ptrdiff_t(before + chunk_offset[c]));
+    chunk_pairs[c] = {};
+  }
+  return tests;
+}
+
+// ---- levels (BroadPhase::levels: core/broad.hpp), files host/levels.cpp ----
+// level_cells: per body its level (level_of the sphere inflated by p.inflation), its cells in that
+// level's grid (of its box, or in centre-cut scenes of its shape's box: cut_cells), control byte and
+// entry count. level_entries: (key, body) entries in body order, keys level << key_shift | cell key;
+// frees p.cells and p.count. Then sort_entries over the plan's key bits and find_candidates (half
+// bits: key_shift − 3) take the pairs within each level; cross_level_candidates appends the pairs of
+// two levels, from the smaller body's side (binary search of its cells in the larger level's keys).
+template <class Real>
+void level_cells(const LevelParams<Real>& lp, int threads, PackedBodies<Real>& p);
+template <class Real, class Key>
+std::uint64_t level_entries(PackedBodies<Real>& p, const LevelParams<Real>& lp, int threads,
+                            Entries<Key>& out);
+template <class Real, class Key>
+std::uint64_t cross_level_candidates(const Entries<Key>& e, const PackedBodies<Real>& p,
+                                     const LevelParams<Real>& lp, std::span<const std::uint8_t> report,
+                                     CandidateFilter filter, const NarrowBodies<double>* fp64, int threads,
+                                     CandidatePairs& out);
+
+// ---- sweep (BroadPhase::sweep), host/sweep.cpp ----
+// sweep_sort: the bodies by the lower face of their box along `axis` (stable radix sort of its
+// orderable bits: ties in input order). sweep_candidates: each body against the later ones whose
+// lower face is at most its upper face, those whose boxes overlap (boxes_overlap) tested.
+struct SweepOrder {
+  std::vector<std::uint32_t> body;  // input index of each sorted place
+};
+template <class Real>
+void sweep_sort(const PackedBodies<Real>& p, int axis, int threads, SweepOrder& out);
+template <class Real>
+std::uint64_t sweep_candidates(const SweepOrder& order, const PackedBodies<Real>& p, int axis,
+                               std::span<const std::uint8_t> report, CandidateFilter filter,
+                               const NarrowBodies<double>* fp64, int threads, CandidatePairs& out);
+
+// ---- brute (BroadPhase::brute), host/brute.cpp: every pair (a < b) whose boxes overlap, tested ----
+template <class Real>
+std::uint64_t brute_candidates(const PackedBodies<Real>& p, std::span<const std::uint8_t> report,
+                               CandidateFilter filter, const NarrowBodies<double>* fp64, int threads,
+                               CandidatePairs& out);
 
 // order: radix sort of the candidates by (a, b).
 void order_candidates(CandidatePairs& c, int threads);

@@ -20,6 +20,7 @@
 #include "bench/bench.hpp"
 #include "validate/validate.hpp"
 #endif
+#include "bench/broad_bench.hpp"
 #include "session.hpp"
 #include "study/study.hpp"
 #include "study/study_families.hpp"
@@ -36,6 +37,11 @@ const std::map<std::string, BenchKind> k_bench_kinds{
 const std::map<std::string, Precision> k_precisions{
     {"fp32", Precision::fp32}, {"fp64", Precision::fp64}, {"mixed", Precision::mixed}};
 const std::map<std::string, Fields> k_fields{{"basic", Fields::basic}, {"full", Fields::full}};
+const std::map<std::string, BroadPhase> k_broad_phases{{"auto", BroadPhase::automatic},
+                                                       {"grid", BroadPhase::grid},
+                                                       {"levels", BroadPhase::levels},
+                                                       {"sweep", BroadPhase::sweep},
+                                                       {"brute", BroadPhase::brute}};
 const std::map<std::string, SlabAxis> k_axes{
     {"auto", SlabAxis::automatic}, {"x", SlabAxis::x}, {"y", SlabAxis::y}, {"z", SlabAxis::z}};
 const std::map<std::string, Balance> k_balances{{"count", Balance::count}, {"width", Balance::width}};
@@ -251,6 +257,15 @@ Subcommand add_detect(CLI::App& app) {
        },
        "Grid cell edge: auto (the edge a cost model of the sort and pair stages picks, 1-3x the "
        "smallest), min (the largest diameter + rounding margin, Le Grand's choice) or a length")
+      ->default_str("auto");
+  d->add_option(
+       "--broad-phase", det.broad_phase,
+       "auto | grid (Le Grand's uniform grid) | levels (a grid per size class: any size "
+       "distribution) | sweep (Baraff's sort and sweep) | brute (every pair): auto picks brute for "
+       "a few dozen bodies, levels where the largest radius exceeds 4x the mean and the grid's cells "
+       "would be crowded, else grid; the "
+       "contacts are the same bits whichever runs")
+      ->transform(CLI::CheckedTransformer(k_broad_phases))
       ->default_str("auto");
   d->add_option("--solver-tolerance", det.solver_tolerance,
                 "Ellipsoid solver: Newton stops when the tangential gradient is <= this x the pair's size "
@@ -499,6 +514,49 @@ Subcommand add_study(CLI::App& app) {
           }};
 }
 
+// bench-broad: the broad phases' timings (rank 0).
+Subcommand add_bench_broad(CLI::App& app) {
+  const auto args = std::make_shared<BroadBenchOptions>();
+  auto* bbc = app.add_subcommand(
+      "bench-broad",
+      "Timing of the broad phases (grid, levels, sweep, brute, auto) x scene families x N on one backend: "
+      "table and CSV; no Bullet needed");
+  bbc->add_option("--families", args->families, "Families to run (default: all)")
+      ->delimiter(',')
+      ->check(CLI::IsMember(broad_bench_families()));
+  bbc->add_option("--lo", args->lo, "First N = 2^lo")->capture_default_str();
+  bbc->add_option("--hi", args->hi, "Last N = 2^hi")->capture_default_str();
+  bbc->add_option("--step", args->step, "log2 N step")->check(CLI::PositiveNumber)->capture_default_str();
+  bbc->add_option("--backend", args->backend, "cpu | cuda")
+      ->transform(CLI::CheckedTransformer(
+          std::map<std::string, Backend>{{"cpu", Backend::cpu}, {"cuda", Backend::cuda}}))
+      ->default_str("cpu");
+  bbc->add_option("--precision", args->precision, "fp32 | fp64 | mixed")
+      ->transform(CLI::CheckedTransformer(k_precisions))
+      ->default_str("fp64");
+  bbc->add_option("--repetitions", args->repetitions, "Time = median of this many warm detections")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  bbc->add_option("--threads", args->threads, "CPU backend threads (0: all cores)")
+      ->check(CLI::NonNegativeNumber);
+  bbc->add_option("--brute-hi", args->brute_hi, "brute runs while N <= 2^brute-hi")->capture_default_str();
+  bbc->add_option("--sweep-hi", args->sweep_hi, "sweep runs while N <= 2^sweep-hi")->capture_default_str();
+  bbc->add_option("--budget", args->budget_s,
+                  "Seconds: a broad phase slower than this at some N is not run at larger N of the family")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  bbc->add_option("--seed", args->seed, "Scene seed")->capture_default_str();
+  bbc->add_flag("--cpu-time", args->cpu_time,
+                "Time the process's CPU time, not the wall clock (CPU backend on a shared machine; with "
+                "--threads 1 the work itself)");
+  bbc->add_option("--csv", args->csv, "Also write the runs as CSV");
+  return {bbc, [args](Session& session) {
+            if (session.rank() != 0) return 0;
+            run_broad_bench(*args, std::cout);
+            return 0;
+          }};
+}
+
 #if defined(CONTACTGRID_HAVE_BULLET)
 // validate: a contact file against Bullet (rank 0).
 Subcommand add_validate(CLI::App& app) {
@@ -624,8 +682,8 @@ int run_cli(int argc, char** argv, Session& session) {
       "Files and conventions: docs/FORMAT.md; commands and exit codes: docs/USAGE.md."};
   app.require_subcommand(1);
   app.set_version_flag("--version", "contactgrid " CONTACTGRID_VERSION);
-  std::vector<Subcommand> commands{add_generate(app), add_detect(app), add_simulate(app), add_compare(app),
-                                   add_study(app)};
+  std::vector<Subcommand> commands{add_generate(app), add_detect(app), add_simulate(app),
+                                   add_compare(app),  add_study(app),  add_bench_broad(app)};
 #if defined(CONTACTGRID_HAVE_BULLET)
   commands.push_back(add_validate(app));
   commands.push_back(add_bench(app));

@@ -13,8 +13,11 @@
 //   agree_frame       [read] global bounds by an all-gather of the partitions' Bounds, folded with
 //                     Bounds::merge in rank order; the frame = make_frame(global bounds) — the frame a
 //                     single-rank run builds — so every rank computes bit-identical local coordinates
-//                     and contact data; the slab axis (largest extent unless forced); the ghost width
-//                     (2·r_max + a rounding margin).
+//                     and contact data; the slab axis (largest extent unless forced); the ghost rule
+//                     (GhostRule, decomposition/slab_decomposition.hpp: a body's ghost width is its
+//                     radius + that of the largest partner that may anchor its pairs + a rounding
+//                     margin: the few wide bodies go as far as they reach, the narrow ones' halos stay
+//                     small) and the broad phase (`auto`: from the global bounds).
 //   make_slabs        [redistribute] cuts from the quantiles of a regular sample of centre
 //                     coordinates gathered to every rank (balance = count; the P-1 quantiles are
 //                     selected, not the sample sorted) or equal widths (balance = width): identical on
@@ -23,13 +26,14 @@
 //                     its owned bodies and its ghosts (decomposition/assemble), already in id order.
 //                     Own rows: every body to its owner (decomposition/routing: to_owner, count → scan
 //                     → fill in parallel; comm/distribute: Alltoall counts, Alltoallv records).
-//   exchange_ghosts   [halo] own rows: every owned body to each other rank within the ghost width
-//                     (routing: to_ghost_ranks, the rule of make_halo_plan; comm/halo_exchange:
+//   exchange_ghosts   [halo] own rows: every owned body to each other rank within its ghost width
+//                     (routing: to_ghost_ranks_by, the rule of make_halo_plan; comm/halo_exchange:
 //                     exchange_with_ghost_ranks, counts by Alltoall, every Irecv posted, every Isend, one
 //                     Waitall). All rows: nothing.
 //   detect_local      [detect] own rows: owned + ghosts merged by id (assemble: merge_by_id); report
-//                     mask = owned; Engine<Real>::detect with the shared frame. The owner of the
-//                     smaller id reports a pair, so each contact is found by exactly one rank.
+//                     mask = owned, and wide (kWideBit); Engine<Real>::detect with the shared frame.
+//                     The owner of a pair's anchor (the smaller id, or the narrow body of a wide and a
+//                     narrow one) reports it, so each contact is found by exactly one rank.
 //   collect_contacts  [gather | exchange, merge] (DistributedOptions::output, comm/contact_collect):
 //                     gathered to rank 0, or exchanged by id_a range, then k-way merged; rank r's rows
 //                     are rows [first_row, first_row + size) of the single-rank result, which

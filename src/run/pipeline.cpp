@@ -155,13 +155,17 @@ ReadScene read_scene(const Session& session, const std::string& path, const Dist
   return in;
 }
 
-// The frame every rank shares: make_frame of the global bounds, the slab axis and the ghost width
-// (2·r_max + the rounding margin of Real).
+// The frame every rank shares: make_frame of the global bounds, the slab axis, the ghost rule (each
+// body's ghost width from its radius: GhostRule), the uniform ghost width of the resident steps
+// (2·r_max + the rounding margin of Real) and the broad phase (`auto`: chosen once, from the global
+// bounds, for every rank's engine).
 struct SharedFrame {
   Bounds global;
   Frame frame;
   int axis = 0;
+  GhostRule ghosts;
   double width = 0;
+  BroadPhase broad = BroadPhase::grid;
 };
 
 template <class Real>
@@ -178,6 +182,15 @@ SharedFrame agree_frame(const Session& session, const std::string& path, const B
     }
     f.axis = choose_axis(f.global, static_cast<int>(options.axis));
     f.width = frame_ghost_width(f.global, f.frame.origin, std::numeric_limits<Real>::epsilon());
+    double extent = 0;  // (frame_ghost_width's: the largest distance of a box from the origin)
+    for (int k = 0; k < 3; ++k) {
+      const double o = component(f.frame.origin, k);
+      extent = std::max(
+          {extent, std::abs(component(f.global.hi, k) - o), std::abs(component(f.global.lo, k) - o)});
+    }
+    f.ghosts = ghost_rule(f.global, extent, std::numeric_limits<Real>::epsilon());
+    f.broad = options.engine.broad_phase == BroadPhase::automatic ? choose_broad_phase(f.global, precision)
+                                                                  : options.engine.broad_phase;
   });
   return f;
 }
@@ -229,7 +242,7 @@ HeldBodies distribute(const Session& session, Partition&& part, const SlabDecomp
   Exports<ShapeRecord> shape_exports;
   agreed_stage(session, "redistribute", [&] {
     if (all_rows) {
-      held.input = select_owned_and_ghosts(std::move(part.position), std::move(part.radius), slabs, f.width,
+      held.input = select_owned_and_ghosts(std::move(part.position), std::move(part.radius), slabs, f.ghosts,
                                            session.rank(), threads, std::move(part.shapes));
       return;
     }
@@ -260,7 +273,8 @@ HeldBodies distribute(const Session& session, Partition&& part, const SlabDecomp
   return held;
 }
 
-// Ghosts to every rank whose slab is within the ghost width (own rows; every row has them already).
+// Ghosts to every rank whose slab is within the body's ghost width (f.ghosts; own rows: every row has
+// them already).
 void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecomposition& slabs,
                      const SharedFrame& f, bool all_rows, int threads) {
   if (all_rows) return;
@@ -269,13 +283,14 @@ void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecompo
   agreed_stage(session, "halo", [&] {
     const auto& owned = held.owned;
     auto x = [&](std::size_t i) { return component(owned[i].position, f.axis); };
-    check_halo_rows(slabs, session.rank(), owned.size(), x, f.width, threads);
-    exports = route<BodyRecord>(owned.size(), session.size(), threads, to_ghost_ranks(slabs, x, f.width),
+    auto width = [&](std::size_t i) { return f.ghosts.width(owned[i].radius); };
+    check_halo_rows(slabs, session.rank(), owned.size(), x, f.ghosts.max_width(f.global.r_max), threads);
+    exports = route<BodyRecord>(owned.size(), session.size(), threads, to_ghost_ranks_by(slabs, x, width),
                                 [&](std::size_t i) { return owned[i]; });
     if (held.has_shapes) {  // the same rule, so the same order as the BodyRecords
       const auto& shapes = held.owned_shapes;
       shape_exports =
-          route<ShapeRecord>(owned.size(), session.size(), threads, to_ghost_ranks(slabs, x, f.width),
+          route<ShapeRecord>(owned.size(), session.size(), threads, to_ghost_ranks_by(slabs, x, width),
                              [&](std::size_t i) { return shapes[i]; });
     }
   });
@@ -284,22 +299,23 @@ void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecompo
 }
 
 // Owned + ghosts in id order (own rows: merged by id), then the engine with the shared frame; the
-// owner of the smaller id reports a pair. A rank that owns nothing reports nothing.
+// owner of a pair's anchor reports it (the smaller id, or the narrow body of a wide and a narrow one:
+// bodies.hpp). A rank that owns nothing reports nothing.
 template <class Real>
 Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBodies& held,
-                            const Frame& frame, bool full, int threads) {
+                            const SharedFrame& f, bool full, int threads) {
   Contacts<Real> local;
   local.full = full;
   agreed_stage(session, "detect", [&] {
     if (held.input.position.empty()) {  // own rows (every row: selected by distribute)
       held.input = merge_by_id(held.owned, held.ghosts.rows, held.ghosts.counts, threads, held.owned_shapes,
-                               held.ghost_shapes.rows);
+                               held.ghost_shapes.rows, f.ghosts);
     }
     held.owned = {};
     held.ghosts = {};
     held.owned_shapes = {};
     held.ghost_shapes = {};
-    if (held.input.owned > 0) local = engine.detect(held.input.view(), frame);
+    if (held.input.owned > 0) local = engine.detect(held.input.view(), f.frame);
   });
   return local;
 }
@@ -320,11 +336,12 @@ CollectedContacts<Real> collect_contacts(const Session& session, Contacts<Real>&
 // chooses the mode from the agreed bounds).
 template <class Real>
 std::optional<Engine<Real>> make_engine(const Session& session, const DistributedOptions& options,
-                                        int threads) {
+                                        int threads, BroadPhase broad) {
   std::optional<Engine<Real>> engine;
   agreed_stage(session, "engine", [&] {
     EngineOptions engine_options = options.engine;
     engine_options.threads = threads;
+    engine_options.broad_phase = broad;
     engine.emplace(engine_options);
   });
   return engine;
@@ -350,6 +367,7 @@ void record_detection(const Session& session, const Engine<Real>& engine, const 
   result.stats.fp64_rows = session.sum(result.stats.fp64_rows);
   result.stats.ellipsoids = result.ellipsoids;  // the scene's (the engines' counts include ghosts)
   result.stats.key_bits = int(session.max(double(result.stats.key_bits)));
+  result.stats.levels = int(session.max(double(result.stats.levels)));
   const std::vector<std::uint64_t> owned = allgather_counts(session, input.owned);
   result.owned_min = *std::min_element(owned.begin(), owned.end());
   result.owned_max = *std::max_element(owned.begin(), owned.end());
@@ -563,7 +581,7 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
   const SharedFrame f = agree_frame<Real>(session, path, in.global, options);
   check_drift_range<Real>(session, path, f.global, options);
   clock.stop(RunStage::read);
-  std::optional<Engine<Real>> engine = make_engine<Real>(session, options, threads);
+  std::optional<Engine<Real>> engine = make_engine<Real>(session, options, threads, f.broad);
   result.bodies = part.bodies;
   result.ellipsoids = part.ellipsoids;
   result.frame = f.frame;
@@ -586,7 +604,7 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
   clock.start();
   fault_point("detect", session.rank());
   Contacts<Real> local =
-      detect_local(session, *engine, held, f.frame, options.engine.fields == Fields::full, threads);
+      detect_local(session, *engine, held, f, options.engine.fields == Fields::full, threads);
   clock.stop(RunStage::detect);
   if (held.input.owned > 0) clock.add_engine(engine->times());
   record_detection(session, *engine, held.input, result);
@@ -625,6 +643,7 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.engine.fields = cmd.fields;
   o.engine.cell_size = cmd.cell_size;
   o.engine.cell_choice = cmd.cell_choice;
+  o.engine.broad_phase = cmd.broad_phase;
   o.engine.threads = cmd.threads;
   o.engine.ellipsoid_tolerance = cmd.solver_tolerance;
   o.engine.ellipsoid_max_iterations = cmd.solver_iterations;

@@ -19,8 +19,9 @@ struct DetectCommand {
   std::optional<Precision> precision;  // --precision; empty: auto (the default), chosen by accuracy
   Accuracy accuracy;                   // --accuracy (auto only; unset: fp64's, docs/PRECISION.md)
   Fields fields = Fields::basic;
-  double cell_size = 0;                        // 0: chosen by cell_choice
-  CellChoice cell_choice = CellChoice::tuned;  // --cell-size auto | min
+  double cell_size = 0;                            // 0: chosen by cell_choice
+  CellChoice cell_choice = CellChoice::tuned;      // --cell-size auto | min
+  BroadPhase broad_phase = BroadPhase::automatic;  // --broad-phase
   int threads = 0;
   double solver_tolerance = 0;  // EngineOptions::ellipsoid_tolerance (--solver-tolerance; 0: default)
   int solver_iterations = 0;    // EngineOptions::ellipsoid_max_iterations (--solver-iterations; 0: default)

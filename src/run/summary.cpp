@@ -74,8 +74,11 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
         "\n  {} fp32 rows recomputed in fp64 (centres closer than fp32 resolves a normal; summed over "
         "ranks)",
         r.stats.fp64_rows);
-  fmt::print("\n  {}-bit cell keys, {} (cell, body) entries, {} pair tests{}\n", r.stats.key_bits,
-             r.stats.entries, r.stats.pair_tests, r.ranks > 1 ? "; times: maximum over ranks" : "");
+  fmt::print("\n  broad phase {}{}, {}-bit cell keys, {} (cell, body) entries, {} pair tests{}\n",
+             to_string(r.stats.broad_phase),
+             r.stats.broad_phase == BroadPhase::levels ? fmt::format(" ({} levels)", r.stats.levels) : "",
+             r.stats.key_bits, r.stats.entries, r.stats.pair_tests,
+             r.ranks > 1 ? "; times: maximum over ranks" : "");
   // One rank moves nothing: the stages that send (redistribute, halo, gather or exchange, merge) are
   // left out of its table. Reading every row (--read all), a rank selects its owned bodies and its
   // ghosts in one pass ("select"), and no halo is exchanged.

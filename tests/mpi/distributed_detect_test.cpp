@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "mpi/mpi_test_env.hpp"
+#include "scene/generate.hpp"
 #include "support/contacts_equal.hpp"
 
 namespace cg {
@@ -305,6 +306,56 @@ TEST(DistributedDetect, ExplicitCellSizeEqualsSingleRank) {
   DistributedOptions o = base_options();
   o.engine.cell_size = 5.0;
   check_both_precisions("cell5", uniform_scene(113, 1000), o);
+}
+
+// A few large bodies among small ones (generate's intruders, bimodal): the large ones go as ghosts to
+// every slab they reach, the small ones only as far as small partners need them (GhostRule), and the
+// pair of a large and a small body is the small one's owner's. Every broad phase.
+Scene two_size_scene(const std::string& kind, std::uint64_t seed, std::uint64_t n, double r_high = 2.0) {
+  GenerateOptions g;
+  g.kind = kind;
+  g.count = n;
+  g.seed = seed;
+  g.radius_low = 0.05;
+  g.radius_high = r_high;  // 1:40 by default
+  g.intruders = 7;
+  g.large_fraction = 0.3;
+  return generate_scene(g);
+}
+
+TEST(DistributedDetect, IntrudersAndBimodalEqualSingleRank) {
+  for (const char* kind : {"intruders", "bimodal"}) {
+    const std::size_t k = check_both_precisions(kind, two_size_scene(kind, 115, 3000));
+    if (session().rank() == 0) {
+      EXPECT_GT(k, 500u) << kind;
+    }
+  }
+  for (BroadPhase bp : {BroadPhase::grid, BroadPhase::sweep, BroadPhase::brute}) {
+    DistributedOptions o = base_options();
+    o.engine.broad_phase = bp;
+    check_both_precisions(std::string("intruders_") + to_string(bp), two_size_scene("intruders", 116, 1500),
+                          o);
+  }
+}
+
+// The small bodies' halos stay small: far fewer ghosts than the uniform width 2·r_max would send.
+TEST(DistributedDetect, SmallBodiesHaveSmallHalos) {
+  const Scene scene = two_size_scene("intruders", 117, 6000, 1.0);
+  const std::string path = write_shared("small_halos", scene);
+  DistributedOptions o = base_options();
+  o.axis = SlabAxis::x;
+  const DistributedResult<double> r = distributed_detect<double>(session(), path, o);
+  if (session().size() == 1) {
+    EXPECT_EQ(r.ghosts, 0u);
+    return;
+  }
+  const SlabDecomposition slabs(0, r.cuts);
+  const double width = ghost_width(1.0, 1e3, 1e-16);
+  std::uint64_t uniform = 0;  // what every body within 2·r_max of another slab would make
+  for (const Vec3<double>& p : scene.sphere_position)
+    slabs.for_each_ghost_rank(p.x, width, [&](int) { ++uniform; });
+  EXPECT_GT(uniform, 0u);
+  EXPECT_LT(4 * r.ghosts, uniform) << r.ghosts << " ghosts";
 }
 
 TEST(DistributedDetect, CountBalanceGivesEvenOwnership) {

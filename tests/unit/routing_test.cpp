@@ -150,7 +150,8 @@ TEST(Assemble, EveryRowSelectionEqualsOwnedMergedWithGhosts) {
     EXPECT_TRUE(std::equal(selected.radius.begin(), selected.radius.end(), merged.radius.begin())) << me;
     EXPECT_TRUE(std::is_sorted(merged.id.begin(), merged.id.end())) << me;
     for (std::size_t k = 0; k < merged.id.size(); ++k)
-      EXPECT_EQ(merged.report[k] == 1, s.owner(x(static_cast<std::size_t>(merged.id[k]))) == me) << me;
+      EXPECT_EQ(merged.report[k] == kReportedBit, s.owner(x(static_cast<std::size_t>(merged.id[k]))) == me)
+          << me;
   }
 }
 
@@ -170,6 +171,107 @@ TEST(Assemble, AnIdHeldTwiceIsAnInternalError) {
   HostVector<BodyRecord> owned{BodyRecord{{0, 0, 0}, 1, 3}};
   HostVector<BodyRecord> ghosts{BodyRecord{{0, 0, 0}, 1, 3}};
   EXPECT_THROW(merge_by_id(owned, ghosts, {1}, 1), Error);
+}
+
+// ---- the ghost rule (GhostRule): a width per body ---------------------------------------------------
+
+// Bodies of radius 0.1 in [0, 100) × [0, 10)², every 500th one of radius 5 (a wide body).
+Bodies two_sizes(std::size_t n, unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> x(0, 100), y(0, 10);
+  Bodies b;
+  for (std::size_t i = 0; i < n; ++i) {
+    b.position.push_back({x(rng), y(rng), y(rng)});
+    b.radius.push_back(i % 500 == 0 ? 5.0 : 0.1);
+  }
+  return b;
+}
+
+Bounds bounds_of(const Bodies& b) { return compute_bounds(BodiesView{b.position, b.radius, {}, {}}); }
+
+TEST(GhostRule, WidthsFollowTheRadii) {
+  const GhostRule u = GhostRule::uniform(3.0);
+  EXPECT_EQ(u.width(0.1), 3.0);
+  EXPECT_EQ(u.width(100.0), 3.0);
+  EXPECT_FALSE(u.wide(1e300));
+  const Bodies b = two_sizes(10000, 1);
+  const GhostRule g = ghost_rule(bounds_of(b), 100, 1e-16);
+  EXPECT_NEAR(g.narrow, 4 * (0.1 + 4.9 * 20 / 10000.0), 1e-9);  // 4 × the mean radius
+  EXPECT_TRUE(g.wide(5.0));
+  EXPECT_FALSE(g.wide(0.1));
+  EXPECT_NEAR(g.width(0.1), 0.1 + g.narrow, 1e-12);
+  EXPECT_NEAR(g.width(5.0), 10.0, 1e-12);
+  EXPECT_EQ(g.wide_bit(5.0), kWideBit);
+  // radii within 4x of their mean: nobody is wide, every body's width r + r_max (below 2·r_max)
+  const Bodies c = random_bodies(1000, 2);
+  const GhostRule h = ghost_rule(bounds_of(c), 100, 1e-16);
+  EXPECT_EQ(h.narrow, bounds_of(c).r_max);
+  EXPECT_FALSE(h.wide(bounds_of(c).r_max));
+}
+
+// The invariant the run relies on: for every contacting pair, the owner of its anchor (bodies.hpp:
+// the smaller id, or the narrow body of a wide and a narrow one) holds the other body, owned or as a
+// ghost of the per-body halo plan — and the narrow bodies' halos are far smaller than 2·r_max's.
+TEST(GhostRule, TheAnchorsOwnerHoldsEveryPartner) {
+  const int ranks = 5;
+  const std::size_t n = 20000;
+  const Bodies b = two_sizes(n, 3);
+  const SlabDecomposition s = random_slabs(ranks, 3);
+  const GhostRule g = ghost_rule(bounds_of(b), 100, 1e-16);
+  std::vector<double> x(n), r(n);
+  for (std::size_t i = 0; i < n; ++i) x[i] = b.position[i].x, r[i] = b.radius[i];
+  // held[q]: the ids rank q holds (its owned bodies and the halo plans' ghosts to it)
+  std::vector<std::vector<char>> held(ranks, std::vector<char>(n, 0));
+  std::uint64_t ghosts = 0, uniform_ghosts = 0;
+  for (int q = 0; q < ranks; ++q) {
+    std::vector<std::size_t> rows;
+    std::vector<double> xq, rq;
+    for (std::size_t i = 0; i < n; ++i)
+      if (s.owner(x[i]) == q) {
+        rows.push_back(i);
+        xq.push_back(x[i]);
+        rq.push_back(r[i]);
+      }
+    for (std::size_t i : rows) held[q][i] = 1;
+    const ExportPlan plan = make_halo_plan(s, q, xq, rq, g, 2);
+    for (int to = 0; to < ranks; ++to)
+      for (std::size_t k : plan.to(to)) held[to][rows[k]] = 1;
+    ghosts += plan.total();
+    uniform_ghosts += make_halo_plan(s, q, xq, ghost_width(5.0, 100, 1e-16), 2).total();
+  }
+  std::uint64_t pairs = 0, across = 0;
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t j = i + 1; j < n; ++j) {
+      const Vec3<double> d = b.position[i] - b.position[j];
+      const double sum = r[i] + r[j];
+      if (d.x * d.x + d.y * d.y + d.z * d.z > sum * sum) continue;
+      ++pairs;
+      const bool wi = g.wide(r[i]), wj = g.wide(r[j]);
+      const std::size_t anchor = wi != wj ? (wi ? j : i) : i, other = anchor == i ? j : i;
+      const int owner = s.owner(x[anchor]);
+      across += s.owner(x[other]) != owner;
+      ASSERT_TRUE(held[owner][other]) << "pair " << i << " " << j;
+    }
+  EXPECT_GT(pairs, 1000u);
+  EXPECT_GT(across, 10u);                 // pairs across cuts exercise the halo
+  EXPECT_LT(5 * ghosts, uniform_ghosts);  // narrow halos: r + 0.44 instead of 10
+}
+
+TEST(Assemble, WideBitsMarkTheRulesWideBodies) {
+  const Bodies b = two_sizes(5000, 4);
+  const SlabDecomposition s = random_slabs(3, 4);
+  const GhostRule g = ghost_rule(bounds_of(b), 100, 1e-16);
+  HostVector<Vec3<double>> p(b.position);
+  HostVector<double> r(b.radius);
+  const EngineInput in = select_owned_and_ghosts(std::move(p), std::move(r), s, g, 1, 2);
+  std::uint64_t wide = 0;
+  for (std::size_t k = 0; k < in.id.size(); ++k) {
+    const auto i = static_cast<std::size_t>(in.id[k]);
+    EXPECT_EQ(in.report[k] & kWideBit, g.wide_bit(b.radius[i])) << k;
+    EXPECT_EQ((in.report[k] & kReportedBit) != 0, s.owner(b.position[i].x) == 1) << k;
+    wide += (in.report[k] & kWideBit) != 0;
+  }
+  EXPECT_GT(wide, 0u);
 }
 
 TEST(Routing, HaloPreconditions) {

@@ -165,6 +165,37 @@ TEST_F(Cli, PolydisperseUsesTheRatio) {
   EXPECT_EQ(run("generate " + path("q.h5") + " --kind polydisperse -n 10 --ratio 5000").code, 2);
 }
 
+// --broad-phase: every broad phase writes the same /contacts bytes; the summary names it; bench-broad
+// prints its table and a CSV row per family, N and broad phase.
+TEST_F(Cli, BroadPhasesWriteTheSameContacts) {
+  ASSERT_EQ(
+      run("generate " + path("i.h5") + " --kind intruders --intruders 3 --rhigh 1 --ratio 50 -n 3000 -q")
+          .code,
+      0);
+  const Result a = run("detect " + path("i.h5") + " -o " + path("auto.h5") + " --backend cpu");
+  ASSERT_EQ(a.code, 0) << a.output;
+  EXPECT_NE(a.output.find("broad phase levels"), std::string::npos) << a.output;
+  for (const char* bp : {"grid", "levels", "sweep", "brute"}) {
+    const std::string out = path(std::string(bp) + ".h5");
+    const Result d = run("detect " + path("i.h5") + " -o " + out + " --backend cpu --broad-phase " + bp);
+    ASSERT_EQ(d.code, 0) << d.output;
+    EXPECT_NE(d.output.find(std::string("broad phase ") + bp), std::string::npos) << d.output;
+    EXPECT_EQ(run("compare " + path("auto.h5") + " " + out).code, 0) << bp;
+  }
+  EXPECT_EQ(run("detect " + path("i.h5") + " -o " + path("x.h5") + " --broad-phase tree").code, 2);
+  ASSERT_EQ(
+      run("generate " + path("b.h5") + " --kind bimodal --large-fraction 0.2 --ratio 10 -n 2000 -q").code, 0);
+  EXPECT_EQ(read_scene(path("b.h5")).size(), 2000u);
+  const Result b =
+      run("bench-broad --lo 8 --hi 10 --families uniform,intruder1 --repetitions 1 --csv " + path("bb.csv"));
+  ASSERT_EQ(b.code, 0) << b.output;
+  EXPECT_NE(b.output.find("intruder1"), std::string::npos) << b.output;
+  std::ifstream csv(path("bb.csv"));
+  std::size_t lines = 0;
+  for (std::string l; std::getline(csv, l);) ++lines;
+  EXPECT_EQ(lines, 1u + 2 * 2 * 5) << "header + 2 families x N = 2^8, 2^10 x 5 broad phases";
+}
+
 TEST_F(Cli, ValidatePassesAndFails) {
   ASSERT_EQ(run("generate " + path("s.h5") + " --count 2000 --seed 3 -q").code, 0);
   ASSERT_EQ(run("detect " + path("s.h5") + " -o " + path("c.h5") + " --backend cpu -q").code, 0);

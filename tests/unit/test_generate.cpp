@@ -371,7 +371,9 @@ TEST_F(Generate, LargeBodiesAreCountedAndSpreadEvenly) {
           first = std::min(first, i);
         }
       EXPECT_EQ(large, k) << n << " " << k;
-      if (k > 0) EXPECT_LT(first, (n + k - 1) / k) << n << " " << k;  // one in each run of n / k ids
+      if (k > 0) {
+        EXPECT_LT(first, (n + k - 1) / k) << n << " " << k;  // one in each run of n / k ids
+      }
     }
 }
 

@@ -1,0 +1,136 @@
+// The broad phases' plans (levels, the sweep's axis) and the rule of `auto`.
+#include "broad_phase.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "backend.hpp"  // bits_for
+#include "errors.hpp"
+
+namespace cg {
+
+const char* to_string(BroadPhase b) {
+  switch (b) {
+    case BroadPhase::automatic:
+      return "auto";
+    case BroadPhase::grid:
+      return "grid";
+    case BroadPhase::levels:
+      return "levels";
+    case BroadPhase::sweep:
+      return "sweep";
+    case BroadPhase::brute:
+      return "brute";
+  }
+  return "?";
+}
+
+namespace {
+// The plan of levels with these tops (the last +inf), or false when a level's grid cannot be keyed.
+bool try_levels(const Bounds& b, const Frame& frame, Precision p, const double* tops, int count,
+                LevelsPlan& out) {
+  out = LevelsPlan{};
+  out.count = count;
+  int half_bits = 0;
+  for (int l = 0; l < count; ++l) {
+    out.top[l] = tops[l];
+    Frame f = frame;
+    if (l + 1 < count) {  // the smallest valid edge for the level's largest radius (at most the frame's)
+      Bounds level = b;
+      level.r_max = tops[l];
+      f.cell_size = std::min(frame.cell_size, min_cell_size(level, p));
+    }
+    try {
+      out.grid[l] = plan_grid(b, f, p);
+    } catch (const InputError&) {
+      return false;  // too many cells for the precision's coordinates or for a 64-bit key
+    }
+    half_bits = std::max(half_bits, out.grid[l].half_bits);
+  }
+  out.half_bits = half_bits;
+  out.key_bits = half_bits + 3 + detail::bits_for(std::uint64_t(count));
+  out.key64 = out.key_bits > 32;
+  if (out.key_bits > 63) return false;
+  for (int l = 0; l < count; ++l) {
+    out.grid[l].half_bits = half_bits;
+    out.grid[l].key_bits = half_bits + 3;
+    out.grid[l].key64 = out.key64;
+  }
+  return true;
+}
+}  // namespace
+
+LevelsPlan plan_levels(const Bounds& b, const Frame& frame, Precision p, double radius_offset) {
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  const double lo = b.r_min + radius_offset, hi = b.r_max + radius_offset;
+  double tops[kMaxLevels];
+  int count = 1;
+  if (b.count > 0 && lo > 0 && hi > lo) {
+    const double ratio = std::max(kLevelRatio, std::pow(hi / lo, 1.0 / (kMaxLevels - 1)) * (1 + 1e-12));
+    for (double t = lo * ratio; t < hi && count < kMaxLevels; t *= ratio) tops[count++ - 1] = t;
+  }
+  tops[count - 1] = inf;
+  Bounds boxes = b;  // the boxes the pair stage sees, the radii grown by the offset
+  boxes.lo = {b.lo.x - radius_offset, b.lo.y - radius_offset, b.lo.z - radius_offset};
+  boxes.hi = {b.hi.x + radius_offset, b.hi.y + radius_offset, b.hi.z + radius_offset};
+  // A level whose cell edge is not below 3/4 of the next one's (the rounding margin of far-off
+  // coordinates dominates the smallest edges) joins it: it would only add a lookup.
+  double kept[kMaxLevels];
+  int n_kept = 0;
+  double above = frame.cell_size;
+  kept[kMaxLevels - 1] = inf;
+  for (int l = count - 2; l >= 0; --l) {
+    Bounds level = boxes;
+    level.r_max = tops[l];
+    const double cell = std::min(frame.cell_size, min_cell_size(level, p));
+    if (cell > 0.75 * above) continue;
+    kept[kMaxLevels - 2 - n_kept++] = tops[l];
+    above = cell;
+  }
+  const double* first_top = kept + (kMaxLevels - 1 - n_kept);
+  count = n_kept + 1;
+  LevelsPlan plan;
+  // The finest levels go first when their grids cannot be keyed: their bodies join the next level.
+  for (int first = 0; first < count; ++first)
+    if (try_levels(boxes, frame, p, first_top + first, count - first, plan)) return plan;
+  return plan;  // (not reached: one level is the grid of the frame, which the caller planned)
+}
+
+template <class Real>
+LevelParams<Real> level_params(const LevelsPlan& plan, double radius_margin) {
+  LevelParams<Real> lp{};
+  lp.count = plan.count;
+  lp.key_shift = plan.half_bits + 3;
+  for (int l = 0; l < plan.count; ++l) {
+    // rounded to Real: a body at most half an ulp above the planned top still fits the level's cell,
+    // whose 16·ε margin covers it (+inf stays +inf)
+    lp.top[l] = static_cast<Real>(plan.top[l]);
+    lp.grid[l] = detail::grid_params<Real>(plan.grid[l], radius_margin);
+  }
+  return lp;
+}
+template LevelParams<float> level_params<float>(const LevelsPlan&, double);
+template LevelParams<double> level_params<double>(const LevelsPlan&, double);
+
+int sweep_axis(const Bounds& b) {
+  const double e[3] = {b.hi.x - b.lo.x, b.hi.y - b.lo.y, b.hi.z - b.lo.z};
+  return e[0] >= e[1] && e[0] >= e[2] ? 0 : (e[1] >= e[2] ? 1 : 2);
+}
+
+double grid_occupancy(const Bounds& b) {
+  const double d = 2 * b.r_max;
+  const double volume =
+      std::max(b.hi.x - b.lo.x, d) * std::max(b.hi.y - b.lo.y, d) * std::max(b.hi.z - b.lo.z, d);
+  return volume > 0 ? double(b.count) * d * d * d / volume : double(b.count);
+}
+
+BroadPhase choose_broad_phase(const Bounds& b, Precision) {
+  if (b.count <= kBruteBodies) return BroadPhase::brute;
+  const double mean = b.count > 0 ? b.r_sum[0] / double(b.count) : b.r_max;
+  if (!(mean > 0 && b.r_max > kLevelsSpread * mean)) return BroadPhase::grid;
+  const double levels = std::log2(2 * b.r_max / std::max(b.r_min, b.r_max * 1e-300));
+  return grid_occupancy(b) > kOccupancyPerLevel * levels ? BroadPhase::levels : BroadPhase::grid;
+}
+
+}  // namespace cg

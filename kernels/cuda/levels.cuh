@@ -1,0 +1,258 @@
+#pragma once
+// CUDA broad phase levels: a hierarchy of grids (core/broad.hpp; the host's host/levels.cpp). Per
+// body its level and the key of its lowest cell in that level's grid (the level in the key's top
+// bits) → scan of the block totals → entries of all levels in one array → the entry sort (sort.cuh)
+// → the pairs within each level by the grid's pair walk (pairs.cuh, unchanged: equal keys are one
+// cell of one level) → the pairs across levels from the smaller body's side: each body looks up its
+// cells in every larger non-empty level (binary search of the level's run of sorted keys), count →
+// scan → fill, appended to the level pairs in ws.broad_pairs.
+#include <cub/device/device_scan.cuh>
+
+#include "cuda/broad.cuh"
+#include "cuda/sort.cuh"
+
+namespace cg::cuda {
+
+// levels, cells: per body (input order) its level, the key of its lowest cell in that level's grid
+// (level << key_shift | cell key), its control byte with the report flags (as reorder_kernel), and
+// per block the sum of the entry counts (total added to c->entries).
+template <class Real, class Key>
+__global__ void __launch_bounds__(kBlock)
+    level_cells_kernel(const Sphere<Real>* __restrict__ spheres, const CutShape* __restrict__ cut,
+                       const std::uint8_t* __restrict__ report, std::uint32_t n, LevelParams<Real> lp,
+                       Key* __restrict__ lo_key, std::uint8_t* __restrict__ ctrl,
+                       std::uint32_t* __restrict__ block_entries, Counters* __restrict__ c) {
+  using Reduce = cub::BlockReduce<std::uint32_t, kBlock>;
+  __shared__ typename Reduce::TempStorage tmp;
+  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+  std::uint32_t count = 0;
+  if (i < n) {
+    const Sphere<Real> s = spheres[i];
+    const int l = level_of(s.r, lp);
+    const BodyCells bc = cut ? cut_cells(s, cut[i], lp.grid[l]) : body_cells(s, lp.grid[l]);
+    const std::uint32_t m = report ? report[i] : 0u;
+    ctrl[i] = static_cast<std::uint8_t>(control_bits(bc) | ((m & kReportedBit) ? kReportBit : 0u) |
+                                        ((m & kPairedBit) ? kPairedCtrlBit : 0u));
+    lo_key[i] = (Key(l) << lp.key_shift) | cell_key<Key>(bc.lo[0], bc.lo[1], bc.lo[2], lp.grid[l]);
+    count = entry_count(bc);
+  }
+  const std::uint32_t total = Reduce(tmp).Sum(count);
+  if (threadIdx.x == 0) {
+    block_entries[blockIdx.x] = total;
+    atomicAdd(&c->entries, static_cast<unsigned long long>(total));
+  }
+}
+
+// levels, entries: fill_entries_kernel's, each body's cells in its own level's grid.
+template <class Key, class Real>
+__global__ void __launch_bounds__(kBlock)
+    level_entries_kernel(const Key* __restrict__ lo_key, const std::uint8_t* __restrict__ ctrl,
+                         std::uint32_t n, LevelParams<Real> lp,
+                         const std::uint32_t* __restrict__ block_offset, Key* __restrict__ keys,
+                         std::uint32_t* __restrict__ body) {
+  using Scan = cub::BlockScan<std::uint32_t, kBlock>;
+  __shared__ typename Scan::TempStorage tmp;
+  __shared__ Key s_keys[8 * kBlock];
+  __shared__ std::uint32_t s_body[8 * kBlock];
+  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+  const Key low = (Key(1) << lp.key_shift) - Key(1);
+  Key k0{};
+  std::uint32_t cb = 0, count = 0;
+  int l = 0;
+  if (i < n) {
+    k0 = lo_key[i];
+    cb = ctrl[i];
+    count = 1u << popcount3((cb >> 3) & 7u);
+    l = key_level(k0, lp.key_shift);
+  }
+  std::uint32_t rank, total;
+  Scan(tmp).ExclusiveSum(count, rank, total);
+  for (std::uint32_t m = 0; m < count; ++m) {
+    s_keys[rank + m] = (k0 & ~low) | spilled_cell_key<Key>(k0 & low, cb, m, lp.grid[l]);
+    s_body[rank + m] = i;
+  }
+  __syncthreads();
+  const std::uint64_t base = block_offset[blockIdx.x];
+  for (std::uint32_t t = threadIdx.x; t < total; t += kBlock) {
+    keys[base + t] = s_keys[t];
+    body[base + t] = s_body[t];
+  }
+}
+
+// levels: where each level's run of the sorted keys starts (begin[count] = the entry count).
+template <class Key>
+__global__ void level_begin_kernel(const Key* __restrict__ keys, std::uint32_t ne, int count, int key_shift,
+                                   std::uint32_t* __restrict__ begin) {
+  const int l = static_cast<int>(threadIdx.x);
+  if (l > count) return;
+  if (l == count) {  // (count << key_shift may not fit the key)
+    begin[l] = ne;
+    return;
+  }
+  const Key k = Key(l) << key_shift;
+  std::uint32_t f = 0, len = ne;
+  while (len > 0) {
+    const std::uint32_t half = len / 2;
+    if (keys[f + half] < k) {
+      f += half + 1;
+      len -= half + 1;
+    } else {
+      len = half;
+    }
+  }
+  begin[l] = f;
+}
+
+// levels, across: per body a the pairs with the bodies of every larger non-empty level, where they
+// share a cell of that level (test_in_cell with both control bytes there), reported and accepted by
+// the pair test — the host's cross_level_candidates. kFill false: counts[a] and the totals of pairs
+// and tests into c; true: the pairs written at offsets[a] onwards.
+template <bool kFill, class Real, class Key, class Test>
+__global__ void __launch_bounds__(kBlock)
+    cross_level_kernel(const Sphere<Real>* __restrict__ spheres, const CutShape* __restrict__ cut,
+                       const std::uint8_t* __restrict__ ctrl, const std::uint8_t* __restrict__ report,
+                       const Key* __restrict__ lo_key, std::uint32_t n, LevelParams<Real> lp,
+                       const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
+                       const std::uint32_t* __restrict__ level_begin, std::uint32_t* __restrict__ counts,
+                       const std::uint32_t* __restrict__ offsets, std::uint32_t* __restrict__ pair_a,
+                       std::uint32_t* __restrict__ pair_b, Counters* __restrict__ c, Test test) {
+  using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
+  __shared__ typename Reduce::TempStorage tmp;
+  __shared__ std::uint32_t s_begin[kMaxLevels + 1];
+  if (threadIdx.x <= static_cast<unsigned>(lp.count)) s_begin[threadIdx.x] = level_begin[threadIdx.x];
+  __syncthreads();
+  const std::uint32_t a = blockIdx.x * kBlock + threadIdx.x;
+  std::uint32_t found = 0, tests = 0;
+  if (a < n) {
+    const Sphere<Real> sa = spheres[a];
+    const int half_bits = lp.key_shift - 3;
+    std::uint64_t w = kFill ? offsets[a] : 0;
+    for (int l = key_level(lo_key[a], lp.key_shift) + 1; l < lp.count; ++l) {
+      const std::uint32_t lo = s_begin[l], hi = s_begin[l + 1];
+      if (lo == hi) continue;
+      const BodyCells bc = cut ? cut_cells(sa, cut[a], lp.grid[l]) : body_cells(sa, lp.grid[l]);
+      const std::uint8_t ca = control_bits(bc);
+      const Key level = Key(l) << lp.key_shift;
+      for (std::uint32_t m = 0, cells = entry_count(bc); m < cells; ++m) {
+        const Key k = level | body_cell_key<Key>(bc, m, lp.grid[l]);
+        const std::uint32_t type = key_type(k, half_bits);
+        std::uint32_t f = lo, len = hi - lo;
+        while (len > 0) {
+          const std::uint32_t half = len / 2;
+          if (keys[f + half] < k) {
+            f += half + 1;
+            len -= half + 1;
+          } else {
+            len = half;
+          }
+        }
+        for (; f < hi && keys[f] == k; ++f) {
+          const std::uint32_t b = body[f];
+          if (!test_in_cell(ca, ctrl[b], type) || !pair_reported(report, a, b)) continue;
+          ++tests;
+          if (test(sa, spheres[b], a, b)) {
+            if constexpr (kFill) store_pair(pair_a, pair_b, w++, a, b);
+            ++found;
+          }
+        }
+      }
+    }
+    if constexpr (!kFill) counts[a] = found;
+  }
+  if constexpr (!kFill) {
+    const unsigned long long block_found = Reduce(tmp).Sum(found);
+    __syncthreads();  // tmp is reused
+    const unsigned long long block_tests = Reduce(tmp).Sum(tests);
+    if (threadIdx.x == 0) {
+      if (block_found) atomicAdd(&c->pairs, block_found);
+      if (block_tests) atomicAdd(&c->tests, block_tests);
+    }
+  }
+}
+
+}  // namespace cg::cuda
+
+namespace cg::detail {
+
+// BroadPhase::levels, after pack (spheres only): stages entries, sort and pairs (see the file comment).
+template <class Real, class Key, class Narrow>
+void levels_stages(RunState<Real, Key, Narrow>& r) {
+  using cuda::kBlock;
+  Workspace& ws = r.ws;
+  cudaStream_t st = r.st;
+  const LevelParams<Real>& lp = r.job.levels;
+  broad_input(r);
+  cuda::level_cells_kernel<Real, Key><<<r.nb, kBlock, 0, st>>>(r.d_cell_spheres, r.d_cell_cut, r.d_report,
+                                                               r.n, lp, r.d_lo_key, r.d_ctrl, r.d_body_totals,
+                                                               r.d_counters);
+  CG_CUDA_CHECK_LAUNCH("level_cells");
+  cub_run(ws, "entries", [&](void* t, std::size_t& b) {
+    return cub::DeviceScan::ExclusiveSum(t, b, r.d_body_totals, r.d_body_offsets, int(r.nb), st);
+  });
+  r.read_counters();  // the entries total and the bad-data status
+  check_packed(r);
+  r.n_entries = r.h_counters->entries;
+  r.stats.entries = r.n_entries;
+  if (r.n_entries >= (std::uint64_t(1) << 31))
+    throw ResourceError(
+        std::to_string(r.n_entries) +
+        " (cell, body) entries exceed the 2^31 - 1 items one CUB sort handles; use fewer bodies "
+        "per rank (more MPI ranks)");
+  const auto ne = static_cast<std::uint32_t>(r.n_entries);
+  ws.reserve({{&ws.keys[0], ne * sizeof(Key)},
+              {&ws.keys[1], ne * sizeof(Key)},
+              {&ws.bodies[0], ne * sizeof(std::uint32_t)},
+              {&ws.bodies[1], ne * sizeof(std::uint32_t)},
+              {&ws.entry_blocks, 2 * std::size_t(cuda::blocks_for(ne)) * sizeof(std::uint32_t)}},
+             "entries");
+  r.keys = ws.entry_keys<Key>(ne);
+  r.body = ws.entry_bodies(ne);
+  cuda::level_entries_kernel<Key><<<r.nb, kBlock, 0, st>>>(r.d_lo_key, r.d_ctrl, r.n, lp, r.d_body_offsets,
+                                                           r.keys.Current(), r.body.Current());
+  CG_CUDA_CHECK_LAUNCH("level_entries");
+  r.events.mark(EngineStage::entries, st);
+  sort_stage(r);
+
+  // the pairs within each level: the grid's walk (its cell type sits below the common key_shift)
+  r.g.half_bits = lp.key_shift - 3;
+  pairs_stage(r);
+  if (lp.count < 2) return;
+
+  // the pairs across levels
+  const std::uint32_t np_in = r.np;
+  const ItemCounts ic = item_counts(ws, r.n64, kMaxLevels + 1);
+  cuda::level_begin_kernel<Key><<<1, 32, 0, st>>>(r.keys.Current(), ne, lp.count, lp.key_shift, ic.extra);
+  CG_CUDA_CHECK_LAUNCH("level_begin");
+  zero_pair_counters(r);
+  with_pair_test(r, [&](auto test) {
+    cuda::cross_level_kernel<false, Real, Key, decltype(test)><<<r.nb, kBlock, 0, st>>>(
+        r.d_cell_spheres, r.d_cell_cut, r.d_ctrl, r.d_report, r.d_lo_key, r.n, lp, r.keys.Current(),
+        r.body.Current(), ic.extra, ic.counts, nullptr, nullptr, nullptr, r.d_counters, test);
+  });
+  CG_CUDA_CHECK_LAUNCH("cross_level_count");
+  r.read_counters();
+  const std::uint64_t across = r.h_counters->pairs;
+  r.stats.pair_tests += r.h_counters->tests;
+  if (across > 0) {
+    const std::uint32_t* in_a = r.pair_a.Current();
+    const std::uint32_t* in_b = r.pair_b.Current();
+    std::uint32_t* store = candidate_store(r, ic, r.n64, ws.broad_pairs, np_in + across);
+    const std::size_t np = r.np;
+    if (np_in > 0) {
+      CG_CUDA_CHECK(
+          cudaMemcpyAsync(store, in_a, np_in * sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, st));
+      CG_CUDA_CHECK(
+          cudaMemcpyAsync(store + np, in_b, np_in * sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, st));
+    }
+    with_pair_test(r, [&](auto test) {
+      cuda::cross_level_kernel<true, Real, Key, decltype(test)>
+          <<<r.nb, kBlock, 0, st>>>(r.d_cell_spheres, r.d_cell_cut, r.d_ctrl, r.d_report, r.d_lo_key, r.n, lp,
+                                    r.keys.Current(), r.body.Current(), ic.extra, nullptr, ic.offsets,
+                                    store + np_in, store + np + np_in, r.d_counters, test);
+    });
+    CG_CUDA_CHECK_LAUNCH("cross_level_fill");
+  }
+  r.events.mark(EngineStage::pairs, st);
+}
+
+}  // namespace cg::detail

@@ -1,0 +1,111 @@
+// Host broad phase levels: a hierarchy of grids (core/broad.hpp). Per body its level and its cells in
+// that level's grid, the (key, body) entries of all levels in one array (keys carry the level above
+// the cell key), and the pairs of two levels from the smaller body's side (see stages.hpp).
+#include <algorithm>
+
+#include "host/stages.hpp"
+
+namespace cg::detail::host {
+
+template <class Real>
+void level_cells(const LevelParams<Real>& lp, int threads, PackedBodies<Real>& p) {
+  const std::size_t n = p.spheres.size();
+  p.level.resize(n);
+  p.cells.resize(n);
+  p.ctrl.resize(n);
+  p.count.resize(n);
+  const bool cut = !p.cut.empty();
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
+  for (std::size_t i = 0; i < n; ++i) {
+    const Sphere<Real> s0 = p.spheres[i];
+    const Sphere<Real> s{s0.x, s0.y, s0.z, s0.r + p.inflation};
+    const int l = level_of(s.r, lp);
+    p.level[i] = static_cast<std::uint8_t>(l);
+    p.cells[i] = cut ? cut_cells(s, p.cut[i], lp.grid[l]) : body_cells(s, lp.grid[l]);
+    p.ctrl[i] = control_bits(p.cells[i]);
+    p.count[i] = entry_count(p.cells[i]);
+  }
+}
+
+template <class Real, class Key>
+std::uint64_t level_entries(PackedBodies<Real>& p, const LevelParams<Real>& lp, int threads,
+                            Entries<Key>& out) {
+  const std::size_t n = p.cells.size();
+  std::vector<std::uint64_t> offset;
+  const std::uint64_t n_entries = exclusive_scan_into(p.count, offset);
+  out.keys.resize(n_entries);
+  out.body.resize(n_entries);
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
+  for (std::size_t i = 0; i < n; ++i) {
+    const int l = p.level[i];
+    const Key level = Key(l) << lp.key_shift;
+    for (std::uint32_t m = 0; m < p.count[i]; ++m) {
+      out.keys[offset[i] + m] = level | body_cell_key<Key>(p.cells[i], m, lp.grid[l]);
+      out.body[offset[i] + m] = static_cast<std::uint32_t>(i);
+    }
+  }
+  p.cells = {};
+  p.count = {};
+  return n_entries;
+}
+
+template <class Real, class Key>
+std::uint64_t cross_level_candidates(const Entries<Key>& e, const PackedBodies<Real>& p,
+                                     const LevelParams<Real>& lp, std::span<const std::uint8_t> report,
+                                     CandidateFilter filter, const NarrowBodies<double>* fp64, int threads,
+                                     CandidatePairs& out) {
+  if (lp.count < 2) return 0;
+  const std::uint8_t* r = report.empty() ? nullptr : report.data();
+  // Each level's run of the sorted keys (empty levels are skipped by every query).
+  std::size_t begin[kMaxLevels + 1];
+  for (int l = 0; l < lp.count; ++l)
+    begin[l] =
+        std::size_t(std::lower_bound(e.keys.begin(), e.keys.end(), Key(l) << lp.key_shift) - e.keys.begin());
+  begin[lp.count] = e.size();  // (count << key_shift may not fit the key)
+  const bool cut = !p.cut.empty();
+  const int half_bits = lp.key_shift - 3;
+  return with_pair_test(filter, p, fp64, [&](const auto& test) {
+    return collect_pairs(p.spheres.size(), 1024, threads, out, [&](std::size_t i, auto&& emit) {
+      const auto a = static_cast<std::uint32_t>(i);
+      const Sphere<Real> s0 = p.spheres[a];
+      const Sphere<Real> sa{s0.x, s0.y, s0.z, s0.r + p.inflation};
+      std::uint64_t tests = 0;
+      for (int l = p.level[a] + 1; l < lp.count; ++l) {
+        if (begin[l] == begin[l + 1]) continue;
+        const BodyCells bc = cut ? cut_cells(sa, p.cut[a], lp.grid[l]) : body_cells(sa, lp.grid[l]);
+        const std::uint8_t ca = control_bits(bc);
+        const Key level = Key(l) << lp.key_shift;
+        for (std::uint32_t m = 0, cells = entry_count(bc); m < cells; ++m) {
+          const Key k = level | body_cell_key<Key>(bc, m, lp.grid[l]);
+          const std::uint32_t type = key_type(k, half_bits);
+          auto f = std::lower_bound(e.keys.begin() + std::ptrdiff_t(begin[l]),
+                                    e.keys.begin() + std::ptrdiff_t(begin[l + 1]), k);
+          for (std::size_t at = std::size_t(f - e.keys.begin()); at < begin[l + 1] && e.keys[at] == k; ++at) {
+            const std::uint32_t b = e.body[at];
+            if (!test_in_cell(ca, p.ctrl[b], type) || !pair_reported(r, a, b)) continue;
+            ++tests;
+            const Sphere<Real> t0 = p.spheres[b];
+            const Sphere<Real> sb{t0.x, t0.y, t0.z, t0.r + p.inflation};
+            if (test(sa, sb, a, b)) emit(std::min(a, b), std::max(a, b));
+          }
+        }
+      }
+      return tests;
+    });
+  });
+}
+
+template void level_cells(const LevelParams<float>&, int, PackedBodies<float>&);
+template void level_cells(const LevelParams<double>&, int, PackedBodies<double>&);
+#define CG_LEVELS(R, K)                                                                                \
+  template std::uint64_t level_entries(PackedBodies<R>&, const LevelParams<R>&, int, Entries<K>&);     \
+  template std::uint64_t cross_level_candidates(                                                       \
+      const Entries<K>&, const PackedBodies<R>&, const LevelParams<R>&, std::span<const std::uint8_t>, \
+      CandidateFilter, const NarrowBodies<double>*, int, CandidatePairs&);
+CG_LEVELS(float, std::uint32_t)
+CG_LEVELS(float, std::uint64_t)
+CG_LEVELS(double, std::uint32_t)
+CG_LEVELS(double, std::uint64_t)
+#undef CG_LEVELS
+
+}  // namespace cg::detail::host

@@ -1,0 +1,198 @@
+// `contactgrid bench-broad` (broad_bench.hpp).
+#include "bench/broad_bench.hpp"
+
+#include <fmt/format.h>
+#include <fmt/ostream.h>
+
+#include <algorithm>
+#include <chrono>
+#include <ctime>
+#include <fstream>
+#include <map>
+#include <optional>
+#include <ostream>
+
+#include "errors.hpp"
+#include "run/progress.hpp"
+#include "scene/generate.hpp"
+
+namespace cg {
+namespace {
+
+struct Family {
+  std::string name, kind;
+  double r_low, r_high, large_fraction = 0.1;
+  std::uint64_t intruders = 0;
+};
+
+const std::vector<Family>& families() {
+  static const std::vector<Family> f{{"uniform", "uniform", 0.5, 1.0},
+                                     {"bimodal10", "bimodal", 0.1, 1.0},
+                                     {"bimodal100", "bimodal", 0.01, 1.0},
+                                     {"loguniform1000", "polydisperse", 0.001, 1.0},
+                                     {"intruder1", "intruders", 0.01, 1.0, 0, 1},
+                                     {"intruders64", "intruders", 1.0, 100.0, 0, 64}};
+  return f;
+}
+
+constexpr BroadPhase kPhases[] = {BroadPhase::grid, BroadPhase::levels, BroadPhase::sweep, BroadPhase::brute,
+                                  BroadPhase::automatic};
+
+struct Timing {
+  double seconds = 0;
+  std::uint64_t contacts = 0, pair_tests = 0;
+  BroadPhase ran = BroadPhase::grid;
+  int levels = 0;
+};
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const std::size_t m = v.size() / 2;
+  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
+}
+
+// Seconds now: wall clock, or the process's CPU time (every thread's; BroadBenchOptions::cpu_time).
+double now(bool cpu_time) {
+  if (cpu_time) {
+    timespec t{};
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+    return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
+  }
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+template <class Real>
+Timing time_engine(const BroadBenchOptions& o, const BodiesView& bodies, BroadPhase bp) {
+  EngineOptions e;
+  e.backend = o.backend;
+  e.threads = o.threads;
+  e.broad_phase = bp;
+  e.fp32_broad_phase = o.precision == Precision::mixed;
+  Engine<Real> engine(e);
+  engine.set_resident(bodies);
+  Timing t;
+  t.contacts = engine.detect_resident();  // warm-up (the workspace grows once)
+  std::vector<double> s;
+  for (int k = 0; k < o.repetitions; ++k) {
+    const double t0 = now(o.cpu_time);
+    const std::size_t c = engine.detect_resident();
+    s.push_back(now(o.cpu_time) - t0);
+    if (c != t.contacts) throw std::runtime_error("bench-broad: a repeated detection found other contacts");
+  }
+  t.seconds = median(s);
+  t.pair_tests = engine.stats().pair_tests;
+  t.ran = engine.stats().broad_phase;
+  t.levels = engine.stats().levels;
+  return t;
+}
+
+Timing time_phase(const BroadBenchOptions& o, const BodiesView& bodies, BroadPhase bp) {
+  return o.precision == Precision::fp32 ? time_engine<float>(o, bodies, bp)
+                                        : time_engine<double>(o, bodies, bp);
+}
+
+}  // namespace
+
+const std::vector<std::string>& broad_bench_families() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> n;
+    for (const Family& f : families()) n.push_back(f.name);
+    return n;
+  }();
+  return names;
+}
+
+void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
+  if (o.lo < 1 || o.hi > 28 || o.lo > o.hi || o.step < 1)
+    throw UsageError("bench-broad: need 1 <= lo <= hi <= 28 and step >= 1");
+  if (o.repetitions < 1) throw UsageError("bench-broad: repetitions must be >= 1");
+  if (o.cpu_time && o.backend != Backend::cpu)
+    throw UsageError("bench-broad: --cpu-time times the CPU backend only (a GPU's work is not CPU time)");
+  std::vector<Family> run;
+  for (const Family& f : families())
+    if (o.families.empty() || std::find(o.families.begin(), o.families.end(), f.name) != o.families.end())
+      run.push_back(f);
+  std::ofstream csv;
+  if (!o.csv.empty()) {
+    csv.open(o.csv);
+    if (!csv) throw IoError("bench-broad: cannot write " + o.csv);
+    csv << "family,n,log2n,broad_phase,ran,levels,seconds,contacts,pair_tests,ns_per_contact\n";
+  }
+  fmt::print(out, "bench-broad: backend {}, precision {}, median of {} ({} seconds; '-': not run)\n",
+             to_string(o.backend), to_string(o.precision), o.repetitions, o.cpu_time ? "CPU" : "wall");
+  fmt::print(out, "{:<15} {:>9} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}  {:<7} {:>9} {:>8} {:>9} {:>9}\n",
+             "family", "N", "contacts", "grid", "levels", "sweep", "brute", "auto", "best", "auto/best",
+             "ns/cont", "/uniform", "/unif/c");
+  std::map<int, double> uniform_best, uniform_per_contact;  // log2 N → the uniform row's best (per contact)
+  const std::uint64_t total = std::uint64_t(run.size()) * std::uint64_t((o.hi - o.lo) / o.step + 1);
+  Progress progress("bench-broad", "rows", total);
+  std::uint64_t done = 0;
+  for (const Family& f : run) {
+    std::map<BroadPhase, bool> over_budget;
+    for (int lg = o.lo; lg <= o.hi; lg += o.step) {
+      GenerateOptions g;
+      g.kind = f.kind;
+      g.count = std::uint64_t(1) << lg;
+      g.seed = o.seed;
+      g.radius_low = f.r_low;
+      g.radius_high = f.r_high;
+      g.large_fraction = f.large_fraction;
+      g.intruders = std::max<std::uint64_t>(1, std::min<std::uint64_t>(f.intruders, g.count));
+      const Scene scene = generate_scene(g);
+      const BodiesView bodies{{scene.sphere_position.data(), scene.sphere_position.size()},
+                              {scene.sphere_radius.data(), scene.sphere_radius.size()},
+                              {},
+                              {}};
+      std::map<BroadPhase, Timing> t;
+      std::optional<std::uint64_t> contacts;
+      for (BroadPhase bp : kPhases) {
+        if (over_budget[bp] || (bp == BroadPhase::brute && lg > o.brute_hi) ||
+            (bp == BroadPhase::sweep && lg > o.sweep_hi))
+          continue;
+        t[bp] = time_phase(o, bodies, bp);
+        if (contacts && *contacts != t[bp].contacts)
+          throw std::runtime_error(fmt::format("bench-broad: {} N = 2^{}: {} finds {} contacts, another {}",
+                                               f.name, lg, to_string(bp), t[bp].contacts, *contacts));
+        contacts = t[bp].contacts;
+        if (t[bp].seconds > o.budget_s) over_budget[bp] = true;
+        if (csv)
+          csv << fmt::format("{},{},{},{},{},{},{:.6g},{},{},{:.4g}\n", f.name, g.count, lg, to_string(bp),
+                             to_string(t[bp].ran), t[bp].levels, t[bp].seconds, t[bp].contacts,
+                             t[bp].pair_tests,
+                             1e9 * t[bp].seconds / double(std::max<std::uint64_t>(1, t[bp].contacts)));
+      }
+      BroadPhase best = BroadPhase::grid;
+      double best_s = 0;
+      for (const auto& [bp, tm] : t)
+        if (bp != BroadPhase::automatic && (best_s == 0 || tm.seconds < best_s))
+          best = bp, best_s = tm.seconds;
+      const double per_contact = best_s / double(std::max<std::uint64_t>(1, contacts.value_or(0)));
+      if (f.name == "uniform") {
+        uniform_best[lg] = best_s;
+        uniform_per_contact[lg] = per_contact;
+      }
+      auto cell = [&](BroadPhase bp) {
+        return t.count(bp) ? fmt::format("{:.4f}", t[bp].seconds) : std::string("-");
+      };
+      const std::string vs_uniform =
+          uniform_best.count(lg) ? fmt::format("{:.2f}", best_s / uniform_best[lg]) : std::string("-");
+      const std::string vs_uniform_per_contact =
+          uniform_per_contact.count(lg) ? fmt::format("{:.2f}", per_contact / uniform_per_contact[lg])
+                                        : std::string("-");
+      fmt::print(
+          out,
+          "{:<15} {:>9} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}  {:<7} {:>9.2f} {:>8.1f} {:>9} {:>9}\n",
+          f.name, g.count, contacts.value_or(0), cell(BroadPhase::grid), cell(BroadPhase::levels),
+          cell(BroadPhase::sweep), cell(BroadPhase::brute),
+          t.count(BroadPhase::automatic)
+              ? fmt::format("{}:{}", to_string(t[BroadPhase::automatic].ran)[0], cell(BroadPhase::automatic))
+              : std::string("-"),
+          to_string(best), t.count(BroadPhase::automatic) ? t[BroadPhase::automatic].seconds / best_s : 0.0,
+          1e9 * per_contact, vs_uniform, vs_uniform_per_contact);
+      out.flush();
+      progress.update(++done);
+    }
+  }
+}
+
+}  // namespace cg

@@ -1,0 +1,392 @@
+// The broad phases (EngineOptions::broad_phase: grid, levels, sweep, brute; kernels/broad_phase.hpp)
+// give the same contacts bit for bit — and, with the sphere tests of the default filters, the same
+// candidates — on every scene kind (generated: uniform, log-uniform 1:1000, bimodal 1:10 and 1:100,
+// intruders 1:100; adversarial: clusters, one cell, cell boundaries, coincident and exactly tangent
+// centres; shapes: mixed spheres and ellipsoids, ellipsoids alone with the centre cut), in every
+// precision mode (fp32, fp64, mixed), with a report mask and with a skin, on both backends (CUDA
+// cases skip visibly without a GPU). The grid is the reference here; its own oracle is the exact
+// reference of test_engine.cpp, and the brute broad phase shares none of its cell logic.
+// Also: the levels' plan, the sweep's sortable keys, and the rule of `auto`.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "backends.hpp"
+#include "broad_phase.hpp"
+#include "core/contact.hpp"
+#include "engine.hpp"
+#include "scene/generate.hpp"
+#include "scenes.hpp"
+#include "support/contacts_equal.hpp"
+
+namespace cg::test {
+namespace {
+
+constexpr BroadPhase kOthers[] = {BroadPhase::levels, BroadPhase::sweep, BroadPhase::brute};
+constexpr Precision kModes[] = {Precision::fp32, Precision::fp64, Precision::mixed};
+
+// A scene of any kind: spheres, or bodies with shape rows.
+struct TestScene {
+  std::string name;
+  std::vector<Vec3<double>> p;
+  std::vector<double> r;
+  std::vector<Shape> shape;
+  std::vector<Vec3<double>> axes;
+  std::vector<Quat<double>> q;
+  std::vector<std::uint8_t> report;
+  BodiesView view() const {
+    BodiesView v{p, r, {}, report};
+    v.shape = shape;
+    v.semi_axes = axes;
+    v.orientation = q;
+    return v;
+  }
+};
+
+TestScene from(const Spheres& s) { return {s.name, s.p, s.r, {}, {}, {}, {}}; }
+TestScene from(const ShapeScene& s) { return {s.name, s.p, s.r, s.shape, s.axes, s.q, {}}; }
+
+TestScene generated(const std::string& kind, std::uint64_t n, double r_low, double r_high, std::uint64_t seed,
+                    std::uint64_t intruders = 3) {
+  GenerateOptions o;
+  o.kind = kind;
+  o.count = n;
+  o.seed = seed;
+  o.radius_low = r_low;
+  o.radius_high = r_high;
+  o.intruders = intruders;
+  const Scene g = generate_scene(o);
+  TestScene s;
+  s.name = kind + " 1:" + std::to_string(int(std::lround(r_high / r_low)));
+  s.p.assign(g.sphere_position.begin(), g.sphere_position.end());
+  s.r.assign(g.sphere_radius.begin(), g.sphere_radius.end());
+  return s;
+}
+
+std::vector<TestScene> scenes(std::uint64_t seed) {
+  std::vector<TestScene> s;
+  s.push_back(generated("uniform", 3000, 0.5, 1, seed));
+  s.push_back(generated("polydisperse", 3000, 0.001, 1, seed + 1));
+  s.push_back(generated("bimodal", 3000, 0.1, 1, seed + 2));
+  s.push_back(generated("bimodal", 4000, 0.01, 1, seed + 3));
+  s.push_back(generated("intruders", 4000, 0.01, 1, seed + 4));
+  s.push_back(from(clustered(1500, seed + 5)));
+  s.push_back(from(one_cell(200, seed + 6)));
+  s.push_back(from(on_boundaries(seed + 7)));
+  s.push_back(from(coincident(seed + 8)));
+  s.push_back(from(tangent(seed + 9)));
+  s.push_back(from(random_spheres(2000, 0.01, 2.0, seed + 10, true).translated({1e5, -3e4, 7})));
+  s.push_back(from(make_scene("mixed shapes", std::uint32_t(seed + 11), 500, 0.5, 12)));
+  s.push_back(from(make_scene("ellipsoids (centre cut)", std::uint32_t(seed + 12), 500, 1.0, 12)));
+  return s;
+}
+
+struct Run {
+  Contacts<double> contacts;   // fp64, mixed
+  Contacts<float> contacts32;  // fp32
+  EngineStats stats;
+};
+
+template <Backend B>
+Run detect(const TestScene& s, Precision mode, BroadPhase bp, double skin = 0) {
+  EngineOptions o;
+  o.backend = B;
+  o.fields = Fields::full;
+  o.broad_phase = bp;
+  o.fp32_broad_phase = mode == Precision::mixed;
+  o.skin = skin;
+  Run run;
+  if (mode == Precision::fp32) {
+    Engine<float> e(o);
+    run.contacts32 = e.detect(s.view());
+    run.stats = e.stats();
+  } else {
+    Engine<double> e(o);
+    run.contacts = e.detect(s.view());
+    run.stats = e.stats();
+  }
+  return run;
+}
+
+std::string same(const Run& got, const Run& want) {
+  const std::string a = compare_contacts(got.contacts, want.contacts);
+  const std::string b = compare_contacts(got.contacts32, want.contacts32);
+  return a != "identical" ? a : b;
+}
+
+template <class T>
+class BroadPhaseTest : public ::testing::Test {};
+TYPED_TEST_SUITE(BroadPhaseTest, BackendTypes, BackendTypeNames);
+
+// Every scene, every mode, every broad phase: the grid's contacts, bit for bit; the sphere filters'
+// candidates too (the centre cut's grid takes the shapes' boxes: there only the contacts agree).
+TYPED_TEST(BroadPhaseTest, EveryBroadPhaseGivesTheGridsContacts) {
+  CG_SKIP_WITHOUT_BACKEND(TypeParam);
+  constexpr Backend B = TypeParam::backend;
+  for (const TestScene& s : scenes(101))
+    for (Precision mode : kModes) {
+      const Run grid = detect<B>(s, mode, BroadPhase::grid);
+      ASSERT_EQ(grid.stats.broad_phase, BroadPhase::grid);
+      ASSERT_GT(grid.stats.contacts, 0u) << s.name;
+      const bool centre_cut = 5 * grid.stats.ellipsoids >= 4 * grid.stats.bodies;
+      for (BroadPhase bp : kOthers) {
+        const Run other = detect<B>(s, mode, bp);
+        SCOPED_TRACE(s.name + ", " + to_string(mode) + ", " + to_string(bp));
+        EXPECT_EQ(other.stats.broad_phase, bp);
+        EXPECT_EQ(same(other, grid), "identical");
+        if (!centre_cut) {
+          EXPECT_EQ(other.stats.candidates, grid.stats.candidates);
+        }
+        EXPECT_EQ(other.stats.narrow_fallbacks, grid.stats.narrow_fallbacks);
+        EXPECT_EQ(other.stats.fp64_rows, grid.stats.fp64_rows);
+      }
+    }
+}
+
+// A report mask (a rank's owned bodies and ghosts): the same reported pairs whichever broad phase.
+TYPED_TEST(BroadPhaseTest, ReportMaskIsObeyed) {
+  CG_SKIP_WITHOUT_BACKEND(TypeParam);
+  constexpr Backend B = TypeParam::backend;
+  std::vector<TestScene> all = scenes(202);
+  for (std::size_t k : {std::size_t(2), std::size_t(4), std::size_t(11)}) {
+    TestScene s = all[k];
+    s.report.resize(s.r.size());
+    for (std::size_t i = 0; i < s.r.size(); ++i)
+      s.report[i] =
+          static_cast<std::uint8_t>(((i % 3) != 0 ? kReportedBit : 0) | (i % 5 < 2 ? kPairedBit : 0));
+    for (Precision mode : kModes) {
+      const Run grid = detect<B>(s, mode, BroadPhase::grid);
+      for (BroadPhase bp : kOthers) {
+        SCOPED_TRACE(s.name + " (mask), " + to_string(mode) + ", " + to_string(bp));
+        EXPECT_EQ(same(detect<B>(s, mode, bp), grid), "identical");
+      }
+    }
+  }
+}
+
+// The wide bit (bodies.hpp): of a wide and a narrow body, the narrow one's report flag decides; of
+// two alike, the smaller id's (and never two paired bodies). Every broad phase, every mode, against
+// the rule applied to all the contacts.
+TYPED_TEST(BroadPhaseTest, WideBitsGiveThePairToTheNarrowBody) {
+  CG_SKIP_WITHOUT_BACKEND(TypeParam);
+  constexpr Backend B = TypeParam::backend;
+  TestScene s = generated("intruders", 3000, 0.01, 1, 404, 12);
+  std::mt19937_64 rng(404);
+  s.report.resize(s.r.size());
+  for (std::size_t i = 0; i < s.r.size(); ++i)
+    s.report[i] =
+        static_cast<std::uint8_t>((rng() % 3 != 0 ? kReportedBit : 0) | (rng() % 7 == 0 ? kPairedBit : 0) |
+                                  (s.r[i] > 0.5 ? kWideBit : 0));
+  TestScene plain = s;
+  plain.report.clear();
+  for (Precision mode : kModes) {
+    const Run all = detect<B>(plain, mode, BroadPhase::grid);
+    const auto& ia = mode == Precision::fp32 ? all.contacts32.id_a : all.contacts.id_a;
+    const auto& ib = mode == Precision::fp32 ? all.contacts32.id_b : all.contacts.id_b;
+    std::vector<std::pair<std::int64_t, std::int64_t>> want;
+    std::size_t by_narrow = 0;
+    for (std::size_t k = 0; k < ia.size(); ++k) {
+      const std::uint8_t ra = s.report[std::size_t(ia[k])], rb = s.report[std::size_t(ib[k])];
+      const bool wa = ra & kWideBit, wb = rb & kWideBit;
+      const std::uint8_t anchor = wa != wb ? (wa ? rb : ra) : ra;
+      if (!(anchor & kReportedBit) || ((ra & kPairedBit) && (rb & kPairedBit))) continue;
+      by_narrow += wa && !wb;
+      want.emplace_back(ia[k], ib[k]);
+    }
+    ASSERT_GT(by_narrow, 100u) << "the scene exercises the rule";
+    for (BroadPhase bp : {BroadPhase::grid, BroadPhase::levels, BroadPhase::sweep, BroadPhase::brute}) {
+      SCOPED_TRACE(std::string(to_string(mode)) + ", " + to_string(bp));
+      const Run got = detect<B>(s, mode, bp);
+      const auto& ga = mode == Precision::fp32 ? got.contacts32.id_a : got.contacts.id_a;
+      const auto& gb = mode == Precision::fp32 ? got.contacts32.id_b : got.contacts.id_b;
+      std::vector<std::pair<std::int64_t, std::int64_t>> have;
+      for (std::size_t k = 0; k < ga.size(); ++k) have.emplace_back(ga[k], gb[k]);
+      EXPECT_EQ(have, want);
+    }
+  }
+}
+
+// A skin: the inflated spheres make the candidates, the contacts stay a skin-0 detection's.
+TYPED_TEST(BroadPhaseTest, SkinKeepsTheContacts) {
+  CG_SKIP_WITHOUT_BACKEND(TypeParam);
+  constexpr Backend B = TypeParam::backend;
+  std::vector<TestScene> all = scenes(303);
+  for (std::size_t k : {std::size_t(3), std::size_t(4), std::size_t(12)})
+    for (Precision mode : kModes) {
+      const Run grid = detect<B>(all[k], mode, BroadPhase::grid, 0.05);
+      EXPECT_EQ(same(grid, detect<B>(all[k], mode, BroadPhase::grid)), "identical");
+      for (BroadPhase bp : kOthers) {
+        SCOPED_TRACE(all[k].name + " (skin), " + to_string(mode) + ", " + to_string(bp));
+        const Run other = detect<B>(all[k], mode, bp, 0.05);
+        EXPECT_EQ(same(other, grid), "identical");
+        EXPECT_EQ(other.stats.candidates, grid.stats.candidates);
+      }
+    }
+}
+
+// A large body reaches every level: the levels of 1:1000 sizes, and the pairs across them.
+TYPED_TEST(BroadPhaseTest, LevelsSpanTheSizes) {
+  CG_SKIP_WITHOUT_BACKEND(TypeParam);
+  constexpr Backend B = TypeParam::backend;
+  const TestScene s = generated("polydisperse", 3000, 0.001, 1, 7);
+  const Run levels = detect<B>(s, Precision::fp64, BroadPhase::levels);
+  EXPECT_EQ(levels.stats.levels, 10);  // tops 0.002 … 0.512, then the rest
+  const Run one = detect<B>(generated("uniform", 2000, 0.5, 1, 8), Precision::fp64, BroadPhase::levels);
+  EXPECT_EQ(one.stats.levels, 1);  // radii within a factor 2: one level, the grid itself
+  // three bodies of r = 1 among grains of r = 0.01: the grid's one cell holds every grain, the
+  // levels test a few pairs per grain
+  const TestScene in = generated("intruders", 3000, 0.01, 1, 9);
+  const Run grid = detect<B>(in, Precision::fp64, BroadPhase::grid),
+            lv = detect<B>(in, Precision::fp64, BroadPhase::levels);
+  EXPECT_EQ(lv.stats.levels, 7);
+  EXPECT_LT(lv.stats.pair_tests * 100, grid.stats.pair_tests);
+}
+
+TYPED_TEST(BroadPhaseTest, AutoPicksByTheRadii) {
+  CG_SKIP_WITHOUT_BACKEND(TypeParam);
+  constexpr Backend B = TypeParam::backend;
+  EXPECT_EQ(detect<B>(generated("uniform", 3000, 0.5, 1, 9), Precision::fp64, BroadPhase::automatic)
+                .stats.broad_phase,
+            BroadPhase::grid);
+  EXPECT_EQ(detect<B>(generated("intruders", 3000, 0.01, 1, 9), Precision::fp64, BroadPhase::automatic)
+                .stats.broad_phase,
+            BroadPhase::levels);
+  EXPECT_EQ(detect<B>(generated("uniform", 20, 0.5, 1, 9), Precision::fp64, BroadPhase::automatic)
+                .stats.broad_phase,
+            BroadPhase::brute);
+  // radii log-uniform over 1:1000 at the generator's density: cells of edge 2·r_max hold a few bodies
+  EXPECT_EQ(detect<B>(generated("polydisperse", 3000, 0.001, 1, 9), Precision::fp64, BroadPhase::automatic)
+                .stats.broad_phase,
+            BroadPhase::grid);
+}
+
+// ---- plans and keys ---------------------------------------------------------------------------------
+
+Bounds bounds_of(double r_min, double r_max, double extent, std::uint64_t n = 1000) {
+  Bounds b;
+  b.lo = {0, 0, 0};
+  b.hi = {extent, extent, extent};
+  b.r_min = r_min;
+  b.r_max = r_max;
+  b.count = n;
+  b.r_sum[0] = double(n) * r_min;
+  return b;
+}
+
+TEST(LevelsPlan, TopsDoubleAndCellsCoverThem) {
+  const Bounds b = bounds_of(0.01, 1, 50);
+  const Frame f = make_frame(b, 0, Precision::fp64, CellChoice::smallest);
+  const LevelsPlan plan = plan_levels(b, f, Precision::fp64, 0);
+  ASSERT_EQ(plan.count, 7);  // 0.02, 0.04, …, 0.64, then the rest
+  for (int l = 0; l + 1 < plan.count; ++l) {
+    EXPECT_DOUBLE_EQ(plan.top[l], 0.01 * std::pow(2.0, l + 1));
+    EXPECT_GE(plan.grid[l].frame.cell_size, 2 * plan.top[l]);
+    EXPECT_LT(plan.grid[l].frame.cell_size, 2.01 * plan.top[l]);
+    EXPECT_EQ(plan.grid[l].half_bits, plan.half_bits);
+  }
+  EXPECT_TRUE(std::isinf(plan.top[plan.count - 1]));
+  EXPECT_EQ(plan.grid[plan.count - 1].frame.cell_size, f.cell_size);
+  EXPECT_EQ(plan.key_bits, plan.half_bits + 3 + 3);
+  const LevelParams<float> lp = level_params<float>(plan, 0);
+  EXPECT_EQ(level_of(0.01f, lp), 0);
+  EXPECT_EQ(level_of(0.03f, lp), 1);
+  EXPECT_EQ(level_of(0.5f, lp), 5);
+  EXPECT_EQ(level_of(0.7f, lp), 6);
+  EXPECT_EQ(level_of(1.0f, lp), 6);
+}
+
+TEST(LevelsPlan, SpreadBeyondTheLevelsWidensTheRatio) {
+  const Bounds b = bounds_of(1e-6, 1, 10);
+  const LevelsPlan plan = plan_levels(b, make_frame(b, 0, Precision::fp64), Precision::fp64, 0);
+  EXPECT_LE(plan.count, kMaxLevels);
+  EXPECT_GE(plan.count, kMaxLevels - 3);     // (the finest cannot be keyed in 63 bits: merged)
+  EXPECT_GT(plan.top[plan.count - 2], 0.3);  // the last finite top reaches the largest radii
+  EXPECT_LE(plan.key_bits, 63);
+}
+
+TEST(LevelsPlan, FinestLevelsMergeWhenTheirGridsCannotBeKeyed) {
+  // fp64: 1e-4 bodies across 1e6 would need 5·10^9 cells per axis (more than 2^31), and any grid
+  // finer than 2^20 super-cells per axis more than 63 key bits with the levels' own
+  const Bounds b = bounds_of(1e-4, 1, 1e6);
+  const LevelsPlan plan = plan_levels(b, make_frame(b, 0, Precision::fp64), Precision::fp64, 0);
+  ASSERT_GE(plan.count, 1);
+  EXPECT_LE(plan.count, 3);
+  EXPECT_GT(plan.top[0], 0.1);  // the smallest bodies in a coarser level
+  EXPECT_LE(plan.key_bits, 63);
+  for (int l = 0; l < plan.count; ++l) EXPECT_LT(double(plan.grid[l].dims[0]), double(1u << 31)) << l;
+}
+
+TEST(LevelsPlan, LevelsOfOneCellEdgeMerge) {
+  // fp32 far from the origin: the coordinates' rounding margin (16·ε32·1e4 = 0.019) sets the smallest
+  // cells, so the finest tops share one edge: one level of them
+  const Bounds b = bounds_of(0.001, 1, 1e4);
+  const LevelsPlan plan = plan_levels(b, make_frame(b, 0, Precision::fp32), Precision::fp32, 0);
+  ASSERT_GE(plan.count, 2);
+  EXPECT_LT(plan.count, 10);
+  for (int l = 0; l + 1 < plan.count; ++l)
+    EXPECT_LE(plan.grid[l].frame.cell_size, 0.75 * plan.grid[l + 1].frame.cell_size) << l;
+}
+
+TEST(SweepKeys, OrderAsTheValues) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1e6, 1e6);
+  std::vector<double> v{
+      0.0, -0.0, 1e-300, -1e-300, std::numeric_limits<double>::max(), -std::numeric_limits<double>::max()};
+  for (int i = 0; i < 1000; ++i) v.push_back(u(rng));
+  for (double a : v)
+    for (double b : {v[0], v[3], v[7], v[100]}) {
+      if (a < b) {
+        EXPECT_LT(orderable_bits(a), orderable_bits(b));
+      }
+      if (float(a) < float(b)) {
+        EXPECT_LT(orderable_bits(float(a)), orderable_bits(float(b)));
+      }
+    }
+}
+
+TEST(BoxRadius, EverySphereTestPairHasOverlappingBoxes) {
+  // pairs at the sphere test's rounding edge along one axis: accepted ones overlap as boxes
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<float> u(-1000, 1000), ur(0.001f, 2);
+  int accepted = 0;
+  for (int i = 0; i < 200000; ++i) {
+    const float x = u(rng), ra = ur(rng), rb = ur(rng);
+    float y = x + (ra + rb);
+    for (int step = 0; step < int(rng() % 4); ++step) y = std::nextafter(y, 1e30f);
+    const Sphere<float> a{x, 0, 0, ra}, b{y, 0, 0, rb};
+    if (!spheres_touch(a, b)) continue;
+    ++accepted;
+    EXPECT_TRUE(boxes_overlap(a, b)) << x << " " << y << " " << ra << " " << rb;
+  }
+  EXPECT_GT(accepted, 1000);
+}
+
+TEST(AutoBroadPhase, Rule) {
+  EXPECT_EQ(choose_broad_phase(bounds_of(0.5, 1, 100, 20), Precision::fp64), BroadPhase::brute);
+  Bounds uniform = bounds_of(0.5, 1, 100, 100000);
+  uniform.r_sum[0] = 0.75 * 100000;
+  EXPECT_EQ(choose_broad_phase(uniform, Precision::fp64), BroadPhase::grid);
+  // one r = 1 among 10^5 grains of r = 0.01 in a cube of edge 3.2: a cell of the grid (edge 2) holds
+  // 2.4·10^4 grains
+  Bounds intruder = bounds_of(0.01, 1, 3.2, 100000);
+  intruder.r_sum[0] = 0.01 * 99999 + 1;
+  EXPECT_NEAR(grid_occupancy(intruder), 100000 * 8.0 / (3.2 * 3.2 * 3.2), 1e-6);
+  EXPECT_EQ(choose_broad_phase(intruder, Precision::fp64), BroadPhase::levels);
+  // the same radii spread over a cube of edge 100: cells of edge 2 hold one body in a hundred, the
+  // grid stays cheap and the levels' lookups would cost more
+  Bounds sparse = bounds_of(0.01, 1, 100, 100000);
+  sparse.r_sum[0] = 0.01 * 99999 + 1;
+  EXPECT_LT(grid_occupancy(sparse), 1.0);
+  EXPECT_EQ(choose_broad_phase(sparse, Precision::fp64), BroadPhase::grid);
+  // a flat scene: the extents are at least the cell
+  Bounds flat = bounds_of(0.01, 1, 100, 100000);
+  flat.hi.z = 0;
+  EXPECT_NEAR(grid_occupancy(flat), 100000 * 8.0 / (100 * 100 * 2), 1e-9);
+}
+
+}  // namespace
+}  // namespace cg::test
