@@ -200,9 +200,9 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
   const HostTransfer how = download_transfer(r.tuning);
   if (how == HostTransfer::streamed && np > 0) {
     const auto t0 = clock_type::now();
-    out.resize(np, full);
+    out.resize(np, set);
     std::vector<HostDevice> ranges;
-    for_each_field(out, cp, full, [&](auto& vec, const void* d_ptr) {
+    for_each_field(out, cp, set, [&](auto& vec, const void* d_ptr) {
       ranges.push_back({reinterpret_cast<std::byte*>(vec.data()),
                         static_cast<std::byte*>(const_cast<void*>(d_ptr)), vec.size() * sizeof(vec[0])});
     });
