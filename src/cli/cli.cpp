@@ -263,9 +263,9 @@ Subcommand add_detect(CLI::App& app) {
        "auto | grid (Le Grand's uniform grid) | levels (a grid per size class: any size "
        "distribution) | sweep (Baraff's sort and sweep) | brute (every pair): auto picks brute for "
        "a few dozen bodies, levels where the largest radius exceeds 4x the mean and the grid's cells "
-       "would be crowded, else grid; the "
+       "would be crowded (the grid on the CUDA backend), else grid; the "
        "contacts are the same bits whichever runs")
-      ->transform(CLI::CheckedTransformer(k_broad_phases))
+      ->transform(enum_names(k_broad_phases))
       ->default_str("auto");
   d->add_option("--solver-tolerance", det.solver_tolerance,
                 "Ellipsoid solver: Newton stops when the tangential gradient is <= this x the pair's size "

@@ -29,6 +29,15 @@ namespace {
 constexpr BroadPhase kOthers[] = {BroadPhase::levels, BroadPhase::sweep, BroadPhase::brute};
 constexpr Precision kModes[] = {Precision::fp32, Precision::fp64, Precision::mixed};
 
+// The CUDA backend refuses levels (engine.cpp: it misses pairs on radius spreads of 1:1000 on the
+// H100) and auto takes the grid there: true, after checking the refusal, where bp is not run on B.
+template <Backend B>
+bool refused(BroadPhase bp) {
+  if (B != Backend::cuda || bp != BroadPhase::levels) return false;
+  EXPECT_THROW(Engine<double>({.backend = B, .broad_phase = bp}), UsageError);
+  return true;
+}
+
 // A scene of any kind: spheres, or bodies with shape rows.
 struct TestScene {
   std::string name;
@@ -134,6 +143,7 @@ TYPED_TEST(BroadPhaseTest, EveryBroadPhaseGivesTheGridsContacts) {
       ASSERT_GT(grid.stats.contacts, 0u) << s.name;
       const bool centre_cut = 5 * grid.stats.ellipsoids >= 4 * grid.stats.bodies;
       for (BroadPhase bp : kOthers) {
+        if (refused<B>(bp)) continue;
         const Run other = detect<B>(s, mode, bp);
         SCOPED_TRACE(s.name + ", " + to_string(mode) + ", " + to_string(bp));
         EXPECT_EQ(other.stats.broad_phase, bp);
@@ -161,6 +171,7 @@ TYPED_TEST(BroadPhaseTest, ReportMaskIsObeyed) {
     for (Precision mode : kModes) {
       const Run grid = detect<B>(s, mode, BroadPhase::grid);
       for (BroadPhase bp : kOthers) {
+        if (refused<B>(bp)) continue;
         SCOPED_TRACE(s.name + " (mask), " + to_string(mode) + ", " + to_string(bp));
         EXPECT_EQ(same(detect<B>(s, mode, bp), grid), "identical");
       }
@@ -199,6 +210,7 @@ TYPED_TEST(BroadPhaseTest, WideBitsGiveThePairToTheNarrowBody) {
     }
     ASSERT_GT(by_narrow, 100u) << "the scene exercises the rule";
     for (BroadPhase bp : {BroadPhase::grid, BroadPhase::levels, BroadPhase::sweep, BroadPhase::brute}) {
+      if (refused<B>(bp)) continue;
       SCOPED_TRACE(std::string(to_string(mode)) + ", " + to_string(bp));
       const Run got = detect<B>(s, mode, bp);
       const auto& ga = mode == Precision::fp32 ? got.contacts32.id_a : got.contacts.id_a;
@@ -220,6 +232,7 @@ TYPED_TEST(BroadPhaseTest, SkinKeepsTheContacts) {
       const Run grid = detect<B>(all[k], mode, BroadPhase::grid, 0.05);
       EXPECT_EQ(same(grid, detect<B>(all[k], mode, BroadPhase::grid)), "identical");
       for (BroadPhase bp : kOthers) {
+        if (refused<B>(bp)) continue;
         SCOPED_TRACE(all[k].name + " (skin), " + to_string(mode) + ", " + to_string(bp));
         const Run other = detect<B>(all[k], mode, bp, 0.05);
         EXPECT_EQ(same(other, grid), "identical");
@@ -232,6 +245,7 @@ TYPED_TEST(BroadPhaseTest, SkinKeepsTheContacts) {
 TYPED_TEST(BroadPhaseTest, LevelsSpanTheSizes) {
   CG_SKIP_WITHOUT_BACKEND(TypeParam);
   constexpr Backend B = TypeParam::backend;
+  if (refused<B>(BroadPhase::levels)) return;
   const TestScene s = generated("polydisperse", 3000, 0.001, 1, 7);
   const Run levels = detect<B>(s, Precision::fp64, BroadPhase::levels);
   EXPECT_EQ(levels.stats.levels, 10);  // tops 0.002 … 0.512, then the rest
@@ -254,7 +268,7 @@ TYPED_TEST(BroadPhaseTest, AutoPicksByTheRadii) {
             BroadPhase::grid);
   EXPECT_EQ(detect<B>(generated("intruders", 3000, 0.01, 1, 9), Precision::fp64, BroadPhase::automatic)
                 .stats.broad_phase,
-            BroadPhase::levels);
+            B == Backend::cuda ? BroadPhase::grid : BroadPhase::levels);
   EXPECT_EQ(detect<B>(generated("uniform", 20, 0.5, 1, 9), Precision::fp64, BroadPhase::automatic)
                 .stats.broad_phase,
             BroadPhase::brute);
