@@ -11,7 +11,7 @@
 # check (the last lines of the output); each step runs whatever an earlier one did.
 set -u
 cd "$(dirname "$0")/.."
-[ -f .devrt/env.sh ] && source .devrt/env.sh
+[ -f .devrt/env.sh ] && source .devrt/env.sh .devrt  # (its argument: else it takes this script's)
 BIN=${BIN:-.devbin}; OUT=${OUT:-/tmp/out}
 mkdir -p "$OUT"; W=${WORK:-/tmp/cgbroad}; mkdir -p "$W"
 CG="$BIN/contactgrid"

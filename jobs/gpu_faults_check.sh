@@ -8,7 +8,7 @@
 # Prints PASS/FAIL per check; exits non-zero naming the failed checks.
 set -u
 BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}; mkdir -p "$OUT"; W=${WORK:-/tmp/cgfaults}; mkdir -p "$W"
-[ -f .devrt/env.sh ] && source .devrt/env.sh
+[ -f .devrt/env.sh ] && source .devrt/env.sh .devrt  # (its argument: else it takes this script's)
 CG="$BIN/contactgrid"
 failed=()
 check() {  # check NAME CONDITION...

@@ -14,7 +14,7 @@
 # present, supplies the runtime libraries.)
 set -u
 cd "$(dirname "$0")/.."
-[ -f .devrt/env.sh ] && source .devrt/env.sh
+[ -f .devrt/env.sh ] && source .devrt/env.sh .devrt  # (its argument: else it takes this script's)
 BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}; mkdir -p "$OUT"; W=${WORK:-/tmp/cgsim}; mkdir -p "$W"
 CG="$BIN/contactgrid"
 failed=()

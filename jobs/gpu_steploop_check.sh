@@ -22,7 +22,7 @@ set -u
 MODE=${1:-one}
 BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}; W=${WORK:-/tmp/cgwork}
 mkdir -p "$OUT" "$W"
-[ -f .devrt/env.sh ] && source .devrt/env.sh
+[ -f .devrt/env.sh ] && source .devrt/env.sh .devrt  # (its argument: else it takes this script's)
 CG="$BIN/contactgrid"
 BACKEND=${BACKEND:-cuda}; SCALE=${SCALE:-0}
 N24=$((16777216 >> SCALE)); N26=$((67108864 >> SCALE))

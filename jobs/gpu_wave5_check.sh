@@ -12,7 +12,7 @@
 # script that failed.
 set -u
 cd "$(dirname "$0")/.."
-[ -f .devrt/env.sh ] && source .devrt/env.sh >/dev/null 2>&1
+[ -f .devrt/env.sh ] && source .devrt/env.sh .devrt >/dev/null 2>&1
 BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}
 export BIN
 failed=()
@@ -23,6 +23,7 @@ part() {  # part NAME COMMAND...: OUT=$OUT/NAME for the command; its output kept
   mkdir -p "$OUT/$name"
   OUT="$OUT/$name" "$@" >"$OUT/$name.log" 2>&1 || failed+=("$name")
   tail -25 "$OUT/$name.log"
+  tar czf "$OUT/$name.tgz" -C "$OUT" "$name" && rm -rf "${OUT:?}/$name"  # one file: the device returns few
 }
 unit() {
   "$BIN/contactgrid_tests" >"$OUT/unit_tests.log" 2>&1
