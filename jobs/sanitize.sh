@@ -17,6 +17,7 @@ cmake --build "$BUILD_DIR" -j "$(nproc)" --target contactgrid contactgrid_tests
 # std::bad_alloc (exit 7), as without the sanitizer
 export ASAN_OPTIONS=detect_leaks=1:allocator_may_return_null=1:abort_on_error=0:strict_string_checks=1
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+export LSAN_OPTIONS=suppressions=$PWD/tests/sanitize/lsan.supp
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
 ctest --test-dir "$BUILD_DIR" -L unit -E 'DyingRanks' --output-on-failure -j "$(nproc)" "$@"
 tests/fuzz/replay_corpus.sh
