@@ -45,22 +45,6 @@ struct OrientedRecord {
   Quat<double> orientation;
 };
 
-// Bodies with room for n rows (shape rows and state as `like`'s).
-StepBodies sized_like(const StepBodies& like, std::size_t n, bool shapes) {
-  StepBodies b;
-  b.position = HostVector<Vec3<double>>(n);
-  b.radius = HostVector<double>(n);
-  b.id = HostVector<std::int64_t>(n);
-  if (shapes) {
-    b.shapes.shape = HostVector<Shape>(n);
-    b.shapes.semi_axes = HostVector<Vec3<double>>(n);
-    b.shapes.orientation = HostVector<Quat<double>>(n);
-  }
-  b.state_bytes = like.state_bytes;
-  b.state = HostVector<std::byte>(n * like.state_bytes);
-  return b;
-}
-
 }  // namespace
 
 const char* to_string(StepStage stage) {
@@ -331,8 +315,8 @@ void StepLoop<Real>::migrate() {
     std::iota(arrival.begin(), arrival.end(), std::size_t(0));
     std::sort(arrival.begin(), arrival.end(),
               [&](std::size_t x, std::size_t y) { return got[x].id < got[y].id; });
-    StepBodies next =
-        sized_like(b, stay.size() + got.size(), s.shapes && (!b.shapes.empty() || !got_shapes.empty()));
+    StepBodies next = sized_step_bodies(
+        stay.size() + got.size(), s.shapes && (!b.shapes.empty() || !got_shapes.empty()), b.state_bytes);
     const bool with_shapes = !next.shapes.empty();
     std::size_t i = 0, j = 0;
     for (std::size_t row = 0; row < next.size(); ++row) {
@@ -700,7 +684,7 @@ StepBodies StepLoop<Real>::gather_bodies() {
   const std::uint64_t total = std::accumulate(counts.begin(), counts.end(), std::uint64_t(0));
   StepBodies all;
   agreed_stage(s.session, "steps", [&] {
-    if (root) all = sized_like(StepBodies{}, total, s.shapes);
+    if (root) all = sized_step_bodies(total, s.shapes);
   });
   auto gather = [&](const auto* local, auto* into, int field) {
     using T = std::remove_cv_t<std::remove_pointer_t<decltype(local)>>;
@@ -726,7 +710,7 @@ StepBodies StepLoop<Real>::gather_bodies() {
   std::vector<std::size_t> order(total);
   std::iota(order.begin(), order.end(), std::size_t(0));
   std::sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) { return all.id[x] < all.id[y]; });
-  StepBodies sorted = sized_like(StepBodies{}, total, s.shapes);
+  StepBodies sorted = sized_step_bodies(total, s.shapes);
   for (std::size_t k = 0; k < total; ++k) {
     const std::size_t i = order[k];
     sorted.position[k] = all.position[i];

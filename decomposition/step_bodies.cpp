@@ -7,6 +7,21 @@
 
 namespace cg {
 
+StepBodies sized_step_bodies(std::size_t n, bool shapes, std::size_t state_bytes) {
+  StepBodies b;
+  b.position = HostVector<Vec3<double>>(n);
+  b.radius = HostVector<double>(n);
+  b.id = HostVector<std::int64_t>(n);
+  if (shapes) {
+    b.shapes.shape = HostVector<Shape>(n);
+    b.shapes.semi_axes = HostVector<Vec3<double>>(n);
+    b.shapes.orientation = HostVector<Quat<double>>(n);
+  }
+  b.state_bytes = state_bytes;
+  b.state = HostVector<std::byte>(n * state_bytes);
+  return b;
+}
+
 StepBodies owned_bodies(const EngineInput& in, int threads) {
   const std::size_t n = in.radius.size();
   std::vector<std::size_t> rows;
@@ -15,15 +30,7 @@ StepBodies owned_bodies(const EngineInput& in, int threads) {
     if (in.implied() || (in.report[i] & kReportedBit)) rows.push_back(i);  // owned (ghosts may be wide)
   const bool shapes = !in.shapes.empty();
   const std::size_t m = rows.size();
-  StepBodies b;
-  b.position = HostVector<Vec3<double>>(m);
-  b.radius = HostVector<double>(m);
-  b.id = HostVector<std::int64_t>(m);
-  if (shapes) {
-    b.shapes.shape = HostVector<Shape>(m);
-    b.shapes.semi_axes = HostVector<Vec3<double>>(m);
-    b.shapes.orientation = HostVector<Quat<double>>(m);
-  }
+  StepBodies b = sized_step_bodies(m, shapes);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (std::size_t k = 0; k < m; ++k) {
     const std::size_t i = rows[k];

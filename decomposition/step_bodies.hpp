@@ -29,6 +29,10 @@ struct StepBodies {
   }
 };
 
+// Bodies with room for n rows (left as they are): shape rows when `shapes`, state of `state_bytes`
+// a body.
+StepBodies sized_step_bodies(std::size_t n, bool shapes, std::size_t state_bytes = 0);
+
 // The owned rows (report mask set, or every row when ids are implied) of an engine input.
 StepBodies owned_bodies(const EngineInput& in, int threads);
 
