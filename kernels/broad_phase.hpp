@@ -53,7 +53,7 @@ int sweep_axis(const Bounds& b);
 // bounds (each extent at least 2·r_max). The grid's pair tests grow with it.
 double grid_occupancy(const Bounds& b);
 
-// `auto`: the broad phase for bodies of these bounds (measured: BENCHMARKS.md §16): brute for at most
+// `auto`: the broad phase for bodies of these bounds (measured: BENCHMARKS.md §18): brute for at most
 // kBruteBodies bodies; levels where the largest radius exceeds kLevelsSpread times the mean one and
 // the grid's cells, sized for the largest, would hold more than kOccupancyPerLevel bodies per level
 // of the hierarchy (log2(2·r_max / r_min) levels: each costs every smaller body a lookup); else the

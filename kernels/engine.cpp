@@ -180,6 +180,12 @@ struct Engine<Real>::Impl {
   ~Impl() { detail::destroy(cuda); }
 };
 
+BroadPhase resolved_broad_phase(BroadPhase requested, const Bounds& b, Precision p, Backend backend) {
+  if (requested != BroadPhase::automatic) return requested;
+  const BroadPhase pick = choose_broad_phase(b, p);
+  return pick == BroadPhase::levels && backend == Backend::cuda ? BroadPhase::grid : pick;
+}
+
 template <class Real>
 Engine<Real>::Engine(EngineOptions options) : m_impl(std::make_unique<Impl>()) {
   m_impl->options = options;
@@ -269,9 +275,7 @@ detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> 
                       : make_frame(grid_bounds, 0, prec, options.cell_choice).cell_size;
   detail::DetectJob<Broad, Narrow> job{{}, plan_grid(grid_bounds, f, prec), {}, options.fields};
   job.grid = detail::grid_params<Broad>(job.plan, margin);
-  job.broad =
-      options.broad_phase == BroadPhase::automatic ? choose_broad_phase(b, prec) : options.broad_phase;
-  if (job.broad == BroadPhase::levels && options.backend == Backend::cuda) job.broad = BroadPhase::grid;
+  job.broad = resolved_broad_phase(options.broad_phase, b, prec, options.backend);
   stats.broad_phase = job.broad;
   if (job.broad == BroadPhase::levels) {
     const LevelsPlan levels = plan_levels(b, f, prec, margin + inflation);

@@ -189,11 +189,7 @@ SharedFrame agree_frame(const Session& session, const std::string& path, const B
           {extent, std::abs(component(f.global.hi, k) - o), std::abs(component(f.global.lo, k) - o)});
     }
     f.ghosts = ghost_rule(f.global, extent, std::numeric_limits<Real>::epsilon());
-    f.broad = options.engine.broad_phase == BroadPhase::automatic ? choose_broad_phase(f.global, precision)
-                                                                  : options.engine.broad_phase;
-    if (f.broad == BroadPhase::levels && options.engine.backend == Backend::cuda &&
-        options.engine.broad_phase == BroadPhase::automatic)
-      f.broad = BroadPhase::grid;  // (the engine refuses levels on CUDA: engine.cpp)
+    f.broad = resolved_broad_phase(options.engine.broad_phase, f.global, precision, options.engine.backend);
   });
   return f;
 }
