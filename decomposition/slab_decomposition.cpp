@@ -33,13 +33,17 @@ double ghost_width(double r_max, double extent, double epsilon) {
   return 2.0 * r_max * (1.0 + 16.0 * epsilon) + 16.0 * epsilon * std::abs(extent);
 }
 
-double frame_ghost_width(const Bounds& global, const Vec3<double>& origin, double epsilon, double reach) {
+double frame_extent(const Bounds& global, const Vec3<double>& origin) {
   double extent = 0;
   for (int k = 0; k < 3; ++k) {
     const double o = component(origin, k);
     extent = std::max({extent, std::abs(component(global.hi, k) - o), std::abs(component(global.lo, k) - o)});
   }
-  return ghost_width(global.r_max, extent + reach, epsilon);
+  return extent;
+}
+
+double frame_ghost_width(const Bounds& global, const Vec3<double>& origin, double epsilon, double reach) {
+  return ghost_width(global.r_max, frame_extent(global, origin) + reach, epsilon);
 }
 
 GhostRule GhostRule::uniform(double w) {

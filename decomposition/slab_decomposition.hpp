@@ -48,6 +48,10 @@ double ghost_width(double r_max, double extent, double epsilon);
 // that may still move by reach/2 each, the origin with them).
 double frame_ghost_width(const Bounds& global, const Vec3<double>& origin, double epsilon, double reach = 0);
 
+// The largest distance, along any axis, of the bodies' `global` box from a frame's origin: the
+// `extent` of ghost_width() and ghost_rule().
+double frame_extent(const Bounds& global, const Vec3<double>& origin);
+
 // How far from its centre, along the slab axis, a body must be held (owned or as a ghost) so that
 // every contact is found by one rank: the ghost width of each body. A pair is reported by its
 // anchor's owner (bodies.hpp: the smaller id, or the narrow body of a wide and a narrow one), which

@@ -182,13 +182,8 @@ SharedFrame agree_frame(const Session& session, const std::string& path, const B
     }
     f.axis = choose_axis(f.global, static_cast<int>(options.axis));
     f.width = frame_ghost_width(f.global, f.frame.origin, std::numeric_limits<Real>::epsilon());
-    double extent = 0;  // (frame_ghost_width's: the largest distance of a box from the origin)
-    for (int k = 0; k < 3; ++k) {
-      const double o = component(f.frame.origin, k);
-      extent = std::max(
-          {extent, std::abs(component(f.global.hi, k) - o), std::abs(component(f.global.lo, k) - o)});
-    }
-    f.ghosts = ghost_rule(f.global, extent, std::numeric_limits<Real>::epsilon());
+    f.ghosts =
+        ghost_rule(f.global, frame_extent(f.global, f.frame.origin), std::numeric_limits<Real>::epsilon());
     f.broad = resolved_broad_phase(options.engine.broad_phase, f.global, precision, options.engine.backend);
   });
   return f;
