@@ -221,6 +221,9 @@ int run_simulate(const SimulateCommand& cmd, Session& session) {
   options.synchronized = cmd.synchronized;
   options.engine.backend = cmd.backend;
   options.engine.threads = cmd.threads;
+  // under mpirun, each rank of a node on its own GPU (as detect's ranks)
+  if (cmd.backend != Backend::cpu && session.uses_mpi())
+    options.engine.device = session.device_for(cuda_device_count());
   double r_min = 1e300;
   for (std::size_t i = 0; i < bodies.size(); ++i)
     r_min = std::min(r_min,
