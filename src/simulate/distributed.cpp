@@ -20,6 +20,7 @@
 #include "resident_steps.hpp"
 #include "routing.hpp"
 #include "run/progress.hpp"
+#include "run/stop.hpp"
 #include "session.hpp"
 #include "simulate/run_output.hpp"
 #include "simulate/simulate_plot.hpp"
@@ -684,8 +685,12 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
       cmd.output_every > 0 ? cmd.output_every : std::max<std::uint64_t>(1, cmd.steps / 10);
   const std::uint64_t log_every = cmd.log_every > 0 ? cmd.log_every : std::max<std::uint64_t>(1, every / 10);
   std::optional<RunOutput> out;
+  // rank 0's log says that a run ended by a signal did not finish (src/run/stop.hpp)
+  CleanupAction incomplete;
   agreed_stage(session, "simulate", [&] {
-    if (root) out.emplace(cmd.output, simulate_parameters(cmd, scene, options));
+    if (!root) return;
+    out.emplace(cmd.output, simulate_parameters(cmd, scene, options));
+    incomplete = CleanupAction::append_file(out->path("log.csv"), "# status: failed: stopped by a signal\n");
   });
   try {
     const int threads = options.engine.threads > 0 ? options.engine.threads : omp_get_max_threads();
@@ -755,6 +760,7 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
     const StepStats loop = sim.loop_stats();
     agreed_stage(session, "simulate", [&] {
       if (!root) return;
+      incomplete.release();
       out->finish();
       if (!cmd.quiet) {
         fmt::print(

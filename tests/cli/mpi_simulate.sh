@@ -15,9 +15,9 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_
 "$CG" generate "$W/pell.h5" --kind pour-ellipsoids -n 150 --seed 6 -q
 opts=(--steps 1500 --output-every 500 --log-every 100 --gravity -4 0 -9.81 --restitution 0.3 --friction 0.5
   --rolling-friction 0.05 --write-contacts --backend cpu --threads 1 --no-plot)
-run() {  # SCENE NP TAG; more than one rank: some bodies changed rank
+run() {  # SCENE NP TAG [OPTION...]; more than one rank: some bodies changed rank
   "$MPIEXEC" -np "$2" --oversubscribe --allow-run-as-root "$CG" simulate "$W/$1.h5" -o "$W/$3" "${opts[@]}" \
-    >"$W/$3.out"
+    "${@:4}" >"$W/$3.out"
   local moved
   moved=$(grep -oE 'bodies that changed rank [0-9]+' "$W/$3.out" | grep -oE '[0-9]+$')
   if [ "$2" -gt 1 ] && ! [ "${moved:-0}" -gt 0 ]; then echo "$3: no body changed rank"; exit 1; fi
@@ -71,6 +71,10 @@ assert len(age) > 0 and (age > 5).sum() > 0, "no lasting contacts (no tangential
 print(f"{d}: fell {(z0 - z1).max():.3g}, {len(age)} contacts at the end, {(age > 5).sum()} older than 5 steps")
 PYEOF
 done
+# fp32 detection: the same at 1 and 3 ranks
+run pour 1 pour.fp32.np1 --precision fp32
+run pour 3 pour.fp32.np3 --precision fp32
+same "$W/pour.fp32.np1" "$W/pour.fp32.np3"
 # without mpirun: the one-rank engine path writes the same frames
 "$CG" simulate "$W/pour.h5" -o "$W/pour.plain" "${opts[@]}" -q
 same "$W/pour.np1" "$W/pour.plain" frames
