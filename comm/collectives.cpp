@@ -1,6 +1,8 @@
 // Small collectives over a Session (see collectives.hpp).
 #include "collectives.hpp"
 
+#include <algorithm>
+
 #include "transport.hpp"
 
 namespace cg {
@@ -47,6 +49,17 @@ std::vector<double> allgather_values(const Session& session, const std::vector<d
 
 std::vector<std::uint64_t> allgather_counts(const Session& session, std::uint64_t mine) {
   return detail::Comm(session).allgather<std::uint64_t>(mine);
+}
+
+std::vector<std::byte> alltoallv_bytes(const Session& session, const std::vector<std::byte>& send,
+                                       const std::vector<std::uint64_t>& send_bytes,
+                                       std::vector<std::uint64_t>& recv_bytes) {
+  const detail::Comm comm(session);
+  recv_bytes = comm.alltoall_counts(send_bytes);
+  HostVector<std::byte> out(send.size());
+  std::copy(send.begin(), send.end(), out.data());
+  const HostVector<std::byte> got = comm.alltoallv(std::move(out), send_bytes, recv_bytes);
+  return std::vector<std::byte>(got.data(), got.data() + got.size());
 }
 
 void max_over_ranks(const Session& session, std::vector<double>& values) {

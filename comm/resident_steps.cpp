@@ -177,6 +177,11 @@ const Frame& StepLoop<Real>::frame() const {
 }
 
 template <class Real>
+const ExportPlan& StepLoop<Real>::halo() const {
+  return m->plan.halo;
+}
+
+template <class Real>
 void StepLoop<Real>::update_frame(int step) {
   State& s = *m;
   const auto f0 = WallClock::now();

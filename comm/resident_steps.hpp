@@ -54,6 +54,7 @@
 #include <vector>
 
 #include "engine.hpp"
+#include "routing.hpp"
 #include "session.hpp"
 #include "slab_decomposition.hpp"
 #include "stage_names.hpp"
@@ -128,6 +129,10 @@ class StepLoop {
   StepBodies& bodies();
   const SlabDecomposition& slabs() const;
   const Frame& frame() const;
+  // The halo of the last layout: bodies() rows [offsets[r], offsets[r + 1]) of `rows` go to rank r as
+  // ghosts, each group ascending (a caller's per-body state that the ghosts need travels the same
+  // way: contactgrid simulate's velocities).
+  const ExportPlan& halo() const;
 
   // Collective. InputError naming the first body that this rank does not own.
   void lay_out();

@@ -1,67 +1,125 @@
 #!/usr/bin/env bash
-# Contact identity (#31 §4) and contactgrid simulate (#32) on one GPU, in one call (about 5 minutes):
-#   1. unit cases with their CUDA halves: the history against its brute-force oracle on the device
-#      (Thrust's and the hand-written search), the physics cases on the CUDA backend (restitution,
-#      Hertz, energy, oblique impact, static friction, ellipsoid at rest), CPU = CUDA bit for bit
-#      (library and CLI: frames and contacts with history);
-#   2. the performance of whole steps (contact detection with history + forces + integration) on a
-#      pour at a settled pack's contact count (generate --kind pour --pour-spacing 1.97: six
-#      neighbours each), fp32, CUDA: 2^20 and 2^24 spheres, 2^22 ellipsoids; steps/s from the run's
-#      summary, and the history stage with Thrust's lower_bound and with the hand kernel at 2^20.
-# Prints a compact table; exits non-zero naming every failed check.
-#   BIN=dir-with-the-CUDA-build's-binaries OUT=results-dir jobs/gpu_simulate_check.sh
+# contactgrid simulate (#32) on the GPU, in one call per part (all of them: under 4 minutes on one H100):
+#   unit      the physics cases on the CUDA backend (restitution, Hertz, energy, oblique impact, static
+#             friction, ellipsoid at rest), DemBackends.* (CPU = CUDA bit for bit: library and CLI
+#             frames and contacts with history), the history's device cases
+#   beverloo  the hopper discharge against Beverloo's law (jobs/beverloo.sh: three orifices, the
+#             exponent fitted; 2.5 ± 0.2), CUDA
+#   perf      whole steps (detection with history + forces + integration, no output) on a pour at a
+#             settled pack's contact count (generate --kind pour --pour-spacing 1.97: six neighbours
+#             each), fp32, CUDA: 2^20 and 2^24 spheres; steps/s from log.csv (issue: 1 500 steps/s at
+#             2^20, 2·10^9 sphere-steps/s at 2^24)
+#   mpi2      (a host with 2 GPUs, its own call) simulate under mpirun -np 2 --backend cuda writes the
+#             frames, contacts and energies of -np 1 and of the CPU backend, bit for bit
+# Default: unit beverloo perf. Writes $OUT/simulate_<part>.tar.gz (each part's logs), $OUT/table.md
+# and $OUT/summary.txt; exits non-zero naming every failed check.
+#   BIN=dir-with-the-CUDA-build's-binaries OUT=results-dir jobs/gpu_simulate_check.sh [PART ...]
 # (BIN holds contactgrid and contactgrid_tests; run from the repository root; .devrt/env.sh, when
 # present, supplies the runtime libraries.)
 set -u
 cd "$(dirname "$0")/.."
 [ -f .devrt/env.sh ] && source .devrt/env.sh .devrt  # (its argument: else it takes this script's)
 BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}; mkdir -p "$OUT"; W=${WORK:-/tmp/cgsim}; mkdir -p "$W"
+BIN=$(cd "$BIN" && pwd)
 CG="$BIN/contactgrid"
+parts=("$@"); [ ${#parts[@]} -eq 0 ] && parts=(unit beverloo perf)
 failed=()
-log() { echo "[$(date -u +%H:%M:%S)] $*"; }
+log() { echo "[$(date -u +%H:%M:%S)] $*" | tee -a "$OUT/summary.txt"; }
 { date -u; nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader; git rev-parse --short HEAD 2>/dev/null; } \
   >"$OUT/device.txt" 2>&1
 cat "$OUT/device.txt"
 
-log "1. unit: history, physics on CUDA, CPU = CUDA (library and CLI)"
-filter='EngineHistory*:StepHistory*:HistoryFiles*:DemDamping*:DemPhysics/cuda.*:DemBackends*:SimulateCli*:SimulateWalls*'
-"$BIN/contactgrid_tests" --gtest_filter="$filter" >"$OUT/unit.log" 2>&1 || failed+=("unit tests ($filter)")
-grep -E '^\[  (PASSED|FAILED) |^\[  SKIPPED|^\[       OK \].*(cuda|Cuda|CUDA|Device)' "$OUT/unit.log" | head -40
-if grep -q '^\[  SKIPPED \].*cuda' "$OUT/unit.log"; then failed+=("CUDA cases skipped: no GPU seen by the tests"); fi
-
-log "2. steps/s: pours at a settled pack's contact count, fp32, CUDA"
-bench() {  # name kind count steps rlow spacing [env]
-  local name=$1 kind=$2 n=$3 steps=$4 rlow=$5 spacing=$6 env=${7:-}
-  "$CG" generate "$W/$name.h5" --kind "$kind" -n "$n" --rlow "$rlow" --rhigh 0.005 --pour-spacing "$spacing" --seed 5 -q ||
-    { failed+=("generate $name"); return; }
-  rm -rf "$W/$name.run"
-  if ! env $env "$CG" simulate "$W/$name.h5" -o "$W/$name.run" --steps "$steps" --output-every "$steps" \
-      --log-every $((steps / 6)) --backend cuda --precision fp32 --no-plot >"$OUT/$name.log" 2>&1; then
-    failed+=("simulate $name"); tail -3 "$OUT/$name.log"; return
-  fi
-  # steps/s: log.csv's seconds_per_step (the steps alone, no frame or log writing), the first block
-  # (warm-up) left out; the summary's "last step: C contacts/body; its detection (ms): stage t ..."
-  local sps cpb hist
-  cp "$W/$name.run/log.csv" "$OUT/$name.log.csv"
-  sps=$(awk -F, 'NR > 1 && $1 !~ /^#/ && $7 > 0 { n++; if (n > 1) { s += $7; k++ } } END { if (k) printf "%.1f", k / s }' "$W/$name.run/log.csv")
-  cpb=$(grep -oE '[0-9.]+ contacts/body' "$OUT/$name.log" | head -1 | cut -d' ' -f1)
-  hist=$(grep -oE ' history [0-9.]+' "$OUT/$name.log" | head -1 | awk '{print $2}')
-  printf '| %-22s | %9s | %6s | %8s | %9s | %7s |\n' "$name" "$n" "$steps" "$sps" "$cpb" "${hist:--}" >>"$OUT/table.md"
+part_unit() {
+  local d=$1
+  local filter='DemPhysics/cuda.*:DemBackends*:SimulateCli*:SimulateWalls*:DemDamping*:EngineHistory*:StepHistory*'
+  "$BIN/contactgrid_tests" --gtest_filter="$filter" >"$d/unit.log" 2>&1 || failed+=("unit: $filter")
+  grep -E '^\[  (PASSED|FAILED) |^\[  SKIPPED' "$d/unit.log" | head -30 | tee -a "$OUT/summary.txt"
+  if grep -q '^\[  SKIPPED \].*cuda' "$d/unit.log"; then failed+=("unit: CUDA cases skipped (no GPU seen)"); fi
 }
-printf '| %-22s | %9s | %6s | %8s | %9s | %7s |\n' run bodies steps steps/s contacts/b "hist ms" >"$OUT/table.md"
-echo '|---|---|---|---|---|---|' >>"$OUT/table.md"
-# spheres: radii 4.95-5 mm at spacing 9.85 mm, each pressed on its six neighbours; ellipsoids: semi-axes
-# 3.5-5 mm at spacing 9 mm (contacts where long axes meet: about half a contact per body)
-bench spheres_2e20 pour $((1 << 20)) 300 0.00495 1.97
-bench spheres_2e20_kernel pour $((1 << 20)) 300 0.00495 1.97 CONTACTGRID_CUDA_HISTORY=kernel
-bench ellipsoids_2e22 pour-ellipsoids $((1 << 22)) 60 0.0035 1.8
-bench spheres_2e24 pour $((1 << 24)) 60 0.00495 1.97
-cat "$OUT/table.md"
-for name in spheres_2e20 spheres_2e20_kernel; do
-  [ -f "$OUT/$name.log" ] && grep -q 'backend cuda' "$OUT/$name.log" || failed+=("$name did not run on the CUDA backend")
+
+part_beverloo() {
+  local d=$1
+  BIN="$BIN" OUT="$W/beverloo" BACKEND=cuda jobs/beverloo.sh >"$d/beverloo.log" 2>&1 ||
+    failed+=("beverloo: exponent outside 2.5 ± 0.2, a bed too low, or a run failed (see beverloo.log)")
+  cp "$W/beverloo/beverloo.json" "$d/" 2>/dev/null
+  tail -8 "$d/beverloo.log" | tee -a "$OUT/summary.txt"
+}
+
+part_perf() {
+  local d=$1
+  bench() {  # name count steps
+    local name=$1 n=$2 steps=$3
+    "$CG" generate "$W/$name.h5" --kind pour -n "$n" --rlow 0.00495 --rhigh 0.005 --pour-spacing 1.97 --seed 5 -q ||
+      { failed+=("perf: generate $name"); return; }
+    rm -rf "$W/$name.run"
+    if ! "$CG" simulate "$W/$name.h5" -o "$W/$name.run" --steps "$steps" --output-every "$steps" \
+        --log-every $((steps / 6)) --backend cuda --precision fp32 --no-plot >"$d/$name.log" 2>&1; then
+      failed+=("perf: simulate $name"); tail -3 "$d/$name.log"; return
+    fi
+    grep -q 'backend cuda' "$d/$name.log" || failed+=("perf: $name did not run on the CUDA backend")
+    cp "$W/$name.run/log.csv" "$d/$name.log.csv"
+    # steps/s: log.csv's seconds_per_step (the steps alone), the first block (warm-up) left out
+    local sps cpb
+    sps=$(awk -F, 'NR > 1 && $1 !~ /^#/ && $7 > 0 { n++; if (n > 1) { s += $7; k++ } } END { if (k) printf "%.1f", k / s }' "$W/$name.run/log.csv")
+    cpb=$(grep -oE '[0-9.]+ contacts/body' "$d/$name.log" | head -1 | cut -d' ' -f1)
+    printf '| %-14s | %9s | %6s | %8s | %10.3g | %9s |\n' "$name" "$n" "$steps" "$sps" \
+      "$(awk -v s="$sps" -v n="$n" 'BEGIN { print s * n }')" "$cpb" >>"$OUT/table.md"
+    rm -f "$W/$name.h5"; rm -rf "$W/$name.run"
+  }
+  printf '| %-14s | %9s | %6s | %8s | %10s | %9s |\n' run bodies steps steps/s sphere-st/s contacts/b >"$OUT/table.md"
+  echo '|---|---|---|---|---|---|' >>"$OUT/table.md"
+  bench spheres_2e20 $((1 << 20)) 300
+  bench spheres_2e24 $((1 << 24)) 60
+  cat "$OUT/table.md" | tee -a "$OUT/summary.txt"
+}
+
+part_mpi2() {
+  local d=$1
+  export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+  local gpus; gpus=$(nvidia-smi -L 2>/dev/null | wc -l)
+  [ "$gpus" -ge 2 ] || { failed+=("mpi2: needs 2 GPUs, $gpus seen"); return; }
+  "$CG" generate "$W/m2.h5" --kind pour -n 60000 --seed 5 -q
+  local opts=(--steps 600 --output-every 200 --log-every 100 --gravity -4 0 -9.81 --restitution 0.3 --friction 0.5
+    --write-contacts --no-plot)
+  rm -rf "$W"/m2.*run
+  mpirun -np 2 "$CG" simulate "$W/m2.h5" -o "$W/m2.np2.run" "${opts[@]}" --backend cuda >"$d/np2.log" 2>&1 ||
+    failed+=("mpi2: np 2 cuda run")
+  mpirun -np 1 "$CG" simulate "$W/m2.h5" -o "$W/m2.np1.run" "${opts[@]}" --backend cuda >"$d/np1.log" 2>&1 ||
+    failed+=("mpi2: np 1 cuda run")
+  mpirun -np 1 "$CG" simulate "$W/m2.h5" -o "$W/m2.cpu.run" "${opts[@]}" --backend cpu >"$d/cpu.log" 2>&1 ||
+    failed+=("mpi2: np 1 cpu run")
+  /usr/bin/python3 - "$W/m2.np1.run" "$W/m2.np2.run" "$W/m2.cpu.run" >"$d/compare.log" 2>&1 <<'PYEOF' ||
+import sys, glob, os, h5py
+ref = sys.argv[1]
+def datasets(path):
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda n, o: out.__setitem__(n, o[()].tobytes()) if isinstance(o, h5py.Dataset) else None)
+    return out
+names = sorted(os.path.basename(p) for p in glob.glob(ref + "/*.h5"))
+assert names, "no frames"
+for other in sys.argv[2:]:
+    for n in names:
+        a, b = datasets(os.path.join(ref, n)), datasets(os.path.join(other, n))
+        assert a == b, f"{other}/{n} differs from {ref}/{n}"
+    print(f"{other}: {len(names)} files the same as {ref}")
+PYEOF
+    failed+=("mpi2: frames or contacts differ (compare.log)")
+  cat "$d/compare.log" | tee -a "$OUT/summary.txt"
+  grep -h 'steps/s' "$d"/np*.log | tee -a "$OUT/summary.txt"
+}
+
+for part in "${parts[@]}"; do
+  d="$W/logs_$part"; rm -rf "$d"; mkdir -p "$d"
+  log "part $part"
+  case $part in
+    unit | beverloo | perf | mpi2) "part_$part" "$d" ;;
+    *) failed+=("unknown part $part") ;;
+  esac
+  tar -czf "$OUT/simulate_$part.tar.gz" -C "$W" "logs_$part"
 done
 
 if [ ${#failed[@]} -gt 0 ]; then
-  log "FAILED:"; printf '  - %s\n' "${failed[@]}"; exit 1
+  log "FAILED:"; printf '  - %s\n' "${failed[@]}" | tee -a "$OUT/summary.txt"; exit 1
 fi
 log "all checks passed"

@@ -13,6 +13,7 @@
 #include "run/progress.hpp"
 #include "run/stop.hpp"
 #include "session.hpp"
+#include "simulate/distributed.hpp"
 #include "simulate/run_output.hpp"
 #include "simulate/simulate_plot.hpp"
 
@@ -95,28 +96,7 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
   const std::uint64_t every =
       cmd.output_every > 0 ? cmd.output_every : std::max<std::uint64_t>(1, cmd.steps / 10);
   const std::uint64_t log_every = cmd.log_every > 0 ? cmd.log_every : std::max<std::uint64_t>(1, every / 10);
-  Attributes parameters;
-  parameters["source"] = scene.source;
-  parameters["dt"] = options.dt;
-  parameters["young"] = options.material.young;
-  parameters["poisson"] = options.material.poisson;
-  parameters["density"] = options.material.density;
-  parameters["restitution"] = options.material.restitution;
-  parameters["friction"] = options.material.friction;
-  parameters["rolling_friction"] = options.material.rolling_friction;
-  parameters["gravity_x"] = options.gravity.x;
-  parameters["gravity_y"] = options.gravity.y;
-  parameters["gravity_z"] = options.gravity.z;
-  parameters["integrator"] = std::string(options.synchronized ? "synchronized-verlet" : "verlet");
-  parameters["software_version"] = std::string(CONTACTGRID_VERSION);
-  std::string walls;
-  for (const std::string& w : cmd.walls) walls += (walls.empty() ? "" : ";") + w;
-  if (walls.empty())
-    if (auto it = scene.attributes.find("simulate_walls"); it != scene.attributes.end())
-      if (const auto* t = std::get_if<std::string>(&it->second)) walls = *t;
-  parameters["simulate_walls"] = walls;  // a frame continues the run with its walls
-
-  RunOutput out(cmd.output, parameters);
+  RunOutput out(cmd.output, simulate_parameters(cmd, scene, options));
   // a run ended at once by a signal (src/run/stop.hpp) still says in its log that it did not finish;
   // a stop at a stop point (between blocks of steps) unwinds to out.fail below
   CleanupAction incomplete =
@@ -205,9 +185,32 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
 
 }  // namespace
 
+Attributes simulate_parameters(const SimulateCommand& cmd, const Scene& scene, const DemOptions& options) {
+  Attributes parameters;
+  parameters["source"] = scene.source;
+  parameters["dt"] = options.dt;
+  parameters["young"] = options.material.young;
+  parameters["poisson"] = options.material.poisson;
+  parameters["density"] = options.material.density;
+  parameters["restitution"] = options.material.restitution;
+  parameters["friction"] = options.material.friction;
+  parameters["rolling_friction"] = options.material.rolling_friction;
+  parameters["gravity_x"] = options.gravity.x;
+  parameters["gravity_y"] = options.gravity.y;
+  parameters["gravity_z"] = options.gravity.z;
+  parameters["integrator"] = std::string(options.synchronized ? "synchronized-verlet" : "verlet");
+  parameters["software_version"] = std::string(CONTACTGRID_VERSION);
+  std::string walls;
+  for (const std::string& w : cmd.walls) walls += (walls.empty() ? "" : ";") + w;
+  if (walls.empty())
+    if (auto it = scene.attributes.find("simulate_walls"); it != scene.attributes.end())
+      if (const auto* t = std::get_if<std::string>(&it->second)) walls = *t;
+  parameters["simulate_walls"] = walls;  // a frame continues the run with its walls
+
+  return parameters;
+}
+
 int run_simulate(const SimulateCommand& cmd, Session& session) {
-  if (session.size() > 1)
-    throw UsageError("simulate runs on one rank for now (start it without mpirun, or with -np 1)");
   if (cmd.precision == Precision::mixed) throw UsageError("simulate: --precision is fp32 or fp64");
   const Scene scene = read_scene(cmd.input);
   DemBodies bodies = bodies_of(scene);
@@ -218,6 +221,9 @@ int run_simulate(const SimulateCommand& cmd, Session& session) {
   options.synchronized = cmd.synchronized;
   options.engine.backend = cmd.backend;
   options.engine.threads = cmd.threads;
+  // under mpirun, each rank of a node on its own GPU (as detect's ranks)
+  if (cmd.backend != Backend::cpu && session.uses_mpi())
+    options.engine.device = session.device_for(cuda_device_count());
   double r_min = 1e300;
   for (std::size_t i = 0; i < bodies.size(); ++i)
     r_min = std::min(r_min,
@@ -244,6 +250,8 @@ int run_simulate(const SimulateCommand& cmd, Session& session) {
     options.dt = limits.automatic;
   }
   check_dem_setup(bodies, options);
+  // under mpirun (any rank count, -np 1 too): the slabs of the step loop (distributed.hpp)
+  if (session.uses_mpi()) return run_simulate_distributed(cmd, session, scene, bodies, options, limits);
   if (cmd.precision == Precision::fp32) return simulate_as<float>(cmd, scene, bodies, options, limits);
   return simulate_as<double>(cmd, scene, bodies, options, limits);
 }

@@ -1,6 +1,7 @@
 #pragma once
-// contactgrid simulate: granular dynamics of a scene file on the engine (kernels/dem.hpp), one rank,
-// written to a run directory (docs/FORMAT.md §6: run_output.hpp).
+// contactgrid simulate: granular dynamics of a scene file on the engine (kernels/dem.hpp), written to a
+// run directory (docs/FORMAT.md §6: run_output.hpp). Under mpirun: the slabs of the step loop
+// (distributed.hpp), the same frames for any rank count.
 //
 //   read scene (with §5 motion) → walls, material, time step (auto: time_step_limits) → Simulation
 //   → every --output-every steps a frame (and contacts), every --log-every a log row → complete
