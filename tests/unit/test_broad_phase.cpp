@@ -402,8 +402,8 @@ TEST(LevelsCpuCuda, SameContactsOnLogUniformScenes) {
     const TestScene s = generated("polydisperse", 8192, 0.001, 1, seed);
     for (Precision mode : kModes) {
       SCOPED_TRACE(s.name + ", seed " + std::to_string(seed) + ", " + to_string(mode));
-      const Run cpu = detect<Backend::cpu>(s, mode, BroadPhase::levels);
-      const Run gpu = detect<Backend::cuda>(s, mode, BroadPhase::levels);
+      const test::Run cpu = detect<Backend::cpu>(s, mode, BroadPhase::levels);
+      const test::Run gpu = detect<Backend::cuda>(s, mode, BroadPhase::levels);
       ASSERT_GE(cpu.stats.levels, 8);
       EXPECT_EQ(same(cpu, detect<Backend::cpu>(s, mode, BroadPhase::grid)), "identical");
       EXPECT_EQ(same(gpu, cpu), "identical");
