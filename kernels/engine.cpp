@@ -180,10 +180,8 @@ struct Engine<Real>::Impl {
   ~Impl() { detail::destroy(cuda); }
 };
 
-BroadPhase resolved_broad_phase(BroadPhase requested, const Bounds& b, Precision p, Backend backend) {
-  if (requested != BroadPhase::automatic) return requested;
-  const BroadPhase pick = choose_broad_phase(b, p);
-  return pick == BroadPhase::levels && backend == Backend::cuda ? BroadPhase::grid : pick;
+BroadPhase resolved_broad_phase(BroadPhase requested, const Bounds& b, Precision p, Backend) {
+  return requested != BroadPhase::automatic ? requested : choose_broad_phase(b, p);
 }
 
 template <class Real>
@@ -200,11 +198,6 @@ Engine<Real>::Engine(EngineOptions options) : m_impl(std::make_unique<Impl>()) {
     throw UsageError("fp32_broad_phase (precision mixed) is an option of Engine<double>");
   Backend b = options.backend;
   if (b == Backend::automatic) b = cuda_available() ? Backend::cuda : Backend::cpu;
-  // The CUDA backend's levels misses pairs on radius spreads of 1:1000 (BroadPhaseTest/cuda on the
-  // H100, BENCHMARKS.md §18): until it is right, CUDA refuses levels and auto takes the grid there.
-  if (b == Backend::cuda && options.broad_phase == BroadPhase::levels)
-    throw UsageError(
-        "broad phase levels is not available on the CUDA backend yet (use grid, sweep or brute)");
   if (b == Backend::cuda) m_impl->cuda = detail::make_cuda_backend(options.device).release();
   m_impl->options.backend = b;
   m_impl->resolved = b;

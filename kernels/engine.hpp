@@ -36,9 +36,8 @@ const char* to_string(Fields f);
 // True when a CUDA device is usable in this process (false in builds without CUDA).
 bool cuda_available();
 
-// The broad phase a call runs: `requested`, or for automatic choose_broad_phase's pick, except that
-// the CUDA backend takes the grid where auto would take levels (its levels misses pairs on radius
-// spreads of 1:1000: BENCHMARKS.md §19; an engine refuses levels on CUDA). `backend` resolved.
+// The broad phase a call runs: `requested`, or for automatic choose_broad_phase's pick. Both backends
+// run every broad phase, so `backend` (resolved) does not change the pick.
 BroadPhase resolved_broad_phase(BroadPhase requested, const Bounds& b, Precision p, Backend backend);
 // Number of usable CUDA devices (0 in builds without CUDA or without a GPU).
 int cuda_device_count();

@@ -72,6 +72,55 @@ CG_HD int key_level(Key key, int key_shift) {
   return static_cast<int>(key >> key_shift);
 }
 
+// The first index f in [lo, hi) of the ascending keys with keys[f] >= key (hi: none).
+template <class Key, class Index>
+CG_HD Index lower_bound_key(const Key* keys, Index lo, Index hi, Key key) {
+  Index len = hi - lo;
+  while (len > 0) {
+    const Index half = len / 2;
+    if (keys[lo + half] < key) {
+      lo += half + 1;
+      len -= half + 1;
+    } else {
+      len = half;
+    }
+  }
+  return lo;
+}
+
+// The pairs across levels of body a in level la, from its side (both backends run this one routine:
+// host/levels.cpp, cuda/levels.cuh): in every larger level l whose run of the sorted entry keys
+// [begin[l], begin[l + 1]) is not empty, the cells of a's box in l's grid (cells_in(grid): its
+// BodyCells there), each looked up in that run, and every body b met there that the pair is tested
+// with in that cell (test_in_cell with both control bytes of level l: the common cell of smallest
+// type) and that the report rule keeps: visit(b). Returns the pairs visited (the pair tests).
+template <class Real, class Key, class Index, class CellsIn, class Visit>
+CG_HD std::uint64_t cross_level_pairs(std::uint32_t a, int la, const LevelParams<Real>& lp, const Key* keys,
+                                      const std::uint32_t* body, const Index* begin, const std::uint8_t* ctrl,
+                                      const std::uint8_t* report, CellsIn&& cells_in, Visit&& visit) {
+  std::uint64_t tests = 0;
+  const int half_bits = lp.key_shift - 3;
+  for (int l = la + 1; l < lp.count; ++l) {
+    const Index lo = begin[l], hi = begin[l + 1];
+    if (lo == hi) continue;
+    const GridParams<Real> g = lp.grid[l];
+    const BodyCells bc = cells_in(g);
+    const std::uint8_t ca = control_bits(bc);
+    const Key level = Key(l) << lp.key_shift;
+    for (std::uint32_t m = 0, cells = entry_count(bc); m < cells; ++m) {
+      const Key k = level | body_cell_key<Key>(bc, m, g);
+      const std::uint32_t type = key_type(k, half_bits);
+      for (Index f = lower_bound_key(keys, lo, hi, k); f < hi && keys[f] == k; ++f) {
+        const std::uint32_t b = body[f];
+        if (!test_in_cell(ca, ctrl[b], type) || !pair_reported(report, a, b)) continue;
+        ++tests;
+        visit(b);
+      }
+    }
+  }
+  return tests;
+}
+
 // ---- sweep: Baraff's sort and sweep along one axis --------------------------------------------------
 
 // The bits of v, as an unsigned integer of the same order (for the radix sort of the boxes' lower

@@ -4,8 +4,9 @@
 // bits) → scan of the block totals → entries of all levels in one array → the entry sort (sort.cuh)
 // → the pairs within each level by the grid's pair walk (pairs.cuh, unchanged: equal keys are one
 // cell of one level) → the pairs across levels from the smaller body's side: each body looks up its
-// cells in every larger non-empty level (binary search of the level's run of sorted keys), count →
-// scan → fill, appended to the level pairs in ws.broad_pairs.
+// cells in every larger non-empty level (binary search of the level's run of sorted keys: the host's
+// routine, core/broad.hpp cross_level_pairs), count → scan → fill, appended to the level pairs in
+// ws.broad_pairs.
 #include <cub/device/device_scan.cuh>
 
 #include "cuda/broad.cuh"
@@ -29,11 +30,12 @@ __global__ void __launch_bounds__(kBlock)
   if (i < n) {
     const Sphere<Real> s = spheres[i];
     const int l = level_of(s.r, lp);
-    const BodyCells bc = cut ? cut_cells(s, cut[i], lp.grid[l]) : body_cells(s, lp.grid[l]);
+    const GridParams<Real> g = lp.grid[l];
+    const BodyCells bc = cut ? cut_cells(s, cut[i], g) : body_cells(s, g);
     const std::uint32_t m = report ? report[i] : 0u;
     ctrl[i] = static_cast<std::uint8_t>(control_bits(bc) | ((m & kReportedBit) ? kReportBit : 0u) |
                                         ((m & kPairedBit) ? kPairedCtrlBit : 0u));
-    lo_key[i] = (Key(l) << lp.key_shift) | cell_key<Key>(bc.lo[0], bc.lo[1], bc.lo[2], lp.grid[l]);
+    lo_key[i] = (Key(l) << lp.key_shift) | cell_key<Key>(bc.lo[0], bc.lo[1], bc.lo[2], g);
     count = entry_count(bc);
   }
   const std::uint32_t total = Reduce(tmp).Sum(count);
@@ -67,8 +69,9 @@ __global__ void __launch_bounds__(kBlock)
   }
   std::uint32_t rank, total;
   Scan(tmp).ExclusiveSum(count, rank, total);
+  const GridParams<Real> g = lp.grid[l];
   for (std::uint32_t m = 0; m < count; ++m) {
-    s_keys[rank + m] = (k0 & ~low) | spilled_cell_key<Key>(k0 & low, cb, m, lp.grid[l]);
+    s_keys[rank + m] = (k0 & ~low) | spilled_cell_key<Key>(k0 & low, cb, m, g);
     s_body[rank + m] = i;
   }
   __syncthreads();
@@ -89,24 +92,13 @@ __global__ void level_begin_kernel(const Key* __restrict__ keys, std::uint32_t n
     begin[l] = ne;
     return;
   }
-  const Key k = Key(l) << key_shift;
-  std::uint32_t f = 0, len = ne;
-  while (len > 0) {
-    const std::uint32_t half = len / 2;
-    if (keys[f + half] < k) {
-      f += half + 1;
-      len -= half + 1;
-    } else {
-      len = half;
-    }
-  }
-  begin[l] = f;
+  begin[l] = lower_bound_key(keys, std::uint32_t(0), ne, Key(Key(l) << key_shift));
 }
 
 // levels, across: per body a the pairs with the bodies of every larger non-empty level, where they
-// share a cell of that level (test_in_cell with both control bytes there), reported and accepted by
-// the pair test — the host's cross_level_candidates. kFill false: counts[a] and the totals of pairs
-// and tests into c; true: the pairs written at offsets[a] onwards.
+// share a cell of that level — core/broad.hpp's cross_level_pairs, the host's routine — reported and
+// accepted by the pair test. kFill false: counts[a] and the totals of pairs and tests into c; true:
+// the pairs written at offsets[a] onwards. The levels are read from a block copy in shared memory.
 template <bool kFill, class Real, class Key, class Test>
 __global__ void __launch_bounds__(kBlock)
     cross_level_kernel(const Sphere<Real>* __restrict__ spheres, const CutShape* __restrict__ cut,
@@ -119,44 +111,26 @@ __global__ void __launch_bounds__(kBlock)
   using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
   __shared__ typename Reduce::TempStorage tmp;
   __shared__ std::uint32_t s_begin[kMaxLevels + 1];
+  __shared__ LevelParams<Real> s_lp;
   if (threadIdx.x <= static_cast<unsigned>(lp.count)) s_begin[threadIdx.x] = level_begin[threadIdx.x];
+  if (threadIdx.x == 0) s_lp = lp;
   __syncthreads();
   const std::uint32_t a = blockIdx.x * kBlock + threadIdx.x;
-  std::uint32_t found = 0, tests = 0;
+  std::uint32_t found = 0;
+  std::uint64_t tests = 0;
   if (a < n) {
     const Sphere<Real> sa = spheres[a];
-    const int half_bits = lp.key_shift - 3;
     std::uint64_t w = kFill ? offsets[a] : 0;
-    for (int l = key_level(lo_key[a], lp.key_shift) + 1; l < lp.count; ++l) {
-      const std::uint32_t lo = s_begin[l], hi = s_begin[l + 1];
-      if (lo == hi) continue;
-      const BodyCells bc = cut ? cut_cells(sa, cut[a], lp.grid[l]) : body_cells(sa, lp.grid[l]);
-      const std::uint8_t ca = control_bits(bc);
-      const Key level = Key(l) << lp.key_shift;
-      for (std::uint32_t m = 0, cells = entry_count(bc); m < cells; ++m) {
-        const Key k = level | body_cell_key<Key>(bc, m, lp.grid[l]);
-        const std::uint32_t type = key_type(k, half_bits);
-        std::uint32_t f = lo, len = hi - lo;
-        while (len > 0) {
-          const std::uint32_t half = len / 2;
-          if (keys[f + half] < k) {
-            f += half + 1;
-            len -= half + 1;
-          } else {
-            len = half;
-          }
-        }
-        for (; f < hi && keys[f] == k; ++f) {
-          const std::uint32_t b = body[f];
-          if (!test_in_cell(ca, ctrl[b], type) || !pair_reported(report, a, b)) continue;
-          ++tests;
-          if (test(sa, spheres[b], a, b)) {
-            if constexpr (kFill) store_pair(pair_a, pair_b, w++, a, b);
-            ++found;
-          }
-        }
-      }
-    }
+    const auto cells_in = [&](const GridParams<Real>& g) {
+      return cut ? cut_cells(sa, cut[a], g) : body_cells(sa, g);
+    };
+    tests = cross_level_pairs(a, key_level(lo_key[a], s_lp.key_shift), s_lp, keys, body, s_begin, ctrl,
+                              report, cells_in, [&](std::uint32_t b) {
+                                if (test(sa, spheres[b], a, b)) {
+                                  if constexpr (kFill) store_pair(pair_a, pair_b, w++, a, b);
+                                  ++found;
+                                }
+                              });
     if constexpr (!kFill) counts[a] = found;
   }
   if constexpr (!kFill) {

@@ -59,38 +59,23 @@ std::uint64_t cross_level_candidates(const Entries<Key>& e, const PackedBodies<R
   // Each level's run of the sorted keys (empty levels are skipped by every query).
   std::size_t begin[kMaxLevels + 1];
   for (int l = 0; l < lp.count; ++l)
-    begin[l] =
-        std::size_t(std::lower_bound(e.keys.begin(), e.keys.end(), Key(l) << lp.key_shift) - e.keys.begin());
+    begin[l] = lower_bound_key(e.keys.data(), std::size_t(0), e.size(), Key(Key(l) << lp.key_shift));
   begin[lp.count] = e.size();  // (count << key_shift may not fit the key)
   const bool cut = !p.cut.empty();
-  const int half_bits = lp.key_shift - 3;
   return with_pair_test(filter, p, fp64, [&](const auto& test) {
     return collect_pairs(p.spheres.size(), 1024, threads, out, [&](std::size_t i, auto&& emit) {
       const auto a = static_cast<std::uint32_t>(i);
       const Sphere<Real> s0 = p.spheres[a];
       const Sphere<Real> sa{s0.x, s0.y, s0.z, s0.r + p.inflation};
-      std::uint64_t tests = 0;
-      for (int l = p.level[a] + 1; l < lp.count; ++l) {
-        if (begin[l] == begin[l + 1]) continue;
-        const BodyCells bc = cut ? cut_cells(sa, p.cut[a], lp.grid[l]) : body_cells(sa, lp.grid[l]);
-        const std::uint8_t ca = control_bits(bc);
-        const Key level = Key(l) << lp.key_shift;
-        for (std::uint32_t m = 0, cells = entry_count(bc); m < cells; ++m) {
-          const Key k = level | body_cell_key<Key>(bc, m, lp.grid[l]);
-          const std::uint32_t type = key_type(k, half_bits);
-          auto f = std::lower_bound(e.keys.begin() + std::ptrdiff_t(begin[l]),
-                                    e.keys.begin() + std::ptrdiff_t(begin[l + 1]), k);
-          for (std::size_t at = std::size_t(f - e.keys.begin()); at < begin[l + 1] && e.keys[at] == k; ++at) {
-            const std::uint32_t b = e.body[at];
-            if (!test_in_cell(ca, p.ctrl[b], type) || !pair_reported(r, a, b)) continue;
-            ++tests;
-            const Sphere<Real> t0 = p.spheres[b];
-            const Sphere<Real> sb{t0.x, t0.y, t0.z, t0.r + p.inflation};
-            if (test(sa, sb, a, b)) emit(std::min(a, b), std::max(a, b));
-          }
-        }
-      }
-      return tests;
+      const auto cells_in = [&](const GridParams<Real>& g) {
+        return cut ? cut_cells(sa, p.cut[a], g) : body_cells(sa, g);
+      };
+      return cross_level_pairs(a, p.level[a], lp, e.keys.data(), e.body.data(), begin, p.ctrl.data(), r,
+                               cells_in, [&](std::uint32_t b) {
+                                 const Sphere<Real> t0 = p.spheres[b];
+                                 const Sphere<Real> sb{t0.x, t0.y, t0.z, t0.r + p.inflation};
+                                 if (test(sa, sb, a, b)) emit(std::min(a, b), std::max(a, b));
+                               });
     });
   });
 }
