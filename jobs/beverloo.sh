@@ -6,10 +6,10 @@
 # (12 500 steps of 20 µs); the mass flow rate from the frames, the exponent fitted with k = 1.4
 # (jobs/beverloo.py; expected 2.5 ± 0.2). 45 000 steps of 18 000 bodies: sized for about a minute on
 # one H100.
-#   BIN=dir-with-contactgrid OUT=results-dir [BACKEND=cuda] jobs/beverloo.sh [extra beverloo.py run options]
+#   BIN=dir-with-contactgrid OUT=results-dir [BACKEND=cuda] [PYTHON=python with numpy, h5py] jobs/beverloo.sh [extra beverloo.py run options]
 # Exit status non-zero when the exponent is outside 2.5 ± 0.2 or a bed fell below twice its orifice.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=${BIN:-build/src}; OUT=${OUT:-/tmp/beverloo}; BACKEND=${BACKEND:-cuda}
 mkdir -p "$OUT"
-exec /usr/bin/python3 jobs/beverloo.py run --contactgrid "$BIN/contactgrid" --out "$OUT" --backend "$BACKEND" "$@"
+exec "${PYTHON:-/usr/bin/python3}" jobs/beverloo.py run --contactgrid "$BIN/contactgrid" --out "$OUT" --backend "$BACKEND" "$@"

@@ -39,7 +39,8 @@ part_unit() {
 
 part_beverloo() {
   local d=$1
-  BIN="$BIN" OUT="$W/beverloo" BACKEND=cuda jobs/beverloo.sh >"$d/beverloo.log" 2>&1 ||
+  # (the device: python3 on PATH has NumPy and h5py, its /usr/bin/python3 may not)
+  BIN="$BIN" OUT="$W/beverloo" BACKEND=cuda PYTHON=$(command -v python3) jobs/beverloo.sh >"$d/beverloo.log" 2>&1 ||
     failed+=("beverloo: exponent outside 2.5 ± 0.2, a bed too low, or a run failed (see beverloo.log)")
   cp "$W/beverloo/beverloo.json" "$d/" 2>/dev/null
   tail -8 "$d/beverloo.log" | tee -a "$OUT/summary.txt"
