@@ -89,7 +89,7 @@ part_mpi2() {
     failed+=("mpi2: np 1 cuda run")
   mpirun -np 1 "$CG" simulate "$W/m2.h5" -o "$W/m2.cpu.run" "${opts[@]}" --backend cpu >"$d/cpu.log" 2>&1 ||
     failed+=("mpi2: np 1 cpu run")
-  /usr/bin/python3 - "$W/m2.np1.run" "$W/m2.np2.run" "$W/m2.cpu.run" >"$d/compare.log" 2>&1 <<'PYEOF' ||
+  python3 - "$W/m2.np1.run" "$W/m2.np2.run" "$W/m2.cpu.run" >"$d/compare.log" 2>&1 <<'PYEOF' ||
 import sys, glob, os, h5py
 ref = sys.argv[1]
 def datasets(path):
