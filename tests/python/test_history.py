@@ -1,7 +1,6 @@
 """Contact identity across calls (Engine(history=True)): every call's contacts carry age (consecutive
 earlier calls of this engine that had the pair) and previous_row (the pair's row in the previous call's
 contacts, -1 when new), checked against an oracle built from the exact pair lists of the calls."""
-import h5py
 import numpy as np
 import pytest
 
@@ -122,6 +121,7 @@ def test_history_fields_need_history_true():
 
 
 def test_history_fields_in_contact_files(tmp_path, cli):
+    h5py = pytest.importorskip("h5py")
     frames, r = moving_bodies(2000, 65)
     engine = contactgrid.Engine(backend="cpu", precision="fp64", history=True)
     engine.detect(frames[0], r)
