@@ -5,12 +5,12 @@
 //                        once); __cuda_array_interface__ arrays → DeviceBodiesView (read in place)
 //   dlpack.cpp           the DLPack protocol both ways: arrays exposing __dlpack__ taken in place (GPU
 //                        ones as device bodies, CPU ones as NumPy arrays), DeviceArray.__dlpack__
-//   engine_object.cpp    PyEngine: the options as words, the precision mode (auto: chosen on the first call
-//   from
-//                        its bodies, as `detect --precision auto`), the engine kept between calls
-//   contacts_object.cpp  PyContacts: the engine's result, its fields as NumPy arrays over the result's own
-//                        storage (host) or as objects exposing __cuda_array_interface__ (device);
-//                        DeviceArray
+//   engine_object.cpp    PyEngine: the options as words, the precision mode (auto: chosen on the first
+//                        call from its bodies, as `detect --precision auto`), the engine kept between
+//                        calls, its contact history (history=True)
+//   contacts_object.cpp  PyContacts: the engine's result, its fields (the optional groups it computed)
+//                        as NumPy arrays over the result's own storage (host) or as DeviceArray objects
+//                        exposing __cuda_array_interface__ and DLPack (device); DeviceArray
 //   files.cpp            the scene and contact files
 // The GIL is released around every engine call and file access; a mutex per engine orders calls
 // from several Python threads.
