@@ -78,7 +78,7 @@ def assert_same_contacts(a, b):
 
 
 def test_history_on_device_contacts():
-    frames, r = moving_bodies(20_000, 81)
+    frames, r = moving_bodies(5000, 81)
     engine = contactgrid.Engine(backend="cuda", precision="fp64", history=True)
     cpu = contactgrid.Engine(backend="cpu", precision="fp64", history=True)
     hosts = []
@@ -100,7 +100,7 @@ def test_history_on_device_contacts():
 
 
 def test_history_on_cuda_resident_steps():
-    frames, r = moving_bodies(20_000, 82)
+    frames, r = moving_bodies(5000, 82)
     engine = contactgrid.Engine(backend="cuda", precision="fp64", history=True, skin=0.3)
     engine.set_resident(contactgrid.DeviceArray(frames[0]), contactgrid.DeviceArray(r))  # GPU arrays: via host
     results = [engine.detect_resident()]
