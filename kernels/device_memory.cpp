@@ -55,6 +55,17 @@ bool is_device_pointer(const void* p) {
   return a.type == cudaMemoryTypeDevice || a.type == cudaMemoryTypeManaged;
 }
 
+int device_of(const void* p) {
+  cudaPointerAttributes a{};
+  if (p && cudaPointerGetAttributes(&a, p) == cudaSuccess &&
+      (a.type == cudaMemoryTypeDevice || a.type == cudaMemoryTypeManaged))
+    return a.device;
+  cudaGetLastError();
+  int device = 0;
+  check(cudaGetDevice(&device), "cudaGetDevice");
+  return device;
+}
+
 }  // namespace cg::device_memory
 
 #else
@@ -71,6 +82,7 @@ void copy_to_device(void*, const void*, std::size_t) { no_cuda(); }
 void copy_to_host(void*, const void*, std::size_t) { no_cuda(); }
 void synchronize_stream(std::uintptr_t) { no_cuda(); }
 bool is_device_pointer(const void*) { return false; }
+int device_of(const void*) { no_cuda(); }
 }  // namespace cg::device_memory
 
 #endif

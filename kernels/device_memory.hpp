@@ -25,4 +25,8 @@ void synchronize_stream(std::uintptr_t stream);
 // host memory, and always false in builds without CUDA.
 bool is_device_pointer(const void* p);
 
+// The CUDA device whose memory `p` is (the current device for null or host memory): what a DLPack
+// consumer is told the memory lives on. CudaError in builds without CUDA.
+int device_of(const void* p);
+
 }  // namespace cg::device_memory

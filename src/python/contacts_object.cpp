@@ -46,9 +46,9 @@ py::array host_column(const T* data, std::size_t rows, const py::object& owner) 
 
 // f(field index, column) for the field called `name`, when present.
 template <class Columns, class F>
-bool with_field(Columns& columns, bool full, const std::string& name, F&& f) {
+bool with_field(Columns& columns, FieldSet set, const std::string& name, F&& f) {
   bool found = false;
-  for_each_contact_field(columns, full, [&](auto index, auto& column) {
+  for_each_contact_field(columns, set, [&](auto index, auto& column) {
     if (!found && name == kContactFields[index].name()) {
       found = true;
       f(index, column);
@@ -89,22 +89,21 @@ std::size_t PyContacts::size() const {
       m_host);
 }
 
-bool PyContacts::full() const {
-  bool f = false;
+FieldSet PyContacts::fields() const {
+  FieldSet set;
   auto get = [&](const auto& c) {
-    if constexpr (!std::is_same_v<std::decay_t<decltype(c)>, std::monostate>) f = c.full;
+    if constexpr (!std::is_same_v<std::decay_t<decltype(c)>, std::monostate>) set = c.fields();
   };
   std::visit(get, m_host);
   std::visit(get, m_device);
-  return f;
+  return set;
 }
 
 std::vector<std::string> PyContacts::names() const {
   std::vector<std::string> out;
-  const bool with_optional = full();
+  const FieldSet set = fields();
   for (const ContactField& f : kContactFields)
-    if (f.group == FieldGroup::basic || (f.group == FieldGroup::full && with_optional))
-      out.emplace_back(f.name());
+    if (set.has(f.group)) out.emplace_back(f.name());
   return out;
 }
 
@@ -118,10 +117,10 @@ void PyContacts::check_current() const {
 py::object PyContacts::field(const py::object& self, const std::string& name) const {
   check_current();
   py::object out;
-  const bool with_optional = full();
+  const FieldSet set = fields();
   auto host = [&](const auto& c) {
     if constexpr (!std::is_same_v<std::decay_t<decltype(c)>, std::monostate>) {
-      with_field(c, with_optional, name, [&](auto, const auto& column) {
+      with_field(c, set, name, [&](auto, const auto& column) {
         using T = typename std::decay_t<decltype(column)>::value_type;
         out = host_column<T>(column.data(), column.size(), self);
       });
@@ -129,7 +128,7 @@ py::object PyContacts::field(const py::object& self, const std::string& name) co
   };
   auto device = [&](const auto& v) {
     if constexpr (!std::is_same_v<std::decay_t<decltype(v)>, std::monostate>) {
-      with_field(v, with_optional, name, [&](auto, const auto& column) {
+      with_field(v, set, name, [&](auto, const auto& column) {
         using T = std::remove_cv_t<std::remove_pointer_t<std::decay_t<decltype(column)>>>;
         using S = typename Layout<T>::Scalar;
         out = py::cast(std::make_unique<DeviceArray>(reinterpret_cast<std::uintptr_t>(column),
@@ -142,7 +141,9 @@ py::object PyContacts::field(const py::object& self, const std::string& name) co
   if (!out) {
     for (const ContactField& f : kContactFields)
       if (name == f.name())
-        throw py::key_error("'" + name + "': an optional field, computed with fields='full' only");
+        throw py::key_error("'" + name + "': an optional field, computed with " +
+                            (f.group == FieldGroup::history ? "Engine(history=True)" : "fields='full'") +
+                            " only");
     throw py::key_error("'" + name + "': not a contact field");
   }
   return out;
@@ -160,9 +161,8 @@ py::object PyContacts::to_host(const py::object& self) const {
           Contacts<Real> c;
           {
             py::gil_scoped_release release;
-            c.resize(v.count, v.full);
-            c.full = v.full;
-            zip_contact_fields(c, v, v.full, [&](auto, auto& host, const auto* device) {
+            c.resize(v.count, v.fields());
+            zip_contact_fields(c, v, v.fields(), [&](auto, auto& host, const auto* device) {
               device_memory::copy_to_host(host.data(), device, host.size() * sizeof(host[0]));
             });
           }

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <string>
 
+#include "device_memory.hpp"
 #include "python/module.hpp"
 
 namespace cg::python {
@@ -55,7 +56,7 @@ Accuracy accuracy_of(const py::object& accuracy) {
 }
 
 PyEngine::PyEngine(const std::string& backend, const std::string& precision, const py::object& accuracy,
-                   const std::string& fields, int threads, double skin, int device) {
+                   const std::string& fields, int threads, double skin, int device, bool history) {
   m_options.backend = backend_of(backend);
   m_fixed = precision_of_word(precision);
   m_accuracy = accuracy_of(accuracy);
@@ -65,6 +66,7 @@ PyEngine::PyEngine(const std::string& backend, const std::string& precision, con
   if (!(skin >= 0) || !std::isfinite(skin)) throw py::value_error("skin: must be a finite length >= 0");
   m_options.skin = skin;
   m_options.device = device;
+  m_options.history = history;
   if (m_fixed && m_accuracy.position)
     throw py::value_error(std::string("accuracy: only with precision 'auto' (the default), not precision '") +
                           to_string(*m_fixed) + "'");
@@ -171,6 +173,7 @@ py::object PyEngine::detect(const py::object& self, const py::object& positions,
     std::lock_guard lock(m_mutex);
     if (!m_mode && bodies.size() == 0) {  // auto and nothing to choose from: no contacts, fp64
       rec = record(0);
+      std::get<Contacts<float>>(out).resize(0, FieldSet{m_options.fields == Fields::full, m_options.history});
     } else {
       if (!m_mode) {
         const SceneSummary s = summarise(bodies);
@@ -184,12 +187,31 @@ py::object PyEngine::detect(const py::object& self, const py::object& positions,
   return std::visit([&](auto& c) { return py::cast(PyContacts(std::move(c), std::move(rec))); }, out);
 }
 
+namespace {
+// GPU arrays (spheres) as NumPy copies: what set_resident takes its rows from.
+std::pair<Doubles, Doubles> host_copies(const py::object& positions, const py::object& radii,
+                                        const py::object& semi_axes, const py::object& orientations) {
+  const DeviceBodies device(positions, radii, semi_axes, orientations);
+  const DeviceBodiesView& v = device.view();
+  Doubles p({py::ssize_t(v.count), py::ssize_t(3)}), r({py::ssize_t(v.count)});
+  double *to_p = p.mutable_data(), *to_r = r.mutable_data();
+  {
+    py::gil_scoped_release release;
+    device.synchronize();
+    device_memory::copy_to_host(to_p, v.position, v.count * 3 * sizeof(double));
+    device_memory::copy_to_host(to_r, v.radius, v.count * sizeof(double));
+  }
+  return {p, r};
+}
+}  // namespace
+
 void PyEngine::set_resident(const py::object& positions, const py::object& radii, const py::object& semi_axes,
                             const py::object& orientations) {
-  if (is_device_array(positions))
-    throw py::value_error(
-        "positions: set_resident copies NumPy arrays (resident bodies live where the backend "
-        "computes); pass GPU arrays to detect");
+  if (is_device_array(positions) || (!radii.is_none() && is_device_array(radii))) {
+    const auto [p, r] = host_copies(positions, radii, semi_axes, orientations);
+    set_resident(p, r, py::none(), py::none());
+    return;
+  }
   const HostBodies bodies(positions, radii, semi_axes, orientations);
   py::gil_scoped_release release;
   std::lock_guard lock(m_mutex);
@@ -280,6 +302,12 @@ std::size_t PyEngine::resident_size() {
   std::lock_guard lock(m_mutex);
   if (!m_mode) return 0;
   return with_engine([](auto& e) { return e.resident_size(); });
+}
+
+void PyEngine::reset_history() {
+  py::gil_scoped_release release;
+  std::lock_guard lock(m_mutex);
+  if (m_mode) with_engine([](auto& e) { e.reset_history(); });
 }
 
 std::string PyEngine::backend() const { return to_string(m_backend); }

@@ -24,9 +24,20 @@ std::string shape_text(const py::array& a) {
 // `x` as float64 in C order: the array itself when it is one already, else one converted copy.
 Doubles as_doubles(const py::object& x, const char* name) {
   py::array a;
-  try {
-    a = py::array::ensure(x);
-  } catch (const py::error_already_set&) {
+  if (const std::optional<int> device = dlpack_device_type(x)) {  // DLPack: CPU tensors in place
+    if (*device == kDLCUDA || *device == kDLCUDAManaged)
+      throw py::value_error(std::string(name) +
+                            ": a GPU array (DLPack) where the other arrays are in host memory: pass all on "
+                            "one side (GPU arrays: positions and radii of spheres)");
+    if (*device != kDLCPU)
+      throw py::value_error(std::string(name) + ": DLPack device type " + std::to_string(*device) +
+                            " is neither the CPU (1) nor CUDA (2)");
+    a = dlpack_host_array(x, name);
+  } else {
+    try {
+      a = py::array::ensure(x);
+    } catch (const py::error_already_set&) {
+    }
   }
   if (!a) throw py::value_error(std::string(name) + ": not an array of numbers");
   if (a.dtype().kind() != 'f' && a.dtype().kind() != 'i' && a.dtype().kind() != 'u')
@@ -112,9 +123,17 @@ BodiesView HostBodies::view() const {
   return v;
 }
 
-// ---- __cuda_array_interface__ ----------------------------------------------------------------------
+// ---- GPU arrays: __cuda_array_interface__ and DLPack -----------------------------------------------
 
-bool is_device_array(const py::handle& x) { return py::hasattr(x, "__cuda_array_interface__"); }
+namespace {
+bool has_cai(const py::handle& x) { return py::hasattr(x, "__cuda_array_interface__"); }
+bool cuda_dlpack(const py::handle& x) {
+  const std::optional<int> device = dlpack_device_type(x);
+  return device && (*device == kDLCUDA || *device == kDLCUDAManaged);
+}
+}  // namespace
+
+bool is_device_array(const py::handle& x) { return has_cai(x) || cuda_dlpack(x); }
 
 namespace {
 
@@ -122,14 +141,46 @@ struct DeviceInput {
   std::uintptr_t pointer = 0;
   std::vector<std::size_t> shape;
   std::uintptr_t stream = 0;
+  DLPackHold hold;  // DLPack: the tensor, held while the engine reads
 };
 
-// The float64 C-order device array `x` exposes, with `columns` columns (0: one dimension).
-DeviceInput device_input(const py::object& x, const char* name, std::size_t columns) {
-  if (!is_device_array(x))
+std::string shape_wanted(std::size_t columns) {
+  return columns ? "(N, " + std::to_string(columns) + ")" : "(N,)";
+}
+
+// A CUDA DLPack tensor: float64, C order (strides NULL or compact), `columns` columns (0: one dimension).
+DeviceInput dlpack_input(const py::object& x, const char* name, std::size_t columns) {
+  DeviceInput in;
+  in.hold = take_dlpack(x, name, true);
+  in.stream = 1;  // handed to __dlpack__: the producer's work is ordered before it
+  const DLTensor& t = in.hold->dl_tensor;
+  if (t.device.device_type != kDLCUDA && t.device.device_type != kDLCUDAManaged)
+    throw py::value_error(std::string(name) + ": __dlpack_device__ said CUDA, the tensor says device type " +
+                          std::to_string(t.device.device_type));
+  if (t.dtype.code != kDLFloat || t.dtype.bits != 64 || t.dtype.lanes != 1)
     throw py::value_error(std::string(name) +
-                          ": a NumPy array where the other arrays are on the GPU "
-                          "(__cuda_array_interface__): pass all on one side");
+                          ": GPU arrays are read in place and must be float64 (DLPack dtype code " +
+                          std::to_string(t.dtype.code) + ", " + std::to_string(t.dtype.bits) + " bits, " +
+                          std::to_string(t.dtype.lanes) + " lanes)");
+  const int dims = columns ? 2 : 1;
+  for (int k = 0; k < t.ndim; ++k) in.shape.push_back(std::size_t(t.shape[k]));
+  if (t.ndim != dims || (columns && in.shape[1] != columns))
+    throw py::value_error(std::string(name) + ": GPU array of " + std::to_string(t.ndim) +
+                          " dimensions, expected " + shape_wanted(columns));
+  if (t.strides) {  // compact C order; the stride of a dimension of length 1 does not matter
+    std::int64_t step = 1;
+    for (int k = dims - 1; k >= 0; --k) {
+      if (t.shape[k] > 1 && t.strides[k] != step)
+        throw py::value_error(std::string(name) + ": GPU arrays are read in place and must be C-contiguous");
+      step *= t.shape[k];
+    }
+  }
+  in.pointer = reinterpret_cast<std::uintptr_t>(static_cast<const char*>(t.data) + t.byte_offset);
+  return in;
+}
+
+// __cuda_array_interface__ (v2 or v3): float64, C order, `columns` columns (0: one dimension).
+DeviceInput cai_input(const py::object& x, const char* name, std::size_t columns) {
   const py::dict cai = x.attr("__cuda_array_interface__");
   const std::string typestr = py::str(cai["typestr"]);
   if (typestr != "<f8")
@@ -142,8 +193,7 @@ DeviceInput device_input(const py::object& x, const char* name, std::size_t colu
   const std::size_t dims = columns ? 2 : 1;
   if (in.shape.size() != dims || (columns && in.shape[1] != columns))
     throw py::value_error(std::string(name) + ": GPU array of " + std::to_string(in.shape.size()) +
-                          " dimensions, expected " +
-                          (columns ? "(N, " + std::to_string(columns) + ")" : "(N,)"));
+                          " dimensions, expected " + shape_wanted(columns));
   if (cai.contains("strides") && !cai["strides"].is_none()) {
     const py::tuple strides = cai["strides"];
     const std::size_t row = 8 * (columns ? columns : 1);
@@ -157,10 +207,20 @@ DeviceInput device_input(const py::object& x, const char* name, std::size_t colu
   const py::tuple data = cai["data"];
   in.pointer = data[0].cast<std::uintptr_t>();
   if (cai.contains("stream") && !cai["stream"].is_none()) in.stream = cai["stream"].cast<std::uintptr_t>();
-  if (in.pointer && !device_memory::is_device_pointer(reinterpret_cast<const void*>(in.pointer)))
+  return in;
+}
+
+// The float64 C-order device array `x` exposes, with `columns` columns (0: one dimension).
+DeviceInput device_input(const py::object& x, const char* name, std::size_t columns) {
+  if (!is_device_array(x))
     throw py::value_error(std::string(name) +
-                          ": __cuda_array_interface__ points to memory the GPU cannot "
-                          "read as device memory");
+                          ": a NumPy array where the other arrays are on the GPU "
+                          "(__cuda_array_interface__ or DLPack): pass all on one side");
+  DeviceInput in = has_cai(x) ? cai_input(x, name, columns) : dlpack_input(x, name, columns);
+  if (in.pointer && !device_memory::is_device_pointer(reinterpret_cast<const void*>(in.pointer)))
+    throw py::value_error(std::string(name) + ": " +
+                          (in.hold ? "the DLPack tensor" : "__cuda_array_interface__") +
+                          " points to memory the GPU cannot read as device memory");
   return in;
 }
 
@@ -182,6 +242,8 @@ DeviceBodies::DeviceBodies(const py::object& positions, const py::object& radii,
   m_view.count = p.shape[0];
   for (std::uintptr_t s : {p.stream, r.stream})
     if (s && std::find(m_streams.begin(), m_streams.end(), s) == m_streams.end()) m_streams.push_back(s);
+  for (const DLPackHold& h : {p.hold, r.hold})
+    if (h) m_held.push_back(h);
 }
 
 void DeviceBodies::synchronize() const {

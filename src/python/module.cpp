@@ -13,7 +13,8 @@ const char* const k_engine_doc =
     R"(An engine kept between calls: its workspace (host buffers, or device memory
 for the CUDA backend), its resident bodies and, with a skin, its candidate pairs.
 
-Engine(*, backend="auto", precision="auto", accuracy=None, fields="basic", threads=0, skin=0.0, device=-1)
+Engine(*, backend="auto", precision="auto", accuracy=None, fields="basic", threads=0, skin=0.0, device=-1,
+       history=False)
 
 backend    "auto" (CUDA when a GPU is usable, else the CPU), "cpu" or "cuda".
 precision  "auto", "fp32", "fp64" or "mixed". "auto" chooses on the first call from that call's bodies
@@ -25,25 +26,31 @@ fields     "basic" (ids, points, normal, distance) or "full" (also local points,
 threads    CPU backend threads (0: all cores).
 skin       Verlet skin, a world length >= 0: candidate pairs kept across calls while the bodies moved
            less than skin/2 (the contacts are always those of a fresh detection).
-device     CUDA device (-1: the current one).)";
+device     CUDA device (-1: the current one).
+history    contact identity across calls: every call's contacts carry age (calls the pair has touched
+           without a break, 0 on its first) and previous_row (its row in this engine's previous
+           call's contacts, -1 when new); reset_history() makes every pair of the next call new.)";
 
 const char* const k_detect_doc =
     R"(detect(positions, radii=None, *, semi_axes=None, orientations=None) -> Contacts
 
 Every touching or overlapping pair of the bodies, sorted by (id_a, id_b); body i has id i.
-Arrays as contactgrid.detect takes them (NumPy, or float64 C-order GPU arrays exposing
-__cuda_array_interface__ for the CUDA backend, whose contacts then stay on the GPU). Device contacts
-are valid until this engine detects again. The GIL is released while the engine runs.)";
+Arrays as contactgrid.detect takes them (NumPy or CPU DLPack arrays, or float64 C-order GPU arrays
+exposing __cuda_array_interface__ or __dlpack__ for the CUDA backend, whose contacts then stay on the
+GPU). Device contacts are valid until this engine detects again. The GIL is released while the engine
+runs.)";
 
 const char* const k_contacts_doc =
     R"(The contacts of one detection (docs/FORMAT.md §2), sorted by (id_a, id_b) with id_a < id_b.
 
 Fields, as attributes or items (contacts.id_a, contacts["id_a"]):
   id_a, id_b (K,) int64; position_on_a, position_on_b, normal_on_b (K, 3); distance (K,)
-  with fields="full" also local_point_a, local_point_b, lateral_friction_dir1, lateral_friction_dir2.
+  with fields="full" also local_point_a, local_point_b, lateral_friction_dir1, lateral_friction_dir2;
+  with Engine(history=True) also age, previous_row (K,) int64.
 Host contacts: NumPy arrays over the engine's result (no copy; they keep it alive); float32 for
 precision "fp32", else float64. Device contacts (on_device): DeviceArray objects exposing
-__cuda_array_interface__ over the engine's device memory, valid until that engine detects again.
+__cuda_array_interface__ and DLPack over the engine's device memory, valid until that engine
+detects again.
 len(contacts) is K; precision, precision_reason, backend, bodies, times, stats describe the run.)";
 
 }  // namespace
@@ -65,13 +72,20 @@ PYBIND11_MODULE(_contactgrid, m) {
         "True when a CUDA device is usable (False in builds without CUDA).");
   m.def("cuda_device_count", &cg::cuda_device_count, "The number of usable CUDA devices.");
 
-  py::class_<DeviceArray>(m, "DeviceArray", R"(GPU memory exposed as __cuda_array_interface__ (v3).
+  py::class_<DeviceArray>(m, "DeviceArray", R"(GPU memory exposed as __cuda_array_interface__ (v3) and DLPack.
 
 DeviceArray(array) copies a NumPy array to the current GPU (C order, its dtype) and frees it with the
 object: for callers without CuPy, PyTorch or Numba, and for tests. The fields of device contacts are
-DeviceArray views of the engine's memory. copy_to_host() returns a NumPy copy.)")
+DeviceArray views of the engine's memory. copy_to_host() returns a NumPy copy. cupy.from_dlpack(a) and
+torch.from_dlpack(a) take it without a copy (the tensor keeps this object alive).)")
       .def(py::init<const py::array&>(), py::arg("array"))
       .def_property_readonly("__cuda_array_interface__", &DeviceArray::interface)
+      .def("__dlpack__", &DeviceArray::dlpack, py::kw_only(), py::arg("stream") = py::none(),
+           py::arg("max_version") = py::none(), py::arg("dl_device") = py::none(),
+           py::arg("copy") = py::none(),
+           R"(A DLPack capsule ("dltensor") over this memory, no copy. The memory is complete when exposed,
+so any consumer stream may read it at once; copy=True and another dl_device raise BufferError.)")
+      .def("__dlpack_device__", &DeviceArray::dlpack_device, "(kDLCUDA = 2, the CUDA device id).")
       .def_property_readonly("shape", [](const DeviceArray& a) { return py::tuple(py::cast(a.shape())); })
       .def_property_readonly("dtype", &DeviceArray::dtype)
       .def_property_readonly("pointer", &DeviceArray::pointer, "The device address of the first element.")
@@ -111,7 +125,10 @@ DeviceArray views of the engine's memory. copy_to_host() returns a NumPy copy.)"
              return out;
            })
       .def_property_readonly("on_device", &PyContacts::on_device, "True: the fields are DeviceArray views.")
-      .def_property_readonly("full", &PyContacts::full, "True: the optional fields were computed.")
+      .def_property_readonly("full", &PyContacts::full,
+                             "True: the optional fields of fields='full' were computed.")
+      .def_property_readonly("history", &PyContacts::history,
+                             "True: age and previous_row were computed (Engine(history=True)).")
       .def_property_readonly(
           "precision", [](const PyContacts& c) { return cg::to_string(c.record().precision); },
           "The precision mode that ran: 'fp32', 'fp64' or 'mixed'.")
@@ -154,10 +171,10 @@ DeviceArray views of the engine's memory. copy_to_host() returns a NumPy copy.)"
 
   py::class_<PyEngine>(m, "Engine", k_engine_doc)
       .def(py::init<const std::string&, const std::string&, const py::object&, const std::string&, int,
-                    double, int>(),
+                    double, int, bool>(),
            py::kw_only(), py::arg("backend") = "auto", py::arg("precision") = "auto",
            py::arg("accuracy") = py::none(), py::arg("fields") = "basic", py::arg("threads") = 0,
-           py::arg("skin") = 0.0, py::arg("device") = -1)
+           py::arg("skin") = 0.0, py::arg("device") = -1, py::arg("history") = false)
       .def(
           "detect",
           [](const py::object& self, const py::object& positions, const py::object& radii,
@@ -169,8 +186,9 @@ DeviceArray views of the engine's memory. copy_to_host() returns a NumPy copy.)"
       .def(
           "set_resident", &PyEngine::set_resident, py::arg("positions"), py::arg("radii") = py::none(),
           py::kw_only(), py::arg("semi_axes") = py::none(), py::arg("orientations") = py::none(),
-          R"(Copies the bodies (NumPy arrays, as detect takes them) to where the backend computes (host memory,
-or GPU memory for CUDA) and keeps them between calls; row i is body i.)")
+          R"(Copies the bodies (as detect takes them) to where the backend computes (host memory, or GPU memory
+for CUDA) and keeps them between calls; row i is body i. GPU arrays (spheres) are copied through host
+memory once.)")
       .def("write_resident", &PyEngine::write_resident, py::arg("first"), py::arg("positions"),
            py::arg("radii"),
            "Overwrites the positions and radii of resident rows [first, first + len(positions)).")
@@ -183,6 +201,8 @@ or GPU memory for CUDA) and keeps them between calls; row i is body i.)")
           "detect_resident",
           [](const py::object& self) { return self.cast<PyEngine&>().detect_resident(self); },
           "Detects among the resident bodies; host contacts (one copy of the engine's, on either backend).")
+      .def("reset_history", &PyEngine::reset_history,
+           "history=True: every pair of the next call is new (age 0, previous_row -1).")
       .def_property_readonly("resident_size", &PyEngine::resident_size, "The number of resident rows.")
       .def_property_readonly("backend", &PyEngine::backend, "The resolved backend: 'cpu' or 'cuda'.")
       .def_property_readonly("precision", &PyEngine::precision,

@@ -3,14 +3,18 @@
 // they turn Python arrays into the engine's views and the engine's results into Python arrays.
 //   inputs.cpp           NumPy arrays → BodiesView (float64 C order read in place, anything else converted
 //                        once); __cuda_array_interface__ arrays → DeviceBodiesView (read in place)
-//   engine_object.cpp    PyEngine: the options as words, the precision mode (auto: chosen on the first call
-//   from
-//                        its bodies, as `detect --precision auto`), the engine kept between calls
-//   contacts_object.cpp  PyContacts: the engine's result, its fields as NumPy arrays over the result's own
-//                        storage (host) or as objects exposing __cuda_array_interface__ (device);
-//                        DeviceArray; the scene and contact files
+//   dlpack.cpp           the DLPack protocol both ways: arrays exposing __dlpack__ taken in place (GPU
+//                        ones as device bodies, CPU ones as NumPy arrays), DeviceArray.__dlpack__
+//   engine_object.cpp    PyEngine: the options as words, the precision mode (auto: chosen on the first
+//                        call from its bodies, as `detect --precision auto`), the engine kept between
+//                        calls, its contact history (history=True)
+//   contacts_object.cpp  PyContacts: the engine's result, its fields (the optional groups it computed)
+//                        as NumPy arrays over the result's own storage (host) or as DeviceArray objects
+//                        exposing __cuda_array_interface__ and DLPack (device); DeviceArray
+//   files.cpp            the scene and contact files
 // The GIL is released around every engine call and file access; a mutex per engine orders calls
 // from several Python threads.
+#include <dlpack/dlpack.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
@@ -56,9 +60,27 @@ class HostBodies {
   HostVector<Shape> m_shape;
 };
 
-// The bodies of one call from arrays exposing __cuda_array_interface__ (v2 or v3): float64, C order
-// (strides None or contiguous), positions (N, 3), radii (N); read in place (never copied). Spheres only:
-// scenes with ellipsoids come as NumPy arrays. A v3 `stream` is waited for before the engine reads.
+// A tensor taken through the DLPack protocol (dlpack/dlpack.h): the producer's DLManagedTensor, whose
+// capsule was renamed "used_dltensor" as the protocol asks; the producer's deleter runs when the last
+// holder goes. Holders drop it with the GIL held (producers release Python objects in the deleter).
+using DLPackHold = std::shared_ptr<const DLManagedTensor>;
+
+// The DLPack device type `x.__dlpack_device__()` names, when `x` exposes __dlpack__ and
+// __dlpack_device__ and is not a NumPy array (those take the NumPy path); none otherwise.
+std::optional<int> dlpack_device_type(const py::handle& x);
+// Consumes `x.__dlpack__(...)` (stream: for a CUDA producer the legacy default stream, 1, which
+// DeviceBodies then waits for; none for a CPU one). ValueError naming `name` for a producer that
+// breaks the protocol.
+DLPackHold take_dlpack(const py::object& x, const char* name, bool cuda);
+// A CPU DLPack tensor as a NumPy array over its memory (any number dtype and strides; no copy), which
+// keeps the tensor until it goes.
+py::array dlpack_host_array(const py::object& x, const char* name);
+
+// The bodies of one call from GPU arrays: objects exposing __cuda_array_interface__ (v2 or v3) or
+// DLPack (__dlpack__ on a CUDA device): float64, C order (strides None or contiguous), positions
+// (N, 3), radii (N); read in place (never copied). Spheres only: scenes with ellipsoids come as NumPy
+// arrays. A v3 `stream` (DLPack: the legacy default stream it was handed) is waited for before the
+// engine reads; the DLPack tensors are held until this object goes.
 class DeviceBodies {
  public:
   DeviceBodies(const py::object& positions, const py::object& radii, const py::object& semi_axes,
@@ -70,9 +92,10 @@ class DeviceBodies {
  private:
   DeviceBodiesView m_view;
   std::vector<std::uintptr_t> m_streams;
+  std::vector<DLPackHold> m_held;
 };
 
-// True when `x` exposes __cuda_array_interface__.
+// True when `x` is a GPU array: it exposes __cuda_array_interface__, or DLPack on a CUDA device.
 bool is_device_array(const py::handle& x);
 
 // `x` as float64 rows of `columns` values, C order (read in place when it is one, else converted once);
@@ -114,11 +137,14 @@ class PyContacts {
 
   std::size_t size() const;
   bool on_device() const { return !std::holds_alternative<std::monostate>(m_device); }
-  bool full() const;
+  bool full() const { return fields().full; }
+  bool history() const { return fields().history; }
+  FieldSet fields() const;  // the optional groups computed
   const RunRecord& record() const { return m_record; }
   std::vector<std::string> names() const;  // the fields present, in docs/FORMAT.md §2 order
 
-  // A field by name (KeyError for an unknown one or an optional one not computed): a NumPy array
+  // A field by name (KeyError for an unknown one or an optional one not computed, naming the option
+  // that computes it): a NumPy array
   // viewing this object's storage (base: self) or, on the device, a DeviceArray viewing the engine's.
   py::object field(const py::object& self, const std::string& name) const;
   // Host contacts: self. Device: one copy of every field to host memory.
@@ -148,6 +174,11 @@ class DeviceArray {
   DeviceArray& operator=(const DeviceArray&) = delete;
 
   py::dict interface() const;  // __cuda_array_interface__
+  // DLPack (dlpack.cpp): a "dltensor" capsule over this memory whose deleter holds `self` (and so the
+  // owner) alive until the consumer calls it; the device as (kDLCUDA, device id).
+  static py::capsule dlpack(const py::object& self, const py::object& stream, const py::object& max_version,
+                            const py::object& dl_device, const py::object& copy);
+  py::tuple dlpack_device() const;
   py::array copy_to_host() const;
   const std::vector<py::ssize_t>& shape() const { return m_shape; }
   py::dtype dtype() const { return m_dtype; }
@@ -193,7 +224,7 @@ Accuracy accuracy_of(const py::object& accuracy);  // None, a number (position) 
 class PyEngine {
  public:
   PyEngine(const std::string& backend, const std::string& precision, const py::object& accuracy,
-           const std::string& fields, int threads, double skin, int device);
+           const std::string& fields, int threads, double skin, int device, bool history);
 
   // detect(positions, radii, ...) on NumPy or CUDA arrays. `self`: kept by device contacts.
   py::object detect(const py::object& self, const py::object& positions, const py::object& radii,
@@ -207,6 +238,8 @@ class PyEngine {
   // Host contacts (a copy of the engine's) on the CPU backend, device contacts on CUDA.
   py::object detect_resident(const py::object& self);
   std::size_t resident_size();
+  // history=True: the next call's pairs are all new.
+  void reset_history();
 
   std::string backend() const;
   std::optional<std::string> precision() const;  // none until chosen

@@ -60,3 +60,55 @@ def pytest_sessionfinish(session, exitstatus):
     reporter = session.config.pluginmanager.get_plugin("terminalreporter")
     if exitstatus == 0 and reporter is not None and reporter.stats.get("skipped") and not reporter.stats.get("passed"):
         session.exitstatus = 77
+
+
+class DLPackOnly:
+    """An array that exposes only the DLPack protocol (__dlpack__, __dlpack_device__) of the array it
+    wraps: NumPy arrays for the CPU path, CuPy arrays or DeviceArray for CUDA. Keeps every capsule it
+    handed out (`capsules`) and the keyword arguments of each call (`calls`), so tests can check that
+    the consumer renamed them and which stream it asked for."""
+
+    def __init__(self, array, device=None):
+        self._array = array
+        self._device = device  # a (type, id) to claim instead of the array's own
+        self.capsules = []
+        self.calls = []
+
+    def __dlpack__(self, **kwargs):
+        self.calls.append(kwargs)
+        capsule = self._array.__dlpack__(**kwargs)
+        self.capsules.append(capsule)
+        return capsule
+
+    def __dlpack_device__(self):
+        return self._device if self._device is not None else self._array.__dlpack_device__()
+
+
+def capsule_name(capsule):
+    """The name of a PyCapsule ("dltensor" unused, "used_dltensor" once a consumer took it)."""
+    import ctypes
+
+    get = ctypes.pythonapi.PyCapsule_GetName
+    get.restype, get.argtypes = ctypes.c_char_p, [ctypes.py_object]
+    return get(capsule).decode()
+
+
+def history_oracle(previous_pairs, pairs):
+    """age and previous_row of each row of `pairs` (id_a, id_b arrays, sorted) given the pair lists of
+    the earlier calls since the history began (`previous_pairs`, oldest first): age counts the
+    consecutive earlier calls that had the pair, previous_row is its row in the last one (-1: new)."""
+    a, b = pairs
+    sets = [set(zip(pa.tolist(), pb.tolist())) for pa, pb in previous_pairs]
+    rows = {}
+    if previous_pairs:
+        pa, pb = previous_pairs[-1]
+        rows = {pair: k for k, pair in enumerate(zip(pa.tolist(), pb.tolist()))}
+    age = np.zeros(len(a), dtype=np.int64)
+    previous_row = np.full(len(a), -1, dtype=np.int64)
+    for k, pair in enumerate(zip(a.tolist(), b.tolist())):
+        n = 0
+        while n < len(sets) and pair in sets[len(sets) - 1 - n]:
+            n += 1
+        age[k] = n
+        previous_row[k] = rows.get(pair, -1)
+    return age, previous_row

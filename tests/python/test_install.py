@@ -49,3 +49,26 @@ def test_pip_install_builds_a_wheel_through_cmake(tmp_path):
     import contactgrid
 
     assert out[0].startswith(str(target)) and out[1] == contactgrid.__version__
+
+
+def test_type_stubs_name_what_the_module_has():
+    """Every class member and keyword the stubs declare exists at runtime, and the reverse for the
+    public methods of Engine, Contacts and DeviceArray (a stub that drifts from the module fails here)."""
+    import ast
+    import re
+
+    import contactgrid
+
+    tree = ast.parse(open(os.path.join(os.path.dirname(contactgrid.__file__), "__init__.pyi")).read())
+    classes = {c.name: c for c in tree.body if isinstance(c, ast.ClassDef)}
+    for name in ("Engine", "Contacts", "DeviceArray"):
+        declared = {n.name for n in classes[name].body if isinstance(n, ast.FunctionDef)}
+        runtime = {m for m in dir(getattr(contactgrid, name)) if not m.startswith("_")}
+        runtime -= {"id_a", "id_b", "position_on_a", "position_on_b", "normal_on_b", "distance"}  # fields
+        assert runtime <= declared, (name, runtime - declared)
+        for member in declared - {"__init__"}:
+            assert hasattr(getattr(contactgrid, name), member), (name, member)
+    init = next(n for n in classes["Engine"].body if isinstance(n, ast.FunctionDef) and n.name == "__init__")
+    stub_keywords = [a.arg for a in init.args.kwonlyargs]
+    doc_keywords = re.findall(r"(\w+): \w+ = ", contactgrid.Engine.__init__.__doc__.splitlines()[0])
+    assert stub_keywords == doc_keywords, (stub_keywords, doc_keywords)

@@ -4,8 +4,8 @@
     contacts = contactgrid.detect(np.array([[0, 0, 0], [1.5, 0, 0]]), np.array([1.0, 1.0]))
     contacts.id_a, contacts.id_b, contacts.distance      # [0] [1] [-0.5]
 
-detect() on NumPy arrays (or GPU arrays exposing __cuda_array_interface__), Engine for loops that
-call it again and again, read_scene / write_scene / read_contacts / write_contacts for the HDF5
+detect() on NumPy arrays (or GPU arrays exposing __cuda_array_interface__ or DLPack), Engine for
+loops that call it again and again (history=True: contact identity across calls), read_scene / write_scene / read_contacts / write_contacts for the HDF5
 files of the command line. Errors carry the command line's messages: InputError and UsageError are
 ValueErrors, ResourceError a MemoryError, IoError an OSError. docs/PYTHON.md is the reference.
 """
@@ -85,10 +85,11 @@ def detect(
 
     Arrays: float64 in C order are read in place. Any other dtype (float32, integers) or layout
     (Fortran order, slices with strides, lists) is converted to float64 C order once, a copy.
-    GPU arrays (CUDA backend): positions and radii exposing __cuda_array_interface__ (v2 or v3;
-    float64, C order) are read in place, and the contacts stay on the GPU: their fields are
-    DeviceArray objects exposing __cuda_array_interface__ (CuPy, PyTorch and Numba take them).
-    Spheres only on that path.
+    Objects exposing DLPack (__dlpack__, __dlpack_device__) on the CPU are taken the same way.
+    GPU arrays (CUDA backend): positions and radii exposing __cuda_array_interface__ (v2 or v3) or
+    DLPack on a CUDA device (float64, C order) are read in place, and the contacts stay on the GPU:
+    their fields are DeviceArray objects exposing __cuda_array_interface__ and DLPack (CuPy, PyTorch
+    and Numba take them). Spheres only on that path.
 
     Returns Contacts: fields as NumPy arrays over the engine's result (no copy), float32 for
     precision "fp32". The GIL is released while the engine runs. Bad bodies raise InputError

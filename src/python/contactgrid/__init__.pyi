@@ -12,7 +12,7 @@ Backend = Literal["auto", "cpu", "cuda"]
 PrecisionWord = Literal["auto", "fp32", "fp64", "mixed"]
 FieldsWord = Literal["basic", "full"]
 Accuracy = None | float | tuple[float, float]
-ArrayIn = npt.ArrayLike | Any  # NumPy-convertible, or an object exposing __cuda_array_interface__
+ArrayIn = npt.ArrayLike | Any  # NumPy-convertible, or an object exposing __cuda_array_interface__ or DLPack
 Path = str | PathLike[str]
 
 class Error(RuntimeError): ...
@@ -36,6 +36,15 @@ class DeviceArray:
     def dtype(self) -> np.dtype[Any]: ...
     @property
     def pointer(self) -> int: ...
+    def __dlpack__(
+        self,
+        *,
+        stream: int | None = None,
+        max_version: tuple[int, int] | None = None,
+        dl_device: tuple[int, int] | None = None,
+        copy: bool | None = None,
+    ) -> Any: ...  # a PyCapsule named "dltensor"
+    def __dlpack_device__(self) -> tuple[int, int]: ...
     def __len__(self) -> int: ...
     def copy_to_host(self) -> npt.NDArray[Any]: ...
 
@@ -52,6 +61,8 @@ class Contacts:
     local_point_b: FieldArray
     lateral_friction_dir1: FieldArray
     lateral_friction_dir2: FieldArray
+    age: FieldArray
+    previous_row: FieldArray
     def __len__(self) -> int: ...
     def __getitem__(self, name: str) -> FieldArray: ...
     def __contains__(self, name: object) -> bool: ...
@@ -61,6 +72,8 @@ class Contacts:
     def on_device(self) -> bool: ...
     @property
     def full(self) -> bool: ...
+    @property
+    def history(self) -> bool: ...
     @property
     def precision(self) -> Literal["fp32", "fp64", "mixed"]: ...
     @property
@@ -88,6 +101,7 @@ class Engine:
         threads: int = 0,
         skin: float = 0.0,
         device: int = -1,
+        history: bool = False,
     ) -> None: ...
     def detect(
         self,
@@ -99,8 +113,8 @@ class Engine:
     ) -> Contacts: ...
     def set_resident(
         self,
-        positions: npt.ArrayLike,
-        radii: npt.ArrayLike | float | None = None,
+        positions: ArrayIn,
+        radii: ArrayIn | float | None = None,
         *,
         semi_axes: npt.ArrayLike | None = None,
         orientations: npt.ArrayLike | None = None,
@@ -113,6 +127,7 @@ class Engine:
         self, first: int = 0, count: int | None = None
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
     def detect_resident(self) -> Contacts: ...
+    def reset_history(self) -> None: ...
     @property
     def resident_size(self) -> int: ...
     @property
