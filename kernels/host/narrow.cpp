@@ -44,7 +44,7 @@ void narrow(const CandidatePairs& c, const NarrowBodies<Real>& bodies, Fields fi
   const SphereDecide<Real> decide{bodies};
   const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(256, n_cand / 16384));
   std::vector<std::uint64_t> chunk_count(n_chunks, 0), chunk_offset;
-  std::vector<std::uint8_t> accept(n_cand);
+  Array<std::uint8_t> accept(n_cand);
 #pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : fp64_rows) if (n_chunks > 1)
   for (std::size_t ch = 0; ch < n_chunks; ++ch) {
     std::uint64_t count = 0;

@@ -64,8 +64,8 @@ std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const
   const std::size_t n_entries = en.size();
   // The spheres (inflated by a skin) and control bytes are first gathered into entry order, so the
   // walk reads memory in sequence.
-  std::vector<Sphere<Real>> entry_sphere(n_entries);
-  std::vector<std::uint8_t> entry_ctrl(n_entries);
+  Array<Sphere<Real>> entry_sphere(n_entries);
+  Array<std::uint8_t> entry_ctrl(n_entries);
 #pragma omp parallel for num_threads(nt) schedule(static) if (n_entries > k_parallel_min)
   for (std::size_t e = 0; e < n_entries; ++e) {
     entry_sphere[e] = p.spheres[en.body[e]];
