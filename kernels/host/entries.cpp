@@ -6,7 +6,7 @@ namespace cg::detail::host {
 template <class Real, class Key>
 std::uint64_t fill_entries(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, Entries<Key>& out) {
   const std::size_t n = p.cells.size();
-  std::vector<std::uint64_t> offset;
+  Array<std::uint64_t> offset;
   const std::uint64_t n_entries = exclusive_scan_into(p.count, offset);
   out.keys.resize(n_entries);
   out.body.resize(n_entries);

@@ -52,7 +52,7 @@ void pack_shapes(const BodiesView& bodies, int threads, std::vector<PackedShape<
 }
 
 template <class Packed>
-void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, std::vector<CutShape>& out) {
+void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, Array<CutShape>& out) {
   const std::size_t n = shapes.size();
   out.resize(n);
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
@@ -76,8 +76,8 @@ void shape_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& out
 
 template void shape_cells(const GridParams<float>&, int, PackedBodies<float>&);
 template void shape_cells(const GridParams<double>&, int, PackedBodies<double>&);
-template void cut_shapes(const std::vector<PackedShape<float>>&, int, std::vector<CutShape>&);
-template void cut_shapes(const std::vector<PackedShape<double>>&, int, std::vector<CutShape>&);
+template void cut_shapes(const std::vector<PackedShape<float>>&, int, Array<CutShape>&);
+template void cut_shapes(const std::vector<PackedShape<double>>&, int, Array<CutShape>&);
 template void pack_shapes(const BodiesView&, int, std::vector<PackedShape<float>>&);
 template void pack_shapes(const BodiesView&, int, std::vector<PackedShape<double>>&);
 

@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <atomic>
 #include <functional>
+#include <type_traits>
 
 #include "backend.hpp"
 #include "host/stages.hpp"
@@ -9,28 +10,98 @@
 namespace cg::detail::host {
 namespace {
 
-// Entry e tests the later entries f of its cell; within a cell the bodies ascend (stable sort of
-// entries made in body order), so body[e] < body[f]. `test`: the candidate filter's pair test
-// (core/narrow.hpp: SpheresTouch, CellRule, or mixed's Fp64Touch; core/centre_cut.hpp: CentreCut), on
-// input indices.
+// The entries in cell order, structure of arrays: each body's packed sphere (inflated by a skin) and
+// control byte, gathered once so that the walk reads memory in sequence and its inner loop vectorises.
+template <class Real>
+struct EntryBodies {
+  Array<Real> x, y, z, r;
+  Array<std::uint32_t> ctrl;  // control_bits, widened: the inner loop's lanes are 32 bits
+  Sphere<Real> sphere(std::size_t e) const { return {x[e], y[e], z[e], r[e]}; }
+};
+
+// What the inner loop may pass over without the test: the pairs the test itself rejects by the same
+// arithmetic. SpheresTouch and mixed's Fp64Touch reject d² > s² (s = ra + rb) and d² > (s + 2m)²
+// (broad_says: apart) respectively, computed here exactly as they compute it (dx = a.x − b.x, …;
+// (dx² + dy²) + dz²; the same roundings, no contraction), so a pair is skipped only where the test
+// says no; a skipped pair still counts as tested. Every other test (CellRule, CentreCut) sees every
+// pair the cell rule assigns.
+template <class Test, class Real>
+struct NearBound {
+  bool all = true;  // no bound: every pair is near
+  Real margin2 = 0;
+  explicit NearBound(const Test& test) {
+    if constexpr (std::is_same_v<Test, SpheresTouch>) {
+      all = false;
+    } else if constexpr (std::is_same_v<Test, Fp64Touch> && std::is_same_v<Real, float>) {
+      all = !(test.margin > 0.0f);  // broad_says is unsure of every pair without a margin
+      margin2 = 2.0f * test.margin;
+    }
+  }
+};
+
+// Entries [lo, hi) of the walk: entry e tests the later entries f of its cell; within a cell the
+// bodies ascend (stable sort of entries made in body order), so body[e] < body[f]. `test`: the
+// candidate filter's pair test (core/narrow.hpp: SpheresTouch, CellRule, or mixed's Fp64Touch;
+// core/centre_cut.hpp: CentreCut), on input indices; it decides every pair the cell rule (and the
+// report mask) assigns, less those NearBound proves it rejects. Returns the pairs tested.
 template <class Test, class Real, class Key, class Emit>
-std::uint64_t walk_entry(std::size_t e, const Entries<Key>& en, const Sphere<Real>* entry_sphere,
-                         const std::uint8_t* entry_ctrl, const std::uint8_t* report, int half_bits,
-                         const Test& test, Emit&& emit) {
+std::uint64_t walk_entries(std::size_t lo, std::size_t hi, const Entries<Key>& en,
+                           const EntryBodies<Real>& eb, const std::uint8_t* report, int half_bits,
+                           const Test& test, Emit&& emit) {
   const std::size_t n_entries = en.size();
-  const Key k = en.keys[e];
-  const std::uint32_t a = en.body[e];
-  // pairs (a, b > a) belong to a's owner, but a wide a's with narrow bodies to theirs (pair_reported)
-  if (report && !(report[a] & (kReportedBit | kWideBit))) return 0;
-  const std::uint32_t type = key_type(k, half_bits);
-  const Sphere<Real> sa = entry_sphere[e];
-  const std::uint8_t ca = entry_ctrl[e];
+  const Key* keys = en.keys.data();
+  const std::uint32_t* body = en.body.data();
+  const Real *ex = eb.x.data(), *ey = eb.y.data(), *ez = eb.z.data(), *er = eb.r.data();
+  const std::uint32_t* ec = eb.ctrl.data();
+  const NearBound<Test, Real> near_bound(test);
+  constexpr std::size_t k_block = 128;  // later entries of one cell flagged at a time
+  std::uint32_t flag[k_block];
   std::uint64_t tests = 0;
-  for (std::size_t f = e + 1; f < n_entries && en.keys[f] == k; ++f) {
-    if (report && !pair_reported(report, a, en.body[f])) continue;
-    if (!test_in_cell(ca, entry_ctrl[f], type)) continue;
-    ++tests;
-    if (test(sa, entry_sphere[f], a, en.body[f])) emit(a, en.body[f]);
+  std::size_t cell_end = lo;
+  for (std::size_t e = lo; e < hi; ++e) {
+    if (e >= cell_end) {  // entry e starts a cell, or the chunk starts inside one
+      cell_end = e + 1;
+      while (cell_end < n_entries && keys[cell_end] == keys[e]) ++cell_end;
+    }
+    const std::uint32_t a = body[e];
+    const std::uint32_t type = key_type(keys[e], half_bits);
+    const std::uint32_t ca = ec[e];
+    if (report) {
+      // pairs (a, b > a) belong to a's owner, but a wide a's with narrow bodies to theirs (pair_reported)
+      if (!(report[a] & (kReportedBit | kWideBit))) continue;
+      const Sphere<Real> sa = eb.sphere(e);
+      for (std::size_t f = e + 1; f < cell_end; ++f) {
+        if (!pair_reported(report, a, body[f])) continue;
+        if (!test_in_cell(std::uint8_t(ca), std::uint8_t(ec[f]), type)) continue;
+        ++tests;
+        if (test(sa, eb.sphere(f), a, body[f])) emit(a, body[f]);
+      }
+      continue;
+    }
+    const Real ax = ex[e], ay = ey[e], az = ez[e], ar = er[e];
+    const std::uint32_t a_two = (ca >> 3) & type;  // test_in_cell: axes both span, whose type bit is set
+    for (std::size_t first = e + 1; first < cell_end; first += k_block) {
+      const std::size_t len = std::min(k_block, cell_end - first);
+      std::uint32_t assigned = 0, wanted = 0;
+      // flag bit 0: the cell rule assigns the pair here (test_in_cell); bit 1: it is near (NearBound)
+      for (std::size_t j = 0; j < len; ++j) {
+        const std::size_t f = first + j;
+        const std::uint32_t cf = ec[f];
+        const std::uint32_t rule = (~(ca ^ cf) & a_two & (cf >> 3) & 7u) == 0u;
+        const Real dx = ax - ex[f], dy = ay - ey[f], dz = az - ez[f];
+        const Real d2 = dx * dx + dy * dy + dz * dz;
+        const Real s = (ar + er[f]) + near_bound.margin2;
+        const std::uint32_t near = near_bound.all || d2 <= s * s;
+        flag[j] = rule | (near << 1);
+        assigned += rule;
+        wanted |= rule & near;
+      }
+      tests += assigned;
+      if (!wanted) continue;
+      const Sphere<Real> sa{ax, ay, az, ar};
+      for (std::size_t j = 0; j < len; ++j)
+        if (flag[j] == 3u && test(sa, eb.sphere(first + j), a, body[first + j])) emit(a, body[first + j]);
+    }
   }
   return tests;
 }
@@ -62,15 +133,27 @@ template <class Test, class Real, class Key>
 std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const std::uint8_t* report,
                       int half_bits, int nt, const Test& test, CandidatePairs& out, ProgressShare& progress) {
   const std::size_t n_entries = en.size();
-  // The spheres (inflated by a skin) and control bytes are first gathered into entry order, so the
-  // walk reads memory in sequence.
-  std::vector<Sphere<Real>> entry_sphere(n_entries);
-  std::vector<std::uint8_t> entry_ctrl(n_entries);
+  EntryBodies<Real> eb;
+  eb.x.resize(n_entries);
+  eb.y.resize(n_entries);
+  eb.z.resize(n_entries);
+  eb.r.resize(n_entries);
+  eb.ctrl.resize(n_entries);
+  // (the bodies of a cell are random places in input order: their reads are asked for ahead)
+  constexpr std::size_t ahead = 16;
 #pragma omp parallel for num_threads(nt) schedule(static) if (n_entries > k_parallel_min)
   for (std::size_t e = 0; e < n_entries; ++e) {
-    entry_sphere[e] = p.spheres[en.body[e]];
-    entry_sphere[e].r += p.inflation;  // a skin: the inflated spheres (0: exactly r)
-    entry_ctrl[e] = p.ctrl[en.body[e]];
+    if (e + ahead < n_entries) {
+      __builtin_prefetch(p.spheres.data() + en.body[e + ahead]);
+      __builtin_prefetch(p.ctrl.data() + en.body[e + ahead]);
+    }
+    const std::uint32_t b = en.body[e];
+    const Sphere<Real> s = p.spheres[b];
+    eb.x[e] = s.x;
+    eb.y[e] = s.y;
+    eb.z[e] = s.z;
+    eb.r[e] = s.r + p.inflation;  // a skin: the inflated spheres (0: exactly r)
+    eb.ctrl[e] = p.ctrl[b];
   }
   // count → scan → fill at the granularity of fixed chunks of entries: each chunk collects its pairs
   // once (no second walk of the cells), the chunk sizes are scanned, the chunks copied in order. The
@@ -82,11 +165,14 @@ std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 1) reduction(+ : tests_total) if (n_chunks > 1)
   for (std::size_t c = 0; c < n_chunks; ++c) {
     std::vector<std::uint64_t>& mine = chunk_pairs[c];
+    auto emit = [&](std::uint32_t a, std::uint32_t b) { mine.push_back((std::uint64_t(a) << id_bits) | b); };
     std::uint64_t unreported = 0;
-    for (std::size_t e = n_entries * c / n_chunks, end = n_entries * (c + 1) / n_chunks; e < end; ++e) {
-      const std::uint64_t tests = walk_entry(
-          e, en, entry_sphere.data(), entry_ctrl.data(), report, half_bits, test,
-          [&](std::uint32_t a, std::uint32_t b) { mine.push_back((std::uint64_t(a) << id_bits) | b); });
+    // progress: the chunk walks its entries in steps, reporting after each
+    constexpr std::size_t k_step = 4096;
+    for (std::size_t e = n_entries * c / n_chunks, end = n_entries * (c + 1) / n_chunks; e < end;
+         e += k_step) {
+      const std::uint64_t tests =
+          walk_entries(e, std::min(end, e + k_step), en, eb, report, half_bits, test, emit);
       tests_total += tests;
       unreported += tests;
       if (progress.on() && unreported >= ProgressShare::kStep) {

@@ -11,10 +11,10 @@
 namespace cg::detail {
 
 template <class Key, class Value>
-void radix_sort(std::vector<Key>& keys, std::vector<Value>& values, int bits, int threads) {
+bool radix_sort_arrays(Key* keys, Value* values, Key* key_tmp, Value* value_tmp, std::size_t n, int bits,
+                       int threads) {
   constexpr bool with_values = !std::is_same_v<Value, NoValues>;
-  const std::size_t n = keys.size();
-  if (n < 2 || bits <= 0) return;
+  if (n < 2 || bits <= 0) return false;
   const int passes = (bits + 10) / 11;
   const int width = (bits + passes - 1) / passes;
   const std::size_t buckets = std::size_t(1) << width;
@@ -22,18 +22,11 @@ void radix_sort(std::vector<Key>& keys, std::vector<Value>& values, int bits, in
   int nt = threads > 0 ? threads : omp_get_max_threads();
   nt = int(std::max<std::size_t>(1, std::min<std::size_t>(nt, n / 262144 + 1)));
 
-  std::vector<Key> k2(n);
-  std::vector<Value> v2;
-  if constexpr (with_values) v2.resize(n);
   std::vector<std::size_t> hist(std::size_t(nt) * buckets);
-  Key* ksrc = keys.data();
-  Key* kdst = k2.data();
-  Value* vsrc = nullptr;
-  Value* vdst = nullptr;
-  if constexpr (with_values) {
-    vsrc = values.data();
-    vdst = v2.data();
-  }
+  Key* ksrc = keys;
+  Key* kdst = key_tmp;
+  Value* vsrc = values;
+  Value* vdst = value_tmp;
   for (int pass = 0; pass < passes; ++pass) {
     const int shift = pass * width;
     int team = 1;
@@ -67,15 +60,14 @@ void radix_sort(std::vector<Key>& keys, std::vector<Value>& values, int bits, in
     std::swap(ksrc, kdst);
     if constexpr (with_values) std::swap(vsrc, vdst);
   }
-  if (ksrc != keys.data()) {
-    keys.swap(k2);
-    if constexpr (with_values) values.swap(v2);
-  }
+  return ksrc != keys;
 }
 
-template void radix_sort(std::vector<std::uint32_t>&, std::vector<std::uint32_t>&, int, int);
-template void radix_sort(std::vector<std::uint64_t>&, std::vector<std::uint32_t>&, int, int);
-template void radix_sort(std::vector<std::uint32_t>&, std::vector<NoValues>&, int, int);
-template void radix_sort(std::vector<std::uint64_t>&, std::vector<NoValues>&, int, int);
+template bool radix_sort_arrays(std::uint32_t*, std::uint32_t*, std::uint32_t*, std::uint32_t*, std::size_t,
+                                int, int);
+template bool radix_sort_arrays(std::uint64_t*, std::uint32_t*, std::uint64_t*, std::uint32_t*, std::size_t,
+                                int, int);
+template bool radix_sort_arrays(std::uint32_t*, NoValues*, std::uint32_t*, NoValues*, std::size_t, int, int);
+template bool radix_sort_arrays(std::uint64_t*, NoValues*, std::uint64_t*, NoValues*, std::size_t, int, int);
 
 }  // namespace cg::detail

@@ -5,19 +5,52 @@
 // (digit, thread, position) keeps the sort stable and the result independent of the thread count.
 #include <algorithm>
 #include <cstdint>
+#include <cstring>
+#include <type_traits>
 #include <vector>
+
+#include "host/scratch_pool.hpp"
 
 namespace cg::detail {
 
 struct NoValues {};
 
-// Sorts keys (and values alongside) by the low `bits` bits of the key; `threads` 0: all. Defined in
-// radix_sort.cpp (compiled with OpenMP) for Key = uint32_t, uint64_t and Value = uint32_t, NoValues.
+// The sort on arrays: keys[0, n) (and values alongside, unless Value is NoValues) by the low `bits`
+// bits of the key; key_tmp and value_tmp hold n elements of scratch. Returns true when the sorted
+// arrays end in the scratch (an odd number of passes). `threads` 0: all. Defined in radix_sort.cpp
+// (compiled with OpenMP) for Key = uint32_t, uint64_t and Value = uint32_t, NoValues.
 template <class Key, class Value>
-void radix_sort(std::vector<Key>& keys, std::vector<Value>& values, int bits, int threads);
+bool radix_sort_arrays(Key* keys, Value* values, Key* key_tmp, Value* value_tmp, std::size_t n, int bits,
+                       int threads);
 
-template <class Key>
-void radix_sort_keys(std::vector<Key>& keys, int bits, int threads) {
+// The sort on vectors (std::vector or the stages' host::Array): the scratch is an Array (pooled, no
+// zero sweep: host/scratch_pool.hpp); the result is swapped in where the types allow, else copied back.
+template <class KeyVector, class ValueVector>
+void radix_sort(KeyVector& keys, ValueVector& values, int bits, int threads) {
+  using Key = typename KeyVector::value_type;
+  using Value = typename ValueVector::value_type;
+  constexpr bool with_values = !std::is_same_v<Value, NoValues>;
+  const std::size_t n = keys.size();
+  if (n < 2 || bits <= 0) return;
+  host::Array<Key> key_tmp(n);
+  host::Array<Value> value_tmp(with_values ? n : 0);
+  if (!radix_sort_arrays(keys.data(), with_values ? values.data() : nullptr, key_tmp.data(),
+                         with_values ? value_tmp.data() : nullptr, n, bits, threads))
+    return;
+  if constexpr (std::is_same_v<KeyVector, host::Array<Key>>)
+    keys.swap(key_tmp);
+  else
+    std::memcpy(keys.data(), key_tmp.data(), n * sizeof(Key));
+  if constexpr (with_values) {
+    if constexpr (std::is_same_v<ValueVector, host::Array<Value>>)
+      values.swap(value_tmp);
+    else
+      std::memcpy(values.data(), value_tmp.data(), n * sizeof(Value));
+  }
+}
+
+template <class KeyVector>
+void radix_sort_keys(KeyVector& keys, int bits, int threads) {
   std::vector<NoValues> none;
   radix_sort(keys, none, bits, threads);
 }

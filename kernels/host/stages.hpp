@@ -18,6 +18,7 @@
 #include "core/shape_narrow.hpp"
 #include "core/skin.hpp"
 #include "engine.hpp"
+#include "host/scratch_pool.hpp"
 
 namespace cg::detail::host {
 
@@ -25,8 +26,9 @@ namespace cg::detail::host {
 constexpr std::size_t k_parallel_min = 32768;
 
 // Exclusive scan of `counts` into `offsets` (size + 1 values, the last the total); returns the total.
-template <class T, class Acc>
-Acc exclusive_scan_into(const std::vector<T>& counts, std::vector<Acc>& offsets) {
+template <class Counts, class Offsets>
+typename Offsets::value_type exclusive_scan_into(const Counts& counts, Offsets& offsets) {
+  using Acc = typename Offsets::value_type;
   offsets.resize(counts.size() + 1);
   Acc sum = 0;
   for (std::size_t i = 0; i < counts.size(); ++i) {
@@ -40,27 +42,27 @@ Acc exclusive_scan_into(const std::vector<T>& counts, std::vector<Acc>& offsets)
 // pack's output, per body in input order.
 template <class Real>
 struct PackedBodies {
-  std::vector<Sphere<Real>> spheres;  // local frame: Real(world - origin)
-  Real inflation = 0;                 // added to every radius by the pair stage (cells, test)
-  std::vector<BodyCells> cells;       // freed by fill_entries
-  std::vector<std::uint8_t> ctrl;     // control_bits
-  std::vector<std::uint32_t> count;   // entry_count; freed by fill_entries
-  std::vector<CutShape> cut;          // CandidateFilter::centre_cut: cut_shape() of every body
-  std::vector<std::uint8_t> level;    // BroadPhase::levels: the level of every body (level_cells)
+  Array<Sphere<Real>> spheres;  // local frame: Real(world - origin)
+  Real inflation = 0;           // added to every radius by the pair stage (cells, test)
+  Array<BodyCells> cells;       // freed by fill_entries
+  Array<std::uint8_t> ctrl;     // control_bits
+  Array<std::uint32_t> count;   // entry_count; freed by fill_entries
+  Array<CutShape> cut;          // CandidateFilter::centre_cut: cut_shape() of every body
+  Array<std::uint8_t> level;    // BroadPhase::levels: the level of every body (level_cells)
 };
 
 // (cell key, body) entries; body-ascending after fill_entries, key-ascending (stable) after sort.
 template <class Key>
 struct Entries {
-  std::vector<Key> keys;
-  std::vector<std::uint32_t> body;
+  Array<Key> keys;
+  Array<std::uint32_t> body;
   std::size_t size() const { return keys.size(); }
 };
 
 // Candidate pairs of local indices a < b, packed as a << id_bits | b: a plain (a, b) array, ascending
 // after order_candidates (so a list can be kept across calls and handed to narrow again).
 struct CandidatePairs {
-  std::vector<std::uint64_t> ab;
+  Array<std::uint64_t> ab;
   int id_bits = 1;
   CandidateFilter filter = CandidateFilter::spheres_touch;  // how the pair stage filtered them
   std::size_t size() const { return ab.size(); }
@@ -98,7 +100,7 @@ void pack_shapes(const BodiesView& bodies, int threads, std::vector<PackedShape<
 
 // cut_shapes (CandidateFilter::centre_cut): cut_shape() of every packed shape, input order.
 template <class Packed>
-void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, std::vector<CutShape>& out);
+void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, Array<CutShape>& out);
 
 // shape_cells (CandidateFilter::centre_cut, after cut_shapes; pack made the spheres only): the cells,
 // control byte and entry count of each body from the box of its shape instead of its bounding sphere

@@ -147,6 +147,33 @@ TYPED_TEST(EngineTest, AllInOneCell) {
   this->expect_matches_reference(s, c);
 }
 
+// Cells crowded with bodies that mostly do not touch: 1500 small spheres in a box of edge 2 and one
+// sphere of radius 1 beside it (so the cell edge is the large one's): hundreds of entries per cell, more
+// than the CPU pair walk flags at a time, and in each a few contacts among many pairs passed over by
+// the sphere bound. fp64's broad phase in fp32 (mixed) gives fp64's contacts bit for bit.
+TYPED_TEST(EngineTest, CrowdedCellsFewContacts) {
+  using R = typename TestFixture::Real;
+  Spheres s = random_spheres(1500, 0.02, 0.05, 71);
+  double edge = 0;
+  for (const auto& p : s.p) edge = std::max({edge, p.x, p.y, p.z});
+  for (auto& p : s.p) p = {p.x * 2.0 / edge, p.y * 2.0 / edge, p.z * 2.0 / edge};
+  s.add(4.5, 0.5, 0.5, 1.0);
+  s.name = "crowded cells";
+  const Contacts<R> c = this->run(s, Fields::full, 0, CellChoice::tuned);
+  EXPECT_GT(c.size(), 50u);
+  EXPECT_LT(c.size(), 1500u * 20u) << "most pairs in a cell must be apart";
+  this->expect_matches_reference(s, c);
+  if constexpr (std::is_same_v<R, double>) {
+    EngineOptions o;
+    o.backend = TypeParam::backend;
+    o.fields = Fields::full;
+    o.fp32_broad_phase = true;
+    Engine<double> mixed(o);
+    const Contacts<double> m = mixed.detect(BodiesView{s.p, s.r, {}, {}});
+    EXPECT_EQ(test::compare_contacts(c, m), "identical");
+  }
+}
+
 TYPED_TEST(EngineTest, OnCellBoundaries) {
   auto s = on_boundaries(51);
   this->expect_matches_reference(s, this->run(s, Fields::basic, 2.0));

@@ -128,6 +128,32 @@ TYPED_TEST(HostStagesTest, StagesByHand) {
   }
 }
 
+// The stages' scratch pool (host/scratch_pool.hpp): a freed array's block serves the next array of
+// about its size (no fresh pages to fault in), a much smaller array does not take it, and
+// release_scratch_pool frees what is held.
+TEST(ScratchPool, ReusesFreedBlocks) {
+  using detail::host::Array;
+  using detail::host::ScratchPool;
+  detail::host::release_scratch_pool();
+  EXPECT_EQ(ScratchPool::instance().held_bytes(), 0u);
+  const float* first = nullptr;
+  {
+    Array<float> a(std::size_t(3) << 20);
+    a.back() = 1;
+    first = a.data();
+  }
+  EXPECT_GE(ScratchPool::instance().held_bytes(), (std::size_t(3) << 20) * sizeof(float));
+  {
+    Array<float> b((std::size_t(3) << 20) - 1000);
+    EXPECT_EQ(b.data(), first) << "a block of about the size is reused";
+    EXPECT_EQ(ScratchPool::instance().held_bytes(), 0u);
+    Array<float> small(std::size_t(1) << 18);
+    EXPECT_NE(small.data(), first);
+  }
+  detail::host::release_scratch_pool();
+  EXPECT_EQ(ScratchPool::instance().held_bytes(), 0u);
+}
+
 // narrow_decide on its own: touching counts, a gap is rejected, the row is the sphere row (world
 // centres 10, 12 and 12.5 on x, frame origin 10).
 TEST(NarrowDecide, TouchingAcceptedGapRejected) {

@@ -1,0 +1,75 @@
+#!/usr/bin/env bash
+# The laptop mode's checks on the device host (issues #33/#37: CPU backend, 2 cores, 2^20 uniform
+# spheres): the CPU = CUDA and CPU = reference cases of the unit suite, then on two pinned quiet cores
+# (taskset -c 0,1) the host's streaming bandwidth, the CPU stages (a new engine per call, as
+# contactgrid.detect; and one engine kept), the CLI's stage table, and SciPy's cKDTree.query_pairs +
+# filter on the same scene when the device's Python has scipy and h5py.
+#   BIN=<CUDA build's binaries: contactgrid contactgrid_tests host_stage_bench host_bandwidth> \
+#   OUT=dir jobs/gpu_hostpath_check.sh
+# Writes $OUT/hostpath.tgz (every log) and prints the summary; exits non-zero naming the failed checks.
+# Run time on an H100 host: about 2 minutes.
+set -u
+cd "$(dirname "$0")/.."
+[ -f .devrt/env.sh ] && source .devrt/env.sh .devrt >/dev/null 2>&1
+BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}
+dir="$OUT/hostpath"; mkdir -p "$dir"
+failed=()
+log() { echo "[$(date -u +%H:%M:%S)] $*"; }
+{ date -u; nproc; grep -m1 'model name' /proc/cpuinfo; uptime; nvidia-smi --query-gpu=name --format=csv,noheader; } \
+  2>&1 | tee "$dir/device.txt"
+
+log "== unit: CPU = CUDA and the engine's cases (CUDA cases must run, not skip)"
+"$BIN/contactgrid_tests" --gtest_filter='*Cuda*:*cuda*:EngineTest*:HostStages*:ScratchPool*:RadixSort*:BroadPhase*' \
+  >"$dir/unit.log" 2>&1 || failed+=(unit)
+grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]' "$dir/unit.log" | head -20
+grep -q 'OK \] EngineTest/cuda_fp64.CrowdedCellsFewContacts' "$dir/unit.log" || failed+=(unit_cuda_case_missing)
+
+scene="$dir/s20.h5"
+"$BIN/contactgrid" generate "$scene" -n 1048576 --seed 20 -q || failed+=(generate)
+log "== bandwidth (2 pinned cores, then 1)"
+taskset -c 0,1 "$BIN/host_bandwidth" 2 512 10 2>&1 | tee "$dir/bandwidth.log" || failed+=(bandwidth)
+taskset -c 0 "$BIN/host_bandwidth" 1 512 10 2>&1 | tee -a "$dir/bandwidth.log"
+log "== stages, 2 threads on cores 0,1: a new engine per call (Python's), then one engine"
+for mode in fresh reuse; do
+  taskset -c 0,1 "$BIN/host_stage_bench" "$scene" 9 2 mixed $mode 2>&1 | tee -a "$dir/stages.log" || failed+=(stages_$mode)
+done
+taskset -c 0 "$BIN/host_stage_bench" "$scene" 9 1 mixed fresh 2>&1 | tee -a "$dir/stages.log"
+log "== the CLI's detect, 2 threads, 5 runs (first call of a process: page faults included)"
+for r in 1 2 3 4 5; do
+  taskset -c 0,1 "$BIN/contactgrid" detect "$scene" -o "$dir/c.h5" --backend cpu --threads 2 -v >>"$dir/cli.log" 2>&1 \
+    || failed+=(cli)
+done
+grep -E '^ +(detect|pack|entries|sort|pairs|order|narrow) ' "$dir/cli.log" | sort -k1,1 -k2,2n |
+  awk '!seen[$1]++' | tee "$dir/cli_best.txt"
+rm -f "$dir/c.h5"
+
+py=${PYTHON:-python3}
+if $py -c "import scipy, h5py" 2>/dev/null; then
+  log "== SciPy cKDTree(positions).query_pairs(2 r_max) + filter, cores 0,1 (median of 3)"
+  taskset -c 0,1 $py - "$scene" <<'PY' 2>&1 | tee "$dir/scipy.log" || failed+=(scipy)
+import sys, time, statistics
+import h5py, numpy as np
+from scipy.spatial import cKDTree
+with h5py.File(sys.argv[1], "r") as f:
+    p = f["/spheres/position"][...].astype(np.float64)
+    r = f["/spheres/radius"][...].astype(np.float64)
+times = []
+for _ in range(3):
+    t0 = time.perf_counter()
+    pairs = cKDTree(p).query_pairs(2 * r.max(), output_type="ndarray")
+    a, b = pairs[:, 0], pairs[:, 1]
+    keep = np.linalg.norm(p[a] - p[b], axis=1) <= r[a] + r[b]
+    times.append(time.perf_counter() - t0)
+print(f"scipy_ms {statistics.median(times) * 1e3:.1f} pairs {int(keep.sum())} runs "
+      + " ".join(f"{t * 1e3:.1f}" for t in times))
+PY
+else
+  echo "no scipy/h5py for $py: SciPy not timed here (jobs/gpu_python_check.sh run times it)" | tee "$dir/scipy.log"
+fi
+rm -f "$scene"
+tar czf "$OUT/hostpath.tgz" -C "$OUT" hostpath && rm -rf "${dir:?}"
+if [ ${#failed[@]} -gt 0 ]; then
+  echo "FAILED: ${failed[*]}"
+  exit 1
+fi
+echo "all passed"
