@@ -409,12 +409,11 @@ Subcommand add_simulate(CLI::App& app) {
       ->capture_default_str();
   sm->add_flag("--write-contacts", sim.write_contacts,
                "Also write contacts_<step>.h5 with each frame (docs/FORMAT.md §2 with the history fields)");
-  sm->add_option("--backend", sim.backend, "cpu | cuda | auto")
-      ->transform(CLI::CheckedTransformer(k_backends))
+  sm->add_option("--backend", sim.backend, "Backend of the contact detection and the dynamics")
+      ->transform(enum_names(k_backends))
       ->default_str("auto");
-  sm->add_option("--precision", sim.precision,
-                 "fp32 | fp64: the contact detection's precision (dynamics: fp64)")
-      ->transform(CLI::CheckedTransformer(k_precisions))
+  sm->add_option("--precision", sim.precision, "the contact detection's precision (dynamics: fp64)")
+      ->transform(enum_names(k_precisions))
       ->default_str("fp64");
   sm->add_option_function<std::string>(
         "--skin",
@@ -527,12 +526,11 @@ Subcommand add_bench_broad(CLI::App& app) {
   bbc->add_option("--lo", args->lo, "First N = 2^lo")->capture_default_str();
   bbc->add_option("--hi", args->hi, "Last N = 2^hi")->capture_default_str();
   bbc->add_option("--step", args->step, "log2 N step")->check(CLI::PositiveNumber)->capture_default_str();
-  bbc->add_option("--backend", args->backend, "cpu | cuda")
-      ->transform(CLI::CheckedTransformer(
-          std::map<std::string, Backend>{{"cpu", Backend::cpu}, {"cuda", Backend::cuda}}))
+  bbc->add_option("--backend", args->backend, "Backend")
+      ->transform(enum_names(std::map<std::string, Backend>{{"cpu", Backend::cpu}, {"cuda", Backend::cuda}}))
       ->default_str("cpu");
-  bbc->add_option("--precision", args->precision, "fp32 | fp64 | mixed")
-      ->transform(CLI::CheckedTransformer(k_precisions))
+  bbc->add_option("--precision", args->precision, "Precision mode (docs/PRECISION.md)")
+      ->transform(enum_names(k_precisions))
       ->default_str("fp64");
   bbc->add_option("--repetitions", args->repetitions, "Time = median of this many warm detections")
       ->check(CLI::Range(1, 1000))

@@ -40,8 +40,11 @@ TEST_F(FirstHour, EnumOptionsListTheirNames) {
   EXPECT_NE(help.output.find("basic|full"), std::string::npos) << help.output;
   EXPECT_NE(help.output.find("auto|x|y|z"), std::string::npos) << help.output;
   EXPECT_EQ(help.output.find("->"), std::string::npos) << help.output;
-  const CliResult bench_help = run_cli("bench --help");
-  EXPECT_EQ(bench_help.output.find("->"), std::string::npos) << bench_help.output;
+  for (const char* command : {"bench", "bench-broad", "simulate", "generate", "validate", "study"}) {
+    const CliResult other = run_cli(std::string(command) + " --help");
+    EXPECT_EQ(other.code, 0) << command << ": " << other.output;
+    EXPECT_EQ(other.output.find("->"), std::string::npos) << command << ": " << other.output;
+  }
 
   const CliResult bad = run_cli("detect " + path("s.h5") + " -o " + path("c.h5") + " --backend gpu");
   EXPECT_EQ(bad.code, 2) << bad.output;

@@ -1,8 +1,8 @@
 // Disk and memory: a write that runs out of room — a full filesystem (a tiny tmpfs in a private mount
-// namespace: ENOSPC) or the file size limit (ulimit -f: SIGXFSZ, then EFBIG) — ends `detect` with its
-// documented exit code and leaves nothing: neither the contact file nor its CSV copy nor a temporary,
-// whichever write it was. A host allocation that fails (ulimit -v) is "out of host memory", exit 7,
-// not a crash. docs/ERRORS.md lists the codes.
+// namespace: ENOSPC) or the file size limit (ulimit -f: SIGXFSZ, then EFBIG) — ends `detect` (or `simulate`)
+// with its documented exit code and leaves nothing: neither the contact file nor its CSV copy nor a
+// temporary, whichever write it was. A host allocation that fails (ulimit -v) is "out of host memory", exit
+// 7, not a crash. docs/ERRORS.md lists the codes.
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -92,6 +92,44 @@ TEST_F(FullDisk, XdmfFilesAppearWithTheOutputsOrNothingDoes) {
   const ShellResult scene = run_on_small_tmpfs(path("disk"), 8192, generate);
   EXPECT_EQ(scene.code, 0) << scene.output;
   EXPECT_NE(scene.output.find("LEFT:s.h5 s.spheres.xmf s.xdmf.h5\n"), std::string::npos) << scene.output;
+}
+
+// simulate on a filesystem that fills up after a few frames (each frame of this pour ~34 KiB, the
+// whole run ~800 KiB): exit 6 naming the disk's reason, no temporary frame left, every frame that is
+// there reads back as a scene, and neither log.csv nor run.xdmf says the run completed.
+TEST_F(FullDisk, SimulateStopsWithExit6AndItsRunSaysItDidNotFinish) {
+  const CliResult g =
+      run_cli("generate " + path("pour.h5") + " --kind pour -n 300 --rlow 0.004 --rhigh 0.005 --seed 3 -q");
+  ASSERT_EQ(g.code, 0) << g.output;
+  const std::string run_dir = path("disk") + "/run";
+  const std::string script =
+      std::string(CG_BINARY) + " simulate " + path("pour.h5") + " -o " + run_dir +
+      " --steps 400 --output-every 20 --backend cpu --threads 2 --no-plot -q; echo RC:$?; "
+      "echo LOG:$(tail -n 1 " +
+      run_dir +
+      "/log.csv); "
+      "grep -o \"Name=.status. Value=.[a-z]*.\" " +
+      run_dir +
+      "/run.xdmf; "
+      "for f in " +
+      run_dir + "/frame_*.h5; do " + CG_BINARY + " detect $f -o " + path("check.h5") +
+      " --backend cpu -q >/dev/null 2>&1 && echo FRAME_OK || echo FRAME_BAD:$f; done; "
+      "echo RUN:$(ls -A " +
+      run_dir + ")";
+  const ShellResult r = run_on_small_tmpfs(path("disk"), 256, script);
+  if (r.code == -1 && r.output.empty()) GTEST_SKIP() << "no tmpfs in a user namespace here (unshare -rm)";
+  EXPECT_NE(r.output.find("RC:6\n"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("No space left on device"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("LOG:# status: complete"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("Value=\"running\""), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("FRAME_OK"), std::string::npos) << "no frame was written before the disk filled:\n"
+                                                          << r.output;
+  EXPECT_EQ(r.output.find("FRAME_BAD"), std::string::npos) << r.output;
+  const std::size_t listing = r.output.find("RUN:");
+  ASSERT_NE(listing, std::string::npos) << r.output;
+  const std::string run_files = r.output.substr(listing, r.output.find('\n', listing) - listing);
+  EXPECT_EQ(run_files.find(".tmp."), std::string::npos) << "a temporary frame was left: " << run_files;
+  EXPECT_NE(run_files.find("log.csv"), std::string::npos) << run_files;
 }
 
 // The file size limit: below the contact file's size, and above it but below the CSV's. The kernel's
