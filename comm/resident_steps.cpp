@@ -175,7 +175,7 @@ struct StepLoop<Real>::State {
   }
 
   // `v` resized to n rows; grown storage (room for a quarter more) moves, so its page lock `pin`
-  // (when `pinned`: the rows a step writes) is released first and taken again on the new storage.
+  // (when given: the rows a step writes) is released first and taken again on the new storage.
   template <class T>
   void resize_kept(HostVector<T>& v, std::size_t n, std::optional<Pin<Real>>* pin) {
     if (n > v.capacity()) {
