@@ -3,7 +3,9 @@
 # backend present (none may skip; the CPU and CUDA estimates must be equal), and a pile of bodies in
 # one cell refused by `detect --backend cuda --max-pair-tests` (exit 9, the estimate with its time, no
 # output file, quickly). Then a smaller pile run to its end on the GPU, its summary kept under $OUT for
-# the device's pair-test rate (kernels/pair_estimate.hpp: kDevicePairTestsPerSecond).
+# the device's pair-test rate, and a pile on two quiet cores of the host for the host's rate
+# (kernels/pair_estimate.hpp: kDevicePairTestsPerSecond, kHostPairTestsPerSecondPerThread). The unit
+# cases include the GPU pair stage's progress on long work (PairEstimate.CudaPairStageReports...).
 #   BIN=dir-with-binaries OUT=results-dir jobs/gpu_faults_check.sh
 # Prints PASS/FAIL per check; exits non-zero naming the failed checks.
 set -u
@@ -49,6 +51,23 @@ log "CLI: a smaller pile run to its end on the GPU (its times, for the rate)"
 rc=$?
 cat "$OUT/faults_pile10k.log"
 check "pile 10k detected on the GPU" test $rc -eq 0
+
+# The rates of kernels/pair_estimate.hpp: pair tests over the detect stage's seconds of a pile (every
+# test a contact), the GPU's from the pile above, the host's on two quiet cores (taskset) per thread.
+rate() {  # LOG THREADS: tests a second (per thread)
+  awk -v threads="$2" '
+    / pair tests$/ { for (i = 1; i < NF; ++i) if ($(i + 1) == "pair") tests = $i }
+    $1 == "detect" && NF == 2 { seconds = $2 }
+    END { if (seconds > 0) printf "%.3g", tests / seconds / threads; else print "?" }' "$1"
+}
+"$CG" generate "$W/pile4k.h5" -n 4000 --seed 3 --rlow 0.001 --rhigh 0.001 --contacts-per-body 100000 -q
+taskset -c 0,1 "$CG" detect "$W/pile4k.h5" -o "$W/p4k.h5" --backend cpu --threads 2 --precision fp64 \
+  >"$OUT/faults_pile4k_cpu.log" 2>&1
+check "pile 4k detected on two quiet cores" test $? -eq 0
+cat "$OUT/faults_pile4k_cpu.log"
+echo "RATE device $(rate "$OUT/faults_pile10k.log" 1) pair tests/s (kDevicePairTestsPerSecond)" | tee "$OUT/faults_rates.txt"
+echo "RATE host $(rate "$OUT/faults_pile4k_cpu.log" 2) pair tests/s per thread (kHostPairTestsPerSecondPerThread; load $(cut -d' ' -f1 /proc/loadavg))" |
+  tee -a "$OUT/faults_rates.txt"
 rm -f "$W"/*.h5
 
 log "done"

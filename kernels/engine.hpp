@@ -87,7 +87,8 @@ struct EngineOptions {
   // max_pair_tests (0: no limit) throws LimitError (exit code 9) before the pair stage runs.
   std::uint64_t max_pair_tests = 0;
   std::function<void(const PairEstimate&)> on_pair_estimate{};
-  // The host pair stage's progress (PairLimits::on_progress): tests done so far, then finished.
+  // The pair stage's progress (PairLimits::on_progress): tests done so far, then finished — the host
+  // backend's always, the CUDA backend's when the estimate is far above the usual (follows_progress).
   std::function<void(std::uint64_t done, bool finished)> on_pair_progress{};
   // The skin chosen by the engine (skin is then ignored): from the largest displacement per call it
   // observes and the measured cost of its builds and reuses, the skin whose mean cost per call is

@@ -13,6 +13,10 @@ bool pair_work_unusual(const PairEstimate& e) {
   return e.tests >= 1'000'000'000ull && per_body >= 1000;
 }
 
+bool follows_progress(const PairEstimate& e, const PairLimits& limits) {
+  return limits.on_progress != nullptr && *limits.on_progress && pair_work_unusual(e);
+}
+
 std::string describe_seconds(double seconds) {
   char text[40];
   if (seconds < 90)

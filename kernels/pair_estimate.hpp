@@ -36,16 +36,27 @@ constexpr double kDevicePairTestsPerSecond = 1e9;
 struct PairLimits {
   std::uint64_t max_tests = 0;                                            // 0: no limit
   const std::function<void(const PairEstimate&)>* on_estimate = nullptr;  // may be null
-  // The pair stage's progress (host backend): tests done so far, from one thread at a time, and once
-  // more with finished = true at the stage's end. May be null.
+  // The pair stage's progress: tests done so far, from one thread at a time, and once more with
+  // finished = true at the stage's end (the host backend always; the CUDA backend when the estimate
+  // is far above the usual: follows_progress). May be null.
   const std::function<void(std::uint64_t done, bool finished)>* on_progress = nullptr;
-  // Whether anyone looks at the estimate: a broad phase makes none otherwise (the library's default
-  // costs nothing; on the GPU the estimate is a scan, a reduction and a wait).
-  bool wanted() const { return max_tests > 0 || (on_estimate != nullptr && *on_estimate); }
+  // Whether anyone looks at the estimate — a limit, a caller that sees it, or one that follows the
+  // progress, which a GPU pair stage reports only when its estimate is far above the usual: a broad
+  // phase makes none otherwise (the library's default costs nothing; on the GPU the estimate is a
+  // scan, a reduction and a wait).
+  bool wanted() const {
+    return max_tests > 0 || (on_estimate != nullptr && *on_estimate) ||
+           (on_progress != nullptr && *on_progress);
+  }
 };
 
 // Far above the usual: at least 1e9 tests (seconds of work) and 1000 per body.
 bool pair_work_unusual(const PairEstimate& e);
+
+// Whether a pair stage with this estimate reports its progress: far above the usual, and a caller
+// follows it (PairLimits::on_progress). The host's pair stage reports whenever a caller follows it; a
+// GPU pair stage is one kernel that the host would otherwise wait for without a word.
+bool follows_progress(const PairEstimate& e, const PairLimits& limits);
 
 // "about 5e+11 pair tests (5e+05 per body; the fullest cell holds 1000000 entries)", and with a rate
 // "…; about 4.2 min at 2e+09 tests a second)"

@@ -198,8 +198,9 @@ class CudaBackend {
       } else {
         if (r.job.pair_limits.wanted()) {  // brute force tests every pair
           const std::uint64_t n = r.n64;
-          check_pair_estimate(PairEstimate{n * (n - 1) / 2, n, n, n, kDevicePairTestsPerSecond},
-                              r.job.pair_limits);
+          const PairEstimate e{n * (n - 1) / 2, n, n, n, kDevicePairTestsPerSecond};
+          check_pair_estimate(e, r.job.pair_limits);
+          r.pair_progress = follows_progress(e, r.job.pair_limits);
         }
         brute_stages(r);
       }

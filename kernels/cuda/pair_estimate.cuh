@@ -69,6 +69,7 @@ void estimate_stage(RunState<Real, Key, Narrow>& r) {
     e.largest = r.h_counters->cell_work.largest;
   }
   check_pair_estimate(e, r.job.pair_limits);
+  r.pair_progress = follows_progress(e, r.job.pair_limits);
 }
 
 }  // namespace cg::detail

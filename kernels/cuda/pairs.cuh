@@ -314,7 +314,7 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
   launch_count_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.pair_perm(), r.d_report,
                      r.g.half_bits, 0u, d_pair_count, d_entry_totals, r.d_counters, d_direct,
                      d_direct + direct_cap, direct_cap);
-  r.read_counters();  // host needs the pairs total
+  r.read_counters_reporting_tests();  // host needs the pairs total
   const std::uint64_t n_pairs = r.h_counters->pairs;
   r.stats.pair_tests = r.h_counters->tests;
   check_pairs(n_pairs);

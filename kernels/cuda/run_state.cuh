@@ -2,12 +2,15 @@
 // The state one CUDA detection hands from stage to stage: the call's sizes and knobs, the DEVICE
 // pointers each stage produces (views of the workspace, see workspace.cuh) and the host's copies of
 // the counters. Built by CudaBackend::run (cuda_backend.cu), which calls the stages in order.
+#include <chrono>
 #include <sstream>
+#include <thread>
 
 #include "backend.hpp"
 #include "core/centre_cut.hpp"
 #include "core/shape.hpp"
 #include "cuda/common.cuh"
+#include "cuda/device_buffer.cuh"
 #include "cuda/stage_events.cuh"
 #include "cuda/tuning.hpp"
 #include "cuda/workspace.cuh"
@@ -104,6 +107,42 @@ struct RunState {
     CG_CUDA_CHECK(
         cudaMemcpyAsync(h_counters, d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, st));
     CG_CUDA_CHECK(cudaStreamSynchronize(st));
+  }
+
+  // The pair stage was estimated far above the usual (pair_work_unusual) and a caller follows its
+  // progress (PairLimits::on_progress): set by the broad phase's estimate.
+  bool pair_progress = false;
+
+  // read_counters after a pair stage's kernel, whose blocks each add their tests to Counters::tests
+  // when they finish. With pair_progress, while the kernel runs the tests done so far go to
+  // PairLimits::on_progress every 100 ms (a copy on a stream of its own reads the counter the blocks
+  // add to), then the whole count, finished. Without it, read_counters: the usual call pays nothing.
+  void read_counters_reporting_tests() {
+    if (!pair_progress) return read_counters();
+    const auto& report = *job.pair_limits.on_progress;
+    cudaStream_t probe_stream = nullptr;
+    CG_CUDA_CHECK(cudaStreamCreateWithFlags(&probe_stream, cudaStreamNonBlocking));
+    struct StreamGuard {
+      cudaStream_t s;
+      ~StreamGuard() { cudaStreamDestroy(s); }
+    } guard{probe_stream};
+    cuda::PinnedBuffer probe;
+    probe.reserve(sizeof(unsigned long long));
+    auto* done = reinterpret_cast<unsigned long long*>(probe.data());
+    for (;;) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      const cudaError_t state = cudaStreamQuery(st);
+      if (state != cudaErrorNotReady) {
+        CG_CUDA_CHECK(state);
+        break;
+      }
+      CG_CUDA_CHECK(
+          cudaMemcpyAsync(done, &d_counters->tests, sizeof *done, cudaMemcpyDeviceToHost, probe_stream));
+      CG_CUDA_CHECK(cudaStreamSynchronize(probe_stream));
+      report(*done, false);
+    }
+    read_counters();
+    report(h_counters->tests, true);
   }
 };
 

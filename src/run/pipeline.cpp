@@ -643,7 +643,7 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.engine.skin = cmd.skin;
   o.engine.max_pair_tests = cmd.max_pair_tests;
   // A pair stage far above the usual is said before it runs (any rank) and, on rank 0's terminal,
-  // shows its progress in pair tests (run/progress.hpp; the host backend reports it).
+  // shows its progress in pair tests (run/progress.hpp; both backends report it).
   auto pair_bar = std::make_shared<std::unique_ptr<Progress>>();
   o.engine.on_pair_estimate = [pair_bar, draw = !cmd.quiet && session.rank() == 0,
                                prefix = session.uses_mpi() ? session.prefix()

@@ -94,7 +94,8 @@ TYPED_TEST(PairEstimateTest, StackedBodiesAreRefusedAboveTheLimit) {
   EXPECT_EQ(this->run(s, std::uint64_t(n) * (n - 1) / 2, seen).size(), c.size());
 }
 
-// The host pair stage reports its progress: the tests done so far, last the whole count, finished.
+// The host pair stage reports its progress whatever the estimate: the tests done so far, last the
+// whole count, finished.
 TEST(PairEstimate, HostPairStageReportsItsProgress) {
   const Spheres s = random_spheres(20000, 0.5, 0.5, 5);
   std::vector<std::pair<std::uint64_t, bool>> calls;
@@ -111,6 +112,55 @@ TEST(PairEstimate, HostPairStageReportsItsProgress) {
     EXPECT_FALSE(calls[k].second);
     EXPECT_LE(calls[k].first, calls.back().first);
   }
+}
+
+// A GPU pair stage far above the usual reports its progress while its kernel runs: 300 000 bodies of
+// radius 1e-4 in one cell (the cells are sized for one body of radius 1 far away), 4.5e10 tests and
+// next to no contacts. Calls come while the stage runs (the kernel takes seconds), never above the
+// last, and last the tests made, finished; grid and brute alike. A usual scene reports nothing. Skips
+// visibly without a GPU.
+TEST(PairEstimate, CudaPairStageReportsTheProgressOfLongWork) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device";
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  Spheres s;
+  const std::size_t n = 300000;
+  for (std::size_t i = 0; i < n; ++i) s.add(u(rng), u(rng), u(rng), 1e-4);
+  s.add(10, 10, 10, 1.0);
+  for (const BroadPhase broad : {BroadPhase::grid, BroadPhase::brute}) {
+    SCOPED_TRACE(broad == BroadPhase::grid ? "grid" : "brute");
+    std::vector<std::pair<std::uint64_t, bool>> calls;
+    std::vector<PairEstimate> seen;
+    EngineOptions o;
+    o.backend = Backend::cuda;
+    o.broad_phase = broad;
+    o.on_pair_estimate = [&seen](const PairEstimate& e) { seen.push_back(e); };
+    o.on_pair_progress = [&calls](std::uint64_t done, bool finished) { calls.emplace_back(done, finished); };
+    Engine<double> engine(o);
+    engine.detect(BodiesView{s.p, s.r, {}, {}});
+    ASSERT_EQ(seen.size(), 1u);
+    EXPECT_TRUE(pair_work_unusual(seen[0]));
+    if (broad == BroadPhase::grid) {
+      EXPECT_EQ(seen[0].largest, n);
+    }
+    ASSERT_GE(calls.size(), 2u) << "no report while the pair stage ran";
+    EXPECT_TRUE(calls.back().second);
+    EXPECT_EQ(calls.back().first, engine.stats().pair_tests);
+    EXPECT_GT(calls.back().first, std::uint64_t(n) * (n - 1) / 4);
+    for (std::size_t k = 0; k + 1 < calls.size(); ++k) {
+      EXPECT_FALSE(calls[k].second);
+      EXPECT_LE(calls[k].first, calls[k + 1].first);
+    }
+  }
+  // a usual scene: no progress from the GPU
+  const Spheres usual = random_spheres(20000, 0.5, 0.5, 5);
+  std::vector<std::pair<std::uint64_t, bool>> calls;
+  EngineOptions o;
+  o.backend = Backend::cuda;
+  o.on_pair_progress = [&calls](std::uint64_t done, bool finished) { calls.emplace_back(done, finished); };
+  Engine<double> engine(o);
+  engine.detect(BodiesView{usual.p, usual.r, {}, {}});
+  EXPECT_TRUE(calls.empty());
 }
 
 // One scene, both backends: the same estimate (the cells' entries are the same on both). Skips
