@@ -88,24 +88,31 @@ struct StepLoop<Real>::State {
   double skin = 0;
   SkinTuner tuner;
 
-  StepBodies bodies;  // owned, ascending id
-  StepPlan plan;      // of the owned rows: interior or boundary, and the halo
-  BoundaryRows rows;  // engine B's row of each boundary row and each ghost
+  StepBodies bodies;         // owned, ascending id
+  StepBodies spare;          // the previous rows' storage: the next migration's rows are merged into it
+  bool rows_changed = true;  // bodies' rows (ids) differ from engine A's: the layout sets them
+  bool uploaded = false;     // this step's layout set engine A's rows from the moved bodies
+  StepPlan plan;             // of the owned rows: interior or boundary, and the halo
+  BoundaryRows rows;         // engine B's row of each boundary row and each ghost
   std::vector<std::uint64_t> send_counts, recv_counts;
-  HostVector<Vec3<double>> laid;  // the owned centres at the layout
+  HostVector<Vec3<double>> laid;        // the owned centres at the layout
+  std::vector<double> axis_coordinate;  // the owned centres along the slab axis (coordinates())
   int steps_since_layout = 0;
   double displacement = 0;  // the largest since the layout (rebuild_due; max over ranks)
   int layouts = 0;
   std::uint64_t migrated = 0, rebalances = 0;
-  // engine B's rows, host side (page-locked while laid out)
+  // engine B's rows, host side: storage kept across layouts (grown with room to spare), page-locked
+  // while it stays where it is
   HostVector<Vec3<double>> b_p;
   HostVector<double> b_r;
   HostVector<std::int64_t> b_id;
-  HostVector<Quat<double>> b_q;     // scenes with ellipsoids
-  HostVector<Vec3<double>> b_semi;  // when the semi-axes travel (StepMotion::send_semi_axes)
+  HostVector<std::uint8_t> b_mask;
+  HostVector<Shape> b_shape;        // scenes with ellipsoids
+  HostVector<Vec3<double>> b_semi;  // (refreshed every step when the semi-axes travel)
+  HostVector<Quat<double>> b_q;     // (refreshed every step)
   std::optional<Engine<Real>> b;    // engine B, made at the first layout with boundary rows
   bool b_active = false;            // this layout has boundary rows
-  std::optional<Pin<Real>> pin_p, pin_r, pin_q;
+  std::optional<Pin<Real>> pin_p, pin_r, pin_q, pin_semi;
   std::uint64_t halo_rows = 0;  // ghosts received per step
   double setup = 0;
   std::uint64_t builds0 = 0, reuses0 = 0;  // engine A's counters before the steps
@@ -145,10 +152,40 @@ struct StepLoop<Real>::State {
     if (!error) error = std::current_exception();
   }
 
-  std::vector<double> coordinates() const {
-    std::vector<double> x(bodies.size());
-    for (std::size_t k = 0; k < x.size(); ++k) x[k] = component(bodies.position[k], slabs.axis());
-    return x;
+  // The owned centres along the slab axis (a buffer kept across rebuilds).
+  std::span<const double> coordinates() {
+    const std::size_t n = bodies.size();
+    axis_coordinate.resize(n);
+    const Vec3<double>* x = bodies.position.data();
+    double* c = axis_coordinate.data();
+    const int axis = slabs.axis();
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > (std::size_t(1) << 15))
+    for (std::size_t k = 0; k < n; ++k) c[k] = component(x[k], axis);
+    return axis_coordinate;
+  }
+
+  // A copy of the bodies' centres at this layout (rebuild_due's reference), in parallel.
+  void remember_centres() {
+    const std::size_t n = bodies.size();
+    laid.resize(n);
+    const Vec3<double>* x = bodies.position.data();
+    Vec3<double>* to = laid.data();
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > (std::size_t(1) << 15))
+    for (std::size_t k = 0; k < n; ++k) to[k] = x[k];
+  }
+
+  // `v` resized to n rows; grown storage (room for a quarter more) moves, so its page lock `pin`
+  // (when given: the rows a step writes) is released first and taken again on the new storage.
+  template <class T>
+  void resize_kept(HostVector<T>& v, std::size_t n, std::optional<Pin<Real>>* pin) {
+    if (n > v.capacity()) {
+      if (pin) pin->reset();
+      HostVector<T> grown;
+      grown.reserve(n + n / 4);
+      v.swap(grown);
+    }
+    v.resize(n);
+    if (pin && !*pin && v.capacity() > 0) pin->emplace(a, v.data(), v.capacity() * sizeof(T));
   }
 
   // Engine B's rows from the bodies' boundary rows and the ghosts' records (the layout's exchange).
@@ -271,15 +308,23 @@ void StepLoop<Real>::migrate() {
   const int me = s.session.rank();
   const std::size_t p = static_cast<std::size_t>(s.session.size()), stride = s.bodies.state_bytes;
   StepBodies& b = s.bodies;
-  ExportPlan plan;
+  ExportPlan plan;  // the rows that leave, by their new owner (none to this rank)
   std::vector<std::uint64_t> send_counts(p, 0);
   HostVector<BodyRecord> send;
   HostVector<ShapeRecord> send_shapes;
   HostVector<std::byte> send_state;
   agreed_stage(s.session, "steps", [&] {
-    plan = make_owner_plan(s.slabs, s.coordinates(), s.threads);
-    for (std::size_t r = 0; r < p; ++r)
-      if (static_cast<int>(r) != me) send_counts[r] = plan.count(static_cast<int>(r));
+    const std::span<const double> x = s.coordinates();
+    const auto owner = to_owner(s.slabs, [x](std::size_t i) { return x[i]; });
+    plan = route<std::size_t, std::allocator<std::size_t>>(
+        x.size(), s.session.size(), s.threads,
+        [&](std::size_t i, auto&& emit) {
+          owner(i, [&](int r) {
+            if (r != me) emit(r);
+          });
+        },
+        [](std::size_t i) { return i; });
+    for (std::size_t r = 0; r < p; ++r) send_counts[r] = plan.count(static_cast<int>(r));
   });
   const std::uint64_t leaving = std::accumulate(send_counts.begin(), send_counts.end(), std::uint64_t(0));
   const std::uint64_t moving = s.session.sum(leaving);
@@ -291,16 +336,12 @@ void StepLoop<Real>::migrate() {
     send = HostVector<BodyRecord>(leaving);
     if (s.shapes) send_shapes = HostVector<ShapeRecord>(leaving);
     send_state = HostVector<std::byte>(leaving * stride);
-    std::size_t w = 0;
-    for (std::size_t r = 0; r < p; ++r) {
-      if (static_cast<int>(r) == me) continue;
-      for (std::size_t k : plan.to(static_cast<int>(r))) {
-        send[w] = BodyRecord{b.position[k], b.radius[k], b.id[k]};
-        if (s.shapes)
-          send_shapes[w] = ShapeRecord{b.shapes.orientation[k], b.shapes.semi_axes[k], b.shapes.shape[k]};
-        std::copy_n(b.state.data() + k * stride, stride, send_state.data() + w * stride);
-        ++w;
-      }
+    for (std::size_t w = 0; w < leaving; ++w) {
+      const std::size_t k = plan.rows[w];
+      send[w] = BodyRecord{b.position[k], b.radius[k], b.id[k]};
+      if (s.shapes)
+        send_shapes[w] = ShapeRecord{b.shapes.orientation[k], b.shapes.semi_axes[k], b.shapes.shape[k]};
+      std::copy_n(b.state.data() + k * stride, stride, send_state.data() + w * stride);
     }
   });
   const std::vector<std::uint64_t> recv_counts = s.comm.alltoall_counts(send_counts);
@@ -314,46 +355,32 @@ void StepLoop<Real>::migrate() {
     got_state = s.comm.alltoallv(std::move(send_state), sb, rb);
   }
   agreed_stage(s.session, "steps", [&] {
-    // the bodies that stay (ascending id) and the arrivals (sorted by id), merged by id
-    const std::span<const std::size_t> stay = plan.to(me);
-    std::vector<std::size_t> arrival(got.size());
-    std::iota(arrival.begin(), arrival.end(), std::size_t(0));
-    std::sort(arrival.begin(), arrival.end(),
+    if (leaving == 0 && got.empty()) return;  // this rank's rows stay as they are
+    // the arrivals sorted by id, the leaving rows ascending, then the rows that stay and the
+    // arrivals merged by id into the spare storage (the runs between the changes copied in parallel)
+    std::vector<std::size_t> order(got.size());
+    std::iota(order.begin(), order.end(), std::size_t(0));
+    std::sort(order.begin(), order.end(),
               [&](std::size_t x, std::size_t y) { return got[x].id < got[y].id; });
-    StepBodies next = sized_step_bodies(
-        stay.size() + got.size(), s.shapes && (!b.shapes.empty() || !got_shapes.empty()), b.state_bytes);
-    const bool with_shapes = !next.shapes.empty();
-    std::size_t i = 0, j = 0;
-    for (std::size_t row = 0; row < next.size(); ++row) {
-      const bool from_stay = j == arrival.size() || (i < stay.size() && b.id[stay[i]] < got[arrival[j]].id);
-      if (from_stay) {
-        const std::size_t k = stay[i++];
-        next.position[row] = b.position[k];
-        next.radius[row] = b.radius[k];
-        next.id[row] = b.id[k];
-        if (with_shapes) {
-          next.shapes.shape[row] = b.shapes.shape[k];
-          next.shapes.semi_axes[row] = b.shapes.semi_axes[k];
-          next.shapes.orientation[row] = b.shapes.orientation[k];
-        }
-        std::copy_n(b.state.data() + k * stride, stride, next.state.data() + row * stride);
-      } else {
-        const std::size_t g = arrival[j++];
-        next.position[row] = got[g].position;
-        next.radius[row] = got[g].radius;
-        next.id[row] = got[g].id;
-        if (with_shapes) {
-          next.shapes.shape[row] = got_shapes[g].shape;
-          next.shapes.semi_axes[row] = got_shapes[g].semi_axes;
-          next.shapes.orientation[row] = got_shapes[g].orientation;
-        }
-        std::copy_n(got_state.data() + g * stride, stride, next.state.data() + row * stride);
+    const bool shapes = s.shapes && (!b.shapes.empty() || !got_shapes.empty());
+    StepBodies arrivals = sized_step_bodies(got.size(), shapes, stride);
+    for (std::size_t j = 0; j < order.size(); ++j) {
+      const std::size_t g = order[j];
+      arrivals.position[j] = got[g].position;
+      arrivals.radius[j] = got[g].radius;
+      arrivals.id[j] = got[g].id;
+      if (shapes) {
+        arrivals.shapes.shape[j] = got_shapes[g].shape;
+        arrivals.shapes.semi_axes[j] = got_shapes[g].semi_axes;
+        arrivals.shapes.orientation[j] = got_shapes[g].orientation;
       }
-      if (row > 0 && !(next.id[row - 1] < next.id[row]))
-        throw Error("steps: body " + std::to_string(next.id[row]) +
-                    " is held twice after migration: internal error");
+      std::copy_n(got_state.data() + g * stride, stride, arrivals.state.data() + j * stride);
     }
-    b = std::move(next);
+    std::vector<std::size_t> gone(plan.rows.begin(), plan.rows.end());
+    std::sort(gone.begin(), gone.end());
+    merge_step_bodies(b, gone, arrivals, shapes, s.spare, s.threads);
+    std::swap(b, s.spare);
+    s.rows_changed = true;
   });
   s.migrated += moving;
   s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
@@ -376,47 +403,58 @@ void StepLoop<Real>::lay_out() {
     s.skin = s.tuner.skin();
   }
   const int me = s.session.rank();
+  const bool alone = s.session.size() == 1;  // every body interior: no plan, no halo, no engine B
   const StepBodies& b = s.bodies;
   Exports<BodyRecord> exports;
   Exports<ShapeRecord> shape_exports;
   agreed_stage(s.session, "steps", [&] {
-    // the ghost width of the layout: the frame's, over coordinates that may still grow by the skin,
-    // plus the skin (each of two bodies moves by at most skin/2 before the next layout)
-    const double width =
-        frame_ghost_width(s.global, s.frame.origin, std::numeric_limits<Real>::epsilon(), s.skin) + s.skin;
-    s.plan = make_step_plan(s.slabs, me, s.coordinates(), width, s.threads);
-    if (s.plan.owned.size() != b.size()) {
-      const std::size_t k = static_cast<std::size_t>(
-          std::find(s.plan.role.begin(), s.plan.role.end(), RowRole::ghost) - s.plan.role.begin());
-      throw InputError("steps: body " + std::to_string(b.id[k]) + " is not owned by rank " +
-                       std::to_string(me));
-    }
-    s.send_counts = s.plan.halo.counts();
-    exports.offsets = s.plan.halo.offsets;
-    exports.rows = HostVector<BodyRecord>(s.plan.halo.total());
-    if (s.shapes) {
-      shape_exports.offsets = s.plan.halo.offsets;
-      shape_exports.rows = HostVector<ShapeRecord>(s.plan.halo.total());
-    }
-    for (std::size_t w = 0; w < s.plan.halo.total(); ++w) {
-      const std::size_t k = s.plan.halo.rows[w];
-      exports.rows[w] = BodyRecord{b.position[k], b.radius[k], b.id[k]};
-      if (s.shapes)
-        shape_exports.rows[w] =
-            ShapeRecord{b.shapes.orientation[k], b.shapes.semi_axes[k], b.shapes.shape[k]};
+    if (!alone) {
+      // the ghost width of the layout: the frame's, over coordinates that may still grow by the
+      // skin, plus the skin (each of two bodies moves by at most skin/2 before the next layout)
+      const double width =
+          frame_ghost_width(s.global, s.frame.origin, std::numeric_limits<Real>::epsilon(), s.skin) + s.skin;
+      s.plan = make_step_plan(s.slabs, me, s.coordinates(), width, s.threads);
+      if (s.plan.owned != b.size()) {
+        const std::size_t k = static_cast<std::size_t>(
+            std::find(s.plan.role.begin(), s.plan.role.end(), RowRole::ghost) - s.plan.role.begin());
+        throw InputError("steps: body " + std::to_string(b.id[k]) + " is not owned by rank " +
+                         std::to_string(me));
+      }
+      s.send_counts = s.plan.halo.counts();
+      exports.offsets = s.plan.halo.offsets;
+      exports.rows = HostVector<BodyRecord>(s.plan.halo.total());
+      if (s.shapes) {
+        shape_exports.offsets = s.plan.halo.offsets;
+        shape_exports.rows = HostVector<ShapeRecord>(s.plan.halo.total());
+      }
+      for (std::size_t w = 0; w < s.plan.halo.total(); ++w) {
+        const std::size_t k = s.plan.halo.rows[w];
+        exports.rows[w] = BodyRecord{b.position[k], b.radius[k], b.id[k]};
+        if (s.shapes)
+          shape_exports.rows[w] =
+              ShapeRecord{b.shapes.orientation[k], b.shapes.semi_axes[k], b.shapes.shape[k]};
+      }
     }
     s.a.set_skin(s.skin);
-    s.a.set_resident(
-        BodiesView{b.position, b.radius, {}, {}, b.shapes.shape, b.shapes.semi_axes, b.shapes.orientation});
-    s.laid.assign(b.position.begin(), b.position.end());
+    if (s.rows_changed) {  // other rows (the setup, a migration that changed this rank's): all of them
+      s.a.set_resident(
+          BodiesView{b.position, b.radius, {}, {}, b.shapes.shape, b.shapes.semi_axes, b.shapes.orientation});
+      s.rows_changed = false;
+      s.uploaded = !first;  // the setup's rows are the file's: step 1 commits its motion
+    } else {                // the same rows: commit writes their motion, the next detection builds
+      s.a.rebuild_candidates();
+    }
+    s.remember_centres();
   });
-  s.recv_counts = s.comm.alltoall_counts(s.send_counts);
-  // the exchange carries the ghosts' records (ids too); the steps refresh their rows
-  const HostVector<BodyRecord> ghosts = s.comm.exchange(exports.rows, s.send_counts, s.recv_counts);
-  HostVector<ShapeRecord> ghost_shapes;  // the same ghosts' shape rows, in the same order
-  if (s.shapes) ghost_shapes = s.comm.exchange(shape_exports.rows, s.send_counts, s.recv_counts);
-  agreed_stage(s.session, "steps", [&] { s.make_engine_b(ghosts, ghost_shapes); });
-  s.halo_rows = ghosts.size();
+  if (!alone) {
+    s.recv_counts = s.comm.alltoall_counts(s.send_counts);
+    // the exchange carries the ghosts' records (ids too); the steps refresh their rows
+    const HostVector<BodyRecord> ghosts = s.comm.exchange(exports.rows, s.send_counts, s.recv_counts);
+    HostVector<ShapeRecord> ghost_shapes;  // the same ghosts' shape rows, in the same order
+    if (s.shapes) ghost_shapes = s.comm.exchange(shape_exports.rows, s.send_counts, s.recv_counts);
+    agreed_stage(s.session, "steps", [&] { s.make_engine_b(ghosts, ghost_shapes); });
+    s.halo_rows = ghosts.size();
+  }
   s.steps_since_layout = 0;
   ++s.layouts;
   if (first) {
@@ -430,9 +468,6 @@ void StepLoop<Real>::lay_out() {
 template <class Real>
 void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
                                           const HostVector<ShapeRecord>& ghost_shapes) {
-  pin_p.reset();
-  pin_r.reset();
-  pin_q.reset();
   b_active = false;
   const StepBodies& o = bodies;
   const std::size_t nb = plan.boundary.size();
@@ -442,26 +477,24 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
   rows = merge_boundary_rows(boundary_ids, ghost_ids);
   if (nb == 0) return;  // no boundary row: the ghosts touch none of this rank's bodies
   const std::size_t total = rows.size();
-  b_p = HostVector<Vec3<double>>(total);
-  b_r = HostVector<double>(total);
-  b_id = HostVector<std::int64_t>(total);
-  HostVector<std::uint8_t> mask(total);
-  ShapeRows b_s;
-  if (shapes) {
-    b_s.shape = HostVector<Shape>(total);
-    b_s.semi_axes = HostVector<Vec3<double>>(total);
-    b_s.orientation = HostVector<Quat<double>>(total);
-  }
+  // the rows a step writes stay page-locked; the others are uploaded once a layout
+  resize_kept(b_p, total, &pin_p);
+  resize_kept(b_r, total, &pin_r);
+  resize_kept(b_id, total, nullptr);
+  resize_kept(b_mask, total, nullptr);
+  resize_kept(b_shape, shapes ? total : 0, nullptr);
+  resize_kept(b_semi, shapes ? total : 0, grow ? &pin_semi : nullptr);
+  resize_kept(b_q, shapes ? total : 0, refresh ? &pin_q : nullptr);
   for (std::size_t k = 0; k < nb; ++k) {
     const std::size_t i = plan.boundary[k], row = rows.of_boundary[k];
     b_p[row] = o.position[i];
     b_r[row] = o.radius[i];
     b_id[row] = o.id[i];
-    mask[row] = kReportedBit | kPairedBit;  // A pairs the boundary rows with each other
+    b_mask[row] = kReportedBit | kPairedBit;  // A pairs the boundary rows with each other
     if (shapes) {
-      b_s.shape[row] = o.shapes.shape[i];
-      b_s.semi_axes[row] = o.shapes.semi_axes[i];
-      b_s.orientation[row] = o.shapes.orientation[i];
+      b_shape[row] = o.shapes.shape[i];
+      b_semi[row] = o.shapes.semi_axes[i];
+      b_q[row] = o.shapes.orientation[i];
     }
   }
   for (std::size_t g = 0; g < ghosts.size(); ++g) {
@@ -469,32 +502,27 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
     b_p[row] = ghosts[g].position;
     b_r[row] = ghosts[g].radius;
     b_id[row] = ghosts[g].id;
-    mask[row] = 0;
+    b_mask[row] = 0;
     if (shapes) {
-      b_s.shape[row] = ghost_shapes[g].shape;
-      b_s.semi_axes[row] = ghost_shapes[g].semi_axes;
-      b_s.orientation[row] = ghost_shapes[g].orientation;
+      b_shape[row] = ghost_shapes[g].shape;
+      b_semi[row] = ghost_shapes[g].semi_axes;
+      b_q[row] = ghost_shapes[g].orientation;
     }
   }
   if (!b) b.emplace(a.options());  // kept across layouts: its workspace stays allocated
   b->set_skin(skin);
-  b->set_resident(BodiesView{b_p, b_r, {}, mask, b_s.shape, b_s.semi_axes, b_s.orientation});
+  b->set_resident(BodiesView{b_p, b_r, {}, b_mask, b_shape, b_semi, b_q});
   b_active = true;
-  pin_p.emplace(a, b_p.data(), b_p.size() * sizeof(Vec3<double>));
-  pin_r.emplace(a, b_r.data(), b_r.size() * sizeof(double));
-  b_q = {};
-  b_semi = {};
-  if (refresh) {
-    b_q = std::move(b_s.orientation);
-    pin_q.emplace(a, b_q.data(), b_q.size() * sizeof(Quat<double>));
-  }
-  if (grow) b_semi = std::move(b_s.semi_axes);
 }
 
 template <class Real>
 void StepLoop<Real>::commit(Moved moved) {
   State& s = *m;
   StepBodies& b = s.bodies;
+  if (s.uploaded) {  // this step's layout set engine A's rows from the moved bodies
+    s.uploaded = false;
+    return;
+  }
   try {
     if (moved.positions) s.a.write_resident(0, b.size(), b.position.data(), b.radius.data());
     if (moved.orientations && !b.shapes.empty())
@@ -624,6 +652,7 @@ void StepLoop<Real>::collect() {
   s.built.push_back(s.a.stats().candidate_builds > s.builds_before || !(s.skin > 0) ? 1.0 : 0.0);
   s.relaid.push_back(s.relaid_now ? 1.0 : 0.0);
   s.relaid_now = false;
+  s.uploaded = false;
   if (s.motion.hash_every_step) {
     std::uint64_t h = 0;
     agreed_stage(s.session, "steps", [&] { h = contacts_hash(contacts()); });

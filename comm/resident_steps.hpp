@@ -20,8 +20,8 @@
 //     rebalance        slab cuts moved part of the way to the owned counts' quantiles, when the
 //                      imbalance of the owned counts passes a threshold
 //     migrate          every body whose centre left its slab to its new owner (its rows, shape rows
-//                      and the caller's state)
-//   commit             otherwise: the moved rows into engine A
+//                      and the caller's state), merged into the rows that stay by id
+//   commit             the moved rows into engine A (nothing when this step's layout set them)
 //   detect_interior    engine A, all pairs of the owned bodies, on a second thread ...
 //   refresh_ghosts     ... while this thread sends every boundary row's position and bounding radius
 //                      (scenes with ellipsoids: and orientation, in the same message) to the ranks
@@ -134,7 +134,9 @@ class StepLoop {
   // way: contactgrid simulate's velocities).
   const ExportPlan& halo() const;
 
-  // Collective. InputError naming the first body that this rank does not own.
+  // Collective. InputError naming the first body that this rank does not own. Engine A's rows are
+  // set again only when migration changed this rank's bodies (else commit writes their motion and
+  // the next detection builds); one rank has no plan, no halo and no engine B to lay out.
   void lay_out();
   // Collective. `step`: the step's number (for the messages).
   void update_frame(int step);
@@ -142,7 +144,8 @@ class StepLoop {
   void rebalance();    // collective
   void migrate();      // collective
   // The caller changed the positions (and bounding radii) and/or the orientations of bodies():
-  // written into engine A's rows (the integrator's part, before the step's clock).
+  // written into engine A's rows (the integrator's part, before the step's clock). Every step, after
+  // the layout when there is one.
   void commit(Moved moved);
 
   void detect_interior();  // collective (with refresh_ghosts and detect_boundary: one step)

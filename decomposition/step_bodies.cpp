@@ -4,6 +4,10 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <string>
+#include <vector>
+
+#include "errors.hpp"
 
 namespace cg {
 
@@ -20,6 +24,92 @@ StepBodies sized_step_bodies(std::size_t n, bool shapes, std::size_t state_bytes
   b.state_bytes = state_bytes;
   b.state = HostVector<std::byte>(n * state_bytes);
   return b;
+}
+
+void resize_step_bodies(StepBodies& b, std::size_t n, bool shapes, std::size_t state_bytes) {
+  b.position.resize(n);
+  b.radius.resize(n);
+  b.id.resize(n);
+  b.shapes.shape.resize(shapes ? n : 0);
+  b.shapes.semi_axes.resize(shapes ? n : 0);
+  b.shapes.orientation.resize(shapes ? n : 0);
+  b.state_bytes = state_bytes;
+  b.state.resize(n * state_bytes);
+}
+
+void merge_step_bodies(const StepBodies& from, std::span<const std::size_t> leaving,
+                       const StepBodies& arrivals, bool shapes, StepBodies& into, int threads) {
+  const std::size_t n = from.size(), m = arrivals.size(), stride = from.state_bytes;
+  if (m > 0 && arrivals.state_bytes != stride)
+    throw Error("migration: the arrivals carry other state than the rows: internal error");
+  if ((shapes && ((n > 0 && from.shapes.empty()) || (m > 0 && arrivals.shapes.empty()))) ||
+      (!shapes && (!from.shapes.empty() || !arrivals.shapes.empty())))
+    throw Error("migration: shape rows on one side only: internal error");
+  for (std::size_t k = 0; k < leaving.size(); ++k)
+    if (leaving[k] >= n || (k > 0 && !(leaving[k - 1] < leaving[k])))
+      throw Error("migration: the leaving rows are not ascending rows: internal error");
+  for (std::size_t j = 1; j < m; ++j)
+    if (!(arrivals.id[j - 1] < arrivals.id[j]))
+      throw Error("migration: body " + std::to_string(arrivals.id[j]) + " arrives twice: internal error");
+  // Where each arrival goes: before the first row of `from` with a larger id (a row that stays with
+  // its id: the body would be held twice).
+  std::vector<std::size_t> before(m);
+  for (std::size_t j = 0; j < m; ++j) {
+    const std::int64_t id = arrivals.id[j];
+    const std::size_t p =
+        static_cast<std::size_t>(std::lower_bound(from.id.begin(), from.id.end(), id) - from.id.begin());
+    if (p < n && from.id[p] == id && !std::binary_search(leaving.begin(), leaving.end(), p))
+      throw Error("steps: body " + std::to_string(id) + " is held twice after migration: internal error");
+    before[j] = p;
+  }
+  // The copies: runs of `from` between the changes, and runs of arrivals at each insertion point.
+  struct Run {
+    bool arrival;
+    std::size_t src, dst, count;
+  };
+  std::vector<Run> runs;
+  std::size_t src = 0, dst = 0, li = 0, aj = 0;
+  while (src < n || aj < m) {
+    const std::size_t q = std::min(li < leaving.size() ? leaving[li] : n, aj < m ? before[aj] : n);
+    if (q > src) {
+      runs.push_back({false, src, dst, q - src});
+      dst += q - src;
+      src = q;
+    }
+    const std::size_t a0 = aj;
+    while (aj < m && before[aj] == q) ++aj;
+    if (aj > a0) {
+      runs.push_back({true, a0, dst, aj - a0});
+      dst += aj - a0;
+    }
+    if (li < leaving.size() && leaving[li] == q) {
+      ++li;
+      src = q + 1;
+    }
+  }
+  resize_step_bodies(into, dst, shapes, stride);
+  // long runs in pieces, so that the threads share the copying
+  constexpr std::size_t k_piece = std::size_t(1) << 16;
+  std::vector<Run> pieces;
+  for (const Run& r : runs)
+    for (std::size_t o = 0; o < r.count; o += k_piece)
+      pieces.push_back({r.arrival, r.src + o, r.dst + o, std::min(k_piece, r.count - o)});
+  const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(pieces.size());
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 4) if (count > 4)
+  for (std::ptrdiff_t k = 0; k < count; ++k) {
+    const Run& r = pieces[static_cast<std::size_t>(k)];
+    const StepBodies& s = r.arrival ? arrivals : from;
+    std::copy_n(s.position.data() + r.src, r.count, into.position.data() + r.dst);
+    std::copy_n(s.radius.data() + r.src, r.count, into.radius.data() + r.dst);
+    std::copy_n(s.id.data() + r.src, r.count, into.id.data() + r.dst);
+    if (shapes) {
+      std::copy_n(s.shapes.shape.data() + r.src, r.count, into.shapes.shape.data() + r.dst);
+      std::copy_n(s.shapes.semi_axes.data() + r.src, r.count, into.shapes.semi_axes.data() + r.dst);
+      std::copy_n(s.shapes.orientation.data() + r.src, r.count, into.shapes.orientation.data() + r.dst);
+    }
+    if (stride > 0)
+      std::copy_n(s.state.data() + r.src * stride, r.count * stride, into.state.data() + r.dst * stride);
+  }
 }
 
 StepBodies owned_bodies(const EngineInput& in, int threads) {

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <cstring>
 #include <functional>
+#include <span>
 
 #include "assemble.hpp"
 #include "engine.hpp"
@@ -32,6 +33,18 @@ struct StepBodies {
 // Bodies with room for n rows (left as they are): shape rows when `shapes`, state of `state_bytes`
 // a body.
 StepBodies sized_step_bodies(std::size_t n, bool shapes, std::size_t state_bytes = 0);
+
+// `b` resized to n rows in place (storage kept when it has room: a rank's bodies change by a few rows
+// at a rebuild), shape rows when `shapes`, state of `state_bytes` a body; rows are left as they are.
+void resize_step_bodies(StepBodies& b, std::size_t n, bool shapes, std::size_t state_bytes);
+
+// A migration's new rows: `from`'s rows except those in `leaving` (row indices, strictly ascending)
+// merged by id with `arrivals` (strictly ascending id), into `into` (resized in place: its storage is
+// the spare of the previous migration). The runs of rows between the changes are copied in parallel;
+// nothing is sorted. Error (internal) when an arrival's id is held by a row that stays, or an input is
+// not ascending. Shape rows: `into` has them when `shapes` (then every source with rows has them).
+void merge_step_bodies(const StepBodies& from, std::span<const std::size_t> leaving,
+                       const StepBodies& arrivals, bool shapes, StepBodies& into, int threads);
 
 // The owned rows (report mask set, or every row when ids are implied) of an engine input.
 StepBodies owned_bodies(const EngineInput& in, int threads);

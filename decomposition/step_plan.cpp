@@ -44,16 +44,24 @@ StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<cons
   };
   StepPlan plan;
   plan.role.resize(n);
-#pragma omp parallel for num_threads(threads) schedule(static) if (n > (std::size_t(1) << 14))
+  std::size_t owned_rows = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : owned_rows) \
+    if (n > (std::size_t(1) << 14))
   for (std::size_t i = 0; i < n; ++i) {
+    const bool mine = owned(i);
     bool sent = false;
-    if (owned(i)) ghost_ranks(i, [&](int) { sent = true; });
-    plan.role[i] = !owned(i) ? RowRole::ghost : sent ? RowRole::boundary : RowRole::interior;
+    if (mine) ghost_ranks(i, [&](int) { sent = true; });
+    plan.role[i] = !mine ? RowRole::ghost : sent ? RowRole::boundary : RowRole::interior;
+    owned_rows += mine ? 1 : 0;
   }
-  for (std::size_t i = 0; i < n; ++i) {
-    if (plan.role[i] != RowRole::ghost) plan.owned.push_back(i);
-    if (plan.role[i] == RowRole::boundary) plan.boundary.push_back(i);
-  }
+  plan.owned = owned_rows;
+  const ExportPlan boundary = route<std::size_t, std::allocator<std::size_t>>(
+      n, 1, threads,
+      [&](std::size_t i, auto&& emit) {
+        if (plan.role[i] == RowRole::boundary) emit(0);
+      },
+      [](std::size_t i) { return i; });
+  plan.boundary.assign(boundary.rows.begin(), boundary.rows.end());
   // The halo: the owned rows by to_ghost_ranks (a ghost row goes nowhere).
   plan.halo = route<std::size_t, std::allocator<std::size_t>>(
       n, slabs.ranks(), threads,

@@ -41,15 +41,16 @@ const char* to_string(RowRole role);
 // The roles of a rank's held rows and its halo.
 struct StepPlan {
   std::vector<RowRole> role;          // per held row
-  std::vector<std::size_t> owned;     // held rows that are owned (interior or boundary), ascending
+  std::size_t owned = 0;              // held rows that are owned (interior or boundary)
   std::vector<std::size_t> boundary;  // held rows that are boundary rows, ascending
   ExportPlan halo;                    // held rows to each other rank (to_ghost_ranks of the owned rows)
   std::size_t count(RowRole r) const;
 };
 
 // The plan of rank `self` for its held rows, `coordinate[i]` being row i's centre coordinate along the
-// slab axis (finite) and `width` the ghost width (finite, >= 0; InputError otherwise). Parallel
-// count → scan → fill (route); the result does not depend on the threads.
+// slab axis (finite) and `width` the ghost width (finite, >= 0; InputError otherwise). One parallel
+// pass classifies the rows, then count → scan → fill (route) lists the boundary rows and the halo;
+// the result does not depend on the threads.
 StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
                         double width, int threads = 1);
 

@@ -532,6 +532,11 @@ void Engine<Real>::set_skin(double skin) {
 }
 
 template <class Real>
+void Engine<Real>::rebuild_candidates() {
+  m_impl->kept.valid = false;
+}
+
+template <class Real>
 std::size_t Engine<Real>::resident_size() const {
   return m_impl->resident_rows;
 }

@@ -220,6 +220,9 @@ class Engine {
   // The skin of the next build (>= 0, finite; UsageError otherwise); a kept list is checked with the
   // skin it was built with until then. Turns EngineOptions::skin_auto off: the caller chooses.
   void set_skin(double skin);
+  // The next detection builds its candidate list instead of checking the kept one (a caller that
+  // laid its rows out again: the step loop's rebuild with the same resident rows, written in place).
+  void rebuild_candidates();
 
   Backend backend() const;      // the resolved backend (never automatic)
   Precision precision() const;  // fp32, fp64, or mixed (Engine<double> with fp32_broad_phase)

@@ -256,6 +256,28 @@ Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies, std::
   return backend.bounds(bodies, ellipsoids);
 }
 
+namespace {
+// Host ranges into the resident DEVICE arrays, by Tuning::upload as the upload stage chooses
+// (streamed through the pinned ring from 1 MiB: the host threads fill its slots while the copy engine
+// moves the previous one; else pageable copies), then the stream's end.
+void upload_resident(CudaBackend& b, const std::vector<HostDevice>& ranges) {
+  std::size_t total = 0;
+  for (const HostDevice& h : ranges) total += h.bytes;
+  if (upload_transfer(b.m_tuning, total) == HostTransfer::streamed) {
+    streamed_upload(cuda::pinned_ring(b.m_device), b.m_tuning.transfer_slot_bytes, ranges, b.m_stream);
+  } else {
+    for (const HostDevice& h : ranges)
+      if (h.bytes > 0)
+        CG_CUDA_CHECK(cudaMemcpyAsync(h.device, h.host, h.bytes, cudaMemcpyHostToDevice, b.m_stream));
+  }
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+}
+
+HostDevice host_device(void* device, const void* host, std::size_t bytes) {
+  return {static_cast<std::byte*>(const_cast<void*>(host)), static_cast<std::byte*>(device), bytes};
+}
+}  // namespace
+
 void resident_upload(CudaBackend& b, const BodiesView& bodies) {
   const std::size_t n = bodies.size();
   CG_CUDA_CHECK(cudaSetDevice(b.m_device));
@@ -275,18 +297,18 @@ void resident_upload(CudaBackend& b, const BodiesView& bodies) {
   ws.res_reported = !bodies.report.empty();
   ws.res_shaped = shapes;
   if (n == 0) return;
-  if (shapes) upload_shape_rows(bodies, ws.res_shape, ws.res_semi, ws.res_orient, b.m_stream);
-  CG_CUDA_CHECK(cudaMemcpyAsync(ws.res_pos.data(), bodies.position.data(), n * sizeof(Vec3<double>),
-                                cudaMemcpyHostToDevice, b.m_stream));
-  CG_CUDA_CHECK(cudaMemcpyAsync(ws.res_rad.data(), bodies.radius.data(), n * sizeof(double),
-                                cudaMemcpyHostToDevice, b.m_stream));
-  if (!bodies.report.empty())
-    CG_CUDA_CHECK(
-        cudaMemcpyAsync(ws.res_report.data(), bodies.report.data(), n, cudaMemcpyHostToDevice, b.m_stream));
+  std::vector<HostDevice> ranges{
+      host_device(ws.res_pos.data(), bodies.position.data(), n * sizeof(Vec3<double>)),
+      host_device(ws.res_rad.data(), bodies.radius.data(), n * sizeof(double))};
+  if (!bodies.report.empty()) ranges.push_back(host_device(ws.res_report.data(), bodies.report.data(), n));
   if (!bodies.id.empty())
-    CG_CUDA_CHECK(cudaMemcpyAsync(ws.res_id.data(), bodies.id.data(), n * sizeof(std::int64_t),
-                                  cudaMemcpyHostToDevice, b.m_stream));
-  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+    ranges.push_back(host_device(ws.res_id.data(), bodies.id.data(), n * sizeof(std::int64_t)));
+  if (shapes) {
+    ranges.push_back(host_device(ws.res_shape.data(), bodies.shape.data(), n * sizeof(Shape)));
+    ranges.push_back(host_device(ws.res_semi.data(), bodies.semi_axes.data(), n * sizeof(Vec3<double>)));
+    ranges.push_back(host_device(ws.res_orient.data(), bodies.orientation.data(), n * sizeof(Quat<double>)));
+  }
+  upload_resident(b, ranges);
 }
 
 void history_upload(CudaBackend& b, const ContactHistory& h) {
@@ -374,13 +396,14 @@ void resident_copy(CudaBackend& b, std::size_t first, std::size_t count, Vec3<do
   CG_CUDA_CHECK(cudaSetDevice(b.m_device));
   auto* d_pos = reinterpret_cast<Vec3<double>*>(b.m_ws.res_pos.data()) + first;
   auto* d_rad = reinterpret_cast<double*>(b.m_ws.res_rad.data()) + first;
-  const auto kind = to_device ? cudaMemcpyHostToDevice : cudaMemcpyDeviceToHost;
-  CG_CUDA_CHECK(cudaMemcpyAsync(to_device ? static_cast<void*>(d_pos) : position,
-                                to_device ? static_cast<const void*>(position) : d_pos,
-                                count * sizeof(Vec3<double>), kind, b.m_stream));
-  CG_CUDA_CHECK(cudaMemcpyAsync(to_device ? static_cast<void*>(d_rad) : radius,
-                                to_device ? static_cast<const void*>(radius) : d_rad, count * sizeof(double),
-                                kind, b.m_stream));
+  if (to_device) {
+    upload_resident(b, {host_device(d_pos, position, count * sizeof(Vec3<double>)),
+                        host_device(d_rad, radius, count * sizeof(double))});
+    return;
+  }
+  CG_CUDA_CHECK(
+      cudaMemcpyAsync(position, d_pos, count * sizeof(Vec3<double>), cudaMemcpyDeviceToHost, b.m_stream));
+  CG_CUDA_CHECK(cudaMemcpyAsync(radius, d_rad, count * sizeof(double), cudaMemcpyDeviceToHost, b.m_stream));
   CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
 }
 
@@ -389,16 +412,21 @@ void resident_copy(CudaBackend& b, std::size_t first, std::size_t count, Vec3<do
 void resident_shape_copy(CudaBackend& b, std::size_t first, std::size_t count, Vec3<double>* semi_axes,
                          Quat<double>* orientation, bool to_device) {
   CG_CUDA_CHECK(cudaSetDevice(b.m_device));
-  const auto kind = to_device ? cudaMemcpyHostToDevice : cudaMemcpyDeviceToHost;
+  std::vector<HostDevice> ranges;
   auto copy = [&](void* host, std::byte* device, std::size_t row_bytes) {
     if (!host) return;
     void* d = device + first * row_bytes;
-    CG_CUDA_CHECK(
-        cudaMemcpyAsync(to_device ? d : host, to_device ? host : d, count * row_bytes, kind, b.m_stream));
+    if (to_device)
+      ranges.push_back(host_device(d, host, count * row_bytes));
+    else
+      CG_CUDA_CHECK(cudaMemcpyAsync(host, d, count * row_bytes, cudaMemcpyDeviceToHost, b.m_stream));
   };
   copy(semi_axes, b.m_ws.res_semi.data(), sizeof(Vec3<double>));
   copy(orientation, b.m_ws.res_orient.data(), sizeof(Quat<double>));
-  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+  if (to_device)
+    upload_resident(b, ranges);
+  else
+    CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
 }
 
 template <class Broad, class Narrow>

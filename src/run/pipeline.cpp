@@ -530,9 +530,8 @@ StepStats run_steps(Session& session, Engine<Real>& engine, const SlabDecomposit
         loop.rebalance();
         loop.migrate();
         loop.lay_out();
-      } else {
-        loop.commit(moved);
       }
+      loop.commit(moved);
       loop.detect_interior();
       loop.refresh_ghosts();
       loop.detect_boundary();

@@ -198,9 +198,8 @@ void step(StepLoop<double>& loop, int s) {
     loop.rebalance();
     loop.migrate();
     loop.lay_out();
-  } else {
-    loop.commit({true, false});
   }
+  loop.commit({true, false});
   loop.detect_interior();
   loop.refresh_ghosts();
   loop.detect_boundary();

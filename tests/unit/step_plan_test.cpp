@@ -70,7 +70,7 @@ TEST(StepPlan, RolesAndHaloAreTheRoutingRules) {
         if (role == RowRole::boundary) boundary.push_back(i);
         for (int q : g) want[static_cast<std::size_t>(q)].push_back(i);
       }
-      EXPECT_EQ(plan.owned, owned);
+      EXPECT_EQ(plan.owned, owned.size());
       EXPECT_EQ(plan.boundary, boundary);
       EXPECT_EQ(plan.count(RowRole::interior) + plan.count(RowRole::boundary), owned.size());
       for (int q = 0; q < ranks; ++q) {
@@ -229,6 +229,89 @@ TEST(StepBodies, OwnedRowsAndTheirMotion) {
   EXPECT_EQ(b.position[1].x, drifted_position(12, {3, 0, 0}, 0.5, 1).x);  // not accumulated
   const Vec3<double> u8 = drift_direction(8), a8 = spin_axis(8);
   EXPECT_NE(u8.x, a8.x);  // the drift's direction is not the spin's axis
+}
+
+// A migration's merge (merge_step_bodies) against sort-by-id of the rows that stay and the arrivals:
+// seeded random ids, the changes at both ends, every row leaving, an arrival taking a leaving row's
+// id, threads 1 and 4 into spare storage of any size; and the internal errors.
+TEST(StepBodies, MigrationMergesByIdInPlaceOfSorting) {
+  std::mt19937_64 rng(3101);
+  const std::size_t stride = 3;
+  auto make = [&](std::vector<std::int64_t> ids, bool shapes) {
+    StepBodies b = sized_step_bodies(ids.size(), shapes, stride);
+    for (std::size_t k = 0; k < ids.size(); ++k) {
+      const double v = double(ids[k]);
+      b.id[k] = ids[k];
+      b.position[k] = {v, v + 0.25, v + 0.5};
+      b.radius[k] = 1 + v / 1024;
+      if (shapes) {
+        b.shapes.shape[k] = ids[k] % 2 ? Shape::ellipsoid : Shape::sphere;
+        b.shapes.semi_axes[k] = {v, 1, 2};
+        b.shapes.orientation[k] = {1, v, 0, 0};
+      }
+      for (std::size_t j = 0; j < stride; ++j) b.state[k * stride + j] = std::byte(ids[k] * 7 + j);
+    }
+    return b;
+  };
+  for (int trial = 0; trial < 40; ++trial) {
+    const bool shapes = trial % 2 == 1;
+    const std::size_t n = trial < 4 ? std::size_t(trial) : std::size_t(rng() % 40000);
+    // ids: a random subset of [0, 4n + 8), split into the rows held and the arrivals
+    std::vector<std::int64_t> all(4 * n + 8);
+    std::iota(all.begin(), all.end(), std::int64_t(0));
+    std::shuffle(all.begin(), all.end(), rng);
+    const std::size_t m = trial % 5 == 0 ? 0 : std::min(all.size() - n, std::size_t(rng() % 2000));
+    std::vector<std::int64_t> held(all.begin(), all.begin() + static_cast<std::ptrdiff_t>(n)),
+        come(all.begin() + static_cast<std::ptrdiff_t>(n), all.begin() + static_cast<std::ptrdiff_t>(n + m));
+    if (trial == 7 && n > 0) come.push_back(-1);  // an arrival before every row
+    std::sort(held.begin(), held.end());
+    std::sort(come.begin(), come.end());
+    std::vector<std::size_t> leaving;
+    const int mode = trial % 4;  // 0: random, 1: none, 2: every row, 3: the first and the last rows
+    for (std::size_t k = 0; k < n; ++k)
+      if ((mode == 0 && rng() % 50 == 0) || mode == 2 || (mode == 3 && (k == 0 || k + 1 == n)))
+        leaving.push_back(k);
+    if (trial == 10 && !leaving.empty())
+      come.insert(std::upper_bound(come.begin(), come.end(), held[leaving[0]]),
+                  held[leaving[0]]);  // back at once
+    const StepBodies from = make(held, shapes), arrivals = make(come, shapes);
+    std::vector<std::int64_t> want;
+    for (std::size_t k = 0, l = 0; k < n; ++k) {
+      if (l < leaving.size() && leaving[l] == k) {
+        ++l;
+        continue;
+      }
+      want.push_back(held[k]);
+    }
+    want.insert(want.end(), come.begin(), come.end());
+    std::sort(want.begin(), want.end());
+    StepBodies into = make(std::vector<std::int64_t>(rng() % 1000, 5), shapes);  // spare of any size
+    merge_step_bodies(from, leaving, arrivals, shapes, into, trial % 3 == 0 ? 1 : 4);
+    ASSERT_EQ(into.size(), want.size()) << "trial " << trial;
+    ASSERT_EQ(into.state.size(), want.size() * stride);
+    const StepBodies expect = make(want, shapes);
+    for (std::size_t k = 0; k < want.size(); ++k) {
+      ASSERT_EQ(into.id[k], want[k]) << "trial " << trial << " row " << k;
+      ASSERT_EQ(into.position[k].y, expect.position[k].y);
+      ASSERT_EQ(into.radius[k], expect.radius[k]);
+      ASSERT_EQ(into.state[k * stride + 2], expect.state[k * stride + 2]);
+      if (shapes) {
+        ASSERT_EQ(into.shapes.shape[k], expect.shapes.shape[k]);
+        ASSERT_EQ(into.shapes.semi_axes[k].x, expect.shapes.semi_axes[k].x);
+        ASSERT_EQ(into.shapes.orientation[k].x, expect.shapes.orientation[k].x);
+      }
+    }
+  }
+  // a body that arrives while it stays, twice, or leaving rows out of order: internal errors
+  const StepBodies from = make({2, 5, 9}, false);
+  StepBodies into;
+  EXPECT_THROW(merge_step_bodies(from, {}, make({5}, false), false, into, 1), Error);
+  EXPECT_THROW(merge_step_bodies(from, {}, make({6, 6}, false), false, into, 1), Error);
+  const std::vector<std::size_t> unordered{2, 1};
+  EXPECT_THROW(merge_step_bodies(from, unordered, make({}, false), false, into, 1), Error);
+  const std::vector<std::size_t> outside{3};
+  EXPECT_THROW(merge_step_bodies(from, outside, make({}, false), false, into, 1), Error);
+  EXPECT_THROW(merge_step_bodies(from, {}, make({1}, true), false, into, 1), Error);
 }
 
 }  // namespace
