@@ -1,15 +1,20 @@
 #!/usr/bin/env bash
-# The wave's GPU checks in three device calls (each under the device's 10-minute limit), every check
-# one engineer's script run as written:
+# The wave's GPU checks in device calls of under the device's 10-minute limit each, every check one
+# engineer's script run as written:
 #   BIN=dir OUT=dir jobs/gpu_wave5_check.sh a     one GPU: the whole unit suite with its CUDA cases,
-#                                                 the broad phases (#34), runaway scenes (#35), the
-#                                                 host path table (#37)
-#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh b     one GPU: contact identity and simulate (#31 §4, #32),
-#                                                 bodies that move on one GPU (#31)
-#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh two   two GPUs: bodies that move at np 2 (#31)
-# BIN holds the CUDA build's contactgrid, contactgrid_tests, contactgrid_mpi_tests and
-# contactgrid_cuda_bench. Each part writes under $OUT/<part>/; the script exits non-zero naming every
-# script that failed.
+#                                                 the broad phases (#34)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh b     one GPU: simulate (#32: physics on CUDA, Beverloo,
+#                                                 steps/s), runaway scenes (#35)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh c     one GPU: bodies that move on one GPU (#31), the host
+#                                                 path table (#37) and the laptop mode on two quiet
+#                                                 cores (#37, #33)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh py    one GPU: the Python module (#33; .devbin/py packed by
+#                                                 jobs/gpu_python_check.sh pack)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh two   two GPUs: bodies that move at np 2 (#31), simulate
+#                                                 under mpirun on two GPUs (#32)
+# BIN holds the CUDA build's contactgrid, contactgrid_tests, contactgrid_mpi_tests,
+# contactgrid_cuda_bench, host_stage_bench and host_bandwidth. Each part writes $OUT/<part>.tgz; the
+# script exits non-zero naming every script that failed.
 set -u
 cd "$(dirname "$0")/.."
 [ -f .devrt/env.sh ] && source .devrt/env.sh .devrt >/dev/null 2>&1
@@ -35,19 +40,25 @@ host_path() {
   "$BIN/contactgrid_cuda_bench" 20 24 2 10 auto spheres >"$OUT/bench.md" 2>&1 || return 1
   sed -n '/Host arrays/,$p' "$OUT/bench.md"
 }
+python_module() { jobs/gpu_python_check.sh run "${PY:-.devbin/py}" "$OUT"; }
 
 { date -u; nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader; } 2>&1 | tee "$OUT/device.txt"
 case ${1:-a} in
   a)
     part unit unit
-    part broadphase jobs/gpu_broadphase_check.sh
-    part faults jobs/gpu_faults_check.sh
-    part hostpath host_path ;;
+    part broadphase jobs/gpu_broadphase_check.sh ;;
   b)
-    part simulate jobs/gpu_simulate_check.sh
-    part steploop jobs/gpu_steploop_check.sh one ;;
+    part simulate jobs/gpu_simulate_check.sh unit beverloo perf
+    part faults jobs/gpu_faults_check.sh ;;
+  c)
+    part steploop jobs/gpu_steploop_check.sh one
+    part hostpath host_path
+    part laptop jobs/gpu_hostpath_check.sh ;;
+  py)
+    part python python_module ;;
   two)
-    part steploop_two jobs/gpu_steploop_check.sh two ;;
+    part steploop_two jobs/gpu_steploop_check.sh two
+    part simulate_mpi2 jobs/gpu_simulate_check.sh mpi2 ;;
 esac
 if [ ${#failed[@]} -gt 0 ]; then
   echo "FAILED: ${failed[*]}"

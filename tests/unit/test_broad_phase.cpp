@@ -434,7 +434,7 @@ std::string device_levels_flow(const TestScene& s, Precision prec) {
   const LevelParams<Real> lp = level_params<Real>(plan, margin);
   detail::host::PackedBodies<Real> pb;
   detail::host::pack(v, f.origin, frame_grid, Real(0), false, 1, pb);
-  const std::vector<Sphere<Real>>& sp = pb.spheres;
+  const auto& sp = pb.spheres;
   const auto n = static_cast<std::uint32_t>(sp.size());
   std::vector<Key> lo_key(n);
   std::vector<std::uint8_t> ctrl(n);
