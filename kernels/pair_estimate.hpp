@@ -43,7 +43,7 @@ struct PairLimits {
   // is far above the usual: follows_progress). May be null.
   const std::function<void(std::uint64_t done, bool finished)>* on_progress = nullptr;
   // Whether anyone looks at the estimate — a limit, a caller that sees it, or one that follows the
-  // progress, which a GPU pair stage reports only when its estimate is far above the usual: a broad
+  // progress, which a GPU grid pair stage reports only when its estimate is far above the usual: a broad
   // phase makes none otherwise (the library's default costs nothing; on the GPU the estimate is a
   // scan, a reduction and a wait).
   bool wanted() const {

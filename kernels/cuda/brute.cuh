@@ -81,7 +81,7 @@ void brute_stages(RunState<Real, Key, Narrow>& r) {
         r.d_cell_spheres, r.d_report, r.n, tiles, ic.counts, nullptr, nullptr, nullptr, r.d_counters, test);
   });
   CG_CUDA_CHECK_LAUNCH("brute_count");
-  r.read_counters_reporting_tests();
+  r.read_counters();
   r.stats.pair_tests = r.h_counters->tests;
   std::uint32_t* store = candidate_store(r, ic, items, ws.pairs, r.h_counters->pairs);
   if (r.np > 0) {

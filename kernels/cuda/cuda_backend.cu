@@ -198,9 +198,8 @@ class CudaBackend {
       } else {
         if (r.job.pair_limits.wanted()) {  // brute force tests every pair
           const std::uint64_t n = r.n64;
-          const PairEstimate e{n * (n - 1) / 2, n, n, n, kDevicePairTestsPerSecond};
-          check_pair_estimate(e, r.job.pair_limits);
-          r.pair_progress = follows_progress(e, r.job.pair_limits);
+          check_pair_estimate(PairEstimate{n * (n - 1) / 2, n, n, n, kDevicePairTestsPerSecond},
+                              r.job.pair_limits);
         }
         brute_stages(r);
       }
