@@ -184,9 +184,9 @@ class DistributedDem {
       migrate();
       m_loop->lay_out();
       ++m_rebuilds;
-    } else {
-      m_loop->commit(Moved{true, m_shapes});
     }
+    // every step, after any layout: the moved rows into engine A (nothing when the layout set them)
+    m_loop->commit(Moved{true, m_shapes});
     detect();
     forces();
     agreed_stage(m_session, "simulate", [&] {
