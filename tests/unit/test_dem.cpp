@@ -438,8 +438,8 @@ ComparedScene compared_scene(bool ellipsoids) {
       const bool ell = i % 3 != 0;
       b.shape.push_back(ell ? Shape::ellipsoid : Shape::sphere);
       b.semi_axes.push_back(ell ? Vec3<double>{r, 0.6 * r, 0.35 * r} : Vec3<double>{r, r, r});
-      const double c = std::cos(0.3 * i), s = std::sin(0.3 * i);
-      b.orientation.push_back(ell ? Quat<double>{c, s * 0.6, 0, s * 0.8} : Quat<double>{1, 0, 0, 0});
+      const double cw = std::cos(0.3 * i), sw = std::sin(0.3 * i);
+      b.orientation.push_back(ell ? Quat<double>{cw, sw * 0.6, 0, sw * 0.8} : Quat<double>{1, 0, 0, 0});
     }
   }
   Material m;
