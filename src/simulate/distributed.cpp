@@ -696,12 +696,7 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
     const int threads = options.engine.threads > 0 ? options.engine.threads : omp_get_max_threads();
     DistributedDem<Real> sim(session, bodies, options, threads);
     const std::size_t spheres = scene.sphere_count();
-    RunInfo info;
-    info.bodies = bodies.size();
-    info.precision = to_string(precision_of<Real>());
-    info.backend = to_string(sim.backend());
-    info.input = cmd.input;
-    info.ranks = session.size();
+    RunInfo info = simulate_run_info(cmd, bodies.size(), precision_of<Real>(), sim.backend(), session.size());
     std::vector<PairKey> previous;  // the keys of the step before an output step
     auto write_frame = [&] {
       const DemBodies all = sim.gather_bodies(bodies);

@@ -15,6 +15,7 @@
 // contacts and log.csv are written by rank 0 from what the ranks gather to it (energies summed there
 // in the one-rank order of core/dem_sum.hpp).
 #include "dem.hpp"
+#include "io/contact_file.hpp"
 #include "scene/scene.hpp"
 #include "simulate/simulate.hpp"
 
@@ -22,6 +23,10 @@ namespace cg {
 
 // The parameters every frame of a run carries (its root attributes).
 Attributes simulate_parameters(const SimulateCommand& cmd, const Scene& scene, const DemOptions& options);
+
+// What a run's contact files say about the run (the cell size: set per file).
+RunInfo simulate_run_info(const SimulateCommand& cmd, std::size_t bodies, Precision precision,
+                          Backend backend, int ranks);
 
 // The run of `cmd` over the session's ranks (collective; rank 0 writes the run directory).
 int run_simulate_distributed(const SimulateCommand& cmd, Session& session, const Scene& scene,

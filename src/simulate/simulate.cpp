@@ -104,11 +104,7 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
   try {
     Simulation<Real> sim(bodies, options);
     const std::size_t spheres = scene.sphere_count();
-    RunInfo info;
-    info.bodies = bodies.size();
-    info.precision = to_string(precision_of<Real>());
-    info.backend = to_string(sim.backend());
-    info.input = cmd.input;
+    RunInfo info = simulate_run_info(cmd, bodies.size(), precision_of<Real>(), sim.backend(), 1);
     auto write_frame = [&](double seconds_per_step) {
       out.frame(sim.steps(), sim.time(), sim.bodies(), spheres);
       if (cmd.write_contacts) {
@@ -184,6 +180,17 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
 }
 
 }  // namespace
+
+RunInfo simulate_run_info(const SimulateCommand& cmd, std::size_t bodies, Precision precision,
+                          Backend backend, int ranks) {
+  RunInfo info;
+  info.bodies = bodies;
+  info.precision = to_string(precision);
+  info.backend = to_string(backend);
+  info.input = cmd.input;
+  info.ranks = ranks;
+  return info;
+}
 
 Attributes simulate_parameters(const SimulateCommand& cmd, const Scene& scene, const DemOptions& options) {
   Attributes parameters;
