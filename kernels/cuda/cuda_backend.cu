@@ -209,7 +209,9 @@ class CudaBackend {
     if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
     narrow_stage(r);
     history_stage(r, m_thrust);
-    const DownloadHostTimes host = download_stage(r, m_h_staging, cuda::pinned_ring(m_device), out);
+    const DownloadHostTimes host =
+        download_stage(r, m_h_staging, cuda::pinned_ring(m_device), out, !m_downloaded);
+    m_downloaded = m_downloaded || !job.device_out;
     if (reuse) check_shapes_read(r);  // (read with the last counters: the reuse path has no other wait)
     m_events.collect(times, host.overlap_s, host.extra_s);  // all events complete: the stream synced
     m_events.narrow_split(stats.narrow_triage_s, stats.narrow_settle_s, stats.narrow_hard_s);
@@ -242,6 +244,7 @@ class CudaBackend {
   Workspace m_ws;                                // DEVICE buffers (workspace.cuh)
   ThrustAllocator m_thrust;                      // DEVICE temporary storage of Thrust calls
   cuda::PinnedBuffer m_h_counters, m_h_staging;  // pinned HOST staging
+  bool m_downloaded = false;                     // a download to host memory was made (download_transfer)
 };
 
 std::unique_ptr<CudaBackend> make_cuda_backend(int device) {

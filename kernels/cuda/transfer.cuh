@@ -171,13 +171,13 @@ double streamed_download(cuda::PinnedRing& ring, std::size_t slot_bytes,
 }
 
 // download: the contact rows described in DEVICE memory (job.device_out), or copied into `out` by
-// Tuning::download: through one whole pinned staging buffer and a parallel host copy (single, the
-// automatic choice, and where the driver refuses to register), streamed through the pinned ring (the
+// Tuning::download (download_transfer): through one whole pinned staging buffer and a parallel host
+// copy (single; also where the driver refuses to register), streamed through the pinned ring (the
 // host copy out of one slot overlaps the transfer of the next), or straight into the result vectors
 // page-locked in place (registered: a parallel first touch, then cudaHostRegister).
 template <class Real, class Key, class Narrow>
 DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuffer& h_staging,
-                                 cuda::PinnedRing& ring, Contacts<Narrow>& out) {
+                                 cuda::PinnedRing& ring, Contacts<Narrow>& out, bool first_download) {
   using clock_type = std::chrono::steady_clock;
   const cuda::ContactPtrs<Narrow>& cp = r.cp;
   const FieldSet set = r.fields();
@@ -197,7 +197,7 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
   const std::uint32_t np = r.n_rows;  // (a rejecting narrow has read it for its tight layout)
   const std::size_t at = r.out_bytes;
   const std::byte* o = r.ws.out.data();
-  const HostTransfer how = download_transfer(r.tuning);
+  const HostTransfer how = download_transfer(r.tuning, h_staging.bytes(), at, first_download);
   if (how == HostTransfer::streamed && np > 0) {
     const auto t0 = clock_type::now();
     out.resize(np, set);

@@ -43,7 +43,7 @@ struct Tuning {
   // (automatic: counting while its counters fit in half the L2).
   Forced counting_order = Forced::automatic;
   // CONTACTGRID_CUDA_DOWNLOAD=streamed / registered / staged: how the contact rows come down
-  // (automatic: single, see download_transfer).
+  // (automatic: see download_transfer).
   HostTransfer download = HostTransfer::automatic;
   // CONTACTGRID_CUDA_TRANSFER_SLOT=bytes: the size of a slot of the streamed transfers' pinned ring
   // (default 4 MiB; tests use small slots to make a transfer wrap around the ring).
@@ -91,12 +91,17 @@ inline HostTransfer upload_transfer(const Tuning& t, std::size_t bytes) {
   return bytes >= (std::size_t(1) << 20) ? HostTransfer::streamed : HostTransfer::single;
 }
 
-// The download a knob asks for, or the automatic one: single (one whole pinned buffer, then all host
-// threads copy into the result vectors). Streamed and registered downloads are slower on the H100 host
-// at every size (BENCHMARKS.md §15): the time goes to the first touch of the fresh result vectors,
-// which a streamed download pays in many small parallel copies.
-inline HostTransfer download_transfer(const Tuning& t) {
-  return t.download != HostTransfer::automatic ? t.download : HostTransfer::single;
+// The download a knob asks for, or the automatic one. single (one whole pinned staging buffer of the
+// engine, then all host threads copy into the result vectors) where the engine's staging buffer
+// already holds the rows or the engine has downloaded before: on a warm engine it beats the streamed
+// and registered downloads at every size (BENCHMARKS.md §15). An engine's first download that would
+// have to pin its staging buffer streams through the process-wide ring instead: pinning hundreds of MB
+// for one call costs more than the copy (a new engine at 2^24, mixed rows: single 0.27–0.37 s,
+// streamed 0.066 s on the H100 host, BENCHMARKS.md §20) — the CLI's detect, Python's detect().
+inline HostTransfer download_transfer(const Tuning& t, std::size_t staging_bytes, std::size_t bytes,
+                                      bool first_download) {
+  if (t.download != HostTransfer::automatic) return t.download;
+  return first_download && bytes > staging_bytes ? HostTransfer::streamed : HostTransfer::single;
 }
 
 // The answer of a knob: forced, or `automatic_choice`.

@@ -50,7 +50,11 @@ TEST(CudaTuning, KnobsReadInOnePlace) {
   EXPECT_TRUE(detail::tuned(t.counting_order, true));
   EXPECT_EQ(detail::upload_transfer(t, std::size_t(1) << 20), detail::HostTransfer::streamed);
   EXPECT_EQ(detail::upload_transfer(t, 1000), detail::HostTransfer::single);
-  EXPECT_EQ(detail::download_transfer(t), detail::HostTransfer::single);
+  // automatic download: an engine's first streams unless its staging buffer holds the rows already;
+  // later ones use the staging buffer
+  EXPECT_EQ(detail::download_transfer(t, 0, 1000, true), detail::HostTransfer::streamed);
+  EXPECT_EQ(detail::download_transfer(t, 4096, 1000, true), detail::HostTransfer::single);
+  EXPECT_EQ(detail::download_transfer(t, 0, 1000, false), detail::HostTransfer::single);
   EXPECT_EQ(t.transfer_slot_bytes, std::size_t(4) << 20);
 
   ::setenv("CONTACTGRID_CUDA_TYPE_PASSES", "1", 1);
@@ -67,7 +71,8 @@ TEST(CudaTuning, KnobsReadInOnePlace) {
   EXPECT_EQ(t.upload, detail::HostTransfer::single);
   EXPECT_EQ(t.renumber, detail::Forced::off);
   EXPECT_FALSE(detail::tuned(t.counting_order, true));
-  EXPECT_EQ(detail::download_transfer(t), detail::HostTransfer::registered);
+  EXPECT_EQ(detail::download_transfer(t, 0, 1000, true), detail::HostTransfer::registered);
+  EXPECT_EQ(detail::download_transfer(t, 0, 1000, false), detail::HostTransfer::registered);
   EXPECT_EQ(t.transfer_slot_bytes, std::size_t(65536));
 
   ::setenv("CONTACTGRID_CUDA_TYPE_PASSES", "0", 1);
