@@ -96,8 +96,8 @@ inline HostTransfer upload_transfer(const Tuning& t, std::size_t bytes) {
 // already holds the rows or the engine has downloaded before: on a warm engine it beats the streamed
 // and registered downloads at every size (BENCHMARKS.md §15). An engine's first download that would
 // have to pin its staging buffer streams through the process-wide ring instead: pinning hundreds of MB
-// for one call costs more than the copy (a new engine at 2^24, mixed rows: single 0.27–0.37 s,
-// streamed 0.066 s on the H100 host, BENCHMARKS.md §20) — the CLI's detect, Python's detect().
+// for one call costs more than the copy it speeds up (BENCHMARKS.md §20) — the CLI's detect and
+// Python's detect() make one download per engine.
 inline HostTransfer download_transfer(const Tuning& t, std::size_t staging_bytes, std::size_t bytes,
                                       bool first_download) {
   if (t.download != HostTransfer::automatic) return t.download;
