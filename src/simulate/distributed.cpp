@@ -681,9 +681,7 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
                    const DemOptions& options, const TimeStepLimits& limits) {
   using clock_type = std::chrono::steady_clock;
   const bool root = session.rank() == 0;
-  const std::uint64_t every =
-      cmd.output_every > 0 ? cmd.output_every : std::max<std::uint64_t>(1, cmd.steps / 10);
-  const std::uint64_t log_every = cmd.log_every > 0 ? cmd.log_every : std::max<std::uint64_t>(1, every / 10);
+  const Cadence cadence(cmd);
   std::optional<RunOutput> out;
   // rank 0's log says that a run ended by a signal did not finish (src/run/stop.hpp)
   CleanupAction incomplete;
@@ -732,21 +730,18 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
     const auto t0 = clock_type::now();
     std::uint64_t done = 0;
     while (done < cmd.steps) {
-      const std::uint64_t next_log = (done / log_every + 1) * log_every;
-      const std::uint64_t next_frame = (done / every + 1) * every;
-      const std::uint64_t to = std::min({next_log, next_frame, cmd.steps});
+      const std::uint64_t to = cadence.block_end(done);
       const auto t1 = clock_type::now();
       const std::uint64_t from = done;
       while (done < to) {
-        if (cmd.write_contacts && done + 1 == to && (to % every == 0 || to == cmd.steps))
-          previous = sim.gather_keys();
+        if (cmd.write_contacts && done + 1 == to && cadence.frame_due(to)) previous = sim.gather_keys();
         sim.step();
         ++done;
       }
       const double per_step =
           session.max(std::chrono::duration<double>(clock_type::now() - t1).count()) / double(to - from);
-      if (done % log_every == 0 || done == cmd.steps) log_row(per_step);
-      if (done % every == 0 || done == cmd.steps) write_frame();
+      if (cadence.log_due(done)) log_row(per_step);
+      if (cadence.frame_due(done)) write_frame();
       progress.update(done);
     }
     progress.finish();

@@ -93,9 +93,7 @@ template <class Real>
 int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies& bodies, DemOptions options,
                 const TimeStepLimits& limits) {
   using clock_type = std::chrono::steady_clock;
-  const std::uint64_t every =
-      cmd.output_every > 0 ? cmd.output_every : std::max<std::uint64_t>(1, cmd.steps / 10);
-  const std::uint64_t log_every = cmd.log_every > 0 ? cmd.log_every : std::max<std::uint64_t>(1, every / 10);
+  const Cadence cadence(cmd);
   RunOutput out(cmd.output, simulate_parameters(cmd, scene, options));
   // a run ended at once by a signal (src/run/stop.hpp) still says in its log that it did not finish;
   // a stop at a stop point (between blocks of steps) unwinds to out.fail below
@@ -129,17 +127,15 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
     const auto t0 = clock_type::now();
     std::uint64_t done = 0;
     while (done < cmd.steps) {
-      const std::uint64_t next_log = (done / log_every + 1) * log_every;
-      const std::uint64_t next_frame = (done / every + 1) * every;
-      const std::uint64_t to = std::min({next_log, next_frame, cmd.steps});
+      const std::uint64_t to = cadence.block_end(done);
       stop_point();
       const auto t1 = clock_type::now();
       sim.run(to - done);
       const double per_step =
           std::chrono::duration<double>(clock_type::now() - t1).count() / double(to - done);
       done = to;
-      if (done % log_every == 0 || done == cmd.steps) log_row(per_step);
-      if (done % every == 0 || done == cmd.steps) write_frame(per_step);
+      if (cadence.log_due(done)) log_row(per_step);
+      if (cadence.frame_due(done)) write_frame(per_step);
       progress.update(done);
     }
     progress.finish();
@@ -180,6 +176,15 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
 }
 
 }  // namespace
+
+Cadence::Cadence(const SimulateCommand& cmd)
+    : frames(cmd.output_every > 0 ? cmd.output_every : std::max<std::uint64_t>(1, cmd.steps / 10)),
+      logs(cmd.log_every > 0 ? cmd.log_every : std::max<std::uint64_t>(1, frames / 10)),
+      steps(cmd.steps) {}
+
+std::uint64_t Cadence::block_end(std::uint64_t done) const {
+  return std::min({(done / logs + 1) * logs, (done / frames + 1) * frames, steps});
+}
 
 RunInfo simulate_run_info(const SimulateCommand& cmd, std::size_t bodies, Precision precision,
                           Backend backend, int ranks) {

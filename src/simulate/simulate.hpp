@@ -47,4 +47,15 @@ std::vector<dem::Wall> parse_wall(const std::string& spec);
 
 int run_simulate(const SimulateCommand& cmd, Session& session);
 
+// When a run writes: a frame every `frames` steps, a log row every `logs` (--output-every,
+// --log-every, or their defaults), over `steps` steps; the one-rank and the mpirun loops step in blocks
+// that end at the next of them.
+struct Cadence {
+  std::uint64_t frames = 1, logs = 1, steps = 0;
+  explicit Cadence(const SimulateCommand& cmd);
+  std::uint64_t block_end(std::uint64_t done) const;  // the step the block after `done` ends at
+  bool frame_due(std::uint64_t step) const { return step % frames == 0 || step == steps; }
+  bool log_due(std::uint64_t step) const { return step % logs == 0 || step == steps; }
+};
+
 }  // namespace cg
