@@ -32,8 +32,9 @@ part() {  # part NAME COMMAND...: OUT=$OUT/NAME for the command; its output kept
   tail -25 "$OUT/$name.log"
   tar czf "$OUT/$name.tgz" -C "$OUT" "$name" && rm -rf "${OUT:?}/$name"  # one file: the device returns few
 }
-unit() {
-  "$BIN/contactgrid_tests" >"$OUT/unit_tests.log" 2>&1
+unit() {  # the cases that run the command line get this copy's binary and source tree
+  CG_BINARY=$(realpath "$BIN/contactgrid") CG_SOURCE_DIR=$PWD CG_MPIEXEC=$(command -v mpiexec) \
+    "$BIN/contactgrid_tests" >"$OUT/unit_tests.log" 2>&1
   local rc=$?
   grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]' "$OUT/unit_tests.log" | head -30
   return $rc

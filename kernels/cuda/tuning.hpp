@@ -95,13 +95,15 @@ inline HostTransfer upload_transfer(const Tuning& t, std::size_t bytes) {
 // engine, then all host threads copy into the result vectors) where the engine's staging buffer
 // already holds the rows or the engine has downloaded before: on a warm engine it beats the streamed
 // and registered downloads at every size (BENCHMARKS.md §15). An engine's first download that would
-// have to pin its staging buffer streams through the process-wide ring instead: pinning hundreds of MB
-// for one call costs more than the copy it speeds up (BENCHMARKS.md §20) — the CLI's detect and
-// Python's detect() make one download per engine.
+// have to pin its staging buffer does not: pinning hundreds of MB for one call costs more than the copy
+// it speeds up (BENCHMARKS.md §20) — the CLI's detect and Python's detect() make one download per
+// engine. From 64 MiB it page-locks the result vectors in place after their parallel first touch
+// (registered), below that it streams through the process-wide ring (BENCHMARKS.md §21).
 inline HostTransfer download_transfer(const Tuning& t, std::size_t staging_bytes, std::size_t bytes,
                                       bool first_download) {
   if (t.download != HostTransfer::automatic) return t.download;
-  return first_download && bytes > staging_bytes ? HostTransfer::streamed : HostTransfer::single;
+  if (!first_download || bytes <= staging_bytes) return HostTransfer::single;
+  return bytes >= (std::size_t(64) << 20) ? HostTransfer::registered : HostTransfer::streamed;
 }
 
 // The answer of a knob: forced, or `automatic_choice`.

@@ -1,10 +1,12 @@
 #pragma once
-// Runs the contactgrid executable (CG_BINARY, set by tests/CMakeLists.txt) with a shell argument
+// Runs the contactgrid executable (cli_binary(), support/paths.hpp) with a shell argument
 // string, for the tests that drive the command line end to end.
 #include <sys/wait.h>
 
 #include <cstdio>
 #include <string>
+
+#include "support/paths.hpp"
 
 namespace cg::test {
 
@@ -14,7 +16,7 @@ struct CliResult {
 };
 
 inline CliResult run_cli(const std::string& args) {
-  const std::string cmd = std::string(CG_BINARY) + " " + args + " 2>&1";
+  const std::string cmd = cli_binary() + " " + args + " 2>&1";
   CliResult r{-1, {}};
   FILE* p = popen(cmd.c_str(), "r");
   if (!p) return r;

@@ -19,6 +19,7 @@
 #include "resident_steps.hpp"
 #include "run/distributed_detect.hpp"
 #include "run/pipeline.hpp"
+#include "support/paths.hpp"
 #include "support/run_cli.hpp"
 #include "temp_dir.hpp"
 
@@ -614,7 +615,7 @@ TEST_F(Cli, HelpAndVersion) {
   const Result version = run("--version");
   EXPECT_EQ(version.code, 0) << version.output;
   EXPECT_EQ(version.output, "contactgrid " CONTACTGRID_VERSION "\n");
-  std::ifstream changelog(std::string(CG_SOURCE_DIR) + "/docs/CHANGELOG.md");
+  std::ifstream changelog(cg::test::source_dir() + "/docs/CHANGELOG.md");
   ASSERT_TRUE(changelog);
   std::string first;  // the first "## <version> ..." heading
   for (std::string line; first.empty() && std::getline(changelog, line);)

@@ -12,6 +12,7 @@
 #include <string>
 
 #include "support/child_process.hpp"
+#include "support/paths.hpp"
 #include "support/run_cli.hpp"
 #include "temp_dir.hpp"
 
@@ -38,9 +39,9 @@ TEST_P(DyingRanks, EndTheJobWithinSecondsAndLeaveNoFile) {
   ASSERT_EQ(g.code, 0) << g.output;
   const std::string fault = std::string(c.action) + "@" + c.stage + ":" + std::to_string(c.rank);
   // --read own: the bodies and ghosts move between ranks, so "exchange" is real communication
-  ChildProcess job({CG_MPIEXEC, "-np", "3", "--oversubscribe", "--allow-run-as-root", CG_BINARY, "detect",
-                    path("scene.h5"), "-o", path("out.h5"), "--backend", "cpu", "--threads", "1", "--read",
-                    "own", "--write", c.write, "-q"},
+  ChildProcess job({cg::test::mpiexec(), "-np", "3", "--oversubscribe", "--allow-run-as-root",
+                    cg::test::cli_binary(), "detect", path("scene.h5"), "-o", path("out.h5"), "--backend",
+                    "cpu", "--threads", "1", "--read", "own", "--write", c.write, "-q"},
                    {"CONTACTGRID_TEST_FAULT=" + fault, "OMPI_ALLOW_RUN_AS_ROOT=1",
                     "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1", "OMPI_MCA_rmaps_base_oversubscribe=1"});
   const std::string said = "test fault: rank " + std::to_string(c.rank) + " " + c.action + " at " + c.stage;

@@ -10,6 +10,7 @@
 #include <string>
 
 #include "io/temp_output.hpp"
+#include "support/paths.hpp"
 #include "support/run_cli.hpp"
 #include "support/shell.hpp"
 #include "temp_dir.hpp"
@@ -29,7 +30,7 @@ class FullDisk : public TempDirTest {
     fs::create_directories(path("disk"));
   }
   std::string detect_into(const std::string& dir) const {
-    return std::string(CG_BINARY) + " detect " + path("scene.h5") + " -o " + dir + "/out.h5 --csv " + dir +
+    return cg::test::cli_binary() + " detect " + path("scene.h5") + " -o " + dir + "/out.h5 --csv " + dir +
            "/out.csv --backend cpu --threads 2 -q";
   }
 };
@@ -80,7 +81,7 @@ TEST_F(FullDisk, XdmfFilesAppearWithTheOutputsOrNothingDoes) {
                                                            << r.output;
   }
   const std::string generate =
-      std::string(CG_BINARY) + " generate " + path("disk") + "/s.h5 -n 20000 --seed 4 -q --xdmf";
+      cg::test::cli_binary() + " generate " + path("disk") + "/s.h5 -n 20000 --seed 4 -q --xdmf";
   for (int kib : {16, kSceneOnlyKiB}) {
     SCOPED_TRACE("generate, " + std::to_string(kib) + " KiB");
     const ShellResult r = run_on_small_tmpfs(path("disk"), kib, generate);
@@ -103,7 +104,7 @@ TEST_F(FullDisk, SimulateStopsWithExit6AndItsRunSaysItDidNotFinish) {
   ASSERT_EQ(g.code, 0) << g.output;
   const std::string run_dir = path("disk") + "/run";
   const std::string script =
-      std::string(CG_BINARY) + " simulate " + path("pour.h5") + " -o " + run_dir +
+      cg::test::cli_binary() + " simulate " + path("pour.h5") + " -o " + run_dir +
       " --steps 400 --output-every 20 --backend cpu --threads 2 --no-plot -q; echo RC:$?; "
       "echo LOG:$(tail -n 1 " +
       run_dir +
@@ -112,7 +113,7 @@ TEST_F(FullDisk, SimulateStopsWithExit6AndItsRunSaysItDidNotFinish) {
       run_dir +
       "/run.xdmf; "
       "for f in " +
-      run_dir + "/frame_*.h5; do " + CG_BINARY + " detect $f -o " + path("check.h5") +
+      run_dir + "/frame_*.h5; do " + cg::test::cli_binary() + " detect $f -o " + path("check.h5") +
       " --backend cpu -q >/dev/null 2>&1 && echo FRAME_OK || echo FRAME_BAD:$f; done; "
       "echo RUN:$(ls -A " +
       run_dir + ")";
@@ -160,7 +161,7 @@ TEST_F(FullDisk, HostAllocationFailureIsOutOfHostMemory) {
                               "--contacts-per-body 100000 -q");
   ASSERT_EQ(g.code, 0) << g.output;
   const ShellResult r =
-      run_shell("ulimit -v 2000000 && " + std::string(CG_BINARY) + " detect " + path("pile.h5") + " -o " +
+      run_shell("ulimit -v 2000000 && " + cg::test::cli_binary() + " detect " + path("pile.h5") + " -o " +
                 path("out.h5") + " --backend cpu --threads 2 --precision fp64");
   EXPECT_EQ(r.code, 7) << r.output;
   EXPECT_NE(r.output.find("out of host memory"), std::string::npos) << r.output;

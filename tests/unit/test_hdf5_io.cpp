@@ -18,6 +18,7 @@
 #include "io/inspect.hpp"
 #include "io/scene_file.hpp"
 #include "support/contacts_equal.hpp"
+#include "support/paths.hpp"
 #include "temp_dir.hpp"
 
 namespace {
@@ -1063,7 +1064,7 @@ TEST_F(Hdf5Io, DatasetLargerThanTheFileIsRejectedBeforeReading) {
 // The two findings of libFuzzer run 6 (BENCHMARKS §7): refused from the file's bytes before HDF5
 // reads what crashed or hung it, with a message naming the file and the object.
 TEST_F(Hdf5Io, SharedMessageWithoutTableAndLoopingHeapFreeListAreInputErrors) {
-  const fs::path dir = fs::path(CG_SOURCE_DIR) / "tests/data/damaged";
+  const fs::path dir = fs::path(cg::test::source_dir()) / "tests/data/damaged";
   const std::string shared = (dir / "shared_message_without_table_segv.h5").string();
   std::string msg = error_of<InputError>([&] { cg::inspect_dataset(shared, "/contacts/id_a"); });
   EXPECT_CONTAINS(msg, shared);
@@ -1087,7 +1088,7 @@ TEST_F(Hdf5Io, SharedMessageWithoutTableAndLoopingHeapFreeListAreInputErrors) {
 // Every file of tests/data/damaged crashed or hung a reader once (libFuzzer, mutation test); each
 // is now an InputError (or, for a file whose damage does not touch what a reader uses, a success).
 TEST_F(Hdf5Io, DamagedRegressionFilesAreInputErrors) {
-  const fs::path dir = fs::path(CG_SOURCE_DIR) / "tests/data/damaged";
+  const fs::path dir = fs::path(cg::test::source_dir()) / "tests/data/damaged";
   int files = 0;
   for (const auto& e : fs::directory_iterator(dir)) {
     if (e.path().extension() != ".h5") continue;

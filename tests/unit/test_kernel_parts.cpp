@@ -50,9 +50,14 @@ TEST(CudaTuning, KnobsReadInOnePlace) {
   EXPECT_TRUE(detail::tuned(t.counting_order, true));
   EXPECT_EQ(detail::upload_transfer(t, std::size_t(1) << 20), detail::HostTransfer::streamed);
   EXPECT_EQ(detail::upload_transfer(t, 1000), detail::HostTransfer::single);
-  // automatic download: an engine's first streams unless its staging buffer holds the rows already;
-  // later ones use the staging buffer
+  // automatic download: an engine's first streams (from 64 MiB: registered) unless its staging buffer
+  // holds the rows already; later ones use the staging buffer
   EXPECT_EQ(detail::download_transfer(t, 0, 1000, true), detail::HostTransfer::streamed);
+  EXPECT_EQ(detail::download_transfer(t, 0, (std::size_t(64) << 20) - 1, true),
+            detail::HostTransfer::streamed);
+  EXPECT_EQ(detail::download_transfer(t, 0, std::size_t(64) << 20, true), detail::HostTransfer::registered);
+  EXPECT_EQ(detail::download_transfer(t, std::size_t(1) << 30, std::size_t(64) << 20, true),
+            detail::HostTransfer::single);
   EXPECT_EQ(detail::download_transfer(t, 4096, 1000, true), detail::HostTransfer::single);
   EXPECT_EQ(detail::download_transfer(t, 0, 1000, false), detail::HostTransfer::single);
   EXPECT_EQ(t.transfer_slot_bytes, std::size_t(4) << 20);

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "engine.hpp"  // target cg_kernels
+#include "support/paths.hpp"
 
 // Contacts of three spheres: 0 and 1 overlap by 0.1, 2 is alone.
 std::size_t count_contacts_example() {
@@ -53,10 +54,10 @@ TEST(Readme, LibraryExampleRuns) { EXPECT_EQ(count_contacts_example(), 1u); }
 TEST(Readme, SkinExampleRuns) { EXPECT_EQ(skin_steps_example(), 6u); }
 
 TEST(Readme, LibraryExamplesAreInTheDocs) {
-  // By CG_SOURCE_DIR, not __FILE__: with CCACHE_BASEDIR set, ccache makes __FILE__ relative to the
+  // By source_dir(), not __FILE__: with CCACHE_BASEDIR set, ccache makes __FILE__ relative to the
   // build directory, which is not CTest's working directory.
   auto text = [](const std::string& relative) {
-    std::ifstream in(std::string(CG_SOURCE_DIR) + "/" + relative);
+    std::ifstream in(cg::test::source_dir() + "/" + relative);
     std::stringstream all;
     all << in.rdbuf();
     return std::make_pair(static_cast<bool>(in), all.str());

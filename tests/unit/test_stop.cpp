@@ -17,6 +17,7 @@
 #include "errors.hpp"
 #include "run/stop.hpp"
 #include "support/child_process.hpp"
+#include "support/paths.hpp"
 #include "support/run_cli.hpp"
 #include "temp_dir.hpp"
 
@@ -36,8 +37,8 @@ class Stop : public TempDirTest {
   // detect of the scene into out.h5 (and out.csv), held by `fault`; the stop grace `grace` seconds.
   std::unique_ptr<ChildProcess> start_detect(const std::string& fault, int grace) {
     return std::make_unique<ChildProcess>(
-        std::vector<std::string>{CG_BINARY, "detect", path("scene.h5"), "-o", path("out.h5"), "--csv",
-                                 path("out.csv"), "--backend", "cpu", "--threads", "1"},
+        std::vector<std::string>{cg::test::cli_binary(), "detect", path("scene.h5"), "-o", path("out.h5"),
+                                 "--csv", path("out.csv"), "--backend", "cpu", "--threads", "1"},
         std::vector<std::string>{"CONTACTGRID_TEST_FAULT=" + fault,
                                  "CONTACTGRID_STOP_GRACE=" + std::to_string(grace), "CONTACTGRID_MPI=0"});
   }
@@ -121,8 +122,9 @@ TEST_F(Stop, TheGraceEndsARunThatNeverStops) {
 TEST_F(Stop, MalformedKnobsAreUsageErrors) {
   for (const std::string env : {"CONTACTGRID_TEST_FAULT=sleep@write", "CONTACTGRID_TEST_FAULT=wait@nowhere",
                                 "CONTACTGRID_STOP_GRACE=soon", "CONTACTGRID_STOP_GRACE=-1"}) {
-    ChildProcess child({CG_BINARY, "detect", path("scene.h5"), "-o", path("out.h5"), "--backend", "cpu"},
-                       {env, "CONTACTGRID_MPI=0"});
+    ChildProcess child(
+        {cg::test::cli_binary(), "detect", path("scene.h5"), "-o", path("out.h5"), "--backend", "cpu"},
+        {env, "CONTACTGRID_MPI=0"});
     const auto status = child.wait(60);
     ASSERT_TRUE(status && WIFEXITED(*status)) << env << ": " << status_text(status);
     EXPECT_EQ(WEXITSTATUS(*status), 2) << env << "\n" << child.output();
