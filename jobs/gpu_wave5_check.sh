@@ -15,7 +15,7 @@
 #   BIN=dir OUT=dir jobs/gpu_wave5_check.sh two   two GPUs: bodies that move at np 2 (#31), simulate
 #                                                 under mpirun on two GPUs (#32)
 # BIN holds the CUDA build's contactgrid, contactgrid_tests, contactgrid_mpi_tests,
-# contactgrid_cuda_bench, host_stage_bench and host_bandwidth. Each part writes $OUT/<part>.tgz; the
+# contactgrid_cuda_bench, host_stage_bench, host_bandwidth and file_write_bandwidth. Each part writes $OUT/<part>.tgz; the
 # script exits non-zero naming every script that failed.
 set -u
 cd "$(dirname "$0")/.."
@@ -58,6 +58,8 @@ file_job() {  # the stage table of two runs of each: the second is the figure (p
     done
     ls -l "$dir/c_$scene.h5"
   done
+  # the host's own file-write bandwidth, the floor of the write stage (tests/bench/file_write_bandwidth.cpp)
+  [ -x "$BIN/file_write_bandwidth" ] && "$BIN/file_write_bandwidth" "$dir" 375 && "$BIN/file_write_bandwidth" /tmp 375
   rm -rf "$dir"
   return $rc
 }
