@@ -31,6 +31,7 @@
 #include "io/scene_file.hpp"
 #include "io/temp_output.hpp"
 #include "node_threads.hpp"
+#include "pieces.hpp"
 #include "precision_choice.hpp"
 #include "routing.hpp"
 #include "run/contact_file_shared.hpp"
@@ -297,7 +298,8 @@ void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecompo
 // bodies.hpp). A rank that owns nothing reports nothing.
 template <class Real>
 Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBodies& held,
-                            const SharedFrame& f, bool full, int threads) {
+                            const SharedFrame& f, bool full, int threads,
+                            const std::function<void(const std::string&)>& log) {
   Contacts<Real> local;
   local.full = full;
   agreed_stage(session, "detect", [&] {
@@ -309,7 +311,14 @@ Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBo
     held.ghosts = {};
     held.owned_shapes = {};
     held.ghost_shapes = {};
-    if (held.input.owned > 0) local = engine.detect(held.input.view(), f.frame);
+    if (held.input.owned > 0) {
+      PieceOptions pieces;  // a memory limit: in slabs that fit it (decomposition/pieces.hpp)
+      pieces.memory_limit = engine.options().device_memory_limit;
+      pieces.width = f.width;
+      pieces.axis = f.axis;
+      pieces.log = log;
+      local = detect_in_pieces(engine, held.input.view(), f.frame, pieces);
+    }
   });
   return local;
 }
@@ -597,7 +606,7 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
   clock.start();
   fault_point("detect", session.rank());
   Contacts<Real> local =
-      detect_local(session, *engine, held, f, options.engine.fields == Fields::full, threads);
+      detect_local(session, *engine, held, f, options.engine.fields == Fields::full, threads, options.log);
   clock.stop(RunStage::detect);
   if (held.input.owned > 0) clock.add_engine(engine->times());
   record_detection(session, *engine, held.input, result);
@@ -642,6 +651,7 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.engine.ellipsoid_max_iterations = cmd.solver_iterations;
   o.engine.skin = cmd.skin;
   o.engine.max_pair_tests = cmd.max_pair_tests;
+  o.engine.device_memory_limit = cmd.memory_limit;
   // A pair stage far above the usual is said before it runs (any rank) and, on rank 0's terminal,
   // shows its progress in pair tests (run/progress.hpp; both backends report it).
   auto pair_bar = std::make_shared<std::unique_ptr<Progress>>();

@@ -1,0 +1,183 @@
+// pieces.cpp: one rank's detection in slabs that fit a memory limit (see pieces.hpp).
+#include "pieces.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <limits>
+#include <thread>
+#include <vector>
+
+#include "contact_merge.hpp"
+#include "host_vector.hpp"
+#include "slab_decomposition.hpp"
+
+namespace cg {
+
+namespace {
+
+// A piece's engine input: owned bodies of [lo, hi) and the ghosts within `width` of it, in input
+// order (ascending id), with their ids and report bytes (kReportedBit kept for the owned anchors only).
+struct PieceInput {
+  HostVector<Vec3<double>> position;
+  HostVector<double> radius;
+  HostVector<std::int64_t> id;
+  HostVector<std::uint8_t> report;
+  HostVector<Shape> shape;
+  HostVector<Vec3<double>> semi_axes;
+  HostVector<Quat<double>> orientation;
+  std::vector<double> owned_at;  // the owned bodies' centre coordinates (where a split cuts)
+
+  BodiesView view() const { return BodiesView{position, radius, id, report, shape, semi_axes, orientation}; }
+};
+
+PieceInput select_piece(const BodiesView& b, int axis, double lo, double hi, double width) {
+  PieceInput p;
+  const bool shapes = !b.shape.empty();
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const double x = component(b.position[i], axis);
+    if (x < lo - width || x >= hi + width) continue;
+    const bool owned = x >= lo && x < hi;
+    const std::uint8_t given = b.report.empty() ? kReportedBit : b.report[i];
+    p.position.push_back(b.position[i]);
+    p.radius.push_back(b.radius[i]);
+    p.id.push_back(b.id.empty() ? static_cast<std::int64_t>(i) : b.id[i]);
+    p.report.push_back(owned ? given : static_cast<std::uint8_t>(given & ~kReportedBit));
+    if (shapes) {
+      p.shape.push_back(b.shape[i]);
+      p.semi_axes.push_back(b.semi_axes[i]);
+      p.orientation.push_back(b.orientation[i]);
+    }
+    if (owned) p.owned_at.push_back(x);
+  }
+  return p;
+}
+
+// A cut that leaves owned bodies on both sides: the median of their centres, or the next larger centre
+// when the median is the smallest. None (NaN) when every centre is the same.
+double split_point(std::vector<double>& at) {
+  if (at.size() < 2) return std::numeric_limits<double>::quiet_NaN();
+  auto mid = at.begin() + static_cast<std::ptrdiff_t>(at.size() / 2);
+  std::nth_element(at.begin(), mid, at.end());
+  const double m = *mid;
+  const double lowest = *std::min_element(at.begin(), at.end());
+  if (lowest < m) return m;
+  double next = std::numeric_limits<double>::infinity();
+  for (double x : at)
+    if (x > m) next = std::min(next, x);
+  return next == std::numeric_limits<double>::infinity() ? std::numeric_limits<double>::quiet_NaN() : next;
+}
+
+std::string bytes_text(std::uint64_t b) {
+  return b >= (std::uint64_t(1) << 30) ? fmt::format("{:.3g} GiB", double(b) / double(1 << 30))
+                                       : fmt::format("{:.3g} MiB", double(b) / double(1 << 20));
+}
+
+}  // namespace
+
+template <class Real>
+std::uint64_t piece_bytes(std::uint64_t rows, bool full, std::uint64_t bodies) {
+  std::uint64_t row = 0;
+  Contacts<Real> probe;
+  for_each_contact_field(probe, FieldSet(full), [&](auto, auto& column) { row += sizeof(column[0]); });
+  const std::uint64_t body = sizeof(Vec3<double>) + sizeof(double) + sizeof(std::int64_t) + 1;
+  return rows * row + bodies * body;
+}
+
+template <class Real>
+Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, const Frame& frame,
+                                const PieceOptions& o, PieceReport* report) {
+  PieceReport local;
+  PieceReport& rep = report ? *report : local;
+  rep = {};
+  if (o.memory_limit == 0) {
+    rep.pieces = rep.attempts = 1;
+    return engine.detect(bodies, frame);
+  }
+  if (engine.options().history)
+    throw UsageError("a detection in pieces (a memory limit) does not keep contact history");
+  const bool full = engine.options().fields == Fields::full;
+  // One attempt: the contacts, or false when the piece does not fit.
+  auto attempt = [&](const BodiesView& v, Contacts<Real>& out) {
+    ++rep.attempts;
+    try {
+      out = engine.detect(v, frame);
+    } catch (const ResourceError&) {
+      return false;
+    }
+    if (piece_bytes<Real>(out.size(), full, v.size()) <= o.memory_limit) return true;
+    out = Contacts<Real>{};
+    return false;
+  };
+
+  Contacts<Real> whole;
+  if (attempt(bodies, whole)) {
+    rep.pieces = 1;
+    return whole;
+  }
+  // The scene in slabs along the axis, each [lo, hi) of centre coordinates.
+  struct Range {
+    double lo, hi;
+  };
+  const double inf = std::numeric_limits<double>::infinity();
+  std::vector<Range> todo;
+  // A piece that does not fit: its two halves next (the lower one first: depth first, in slab order).
+  auto split = [&](const Range& r, std::vector<double>& owned_at, std::size_t held) {
+    const double cut = split_point(owned_at);
+    if (!(cut == cut)) {
+      throw ResourceError(fmt::format(
+          "the contacts of a piece of {} bodies ({} owned) do not fit in the memory limit of {} and the "
+          "piece cannot be split further; raise --memory-limit",
+          held, owned_at.size(), bytes_text(o.memory_limit)));
+    }
+    todo.push_back({cut, r.hi});
+    todo.push_back({r.lo, cut});
+  };
+  {
+    std::vector<double> at(bodies.size());
+    for (std::size_t i = 0; i < at.size(); ++i) at[i] = component(bodies.position[i], o.axis);
+    split({-inf, inf}, at, bodies.size());
+  }
+  std::vector<Contacts<Real>> runs;
+  while (!todo.empty()) {
+    const Range r = todo.back();
+    todo.pop_back();
+    PieceInput p = select_piece(bodies, o.axis, r.lo, r.hi, o.width);
+    if (p.owned_at.empty()) continue;  // a piece that owns nothing reports nothing
+    Contacts<Real> c;
+    if (attempt(p.view(), c)) {
+      runs.push_back(std::move(c));
+      continue;
+    }
+    split(r, p.owned_at, p.position.size());
+  }
+  rep.pieces = runs.size();
+
+  std::vector<ContactRunView<Real>> views;
+  std::size_t total = 0;
+  for (const Contacts<Real>& run : runs) {
+    views.push_back(contact_run_view(run, full));
+    total += run.size();
+  }
+  Contacts<Real> out;
+  out.resize(total, FieldSet(full));
+  const int threads = engine.options().threads > 0 ? engine.options().threads
+                                                   : std::max(1, int(std::thread::hardware_concurrency()));
+  const std::uint64_t duplicates = merge_contact_runs_into(views, out, full, threads, threads);
+  if (duplicates != 0)
+    throw Error(
+        fmt::format("detect_in_pieces: {} contacts found by two pieces (an internal error)", duplicates));
+  if (o.log)
+    o.log(fmt::format("detect: {} contacts in {} pieces under the memory limit of {} ({} detections)", total,
+                      rep.pieces, bytes_text(o.memory_limit), rep.attempts));
+  return out;
+}
+
+template std::uint64_t piece_bytes<float>(std::uint64_t, bool, std::uint64_t);
+template std::uint64_t piece_bytes<double>(std::uint64_t, bool, std::uint64_t);
+template Contacts<float> detect_in_pieces(Engine<float>&, const BodiesView&, const Frame&,
+                                          const PieceOptions&, PieceReport*);
+template Contacts<double> detect_in_pieces(Engine<double>&, const BodiesView&, const Frame&,
+                                           const PieceOptions&, PieceReport*);
+
+}  // namespace cg
