@@ -31,24 +31,60 @@ struct PieceInput {
   BodiesView view() const { return BodiesView{position, radius, id, report, shape, semi_axes, orientation}; }
 };
 
-PieceInput select_piece(const BodiesView& b, int axis, double lo, double hi, double width) {
+// Parallel: each body's role (0 not held, 1 ghost, 2 owned) and the held count per block of rows, a
+// scan of the blocks, then each block fills its rows in order.
+PieceInput select_piece(const BodiesView& b, int axis, double lo, double hi, double width, int threads) {
+  const std::size_t n = b.size(), block = std::size_t(1) << 16, blocks = (n + block - 1) / block;
+  std::vector<std::uint8_t> role(n);
+  std::vector<std::size_t> held(blocks + 1, 0), owned(blocks + 1, 0);
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (std::size_t k = 0; k < blocks; ++k) {
+    std::size_t h = 0, o = 0;
+    for (std::size_t i = k * block; i < std::min(n, (k + 1) * block); ++i) {
+      const double x = component(b.position[i], axis);
+      const std::uint8_t r = x < lo - width || x >= hi + width ? 0 : (x >= lo && x < hi ? 2 : 1);
+      role[i] = r;
+      h += r != 0;
+      o += r == 2;
+    }
+    held[k + 1] = h;
+    owned[k + 1] = o;
+  }
+  for (std::size_t k = 0; k < blocks; ++k) {
+    held[k + 1] += held[k];
+    owned[k + 1] += owned[k];
+  }
   PieceInput p;
   const bool shapes = !b.shape.empty();
-  for (std::size_t i = 0; i < b.size(); ++i) {
-    const double x = component(b.position[i], axis);
-    if (x < lo - width || x >= hi + width) continue;
-    const bool owned = x >= lo && x < hi;
-    const std::uint8_t given = b.report.empty() ? kReportedBit : b.report[i];
-    p.position.push_back(b.position[i]);
-    p.radius.push_back(b.radius[i]);
-    p.id.push_back(b.id.empty() ? static_cast<std::int64_t>(i) : b.id[i]);
-    p.report.push_back(owned ? given : static_cast<std::uint8_t>(given & ~kReportedBit));
-    if (shapes) {
-      p.shape.push_back(b.shape[i]);
-      p.semi_axes.push_back(b.semi_axes[i]);
-      p.orientation.push_back(b.orientation[i]);
+  const std::size_t m = held[blocks];
+  p.position.resize(m);
+  p.radius.resize(m);
+  p.id.resize(m);
+  p.report.resize(m);
+  if (shapes) {
+    p.shape.resize(m);
+    p.semi_axes.resize(m);
+    p.orientation.resize(m);
+  }
+  p.owned_at.resize(owned[blocks]);
+#pragma omp parallel for num_threads(threads) schedule(static)
+  for (std::size_t k = 0; k < blocks; ++k) {
+    std::size_t w = held[k], o = owned[k];
+    for (std::size_t i = k * block; i < std::min(n, (k + 1) * block); ++i) {
+      if (role[i] == 0) continue;
+      const std::uint8_t given = b.report.empty() ? kReportedBit : b.report[i];
+      p.position[w] = b.position[i];
+      p.radius[w] = b.radius[i];
+      p.id[w] = b.id.empty() ? static_cast<std::int64_t>(i) : b.id[i];
+      p.report[w] = role[i] == 2 ? given : static_cast<std::uint8_t>(given & ~kReportedBit);
+      if (shapes) {
+        p.shape[w] = b.shape[i];
+        p.semi_axes[w] = b.semi_axes[i];
+        p.orientation[w] = b.orientation[i];
+      }
+      if (role[i] == 2) p.owned_at[o++] = component(b.position[i], axis);
+      ++w;
     }
-    if (owned) p.owned_at.push_back(x);
   }
   return p;
 }
@@ -97,6 +133,8 @@ Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, 
   if (engine.options().history)
     throw UsageError("a detection in pieces (a memory limit) does not keep contact history");
   const bool full = engine.options().fields == Fields::full;
+  const int threads = engine.options().threads > 0 ? engine.options().threads
+                                                   : std::max(1, int(std::thread::hardware_concurrency()));
   // One attempt: the contacts, or false when the piece does not fit.
   auto attempt = [&](const BodiesView& v, Contacts<Real>& out) {
     ++rep.attempts;
@@ -142,7 +180,7 @@ Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, 
   while (!todo.empty()) {
     const Range r = todo.back();
     todo.pop_back();
-    PieceInput p = select_piece(bodies, o.axis, r.lo, r.hi, o.width);
+    PieceInput p = select_piece(bodies, o.axis, r.lo, r.hi, o.width, threads);
     if (p.owned_at.empty()) continue;  // a piece that owns nothing reports nothing
     Contacts<Real> c;
     if (attempt(p.view(), c)) {
@@ -161,8 +199,6 @@ Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, 
   }
   Contacts<Real> out;
   out.resize(total, FieldSet(full));
-  const int threads = engine.options().threads > 0 ? engine.options().threads
-                                                   : std::max(1, int(std::thread::hardware_concurrency()));
   const std::uint64_t duplicates = merge_contact_runs_into(views, out, full, threads, threads);
   if (duplicates != 0)
     throw Error(
