@@ -10,11 +10,11 @@
 //
 // How the pieces are chosen: the whole scene is tried first; a piece that does not fit is split at the
 // median centre of its owned bodies and both halves are tried, depth first. A piece does not fit when
-// the engine throws ResourceError (CUDA: the workspace would pass EngineOptions::device_memory_limit or
-// the device's free memory) or when its contact rows and bodies take more than `memory_limit` bytes
-// (the model both backends share, so that the CPU backend pieces the same scenes). A piece whose owned
-// bodies cannot be split (one body, or all centres equal along the axis) and still does not fit ends
-// the detection with ResourceError (exit code 7) naming the limit.
+// the engine throws ResourceError (CUDA: the workspace would pass CONTACTGRID_DEVICE_MEMORY_LIMIT, which
+// the command line's --memory-limit sets, or the device's free memory) or when its contact rows and bodies
+// take more than `memory_limit` bytes (the model both backends share, so that the CPU backend pieces the same
+// scenes). A piece whose owned bodies cannot be split (one body, or all centres equal along the axis) and
+// still does not fit ends the detection with ResourceError (exit code 7) naming the limit.
 #include <cstdint>
 #include <functional>
 #include <string>

@@ -46,8 +46,6 @@ struct DetectJob {
   // What the broad phase does with its estimate of the pair tests before its pair stage
   // (check_pair_estimate, pair_estimate.hpp; from EngineOptions).
   PairLimits pair_limits{};
-  // CUDA: EngineOptions::device_memory_limit (0: none), the workspace's cap with Tuning::memory_limit.
-  std::uint64_t memory_limit = 0;
   // The broad phase (resolved: never automatic) and what levels and sweep need.
   BroadPhase broad = BroadPhase::grid;
   LevelParams<Broad> levels{};

@@ -283,7 +283,6 @@ detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> 
   if (options.ellipsoid_max_iterations > 0) job.solver.max_iterations = options.ellipsoid_max_iterations;
   job.pair_limits = {options.max_pair_tests, options.on_pair_estimate ? &options.on_pair_estimate : nullptr,
                      options.on_pair_progress ? &options.on_pair_progress : nullptr};
-  job.memory_limit = options.device_memory_limit;
   stats.key_bits = job.plan.key_bits;
   stats.cell_size = f.cell_size;
   return job;

@@ -93,11 +93,6 @@ struct EngineOptions {
   // observes and the measured cost of its builds and reuses, the skin whose mean cost per call is
   // lowest (kernels/skin_tuner.hpp). For an engine called once per step of a simulation.
   bool skin_auto = false;
-  // CUDA: the most device memory (bytes) the engine's workspace may hold (0: what the device has; the
-  // smaller of this and CONTACTGRID_DEVICE_MEMORY_LIMIT when both are set). A stage that would grow
-  // the workspace past it throws ResourceError (exit code 7) before it allocates. The CPU backend
-  // ignores it. detect_in_pieces (decomposition/pieces.hpp) splits a scene whose piece does not fit.
-  std::uint64_t device_memory_limit = 0;
 };
 
 // Counters of one run (for tests and the summary).

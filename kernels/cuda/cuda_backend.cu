@@ -140,9 +140,6 @@ class CudaBackend {
   void run(const DetectJob<Real, Narrow>& job, Contacts<Narrow>& out, StageTimes& times, EngineStats& stats) {
     CG_CUDA_CHECK(cudaSetDevice(m_device));
     refresh_tuning();
-    if (job.memory_limit)  // EngineOptions::device_memory_limit: the smaller cap wins
-      m_ws.memory_limit =
-          std::min<std::size_t>(m_ws.memory_limit.value_or(job.memory_limit), job.memory_limit);
     m_ws.allocations = 0;
     m_thrust.allocations = 0;
     const std::uint64_t n64 = job.body_count();

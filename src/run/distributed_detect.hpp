@@ -94,6 +94,10 @@ struct DistributedOptions {
   // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
   // printed to stderr as a warning only if duplicates were removed.
   std::function<void(const std::string&)> log;
+  // --memory-limit: the bytes a rank's detection may hold (0: no limit, one piece). Above it the rank
+  // detects in slabs that fit (decomposition/pieces.hpp), with the same contacts; on CUDA the engine's
+  // workspace is capped there too (CONTACTGRID_DEVICE_MEMORY_LIMIT, the smaller of the two).
+  std::uint64_t memory_limit = 0;
 };
 
 // Throws UsageError naming the bad option (for library callers; the CLI has typed them already).
