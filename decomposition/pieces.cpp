@@ -109,6 +109,43 @@ std::string bytes_text(std::uint64_t b) {
                                        : fmt::format("{:.3g} MiB", double(b) / double(1 << 20));
 }
 
+// `sum` with a piece's statistics `s` (the first piece's: taken as they are).
+void add_stats(EngineStats& sum, const EngineStats& s, bool first) {
+  if (first) {
+    sum = s;
+    return;
+  }
+  const EngineStats before = sum;
+  sum = s;
+  sum.bodies += before.bodies;
+  sum.entries += before.entries;
+  sum.pair_tests += before.pair_tests;
+  sum.contacts += before.contacts;
+  sum.candidates += before.candidates;
+  sum.ellipsoids += before.ellipsoids;
+  sum.narrow_fallbacks += before.narrow_fallbacks;
+  sum.narrow_unconverged += before.narrow_unconverged;
+  sum.narrow_unsettled += before.narrow_unsettled;
+  sum.narrow_hard += before.narrow_hard;
+  sum.narrow_solver_runs += before.narrow_solver_runs;
+  sum.narrow_evaluations += before.narrow_evaluations;
+  sum.narrow_max_evaluations = std::max(sum.narrow_max_evaluations, before.narrow_max_evaluations);
+  sum.fp64_rows += before.fp64_rows;
+  sum.narrow_triage_s += before.narrow_triage_s;
+  sum.narrow_settle_s += before.narrow_settle_s;
+  sum.narrow_hard_s += before.narrow_hard_s;
+}
+
+void add_times(StageTimes& sum, const StageTimes& t) {
+  for (const StageTime& st : t) {
+    auto at = std::find_if(sum.begin(), sum.end(), [&](const StageTime& x) { return x.name == st.name; });
+    if (at == sum.end())
+      sum.push_back(st);
+    else
+      at->seconds += st.seconds;
+  }
+}
+
 }  // namespace
 
 template <class Real>
@@ -128,7 +165,10 @@ Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, 
   rep = {};
   if (o.memory_limit == 0) {
     rep.pieces = rep.attempts = 1;
-    return engine.detect(bodies, frame);
+    Contacts<Real> c = engine.detect(bodies, frame);
+    rep.stats = engine.stats();
+    rep.times = engine.times();
+    return c;
   }
   if (engine.options().history)
     throw UsageError("a detection in pieces (a memory limit) does not keep contact history");
@@ -151,6 +191,8 @@ Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, 
   Contacts<Real> whole;
   if (attempt(bodies, whole)) {
     rep.pieces = 1;
+    rep.stats = engine.stats();
+    rep.times = engine.times();
     return whole;
   }
   // The scene in slabs along the axis, each [lo, hi) of centre coordinates.
@@ -185,6 +227,8 @@ Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, 
     Contacts<Real> c;
     if (attempt(p.view(), c)) {
       runs.push_back(std::move(c));
+      add_stats(rep.stats, engine.stats(), runs.size() == 1);
+      add_times(rep.times, engine.times());
       continue;
     }
     split(r, p.owned_at, p.position.size());

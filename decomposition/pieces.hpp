@@ -33,6 +33,11 @@ struct PieceOptions {
 struct PieceReport {
   std::uint64_t pieces = 0;    // pieces whose contacts were kept
   std::uint64_t attempts = 0;  // detections run (pieces + the ones that did not fit)
+  // The engine's statistics of the kept pieces: the last one's, with the counters (entries, pair tests,
+  // contacts, candidates, the narrow phase's counts, fp64 rows) summed over the pieces and the largest
+  // narrow_max_evaluations; `ellipsoids` counts ghosts once per piece that holds them.
+  EngineStats stats;
+  StageTimes times;  // the engine's stage times, summed by stage over the kept pieces
 };
 
 // The contacts of `bodies` (ids and report mask as BodiesView: a pair is reported iff its anchor is

@@ -303,7 +303,7 @@ void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecompo
 template <class Real>
 Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBodies& held,
                             const SharedFrame& f, bool full, int threads, std::uint64_t memory_limit,
-                            const std::function<void(const std::string&)>& log) {
+                            const std::function<void(const std::string&)>& log, PieceReport& report) {
   Contacts<Real> local;
   local.full = full;
   agreed_stage(session, "detect", [&] {
@@ -321,7 +321,7 @@ Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBo
       pieces.width = f.width;
       pieces.axis = f.axis;
       pieces.log = log;
-      local = detect_in_pieces(engine, held.input.view(), f.frame, pieces);
+      local = detect_in_pieces(engine, held.input.view(), f.frame, pieces, &report);
     }
   });
   return local;
@@ -368,9 +368,9 @@ std::optional<Engine<Real>> make_engine(const Session& session, const Distribute
 // slabs (owned bodies per rank) and the ghosts held. Collective.
 template <class Real>
 void record_detection(const Session& session, const Engine<Real>& engine, const EngineInput& input,
-                      DistributedResult<Real>& result) {
+                      const PieceReport& pieces, DistributedResult<Real>& result) {
   result.backend = engine.backend();
-  if (input.owned > 0) result.stats = engine.stats();
+  if (input.owned > 0) result.stats = pieces.stats;  // (one piece: the engine's)
   result.stats.entries = session.sum(result.stats.entries);
   result.stats.pair_tests = session.sum(result.stats.pair_tests);
   result.stats.narrow_fallbacks = session.sum(result.stats.narrow_fallbacks);
@@ -619,11 +619,12 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
   stop_point();
   clock.start();
   fault_point("detect", session.rank());
+  PieceReport pieces;
   Contacts<Real> local = detect_local(session, *engine, held, f, options.engine.fields == Fields::full,
-                                      threads, options.memory_limit, options.log);
+                                      threads, options.memory_limit, options.log, pieces);
   clock.stop(RunStage::detect);
-  if (held.input.owned > 0) clock.add_engine(engine->times());
-  record_detection(session, *engine, held.input, result);
+  if (held.input.owned > 0) clock.add_engine(pieces.times);  // (in pieces: summed over them)
+  record_detection(session, *engine, held.input, pieces, result);
   if (options.resident_steps == 0) held.input = {};  // else the steps start from it
 
   stop_point();

@@ -5,6 +5,7 @@
 // refusal: ResourceError, exit code 7, no output file.
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <random>
 
@@ -107,6 +108,42 @@ TYPED_TEST(PiecesTest, KeepsTheReportMaskAndIds) {
   PieceReport report_out;
   EXPECT_EQ(compare_contacts(detect_in_pieces(engine, v, frame, p, &report_out), whole), "identical");
   EXPECT_GE(report_out.pieces, 3u);
+}
+
+// CUDA: a piece that runs out of device memory in the middle (the workspace capped by
+// CONTACTGRID_DEVICE_MEMORY_LIMIT at about half of what the whole scene takes) is split and detected
+// again; the result is the one-piece result. The model limit is out of the way (1 TiB).
+TEST(PiecesCuda, DeviceOutOfMemoryInTheMiddleSplitsThePiece) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  const Spheres s = random_spheres(400000, 0.5, 1.0, 13);
+  const BodiesView v{s.p, s.r, {}, {}};
+  const Bounds global = compute_bounds(v);
+  const Frame frame = make_frame(global, 0, Precision::fp32, CellChoice::tuned);
+  EngineOptions o;
+  o.backend = Backend::cuda;
+  Engine<float> unlimited(o);
+  const Contacts<float> whole = unlimited.detect(v, frame);
+  const std::uint64_t peak = unlimited.stats().peak_device_bytes;
+  ASSERT_GT(peak, 0u);
+  const std::string cap = std::to_string((std::uint64_t(64) << 20) + peak / 2);
+  ::setenv("CONTACTGRID_DEVICE_MEMORY_LIMIT", cap.c_str(), 1);
+  Engine<float> capped(o);
+  EXPECT_THROW(capped.detect(v, frame), ResourceError) << "the cap does not make the whole scene fail";
+  PieceOptions p;
+  p.memory_limit = std::uint64_t(1) << 40;
+  p.width = frame_ghost_width(global, frame.origin, std::numeric_limits<float>::epsilon());
+  p.axis = choose_axis(global, -1);
+  PieceReport report;
+  Contacts<float> pieces;
+  try {
+    pieces = detect_in_pieces(capped, v, frame, p, &report);
+  } catch (...) {
+    ::unsetenv("CONTACTGRID_DEVICE_MEMORY_LIMIT");
+    throw;
+  }
+  ::unsetenv("CONTACTGRID_DEVICE_MEMORY_LIMIT");
+  EXPECT_GE(report.pieces, 2u);
+  EXPECT_EQ(compare_contacts(pieces, whole), "identical");
 }
 
 class PiecesCli : public TempDirTest {};
