@@ -47,8 +47,8 @@ for run in 1 2; do
     [ $run = 2 ] || [ $kind = pieces ] || rm -f "$dir/$kind.h5"
   done
 done
-grep -h "pieces under the memory limit" "$dir"/pieces_pieces_*.log | tail -1
-grep -q "pieces under the memory limit" "$dir/pieces_pieces_2.log" || failed+=(pieces_not_in_pieces)
+grep -h "pieces under --memory-limit" "$dir"/pieces_pieces_*.log | tail -1
+grep -qE "^  ([2-9]|[1-9][0-9]+) pieces under --memory-limit" "$dir/pieces_pieces_2.log" || failed+=(pieces_not_in_pieces)
 "$BIN/contactgrid" compare "$dir/whole.h5" "$dir/pieces.h5" >"$dir/pieces_compare.log" 2>&1 || failed+=(pieces_not_identical)
 cat "$dir/pieces_compare.log"
 if command -v h5dump >/dev/null; then h5dump -H "$dir/whole.h5" | grep -m2 -A1 'DATASPACE' >>"$dir/pieces_compare.log"; fi

@@ -129,7 +129,10 @@ struct DistributedResult {
   Backend backend = Backend::cpu;        // the engine's resolved backend (this rank)
   int threads = 1;                       // host threads of this rank (engine and host loops)
   EngineStats stats;  // entries, pair tests, narrow_fallbacks, narrow_unconverged summed over ranks
-  StepStats steps;    // resident steps (steps == 0: none ran)
+  // --memory-limit (DistributedOptions::memory_limit; 0: none): the most pieces a rank's detection
+  // took, and the most detections (pieces + the tries that did not fit) a rank ran.
+  std::uint64_t memory_limit = 0, pieces = 1, piece_detections = 1;
+  StepStats steps;  // resident steps (steps == 0: none ran)
 };
 
 // Collective over `session`: every rank calls it with the same arguments. The stages read … collect

@@ -625,6 +625,9 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
   clock.stop(RunStage::detect);
   if (held.input.owned > 0) clock.add_engine(pieces.times);  // (in pieces: summed over them)
   record_detection(session, *engine, held.input, pieces, result);
+  result.memory_limit = options.memory_limit;
+  result.pieces = std::uint64_t(session.max(double(pieces.pieces)));
+  result.piece_detections = std::uint64_t(session.max(double(pieces.attempts)));
   if (options.resident_steps == 0) held.input = {};  // else the steps start from it
 
   stop_point();
