@@ -104,6 +104,24 @@ double split_point(std::vector<double>& at) {
   return next == std::numeric_limits<double>::infinity() ? std::numeric_limits<double>::quiet_NaN() : next;
 }
 
+// Up to parts - 1 ascending cuts at the quantiles of `at`, each above its smallest value (so that no
+// part repeats the whole); empty when none is.
+std::vector<double> quantile_cuts(std::vector<double>& at, std::size_t parts) {
+  std::vector<double> cuts;
+  if (at.size() < 2) return cuts;
+  const double lowest = *std::min_element(at.begin(), at.end());
+  std::size_t from = 0;
+  for (std::size_t j = 1; j < parts; ++j) {
+    const std::size_t k = at.size() * j / parts;
+    if (k < from) continue;
+    std::nth_element(at.begin() + std::ptrdiff_t(from), at.begin() + std::ptrdiff_t(k), at.end());
+    from = k;
+    const double c = at[k];
+    if (c > lowest && (cuts.empty() || c > cuts.back())) cuts.push_back(c);
+  }
+  return cuts;
+}
+
 std::string bytes_text(std::uint64_t b) {
   return b >= (std::uint64_t(1) << 30) ? fmt::format("{:.3g} GiB", double(b) / double(1 << 30))
                                        : fmt::format("{:.3g} MiB", double(b) / double(1 << 20));
@@ -175,15 +193,19 @@ Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, 
   const bool full = engine.options().fields == Fields::full;
   const int threads = engine.options().threads > 0 ? engine.options().threads
                                                    : std::max(1, int(std::thread::hardware_concurrency()));
-  // One attempt: the contacts, or false when the piece does not fit.
+  // One attempt: the contacts, or false when the piece does not fit. `needed`: the bytes the model
+  // counted for a piece whose contacts came back too large (0 after a ResourceError: not known).
+  std::uint64_t needed = 0;
   auto attempt = [&](const BodiesView& v, Contacts<Real>& out) {
     ++rep.attempts;
+    needed = 0;
     try {
       out = engine.detect(v, frame);
     } catch (const ResourceError&) {
       return false;
     }
-    if (piece_bytes<Real>(out.size(), full, v.size()) <= o.memory_limit) return true;
+    needed = piece_bytes<Real>(out.size(), full, v.size());
+    if (needed <= o.memory_limit) return true;
     out = Contacts<Real>{};
     return false;
   };
@@ -201,17 +223,32 @@ Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, 
   };
   const double inf = std::numeric_limits<double>::infinity();
   std::vector<Range> todo;
-  // A piece that does not fit: its two halves next (the lower one first: depth first, in slab order).
+  // A piece that does not fit: its parts next, the lowest first (depth first, in slab order). Two
+  // halves, or where the model counted the bytes it needs, as many parts of equal owned counts as
+  // those bytes take at 80 % of the limit (each part then likely fits at the first try).
   auto split = [&](const Range& r, std::vector<double>& owned_at, std::size_t held) {
-    const double cut = split_point(owned_at);
-    if (!(cut == cut)) {
-      throw ResourceError(fmt::format(
-          "the contacts of a piece of {} bodies ({} owned) do not fit in the memory limit of {} and the "
-          "piece cannot be split further; raise --memory-limit",
-          held, owned_at.size(), bytes_text(o.memory_limit)));
+    const std::size_t parts =
+        needed == 0
+            ? 2
+            : std::clamp<std::size_t>(std::size_t(double(needed) / (0.8 * double(o.memory_limit))) + 1, 2,
+                                      std::max<std::size_t>(owned_at.size(), 2));
+    std::vector<double> cuts = quantile_cuts(owned_at, parts);
+    if (cuts.empty()) {
+      const double cut = split_point(owned_at);
+      if (!(cut == cut)) {
+        throw ResourceError(fmt::format(
+            "the contacts of a piece of {} bodies ({} owned) do not fit in the memory limit of {} and the "
+            "piece cannot be split further; raise --memory-limit",
+            held, owned_at.size(), bytes_text(o.memory_limit)));
+      }
+      cuts = {cut};
     }
-    todo.push_back({cut, r.hi});
-    todo.push_back({r.lo, cut});
+    double hi = r.hi;
+    for (auto c = cuts.rbegin(); c != cuts.rend(); ++c) {
+      todo.push_back({*c, hi});
+      hi = *c;
+    }
+    todo.push_back({r.lo, hi});
   };
   {
     std::vector<double> at(bodies.size());

@@ -8,13 +8,15 @@
 // math), and the pieces' sorted runs are merged by (id_a, id_b) (contact_merge.hpp): the result is
 // the one-piece result, row for row.
 //
-// How the pieces are chosen: the whole scene is tried first; a piece that does not fit is split at the
-// median centre of its owned bodies and both halves are tried, depth first. A piece does not fit when
-// the engine throws ResourceError (CUDA: the workspace would pass CONTACTGRID_DEVICE_MEMORY_LIMIT, which
-// the command line's --memory-limit sets, or the device's free memory) or when its contact rows and bodies
-// take more than `memory_limit` bytes (the model both backends share, so that the CPU backend pieces the same
-// scenes). A piece whose owned bodies cannot be split (one body, or all centres equal along the axis) and
-// still does not fit ends the detection with ResourceError (exit code 7) naming the limit.
+// How the pieces are chosen: the whole scene is tried first; a piece that does not fit is split into
+// slabs of equal owned counts along the axis — two halves, or, where the model below counted the
+// bytes the piece needs, as many as those bytes take at 80 % of the limit — and each is tried, depth
+// first, in slab order. A piece does not fit when the engine throws ResourceError (CUDA: the workspace
+// would pass CONTACTGRID_DEVICE_MEMORY_LIMIT, which the command line's --memory-limit sets, or the
+// device's free memory) or when its contact rows and bodies take more than `memory_limit` bytes (the
+// model both backends share, so that the CPU backend pieces the same scenes). A piece whose owned
+// bodies cannot be split (one body, or all centres equal along the axis) and still does not fit ends
+// the detection with ResourceError (exit code 7) naming the limit.
 #include <cstdint>
 #include <functional>
 #include <string>
