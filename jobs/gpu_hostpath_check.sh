@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The host path's checks on the device host (issue #37). Two parts, MODE=laptop | pieces | all (default all):
+# The host path's checks on the device host (issue #37). MODE=laptop | pieces | floor20 | all (default all):
 # laptop: the laptop mode (CPU backend, 2 cores, 2^20 uniform spheres): the CPU = CUDA and CPU =
 #   reference cases of the unit suite, then on two pinned quiet cores (taskset -c 0,1) the host's
 #   streaming bandwidth, the CPU stages (a new engine per call, as contactgrid.detect; and one engine
@@ -10,10 +10,14 @@
 #   the CLI on CUDA in fp32 without a limit and under --memory-limit 4G (best of 2 each): the same
 #   /contacts (contactgrid compare: byte-identical), the limited run in several pieces, and its wall time
 #   within 1.5x of the unlimited one.
-#   BIN=<CUDA build's binaries: contactgrid contactgrid_tests host_stage_bench host_bandwidth> \
-#   OUT=dir [MODE=pieces] jobs/gpu_hostpath_check.sh
+# floor20: contactgrid_cuda_bench 20 24 4 10 auto spheres: host arrays -> host contacts at 2^20 and
+#   2^24 for each transfer path, the upload and download times beside the floor (measure first: what a
+#   call's fixed costs are before they are cut).
+#   BIN=<CUDA build's binaries: contactgrid contactgrid_tests host_stage_bench host_bandwidth
+#        contactgrid_cuda_bench> OUT=dir [MODE=pieces] jobs/gpu_hostpath_check.sh
 # Writes $OUT/hostpath.tgz (every log) and prints the summary; exits non-zero naming the failed checks.
-# Run time on an H100 host: about 2 minutes per part.
+# Run time on an H100 host: about 2 minutes per part (MODE=all: under 4 minutes is not promised; run
+# the parts one per call).
 set -u
 cd "$(dirname "$0")/.."
 [ -f .devrt/env.sh ] && source .devrt/env.sh .devrt >/dev/null 2>&1
@@ -59,6 +63,16 @@ echo "whole_s $whole_s pieces_s $pieces_s ratio $ratio" >"$dir/pieces_summary.tx
 grep -hE '^ +(detect|write|read|total)' "$dir/pieces_whole_2.log" "$dir/pieces_pieces_2.log" | tee -a "$dir/pieces_summary.txt"
 awk -v r="$ratio" 'BEGIN{exit !(r <= 1.5)}' || failed+=(pieces_ratio_above_1.5)
 rm -f "$big" "$dir/whole.h5" "$dir/pieces.h5"
+fi
+
+if [ "$MODE" = floor20 ] || [ "$MODE" = all ]; then
+log "== host path at 2^20 and 2^24 (measure first): host arrays -> host contacts per transfer path, beside the floor"
+if [ -x "$BIN/contactgrid_cuda_bench" ]; then
+  "$BIN/contactgrid_cuda_bench" 20 24 4 10 auto spheres >"$dir/floor20.md" 2>&1 || failed+=(floor20_bench)
+  grep -iE 'floor|^\| 2\^' "$dir/floor20.md" | tail -12
+else
+  echo "no $BIN/contactgrid_cuda_bench: host path rows not measured" | tee "$dir/floor20.md"; failed+=(floor20_no_bench)
+fi
 fi
 
 if [ "$MODE" = laptop ] || [ "$MODE" = all ]; then
