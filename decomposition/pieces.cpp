@@ -202,6 +202,9 @@ Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, 
     try {
       out = engine.detect(v, frame);
     } catch (const ResourceError&) {
+      // The workspace keeps what the failed stages grew (sized for this piece, counted against the
+      // limit): a new engine of the same options starts the next piece from nothing.
+      engine = Engine<Real>(engine.options());
       return false;
     }
     needed = piece_bytes<Real>(out.size(), full, v.size());

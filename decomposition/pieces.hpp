@@ -44,7 +44,9 @@ struct PieceReport {
 
 // The contacts of `bodies` (ids and report mask as BodiesView: a pair is reported iff its anchor is
 // reported; a piece reports the anchors it owns) with the shared `frame`, in pieces that fit
-// o.memory_limit. The engine must not keep contact history (EngineOptions::history: UsageError).
+// o.memory_limit. The engine must not keep contact history (EngineOptions::history: UsageError); after
+// a piece that ran out of memory it is replaced by a new engine of the same options (its workspace
+// released), so it holds no resident bodies or kept candidates afterwards.
 template <class Real>
 Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, const Frame& frame,
                                 const PieceOptions& o, PieceReport* report = nullptr);
