@@ -1,13 +1,23 @@
 #!/usr/bin/env bash
-# The laptop mode's checks on the device host (issues #33/#37: CPU backend, 2 cores, 2^20 uniform
-# spheres): the CPU = CUDA and CPU = reference cases of the unit suite, then on two pinned quiet cores
-# (taskset -c 0,1) the host's streaming bandwidth, the CPU stages (a new engine per call, as
-# contactgrid.detect; and one engine kept), the CLI's stage table, and SciPy's cKDTree.query_pairs +
-# filter on the same scene when the device's Python has scipy and h5py.
-#   BIN=<CUDA build's binaries: contactgrid contactgrid_tests host_stage_bench host_bandwidth> \
-#   OUT=dir jobs/gpu_hostpath_check.sh
+# The host path's checks on the device host (issue #37). MODE=laptop | pieces | floor20 | all (default all):
+# laptop: the laptop mode (CPU backend, 2 cores, 2^20 uniform spheres): the CPU = CUDA and CPU =
+#   reference cases of the unit suite, then on two pinned quiet cores (taskset -c 0,1) the host's
+#   streaming bandwidth, the CPU stages (a new engine per call, as contactgrid.detect; and one engine
+#   kept), the CLI's stage table, and SciPy's cKDTree.query_pairs + filter on the same scene when the
+#   device's Python has scipy and h5py.
+# pieces: contacts in bounded memory (decomposition/pieces.hpp): the Pieces* unit cases on both backends
+#   (the CUDA ones must run), then 2^24 spheres at 6 contacts per body (about 100 M contacts) detected by
+#   the CLI on CUDA in fp32 without a limit and under --memory-limit 4G (best of 2 each): the same
+#   /contacts (contactgrid compare: byte-identical), the limited run in several pieces, and its wall time
+#   within 1.5x of the unlimited one.
+# floor20: contactgrid_cuda_bench 20 24 4 10 auto spheres: host arrays -> host contacts at 2^20 and
+#   2^24 for each transfer path, the upload and download times beside the floor (measure first: what a
+#   call's fixed costs are before they are cut).
+#   BIN=<CUDA build's binaries: contactgrid contactgrid_tests host_stage_bench host_bandwidth
+#        contactgrid_cuda_bench> OUT=dir [MODE=pieces] jobs/gpu_hostpath_check.sh
 # Writes $OUT/hostpath.tgz (every log) and prints the summary; exits non-zero naming the failed checks.
-# Run time on an H100 host: about 2 minutes.
+# Run time on an H100 host: about 2 minutes per part (MODE=all: under 4 minutes is not promised; run
+# the parts one per call).
 set -u
 cd "$(dirname "$0")/.."
 [ -f .devrt/env.sh ] && source .devrt/env.sh .devrt >/dev/null 2>&1
@@ -18,6 +28,54 @@ log() { echo "[$(date -u +%H:%M:%S)] $*"; }
 { date -u; nproc; grep -m1 'model name' /proc/cpuinfo; uptime; nvidia-smi --query-gpu=name --format=csv,noheader; } \
   2>&1 | tee "$dir/device.txt"
 
+MODE=${MODE:-all}
+now() { date +%s.%N; }
+
+if [ "$MODE" = pieces ] || [ "$MODE" = all ]; then
+log "== pieces: unit cases on both backends (CUDA cases must run, not skip)"
+"$BIN/contactgrid_tests" --gtest_filter='Pieces*' >"$dir/pieces_unit.log" 2>&1 || failed+=(pieces_unit)
+grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]' "$dir/pieces_unit.log" | head -20
+grep -q 'OK \] PiecesTest/cuda.SpheresGiveTheOnePieceContacts' "$dir/pieces_unit.log" || failed+=(pieces_unit_cuda_missing)
+big="$dir/s24.h5"
+log "== pieces: 2^24 spheres at 6 contacts per body"
+"$BIN/contactgrid" generate "$big" -n 16777216 --seed 24 --contacts-per-body 6 -q || failed+=(pieces_generate)
+best() { sort -n | head -1; }
+for run in 1 2; do
+  for kind in whole pieces; do
+    extra=""; [ $kind = pieces ] && extra="--memory-limit 4G"
+    t0=$(now)
+    "$BIN/contactgrid" detect "$big" -o "$dir/$kind.h5" --backend cuda --precision fp32 -v $extra \
+      >"$dir/pieces_${kind}_$run.log" 2>&1 || failed+=(pieces_${kind}_run$run)
+    t1=$(now)
+    echo "$t0 $t1" | awk '{printf "%.3f\n", $2 - $1}' >>"$dir/pieces_${kind}_s.txt"
+    [ $run = 2 ] || [ $kind = pieces ] || rm -f "$dir/$kind.h5"
+  done
+done
+grep -h "pieces under --memory-limit" "$dir"/pieces_pieces_*.log | tail -1
+grep -qE "^  ([2-9]|[1-9][0-9]+) pieces under --memory-limit" "$dir/pieces_pieces_2.log" || failed+=(pieces_not_in_pieces)
+"$BIN/contactgrid" compare "$dir/whole.h5" "$dir/pieces.h5" >"$dir/pieces_compare.log" 2>&1 || failed+=(pieces_not_identical)
+cat "$dir/pieces_compare.log"
+if command -v h5dump >/dev/null; then h5dump -H "$dir/whole.h5" | grep -m2 -A1 'DATASPACE' >>"$dir/pieces_compare.log"; fi
+whole_s=$(best <"$dir/pieces_whole_s.txt"); pieces_s=$(best <"$dir/pieces_pieces_s.txt")
+ratio=$(awk -v a="$pieces_s" -v b="$whole_s" 'BEGIN{printf "%.2f", a / b}')
+log "pieces: whole ${whole_s} s, --memory-limit 4G ${pieces_s} s (best of 2, CLI wall time), ratio ${ratio} (target <= 1.5)"
+echo "whole_s $whole_s pieces_s $pieces_s ratio $ratio" >"$dir/pieces_summary.txt"
+grep -hE '^ +(detect|write|read|total)' "$dir/pieces_whole_2.log" "$dir/pieces_pieces_2.log" | tee -a "$dir/pieces_summary.txt"
+awk -v r="$ratio" 'BEGIN{exit !(r <= 1.5)}' || failed+=(pieces_ratio_above_1.5)
+rm -f "$big" "$dir/whole.h5" "$dir/pieces.h5"
+fi
+
+if [ "$MODE" = floor20 ] || [ "$MODE" = all ]; then
+log "== host path at 2^20 and 2^24 (measure first): host arrays -> host contacts per transfer path, beside the floor"
+if [ -x "$BIN/contactgrid_cuda_bench" ]; then
+  "$BIN/contactgrid_cuda_bench" 20 24 4 10 auto spheres >"$dir/floor20.md" 2>&1 || failed+=(floor20_bench)
+  grep -iE 'floor|^\| 2\^' "$dir/floor20.md" | tail -12
+else
+  echo "no $BIN/contactgrid_cuda_bench: host path rows not measured" | tee "$dir/floor20.md"; failed+=(floor20_no_bench)
+fi
+fi
+
+if [ "$MODE" = laptop ] || [ "$MODE" = all ]; then
 log "== unit: CPU = CUDA and the engine's cases (CUDA cases must run, not skip)"
 "$BIN/contactgrid_tests" --gtest_filter='*Cuda*:*cuda*:EngineTest*:HostStages*:ScratchPool*:RadixSort*:BroadPhase*' \
   >"$dir/unit.log" 2>&1 || failed+=(unit)
@@ -67,6 +125,7 @@ else
   echo "no scipy/h5py for $py: SciPy not timed here (jobs/gpu_python_check.sh run times it)" | tee "$dir/scipy.log"
 fi
 rm -f "$scene"
+fi
 tar czf "$OUT/hostpath.tgz" -C "$OUT" hostpath && rm -rf "${dir:?}"
 if [ ${#failed[@]} -gt 0 ]; then
   echo "FAILED: ${failed[*]}"

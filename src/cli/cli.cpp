@@ -69,6 +69,28 @@ CLI::Validator enum_names(const std::map<std::string, E>& names) {
 
 }  // namespace
 
+// A size in bytes: a number with an optional unit K, M, G, T (powers of 1024; "GB", "GiB" too).
+std::uint64_t parse_size(const std::string& text, const char* option) {
+  std::size_t used = 0;
+  double x = 0;
+  try {
+    x = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  std::string unit = text.substr(used);
+  for (char& ch : unit) ch = char(std::toupper(static_cast<unsigned char>(ch)));
+  if (unit.size() > 1 && unit.back() == 'B') unit.pop_back();
+  if (unit.size() > 1 && unit.back() == 'I') unit.pop_back();
+  const std::size_t k = unit.empty() ? std::string::npos : std::string("KMGT").find(unit);
+  const double bytes = x * std::pow(1024.0, unit.empty() ? 0.0 : double(k + 1));
+  if (used == 0 || !(x > 0) || !std::isfinite(x) ||
+      (!unit.empty() && (unit.size() != 1 || k == std::string::npos)) || bytes < 1 || bytes > 9e18)
+    throw UsageError(std::string(option) + ": '" + text +
+                     "' is not a size (e.g. 4G, 512M, 1.5GiB, or bytes)");
+  return std::uint64_t(bytes);
+}
+
 std::optional<double> positive_number(const std::string& word) {
   std::size_t used = 0;
   double x = 0;
@@ -283,6 +305,11 @@ Subcommand add_detect(CLI::App& app) {
                 "the cells' occupancy before the pair stage; exit code 9; 0: no limit)")
       ->check(CLI::NonNegativeNumber)
       ->default_str("0");
+  d->add_option_function<std::string>(
+      "--memory-limit", [&det](const std::string& t) { det.memory_limit = parse_size(t, "--memory-limit"); },
+      "Device memory a rank's detection may use (e.g. 4G, 512M): contacts that do not fit are computed "
+      "in pieces (slabs of the scene) with the same result; a scene that does not fit even in the smallest "
+      "piece is refused (exit code 7). Default: the device's memory, in one piece");
   d->add_option("--threads", det.threads, "CPU backend threads (0: all cores)")
       ->check(CLI::NonNegativeNumber);
   d->add_option("--axis", det.axis, "MPI slab axis: auto (largest extent) | x | y | z")

@@ -94,6 +94,10 @@ struct DistributedOptions {
   // Info lines (rank 0 only): the merge line with the duplicate count. When empty, the line is
   // printed to stderr as a warning only if duplicates were removed.
   std::function<void(const std::string&)> log;
+  // --memory-limit: the bytes a rank's detection may hold (0: no limit, one piece). Above it the rank
+  // detects in slabs that fit (decomposition/pieces.hpp), with the same contacts; on CUDA the engine's
+  // workspace is capped there too (CONTACTGRID_DEVICE_MEMORY_LIMIT, the smaller of the two).
+  std::uint64_t memory_limit = 0;
 };
 
 // Throws UsageError naming the bad option (for library callers; the CLI has typed them already).
@@ -125,7 +129,10 @@ struct DistributedResult {
   Backend backend = Backend::cpu;        // the engine's resolved backend (this rank)
   int threads = 1;                       // host threads of this rank (engine and host loops)
   EngineStats stats;  // entries, pair tests, narrow_fallbacks, narrow_unconverged summed over ranks
-  StepStats steps;    // resident steps (steps == 0: none ran)
+  // --memory-limit (DistributedOptions::memory_limit; 0: none): the most pieces a rank's detection
+  // took, and the most detections (pieces + the tries that did not fit) a rank ran.
+  std::uint64_t memory_limit = 0, pieces = 1, piece_detections = 1;
+  StepStats steps;  // resident steps (steps == 0: none ran)
 };
 
 // Collective over `session`: every rank calls it with the same arguments. The stages read … collect

@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -31,6 +32,7 @@
 #include "io/scene_file.hpp"
 #include "io/temp_output.hpp"
 #include "node_threads.hpp"
+#include "pieces.hpp"
 #include "precision_choice.hpp"
 #include "routing.hpp"
 #include "run/contact_file_shared.hpp"
@@ -60,6 +62,9 @@ void check_options(const DistributedOptions& options) {
   if (options.max_sample < 1) throw UsageError("max_sample: must be >= 1");
   if (options.max_message_bytes < 64) throw UsageError("max_message_bytes: must be >= 64");
   if (options.resident_steps < 0) throw UsageError("--steps: must be >= 0");
+  if (options.memory_limit && options.resident_steps > 0)
+    throw UsageError(
+        "--memory-limit: not with --steps (the resident steps hold every body's contacts at once)");
   if (!std::isfinite(options.step_motion.spin)) throw UsageError("--spin: must be a finite angle (radians)");
   if (!std::isfinite(options.step_motion.drift)) throw UsageError("--drift: must be a finite length");
   if (!options.final_scene.empty() && options.resident_steps == 0)
@@ -297,7 +302,8 @@ void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecompo
 // bodies.hpp). A rank that owns nothing reports nothing.
 template <class Real>
 Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBodies& held,
-                            const SharedFrame& f, bool full, int threads) {
+                            const SharedFrame& f, bool full, int threads, std::uint64_t memory_limit,
+                            const std::function<void(const std::string&)>& log, PieceReport& report) {
   Contacts<Real> local;
   local.full = full;
   agreed_stage(session, "detect", [&] {
@@ -309,7 +315,14 @@ Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBo
     held.ghosts = {};
     held.owned_shapes = {};
     held.ghost_shapes = {};
-    if (held.input.owned > 0) local = engine.detect(held.input.view(), f.frame);
+    if (held.input.owned > 0) {
+      PieceOptions pieces;  // a memory limit: in slabs that fit it (decomposition/pieces.hpp)
+      pieces.memory_limit = memory_limit;
+      pieces.width = f.width;
+      pieces.axis = f.axis;
+      pieces.log = log;
+      local = detect_in_pieces(engine, held.input.view(), f.frame, pieces, &report);
+    }
   });
   return local;
 }
@@ -326,6 +339,14 @@ CollectedContacts<Real> collect_contacts(const Session& session, Contacts<Real>&
                                                  : exchange_contacts(session, std::move(local), bodies, o);
 }
 
+// --memory-limit caps the CUDA engine's workspace as CONTACTGRID_DEVICE_MEMORY_LIMIT does (the
+// backend reads it at each call, kernels/cuda/tuning.hpp): the smaller of the two stays.
+void cap_device_memory(std::uint64_t limit) {
+  const char* set = std::getenv("CONTACTGRID_DEVICE_MEMORY_LIMIT");
+  if (set && *set && std::strtoull(set, nullptr, 10) <= limit) return;
+  setenv("CONTACTGRID_DEVICE_MEMORY_LIMIT", std::to_string(limit).c_str(), 1);
+}
+
 // The engine of the run's mode, built with the rank's threads (after the read: --precision auto
 // chooses the mode from the agreed bounds).
 template <class Real>
@@ -336,6 +357,8 @@ std::optional<Engine<Real>> make_engine(const Session& session, const Distribute
     EngineOptions engine_options = options.engine;
     engine_options.threads = threads;
     engine_options.broad_phase = broad;
+    if (options.memory_limit && engine_options.backend != Backend::cpu)
+      cap_device_memory(options.memory_limit);
     engine.emplace(engine_options);
   });
   return engine;
@@ -345,9 +368,9 @@ std::optional<Engine<Real>> make_engine(const Session& session, const Distribute
 // slabs (owned bodies per rank) and the ghosts held. Collective.
 template <class Real>
 void record_detection(const Session& session, const Engine<Real>& engine, const EngineInput& input,
-                      DistributedResult<Real>& result) {
+                      const PieceReport& pieces, DistributedResult<Real>& result) {
   result.backend = engine.backend();
-  if (input.owned > 0) result.stats = engine.stats();
+  if (input.owned > 0) result.stats = pieces.stats;  // (one piece: the engine's)
   result.stats.entries = session.sum(result.stats.entries);
   result.stats.pair_tests = session.sum(result.stats.pair_tests);
   result.stats.narrow_fallbacks = session.sum(result.stats.narrow_fallbacks);
@@ -596,11 +619,15 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
   stop_point();
   clock.start();
   fault_point("detect", session.rank());
-  Contacts<Real> local =
-      detect_local(session, *engine, held, f, options.engine.fields == Fields::full, threads);
+  PieceReport pieces;
+  Contacts<Real> local = detect_local(session, *engine, held, f, options.engine.fields == Fields::full,
+                                      threads, options.memory_limit, options.log, pieces);
   clock.stop(RunStage::detect);
-  if (held.input.owned > 0) clock.add_engine(engine->times());
-  record_detection(session, *engine, held.input, result);
+  if (held.input.owned > 0) clock.add_engine(pieces.times);  // (in pieces: summed over them)
+  record_detection(session, *engine, held.input, pieces, result);
+  result.memory_limit = options.memory_limit;
+  result.pieces = std::uint64_t(session.max(double(pieces.pieces)));
+  result.piece_detections = std::uint64_t(session.max(double(pieces.attempts)));
   if (options.resident_steps == 0) held.input = {};  // else the steps start from it
 
   stop_point();
@@ -642,6 +669,7 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   o.engine.ellipsoid_max_iterations = cmd.solver_iterations;
   o.engine.skin = cmd.skin;
   o.engine.max_pair_tests = cmd.max_pair_tests;
+  o.memory_limit = cmd.memory_limit;
   // A pair stage far above the usual is said before it runs (any rank) and, on rank 0's terminal,
   // shows its progress in pair tests (run/progress.hpp; both backends report it).
   auto pair_bar = std::make_shared<std::unique_ptr<Progress>>();

@@ -36,6 +36,7 @@ struct DetectCommand {
   double drift = 0;         // StepMotion::drift: world length per step every centre moves
   std::string final_scene;  // --final-scene: the last step's bodies as a scene file
   std::uint64_t max_pair_tests = 0;  // EngineOptions::max_pair_tests (0: no limit)
+  std::uint64_t memory_limit = 0;    // --memory-limit: device bytes per rank, pieces (0: one piece)
   bool quiet = false;
   bool xdmf = false;     // --xdmf: ParaView files beside the output (src/cli, io/xdmf)
   bool verbose = false;  // also the info lines of the run (the merge line with its duplicate count)

@@ -61,6 +61,10 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
     fmt::print(", read {}, slab axis {}, owned bodies per rank {} … {}, ghosts {}, duplicates removed {}",
                r.read == SceneRead::all_rows ? "all rows per rank" : "own rows", "xyz"[r.axis], r.owned_min,
                r.owned_max, r.ghosts, r.duplicates_removed);
+  if (r.memory_limit > 0)
+    fmt::print("\n  {} pieces under --memory-limit {:.4g} MiB ({} detections{})", r.pieces,
+               double(r.memory_limit) / double(1 << 20), r.piece_detections,
+               r.ranks > 1 ? "; the most on a rank" : "");
   if (r.ellipsoids > 0)
     fmt::print("\n  {} ellipsoids, {} narrow fallbacks, {} narrow solves unconverged (summed over ranks)",
                r.ellipsoids, r.stats.narrow_fallbacks, r.stats.narrow_unconverged);

@@ -1,0 +1,200 @@
+// Contacts of any count in bounded memory (decomposition/pieces.hpp): a scene whose contacts exceed
+// the memory limit is detected in slabs, and the result is the one-piece result row for row — spheres
+// and ellipsoids, fp32, fp64 and mixed, on both backends (CUDA cases skip without a GPU), through the
+// library and the command line (--memory-limit). A limit too small for even one body's piece is a
+// refusal: ResourceError, exit code 7, no output file.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <random>
+
+#include "backends.hpp"
+#include "engine.hpp"
+#include "io/contact_file.hpp"
+#include "io/scene_file.hpp"
+#include "pieces.hpp"
+#include "scenes.hpp"
+#include "slab_decomposition.hpp"
+#include "support/contacts_equal.hpp"
+#include "support/run_cli.hpp"
+#include "temp_dir.hpp"
+
+namespace cg::test {
+namespace {
+
+// The one-piece contacts of `v` and those in pieces under a limit of about a quarter of their bytes.
+template <class Real>
+void expect_same_in_pieces(Backend backend, const BodiesView& v, bool mixed, bool full) {
+  EngineOptions o;
+  o.backend = backend;
+  o.fp32_broad_phase = mixed;
+  o.fields = full ? Fields::full : Fields::basic;
+  Engine<Real> engine(o);
+  const Bounds global = compute_bounds(v);
+  const Precision precision = mixed ? Precision::mixed : precision_of<Real>();
+  const Frame frame = make_frame(global, 0, precision, CellChoice::tuned);
+  const Contacts<Real> whole = engine.detect(v, frame);
+  ASSERT_GT(whole.size(), 100u);
+
+  PieceOptions p;
+  p.memory_limit = piece_bytes<Real>(whole.size() / 4, full, v.size() / 2);
+  p.width = frame_ghost_width(global, frame.origin, std::numeric_limits<Real>::epsilon());
+  p.axis = choose_axis(global, -1);
+  PieceReport report;
+  const Contacts<Real> pieces = detect_in_pieces(engine, v, frame, p, &report);
+  EXPECT_GE(report.pieces, 2u);
+  EXPECT_GT(report.attempts, report.pieces);  // the whole scene was tried first
+  EXPECT_EQ(pieces.size(), whole.size());
+  EXPECT_EQ(compare_contacts(pieces, whole), "identical");
+
+  // No limit: one piece, the engine's own detect().
+  PieceReport one;
+  EXPECT_EQ(compare_contacts(detect_in_pieces(engine, v, frame, PieceOptions{}, &one), whole), "identical");
+  EXPECT_EQ(one.pieces, 1u);
+
+  // Too small for a piece of one owned body and its ghosts: refused.
+  p.memory_limit = 64;
+  EXPECT_THROW(detect_in_pieces(engine, v, frame, p), ResourceError);
+}
+
+template <class T>
+class PiecesTest : public ::testing::Test {
+ protected:
+  void SetUp() override { CG_SKIP_WITHOUT_BACKEND(T); }
+};
+TYPED_TEST_SUITE(PiecesTest, BackendTypes, BackendTypeNames);
+
+TYPED_TEST(PiecesTest, SpheresGiveTheOnePieceContacts) {
+  for (std::uint64_t seed : {5u, 6u}) {
+    const Spheres s = random_spheres(6000, 0.5, 1.0, seed);
+    SCOPED_TRACE(s.name);
+    const BodiesView v{s.p, s.r, {}, {}};
+    expect_same_in_pieces<float>(TypeParam::backend, v, false, false);
+    expect_same_in_pieces<double>(TypeParam::backend, v, false, true);
+    expect_same_in_pieces<double>(TypeParam::backend, v, true, false);
+  }
+}
+
+TYPED_TEST(PiecesTest, EllipsoidsGiveTheOnePieceContacts) {
+  const ShapeScene s = make_scene("mixed shapes", 7, 3000, 0.6, 18.0);
+  SCOPED_TRACE(s.name);
+  expect_same_in_pieces<float>(TypeParam::backend, s.view(), false, false);
+  expect_same_in_pieces<double>(TypeParam::backend, s.view(), false, true);
+  expect_same_in_pieces<double>(TypeParam::backend, s.view(), true, false);
+}
+
+// A report mask and ids (a rank's owned bodies and ghosts): a piece reports only the anchors it owns
+// among those the input reports, so the pieces give the rank's contacts.
+TYPED_TEST(PiecesTest, KeepsTheReportMaskAndIds) {
+  const Spheres s = random_spheres(5000, 0.5, 1.0, 9);
+  std::vector<std::int64_t> id(s.r.size());
+  std::vector<std::uint8_t> report(s.r.size());
+  for (std::size_t i = 0; i < id.size(); ++i) {
+    id[i] = 3 * std::int64_t(i) + 1;
+    report[i] = i % 3 == 0 ? 0 : kReportedBit;
+  }
+  const BodiesView v{s.p, s.r, id, report};
+  EngineOptions o;
+  o.backend = TypeParam::backend;
+  Engine<double> engine(o);
+  const Bounds global = compute_bounds(v);
+  const Frame frame = make_frame(global, 0, Precision::fp64, CellChoice::tuned);
+  const Contacts<double> whole = engine.detect(v, frame);
+  PieceOptions p;
+  p.memory_limit = piece_bytes<double>(whole.size() / 3, false, v.size() / 3);
+  p.width = frame_ghost_width(global, frame.origin, std::numeric_limits<double>::epsilon());
+  p.axis = 1;
+  PieceReport report_out;
+  EXPECT_EQ(compare_contacts(detect_in_pieces(engine, v, frame, p, &report_out), whole), "identical");
+  EXPECT_GE(report_out.pieces, 2u);
+}
+
+// CUDA: a piece that runs out of device memory in the middle (the workspace capped by
+// CONTACTGRID_DEVICE_MEMORY_LIMIT at about half of what the whole scene takes) is split and detected
+// again; the result is the one-piece result. The model limit is out of the way (1 TiB).
+TEST(PiecesCuda, DeviceOutOfMemoryInTheMiddleSplitsThePiece) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  const Spheres s = random_spheres(400000, 0.5, 1.0, 13);
+  const BodiesView v{s.p, s.r, {}, {}};
+  const Bounds global = compute_bounds(v);
+  const Frame frame = make_frame(global, 0, Precision::fp32, CellChoice::tuned);
+  EngineOptions o;
+  o.backend = Backend::cuda;
+  Engine<float> unlimited(o);
+  const Contacts<float> whole = unlimited.detect(v, frame);
+  const std::uint64_t peak = unlimited.stats().peak_device_bytes;
+  ASSERT_GT(peak, 0u);
+  const std::string cap = std::to_string((std::uint64_t(64) << 20) + peak / 2);
+  ::setenv("CONTACTGRID_DEVICE_MEMORY_LIMIT", cap.c_str(), 1);
+  Engine<float> capped(o);
+  EXPECT_THROW(capped.detect(v, frame), ResourceError) << "the cap does not make the whole scene fail";
+  PieceOptions p;
+  p.memory_limit = std::uint64_t(1) << 40;
+  p.width = frame_ghost_width(global, frame.origin, std::numeric_limits<float>::epsilon());
+  p.axis = choose_axis(global, -1);
+  PieceReport report;
+  Contacts<float> pieces;
+  try {
+    pieces = detect_in_pieces(capped, v, frame, p, &report);
+  } catch (...) {
+    ::unsetenv("CONTACTGRID_DEVICE_MEMORY_LIMIT");
+    throw;
+  }
+  ::unsetenv("CONTACTGRID_DEVICE_MEMORY_LIMIT");
+  EXPECT_GE(report.pieces, 2u);
+  EXPECT_EQ(compare_contacts(pieces, whole), "identical");
+}
+
+class PiecesCli : public TempDirTest {};
+
+Scene granular_scene(std::size_t n, std::uint64_t seed, bool ellipsoids) {
+  const Spheres s = random_spheres(n, 0.5, 1.0, seed);
+  Scene scene;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (ellipsoids && i % 2 == 1) {
+      scene.ellipsoid_position.push_back(s.p[i]);
+      scene.ellipsoid_semi_axes.push_back({s.r[i], 0.7 * s.r[i], 0.5 * s.r[i]});
+      scene.ellipsoid_orientation.push_back({std::sqrt(0.5), std::sqrt(0.5), 0, 0});
+    } else {
+      scene.sphere_position.push_back(s.p[i]);
+      scene.sphere_radius.push_back(s.r[i]);
+    }
+  }
+  return scene;
+}
+
+// The command line: --memory-limit below the contacts' bytes gives the same /contacts as no limit
+// (spheres and ellipsoids, each precision); a limit too small for any piece exits 7 with one message
+// and leaves no file.
+TEST_F(PiecesCli, MemoryLimitGivesTheSameContactsFile) {
+  for (bool ellipsoids : {false, true}) {
+    write_scene(path("scene.h5"), granular_scene(8000, 21, ellipsoids));
+    for (const char* precision : {"fp32", "fp64", "mixed"}) {
+      SCOPED_TRACE(std::string(precision) + (ellipsoids ? " ellipsoids" : " spheres"));
+      const std::string common =
+          "detect " + path("scene.h5") + " --backend cpu --threads 2 --precision " + precision;
+      const CliResult a = run_cli(common + " -o " + path("whole.h5"));
+      ASSERT_EQ(a.code, 0) << a.output;
+      const CliResult b = run_cli(common + " -o " + path("pieces.h5") + " --memory-limit 256K");
+      ASSERT_EQ(b.code, 0) << b.output;
+      EXPECT_NE(b.output.find(" pieces under --memory-limit 0.25 MiB"), std::string::npos) << b.output;
+      EXPECT_EQ(b.output.find("  1 pieces under"), std::string::npos) << b.output;
+      const ContactFile whole = read_contacts(path("whole.h5")), pieces = read_contacts(path("pieces.h5"));
+      ASSERT_GT(whole.contacts.size(), 500u);
+      EXPECT_EQ(whole.precision, pieces.precision);
+      EXPECT_EQ(compare_contacts(pieces.contacts, whole.contacts), "identical");
+    }
+  }
+  const CliResult r = run_cli("detect " + path("scene.h5") + " --backend cpu -o " + path("refused.h5") +
+                              " --memory-limit 1K");
+  EXPECT_EQ(r.code, 7) << r.output;
+  EXPECT_NE(r.output.find("do not fit in the memory limit of"), std::string::npos) << r.output;
+  EXPECT_FALSE(std::filesystem::exists(path("refused.h5")));
+  const CliResult bad = run_cli("detect " + path("scene.h5") + " -o " + path("x.h5") + " --memory-limit 4Q");
+  EXPECT_NE(bad.code, 0);
+  EXPECT_NE(bad.output.find("--memory-limit: '4Q' is not a size"), std::string::npos) << bad.output;
+}
+
+}  // namespace
+}  // namespace cg::test
