@@ -11,7 +11,8 @@
 #             steps/s from log.csv (issue: 1 500 steps/s at 2^20, 2·10^9 sphere-steps/s at 2^24, 3·10^8
 #             ellipsoid-steps/s at 2^22); then short runs with --stage-times: where a step's time goes
 #             (per stage, and the engine's stages within detect), at 2^24 also with the body stage's
-#             index by the radix sort (CONTACTGRID_DEM_SUMS=sort) against the default (counts)
+#             index by the radix sort (CONTACTGRID_DEM_SUMS=sort) and the history searched by Thrust
+#             (CONTACTGRID_CUDA_HISTORY=thrust) against the defaults (counts; the search from the row)
 #   mpi2      (a host with 2 GPUs, its own call) simulate under mpirun -np 2 --backend cuda writes the
 #             frames, contacts and energies of -np 1 and of the CPU backend, bit for bit
 #   two       (a host with 2 GPUs, its own call) steps/s of mpirun -np 1 and -np 2 --backend cuda on a
@@ -94,18 +95,19 @@ part_perf() {
   : >"$OUT/stages.txt"
   if scene spheres_2e20 pour $((1 << 20)); then
     bench spheres_2e20 $((1 << 20)) 300
-    stages spheres_2e20 120 counts
+    stages spheres_2e20 120 default
     rm -f "$W/spheres_2e20.h5"
   fi
   if scene ellipsoids_2e22 pour-ellipsoids $((1 << 22)) --max-aspect 4; then
     bench ellipsoids_2e22 $((1 << 22)) 60
-    stages ellipsoids_2e22 30 counts
+    stages ellipsoids_2e22 30 default
     rm -f "$W/ellipsoids_2e22.h5"
   fi
   if scene spheres_2e24 pour $((1 << 24)); then
     bench spheres_2e24 $((1 << 24)) 60
-    stages spheres_2e24 30 counts
-    stages spheres_2e24 30 sort CONTACTGRID_DEM_SUMS=sort
+    stages spheres_2e24 30 default
+    stages spheres_2e24 30 sums-sort CONTACTGRID_DEM_SUMS=sort
+    stages spheres_2e24 30 history-thrust CONTACTGRID_CUDA_HISTORY=thrust
     rm -f "$W/spheres_2e24.h5"
   fi
   cat "$OUT/table.md" "$OUT/stages.txt" | tee -a "$OUT/summary.txt"
