@@ -7,12 +7,20 @@
 #             exponent fitted; 2.5 ± 0.2), CUDA
 #   perf      whole steps (detection with history + forces + integration, no output) on a pour at a
 #             settled pack's contact count (generate --kind pour --pour-spacing 1.97: six neighbours
-#             each), fp32, CUDA: 2^20 and 2^24 spheres; steps/s from log.csv (issue: 1 500 steps/s at
-#             2^20, 2·10^9 sphere-steps/s at 2^24)
+#             each), fp32, CUDA: 2^20 and 2^24 spheres, 2^22 ellipsoids (pour-ellipsoids, aspect <= 1:4);
+#             steps/s from log.csv (issue: 1 500 steps/s at 2^20, 2·10^9 sphere-steps/s at 2^24, 3·10^8
+#             ellipsoid-steps/s at 2^22); then short runs with --stage-times: where a step's time goes
+#             (per stage, and the engine's stages within detect), at 2^24 also with the body stage's
+#             index by the radix sort (CONTACTGRID_DEM_SUMS=sort) and the history searched by Thrust
+#             (CONTACTGRID_CUDA_HISTORY=thrust) against the defaults (counts; the search from the row)
 #   mpi2      (a host with 2 GPUs, its own call) simulate under mpirun -np 2 --backend cuda writes the
 #             frames, contacts and energies of -np 1 and of the CPU backend, bit for bit
-# Default: unit beverloo perf. Writes $OUT/simulate_<part>.tar.gz (each part's logs), $OUT/table.md
-# and $OUT/summary.txt; exits non-zero naming every failed check.
+#   two       (a host with 2 GPUs, its own call) steps/s of mpirun -np 1 and -np 2 --backend cuda on a
+#             pour of N2 spheres (default 2^22: forces still on the host under mpirun; issue: np 2 >=
+#             1.8x np 1 at 2^25, N2=33554432)
+# Default: unit beverloo perf (on a host of 2 GPUs: mpi2 two). Writes $OUT/simulate_<part>.tar.gz
+# (each part's logs), $OUT/table.md, $OUT/stages.txt and $OUT/summary.txt; exits non-zero naming every
+# failed check.
 #   BIN=dir-with-the-CUDA-build's-binaries OUT=results-dir jobs/gpu_simulate_check.sh [PART ...]
 # (BIN holds contactgrid and contactgrid_tests; run from the repository root; .devrt/env.sh, when
 # present, supplies the runtime libraries.)
@@ -48,10 +56,13 @@ part_beverloo() {
 
 part_perf() {
   local d=$1
+  scene() {  # name kind count [extra generate options]
+    local name=$1 kind=$2 n=$3; shift 3
+    "$CG" generate "$W/$name.h5" --kind "$kind" -n "$n" --rlow 0.00495 --rhigh 0.005 --pour-spacing 1.97 --seed 5 -q "$@" ||
+      { failed+=("perf: generate $name"); return 1; }
+  }
   bench() {  # name count steps
     local name=$1 n=$2 steps=$3
-    "$CG" generate "$W/$name.h5" --kind pour -n "$n" --rlow 0.00495 --rhigh 0.005 --pour-spacing 1.97 --seed 5 -q ||
-      { failed+=("perf: generate $name"); return; }
     rm -rf "$W/$name.run"
     if ! "$CG" simulate "$W/$name.h5" -o "$W/$name.run" --steps "$steps" --output-every "$steps" \
         --log-every $((steps / 6)) --backend cuda --precision fp32 --no-plot >"$d/$name.log" 2>&1; then
@@ -65,13 +76,67 @@ part_perf() {
     cpb=$(grep -oE '[0-9.]+ contacts/body' "$d/$name.log" | head -1 | cut -d' ' -f1)
     printf '| %-14s | %9s | %6s | %8s | %10.3g | %9s |\n' "$name" "$n" "$steps" "$sps" \
       "$(awk -v s="$sps" -v n="$n" 'BEGIN { print s * n }')" "$cpb" >>"$OUT/table.md"
-    rm -f "$W/$name.h5"; rm -rf "$W/$name.run"
+    rm -rf "$W/$name.run"
   }
-  printf '| %-14s | %9s | %6s | %8s | %10s | %9s |\n' run bodies steps steps/s sphere-st/s contacts/b >"$OUT/table.md"
+  stages() {  # name steps label [environment]
+    local name=$1 steps=$2 label=$3; shift 3
+    rm -rf "$W/$name.st.run"
+    if ! env "$@" "$CG" simulate "$W/$name.h5" -o "$W/$name.st.run" --steps "$steps" --output-every "$steps" \
+        --backend cuda --precision fp32 --no-plot --stage-times >"$d/$name.$label.stages.log" 2>&1; then
+      failed+=("perf: simulate $name --stage-times ($label)"); tail -3 "$d/$name.$label.stages.log"; return
+    fi
+    grep -q 'stage times' "$d/$name.$label.stages.log" || failed+=("perf: $name printed no stage times")
+    { echo "$name ($label):"; grep -E 'steps/s|stage times|within detect|energies:' "$d/$name.$label.stages.log"; } \
+      >>"$OUT/stages.txt"
+    rm -rf "$W/$name.st.run"
+  }
+  printf '| %-14s | %9s | %6s | %8s | %10s | %9s |\n' run bodies steps steps/s body-st/s contacts/b >"$OUT/table.md"
   echo '|---|---|---|---|---|---|' >>"$OUT/table.md"
-  bench spheres_2e20 $((1 << 20)) 300
-  bench spheres_2e24 $((1 << 24)) 60
-  cat "$OUT/table.md" | tee -a "$OUT/summary.txt"
+  : >"$OUT/stages.txt"
+  if scene spheres_2e20 pour $((1 << 20)); then
+    bench spheres_2e20 $((1 << 20)) 300
+    stages spheres_2e20 120 default
+    rm -f "$W/spheres_2e20.h5"
+  fi
+  if scene ellipsoids_2e22 pour-ellipsoids $((1 << 22)) --max-aspect 4; then
+    bench ellipsoids_2e22 $((1 << 22)) 60
+    stages ellipsoids_2e22 30 default
+    rm -f "$W/ellipsoids_2e22.h5"
+  fi
+  if scene spheres_2e24 pour $((1 << 24)); then
+    bench spheres_2e24 $((1 << 24)) 60
+    stages spheres_2e24 30 default
+    stages spheres_2e24 30 sums-sort CONTACTGRID_DEM_SUMS=sort
+    stages spheres_2e24 30 history-thrust CONTACTGRID_CUDA_HISTORY=thrust
+    rm -f "$W/spheres_2e24.h5"
+  fi
+  cat "$OUT/table.md" "$OUT/stages.txt" | tee -a "$OUT/summary.txt"
+}
+
+part_two() {
+  local d=$1 n=${N2:-$((1 << 22))} steps=${STEPS2:-30}
+  export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+  local gpus; gpus=$(nvidia-smi -L 2>/dev/null | wc -l)
+  [ "$gpus" -ge 2 ] || { failed+=("two: needs 2 GPUs, $gpus seen"); return; }
+  "$CG" generate "$W/t.h5" --kind pour -n "$n" --rlow 0.00495 --rhigh 0.005 --pour-spacing 1.97 --seed 5 -q ||
+    { failed+=("two: generate"); return; }
+  local np sps=()
+  for np in 1 2; do
+    rm -rf "$W/t.np$np.run"
+    if ! mpirun --bind-to none -np $np "$CG" simulate "$W/t.h5" -o "$W/t.np$np.run" --steps "$steps" \
+        --output-every "$steps" --log-every $((steps / 3)) --backend cuda --precision fp32 --no-plot \
+        >"$d/np$np.log" 2>&1; then
+      failed+=("two: np $np run"); tail -3 "$d/np$np.log"; continue
+    fi
+    cp "$W/t.np$np.run/log.csv" "$d/np$np.log.csv"
+    sps+=("$(awk -F, 'NR > 1 && $1 !~ /^#/ && $7 > 0 { n++; if (n > 1) { s += $7; k++ } } END { if (k) printf "%.2f", k / s }' "$W/t.np$np.run/log.csv")")
+    rm -rf "$W/t.np$np.run"
+  done
+  rm -f "$W/t.h5"
+  if [ ${#sps[@]} -eq 2 ]; then
+    log "two: $n spheres, $steps steps: np 1 ${sps[0]} steps/s, np 2 ${sps[1]} steps/s, np 2 / np 1 = $(awk -v a="${sps[0]}" -v b="${sps[1]}" 'BEGIN { if (a > 0) printf "%.2f", b / a }') (issue: >= 1.8)"
+  fi
+  grep -h 'steps/s' "$d"/np*.log | tee -a "$OUT/summary.txt"
 }
 
 part_mpi2() {
@@ -114,7 +179,7 @@ for part in "${parts[@]}"; do
   d="$W/logs_$part"; rm -rf "$d"; mkdir -p "$d"
   log "part $part"
   case $part in
-    unit | beverloo | perf | mpi2) "part_$part" "$d" ;;
+    unit | beverloo | perf | mpi2 | two) "part_$part" "$d" ;;
     *) failed+=("unknown part $part") ;;
   esac
   tar -czf "$OUT/simulate_$part.tar.gz" -C "$W" "logs_$part"

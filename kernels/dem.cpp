@@ -16,6 +16,7 @@
 #include "core/dem_step.hpp"
 #include "dem_backend.hpp"
 #include "host/dem_stages.hpp"
+#include "timing.hpp"
 
 namespace cg {
 
@@ -39,6 +40,10 @@ template void cuda_dem_forces(CudaDem&, const DeviceContactsView<double>&, const
 DemEnergies cuda_dem_energies(CudaDem&, std::size_t, Vec3<double>) {
   throw CudaError("this contactgrid was built without CUDA");
 }
+void cuda_dem_time_enable(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
+void cuda_dem_time_start(CudaDem&) {}
+void cuda_dem_time_mark(CudaDem&, DemStage) {}
+void cuda_dem_time_collect(CudaDem&, double*) {}
 void cuda_dem_download(CudaDem&, DemBodies&) { throw CudaError("this contactgrid was built without CUDA"); }
 }  // namespace detail
 #endif
@@ -215,6 +220,11 @@ struct Simulation<Real>::Impl {
   Contacts<Real> contacts;  // CPU: the last step's; CUDA: downloaded on request
   bool contacts_downloaded = false;
   DeviceContactsView<Real> device_contacts{};
+  // DemOptions::stage_times: on during step(); the sums (DemStageTimes)
+  bool timing = false;
+  double stage_seconds[detail::kDemStages] = {};
+  WallClock::time_point last_mark{};
+  DemStageTimes times;
 
   static EngineOptions engine_options(EngineOptions e) {
     e.history = true;
@@ -233,36 +243,74 @@ struct Simulation<Real>::Impl {
     return v;
   }
 
+  // The end of a stage of a timed step (CUDA: an event; CPU: the wall clock).
+  void mark(detail::DemStage s) {
+    if (!timing) return;
+    if (resolved == Backend::cuda) {
+      detail::cuda_dem_time_mark(*cuda, s);
+      return;
+    }
+    const WallClock::time_point now = WallClock::now();
+    stage_seconds[static_cast<int>(s)] += std::chrono::duration<double>(now - last_mark).count();
+    last_mark = now;
+  }
+  void detected() {
+    mark(detail::DemStage::detect);
+    if (!timing) return;
+    for (const StageTime& t : engine.times()) {
+      auto at = std::find_if(times.detection.begin(), times.detection.end(),
+                             [&](const StageTime& x) { return x.name == t.name; });
+      if (at == times.detection.end())
+        times.detection.push_back(t);
+      else
+        at->seconds += t.seconds;
+    }
+  }
+
   // The contacts at the current positions and the forces from them (no integration).
   void forces() {
     if (resolved == Backend::cuda) {
       device_contacts = engine.detect_device_resident(detail::cuda_dem_bodies(*cuda));
+      detected();
       contact_count = device_contacts.count;
       contacts_downloaded = false;
-      detail::cuda_dem_forces(*cuda, device_contacts, constants);
+      detail::cuda_dem_forces(*cuda, device_contacts, constants);  // marks its stages
       return;
     }
     contacts = engine.detect(host_view());
+    detected();
     contact_count = contacts.size();
     const dem::ContactRows<Real> rows{contacts.id_a.data(),          contacts.id_b.data(),
                                       contacts.position_on_a.data(), contacts.position_on_b.data(),
                                       contacts.normal_on_b.data(),   contacts.distance.data(),
                                       contacts.previous_row.data(),  contacts.size()};
     detail::host::dem_contact_forces(host, rows, constants, threads);
+    mark(detail::DemStage::contact_terms);
     detail::host::dem_body_forces(host, rows, constants, threads);
+    mark(detail::DemStage::body_terms);
   }
 
   void step() {
     const double dt = options.dt;
+    timing = options.stage_times;
     if (resolved == Backend::cuda) {
+      if (timing) detail::cuda_dem_time_start(*cuda);
       detail::cuda_dem_kick_drift(*cuda, dt);
+      mark(detail::DemStage::kick_drift);
       forces();
       detail::cuda_dem_kick(*cuda, dt);
+      mark(detail::DemStage::kick);
+      if (timing) detail::cuda_dem_time_collect(*cuda, stage_seconds);
     } else {
+      last_mark = WallClock::now();
       detail::host::dem_kick_drift(host, dt, threads);
+      mark(detail::DemStage::kick_drift);
       forces();
       detail::host::dem_kick(host, dt, threads);
+      mark(detail::DemStage::kick);
     }
+    if (timing) ++times.steps;
+    timing = false;
     ++steps;
   }
 };
@@ -295,6 +343,7 @@ Simulation<Real>::Simulation(const DemBodies& bodies, const DemOptions& options)
   const std::vector<dem::BodyProps> props = props_of(st, options.material.density);
   if (s.resolved == Backend::cuda) {
     s.cuda = detail::make_cuda_dem(options.engine.device, st, props, options.walls);
+    if (options.stage_times) detail::cuda_dem_time_enable(*s.cuda);
   } else {
     detail::host::HostDem& h = s.host;
     h.position = st.position;
@@ -360,6 +409,15 @@ const StageTimes& Simulation<Real>::engine_times() const {
   return m_impl->engine.times();
 }
 template <class Real>
+DemStageTimes Simulation<Real>::stage_times() const {
+  const Impl& s = *m_impl;
+  DemStageTimes t = s.times;
+  if (t.steps == 0) return t;
+  for (int i = 0; i < detail::kDemStages; ++i)
+    t.step.push_back({detail::dem_stage_name(i), s.stage_seconds[i]});
+  return t;
+}
+template <class Real>
 Backend Simulation<Real>::backend() const {
   return m_impl->resolved;
 }
@@ -396,9 +454,16 @@ const Contacts<Real>& Simulation<Real>::contacts() {
 template <class Real>
 DemEnergies Simulation<Real>::energies() {
   Impl& s = *m_impl;
-  if (s.resolved == Backend::cuda)
-    return detail::cuda_dem_energies(*s.cuda, s.contact_count, s.options.gravity);
-  return detail::host::dem_energies(s.host, s.contact_count, s.options.gravity, s.threads);
+  const WallClock::time_point t0 = WallClock::now();
+  const DemEnergies e =
+      s.resolved == Backend::cuda
+          ? detail::cuda_dem_energies(*s.cuda, s.contact_count, s.options.gravity)
+          : detail::host::dem_energies(s.host, s.contact_count, s.options.gravity, s.threads);
+  if (s.options.stage_times) {
+    s.times.energy_seconds += seconds_since(t0);
+    ++s.times.energy_calls;
+  }
+  return e;
 }
 
 template class Simulation<float>;

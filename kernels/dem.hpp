@@ -43,6 +43,20 @@ struct DemOptions {
   double dt = 0;             // > 0 (time_step_limits says what is stable)
   bool synchronized = true;  // false: plain velocity Verlet (for comparison)
   EngineOptions engine;      // backend, skin, threads, device (history is set on)
+  // Time each stage of every step (Simulation::stage_times). CUDA: events on the device's timeline,
+  // and the host waits for each step's last one (one synchronisation a step more).
+  bool stage_times = false;
+};
+
+// Where the steps' time went (DemOptions::stage_times), summed over `steps` steps: `step` the
+// stages of a step in order (kick_drift, detect, contact_terms, body_index, body_terms, kick; the CPU
+// backend times body_index within body_terms), `detection` the engine's own stages of each detect
+// (EngineStats' names), `energy_seconds` the energies() calls (log rows; not in the steps).
+struct DemStageTimes {
+  std::uint64_t steps = 0;
+  StageTimes step, detection;
+  double energy_seconds = 0;
+  std::uint64_t energy_calls = 0;
 };
 
 // The time scales of a scene (dt auto and the warning for a given dt): Rayleigh's wave time of the
@@ -90,6 +104,7 @@ class Simulation {
   DemEnergies energies();             // of the current state (after the last step's forces)
   const EngineStats& engine_stats() const;
   const StageTimes& engine_times() const;
+  DemStageTimes stage_times() const;  // DemOptions::stage_times; empty without it
   Backend backend() const;
   double alpha() const;  // the damping of the restitution
 

@@ -10,6 +10,21 @@
 
 namespace cg::detail {
 
+// The stages of a step in order, as DemOptions::stage_times reports them (dem.hpp: DemStageTimes).
+//   kick_drift     the first half kick and the drift of every body
+//   detect         the engine's detection with history (its own stages: DemStageTimes::detection)
+//   contact_terms  each contact's force, torques and spring
+//   body_index     where each body's rows lie as A and as B (the order of its sums)
+//   body_terms     each body's sums in that order, walls, gravity
+//   kick           the second half kick
+enum class DemStage : int { kick_drift, detect, contact_terms, body_index, body_terms, kick };
+constexpr int kDemStages = 6;
+inline const char* dem_stage_name(int s) {
+  constexpr const char* names[kDemStages] = {"kick_drift", "detect",     "contact_terms",
+                                             "body_index", "body_terms", "kick"};
+  return names[s];
+}
+
 class CudaDem;
 // The bodies and their properties uploaded to `device` (-1: current): CudaError without CUDA.
 std::unique_ptr<CudaDem> make_cuda_dem(int device, const DemBodies& bodies,
@@ -25,6 +40,12 @@ void cuda_dem_kick(CudaDem& dem, double dt);
 template <class Real>
 void cuda_dem_forces(CudaDem& dem, const DeviceContactsView<Real>& contacts, const dem::StepConstants& c);
 DemEnergies cuda_dem_energies(CudaDem& dem, std::size_t contacts, Vec3<double> gravity);
+// The step's stage events (DemStage): on from now, the step's start, a stage's end, and the seconds
+// of the last step's marked stages added to seconds[kDemStages] (waits for its last event).
+void cuda_dem_time_enable(CudaDem& dem);
+void cuda_dem_time_start(CudaDem& dem);
+void cuda_dem_time_mark(CudaDem& dem, DemStage stage);
+void cuda_dem_time_collect(CudaDem& dem, double* seconds);
 // The current state into `out` (positions, velocities, spins, orientations; the rest kept).
 void cuda_dem_download(CudaDem& dem, DemBodies& out);
 

@@ -33,17 +33,27 @@ struct BodyArrays {
   std::size_t count;
 
   CG_HD bool ellipsoid(std::size_t i) const { return shape && shape[i] == Shape::ellipsoid; }
+  // Body i's state. A sphere's angular momentum and orientation are never read nor changed (its
+  // spin is ω; it has no orientation): a sphere's state holds zero and the identity there, and its
+  // rows of those arrays are not loaded (the bytes a contact and a step read).
   CG_HD BodyState state(std::size_t i) const {
-    return {position[i], velocity[i], omega[i], momentum[i], orientation[i], force[i], torque[i]};
+    BodyState s{position[i], velocity[i], omega[i], {0, 0, 0}, {1, 0, 0, 0}, force[i], torque[i]};
+    if (ellipsoid(i)) {
+      s.momentum = momentum[i];
+      s.orientation = orientation[i];
+    }
+    return s;
   }
+  // What the integration changes: position, velocity and spin (ellipsoids: angular momentum and
+  // orientation too). Force and torque are the body stage's (body_terms), never stored here.
   CG_HD void store(std::size_t i, const BodyState& b) const {
     position[i] = b.position;
     velocity[i] = b.velocity;
     omega[i] = b.omega;
-    momentum[i] = b.momentum;
-    orientation[i] = b.orientation;
-    force[i] = b.force;
-    torque[i] = b.torque;
+    if (ellipsoid(i)) {
+      momentum[i] = b.momentum;
+      orientation[i] = b.orientation;
+    }
   }
 };
 

@@ -7,7 +7,8 @@
 // rank found the pair or on the bodies' local rows. Both steps' rows are sorted by key (the engine's
 // (id_a, id_b) order, mapped monotonically to global ids), so the row of a pair in the previous step
 // is a binary search of its key in the previous keys: lower_bound_key here (host, the device's own
-// kernel) or Thrust's vectorised lower_bound (cuda/history.cuh) — the same position either way, then
+// kernel), lower_bound_key_near (the device's default: from the row's own place) or Thrust's
+// vectorised lower_bound (cuda/history.cuh) — the same position every way, then
 // history_of turns that position into the two fields. Integers only: the backends agree exactly.
 #include <cstddef>
 #include <cstdint>
@@ -32,6 +33,41 @@ CG_HD PairKey pair_key(std::int64_t a, std::int64_t b, const std::int64_t* globa
 // The first position p in the sorted keys[0, m) with !(keys[p] < key) (m when none).
 CG_HD std::size_t lower_bound_key(const PairKey* keys, std::size_t m, const PairKey& key) {
   std::size_t lo = 0, hi = m;
+  while (lo < hi) {
+    const std::size_t mid = lo + (hi - lo) / 2;
+    if (keys[mid] < key)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
+// The same position as lower_bound_key, searched from a guess: steps doubling away from `guess` until
+// they bracket the position, then a binary search between them. A contact's row moves little from one
+// step to the next, so guessed from the row's own index its previous position is a few reads away,
+// next to the neighbouring rows' (coalesced on the device), where a search from the middle of all the
+// keys reads about log2(m) places far apart.
+CG_HD std::size_t lower_bound_key_near(const PairKey* keys, std::size_t m, const PairKey& key,
+                                       std::size_t guess) {
+  if (m == 0) return 0;
+  if (guess >= m) guess = m - 1;
+  std::size_t lo = 0, hi = m, step = 1;  // the position lies in [lo, hi]
+  if (keys[guess] < key) {               // after guess: keys[lo - 1] < key
+    lo = guess + 1;
+    while (lo + step - 1 < m && keys[lo + step - 1] < key) {
+      lo += step;
+      step *= 2;
+    }
+    hi = lo + step - 1 < m ? lo + step - 1 : m;
+  } else {  // at or before guess: !(keys[hi] < key)
+    hi = guess;
+    while (hi >= step && !(keys[hi - step] < key)) {
+      hi -= step;
+      step *= 2;
+    }
+    lo = hi >= step ? hi - step + 1 : 0;
+  }
   while (lo < hi) {
     const std::size_t mid = lo + (hi - lo) / 2;
     if (keys[mid] < key)

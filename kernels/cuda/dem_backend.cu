@@ -10,6 +10,7 @@
 #include "cuda/dem_integrate.cuh"
 #include "cuda/dem_state.cuh"
 #include "cuda/dem_sums.cuh"
+#include "cuda/tuning.hpp"
 #include "dem_backend.hpp"
 
 namespace cg::detail {
@@ -35,6 +36,7 @@ std::unique_ptr<CudaDem> make_cuda_dem(int device, const DemBodies& b,
   if (device < 0) CG_CUDA_CHECK(cudaGetDevice(&device));
   d->device = device;
   CG_CUDA_CHECK(cudaSetDevice(device));
+  d->sums_by_sort = read_tuning().dem_sums_sort;
   const std::size_t n = b.size();
   d->count = n;
   d->shapes = !b.shape.empty();
@@ -108,7 +110,8 @@ void cuda_dem_forces(CudaDem& d, const DeviceContactsView<Real>& contacts, const
   CG_CUDA_CHECK(cudaSetDevice(d.device));
   const dem::ContactRows<Real> rows = contact_rows(contacts);
   dem_contact_stage(d, rows, c);
-  dem_body_stage(d, rows, c);
+  d.events.mark(DemStage::contact_terms);
+  dem_body_stage(d, rows, c);  // marks body_index and body_terms
 }
 template void cuda_dem_forces(CudaDem&, const DeviceContactsView<float>&, const dem::StepConstants&);
 template void cuda_dem_forces(CudaDem&, const DeviceContactsView<double>&, const dem::StepConstants&);
@@ -117,6 +120,14 @@ DemEnergies cuda_dem_energies(CudaDem& d, std::size_t contacts, Vec3<double> gra
   CG_CUDA_CHECK(cudaSetDevice(d.device));
   return dem_energy_stage(d, contacts, gravity);
 }
+
+void cuda_dem_time_enable(CudaDem& d) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  d.events.enable();
+}
+void cuda_dem_time_start(CudaDem& d) { d.events.start(); }
+void cuda_dem_time_mark(CudaDem& d, DemStage stage) { d.events.mark(stage); }
+void cuda_dem_time_collect(CudaDem& d, double* seconds) { d.events.collect(seconds); }
 
 void cuda_dem_download(CudaDem& d, DemBodies& out) {
   CG_CUDA_CHECK(cudaSetDevice(d.device));

@@ -4,17 +4,73 @@
 // Every kernel runs on the legacy default stream: the engine's own (blocking) stream is ordered
 // after it, and the engine returns with its contacts complete, so the stages and the engine's
 // detection follow each other with no extra synchronisation.
+#include <algorithm>
 #include <cstdint>
+#include <iterator>
 
 #include "core/dem_step.hpp"
 #include "cuda/device_buffer.cuh"
 #include "cuda/thrust_alloc.cuh"
 #include "dem.hpp"
+#include "dem_backend.hpp"
 
 namespace cg::detail {
 
 template <class T>
 using DemBuffer = cuda::DeviceBuffer<T>;
+
+// The step's stage timer (DemOptions::stage_times): an event on the legacy stream at the step's start
+// and at the end of each DemStage; a stage's time is the span from the previous event to its own (on
+// the device's timeline, so the host's gaps between launches count where they fall).
+class DemStageEvents {
+ public:
+  DemStageEvents() = default;
+  DemStageEvents(const DemStageEvents&) = delete;
+  DemStageEvents& operator=(const DemStageEvents&) = delete;
+  ~DemStageEvents() {
+    for (cudaEvent_t& e : m_events)
+      if (e) cudaEventDestroy(e);
+  }
+  bool on() const { return m_on; }
+  void enable() {
+    for (cudaEvent_t& e : m_events)
+      if (!e) CG_CUDA_CHECK(cudaEventCreate(&e));
+    m_on = true;
+  }
+  void start() {
+    if (!m_on) return;
+    std::fill(std::begin(m_marked), std::end(m_marked), false);
+    CG_CUDA_CHECK(cudaEventRecord(m_events[0], cudaStreamLegacy));
+  }
+  void mark(DemStage s) {
+    if (!m_on) return;
+    const int i = static_cast<int>(s);
+    CG_CUDA_CHECK(cudaEventRecord(m_events[i + 1], cudaStreamLegacy));
+    m_marked[i] = true;
+  }
+  // Waits for the step's events and adds each marked stage's seconds to seconds[stage].
+  void collect(double* seconds) {
+    if (!m_on) return;
+    int last = -1;
+    for (int i = 0; i < kDemStages; ++i)
+      if (m_marked[i]) last = i;
+    if (last < 0) return;
+    CG_CUDA_CHECK(cudaEventSynchronize(m_events[last + 1]));
+    cudaEvent_t prev = m_events[0];
+    for (int i = 0; i < kDemStages; ++i) {
+      if (!m_marked[i]) continue;
+      float ms = 0;
+      CG_CUDA_CHECK(cudaEventElapsedTime(&ms, prev, m_events[i + 1]));
+      seconds[i] += ms * 1e-3;
+      prev = m_events[i + 1];
+    }
+  }
+
+ private:
+  cudaEvent_t m_events[kDemStages + 1] = {};
+  bool m_marked[kDemStages] = {};
+  bool m_on = false;
+};
 
 class CudaDem {
  public:
@@ -31,9 +87,12 @@ class CudaDem {
   DemBuffer<Vec3<double>> contact_force, torque_a, torque_b, xi[2], normal[2];
   DemBuffer<double> contact_energy;
   int current = 0;
-  // the rows by B, the begins of each body's rows, walls, their springs and energies
-  DemBuffer<std::uint32_t> b_keys[2], by_b[2], a_begin, b_begin;
+  // the rows by B, the begins of each body's rows (sort: the radix sort's keys; counts: each row's
+  // rank among its B's rows), walls, their springs and energies
+  DemBuffer<std::uint32_t> b_keys[2], by_b[2], a_begin, b_begin, b_rank;
   DemBuffer<std::byte> sort_temp;
+  bool sums_by_sort = false;  // tuning: CONTACTGRID_DEM_SUMS=sort
+  DemStageEvents events;
   DemBuffer<dem::Wall> walls;
   int wall_count = 0;
   DemBuffer<Vec3<double>> wall_xi;

@@ -1,14 +1,26 @@
 #pragma once
-// The body stage of the granular dynamics on the device: the rows' order by B (a stable radix sort of
-// (B, row), over the bits of the body count: CUB, whose bit range Thrust's sort does not take), where
-// each body's rows begin (Thrust's vectorised lower_bound of every body id in the rows' A and in the
-// sorted Bs), then body_terms of every body (core/dem_step.hpp: its sums in a fixed order, walls,
-// gravity), one thread per body. No atomics: the same sums as the CPU's, bit for bit.
+// The body stage of the granular dynamics on the device: where each body's rows lie (BodyRowIndex:
+// its rows as A are contiguous, the rows being sorted by A; its rows as B, in ascending row order),
+// then body_terms of every body (core/dem_step.hpp: its sums in a fixed order, walls, gravity), one
+// thread per body. No floating-point atomics: the same sums as the CPU's, bit for bit.
+//
+// The index, two ways to the same arrays (tuning: CONTACTGRID_DEM_SUMS):
+//   counts (default)  one pass over the rows counts each body's rows as A and as B (integer atomics;
+//                     each row keeps its rank among its B's rows), an exclusive scan of each count
+//                     gives the begins, one pass puts each row at its B's begin plus its rank, and a
+//                     segmented sort of each body's few rows restores the ascending row order that
+//                     the atomics' ranks do not fix. O(rows + bodies) streaming passes, every read of
+//                     a row coalesced but the scatter.
+//   sort              a stable radix sort of (B, row) over the bits of the body count (CUB), then
+//                     Thrust's vectorised lower_bound of every body id in the rows' A and in the
+//                     sorted Bs (a binary search per body over the rows).
 #include <thrust/binary_search.h>
 #include <thrust/execution_policy.h>
 #include <thrust/iterator/counting_iterator.h>
 
 #include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_scan.cuh>
+#include <cub/device/device_segmented_sort.cuh>
 
 #include "backend.hpp"
 #include "cuda/common.cuh"
@@ -25,6 +37,24 @@ __global__ void dem_b_keys_kernel(const std::int64_t* id_b, std::size_t k, std::
   rows[r] = static_cast<std::uint32_t>(r);
 }
 
+// Each body's rows as A and as B (a_count, b_count: zero on entry), and each row's rank among its B's
+// rows (in the order the atomics come: the segmented sort fixes the order).
+__global__ void dem_count_kernel(const std::int64_t* id_a, const std::int64_t* id_b, std::size_t k,
+                                 std::uint32_t* a_count, std::uint32_t* b_count, std::uint32_t* b_rank) {
+  const std::size_t r = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
+  if (r >= k) return;
+  atomicAdd(a_count + id_a[r], 1u);
+  b_rank[r] = atomicAdd(b_count + id_b[r], 1u);
+}
+
+// Row r at its B's begin plus its rank.
+__global__ void dem_place_kernel(const std::int64_t* id_b, std::size_t k, const std::uint32_t* b_begin,
+                                 const std::uint32_t* b_rank, std::uint32_t* by_b) {
+  const std::size_t r = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
+  if (r >= k) return;
+  by_b[b_begin[id_b[r]] + b_rank[r]] = static_cast<std::uint32_t>(r);
+}
+
 __global__ void dem_body_kernel(dem::BodyArrays b, dem::StepConstants c, dem::ContactTerms t,
                                 dem::BodyRowIndex index, dem::WallTerms w) {
   const std::size_t i = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
@@ -36,41 +66,86 @@ __global__ void dem_body_kernel(dem::BodyArrays b, dem::StepConstants c, dem::Co
 
 namespace cg::detail {
 
+// The index by the radix sort (file comment); returns by_b.
+template <class Real>
+const std::uint32_t* dem_index_by_sort(CudaDem& d, const dem::ContactRows<Real>& rows) {
+  const std::size_t n = d.count, k = rows.count;
+  auto policy = thrust::cuda::par_nosync(d.thrust).on(cudaStreamLegacy);
+  for (int h = 0; h < 2; ++h) {
+    d.b_keys[h].reserve(k, true);
+    d.by_b[h].reserve(k, true);
+  }
+  cuda::dem_b_keys_kernel<<<cuda::blocks_for(k), cuda::kBlock>>>(rows.id_b, k, d.b_keys[0].data(),
+                                                                 d.by_b[0].data());
+  CG_CUDA_CHECK_LAUNCH("dem_b_keys");
+  cub::DoubleBuffer<std::uint32_t> keys(d.b_keys[0].data(), d.b_keys[1].data());
+  cub::DoubleBuffer<std::uint32_t> vals(d.by_b[0].data(), d.by_b[1].data());
+  const int bits = std::max(1, bits_for(n));
+  std::size_t temp = 0;
+  CG_CUDA_CHECK(
+      cub::DeviceRadixSort::SortPairs(nullptr, temp, keys, vals, int(k), 0, bits, cudaStreamLegacy));
+  d.sort_temp.reserve(std::max<std::size_t>(temp, 1), true);
+  CG_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(d.sort_temp.data(), temp, keys, vals, int(k), 0, bits,
+                                                cudaStreamLegacy));
+  const std::uint32_t* sorted_b = keys.Current();
+  thrust::lower_bound(policy, rows.id_a, rows.id_a + k, thrust::counting_iterator<std::int64_t>(0),
+                      thrust::counting_iterator<std::int64_t>(std::int64_t(n) + 1), d.a_begin.data());
+  thrust::lower_bound(policy, sorted_b, sorted_b + k, thrust::counting_iterator<std::uint32_t>(0),
+                      thrust::counting_iterator<std::uint32_t>(std::uint32_t(n) + 1), d.b_begin.data());
+  return vals.Current();
+}
+
+// The index by counts, scans and a segmented sort (file comment); returns by_b.
+template <class Real>
+const std::uint32_t* dem_index_by_counts(CudaDem& d, const dem::ContactRows<Real>& rows) {
+  const std::size_t n = d.count, k = rows.count;
+  d.b_rank.reserve(k, true);
+  for (int h = 0; h < 2; ++h) d.by_b[h].reserve(k, true);
+  CG_CUDA_CHECK(cudaMemsetAsync(d.a_begin.data(), 0, (n + 1) * sizeof(std::uint32_t), cudaStreamLegacy));
+  CG_CUDA_CHECK(cudaMemsetAsync(d.b_begin.data(), 0, (n + 1) * sizeof(std::uint32_t), cudaStreamLegacy));
+  cuda::dem_count_kernel<<<cuda::blocks_for(k), cuda::kBlock>>>(rows.id_a, rows.id_b, k, d.a_begin.data(),
+                                                                d.b_begin.data(), d.b_rank.data());
+  CG_CUDA_CHECK_LAUNCH("dem_count");
+  // the counts' exclusive scans in place (n + 1 entries: the last begin is the row count)
+  std::size_t scan_temp = 0, sort_temp = 0;
+  CG_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, scan_temp, d.a_begin.data(), d.a_begin.data(), n + 1,
+                                              cudaStreamLegacy));
+  const std::uint32_t* begin = d.b_begin.data();
+  CG_CUDA_CHECK(cub::DeviceSegmentedSort::SortKeys(nullptr, sort_temp, d.by_b[0].data(), d.by_b[1].data(),
+                                                   std::int64_t(k), std::int64_t(n), begin, begin + 1,
+                                                   cudaStreamLegacy));
+  std::size_t temp = std::max(scan_temp, sort_temp);
+  d.sort_temp.reserve(std::max<std::size_t>(temp, 1), true);
+  temp = d.sort_temp.capacity();
+  CG_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(d.sort_temp.data(), temp, d.a_begin.data(), d.a_begin.data(),
+                                              n + 1, cudaStreamLegacy));
+  temp = d.sort_temp.capacity();
+  CG_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(d.sort_temp.data(), temp, d.b_begin.data(), d.b_begin.data(),
+                                              n + 1, cudaStreamLegacy));
+  cuda::dem_place_kernel<<<cuda::blocks_for(k), cuda::kBlock>>>(rows.id_b, k, d.b_begin.data(),
+                                                                d.b_rank.data(), d.by_b[0].data());
+  CG_CUDA_CHECK_LAUNCH("dem_place");
+  temp = d.sort_temp.capacity();
+  CG_CUDA_CHECK(cub::DeviceSegmentedSort::SortKeys(d.sort_temp.data(), temp, d.by_b[0].data(),
+                                                   d.by_b[1].data(), std::int64_t(k), std::int64_t(n), begin,
+                                                   begin + 1, cudaStreamLegacy));
+  return d.by_b[1].data();
+}
+
 template <class Real>
 void dem_body_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::StepConstants& c) {
   const std::size_t n = d.count, k = rows.count;
   if (n == 0) return;
-  auto policy = thrust::cuda::par_nosync(d.thrust).on(cudaStreamLegacy);
   d.a_begin.reserve(n + 1, true);
   d.b_begin.reserve(n + 1, true);
   const std::uint32_t* by_b = nullptr;
   if (k > 0) {
-    for (int h = 0; h < 2; ++h) {
-      d.b_keys[h].reserve(k, true);
-      d.by_b[h].reserve(k, true);
-    }
-    cuda::dem_b_keys_kernel<<<cuda::blocks_for(k), cuda::kBlock>>>(rows.id_b, k, d.b_keys[0].data(),
-                                                                   d.by_b[0].data());
-    CG_CUDA_CHECK_LAUNCH("dem_b_keys");
-    cub::DoubleBuffer<std::uint32_t> keys(d.b_keys[0].data(), d.b_keys[1].data());
-    cub::DoubleBuffer<std::uint32_t> vals(d.by_b[0].data(), d.by_b[1].data());
-    const int bits = std::max(1, bits_for(n));
-    std::size_t temp = 0;
-    CG_CUDA_CHECK(
-        cub::DeviceRadixSort::SortPairs(nullptr, temp, keys, vals, int(k), 0, bits, cudaStreamLegacy));
-    d.sort_temp.reserve(std::max<std::size_t>(temp, 1), true);
-    CG_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(d.sort_temp.data(), temp, keys, vals, int(k), 0, bits,
-                                                  cudaStreamLegacy));
-    by_b = vals.Current();
-    const std::uint32_t* sorted_b = keys.Current();
-    thrust::lower_bound(policy, rows.id_a, rows.id_a + k, thrust::counting_iterator<std::int64_t>(0),
-                        thrust::counting_iterator<std::int64_t>(std::int64_t(n) + 1), d.a_begin.data());
-    thrust::lower_bound(policy, sorted_b, sorted_b + k, thrust::counting_iterator<std::uint32_t>(0),
-                        thrust::counting_iterator<std::uint32_t>(std::uint32_t(n) + 1), d.b_begin.data());
+    by_b = d.sums_by_sort ? dem_index_by_sort(d, rows) : dem_index_by_counts(d, rows);
   } else {
     CG_CUDA_CHECK(cudaMemsetAsync(d.a_begin.data(), 0, (n + 1) * sizeof(std::uint32_t), cudaStreamLegacy));
     CG_CUDA_CHECK(cudaMemsetAsync(d.b_begin.data(), 0, (n + 1) * sizeof(std::uint32_t), cudaStreamLegacy));
   }
+  d.events.mark(DemStage::body_index);
   const dem::ContactTerms t{d.contact_force.data(),
                             d.torque_a.data(),
                             d.torque_b.data(),
@@ -85,6 +160,7 @@ void dem_body_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::S
   on_device.walls = d.walls.data();
   cuda::dem_body_kernel<<<cuda::blocks_for(n), cuda::kBlock>>>(d.arrays(), on_device, t, index, w);
   CG_CUDA_CHECK_LAUNCH("dem_body");
+  d.events.mark(DemStage::body_terms);
 }
 
 }  // namespace cg::detail

@@ -3,10 +3,11 @@
 // core/history.hpp states the rule). Each contact row's key (the global ids of its bodies, or its
 // local ids) is searched in the previous step's sorted keys (ws.hist_keys[hist_current], hist_count
 // rows); the position gives the row's age and previous_row, and the row's key and age become the next
-// step's history (the other hist buffer; the two swap). The search is Thrust's vectorised
-// lower_bound followed by one kernel that turns positions into the fields, or (Tuning::history_search
-// = kernel) one hand-written kernel doing both: the same fields either way, the faster to be kept by
-// measurement (BENCHMARKS.md).
+// step's history (the other hist buffer; the two swap). The search (Tuning::history_search): one
+// kernel searching from the row's own place among the keys (near, the default: lower_bound_key_near),
+// one kernel searching all the keys (kernel), or Thrust's vectorised lower_bound followed by one kernel
+// that turns positions into the fields (thrust): the same fields every way (BENCHMARKS.md compares
+// them).
 #include <thrust/binary_search.h>
 #include <thrust/execution_policy.h>
 #include <thrust/iterator/counting_iterator.h>
@@ -35,17 +36,25 @@ struct HistorySteps {
   std::int64_t* new_age;
 };
 
-// Row i's fields from its lower bound (kSearch: searched here; else read from previous_row[i], where
-// Thrust left it), and its key and age into the next step.
-template <bool kSearch>
+// How history_kernel finds a row's lower bound: read from previous_row[i] (where Thrust left it),
+// searched over all the keys, or searched from the row's own place (i scaled by the steps' row counts).
+enum class RowSearch { given, all, near };
+
+// Row i's fields from its lower bound, and its key and age into the next step.
+template <RowSearch kSearch>
 __global__ void history_kernel(RowKey key_of, std::uint32_t rows, HistorySteps h, std::int64_t* previous_row,
                                std::int64_t* age) {
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
   if (i >= rows) return;
   const PairKey key = key_of(i);
   const std::size_t m = static_cast<std::size_t>(h.old_count);
-  const std::size_t p =
-      kSearch ? lower_bound_key(h.old_keys, m, key) : static_cast<std::size_t>(previous_row[i]);
+  std::size_t p = 0;
+  if constexpr (kSearch == RowSearch::given)
+    p = static_cast<std::size_t>(previous_row[i]);
+  else if constexpr (kSearch == RowSearch::all)
+    p = lower_bound_key(h.old_keys, m, key);
+  else
+    p = lower_bound_key_near(h.old_keys, m, key, std::size_t((std::uint64_t(i) * m) / rows));
   const RowHistory r = history_of(h.old_keys, h.old_age, m, p, key);
   previous_row[i] = r.previous_row;
   age[i] = r.age;
@@ -81,10 +90,13 @@ void history_stage(RunState<Real, Key, Narrow>& r, ThrustAllocator& alloc) {
       const auto keys = thrust::make_transform_iterator(thrust::counting_iterator<std::uint32_t>(0), key_of);
       thrust::lower_bound(thrust::cuda::par_nosync(alloc).on(r.st), h.old_keys, h.old_keys + h.old_count,
                           keys, keys + k, r.cp.previous_row);
-      cuda::history_kernel<false>
+      cuda::history_kernel<cuda::RowSearch::given>
+          <<<cuda::blocks_for(k), cuda::kBlock, 0, r.st>>>(key_of, k, h, r.cp.previous_row, r.cp.age);
+    } else if (r.tuning.history_search == HistorySearch::kernel) {
+      cuda::history_kernel<cuda::RowSearch::all>
           <<<cuda::blocks_for(k), cuda::kBlock, 0, r.st>>>(key_of, k, h, r.cp.previous_row, r.cp.age);
     } else {
-      cuda::history_kernel<true>
+      cuda::history_kernel<cuda::RowSearch::near>
           <<<cuda::blocks_for(k), cuda::kBlock, 0, r.st>>>(key_of, k, h, r.cp.previous_row, r.cp.age);
     }
     CG_CUDA_CHECK_LAUNCH("history");

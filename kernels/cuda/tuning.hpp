@@ -17,7 +17,7 @@ namespace cg::detail {
 enum class Forced { automatic, off, on };
 
 // How the history stage (cuda/history.cuh) searches the previous step's keys.
-enum class HistorySearch { thrust, kernel };
+enum class HistorySearch { thrust, kernel, near };
 
 // How host arrays cross PCIe (transfer.cuh). streamed: through the engine's ring of pinned slots, the
 // host copying one slot while the copy engine moves another; registered: the caller's arrays
@@ -58,10 +58,16 @@ struct Tuning {
   // thread per pair (cuda/narrow.cuh); 0: always one thread per pair. The same contacts either way.
   // Default 1: a group that takes pairs one after the other loses to a thread per pair (H100).
   unsigned warp_solve_pairs = 1;
-  // CONTACTGRID_CUDA_HISTORY=kernel: the history stage searches with its own kernel (a binary search
-  // per row, the fields written in the same kernel); default: Thrust's vectorised lower_bound, then
-  // a kernel for the fields. The same fields either way.
-  HistorySearch history_search = HistorySearch::thrust;
+  // CONTACTGRID_CUDA_HISTORY=kernel / thrust: the history stage searches with its own kernel (a
+  // binary search per row over all the keys, the fields written in the same kernel) / with Thrust's
+  // vectorised lower_bound, then a kernel for the fields; default (near): one kernel whose search
+  // starts at the row's own place among the keys (core/history.hpp: lower_bound_key_near). The same
+  // fields every way.
+  HistorySearch history_search = HistorySearch::near;
+  // CONTACTGRID_DEM_SUMS=sort: the granular dynamics' body stage finds each body's rows as B by a
+  // radix sort of (B, row) and Thrust's lower_bound of every body id (cuda/dem_sums.cuh); default:
+  // counts, their scan and a segmented sort of each body's rows. The same sums either way.
+  bool dem_sums_sort = false;
 };
 
 // `on` / `off` when the variable equals one of the two spellings, else automatic.
@@ -131,7 +137,10 @@ inline Tuning read_tuning() {
   if (const char* w = std::getenv("CONTACTGRID_CUDA_WARP_SOLVE"))
     t.warp_solve_pairs = static_cast<unsigned>(std::strtoul(w, nullptr, 10));
   if (const char* h = std::getenv("CONTACTGRID_CUDA_HISTORY"))
-    t.history_search = std::string_view(h) == "kernel" ? HistorySearch::kernel : HistorySearch::thrust;
+    t.history_search = std::string_view(h) == "kernel"   ? HistorySearch::kernel
+                       : std::string_view(h) == "thrust" ? HistorySearch::thrust
+                                                         : HistorySearch::near;
+  if (const char* d = std::getenv("CONTACTGRID_DEM_SUMS")) t.dem_sums_sort = std::string_view(d) == "sort";
   if (const char* c = std::getenv("CONTACTGRID_CUDA_CANDIDATES")) {
     const std::string_view v = c;
     if (v == "cells") t.candidates = CandidateFilter::cells;

@@ -434,6 +434,9 @@ Subcommand add_simulate(CLI::App& app) {
   sm->add_option("--rolling-friction", sim.material.rolling_friction,
                  "Rolling friction coefficient (0: none)")
       ->capture_default_str();
+  sm->add_flag("--stage-times", sim.stage_times,
+               "Print where a step's time goes: each stage's mean ms a step (CUDA: events; the host waits "
+               "for each step's end)");
   sm->add_flag("--write-contacts", sim.write_contacts,
                "Also write contacts_<step>.h5 with each frame (docs/FORMAT.md §2 with the history fields)");
   sm->add_option("--backend", sim.backend, "Backend of the contact detection and the dynamics")

@@ -161,6 +161,7 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
         stages += fmt::format(" {} {:.3f}", t.name, t.seconds * 1e3);
       fmt::print("  last step: {:.2f} contacts/body; its detection (ms):{}\n",
                  2.0 * double(sim.contact_count()) / double(std::max<std::size_t>(bodies.size(), 1)), stages);
+      fmt::print("{}", stage_times_report(sim.stage_times()));
       fmt::print("  -> {}/ (frame_*.h5, {}run.xdmf, log.csv)\n", cmd.output,
                  cmd.write_contacts ? "contacts_*.h5, " : "");
     }
@@ -184,6 +185,29 @@ Cadence::Cadence(const SimulateCommand& cmd)
 
 std::uint64_t Cadence::block_end(std::uint64_t done) const {
   return std::min({(done / logs + 1) * logs, (done / frames + 1) * frames, steps});
+}
+
+std::string stage_times_report(const DemStageTimes& t) {
+  if (t.steps == 0) return {};
+  const double per = 1e3 / double(t.steps);
+  double total = 0;
+  std::string steps, detection;
+  for (const StageTime& s : t.step) {
+    steps += fmt::format(" {} {:.3f}", s.name, s.seconds * per);
+    total += s.seconds * per;
+  }
+  double engine = 0;
+  for (const StageTime& s : t.detection) {
+    detection += fmt::format(" {} {:.3f}", s.name, s.seconds * per);
+    engine += s.seconds * per;
+  }
+  std::string out =
+      fmt::format("  stage times (ms a step, mean of {} steps):{} = {:.3f}\n", t.steps, steps, total);
+  out += fmt::format("  the engine's stages within detect (ms a step):{} = {:.3f}\n", detection, engine);
+  if (t.energy_calls > 0)
+    out += fmt::format("  energies: {:.3f} ms a call ({} calls, between blocks of steps)\n",
+                       t.energy_seconds * 1e3 / double(t.energy_calls), t.energy_calls);
+  return out;
 }
 
 RunInfo simulate_run_info(const SimulateCommand& cmd, std::size_t bodies, Precision precision,
@@ -231,6 +255,7 @@ int run_simulate(const SimulateCommand& cmd, Session& session) {
   options.gravity = cmd.gravity;
   options.walls = walls_of(cmd, scene);
   options.synchronized = cmd.synchronized;
+  options.stage_times = cmd.stage_times;
   options.engine.backend = cmd.backend;
   options.engine.threads = cmd.threads;
   // under mpirun, each rank of a node on its own GPU (as detect's ranks)

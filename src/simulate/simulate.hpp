@@ -32,8 +32,13 @@ struct SimulateCommand {
   int threads = 0;
   bool synchronized = true;
   bool quiet = false;
-  bool plots = true;  // gnuplot PNG/SVG of the log at the end, when gnuplot is present
+  bool plots = true;         // gnuplot PNG/SVG of the log at the end, when gnuplot is present
+  bool stage_times = false;  // --stage-times: where a step's time goes (DemOptions::stage_times)
 };
+
+// The --stage-times lines: the mean milliseconds a step of each stage, and of the engine's stages
+// within detect (empty when nothing was timed).
+std::string stage_times_report(const DemStageTimes& t);
 
 // One --walls spec into walls (UsageError naming it):
 //   plane:PX,PY,PZ,NX,NY,NZ            a plane through P, normal N (into the domain; normalised)

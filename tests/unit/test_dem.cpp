@@ -21,6 +21,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <random>
 #include <string>
@@ -514,6 +515,71 @@ TEST(DemBackends, CpuEqualsCudaBitForBit) {
   cpu_equals_cuda<float>(false);
   cpu_equals_cuda<double>(true);
   cpu_equals_cuda<float>(true);
+}
+
+// The body stage's two indexes on the device (CONTACTGRID_DEM_SUMS=sort: a radix sort and
+// lower_bound; default: counts, scans and a segmented sort) give the same trajectory, bit for bit.
+template <class Real>
+void cuda_sums_by_sort_equal_counts(bool ellipsoids) {
+  const ComparedScene scene = compared_scene(ellipsoids);
+  DemOptions o = scene.options;
+  o.engine.backend = Backend::cuda;
+  Simulation<Real> counts(scene.bodies, o);
+  setenv("CONTACTGRID_DEM_SUMS", "sort", 1);
+  Simulation<Real> sorted(scene.bodies, o);  // (the knob is read when a simulation starts)
+  unsetenv("CONTACTGRID_DEM_SUMS");
+  for (int block = 0; block < 3; ++block) {
+    counts.run(50);
+    sorted.run(50);
+    const std::string at =
+        std::string(ellipsoids ? "ellipsoids" : "spheres") + " step " + std::to_string(counts.steps());
+    const DemBodies x = counts.bodies(), y = sorted.bodies();
+    ASSERT_EQ(std::memcmp(x.position.data(), y.position.data(), x.size() * sizeof(Vec3<double>)), 0) << at;
+    ASSERT_EQ(
+        std::memcmp(x.angular_velocity.data(), y.angular_velocity.data(), x.size() * sizeof(Vec3<double>)), 0)
+        << at;
+    ASSERT_GT(counts.contact_count(), 0u) << at;
+  }
+}
+
+TEST(DemBackends, CudaSumsBySortEqualCounts) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  cuda_sums_by_sort_equal_counts<float>(false);
+  cuda_sums_by_sort_equal_counts<double>(true);
+}
+
+// --stage-times: every step's stages are timed in order, the engine's stages within detect too, and
+// timing changes nothing of the trajectory.
+TYPED_TEST(DemPhysics, StageTimesCoverEveryStepAndChangeNothing) {
+  const ComparedScene scene = compared_scene(false);
+  DemOptions o = scene.options;
+  o.engine.backend = TypeParam::backend;
+  Simulation<double> plain(scene.bodies, o);
+  o.stage_times = true;
+  Simulation<double> timed(scene.bodies, o);
+  EXPECT_EQ(plain.stage_times().steps, 0u);
+  plain.run(30);
+  timed.run(20);
+  timed.run(10);
+  (void)timed.energies();
+  const DemStageTimes t = timed.stage_times();
+  EXPECT_EQ(t.steps, 30u);
+  const std::vector<std::string> names{"kick_drift", "detect",     "contact_terms",
+                                       "body_index", "body_terms", "kick"};
+  ASSERT_EQ(t.step.size(), names.size());
+  double total = 0;
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    EXPECT_EQ(t.step[i].name, names[i]);
+    EXPECT_GE(t.step[i].seconds, 0) << names[i];
+    total += t.step[i].seconds;
+  }
+  EXPECT_GT(total, 0);
+  EXPECT_GT(t.step[1].seconds, 0);  // detect
+  EXPECT_FALSE(t.detection.empty());
+  EXPECT_EQ(t.energy_calls, 1u);
+  const DemBodies x = plain.bodies(), y = timed.bodies();
+  EXPECT_EQ(std::memcmp(x.position.data(), y.position.data(), x.size() * sizeof(Vec3<double>)), 0);
+  EXPECT_EQ(std::memcmp(x.velocity.data(), y.velocity.data(), x.size() * sizeof(Vec3<double>)), 0);
 }
 
 }  // namespace

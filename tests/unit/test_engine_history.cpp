@@ -236,6 +236,40 @@ TEST(StepHistory, LowerBoundKey) {
   EXPECT_EQ(lower_bound_key(keys, 0, {7, 9}), 0u);
 }
 
+// The search from a guess gives lower_bound_key's position from every guess: seeded sorted keys with
+// runs of one first body, every key present and absent (between, before, after all), every guess
+// (in range and past the end), and no keys at all.
+TEST(StepHistory, LowerBoundKeyNearEqualsTheWholeSearch) {
+  EXPECT_EQ(lower_bound_key_near(nullptr, 0, {1, 2}, 0), 0u);
+  EXPECT_EQ(lower_bound_key_near(nullptr, 0, {1, 2}, 5), 0u);
+  std::mt19937_64 rng(9021);
+  for (const std::size_t m : {1u, 2u, 3u, 7u, 64u, 300u}) {
+    std::vector<PairKey> keys;
+    std::int64_t a = 0, b = 0;
+    while (keys.size() < m) {
+      if (rng() % 3 == 0) {
+        a += 1 + std::int64_t(rng() % 3);
+        b = a;
+      }
+      b += 1 + std::int64_t(rng() % 3);
+      keys.push_back({a, b});
+    }
+    std::vector<PairKey> probes = keys;
+    for (const PairKey& k : keys) {
+      probes.push_back({k.a, k.b - 1});
+      probes.push_back({k.a, k.b + 1});
+    }
+    probes.push_back({-1, 0});
+    probes.push_back({a + 5, 0});
+    for (const PairKey& key : probes) {
+      const std::size_t want = lower_bound_key(keys.data(), m, key);
+      for (std::size_t guess = 0; guess <= m + 2; ++guess)
+        ASSERT_EQ(lower_bound_key_near(keys.data(), m, key, guess), want)
+            << "m " << m << " key (" << key.a << ", " << key.b << ") guess " << guess;
+    }
+  }
+}
+
 class HistoryFiles : public TempDirTest {
  protected:
   std::string text(const std::string& file) const {
@@ -276,8 +310,8 @@ TEST_F(HistoryFiles, RoundTrip) {
 
 #if defined(CONTACTGRID_HAVE_CUDA)
 // Device arrays (DEVICE, with global ids), the device history against the CPU engine's host history
-// of the same bodies, with both device searches (Thrust, the hand-written kernel), and a skin so that
-// the rejecting narrow's rows are counted before the stage. Then the history moves between paths: a
+// of the same bodies, with every device search (from the row's place, Thrust, the whole search), and a skin
+// so that the rejecting narrow's rows are counted before the stage. Then the history moves between paths: a
 // host-array call on the CUDA engine continues the device history, and a device call after it.
 template <class Real>
 void device_walk(const char* search) {
@@ -331,7 +365,7 @@ void device_walk(const char* search) {
 TEST(EngineHistoryDevice, DeviceHistoryEqualsHost) {
 #if defined(CONTACTGRID_HAVE_CUDA)
   if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
-  for (const char* search : {"thrust", "kernel"}) {
+  for (const char* search : {"near", "thrust", "kernel"}) {
     device_walk<float>(search);
     device_walk<double>(search);
   }
