@@ -180,8 +180,10 @@ struct Engine<Real>::Impl {
   ~Impl() { detail::destroy(cuda); }
 };
 
-BroadPhase resolved_broad_phase(BroadPhase requested, const Bounds& b, Precision p, Backend) {
-  return requested != BroadPhase::automatic ? requested : choose_broad_phase(b, p);
+BroadPhase resolved_broad_phase(BroadPhase requested, const Bounds& b, Precision p, Backend backend) {
+  if (requested != BroadPhase::automatic) return requested;
+  if (backend == Backend::automatic) backend = cuda_available() ? Backend::cuda : Backend::cpu;
+  return choose_broad_phase(b, p, backend == Backend::cuda);
 }
 
 template <class Real>
