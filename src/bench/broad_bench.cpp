@@ -213,7 +213,7 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
       }
       auto cell = [&](BroadPhase bp) {
         if (t.count(bp)) return fmt::format("{:.4f}", t[bp].seconds);
-        if (skipped.count(bp)) return fmt::format(">{:.3g}", skipped[bp]);
+        if (skipped.count(bp)) return fmt::format(">{:.2g}", skipped[bp]);
         return std::string("-");
       };
       const bool timed_auto = t.count(BroadPhase::automatic) && best;
