@@ -297,7 +297,8 @@ TYPED_TEST(BroadPhaseTest, ResidentBodiesPlanTheLevelsOfTheHostArrays) {
       // and with it the top level's tests, may differ by a rounding)
       EXPECT_NEAR(double(e.stats().pair_tests), double(host.stats.pair_tests),
                   0.1 * double(host.stats.pair_tests));
-      if (bp == BroadPhase::levels) {
+      // (the bimodal scene of 4000 bodies holds no r = 1 body at 10 % of the volume: one level)
+      if (bp == BroadPhase::levels && s.name.rfind("bimodal", 0) != 0) {
         EXPECT_GE(e.stats().levels, 3);
       }
     }
