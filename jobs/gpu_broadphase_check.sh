@@ -1,19 +1,24 @@
 #!/usr/bin/env bash
-# The broad phases (issue #34) on one GPU, in one call (under 4 minutes on an H100):
-#   1. the unit tests of the broad phases with their CUDA cases (none may skip, none may fail), among
-#      them LevelsCpuCuda (CUDA levels = the CPU's on log-uniform 1:1000 scenes, every mode);
-#   2. CPU = CUDA, byte for byte: every scene family at 2^13 and 2^18, fp32 and fp64, the CPU's auto
-#      against the CUDA backend's grid, levels and sweep (brute at 2^13), and mpirun np 2 with CUDA;
-#   3. the H100 table (bench-broad, fp32): grid, levels, sweep and auto at 2^20, 2^22 and 2^24 (sweep
-#      stops at the first N where it passes 0.5 s), brute at 2^13 … 2^16.
-#   BIN=dir OUT=results-dir jobs/gpu_broadphase_check.sh
+# The broad phases (issue #34) on one GPU, one mode a call (each under 4 minutes on an H100):
+#   check    the unit tests of the broad phases with their CUDA cases (none may skip, none may fail:
+#            LevelsCpuCuda, OrderCpuCuda, the resident bodies' levels, the levels' pair tests linear
+#            in N); CPU = CUDA byte for byte, every scene family at 2^13 (grid, levels, sweep, brute;
+#            fp32 and fp64) and mpirun np 2 with CUDA (intruders, log-uniform)
+#   compare  CPU = CUDA byte for byte at 2^18: every family, grid, levels and sweep in fp32, levels in
+#            fp64 (the CUDA runs four at a time on the one GPU)
+#   table    the H100 table (bench-broad, fp32): every family at 2^18, 2^20, 2^22 and 2^24, grid,
+#            levels, sweep and auto; a run predicted above 6 s (warm-up and 3 repetitions) is skipped,
+#            shown as >t; the /uniform per-contact column and auto's pick against the best (the last
+#            line: on how many rows auto is within 10 % of the best)
+#   small    the same at 2^13 … 2^16 with brute
+#   BIN=dir OUT=results-dir jobs/gpu_broadphase_check.sh check|compare|table|small   (default: check)
 # BIN holds the CUDA build's contactgrid and contactgrid_tests. Everything lands in
-# $OUT/broadphase.tgz (logs, compare table, the tables as text and CSV); the summary is printed.
-# Exits non-zero naming every failed check (the last lines of the output); each step runs whatever
-# an earlier one did.
+# $OUT/broadphase_<mode>.tgz (logs, compare table, the tables as text and CSV); the summary is printed.
+# Exits non-zero naming every failed check (the last lines of the output).
 set -u
 cd "$(dirname "$0")/.." || exit 2
 [ -f .devrt/env.sh ] && source .devrt/env.sh .devrt  # (its argument: else it takes this script's)
+MODE=${1:-check}
 BIN=${BIN:-.devbin}; OUT=${OUT:-/tmp/out}
 mkdir -p "$OUT"; W=${WORK:-/tmp/cgbroad}; R="$W/results"; rm -rf "$R"; mkdir -p "$R"
 CG="$BIN/contactgrid"
@@ -21,19 +26,10 @@ export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_btl_va
 failed=()
 fail() { failed+=("$1"); echo "FAILED: $1"; }
 log() { echo "[$(date -u +%H:%M:%S)] $*"; }
-pack() { tar czf "$OUT/broadphase.tgz" -C "$W" results; }
+pack() { tar czf "$OUT/broadphase_$MODE.tgz" -C "$W" results; }
 { date -u; nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader; } >"$R/device.txt"
 cat "$R/device.txt"
 
-log "1. unit tests of the broad phases (CUDA cases must run, not skip)"
-timeout 120 "$BIN/contactgrid_tests" \
-  --gtest_filter='BroadPhaseTest/cuda.*:LevelsCpuCuda.*:LevelsDeviceFlow.*:LevelsPlan.*:SweepKeys.*:BoxRadius.*:AutoBroadPhase.*' \
-  >"$R/tests.log" 2>&1 || fail "unit tests (tests.log)"
-grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]|Failure|Expected|Which is|actual' "$R/tests.log" | head -40
-grep -q 'BroadPhaseTest/cuda' "$R/tests.log" || fail "no CUDA case of BroadPhaseTest ran"
-grep -E '^\[  SKIPPED \] (BroadPhaseTest/cuda|LevelsCpuCuda)' "$R/tests.log" && fail "CUDA cases skipped (no GPU seen?)"
-
-log "2. CPU = CUDA byte for byte, every scene family at 2^13 and 2^18 (brute at 2^13), fp32 and fp64"
 # name  generate-arguments
 families=(
   "uniform|--kind uniform"
@@ -44,11 +40,13 @@ families=(
   "intruder1|--kind intruders --rhigh 1 --ratio 100 --intruders 1"
   "mixed|--kind mixed --max-aspect 4"
 )
-: >"$R/compare.log"; : >"$R/compare.txt"
-# the scenes and the CPU references in parallel (the host's cores), then the CUDA runs one at a time
-for entry in "${families[@]}"; do
-  name=${entry%%|*}; args=${entry#*|}
-  for lg in 13 18; do
+
+# compare LG "fp32:grid fp32:levels ..." PARALLEL: each family's scene and CPU references (auto) made
+# in parallel, then its CUDA runs (PARALLEL families at a time on the GPU), each compared byte for byte
+compare() {
+  local lg=$1 runs=$2 parallel=$3
+  for entry in "${families[@]}"; do
+    name=${entry%%|*}; args=${entry#*|}
     (
       scene="$W/$name.$lg.h5"
       # shellcheck disable=SC2086
@@ -59,68 +57,91 @@ for entry in "${families[@]}"; do
       done
     ) &
   done
-done
-wait
-step2() {
+  wait
+  local running=0
   for entry in "${families[@]}"; do
     name=${entry%%|*}
-    for lg in 13 18; do
+    (
       scene="$W/$name.$lg.h5"
-      [ -f "$scene" ] || { fail "generate $name 2^$lg"; cat "$W/$name.$lg.gen.log" >>"$R/compare.log"; continue; }
-      phases="grid levels sweep"; [ $lg = 13 ] && phases="grid levels sweep brute"
-      for prec in fp32 fp64; do
-        ref="$W/$name.$lg.cpu.$prec.h5"
-        [ -f "$ref" ] || { fail "detect cpu $name 2^$lg $prec"; cat "$W/$name.$lg.cpu.$prec.log" >>"$R/compare.log"; continue; }
-        for bp in $phases; do
-          got="$W/$name.$lg.cuda.$bp.$prec.h5"
-          if ! "$CG" detect "$scene" -o "$got" --backend cuda --precision $prec --broad-phase $bp -q >>"$R/compare.log" 2>&1; then
-            fail "detect cuda $name 2^$lg $prec $bp"; continue
-          fi
-          echo "== $name 2^$lg $prec $bp" >>"$R/compare.log"
-          if "$CG" compare "$ref" "$got" >>"$R/compare.log" 2>&1; then r=IDENTICAL; else r=DIFFERENT; fail "cpu/cuda $name 2^$lg $prec $bp"; fi
-          printf '%-15s 2^%-3s %-5s %-7s %s\n' "$name" "$lg" "$prec" "$bp" "$r" >>"$R/compare.txt"
-        done
+      res="$W/$name.$lg.compare.txt"; : >"$res"
+      [ -f "$scene" ] || { echo "FAIL generate $name 2^$lg" >>"$res"; exit 0; }
+      for run in $runs; do
+        prec=${run%%:*}; bp=${run#*:}
+        ref="$W/$name.$lg.cpu.$prec.h5"; got="$W/$name.$lg.cuda.$bp.$prec.h5"
+        [ -f "$ref" ] || { echo "FAIL detect cpu $name 2^$lg $prec" >>"$res"; continue; }
+        if ! "$CG" detect "$scene" -o "$got" --backend cuda --precision "$prec" --broad-phase "$bp" -q \
+          >"$W/$name.$lg.$bp.$prec.log" 2>&1; then
+          echo "FAIL detect cuda $name 2^$lg $prec $bp" >>"$res"; continue
+        fi
+        if "$CG" compare "$ref" "$got" >>"$W/$name.$lg.$bp.$prec.log" 2>&1; then r=IDENTICAL; else r=DIFFERENT; fi
+        printf '%-15s 2^%-3s %-5s %-7s %s\n' "$name" "$lg" "$prec" "$bp" "$r" >>"$res"
+        rm -f "$got"
       done
-    done
+    ) &
+    running=$((running + 1))
+    if [ "$running" -ge "$parallel" ]; then wait -n; running=$((running - 1)); fi
   done
-  for name in intruders64 loguniform1000; do
-    got="$W/$name.np2.h5"
-    if mpirun --bind-to none -np 2 "$CG" detect "$W/$name.18.h5" -o "$got" --backend cuda --precision fp64 -q >>"$R/compare.log" 2>&1 &&
-       "$CG" compare "$W/$name.18.cpu.fp64.h5" "$got" >>"$R/compare.log" 2>&1; then
-      echo "np2 cuda $name 2^18: IDENTICAL" | tee -a "$R/compare.txt"
-    else
-      fail "np2 cuda $name 2^18 against the CPU's np1"
-    fi
+  wait
+  for entry in "${families[@]}"; do
+    name=${entry%%|*}; res="$W/$name.$lg.compare.txt"
+    [ -f "$res" ] || { fail "no comparison of $name 2^$lg"; continue; }
+    grep -v '^FAIL' "$res" >>"$R/compare.txt"
+    while read -r line; do fail "${line#FAIL }"; done < <(grep '^FAIL' "$res")
+    while read -r line; do fail "cpu/cuda $line"; done < <(grep DIFFERENT "$res")
+    cat "$W/$name.$lg".*.log >>"$R/compare.log" 2>/dev/null
   done
 }
-step2
-echo "$(grep -c IDENTICAL "$R/compare.txt") identical, $(grep -c DIFFERENT "$R/compare.txt") different"
-grep DIFFERENT "$R/compare.txt"
-pack
 
-log "3. the H100 table, fp32: 2^20, 2^22, 2^24 (grid, levels, sweep, auto); brute at 2^13 … 2^16"
-# the issue's rows; sweep stops at the first N where it passes 0.5 s (2.4 s at 2^24 on uniform)
-timeout 120 "$CG" bench-broad --backend cuda --precision fp32 --lo 20 --hi 24 --step 2 \
-  --families uniform,bimodal10,bimodal100,loguniform1000 --repetitions 3 --brute-hi 0 --sweep-hi 24 \
-  --budget 0.5 --csv "$R/broad_h100.csv" >"$R/broad_h100.txt" 2>&1 || fail "bench-broad 2^20-2^24 (broad_h100.txt)"
-cat "$R/broad_h100.txt"
-# the intruders: the grid's cells hold every grain (quadratic), so one timed run each and the grid
-# stops after 2^20 (budget); uniform again for the /uniform columns
-timeout 60 "$CG" bench-broad --backend cuda --precision fp32 --lo 20 --hi 24 --step 2 \
-  --families uniform,intruder1,intruders64 --repetitions 1 --brute-hi 0 --sweep-hi 22 --budget 0.5 \
-  --csv "$R/broad_h100_intruders.csv" >"$R/broad_h100_intruders.txt" 2>&1 ||
-  fail "bench-broad intruders 2^20-2^24 (broad_h100_intruders.txt)"
-cat "$R/broad_h100_intruders.txt"
-timeout 40 "$CG" bench-broad --backend cuda --precision fp32 --lo 13 --hi 16 --step 1 \
-  --families uniform,bimodal10,bimodal100,loguniform1000,intruder1,intruders64 --repetitions 3 \
-  --brute-hi 16 --sweep-hi 16 --budget 2 --csv "$R/broad_h100_small.csv" >"$R/broad_h100_small.txt" 2>&1 ||
-  fail "bench-broad 2^13-2^16 (broad_h100_small.txt)"
-cat "$R/broad_h100_small.txt"
+case $MODE in
+  check)
+    log "1. unit tests of the broad phases (CUDA cases must run, not skip)"
+    timeout 150 "$BIN/contactgrid_tests" \
+      --gtest_filter='BroadPhaseTest/cuda.*:LevelsCpuCuda.*:OrderCpuCuda.*:LevelsDeviceFlow.*:LevelsPlan.*:SweepKeys.*:BoxRadius.*:AutoBroadPhase.*' \
+      >"$R/tests.log" 2>&1 || fail "unit tests (tests.log)"
+    grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]|Failure|Expected|Which is|actual' "$R/tests.log" | head -40
+    grep -q 'BroadPhaseTest/cuda' "$R/tests.log" || fail "no CUDA case of BroadPhaseTest ran"
+    grep -E '^\[  SKIPPED \] (BroadPhaseTest/cuda|LevelsCpuCuda|OrderCpuCuda)' "$R/tests.log" &&
+      fail "CUDA cases skipped (no GPU seen?)"
+    pack
+    log "2. CPU = CUDA byte for byte, every scene family at 2^13, every broad phase, fp32 and fp64"
+    compare 13 "fp32:grid fp32:levels fp32:sweep fp32:brute fp64:grid fp64:levels fp64:sweep fp64:brute" 4
+    for name in intruders64 loguniform1000; do
+      got="$W/$name.np2.h5"
+      if mpirun --bind-to none -np 2 "$CG" detect "$W/$name.13.h5" -o "$got" --backend cuda --precision fp64 -q \
+        >>"$R/compare.log" 2>&1 && "$CG" compare "$W/$name.13.cpu.fp64.h5" "$got" >>"$R/compare.log" 2>&1; then
+        echo "np2 cuda $name 2^13: IDENTICAL" | tee -a "$R/compare.txt"
+      else
+        fail "np2 cuda $name 2^13 against the CPU's np1"
+      fi
+    done
+    echo "$(grep -c IDENTICAL "$R/compare.txt") identical, $(grep -c DIFFERENT "$R/compare.txt") different"
+    ;;
+  compare)
+    log "CPU = CUDA byte for byte, every scene family at 2^18: grid, levels, sweep fp32; levels fp64"
+    compare 18 "fp32:grid fp32:levels fp32:sweep fp64:levels" 4
+    echo "$(grep -c IDENTICAL "$R/compare.txt") identical, $(grep -c DIFFERENT "$R/compare.txt") different"
+    ;;
+  table | small)
+    if [ "$MODE" = table ]; then
+      range=(--lo 18 --hi 24 --step 2 --brute-hi 0 --sweep-hi 24); limit=200
+    else
+      range=(--lo 13 --hi 16 --step 1 --brute-hi 16 --sweep-hi 16); limit=100
+    fi
+    log "the H100 table, fp32 (${range[*]})"
+    timeout $limit "$CG" bench-broad --backend cuda --precision fp32 "${range[@]}" --repetitions 3 \
+      --limit 6 --budget 10 --csv "$R/broad_h100_$MODE.csv" >"$R/broad_h100_$MODE.txt" 2>&1 ||
+      fail "bench-broad $MODE (broad_h100_$MODE.txt)"
+    cat "$R/broad_h100_$MODE.txt"
+    ;;
+  *)
+    echo "usage: BIN=dir OUT=dir $0 check|compare|table|small" >&2
+    exit 2
+    ;;
+esac
 pack
-
-log "done"
+log "done ($MODE)"
 if [ ${#failed[@]} -gt 0 ]; then
   printf 'FAILED CHECK: %s\n' "${failed[@]}"
   exit 1
 fi
-echo "ALL BROAD-PHASE CHECKS PASSED"
+echo "ALL BROAD-PHASE CHECKS PASSED ($MODE)"

@@ -125,12 +125,13 @@ double grid_occupancy(const Bounds& b) {
   return volume > 0 ? double(b.count) * d * d * d / volume : double(b.count);
 }
 
-BroadPhase choose_broad_phase(const Bounds& b, Precision) {
+BroadPhase choose_broad_phase(const Bounds& b, Precision, bool device) {
   if (b.count <= kBruteBodies) return BroadPhase::brute;
   const double mean = b.count > 0 ? b.r_sum[0] / double(b.count) : b.r_max;
   if (!(mean > 0 && b.r_max > kLevelsSpread * mean)) return BroadPhase::grid;
   const double levels = std::log2(2 * b.r_max / std::max(b.r_min, b.r_max * 1e-300));
-  return grid_occupancy(b) > kOccupancyPerLevel * levels ? BroadPhase::levels : BroadPhase::grid;
+  const double per_level = device ? kOccupancyPerLevelDevice : kOccupancyPerLevel;
+  return grid_occupancy(b) > per_level * levels ? BroadPhase::levels : BroadPhase::grid;
 }
 
 }  // namespace cg

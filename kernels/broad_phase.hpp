@@ -53,14 +53,18 @@ int sweep_axis(const Bounds& b);
 // bounds (each extent at least 2·r_max). The grid's pair tests grow with it.
 double grid_occupancy(const Bounds& b);
 
-// `auto`: the broad phase for bodies of these bounds (measured: BENCHMARKS.md §18): brute for at most
-// kBruteBodies bodies; levels where the largest radius exceeds kLevelsSpread times the mean one and
-// the grid's cells, sized for the largest, would hold more than kOccupancyPerLevel bodies per level
-// of the hierarchy (log2(2·r_max / r_min) levels: each costs every smaller body a lookup); else the
-// grid (a wide radius law in a sparse scene, log-uniform 1:1000 among them, is the grid's).
-BroadPhase choose_broad_phase(const Bounds& b, Precision p);
+// `auto`: the broad phase for bodies of these bounds (measured: BENCHMARKS.md §18, §20): brute for at
+// most kBruteBodies bodies; levels where the largest radius exceeds kLevelsSpread times the mean one
+// and the grid's cells, sized for the largest, would hold more than kOccupancyPerLevel bodies per
+// level of the hierarchy (log2(2·r_max / r_min) levels: each costs every smaller body a lookup); else
+// the grid (a wide radius law in a sparse scene, log-uniform 1:1000 among them, is the grid's).
+// `device`: for the CUDA backend, whose grid pays more for crowded cells (its pair walk stages 32
+// entries of a cell in shared memory and walks the rest of a longer cell from memory, one thread per
+// entry), so levels take over from kOccupancyPerLevelDevice bodies per level (bimodal 1:10 among them).
+BroadPhase choose_broad_phase(const Bounds& b, Precision p, bool device = false);
 inline constexpr std::uint64_t kBruteBodies = 32;
 inline constexpr double kLevelsSpread = 4;
 inline constexpr double kOccupancyPerLevel = 64;
+inline constexpr double kOccupancyPerLevelDevice = 4;
 
 }  // namespace cg

@@ -180,8 +180,10 @@ struct Engine<Real>::Impl {
   ~Impl() { detail::destroy(cuda); }
 };
 
-BroadPhase resolved_broad_phase(BroadPhase requested, const Bounds& b, Precision p, Backend) {
-  return requested != BroadPhase::automatic ? requested : choose_broad_phase(b, p);
+BroadPhase resolved_broad_phase(BroadPhase requested, const Bounds& b, Precision p, Backend backend) {
+  if (requested != BroadPhase::automatic) return requested;
+  if (backend == Backend::automatic) backend = cuda_available() ? Backend::cuda : Backend::cpu;
+  return choose_broad_phase(b, p, backend == Backend::cuda);
 }
 
 template <class Real>
@@ -256,6 +258,11 @@ detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> 
                                           const EngineOptions& options, double inflation,
                                           EngineStats& stats) {
   constexpr Precision prec = precision_of<Broad, Narrow>();
+  // the levels and auto's choice size themselves by the smallest radius: bounds without it (0) would
+  // plan one level, the grid, whatever the radii (every source of bounds carries it)
+  if (b.count > 0 && !(b.r_min > 0 && b.r_min <= b.r_max))
+    throw Error("internal: the bodies' bounds lack their smallest radius (r_min " + std::to_string(b.r_min) +
+                ", r_max " + std::to_string(b.r_max) + ")");
   Frame f = frame ? *frame : make_frame(b, options.cell_size, prec, options.cell_choice);
   if (frame) check_fp32_world(b, prec);
   const double margin = broad_margin(b, f.origin, prec);

@@ -36,8 +36,9 @@ const char* to_string(Fields f);
 // True when a CUDA device is usable in this process (false in builds without CUDA).
 bool cuda_available();
 
-// The broad phase a call runs: `requested`, or for automatic choose_broad_phase's pick. Both backends
-// run every broad phase, so `backend` (resolved) does not change the pick.
+// The broad phase a call runs: `requested`, or for automatic choose_broad_phase's pick for `backend`
+// (automatic: CUDA where a device is usable), whose grid pays more for crowded cells on a GPU. Every
+// pick gives the same contacts, bit for bit.
 BroadPhase resolved_broad_phase(BroadPhase requested, const Bounds& b, Precision p, Backend backend);
 // Number of usable CUDA devices (0 in builds without CUDA or without a GPU).
 int cuda_device_count();

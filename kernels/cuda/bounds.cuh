@@ -8,28 +8,56 @@
 
 namespace cg::cuda {
 
-// Per-block partial bounds (device_bounds): box, r_max and the radius moments Σ r, Σ r², Σ r³.
+// Per-block partial bounds (device_bounds): box, r_min, r_max and the radius moments Σ r, Σ r², Σ r³.
+// r_min sizes the levels of BroadPhase::levels (plan_levels), enters auto's choice of broad phase and
+// --precision auto's accuracy: the device's bounds carry it as compute_bounds does.
 struct BoundsPartial {
-  double lo[3], hi[3], r_max, r_sum[3];
+  double lo[3], hi[3], r_min, r_max, r_sum[3];
 };
-constexpr int kBoundsValues = 10;  // lo[3], hi[3], r_max: min/max; r_sum[3]: sums
+// The values folded, in this order: lo[3], r_min (min); hi[3], r_max (max); r_sum[3] (sums).
+constexpr int kBoundsValues = 11;
+constexpr int kBoundsMins = 4, kBoundsMaxes = 8;  // values [0, 4): min; [4, 8): max; the rest: sum
 
-// Folds value v of b into a (min for 0–2, max for 3–6, sum for 7–9).
+// Folds value v of b into a.
 __device__ __forceinline__ double fold_bound(int v, double a, double b) {
-  if (v < 3) return b < a ? b : a;
-  if (v < 7) return b > a ? b : a;
+  if (v < kBoundsMins) return b < a ? b : a;
+  if (v < kBoundsMaxes) return b > a ? b : a;
   return a + b;
 }
 
-// Bounds of the bodies' boxes (p ± r, as compute_bounds), r_max and the radius moments, one partial
+// A partial's values in fold order, and back.
+__device__ __forceinline__ void bounds_values(const BoundsPartial& p, double* v) {
+  for (int k = 0; k < 3; ++k) {
+    v[k] = p.lo[k];
+    v[4 + k] = p.hi[k];
+    v[8 + k] = p.r_sum[k];
+  }
+  v[3] = p.r_min;
+  v[7] = p.r_max;
+}
+__device__ __forceinline__ void bounds_partial(const double* v, BoundsPartial& p) {
+  for (int k = 0; k < 3; ++k) {
+    p.lo[k] = v[k];
+    p.hi[k] = v[4 + k];
+    p.r_sum[k] = v[8 + k];
+  }
+  p.r_min = v[3];
+  p.r_max = v[7];
+}
+// The values of no body (the identity of every fold).
+__device__ __forceinline__ double bounds_identity(int v) {
+  return v < kBoundsMins ? INFINITY : (v < kBoundsMaxes ? -INFINITY : 0.0);
+}
+
+// Bounds of the bodies' boxes (p ± r, as compute_bounds), r_min, r_max and the radius moments, one partial
 // per block (grid-stride). Records the first invalid body in c->bad. min/max are exact: same bits as
 // the host; the moments (used only to choose the cell edge) are summed in a fixed order.
 __global__ void bounds_partial_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
                                       std::uint64_t n, BoundsPartial* __restrict__ partial,
                                       Counters* __restrict__ c) {
   __shared__ double sh[kBoundsValues][kBlock];
-  double acc[kBoundsValues] = {INFINITY,  INFINITY, INFINITY, -INFINITY, -INFINITY,
-                               -INFINITY, 0.0,      0.0,      0.0,       0.0};
+  double acc[kBoundsValues];
+  for (int v = 0; v < kBoundsValues; ++v) acc[v] = bounds_identity(v);
   for (std::uint64_t i = std::uint64_t(blockIdx.x) * kBlock + threadIdx.x; i < n;
        i += std::uint64_t(gridDim.x) * kBlock) {
     const double p[3] = {pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]};
@@ -38,12 +66,13 @@ __global__ void bounds_partial_kernel(const double* __restrict__ pos, const doub
     for (int k = 0; k < 3; ++k) {
       const double lo = p[k] - r, hi = p[k] + r;
       acc[k] = lo < acc[k] ? lo : acc[k];
-      acc[3 + k] = hi > acc[3 + k] ? hi : acc[3 + k];
+      acc[4 + k] = hi > acc[4 + k] ? hi : acc[4 + k];
     }
-    acc[6] = r > acc[6] ? r : acc[6];
-    acc[7] += r;
-    acc[8] += r * r;
-    acc[9] += r * r * r;
+    acc[3] = r < acc[3] ? r : acc[3];
+    acc[7] = r > acc[7] ? r : acc[7];
+    acc[8] += r;
+    acc[9] += r * r;
+    acc[10] += r * r * r;
   }
   for (int v = 0; v < kBoundsValues; ++v) sh[v][threadIdx.x] = acc[v];
   __syncthreads();
@@ -54,12 +83,9 @@ __global__ void bounds_partial_kernel(const double* __restrict__ pos, const doub
     __syncthreads();
   }
   if (threadIdx.x == 0) {
-    for (int k = 0; k < 3; ++k) {
-      partial[blockIdx.x].lo[k] = sh[k][0];
-      partial[blockIdx.x].hi[k] = sh[3 + k][0];
-      partial[blockIdx.x].r_sum[k] = sh[7 + k][0];
-    }
-    partial[blockIdx.x].r_max = sh[6][0];
+    double v[kBoundsValues];
+    for (int k = 0; k < kBoundsValues; ++k) v[k] = sh[k][0];
+    bounds_partial(v, partial[blockIdx.x]);
   }
 }
 
@@ -68,21 +94,13 @@ constexpr int kBoundsFold = 512;
 __global__ void __launch_bounds__(kBoundsFold) bounds_final_kernel(BoundsPartial* partial, int count) {
   __shared__ double sh[kBoundsValues][kBoundsFold];
   const int t = threadIdx.x;
+  double v[kBoundsValues];
   if (t < count) {
-    for (int k = 0; k < 3; ++k) {
-      sh[k][t] = partial[t].lo[k];
-      sh[3 + k][t] = partial[t].hi[k];
-      sh[7 + k][t] = partial[t].r_sum[k];
-    }
-    sh[6][t] = partial[t].r_max;
+    bounds_values(partial[t], v);
   } else {
-    for (int k = 0; k < 3; ++k) {
-      sh[k][t] = INFINITY;
-      sh[3 + k][t] = -INFINITY;
-      sh[7 + k][t] = 0.0;
-    }
-    sh[6][t] = 0.0;
+    for (int k = 0; k < kBoundsValues; ++k) v[k] = bounds_identity(k);
   }
+  for (int k = 0; k < kBoundsValues; ++k) sh[k][t] = v[k];
   __syncthreads();
   for (int s = kBoundsFold / 2; s > 0; s >>= 1) {
     if (t < s)
@@ -90,12 +108,8 @@ __global__ void __launch_bounds__(kBoundsFold) bounds_final_kernel(BoundsPartial
     __syncthreads();
   }
   if (t == 0) {
-    for (int k = 0; k < 3; ++k) {
-      partial[0].lo[k] = sh[k][0];
-      partial[0].hi[k] = sh[3 + k][0];
-      partial[0].r_sum[k] = sh[7 + k][0];
-    }
-    partial[0].r_max = sh[6][0];
+    for (int k = 0; k < kBoundsValues; ++k) v[k] = sh[k][0];
+    bounds_partial(v, partial[0]);
   }
 }
 
@@ -156,6 +170,7 @@ Bounds bounds_stage(Workspace& ws, cuda::PinnedBuffer& h_staging, cudaStream_t s
   b.lo = {p.lo[0], p.lo[1], p.lo[2]};
   b.hi = {p.hi[0], p.hi[1], p.hi[2]};
   b.r_max = p.r_max;
+  b.r_min = p.r_min;
   for (int k = 0; k < 3; ++k) b.r_sum[k] = p.r_sum[k];
   return b;
 }

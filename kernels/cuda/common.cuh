@@ -63,7 +63,8 @@ struct Counters {
   // skin check (cuda/skin.cuh): the bits of the largest squared displacement and radius growth
   // (non-negative doubles order as their bits), and whether a report byte changed
   unsigned long long skin_moved_sq, skin_growth, skin_report_changed;
-  CellWork cell_work;  // written (not added to) by the estimate's reduction
+  CellWork cell_work;            // written (not added to) by the estimate's reduction
+  unsigned long long long_runs;  // order: runs of equal a left to the segmented sort (order.cuh)
 };
 
 // Pointers of the contact arrays in DEVICE memory (core/contact_fields.hpp); the optional ones are

@@ -4,10 +4,14 @@
 // offsets: ws.a_counts / a_offsets) while those counters stay in half the L2 (there it beats the radix
 // sort), else by a radix sort of (a, b) by a (the counters' random atomics in DRAM cost several times
 // the sort; BENCHMARKS.md §3); Tuning::counting_order forces one. Then each run of
-// equal a is sorted by b (sort_runs_kernel).
+// equal a is sorted by b: a short one (a body's few contacts) by its first thread (sort_runs_kernel),
+// a long one (a large body's contacts with the grains of larger index: tens of thousands among
+// r = 0.01 grains) by CUB's segmented sort, so that no thread sorts a long run alone (quadratic).
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
+#include <cub/device/device_segmented_sort.cuh>
 
+#include "core/broad.hpp"
 #include "cuda/common.cuh"
 #include "cuda/run_state.cuh"
 
@@ -34,24 +38,46 @@ __global__ void __launch_bounds__(kBlock)
   b_out[w] = b_in[k];
 }
 
-// order, second step: each run of equal a is put in b order by its first thread (insertion sort;
-// runs are a body's contacts, short). Pairs are distinct, so the result is the (a, b) order of the
-// host's sort of a << id_bits | b, whatever the order within the runs before.
+// Runs of equal a up to this length are sorted by their first thread; longer ones by the segmented sort.
+constexpr std::uint32_t kShortRun = 32;
+
+// order, second step: each run of equal a (pair_a ascending) is put in b order. A run of at most
+// kShortRun pairs by its first thread (insertion sort); a longer one is listed for the segmented
+// sort: [run_begin[s], run_end[s]) at s = an atomic cursor c->long_runs (its end found by a binary
+// search, not a walk). Pairs are distinct, so the result is the (a, b) order of the host's sort of
+// a << id_bits | b, whatever the order within the runs before.
 __global__ void __launch_bounds__(kBlock)
     sort_runs_kernel(const std::uint32_t* __restrict__ pair_a, std::uint32_t* __restrict__ pair_b,
-                     std::uint32_t n_pairs) {
+                     std::uint32_t n_pairs, std::uint32_t* __restrict__ run_begin,
+                     std::uint32_t* __restrict__ run_end, Counters* __restrict__ c) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   if (k >= n_pairs) return;
   const std::uint32_t a = pair_a[k];
   if (k > 0 && pair_a[k - 1] == a) return;  // not the first of its run
+  const std::uint32_t lim = n_pairs - k > kShortRun ? k + kShortRun + 1 : n_pairs;
   std::uint32_t end = k + 1;
-  while (end < n_pairs && pair_a[end] == a) ++end;
+  while (end < lim && pair_a[end] == a) ++end;
+  if (end - k > kShortRun) {  // a long run: its end, and a slot in the list
+    end = lower_bound_key(pair_a, end, n_pairs, a + 1u);
+    const auto s = static_cast<std::uint32_t>(atomicAdd(&c->long_runs, 1ull));
+    run_begin[s] = k;
+    run_end[s] = end;
+    return;
+  }
   for (std::uint32_t i = k + 1; i < end; ++i) {
     const std::uint32_t v = pair_b[i];
     std::uint32_t j = i;
     for (; j > k && pair_b[j - 1] > v; --j) pair_b[j] = pair_b[j - 1];
     pair_b[j] = v;
   }
+}
+
+// order, the long runs: each block copies its run of the segmented sort's output back.
+__global__ void __launch_bounds__(kBlock)
+    copy_runs_kernel(const std::uint32_t* __restrict__ sorted, std::uint32_t* __restrict__ pair_b,
+                     const std::uint32_t* __restrict__ run_begin, const std::uint32_t* __restrict__ run_end) {
+  for (std::uint32_t i = run_begin[blockIdx.x] + threadIdx.x, end = run_end[blockIdx.x]; i < end; i += kBlock)
+    pair_b[i] = sorted[i];
 }
 
 }  // namespace cg::cuda
@@ -87,8 +113,29 @@ void order_stage(RunState<Real, Key, Narrow>& r) {
     r.pair_b.selector ^= 1;
   }
   if (np > 1) {
-    cuda::sort_runs_kernel<<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), np);
+    // the long runs' list in the dead alternate a buffer (at most np / (kShortRun + 1) runs: begins in
+    // its first half, ends in its second), the segmented sort's output in the dead alternate b buffer
+    std::uint32_t* run_begin = r.pair_a.Alternate();
+    std::uint32_t* run_end = run_begin + np / 2;
+    unsigned long long* d_long = &r.d_counters->long_runs;
+    unsigned long long* h_long = &r.h_counters->long_runs;
+    CG_CUDA_CHECK(cudaMemsetAsync(d_long, 0, sizeof *d_long, st));
+    cuda::sort_runs_kernel<<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), np,
+                                                              run_begin, run_end, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("sort_runs");
+    CG_CUDA_CHECK(cudaMemcpyAsync(h_long, d_long, sizeof *h_long, cudaMemcpyDeviceToHost, st));
+    CG_CUDA_CHECK(cudaStreamSynchronize(st));
+    const std::uint64_t long_runs = *h_long;
+    if (long_runs > 0) {
+      cub_run(ws, "order", [&](void* t, std::size_t& b) {
+        return cub::DeviceSegmentedSort::SortKeys(t, b, r.pair_b.Current(), r.pair_b.Alternate(),
+                                                  std::int64_t(np), std::int64_t(long_runs), run_begin,
+                                                  run_end, st);
+      });
+      cuda::copy_runs_kernel<<<static_cast<unsigned>(long_runs), kBlock, 0, st>>>(
+          r.pair_b.Alternate(), r.pair_b.Current(), run_begin, run_end);
+      CG_CUDA_CHECK_LAUNCH("copy_runs");
+    }
   }
   r.events.mark(EngineStage::order, st);
 }

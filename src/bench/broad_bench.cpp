@@ -3,9 +3,11 @@
 
 #include <fmt/format.h>
 #include <fmt/ostream.h>
+#include <fmt/ranges.h>
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <ctime>
 #include <fstream>
 #include <map>
@@ -86,6 +88,22 @@ Timing time_engine(const BroadBenchOptions& o, const BodiesView& bodies, BroadPh
   return t;
 }
 
+// Seconds a call of `bp` is predicted to take at N = 2^lg from its times at smaller N of the family
+// (log2 N → seconds): the last grown as N^e, e from the last two (clamped to [1, 2]) or, from one, 1
+// (grid, levels) or 2 (sweep, brute: their tests grow faster than N). Negative: no time yet.
+double predicted_seconds(const std::map<int, double>& history, int lg, BroadPhase bp) {
+  if (history.empty()) return -1;
+  const auto last = std::prev(history.end());
+  double e = bp == BroadPhase::sweep || bp == BroadPhase::brute ? 2.0 : 1.0;
+  if (history.size() >= 2) {
+    const auto before = std::prev(last);
+    if (before->second > 0 && last->second > 0 && last->first > before->first)
+      e = std::clamp(std::log2(last->second / before->second) / double(last->first - before->first), 1.0,
+                     2.0);
+  }
+  return last->second * std::exp2(e * double(lg - last->first));
+}
+
 Timing time_phase(const BroadBenchOptions& o, const BodiesView& bodies, BroadPhase bp) {
   return o.precision == Precision::fp32 ? time_engine<float>(o, bodies, bp)
                                         : time_engine<double>(o, bodies, bp);
@@ -118,7 +136,9 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
     if (!csv) throw IoError("bench-broad: cannot write " + o.csv);
     csv << "family,n,log2n,broad_phase,ran,levels,seconds,contacts,pair_tests,ns_per_contact\n";
   }
-  fmt::print(out, "bench-broad: backend {}, precision {}, median of {} ({} seconds; '-': not run)\n",
+  fmt::print(out,
+             "bench-broad: backend {}, precision {}, median of {} ({} seconds; '-': not run; '>t': skipped, "
+             "predicted t seconds a call)\n",
              to_string(o.backend), to_string(o.precision), o.repetitions, o.cpu_time ? "CPU" : "wall");
   fmt::print(out, "{:<15} {:>9} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}  {:<7} {:>9} {:>8} {:>9} {:>9}\n",
              "family", "N", "contacts", "grid", "levels", "sweep", "brute", "auto", "best", "auto/best",
@@ -126,9 +146,11 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
   std::map<int, double> uniform_best, uniform_per_contact;  // log2 N → the uniform row's best (per contact)
   const std::uint64_t total = std::uint64_t(run.size()) * std::uint64_t((o.hi - o.lo) / o.step + 1);
   Progress progress("bench-broad", "rows", total);
-  std::uint64_t done = 0;
+  std::uint64_t done = 0, rows_with_auto = 0, auto_near_best = 0;
+  std::vector<std::string> auto_far;  // rows where auto is more than 10 % above the best
   for (const Family& f : run) {
     std::map<BroadPhase, bool> over_budget;
+    std::map<BroadPhase, std::map<int, double>> history;  // per broad phase: log2 N → seconds a call
     for (int lg = o.lo; lg <= o.hi; lg += o.step) {
       GenerateOptions g;
       g.kind = f.kind;
@@ -143,13 +165,32 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
                               {scene.sphere_radius.data(), scene.sphere_radius.size()},
                               {},
                               {}};
+      // auto's pick: the engine's rule on the bounds it computes (the device's equal the host's)
+      const BroadPhase pick =
+          resolved_broad_phase(BroadPhase::automatic, compute_bounds(bodies), o.precision, o.backend);
       std::map<BroadPhase, Timing> t;
+      std::map<BroadPhase, double> skipped;  // predicted seconds a call of a skipped run
       std::optional<std::uint64_t> contacts;
       for (BroadPhase bp : kPhases) {
-        if (over_budget[bp] || (bp == BroadPhase::brute && lg > o.brute_hi) ||
-            (bp == BroadPhase::sweep && lg > o.sweep_hi))
+        const bool is_auto = bp == BroadPhase::automatic;
+        const BroadPhase as = is_auto ? pick : bp;
+        if (is_auto && t.count(pick)) {  // the same code, timed in this row
+          t[bp] = t[pick];
+        } else if (is_auto && skipped.count(pick)) {
+          skipped[bp] = skipped[pick];
           continue;
-        t[bp] = time_phase(o, bodies, bp);
+        } else {
+          if (!is_auto && (over_budget[bp] || (bp == BroadPhase::brute && lg > o.brute_hi) ||
+                           (bp == BroadPhase::sweep && lg > o.sweep_hi)))
+            continue;
+          const double p = predicted_seconds(history[as], lg, as);
+          if (o.limit_s > 0 && p >= 0 && p * (1 + o.repetitions) > o.limit_s) {
+            skipped[bp] = p;
+            continue;
+          }
+          t[bp] = time_phase(o, bodies, bp);
+          history[as][lg] = t[bp].seconds;
+        }
         if (contacts && *contacts != t[bp].contacts)
           throw std::runtime_error(fmt::format("bench-broad: {} N = 2^{}: {} finds {} contacts, another {}",
                                                f.name, lg, to_string(bp), t[bp].contacts, *contacts));
@@ -161,38 +202,49 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
                              t[bp].pair_tests,
                              1e9 * t[bp].seconds / double(std::max<std::uint64_t>(1, t[bp].contacts)));
       }
-      BroadPhase best = BroadPhase::grid;
+      std::optional<BroadPhase> best;
       double best_s = 0;
       for (const auto& [bp, tm] : t)
-        if (bp != BroadPhase::automatic && (best_s == 0 || tm.seconds < best_s))
-          best = bp, best_s = tm.seconds;
+        if (bp != BroadPhase::automatic && (!best || tm.seconds < best_s)) best = bp, best_s = tm.seconds;
       const double per_contact = best_s / double(std::max<std::uint64_t>(1, contacts.value_or(0)));
-      if (f.name == "uniform") {
+      if (f.name == "uniform" && best) {
         uniform_best[lg] = best_s;
         uniform_per_contact[lg] = per_contact;
       }
       auto cell = [&](BroadPhase bp) {
-        return t.count(bp) ? fmt::format("{:.4f}", t[bp].seconds) : std::string("-");
+        if (t.count(bp)) return fmt::format("{:.4f}", t[bp].seconds);
+        if (skipped.count(bp)) return fmt::format(">{:.2g}", skipped[bp]);
+        return std::string("-");
       };
-      const std::string vs_uniform =
-          uniform_best.count(lg) ? fmt::format("{:.2f}", best_s / uniform_best[lg]) : std::string("-");
+      const bool timed_auto = t.count(BroadPhase::automatic) && best;
+      const double auto_ratio = timed_auto ? t[BroadPhase::automatic].seconds / best_s : 0.0;
+      if (timed_auto) {
+        ++rows_with_auto;
+        if (auto_ratio <= 1.10)
+          ++auto_near_best;
+        else
+          auto_far.push_back(fmt::format("{} 2^{} ({}: {:.2f}x)", f.name, lg, to_string(pick), auto_ratio));
+      }
+      const std::string vs_uniform = best && uniform_best.count(lg)
+                                         ? fmt::format("{:.2f}", best_s / uniform_best[lg])
+                                         : std::string("-");
       const std::string vs_uniform_per_contact =
-          uniform_per_contact.count(lg) ? fmt::format("{:.2f}", per_contact / uniform_per_contact[lg])
-                                        : std::string("-");
+          best && uniform_per_contact.count(lg) ? fmt::format("{:.2f}", per_contact / uniform_per_contact[lg])
+                                                : std::string("-");
       fmt::print(
-          out,
-          "{:<15} {:>9} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}  {:<7} {:>9.2f} {:>8.1f} {:>9} {:>9}\n",
+          out, "{:<15} {:>9} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}  {:<7} {:>9} {:>8} {:>9} {:>9}\n",
           f.name, g.count, contacts.value_or(0), cell(BroadPhase::grid), cell(BroadPhase::levels),
           cell(BroadPhase::sweep), cell(BroadPhase::brute),
-          t.count(BroadPhase::automatic)
-              ? fmt::format("{}:{}", to_string(t[BroadPhase::automatic].ran)[0], cell(BroadPhase::automatic))
-              : std::string("-"),
-          to_string(best), t.count(BroadPhase::automatic) ? t[BroadPhase::automatic].seconds / best_s : 0.0,
-          1e9 * per_contact, vs_uniform, vs_uniform_per_contact);
+          fmt::format("{}:{}", to_string(pick)[0], cell(BroadPhase::automatic)),
+          best ? to_string(*best) : "-", timed_auto ? fmt::format("{:.2f}", auto_ratio) : std::string("-"),
+          best ? fmt::format("{:.1f}", 1e9 * per_contact) : std::string("-"), vs_uniform,
+          vs_uniform_per_contact);
       out.flush();
       progress.update(++done);
     }
   }
+  fmt::print(out, "auto within 10 % of the best: {} of {} rows{}{}\n", auto_near_best, rows_with_auto,
+             auto_far.empty() ? "" : "; not: ", fmt::join(auto_far, ", "));
 }
 
 }  // namespace cg

@@ -12,10 +12,17 @@
 // Timing: per (family, N) the bodies are made resident (Engine::set_resident), one untimed warm-up,
 // then the median of `repetitions` detect_resident() calls (wall clock, or CPU time: cpu_time; CUDA:
 // the contacts stay on the device). A broad phase whose run at some N took longer than `budget_s` is not run
-// at larger N of that family ("-"); brute runs while N <= 2^brute_hi, sweep while N <= 2^sweep_hi. Every
-// broad phase of a row must find the same number of contacts (else the command fails: they are the same
-// bits). Columns: seconds per broad phase; best = the fastest; auto/best; ns per contact of the best; the
-// best against the uniform row's best at that N (/uniform: time; /unif/c: time per contact).
+// at larger N of that family ("-"); brute runs while N <= 2^brute_hi, sweep while N <= 2^sweep_hi; a broad
+// phase whose warm-up and repetitions at this N are predicted to take longer than `limit_s` is skipped,
+// its predicted seconds a call shown as ">t" (the prediction: its time at the family's previous N grown
+// as N^e, e from its last two times at smaller N, clamped to [1, 2]; from one time: 1 for grid and
+// levels, 2 for sweep and brute). `auto` is the broad phase the engine picks for the row (the same
+// rule, on the same bounds), its time the picked phase's of that row where that was run (the same code
+// is not timed twice). Every broad phase of a row must find the same number of contacts (else the
+// command fails: they are the same bits). Columns: seconds per broad phase; auto with the letter of its
+// pick; best = the fastest; auto/best; ns per contact of the best; the best against the uniform row's
+// best at that N (/uniform: time; /unif/c: time per contact). A last line counts the rows where auto is
+// within 10 % of the best.
 #include <cstdint>
 #include <iosfwd>
 #include <string>
@@ -35,6 +42,7 @@ struct BroadBenchOptions {
   int threads = 0;
   int brute_hi = 14, sweep_hi = 16;
   double budget_s = 30;
+  double limit_s = 60;  // predicted seconds (warm-up and repetitions) above which a run is skipped; 0: none
   // Time the process's CPU time (all threads) instead of the wall clock: on a machine shared with
   // other work, with threads = 1, the work itself rather than the waits (CPU backend only).
   bool cpu_time = false;

@@ -573,6 +573,11 @@ Subcommand add_bench_broad(CLI::App& app) {
                   "Seconds: a broad phase slower than this at some N is not run at larger N of the family")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  bbc->add_option("--limit", args->limit_s,
+                  "Seconds: a broad phase whose warm-up and repetitions at some N are predicted (from its "
+                  "times at smaller N) to take longer is skipped, its prediction shown as >t; 0: none")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   bbc->add_option("--seed", args->seed, "Scene seed")->capture_default_str();
   bbc->add_flag("--cpu-time", args->cpu_time,
                 "Time the process's CPU time, not the wall clock (CPU backend on a shared machine; with "

@@ -269,6 +269,69 @@ TYPED_TEST(BroadPhaseTest, AutoPicksByTheRadii) {
             BroadPhase::grid);
 }
 
+// Resident bodies (Engine::set_resident, detect_resident; on CUDA: their bounds from the device, the
+// path of bench-broad and of the step loops) plan what the host arrays plan: the same broad phase
+// under auto, the same levels, as many pair tests and the same contacts. The levels and auto size
+// themselves by the smallest radius; bounds without it plan one level, the grid, and the intruder's
+// grains then crowd the grid's cells.
+TYPED_TEST(BroadPhaseTest, ResidentBodiesPlanTheLevelsOfTheHostArrays) {
+  CG_SKIP_WITHOUT_BACKEND(TypeParam);
+  constexpr Backend B = TypeParam::backend;
+  for (const TestScene& s :
+       {generated("intruders", 3000, 0.01, 1, 9, 1), generated("bimodal", 4000, 0.1, 1, 10),
+        generated("polydisperse", 3000, 0.001, 1, 11)})
+    for (BroadPhase bp : {BroadPhase::levels, BroadPhase::automatic}) {
+      SCOPED_TRACE(s.name + ", " + to_string(bp));
+      const Run host = detect<B>(s, Precision::fp32, bp);
+      EngineOptions o;
+      o.backend = B;
+      o.fields = Fields::full;
+      o.broad_phase = bp;
+      Engine<float> e(o);
+      e.set_resident(s.view());
+      e.detect_resident();
+      EXPECT_EQ(compare_contacts(e.resident_contacts(), host.contacts32), "identical");
+      EXPECT_EQ(e.stats().broad_phase, host.stats.broad_phase);
+      EXPECT_EQ(e.stats().levels, host.stats.levels);
+      // (the device sums the radius moments of the cell-size model in another order: the frame's edge,
+      // and with it the top level's tests, may differ by a rounding)
+      EXPECT_NEAR(double(e.stats().pair_tests), double(host.stats.pair_tests),
+                  0.1 * double(host.stats.pair_tests));
+      // (the bimodal scene of 4000 bodies holds no r = 1 body at 10 % of the volume: one level)
+      if (bp == BroadPhase::levels && s.name.rfind("bimodal", 0) != 0) {
+        EXPECT_GE(e.stats().levels, 3);
+      }
+    }
+}
+
+// The levels' work is near-linear in N on one r = 1 intruder among r = 0.01 grains (issue #34): the
+// pair tests per body of 2^15 bodies within 1.5x of those of 2^12 (the grid's grow with N: every
+// grain of the intruder's cells meets every other), host arrays and resident bodies alike.
+TYPED_TEST(BroadPhaseTest, LevelsPairTestsGrowLinearlyWithOneIntruder) {
+  CG_SKIP_WITHOUT_BACKEND(TypeParam);
+  constexpr Backend B = TypeParam::backend;
+  double per_body[2][2] = {};
+  const std::uint64_t sizes[2] = {4096, 32768};
+  for (int k = 0; k < 2; ++k) {
+    const TestScene s = generated("intruders", sizes[k], 0.01, 1, 12, 1);
+    const Run host = detect<B>(s, Precision::fp32, BroadPhase::levels);
+    EngineOptions o;
+    o.backend = B;
+    o.broad_phase = BroadPhase::levels;
+    Engine<float> e(o);
+    e.set_resident(s.view());
+    e.detect_resident();
+    per_body[k][0] = double(host.stats.pair_tests) / double(sizes[k]);
+    per_body[k][1] = double(e.stats().pair_tests) / double(sizes[k]);
+  }
+  for (int path = 0; path < 2; ++path) {
+    SCOPED_TRACE(path == 0 ? "host arrays" : "resident");
+    EXPECT_GT(per_body[0][path], 0.5);
+    EXPECT_LT(per_body[1][path], 1.5 * per_body[0][path]);
+    EXPECT_LT(per_body[1][path], 20.0);
+  }
+}
+
 // ---- plans and keys ---------------------------------------------------------------------------------
 
 Bounds bounds_of(double r_min, double r_max, double extent, std::uint64_t n = 1000) {
@@ -387,6 +450,23 @@ TEST(AutoBroadPhase, Rule) {
   sparse.r_sum[0] = 0.01 * 99999 + 1;
   EXPECT_LT(grid_occupancy(sparse), 1.0);
   EXPECT_EQ(choose_broad_phase(sparse, Precision::fp64), BroadPhase::grid);
+  EXPECT_EQ(choose_broad_phase(sparse, Precision::fp64, true), BroadPhase::grid);
+  EXPECT_EQ(choose_broad_phase(intruder, Precision::fp64, true), BroadPhase::levels);
+  EXPECT_EQ(choose_broad_phase(uniform, Precision::fp64, true), BroadPhase::grid);
+  // bimodal 1:10 (10 % of the volume in r = 1 among r = 0.1) at the generator's density: a cell of
+  // edge 2 holds ~164 bodies over log2(20) = 4.3 levels: the host's grid, a GPU's levels (its grid
+  // walks cells longer than its staged window from memory)
+  Bounds bimodal = bounds_of(0.1, 1, 23.4, 262144);
+  bimodal.r_sum[0] = 0.1 * 262144 * 1.0;
+  EXPECT_NEAR(grid_occupancy(bimodal), 163.7, 0.5);
+  EXPECT_EQ(choose_broad_phase(bimodal, Precision::fp32), BroadPhase::grid);
+  EXPECT_EQ(choose_broad_phase(bimodal, Precision::fp32, true), BroadPhase::levels);
+  // log-uniform 1:1000 at the generator's density: ~9 bodies a cell over 11 levels, the grid's on both
+  Bounds loguniform = bounds_of(0.001, 1, 61.8, 262144);
+  loguniform.r_sum[0] = 262144 * 0.145;
+  EXPECT_NEAR(grid_occupancy(loguniform), 8.9, 0.1);
+  EXPECT_EQ(choose_broad_phase(loguniform, Precision::fp32), BroadPhase::grid);
+  EXPECT_EQ(choose_broad_phase(loguniform, Precision::fp32, true), BroadPhase::grid);
   // a flat scene: the extents are at least the cell
   Bounds flat = bounds_of(0.01, 1, 100, 100000);
   flat.hi.z = 0;
@@ -410,6 +490,29 @@ TEST(LevelsCpuCuda, SameContactsOnLogUniformScenes) {
       EXPECT_EQ(gpu.stats.candidates, cpu.stats.candidates);
       EXPECT_EQ(gpu.stats.levels, cpu.stats.levels);
       EXPECT_EQ(gpu.stats.entries, cpu.stats.entries);
+    }
+  }
+}
+
+// The order stage's long runs (cuda/order.cuh: a large body's contacts with the grains of larger
+// index, sorted by CUB's segmented sort instead of one thread): three r = 1 intruders among 2^14
+// grains of r = 0.01 (the first intruder's run holds thousands of pairs), every broad phase, fp32 and
+// fp64: the CUDA contacts are the CPU's, bit for bit. Skips visibly without a GPU.
+TEST(OrderCpuCuda, LongRunsOfOneBodyKeepTheHostOrder) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  const TestScene s = generated("intruders", 16384, 0.01, 1, 21, 3);
+  for (Precision mode : {Precision::fp32, Precision::fp64}) {
+    const test::Run cpu = detect<Backend::cpu>(s, mode, BroadPhase::levels);
+    const auto& ia = mode == Precision::fp32 ? cpu.contacts32.id_a : cpu.contacts.id_a;
+    std::size_t longest = 0, run = 0;
+    for (std::size_t k = 0; k < ia.size(); ++k) {
+      run = k > 0 && ia[k] == ia[k - 1] ? run + 1 : 1;
+      longest = std::max(longest, run);
+    }
+    ASSERT_GT(longest, 1000u) << "the scene has a long run";
+    for (BroadPhase bp : {BroadPhase::grid, BroadPhase::levels, BroadPhase::sweep}) {
+      SCOPED_TRACE(std::string(to_string(mode)) + ", " + to_string(bp));
+      EXPECT_EQ(same(detect<Backend::cuda>(s, mode, bp), cpu), "identical");
     }
   }
 }

@@ -195,6 +195,17 @@ TEST_F(Cli, BroadPhasesWriteTheSameContacts) {
   std::size_t lines = 0;
   for (std::string l; std::getline(csv, l);) ++lines;
   EXPECT_EQ(lines, 1u + 2 * 2 * 5) << "header + 2 families x N = 2^8, 2^10 x 5 broad phases";
+  EXPECT_NE(b.output.find("auto within 10 % of the best: "), std::string::npos) << b.output;
+  // --limit: at 2^10 every broad phase is predicted (from its time at 2^8) above 1 ns: skipped, shown
+  // as ">t", and not in the CSV
+  const Result lim = run("bench-broad --lo 8 --hi 10 --families uniform --repetitions 1 --limit 1e-9 --csv " +
+                         path("lim.csv"));
+  ASSERT_EQ(lim.code, 0) << lim.output;
+  EXPECT_NE(lim.output.find(" >"), std::string::npos) << lim.output;
+  std::ifstream lim_csv(path("lim.csv"));
+  lines = 0;
+  for (std::string l; std::getline(lim_csv, l);) ++lines;
+  EXPECT_EQ(lines, 1u + 5) << "header + the 2^8 row's 5 broad phases";
 }
 
 TEST_F(Cli, ValidatePassesAndFails) {
