@@ -79,7 +79,7 @@ bool cuda_available() { return false; }
 int cuda_device_count() { return 0; }
 namespace detail {
 class CudaBackend {};
-std::unique_ptr<CudaBackend> make_cuda_backend(int) {
+std::unique_ptr<CudaBackend> make_cuda_backend(int, std::uint64_t) {
   throw CudaError("this contactgrid was built without CUDA (rebuild with nvcc present)");
 }
 template <class Broad, class Narrow>
@@ -200,7 +200,8 @@ Engine<Real>::Engine(EngineOptions options) : m_impl(std::make_unique<Impl>()) {
     throw UsageError("fp32_broad_phase (precision mixed) is an option of Engine<double>");
   Backend b = options.backend;
   if (b == Backend::automatic) b = cuda_available() ? Backend::cuda : Backend::cpu;
-  if (b == Backend::cuda) m_impl->cuda = detail::make_cuda_backend(options.device).release();
+  if (b == Backend::cuda)
+    m_impl->cuda = detail::make_cuda_backend(options.device, options.device_memory_limit).release();
   m_impl->options.backend = b;
   m_impl->resolved = b;
 }

@@ -59,6 +59,10 @@ struct EngineOptions {
   BroadPhase broad_phase = BroadPhase::automatic;
   int threads = 0;  // CPU backend threads; 0: all hardware threads
   int device = -1;  // CUDA device; -1: current
+  // CUDA: the most device memory the engine's workspace may hold, in bytes (0: what the device has
+  // free); a call that needs more throws ResourceError. CONTACTGRID_DEVICE_MEMORY_LIMIT (docs/GPU.md)
+  // caps it too: the smaller of the two holds.
+  std::uint64_t device_memory_limit = 0;
   // Ellipsoid narrow phase (scenes with ellipsoids only; core/ellipsoid_contact.hpp SolverSettings):
   // Newton stops when the tangential gradient is <= tolerance × (largest semi-axis of A + of B);
   // iteration cap per start. 0: the precision's default (fp32 2e-5, fp64 1e-11; 40 iterations).

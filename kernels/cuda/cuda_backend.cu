@@ -107,7 +107,7 @@ namespace detail {
 
 class CudaBackend {
  public:
-  explicit CudaBackend(int device) {
+  CudaBackend(int device, std::uint64_t memory_limit) : m_memory_limit(memory_limit) {
     if (device < 0) CG_CUDA_CHECK(cudaGetDevice(&device));
     m_device = device;
     CG_CUDA_CHECK(cudaSetDevice(m_device));
@@ -132,6 +132,8 @@ class CudaBackend {
   void refresh_tuning() {
     m_tuning = read_tuning();
     m_ws.memory_limit = m_tuning.memory_limit;
+    if (m_memory_limit > 0)  // EngineOptions::device_memory_limit: the smaller cap holds
+      m_ws.memory_limit = std::min<std::size_t>(m_ws.memory_limit.value_or(m_memory_limit), m_memory_limit);
   }
 
   // One detection: the stages in order (see the file comment).
@@ -245,11 +247,12 @@ class CudaBackend {
   ThrustAllocator m_thrust;                      // DEVICE temporary storage of Thrust calls
   cuda::PinnedBuffer m_h_counters, m_h_staging;  // pinned HOST staging
   bool m_downloaded = false;                     // a download to host memory was made (download_transfer)
+  std::uint64_t m_memory_limit = 0;              // EngineOptions::device_memory_limit (0: none)
 };
 
-std::unique_ptr<CudaBackend> make_cuda_backend(int device) {
+std::unique_ptr<CudaBackend> make_cuda_backend(int device, std::uint64_t memory_limit) {
   if (!cuda_available()) throw CudaError("no CUDA device is available to this process");
-  return std::make_unique<CudaBackend>(device);
+  return std::make_unique<CudaBackend>(device, memory_limit);
 }
 
 void destroy(CudaBackend* backend) { delete backend; }

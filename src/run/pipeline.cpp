@@ -339,14 +339,6 @@ CollectedContacts<Real> collect_contacts(const Session& session, Contacts<Real>&
                                                  : exchange_contacts(session, std::move(local), bodies, o);
 }
 
-// --memory-limit caps the CUDA engine's workspace as CONTACTGRID_DEVICE_MEMORY_LIMIT does (the
-// backend reads it at each call, kernels/cuda/tuning.hpp): the smaller of the two stays.
-void cap_device_memory(std::uint64_t limit) {
-  const char* set = std::getenv("CONTACTGRID_DEVICE_MEMORY_LIMIT");
-  if (set && *set && std::strtoull(set, nullptr, 10) <= limit) return;
-  setenv("CONTACTGRID_DEVICE_MEMORY_LIMIT", std::to_string(limit).c_str(), 1);
-}
-
 // The engine of the run's mode, built with the rank's threads (after the read: --precision auto
 // chooses the mode from the agreed bounds).
 template <class Real>
@@ -357,8 +349,7 @@ std::optional<Engine<Real>> make_engine(const Session& session, const Distribute
     EngineOptions engine_options = options.engine;
     engine_options.threads = threads;
     engine_options.broad_phase = broad;
-    if (options.memory_limit && engine_options.backend != Backend::cpu)
-      cap_device_memory(options.memory_limit);
+    if (options.memory_limit) engine_options.device_memory_limit = options.memory_limit;
     engine.emplace(engine_options);
   });
   return engine;

@@ -111,8 +111,8 @@ TYPED_TEST(PiecesTest, KeepsTheReportMaskAndIds) {
 }
 
 // CUDA: a piece that runs out of device memory in the middle (the workspace capped by
-// CONTACTGRID_DEVICE_MEMORY_LIMIT at about half of what the whole scene takes) is split and detected
-// again; the result is the one-piece result. The model limit is out of the way (1 TiB).
+// EngineOptions::device_memory_limit at about half of what the whole scene takes) is split and
+// detected again; the result is the one-piece result. The model limit is out of the way (1 TiB).
 TEST(PiecesCuda, DeviceOutOfMemoryInTheMiddleSplitsThePiece) {
   if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
   const Spheres s = random_spheres(400000, 0.5, 1.0, 13);
@@ -125,8 +125,7 @@ TEST(PiecesCuda, DeviceOutOfMemoryInTheMiddleSplitsThePiece) {
   const Contacts<float> whole = unlimited.detect(v, frame);
   const std::uint64_t peak = unlimited.stats().peak_device_bytes;
   ASSERT_GT(peak, 0u);
-  const std::string cap = std::to_string((std::uint64_t(64) << 20) + peak / 2);
-  ::setenv("CONTACTGRID_DEVICE_MEMORY_LIMIT", cap.c_str(), 1);
+  o.device_memory_limit = (std::uint64_t(64) << 20) + peak / 2;
   Engine<float> capped(o);
   EXPECT_THROW(capped.detect(v, frame), ResourceError) << "the cap does not make the whole scene fail";
   PieceOptions p;
@@ -134,14 +133,7 @@ TEST(PiecesCuda, DeviceOutOfMemoryInTheMiddleSplitsThePiece) {
   p.width = frame_ghost_width(global, frame.origin, std::numeric_limits<float>::epsilon());
   p.axis = choose_axis(global, -1);
   PieceReport report;
-  Contacts<float> pieces;
-  try {
-    pieces = detect_in_pieces(capped, v, frame, p, &report);
-  } catch (...) {
-    ::unsetenv("CONTACTGRID_DEVICE_MEMORY_LIMIT");
-    throw;
-  }
-  ::unsetenv("CONTACTGRID_DEVICE_MEMORY_LIMIT");
+  const Contacts<float> pieces = detect_in_pieces(capped, v, frame, p, &report);
   EXPECT_GE(report.pieces, 2u);
   EXPECT_EQ(compare_contacts(pieces, whole), "identical");
 }
