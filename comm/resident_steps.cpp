@@ -92,13 +92,14 @@ struct StepLoop<Real>::State {
   StepBodies spare;          // the previous rows' storage: the next migration's rows are merged into it
   bool rows_changed = true;  // bodies' rows (ids) differ from engine A's: the layout sets them
   bool uploaded = false;     // this step's layout set engine A's rows from the moved bodies
+  bool written = false;      // this step's update_frame wrote the moved positions into engine A
   StepPlan plan;             // of the owned rows: interior or boundary, and the halo
   BoundaryRows rows;         // engine B's row of each boundary row and each ghost
   std::vector<std::uint64_t> send_counts, recv_counts;
-  HostVector<Vec3<double>> laid;        // the owned centres at the layout
   std::vector<double> axis_coordinate;  // the owned centres along the slab axis (coordinates())
   int steps_since_layout = 0;
   double displacement = 0;  // the largest since the layout (rebuild_due; max over ranks)
+  double moved = 0;         // ... this rank's (update_frame: engine A's resident_extent)
   int layouts = 0;
   std::uint64_t migrated = 0, rebalances = 0;
   // engine B's rows, host side: storage kept across layouts (grown with room to spare), page-locked
@@ -164,16 +165,6 @@ struct StepLoop<Real>::State {
     return axis_coordinate;
   }
 
-  // A copy of the bodies' centres at this layout (rebuild_due's reference), in parallel.
-  void remember_centres() {
-    const std::size_t n = bodies.size();
-    laid.resize(n);
-    const Vec3<double>* x = bodies.position.data();
-    Vec3<double>* to = laid.data();
-#pragma omp parallel for num_threads(threads) schedule(static) if (n > (std::size_t(1) << 15))
-    for (std::size_t k = 0; k < n; ++k) to[k] = x[k];
-  }
-
   // `v` resized to n rows; grown storage (room for a quarter more) moves, so its page lock `pin`
   // (when given: the rows a step writes) is released first and taken again on the new storage.
   template <class T>
@@ -221,12 +212,31 @@ const ExportPlan& StepLoop<Real>::halo() const {
 template <class Real>
 void StepLoop<Real>::update_frame(int step) {
   State& s = *m;
+  // After the first layout engine A holds the bodies' rows: the moved positions go there first (the
+  // commit's write, made early and not timed, as commit is not), then the engine validates them and
+  // returns their bounds and the largest displacement since the layout where they are (CUDA: on the
+  // device; no centre is read on the host). Before it: the bodies' own bounds.
+  const bool resident = s.layouts > 0 && !s.rows_changed;
+  StepBodies& b = s.bodies;
+  if (resident) {
+    agreed_stage(s.session, "steps", [&] {
+      s.a.write_resident(0, b.size(), b.position.data(), b.radius.data());
+      s.written = true;
+    });
+  }
   const auto f0 = WallClock::now();
   Bounds mine;
   agreed_stage(s.session, "steps", [&] {
-    if (s.bodies.size() == 0) return;
+    s.moved = 0;
+    if (b.size() == 0) return;
     try {
-      mine = compute_bounds(s.bodies.view());
+      if (resident) {
+        const ResidentExtent e = s.a.resident_extent(b.id);
+        mine = e.bounds;
+        s.moved = e.displacement;
+      } else {
+        mine = compute_bounds(b.view());
+      }
     } catch (const InputError& e) {
       throw InputError("step " + std::to_string(step) + ": " + e.what());
     }
@@ -248,16 +258,7 @@ template <class Real>
 bool StepLoop<Real>::rebuild_due() {
   State& s = *m;
   const auto t0 = WallClock::now();
-  const std::size_t n = s.bodies.size();
-  double moved_sq = 0;
-  const Vec3<double>* x = s.bodies.position.data();
-  const Vec3<double>* x0 = s.laid.data();
-#pragma omp parallel for num_threads(s.threads) schedule(static) reduction(max : moved_sq) if (n > (1u << 15))
-  for (std::size_t k = 0; k < n; ++k) {
-    const Vec3<double> d = x[k] - x0[k];
-    moved_sq = std::max(moved_sq, d.x * d.x + d.y * d.y + d.z * d.z);
-  }
-  s.displacement = s.session.max(std::sqrt(moved_sq));
+  s.displacement = s.session.max(s.moved);  // (update_frame's, from engine A's mark at the layout)
   ++s.steps_since_layout;
   s.tuner_displacement = s.displacement;
   s.tuner_steps = s.steps_since_layout;
@@ -441,10 +442,12 @@ void StepLoop<Real>::lay_out() {
           BodiesView{b.position, b.radius, {}, {}, b.shapes.shape, b.shapes.semi_axes, b.shapes.orientation});
       s.rows_changed = false;
       s.uploaded = !first;  // the setup's rows are the file's: step 1 commits its motion
-    } else {                // the same rows: commit writes their motion, the next detection builds
+    } else {                // the same rows (update_frame wrote their motion): the next detection builds
+      if (!s.written) s.a.write_resident(0, b.size(), b.position.data(), b.radius.data());
+      s.written = true;
       s.a.rebuild_candidates();
     }
-    s.remember_centres();
+    s.a.mark_resident();  // the rebuild check's reference: the centres of this layout
   });
   if (!alone) {
     s.recv_counts = s.comm.alltoall_counts(s.send_counts);
@@ -519,12 +522,14 @@ template <class Real>
 void StepLoop<Real>::commit(Moved moved) {
   State& s = *m;
   StepBodies& b = s.bodies;
+  const bool written = s.written;
+  s.written = false;
   if (s.uploaded) {  // this step's layout set engine A's rows from the moved bodies
     s.uploaded = false;
     return;
   }
   try {
-    if (moved.positions) s.a.write_resident(0, b.size(), b.position.data(), b.radius.data());
+    if (moved.positions && !written) s.a.write_resident(0, b.size(), b.position.data(), b.radius.data());
     if (moved.orientations && !b.shapes.empty())
       s.a.write_resident_shapes(0, b.size(), nullptr, b.shapes.orientation.data());
   } catch (...) {
@@ -653,6 +658,7 @@ void StepLoop<Real>::collect() {
   s.relaid.push_back(s.relaid_now ? 1.0 : 0.0);
   s.relaid_now = false;
   s.uploaded = false;
+  s.written = false;
   if (s.motion.hash_every_step) {
     std::uint64_t h = 0;
     agreed_stage(s.session, "steps", [&] { h = contacts_hash(contacts()); });

@@ -14,14 +14,19 @@
 //   (the caller moves bodies(): the integrator's part, before the step's clock)
 //   update_frame       the moved bodies' bounds over the ranks (a centre that is not finite stops the
 //                      run: InputError naming the body and the step), the frame of a run from scratch
-//                      of them (so the contacts are its bits), the ghost width
+//                      of them (so the contacts are its bits), the ghost width; after the first
+//                      layout the moved positions go into engine A first and the engine computes the
+//                      bounds and the largest displacement since the layout where its rows are
+//                      (Engine::resident_extent; CUDA: on the device, no centre read on the host)
 //   rebuild_due        whether a body moved by more than skin/2 since the layout (the rows' ghost set
-//                      no longer covers every contact); then, before lay_out:
+//                      no longer covers every contact; engine A's mark_resident at the layout is the
+//                      reference); then, before lay_out:
 //     rebalance        slab cuts moved part of the way to the owned counts' quantiles, when the
 //                      imbalance of the owned counts passes a threshold
 //     migrate          every body whose centre left its slab to its new owner (its rows, shape rows
 //                      and the caller's state), merged into the rows that stay by id
-//   commit             the moved rows into engine A (nothing when this step's layout set them)
+//   commit             the moved rows into engine A (nothing when this step's layout or update_frame
+//                      wrote them)
 //   detect_interior    engine A, all pairs of the owned bodies, on a second thread ...
 //   refresh_ghosts     ... while this thread sends every boundary row's position and bounding radius
 //                      (scenes with ellipsoids: and orientation, in the same message) to the ranks
@@ -81,7 +86,8 @@ struct StepStats {
   bool oriented = false;        // the halo carried the ghosts' orientations (a scene with ellipsoids)
   std::uint64_t halo_rows = 0;  // ghost rows refreshed per step (the last layout's), summed over ranks
   double setup = 0;             // the first lay_out (max over ranks)
-  double frame = 0;             // update_frame: bounds over the ranks, the frame
+  double frame = 0;             // update_frame: bounds and displacement (engine A), over the ranks, the
+                                // frame (the write of the moved positions into A is not timed)
   double migrate = 0;           // per step that rebuilt: rebalance + migrate (median)
   double rebuild = 0;           // per step that rebuilt: the rebuild check + lay_out (median)
   double halo = 0;              // refresh_ghosts: boundary rows (and orientations) through MPI, into B
@@ -135,7 +141,7 @@ class StepLoop {
   const ExportPlan& halo() const;
 
   // Collective. InputError naming the first body that this rank does not own. Engine A's rows are
-  // set again only when migration changed this rank's bodies (else commit writes their motion and
+  // set again only when migration changed this rank's bodies (else update_frame wrote their motion and
   // the next detection builds); one rank has no plan, no halo and no engine B to lay out.
   void lay_out();
   // Collective. `step`: the step's number (for the messages).

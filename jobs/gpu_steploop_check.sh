@@ -13,8 +13,9 @@
 # Columns: fresh = a detection from scratch per step (--skin 0: every step builds), mean = the mean
 # step with skin auto (frame + migrate + rebuild + detection, reuses and rebuilds together), build =
 # the detection of a step that built its candidate lists, reuse = one that reused them, layout = the
-# rebuild's check and layout (ghost set, rows), frame = the moved bodies' bounds over the ranks (every
-# step, host), migrate = rebalance + migration, halo = the ghost refresh; all in
+# rebuild's check and layout (ghost set, rows), frame = the moved bodies' bounds and largest
+# displacement (every step; engine A's resident_extent: on the device, a few values read back) over
+# the ranks, migrate = rebalance + migration, halo = the ghost refresh; all in
 # ms, medians over the steps of the maxima over ranks. Targets (#31): mean/fresh <= 0.20, (build +
 # layout)/fresh <= 1.0; np 2 / np 1 >= 1.8.
 # A dry run of the script itself on a machine without a GPU: BACKEND=cpu SCALE=8 (2^8 times fewer

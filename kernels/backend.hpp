@@ -129,6 +129,12 @@ void history_download(CudaBackend& backend, ContactHistory& history);
 // where bodies.shape is set their shape rows checked as validate_shapes (same texts, after the bodies'
 // own) and the ellipsoids counted into `ellipsoids` (0 without shapes); one wait for both.
 Bounds device_bounds(CudaBackend& backend, const DeviceBodiesView& bodies, std::size_t& ellipsoids);
+// Engine::mark_resident / resident_extent on the DEVICE rows (cuda/resident_extent.cuh): the resident
+// centres copied aside on the device; the rows' bounds (a bad row named by ids[row], or its index
+// without ids) and, when `marked`, the largest displacement from the copy, in one pass and one wait.
+void resident_mark(CudaBackend& backend);
+Bounds resident_extent(CudaBackend& backend, std::span<const std::int64_t> ids, bool marked,
+                       double& displacement);
 
 }  // namespace cg::detail
 

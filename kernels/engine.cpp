@@ -90,6 +90,10 @@ void destroy(CudaBackend* b) { delete b; }
 Bounds device_bounds(CudaBackend&, const DeviceBodiesView&, std::size_t&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
+void resident_mark(CudaBackend&) { throw CudaError("this contactgrid was built without CUDA"); }
+Bounds resident_extent(CudaBackend&, std::span<const std::int64_t>, bool, double&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
 template <class Real>
 void download_contacts(CudaBackend&, const DeviceContactsView<Real>&, Contacts<Real>&) {
   throw CudaError("this contactgrid was built without CUDA");
@@ -138,7 +142,9 @@ struct Engine<Real>::Impl {
   HostVector<Quat<double>> resident_orientation;
   HostVector<std::int64_t> resident_id;  // the rows' global ids (history keys); empty: row indices
   std::size_t resident_rows = 0;
-  bool resident_shapes = false;  // set_resident had shape rows (either backend)
+  bool resident_shapes = false;                       // set_resident had shape rows (either backend)
+  bool resident_marked = false;                       // mark_resident since the rows were set
+  HostVector<Vec3<double>> resident_marked_position;  // CPU: the centres at the mark (CUDA: on the device)
   Contacts<Real> resident_contacts;
   std::optional<DeviceContactsView<Real>> resident_on_device;  // CUDA: not yet downloaded
   bool resident_overwritten = false;  // CUDA: a later detection reused the workspace first
@@ -514,6 +520,7 @@ void Engine<Real>::set_resident(const BodiesView& b) {
       throw InputError("set_resident: ids are not strictly ascending at row " + std::to_string(i));
   s.resident_rows = b.size();
   s.resident_shapes = shapes;
+  s.resident_marked = false;
   s.kept.valid = false;  // other rows: the next detection builds
   s.resident_contacts = Contacts<Real>{};
   s.resident_on_device.reset();
@@ -529,6 +536,54 @@ void Engine<Real>::set_resident(const BodiesView& b) {
   s.resident_semi_axes.assign(b.semi_axes.begin(), b.semi_axes.end());
   s.resident_orientation.assign(b.orientation.begin(), b.orientation.end());
   s.resident_id.assign(b.id.begin(), b.id.end());
+}
+
+template <class Real>
+void Engine<Real>::mark_resident() {
+  Impl& s = *m_impl;
+  s.resident_marked = true;
+  if (s.resolved == Backend::cuda) {
+    detail::resident_mark(*s.cuda);
+    return;
+  }
+  const std::size_t n = s.resident_rows;
+  s.resident_marked_position.resize(n);
+  const Vec3<double>* x = s.resident_position.data();
+  Vec3<double>* to = s.resident_marked_position.data();
+  const int nt = s.options.threads > 0 ? s.options.threads : omp_get_max_threads();
+#pragma omp parallel for num_threads(nt) schedule(static) if (n > (std::size_t(1) << 15))
+  for (std::size_t k = 0; k < n; ++k) to[k] = x[k];
+}
+
+template <class Real>
+ResidentExtent Engine<Real>::resident_extent(std::span<const std::int64_t> ids) {
+  Impl& s = *m_impl;
+  const std::size_t n = s.resident_rows;
+  if (!ids.empty() && ids.size() != n)
+    throw UsageError("resident_extent: " + std::to_string(ids.size()) + " ids for " + std::to_string(n) +
+                     " resident rows");
+  ResidentExtent e;
+  if (s.resolved == Backend::cuda) {
+    e.bounds = detail::resident_extent(*s.cuda, ids, s.resident_marked, e.displacement);
+    return e;
+  }
+  e.bounds =
+      compute_bounds(BodiesView{{s.resident_position.data(), n}, {s.resident_radius.data(), n}, ids, {}});
+  if (!s.resident_marked) return e;
+  // the largest squared distance (exact: the max of values rounded alike on both backends), then its root
+  double moved_sq = 0;
+  const Vec3<double>* x = s.resident_position.data();
+  const Vec3<double>* x0 = s.resident_marked_position.data();
+  const int nt = s.options.threads > 0 ? s.options.threads : omp_get_max_threads();
+#pragma omp parallel for num_threads(nt) schedule(static) \
+    reduction(max                                         \
+              : moved_sq) if (n > (std::size_t(1) << 15))
+  for (std::size_t k = 0; k < n; ++k) {
+    const Vec3<double> d = x[k] - x0[k];
+    moved_sq = std::max(moved_sq, d.x * d.x + d.y * d.y + d.z * d.z);
+  }
+  e.displacement = std::sqrt(moved_sq);
+  return e;
 }
 
 template <class Real>

@@ -138,6 +138,13 @@ struct EngineStats {
   double skin = 0;  // the skin of the kept list (its build's; 0: none kept)
 };
 
+// Engine::resident_extent: where the resident rows are and how far they moved.
+struct ResidentExtent {
+  Bounds bounds;            // of the resident rows, as compute_bounds
+  double displacement = 0;  // the largest distance of a resident centre from its place at the last
+                            // mark_resident() (0 without a mark since the rows were set)
+};
+
 template <class Real>
 class Engine {
  public:
@@ -213,6 +220,15 @@ class Engine {
                              const Quat<double>* orientation);
   std::size_t detect_resident(std::optional<Frame> frame = std::nullopt);
   const Contacts<Real>& resident_contacts();
+  // A step loop's frame and rebuild check where the rows are (CUDA: on the device, one read back of a
+  // few values; no centre crosses to the host): mark_resident remembers the resident centres;
+  // resident_extent validates the rows and returns their bounds (as compute_bounds: the same
+  // InputError texts, a bad row named by ids[row] when `ids` is given, else by its row index) and the
+  // largest displacement since the mark. Bit-identical on both backends (min / max are exact; the
+  // radius moments of Bounds::r_sum are summed in each backend's order, as compute_bounds' threads
+  // and device_bounds do).
+  void mark_resident();
+  ResidentExtent resident_extent(std::span<const std::int64_t> ids = {});
   // Page-locks host memory that read_resident / write_resident use again and again (CUDA:
   // cudaHostRegister, so the copies run at the link's speed; CPU: nothing to do). false when the
   // driver refuses (the copies stay pageable). unpin_host before that memory is freed.

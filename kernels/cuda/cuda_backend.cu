@@ -55,6 +55,7 @@
 #include "cuda/pack.cuh"
 #include "cuda/pair_estimate.cuh"
 #include "cuda/pairs.cuh"
+#include "cuda/resident_extent.cuh"
 #include "cuda/run_state.cuh"
 #include "cuda/shapes.cuh"
 #include "cuda/skin.cuh"
@@ -392,6 +393,22 @@ DeviceBodiesView resident_view(const CudaBackend& b) {
   }
   if (b.m_ws.res_ided) v.id = reinterpret_cast<const std::int64_t*>(b.m_ws.res_id.data());
   return v;
+}
+
+void resident_mark(CudaBackend& b) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  mark_stage(b.m_ws, b.m_ws.res_mark, b.m_stream, reinterpret_cast<const double*>(b.m_ws.res_pos.data()),
+             b.m_ws.res_count);
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+}
+
+Bounds resident_extent(CudaBackend& b, std::span<const std::int64_t> ids, bool marked, double& displacement) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  const Workspace& ws = b.m_ws;
+  return extent_stage(b.m_ws, b.m_h_counters, b.m_stream, reinterpret_cast<const double*>(ws.res_pos.data()),
+                      reinterpret_cast<const double*>(ws.res_rad.data()),
+                      marked ? reinterpret_cast<const double*>(ws.res_mark.data()) : nullptr, ws.res_count,
+                      ids, displacement);
 }
 
 // Rows [first, first + count) of positions and radii between the resident DEVICE arrays and host

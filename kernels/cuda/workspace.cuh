@@ -49,6 +49,8 @@
 //   ref_rad, ref_report                        kept_count each) and the bodies' state it was built
 //                                              from (cuda/skin.cuh); owned across calls, never aliased
 //   res_id                 between calls       resident bodies' global ids (the history's keys)
+//   res_mark               between calls       the resident centres at Engine::mark_resident (the
+//                                              step loop's rebuild check: cuda/resident_extent.cuh)
 //   hist_keys[2],          between calls       EngineOptions::history on the device: the previous
 //   hist_age[2]                                step's pair keys and ages (hist_current), and the
 //                                              step being made (cuda/history.cuh); never aliased
@@ -87,6 +89,7 @@ struct Workspace {
   Bytes shape_kind, shape_semi, shape_orient, shapes, cell_cut, normals, narrow_list, narrow_carry;
   Bytes kept_pairs, ref_pos, ref_rad, ref_report;
   Bytes res_id, hist_keys[2], hist_age[2];
+  Bytes res_mark;
   Bytes broad_counts, broad_pairs;
   std::size_t res_count = 0;
   bool res_ided = false;       // resident global ids present
@@ -104,13 +107,13 @@ struct Workspace {
   std::uint64_t held_bytes() const {
     std::uint64_t s = 0;
     for (const Bytes* b :
-         {&pos,          &rad,        &report,   &spheres,      &cell_spheres, &perm,        &ctrl,
-          &body_blocks,  &base,       &keys[0],  &keys[1],      &bodies[0],    &bodies[1],   &entry_blocks,
-          &pairs,        &out,        &temp,     &counters,     &partials,     &res_pos,     &res_rad,
-          &res_report,   &res_shape,  &res_semi, &res_orient,   &shape_kind,   &shape_semi,  &shape_orient,
-          &shapes,       &cell_cut,   &normals,  &narrow_list,  &narrow_carry, &kept_pairs,  &ref_pos,
-          &ref_rad,      &ref_report, &res_id,   &hist_keys[0], &hist_keys[1], &hist_age[0], &hist_age[1],
-          &broad_counts, &broad_pairs})
+         {&pos,          &rad,         &report,   &spheres,      &cell_spheres, &perm,        &ctrl,
+          &body_blocks,  &base,        &keys[0],  &keys[1],      &bodies[0],    &bodies[1],   &entry_blocks,
+          &pairs,        &out,         &temp,     &counters,     &partials,     &res_pos,     &res_rad,
+          &res_report,   &res_shape,   &res_semi, &res_orient,   &shape_kind,   &shape_semi,  &shape_orient,
+          &shapes,       &cell_cut,    &normals,  &narrow_list,  &narrow_carry, &kept_pairs,  &ref_pos,
+          &ref_rad,      &ref_report,  &res_id,   &hist_keys[0], &hist_keys[1], &hist_age[0], &hist_age[1],
+          &broad_counts, &broad_pairs, &res_mark})
       s += b->bytes();
     return s;
   }

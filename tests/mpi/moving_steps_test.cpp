@@ -267,11 +267,12 @@ TEST(StepLoop, CallerStateTravelsAndTheSlabsRebalance) {
 }
 
 // A centre that becomes NaN during the steps stops every rank with an InputError naming the body and
-// the step (never a hang, never a sweep of all pairs).
-TEST(StepLoop, NonFiniteCentreNamesBodyAndStep) {
+// the step (never a hang, never a sweep of all pairs). After the first layout engine A finds it
+// where its rows are (Engine::resident_extent; CUDA: on the device, the row named by its global id).
+void check_non_finite_centre(Backend backend) {
   const World w = world(800, 72);
   EngineOptions options;
-  options.backend = Backend::cpu;
+  options.backend = backend;
   options.threads = 1;
   options.skin = 0.3;
   Engine<double> engine(options);
@@ -296,6 +297,13 @@ TEST(StepLoop, NonFiniteCentreNamesBodyAndStep) {
     EXPECT_NE(what.find("step 2"), std::string::npos) << what;
     EXPECT_NE(what.find("body 417"), std::string::npos) << what;
   }
+}
+
+TEST(StepLoop, NonFiniteCentreNamesBodyAndStep) { check_non_finite_centre(Backend::cpu); }
+
+TEST(StepLoop, NonFiniteCentreNamesBodyAndStepOnCuda) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  check_non_finite_centre(Backend::cuda);
 }
 
 }  // namespace
