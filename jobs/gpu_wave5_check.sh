@@ -8,6 +8,8 @@
 #   BIN=dir OUT=dir jobs/gpu_wave5_check.sh c     one GPU: bodies that move on one GPU (#31), the host
 #                                                 path table (#37) and the laptop mode on two quiet
 #                                                 cores (#37, #33)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh f     one GPU: the file jobs of #37 (2^24 spheres and
+#                                                 ellipsoids, fp32, file in the page cache → file)
 #   BIN=dir OUT=dir jobs/gpu_wave5_check.sh py    one GPU: the Python module (#33; .devbin/py packed by
 #                                                 jobs/gpu_python_check.sh pack)
 #   BIN=dir OUT=dir jobs/gpu_wave5_check.sh two   two GPUs: bodies that move at np 2 (#31), simulate
@@ -40,6 +42,24 @@ host_path() {
   "$BIN/contactgrid_cuda_bench" 20 24 2 10 auto spheres >"$OUT/bench.md" 2>&1 || return 1
   sed -n '/Host arrays/,$p' "$OUT/bench.md"
 }
+file_job() {  # the stage table of two runs of each: the second is the figure (page cache warm)
+  local dir=${SCRATCH:-/dev/shm}/cg_filejob
+  mkdir -p "$dir" || return 1
+  "$BIN/contactgrid" generate "$dir/s24.h5" -n 16777216 --seed 7 -q || return 1
+  "$BIN/contactgrid" generate "$dir/e24.h5" --kind ellipsoids -n 16777216 --seed 7 -q || return 1
+  ls -l "$dir"
+  local scene rc=0
+  for scene in s24 e24; do
+    for run in 1 2; do
+      echo "== $scene run $run"
+      "$BIN/contactgrid" detect "$dir/$scene.h5" -o "$dir/c_$scene.h5" --backend cuda --precision fp32 -v \
+        2>&1 | sed -n '/contactgrid detect/p;/stage/,$p' || rc=1
+    done
+    ls -l "$dir/c_$scene.h5"
+  done
+  rm -rf "$dir"
+  return $rc
+}
 python_module() { jobs/gpu_python_check.sh run "${PY:-.devbin/py}" "$OUT"; }
 
 { date -u; nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader; } 2>&1 | tee "$OUT/device.txt"
@@ -54,6 +74,8 @@ case ${1:-a} in
     part steploop jobs/gpu_steploop_check.sh one
     part hostpath host_path
     part laptop jobs/gpu_hostpath_check.sh ;;
+  f)
+    part filejob file_job ;;
   py)
     part python python_module ;;
   two)

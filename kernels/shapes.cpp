@@ -1,5 +1,7 @@
 // Host check of the bodies' shape rows (bodies.hpp: validate_shapes): the predicate of
 // core/shape.hpp, the messages the device-array path repeats (it re-runs this on the bad body's rows).
+#include <omp.h>
+
 #include <sstream>
 #include <string>
 
@@ -16,16 +18,31 @@ std::size_t validate_shapes(const BodiesView& bodies) {
                      std::to_string(bodies.semi_axes.size()) + " semi-axes and " +
                      std::to_string(bodies.orientation.size()) + " orientations for " + std::to_string(n) +
                      " bodies");
-  std::size_t ellipsoids = 0;
-  for (std::size_t i = 0; i < n; ++i) {
+  // Parallel: the ellipsoid count and the first body whose rows fail, as a sequential scan would find
+  // it (the smallest index); its message is written from that body's rows alone.
+  auto fault_of = [&](std::size_t i, double& norm) {
     const std::uint8_t kind = static_cast<std::uint8_t>(bodies.shape[i]);
     const Vec3<double> e = bodies.semi_axes[i];
     const Quat<double> q = bodies.orientation[i];
     const double semi[3] = {e.x, e.y, e.z}, quat[4] = {q.w, q.x, q.y, q.z};
+    return shape_fault(kind, bodies.radius[i], semi, quat, norm);
+  };
+  std::size_t ellipsoids = 0, first_bad = n;
+  const int threads = n < (std::size_t(1) << 15) ? 1 : omp_get_max_threads();
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : ellipsoids) \
+    reduction(min : first_bad) if (threads > 1)
+  for (std::size_t i = 0; i < n; ++i) {
     double norm = 0;
-    const ShapeFault f = shape_fault(kind, bodies.radius[i], semi, quat, norm);
-    ellipsoids += kind == static_cast<std::uint8_t>(Shape::ellipsoid);
-    if (f == ShapeFault::none) continue;
+    ellipsoids += bodies.shape[i] == Shape::ellipsoid;
+    if (fault_of(i, norm) != ShapeFault::none && i < first_bad) first_bad = i;
+  }
+  if (first_bad < n) {
+    const std::size_t i = first_bad;
+    const std::uint8_t kind = static_cast<std::uint8_t>(bodies.shape[i]);
+    const Vec3<double> e = bodies.semi_axes[i];
+    const Quat<double> q = bodies.orientation[i];
+    double norm = 0;
+    const ShapeFault f = fault_of(i, norm);
     std::ostringstream m;
     m << "body " << (bodies.id.empty() ? std::int64_t(i) : bodies.id[i]) << ": ";
     switch (f) {

@@ -183,6 +183,11 @@ void reserve_pack(RunState<Real, Key, Narrow>& r) {
               {&ws.base, n64 * sizeof(Key)},  // type passes: base keys; else the lowest cells' keys
               {&ws.counters, sizeof(cuda::Counters)}},
              "pack");
+  if (!r.device_in && r.job.ellipsoids > 0)  // host shape rows, uploaded with the bodies (upload_stage)
+    ws.reserve({{&ws.shape_kind, n64 * sizeof(Shape)},
+                {&ws.shape_semi, n64 * sizeof(Vec3<double>)},
+                {&ws.shape_orient, n64 * sizeof(Quat<double>)}},
+               "pack");
 }
 
 // spheres_only: the spheres in input order alone (the reuse of candidates kept with a skin needs no

@@ -109,17 +109,8 @@ inline std::size_t shape_check_result(const cuda::Counters& c, const DeviceBodie
   return static_cast<std::size_t>(c.ellipsoids);
 }
 
-// The shape rows of host bodies copied into DEVICE buffers of at least their size (queued on `st`).
-inline void upload_shape_rows(const BodiesView& b, Bytes& kind, Bytes& semi, Bytes& orient, cudaStream_t st) {
-  const std::size_t n = b.size();
-  CG_CUDA_CHECK(cudaMemcpyAsync(kind.data(), b.shape.data(), n * sizeof(Shape), cudaMemcpyHostToDevice, st));
-  CG_CUDA_CHECK(
-      cudaMemcpyAsync(semi.data(), b.semi_axes.data(), n * sizeof(Vec3<double>), cudaMemcpyHostToDevice, st));
-  CG_CUDA_CHECK(cudaMemcpyAsync(orient.data(), b.orientation.data(), n * sizeof(Quat<double>),
-                                cudaMemcpyHostToDevice, st));
-}
-
-// Scenes with ellipsoids: the shape rows on the device (host-array path: uploaded) and where their
+// Scenes with ellipsoids: the shape rows on the device (host-array path: uploaded by upload_stage with
+// the positions and radii, transfer.cuh) and where their
 // packed shapes go (r.d_shapes); `launch`: pack them here (pack_shapes_kernel), else the caller does.
 // Sphere-only scenes: nothing (r.d_shapes stays null, the input's kind null).
 template <class Real, class Key, class Narrow>
@@ -134,12 +125,7 @@ cuda::ShapeInput<Narrow> shapes_stage(RunState<Real, Key, Narrow>& r, bool launc
     in.orient = r.job.device_bodies->orientation;
     ws.reserve({{&ws.shapes, n64 * sizeof(PackedShape<Narrow>)}}, "pack");
   } else {
-    ws.reserve({{&ws.shape_kind, n64 * sizeof(Shape)},
-                {&ws.shape_semi, n64 * sizeof(Vec3<double>)},
-                {&ws.shape_orient, n64 * sizeof(Quat<double>)},
-                {&ws.shapes, n64 * sizeof(PackedShape<Narrow>)}},
-               "pack");
-    upload_shape_rows(r.job.bodies, ws.shape_kind, ws.shape_semi, ws.shape_orient, r.st);
+    ws.reserve({{&ws.shapes, n64 * sizeof(PackedShape<Narrow>)}}, "pack");
     in.kind = reinterpret_cast<const Shape*>(ws.shape_kind.data());
     in.semi = reinterpret_cast<const double*>(ws.shape_semi.data());
     in.orient = reinterpret_cast<const double*>(ws.shape_orient.data());

@@ -67,7 +67,8 @@ inline void streamed_upload(cuda::PinnedRing& ring, std::size_t slot_bytes,
 }
 
 // upload: the DEVICE bodies of the call: the caller's arrays (device-array API), or the host arrays
-// copied into ws.pos / rad / report (stage "upload"), by Tuning::upload: streamed through the pinned
+// copied into ws.pos / rad / report and, with ellipsoids, ws.shape_kind / semi / orient (stage
+// "upload"), by Tuning::upload: streamed through the pinned
 // ring (automatic from 1 MiB), the arrays page-locked in place for the copy and unpinned once it is
 // done (registered), or one pageable copy that the driver stages on one thread (below 1 MiB). A range
 // the driver refuses to page-lock is copied pageable.
@@ -94,6 +95,12 @@ void upload_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedRing& ring) {
   if (!r.job.bodies.report.empty()) {
     ranges.push_back(range(ws.report.data(), r.job.bodies.report.data(), n64));
     r.d_report = reinterpret_cast<const std::uint8_t*>(ws.report.data());
+  }
+  if (r.job.ellipsoids > 0) {  // the shape rows (reserve_pack), packed by the pack stage (shapes.cuh)
+    const BodiesView& b = r.job.bodies;
+    ranges.push_back(range(ws.shape_kind.data(), b.shape.data(), n64 * sizeof(Shape)));
+    ranges.push_back(range(ws.shape_semi.data(), b.semi_axes.data(), n64 * sizeof(Vec3<double>)));
+    ranges.push_back(range(ws.shape_orient.data(), b.orientation.data(), n64 * sizeof(Quat<double>)));
   }
   std::size_t total = 0;
   for (const HostDevice& h : ranges) total += h.bytes;

@@ -194,7 +194,14 @@ void read_motion(const SceneSource& s, const std::optional<Dataset>& d, hsize_t 
   if (!d) return;
   out.resize(count);
   if (count > 0) read_rows_f64(s.where, *d, first, count, &out[0].x);
-  for (hsize_t i = 0; i < count; ++i) check_finite(s, *d, first + i, &out[i].x, 3);
+  hsize_t from = count;  // the first row that is not finite, found in parallel; its message sequential
+  const int threads = count < 65536 ? 1 : omp_get_max_threads();
+#pragma omp parallel for num_threads(threads) reduction(min : from) schedule(static) if (threads > 1)
+  for (hsize_t i = 0; i < count; ++i) {
+    if (!(std::isfinite(out[i].x) && std::isfinite(out[i].y) && std::isfinite(out[i].z)) && i < from)
+      from = i;
+  }
+  for (hsize_t i = from; i < count; ++i) check_finite(s, *d, first + i, &out[i].x, 3);
 }
 
 // Reads and validates sphere rows [first, first + count) into out (appended), chunk by chunk, into
@@ -245,15 +252,37 @@ void read_ellipsoids(const SceneSource& s, hsize_t first, hsize_t count, Scene& 
   out.ellipsoid_position.resize(count);
   out.ellipsoid_semi_axes.resize(count);
   out.ellipsoid_orientation.resize(count);
-  for (hsize_t done = 0; done < count; done += kReadChunkRows) {
-    hsize_t n = std::min(kReadChunkRows, count - done);
+  // As read_spheres: chunks of kReadChunkRows per thread read in parallel, then validated in parallel
+  // up to the first bad row, whose message the sequential checks write.
+  const hsize_t chunk_rows = kReadChunkRows * static_cast<hsize_t>(std::max(1, omp_get_max_threads()));
+  for (hsize_t done = 0; done < count; done += chunk_rows) {
+    hsize_t n = std::min(chunk_rows, count - done);
     Vec3<double>* position = out.ellipsoid_position.data() + done;
     Vec3<double>* axes = out.ellipsoid_semi_axes.data() + done;
     std::array<double, 4>* orientation = out.ellipsoid_orientation.data() + done;
-    read_rows(s.where, s.ellipsoid_position, first + done, n, H5T_NATIVE_DOUBLE, position);
-    read_rows(s.where, s.ellipsoid_semi_axes, first + done, n, H5T_NATIVE_DOUBLE, axes);
-    read_rows(s.where, s.ellipsoid_orientation, first + done, n, H5T_NATIVE_DOUBLE, orientation);
-    for (hsize_t i = 0; i < n; ++i) {
+    read_rows_f64(s.where, s.ellipsoid_position, first + done, n, &position->x);
+    read_rows_f64(s.where, s.ellipsoid_semi_axes, first + done, n, &axes->x);
+    read_rows_f64(s.where, s.ellipsoid_orientation, first + done, n, orientation->data());
+    hsize_t from = n;
+    const int threads = n < 65536 ? 1 : omp_get_max_threads();
+    {
+      const double lo = s.radius_low ? *s.radius_low : -std::numeric_limits<double>::infinity();
+      const double hi = s.radius_high ? *s.radius_high : std::numeric_limits<double>::infinity();
+#pragma omp parallel for num_threads(threads) reduction(min : from) schedule(static) if (threads > 1)
+      for (hsize_t i = 0; i < n; ++i) {
+        const Vec3<double> p = position[i], a = axes[i];
+        const std::array<double, 4>& q = orientation[i];
+        const double bound = std::max({a.x, a.y, a.z});
+        const double norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        const bool good = std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z) &&
+                          std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z) && a.x > 0 &&
+                          a.y > 0 && a.z > 0 && !(bound < lo) && !(bound > hi) && std::isfinite(q[0]) &&
+                          std::isfinite(q[1]) && std::isfinite(q[2]) && std::isfinite(q[3]) &&
+                          std::abs(norm - 1) <= kQuaternionTolerance;
+        if (!good && i < from) from = i;
+      }
+    }
+    for (hsize_t i = from; i < n; ++i) {
       hsize_t row = first + done + i;
       check_finite(s, s.ellipsoid_position, row, &position[i].x, 3);
       check_finite(s, s.ellipsoid_semi_axes, row, &axes[i].x, 3);
@@ -271,7 +300,13 @@ void read_ellipsoids(const SceneSource& s, hsize_t first, hsize_t count, Scene& 
                                 s.ellipsoid_orientation.name, row, q[0], q[1], q[2], q[3], norm,
                                 kQuaternionTolerance));
       }
-      if (s.xyzw) orientation[i] = {q[3], q[0], q[1], q[2]};  // to docs/FORMAT.md §1's (w, x, y, z)
+    }
+    if (s.xyzw) {  // to docs/FORMAT.md §1's (w, x, y, z)
+#pragma omp parallel for num_threads(threads) schedule(static) if (threads > 1)
+      for (hsize_t i = 0; i < n; ++i) {
+        const std::array<double, 4> q = orientation[i];
+        orientation[i] = {q[3], q[0], q[1], q[2]};
+      }
     }
   }
 }
@@ -482,6 +517,9 @@ BodyRows body_rows(Scene&& scene, bool shapes) {
   rows.semi_axes.resize(n + e);
   rows.orientation.resize(n + e);
   const Quat<double> identity{1, 0, 0, 0};
+  // Parallel copies: the first touch of the rows, on the threads that later read them.
+  const int threads = n + e < 65536 ? 1 : omp_get_max_threads();
+#pragma omp parallel for num_threads(threads) schedule(static) if (threads > 1)
   for (std::size_t i = 0; i < n; ++i) {
     const double r = scene.sphere_radius[i];
     rows.position[i] = scene.sphere_position[i];
@@ -490,6 +528,7 @@ BodyRows body_rows(Scene&& scene, bool shapes) {
     rows.semi_axes[i] = {r, r, r};
     rows.orientation[i] = identity;
   }
+#pragma omp parallel for num_threads(threads) schedule(static) if (threads > 1)
   for (std::size_t j = 0; j < e; ++j) {
     const Vec3<double> a = scene.ellipsoid_semi_axes[j];
     const std::array<double, 4>& q = scene.ellipsoid_orientation[j];
@@ -501,6 +540,9 @@ BodyRows body_rows(Scene&& scene, bool shapes) {
   }
   scene.sphere_position = {};
   scene.sphere_radius = {};
+  scene.ellipsoid_position = {};
+  scene.ellipsoid_semi_axes = {};
+  scene.ellipsoid_orientation = {};
   return rows;
 }
 

@@ -21,9 +21,9 @@ struct Scene {
   std::string source;                        // file it came from ("" if generated in memory)
   HostVector<Vec3<double>> sphere_position;  // (no zero sweep before the reader overwrites them)
   HostVector<double> sphere_radius;
-  std::vector<Vec3<double>> ellipsoid_position;
-  std::vector<Vec3<double>> ellipsoid_semi_axes;
-  std::vector<std::array<double, 4>> ellipsoid_orientation;  // (w, x, y, z)
+  HostVector<Vec3<double>> ellipsoid_position;
+  HostVector<Vec3<double>> ellipsoid_semi_axes;
+  HostVector<std::array<double, 4>> ellipsoid_orientation;  // (w, x, y, z)
   // Motion (docs/FORMAT.md §5), world frame: one row per body of the group, or empty (absent: zero).
   std::vector<Vec3<double>> sphere_velocity, sphere_angular_velocity;
   std::vector<Vec3<double>> ellipsoid_velocity, ellipsoid_angular_velocity;

@@ -203,6 +203,43 @@ TEST_F(Hdf5Io, LargeSceneReadsInParallelBlocks) {
   EXPECT_EQ(std::memcmp(part.sphere_radius.data(), s.sphere_radius.data() + first, count * 8), 0);
 }
 
+// Large ellipsoid scenes take the same parallel path (blocks read on all threads, rows checked in
+// parallel up to the first bad one): rows, partial ranges and the xyzw order come back exactly, and of
+// several bad rows far apart the message names the first, whatever the threads.
+TEST_F(Hdf5Io, LargeEllipsoidSceneReadsInParallelAndNamesTheFirstBadRow) {
+  constexpr std::size_t n = 300000;  // above the parallel checks' threshold, several 4 MiB blocks
+  Scene s;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double a = 1e-5 * double(i);
+    s.ellipsoid_position.push_back({0.5 * double(i), -1.0, 2e3 + 1e-3 * double(i)});
+    s.ellipsoid_semi_axes.push_back({0.5, 0.75, 1.0 + 1e-6 * double(i % 1000)});
+    s.ellipsoid_orientation.push_back({std::cos(a), 0.0, std::sin(a), 0.0});
+  }
+  Scene stored = s;
+  for (auto& q : stored.ellipsoid_orientation) q = {q[1], q[2], q[3], q[0]};
+  stored.attributes["quaternion_order"] = std::string("xyzw");
+  cg::write_scene(path("big.h5"), stored);
+  s.attributes.clear();
+  expect_same_scene(s, cg::read_scene(path("big.h5")));
+  const std::size_t first = 70001, count = 200003;
+  const Scene part = cg::read_scene_rows(path("big.h5"), first, count);
+  ASSERT_EQ(part.ellipsoid_count(), count);
+  EXPECT_EQ(
+      std::memcmp(part.ellipsoid_orientation.data(), s.ellipsoid_orientation.data() + first, count * 32), 0);
+  EXPECT_EQ(std::memcmp(part.ellipsoid_semi_axes.data(), s.ellipsoid_semi_axes.data() + first, count * 24),
+            0);
+
+  Scene bad = s;
+  bad.ellipsoid_orientation[250123] = {2, 0, 0, 0};
+  bad.ellipsoid_semi_axes[180017].y = -0.5;
+  bad.ellipsoid_position[299990].z = std::numeric_limits<double>::quiet_NaN();
+  cg::write_scene(path("bad.h5"), bad);
+  std::string msg = error_of<InputError>([&] { cg::read_scene(path("bad.h5")); });
+  EXPECT_EQ(msg, path("bad.h5") + ": /ellipsoids/semi_axes row 180017: semi-axis -0.5 is not > 0");
+  msg = error_of<InputError>([&] { cg::read_scene_rows(path("bad.h5"), 190000, 100000); });
+  EXPECT_CONTAINS(msg, "/ellipsoids/orientation row 250123: quaternion (2, 0, 0, 0) has norm 2");
+}
+
 TEST_F(Hdf5Io, SceneRoundTripEllipsoidsBoundsAndAttributes) {
   Scene s = mixed_scene();
   cg::write_scene(path("m.h5"), s);
