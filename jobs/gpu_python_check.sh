@@ -7,25 +7,14 @@
 #   here:   jobs/gpu_python_check.sh pack [DIR=.devbin/py]     (after a CUDA build in build/, or
 #           BUILD_DIR=<that build>; the DLPack header travels along: the device has no libdlpack-dev)
 #   there:  jobs/gpu_python_check.sh run  [DIR=.devbin/py] [OUT=/tmp/out]
+#           jobs/gpu_python_check.sh module [DIR=.devbin/py]   (the module alone, into /tmp/cgpy:
+#           what jobs/gpu_library_check.sh times)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 mode=$1 dir=$(realpath -m "${2:-.devbin/py}")
-case $mode in
-  pack)
-    build=${BUILD_DIR:-build}
-    mkdir -p "$dir/lib" "$dir/include/dlpack"
-    cp /usr/include/dlpack/dlpack.h "$dir/include/dlpack/"
-    cp "$build"/kernels/libcontactgrid.a "$build"/src/libcg_io.a "$build"/src/contactgrid "$dir/"
-    cp "$build"/kernels/contactgrid_cuda_bench "$dir/" 2>/dev/null || true
-    cmake --build "$build" --target detect_call_bench && cp "$build"/tests/detect_call_bench "$dir/"
-    { ldd "$build"/src/python/contactgrid/_contactgrid*.so; ldd "$build"/src/contactgrid; ldd "$dir/detect_call_bench"; } | awk '/=>/{print $3}' |
-      grep -v -E 'libc\.so|libm\.so|libstdc|libgcc_s|ld-linux|libpython|libgomp' | sort -u |
-      xargs -I{} cp -L {} "$dir/lib/"
-    du -sh "$dir" ;;
-  run)
-    set +e  # every step runs and reports, whatever an earlier one did
-    out=$(realpath -m "${3:-/tmp/out}")
-    mkdir -p "$out" /tmp/cgpy/contactgrid
+# The module compiled here against this interpreter ($PYTHON or python3) into /tmp/cgpy/contactgrid.
+build_module() {
+    mkdir -p /tmp/cgpy/contactgrid
     py=${PYTHON:-python3}
     ext=$($py -c "import sysconfig; print(sysconfig.get_config_var('EXT_SUFFIX'))")
     cp src/python/contactgrid/__init__.py src/python/contactgrid/__init__.pyi /tmp/cgpy/contactgrid/
@@ -36,6 +25,27 @@ case $mode in
       -o "/tmp/cgpy/contactgrid/_contactgrid$ext" "$dir/libcg_io.a" "$dir/libcontactgrid.a" \
       -L/usr/local/cuda/lib64 -lcudart_static -ldl -lrt -lpthread -fopenmp -L"$dir/lib" -lhdf5_serial -lfmt \
       -Wl,--exclude-libs,ALL -Wl,-rpath,"$dir/lib" -Wl,-rpath-link,"$dir/lib" 2>&1 | tail -20
+}
+case $mode in
+  pack)
+    build=${BUILD_DIR:-build}
+    mkdir -p "$dir/lib" "$dir/include/dlpack"
+    cp /usr/include/dlpack/dlpack.h "$dir/include/dlpack/"
+    cp "$build"/kernels/libcontactgrid.a "$build"/src/libcg_io.a "$build"/src/contactgrid "$dir/"
+    cp "$build"/kernels/contactgrid_cuda_bench "$dir/" 2>/dev/null || true
+    cmake --build "$build" --target detect_call_bench host_stage_bench host_bandwidth &&
+      cp "$build"/tests/detect_call_bench "$build"/tests/host_stage_bench "$build"/tests/host_bandwidth "$dir/"
+    { ldd "$build"/src/python/contactgrid/_contactgrid*.so; ldd "$build"/src/contactgrid; ldd "$dir/detect_call_bench"; } | awk '/=>/{print $3}' |
+      grep -v -E 'libc\.so|libm\.so|libstdc|libgcc_s|ld-linux|libpython|libgomp' | sort -u |
+      xargs -I{} cp -L {} "$dir/lib/"
+    du -sh "$dir" ;;
+  module)
+    build_module ;;
+  run)
+    set +e  # every step runs and reports, whatever an earlier one did
+    out=$(realpath -m "${3:-/tmp/out}")
+    mkdir -p "$out"
+    build_module
     export PYTHONPATH=/tmp/cgpy CG_BINARY="$dir/contactgrid" LD_LIBRARY_PATH="$dir/lib"
     { date -u; nvidia-smi --query-gpu=name,driver_version --format=csv,noheader || true; $py --version;
       $py -c "import numpy, contactgrid; print('numpy', numpy.__version__, 'cuda', contactgrid.cuda_available())" || true

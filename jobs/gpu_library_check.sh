@@ -1,0 +1,85 @@
+#!/usr/bin/env bash
+# The laptop mode's figure (issues #33 and #37: Python contactgrid.detect on NumPy arrays of 2^20
+# uniform spheres, CPU backend, 2 cores, >= 20x SciPy's cKDTree.query_pairs + filter on the same
+# pairs, and within 5 % of the same call from C++), measured on two quiet cores of the device host
+# (taskset -c 0,1, 2 threads), each figure the median of >= 5 calls after a warm one:
+#   bandwidth  host_bandwidth: the two cores' streaming copy and read rates (the floor column's)
+#   engine     host_stage_bench: a new engine a call (as contactgrid.detect makes), per stage
+#   cli        contactgrid detect --backend cpu --threads 2: the detect stage of 5 processes
+#   python     tests/bench/python_bench.py: contactgrid.detect, the same call from C++ (detect_call_bench)
+#              and SciPy (same pairs checked), the ratios
+# Needs no GPU: the binaries of a CUDA build run their CPU backend. Here: BUILD_DIR=build
+# jobs/gpu_python_check.sh pack .devbin/py (it packs contactgrid, detect_call_bench, host_stage_bench,
+# host_bandwidth, the static libraries for the module and their shared libraries). There:
+#   source .devrt/env.sh .devrt; OUT=dir jobs/gpu_library_check.sh [DIR=.devbin/py]
+# Writes $OUT/library.tgz (every log), prints the summary; exits non-zero naming what failed (a
+# step that did not run, different pairs from SciPy, Python more than 5 % above C++, SciPy / Python
+# below 20). Run time: about 2 minutes (the module's compile about 1 of them).
+set -u
+cd "$(dirname "$0")/.."
+[ -f .devrt/env.sh ] && source .devrt/env.sh .devrt >/dev/null 2>&1
+dir=$(realpath -m "${1:-.devbin/py}")
+OUT=${OUT:-/tmp/out}
+log_dir="$OUT/library"
+mkdir -p "$log_dir"
+failed=()
+log() { echo "[$(date -u +%H:%M:%S)] $*"; }
+py=${PYTHON:-python3}
+export LD_LIBRARY_PATH="$dir/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+cores="taskset -c 0,1"
+{ date -u; nproc; grep -m1 'model name' /proc/cpuinfo; uptime; git log -1 --format='commit %h %s' 2>/dev/null
+  cat /sys/kernel/mm/transparent_hugepage/enabled 2>/dev/null; } 2>&1 | tee "$log_dir/device.txt"
+
+log "== the module (compiled against $py)"
+jobs/gpu_python_check.sh module "$dir" >"$log_dir/module.log" 2>&1 || failed+=(module)
+tail -5 "$log_dir/module.log"
+
+scene="$log_dir/s20.h5"
+"$dir/contactgrid" generate "$scene" -n 1048576 --seed 20 -q || failed+=(generate)
+
+log "== bandwidth, cores 0,1"
+$cores "$dir/host_bandwidth" 2 512 10 2>&1 | tee "$log_dir/bandwidth.log" || failed+=(bandwidth)
+
+log "== engine: host_stage_bench, a new engine a call, 2 threads, cores 0,1, 9 calls"
+$cores "$dir/host_stage_bench" "$scene" 9 2 mixed fresh 2>&1 | tee "$log_dir/engine.log" || failed+=(engine)
+
+log "== CLI: contactgrid detect --backend cpu --threads 2, 5 processes"
+for r in 1 2 3 4 5; do
+  $cores "$dir/contactgrid" detect "$scene" -o "$log_dir/c.h5" --backend cpu --threads 2 -v >>"$log_dir/cli.log" 2>&1 ||
+    failed+=(cli)
+done
+rm -f "$log_dir/c.h5"
+grep -E '^ +detect ' "$log_dir/cli.log" | awk '{print $2 * 1e3}' | sort -n >"$log_dir/cli_detect_ms.txt"
+
+log "== Python, C++, SciPy: python_bench.py, cores 0,1 (9 calls each, SciPy 5)"
+PYTHONPATH=/tmp/cgpy $cores $py tests/bench/python_bench.py --log2n 20 --backend cpu --threads 2 \
+  --repetitions 9 --scipy-repetitions 5 --binary "$dir/contactgrid" --cxx "$dir/detect_call_bench" 2>&1 |
+  tee "$log_dir/python.log"
+[ "${PIPESTATUS[0]}" -eq 0 ] || failed+=(python_bench)
+rm -f "$scene"
+
+# The summary: medians (ms) and the issue's two ratios.
+engine=$(awk '$1 == "(sum)" {print $3}' "$log_dir/engine.log")
+cli=$(awk '{a[NR] = $1} END {if (NR) print a[int((NR + 1) / 2)]}' "$log_dir/cli_detect_ms.txt")
+pyt=$(awk '/^contactgrid.detect/ {print $2}' "$log_dir/python.log")
+cxx=$(awk '/^same call from C\+\+/ {print $5}' "$log_dir/python.log")
+sp=$(awk '/^SciPy cKDTree/ {print $3}' "$log_dir/python.log")
+same=$(grep -o 'same pairs: [A-Za-z]*' "$log_dir/python.log" | awk '{print $3}')
+awk -v e="$engine" -v c="$cli" -v p="$pyt" -v x="$cxx" -v s="$sp" -v same="$same" 'BEGIN {
+  printf "\nlaptop mode, 2^20 uniform spheres, CPU backend, cores 0,1, medians (ms):\n"
+  printf "  engine stages %s | CLI detect stage %s | Python %s | same call from C++ %s | SciPy %s\n", e, c, p, x, s
+  if (p > 0 && x > 0) printf "  Python / C++          %.3f   (target <= 1.05)\n", p / x
+  if (p > 0 && s > 0) printf "  SciPy / Python        %.1fx   (target >= 20)\n", s / p
+  if (e > 0 && s > 0) printf "  SciPy / engine        %.1fx\n", s / e
+  printf "  same pairs as SciPy   %s\n", same
+}' | tee "$log_dir/summary.txt"
+[ "$same" = True ] || failed+=(same_pairs)
+awk -v p="$pyt" -v x="$cxx" 'BEGIN {exit !(p > 0 && x > 0 && p <= 1.05 * x)}' || failed+=(python_over_cxx)
+awk -v p="$pyt" -v s="$sp" 'BEGIN {exit !(p > 0 && s >= 20 * p)}' || failed+=(scipy_ratio_below_20)
+
+tar czf "$OUT/library.tgz" -C "$OUT" library && rm -rf "${log_dir:?}"
+if [ ${#failed[@]} -gt 0 ]; then
+  echo "FAILED: ${failed[*]}"
+  exit 1
+fi
+echo "all passed"
