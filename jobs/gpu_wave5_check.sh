@@ -2,15 +2,18 @@
 # The wave's GPU checks in device calls of under the device's 10-minute limit each, every check one
 # engineer's script run as written:
 #   BIN=dir OUT=dir jobs/gpu_wave5_check.sh a     one GPU: the whole unit suite with its CUDA cases,
-#                                                 the broad phases (#34)
-#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh b     one GPU: simulate (#32: physics on CUDA, Beverloo,
-#                                                 steps/s), runaway scenes (#35)
-#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh c     one GPU: bodies that move on one GPU (#31), the host
-#                                                 path table (#37) and the laptop mode on two quiet
-#                                                 cores (#37, #33)
+#                                                 the broad phases' checks (#34)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh b     one GPU: simulate (#32: physics on CUDA, steps/s and
+#                                                 the stage breakdown)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh c     one GPU: bodies that move on one GPU (#31), contacts in
+#                                                 pieces under a memory limit (#37)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh d     one GPU: the broad phases' CPU = CUDA comparison at
+#                                                 2^18 and their timing table (#34)
 #   BIN=dir OUT=dir jobs/gpu_wave5_check.sh f     one GPU: the file jobs of #37 (2^24 spheres and
-#                                                 ellipsoids, fp32, file in the page cache → file)
-#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh py    one GPU: the Python module (#33; .devbin/py packed by
+#                                                 ellipsoids, fp32, file in the page cache → file) and
+#                                                 the host path table
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh py    one GPU: the Python module (#33) and the laptop mode on
+#                                                 two quiet cores (#33, #37; .devbin/py packed by
 #                                                 jobs/gpu_python_check.sh pack)
 #   BIN=dir OUT=dir jobs/gpu_wave5_check.sh two   two GPUs: bodies that move at np 2 (#31), simulate
 #                                                 under mpirun on two GPUs (#32)
@@ -69,21 +72,24 @@ python_module() { jobs/gpu_python_check.sh run "${PY:-.devbin/py}" "$OUT"; }
 case ${1:-a} in
   a)
     part unit unit
-    part broadphase jobs/gpu_broadphase_check.sh ;;
+    part broadphase jobs/gpu_broadphase_check.sh check ;;
   b)
-    part simulate jobs/gpu_simulate_check.sh unit beverloo perf
-    part faults jobs/gpu_faults_check.sh ;;
+    part simulate jobs/gpu_simulate_check.sh unit perf ;;
   c)
     part steploop jobs/gpu_steploop_check.sh one
-    part hostpath host_path
-    part laptop jobs/gpu_hostpath_check.sh ;;
+    part pieces env MODE=pieces jobs/gpu_hostpath_check.sh ;;
+  d)
+    part broad_compare jobs/gpu_broadphase_check.sh compare
+    part broad_table jobs/gpu_broadphase_check.sh table ;;
   f)
-    part filejob file_job ;;
+    part filejob file_job
+    part hostpath host_path ;;
   py)
-    part python python_module ;;
+    part python python_module
+    part library jobs/gpu_library_check.sh "${PY:-.devbin/py}" ;;
   two)
     part steploop_two jobs/gpu_steploop_check.sh two
-    part simulate_mpi2 jobs/gpu_simulate_check.sh mpi2 ;;
+    part simulate_two jobs/gpu_simulate_check.sh mpi2 two ;;
 esac
 if [ ${#failed[@]} -gt 0 ]; then
   echo "FAILED: ${failed[*]}"
