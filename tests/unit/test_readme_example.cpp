@@ -9,11 +9,12 @@
 #include <utility>
 #include <vector>
 
+#include "support/paths.hpp"
+
 // EXAMPLE-BEGIN
 #include <vector>
 
 #include "engine.hpp"  // target cg_kernels
-#include "support/paths.hpp"
 
 // Contacts of three spheres: 0 and 1 overlap by 0.1, 2 is alone.
 std::size_t count_contacts_example() {
