@@ -58,7 +58,9 @@ part_perf() {
   local d=$1
   scene() {  # name kind count [extra generate options]
     local name=$1 kind=$2 n=$3; shift 3
-    "$CG" generate "$W/$name.h5" --kind "$kind" -n "$n" --rlow 0.00495 --rhigh 0.005 --pour-spacing 1.97 --seed 5 -q "$@" ||
+    local rlow=(--rlow 0.00495)  # --max-aspect sets the smallest semi-axis itself (generate refuses both)
+    [[ " $* " == *" --max-aspect "* ]] && rlow=()
+    "$CG" generate "$W/$name.h5" --kind "$kind" -n "$n" "${rlow[@]}" --rhigh 0.005 --pour-spacing 1.97 --seed 5 -q "$@" ||
       { failed+=("perf: generate $name"); return 1; }
   }
   bench() {  # name count steps

@@ -25,6 +25,8 @@ cd "$(dirname "$0")/.."
 [ -f .devrt/env.sh ] && source .devrt/env.sh .devrt >/dev/null 2>&1
 BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}
 export BIN
+# the unit cases that run the command line take this copy's binary and source tree (tests/support/paths.hpp)
+export CG_BINARY=$(realpath "$BIN/contactgrid") CG_SOURCE_DIR=$PWD CG_MPIEXEC=$(command -v mpiexec)
 failed=()
 log() { echo "[$(date -u +%H:%M:%S)] $*"; }
 part() {  # part NAME COMMAND...: OUT=$OUT/NAME for the command; its output kept in NAME.log
@@ -35,9 +37,8 @@ part() {  # part NAME COMMAND...: OUT=$OUT/NAME for the command; its output kept
   tail -25 "$OUT/$name.log"
   tar czf "$OUT/$name.tgz" -C "$OUT" "$name" && rm -rf "${OUT:?}/$name"  # one file: the device returns few
 }
-unit() {  # the cases that run the command line get this copy's binary and source tree
-  CG_BINARY=$(realpath "$BIN/contactgrid") CG_SOURCE_DIR=$PWD CG_MPIEXEC=$(command -v mpiexec) \
-    "$BIN/contactgrid_tests" >"$OUT/unit_tests.log" 2>&1
+unit() {
+  "$BIN/contactgrid_tests" >"$OUT/unit_tests.log" 2>&1
   local rc=$?
   grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]' "$OUT/unit_tests.log" | head -30
   return $rc
