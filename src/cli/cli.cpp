@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "cli/commands.hpp"
+#include "io/size_text.hpp"
 #include "io/temp_output.hpp"
 #include "io/xdmf.hpp"
 #include "run/pipeline.hpp"
@@ -68,28 +69,6 @@ CLI::Validator enum_names(const std::map<std::string, E>& names) {
 }
 
 }  // namespace
-
-// A size in bytes: a number with an optional unit K, M, G, T (powers of 1024; "GB", "GiB" too).
-std::uint64_t parse_size(const std::string& text, const char* option) {
-  std::size_t used = 0;
-  double x = 0;
-  try {
-    x = std::stod(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  std::string unit = text.substr(used);
-  for (char& ch : unit) ch = char(std::toupper(static_cast<unsigned char>(ch)));
-  if (unit.size() > 1 && unit.back() == 'B') unit.pop_back();
-  if (unit.size() > 1 && unit.back() == 'I') unit.pop_back();
-  const std::size_t k = unit.empty() ? std::string::npos : std::string("KMGT").find(unit);
-  const double bytes = x * std::pow(1024.0, unit.empty() ? 0.0 : double(k + 1));
-  if (used == 0 || !(x > 0) || !std::isfinite(x) ||
-      (!unit.empty() && (unit.size() != 1 || k == std::string::npos)) || bytes < 1 || bytes > 9e18)
-    throw UsageError(std::string(option) + ": '" + text +
-                     "' is not a size (e.g. 4G, 512M, 1.5GiB, or bytes)");
-  return std::uint64_t(bytes);
-}
 
 std::optional<double> positive_number(const std::string& word) {
   std::size_t used = 0;

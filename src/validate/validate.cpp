@@ -24,6 +24,7 @@
 #include "errors.hpp"
 #include "io/contact_file.hpp"
 #include "io/scene_file.hpp"
+#include "io/size_text.hpp"
 #include "run/progress.hpp"
 #include "validate/bullet_oracle.hpp"
 #include "validate/validate_detail.hpp"
@@ -297,27 +298,7 @@ std::uint64_t default_memory_limit() {
   return std::min(four, std::uint64_t(pages) * std::uint64_t(page) / 2);
 }
 
-std::uint64_t parse_memory(const std::string& text) {
-  std::size_t used = 0;
-  double x = 0;
-  try {
-    x = std::stod(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  std::string unit = text.substr(used);
-  for (char& ch : unit) ch = char(std::toupper(static_cast<unsigned char>(ch)));
-  if (unit.size() > 1 && unit.back() == 'B') unit.pop_back();  // "GB", "GiB" → "G", "GI"
-  if (unit.size() > 1 && unit.back() == 'I') unit.pop_back();
-  const std::string units = "KMGT";
-  const std::size_t k = unit.empty() ? std::string::npos : units.find(unit);
-  if (used == 0 || !(x > 0) || !std::isfinite(x) ||
-      (!unit.empty() && (unit.size() != 1 || k == std::string::npos)))
-    throw UsageError("--memory: '" + text + "' is not a size (e.g. 4G, 512M, 1.5GiB, or bytes)");
-  const double bytes = x * std::pow(1024.0, unit.empty() ? 0.0 : double(k + 1));
-  if (bytes < 1 || bytes > 9e18) throw UsageError("--memory: '" + text + "' is out of range");
-  return std::uint64_t(bytes);
-}
+std::uint64_t parse_memory(const std::string& text) { return parse_size(text, "--memory"); }
 
 const char* to_string(ValidateOffender::Kind k) {
   static constexpr const char* names[ValidateOffender::kinds] = {

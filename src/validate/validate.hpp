@@ -92,7 +92,7 @@ struct ValidateOptions {
 
 // The default memory limit: 4 GiB or half the machine's memory, whichever is smaller.
 std::uint64_t default_memory_limit();
-// "4G", "512M", "1.5GiB", "800000000" -> bytes (K, M, G, T: powers of 1024); UsageError otherwise.
+// validate's --memory: io/size_text.hpp's parse_size ("4G", "512M", "1.5GiB", "800000000" -> bytes).
 std::uint64_t parse_memory(const std::string& text);
 
 // "double" | "float" (also "fp64" | "fp32") -> Precision, "auto" -> unset; UsageError otherwise.
