@@ -1,126 +1,20 @@
-// pieces.cpp: one rank's detection in slabs that fit a memory limit (see pieces.hpp).
+// pieces.cpp: one rank's detection in ranges of bodies that fit a memory limit (see pieces.hpp).
 #include "pieces.hpp"
 
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <future>
 #include <limits>
 #include <thread>
 #include <vector>
 
 #include "contact_merge.hpp"
 #include "host_vector.hpp"
-#include "slab_decomposition.hpp"
 
 namespace cg {
 
 namespace {
-
-// A piece's engine input: owned bodies of [lo, hi) and the ghosts within `width` of it, in input
-// order (ascending id), with their ids and report bytes (kReportedBit kept for the owned anchors only).
-struct PieceInput {
-  HostVector<Vec3<double>> position;
-  HostVector<double> radius;
-  HostVector<std::int64_t> id;
-  HostVector<std::uint8_t> report;
-  HostVector<Shape> shape;
-  HostVector<Vec3<double>> semi_axes;
-  HostVector<Quat<double>> orientation;
-  std::vector<double> owned_at;  // the owned bodies' centre coordinates (where a split cuts)
-
-  BodiesView view() const { return BodiesView{position, radius, id, report, shape, semi_axes, orientation}; }
-};
-
-// Parallel: each body's role (0 not held, 1 ghost, 2 owned) and the held count per block of rows, a
-// scan of the blocks, then each block fills its rows in order.
-PieceInput select_piece(const BodiesView& b, int axis, double lo, double hi, double width, int threads) {
-  const std::size_t n = b.size(), block = std::size_t(1) << 16, blocks = (n + block - 1) / block;
-  std::vector<std::uint8_t> role(n);
-  std::vector<std::size_t> held(blocks + 1, 0), owned(blocks + 1, 0);
-#pragma omp parallel for num_threads(threads) schedule(static)
-  for (std::size_t k = 0; k < blocks; ++k) {
-    std::size_t h = 0, o = 0;
-    for (std::size_t i = k * block; i < std::min(n, (k + 1) * block); ++i) {
-      const double x = component(b.position[i], axis);
-      const std::uint8_t r = x < lo - width || x >= hi + width ? 0 : (x >= lo && x < hi ? 2 : 1);
-      role[i] = r;
-      h += r != 0;
-      o += r == 2;
-    }
-    held[k + 1] = h;
-    owned[k + 1] = o;
-  }
-  for (std::size_t k = 0; k < blocks; ++k) {
-    held[k + 1] += held[k];
-    owned[k + 1] += owned[k];
-  }
-  PieceInput p;
-  const bool shapes = !b.shape.empty();
-  const std::size_t m = held[blocks];
-  p.position.resize(m);
-  p.radius.resize(m);
-  p.id.resize(m);
-  p.report.resize(m);
-  if (shapes) {
-    p.shape.resize(m);
-    p.semi_axes.resize(m);
-    p.orientation.resize(m);
-  }
-  p.owned_at.resize(owned[blocks]);
-#pragma omp parallel for num_threads(threads) schedule(static)
-  for (std::size_t k = 0; k < blocks; ++k) {
-    std::size_t w = held[k], o = owned[k];
-    for (std::size_t i = k * block; i < std::min(n, (k + 1) * block); ++i) {
-      if (role[i] == 0) continue;
-      const std::uint8_t given = b.report.empty() ? kReportedBit : b.report[i];
-      p.position[w] = b.position[i];
-      p.radius[w] = b.radius[i];
-      p.id[w] = b.id.empty() ? static_cast<std::int64_t>(i) : b.id[i];
-      p.report[w] = role[i] == 2 ? given : static_cast<std::uint8_t>(given & ~kReportedBit);
-      if (shapes) {
-        p.shape[w] = b.shape[i];
-        p.semi_axes[w] = b.semi_axes[i];
-        p.orientation[w] = b.orientation[i];
-      }
-      if (role[i] == 2) p.owned_at[o++] = component(b.position[i], axis);
-      ++w;
-    }
-  }
-  return p;
-}
-
-// A cut that leaves owned bodies on both sides: the median of their centres, or the next larger centre
-// when the median is the smallest. None (NaN) when every centre is the same.
-double split_point(std::vector<double>& at) {
-  if (at.size() < 2) return std::numeric_limits<double>::quiet_NaN();
-  auto mid = at.begin() + static_cast<std::ptrdiff_t>(at.size() / 2);
-  std::nth_element(at.begin(), mid, at.end());
-  const double m = *mid;
-  const double lowest = *std::min_element(at.begin(), at.end());
-  if (lowest < m) return m;
-  double next = std::numeric_limits<double>::infinity();
-  for (double x : at)
-    if (x > m) next = std::min(next, x);
-  return next == std::numeric_limits<double>::infinity() ? std::numeric_limits<double>::quiet_NaN() : next;
-}
-
-// Up to parts - 1 ascending cuts at the quantiles of `at`, each above its smallest value (so that no
-// part repeats the whole); empty when none is.
-std::vector<double> quantile_cuts(std::vector<double>& at, std::size_t parts) {
-  std::vector<double> cuts;
-  if (at.size() < 2) return cuts;
-  const double lowest = *std::min_element(at.begin(), at.end());
-  std::size_t from = 0;
-  for (std::size_t j = 1; j < parts; ++j) {
-    const std::size_t k = at.size() * j / parts;
-    if (k < from) continue;
-    std::nth_element(at.begin() + std::ptrdiff_t(from), at.begin() + std::ptrdiff_t(k), at.end());
-    from = k;
-    const double c = at[k];
-    if (c > lowest && (cuts.empty() || c > cuts.back())) cuts.push_back(c);
-  }
-  return cuts;
-}
 
 std::string bytes_text(std::uint64_t b) {
   return b >= (std::uint64_t(1) << 30) ? fmt::format("{:.3g} GiB", double(b) / double(1 << 30))
@@ -176,105 +70,151 @@ std::uint64_t piece_bytes(std::uint64_t rows, bool full, std::uint64_t bodies) {
 }
 
 template <class Real>
-Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, const Frame& frame,
-                                const PieceOptions& o, PieceReport* report) {
+void detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, const Frame& frame,
+                      const PieceOptions& o, const std::function<void(Contacts<Real>&&)>& sink,
+                      PieceReport* report) {
   PieceReport local;
   PieceReport& rep = report ? *report : local;
   rep = {};
   if (o.memory_limit == 0) {
     rep.pieces = rep.attempts = 1;
+    if (o.before_piece) o.before_piece(0);
     Contacts<Real> c = engine.detect(bodies, frame);
     rep.stats = engine.stats();
     rep.times = engine.times();
-    return c;
+    sink(std::move(c));
+    return;
   }
   if (engine.options().history)
     throw UsageError("a detection in pieces (a memory limit) does not keep contact history");
   const bool full = engine.options().fields == Fields::full;
   const int threads = engine.options().threads > 0 ? engine.options().threads
                                                    : std::max(1, int(std::thread::hardware_concurrency()));
-  // One attempt: the contacts, or false when the piece does not fit. `needed`: the bytes the model
-  // counted for a piece whose contacts came back too large (0 after a ResourceError: not known).
-  std::uint64_t needed = 0;
-  auto attempt = [&](const BodiesView& v, Contacts<Real>& out) {
-    ++rep.attempts;
-    needed = 0;
-    try {
-      out = engine.detect(v, frame);
-    } catch (const ResourceError&) {
-      // The workspace keeps what the failed stages grew (sized for this piece, counted against the
-      // limit): a new engine of the same options starts the next piece from nothing.
-      engine = Engine<Real>(engine.options());
-      return false;
-    }
-    needed = piece_bytes<Real>(out.size(), full, v.size());
-    if (needed <= o.memory_limit) return true;
-    out = Contacts<Real>{};
-    return false;
-  };
+  const std::size_t n = bodies.size();
+  const std::uint64_t fixed = piece_bytes<Real>(0, full, n), per_row = piece_bytes<Real>(1, full, 0);
+  if (fixed >= o.memory_limit)
+    throw ResourceError(
+        fmt::format("the {} bodies alone ({}) do not fit in the memory limit of {}; raise --memory-limit", n,
+                    bytes_text(fixed), bytes_text(o.memory_limit)));
+  // The rows a piece may hold (the model: rows and all bodies within the limit), and the rows planned
+  // (80 % of those), lowered after a piece that ran out of memory.
+  const std::uint64_t allowed = (o.memory_limit - fixed) / per_row;
+  std::uint64_t planned = std::max<std::uint64_t>(1, allowed / 5 * 4);
 
-  Contacts<Real> whole;
-  if (attempt(bodies, whole)) {
-    rep.pieces = 1;
-    rep.stats = engine.stats();
-    rep.times = engine.times();
-    return whole;
+  // The report bytes the engine sees: the caller's inside the piece's range, without kReportedBit
+  // outside it (set and cleared range by range).
+  HostVector<std::uint8_t> mask(n);
+  bool wide = false;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(|| : wide)
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint8_t given = bodies.report.empty() ? kReportedBit : bodies.report[i];
+    mask[i] = static_cast<std::uint8_t>(given & ~kReportedBit);
+    wide = wide || (given & kWideBit) != 0;
   }
-  // The scene in slabs along the axis, each [lo, hi) of centre coordinates.
-  struct Range {
-    double lo, hi;
-  };
-  const double inf = std::numeric_limits<double>::infinity();
-  std::vector<Range> todo;
-  // A piece that does not fit: its parts next, the lowest first (depth first, in slab order). Two
-  // halves, or where the model counted the bytes it needs, as many parts of equal owned counts as
-  // those bytes take at 80 % of the limit (each part then likely fits at the first try).
-  auto split = [&](const Range& r, std::vector<double>& owned_at, std::size_t held) {
-    const std::size_t parts =
-        needed == 0
-            ? 2
-            : std::clamp<std::size_t>(std::size_t(double(needed) / (0.8 * double(o.memory_limit))) + 1, 2,
-                                      std::max<std::size_t>(owned_at.size(), 2));
-    std::vector<double> cuts = quantile_cuts(owned_at, parts);
-    if (cuts.empty()) {
-      const double cut = split_point(owned_at);
-      if (!(cut == cut)) {
-        throw ResourceError(fmt::format(
-            "the contacts of a piece of {} bodies ({} owned) do not fit in the memory limit of {} and the "
-            "piece cannot be split further; raise --memory-limit",
-            held, owned_at.size(), bytes_text(o.memory_limit)));
-      }
-      cuts = {cut};
+  auto set_range = [&](std::size_t first, std::size_t last, bool on) {
+#pragma omp parallel for num_threads(threads) schedule(static)
+    for (std::size_t i = first; i < last; ++i) {
+      const std::uint8_t given = bodies.report.empty() ? kReportedBit : bodies.report[i];
+      mask[i] = on ? given : static_cast<std::uint8_t>(given & ~kReportedBit);
     }
-    double hi = r.hi;
-    for (auto c = cuts.rbegin(); c != cuts.rend(); ++c) {
-      todo.push_back({*c, hi});
-      hi = *c;
-    }
-    todo.push_back({r.lo, hi});
   };
-  {
-    std::vector<double> at(bodies.size());
-    for (std::size_t i = 0; i < at.size(); ++i) at[i] = component(bodies.position[i], o.axis);
-    split({-inf, inf}, at, bodies.size());
-  }
+  BodiesView view = bodies;
+  view.report = mask;
+
+  // The blocks go to the sink on a second thread, one at a time: host memory holds the block being
+  // handed on and the piece being detected. Unordered pieces (wide bodies) are kept and merged.
+  std::future<void> handing;
   std::vector<Contacts<Real>> runs;
-  while (!todo.empty()) {
-    const Range r = todo.back();
-    todo.pop_back();
-    PieceInput p = select_piece(bodies, o.axis, r.lo, r.hi, o.width, threads);
-    if (p.owned_at.empty()) continue;  // a piece that owns nothing reports nothing
-    Contacts<Real> c;
-    if (attempt(p.view(), c)) {
+  auto hand_on = [&](Contacts<Real>&& c) {
+    if (handing.valid()) handing.get();
+    if (wide) {
       runs.push_back(std::move(c));
-      add_stats(rep.stats, engine.stats(), runs.size() == 1);
-      add_times(rep.times, engine.times());
-      continue;
+      return;
     }
-    split(r, p.owned_at, p.position.size());
-  }
-  rep.pieces = runs.size();
+    handing = std::async(std::launch::async, [&sink, c = std::move(c)]() mutable { sink(std::move(c)); });
+  };
 
+  std::uint64_t total = 0;
+  double density = 0;  // the most contacts per body of a kept piece so far
+  std::size_t first = 0;
+  try {
+    while (first < n) {
+      // The piece's bodies: an eighth of the scene first, then as many as the densest piece so far
+      // says fit the planned rows.
+      std::size_t count = density > 0 ? std::size_t(double(planned) / density) : (n + 7) / 8;
+      count = std::clamp<std::size_t>(count, 1, n - first);
+      bool halved = false;
+      for (;;) {
+        if (o.before_piece) o.before_piece(rep.attempts);
+        ++rep.attempts;
+        set_range(first, first + count, true);
+        Contacts<Real> c;
+        bool fits = true;
+        try {
+          c = engine.detect(view, frame);
+          fits = c.size() <= allowed;
+        } catch (const ResourceError&) {
+          // The workspace keeps what the failed stages grew (counted against the limit): a new engine
+          // of the same options goes on from nothing.
+          engine = Engine<Real>(engine.options());
+          fits = false;
+        }
+        set_range(first, first + count, false);
+        if (fits) {
+          density = std::max(density, double(c.size()) / double(count));
+          // After a piece that did not fit, no later one is planned larger than the half that did.
+          if (halved) planned = std::min<std::uint64_t>(planned, std::max<std::size_t>(c.size(), 1));
+          total += c.size();
+          add_stats(rep.stats, engine.stats(), rep.pieces == 0);
+          add_times(rep.times, engine.times());
+          ++rep.pieces;
+          first += count;
+          hand_on(std::move(c));
+          break;
+        }
+        if (count == 1) {
+          throw ResourceError(fmt::format(
+              "the contacts of body {} do not fit in the memory limit of {} beside the {} bodies; raise "
+              "--memory-limit",
+              bodies.id.empty() ? std::int64_t(first) : bodies.id[first], bytes_text(o.memory_limit), n));
+        }
+        count /= 2;
+        halved = true;
+      }
+    }
+    if (handing.valid()) handing.get();
+  } catch (...) {
+    if (handing.valid()) handing.wait();  // the block being handed on returns first
+    throw;
+  }
+  rep.stats.bodies = n;
+  if (wide) {
+    std::vector<ContactRunView<Real>> views;
+    for (const Contacts<Real>& run : runs) views.push_back(contact_run_view(run, full));
+    Contacts<Real> out;
+    out.resize(total, FieldSet(full));
+    const std::uint64_t duplicates = merge_contact_runs_into(views, out, full, threads, threads);
+    if (duplicates != 0)
+      throw Error(
+          fmt::format("detect_in_pieces: {} contacts found by two pieces (an internal error)", duplicates));
+    runs.clear();
+    sink(std::move(out));
+  }
+  if (o.log)
+    o.log(fmt::format("detect: {} contacts in {} pieces under the memory limit of {} ({} detections)", total,
+                      rep.pieces, bytes_text(o.memory_limit), rep.attempts));
+}
+
+template <class Real>
+Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, const Frame& frame,
+                                const PieceOptions& o, PieceReport* report) {
+  std::vector<Contacts<Real>> runs;
+  detect_in_pieces<Real>(
+      engine, bodies, frame, o, [&](Contacts<Real>&& c) { runs.push_back(std::move(c)); }, report);
+  if (runs.size() == 1) return std::move(runs[0]);
+  const bool full = engine.options().fields == Fields::full;
+  const int threads = engine.options().threads > 0 ? engine.options().threads
+                                                   : std::max(1, int(std::thread::hardware_concurrency()));
   std::vector<ContactRunView<Real>> views;
   std::size_t total = 0;
   for (const Contacts<Real>& run : runs) {
@@ -283,13 +223,8 @@ Contacts<Real> detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, 
   }
   Contacts<Real> out;
   out.resize(total, FieldSet(full));
-  const std::uint64_t duplicates = merge_contact_runs_into(views, out, full, threads, threads);
-  if (duplicates != 0)
-    throw Error(
-        fmt::format("detect_in_pieces: {} contacts found by two pieces (an internal error)", duplicates));
-  if (o.log)
-    o.log(fmt::format("detect: {} contacts in {} pieces under the memory limit of {} ({} detections)", total,
-                      rep.pieces, bytes_text(o.memory_limit), rep.attempts));
+  out.full = full;
+  merge_contact_runs_into(views, out, full, threads, threads);  // consecutive blocks: a concatenation
   return out;
 }
 
@@ -299,5 +234,9 @@ template Contacts<float> detect_in_pieces(Engine<float>&, const BodiesView&, con
                                           const PieceOptions&, PieceReport*);
 template Contacts<double> detect_in_pieces(Engine<double>&, const BodiesView&, const Frame&,
                                            const PieceOptions&, PieceReport*);
+template void detect_in_pieces(Engine<float>&, const BodiesView&, const Frame&, const PieceOptions&,
+                               const std::function<void(Contacts<float>&&)>&, PieceReport*);
+template void detect_in_pieces(Engine<double>&, const BodiesView&, const Frame&, const PieceOptions&,
+                               const std::function<void(Contacts<double>&&)>&, PieceReport*);
 
 }  // namespace cg

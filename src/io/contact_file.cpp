@@ -49,6 +49,85 @@ hid_t dataset_type(const ContactField& f, bool fp32) {
   return f.kind == FieldKind::integer ? H5T_STD_I64LE : fp32 ? H5T_IEEE_F32LE : H5T_IEEE_F64LE;
 }
 
+// A run of whole rows of one dataset, written by one pwrite loop.
+struct RowBlock {
+  std::size_t dataset;
+  const unsigned char* src;
+  std::uint64_t offset, bytes, row;  // file offset, length, first row (for messages)
+};
+
+// The rows of dataset k of `c` in layout order (kContactFields).
+template <class Real>
+std::vector<const unsigned char*> row_sources(const Contacts<Real>& c) {
+  std::vector<const unsigned char*> src;
+  for_each_contact_field(c, c.fields(), [&](auto, const auto& column) {
+    src.push_back(reinterpret_cast<const unsigned char*>(column.data()));
+  });
+  return src;
+}
+
+// Rows [from, from + count) of dataset k (at `src`), to the file from `offset` on, in blocks of at most
+// 4 MiB; `row` is the file row of `from`.
+void add_blocks(std::vector<RowBlock>& blocks, std::size_t k, const unsigned char* src,
+                std::uint64_t row_bytes, std::uint64_t from, std::uint64_t count, std::uint64_t offset,
+                std::uint64_t row) {
+  const std::uint64_t rows_per_block = std::max<std::uint64_t>(1, (std::uint64_t(4) << 20) / row_bytes);
+  for (std::uint64_t r = 0; r < count; r += rows_per_block) {
+    const std::uint64_t m = std::min(rows_per_block, count - r);
+    blocks.push_back({k, src + (from + r) * row_bytes, offset + r * row_bytes, m * row_bytes, row + r});
+  }
+}
+
+// The blocks, written into layout.temp by a team of `threads` (0: all). IoError naming the dataset and
+// the rows of the first block that failed.
+void pwrite_blocks(const ContactFileLayout& layout, const std::vector<RowBlock>& blocks, int threads) {
+  if (blocks.empty()) return;
+  const int fd = ::open(layout.temp.c_str(), O_WRONLY | O_CLOEXEC);
+  if (fd < 0) {
+    const int e = errno;
+    throw IoError(
+        fmt::format("{}: cannot open {} for writing: {}", layout.path, layout.temp, std::strerror(e)));
+  }
+  std::mutex failed_mutex;
+  std::optional<std::pair<std::size_t, int>> failed;  // (block, errno) of the first failed block
+  const int team = threads > 0 ? threads : omp_get_max_threads();
+  const std::ptrdiff_t nb = static_cast<std::ptrdiff_t>(blocks.size());
+#pragma omp parallel for num_threads(team) schedule(dynamic, 1) if (nb > 1)
+  for (std::ptrdiff_t b = 0; b < nb; ++b) {
+    const RowBlock& block = blocks[static_cast<std::size_t>(b)];
+    std::uint64_t done = 0;
+    int error = 0;
+    while (done < block.bytes) {
+      const ssize_t w =
+          ::pwrite(fd, block.src + done, block.bytes - done, static_cast<off_t>(block.offset + done));
+      if (w < 0 && errno == EINTR) continue;
+      if (w <= 0) {
+        error = w < 0 ? errno : ENOSPC;  // no progress: treat as a full device
+        break;
+      }
+      done += static_cast<std::uint64_t>(w);
+    }
+    if (error) {
+      std::lock_guard<std::mutex> guard(failed_mutex);
+      if (!failed || b < static_cast<std::ptrdiff_t>(failed->first))
+        failed.emplace(static_cast<std::size_t>(b), error);
+    }
+  }
+  const int closed = ::close(fd);
+  const int close_error = errno;
+  if (failed) {
+    const RowBlock& block = blocks[failed->first];
+    const ContactFileLayout::Dataset& d = layout.datasets[block.dataset];
+    throw IoError(fmt::format("{}: {}: cannot write rows {} to {} (into {}): {}", layout.path, d.name,
+                              block.row, block.row + block.bytes / d.row_bytes - 1, layout.temp,
+                              std::strerror(failed->second)));
+  }
+  if (closed != 0) {
+    throw IoError(fmt::format("{}: cannot close {} after writing rows: {}", layout.path, layout.temp,
+                              std::strerror(close_error)));
+  }
+}
+
 }  // namespace
 
 std::string ContactFileLayout::to_text() const {
@@ -164,70 +243,13 @@ void write_contact_rows(const ContactFileLayout& layout, std::uint64_t first_row
                             layout.path, first_row, n, layout.rows));
   if (n == 0) return;
 
-  // Blocks of at most 4 MiB (whole rows), over every dataset, written by a team of threads.
-  struct Block {
-    std::size_t dataset;
-    const unsigned char* src;
-    std::uint64_t offset, bytes, row;
-  };
-  std::vector<const unsigned char*> src;  // the rows of dataset k, in layout order (kContactFields)
-  for_each_contact_field(c, c.fields(), [&](auto, const auto& column) {
-    src.push_back(reinterpret_cast<const unsigned char*>(column.data()));
-  });
-  std::vector<Block> blocks;
+  std::vector<RowBlock> blocks;
+  const std::vector<const unsigned char*> src = row_sources(c);
   for (std::size_t k = 0; k < layout.datasets.size(); ++k) {
     const ContactFileLayout::Dataset& d = layout.datasets[k];
-    const std::uint64_t rows_per_block = std::max<std::uint64_t>(1, (std::uint64_t(4) << 20) / d.row_bytes);
-    for (std::uint64_t r = 0; r < n; r += rows_per_block) {
-      const std::uint64_t m = std::min(rows_per_block, n - r);
-      blocks.push_back({k, src[k] + r * d.row_bytes, d.offset + (first_row + r) * d.row_bytes,
-                        m * d.row_bytes, first_row + r});
-    }
+    add_blocks(blocks, k, src[k], d.row_bytes, 0, n, d.offset + first_row * d.row_bytes, first_row);
   }
-  const int fd = ::open(layout.temp.c_str(), O_WRONLY | O_CLOEXEC);
-  if (fd < 0) {
-    const int e = errno;
-    throw IoError(
-        fmt::format("{}: cannot open {} for writing: {}", layout.path, layout.temp, std::strerror(e)));
-  }
-  std::mutex failed_mutex;
-  std::optional<std::pair<std::size_t, int>> failed;  // (block, errno) of the first failed block
-  const int team = threads > 0 ? threads : omp_get_max_threads();
-  const std::ptrdiff_t nb = static_cast<std::ptrdiff_t>(blocks.size());
-#pragma omp parallel for num_threads(team) schedule(dynamic, 1) if (nb > 1)
-  for (std::ptrdiff_t b = 0; b < nb; ++b) {
-    const Block& block = blocks[static_cast<std::size_t>(b)];
-    std::uint64_t done = 0;
-    int error = 0;
-    while (done < block.bytes) {
-      const ssize_t w =
-          ::pwrite(fd, block.src + done, block.bytes - done, static_cast<off_t>(block.offset + done));
-      if (w < 0 && errno == EINTR) continue;
-      if (w <= 0) {
-        error = w < 0 ? errno : ENOSPC;  // no progress: treat as a full device
-        break;
-      }
-      done += static_cast<std::uint64_t>(w);
-    }
-    if (error) {
-      std::lock_guard<std::mutex> guard(failed_mutex);
-      if (!failed || b < static_cast<std::ptrdiff_t>(failed->first))
-        failed.emplace(static_cast<std::size_t>(b), error);
-    }
-  }
-  const int closed = ::close(fd);
-  const int close_error = errno;
-  if (failed) {
-    const Block& block = blocks[failed->first];
-    const ContactFileLayout::Dataset& d = layout.datasets[block.dataset];
-    throw IoError(fmt::format("{}: {}: cannot write rows {} to {} (into {}): {}", layout.path, d.name,
-                              block.row, block.row + block.bytes / d.row_bytes - 1, layout.temp,
-                              std::strerror(failed->second)));
-  }
-  if (closed != 0) {
-    throw IoError(fmt::format("{}: cannot close {} after writing rows: {}", layout.path, layout.temp,
-                              std::strerror(close_error)));
-  }
+  pwrite_blocks(layout, blocks, threads);
 }
 
 template void write_contact_rows<float>(const ContactFileLayout&, std::uint64_t, const Contacts<float>&, int);
@@ -288,6 +310,132 @@ void commit_contact_file(const ContactFileLayout& layout, const RunInfo& info) {
 void discard_contact_file(const ContactFileLayout& layout) noexcept {
   remove_quietly(layout.temp);
   forget_on_stop(layout.temp);
+}
+
+// ---- a contact file written as its rows come ---------------------------------------------------------
+
+ContactFileStream::ContactFileStream(std::string path, Precision precision, FieldSet fields) {
+  m_layout.path = std::move(path);
+  m_layout.precision = precision;
+  m_layout.fields = fields;
+}
+
+ContactFileStream::~ContactFileStream() {
+  if (!m_finished) discard();
+}
+
+void ContactFileStream::discard() noexcept {
+  if (m_created) discard_contact_file(m_layout);
+  m_finished = true;
+}
+
+void ContactFileStream::create(std::uint64_t chunk_rows) {
+  LibraryLock lock;
+  m_layout.temp = temp_name(m_layout.path);
+  m_chunk_rows = chunk_rows;
+  const bool fp32 = m_layout.precision == Precision::fp32;
+  Where where(m_layout.path, true);
+  remove_on_stop(m_layout.temp);  // until commit or discard
+  m_created = true;
+  Handle file = create_file(where, m_layout.temp);
+  create_group(where, file, "/contacts");
+  for (const ContactField& field : kContactFields) {
+    if (!m_layout.fields.has(field.group)) continue;
+    const hsize_t cols = dataset_columns(field);
+    std::vector<hsize_t> dims{0}, max{H5S_UNLIMITED}, chunk{chunk_rows};
+    if (cols) {
+      dims.push_back(cols);
+      max.push_back(cols);
+      chunk.push_back(cols);
+    }
+    const std::string name = field.path;
+    Handle space = checked(H5Screate_simple(int(dims.size()), dims.data(), max.data()), H5Sclose, where,
+                           fmt::format("{}: cannot make the dataspace", name));
+    Handle dcpl = creation_properties(where, H5P_DATASET_CREATE);
+    // chunked (appended to), each chunk allocated when the rows reach it, never filled
+    check(H5Pset_chunk(dcpl, int(chunk.size()), chunk.data()), where, "cannot set dataset properties");
+    check(H5Pset_alloc_time(dcpl, H5D_ALLOC_TIME_EARLY), where, "cannot set dataset properties");
+    check(H5Pset_fill_time(dcpl, H5D_FILL_TIME_NEVER), where, "cannot set dataset properties");
+    const hid_t type = dataset_type(field, fp32);
+    Handle dataset = checked(H5Dcreate2(file, name.c_str(), type, space, H5P_DEFAULT, dcpl, H5P_DEFAULT),
+                             H5Dclose, where, fmt::format("{}: cannot create the dataset", name));
+    m_layout.datasets.push_back({name, 0, H5Tget_size(type) * (cols ? cols : 1)});
+  }
+  file.close(where, "cannot close (flush) the file");
+}
+
+template <class Real>
+void ContactFileStream::append(const Contacts<Real>& c, int threads) {
+  const std::uint64_t n = c.size(), first = m_layout.rows;
+  constexpr Precision precision = precision_of<Real>();
+  if (m_finished) throw Error(fmt::format("{}: ContactFileStream::append after commit", m_layout.path));
+  if (!c.consistent())
+    throw Error(fmt::format("{}: ContactFileStream: the contact arrays differ in length", m_layout.path));
+  if (precision != m_layout.precision || c.fields() != m_layout.fields)
+    throw Error(fmt::format("{}: ContactFileStream: the rows ({}, {} fields) do not match the file ({}, {})",
+                            m_layout.path, to_string(precision), field_count(c.fields()),
+                            to_string(m_layout.precision), field_count(m_layout.fields)));
+  if (n == 0) return;
+  try {
+    // Chunks of a quarter of the first block (a power of two, 4 Ki to 256 Ki rows): a few MiB each
+    // for large outputs, at most one chunk a dataset beyond the rows for small ones.
+    if (!m_created)
+      create(std::clamp<std::uint64_t>(std::bit_ceil(std::max<std::uint64_t>(n / 4, 1)), 4096, 1 << 18));
+    std::vector<RowBlock> blocks;
+    const std::vector<const unsigned char*> src = row_sources(c);
+    {
+      LibraryLock lock;
+      Where where(m_layout.path, true);
+      Handle file = checked(H5Fopen(m_layout.temp.c_str(), H5F_ACC_RDWR, H5P_DEFAULT), H5Fclose, where,
+                            fmt::format("cannot reopen {}", m_layout.temp));
+      const std::uint64_t end = first + n, cr = m_chunk_rows;
+      for (std::size_t k = 0; k < m_layout.datasets.size(); ++k) {
+        const ContactFileLayout::Dataset& d = m_layout.datasets[k];
+        Handle dataset = checked(H5Dopen2(file, d.name.c_str(), H5P_DEFAULT), H5Dclose, where,
+                                 fmt::format("{}: cannot open the dataset", d.name));
+        const bool vector = d.row_bytes == 3 * sizeof(Real);
+        std::vector<hsize_t> extent{end};
+        if (vector) extent.push_back(3);
+        check(H5Dset_extent(dataset, extent.data()), where,
+              fmt::format("{}: cannot extend to {} rows", d.name, end));
+        for (std::uint64_t chunk = first / cr; chunk * cr < end; ++chunk) {
+          std::vector<hsize_t> at{chunk * cr};
+          if (vector) at.push_back(0);
+          unsigned mask = 0;
+          haddr_t address = HADDR_UNDEF;
+          hsize_t size = 0;
+          check(H5Dget_chunk_info_by_coord(dataset, at.data(), &mask, &address, &size), where,
+                fmt::format("{}: cannot locate the chunk of row {}", d.name, chunk * cr));
+          if (address == HADDR_UNDEF)
+            where.fail(fmt::format("{}: the chunk of row {} has no file space", d.name, chunk * cr));
+          const std::uint64_t lo = std::max(first, chunk * cr), hi = std::min(end, (chunk + 1) * cr);
+          add_blocks(blocks, k, src[k], d.row_bytes, lo - first, hi - lo,
+                     std::uint64_t(address) + (lo - chunk * cr) * d.row_bytes, lo);
+        }
+      }
+      file.close(where, "cannot close (flush) the file");
+    }
+    pwrite_blocks(m_layout, blocks, threads);
+    m_layout.rows = first + n;
+  } catch (...) {
+    discard();
+    throw;
+  }
+}
+
+template void ContactFileStream::append<float>(const Contacts<float>&, int);
+template void ContactFileStream::append<double>(const Contacts<double>&, int);
+
+void ContactFileStream::commit(const RunInfo& info) {
+  if (m_finished) throw Error(fmt::format("{}: ContactFileStream::commit twice", m_layout.path));
+  try {
+    if (!m_created) create(4096);
+  } catch (...) {
+    discard();
+    throw;
+  }
+  m_finished = true;  // commit_contact_file removes the temporary on failure
+  commit_contact_file(m_layout, info);
 }
 
 template <class Real>

@@ -85,6 +85,39 @@ void commit_contact_file(const ContactFileLayout& layout, const RunInfo& info);
 // Removes the temporary (no error if it is gone). Never throws.
 void discard_contact_file(const ContactFileLayout& layout) noexcept;
 
+// ---- a contact file written as its rows come, in order (streamed) ---------------------------------
+// For a run whose contacts come in consecutive blocks of the sorted order (detect_in_pieces): each
+// block is appended to every /contacts dataset as it comes, so the writer never holds more than the
+// block. The datasets are chunked with an unlimited row count (docs/FORMAT.md §2 allows any storage
+// layout; readers see the same shapes, types and values); an append extends them (HDF5 allocates the
+// new chunks at once, never filled), reads the chunks' file offsets, closes the file and pwrites the
+// rows there on `threads` writers — no HDF5 while the rows go out, as write_contact_rows. The file
+// is created at the first append (its chunk size from that block's rows) or at commit. Commit writes
+// the root attributes and renames the temporary over the path; destroying an uncommitted stream (a
+// failed run) removes the temporary: no output appears.
+class ContactFileStream {
+ public:
+  ContactFileStream(std::string path, Precision precision, FieldSet fields);
+  ~ContactFileStream();
+  ContactFileStream(const ContactFileStream&) = delete;
+  ContactFileStream& operator=(const ContactFileStream&) = delete;
+
+  // The next rows (precision and fields must match; Error otherwise). IoError when a write fails.
+  template <class Real>
+  void append(const Contacts<Real>& rows, int threads = 0);
+  std::uint64_t rows() const { return m_layout.rows; }
+  const std::string& path() const { return m_layout.path; }
+  // Root attributes (contacts = rows()), close, rename. IoError on failure, the temporary removed.
+  void commit(const RunInfo& info);
+  void discard() noexcept;
+
+ private:
+  void create(std::uint64_t chunk_rows);
+  ContactFileLayout m_layout;  // rows: appended so far; offsets unused (chunks are found per append)
+  std::uint64_t m_chunk_rows = 0;
+  bool m_created = false, m_finished = false;
+};
+
 // Reads a contact file back in double (whatever precision it was written in). Without
 // `optional_fields` the optional datasets are checked (all or none) but not read (contacts.full false).
 struct ContactFile {

@@ -299,11 +299,14 @@ void exchange_ghosts(const Session& session, HeldBodies& held, const SlabDecompo
 
 // Owned + ghosts in id order (own rows: merged by id), then the engine with the shared frame; the
 // owner of a pair's anchor reports it (the smaller id, or the narrow body of a wide and a narrow one:
-// bodies.hpp). A rank that owns nothing reports nothing.
+// bodies.hpp). A rank that owns nothing reports nothing. With a memory limit the engine runs in pieces
+// (decomposition/pieces.hpp); given a `stream`, each piece's rows are appended to the output file as
+// they come (one rank: the pieces are the file's rows in order) and nothing is returned.
 template <class Real>
 Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBodies& held,
                             const SharedFrame& f, bool full, int threads, std::uint64_t memory_limit,
-                            const std::function<void(const std::string&)>& log, PieceReport& report) {
+                            const std::function<void(const std::string&)>& log, PieceReport& report,
+                            ContactFileStream* stream) {
   Contacts<Real> local;
   local.full = full;
   agreed_stage(session, "detect", [&] {
@@ -316,12 +319,20 @@ Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBo
     held.owned_shapes = {};
     held.ghost_shapes = {};
     if (held.input.owned > 0) {
-      PieceOptions pieces;  // a memory limit: in slabs that fit it (decomposition/pieces.hpp)
+      PieceOptions pieces;
       pieces.memory_limit = memory_limit;
-      pieces.width = f.width;
-      pieces.axis = f.axis;
       pieces.log = log;
-      local = detect_in_pieces(engine, held.input.view(), f.frame, pieces, &report);
+      const int rank = session.rank();
+      pieces.before_piece = [rank](std::uint64_t piece) {
+        if (piece == 1) fault_point("piece", rank);
+      };
+      if (stream) {
+        detect_in_pieces<Real>(
+            engine, held.input.view(), f.frame, pieces,
+            [stream, threads](Contacts<Real>&& rows) { stream->append(rows, threads); }, &report);
+      } else {
+        local = detect_in_pieces(engine, held.input.view(), f.frame, pieces, &report);
+      }
     }
   });
   return local;
@@ -574,7 +585,8 @@ StepStats run_steps(Session& session, Engine<Real>& engine, const SlabDecomposit
 // and the run's statistics. Called inside the rank's DefaultTeam of `threads`.
 template <class Real>
 DistributedResult<Real> distributed_run(Session& session, const std::string& path,
-                                        const DistributedOptions& options, ReadScene&& in, int threads) {
+                                        const DistributedOptions& options, ReadScene&& in, int threads,
+                                        ContactFileStream* stream = nullptr) {
   const bool all_rows = in.all_rows;
   Partition& part = in.part;
   DistributedResult<Real> result;
@@ -612,7 +624,7 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
   fault_point("detect", session.rank());
   PieceReport pieces;
   Contacts<Real> local = detect_local(session, *engine, held, f, options.engine.fields == Fields::full,
-                                      threads, options.memory_limit, options.log, pieces);
+                                      threads, options.memory_limit, options.log, pieces, stream);
   clock.stop(RunStage::detect);
   if (held.input.owned > 0) clock.add_engine(pieces.times);  // (in pieces: summed over them)
   record_detection(session, *engine, held.input, pieces, result);
@@ -623,6 +635,11 @@ DistributedResult<Real> distributed_run(Session& session, const std::string& pat
 
   stop_point();
   fault_point("gather", session.rank());
+  if (stream) {  // the rows are in the output file already
+    result.total_contacts = stream->rows();
+    result.times = clock.times(session, RunStage::gather);
+    return result;
+  }
   CollectedContacts<Real> c = collect_contacts(session, std::move(local), result.bodies, options, threads);
   const RunStage transfer = options.output == ContactOutput::gather ? RunStage::gather : RunStage::exchange;
   clock.add(transfer, c.transfer_seconds);
@@ -722,6 +739,26 @@ RunTime write_output(Session& session, const DetectCommand& cmd, const Distribut
   return {RunStage::write, -1, seconds};
 }
 
+// The streamed output file's root attributes and its rename (its rows were appended as the pieces
+// came). Returns the time of this last step.
+template <class Real>
+RunTime commit_stream(ContactFileStream& stream, const DistributedResult<Real>& r, const DetectCommand& cmd,
+                      RunInfo& info) {
+  const auto t0 = WallClock::now();
+  info.bodies = r.bodies;
+  info.backend = to_string(r.backend);
+  info.ranks = r.ranks;
+  info.cell_size = r.cell_size;
+  info.input = cmd.input;
+  info.times = file_stage_times(r.times);
+  info.ellipsoids = r.ellipsoids;
+  info.narrow_fallbacks = r.stats.narrow_fallbacks;
+  info.narrow_unconverged = r.stats.narrow_unconverged;
+  info.times.push_back({"write", seconds_since(t0)});
+  stream.commit(info);
+  return {RunStage::write, -1, seconds_since(t0)};
+}
+
 // The CSV copy, by rank 0 (which holds every contact: --csv gathers). Returns its time (rank 0).
 template <class Real>
 RunTime write_csv(const Session& session, const std::string& path, const Contacts<Real>& contacts) {
@@ -778,8 +815,15 @@ PrecisionChoice choose_mode(const Session& session, const DetectCommand& cmd, co
 template <class Real>
 int run_in_mode(const DetectCommand& cmd, Session& session, const DistributedOptions& options, ReadScene&& in,
                 const PrecisionChoice& choice, int threads) {
-  DistributedResult<Real> r = or_abort(
-      session, [&] { return distributed_run<Real>(session, cmd.input, options, std::move(in), threads); });
+  // One rank under a memory limit writes the contacts as its pieces come (host memory: a piece or
+  // two, never all rows); a CSV copy or several ranks gather them first.
+  std::optional<ContactFileStream> stream;
+  if (options.memory_limit && session.size() == 1 && cmd.csv.empty() && options.resident_steps == 0)
+    stream.emplace(cmd.output, precision_of<Real>(), FieldSet(options.engine.fields == Fields::full));
+  DistributedResult<Real> r = or_abort(session, [&] {
+    return distributed_run<Real>(session, cmd.input, options, std::move(in), threads,
+                                 stream ? &*stream : nullptr);
+  });
   RunTimes times = r.times;
   RunInfo info;
   info.precision = to_string(choice.mode);
@@ -787,7 +831,10 @@ int run_in_mode(const DetectCommand& cmd, Session& session, const DistributedOpt
   stop_point();
   // The contact file and its CSV copy appear both or neither (rank 0 renames them into place).
   FinishedOutputs outputs;
-  times.push_back(write_output(session, cmd, r, info));
+  if (stream)
+    times.push_back(commit_stream(*stream, r, cmd, info));
+  else
+    times.push_back(write_output(session, cmd, r, info));
   if (session.rank() == 0) outputs.add(cmd.output);
   if (!cmd.csv.empty()) {
     times.push_back(write_csv(session, cmd.csv, r.contacts));

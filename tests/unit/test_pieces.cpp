@@ -37,16 +37,38 @@ void expect_same_in_pieces(Backend backend, const BodiesView& v, bool mixed, boo
   const Contacts<Real> whole = engine.detect(v, frame);
   ASSERT_GT(whole.size(), 100u);
 
+  // A limit of about a quarter of the rows beside all bodies: every piece fits at its first try (sized
+  // from the densest piece so far), and the blocks come in order, each within the limit.
   PieceOptions p;
-  p.memory_limit = piece_bytes<Real>(whole.size() / 4, full, v.size() / 2);
-  p.width = frame_ghost_width(global, frame.origin, std::numeric_limits<Real>::epsilon());
-  p.axis = choose_axis(global, -1);
+  const std::uint64_t allowed = whole.size() / 4;
+  p.memory_limit = piece_bytes<Real>(allowed, full, v.size());
   PieceReport report;
-  const Contacts<Real> pieces = detect_in_pieces(engine, v, frame, p, &report);
-  EXPECT_GE(report.pieces, 2u);
-  EXPECT_GT(report.attempts, report.pieces);  // the whole scene was tried first
+  std::vector<Contacts<Real>> blocks;
+  detect_in_pieces<Real>(
+      engine, v, frame, p, [&](Contacts<Real>&& c) { blocks.push_back(std::move(c)); }, &report);
+  EXPECT_GE(report.pieces, 5u);
+  EXPECT_EQ(report.attempts, report.pieces);  // no failed try
+  ASSERT_EQ(blocks.size(), report.pieces);
+  std::size_t at = 0;
+  for (const Contacts<Real>& b : blocks) {
+    EXPECT_LE(b.size(), allowed);
+    for (std::size_t i = 0; i < b.size(); ++i, ++at) {
+      ASSERT_EQ(b.id_a[i], whole.id_a[at]) << "block rows are not the next rows of the whole";
+      ASSERT_EQ(b.id_b[i], whole.id_b[at]);
+    }
+  }
+  EXPECT_EQ(at, whole.size());
+  const Contacts<Real> pieces = detect_in_pieces(engine, v, frame, p);
   EXPECT_EQ(pieces.size(), whole.size());
   EXPECT_EQ(compare_contacts(pieces, whole), "identical");
+
+  // A limit the first piece (an eighth of the bodies) does not fit: halved until it does, the later
+  // pieces planned no larger.
+  p.memory_limit = piece_bytes<Real>(whole.size() / 40, full, v.size());
+  PieceReport halved;
+  EXPECT_EQ(compare_contacts(detect_in_pieces(engine, v, frame, p, &halved), whole), "identical");
+  EXPECT_GT(halved.attempts, halved.pieces);
+  EXPECT_LE(halved.attempts, halved.pieces + 4) << "failed tries beyond the first piece's halvings";
 
   // No limit: one piece, the engine's own detect().
   PieceReport one;
@@ -102,12 +124,23 @@ TYPED_TEST(PiecesTest, KeepsTheReportMaskAndIds) {
   const Frame frame = make_frame(global, 0, Precision::fp64, CellChoice::tuned);
   const Contacts<double> whole = engine.detect(v, frame);
   PieceOptions p;
-  p.memory_limit = piece_bytes<double>(whole.size() / 3, false, v.size() / 3);
-  p.width = frame_ghost_width(global, frame.origin, std::numeric_limits<double>::epsilon());
-  p.axis = 1;
+  p.memory_limit = piece_bytes<double>(whole.size() / 3, false, v.size());
   PieceReport report_out;
   EXPECT_EQ(compare_contacts(detect_in_pieces(engine, v, frame, p, &report_out), whole), "identical");
   EXPECT_GE(report_out.pieces, 2u);
+
+  // Wide bodies (a distributed run's ghosts: the narrow body of a wide-narrow pair is its anchor): the
+  // pieces' rows are not consecutive blocks, so they are merged before they are handed on (one block).
+  for (std::size_t i = 0; i < id.size(); i += 40) report[i] |= kWideBit;
+  const Contacts<double> wide = engine.detect(v, frame);
+  std::size_t blocks = 0;
+  Contacts<double> merged;
+  detect_in_pieces<double>(engine, v, frame, p, [&](Contacts<double>&& c) {
+    ++blocks;
+    merged = std::move(c);
+  });
+  EXPECT_EQ(blocks, 1u);
+  EXPECT_EQ(compare_contacts(merged, wide), "identical");
 }
 
 // CUDA: a piece that runs out of device memory in the middle (the workspace capped by
@@ -130,8 +163,6 @@ TEST(PiecesCuda, DeviceOutOfMemoryInTheMiddleSplitsThePiece) {
   EXPECT_THROW(capped.detect(v, frame), ResourceError) << "the cap does not make the whole scene fail";
   PieceOptions p;
   p.memory_limit = std::uint64_t(1) << 40;
-  p.width = frame_ghost_width(global, frame.origin, std::numeric_limits<float>::epsilon());
-  p.axis = choose_axis(global, -1);
   PieceReport report;
   const Contacts<float> pieces = detect_in_pieces(capped, v, frame, p, &report);
   EXPECT_GE(report.pieces, 2u);
@@ -168,9 +199,9 @@ TEST_F(PiecesCli, MemoryLimitGivesTheSameContactsFile) {
           "detect " + path("scene.h5") + " --backend cpu --threads 2 --precision " + precision;
       const CliResult a = run_cli(common + " -o " + path("whole.h5"));
       ASSERT_EQ(a.code, 0) << a.output;
-      const CliResult b = run_cli(common + " -o " + path("pieces.h5") + " --memory-limit 256K");
+      const CliResult b = run_cli(common + " -o " + path("pieces.h5") + " --memory-limit 512K");
       ASSERT_EQ(b.code, 0) << b.output;
-      EXPECT_NE(b.output.find(" pieces under --memory-limit 0.25 MiB"), std::string::npos) << b.output;
+      EXPECT_NE(b.output.find(" pieces under --memory-limit 0.5 MiB"), std::string::npos) << b.output;
       EXPECT_EQ(b.output.find("  1 pieces under"), std::string::npos) << b.output;
       const ContactFile whole = read_contacts(path("whole.h5")), pieces = read_contacts(path("pieces.h5"));
       ASSERT_GT(whole.contacts.size(), 500u);
