@@ -33,13 +33,14 @@ const Fault& fault() {
     out.stage =
         at == std::string::npos ? "" : s.substr(at + 1, colon == std::string::npos ? colon : colon - at - 1);
     if (colon != std::string::npos) out.rank = std::atoi(s.c_str() + colon + 1);
-    const bool action_ok =
-        out.action == "wait" || out.action == "hang" || out.action == "exit" || out.action == "kill";
+    const bool action_ok = out.action == "wait" || out.action == "hang" || out.action == "exit" ||
+                           out.action == "kill" || out.action == "oom" || out.action == "device";
     const bool stage_ok = out.stage == "read" || out.stage == "exchange" || out.stage == "detect" ||
-                          out.stage == "gather" || out.stage == "write";
+                          out.stage == "piece" || out.stage == "gather" || out.stage == "write";
     if (!action_ok || !stage_ok)
-      throw UsageError("CONTACTGRID_TEST_FAULT=" + s +
-                       ": expected <wait|hang|exit|kill>@<read|exchange|detect|gather|write>[:<rank>]");
+      throw UsageError(
+          "CONTACTGRID_TEST_FAULT=" + s +
+          ": expected <wait|hang|exit|kill|oom|device>@<read|exchange|detect|piece|gather|write>[:<rank>]");
     return out;
   }();
   return f;
@@ -54,6 +55,8 @@ void fault_point(const char* stage, int rank) {
   std::fflush(stderr);
   using namespace std::chrono_literals;
   if (f.action == "exit") std::exit(1);
+  if (f.action == "oom") throw ResourceError(std::string("test fault: out of device memory at ") + stage);
+  if (f.action == "device") throw CudaError(std::string("test fault: a device error at ") + stage);
   if (f.action == "kill") ::raise(SIGKILL);
   const auto end = std::chrono::steady_clock::now() + 600s;
   while (std::chrono::steady_clock::now() < end) {
