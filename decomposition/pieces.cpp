@@ -135,7 +135,8 @@ void detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, const Fram
   };
 
   std::uint64_t total = 0;
-  double density = 0;  // the most contacts per body of a kept piece so far
+  double density = 0;         // the most contacts per body of a kept piece so far
+  std::uint64_t largest = 0;  // the most rows of a kept piece so far
   std::size_t first = 0;
   try {
     while (first < n) {
@@ -164,6 +165,17 @@ void detect_in_pieces(Engine<Real>& engine, const BodiesView& bodies, const Fram
           density = std::max(density, double(c.size()) / double(count));
           // After a piece that did not fit, no later one is planned larger than the half that did.
           if (halved) planned = std::min<std::uint64_t>(planned, std::max<std::size_t>(c.size(), 1));
+          // CUDA: the workspace this piece held (the largest so far) against its rows gives the bytes a
+          // row takes on the device beyond the model's bodies (an overestimate: the workspace's share
+          // that grows with the bodies counts as rows): later pieces are planned at 80 % of that.
+          const std::uint64_t held = engine.stats().peak_device_bytes;
+          if (held > fixed && c.size() >= largest && c.size() > 0) {
+            largest = c.size();
+            const double device_row = double(held - fixed) / double(c.size());
+            planned = std::min<std::uint64_t>(
+                planned,
+                std::max<std::uint64_t>(1, std::uint64_t(0.8 * double(o.memory_limit - fixed) / device_row)));
+          }
           total += c.size();
           add_stats(rep.stats, engine.stats(), rep.pieces == 0);
           add_times(rep.times, engine.times());

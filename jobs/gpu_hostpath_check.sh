@@ -6,10 +6,12 @@
 #   kept), the CLI's stage table, and SciPy's cKDTree.query_pairs + filter on the same scene when the
 #   device's Python has scipy and h5py.
 # pieces: contacts in bounded memory (decomposition/pieces.hpp): the Pieces* unit cases on both backends
-#   (the CUDA ones must run), then 2^24 spheres at 6 contacts per body (about 100 M contacts) detected by
-#   the CLI on CUDA in fp32 without a limit and under --memory-limit 4G (best of 2 each): the same
-#   /contacts (contactgrid compare: byte-identical), the limited run in several pieces, and its wall time
-#   within 1.5x of the unlimited one.
+#   (the CUDA ones must run; the CLI ones on the device's binary), then 2^24 spheres at 6 contacts per
+#   body (about 100 M contacts) detected by the CLI on CUDA in fp32 without a limit and under
+#   --memory-limit 4G (best of 2 each): the same /contacts (contactgrid compare: byte-identical), the
+#   limited run in several pieces, its wall time within 1.5x of the unlimited one, and each run's peak
+#   host RSS (/usr/bin/time -v, where the host has it; printed: two pieces in flight may hold as much as
+#   the whole when the device limit is near the rows' bytes).
 # floor20: contactgrid_cuda_bench 20 24 4 10 auto spheres: host arrays -> host contacts at 2^20 and
 #   2^24 for each transfer path, the upload and download times beside the floor (measure first: what a
 #   call's fixed costs are before they are cut).
@@ -33,7 +35,9 @@ now() { date +%s.%N; }
 
 if [ "$MODE" = pieces ] || [ "$MODE" = all ]; then
 log "== pieces: unit cases on both backends (CUDA cases must run, not skip)"
-"$BIN/contactgrid_tests" --gtest_filter='Pieces*' >"$dir/pieces_unit.log" 2>&1 || failed+=(pieces_unit)
+CG_BINARY=$(realpath "$BIN/contactgrid") CG_SOURCE_DIR=$PWD \
+  "$BIN/contactgrid_tests" --gtest_filter='Pieces*' >"$dir/pieces_unit.log" 2>&1 || failed+=(pieces_unit)
+grep -h "peak RSS" "$dir/pieces_unit.log"
 grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]' "$dir/pieces_unit.log" | head -20
 grep -q 'OK \] PiecesTest/cuda.SpheresGiveTheOnePieceContacts' "$dir/pieces_unit.log" || failed+=(pieces_unit_cuda_missing)
 big="$dir/s24.h5"
@@ -43,15 +47,19 @@ best() { sort -n | head -1; }
 for run in 1 2; do
   for kind in whole pieces; do
     extra=""; [ $kind = pieces ] && extra="--memory-limit 4G"
+    timer=""; [ -x /usr/bin/time ] && timer="/usr/bin/time -v -o $dir/pieces_${kind}_${run}_time.txt"
     t0=$(now)
-    "$BIN/contactgrid" detect "$big" -o "$dir/$kind.h5" --backend cuda --precision fp32 -v $extra \
+    $timer "$BIN/contactgrid" detect "$big" -o "$dir/$kind.h5" --backend cuda --precision fp32 -v $extra \
       >"$dir/pieces_${kind}_$run.log" 2>&1 || failed+=(pieces_${kind}_run$run)
     t1=$(now)
     echo "$t0 $t1" | awk '{printf "%.3f\n", $2 - $1}' >>"$dir/pieces_${kind}_s.txt"
     [ $run = 2 ] || [ $kind = pieces ] || rm -f "$dir/$kind.h5"
   done
 done
-grep -h "pieces under --memory-limit" "$dir"/pieces_pieces_*.log | tail -1
+grep -h "pieces under --memory-limit" "$dir"/pieces_pieces_*.log | tail -2
+grep -qE "pieces under --memory-limit .*\(([0-9]+) detections" "$dir/pieces_pieces_2.log" &&
+  awk '/pieces under --memory-limit/{p=$1; d=$0; sub(/.*\(/,"",d); sub(/ detections.*/,"",d); exit !(p == d)}' \
+    "$dir/pieces_pieces_2.log" || failed+=(pieces_failed_tries)
 grep -qE "^  ([2-9]|[1-9][0-9]+) pieces under --memory-limit" "$dir/pieces_pieces_2.log" || failed+=(pieces_not_in_pieces)
 "$BIN/contactgrid" compare "$dir/whole.h5" "$dir/pieces.h5" >"$dir/pieces_compare.log" 2>&1 || failed+=(pieces_not_identical)
 cat "$dir/pieces_compare.log"
@@ -62,6 +70,14 @@ log "pieces: whole ${whole_s} s, --memory-limit 4G ${pieces_s} s (best of 2, CLI
 echo "whole_s $whole_s pieces_s $pieces_s ratio $ratio" >"$dir/pieces_summary.txt"
 grep -hE '^ +(detect|write|read|total)' "$dir/pieces_whole_2.log" "$dir/pieces_pieces_2.log" | tee -a "$dir/pieces_summary.txt"
 awk -v r="$ratio" 'BEGIN{exit !(r <= 1.5)}' || failed+=(pieces_ratio_above_1.5)
+if [ -f "$dir/pieces_pieces_2_time.txt" ]; then
+  rss() { awk -F': ' '/Maximum resident set size/{printf "%.0f", $2 / 1024}' "$1"; }
+  whole_rss=$(rss "$dir/pieces_whole_2_time.txt"); pieces_rss=$(rss "$dir/pieces_pieces_2_time.txt")
+  log "pieces: peak host RSS whole ${whole_rss} MiB, --memory-limit 4G ${pieces_rss} MiB"
+  echo "whole_rss_mib $whole_rss pieces_rss_mib $pieces_rss" >>"$dir/pieces_summary.txt"
+else
+  log "pieces: no /usr/bin/time on this host: peak RSS not measured"
+fi
 rm -f "$big" "$dir/whole.h5" "$dir/pieces.h5"
 fi
 
