@@ -276,21 +276,22 @@ TEST(DistributedDetect, SlabsThinnerThanTheGhostWidthEqualsSingleRank) {
 }
 
 // --memory-limit (decomposition/pieces.hpp): every rank detects its owned bodies and ghosts in
-// slabs that fit, reporting only the anchors each slab owns; the result is the single-rank engine's.
+// ranges of ids that fit, each reporting only the anchors of its range; the result is the single-rank
+// engine's.
 TEST(DistributedDetect, MemoryLimitPiecesEqualSingleRank) {
   const Scene scene = uniform_scene(112, 3000);
   const std::string path = write_shared("pieces", scene);
   for (SceneRead read : {SceneRead::own_rows, SceneRead::all_rows}) {
     DistributedOptions o = base_options();
     o.read = read;
-    o.memory_limit = 40000;  // bytes: a few hundred bodies and their contacts a piece
+    o.memory_limit = 160000;  // bytes: the bodies held and a few hundred contacts a piece
     const std::string what =
         std::string("pieces") + (read == SceneRead::own_rows ? " (own rows)" : " (every row)");
     const std::size_t k = check_equal_to_single_rank<double>(path, scene, o, what);
     check_equal_to_single_rank<float>(path, scene, o, what);
     const DistributedResult<double> r = distributed_detect<double>(session(), path, o);
     EXPECT_GE(r.pieces, 2u) << what;
-    EXPECT_GT(r.piece_detections, r.pieces) << what;
+    EXPECT_GE(r.piece_detections, r.pieces) << what;
     if (session().rank() == 0) {
       EXPECT_GT(k, 200u);
     }
