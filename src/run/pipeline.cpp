@@ -323,7 +323,8 @@ Contacts<Real> detect_local(const Session& session, Engine<Real>& engine, HeldBo
       pieces.memory_limit = memory_limit;
       pieces.log = log;
       const int rank = session.rank();
-      pieces.before_piece = [rank](std::uint64_t piece) {
+      pieces.before_piece = [rank](std::uint64_t piece) {  // a signal stops the run between pieces
+        stop_point();
         if (piece == 1) fault_point("piece", rank);
       };
       if (stream) {
