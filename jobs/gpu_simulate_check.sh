@@ -2,7 +2,9 @@
 # contactgrid simulate (#32) on the GPU, in one call per part (all of them: under 4 minutes on one H100):
 #   unit      the physics cases on the CUDA backend (restitution, Hertz, energy, oblique impact, static
 #             friction, ellipsoid at rest), DemBackends.* (CPU = CUDA bit for bit: library and CLI
-#             frames and contacts with history), the history's device cases
+#             frames and contacts with history, energies summed three levels deep, runs of several
+#             lengths; the contact stage's two ways and the body index's two ways the same bits),
+#             DemSum.*, the history's device cases
 #   beverloo  the hopper discharge against Beverloo's law (jobs/beverloo.sh: three orifices, the
 #             exponent fitted; 2.5 ± 0.2), CUDA
 #   perf      whole steps (detection with history + forces + integration, no output) on a pour at a
@@ -10,9 +12,9 @@
 #             each), fp32, CUDA: 2^20 and 2^24 spheres, 2^22 ellipsoids (pour-ellipsoids, aspect <= 1:4);
 #             steps/s from log.csv (issue: 1 500 steps/s at 2^20, 2·10^9 sphere-steps/s at 2^24, 3·10^8
 #             ellipsoid-steps/s at 2^22); then short runs with --stage-times: where a step's time goes
-#             (per stage, and the engine's stages within detect), at 2^24 also with the body stage's
-#             index by the radix sort (CONTACTGRID_DEM_SUMS=sort) and the history searched by Thrust
-#             (CONTACTGRID_CUDA_HISTORY=thrust) against the defaults (counts; the search from the row)
+#             (per stage, and the engine's stages within detect; the energies' time a call), at 2^20
+#             and 2^24 also with every contact term stored (CONTACTGRID_DEM_TERMS=rows) against the
+#             default (the contact stage sums each body's rows as A itself)
 #   mpi2      (a host with 2 GPUs, its own call) simulate under mpirun -np 2 --backend cuda writes the
 #             frames, contacts and energies of -np 1 and of the CPU backend, bit for bit
 #   two       (a host with 2 GPUs, its own call) steps/s of mpirun -np 1 and -np 2 --backend cuda on a
@@ -39,7 +41,7 @@ cat "$OUT/device.txt"
 
 part_unit() {
   local d=$1
-  local filter='DemPhysics/cuda.*:DemBackends*:SimulateCli*:SimulateWalls*:DemDamping*:EngineHistory*:StepHistory*'
+  local filter='DemPhysics/cuda.*:DemBackends*:DemSum*:SimulateCli*:SimulateWalls*:DemDamping*:EngineHistory*:StepHistory*'
   "$BIN/contactgrid_tests" --gtest_filter="$filter" >"$d/unit.log" 2>&1 || failed+=("unit: $filter")
   grep -E '^\[  (PASSED|FAILED) |^\[  SKIPPED' "$d/unit.log" | head -30 | tee -a "$OUT/summary.txt"
   if grep -q '^\[  SKIPPED \].*cuda' "$d/unit.log"; then failed+=("unit: CUDA cases skipped (no GPU seen)"); fi
@@ -88,7 +90,7 @@ part_perf() {
       failed+=("perf: simulate $name --stage-times ($label)"); tail -3 "$d/$name.$label.stages.log"; return
     fi
     grep -q 'stage times' "$d/$name.$label.stages.log" || failed+=("perf: $name printed no stage times")
-    { echo "$name ($label):"; grep -E 'steps/s|stage times|within detect|energies:' "$d/$name.$label.stages.log"; } \
+    { echo "$name ($label):"; grep -E 'steps/s|stage times|within detect|energ' "$d/$name.$label.stages.log"; } \
       >>"$OUT/stages.txt"
     rm -rf "$W/$name.st.run"
   }
@@ -98,6 +100,7 @@ part_perf() {
   if scene spheres_2e20 pour $((1 << 20)); then
     bench spheres_2e20 $((1 << 20)) 300
     stages spheres_2e20 120 default
+    stages spheres_2e20 120 terms-rows CONTACTGRID_DEM_TERMS=rows
     rm -f "$W/spheres_2e20.h5"
   fi
   if scene ellipsoids_2e22 pour-ellipsoids $((1 << 22)) --max-aspect 4; then
@@ -108,8 +111,7 @@ part_perf() {
   if scene spheres_2e24 pour $((1 << 24)); then
     bench spheres_2e24 $((1 << 24)) 60
     stages spheres_2e24 30 default
-    stages spheres_2e24 30 sums-sort CONTACTGRID_DEM_SUMS=sort
-    stages spheres_2e24 30 history-thrust CONTACTGRID_CUDA_HISTORY=thrust
+    stages spheres_2e24 30 terms-rows CONTACTGRID_DEM_TERMS=rows
     rm -f "$W/spheres_2e24.h5"
   fi
   cat "$OUT/table.md" "$OUT/stages.txt" | tee -a "$OUT/summary.txt"

@@ -30,13 +30,13 @@ std::unique_ptr<CudaDem> make_cuda_dem(int, const DemBodies&, const std::vector<
 void destroy(CudaDem* d) { delete d; }
 DeviceBodiesView cuda_dem_bodies(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
 void cuda_dem_kick_drift(CudaDem&, double) { throw CudaError("this contactgrid was built without CUDA"); }
-void cuda_dem_kick(CudaDem&, double) { throw CudaError("this contactgrid was built without CUDA"); }
 template <class Real>
-void cuda_dem_forces(CudaDem&, const DeviceContactsView<Real>&, const dem::StepConstants&) {
+void cuda_dem_forces(CudaDem&, const DeviceContactsView<Real>&, const dem::StepConstants&, DemThen) {
   throw CudaError("this contactgrid was built without CUDA");
 }
-template void cuda_dem_forces(CudaDem&, const DeviceContactsView<float>&, const dem::StepConstants&);
-template void cuda_dem_forces(CudaDem&, const DeviceContactsView<double>&, const dem::StepConstants&);
+template void cuda_dem_forces(CudaDem&, const DeviceContactsView<float>&, const dem::StepConstants&, DemThen);
+template void cuda_dem_forces(CudaDem&, const DeviceContactsView<double>&, const dem::StepConstants&,
+                              DemThen);
 DemEnergies cuda_dem_energies(CudaDem&, std::size_t, Vec3<double>) {
   throw CudaError("this contactgrid was built without CUDA");
 }
@@ -220,6 +220,8 @@ struct Simulation<Real>::Impl {
   Contacts<Real> contacts;  // CPU: the last step's; CUDA: downloaded on request
   bool contacts_downloaded = false;
   DeviceContactsView<Real> device_contacts{};
+  // CUDA: the device state already holds this step's kick_drift (done by the last step's body stage)
+  bool drifted = false;
   // DemOptions::stage_times: on during step(); the sums (DemStageTimes)
   bool timing = false;
   double stage_seconds[detail::kDemStages] = {};
@@ -267,14 +269,15 @@ struct Simulation<Real>::Impl {
     }
   }
 
-  // The contacts at the current positions and the forces from them (no integration).
-  void forces() {
+  // The contacts at the current positions and the forces from them; CUDA: then `then` (the body
+  // stage's pass over the bodies integrates them too).
+  void forces(detail::DemThen then = detail::DemThen::nothing) {
     if (resolved == Backend::cuda) {
       device_contacts = engine.detect_device_resident(detail::cuda_dem_bodies(*cuda));
       detected();
       contact_count = device_contacts.count;
       contacts_downloaded = false;
-      detail::cuda_dem_forces(*cuda, device_contacts, constants);  // marks its stages
+      detail::cuda_dem_forces(*cuda, device_contacts, constants, then);  // marks its stages
       return;
     }
     contacts = engine.detect(host_view());
@@ -290,15 +293,18 @@ struct Simulation<Real>::Impl {
     mark(detail::DemStage::body_terms);
   }
 
-  void step() {
+  // One step; `another`: the next step follows with nothing between (CUDA: this step's body stage
+  // also does the next one's kick_drift, one pass over the bodies fewer; the same bits).
+  void step(bool another) {
     const double dt = options.dt;
     timing = options.stage_times;
     if (resolved == Backend::cuda) {
       if (timing) detail::cuda_dem_time_start(*cuda);
-      detail::cuda_dem_kick_drift(*cuda, dt);
+      if (!drifted) detail::cuda_dem_kick_drift(*cuda, dt);
       mark(detail::DemStage::kick_drift);
-      forces();
-      detail::cuda_dem_kick(*cuda, dt);
+      drifted = false;
+      forces(another ? detail::DemThen::kick_and_drift : detail::DemThen::kick);  // kick: in body_terms
+      drifted = another;
       mark(detail::DemStage::kick);
       if (timing) detail::cuda_dem_time_collect(*cuda, stage_seconds);
     } else {
@@ -381,7 +387,7 @@ template <class Real>
 void Simulation<Real>::run(std::uint64_t steps) {
   for (std::uint64_t k = 0; k < steps; ++k) {
     try {
-      m_impl->step();
+      m_impl->step(k + 1 < steps);
     } catch (const InputError& e) {  // a body's state stopped being finite: say when
       throw InputError(std::string(e.what()) + " (at step " + std::to_string(m_impl->steps + 1) + ")");
     }

@@ -15,8 +15,9 @@ namespace cg::detail {
 //   detect         the engine's detection with history (its own stages: DemStageTimes::detection)
 //   contact_terms  each contact's force, torques and spring
 //   body_index     where each body's rows lie as A and as B (the order of its sums)
-//   body_terms     each body's sums in that order, walls, gravity
-//   kick           the second half kick
+//   body_terms     each body's sums in that order, walls, gravity (CUDA: and the body's kick, and
+//                  the next step's kick_drift where one follows: DemThen)
+//   kick           the second half kick (CPU; CUDA: in body_terms, its stage empty)
 enum class DemStage : int { kick_drift, detect, contact_terms, body_index, body_terms, kick };
 constexpr int kDemStages = 6;
 inline const char* dem_stage_name(int s) {
@@ -34,11 +35,16 @@ void destroy(CudaDem* dem);
 // The bodies as the engine reads them (DEVICE).
 DeviceBodiesView cuda_dem_bodies(CudaDem& dem);
 void cuda_dem_kick_drift(CudaDem& dem, double dt);
-void cuda_dem_kick(CudaDem& dem, double dt);
+// What the body stage does after a body's force and torque (one pass over the bodies, where each
+// body's step reads only its own state): nothing (the forces of the start), the step's second half
+// kick, or that kick and then the next step's kick_drift (a step followed by another with nothing
+// between them). The same operations in the same order as the separate stages: the same bits.
+enum class DemThen : int { nothing, kick, kick_and_drift };
 // contact_terms then the order by B and body_terms, on the device, over the engine's device contacts
-// (c.walls is replaced by the device copy of the walls).
+// (c.walls is replaced by the device copy of the walls), then `then` with c.dt.
 template <class Real>
-void cuda_dem_forces(CudaDem& dem, const DeviceContactsView<Real>& contacts, const dem::StepConstants& c);
+void cuda_dem_forces(CudaDem& dem, const DeviceContactsView<Real>& contacts, const dem::StepConstants& c,
+                     DemThen then);
 DemEnergies cuda_dem_energies(CudaDem& dem, std::size_t contacts, Vec3<double> gravity);
 // The step's stage events (DemStage): on from now, the step's start, a stage's end, and the seconds
 // of the last step's marked stages added to seconds[kDemStages] (waits for its last event).

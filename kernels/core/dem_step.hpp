@@ -99,10 +99,18 @@ CG_HD Vec3<double> unit(Vec3<double> v) {
   return n > 0 ? (1.0 / n) * v : v;
 }
 
-// Contact row k (file comment).
+// Contact row k's terms: what contact_terms stores, and what a body's sum over its rows adds.
+struct ContactResult {
+  Vec3<double> force, torque_a, torque_b, xi, normal;
+  double energy;
+};
+
+// Contact row k's terms from the bodies' states and the last step's springs (read through
+// previous_row), nothing written: any caller gets the same bits.
 template <class Real>
-CG_HD void contact_terms(std::size_t k, const ContactRows<Real>& rows, const BodyArrays& b,
-                         const StepConstants& c, const ContactTerms& t) {
+CG_HD ContactResult contact_result(std::size_t k, const ContactRows<Real>& rows, const BodyArrays& b,
+                                   const StepConstants& c, const Vec3<double>* old_xi,
+                                   const Vec3<double>* old_normal) {
   const std::size_t ia = static_cast<std::size_t>(rows.id_a[k]), ib = static_cast<std::size_t>(rows.id_b[k]);
   const Vec3<double> pa = vec_cast<double>(rows.position_on_a[k]),
                      pb = vec_cast<double>(rows.position_on_b[k]);
@@ -126,7 +134,7 @@ CG_HD void contact_terms(std::size_t k, const ContactRows<Real>& rows, const Bod
     in.v_sync =
         (synced_velocity(sa, qa, c.dt) + cross(wa, ra)) - (synced_velocity(sb, qb, c.dt) + cross(wb, rb));
     in.w_rel = wa - wb;
-    in.half_normal = prev >= 0 ? unit(t.old_normal[prev] + n) : n;
+    in.half_normal = prev >= 0 ? unit(old_normal[prev] + n) : n;
   } else {
     in.v_sync = v_half;
     in.w_rel = sa.omega - sb.omega;
@@ -135,15 +143,24 @@ CG_HD void contact_terms(std::size_t k, const ContactRows<Real>& rows, const Bod
   const Pair pair = pair_of(qa.radius, qa.mass, qa.fixed, qb.radius, qb.mass, qb.fixed);
   const double ia_mean = (qa.inertia.x + qa.inertia.y + qa.inertia.z) / 3.0;
   const double ib_mean = (qb.inertia.x + qb.inertia.y + qb.inertia.z) / 3.0;
-  const Vec3<double> old = prev >= 0 ? t.old_xi[prev] : Vec3<double>{0, 0, 0};
+  const Vec3<double> old = prev >= 0 ? old_xi[prev] : Vec3<double>{0, 0, 0};
   const double inertia = qa.fixed ? ib_mean : (qb.fixed ? ia_mean : ia_mean * ib_mean / (ia_mean + ib_mean));
   const ContactOutput o = contact_force(c.law, pair, inertia, in, old);
-  t.force[k] = o.force;
-  t.torque_a[k] = cross(ra, o.force) + o.rolling_torque;
-  t.torque_b[k] = cross(rb, -o.force) - o.rolling_torque;
-  t.energy[k] = o.energy;
-  t.xi[k] = o.xi;
-  t.normal[k] = n;
+  return {o.force, cross(ra, o.force) + o.rolling_torque, cross(rb, -o.force) - o.rolling_torque, o.xi, n,
+          o.energy};
+}
+
+// Contact row k (file comment).
+template <class Real>
+CG_HD void contact_terms(std::size_t k, const ContactRows<Real>& rows, const BodyArrays& b,
+                         const StepConstants& c, const ContactTerms& t) {
+  const ContactResult r = contact_result(k, rows, b, c, t.old_xi, t.old_normal);
+  t.force[k] = r.force;
+  t.torque_a[k] = r.torque_a;
+  t.torque_b[k] = r.torque_b;
+  t.energy[k] = r.energy;
+  t.xi[k] = r.xi;
+  t.normal[k] = r.normal;
 }
 
 // Where body i's terms lie: rows [a_begin[i], a_begin[i + 1]) (it is A; rows sorted by A), and
@@ -160,14 +177,20 @@ struct WallTerms {
   double* energy;  // count
 };
 
-// Body i's force and torque of the step into b.force[i], b.torque[i] (file comment).
-CG_HD void body_terms(std::size_t i, const BodyArrays& b, const StepConstants& c, const ContactTerms& t,
-                      const BodyRowIndex& index, const WallTerms& w) {
-  Vec3<double> f{0, 0, 0}, tau{0, 0, 0};
+// Body i's sums over its rows as A, in row order, onto f and tau.
+CG_HD void a_sums(std::size_t i, const ContactTerms& t, const BodyRowIndex& index, Vec3<double>& f,
+                  Vec3<double>& tau) {
   for (std::uint32_t k = index.a_begin[i]; k < index.a_begin[i + 1]; ++k) {
     f = f + t.force[k];
     tau = tau + t.torque_a[k];
   }
+}
+
+// Body i's force and torque of the step into b.force[i], b.torque[i], from f and tau, the sums of its
+// rows as A (from zero, in row order): its rows as B, its walls, gravity (file comment).
+CG_HD void body_terms_after_a(std::size_t i, const BodyArrays& b, const StepConstants& c,
+                              const ContactTerms& t, const BodyRowIndex& index, const WallTerms& w,
+                              Vec3<double> f, Vec3<double> tau) {
   for (std::uint32_t j = index.b_begin[i]; j < index.b_begin[i + 1]; ++j) {
     const std::uint32_t k = index.by_b[j];
     f = f - t.force[k];
@@ -213,6 +236,14 @@ CG_HD void body_terms(std::size_t i, const BodyArrays& b, const StepConstants& c
   b.force[i] = f;
   b.torque[i] = tau;
   w.energy[i] = energy;
+}
+
+// Body i's force and torque of the step into b.force[i], b.torque[i] (file comment).
+CG_HD void body_terms(std::size_t i, const BodyArrays& b, const StepConstants& c, const ContactTerms& t,
+                      const BodyRowIndex& index, const WallTerms& w) {
+  Vec3<double> f{0, 0, 0}, tau{0, 0, 0};
+  a_sums(i, t, index, f, tau);
+  body_terms_after_a(i, b, c, t, index, w, f, tau);
 }
 
 // Body i's energies: kinetic, and potential of gravity (−m g·x; the walls' elastic energy is in

@@ -37,6 +37,7 @@ std::unique_ptr<CudaDem> make_cuda_dem(int device, const DemBodies& b,
   d->device = device;
   CG_CUDA_CHECK(cudaSetDevice(device));
   d->sums_by_sort = read_tuning().dem_sums_sort;
+  d->a_sums = !read_tuning().dem_terms_rows;
   const std::size_t n = b.size();
   d->count = n;
   d->shapes = !b.shape.empty();
@@ -97,24 +98,21 @@ DeviceBodiesView cuda_dem_bodies(CudaDem& d) {
 
 void cuda_dem_kick_drift(CudaDem& d, double dt) {
   CG_CUDA_CHECK(cudaSetDevice(d.device));
-  dem_integrate_stage<true>(d, dt);
-}
-
-void cuda_dem_kick(CudaDem& d, double dt) {
-  CG_CUDA_CHECK(cudaSetDevice(d.device));
-  dem_integrate_stage<false>(d, dt);
+  dem_kick_drift_stage(d, dt);
 }
 
 template <class Real>
-void cuda_dem_forces(CudaDem& d, const DeviceContactsView<Real>& contacts, const dem::StepConstants& c) {
+void cuda_dem_forces(CudaDem& d, const DeviceContactsView<Real>& contacts, const dem::StepConstants& c,
+                     DemThen then) {
   CG_CUDA_CHECK(cudaSetDevice(d.device));
   const dem::ContactRows<Real> rows = contact_rows(contacts);
   dem_contact_stage(d, rows, c);
   d.events.mark(DemStage::contact_terms);
-  dem_body_stage(d, rows, c);  // marks body_index and body_terms
+  dem_body_stage(d, rows, c, then);  // marks body_index and body_terms
 }
-template void cuda_dem_forces(CudaDem&, const DeviceContactsView<float>&, const dem::StepConstants&);
-template void cuda_dem_forces(CudaDem&, const DeviceContactsView<double>&, const dem::StepConstants&);
+template void cuda_dem_forces(CudaDem&, const DeviceContactsView<float>&, const dem::StepConstants&, DemThen);
+template void cuda_dem_forces(CudaDem&, const DeviceContactsView<double>&, const dem::StepConstants&,
+                              DemThen);
 
 DemEnergies cuda_dem_energies(CudaDem& d, std::size_t contacts, Vec3<double> gravity) {
   CG_CUDA_CHECK(cudaSetDevice(d.device));

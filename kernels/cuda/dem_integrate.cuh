@@ -1,20 +1,17 @@
 #pragma once
-// The integration stages of the granular dynamics on the device: kick_drift and kick of every body
-// (core/dem_body.hpp), one thread per body.
+// The integration stage of the granular dynamics on the device that has a pass of its own: kick_drift
+// of every body (core/dem_body.hpp), one thread per body, where the last step's body stage has not
+// done it already. The second half kick runs in the body stage's pass (dem_sums.cuh: DemThen).
 #include "cuda/common.cuh"
 #include "cuda/dem_state.cuh"
 
 namespace cg::cuda {
 
-template <bool kDrift>
-__global__ void dem_integrate_kernel(dem::BodyArrays b, double dt) {
+__global__ void dem_kick_drift_kernel(dem::BodyArrays b, double dt) {
   const std::size_t i = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
   if (i >= b.count) return;
   dem::BodyState s = b.state(i);
-  if (kDrift)
-    dem::kick_drift(s, b.props[i], b.ellipsoid(i), dt);
-  else
-    dem::kick(s, b.props[i], b.ellipsoid(i), dt);
+  dem::kick_drift(s, b.props[i], b.ellipsoid(i), dt);
   b.store(i, s);
 }
 
@@ -22,11 +19,10 @@ __global__ void dem_integrate_kernel(dem::BodyArrays b, double dt) {
 
 namespace cg::detail {
 
-template <bool kDrift>
-void dem_integrate_stage(CudaDem& d, double dt) {
+inline void dem_kick_drift_stage(CudaDem& d, double dt) {
   if (d.count == 0) return;
-  cuda::dem_integrate_kernel<kDrift><<<cuda::blocks_for(d.count), cuda::kBlock>>>(d.arrays(), dt);
-  CG_CUDA_CHECK_LAUNCH("dem_integrate");
+  cuda::dem_kick_drift_kernel<<<cuda::blocks_for(d.count), cuda::kBlock>>>(d.arrays(), dt);
+  CG_CUDA_CHECK_LAUNCH("dem_kick_drift");
 }
 
 }  // namespace cg::detail

@@ -83,8 +83,11 @@ class CudaDem {
   DemBuffer<dem::BodyProps> props;
   DemBuffer<Shape> shape;
   DemBuffer<double> radius;
-  // contacts: terms of the step, springs and normals of this step and the last (current: the last)
-  DemBuffer<Vec3<double>> contact_force, torque_a, torque_b, xi[2], normal[2];
+  // contacts: terms of the step, springs and normals of this step and the last (current: the last);
+  // a_sums (tuning: CONTACTGRID_DEM_TERMS, dem_forces.cuh): each body's sums over its rows as A
+  // (a_force, a_torque) from the contact stage, no torque_a
+  DemBuffer<Vec3<double>> contact_force, torque_a, torque_b, xi[2], normal[2], a_force, a_torque;
+  bool a_sums = true;
   DemBuffer<double> contact_energy;
   int current = 0;
   // the rows by B, the begins of each body's rows (sort: the radix sort's keys; counts: each row's

@@ -2,7 +2,8 @@
 // The body stage of the granular dynamics on the device: where each body's rows lie (BodyRowIndex:
 // its rows as A are contiguous, the rows being sorted by A; its rows as B, in ascending row order),
 // then body_terms of every body (core/dem_step.hpp: its sums in a fixed order, walls, gravity), one
-// thread per body. No floating-point atomics: the same sums as the CPU's, bit for bit.
+// thread per body, and in the same pass the body's kick (and the next step's kick_drift: DemThen). No
+// floating-point atomics: the same sums as the CPU's, bit for bit.
 //
 // The index, two ways to the same arrays (tuning: CONTACTGRID_DEM_SUMS):
 //   counts (default)  one pass over the rows counts each body's rows as A and as B (integer atomics;
@@ -55,11 +56,31 @@ __global__ void dem_place_kernel(const std::int64_t* id_b, std::size_t k, const 
   by_b[b_begin[id_b[r]] + b_rank[r]] = static_cast<std::uint32_t>(r);
 }
 
+// body_terms of body i (a_force null: its sums over its rows as A too; else those sums are
+// a_force[i], a_torque[i], stored by the contact stage where it has such rows: dem_forces.cuh), then
+// (kThen: DemThen) its kick and the next step's kick_drift: a body's step reads and writes only its own
+// state (the contact stage has read every body's), so the integration needs no pass of its own.
+template <int kThen>
 __global__ void dem_body_kernel(dem::BodyArrays b, dem::StepConstants c, dem::ContactTerms t,
-                                dem::BodyRowIndex index, dem::WallTerms w) {
+                                dem::BodyRowIndex index, dem::WallTerms w, const Vec3<double>* a_force,
+                                const Vec3<double>* a_torque) {
   const std::size_t i = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
   if (i >= b.count) return;
-  dem::body_terms(i, b, c, t, index, w);
+  Vec3<double> f{0, 0, 0}, tau{0, 0, 0};
+  if (!a_force) {
+    dem::a_sums(i, t, index, f, tau);
+  } else if (index.a_begin[i] < index.a_begin[i + 1]) {
+    f = a_force[i];
+    tau = a_torque[i];
+  }
+  dem::body_terms_after_a(i, b, c, t, index, w, f, tau);
+  if (kThen == int(detail::DemThen::nothing)) return;
+  dem::BodyState s = b.state(i);
+  const dem::BodyProps& p = b.props[i];
+  const bool ell = b.ellipsoid(i);
+  dem::kick(s, p, ell, c.dt);
+  if (kThen == int(detail::DemThen::kick_and_drift)) dem::kick_drift(s, p, ell, c.dt);
+  b.store(i, s);
 }
 
 }  // namespace cg::cuda
@@ -133,7 +154,8 @@ const std::uint32_t* dem_index_by_counts(CudaDem& d, const dem::ContactRows<Real
 }
 
 template <class Real>
-void dem_body_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::StepConstants& c) {
+void dem_body_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
+                    DemThen then) {
   const std::size_t n = d.count, k = rows.count;
   if (n == 0) return;
   d.a_begin.reserve(n + 1, true);
@@ -147,7 +169,7 @@ void dem_body_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::S
   }
   d.events.mark(DemStage::body_index);
   const dem::ContactTerms t{d.contact_force.data(),
-                            d.torque_a.data(),
+                            d.a_sums ? nullptr : d.torque_a.data(),
                             d.torque_b.data(),
                             d.contact_energy.data(),
                             nullptr,
@@ -158,7 +180,17 @@ void dem_body_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::S
   const dem::WallTerms w{d.wall_xi.data(), d.wall_energy.data()};
   dem::StepConstants on_device = c;
   on_device.walls = d.walls.data();
-  cuda::dem_body_kernel<<<cuda::blocks_for(n), cuda::kBlock>>>(d.arrays(), on_device, t, index, w);
+  const dem::BodyArrays b = d.arrays();
+  const Vec3<double>* af = d.a_sums ? d.a_force.data() : nullptr;
+  const Vec3<double>* at = d.a_sums ? d.a_torque.data() : nullptr;
+  const unsigned blocks = cuda::blocks_for(n);
+  if (then == DemThen::nothing)
+    cuda::dem_body_kernel<int(DemThen::nothing)><<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at);
+  else if (then == DemThen::kick)
+    cuda::dem_body_kernel<int(DemThen::kick)><<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at);
+  else
+    cuda::dem_body_kernel<int(DemThen::kick_and_drift)>
+        <<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at);
   CG_CUDA_CHECK_LAUNCH("dem_body");
   d.events.mark(DemStage::body_terms);
 }

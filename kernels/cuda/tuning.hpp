@@ -68,6 +68,10 @@ struct Tuning {
   // radix sort of (B, row) and Thrust's lower_bound of every body id (cuda/dem_sums.cuh); default:
   // counts, their scan and a segmented sort of each body's rows. The same sums either way.
   bool dem_sums_sort = false;
+  // CONTACTGRID_DEM_TERMS=rows: the granular dynamics' contact stage stores every term of every row
+  // and the body stage sums each body's rows as A and as B; default: the contact stage sums each
+  // body's rows as A itself (cuda/dem_forces.cuh). The same sums either way.
+  bool dem_terms_rows = false;
 };
 
 // `on` / `off` when the variable equals one of the two spellings, else automatic.
@@ -141,6 +145,7 @@ inline Tuning read_tuning() {
                        : std::string_view(h) == "thrust" ? HistorySearch::thrust
                                                          : HistorySearch::near;
   if (const char* d = std::getenv("CONTACTGRID_DEM_SUMS")) t.dem_sums_sort = std::string_view(d) == "sort";
+  if (const char* d = std::getenv("CONTACTGRID_DEM_TERMS")) t.dem_terms_rows = std::string_view(d) == "rows";
   if (const char* c = std::getenv("CONTACTGRID_CUDA_CANDIDATES")) {
     const std::string_view v = c;
     if (v == "cells") t.candidates = CandidateFilter::cells;

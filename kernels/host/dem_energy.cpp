@@ -1,5 +1,5 @@
-// The energies of the granular dynamics on the CPU, in the fixed order of core/dem_sum.hpp (chunks,
-// then the chunks in order), so they equal the device's.
+// The energies of the granular dynamics on the CPU, in the fixed order of core/dem_sum.hpp (a tree of
+// chunk sums, each level's chunks over the threads), so they equal the device's.
 #include <omp.h>
 
 #include "core/dem_sum.hpp"
@@ -10,14 +10,11 @@ namespace cg::detail::host {
 namespace {
 template <class F>
 double fixed_sum(std::size_t n, int threads, F&& value) {
-  const std::size_t chunks = dem::energy_chunks(n);
-  std::vector<double> part(chunks);
-  const std::ptrdiff_t nc = static_cast<std::ptrdiff_t>(chunks);
-#pragma omp parallel for num_threads(threads) schedule(static) if (chunks > 1)
-  for (std::ptrdiff_t c = 0; c < nc; ++c) part[std::size_t(c)] = dem::chunk_sum(std::size_t(c), n, value);
-  double s = 0;
-  for (double p : part) s = s + p;
-  return s;
+  return dem::tree_sum(n, value, [threads](std::size_t chunks, auto&& f) {
+    const std::ptrdiff_t nc = static_cast<std::ptrdiff_t>(chunks);
+#pragma omp parallel for num_threads(threads) schedule(static) if (chunks > 64)
+    for (std::ptrdiff_t c = 0; c < nc; ++c) f(std::size_t(c));
+  });
 }
 }  // namespace
 

@@ -48,7 +48,7 @@ template <class Real>
 void dem_body_forces(HostDem& s, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
                      int threads);
 
-// The energies, summed in chunks of kEnergyChunk items, then the chunks in order (as the device).
+// The energies, summed in the tree of chunks of core/dem_sum.hpp (as the device).
 DemEnergies dem_energies(HostDem& s, std::size_t contacts, Vec3<double> gravity, int threads);
 
 }  // namespace cg::detail::host

@@ -245,11 +245,7 @@ class DistributedDem {
     std::sort(contacts.begin(), contacts.end(), [](const ContactOut<Real>& x, const ContactOut<Real>& y) {
       return x.a < y.a || (x.a == y.a && x.b < y.b);
     });
-    auto fixed_sum = [](std::size_t n, auto&& value) {
-      double s = 0;
-      for (std::size_t c = 0; c < dem::energy_chunks(n); ++c) s = s + dem::chunk_sum(c, n, value);
-      return s;
-    };
+    auto fixed_sum = [](std::size_t n, auto&& value) { return dem::tree_sum(n, value); };
     e.kinetic = fixed_sum(bodies.size(), [&](std::size_t i) { return bodies[i].kinetic; });
     e.gravity = fixed_sum(bodies.size(), [&](std::size_t i) { return bodies[i].gravity; });
     e.elastic = fixed_sum(contacts.size(), [&](std::size_t k) { return contacts[k].energy; }) +

@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "backends.hpp"
+#include "core/dem_sum.hpp"
 #include "dem.hpp"
 #include "support/contacts_equal.hpp"
 
@@ -518,34 +519,129 @@ TEST(DemBackends, CpuEqualsCudaBitForBit) {
 }
 
 // The body stage's two indexes on the device (CONTACTGRID_DEM_SUMS=sort: a radix sort and
-// lower_bound; default: counts, scans and a segmented sort) give the same trajectory, bit for bit.
+// lower_bound; default: counts, scans and a segmented sort), and the contact stage's two ways
+// (CONTACTGRID_DEM_TERMS=rows: every term stored; default: the sums over the rows as A in the contact
+// stage) give the same trajectory, bit for bit.
 template <class Real>
-void cuda_sums_by_sort_equal_counts(bool ellipsoids) {
+void cuda_knob_changes_nothing(bool ellipsoids, const char* variable, const char* value) {
   const ComparedScene scene = compared_scene(ellipsoids);
   DemOptions o = scene.options;
   o.engine.backend = Backend::cuda;
-  Simulation<Real> counts(scene.bodies, o);
-  setenv("CONTACTGRID_DEM_SUMS", "sort", 1);
-  Simulation<Real> sorted(scene.bodies, o);  // (the knob is read when a simulation starts)
-  unsetenv("CONTACTGRID_DEM_SUMS");
+  Simulation<Real> plain(scene.bodies, o);
+  setenv(variable, value, 1);
+  Simulation<Real> knob(scene.bodies, o);  // (the knob is read when a simulation starts)
+  unsetenv(variable);
   for (int block = 0; block < 3; ++block) {
-    counts.run(50);
-    sorted.run(50);
+    plain.run(50);
+    knob.run(50);
     const std::string at =
-        std::string(ellipsoids ? "ellipsoids" : "spheres") + " step " + std::to_string(counts.steps());
-    const DemBodies x = counts.bodies(), y = sorted.bodies();
+        std::string(ellipsoids ? "ellipsoids" : "spheres") + " step " + std::to_string(plain.steps());
+    const DemBodies x = plain.bodies(), y = knob.bodies();
     ASSERT_EQ(std::memcmp(x.position.data(), y.position.data(), x.size() * sizeof(Vec3<double>)), 0) << at;
     ASSERT_EQ(
         std::memcmp(x.angular_velocity.data(), y.angular_velocity.data(), x.size() * sizeof(Vec3<double>)), 0)
         << at;
-    ASSERT_GT(counts.contact_count(), 0u) << at;
+    ASSERT_GT(plain.contact_count(), 0u) << at;
+    const DemEnergies ec = plain.energies(), es = knob.energies();
+    EXPECT_EQ(ec.elastic, es.elastic) << at;
   }
 }
 
 TEST(DemBackends, CudaSumsBySortEqualCounts) {
   if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
-  cuda_sums_by_sort_equal_counts<float>(false);
-  cuda_sums_by_sort_equal_counts<double>(true);
+  cuda_knob_changes_nothing<float>(false, "CONTACTGRID_DEM_SUMS", "sort");
+  cuda_knob_changes_nothing<double>(true, "CONTACTGRID_DEM_SUMS", "sort");
+}
+
+TEST(DemBackends, CudaTermsByRowsEqualASums) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  cuda_knob_changes_nothing<float>(false, "CONTACTGRID_DEM_TERMS", "rows");
+  cuda_knob_changes_nothing<double>(true, "CONTACTGRID_DEM_TERMS", "rows");
+}
+
+// The energies' fixed order (core/dem_sum.hpp): chunks of kEnergyChunk summed in item order, then
+// the chunks' sums the same way, level by level; the order in which a level's chunks run changes
+// nothing. Values of mixed magnitudes and signs, so that another order would give other bits.
+TEST(DemSum, TreeSumIsChunksThenTheirChunks) {
+  std::mt19937_64 rng(77);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const std::size_t c = dem::kEnergyChunk;
+  for (const std::size_t n : {std::size_t(0), std::size_t(1), c - 1, c, c + 1, c * c, c * c * 2 + 5}) {
+    std::vector<double> v(n);
+    for (std::size_t i = 0; i < n; ++i) v[i] = u(rng) * std::pow(10.0, double(int(i % 13) - 6));
+    // by hand: each level's chunks, from the first item to the last
+    std::vector<double> level = v;
+    do {
+      std::vector<double> next((level.size() + c - 1) / c, 0.0);
+      for (std::size_t i = 0; i < level.size(); ++i) next[i / c] = next[i / c] + level[i];
+      level.swap(next);
+    } while (level.size() > 1);
+    const double expected = n == 0 ? 0.0 : level[0];
+    const auto value = [&](std::size_t i) { return v[i]; };
+    const double serial = dem::tree_sum(n, value);
+    const double backwards = dem::tree_sum(n, value, [](std::size_t chunks, auto&& f) {
+      for (std::size_t k = chunks; k-- > 0;) f(k);
+    });
+    EXPECT_EQ(std::memcmp(&serial, &expected, sizeof(double)), 0) << n << " items";
+    EXPECT_EQ(std::memcmp(&backwards, &expected, sizeof(double)), 0) << n << " items";
+    if (n > c * c) {  // the plain sum in item order differs: the test can tell the orders apart
+      double plain = 0;
+      for (double x : v) plain = plain + x;
+      EXPECT_NE(plain, expected) << n << " items";
+    }
+  }
+}
+
+// More bodies and contacts than kEnergyChunk² (the energies' tree three levels deep on both backends),
+// steps in runs of several lengths (CUDA: the body stage does the next step's kick_drift within a run,
+// a separate pass at a run's start): CPU = CUDA bit for bit, energies too.
+TEST(DemBackends, ManyBodiesInRunsCpuEqualsCuda) {
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> u(0, 1);
+  DemBodies b;
+  const int side = 40;
+  for (int i = 0; i < side * side * 2; ++i) {
+    b.position.push_back(
+        {0.95 * (i % side) + 0.6, 0.95 * ((i / side) % side) + 0.6, 0.95 * (i / (side * side)) + 0.5});
+    b.radius.push_back(0.48 + 0.02 * u(rng));
+    b.velocity.push_back({0.2 * (u(rng) - 0.5), 0.2 * (u(rng) - 0.5), 0.2 * (u(rng) - 0.5)});
+  }
+  Material m;
+  m.young = 1e7;
+  m.restitution = 0.6;
+  m.friction = 0.4;
+  DemOptions o;
+  o.material = m;
+  o.dt = time_step_limits(b, m, 5.0).automatic;
+  o.gravity = {0, 0, -9.81};
+  o.walls = {plane({0, 0, 0}, {0, 0, 1})};
+  o.engine.skin = 0.05;
+  o.engine.backend = Backend::cpu;
+  Simulation<float> cpu(b, o);
+  const std::size_t c = dem::kEnergyChunk;
+  cpu.run(1);
+  ASSERT_GT(b.size(), c * c);
+  ASSERT_GT(cpu.contact_count(), c * c);  // the premise: three levels for the contacts too
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  o.engine.backend = Backend::cuda;
+  Simulation<float> gpu(b, o);
+  gpu.run(1);
+  for (const int steps : {3, 1, 2, 5}) {
+    cpu.run(std::uint64_t(steps));
+    gpu.run(std::uint64_t(steps));
+    const std::string at = "step " + std::to_string(cpu.steps());
+    const DemBodies x = cpu.bodies(), y = gpu.bodies();
+    ASSERT_EQ(std::memcmp(x.position.data(), y.position.data(), x.size() * sizeof(Vec3<double>)), 0) << at;
+    ASSERT_EQ(std::memcmp(x.velocity.data(), y.velocity.data(), x.size() * sizeof(Vec3<double>)), 0) << at;
+    ASSERT_EQ(
+        std::memcmp(x.angular_velocity.data(), y.angular_velocity.data(), x.size() * sizeof(Vec3<double>)), 0)
+        << at;
+    const DemEnergies ec = cpu.energies(), eg = gpu.energies();
+    EXPECT_EQ(ec.kinetic, eg.kinetic) << at;
+    EXPECT_EQ(ec.elastic, eg.elastic) << at;
+    EXPECT_EQ(ec.gravity, eg.gravity) << at;
+    EXPECT_GT(ec.elastic, 0) << at;
+  }
 }
 
 // --stage-times: every step's stages are timed in order, the engine's stages within detect too, and
