@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -18,9 +19,9 @@ namespace {
 
 // Steps of bodies moving `v` per step under a modelled cost: a build costs build(s), a reuse
 // reuse(s); a list lasts while the displacement since its build is <= s/2. Returns the tuner's
-// final choice of reuses per build and the mean cost per step over the last `tail` steps.
+// final choice of reuses per build, the builds made and the mean cost per step over the last 200 steps.
 struct TunedRun {
-  int n = 0;
+  int n = 0, builds = 0;
   double skin = 0, mean = 0;
 };
 template <class Build, class Reuse>
@@ -30,7 +31,7 @@ TunedRun simulate(double v, int steps, Build&& build, Reuse&& reuse, double leng
   int since = 0;
   bool kept = false;
   double tail_cost = 0;
-  int tail = 0;
+  int tail = 0, builds = 0;
   for (int k = 0; k < steps; ++k) {
     const double skin = tuner.skin();
     moved += v;
@@ -39,6 +40,7 @@ TunedRun simulate(double v, int steps, Build&& build, Reuse&& reuse, double leng
     const double cost = reused ? reuse(kept_skin) : build(skin);
     tuner.observe(!reused, cost, kept ? moved : 0, since);
     if (!reused) {
+      ++builds;
       kept = skin > 0;
       kept_skin = skin;
       moved = 0;
@@ -46,27 +48,43 @@ TunedRun simulate(double v, int steps, Build&& build, Reuse&& reuse, double leng
     }
     if (k >= steps - 200) tail_cost += cost, ++tail;
   }
-  return {tuner.reuses_per_build(), tuner.skin(), tail_cost / tail};
+  return {tuner.reuses_per_build(), builds, tuner.skin(), tail_cost / std::max(tail, 1)};
 }
 
-// Costs rising with the skin (more candidates): the best n of (build + n·reuse)/(n + 1) is found by
-// the search, within a factor 2 (n is searched in powers of two).
+// Costs rising with the skin (more candidates): the tuner's lines through the measured builds and
+// reuses find the n of the lowest (build + n·reuse)/(n + 1), and it gets there within a few cycles.
 TEST(SkinTuner, FindsTheCheapestReusesPerBuild) {
   const double v = 0.01;
   auto build = [](double s) { return 10.0 * (1 + 4 * s); };
   auto reuse = [](double s) { return 1.0 * (1 + 4 * s); };
-  const TunedRun r = simulate(v, 2000, build, reuse);
+  auto mean_of = [&](int n) {
+    const double s = 2 * v * n * (1 + 1.0 / 16);
+    return (build(s) + n * reuse(s)) / (n + 1);
+  };
   double best = 1e300;
   int best_n = 0;
-  for (int n = 1; n <= 256; n *= 2) {
-    const double s = 2 * v * n * (1 + 1.0 / 16);
-    const double mean = (build(s) + n * reuse(s)) / (n + 1);
-    if (mean < best) best = mean, best_n = n;
-  }
+  for (int n = 1; n <= 256; ++n)
+    if (mean_of(n) < best) best = mean_of(n), best_n = n;
+  const TunedRun r = simulate(v, 2000, build, reuse);
   EXPECT_EQ(r.n, best_n);
   EXPECT_NEAR(r.skin, 2 * v * best_n * (1 + 1.0 / 16), 1e-12);
-  EXPECT_LT(r.mean, 1.05 * best);
+  EXPECT_LT(r.mean, 1.01 * best);
   EXPECT_LT(r.mean, 0.5 * build(0));  // far cheaper than building every step
+  // the search: n = 2, then 8, then the model's choice — the first 40 steps hold at most 8 builds
+  // (three of them before the motion is known; a doubling search by measured means made 11)
+  const int builds = simulate(v, 40, build, reuse).builds;
+  EXPECT_LE(builds, 8);
+}
+
+// A cheaper reuse (or a dearer build) moves the choice to longer lists: the model follows the costs.
+TEST(SkinTuner, CheaperReusesChooseLongerLists) {
+  auto run = [](double reuse_cost) {
+    return simulate(
+               0.01, 600, [](double s) { return 10.0 * (1 + 4 * s); },
+               [&](double s) { return reuse_cost * (1 + 8 * s); })
+        .n;
+  };
+  EXPECT_GT(run(0.3), run(1.0));
 }
 
 // Free reuses: the search goes on doubling until the skin reaches twice the length scale.
