@@ -87,7 +87,7 @@ case $MODE in
   one)
     log "CUDA tests of the step loop (skin, tuner, resident engines, narrow paths; MPI moving steps np 1, 2)"
     "$BIN/contactgrid_tests" --gtest_color=no \
-      --gtest_filter='*Skin*:*Resident*:*Tuner*:StepBodies.*:StepPlan*:*Narrow*:*Order*:*Candidates*' \
+      --gtest_filter='*Skin*:*Resident*:*Tuner*:StepBodies.*:StepPlan*:CudaNarrowTest*:EngineTest*:BroadPhaseTest*' \
       >"$OUT/tests.log" 2>&1
     check "contactgrid_tests (skin, resident, narrow, order)" gtest_ok "$OUT/tests.log"
     # the rejecting narrow's count → scan → fill path (CONTACTGRID_CUDA_NARROW=two-pass) against the same tests

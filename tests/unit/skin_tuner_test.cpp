@@ -112,9 +112,12 @@ TEST(SkinTuner, FollowsTheLargestSpeed) {
   t.observe(true, 1, 0, 1);
   (void)t.skin();
   t.observe(false, 1, 0.1, 1);
-  EXPECT_NEAR(t.skin(), 2 * 0.1 * (1 + 1.0 / 16), 1e-12);
-  t.observe(true, 1, 0.9, 3);  // 0.3 per step
+  EXPECT_NEAR(t.skin(), 2 * 0.1 * 2 * (1 + 1.0 / 16), 1e-12);  // the first trial, n = 2
+  t.observe(true, 1, 0.9, 3);                                  // 0.3 per step
   EXPECT_DOUBLE_EQ(t.speed(), 0.3);
+  const double skin = t.skin();  // the search's next trial: 4 times the reuses the cycle made
+  EXPECT_EQ(t.reuses_per_build(), 4);
+  EXPECT_NEAR(skin, 2 * 0.3 * 4 * (1 + 1.0 / 16), 1e-12);
 }
 
 // Random spheres drifting by the CLI's rule.
@@ -127,9 +130,9 @@ struct Drifting {
     return p;
   }
 };
-Drifting drifting(std::size_t n, unsigned seed) {
+Drifting drifting(std::size_t n, unsigned seed, double edge = 12) {
   std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> x(0, 12), r(0.3, 0.6);
+  std::uniform_real_distribution<double> x(0, edge), r(0.3, 0.6);
   Drifting d;
   for (std::size_t i = 0; i < n; ++i) {
     d.p0.push_back({x(rng), x(rng), x(rng)});
@@ -182,6 +185,34 @@ TYPED_TEST(EngineSkin, SetSkinAndAutoGiveTheContactsOfSkinZero) {
   EXPECT_EQ(changed.stats().skin, 0);  // no list kept since set_skin(0)
   EXPECT_THROW(changed.set_skin(-1), UsageError);
   EXPECT_THROW(changed.set_skin(std::nan("")), UsageError);
+}
+
+// Resident steps with a skin over enough candidates for many tiles of the CUDA narrow's one-pass
+// compaction (its decoupled look-back) and for the pair stage's direct write into the room the
+// previous build left: every step a skin-0 detection's contacts, builds and reuses both seen.
+TYPED_TEST(EngineSkin, ResidentStepsOverManyTilesGiveTheContactsOfSkinZero) {
+  using Real = typename TypeParam::Real;
+  CG_SKIP_WITHOUT_BACKEND(TypeParam);
+  const std::size_t n = 40000;
+  const Drifting d = drifting(n, 11, 12 * std::cbrt(double(n) / 1500));
+  EngineOptions fresh;
+  fresh.backend = TypeParam::backend;
+  fresh.threads = 2;
+  EngineOptions skinned = fresh;
+  skinned.skin = 0.06;  // lasts two steps of 0.01 (2 · 0.02 <= 0.06), the third rebuilds
+  Engine<Real> scratch(fresh), resident(skinned);
+  resident.set_resident(BodiesView{d.p0, d.r, {}, {}});
+  for (int step = 0; step < 7; ++step) {
+    const HostVector<Vec3<double>> p = d.at(step, 0.01);
+    const Contacts<Real> want = scratch.detect(BodiesView{p, d.r, {}, {}});
+    resident.write_resident(0, p.size(), p.data(), d.r.data());
+    resident.detect_resident();
+    const Contacts<Real>& got = resident.resident_contacts();
+    ASSERT_GT(want.size(), 20000u);
+    EXPECT_EQ(test::compare_contacts(got, want), "identical") << "step " << step;
+  }
+  EXPECT_GE(resident.stats().candidate_reuses, 3u);
+  EXPECT_GE(resident.stats().candidate_builds, 2u);
 }
 
 }  // namespace
