@@ -127,6 +127,9 @@ case $MODE in
     check "s24: auto = two-pass narrow (last step)" \
       bash -c "grep -h 'contacts on the last step' '$OUT/s24.auto.log' '$OUT/s24.auto_two_pass.log' | sed -E 's/.*, ([0-9]+) contacts on the last step.*/\1/' | uniq | wc -l | grep -qx 1"
     table_one s24 | tee "$OUT/table.md"
+    printf 'two-pass narrow (CONTACTGRID_CUDA_NARROW=two-pass): mean %s, build %s, reuse %s ms, %s\n' \
+      "$(field s24.auto_two_pass mean)" "$(field s24.auto_two_pass build)" "$(field s24.auto_two_pass reuse)" \
+      "$(lists s24.auto_two_pass)" | tee -a "$OUT/table.md"
     for t in s24.fresh s24.auto s24.auto_two_pass; do
       echo "-- $t: per-step stages (ms, median of the steps)"
       sed -nE '/^resident steps/,/^  candidate lists/p' "$OUT/$t.log"
