@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Bodies that move (issue #31) on the GPU: the step loop's CUDA tests, the CLI's drifting steps against
 # a plain detection of the final scene, and the issue's Performance figures as one compact table.
-#   BIN=dir OUT=dir jobs/gpu_steploop_check.sh one   one H100 (~4 min): tests, CLI, 2^24 spheres and
-#                                                    2^24 ellipsoids (aspect <= 1:4), fp32, 6 contacts
-#                                                    per body, drift 1 % of r_max per step, skin auto
+#   BIN=dir OUT=dir jobs/gpu_steploop_check.sh one   one H100 (< 3 min): tests, CLI, 2^24 spheres,
+#                                                    fp32, 6 contacts per body, drift 1 % of r_max per
+#                                                    step, skin auto (one-pass and two-pass narrow)
 #   BIN=dir OUT=dir jobs/gpu_steploop_check.sh two   a 2-GPU host (~4 min): the MPI tests at np 2, then
 #                                                    2^26 spheres and 2^24 ellipsoids at np 1 and np 2
 #                                                    (one rank per GPU): per-step migration, halo and
@@ -85,50 +85,55 @@ table_one() {  # SCENE…: fresh and auto runs at np 1
 
 case $MODE in
   one)
-    log "CUDA tests of the step loop (skin, tuner, resident engines; MPI moving steps at np 1 and 2 on one GPU)"
-    "$BIN/contactgrid_tests" --gtest_color=no --gtest_filter='*Skin*:*Resident*:*Tuner*:StepBodies.*:StepPlan*' >"$OUT/tests.log" 2>&1
-    check "contactgrid_tests (skin, resident)" gtest_ok "$OUT/tests.log"
+    log "CUDA tests of the step loop (skin, tuner, resident engines, narrow paths; MPI moving steps np 1, 2)"
+    "$BIN/contactgrid_tests" --gtest_color=no \
+      --gtest_filter='*Skin*:*Resident*:*Tuner*:StepBodies.*:StepPlan*:CudaNarrowTest*:EngineTest*:BroadPhaseTest*' \
+      >"$OUT/tests.log" 2>&1
+    check "contactgrid_tests (skin, resident, narrow, order)" gtest_ok "$OUT/tests.log"
+    # the rejecting narrow's count → scan → fill path (CONTACTGRID_CUDA_NARROW=two-pass) against the same tests
+    CONTACTGRID_CUDA_NARROW=two-pass "$BIN/contactgrid_tests" --gtest_color=no --gtest_filter='*Skin*:*Resident*' \
+      >"$OUT/tests.two_pass.log" 2>&1
+    check "contactgrid_tests (skin, resident), two-pass narrow" gtest_ok "$OUT/tests.two_pass.log"
     for np in 1 2; do
       "${MPI[@]}" -np $np "$BIN/contactgrid_mpi_tests" --gtest_color=no --gtest_filter='MovingSteps.*:StepLoop.*' \
         >"$OUT/mpi_tests.np$np.log" 2>&1
       check "contactgrid_mpi_tests MovingSteps np $np" gtest_ok "$OUT/mpi_tests.np$np.log"
     done
 
-    log "CLI: drifting steps on cuda, -o = plain detect of --final-scene (cuda and cpu), np 1 and 2"
-    "$CG" generate "$W/u.h5" -n $((200000 >> SCALE)) --seed 21 --contacts-per-body 1 -q
+    log "CLI: drifting steps on cuda, skin auto, -o = plain detect of --final-scene (cuda and cpu), np 1 and 2"
+    "$CG" generate "$W/u.h5" -n $((200000 >> SCALE)) --seed 21 --contacts-per-body 6 -q
     "$CG" generate "$W/m.h5" -n $((100000 >> SCALE)) --seed 22 --kind mixed --ellipsoid-fraction 0.4 --rlow 0.3 --rhigh 0.6 \
       --contacts-per-body 1 -q
     for sc in u m; do
       for np in 1 2; do
-        for skin in 0 auto; do
-          t=$sc.np$np.$skin
-          spin=(); [ $sc = m ] && spin=(--spin 0.2)
-          "${MPI[@]}" -np $np "$CG" detect "$W/$sc.h5" -o "$W/$t.last.h5" --backend "$BACKEND" --precision fp64 \
-            --fields full --steps 8 --drift 0.12 --skin $skin "${spin[@]}" --final-scene "$W/$t.final.h5" \
-            >"$OUT/cli.$t.log" 2>&1
-          "$CG" detect "$W/$t.final.h5" -o "$W/$t.plain.h5" --backend "$BACKEND" --precision fp64 --fields full -q
-          check "cli $t: last step = $BACKEND detect of the final scene" same "$W/$t.last.h5" "$W/$t.plain.h5"
-          "$CG" detect "$W/$t.final.h5" -o "$W/$t.cpu.h5" --backend cpu --precision fp64 --fields full -q
-          check "cli $t: last step = cpu detect of the final scene" same "$W/$t.last.h5" "$W/$t.cpu.h5"
-        done
+        t=$sc.np$np.auto
+        spin=(); [ $sc = m ] && spin=(--spin 0.2)
+        prec=fp64; [ $sc = u ] && prec=fp32  # fp32 spheres: the one-pass narrow of the steps
+        "${MPI[@]}" -np $np "$CG" detect "$W/$sc.h5" -o "$W/$t.last.h5" --backend "$BACKEND" --precision $prec \
+          --steps 12 --drift 0.01 --skin auto "${spin[@]}" --final-scene "$W/$t.final.h5" >"$OUT/cli.$t.log" 2>&1
+        "$CG" detect "$W/$t.final.h5" -o "$W/$t.plain.h5" --backend "$BACKEND" --precision $prec -q
+        check "cli $t: last step = $BACKEND detect of the final scene" same "$W/$t.last.h5" "$W/$t.plain.h5"
+        "$CG" detect "$W/$t.final.h5" -o "$W/$t.cpu.h5" --backend cpu --precision $prec -q
+        check "cli $t: last step = cpu detect of the final scene" same "$W/$t.last.h5" "$W/$t.cpu.h5"
       done
     done
 
-    log "bench: 2^24, fp32, 6 contacts per body, drift 0.01 (1 % of r_max) per step"
+    log "bench: 2^24 spheres, fp32, 6 contacts per body, drift 0.01 (1 % of r_max) per step"
     "$CG" generate "$W/s24.h5" -n $N24 --seed 24 --contacts-per-body 6 -q
-    "$CG" generate "$W/e24.h5" -n $N24 --seed 25 --kind ellipsoids --max-aspect 4 --contacts-per-body 6 -q
-    for sc in s24 e24; do
-      check "bench $sc fresh" steps $sc 1 0 6 $sc.fresh
-      check "bench $sc auto" steps $sc 1 auto 40 $sc.auto
+    check "bench s24 fresh" steps s24 1 0 6 s24.fresh
+    check "bench s24 auto" steps s24 1 auto 40 s24.auto
+    # the same with the rejecting narrow's two passes: what the one pass saves per reuse
+    CONTACTGRID_CUDA_NARROW=two-pass check "bench s24 auto, two-pass narrow" steps s24 1 auto 40 s24.auto_two_pass
+    check "s24: auto = two-pass narrow (last step)" \
+      bash -c "grep -h 'contacts on the last step' '$OUT/s24.auto.log' '$OUT/s24.auto_two_pass.log' | sed -E 's/.*, ([0-9]+) contacts on the last step.*/\1/' | uniq | wc -l | grep -qx 1"
+    table_one s24 | tee "$OUT/table.md"
+    printf 'two-pass narrow (CONTACTGRID_CUDA_NARROW=two-pass): mean %s, build %s, reuse %s ms, %s\n' \
+      "$(field s24.auto_two_pass mean)" "$(field s24.auto_two_pass build)" "$(field s24.auto_two_pass reuse)" \
+      "$(lists s24.auto_two_pass)" | tee -a "$OUT/table.md"
+    for t in s24.fresh s24.auto s24.auto_two_pass; do
+      echo "-- $t: per-step stages (ms, median of the steps)"
+      sed -nE '/^resident steps/,/^  candidate lists/p' "$OUT/$t.log"
     done
-    table_one s24 e24 | tee "$OUT/table.md"
-    if [ -x "$BIN/contactgrid_cuda_bench" ]; then
-      log "engine alone, bodies on the GPU: 2^24 spheres, fresh / reuse / rebuild at skin 0.1 (BENCHMARKS §10's table)"
-      "$BIN/contactgrid_cuda_bench" 24 24 1 10 auto spheres 0.1 >"$OUT/cuda_bench_skin.md" 2>&1
-      check "contactgrid_cuda_bench skin 0.1: every step's count = from scratch" \
-        bash -c "grep -q 'skin: rebuild' '$OUT/cuda_bench_skin.md' && ! grep -q '| NO |' '$OUT/cuda_bench_skin.md'"
-      sed -n '/skin: rebuild/,$p' "$OUT/cuda_bench_skin.md"
-    fi
     ;;
   two)
     log "MPI moving steps at np 2 (one rank per GPU)"

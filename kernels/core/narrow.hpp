@@ -164,6 +164,16 @@ CG_HD bool fp32_resolves(const Sphere<float>& a, const Sphere<float>& b, float l
   return len >= fraction * m;
 }
 
+// The decision alone of candidate (a, b) (narrow_decide's `contact`): fp64 and mixed on the
+// frame-local doubles, fp32 on the local floats.
+template <class Real>
+CG_HD bool narrow_touch(const NarrowBodies<Real>& w, std::uint32_t a, std::uint32_t b) {
+  if constexpr (std::is_same_v<Real, double>)
+    return touch_fp64(w, a, b);
+  else
+    return spheres_touch(w.spheres[a], w.spheres[b]);
+}
+
 // The decision and row of candidate (a, b) for the narrow stage's real type Real (see the file
 // comment): fp64 and mixed decide on the frame-local doubles and take the row from the world doubles;
 // fp32 decides and computes on the local floats, and takes unresolved normals from the world doubles.
@@ -172,11 +182,11 @@ CG_HD NarrowDecision<Real> narrow_decide(const NarrowBodies<Real>& w, std::uint3
                                          bool full, NarrowFlags& flags) {
   NarrowDecision<Real> d{};
   if constexpr (std::is_same_v<Real, double>) {
-    d.contact = touch_fp64(w, a, b);
+    d.contact = narrow_touch(w, a, b);
     if (d.contact) d.row = world_sphere_row(world_sphere(w, a), world_sphere(w, b), full);
   } else {
     const Sphere<float> sa = w.spheres[a], sb = w.spheres[b];
-    d.contact = spheres_touch(sa, sb);
+    d.contact = spheres_touch(sa, sb);  // narrow_touch on the spheres already read
     if (!d.contact) return d;
     const Vec3<float> dc = sa.centre() - sb.centre();
     if (fp32_resolves(sa, sb, cg_sqrt(dot(dc, dc)))) {

@@ -36,6 +36,12 @@ struct SphereDecide {
   CG_HD bool accept(std::uint32_t a, std::uint32_t b, NarrowFlags& flags) const {
     return narrow_decide(bodies, a, b, false, flags).contact;
   }
+  // The decision alone (no row, no flags): the CUDA one-pass compaction's select, whose row and flags
+  // come from row_flags() for the accepted pairs alone.
+  CG_HD bool touch(std::uint32_t a, std::uint32_t b) const { return narrow_touch(bodies, a, b); }
+  CG_HD ContactRow<Real> row_flags(std::uint32_t a, std::uint32_t b, bool full, NarrowFlags& flags) const {
+    return narrow_decide(bodies, a, b, full, flags).row;
+  }
   CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
     NarrowFlags unused;  // counted by accept()
     return narrow_decide(bodies, a, b, full, unused).row;

@@ -18,7 +18,11 @@
 // list: a lane group per pair, its starts on the lanes).
 //
 // Flags and offsets live in the candidates' dead alternate buffers (pair_a / pair_b .Alternate()).
+#include <thrust/iterator/counting_iterator.h>
+#include <thrust/iterator/tabulate_output_iterator.h>
+
 #include <cub/device/device_scan.cuh>
+#include <cub/device/device_select.cuh>
 #include <limits>
 #include <type_traits>
 
@@ -325,6 +329,38 @@ __global__ void __launch_bounds__(kBlock)
   store_row(out, w, row, full);  // core/contact_fields.hpp: the one row store
 }
 
+// The one-pass compaction of sphere candidates (narrow_select): the select of cub::DeviceSelect::If
+// over the candidate indices (the decision alone), and the writer of the accepted candidate k's row at
+// its output place i (a tabulate output iterator: CUB hands it the selected k with its place, after its
+// decoupled look-back). The writer decides again to take the row and the flags: the pair and its two
+// spheres were read by the select of the same tile a moment before (L1/L2, not DRAM).
+template <class Real>
+struct SphereTouchAt {
+  const std::uint32_t* pair_a;
+  const std::uint32_t* pair_b;
+  SphereDecide<Real> decide;
+  __device__ bool operator()(std::uint32_t k) const { return decide.touch(pair_a[k], pair_b[k]); }
+};
+template <class Real>
+struct SphereRowAt {
+  const std::uint32_t* pair_a;
+  const std::uint32_t* pair_b;
+  SphereDecide<Real> decide;
+  ContactPtrs<Real> out;
+  bool full;
+  Counters* c;
+  __device__ void operator()(std::ptrdiff_t i, std::uint32_t k) const {
+    const std::uint32_t a = pair_a[k], b = pair_b[k];
+    NarrowFlags flags;
+    ContactRow<Real> row = decide.row_flags(a, b, full, flags);
+    row.id_a = a;
+    row.id_b = b;
+    store_row(out, static_cast<std::size_t>(i), row, full);  // core/contact_fields.hpp: the one row store
+    if (flags.fp64_rows)  // rare (centres closer than fp32 resolves): one atomic each
+      atomicAdd(&c->fp64_rows, static_cast<unsigned long long>(flags.fp64_rows));
+  }
+};
+
 // The rows of fp32's pairs in fp64 (NaN-marked and listed by narrow_hard_fp64_kernel): fp64's row
 // rounded once, as row_from gives them on the host. It walks the list, not every candidate: a few rows.
 template <class Real>
@@ -456,6 +492,32 @@ const Vec3<Narrow>* narrow_shapes_count(RunState<Real, Key, Narrow>& r, const Sh
   return d_normal;
 }
 
+// The rejecting path of sphere scenes with device output (the resident steps' path, a skin's builds
+// and reuses): one pass over the candidates, cub::DeviceSelect::If (a stable compaction with decoupled
+// look-back) whose output iterator writes each accepted candidate's row at its place (SphereRowAt), the
+// row count into the counters (read after the call's last synchronisation, as narrow_compact's). Each
+// candidate and its spheres are read from DRAM once, and no flag or offset array is written: against
+// count → scan → fill, half the candidate and body reads and none of the scratch traffic.
+template <class Real, class Key, class Narrow>
+void narrow_select(RunState<Real, Key, Narrow>& r, const SphereDecide<Narrow>& decide) {
+  cudaStream_t st = r.st;
+  const std::uint32_t np = r.np;
+  r.out_bytes = layout_contacts(r.ws.out.data(), np, r.fields(), r.cp);  // rows at their select places
+  const std::uint32_t* a = r.pair_a.Current();
+  const std::uint32_t* b = r.pair_b.Current();
+  const cuda::SphereTouchAt<Narrow> touch{a, b, decide};
+  const auto rows = thrust::make_tabulate_output_iterator(
+      cuda::SphereRowAt<Narrow>{a, b, decide, r.cp, r.full, r.d_counters});
+  cub_run(r.ws, "narrow", [&](void* t, std::size_t& bytes) {
+    return cub::DeviceSelect::If(t, bytes, thrust::counting_iterator<std::uint32_t>(0), rows,
+                                 &r.d_counters->rows, int(np), touch, st);
+  });
+  // the counters (the fp64 rows, the row count), read after the next wait
+  CG_CUDA_CHECK(
+      cudaMemcpyAsync(r.h_counters, r.d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, st));
+  r.rows_pending = true;
+}
+
 // The rejecting path: count → scan → fill (see the file comment). Rows that stay on the device
 // (job.device_out) go where the scan puts them in an out buffer laid out for every candidate (np rows:
 // ws.out holds them), so the fill follows the scan with no wait, and the counters — the row count
@@ -534,6 +596,8 @@ void narrow_stage(RunState<Real, Key, Narrow>& r) {
     if (r.d_shapes)  // scenes with ellipsoids (r.filter is then never spheres_touch)
       narrow_compact(r, ShapeDecide<Narrow>{bodies, r.d_shapes, r.job.solver, r.shape_rows,
                                             r.filter == CandidateFilter::centre_cut});
+    else if (r.job.device_out && !r.tuning.narrow_two_pass)
+      narrow_select(r, SphereDecide<Narrow>{bodies});
     else
       narrow_compact(r, SphereDecide<Narrow>{bodies});
     r.events.mark(EngineStage::narrow, r.st);

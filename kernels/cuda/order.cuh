@@ -41,35 +41,38 @@ __global__ void __launch_bounds__(kBlock)
 // Runs of equal a up to this length are sorted by their first thread; longer ones by the segmented sort.
 constexpr std::uint32_t kShortRun = 32;
 
-// order, second step: each run of equal a (pair_a ascending) is put in b order. A run of at most
-// kShortRun pairs by its first thread (insertion sort); a longer one is listed for the segmented
-// sort: [run_begin[s], run_end[s]) at s = an atomic cursor c->long_runs (its end found by a binary
-// search, not a walk). Pairs are distinct, so the result is the (a, b) order of the host's sort of
-// a << id_bits | b, whatever the order within the runs before.
+// order, second step: each run of equal a (pair_a ascending) is put in b order, into `b_out` (the dead
+// alternate b buffer). One thread per pair: a pair in a run of at most kShortRun pairs finds its run
+// (the neighbours of equal a, in L1), counts the b of its run below its own (pairs are distinct, so
+// the counts are the ranks) and writes its b at the run's start + its rank: every thread works, none
+// waits on another, and a run is read from DRAM once. A pair of a longer run copies its b unchanged,
+// and the run's first pair lists it for the segmented sort: [run_begin[s], run_end[s]) at s = an
+// atomic cursor c->long_runs (its end found by a binary search, not a walk). The result is the (a, b)
+// order of the host's sort of a << id_bits | b, whatever the order within the runs before.
 __global__ void __launch_bounds__(kBlock)
-    sort_runs_kernel(const std::uint32_t* __restrict__ pair_a, std::uint32_t* __restrict__ pair_b,
-                     std::uint32_t n_pairs, std::uint32_t* __restrict__ run_begin,
-                     std::uint32_t* __restrict__ run_end, Counters* __restrict__ c) {
+    sort_runs_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
+                     std::uint32_t n_pairs, std::uint32_t* __restrict__ b_out,
+                     std::uint32_t* __restrict__ run_begin, std::uint32_t* __restrict__ run_end,
+                     Counters* __restrict__ c) {
   const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
   if (k >= n_pairs) return;
-  const std::uint32_t a = pair_a[k];
-  if (k > 0 && pair_a[k - 1] == a) return;  // not the first of its run
-  const std::uint32_t lim = n_pairs - k > kShortRun ? k + kShortRun + 1 : n_pairs;
-  std::uint32_t end = k + 1;
-  while (end < lim && pair_a[end] == a) ++end;
-  if (end - k > kShortRun) {  // a long run: its end, and a slot in the list
-    end = lower_bound_key(pair_a, end, n_pairs, a + 1u);
+  const std::uint32_t a = pair_a[k], b = pair_b[k];
+  // the run around k, each side walked no further than tells a long run from a short one
+  std::uint32_t start = k, end = k + 1;
+  while (start > 0 && pair_a[start - 1] == a && k - start <= kShortRun) --start;
+  while (end < n_pairs && pair_a[end] == a && end - start <= kShortRun) ++end;
+  if (end - start > kShortRun) {  // a long run: b as it is, and the run's first pair lists the run
+    b_out[k] = b;
+    if (k > 0 && pair_a[k - 1] == a) return;
+    const std::uint32_t run_stop = lower_bound_key(pair_a, k + 1, n_pairs, a + 1u);
     const auto s = static_cast<std::uint32_t>(atomicAdd(&c->long_runs, 1ull));
     run_begin[s] = k;
-    run_end[s] = end;
+    run_end[s] = run_stop;
     return;
   }
-  for (std::uint32_t i = k + 1; i < end; ++i) {
-    const std::uint32_t v = pair_b[i];
-    std::uint32_t j = i;
-    for (; j > k && pair_b[j - 1] > v; --j) pair_b[j] = pair_b[j - 1];
-    pair_b[j] = v;
-  }
+  std::uint32_t rank = 0;
+  for (std::uint32_t i = start; i < end; ++i) rank += pair_b[i] < b ? 1u : 0u;
+  b_out[start + rank] = b;
 }
 
 // order, the long runs: each block copies its run of the segmented sort's output back.
@@ -114,15 +117,17 @@ void order_stage(RunState<Real, Key, Narrow>& r) {
   }
   if (np > 1) {
     // the long runs' list in the dead alternate a buffer (at most np / (kShortRun + 1) runs: begins in
-    // its first half, ends in its second), the segmented sort's output in the dead alternate b buffer
+    // its first half, ends in its second); sort_runs writes into the alternate b buffer, which becomes
+    // the current one, and the segmented sort of the long runs into the other, copied back
     std::uint32_t* run_begin = r.pair_a.Alternate();
     std::uint32_t* run_end = run_begin + np / 2;
     unsigned long long* d_long = &r.d_counters->long_runs;
     unsigned long long* h_long = &r.h_counters->long_runs;
     CG_CUDA_CHECK(cudaMemsetAsync(d_long, 0, sizeof *d_long, st));
-    cuda::sort_runs_kernel<<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), np,
-                                                              run_begin, run_end, r.d_counters);
+    cuda::sort_runs_kernel<<<blocks_for(np), kBlock, 0, st>>>(
+        r.pair_a.Current(), r.pair_b.Current(), np, r.pair_b.Alternate(), run_begin, run_end, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("sort_runs");
+    r.pair_b.selector ^= 1;  // the short runs sorted, the long ones as they were
     CG_CUDA_CHECK(cudaMemcpyAsync(h_long, d_long, sizeof *h_long, cudaMemcpyDeviceToHost, st));
     CG_CUDA_CHECK(cudaStreamSynchronize(st));
     const std::uint64_t long_runs = *h_long;

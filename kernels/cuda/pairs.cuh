@@ -308,9 +308,14 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
   std::uint32_t* d_entry_totals = ws.entry_blocks.span_as<std::uint32_t>(2 * neb).data();
   std::uint32_t* d_entry_offsets = d_entry_totals + neb;
   // Direct write of the pairs as four u32 arrays (a, b, and the order sort's second copies) of
-  // cap = ne / 4 pairs each.
-  const std::uint64_t direct_cap = ne / 4;
-  std::uint32_t* d_direct = Workspace::direct_pairs(r.body);
+  // cap pairs each: cap = ne / 4 in the dead alternate entry-body buffer, or — where an earlier call
+  // left ws.pairs larger (a rebuild of a skin's list: about the previous build's candidates, with the
+  // buffer's geometric growth) — in ws.pairs, so a rebuild skips the scan → fill walk.
+  const std::uint64_t held_cap = ws.pairs.capacity() / (4 * sizeof(std::uint32_t));
+  const bool direct_in_pairs = held_cap > ne / 4;
+  const std::uint64_t direct_cap = direct_in_pairs ? held_cap : ne / 4;
+  std::uint32_t* d_direct = direct_in_pairs ? ws.pairs.span_as<std::uint32_t>(4 * held_cap).data()
+                                            : Workspace::direct_pairs(r.body);
   launch_count_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.pair_perm(), r.d_report,
                      r.g.half_bits, 0u, d_pair_count, d_entry_totals, r.d_counters, d_direct,
                      d_direct + direct_cap, direct_cap);
@@ -321,19 +326,19 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
   r.np = static_cast<std::uint32_t>(n_pairs);
 
   // ---- (scan → fill) ----
-  // Pairs as (a, b) u32 arrays, double-buffered (16 B a pair). When they fit in the alternate entry
-  // body buffer (np <= ne / 4), the count kernel has already written them there; else they are
-  // placed in ws.pairs by the scan of the block totals → fill_pairs (from the contact masks).
-  const bool pairs_in_entries = n_pairs <= direct_cap;
-  ws.reserve({{&ws.pairs, pairs_in_entries ? 0 : 4 * std::size_t(r.np) * sizeof(std::uint32_t)},
+  // Pairs as (a, b) u32 arrays, double-buffered (16 B a pair). When they fit the direct write's room
+  // (np <= cap), the count kernel has already written them there; else they are placed in ws.pairs
+  // by the scan of the block totals → fill_pairs (from the contact masks).
+  const bool written = n_pairs <= direct_cap;
+  ws.reserve({{&ws.pairs, written ? 0 : 4 * std::size_t(r.np) * sizeof(std::uint32_t)},
               {&ws.out, r.out_bytes_for(r.np)}},
              "pairs");
-  const std::size_t stride = pairs_in_entries ? std::size_t(direct_cap) : std::size_t(r.np);
+  const std::size_t stride = written ? std::size_t(direct_cap) : std::size_t(r.np);
   std::uint32_t* d_pair_store =
-      pairs_in_entries ? d_direct : ws.pairs.span_as<std::uint32_t>(4 * std::size_t(r.np)).data();
+      written ? d_direct : ws.pairs.span_as<std::uint32_t>(4 * std::size_t(r.np)).data();
   r.pair_a = cub::DoubleBuffer<std::uint32_t>(d_pair_store, d_pair_store + 2 * stride);
   r.pair_b = cub::DoubleBuffer<std::uint32_t>(d_pair_store + stride, d_pair_store + 3 * stride);
-  if (!pairs_in_entries && r.np > 0) {
+  if (!written && r.np > 0) {
     cub_run(ws, "pairs", [&](void* t, std::size_t& b) {
       return cub::DeviceScan::ExclusiveSum(t, b, d_entry_totals, d_entry_offsets, int(neb), st);
     });

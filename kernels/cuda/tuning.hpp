@@ -72,6 +72,11 @@ struct Tuning {
   // and the body stage sums each body's rows as A and as B; default: the contact stage sums each
   // body's rows as A itself (cuda/dem_forces.cuh). The same sums either way.
   bool dem_terms_rows = false;
+  // CONTACTGRID_CUDA_NARROW=two-pass: the rejecting narrow stage of sphere scenes with device output
+  // counts, scans and fills (two reads of the candidates and their spheres, cuda/narrow.cuh:
+  // narrow_compact); default: one pass, a stable compaction with decoupled look-back whose output
+  // writes the rows (narrow_select). The same rows either way.
+  bool narrow_two_pass = false;
 };
 
 // `on` / `off` when the variable equals one of the two spellings, else automatic.
@@ -146,6 +151,8 @@ inline Tuning read_tuning() {
                                                          : HistorySearch::near;
   if (const char* d = std::getenv("CONTACTGRID_DEM_SUMS")) t.dem_sums_sort = std::string_view(d) == "sort";
   if (const char* d = std::getenv("CONTACTGRID_DEM_TERMS")) t.dem_terms_rows = std::string_view(d) == "rows";
+  if (const char* n = std::getenv("CONTACTGRID_CUDA_NARROW"))
+    t.narrow_two_pass = std::string_view(n) == "two-pass";
   if (const char* c = std::getenv("CONTACTGRID_CUDA_CANDIDATES")) {
     const std::string_view v = c;
     if (v == "cells") t.candidates = CandidateFilter::cells;

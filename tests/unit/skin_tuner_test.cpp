@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -18,9 +19,9 @@ namespace {
 
 // Steps of bodies moving `v` per step under a modelled cost: a build costs build(s), a reuse
 // reuse(s); a list lasts while the displacement since its build is <= s/2. Returns the tuner's
-// final choice of reuses per build and the mean cost per step over the last `tail` steps.
+// final choice of reuses per build, the builds made and the mean cost per step over the last 200 steps.
 struct TunedRun {
-  int n = 0;
+  int n = 0, builds = 0;
   double skin = 0, mean = 0;
 };
 template <class Build, class Reuse>
@@ -30,7 +31,7 @@ TunedRun simulate(double v, int steps, Build&& build, Reuse&& reuse, double leng
   int since = 0;
   bool kept = false;
   double tail_cost = 0;
-  int tail = 0;
+  int tail = 0, builds = 0;
   for (int k = 0; k < steps; ++k) {
     const double skin = tuner.skin();
     moved += v;
@@ -39,6 +40,7 @@ TunedRun simulate(double v, int steps, Build&& build, Reuse&& reuse, double leng
     const double cost = reused ? reuse(kept_skin) : build(skin);
     tuner.observe(!reused, cost, kept ? moved : 0, since);
     if (!reused) {
+      ++builds;
       kept = skin > 0;
       kept_skin = skin;
       moved = 0;
@@ -46,27 +48,43 @@ TunedRun simulate(double v, int steps, Build&& build, Reuse&& reuse, double leng
     }
     if (k >= steps - 200) tail_cost += cost, ++tail;
   }
-  return {tuner.reuses_per_build(), tuner.skin(), tail_cost / tail};
+  return {tuner.reuses_per_build(), builds, tuner.skin(), tail_cost / std::max(tail, 1)};
 }
 
-// Costs rising with the skin (more candidates): the best n of (build + n·reuse)/(n + 1) is found by
-// the search, within a factor 2 (n is searched in powers of two).
+// Costs rising with the skin (more candidates): the tuner's lines through the measured builds and
+// reuses find the n of the lowest (build + n·reuse)/(n + 1), and it gets there within a few cycles.
 TEST(SkinTuner, FindsTheCheapestReusesPerBuild) {
   const double v = 0.01;
   auto build = [](double s) { return 10.0 * (1 + 4 * s); };
   auto reuse = [](double s) { return 1.0 * (1 + 4 * s); };
-  const TunedRun r = simulate(v, 2000, build, reuse);
+  auto mean_of = [&](int n) {
+    const double s = 2 * v * n * (1 + 1.0 / 16);
+    return (build(s) + n * reuse(s)) / (n + 1);
+  };
   double best = 1e300;
   int best_n = 0;
-  for (int n = 1; n <= 256; n *= 2) {
-    const double s = 2 * v * n * (1 + 1.0 / 16);
-    const double mean = (build(s) + n * reuse(s)) / (n + 1);
-    if (mean < best) best = mean, best_n = n;
-  }
+  for (int n = 1; n <= 256; ++n)
+    if (mean_of(n) < best) best = mean_of(n), best_n = n;
+  const TunedRun r = simulate(v, 2000, build, reuse);
   EXPECT_EQ(r.n, best_n);
   EXPECT_NEAR(r.skin, 2 * v * best_n * (1 + 1.0 / 16), 1e-12);
-  EXPECT_LT(r.mean, 1.05 * best);
+  EXPECT_LT(r.mean, 1.01 * best);
   EXPECT_LT(r.mean, 0.5 * build(0));  // far cheaper than building every step
+  // the search: n = 2, then 8, then the model's choice — the first 40 steps hold at most 8 builds
+  // (three of them before the motion is known; a doubling search by measured means made 11)
+  const int builds = simulate(v, 40, build, reuse).builds;
+  EXPECT_LE(builds, 8);
+}
+
+// A cheaper reuse (or a dearer build) moves the choice to longer lists: the model follows the costs.
+TEST(SkinTuner, CheaperReusesChooseLongerLists) {
+  auto run = [](double reuse_cost) {
+    return simulate(
+               0.01, 600, [](double s) { return 10.0 * (1 + 4 * s); },
+               [&](double s) { return reuse_cost * (1 + 8 * s); })
+        .n;
+  };
+  EXPECT_GT(run(0.3), run(1.0));
 }
 
 // Free reuses: the search goes on doubling until the skin reaches twice the length scale.
@@ -94,9 +112,12 @@ TEST(SkinTuner, FollowsTheLargestSpeed) {
   t.observe(true, 1, 0, 1);
   (void)t.skin();
   t.observe(false, 1, 0.1, 1);
-  EXPECT_NEAR(t.skin(), 2 * 0.1 * (1 + 1.0 / 16), 1e-12);
-  t.observe(true, 1, 0.9, 3);  // 0.3 per step
+  EXPECT_NEAR(t.skin(), 2 * 0.1 * 2 * (1 + 1.0 / 16), 1e-12);  // the first trial, n = 2
+  t.observe(true, 1, 0.9, 3);                                  // 0.3 per step
   EXPECT_DOUBLE_EQ(t.speed(), 0.3);
+  const double skin = t.skin();  // the search's next trial: 4 times the reuses the cycle made
+  EXPECT_EQ(t.reuses_per_build(), 4);
+  EXPECT_NEAR(skin, 2 * 0.3 * 4 * (1 + 1.0 / 16), 1e-12);
 }
 
 // Random spheres drifting by the CLI's rule.
@@ -109,9 +130,9 @@ struct Drifting {
     return p;
   }
 };
-Drifting drifting(std::size_t n, unsigned seed) {
+Drifting drifting(std::size_t n, unsigned seed, double edge = 12) {
   std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> x(0, 12), r(0.3, 0.6);
+  std::uniform_real_distribution<double> x(0, edge), r(0.3, 0.6);
   Drifting d;
   for (std::size_t i = 0; i < n; ++i) {
     d.p0.push_back({x(rng), x(rng), x(rng)});
@@ -164,6 +185,34 @@ TYPED_TEST(EngineSkin, SetSkinAndAutoGiveTheContactsOfSkinZero) {
   EXPECT_EQ(changed.stats().skin, 0);  // no list kept since set_skin(0)
   EXPECT_THROW(changed.set_skin(-1), UsageError);
   EXPECT_THROW(changed.set_skin(std::nan("")), UsageError);
+}
+
+// Resident steps with a skin over enough candidates for many tiles of the CUDA narrow's one-pass
+// compaction (its decoupled look-back) and for the pair stage's direct write into the room the
+// previous build left: every step a skin-0 detection's contacts, builds and reuses both seen.
+TYPED_TEST(EngineSkin, ResidentStepsOverManyTilesGiveTheContactsOfSkinZero) {
+  using Real = typename TypeParam::Real;
+  CG_SKIP_WITHOUT_BACKEND(TypeParam);
+  const std::size_t n = 40000;
+  const Drifting d = drifting(n, 11, 12 * std::cbrt(double(n) / 1500));
+  EngineOptions fresh;
+  fresh.backend = TypeParam::backend;
+  fresh.threads = 2;
+  EngineOptions skinned = fresh;
+  skinned.skin = 0.06;  // lasts two steps of 0.01 (2 · 0.02 <= 0.06), the third rebuilds
+  Engine<Real> scratch(fresh), resident(skinned);
+  resident.set_resident(BodiesView{d.p0, d.r, {}, {}});
+  for (int step = 0; step < 7; ++step) {
+    const HostVector<Vec3<double>> p = d.at(step, 0.01);
+    const Contacts<Real> want = scratch.detect(BodiesView{p, d.r, {}, {}});
+    resident.write_resident(0, p.size(), p.data(), d.r.data());
+    resident.detect_resident();
+    const Contacts<Real>& got = resident.resident_contacts();
+    ASSERT_GT(want.size(), 20000u);
+    EXPECT_EQ(test::compare_contacts(got, want), "identical") << "step " << step;
+  }
+  EXPECT_GE(resident.stats().candidate_reuses, 3u);
+  EXPECT_GE(resident.stats().candidate_builds, 2u);
 }
 
 }  // namespace
