@@ -127,6 +127,10 @@ double grid_occupancy(const Bounds& b) {
 
 BroadPhase choose_broad_phase(const Bounds& b, Precision, bool device) {
   if (b.count <= kBruteBodies) return BroadPhase::brute;
+  // one size class (levels plan one level: the frame's grid) of many bodies on a GPU: the levels' walk
+  // of that grid in input order
+  if (device && b.count >= kOneLevelDeviceBodies && b.r_max <= kLevelRatio * b.r_min)
+    return BroadPhase::levels;
   const double mean = b.count > 0 ? b.r_sum[0] / double(b.count) : b.r_max;
   if (!(mean > 0 && b.r_max > kLevelsSpread * mean)) return BroadPhase::grid;
   const double levels = std::log2(2 * b.r_max / std::max(b.r_min, b.r_max * 1e-300));
