@@ -11,8 +11,13 @@
 #            shown as >t; the /uniform per-contact column and auto's pick against the best (the last
 #            line: on how many rows auto is within 10 % of the best)
 #   small    the same at 2^13 … 2^16 with brute
-#   BIN=dir OUT=results-dir jobs/gpu_broadphase_check.sh check|compare|table|small   (default: check)
-# BIN holds the CUDA build's contactgrid and contactgrid_tests. Everything lands in
+#   steps    (under 3 minutes) the resident steps' halo by radius with CUDA: the MPI tests of mixed
+#            sizes crossing the cuts at np 1 and 2 (every step = the CPU's one-rank detection from
+#            scratch), `detect --steps --drift` on 64 intruders among grains, CUDA np 2 = CPU np 1 byte
+#            for byte; then the uniform and bimodal rows at 2^22 and 2^24 (grid, levels, auto: auto's
+#            one-level pick on the device, the levels' fill pass)
+#   BIN=dir OUT=results-dir jobs/gpu_broadphase_check.sh check|compare|table|small|steps   (default: check)
+# BIN holds the CUDA build's contactgrid, contactgrid_tests and (steps) contactgrid_mpi_tests. Everything lands in
 # $OUT/broadphase_<mode>.tgz (logs, compare table, the tables as text and CSV); the summary is printed.
 # Exits non-zero naming every failed check (the last lines of the output).
 set -u
@@ -133,8 +138,39 @@ case $MODE in
       fail "bench-broad $MODE (broad_h100_$MODE.txt)"
     cat "$R/broad_h100_$MODE.txt"
     ;;
+  steps)
+    log "1. MPI tests: mixed sizes crossing the cuts, CUDA steps = the CPU from scratch (np 1, 2)"
+    for np in 1 2; do
+      timeout 120 mpirun --bind-to none -np $np "$BIN/contactgrid_mpi_tests" --gtest_color=no \
+        --gtest_filter='MovingSteps.CudaMixedSizes*:MovingSteps.MixedSizes*:StepLoop.HaloByRadius*' \
+        >"$R/mpi_steps.np$np.log" 2>&1 || fail "mpi tests np $np (mpi_steps.np$np.log)"
+      grep -E '^\[  (PASSED|FAILED|SKIPPED) |Failure' "$R/mpi_steps.np$np.log" | sort | uniq -c | head -12
+      grep -q '^\[  SKIPPED \] MovingSteps.CudaMixedSizes' "$R/mpi_steps.np$np.log" &&
+        fail "np $np: the CUDA case skipped (no GPU seen?)"
+    done
+    log "2. detect --steps --drift, 64 intruders r = 3 among r = 0.3 grains (2^18): CUDA np 2 = CPU np 1"
+    scene="$W/intruders.h5"
+    "$CG" generate "$scene" -n $((1 << 18)) --seed 35 --kind intruders --rlow 0.3 --rhigh 3 --intruders 64 \
+      --contacts-per-body 1 -q >"$R/steps_cli.log" 2>&1 || fail "generate the intruder scene"
+    opts=(--precision fp64 --fields full --steps 6 --drift 0.05 --skin 0.2)
+    "$CG" detect "$scene" -o "$W/steps.cpu.h5" --backend cpu "${opts[@]}" >>"$R/steps_cli.log" 2>&1 ||
+      fail "detect --steps cpu np 1 (steps_cli.log)"
+    timeout 120 mpirun --bind-to none -np 2 "$CG" detect "$scene" -o "$W/steps.cuda.h5" --backend cuda \
+      "${opts[@]}" >>"$R/steps_cli.log" 2>&1 || fail "detect --steps cuda np 2 (steps_cli.log)"
+    if "$CG" compare "$W/steps.cpu.h5" "$W/steps.cuda.h5" >>"$R/steps_cli.log" 2>&1; then
+      echo "steps, intruders 2^18, CUDA np 2 against CPU np 1: IDENTICAL"
+    else
+      fail "steps, intruders 2^18: CUDA np 2 differs from CPU np 1"
+    fi
+    grep -iE 'halo|ghost|steps' "$R/steps_cli.log" | head -12
+    log "3. the uniform and bimodal rows at 2^22 and 2^24 (fp32; grid, levels, auto)"
+    timeout 100 "$CG" bench-broad --backend cuda --precision fp32 --families uniform,bimodal10,bimodal100 \
+      --lo 22 --hi 24 --step 2 --brute-hi 0 --sweep-hi 0 --repetitions 3 --limit 6 --budget 10 \
+      --csv "$R/broad_h100_steps.csv" >"$R/broad_h100_steps.txt" 2>&1 || fail "bench-broad (broad_h100_steps.txt)"
+    cat "$R/broad_h100_steps.txt"
+    ;;
   *)
-    echo "usage: BIN=dir OUT=dir $0 check|compare|table|small" >&2
+    echo "usage: BIN=dir OUT=dir $0 check|compare|table|small|steps" >&2
     exit 2
     ;;
 esac
