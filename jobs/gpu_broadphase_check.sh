@@ -168,6 +168,33 @@ case $MODE in
       --lo 22 --hi 24 --step 2 --brute-hi 0 --sweep-hi 0 --repetitions 3 --limit 6 --budget 10 \
       --csv "$R/broad_h100_steps.csv" >"$R/broad_h100_steps.txt" 2>&1 || fail "bench-broad (broad_h100_steps.txt)"
     cat "$R/broad_h100_steps.txt"
+    log "4. where the levels' time goes: per-kernel durations (ncu) of one detect, bimodal 1:10 and uniform, 2^22"
+    NCU=$(command -v ncu || ls /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1)
+    for fam in "bimodal10|--kind bimodal --rhigh 1 --ratio 10 --large-fraction 0.1" "uniform|--kind uniform"; do
+      name=${fam%%|*}; args=${fam#*|}
+      # shellcheck disable=SC2086
+      "$CG" generate "$W/$name.22.h5" -n $((1 << 22)) --seed 34 $args -q || { fail "generate $name 2^22"; continue; }
+      [ -n "$NCU" ] || { echo "no ncu: step 4 skipped"; break; }
+      timeout 60 "$NCU" --clock-control none --metrics gpu__time_duration.sum --csv --log-file "$R/ncu_$name.csv" \
+        "$CG" detect "$W/$name.22.h5" -o "$W/$name.22.out.h5" --backend cuda --precision fp32 --broad-phase levels \
+        -v >"$R/ncu_$name.out" 2>&1 || echo "ncu $name rc=$?"
+      echo "== $name 2^22, levels: ms per kernel"
+      python3 - "$R/ncu_$name.csv" <<'PY' | tee "$R/ncu_$name.sum.txt"
+import csv, sys, collections
+rows = list(csv.reader(open(sys.argv[1], errors="replace")))
+hdr = next((i for i, r in enumerate(rows) if "Metric Name" in r), None)
+if hdr is None: print("no ncu rows"); sys.exit()
+h = rows[hdr]; k, m, v = h.index("Kernel Name"), h.index("Metric Name"), h.index("Metric Value")
+tot = collections.defaultdict(float); cnt = collections.Counter()
+for r in rows[hdr + 1:]:
+    if len(r) <= v or r[m] != "gpu__time_duration.sum": continue
+    try: val = float(r[v].replace(",", ""))
+    except ValueError: continue
+    tot[r[k][:80]] += val; cnt[r[k][:80]] += 1
+for n, t in sorted(tot.items(), key=lambda x: -x[1])[:16]: print(f"{t/1e6:8.3f} ms x{cnt[n]:<3} {n}")
+print(f"total {sum(tot.values())/1e6:.3f} ms")
+PY
+    done
     ;;
   *)
     echo "usage: BIN=dir OUT=dir $0 check|compare|table|small|steps" >&2

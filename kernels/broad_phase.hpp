@@ -60,14 +60,8 @@ double grid_occupancy(const Bounds& b);
 // the grid (a wide radius law in a sparse scene, log-uniform 1:1000 among them, is the grid's).
 // `device`: for the CUDA backend, whose grid pays more for crowded cells (its pair walk stages 32
 // entries of a cell in shared memory and walks the rest of a longer cell from memory, one thread per
-// entry), so levels take over from kOccupancyPerLevelDevice bodies per level (bimodal 1:10 among them);
-// and a scene of one size class (r_max <= kLevelRatio · r_min: the levels plan one level, the grid of
-// the frame) of at least kOneLevelDeviceBodies bodies is the levels' on the device too: the same
-// grid, walked with the bodies in input order, where the grid renumbers them by z layer once they
-// outgrow the L2 (one-level levels ran 1.10–1.14× faster than the grid at 2^22 and 2^24 on an H100,
-// not faster at 2^18 and 2^20: BENCHMARKS.md §22).
+// entry), so levels take over from kOccupancyPerLevelDevice bodies per level (bimodal 1:10 among them).
 BroadPhase choose_broad_phase(const Bounds& b, Precision p, bool device = false);
-inline constexpr std::uint64_t kOneLevelDeviceBodies = std::uint64_t(1) << 21;
 inline constexpr std::uint64_t kBruteBodies = 32;
 inline constexpr double kLevelsSpread = 4;
 inline constexpr double kOccupancyPerLevel = 64;

@@ -469,7 +469,7 @@ TEST(AutoBroadPhase, Rule) {
   EXPECT_EQ(choose_broad_phase(loguniform, Precision::fp32, true), BroadPhase::grid);
   // one size class (r_max <= 2 r_min: one level) from 2^21 bodies: the levels' walk on a GPU, the
   // grid on the host; below 2^21, and wider radius laws, as above
-  const std::uint64_t many = kOneLevelDeviceBodies;
+  const std::uint64_t many = std::uint64_t(1) << 21;  // broad_phase.cpp's kOneLevelDeviceBodies
   Bounds large_uniform = bounds_of(0.5, 1, 200, many);
   large_uniform.r_sum[0] = 0.75 * double(many);
   EXPECT_EQ(choose_broad_phase(large_uniform, Precision::fp32, true), BroadPhase::levels);
