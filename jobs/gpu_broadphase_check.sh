@@ -11,11 +11,13 @@
 #            shown as >t; the /uniform per-contact column and auto's pick against the best (the last
 #            line: on how many rows auto is within 10 % of the best)
 #   small    the same at 2^13 … 2^16 with brute
-#   steps    (under 3 minutes) the resident steps' halo by radius with CUDA: the MPI tests of mixed
+#   steps    (under 3 minutes) the unit cases of every broad phase's pair estimate on CUDA; the
+#            resident steps' halo by radius with CUDA: the MPI tests of mixed
 #            sizes crossing the cuts at np 1 and 2 (every step = the CPU's one-rank detection from
 #            scratch), `detect --steps --drift` on 64 intruders among grains, CUDA np 2 = CPU np 1 byte
 #            for byte; then the uniform and bimodal rows at 2^22 and 2^24 (grid, levels, auto: auto's
-#            one-level pick on the device, the levels' fill pass)
+#            one-level pick on the device, the levels' fill pass), and the per-kernel durations (ncu)
+#            of one levels detection of bimodal 1:10 and of uniform at 2^22 (where the levels' time goes)
 #   BIN=dir OUT=results-dir jobs/gpu_broadphase_check.sh check|compare|table|small|steps   (default: check)
 # BIN holds the CUDA build's contactgrid, contactgrid_tests and (steps) contactgrid_mpi_tests. Everything lands in
 # $OUT/broadphase_<mode>.tgz (logs, compare table, the tables as text and CSV); the summary is printed.
@@ -139,6 +141,12 @@ case $MODE in
     cat "$R/broad_h100_$MODE.txt"
     ;;
   steps)
+    log "0. unit tests: every broad phase's pair estimate and refusal on CUDA (levels, sweep too), auto's rule"
+    timeout 120 "$BIN/contactgrid_tests" --gtest_color=no \
+      --gtest_filter='PairEstimateTest/cuda.*:PairEstimate.*:AutoBroadPhase.*:StepPlan.*:LevelsCpuCuda.*' \
+      >"$R/tests_steps.log" 2>&1 || fail "unit tests (tests_steps.log)"
+    grep -E '^\[  (PASSED|FAILED|SKIPPED) |Failure' "$R/tests_steps.log" | head -20
+    grep -q '^\[  SKIPPED \] PairEstimateTest/cuda' "$R/tests_steps.log" && fail "CUDA estimate cases skipped"
     log "1. MPI tests: mixed sizes crossing the cuts, CUDA steps = the CPU from scratch (np 1, 2)"
     for np in 1 2; do
       timeout 120 mpirun --bind-to none -np $np "$BIN/contactgrid_mpi_tests" --gtest_color=no \
