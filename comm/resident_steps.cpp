@@ -94,6 +94,7 @@ struct StepLoop<Real>::State {
   bool uploaded = false;     // this step's layout set engine A's rows from the moved bodies
   bool written = false;      // this step's update_frame wrote the moved positions into engine A
   StepPlan plan;             // of the owned rows: interior or boundary, and the halo
+  GhostRule rule;            // the layout's halo rule (StepMotion::ghosts_by_radius; else uniform)
   BoundaryRows rows;         // engine B's row of each boundary row and each ghost
   std::vector<std::uint64_t> send_counts, recv_counts;
   std::vector<double> axis_coordinate;  // the owned centres along the slab axis (coordinates())
@@ -411,10 +412,17 @@ void StepLoop<Real>::lay_out() {
   agreed_stage(s.session, "steps", [&] {
     if (!alone) {
       // the ghost width of the layout: the frame's, over coordinates that may still grow by the
-      // skin, plus the skin (each of two bodies moves by at most skin/2 before the next layout)
-      const double width =
-          frame_ghost_width(s.global, s.frame.origin, std::numeric_limits<Real>::epsilon(), s.skin) + s.skin;
-      s.plan = make_step_plan(s.slabs, me, s.coordinates(), width, s.threads);
+      // skin, plus the skin (each of two bodies moves by at most skin/2 before the next layout); per
+      // body (the run's GhostRule with the skin in its margin) or one for all
+      const double epsilon = std::numeric_limits<Real>::epsilon();
+      if (s.motion.ghosts_by_radius) {
+        s.rule = ghost_rule(s.global, frame_extent(s.global, s.frame.origin), epsilon, s.skin);
+        s.plan = make_step_plan(s.slabs, me, s.coordinates(), b.radius, s.rule, s.threads);
+      } else {
+        const double width = frame_ghost_width(s.global, s.frame.origin, epsilon, s.skin) + s.skin;
+        s.rule = GhostRule::uniform(width);
+        s.plan = make_step_plan(s.slabs, me, s.coordinates(), width, s.threads);
+      }
       if (s.plan.owned != b.size()) {
         const std::size_t k = static_cast<std::size_t>(
             std::find(s.plan.role.begin(), s.plan.role.end(), RowRole::ghost) - s.plan.role.begin());
@@ -473,6 +481,14 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
                                           const HostVector<ShapeRecord>& ghost_shapes) {
   b_active = false;
   const StepBodies& o = bodies;
+  // the owned rows a wide ghost may touch join the boundary rows (they anchor those pairs)
+  std::vector<double> wide_x, wide_r;
+  for (const BodyRecord& g : ghosts)
+    if (rule.wide(g.radius)) {
+      wide_x.push_back(component(g.position, slabs.axis()));
+      wide_r.push_back(g.radius);
+    }
+  if (!wide_x.empty()) add_wide_partners(plan, coordinates(), o.radius, wide_x, wide_r, rule, threads);
   const std::size_t nb = plan.boundary.size();
   std::vector<std::int64_t> boundary_ids(nb), ghost_ids(ghosts.size());
   for (std::size_t k = 0; k < nb; ++k) boundary_ids[k] = o.id[plan.boundary[k]];
@@ -493,7 +509,8 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
     b_p[row] = o.position[i];
     b_r[row] = o.radius[i];
     b_id[row] = o.id[i];
-    b_mask[row] = kReportedBit | kPairedBit;  // A pairs the boundary rows with each other
+    // A pairs the boundary rows with each other; a pair of a wide and a narrow body is its narrow one's
+    b_mask[row] = kReportedBit | kPairedBit | rule.wide_bit(o.radius[i]);
     if (shapes) {
       b_shape[row] = o.shapes.shape[i];
       b_semi[row] = o.shapes.semi_axes[i];
@@ -505,7 +522,7 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
     b_p[row] = ghosts[g].position;
     b_r[row] = ghosts[g].radius;
     b_id[row] = ghosts[g].id;
-    b_mask[row] = 0;
+    b_mask[row] = rule.wide_bit(ghosts[g].radius);
     if (shapes) {
       b_shape[row] = ghost_shapes[g].shape;
       b_semi[row] = ghost_shapes[g].semi_axes;

@@ -8,9 +8,11 @@
 //
 //   lay_out            the rows of the steps (setup, and every rebuild): the plan of the owned rows
 //                      (decomposition/step_plan: interior or boundary, and which rank needs which
-//                      boundary row, by the run's routing rules over the ghost width plus the skin),
-//                      the exchange of the ghosts' whole records, engine A's rows (the owned bodies)
-//                      and engine B's (boundary rows + ghosts)
+//                      boundary row, by the run's routing rules over the ghost width plus the skin:
+//                      per body with StepMotion::ghosts_by_radius, a large body to every slab it
+//                      reaches and the small ones' halos small), the exchange of the ghosts' whole
+//                      records, engine A's rows (the owned bodies) and engine B's (boundary rows, the
+//                      owned rows a wide ghost may touch, and the ghosts)
 //   (the caller moves bodies(): the integrator's part, before the step's clock)
 //   update_frame       the moved bodies' bounds over the ranks (a centre that is not finite stops the
 //                      run: InputError naming the body and the step), the frame of a run from scratch

@@ -55,13 +55,14 @@ GhostRule GhostRule::uniform(double w) {
   return g;
 }
 
-GhostRule ghost_rule(const Bounds& global, double extent, double epsilon) {
-  const double r_max = global.r_max, margin = ghost_width(r_max, extent, epsilon) - 2 * r_max;
+GhostRule ghost_rule(const Bounds& global, double extent, double epsilon, double reach) {
+  const double r_max = global.r_max;
   const double mean = global.count > 0 ? global.r_sum[0] / double(global.count) : r_max;
   GhostRule g;
+  g.margin = ghost_width(r_max, extent + reach, epsilon) - 2 * r_max + reach;
   g.narrow = mean > 0 ? std::min(r_max, kLevelsSpread * mean) : r_max;
-  g.narrow_reach = g.narrow + margin;
-  g.wide_reach = r_max + margin;
+  g.narrow_reach = g.narrow + g.margin;
+  g.wide_reach = r_max + g.margin;
   return g;
 }
 

@@ -60,11 +60,12 @@ double frame_extent(const Bounds& global, const Vec3<double>& origin);
 // So a narrow body goes to the slabs within r + narrow (its anchors are narrow), a wide one to those
 // within r + r_max (any body may anchor its pairs), each plus the rounding margin of ghost_width():
 // the few large bodies of a scene go to every slab they reach, the small ones' halos stay small.
-// uniform(w): every body within w, none wide (the resident steps' rule; tests).
+// uniform(w): every body within w, none wide (contactgrid simulate's steps; tests).
 struct GhostRule {
   double narrow = 0;        // largest radius of a narrow body (+inf: none is wide)
   double narrow_reach = 0;  // a narrow body's width, beyond its radius (uniform: the whole width)
   double wide_reach = 0;    // a wide body's width, beyond its radius
+  double margin = 0;        // in both reaches: the rounding margin (and the resident steps' skin)
   bool per_radius = true;   // the width grows with the body's radius (false: uniform)
   bool wide(double r) const { return r > narrow; }
   double width(double r) const { return (per_radius ? r : 0.0) + (wide(r) ? wide_reach : narrow_reach); }
@@ -77,7 +78,9 @@ struct GhostRule {
 // The rule of a run from its global bounds: narrow = min(r_max, kLevelsSpread × the mean radius)
 // (the bodies auto's levels treat as large are the wide ones; a scene of similar radii has none), the
 // reaches narrow and r_max plus the margin of ghost_width(r_max, extent, epsilon) beyond 2·r_max.
-GhostRule ghost_rule(const Bounds& global, double extent, double epsilon);
+// `reach` (the resident steps' skin: bodies that may still move by reach/2 each, the origin with them)
+// grows the extent and the margin by it, as frame_ghost_width's.
+GhostRule ghost_rule(const Bounds& global, double extent, double epsilon, double reach = 0);
 
 // The slabs of a run.
 //

@@ -69,6 +69,13 @@ struct StepMotion {
   bool hash_every_step = false;
   // Called on every rank after each step with the number of steps done (a progress line; empty: none).
   std::function<void(int)> on_step;
+  // The halo's rule. On (detect's steps): each body's ghost width from its radius (GhostRule, the run's
+  // per-body halo plus the skin): a large body goes to every slab it reaches, a small one only as far
+  // as small partners need it, and a pair crossing a cut is reported by the owner of its anchor
+  // (bodies.hpp: the narrow body of a wide and a narrow one). Off: one width for every body (2·r_max
+  // plus the skin), each such pair reported by the owner of its smaller id (contactgrid simulate
+  // computes a contact's terms there).
+  bool ghosts_by_radius = false;
 };
 
 // An order-free fingerprint of a contact pair; a contact set's is the sum over its pairs.

@@ -5,6 +5,8 @@
 #include <cmath>
 #include <numeric>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace cg {
 
@@ -24,19 +26,36 @@ std::size_t StepPlan::count(RowRole r) const {
   return static_cast<std::size_t>(std::count(role.begin(), role.end(), r));
 }
 
-StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
-                        double width, int threads) {
+namespace {
+
+void check_plan_input(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
+                      int threads) {
   if (self < 0 || self >= slabs.ranks())
     throw UsageError("step plan: rank " + std::to_string(self) + " is not in [0, " +
                      std::to_string(slabs.ranks()) + ")");
-  if (!(width >= 0) || !std::isfinite(width))
-    throw InputError("step plan: ghost width is not a finite value >= 0");
   const std::size_t n = coordinate.size();
   const std::size_t bad = first_bad(n, threads, [&](std::size_t i) { return !std::isfinite(coordinate[i]); });
   if (bad < n) throw InputError("step plan: row " + std::to_string(bad) + "'s coordinate is not finite");
+}
+
+// The rows listed by role (ascending), as route() lists them.
+std::vector<std::size_t> rows_of(const std::vector<RowRole>& role, RowRole r, int threads) {
+  const ExportPlan rows = route<std::size_t, std::allocator<std::size_t>>(
+      role.size(), 1, threads,
+      [&](std::size_t i, auto&& emit) {
+        if (role[i] == r) emit(0);
+      },
+      [](std::size_t i) { return i; });
+  return std::vector<std::size_t>(rows.rows.begin(), rows.rows.end());
+}
+
+// The plan by a halo rule `ghost_ranks(i, emit)` (routing.hpp's to_ghost_ranks or to_ghost_ranks_by).
+template <class GhostRanks>
+StepPlan plan_by(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
+                 const GhostRanks& ghost_ranks, int threads) {
+  const std::size_t n = coordinate.size();
   auto x = [coordinate](std::size_t i) { return coordinate[i]; };
   const auto owner = to_owner(slabs, x);
-  const auto ghost_ranks = to_ghost_ranks(slabs, x, width);
   auto owned = [&](std::size_t i) {
     bool mine = false;
     owner(i, [&](int r) { mine = r == self; });
@@ -55,14 +74,8 @@ StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<cons
     owned_rows += mine ? 1 : 0;
   }
   plan.owned = owned_rows;
-  const ExportPlan boundary = route<std::size_t, std::allocator<std::size_t>>(
-      n, 1, threads,
-      [&](std::size_t i, auto&& emit) {
-        if (plan.role[i] == RowRole::boundary) emit(0);
-      },
-      [](std::size_t i) { return i; });
-  plan.boundary.assign(boundary.rows.begin(), boundary.rows.end());
-  // The halo: the owned rows by to_ghost_ranks (a ghost row goes nowhere).
+  plan.boundary = rows_of(plan.role, RowRole::boundary, threads);
+  // The halo: the owned rows by the rule (a ghost row goes nowhere).
   plan.halo = route<std::size_t, std::allocator<std::size_t>>(
       n, slabs.ranks(), threads,
       [&](std::size_t i, auto&& emit) {
@@ -70,6 +83,70 @@ StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<cons
       },
       [](std::size_t i) { return i; });
   return plan;
+}
+
+}  // namespace
+
+StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
+                        double width, int threads) {
+  if (!(width >= 0) || !std::isfinite(width))
+    throw InputError("step plan: ghost width is not a finite value >= 0");
+  check_plan_input(slabs, self, coordinate, threads);
+  auto x = [coordinate](std::size_t i) { return coordinate[i]; };
+  return plan_by(slabs, self, coordinate, to_ghost_ranks(slabs, x, width), threads);
+}
+
+StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
+                        std::span<const double> radius, const GhostRule& rule, int threads) {
+  if (radius.size() != coordinate.size()) throw UsageError("step plan: one radius per coordinate");
+  for (const double reach : {rule.narrow_reach, rule.wide_reach, rule.margin})
+    if (!(reach >= 0) || !std::isfinite(reach))
+      throw InputError("step plan: ghost width is not a finite value >= 0");
+  check_plan_input(slabs, self, coordinate, threads);
+  auto x = [coordinate](std::size_t i) { return coordinate[i]; };
+  return plan_by(
+      slabs, self, coordinate,
+      to_ghost_ranks_by(slabs, x, [&rule, radius](std::size_t i) { return rule.width(radius[i]); }), threads);
+}
+
+std::size_t add_wide_partners(StepPlan& plan, std::span<const double> coordinate,
+                              std::span<const double> radius, std::span<const double> wide_coordinate,
+                              std::span<const double> wide_radius, const GhostRule& rule, int threads) {
+  if (radius.size() != coordinate.size() || coordinate.size() != plan.role.size() ||
+      wide_radius.size() != wide_coordinate.size())
+    throw UsageError("step plan: one radius per coordinate and one role per row");
+  if (wide_coordinate.empty()) return 0;
+  // the slab-axis intervals the wide ghosts reach (beyond the margin), merged: sorted, disjoint
+  std::vector<std::pair<double, double>> reach(wide_coordinate.size());
+  for (std::size_t g = 0; g < reach.size(); ++g) {
+    const double w = wide_radius[g] + rule.margin;
+    reach[g] = {wide_coordinate[g] - w, wide_coordinate[g] + w};
+  }
+  std::sort(reach.begin(), reach.end());
+  std::vector<double> lo, hi;
+  for (const auto& [a, b] : reach) {
+    if (!hi.empty() && a <= hi.back()) {
+      hi.back() = std::max(hi.back(), b);
+    } else {
+      lo.push_back(a);
+      hi.push_back(b);
+    }
+  }
+  const std::size_t n = coordinate.size();
+  std::size_t added = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : added) if (n > (std::size_t(1) << 14))
+  for (std::size_t i = 0; i < n; ++i) {
+    if (plan.role[i] != RowRole::interior) continue;
+    // the last interval starting at or below the row's top: the row meets the union iff it meets it
+    const double top = coordinate[i] + radius[i], bottom = coordinate[i] - radius[i];
+    const std::size_t k = static_cast<std::size_t>(std::upper_bound(lo.begin(), lo.end(), top) - lo.begin());
+    if (k > 0 && hi[k - 1] >= bottom) {
+      plan.role[i] = RowRole::boundary;
+      ++added;
+    }
+  }
+  if (added > 0) plan.boundary = rows_of(plan.role, RowRole::boundary, threads);
+  return added;
 }
 
 BoundaryRows merge_boundary_rows(std::span<const std::int64_t> boundary_ids,

@@ -13,6 +13,12 @@
 // of the rank exactly once, and the owner of the smaller id reports a pair that crosses a cut, as in
 // the run (routing.hpp: make_halo_plan's invariant).
 //
+// With a ghost width per body (GhostRule, the run's per-body halo) the same holds by the anchor rule
+// (bodies.hpp): B's mask carries kWideBit on the wide rows, a pair of a wide and a narrow body is
+// reported by the narrow one's owner, which holds the wide one (a wide body reaches every slab within
+// its radius + r_max); an owned row that a wide ghost may touch is a boundary row too
+// (add_wide_partners), as its own width covers narrow partners only.
+//
 //        rank 0                 rank 1                  rank 2
 //   ... interior ... [boundary | ghosts of 1]  [ghosts of 0 | boundary ... interior ... boundary] ...
 //                            cut 1 ± width
@@ -33,7 +39,8 @@ namespace cg {
 // What a held row is for in a step.
 enum class RowRole : std::uint8_t {
   interior,  // owned; no other rank's slab within the ghost width: engine A only
-  boundary,  // owned; a ghost of at least one other rank: engine A, engine B, and the halo
+  boundary,  // owned; a ghost of at least one other rank (or a wide ghost's partner: add_wide_partners):
+             // engine A, engine B, and the halo
   ghost,     // owned by another rank (its owner sends it each step): engine B only
 };
 const char* to_string(RowRole role);
@@ -53,6 +60,23 @@ struct StepPlan {
 // the result does not depend on the threads.
 StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
                         double width, int threads = 1);
+
+// The same with a ghost width per row, rule.width(radius[i]) (GhostRule: the run's per-body halo;
+// the rule's margin holds the steps' skin): a wide body goes to every slab it reaches, a narrow one
+// only as far as narrow partners need it, and engine B reports a pair by its anchor (bodies.hpp: the
+// narrow body of a wide and a narrow one), so the wide rows carry kWideBit in B's mask.
+StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
+                        std::span<const double> radius, const GhostRule& rule, int threads = 1);
+
+// After the layout's exchange, with a per-body rule: an interior row's own width reaches narrow
+// partners only, yet a wide ghost may touch it, and it anchors that pair. Every interior row whose
+// centre lies within its radius + a wide ghost's radius + rule.margin of that ghost's centre (along
+// the slab axis) becomes a boundary row, so that engine B pairs it with the wide ghosts; it is sent
+// nowhere (the halo stays). `wide_coordinate`, `wide_radius`: the wide ghosts' (few: the merged
+// intervals they reach, one binary search a row). Returns the rows added.
+std::size_t add_wide_partners(StepPlan& plan, std::span<const double> coordinate,
+                              std::span<const double> radius, std::span<const double> wide_coordinate,
+                              std::span<const double> wide_radius, const GhostRule& rule, int threads = 1);
 
 // Engine B's rows: the boundary rows (ids ascending) and the ghosts (ids grouped by source rank, each
 // group ascending, as the halo delivers them) merged in ascending id.

@@ -11,8 +11,15 @@
 #            shown as >t; the /uniform per-contact column and auto's pick against the best (the last
 #            line: on how many rows auto is within 10 % of the best)
 #   small    the same at 2^13 … 2^16 with brute
-#   BIN=dir OUT=results-dir jobs/gpu_broadphase_check.sh check|compare|table|small   (default: check)
-# BIN holds the CUDA build's contactgrid and contactgrid_tests. Everything lands in
+#   steps    (under 3 minutes) the unit cases of every broad phase's pair estimate on CUDA; the
+#            resident steps' halo by radius with CUDA: the MPI tests of mixed
+#            sizes crossing the cuts at np 1 and 2 (every step = the CPU's one-rank detection from
+#            scratch), `detect --steps --drift` on 64 intruders among grains, CUDA np 2 = CPU np 1 byte
+#            for byte; then the uniform and bimodal rows at 2^22 and 2^24 (grid, levels, auto: auto's
+#            one-level pick on the device, the levels' fill pass), and the per-kernel durations (ncu)
+#            of one levels detection of bimodal 1:10 and of uniform at 2^22 (where the levels' time goes)
+#   BIN=dir OUT=results-dir jobs/gpu_broadphase_check.sh check|compare|table|small|steps   (default: check)
+# BIN holds the CUDA build's contactgrid, contactgrid_tests and (steps) contactgrid_mpi_tests. Everything lands in
 # $OUT/broadphase_<mode>.tgz (logs, compare table, the tables as text and CSV); the summary is printed.
 # Exits non-zero naming every failed check (the last lines of the output).
 set -u
@@ -133,8 +140,72 @@ case $MODE in
       fail "bench-broad $MODE (broad_h100_$MODE.txt)"
     cat "$R/broad_h100_$MODE.txt"
     ;;
+  steps)
+    log "0. unit tests: every broad phase's pair estimate and refusal on CUDA (levels, sweep too), auto's rule"
+    timeout 120 "$BIN/contactgrid_tests" --gtest_color=no \
+      --gtest_filter='PairEstimateTest/cuda.*:PairEstimate.*:AutoBroadPhase.*:StepPlan.*:LevelsCpuCuda.*' \
+      >"$R/tests_steps.log" 2>&1 || fail "unit tests (tests_steps.log)"
+    grep -E '^\[  (PASSED|FAILED|SKIPPED) |Failure' "$R/tests_steps.log" | head -20
+    grep -q '^\[  SKIPPED \] PairEstimateTest/cuda' "$R/tests_steps.log" && fail "CUDA estimate cases skipped"
+    log "1. MPI tests: mixed sizes crossing the cuts, CUDA steps = the CPU from scratch (np 1, 2)"
+    for np in 1 2; do
+      timeout 120 mpirun --bind-to none -np $np "$BIN/contactgrid_mpi_tests" --gtest_color=no \
+        --gtest_filter='MovingSteps.CudaMixedSizes*:MovingSteps.MixedSizes*:StepLoop.HaloByRadius*' \
+        >"$R/mpi_steps.np$np.log" 2>&1 || fail "mpi tests np $np (mpi_steps.np$np.log)"
+      grep -E '^\[  (PASSED|FAILED|SKIPPED) |Failure' "$R/mpi_steps.np$np.log" | sort | uniq -c | head -12
+      grep -q '^\[  SKIPPED \] MovingSteps.CudaMixedSizes' "$R/mpi_steps.np$np.log" &&
+        fail "np $np: the CUDA case skipped (no GPU seen?)"
+    done
+    log "2. detect --steps --drift, 64 intruders r = 3 among r = 0.3 grains (2^18): CUDA np 2 = CPU np 1"
+    scene="$W/intruders.h5"
+    "$CG" generate "$scene" -n $((1 << 18)) --seed 35 --kind intruders --rlow 0.3 --rhigh 3 --intruders 64 \
+      --contacts-per-body 1 -q >"$R/steps_cli.log" 2>&1 || fail "generate the intruder scene"
+    opts=(--precision fp64 --fields full --steps 6 --drift 0.05 --skin 0.2)
+    "$CG" detect "$scene" -o "$W/steps.cpu.h5" --backend cpu "${opts[@]}" >>"$R/steps_cli.log" 2>&1 ||
+      fail "detect --steps cpu np 1 (steps_cli.log)"
+    timeout 120 mpirun --bind-to none -np 2 "$CG" detect "$scene" -o "$W/steps.cuda.h5" --backend cuda \
+      "${opts[@]}" >>"$R/steps_cli.log" 2>&1 || fail "detect --steps cuda np 2 (steps_cli.log)"
+    if "$CG" compare "$W/steps.cpu.h5" "$W/steps.cuda.h5" >>"$R/steps_cli.log" 2>&1; then
+      echo "steps, intruders 2^18, CUDA np 2 against CPU np 1: IDENTICAL"
+    else
+      fail "steps, intruders 2^18: CUDA np 2 differs from CPU np 1"
+    fi
+    grep -iE 'halo|ghost|steps' "$R/steps_cli.log" | head -12
+    log "3. the uniform and bimodal rows at 2^22 and 2^24 (fp32; grid, levels, auto)"
+    timeout 100 "$CG" bench-broad --backend cuda --precision fp32 --families uniform,bimodal10,bimodal100 \
+      --lo 22 --hi 24 --step 2 --brute-hi 0 --sweep-hi 0 --repetitions 3 --limit 6 --budget 10 \
+      --csv "$R/broad_h100_steps.csv" >"$R/broad_h100_steps.txt" 2>&1 || fail "bench-broad (broad_h100_steps.txt)"
+    cat "$R/broad_h100_steps.txt"
+    log "4. where the levels' time goes: per-kernel durations (ncu) of one detect, bimodal 1:10 and uniform, 2^22"
+    NCU=$(command -v ncu || ls /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1)
+    for fam in "bimodal10|--kind bimodal --rhigh 1 --ratio 10 --large-fraction 0.1" "uniform|--kind uniform"; do
+      name=${fam%%|*}; args=${fam#*|}
+      # shellcheck disable=SC2086
+      "$CG" generate "$W/$name.22.h5" -n $((1 << 22)) --seed 34 $args -q || { fail "generate $name 2^22"; continue; }
+      [ -n "$NCU" ] || { echo "no ncu: step 4 skipped"; break; }
+      timeout 60 "$NCU" --clock-control none --metrics gpu__time_duration.sum --csv --log-file "$R/ncu_$name.csv" \
+        "$CG" detect "$W/$name.22.h5" -o "$W/$name.22.out.h5" --backend cuda --precision fp32 --broad-phase levels \
+        -v >"$R/ncu_$name.out" 2>&1 || echo "ncu $name rc=$?"
+      echo "== $name 2^22, levels: ms per kernel"
+      python3 - "$R/ncu_$name.csv" <<'PY' | tee "$R/ncu_$name.sum.txt"
+import csv, sys, collections
+rows = list(csv.reader(open(sys.argv[1], errors="replace")))
+hdr = next((i for i, r in enumerate(rows) if "Metric Name" in r), None)
+if hdr is None: print("no ncu rows"); sys.exit()
+h = rows[hdr]; k, m, v = h.index("Kernel Name"), h.index("Metric Name"), h.index("Metric Value")
+tot = collections.defaultdict(float); cnt = collections.Counter()
+for r in rows[hdr + 1:]:
+    if len(r) <= v or r[m] != "gpu__time_duration.sum": continue
+    try: val = float(r[v].replace(",", ""))
+    except ValueError: continue
+    tot[r[k][:80]] += val; cnt[r[k][:80]] += 1
+for n, t in sorted(tot.items(), key=lambda x: -x[1])[:16]: print(f"{t/1e6:8.3f} ms x{cnt[n]:<3} {n}")
+print(f"total {sum(tot.values())/1e6:.3f} ms")
+PY
+    done
+    ;;
   *)
-    echo "usage: BIN=dir OUT=dir $0 check|compare|table|small" >&2
+    echo "usage: BIN=dir OUT=dir $0 check|compare|table|small|steps" >&2
     exit 2
     ;;
 esac

@@ -10,6 +10,7 @@
 #include <cub/device/device_scan.cuh>
 
 #include "cuda/broad.cuh"
+#include "cuda/pair_estimate.cuh"
 #include "cuda/sort.cuh"
 
 namespace cg::cuda {
@@ -98,7 +99,9 @@ __global__ void level_begin_kernel(const Key* __restrict__ keys, std::uint32_t n
 // levels, across: per body a the pairs with the bodies of every larger non-empty level, where they
 // share a cell of that level — core/broad.hpp's cross_level_pairs, the host's routine — reported and
 // accepted by the pair test. kFill false: counts[a] and the totals of pairs and tests into c; true:
-// the pairs written at offsets[a] onwards. The levels are read from a block copy in shared memory.
+// the pairs written at offsets[a] onwards, searched again only for the bodies whose count is not 0
+// (most small bodies of a mixed scene touch no larger one: the fill skips their lookups). The levels
+// are read from a block copy in shared memory.
 template <bool kFill, class Real, class Key, class Test>
 __global__ void __launch_bounds__(kBlock)
     cross_level_kernel(const Sphere<Real>* __restrict__ spheres, const CutShape* __restrict__ cut,
@@ -118,7 +121,7 @@ __global__ void __launch_bounds__(kBlock)
   const std::uint32_t a = blockIdx.x * kBlock + threadIdx.x;
   std::uint32_t found = 0;
   std::uint64_t tests = 0;
-  if (a < n) {
+  if (a < n && (!kFill || counts[a] > 0)) {
     const Sphere<Real> sa = spheres[a];
     std::uint64_t w = kFill ? offsets[a] : 0;
     const auto cells_in = [&](const GridParams<Real>& g) {
@@ -186,6 +189,8 @@ void levels_stages(RunState<Real, Key, Narrow>& r) {
   CG_CUDA_CHECK_LAUNCH("level_entries");
   r.events.mark(EngineStage::entries, st);
   sort_stage(r);
+  // the pairs within the levels: the grid's estimate over all their cells (may refuse the scene)
+  if (r.job.pair_limits.wanted()) estimate_stage(r);
 
   // the pairs within each level: the grid's walk (its cell type sits below the common key_shift)
   r.g.half_bits = lp.key_shift - 3;
@@ -221,7 +226,7 @@ void levels_stages(RunState<Real, Key, Narrow>& r) {
     with_pair_test(r, [&](auto test) {
       cuda::cross_level_kernel<true, Real, Key, decltype(test)>
           <<<r.nb, kBlock, 0, st>>>(r.d_cell_spheres, r.d_cell_cut, r.d_ctrl, r.d_report, r.d_lo_key, r.n, lp,
-                                    r.keys.Current(), r.body.Current(), ic.extra, nullptr, ic.offsets,
+                                    r.keys.Current(), r.body.Current(), ic.extra, ic.counts, ic.offsets,
                                     store + np_in, store + np + np_in, r.d_counters, test);
     });
     CG_CUDA_CHECK_LAUNCH("cross_level_fill");

@@ -7,6 +7,7 @@
 #include <cub/device/device_radix_sort.cuh>
 
 #include "cuda/broad.cuh"
+#include "cuda/pair_estimate.cuh"
 
 namespace cg::cuda {
 
@@ -76,9 +77,55 @@ __global__ void __launch_bounds__(kBlock)
   }
 }
 
+// The boxes the sweep of sorted place k passes (the later ones that start before its box ends: a
+// bound of its tests), as a CellWork (tests, largest) for the estimate's reduction.
+template <class Real, class Bits>
+struct SweepOverlaps {
+  const Sphere<Real>* sorted;
+  const Bits* keys;  // the sorted lower faces' orderable bits
+  std::uint32_t n;
+  int axis;
+  __host__ __device__ CellWork operator()(std::uint32_t k) const {
+    const Sphere<Real> s = sorted[k];
+    const Bits end = orderable_bits(axis_of(s, axis) + box_radius(s.r));
+    std::uint32_t lo = k + 1, hi = n;  // the first later place whose lower face is above the end
+    while (lo < hi) {
+      const std::uint32_t mid = lo + (hi - lo) / 2;
+      if (keys[mid] <= end)
+        lo = mid + 1;
+      else
+        hi = mid;
+    }
+    const unsigned long long m = lo - k - 1;
+    return {m, m};
+  }
+};
+
 }  // namespace cg::cuda
 
 namespace cg::detail {
+
+// The sweep's pair estimate (pair_estimate.hpp; the host's host::sweep_estimate) after its sort: one
+// reduction and one wait; check_pair_estimate may refuse the scene before the sweep runs.
+template <class Real, class Key, class Narrow, class Bits>
+void sweep_estimate_stage(RunState<Real, Key, Narrow>& r, const Sphere<Real>* sorted, const Bits* keys,
+                          int axis) {
+  PairEstimate e{0, r.n64, r.n64, 0, kDevicePairTestsPerSecond};
+  if (r.n > 1) {
+    const auto work =
+        thrust::make_transform_iterator(thrust::counting_iterator<std::uint32_t>(0),
+                                        cuda::SweepOverlaps<Real, Bits>{sorted, keys, r.n, axis});
+    cub_run(r.ws, "pairs", [&](void* t, std::size_t& b) {
+      return cub::DeviceReduce::Reduce(t, b, work, &r.d_counters->cell_work, int(r.n), cuda::AddCellWork{},
+                                       cuda::CellWork{0, 0}, r.st);
+    });
+    r.read_counters();
+    e.tests = r.h_counters->cell_work.tests;
+    e.largest = r.h_counters->cell_work.largest;
+  }
+  check_pair_estimate(e, r.job.pair_limits);
+  r.pair_progress = follows_progress(e, r.job.pair_limits);
+}
 
 // BroadPhase::sweep, after pack (spheres only): stages sort and pairs (see the file comment).
 template <class Real, class Key, class Narrow>
@@ -110,6 +157,7 @@ void sweep_stages(RunState<Real, Key, Narrow>& r) {
   cuda::sweep_gather_kernel<Real><<<r.nb, kBlock, 0, st>>>(r.d_cell_spheres, index.Current(), n, sorted);
   CG_CUDA_CHECK_LAUNCH("sweep_gather");
   r.events.mark(EngineStage::sort, st);
+  if (r.job.pair_limits.wanted()) sweep_estimate_stage(r, sorted, keys.Current(), axis);
 
   const std::uint32_t warps = cuda::blocks_for(32 * r.n64);
   const ItemCounts ic = item_counts(ws, r.n64);

@@ -119,6 +119,11 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
       host::sort_entries(entries, job.plan.key_bits, nt);
       timer.lap(EngineStage::sort);
 
+      if (job.pair_limits.wanted()) {  // the pairs within the levels: the grid's estimate over all cells
+        PairEstimate estimate = host::estimate_pair_tests(entries, job.bodies.size(), nt);
+        estimate.tests_per_second = kHostPairTestsPerSecondPerThread * nt;
+        check_pair_estimate(estimate, job.pair_limits);
+      }
       stats.pair_tests = host::find_candidates(entries, bodies, job.bodies.report, job.levels.key_shift - 3,
                                                filter, fp64, nt, built);
       stats.pair_tests += host::cross_level_candidates(entries, bodies, job.levels, job.bodies.report, filter,
@@ -129,6 +134,12 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
       host::SweepOrder order;
       host::sweep_sort(bodies, job.sweep_axis, nt, order);
       timer.lap(EngineStage::sort);
+
+      if (job.pair_limits.wanted()) {
+        PairEstimate estimate = host::sweep_estimate(order, bodies, job.sweep_axis, nt);
+        estimate.tests_per_second = kHostPairTestsPerSecondPerThread * nt;
+        check_pair_estimate(estimate, job.pair_limits);
+      }
 
       stats.pair_tests =
           host::sweep_candidates(order, bodies, job.sweep_axis, job.bodies.report, filter, fp64, nt, built);

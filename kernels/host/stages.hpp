@@ -205,6 +205,11 @@ struct SweepOrder {
 };
 template <class Real>
 void sweep_sort(const PackedBodies<Real>& p, int axis, int threads, SweepOrder& out);
+// sweep_estimate: the pair estimate of the sweep (pair_estimate.hpp) after sweep_sort: Σ over the
+// sorted places of the later boxes that start before the place's box ends (the boxes the sweep passes,
+// a bound of its tests), the most of one place as the largest.
+template <class Real>
+PairEstimate sweep_estimate(const SweepOrder& order, const PackedBodies<Real>& p, int axis, int threads);
 template <class Real>
 std::uint64_t sweep_candidates(const SweepOrder& order, const PackedBodies<Real>& p, int axis,
                                std::span<const std::uint8_t> report, CandidateFilter filter,

@@ -1,4 +1,6 @@
 // Host broad phase sweep: Baraff's sort and sweep along one axis (see stages.hpp).
+#include <algorithm>
+
 #include "host/radix_sort.hpp"
 #include "host/stages.hpp"
 
@@ -61,8 +63,31 @@ std::uint64_t sweep_candidates(const SweepOrder& order, const PackedBodies<Real>
   });
 }
 
+template <class Real>
+PairEstimate sweep_estimate(const SweepOrder& order, const PackedBodies<Real>& p, int axis, int threads) {
+  const std::size_t n = order.body.size();
+  std::vector<Real> lower(n);
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
+  for (std::size_t k = 0; k < n; ++k) lower[k] = lower_face(p.spheres[order.body[k]], p.inflation, axis);
+  std::uint64_t tests = 0, largest = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : tests) reduction(max : largest) \
+    if (n > k_parallel_min)
+  for (std::size_t k = 0; k < n; ++k) {
+    // the later places the sweep of k passes: those whose lower face is at most its upper face
+    const Real end = upper_face(p.spheres[order.body[k]], p.inflation, axis);
+    const std::uint64_t m = static_cast<std::uint64_t>(
+        std::upper_bound(lower.begin() + static_cast<std::ptrdiff_t>(k) + 1, lower.end(), end) -
+        lower.begin() - static_cast<std::ptrdiff_t>(k) - 1);
+    tests += m;
+    largest = std::max(largest, m);
+  }
+  return {tests, n, n, largest};
+}
+
 template void sweep_sort(const PackedBodies<float>&, int, int, SweepOrder&);
 template void sweep_sort(const PackedBodies<double>&, int, int, SweepOrder&);
+template PairEstimate sweep_estimate(const SweepOrder&, const PackedBodies<float>&, int, int);
+template PairEstimate sweep_estimate(const SweepOrder&, const PackedBodies<double>&, int, int);
 template std::uint64_t sweep_candidates(const SweepOrder&, const PackedBodies<float>&, int,
                                         std::span<const std::uint8_t>, CandidateFilter,
                                         const NarrowBodies<double>*, int, CandidatePairs&);

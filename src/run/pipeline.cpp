@@ -538,7 +538,8 @@ template <class Real>
 StepStats run_steps(Session& session, Engine<Real>& engine, const SlabDecomposition& slabs,
                     const EngineInput& input, DistributedResult<Real>& result,
                     const DistributedOptions& options, int threads) {
-  const StepMotion& motion = options.step_motion;
+  StepMotion motion = options.step_motion;
+  motion.ghosts_by_radius = true;  // the run's per-body halo (the steps' contacts are its bits)
   StepStats st;
   {
     StepLoop<Real> loop(session, engine, slabs, motion, threads);

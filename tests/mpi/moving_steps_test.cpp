@@ -131,6 +131,34 @@ TEST(MovingSteps, DriftingTurningEllipsoidsEqualOneRankFromScratchEveryStep) {
   check_drifting<double>("drift_mixed", generated("mixed", 1500, 62), 0.07, 0.2);
 }
 
+// Mixed sizes crossing the cuts (detect's steps halo by radius: a large body goes to every slab it
+// reaches, a small one only as far as small partners need it, a pair of a large and a small body is
+// reported by the small one's owner): six intruders of radius 3 among grains of 0.3, and a bimodal
+// 1:5 mix, drifting across the cuts.
+Scene two_sizes(const std::string& kind, std::uint64_t seed, double r_high) {
+  GenerateOptions g;
+  g.kind = kind;
+  g.count = 2500;
+  g.seed = seed;
+  g.radius_low = 0.3;
+  g.radius_high = r_high;
+  g.contacts_per_body = 1.0;
+  g.intruders = 6;
+  g.large_fraction = 0.5;
+  return generate_scene(g);
+}
+
+TEST(MovingSteps, MixedSizesCrossingTheCutsEqualOneRankFromScratchEveryStep) {
+  check_drifting<double>("drift_intruders", two_sizes("intruders", 63, 3.0), 0.07, 0);
+  check_drifting<float>("drift_bimodal", two_sizes("bimodal", 64, 1.5), 0.07, 0);
+}
+
+TEST(MovingSteps, CudaMixedSizesCrossingTheCutsEqualTheCpuFromScratchEveryStep) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  check_drifting<double>("drift_intruders", two_sizes("intruders", 63, 3.0), 0.07, 0, Backend::cuda);
+  check_drifting<float>("drift_bimodal", two_sizes("bimodal", 64, 1.5), 0.07, 0, Backend::cuda);
+}
+
 // The same steps on the GPU (device-resident engines, host-staged halo and migration): every step's
 // bits equal the CPU's one-rank detection from scratch.
 TEST(MovingSteps, CudaDriftingBodiesEqualTheCpuFromScratchEveryStep) {
@@ -263,6 +291,59 @@ TEST(StepLoop, CallerStateTravelsAndTheSlabsRebalance) {
   for (std::size_t i = 0; i < all.size(); ++i) {
     ASSERT_EQ(all.id[i], static_cast<std::int64_t>(i));
     ASSERT_EQ(std::memcmp(&all.position[i], &w.position[i], sizeof(Vec3<double>)), 0) << "body " << i;
+  }
+}
+
+// The loop's halo by radius (StepMotion::ghosts_by_radius) against one width for all, through the
+// loop's own API: eight bodies of radius 4 among 2 500 of 0.3 … 0.6 moved by the caller's integrator
+// (migrations and rebuilds). Both give the oracle's contacts at every step; the halo by radius sends
+// a fraction of the rows (the small bodies' widths do not follow the largest radius).
+TEST(StepLoop, HaloByRadiusSendsFewerRowsAndFindsTheSameContacts) {
+  World w = world(2500, 73);
+  for (std::size_t i = 100; i < w.radius.size(); i += 300) w.radius[i] = 4.0;
+  std::vector<std::uint64_t> want;  // rank 0: the oracle's hash per step
+  std::uint64_t sent[2] = {0, 0};
+  for (const bool by_radius : {false, true}) {
+    World moving = w;
+    EngineOptions options;
+    options.backend = Backend::cpu;
+    options.threads = 1;
+    options.skin = 0.45;
+    Engine<double> engine(options);
+    const SlabDecomposition slabs = SlabDecomposition::equal_width(0, 0, 30, session().size());
+    StepMotion motion;
+    motion.hash_every_step = true;
+    motion.ghosts_by_radius = by_radius;
+    StepLoop<double> loop(session(), engine, slabs, motion, 1);
+    loop.bodies() = owned_of(moving, slabs);
+    loop.update_frame(0);
+    loop.lay_out();
+    std::uint64_t halo = loop.halo().total();
+    for (int s = 1; s <= 8; ++s) {
+      integrate(loop.bodies());
+      step(loop, s);
+      halo += loop.halo().total();
+      for (std::size_t i = 0; i < moving.position.size(); ++i)
+        moving.position[i] = moving.position[i] + moving.velocity[i];
+      if (session().rank() == 0 && !by_radius) {
+        EngineOptions o = options;
+        o.skin = 0;
+        want.push_back(
+            contacts_hash(Engine<double>(o).detect(BodiesView{moving.position, moving.radius, {}, {}})));
+      }
+    }
+    const StepStats st = loop.stats();
+    sent[by_radius ? 1 : 0] = session().sum(halo);
+    if (session().size() > 1) {
+      EXPECT_GT(st.migrated, 0u);
+    }
+    if (session().rank() != 0) continue;
+    ASSERT_EQ(st.step_hashes.size(), want.size());
+    for (std::size_t s = 0; s < want.size(); ++s)
+      EXPECT_EQ(st.step_hashes[s], want[s]) << (by_radius ? "by radius" : "one width") << ", step " << s + 1;
+  }
+  if (session().size() > 1) {
+    EXPECT_LT(2 * sent[1], sent[0]) << sent[1] << " rows against " << sent[0];
   }
 }
 

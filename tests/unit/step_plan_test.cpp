@@ -14,6 +14,7 @@
 #include <set>
 #include <vector>
 
+#include "core/broad.hpp"
 #include "step_bodies.hpp"
 
 namespace cg {
@@ -162,6 +163,234 @@ TEST(StepPlan, TheTwoEnginesOfAllRanksFindEveryPairOnce) {
   }
 }
 
+// ---- a ghost width per body (GhostRule): large bodies to every slab they reach, small halos small ----
+
+// Radii of a mixed scene: most small (0.2 … 0.4), every `every`-th large (`large`), the rule of the
+// run (ghost_rule) over their bounds, with a margin standing for the rounding and the skin.
+struct Sized {
+  std::vector<double> x, r;
+  GhostRule rule;
+};
+Sized sized(std::size_t n, double large, std::mt19937_64& rng, std::size_t every = 97, double reach = 0.05) {
+  Sized s;
+  s.x = random_coordinates(n, rng);
+  std::uniform_real_distribution<double> small(0.2, 0.4);
+  Bounds b;
+  b.count = n;
+  for (std::size_t i = 0; i < n; ++i) {
+    s.r.push_back(i % every == 5 ? large : small(rng));
+    b.r_max = std::max(b.r_max, s.r.back());
+    b.r_sum[0] += s.r.back();
+  }
+  b.lo = {0, 0, 0};
+  b.hi = {100, 100, 100};
+  s.rule = ghost_rule(b, 100, 1e-16, reach);
+  return s;
+}
+
+// Roles and halo against brute force with each row's own width, whatever the threads; the owned rows
+// a wide ghost may touch become boundary rows (add_wide_partners) and go nowhere.
+TEST(StepPlan, PerBodyRolesHaloAndWidePartners) {
+  std::mt19937_64 rng(43);
+  for (int trial = 0; trial < 6; ++trial) {
+    const int ranks = 2 + trial % 3;
+    const std::size_t n = trial < 3 ? 3000 : 40000;
+    const Sized b = sized(n, trial % 2 ? 6.0 : 2.5, rng);
+    ASSERT_TRUE(b.rule.wide(b.rule.narrow * 1.01) && !b.rule.wide(0.4));
+    const SlabDecomposition s = random_slabs(ranks, rng);
+    std::vector<double> wide_x, wide_r;  // a wide ghost set: every wide body another rank owns
+    std::size_t all_partners = 0;
+    for (int self = 0; self < ranks; ++self) {
+      std::vector<double> xs, rs;
+      wide_x.clear();
+      wide_r.clear();
+      for (std::size_t i = 0; i < n; ++i) {
+        if (s.owner(b.x[i]) == self) {
+          xs.push_back(b.x[i]);
+          rs.push_back(b.r[i]);
+        } else if (b.rule.wide(b.r[i])) {
+          wide_x.push_back(b.x[i]);
+          wide_r.push_back(b.r[i]);
+        }
+      }
+      StepPlan plan = make_step_plan(s, self, xs, rs, b.rule, 1);
+      const StepPlan threaded = make_step_plan(s, self, xs, rs, b.rule, 3);
+      EXPECT_EQ(threaded.role, plan.role);
+      EXPECT_EQ(threaded.halo.rows, plan.halo.rows);
+      std::vector<std::vector<std::size_t>> want(static_cast<std::size_t>(ranks));
+      std::vector<std::size_t> boundary, partners;
+      for (std::size_t k = 0; k < xs.size(); ++k) {
+        const std::vector<int> g = ghost_ranks(s, xs[k], b.rule.width(rs[k]));
+        ASSERT_EQ(plan.role[k], g.empty() ? RowRole::interior : RowRole::boundary) << "row " << k;
+        for (int q : g) want[static_cast<std::size_t>(q)].push_back(k);
+        bool touched = false;
+        for (std::size_t w = 0; w < wide_x.size(); ++w)
+          touched = touched || std::abs(xs[k] - wide_x[w]) <= rs[k] + wide_r[w] + b.rule.margin;
+        if (!g.empty() || touched) boundary.push_back(k);
+        if (g.empty() && touched) partners.push_back(k);
+      }
+      for (int q = 0; q < ranks; ++q) {
+        const auto got = plan.halo.to(q);
+        EXPECT_EQ(std::vector<std::size_t>(got.begin(), got.end()), want[static_cast<std::size_t>(q)]);
+      }
+      const ExportPlan halo = plan.halo;
+      StepPlan threaded_partners = threaded;
+      EXPECT_EQ(add_wide_partners(plan, xs, rs, wide_x, wide_r, b.rule, 1), partners.size());
+      add_wide_partners(threaded_partners, xs, rs, wide_x, wide_r, b.rule, 4);
+      EXPECT_EQ(plan.boundary, boundary) << "rank " << self << " of " << ranks;
+      EXPECT_EQ(threaded_partners.boundary, boundary);
+      EXPECT_EQ(plan.halo.rows, halo.rows);  // the partners are sent nowhere
+      all_partners += partners.size();
+    }
+    if (trial % 2) {  // large bodies of radius 6
+      EXPECT_GT(all_partners, 0u) << "trial " << trial;
+    }
+  }
+}
+
+// A small body's ghosts do not grow with the largest radius: four large bodies among 20 000 small ones,
+// of radius 2, 8 or 40. A small body's width is r + narrow (kLevelsSpread × the mean radius, which the
+// large ones move by under 3 %), so the small rows' halo stays the same set but for a few rows at its
+// edge, while the large bodies reach further; one width for all (2·r_max) sends far more.
+TEST(StepPlan, SmallBodysGhostsDoNotGrowWithTheLargestRadius) {
+  const SlabDecomposition s = SlabDecomposition::equal_width(0, 0, 100, 8);
+  std::vector<std::vector<std::size_t>> small_to;  // per large radius: the small rows' halo, flattened
+  std::vector<std::size_t> large_sent, uniform_sent;
+  for (const double large : {2.0, 8.0, 40.0}) {
+    std::mt19937_64 rng(44);  // the same bodies but for the large radius
+    const Sized b = sized(20000, large, rng, 5000);
+    std::vector<std::size_t> small, total_large;
+    std::size_t sent_large = 0, sent_uniform = 0;
+    for (int self = 0; self < 8; ++self) {
+      std::vector<double> xs, rs;
+      std::vector<std::size_t> rows;
+      for (std::size_t i = 0; i < b.x.size(); ++i)
+        if (s.owner(b.x[i]) == self) {
+          xs.push_back(b.x[i]);
+          rs.push_back(b.r[i]);
+          rows.push_back(i);
+        }
+      const StepPlan plan = make_step_plan(s, self, xs, rs, b.rule);
+      for (int q = 0; q < 8; ++q)
+        for (std::size_t k : plan.halo.to(q)) {
+          if (b.rule.wide(rs[k])) {
+            ++sent_large;
+          } else {
+            small.push_back(rows[k] * 8 + static_cast<std::size_t>(q));
+          }
+        }
+      const double uniform = 2 * large + b.rule.margin;
+      sent_uniform += make_step_plan(s, self, xs, uniform).halo.total();
+    }
+    std::sort(small.begin(), small.end());
+    small_to.push_back(small);
+    large_sent.push_back(sent_large);
+    uniform_sent.push_back(sent_uniform);
+  }
+  ASSERT_GT(small_to[0].size(), 1000u);
+  for (std::size_t k = 1; k < 3; ++k) {
+    EXPECT_TRUE(std::includes(small_to[k].begin(), small_to[k].end(), small_to[0].begin(), small_to[0].end()))
+        << "large radius #" << k;
+    EXPECT_LT(double(small_to[k].size()), 1.03 * double(small_to[0].size())) << "large radius #" << k;
+  }
+  EXPECT_LT(large_sent[0], large_sent[1]);  // a large body reaches every slab within r + r_max
+  EXPECT_LT(large_sent[1], large_sent[2]);
+  EXPECT_GE(large_sent[2], 4u * 5);  // radius 40 over slabs 12.5 wide: most other slabs
+  EXPECT_LT(small_to[0].size() + large_sent[0], uniform_sent[0]);
+  for (std::size_t k = 1; k < 3; ++k)
+    EXPECT_LT(3 * (small_to[k].size() + large_sent[k]), uniform_sent[k]) << "large radius #" << k;
+}
+
+// Every rank's two engines with a width per body, as the steps run them: B's mask with kWideBit on the
+// wide rows and the owned rows a wide ghost may touch among the boundary rows; B reports a pair by
+// core/broad.hpp's pair_reported (the anchor: the narrow body of a wide and a narrow one, else the
+// smaller id). Every pair within r_i + r_j + margin (a superset of the contacts) is then found exactly
+// once over all ranks.
+TEST(StepPlan, TheTwoEnginesFindEveryPairOnceWithWidthsPerBody) {
+  std::mt19937_64 rng(45);
+  for (int trial = 0; trial < 8; ++trial) {
+    const int ranks = 1 + trial % 4;
+    const std::size_t n = 1500;
+    const Sized b = sized(n, trial % 2 ? 9.0 : 3.0, rng);
+    const SlabDecomposition s = random_slabs(ranks, rng);
+    std::vector<std::int64_t> id(n);
+    std::iota(id.begin(), id.end(), 0);
+    std::shuffle(id.begin(), id.end(), rng);
+    std::vector<std::size_t> by_id(n);
+    for (std::size_t i = 0; i < n; ++i) by_id[static_cast<std::size_t>(id[i])] = i;
+    std::vector<std::vector<std::size_t>> held(static_cast<std::size_t>(ranks));  // rows by id
+    for (std::size_t k = 0; k < n; ++k)
+      held[static_cast<std::size_t>(s.owner(b.x[by_id[k]]))].push_back(by_id[k]);
+    auto near = [&](std::size_t i, std::size_t j) {
+      return std::abs(b.x[i] - b.x[j]) <= b.r[i] + b.r[j] + b.rule.margin;
+    };
+    std::vector<StepPlan> plans;
+    for (int p = 0; p < ranks; ++p) {
+      std::vector<double> xs, rs;
+      for (std::size_t i : held[static_cast<std::size_t>(p)]) xs.push_back(b.x[i]), rs.push_back(b.r[i]);
+      plans.push_back(make_step_plan(s, p, xs, rs, b.rule));
+    }
+    std::map<std::pair<std::int64_t, std::int64_t>, int> found;
+    auto report = [&](std::size_t i, std::size_t j) {
+      if (near(i, j)) ++found[{std::min(id[i], id[j]), std::max(id[i], id[j])}];
+    };
+    std::size_t ghosts = 0;
+    for (int p = 0; p < ranks; ++p) {
+      const auto& rows = held[static_cast<std::size_t>(p)];
+      StepPlan& plan = plans[static_cast<std::size_t>(p)];
+      for (std::size_t a = 0; a < rows.size(); ++a)  // engine A
+        for (std::size_t c = a + 1; c < rows.size(); ++c) report(rows[a], rows[c]);
+      std::vector<std::size_t> ghost_rows;
+      std::vector<std::int64_t> ghost_ids;
+      std::vector<double> wide_x, wide_r, xs, rs;
+      for (int q = 0; q < ranks; ++q)
+        for (std::size_t k : plans[static_cast<std::size_t>(q)].halo.to(p)) {
+          const std::size_t i = held[static_cast<std::size_t>(q)][k];
+          ghost_rows.push_back(i);
+          ghost_ids.push_back(id[i]);
+          if (b.rule.wide(b.r[i])) wide_x.push_back(b.x[i]), wide_r.push_back(b.r[i]);
+        }
+      ghosts += ghost_rows.size();
+      for (std::size_t i : rows) xs.push_back(b.x[i]), rs.push_back(b.r[i]);
+      add_wide_partners(plan, xs, rs, wide_x, wide_r, b.rule);
+      std::vector<std::int64_t> boundary_ids;
+      for (std::size_t k : plan.boundary) boundary_ids.push_back(id[rows[k]]);
+      const BoundaryRows br = merge_boundary_rows(boundary_ids, ghost_ids);
+      std::vector<std::size_t> row_of(br.size());
+      std::vector<std::uint8_t> mask(br.size());
+      for (std::size_t k = 0; k < plan.boundary.size(); ++k) {
+        const std::size_t i = rows[plan.boundary[k]];
+        row_of[br.of_boundary[k]] = i;
+        mask[br.of_boundary[k]] = kReportedBit | kPairedBit | b.rule.wide_bit(b.r[i]);
+      }
+      for (std::size_t g = 0; g < ghost_rows.size(); ++g) {
+        row_of[br.of_ghost[g]] = ghost_rows[g];
+        mask[br.of_ghost[g]] = b.rule.wide_bit(b.r[ghost_rows[g]]);
+      }
+      for (std::size_t a = 0; a < br.size(); ++a)  // engine B
+        for (std::size_t c = a + 1; c < br.size(); ++c)
+          if (pair_reported(mask.data(), static_cast<std::uint32_t>(a), static_cast<std::uint32_t>(c)))
+            report(row_of[a], row_of[c]);
+    }
+    std::size_t pairs = 0, wide_pairs = 0;
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t j = i + 1; j < n; ++j)
+        if (near(i, j)) {
+          ++pairs;
+          wide_pairs += b.rule.wide(b.r[i]) != b.rule.wide(b.r[j]);
+          const auto it = found.find({std::min(id[i], id[j]), std::max(id[i], id[j])});
+          ASSERT_TRUE(it != found.end()) << "pair " << id[i] << ", " << id[j] << " missed at " << ranks
+                                         << " ranks (radii " << b.r[i] << ", " << b.r[j] << ")";
+          ASSERT_EQ(it->second, 1) << "pair " << id[i] << ", " << id[j] << " found twice";
+        }
+    EXPECT_EQ(found.size(), pairs);
+    EXPECT_GT(wide_pairs, 100u);
+    if (ranks > 1) {
+      EXPECT_GT(ghosts, 0u);
+    }
+  }
+}
+
 TEST(StepPlan, MergesBoundaryRowsAndGhostsById) {
   const std::vector<std::int64_t> boundary{2, 5, 9, 40};
   const std::vector<std::int64_t> ghosts{7, 30, 1, 3, 41};  // two sources: [7, 30], [1, 3, 41]
@@ -184,6 +413,11 @@ TEST(StepPlan, RefusesBadWidthsAndCoordinates) {
   const StepPlan one = make_step_plan(SlabDecomposition::single(0), 0, x, 5);
   EXPECT_EQ(one.count(RowRole::interior), 3u);  // one rank: no other slab, no halo
   EXPECT_EQ(one.halo.total(), 0u);
+  const std::vector<double> r{0.5, 0.5, 0.5};
+  GhostRule bad_rule = GhostRule::uniform(1);
+  bad_rule.wide_reach = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(make_step_plan(s, 0, x, r, bad_rule), InputError);
+  EXPECT_THROW(make_step_plan(s, 0, x, std::vector<double>{0.5}, GhostRule::uniform(1)), UsageError);
 }
 
 // The owned rows of a run's engine input, ascending id, and the spin's motion from the attached poses.

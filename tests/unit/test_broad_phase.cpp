@@ -467,6 +467,25 @@ TEST(AutoBroadPhase, Rule) {
   EXPECT_NEAR(grid_occupancy(loguniform), 8.9, 0.1);
   EXPECT_EQ(choose_broad_phase(loguniform, Precision::fp32), BroadPhase::grid);
   EXPECT_EQ(choose_broad_phase(loguniform, Precision::fp32, true), BroadPhase::grid);
+  // one size class (r_max <= 2 r_min: one level) from 2^21 bodies: the levels' walk on a GPU, the
+  // grid on the host; below 2^21, and wider radius laws, as above
+  const std::uint64_t many = std::uint64_t(1) << 21;  // broad_phase.cpp's kOneLevelDeviceBodies
+  Bounds large_uniform = bounds_of(0.5, 1, 200, many);
+  large_uniform.r_sum[0] = 0.75 * double(many);
+  EXPECT_EQ(choose_broad_phase(large_uniform, Precision::fp32, true), BroadPhase::levels);
+  EXPECT_EQ(choose_broad_phase(large_uniform, Precision::fp64, false), BroadPhase::grid);
+  Bounds fewer = large_uniform;
+  fewer.count = many - 1;
+  EXPECT_EQ(choose_broad_phase(fewer, Precision::fp32, true), BroadPhase::grid);
+  Bounds one_size = bounds_of(0.01, 0.01, 100, 4 * many);  // bimodal 1:100 with no large body drawn
+  one_size.r_sum[0] = 0.01 * 4 * double(many);
+  EXPECT_EQ(choose_broad_phase(one_size, Precision::fp32, true), BroadPhase::levels);
+  Bounds wider = bounds_of(0.49, 1, 200, 4 * many);  // just over one level: the grid, as uniform below
+  wider.r_sum[0] = 0.75 * 4 * double(many);
+  EXPECT_EQ(choose_broad_phase(wider, Precision::fp32, true), BroadPhase::grid);
+  Bounds large_loguniform = bounds_of(0.001, 1, 980, 16 * many);
+  large_loguniform.r_sum[0] = 16 * double(many) * 0.145;
+  EXPECT_EQ(choose_broad_phase(large_loguniform, Precision::fp32, true), BroadPhase::grid);
   // a flat scene: the extents are at least the cell
   Bounds flat = bounds_of(0.01, 1, 100, 100000);
   flat.hi.z = 0;

@@ -25,9 +25,10 @@ class PairEstimateTest : public ::testing::Test {
 
   // One detection in fp64 with the limit `max_tests`; the estimates the engine handed out.
   Contacts<double> run(const Spheres& s, std::uint64_t max_tests, std::vector<PairEstimate>& seen,
-                       EngineStats* stats = nullptr) {
+                       EngineStats* stats = nullptr, BroadPhase broad = BroadPhase::automatic) {
     EngineOptions o;
     o.backend = T::backend;
+    o.broad_phase = broad;
     o.max_pair_tests = max_tests;
     o.on_pair_estimate = [&seen](const PairEstimate& e) { seen.push_back(e); };
     Engine<double> engine(o);
@@ -92,6 +93,43 @@ TYPED_TEST(PairEstimateTest, StackedBodiesAreRefusedAboveTheLimit) {
   }
   seen.clear();
   EXPECT_EQ(this->run(s, std::uint64_t(n) * (n - 1) / 2, seen).size(), c.size());
+}
+
+// Every broad phase estimates its tests before its pair stage (grid and levels: Σ m·(m − 1)/2 over the
+// cells of the sorted entries, the levels' within each level; sweep: the boxes each sweep passes;
+// brute: every pair) and refuses the pile below the estimate; each estimate bounds the pile's pairs.
+// The levels' pairs across levels (the one large body against the pile) come on top of theirs.
+TYPED_TEST(PairEstimateTest, EveryBroadPhaseEstimatesAndRefusesAPile) {
+  std::mt19937_64 rng(8);
+  std::uniform_real_distribution<double> u(-0.01, 0.01);
+  Spheres s;
+  const std::uint64_t n = 1200, pairs = n * (n - 1) / 2;
+  for (std::uint64_t i = 0; i < n; ++i) s.add(u(rng), u(rng), u(rng), 0.02);
+  s.add(10, 10, 10, 0.5);
+  for (const BroadPhase broad :
+       {BroadPhase::grid, BroadPhase::levels, BroadPhase::sweep, BroadPhase::brute}) {
+    SCOPED_TRACE(to_string(broad));
+    std::vector<PairEstimate> seen;
+    EngineStats stats;
+    const Contacts<double> c = this->run(s, 0, seen, &stats, broad);
+    EXPECT_EQ(stats.broad_phase, broad);
+    ASSERT_EQ(seen.size(), 1u);
+    EXPECT_EQ(c.size(), pairs);
+    EXPECT_GE(seen[0].tests, pairs);
+    EXPECT_GE(seen[0].tests + (broad == BroadPhase::levels ? n : 0), stats.pair_tests);
+    EXPECT_GE(seen[0].largest, n - 1);
+    EXPECT_GT(seen[0].tests_per_second, 0);
+    try {
+      seen.clear();
+      this->run(s, pairs - 1, seen, nullptr, broad);
+      ADD_FAILURE() << "a limit below the estimate should refuse the pile";
+    } catch (const LimitError& e) {
+      EXPECT_EQ(e.exit_code(), 9);
+      EXPECT_NE(std::string(e.what()).find("--max-pair-tests " + std::to_string(pairs - 1)),
+                std::string::npos)
+          << e.what();
+    }
+  }
 }
 
 // The host pair stage reports its progress whatever the estimate: the tests done so far, last the
