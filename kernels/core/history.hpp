@@ -68,14 +68,7 @@ CG_HD std::size_t lower_bound_key_near(const PairKey* keys, std::size_t m, const
     }
     lo = hi >= step ? hi - step + 1 : 0;
   }
-  while (lo < hi) {
-    const std::size_t mid = lo + (hi - lo) / 2;
-    if (keys[mid] < key)
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
-  return lo;
+  return lo + lower_bound_key(keys + lo, hi - lo, key);
 }
 
 // A row's history fields.
