@@ -4,7 +4,8 @@
 #   reference cases of the unit suite, then on two pinned quiet cores (taskset -c 0,1) the host's
 #   streaming bandwidth, the CPU stages (a new engine per call, as contactgrid.detect; and one engine
 #   kept), the CLI's stage table, and SciPy's cKDTree.query_pairs + filter on the same scene when the
-#   device's Python has scipy and h5py.
+#   device's Python has scipy and h5py; then one summary line (stages, page faults a call, SciPy, the
+#   ratio against the issue's 20x). About 2 minutes.
 # pieces: contacts in bounded memory (decomposition/pieces.hpp): the Pieces* unit cases on both backends
 #   (the CUDA ones must run; the CLI ones on the device's binary), then 2^24 spheres at 6 contacts per
 #   body (about 100 M contacts) detected by the CLI on CUDA in fp32 without a limit and under
@@ -139,6 +140,15 @@ print(f"scipy_ms {statistics.median(times) * 1e3:.1f} pairs {int(keep.sum())} ru
 PY
 else
   echo "no scipy/h5py for $py: SciPy not timed here (jobs/gpu_python_check.sh run times it)" | tee "$dir/scipy.log"
+fi
+# The summary: the engine's stages at 2 threads (a new engine a call: the median of their sum, and a
+# call's page faults, 0 once the pools are warm) against SciPy's median, the issue's 20x
+sum_ms=$(awk '/a new engine, threads 2/{f=1} f && /^\(sum\)/{print $3; exit}' "$dir/stages.log")
+faults=$(awk '/a new engine, threads 2/{f=1} f && /^faults/{print $3; exit}' "$dir/stages.log")
+scipy_ms=$(awk '/^scipy_ms/{print $2}' "$dir/scipy.log")
+if [ -n "$sum_ms" ] && [ -n "$scipy_ms" ]; then
+  awk -v e="$sum_ms" -v s="$scipy_ms" -v f="$faults" 'BEGIN{printf "laptop: stages (2 threads, median) %.1f ms, page faults a call %s, SciPy %.1f ms: %.1fx (target >= 20x: stages <= %.1f ms)\n", e, f, s, s / e, s / 20}' |
+    tee "$dir/laptop_summary.txt"
 fi
 rm -f "$scene"
 fi

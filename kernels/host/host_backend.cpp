@@ -77,8 +77,12 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   // (shape_cells); the other broad phases make their own (levels) or none
   const bool grid = job.broad == BroadPhase::grid;
   const bool cut = filter == CandidateFilter::centre_cut && !reuse;
+  // fp64 and mixed sphere scenes: the narrow stage reads each contact's second body at random, from
+  // pack's world rows (one cache line a body) rather than the input's position and radius arrays
+  host::Array<Sphere<double>> world_rows;
+  const bool rows_packed = std::is_same_v<Narrow, double> && !shapes;
   host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Broad>(job.inflation),
-             !reuse && !cut && grid, nt, bodies);
+             !reuse && !cut && grid, nt, bodies, rows_packed ? &world_rows : nullptr);
   if (shapes) host::pack_shapes(job.bodies, nt, packed_shapes);
   if (cut) host::cut_shapes(packed_shapes, nt, bodies.cut);
   if (cut && grid) host::shape_cells(job.grid, nt, bodies);
@@ -167,7 +171,7 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
                              reinterpret_cast<const double*>(job.bodies.orientation.data())};
     host::narrow_shapes(candidates, world, packed_shapes, rows, job.solver, job.fields, nt, out, stats);
   } else {
-    host::narrow(candidates, world, job.fields, nt, out, stats);
+    host::narrow(candidates, world, job.fields, nt, out, stats, rows_packed ? world_rows.data() : nullptr);
   }
   timer.lap(EngineStage::narrow);
 }

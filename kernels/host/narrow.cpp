@@ -32,11 +32,53 @@ void write_row(const ContactColumns<Real, Ptr>& rows, std::size_t k, std::uint32
   store_row(rows, k, row, full);
 }
 
+// narrow_decide's fp64 and mixed branch (core/narrow.hpp) on pack's world rows (the same doubles as
+// the input's position and radius arrays, one cache line a body): touch_fp64 on the frame-local
+// doubles, the row from the world doubles.
+template <bool kFull>
+ContactRow<double> world_rows_decide(const Sphere<double>* world, const Vec3<double>& origin, std::uint32_t a,
+                                     std::uint32_t b) {
+  const Sphere<double> sa = world[a], sb = world[b];
+  ContactRow<double> row{};
+  const Sphere<double> la{sa.x - origin.x, sa.y - origin.y, sa.z - origin.z, sa.r};
+  const Sphere<double> lb{sb.x - origin.x, sb.y - origin.y, sb.z - origin.z, sb.r};
+  if (spheres_touch(la, lb)) row = world_sphere_row(sa, sb, kFull);
+  return row;
+}
+
+// One row per candidate (every candidate is a contact), rows [lo, hi). kFull: the full fields, a
+// constant here so that a basic row's inlined core functions drop the full fields' work (their zeroed
+// members, the friction basis) and the row's copies. `world` (fp64, mixed; may be null): pack's world
+// rows, read in place of the input's arrays.
+template <bool kFull, class Real>
+std::uint64_t one_row_per_candidate(const CandidatePairs& c, const NarrowBodies<Real>& bodies,
+                                    const NarrowBodies<Real>& one_row, const Sphere<double>* world,
+                                    const ContactColumns<Real, Ptr>& rows, std::size_t lo, std::size_t hi) {
+  const std::size_t n_cand = c.size();
+  NarrowFlags flags;
+  if constexpr (std::is_same_v<Real, double>) {
+    if (world != nullptr) {
+      for (std::size_t k = lo; k < hi; ++k) {
+        if (k + k_prefetch_rows < n_cand) __builtin_prefetch(world + c.b(k + k_prefetch_rows));
+        const std::uint32_t a = c.a(k), b = c.b(k);
+        write_row(rows, k, a, b, world_rows_decide<kFull>(world, bodies.origin, a, b), kFull);
+      }
+      return 0;
+    }
+  }
+  for (std::size_t k = lo; k < hi; ++k) {
+    if (k + k_prefetch_rows < n_cand) prefetch_body(bodies, c.b(k + k_prefetch_rows));
+    const std::uint32_t a = c.a(k), b = c.b(k);
+    write_row(rows, k, a, b, narrow_decide(one_row, a, b, kFull, flags).row, kFull);
+  }
+  return flags.fp64_rows;
+}
+
 }  // namespace
 
 template <class Real>
 void narrow(const CandidatePairs& c, const NarrowBodies<Real>& bodies, Fields fields, int nt,
-            Contacts<Real>& out, EngineStats& stats) {
+            Contacts<Real>& out, EngineStats& stats, const Sphere<double>* world) {
   const bool full = fields == Fields::full;
   const std::size_t n_cand = c.size();
   std::uint64_t fp64_rows = 0;
@@ -45,13 +87,12 @@ void narrow(const CandidatePairs& c, const NarrowBodies<Real>& bodies, Fields fi
     one_row.broad = nullptr;
     out.resize(n_cand, full);
     const ContactColumns<Real, Ptr> rows = columns_of(out);
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : fp64_rows) if (n_cand > k_parallel_min)
-    for (std::size_t k = 0; k < n_cand; ++k) {
-      if (k + k_prefetch_rows < n_cand) prefetch_body(bodies, c.b(k + k_prefetch_rows));
-      const std::uint32_t a = c.a(k), b = c.b(k);
-      NarrowFlags flags;
-      write_row(rows, k, a, b, narrow_decide(one_row, a, b, full, flags).row, full);
-      fp64_rows += flags.fp64_rows;
+    const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(256, n_cand / 16384));
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(+ : fp64_rows) if (n_chunks > 1)
+    for (std::size_t ch = 0; ch < n_chunks; ++ch) {
+      const std::size_t lo = n_cand * ch / n_chunks, hi = n_cand * (ch + 1) / n_chunks;
+      fp64_rows += full ? one_row_per_candidate<true>(c, bodies, one_row, world, rows, lo, hi)
+                        : one_row_per_candidate<false>(c, bodies, one_row, world, rows, lo, hi);
     }
     stats.fp64_rows += fp64_rows;
     return;
@@ -91,8 +132,8 @@ void narrow(const CandidatePairs& c, const NarrowBodies<Real>& bodies, Fields fi
 }
 
 template void narrow(const CandidatePairs&, const NarrowBodies<float>&, Fields, int, Contacts<float>&,
-                     EngineStats&);
+                     EngineStats&, const Sphere<double>*);
 template void narrow(const CandidatePairs&, const NarrowBodies<double>&, Fields, int, Contacts<double>&,
-                     EngineStats&);
+                     EngineStats&, const Sphere<double>*);
 
 }  // namespace cg::detail::host

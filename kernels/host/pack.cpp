@@ -12,17 +12,31 @@ Sphere<Real> local_sphere(const BodiesView& bodies, const Vec3<double>& origin, 
   return {static_cast<Real>(p.x - origin.x), static_cast<Real>(p.y - origin.y),
           static_cast<Real>(p.z - origin.z), static_cast<Real>(bodies.radius[i]) + g.radius_margin};
 }
+
+// Body i's world row: its input doubles, centre and radius together.
+inline Sphere<double> world_row(const BodiesView& bodies, std::size_t i) {
+  const Vec3<double> p = bodies.position[i];
+  return {p.x, p.y, p.z, bodies.radius[i]};
+}
 }  // namespace
 
 template <class Real>
 void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams<Real>& g, Real inflation,
-          bool cells_too, int threads, PackedBodies<Real>& out) {
+          bool cells_too, int threads, PackedBodies<Real>& out, Array<Sphere<double>>* world) {
   const std::size_t n = bodies.size();
   out.spheres.resize(n);
   out.inflation = inflation;
+  Sphere<double>* w = nullptr;
+  if (world != nullptr) {
+    world->resize(n);
+    w = world->data();
+  }
   if (!cells_too) {
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
-    for (std::size_t i = 0; i < n; ++i) out.spheres[i] = local_sphere<Real>(bodies, origin, g, i);
+    for (std::size_t i = 0; i < n; ++i) {
+      out.spheres[i] = local_sphere<Real>(bodies, origin, g, i);
+      if (w) w[i] = world_row(bodies, i);
+    }
     return;
   }
   out.cells.resize(n);
@@ -32,6 +46,7 @@ void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams
   for (std::size_t i = 0; i < n; ++i) {
     const Sphere<Real> s = local_sphere<Real>(bodies, origin, g, i);
     out.spheres[i] = s;
+    if (w) w[i] = world_row(bodies, i);
     out.cells[i] = body_cells(Sphere<Real>{s.x, s.y, s.z, s.r + inflation}, g);
     out.ctrl[i] = control_bits(out.cells[i]);
     out.count[i] = entry_count(out.cells[i]);
@@ -82,8 +97,8 @@ template void pack_shapes(const BodiesView&, int, std::vector<PackedShape<float>
 template void pack_shapes(const BodiesView&, int, std::vector<PackedShape<double>>&);
 
 template void pack(const BodiesView&, const Vec3<double>&, const GridParams<float>&, float, bool, int,
-                   PackedBodies<float>&);
+                   PackedBodies<float>&, Array<Sphere<double>>*);
 template void pack(const BodiesView&, const Vec3<double>&, const GridParams<double>&, double, bool, int,
-                   PackedBodies<double>&);
+                   PackedBodies<double>&, Array<Sphere<double>>*);
 
 }  // namespace cg::detail::host

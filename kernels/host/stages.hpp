@@ -89,10 +89,12 @@ void keep_candidates(const BodiesView& bodies, CandidatePairs&& c, KeptCandidate
 
 // pack: world (double) → local Real spheres; per body its cells (of the sphere inflated by
 // `inflation`, 0 without a skin), control byte and entry count. cells_too false: the spheres only
-// (the reuse of kept candidates needs no grid).
+// (the reuse of kept candidates needs no grid). `world` (may be null): also the world rows of every
+// body as one Sphere<double> each (x, y, z, r: the input's doubles, one cache line a body), which the
+// narrow stage reads at random in place of the input's two arrays.
 template <class Real>
 void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams<Real>& g, Real inflation,
-          bool cells_too, int threads, PackedBodies<Real>& out);
+          bool cells_too, int threads, PackedBodies<Real>& out, Array<Sphere<double>>* world = nullptr);
 
 // pack_shapes (scenes with ellipsoids): pack_shape() of every body, input order.
 template <class Real>
@@ -228,10 +230,12 @@ void order_candidates(CandidatePairs& c, int threads);
 // bodies.spheres, fp64 and mixed from the world doubles); contact rows of the requested fields, world
 // frame, in candidate order. When the filter may reject (narrow_may_reject): count → scan → fill
 // (accept flags, exclusive scan of chunk counts, fill of the accepted rows); else one row per
-// candidate. fp32 rows recomputed in fp64 are added to stats.fp64_rows.
+// candidate. fp32 rows recomputed in fp64 are added to stats.fp64_rows. `world` (fp64 and mixed, may
+// be null): pack's world rows, read in place of bodies.position and bodies.radius (the same doubles)
+// where every candidate is a contact.
 template <class Real>
 void narrow(const CandidatePairs& c, const NarrowBodies<Real>& bodies, Fields fields, int threads,
-            Contacts<Real>& out, EngineStats& stats);
+            Contacts<Real>& out, EngineStats& stats, const Sphere<double>* world = nullptr);
 
 // narrow for scenes with ellipsoids: ShapeDecide (core/shape_narrow.hpp) on every candidate, always
 // count → scan → fill (c.filter may reject); the solver's flags are added to stats.narrow_fallbacks

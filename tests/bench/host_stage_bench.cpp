@@ -6,7 +6,9 @@
 // time of the process over the call (user + system, all threads: getrusage), which other processes on
 // the same cores do not inflate.
 //   host_stage_bench SCENE.h5 [REPETITIONS=9] [THREADS=0] [PRECISION=mixed|fp32|fp64] [fresh|reuse]
-// Prints one line per stage: name, min ms, median ms; then contacts.
+// (CG_BENCH_CELL_SIZE=EDGE in the environment: the grid's cell edge, EngineOptions::cell_size)
+// Prints one line per stage: name, min ms, median ms; then the CPU ms of a call ("cpu") and its minor
+// page faults ("faults", a count: each fresh page the kernel zeroes); then contacts.
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -31,6 +33,13 @@ double cpu_seconds() {
          1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
 }
 
+// Minor page faults of the process so far (a fresh page the kernel zeroes is one).
+double page_faults() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_minflt);
+}
+
 template <class Real>
 std::size_t calls(const EngineOptions& o, const BodiesView& v, int repetitions, bool reuse,
                   std::map<std::string, std::vector<double>>& stage_times, std::vector<std::string>& order) {
@@ -38,9 +47,9 @@ std::size_t calls(const EngineOptions& o, const BodiesView& v, int repetitions, 
   std::size_t contacts = 0;
   for (int r = -1; r < repetitions; ++r) {
     if (!engine || !reuse) engine = std::make_unique<Engine<Real>>(o);
-    const double cpu0 = cpu_seconds();
+    const double cpu0 = cpu_seconds(), faults0 = page_faults();
     contacts = engine->detect(v).size();
-    const double cpu = cpu_seconds() - cpu0;
+    const double cpu = cpu_seconds() - cpu0, faults = page_faults() - faults0;
     if (r < 0) continue;  // warm: the first call's page faults of the process
     double total = 0;
     for (const StageTime& t : engine->times()) {
@@ -50,9 +59,11 @@ std::size_t calls(const EngineOptions& o, const BodiesView& v, int repetitions, 
     }
     stage_times["(sum)"].push_back(total);
     stage_times["cpu"].push_back(cpu);
+    stage_times["faults"].push_back(faults * 1e-3);  // printed as a count: the rows print s × 1e3
   }
   order.push_back("(sum)");
   order.push_back("cpu");
+  order.push_back("faults");
   return contacts;
 }
 
@@ -70,6 +81,7 @@ int main(int argc, char** argv) {
   const std::string precision = argc > 4 ? argv[4] : "mixed";
   const bool reuse = argc > 5 && std::string(argv[5]) == "reuse";
   o.fp32_broad_phase = precision == "mixed";
+  if (const char* cell = std::getenv("CG_BENCH_CELL_SIZE")) o.cell_size = std::atof(cell);  // 0: the plan's
   const BodyRows rows = body_rows(read_scene(argv[1]), false);
   const BodiesView v{rows.position, rows.radius, {}, {}};
   std::map<std::string, std::vector<double>> stage_times;
