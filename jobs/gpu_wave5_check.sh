@@ -17,6 +17,11 @@
 #                                                 jobs/gpu_python_check.sh pack)
 #   BIN=dir OUT=dir jobs/gpu_wave5_check.sh two   two GPUs: bodies that move at np 2 (#31), simulate
 #                                                 under mpirun on two GPUs (#32)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh e     one GPU: the whole unit suite, simulate's steps/s and
+#                                                 stages (#32), bodies that move on one GPU (#31)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh g     one GPU: contacts in pieces (#37), the resident steps
+#                                                 by radius and auto's rows (#34), the laptop mode on
+#                                                 two quiet cores (#33, #37)
 # BIN holds the CUDA build's contactgrid, contactgrid_tests, contactgrid_mpi_tests,
 # contactgrid_cuda_bench, host_stage_bench, host_bandwidth and file_write_bandwidth. Each part writes $OUT/<part>.tgz; the
 # script exits non-zero naming every script that failed.
@@ -88,6 +93,14 @@ case ${1:-a} in
   py)
     part python python_module
     part library jobs/gpu_library_check.sh "${PY:-.devbin/py}" ;;
+  e)
+    part unit unit
+    part simulate jobs/gpu_simulate_check.sh perf
+    part steploop jobs/gpu_steploop_check.sh one ;;
+  g)
+    part pieces env MODE=pieces jobs/gpu_hostpath_check.sh
+    part broad_steps jobs/gpu_broadphase_check.sh steps
+    part laptop env MODE=laptop jobs/gpu_hostpath_check.sh ;;
   two)
     part steploop_two jobs/gpu_steploop_check.sh two
     part simulate_two jobs/gpu_simulate_check.sh mpi2 two ;;

@@ -60,8 +60,10 @@ double grid_occupancy(const Bounds& b);
 // the grid (a wide radius law in a sparse scene, log-uniform 1:1000 among them, is the grid's).
 // `device`: for the CUDA backend, whose grid pays more for crowded cells (its pair walk stages 32
 // entries of a cell in shared memory and walks the rest of a longer cell from memory, one thread per
-// entry), so levels take over from kOccupancyPerLevelDevice bodies per level (bimodal 1:10 among them).
-BroadPhase choose_broad_phase(const Bounds& b, Precision p, bool device = false);
+// entry), so levels take over from kOccupancyPerLevelDevice bodies per level (bimodal 1:10 among them),
+// and a scene of one size class of at least 2^21 bodies takes the levels' one-level walk in input
+// order unless the call keeps its candidates (`skin`), which keeps the grid (broad_phase.cpp).
+BroadPhase choose_broad_phase(const Bounds& b, Precision p, bool device = false, bool skin = false);
 inline constexpr std::uint64_t kBruteBodies = 32;
 inline constexpr double kLevelsSpread = 4;
 inline constexpr double kOccupancyPerLevel = 64;

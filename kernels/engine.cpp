@@ -186,10 +186,11 @@ struct Engine<Real>::Impl {
   ~Impl() { detail::destroy(cuda); }
 };
 
-BroadPhase resolved_broad_phase(BroadPhase requested, const Bounds& b, Precision p, Backend backend) {
+BroadPhase resolved_broad_phase(BroadPhase requested, const Bounds& b, Precision p, Backend backend,
+                                bool skin) {
   if (requested != BroadPhase::automatic) return requested;
   if (backend == Backend::automatic) backend = cuda_available() ? Backend::cuda : Backend::cpu;
-  return choose_broad_phase(b, p, backend == Backend::cuda);
+  return choose_broad_phase(b, p, backend == Backend::cuda, skin);
 }
 
 template <class Real>
@@ -282,7 +283,7 @@ detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> 
                       : make_frame(grid_bounds, 0, prec, options.cell_choice).cell_size;
   detail::DetectJob<Broad, Narrow> job{{}, plan_grid(grid_bounds, f, prec), {}, options.fields};
   job.grid = detail::grid_params<Broad>(job.plan, margin);
-  job.broad = resolved_broad_phase(options.broad_phase, b, prec, options.backend);
+  job.broad = resolved_broad_phase(options.broad_phase, b, prec, options.backend, options.skin != 0);
   stats.broad_phase = job.broad;
   if (job.broad == BroadPhase::levels) {
     const LevelsPlan levels = plan_levels(b, f, prec, margin + inflation);

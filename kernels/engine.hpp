@@ -37,9 +37,10 @@ const char* to_string(Fields f);
 bool cuda_available();
 
 // The broad phase a call runs: `requested`, or for automatic choose_broad_phase's pick for `backend`
-// (automatic: CUDA where a device is usable), whose grid pays more for crowded cells on a GPU. Every
-// pick gives the same contacts, bit for bit.
-BroadPhase resolved_broad_phase(BroadPhase requested, const Bounds& b, Precision p, Backend backend);
+// (automatic: CUDA where a device is usable), whose grid pays more for crowded cells on a GPU, and for
+// `skin` (the call keeps its candidates). Every pick gives the same contacts, bit for bit.
+BroadPhase resolved_broad_phase(BroadPhase requested, const Bounds& b, Precision p, Backend backend,
+                                bool skin = false);
 // Number of usable CUDA devices (0 in builds without CUDA or without a GPU).
 int cuda_device_count();
 

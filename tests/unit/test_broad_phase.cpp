@@ -474,6 +474,8 @@ TEST(AutoBroadPhase, Rule) {
   large_uniform.r_sum[0] = 0.75 * double(many);
   EXPECT_EQ(choose_broad_phase(large_uniform, Precision::fp32, true), BroadPhase::levels);
   EXPECT_EQ(choose_broad_phase(large_uniform, Precision::fp64, false), BroadPhase::grid);
+  // calls that keep their candidates (a skin) keep the grid: the rule's measurement was of fresh calls
+  EXPECT_EQ(choose_broad_phase(large_uniform, Precision::fp32, true, true), BroadPhase::grid);
   Bounds fewer = large_uniform;
   fewer.count = many - 1;
   EXPECT_EQ(choose_broad_phase(fewer, Precision::fp32, true), BroadPhase::grid);
