@@ -13,8 +13,8 @@
 #             steps/s from log.csv (issue: 1 500 steps/s at 2^20, 2·10^9 sphere-steps/s at 2^24, 3·10^8
 #             ellipsoid-steps/s at 2^22); then short runs with --stage-times: where a step's time goes
 #             (per stage, and the engine's stages within detect; the energies' time a call), at 2^20
-#             and 2^24 also with every contact term stored (CONTACTGRID_DEM_TERMS=rows) against the
-#             default (the contact stage sums each body's rows as A itself)
+#             and 2^24 also with the contact stage summing each body's rows as A itself
+#             (CONTACTGRID_DEM_TERMS=sums) against the default (every contact term stored)
 #   mpi2      (a host with 2 GPUs, its own call) simulate under mpirun -np 2 --backend cuda writes the
 #             frames, contacts and energies of -np 1 and of the CPU backend, bit for bit
 #   two       (a host with 2 GPUs, its own call) steps/s of mpirun -np 1 and -np 2 --backend cuda on a
@@ -100,7 +100,7 @@ part_perf() {
   if scene spheres_2e20 pour $((1 << 20)); then
     bench spheres_2e20 $((1 << 20)) 300
     stages spheres_2e20 120 default
-    stages spheres_2e20 120 terms-rows CONTACTGRID_DEM_TERMS=rows
+    stages spheres_2e20 120 a-sums CONTACTGRID_DEM_TERMS=sums
     rm -f "$W/spheres_2e20.h5"
   fi
   # ellipsoids: a pour's lattice leaves randomly turned ellipsoids apart (0.4 contacts a body at the
@@ -115,7 +115,7 @@ part_perf() {
   if scene spheres_2e24 pour $((1 << 24)); then
     bench spheres_2e24 $((1 << 24)) 60
     stages spheres_2e24 30 default
-    stages spheres_2e24 30 terms-rows CONTACTGRID_DEM_TERMS=rows
+    stages spheres_2e24 30 a-sums CONTACTGRID_DEM_TERMS=sums
     rm -f "$W/spheres_2e24.h5"
   fi
   cat "$OUT/table.md" "$OUT/stages.txt" | tee -a "$OUT/summary.txt"

@@ -19,9 +19,11 @@
 #                                                 under mpirun on two GPUs (#32)
 #   BIN=dir OUT=dir jobs/gpu_wave5_check.sh e     one GPU: the whole unit suite, simulate's steps/s and
 #                                                 stages (#32), bodies that move on one GPU (#31)
-#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh g     one GPU: contacts in pieces (#37), the resident steps
-#                                                 by radius and auto's rows (#34), the laptop mode on
-#                                                 two quiet cores (#33, #37)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh g     one GPU: the unit cases of simulate and pieces,
+#                                                 simulate's steps/s (#32), contacts in pieces (#37), the
+#                                                 resident steps by radius and auto's rows (#34)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh l     the pieces' unit cases; the laptop mode on two quiet
+#                                                 cores (#33, #37)
 # BIN holds the CUDA build's contactgrid, contactgrid_tests, contactgrid_mpi_tests,
 # contactgrid_cuda_bench, host_stage_bench, host_bandwidth and file_write_bandwidth. Each part writes $OUT/<part>.tgz; the
 # script exits non-zero naming every script that failed.
@@ -44,6 +46,12 @@ part() {  # part NAME COMMAND...: OUT=$OUT/NAME for the command; its output kept
 }
 unit() {
   "$BIN/contactgrid_tests" >"$OUT/unit_tests.log" 2>&1
+  local rc=$?
+  grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]' "$OUT/unit_tests.log" | head -30
+  return $rc
+}
+unit_filtered() {  # unit_filtered FILTER: the unit cases of FILTER (after a fix, the cases it touches)
+  "$BIN/contactgrid_tests" --gtest_filter="$1" >"$OUT/unit_tests.log" 2>&1
   local rc=$?
   grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]' "$OUT/unit_tests.log" | head -30
   return $rc
@@ -98,8 +106,12 @@ case ${1:-a} in
     part simulate jobs/gpu_simulate_check.sh perf
     part steploop jobs/gpu_steploop_check.sh one ;;
   g)
+    part unit_g unit_filtered 'Dem*:Pieces*:Simulate*:AutoBroadPhase*'
+    part simulate jobs/gpu_simulate_check.sh perf
     part pieces env MODE=pieces jobs/gpu_hostpath_check.sh
-    part broad_steps jobs/gpu_broadphase_check.sh steps
+    part broad_steps jobs/gpu_broadphase_check.sh steps ;;
+  l)
+    part unit_pieces unit_filtered 'Pieces*'
     part laptop env MODE=laptop jobs/gpu_hostpath_check.sh ;;
   two)
     part steploop_two jobs/gpu_steploop_check.sh two

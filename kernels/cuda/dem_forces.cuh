@@ -2,7 +2,7 @@
 // The contact stage of the granular dynamics on the device: each contact row's terms
 // (core/dem_step.hpp: contact_result), one thread per row, over the engine's device-resident
 // contacts; then this step's springs become the last step's. Two ways (tuning: CONTACTGRID_DEM_TERMS):
-//   a-sums (default)  the kernel also sums each body's rows as A (the rows are sorted by A, so a body's
+//   sums              the kernel also sums each body's rows as A (the rows are sorted by A, so a body's
 //                     rows as A are one run): a block keeps its rows' force and torque on A in shared
 //                     memory, and the thread of the first row of each run adds the run's terms in row
 //                     order, from zero (a run that goes on past the block's last row: its further
@@ -11,7 +11,9 @@
 //                     what the body stage still needs (the force and torque on B, the spring, the
 //                     normal, the energy): no torque on A per row, and the body stage reads no rows
 //                     as A (dem_sums.cuh).
-//   rows              contact_terms of every row (every term stored); the body stage sums both sides.
+//   rows (default)    contact_terms of every row (every term stored); the body stage sums both sides:
+//                     on the H100 the faster of the two (the sums' runs keep a block's threads waiting
+//                     on the run's first thread).
 // The same sums in the same order either way: the bits of the CPU backend.
 #include "cuda/common.cuh"
 #include "cuda/dem_state.cuh"

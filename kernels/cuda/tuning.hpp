@@ -68,10 +68,11 @@ struct Tuning {
   // radix sort of (B, row) and Thrust's lower_bound of every body id (cuda/dem_sums.cuh); default:
   // counts, their scan and a segmented sort of each body's rows. The same sums either way.
   bool dem_sums_sort = false;
-  // CONTACTGRID_DEM_TERMS=rows: the granular dynamics' contact stage stores every term of every row
-  // and the body stage sums each body's rows as A and as B; default: the contact stage sums each
-  // body's rows as A itself (cuda/dem_forces.cuh). The same sums either way.
-  bool dem_terms_rows = false;
+  // The granular dynamics' contact stage (cuda/dem_forces.cuh): by default it stores every term of
+  // every row and the body stage sums each body's rows as A and as B (the faster on the H100:
+  // BENCHMARKS.md §24); CONTACTGRID_DEM_TERMS=sums: the contact stage sums each body's rows as A
+  // itself. The same sums either way.
+  bool dem_terms_rows = true;
   // CONTACTGRID_CUDA_NARROW=two-pass: the rejecting narrow stage of sphere scenes with device output
   // counts, scans and fills (two reads of the candidates and their spheres, cuda/narrow.cuh:
   // narrow_compact); default: one pass, a stable compaction with decoupled look-back whose output
@@ -150,7 +151,7 @@ inline Tuning read_tuning() {
                        : std::string_view(h) == "thrust" ? HistorySearch::thrust
                                                          : HistorySearch::near;
   if (const char* d = std::getenv("CONTACTGRID_DEM_SUMS")) t.dem_sums_sort = std::string_view(d) == "sort";
-  if (const char* d = std::getenv("CONTACTGRID_DEM_TERMS")) t.dem_terms_rows = std::string_view(d) == "rows";
+  if (const char* d = std::getenv("CONTACTGRID_DEM_TERMS")) t.dem_terms_rows = std::string_view(d) != "sums";
   if (const char* n = std::getenv("CONTACTGRID_CUDA_NARROW"))
     t.narrow_two_pass = std::string_view(n) == "two-pass";
   if (const char* c = std::getenv("CONTACTGRID_CUDA_CANDIDATES")) {

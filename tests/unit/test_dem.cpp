@@ -520,7 +520,7 @@ TEST(DemBackends, CpuEqualsCudaBitForBit) {
 
 // The body stage's two indexes on the device (CONTACTGRID_DEM_SUMS=sort: a radix sort and
 // lower_bound; default: counts, scans and a segmented sort), and the contact stage's two ways
-// (CONTACTGRID_DEM_TERMS=rows: every term stored; default: the sums over the rows as A in the contact
+// (default: every term stored; CONTACTGRID_DEM_TERMS=sums: the sums over the rows as A in the contact
 // stage) give the same trajectory, bit for bit.
 template <class Real>
 void cuda_knob_changes_nothing(bool ellipsoids, const char* variable, const char* value) {
@@ -555,8 +555,8 @@ TEST(DemBackends, CudaSumsBySortEqualCounts) {
 
 TEST(DemBackends, CudaTermsByRowsEqualASums) {
   if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
-  cuda_knob_changes_nothing<float>(false, "CONTACTGRID_DEM_TERMS", "rows");
-  cuda_knob_changes_nothing<double>(true, "CONTACTGRID_DEM_TERMS", "rows");
+  cuda_knob_changes_nothing<float>(false, "CONTACTGRID_DEM_TERMS", "sums");
+  cuda_knob_changes_nothing<double>(true, "CONTACTGRID_DEM_TERMS", "sums");
 }
 
 // The energies' fixed order (core/dem_sum.hpp): chunks of kEnergyChunk summed in item order, then

@@ -148,12 +148,18 @@ TYPED_TEST(PiecesTest, KeepsTheReportMaskAndIds) {
   EXPECT_EQ(compare_contacts(merged, wide), "identical");
 }
 
-// CUDA: a piece that runs out of device memory in the middle (the workspace capped by
-// EngineOptions::device_memory_limit at about half of what the whole scene takes) is split and
-// detected again; the result is the one-piece result. The model limit is out of the way (1 TiB).
+// CUDA: a piece that runs out of device memory in the middle is split and detected again; the result
+// is the one-piece result. Every piece holds all the bodies' workspace (a piece is a range of anchors),
+// so the scene is dense (about 50 neighbours a body: the contacts' rows outweigh the bodies and the
+// workspace's 64 MiB margin) and the cap (EngineOptions::device_memory_limit) is the bodies' share,
+// the margin and a tenth of what the contacts add: the whole scene fails, the first piece (an eighth
+// of the anchors) too, a half of it fits. The model limit is out of the way (1 TiB).
 TEST(PiecesCuda, DeviceOutOfMemoryInTheMiddleSplitsThePiece) {
   if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
-  const Spheres s = random_spheres(400000, 0.5, 1.0, 13);
+  Spheres s;
+  std::mt19937_64 rng(13);
+  std::uniform_real_distribution<double> u(0, 40);
+  for (int i = 0; i < 100000; ++i) s.add(u(rng), u(rng), u(rng), 1.0);
   const BodiesView v{s.p, s.r, {}, {}};
   const Bounds global = compute_bounds(v);
   const Frame frame = make_frame(global, 0, Precision::fp32, CellChoice::tuned);
@@ -162,8 +168,16 @@ TEST(PiecesCuda, DeviceOutOfMemoryInTheMiddleSplitsThePiece) {
   Engine<float> unlimited(o);
   const Contacts<float> whole = unlimited.detect(v, frame);
   const std::uint64_t peak = unlimited.stats().peak_device_bytes;
-  ASSERT_GT(peak, 0u);
-  o.device_memory_limit = (std::uint64_t(64) << 20) + peak / 2;
+  // the bodies' share: one anchor reported
+  std::vector<std::uint8_t> one(s.r.size(), 0);
+  one[0] = kReportedBit;
+  Engine<float> anchor(o);
+  (void)anchor.detect(BodiesView{s.p, s.r, {}, one}, frame);
+  const std::uint64_t bodies_share = anchor.stats().peak_device_bytes;
+  ASSERT_GT(peak, bodies_share);
+  const std::uint64_t margin = std::uint64_t(64) << 20;  // cuda/workspace.cuh: Workspace::reserve
+  ASSERT_GT(peak - bodies_share, 2 * margin) << "the contacts do not outweigh the margin";
+  o.device_memory_limit = bodies_share + margin + (peak - bodies_share) / 10;
   Engine<float> capped(o);
   EXPECT_THROW(capped.detect(v, frame), ResourceError) << "the cap does not make the whole scene fail";
   PieceOptions p;
@@ -171,6 +185,7 @@ TEST(PiecesCuda, DeviceOutOfMemoryInTheMiddleSplitsThePiece) {
   PieceReport report;
   const Contacts<float> pieces = detect_in_pieces(capped, v, frame, p, &report);
   EXPECT_GE(report.pieces, 2u);
+  EXPECT_GT(report.attempts, report.pieces) << "no piece ran out of device memory mid-way";
   EXPECT_EQ(compare_contacts(pieces, whole), "identical");
 }
 
