@@ -723,11 +723,9 @@ DistributedOptions run_options(const DetectCommand& cmd, const Session& session)
   return o;
 }
 
-// Every rank writes its rows of the one file (src/run/contact_file_shared.hpp); the file records the
-// times so far and the write's. Returns the write's time.
+// The output file's record of the run (its root attributes): what ran, on what, and the stage times.
 template <class Real>
-RunTime write_output(Session& session, const DetectCommand& cmd, const DistributedResult<Real>& r,
-                     RunInfo& info) {
+void describe_run(const DistributedResult<Real>& r, const DetectCommand& cmd, RunInfo& info) {
   info.bodies = r.bodies;
   info.backend = to_string(r.backend);
   info.ranks = r.ranks;
@@ -737,6 +735,14 @@ RunTime write_output(Session& session, const DetectCommand& cmd, const Distribut
   info.ellipsoids = r.ellipsoids;
   info.narrow_fallbacks = r.stats.narrow_fallbacks;
   info.narrow_unconverged = r.stats.narrow_unconverged;
+}
+
+// Every rank writes its rows of the one file (src/run/contact_file_shared.hpp); the file records the
+// times so far and the write's. Returns the write's time.
+template <class Real>
+RunTime write_output(Session& session, const DetectCommand& cmd, const DistributedResult<Real>& r,
+                     RunInfo& info) {
+  describe_run(r, cmd, info);
   const double seconds = write_contacts_distributed(session, cmd.output, r.contacts, r.first_row,
                                                     r.total_contacts, info, r.threads);
   return {RunStage::write, -1, seconds};
@@ -748,15 +754,7 @@ template <class Real>
 RunTime commit_stream(ContactFileStream& stream, const DistributedResult<Real>& r, const DetectCommand& cmd,
                       RunInfo& info) {
   const auto t0 = WallClock::now();
-  info.bodies = r.bodies;
-  info.backend = to_string(r.backend);
-  info.ranks = r.ranks;
-  info.cell_size = r.cell_size;
-  info.input = cmd.input;
-  info.times = file_stage_times(r.times);
-  info.ellipsoids = r.ellipsoids;
-  info.narrow_fallbacks = r.stats.narrow_fallbacks;
-  info.narrow_unconverged = r.stats.narrow_unconverged;
+  describe_run(r, cmd, info);
   info.times.push_back({"write", seconds_since(t0)});
   stream.commit(info);
   return {RunStage::write, -1, seconds_since(t0)};
