@@ -128,9 +128,9 @@ double grid_occupancy(const Bounds& b) {
 // `auto` on the device for a scene of one size class (r_max <= kLevelRatio · r_min: the levels plan one
 // level, the grid of the frame) of at least this many bodies: the levels, the same grid walked with the
 // bodies in input order, where the grid renumbers them by z layer once they outgrow the L2 (one-level
-// levels ran 1.10–1.14× faster than the grid at 2^22 and 2^24 on an H100, not faster at 2^18 and 2^20:
-// BENCHMARKS.md §22). Calls that keep their candidates (a skin) keep the grid: the measurement was of
-// fresh detections, and the steps' builds reuse the grid's candidate buffers.
+// levels is the faster from 2^22 bodies on an H100, not below 2^21: BENCHMARKS.md §22, §24). Calls that
+// keep their candidates (a skin) keep the grid: the measurement was of fresh detections, and the
+// steps' builds reuse the grid's candidate buffers.
 constexpr std::uint64_t kOneLevelDeviceBodies = std::uint64_t(1) << 21;
 
 BroadPhase choose_broad_phase(const Bounds& b, Precision, bool device, bool skin) {
