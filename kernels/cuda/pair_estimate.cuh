@@ -46,6 +46,19 @@ struct AddCellWork {
 
 namespace cg::detail {
 
+// The pair tests and the largest count of `work` (one CellWork for each of its `count` items), reduced
+// on the device and read back into `e` (one wait): the grid's estimate and the sweep's share it.
+template <class Real, class Key, class Narrow, class Work>
+void add_cell_work(RunState<Real, Key, Narrow>& r, Work work, std::uint32_t count, PairEstimate& e) {
+  cub_run(r.ws, "pairs", [&](void* t, std::size_t& b) {
+    return cub::DeviceReduce::Reduce(t, b, work, &r.d_counters->cell_work, int(count), cuda::AddCellWork{},
+                                     cuda::CellWork{0, 0}, r.st);
+  });
+  r.read_counters();
+  e.tests = r.h_counters->cell_work.tests;
+  e.largest = r.h_counters->cell_work.largest;
+}
+
 template <class Real, class Key, class Narrow>
 void estimate_stage(RunState<Real, Key, Narrow>& r) {
   const auto ne = static_cast<std::uint32_t>(r.n_entries);
@@ -58,15 +71,10 @@ void estimate_stage(RunState<Real, Key, Narrow>& r) {
       return cub::DeviceScan::InclusiveScan(t, b, starts, d_start, ::cuda::maximum<std::uint32_t>{}, int(ne),
                                             r.st);
     });
-    const auto work = thrust::make_transform_iterator(thrust::counting_iterator<std::uint32_t>(0),
-                                                      cuda::EarlierInCell{d_start});
-    cub_run(r.ws, "pairs", [&](void* t, std::size_t& b) {
-      return cub::DeviceReduce::Reduce(t, b, work, &r.d_counters->cell_work, int(ne), cuda::AddCellWork{},
-                                       cuda::CellWork{0, 0}, r.st);
-    });
-    r.read_counters();
-    e.tests = r.h_counters->cell_work.tests;
-    e.largest = r.h_counters->cell_work.largest;
+    add_cell_work(r,
+                  thrust::make_transform_iterator(thrust::counting_iterator<std::uint32_t>(0),
+                                                  cuda::EarlierInCell{d_start}),
+                  ne, e);
   }
   check_pair_estimate(e, r.job.pair_limits);
   r.pair_progress = follows_progress(e, r.job.pair_limits);

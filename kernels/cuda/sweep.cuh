@@ -111,18 +111,11 @@ template <class Real, class Key, class Narrow, class Bits>
 void sweep_estimate_stage(RunState<Real, Key, Narrow>& r, const Sphere<Real>* sorted, const Bits* keys,
                           int axis) {
   PairEstimate e{0, r.n64, r.n64, 0, kDevicePairTestsPerSecond};
-  if (r.n > 1) {
-    const auto work =
-        thrust::make_transform_iterator(thrust::counting_iterator<std::uint32_t>(0),
-                                        cuda::SweepOverlaps<Real, Bits>{sorted, keys, r.n, axis});
-    cub_run(r.ws, "pairs", [&](void* t, std::size_t& b) {
-      return cub::DeviceReduce::Reduce(t, b, work, &r.d_counters->cell_work, int(r.n), cuda::AddCellWork{},
-                                       cuda::CellWork{0, 0}, r.st);
-    });
-    r.read_counters();
-    e.tests = r.h_counters->cell_work.tests;
-    e.largest = r.h_counters->cell_work.largest;
-  }
+  if (r.n > 1)
+    add_cell_work(r,
+                  thrust::make_transform_iterator(thrust::counting_iterator<std::uint32_t>(0),
+                                                  cuda::SweepOverlaps<Real, Bits>{sorted, keys, r.n, axis}),
+                  r.n, e);
   check_pair_estimate(e, r.job.pair_limits);
   r.pair_progress = follows_progress(e, r.job.pair_limits);
 }
