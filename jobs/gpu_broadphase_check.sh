@@ -22,9 +22,9 @@
 #            smallest edges (CONTACTGRID_LEVELS_CELLS=smallest): the unit cases of BroadPhase*, Levels*,
 #            AutoBroadPhase*, PairEstimate* with CUDA (none may skip); bimodal 1:10 and log-uniform
 #            1:1000 at 2^20, CUDA levels (both cell rules) and grid = the CPU byte for byte, and mpirun
-#            np 2 CUDA levels = the CPU; then the 2^24 rows, fp32, before (smallest) and after (tuned):
-#            uniform, bimodal 1:10 and 1:100 (grid where it runs in seconds, levels, auto), log-uniform
-#            1:1000 and 64 intruders (§24's other targets), with every broad phase's stage times
+#            np 2 CUDA levels = the CPU; then the 2^24 rows, fp32, with every run's stage times: before
+#            (smallest cells) uniform, bimodal 1:10 and 1:100 with levels; after (tuned) those and
+#            log-uniform 1:1000 and 64 intruders (§24's other targets) with levels, auto and auto's pick
 #   BIN=dir OUT=results-dir jobs/gpu_broadphase_check.sh check|compare|table|small|steps|cells   (default: check)
 # BIN holds the CUDA build's contactgrid, contactgrid_tests and (steps) contactgrid_mpi_tests. Everything lands in
 # $OUT/broadphase_<mode>.tgz (logs, compare table, the tables as text and CSV); the summary is printed.
@@ -247,11 +247,11 @@ PY
         >"$R/cells_$1.txt" 2>&1 || fail "bench-broad $1 (cells_$1.txt)"
       echo "== $1 (levels cells: $2)"; cat "$R/cells_$1.txt"
     }
-    bench before smallest uniform,bimodal10,bimodal100 levels,auto
-    bench after tuned uniform,bimodal10,loguniform1000 grid,levels,auto
-    bench after_wide tuned uniform,bimodal100,intruders64 levels,auto
+    bench before smallest uniform,bimodal10,bimodal100 levels
+    bench after tuned uniform,bimodal10,bimodal100,loguniform1000,intruders64 levels,auto
     echo "targets (time per contact against uniform, /unif/c): bimodal 1:10 and 1:100 <= 1.5, log-uniform <= 1.5,"
-    echo "intruders64 <= 2 (grid is skipped on bimodal100 and intruders64 at 2^24: 6.5 s and > 18 s a call in §22/§24)"
+    echo "intruders64 <= 2; the grid runs where auto picks it (bimodal 1:100 and intruders64 take 6.5 s and"
+    echo "more than 18 s a call with the grid at 2^24: §22, §24)"
     ;;
   *)
     echo "usage: BIN=dir OUT=dir $0 check|compare|table|small|steps|cells" >&2

@@ -176,14 +176,20 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
       // auto's pick: the engine's rule on the bounds it computes (the device's equal the host's)
       const BroadPhase pick =
           resolved_broad_phase(BroadPhase::automatic, compute_bounds(bodies), o.precision, o.backend);
+      // the broad phases of o.phases, and auto's pick where auto is among them (auto/best compares it)
+      const auto listed = [&](BroadPhase bp) {
+        return o.phases.empty() || std::find(o.phases.begin(), o.phases.end(), bp) != o.phases.end();
+      };
+      const auto timed = [&](BroadPhase bp) {
+        return listed(bp) || (bp == pick && listed(BroadPhase::automatic));
+      };
       std::map<BroadPhase, Timing> t;
       std::map<BroadPhase, double> skipped;  // predicted seconds a call of a skipped run
       std::optional<std::uint64_t> contacts;
       for (BroadPhase bp : kPhases) {
         const bool is_auto = bp == BroadPhase::automatic;
         const BroadPhase as = is_auto ? pick : bp;
-        if (is_auto && !o.phases.empty() &&
-            std::find(o.phases.begin(), o.phases.end(), bp) == o.phases.end()) {
+        if (!timed(bp)) {
           continue;
         } else if (is_auto && t.count(pick)) {  // the same code, timed in this row
           t[bp] = t[pick];
@@ -191,8 +197,6 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
           skipped[bp] = skipped[pick];
           continue;
         } else {
-          if (!o.phases.empty() && std::find(o.phases.begin(), o.phases.end(), bp) == o.phases.end())
-            continue;
           if (!is_auto && (over_budget[bp] || (bp == BroadPhase::brute && lg > o.brute_hi) ||
                            (bp == BroadPhase::sweep && lg > o.sweep_hi)))
             continue;

@@ -34,7 +34,7 @@ namespace cg {
 
 struct BroadBenchOptions {
   std::vector<std::string> families;  // default: all
-  std::vector<BroadPhase> phases;     // the broad phases timed (auto among them; default: all)
+  std::vector<BroadPhase> phases;     // the broad phases timed (default: all); with auto, its pick too
   int lo = 12, hi = 16;               // N = 2^lo … 2^hi, step `step`
   int step = 2;
   Backend backend = Backend::cpu;
