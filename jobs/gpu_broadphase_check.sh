@@ -21,8 +21,8 @@
 #   cells    (under 3 minutes) the levels' cells sized by the grid's cost model against the former
 #            smallest edges (CONTACTGRID_LEVELS_CELLS=smallest): the unit cases of BroadPhase*, Levels*,
 #            AutoBroadPhase*, PairEstimate* with CUDA (none may skip); bimodal 1:10 and log-uniform
-#            1:1000 at 2^20, CUDA levels (both cell rules) and grid = the CPU byte for byte, and mpirun
-#            np 2 CUDA levels = the CPU; then the 2^24 rows, fp32, with every run's stage times: before
+#            1:1000 at 2^20, the CPU's levels, CUDA levels (both cell rules), CUDA grid and mpirun np 2
+#            CUDA levels = the CPU's grid byte for byte; then the 2^24 rows, fp32, with every run's stage times: before
 #            (smallest cells) uniform, bimodal 1:10 and 1:100 with levels; after (tuned) those and
 #            log-uniform 1:1000 and 64 intruders (§24's other targets) with levels, auto and auto's pick
 #   BIN=dir OUT=results-dir jobs/gpu_broadphase_check.sh check|compare|table|small|steps|cells   (default: check)
@@ -226,16 +226,17 @@ PY
       # shellcheck disable=SC2086
       "$CG" generate "$scene" -n $((1 << 20)) --seed 34 $args -q >>"$R/cells_identity.log" 2>&1 ||
         { fail "generate $name 2^20"; continue; }
-      "$CG" detect "$scene" -o "$ref" --backend cpu --precision fp32 --broad-phase levels -q \
+      "$CG" detect "$scene" -o "$ref" --backend cpu --precision fp32 --broad-phase grid -q \
         >>"$R/cells_identity.log" 2>&1 || { fail "detect cpu $name"; continue; }
-      for run in "tuned levels 1" "smallest levels 1" "tuned grid 1" "tuned levels 2"; do
-        read -r cells bp np <<<"$run"; got="$W/$name.20.$cells.$bp.np$np.h5"
+      for run in "tuned cpu levels 1" "tuned cuda levels 1" "smallest cuda levels 1" "tuned cuda grid 1" \
+        "tuned cuda levels 2"; do
+        read -r cells be bp np <<<"$run"; got="$W/$name.20.$cells.$be.$bp.np$np.h5"
         if CONTACTGRID_LEVELS_CELLS=$cells timeout 60 mpirun --bind-to none -np "$np" "$CG" detect "$scene" \
-          -o "$got" --backend cuda --precision fp32 --broad-phase "$bp" -q >>"$R/cells_identity.log" 2>&1 &&
+          -o "$got" --backend "$be" --precision fp32 --broad-phase "$bp" -q >>"$R/cells_identity.log" 2>&1 &&
           "$CG" compare "$ref" "$got" >>"$R/cells_identity.log" 2>&1; then
-          echo "$name 2^20 cuda $bp cells=$cells np $np: IDENTICAL to the CPU" | tee -a "$R/compare.txt"
+          echo "$name 2^20 $be $bp cells=$cells np $np: IDENTICAL to the CPU grid" | tee -a "$R/compare.txt"
         else
-          fail "$name 2^20 cuda $bp cells=$cells np $np differs from the CPU (cells_identity.log)"
+          fail "$name 2^20 $be $bp cells=$cells np $np differs from the CPU grid (cells_identity.log)"
         fi
         rm -f "$got"
       done
