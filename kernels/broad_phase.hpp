@@ -22,10 +22,11 @@ enum class BroadPhase { automatic, grid, levels, sweep, brute };
 const char* to_string(BroadPhase b);
 
 // The levels of one call: level l holds the bodies of broad-phase radius in (top[l − 1], top[l]]
-// (top of the last: +inf), its grid's cell edge the smallest valid one for top[l] (the last level: the
-// frame's edge). Consecutive tops differ by kLevelRatio (more where the radii span more than
-// kLevelRatio^(kMaxLevels − 1)). Every level's grid covers the bounds and shares half_bits; keys are
-// level << (half_bits + 3) | cell key, key_bits in all.
+// (top of the last: +inf), its grid's cell edge the one the grid's cost model picks for the level's
+// radii (tuned_cell_size, from the smallest valid edge for top[l] to 3 times it, at most the next
+// level's smallest valid edge; the last level: the frame's edge). Consecutive tops differ by kLevelRatio
+// (more where the radii span more than kLevelRatio^(kMaxLevels − 1)). Every level's grid covers the bounds
+// and shares half_bits; keys are level << (half_bits + 3) | cell key, key_bits in all.
 struct LevelsPlan {
   int count = 1;
   double top[kMaxLevels] = {};
