@@ -78,6 +78,10 @@ struct Tuning {
   // narrow_compact); default: one pass, a stable compaction with decoupled look-back whose output
   // writes the rows (narrow_select). The same rows either way.
   bool narrow_two_pass = false;
+  // CONTACTGRID_STEP_ORDER=file: the resident steps' kept candidates stay in (a, b) order of the
+  // input indices (cuda/skin.cuh); default: in the bodies' cell order with the cell-ordered spheres
+  // (cuda/cell_order.cuh), the rows sorted by (a, b) when they come down. The same rows either way.
+  bool step_order_file = false;
 };
 
 // `on` / `off` when the variable equals one of the two spellings, else automatic.
@@ -159,6 +163,8 @@ inline Tuning read_tuning() {
     if (v == "cells") t.candidates = CandidateFilter::cells;
     if (v == "bounding") t.candidates = CandidateFilter::bounding_spheres;
   }
+  if (const char* o = std::getenv("CONTACTGRID_STEP_ORDER"))
+    t.step_order_file = std::string_view(o) == "file";
   return t;
 }
 
