@@ -5,7 +5,7 @@
 #                                                    fp32, 6 contacts per body, drift 1 % of r_max per
 #                                                    step, skin auto: the kept candidates in cell order
 #                                                    (default) and in (a, b) order of the input indices
-#                                                    (CONTACTGRID_STEP_ORDER=file, the former path)
+#                                                    (CONTACTGRID_STEP_ORDER=file)
 #   BIN=dir OUT=dir jobs/gpu_steploop_check.sh two   a 2-GPU host (~4 min): the MPI tests at np 2, then
 #                                                    2^26 spheres and 2^24 ellipsoids at np 1 and np 2
 #                                                    (one rank per GPU): per-step migration, halo and
@@ -141,7 +141,7 @@ case $MODE in
     "$CG" detect "$W/s24.final.h5" -o "$W/s24.plain.h5" --backend "$BACKEND" --precision fp32 -q
     check "s24 auto (cell order): last step = plain detect of the final scene" same "$W/s24.auto.h5" "$W/s24.plain.h5"
     rm -f "$W/s24.auto.h5" "$W/s24.plain.h5" "$W/s24.final.h5"
-    # the former path: the kept candidates in (a, b) order of the input indices
+    # the (a, b) path: the kept candidates in (a, b) order of the input indices
     CONTACTGRID_STEP_ORDER=file check "bench s24 auto, file order" steps s24 1 auto 40 s24.auto_file
     check "s24: cell order = file order (contacts on the last step)" \
       bash -c "grep -h 'contacts on the last step' '$OUT/s24.auto.log' '$OUT/s24.auto_file.log' | sed -E 's/.*, ([0-9]+) contacts on the last step.*/\1/' | uniq | wc -l | grep -qx 1"
