@@ -420,7 +420,9 @@ TEST(EngineSkinCuda, CellOrderResidentStepsEqualFreshDetection) {
     const std::uint64_t builds = cell.stats().candidate_builds;
     ASSERT_EQ(cell.detect_resident(), want.size()) << at;
     ASSERT_EQ(compare_contacts(cell.resident_contacts(), want), "identical") << at << " (cell order)";
-    if (switched) EXPECT_EQ(cell.stats().candidate_builds, builds + 1) << at << ": after the file order";
+    if (switched) {
+      EXPECT_EQ(cell.stats().candidate_builds, builds + 1) << at << ": after the file order";
+    }
     switched = false;
     {
       const Env order("CONTACTGRID_STEP_ORDER", "file");
