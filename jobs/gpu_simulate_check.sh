@@ -18,7 +18,8 @@
 #             CONTACTGRID_DEM_STORE=all CONTACTGRID_DEM_BLOCKS=1: CUB's segmented sort of the rows by
 #             B, every contact term stored in double every step, the force kernels' registers
 #             uncapped), and the two runs' frames and energies must be the same bytes; stage times
-#             also with the registers capped for 1 and 3 blocks an SM (the default: 2). Ellipsoids (2^22) and the
+#             also with the registers uncapped (1 block an SM) and capped for 3 (2^24: FULL=1; the
+#             default: 2). Ellipsoids (2^22) and the
 #             contact stage's sums as A (CONTACTGRID_DEM_TERMS=sums) only with FULL=1.
 #   mpi2      (a host with 2 GPUs, its own call) simulate under mpirun -np 2 --backend cuda writes the
 #             frames, contacts and energies of -np 1 and of the CPU backend, bit for bit
@@ -125,9 +126,10 @@ PYEOF
   printf '| %-22s | %9s | %6s | %8s | %10s | %9s |\n' run bodies steps steps/s body-st/s contacts/b >"$OUT/table.md"
   echo '|---|---|---|---|---|---|' >>"$OUT/table.md"
   : >"$OUT/stages.txt"
-  if scene spheres_2e20 pour $((1 << 20)); then
-    bench spheres_2e20 $((1 << 20)) 300 after
-    bench spheres_2e20 $((1 << 20)) 300 before "${BEFORE[@]}"
+  local n20=${N20:-$((1 << 20))} n24=${N24:-$((1 << 24))}  # (smaller: a dry run of this script)
+  if scene spheres_2e20 pour "$n20"; then
+    bench spheres_2e20 "$n20" 300 after
+    bench spheres_2e20 "$n20" 300 before "${BEFORE[@]}"
     same_frames spheres_2e20
     stages spheres_2e20 120 after
     stages spheres_2e20 120 before "${BEFORE[@]}"
@@ -150,14 +152,14 @@ PYEOF
       failed+=("perf: generate ellipsoids_2e22")
     fi
   fi
-  if scene spheres_2e24 pour $((1 << 24)); then
-    bench spheres_2e24 $((1 << 24)) 60 after
-    bench spheres_2e24 $((1 << 24)) 60 before "${BEFORE[@]}"
+  if scene spheres_2e24 pour "$n24"; then
+    bench spheres_2e24 "$n24" 60 after
+    bench spheres_2e24 "$n24" 60 before "${BEFORE[@]}"
     same_frames spheres_2e24
     stages spheres_2e24 30 after
     stages spheres_2e24 30 before "${BEFORE[@]}"
     stages spheres_2e24 30 after-blocks1 CONTACTGRID_DEM_BLOCKS=1
-    stages spheres_2e24 30 after-blocks3 CONTACTGRID_DEM_BLOCKS=3
+    [ "${FULL:-0}" = 1 ] && stages spheres_2e24 30 after-blocks3 CONTACTGRID_DEM_BLOCKS=3
     [ "${FULL:-0}" = 1 ] && stages spheres_2e24 30 a-sums CONTACTGRID_DEM_TERMS=sums
     rm -f "$W/spheres_2e24.h5"
   fi
