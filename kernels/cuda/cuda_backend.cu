@@ -211,6 +211,7 @@ class CudaBackend {
     }
     if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
     narrow_stage(r);
+    narrow_fp64_rows(r, cuda::pinned_ring(m_device));  // fp32's 16-byte upload: the rows it cannot make
     history_stage(r, m_thrust);
     const DownloadHostTimes host =
         download_stage(r, m_h_staging, cuda::pinned_ring(m_device), out, !m_downloaded);
