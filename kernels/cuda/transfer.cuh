@@ -298,11 +298,12 @@ bool direct_download(RunState<Real, Key, Narrow>& r, Contacts<Narrow>& out, Down
 }
 
 // download: the contact rows described in DEVICE memory (job.device_out), straight into `out`'s
-// page-locked pool blocks (direct_download; not with CONTACTGRID_CUDA_HOST_PATH=old), or copied into
-// `out` by Tuning::download (download_transfer): through one whole pinned staging buffer and a parallel host
-// copy (single; also where the driver refuses to register), streamed through the pinned ring (the
-// host copy out of one slot overlaps the transfer of the next), or straight into the result vectors
-// page-locked in place (registered: a parallel first touch, then cudaHostRegister).
+// page-locked pool blocks (direct_download: the automatic download, not with
+// CONTACTGRID_CUDA_HOST_PATH=old), or copied into `out` by Tuning::download (download_transfer):
+// through one whole pinned staging buffer and a parallel host copy (single; also where the driver
+// refuses to register), streamed through the pinned ring (the host copy out of one slot overlaps the
+// transfer of the next), or straight into the result vectors page-locked in place (registered: a
+// parallel first touch, then cudaHostRegister).
 template <class Real, class Key, class Narrow>
 DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuffer& h_staging,
                                  cuda::PinnedRing& ring, Contacts<Narrow>& out, bool first_download) {
@@ -323,7 +324,9 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
     return ht;
   }
   const std::uint32_t np = r.n_rows;  // (a rejecting narrow has read it for its tight layout)
-  if (np > 0 && !host_path_old() && direct_download(r, out, ht)) return ht;
+  if (np > 0 && r.tuning.download == HostTransfer::automatic && !host_path_old() &&
+      direct_download(r, out, ht))
+    return ht;
   const std::size_t at = r.out_bytes;
   const std::byte* o = r.ws.out.data();
   const HostTransfer how = download_transfer(r.tuning, h_staging.bytes(), at, first_download);
