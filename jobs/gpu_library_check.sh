@@ -3,7 +3,8 @@
 # PART=hostpath — issue #37's host path on the GPU (about 1.5 minutes on an H100):
 #   unit       contactgrid_tests: HostPath* (the 16-byte upload and the direct download against the old
 #              path, CONTACTGRID_CUDA_HOST_PATH=old, and the CPU, through 4096- and 5000-byte slots),
-#              UploadPack*, HostPoolLocks*, and every CUDA case (*Cuda*, *cuda*, EngineTest*, Pieces*),
+#              UploadPack*, HostPoolLocks*, and the CUDA cases of the host-array calls (CudaBackend*,
+#              EngineTest*, EngineShapesTest*, EngineSkin*, EngineHistory*, Pieces*, BroadPhaseTest*),
 #              which run the new path by default; HostPathCuda must run, not skip
 #   bench      contactgrid_cuda_bench 20 24 4 10 auto spheres: host arrays -> host contacts, fp32, basic
 #              fields, the packed path and the old paths (before / after in one run) beside the bytes
@@ -51,7 +52,7 @@ cores="taskset -c 0,1"
 
 if [ "$PART" = hostpath ] || [ "$PART" = all ]; then
 log "== host path: unit cases (CUDA ones must run)"
-"$BIN/contactgrid_tests" --gtest_filter='HostPath*:UploadPack*:HostPoolLocks*:*Cuda*:*cuda*:EngineTest*:Pieces*' \
+"$BIN/contactgrid_tests" --gtest_filter='HostPath*:UploadPack*:HostPoolLocks*:CudaBackend*:CudaTuning*:EngineTest*:EngineShapesTest*:EngineSkin*:EngineHistory*:PiecesTest*:PiecesCuda*:BroadPhaseTest*:LevelsCpuCuda*' \
   >"$log_dir/hostpath_unit.log" 2>&1 || failed+=(hostpath_unit)
 grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]' "$log_dir/hostpath_unit.log" | head -20
 grep -q 'OK \] HostPathCuda.PackedUploadAndDirectDownloadGiveTheOldPathsBytes' "$log_dir/hostpath_unit.log" ||
