@@ -388,11 +388,13 @@ std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs
   struct Path {
     const char *name, *up, *down;
     bool old;
+    const char* slot;  // CONTACTGRID_CUDA_TRANSFER_SLOT (null: the default, 4 MiB)
   };
-  const Path paths[] = {{"packed", nullptr, nullptr, false},
-                        {"old streamed", "streamed", "streamed", true},
-                        {"old registered", "registered", "registered", true},
-                        {"old pageable", "pageable", "staged", true}};
+  const Path paths[] = {{"packed", nullptr, nullptr, false, nullptr},
+                        {"packed 1 MiB slots", nullptr, nullptr, false, "1048576"},
+                        {"old streamed", "streamed", "streamed", true, nullptr},
+                        {"old registered", "registered", "registered", true, nullptr},
+                        {"old pageable", "pageable", "staged", true, nullptr}};
   for (const Path& path : paths) {
     const char* up = path.name;
     auto set = [](const char* name, const char* value) {
@@ -404,6 +406,7 @@ std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs
     set("CONTACTGRID_CUDA_UPLOAD", path.up);
     set("CONTACTGRID_CUDA_DOWNLOAD", path.down);
     set("CONTACTGRID_CUDA_HOST_PATH", path.old ? "old" : nullptr);
+    set("CONTACTGRID_CUDA_TRANSFER_SLOT", path.slot);
     cg::Engine<float> engine(
         {.backend = cg::Backend::cuda, .cell_size = g_cell_size, .cell_choice = g_cell_choice});
     std::vector<double> total, upload_ms, download_ms;
@@ -436,6 +439,7 @@ std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs
   ::unsetenv("CONTACTGRID_CUDA_UPLOAD");
   ::unsetenv("CONTACTGRID_CUDA_DOWNLOAD");
   ::unsetenv("CONTACTGRID_CUDA_HOST_PATH");
+  ::unsetenv("CONTACTGRID_CUDA_TRANSFER_SLOT");
   return rows;
 }
 
