@@ -100,6 +100,27 @@ class HostPool {
     return m_held;
   }
 
+  // Page-locked blocks (the CUDA backend's downloads straight into the result vectors,
+  // cuda/transfer.cuh): lock_block(p) page-locks the pooled block in use at p through `lock` on its
+  // first call and keeps it locked while the pool holds it, free or in use; `unlock` runs before the
+  // pool frees it. Returns the block's size, 0 when p is no pooled block in use or `lock` refuses.
+  using LockFn = bool (*)(void*, std::size_t);
+  using UnlockFn = void (*)(void*);
+  std::size_t lock_block(void* p, LockFn lock, UnlockFn unlock) {
+    std::lock_guard<std::mutex> guard(m_mutex);
+    auto at = m_size.find(p);
+    if (at == m_size.end()) return 0;
+    if (m_locked.count(p)) return at->second;
+    if (!lock(p, at->second)) return 0;
+    m_locked.emplace(p, unlock);
+    return at->second;
+  }
+  // Whether the block in use at p is page-locked (lock_block).
+  bool block_locked(void* p) {
+    std::lock_guard<std::mutex> guard(m_mutex);
+    return m_locked.count(p) != 0;
+  }
+
  private:
   HostPool() {
     const char* v = std::getenv("CONTACTGRID_HOST_POOL_MIB");
@@ -111,6 +132,10 @@ class HostPool {
     while (m_held > cap && !m_free.empty()) {
       auto last = std::prev(m_free.end());
       m_held -= last->first;
+      if (auto l = m_locked.find(last->second); l != m_locked.end()) {
+        l->second(l->first);
+        m_locked.erase(l);
+      }
       ::operator delete(last->second, std::align_val_t(k_block));
       m_free.erase(last);
     }
@@ -119,6 +144,7 @@ class HostPool {
   std::mutex m_mutex;
   std::multimap<std::size_t, void*> m_free;  // size → block
   std::map<void*, std::size_t> m_size;       // blocks in use → their pooled size
+  std::map<void*, UnlockFn> m_locked;        // page-locked blocks, free or in use → their unlock
   std::size_t m_held = 0, m_cap = 0;
 };
 }  // namespace detail

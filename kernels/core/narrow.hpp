@@ -187,6 +187,10 @@ CG_HD NarrowDecision<Real> narrow_decide_floats(const NarrowBodies<Real>& w, con
   const Vec3<float> dc = sa.centre() - sb.centre();
   if (fp32_resolves(sa, sb, cg_sqrt(dot(dc, dc)))) {
     d.row = sphere_contact_row(sa, sb, w.origin, full);
+  } else if (w.position == nullptr) {
+    // no world doubles (the CUDA host path's 16-byte upload): counted, the row left empty; the call
+    // uploads them and runs its narrow stage again (cuda/transfer.cuh: narrow_fp64_rows)
+    ++flags.fp64_rows;
   } else {
     d.row = row_cast<float>(world_sphere_row(world_sphere(w, a), world_sphere(w, b), full), full);
     ++flags.fp64_rows;

@@ -221,10 +221,12 @@ class CudaBackend {
       }
     }
     if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
-    if (cell_order)
-      narrow_cell_stage(r);
-    else
+    if (cell_order) {
+      narrow_cell_stage(r);  // (a skin: never the 16-byte upload of narrow_fp64_rows)
+    } else {
       narrow_stage(r);
+      narrow_fp64_rows(r, cuda::pinned_ring(m_device));  // fp32's 16-byte upload: the rows it cannot make
+    }
     m_ws.rows_cell_order = cell_order;  // download_contacts sorts such rows by (a, b)
     history_stage(r, m_thrust);
     const DownloadHostTimes host =

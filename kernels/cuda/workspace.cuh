@@ -7,7 +7,10 @@
 // Buffers and who uses them (n bodies, ne entries, nb = blocks of n, neb = blocks of ne, np pairs):
 //   pos, rad               upload → narrow     host-array path: the input copied to the device; the
 //                                              narrow stage reads the world doubles by body index
-//                                              (fp64, mixed, fp32's fp64 rows): never aliased
+//                                              (fp64, mixed, fp32's fp64 rows): never aliased.
+//                                              fp32 spheres: pos holds the host-packed 16-byte
+//                                              spheres (upload → pack), then, where rows need
+//                                              them, the doubles (transfer.cuh: narrow_fp64_rows)
 //   report                 upload → pack       host-array path: the report mask
 //   spheres                pack → narrow       Real spheres in input order (narrow: fp32 only)
 //   cell_spheres, perm,    pack → pairs        spheres, input index and control byte in cell order
