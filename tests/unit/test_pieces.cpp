@@ -287,6 +287,10 @@ Measured run_measured(const std::string& args, const std::string& log) {
 // of their bytes, where the run without a limit holds them all (the test's own check that it can
 // fail). fp64, 100 000 spheres at about 30 contacts a body (about 290 MB of rows).
 TEST_F(PiecesCli, HostMemoryStaysBoundedWhileTheFileIsWritten) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "AddressSanitizer's allocator (quarantine, shadow memory, its own caches) decides the "
+                  "peak RSS here: the bound is measured in the regular build";
+#endif
   const std::size_t n = 100000;
   std::mt19937_64 rng(31);
   std::uniform_real_distribution<double> u(0, 46.4);
