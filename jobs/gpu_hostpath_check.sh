@@ -96,7 +96,7 @@ fi
 
 if [ "$MODE" = laptop ] || [ "$MODE" = all ]; then
 log "== unit: CPU = CUDA and the engine's cases (CUDA cases must run, not skip)"
-"$BIN/contactgrid_tests" --gtest_filter='*Cuda*:*cuda*:EngineTest*:HostStages*:ScratchPool*:RadixSort*:BroadPhase*' \
+"$BIN/contactgrid_tests" --gtest_filter='*Cuda*:*cuda*:EngineTest*:HostStages*:HostCellList*:ScratchPool*:RadixSort*:BroadPhase*' \
   >"$dir/unit.log" 2>&1 || failed+=(unit)
 grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]' "$dir/unit.log" | head -20
 grep -q 'OK \] EngineTest/cuda_fp64.CrowdedCellsFewContacts' "$dir/unit.log" || failed+=(unit_cuda_case_missing)
