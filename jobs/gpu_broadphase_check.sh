@@ -18,7 +18,14 @@
 #            for byte; then the uniform and bimodal rows at 2^22 and 2^24 (grid, levels, auto: auto's
 #            one-level pick on the device, the levels' fill pass), and the per-kernel durations (ncu)
 #            of one levels detection of bimodal 1:10 and of uniform at 2^22 (where the levels' time goes)
-#   BIN=dir OUT=results-dir jobs/gpu_broadphase_check.sh check|compare|table|small|steps   (default: check)
+#   cells    (under 3 minutes) the levels' cells sized by the grid's cost model against the former
+#            smallest edges (CONTACTGRID_LEVELS_CELLS=smallest): the unit cases of BroadPhase*, Levels*,
+#            AutoBroadPhase*, PairEstimate* with CUDA (none may skip); bimodal 1:10 and log-uniform
+#            1:1000 at 2^20, the CPU's levels, CUDA levels (both cell rules), CUDA grid and mpirun np 2
+#            CUDA levels = the CPU's grid byte for byte; then the 2^24 rows, fp32, with every run's stage times: before
+#            (smallest cells) uniform, bimodal 1:10 and 1:100 with levels; after (tuned) those and
+#            log-uniform 1:1000 and 64 intruders (§24's other targets) with levels, auto and auto's pick
+#   BIN=dir OUT=results-dir jobs/gpu_broadphase_check.sh check|compare|table|small|steps|cells   (default: check)
 # BIN holds the CUDA build's contactgrid, contactgrid_tests and (steps) contactgrid_mpi_tests. Everything lands in
 # $OUT/broadphase_<mode>.tgz (logs, compare table, the tables as text and CSV); the summary is printed.
 # Exits non-zero naming every failed check (the last lines of the output).
@@ -204,8 +211,51 @@ print(f"total {sum(tot.values())/1e6:.3f} ms")
 PY
     done
     ;;
+  cells)
+    log "0. unit tests with their CUDA cases: BroadPhase*, Levels*, AutoBroadPhase*, PairEstimate*"
+    timeout 150 "$BIN/contactgrid_tests" --gtest_color=no \
+      --gtest_filter='BroadPhase*:Levels*:AutoBroadPhase*:PairEstimate*' >"$R/tests_cells.log" 2>&1 ||
+      fail "unit tests (tests_cells.log)"
+    grep -E '^\[  (PASSED|FAILED|SKIPPED) |Failure' "$R/tests_cells.log" | head -20
+    grep -E '^\[  SKIPPED \] (BroadPhaseTest/cuda|LevelsCpuCuda|PairEstimateTest/cuda)' "$R/tests_cells.log" &&
+      fail "CUDA cases skipped (no GPU seen?)"
+    log "1. byte identity at 2^20: CUDA levels (tuned and smallest cells), grid, np 2 = the CPU"
+    for fam in "bimodal10|--kind bimodal --rhigh 1 --ratio 10 --large-fraction 0.1" \
+      "loguniform1000|--kind polydisperse --rhigh 1 --ratio 1000"; do
+      name=${fam%%|*}; args=${fam#*|}; scene="$W/$name.20.h5"; ref="$W/$name.20.cpu.h5"
+      # shellcheck disable=SC2086
+      "$CG" generate "$scene" -n $((1 << 20)) --seed 34 $args -q >>"$R/cells_identity.log" 2>&1 ||
+        { fail "generate $name 2^20"; continue; }
+      "$CG" detect "$scene" -o "$ref" --backend cpu --precision fp32 --broad-phase grid -q \
+        >>"$R/cells_identity.log" 2>&1 || { fail "detect cpu $name"; continue; }
+      for run in "tuned cpu levels 1" "tuned cuda levels 1" "smallest cuda levels 1" "tuned cuda grid 1" \
+        "tuned cuda levels 2"; do
+        read -r cells be bp np <<<"$run"; got="$W/$name.20.$cells.$be.$bp.np$np.h5"
+        if CONTACTGRID_LEVELS_CELLS=$cells timeout 60 mpirun --bind-to none -np "$np" "$CG" detect "$scene" \
+          -o "$got" --backend "$be" --precision fp32 --broad-phase "$bp" -q >>"$R/cells_identity.log" 2>&1 &&
+          "$CG" compare "$ref" "$got" >>"$R/cells_identity.log" 2>&1; then
+          echo "$name 2^20 $be $bp cells=$cells np $np: IDENTICAL to the CPU grid" | tee -a "$R/compare.txt"
+        else
+          fail "$name 2^20 $be $bp cells=$cells np $np differs from the CPU grid (cells_identity.log)"
+        fi
+        rm -f "$got"
+      done
+    done
+    log "2. the 2^24 rows, fp32: before (CONTACTGRID_LEVELS_CELLS=smallest) and after (tuned)"
+    bench() {  # label cells families phases
+      CONTACTGRID_LEVELS_CELLS=$2 timeout 100 "$CG" bench-broad --backend cuda --precision fp32 --families "$3" \
+        --broad-phases "$4" --lo 24 --hi 24 --repetitions 3 --stage-times --csv "$R/cells_$1.csv" \
+        >"$R/cells_$1.txt" 2>&1 || fail "bench-broad $1 (cells_$1.txt)"
+      echo "== $1 (levels cells: $2)"; cat "$R/cells_$1.txt"
+    }
+    bench before smallest uniform,bimodal10,bimodal100 levels
+    bench after tuned uniform,bimodal10,bimodal100,loguniform1000,intruders64 levels,auto
+    echo "targets (time per contact against uniform, /unif/c): bimodal 1:10 and 1:100 <= 1.5, log-uniform <= 1.5,"
+    echo "intruders64 <= 2; the grid runs where auto picks it (bimodal 1:100 and intruders64 take 6.5 s and"
+    echo "more than 18 s a call with the grid at 2^24: §22, §24)"
+    ;;
   *)
-    echo "usage: BIN=dir OUT=dir $0 check|compare|table|small|steps" >&2
+    echo "usage: BIN=dir OUT=dir $0 check|compare|table|small|steps|cells" >&2
     exit 2
     ;;
 esac

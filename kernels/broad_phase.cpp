@@ -3,7 +3,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
+#include <string_view>
 
 #include "backend.hpp"  // bits_for
 #include "errors.hpp"
@@ -27,20 +29,51 @@ const char* to_string(BroadPhase b) {
 }
 
 namespace {
-// The plan of levels with these tops (the last +inf), or false when a level's grid cannot be keyed.
+// How a level below the top one sizes its cells (CONTACTGRID_LEVELS_CELLS=smallest: the smallest valid
+// edge for the level's largest radius, the plan's former rule, for before/after measurements).
+bool tuned_level_cells() {
+  static const bool tuned = [] {
+    const char* v = std::getenv("CONTACTGRID_LEVELS_CELLS");
+    return v == nullptr || std::string_view(v) != "smallest";
+  }();
+  return tuned;
+}
+
+// The cell edge of a level below the top one (radii in (bottom, top], the next level's top `next`, +inf
+// for the top level): the grid's cost model (tuned_cell_size: entries against pair-walk steps) for the
+// level, at most the next level's smallest valid edge (the frame's for the top level), so edges never
+// shrink up the levels. The model takes every body of the scene into the level, each of the level's
+// smallest radius: the finest level of a mixed scene holds most bodies (a bimodal mix's grains, all of
+// one radius), whose boxes then span fewer cells of a wider edge, as the one-level grid's tuned cells
+// do for a scene of one size.
+double level_cell_size(const Bounds& b, const Frame& frame, Precision p, double bottom, double top,
+                       double next) {
+  Bounds level = b;
+  level.r_max = top;
+  const double smallest = std::min(frame.cell_size, min_cell_size(level, p));
+  if (!tuned_level_cells() || !(bottom > 0)) return smallest;
+  Bounds above = b;
+  above.r_max = next;
+  const double cap = std::isinf(next) ? frame.cell_size : std::min(frame.cell_size, min_cell_size(above, p));
+  const double n = double(b.count);
+  level.r_sum[0] = n * bottom;
+  level.r_sum[1] = n * bottom * bottom;
+  level.r_sum[2] = n * bottom * bottom * bottom;
+  return std::max(smallest, std::min(cap, tuned_cell_size(level, p)));
+}
+
+// The plan of levels with these tops (the last +inf), or false when a level's grid cannot be keyed;
+// `bottom`: the smallest radius of the first level.
 bool try_levels(const Bounds& b, const Frame& frame, Precision p, const double* tops, int count,
-                LevelsPlan& out) {
+                double bottom, LevelsPlan& out) {
   out = LevelsPlan{};
   out.count = count;
   int half_bits = 0;
   for (int l = 0; l < count; ++l) {
     out.top[l] = tops[l];
     Frame f = frame;
-    if (l + 1 < count) {  // the smallest valid edge for the level's largest radius (at most the frame's)
-      Bounds level = b;
-      level.r_max = tops[l];
-      f.cell_size = std::min(frame.cell_size, min_cell_size(level, p));
-    }
+    if (l + 1 < count)
+      f.cell_size = level_cell_size(b, frame, p, l == 0 ? bottom : tops[l - 1], tops[l], tops[l + 1]);
     try {
       out.grid[l] = plan_grid(b, f, p);
     } catch (const InputError&) {
@@ -93,7 +126,9 @@ LevelsPlan plan_levels(const Bounds& b, const Frame& frame, Precision p, double 
   LevelsPlan plan;
   // The finest levels go first when their grids cannot be keyed: their bodies join the next level.
   for (int first = 0; first < count; ++first)
-    if (try_levels(boxes, frame, p, first_top + first, count - first, plan)) return plan;
+    if (try_levels(boxes, frame, p, first_top + first, count - first, first == 0 ? lo : first_top[first - 1],
+                   plan))
+      return plan;
   return plan;  // (not reached: one level is the grid of the frame, which the caller planned)
 }
 

@@ -45,6 +45,7 @@ struct Timing {
   std::uint64_t contacts = 0, pair_tests = 0;
   BroadPhase ran = BroadPhase::grid;
   int levels = 0;
+  std::string stages;  // BroadBenchOptions::stage_times: the last repetition's stages and counts
 };
 
 double median(std::vector<double> v) {
@@ -85,6 +86,13 @@ Timing time_engine(const BroadBenchOptions& o, const BodiesView& bodies, BroadPh
   t.pair_tests = engine.stats().pair_tests;
   t.ran = engine.stats().broad_phase;
   t.levels = engine.stats().levels;
+  if (o.stage_times) {
+    const EngineStats& st = engine.stats();
+    for (const StageTime& stage : engine.times())
+      t.stages += fmt::format("{} {:.3f}  ", stage.name, 1e3 * stage.seconds);
+    t.stages += fmt::format("(ms; levels {}, entries {}, pair tests {}, candidates {})", st.levels,
+                            st.entries, st.pair_tests, st.candidates);
+  }
   return t;
 }
 
@@ -168,13 +176,22 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
       // auto's pick: the engine's rule on the bounds it computes (the device's equal the host's)
       const BroadPhase pick =
           resolved_broad_phase(BroadPhase::automatic, compute_bounds(bodies), o.precision, o.backend);
+      // the broad phases of o.phases, and auto's pick where auto is among them (auto/best compares it)
+      const auto listed = [&](BroadPhase bp) {
+        return o.phases.empty() || std::find(o.phases.begin(), o.phases.end(), bp) != o.phases.end();
+      };
+      const auto timed = [&](BroadPhase bp) {
+        return listed(bp) || (bp == pick && listed(BroadPhase::automatic));
+      };
       std::map<BroadPhase, Timing> t;
       std::map<BroadPhase, double> skipped;  // predicted seconds a call of a skipped run
       std::optional<std::uint64_t> contacts;
       for (BroadPhase bp : kPhases) {
         const bool is_auto = bp == BroadPhase::automatic;
         const BroadPhase as = is_auto ? pick : bp;
-        if (is_auto && t.count(pick)) {  // the same code, timed in this row
+        if (!timed(bp)) {
+          continue;
+        } else if (is_auto && t.count(pick)) {  // the same code, timed in this row
           t[bp] = t[pick];
         } else if (is_auto && skipped.count(pick)) {
           skipped[bp] = skipped[pick];
@@ -239,6 +256,9 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
           best ? to_string(*best) : "-", timed_auto ? fmt::format("{:.2f}", auto_ratio) : std::string("-"),
           best ? fmt::format("{:.1f}", 1e9 * per_contact) : std::string("-"), vs_uniform,
           vs_uniform_per_contact);
+      if (o.stage_times)
+        for (const auto& [bp, tm] : t)
+          if (bp != BroadPhase::automatic) fmt::print(out, "    {:<7} {}\n", to_string(bp), tm.stages);
       out.flush();
       progress.update(++done);
     }

@@ -34,6 +34,7 @@ namespace cg {
 
 struct BroadBenchOptions {
   std::vector<std::string> families;  // default: all
+  std::vector<BroadPhase> phases;     // the broad phases timed (default: all); with auto, its pick too
   int lo = 12, hi = 16;               // N = 2^lo … 2^hi, step `step`
   int step = 2;
   Backend backend = Backend::cpu;
@@ -46,6 +47,9 @@ struct BroadBenchOptions {
   // Time the process's CPU time (all threads) instead of the wall clock: on a machine shared with
   // other work, with threads = 1, the work itself rather than the waits (CPU backend only).
   bool cpu_time = false;
+  // Print, under each row, every timed broad phase's stage times of its last repetition (ms), its
+  // levels, (cell, body) entries, pair tests and candidates: where a family's time goes.
+  bool stage_times = false;
   std::uint64_t seed = 1;
   std::string csv;
 };

@@ -532,6 +532,9 @@ Subcommand add_bench_broad(CLI::App& app) {
   bbc->add_option("--families", args->families, "Families to run (default: all)")
       ->delimiter(',')
       ->check(CLI::IsMember(broad_bench_families()));
+  bbc->add_option("--broad-phases", args->phases, "Broad phases to time (default: all; auto among them)")
+      ->delimiter(',')
+      ->transform(enum_names(k_broad_phases));
   bbc->add_option("--lo", args->lo, "First N = 2^lo")->capture_default_str();
   bbc->add_option("--hi", args->hi, "Last N = 2^hi")->capture_default_str();
   bbc->add_option("--step", args->step, "log2 N step")->check(CLI::PositiveNumber)->capture_default_str();
@@ -561,6 +564,9 @@ Subcommand add_bench_broad(CLI::App& app) {
   bbc->add_flag("--cpu-time", args->cpu_time,
                 "Time the process's CPU time, not the wall clock (CPU backend on a shared machine; with "
                 "--threads 1 the work itself)");
+  bbc->add_flag("--stage-times", args->stage_times,
+                "Under each row, every broad phase's stage times (ms, its last repetition), levels, entries, "
+                "pair tests and candidates");
   bbc->add_option("--csv", args->csv, "Also write the runs as CSV");
   return {bbc, [args](Session& session) {
             if (session.rank() != 0) return 0;
