@@ -89,6 +89,14 @@ class HostPool {
     trim(m_cap);
   }
 
+  // Lowers the cap on the free blocks held to at most `bytes` (a run under a memory limit: what the
+  // pool keeps counts against the limit too) and frees what exceeds it.
+  void cap_at_most(std::size_t bytes) noexcept {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    m_cap = std::min(m_cap, bytes);
+    trim(m_cap);
+  }
+
   // Frees every free block (blocks in use stay theirs).
   void release_all() noexcept {
     std::lock_guard<std::mutex> lock(m_mutex);
@@ -148,6 +156,9 @@ class HostPool {
   std::size_t m_held = 0, m_cap = 0;
 };
 }  // namespace detail
+
+// The host pool keeps at most `bytes` of free blocks from now on (see detail::HostPool).
+inline void cap_host_pool(std::size_t bytes) noexcept { detail::HostPool::instance().cap_at_most(bytes); }
 
 template <class T>
 struct HostAllocator {
