@@ -3,9 +3,11 @@
 # laptop: the laptop mode (CPU backend, 2 cores, 2^20 uniform spheres): the CPU = CUDA and CPU =
 #   reference cases of the unit suite, then on two pinned quiet cores (taskset -c 0,1) the host's
 #   streaming bandwidth, the CPU stages (a new engine per call, as contactgrid.detect; and one engine
-#   kept), the CLI's stage table, and SciPy's cKDTree.query_pairs + filter on the same scene when the
-#   device's Python has scipy and h5py; then one summary line (stages, page faults a call, SciPy, the
-#   ratio against the issue's 20x). About 2 minutes.
+#   kept; and with CONTACTGRID_HOST_PAIRS=legrand, the pair stage of Le Grand's cells: "before"), the
+#   CLI's stage table, the cell list's /contacts against Le Grand's (fp32, fp64, mixed: identical), and
+#   SciPy's cKDTree.query_pairs + filter on the same scene when the device's Python has scipy and h5py;
+#   then the summary lines (stages, page faults a call, SciPy, the ratio against the issue's 20x; the
+#   same for "before"). About 2 minutes.
 # pieces: contacts in bounded memory (decomposition/pieces.hpp): the Pieces* unit cases on both backends
 #   (the CUDA ones must run; the CLI ones on the device's binary), then 2^24 spheres at 6 contacts per
 #   body (about 100 M contacts) detected by the CLI on CUDA in fp32 without a limit and under
@@ -94,7 +96,7 @@ fi
 
 if [ "$MODE" = laptop ] || [ "$MODE" = all ]; then
 log "== unit: CPU = CUDA and the engine's cases (CUDA cases must run, not skip)"
-"$BIN/contactgrid_tests" --gtest_filter='*Cuda*:*cuda*:EngineTest*:HostStages*:ScratchPool*:RadixSort*:BroadPhase*' \
+"$BIN/contactgrid_tests" --gtest_filter='*Cuda*:*cuda*:EngineTest*:HostStages*:HostCellList*:ScratchPool*:RadixSort*:BroadPhase*' \
   >"$dir/unit.log" 2>&1 || failed+=(unit)
 grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]' "$dir/unit.log" | head -20
 grep -q 'OK \] EngineTest/cuda_fp64.CrowdedCellsFewContacts' "$dir/unit.log" || failed+=(unit_cuda_case_missing)
@@ -109,6 +111,11 @@ for mode in fresh reuse; do
   taskset -c 0,1 "$BIN/host_stage_bench" "$scene" 9 2 mixed $mode 2>&1 | tee -a "$dir/stages.log" || failed+=(stages_$mode)
 done
 taskset -c 0 "$BIN/host_stage_bench" "$scene" 9 1 mixed fresh 2>&1 | tee -a "$dir/stages.log"
+log "== before: Le Grand's cells in the pair stage (CONTACTGRID_HOST_PAIRS=legrand), 2 threads then 1"
+CONTACTGRID_HOST_PAIRS=legrand taskset -c 0,1 "$BIN/host_stage_bench" "$scene" 9 2 mixed fresh 2>&1 |
+  tee "$dir/stages_legrand.log" || failed+=(stages_legrand)
+CONTACTGRID_HOST_PAIRS=legrand taskset -c 0 "$BIN/host_stage_bench" "$scene" 9 1 mixed fresh 2>&1 |
+  tee -a "$dir/stages_legrand.log"
 log "== the CLI's detect, 2 threads, 5 runs (first call of a process: page faults included)"
 for r in 1 2 3 4 5; do
   taskset -c 0,1 "$BIN/contactgrid" detect "$scene" -o "$dir/c.h5" --backend cpu --threads 2 -v >>"$dir/cli.log" 2>&1 \
@@ -116,7 +123,16 @@ for r in 1 2 3 4 5; do
 done
 grep -E '^ +(detect|pack|entries|sort|pairs|order|narrow) ' "$dir/cli.log" | sort -k1,1 -k2,2n |
   awk '!seen[$1]++' | tee "$dir/cli_best.txt"
-rm -f "$dir/c.h5"
+log "== the cell list's /contacts = Le Grand's (fp32, fp64, mixed)"
+for prec in fp32 fp64 mixed; do
+  taskset -c 0,1 "$BIN/contactgrid" detect "$scene" -o "$dir/list.h5" --backend cpu --threads 2 --precision $prec -q &&
+    CONTACTGRID_HOST_PAIRS=legrand taskset -c 0,1 "$BIN/contactgrid" detect "$scene" -o "$dir/legrand.h5" \
+      --backend cpu --threads 2 --precision $prec -q &&
+    "$BIN/contactgrid" compare "$dir/list.h5" "$dir/legrand.h5" 2>&1 | tee -a "$dir/list_compare.log" | grep -q IDENTICAL ||
+    failed+=(cell_list_not_identical_$prec)
+done
+cat "$dir/list_compare.log"
+rm -f "$dir/c.h5" "$dir/list.h5" "$dir/legrand.h5"
 
 py=${PYTHON:-python3}
 if $py -c "import scipy, h5py" 2>/dev/null; then
@@ -147,8 +163,11 @@ sum_ms=$(awk '/a new engine, threads 2/{f=1} f && /^\(sum\)/{print $3; exit}' "$
 faults=$(awk '/a new engine, threads 2/{f=1} f && /^faults/{print $3; exit}' "$dir/stages.log")
 scipy_ms=$(awk '/^scipy_ms/{print $2}' "$dir/scipy.log")
 if [ -n "$sum_ms" ] && [ -n "$scipy_ms" ]; then
+  before_ms=$(awk '/a new engine, threads 2/{f=1} f && /^\(sum\)/{print $3; exit}' "$dir/stages_legrand.log")
   awk -v e="$sum_ms" -v s="$scipy_ms" -v f="$faults" 'BEGIN{printf "laptop: stages (2 threads, median) %.1f ms, page faults a call %s, SciPy %.1f ms: %.1fx (target >= 20x: stages <= %.1f ms)\n", e, f, s, s / e, s / 20}' |
     tee "$dir/laptop_summary.txt"
+  [ -n "$before_ms" ] && awk -v e="$before_ms" -v s="$scipy_ms" 'BEGIN{printf "laptop before (CONTACTGRID_HOST_PAIRS=legrand, same run): stages %.1f ms: %.1fx\n", e, s / e}' |
+    tee -a "$dir/laptop_summary.txt"
 fi
 rm -f "$scene"
 fi

@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# contactgrid simulate (#32) on the GPU, in one call per part (all of them: under 4 minutes on one H100):
+# contactgrid simulate (#32) on the GPU, in one call per part (the default parts: under 3 minutes on one H100):
 #   unit      the physics cases on the CUDA backend (restitution, Hertz, energy, oblique impact, static
 #             friction, ellipsoid at rest), DemBackends.* (CPU = CUDA bit for bit: library and CLI
 #             frames and contacts with history, energies summed three levels deep, runs of several
-#             lengths; the contact stage's two ways and the body index's two ways the same bits),
-#             DemSum.*, the history's device cases
+#             lengths; the same bits from the contact stage's two ways, the body index's two ways,
+#             the per-body sort of the rows by B and CUB's, the terms stored only where read and all
+#             of them), DemSum.*, Simulate*, the history's device cases
 #   beverloo  the hopper discharge against Beverloo's law (jobs/beverloo.sh: three orifices, the
 #             exponent fitted; 2.5 ± 0.2), CUDA
 #   perf      whole steps (detection with history + forces + integration, no output) on a pour at a
@@ -12,15 +13,20 @@
 #             each), fp32, CUDA: 2^20 and 2^24 spheres, 2^22 ellipsoids (a random pack at 6 contacts a body, aspect <= 1:4);
 #             steps/s from log.csv (issue: 1 500 steps/s at 2^20, 2·10^9 sphere-steps/s at 2^24, 3·10^8
 #             ellipsoid-steps/s at 2^22); then short runs with --stage-times: where a step's time goes
-#             (per stage, and the engine's stages within detect; the energies' time a call), at 2^20
-#             and 2^24 also with the contact stage summing each body's rows as A itself
-#             (CONTACTGRID_DEM_TERMS=sums) against the default (every contact term stored)
+#             (per stage, and the engine's stages within detect; the energies' time a call). Spheres
+#             run twice, "after" (the defaults) and "before" (CONTACTGRID_DEM_SEGMENTS=cub
+#             CONTACTGRID_DEM_STORE=all CONTACTGRID_DEM_BLOCKS=1: CUB's segmented sort of the rows by
+#             B, every contact term stored in double every step, the force kernels' registers
+#             uncapped), and the two runs' frames and energies must be the same bytes; stage times
+#             also with the registers uncapped (1 block an SM) and capped for 3 (2^24: FULL=1; the
+#             default: 2). Ellipsoids (2^22) and the
+#             contact stage's sums as A (CONTACTGRID_DEM_TERMS=sums) only with FULL=1.
 #   mpi2      (a host with 2 GPUs, its own call) simulate under mpirun -np 2 --backend cuda writes the
 #             frames, contacts and energies of -np 1 and of the CPU backend, bit for bit
 #   two       (a host with 2 GPUs, its own call) steps/s of mpirun -np 1 and -np 2 --backend cuda on a
 #             pour of N2 spheres (default 2^22: forces still on the host under mpirun; issue: np 2 >=
 #             1.8x np 1 at 2^25, N2=33554432)
-# Default: unit beverloo perf (on a host of 2 GPUs: mpi2 two). Writes $OUT/simulate_<part>.tar.gz
+# Default: unit perf (under 3 minutes on one H100; beverloo on request; on a host of 2 GPUs: mpi2 two). Writes $OUT/simulate_<part>.tar.gz
 # (each part's logs), $OUT/table.md, $OUT/stages.txt and $OUT/summary.txt; exits non-zero naming every
 # failed check.
 #   BIN=dir-with-the-CUDA-build's-binaries OUT=results-dir jobs/gpu_simulate_check.sh [PART ...]
@@ -32,7 +38,8 @@ cd "$(dirname "$0")/.."
 BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}; mkdir -p "$OUT"; W=${WORK:-/tmp/cgsim}; mkdir -p "$W"
 BIN=$(cd "$BIN" && pwd)
 CG="$BIN/contactgrid"
-parts=("$@"); [ ${#parts[@]} -eq 0 ] && parts=(unit beverloo perf)
+parts=("$@"); [ ${#parts[@]} -eq 0 ] && parts=(unit perf)
+BEFORE=(CONTACTGRID_DEM_SEGMENTS=cub CONTACTGRID_DEM_STORE=all CONTACTGRID_DEM_BLOCKS=1)  # the path before this session's
 failed=()
 log() { echo "[$(date -u +%H:%M:%S)] $*" | tee -a "$OUT/summary.txt"; }
 { date -u; nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader; git rev-parse --short HEAD 2>/dev/null; } \
@@ -41,7 +48,7 @@ cat "$OUT/device.txt"
 
 part_unit() {
   local d=$1
-  local filter='DemPhysics/cuda.*:DemBackends*:DemSum*:SimulateCli*:SimulateWalls*:DemDamping*:EngineHistory*:StepHistory*'
+  local filter='DemPhysics/cuda.*:DemBackends*:DemSum*:Simulate*:DemDamping*:EngineHistory*:StepHistory*'
   "$BIN/contactgrid_tests" --gtest_filter="$filter" >"$d/unit.log" 2>&1 || failed+=("unit: $filter")
   grep -E '^\[  (PASSED|FAILED) |^\[  SKIPPED' "$d/unit.log" | head -30 | tee -a "$OUT/summary.txt"
   if grep -q '^\[  SKIPPED \].*cuda' "$d/unit.log"; then failed+=("unit: CUDA cases skipped (no GPU seen)"); fi
@@ -65,22 +72,44 @@ part_perf() {
     "$CG" generate "$W/$name.h5" --kind "$kind" -n "$n" "${rlow[@]}" --rhigh 0.005 --pour-spacing 1.97 --seed 5 -q "$@" ||
       { failed+=("perf: generate $name"); return 1; }
   }
-  bench() {  # name count steps
-    local name=$1 n=$2 steps=$3
-    rm -rf "$W/$name.run"
-    if ! "$CG" simulate "$W/$name.h5" -o "$W/$name.run" --steps "$steps" --output-every "$steps" \
-        --log-every $((steps / 6)) --backend cuda --precision fp32 --no-plot >"$d/$name.log" 2>&1; then
-      failed+=("perf: simulate $name"); tail -3 "$d/$name.log"; return
+  bench() {  # name count steps [label environment...]: the run stays in $W/$name.$label.run
+    local name=$1 n=$2 steps=$3 label=${4:-after}; shift 3; [ $# -gt 0 ] && shift
+    local run="$W/$name.$label.run"
+    rm -rf "$run"
+    if ! env "$@" "$CG" simulate "$W/$name.h5" -o "$run" --steps "$steps" --output-every "$steps" \
+        --log-every $((steps / 6)) --backend cuda --precision fp32 --no-plot >"$d/$name.$label.log" 2>&1; then
+      failed+=("perf: simulate $name ($label)"); tail -3 "$d/$name.$label.log"; return
     fi
-    grep -q 'backend cuda' "$d/$name.log" || failed+=("perf: $name did not run on the CUDA backend")
-    cp "$W/$name.run/log.csv" "$d/$name.log.csv"
+    grep -q 'backend cuda' "$d/$name.$label.log" || failed+=("perf: $name did not run on the CUDA backend")
+    cp "$run/log.csv" "$d/$name.$label.log.csv"
     # steps/s: log.csv's seconds_per_step (the steps alone), the first block (warm-up) left out
     local sps cpb
-    sps=$(awk -F, 'NR > 1 && $1 !~ /^#/ && $7 > 0 { n++; if (n > 1) { s += $7; k++ } } END { if (k) printf "%.1f", k / s }' "$W/$name.run/log.csv")
-    cpb=$(grep -oE '[0-9.]+ contacts/body' "$d/$name.log" | head -1 | cut -d' ' -f1)
-    printf '| %-14s | %9s | %6s | %8s | %10.3g | %9s |\n' "$name" "$n" "$steps" "$sps" \
+    sps=$(awk -F, 'NR > 1 && $1 !~ /^#/ && $7 > 0 { n++; if (n > 1) { s += $7; k++ } } END { if (k) printf "%.1f", k / s }' "$run/log.csv")
+    cpb=$(grep -oE '[0-9.]+ contacts/body' "$d/$name.$label.log" | head -1 | cut -d' ' -f1)
+    printf '| %-22s | %9s | %6s | %8s | %10.3g | %9s |\n' "$name ($label)" "$n" "$steps" "$sps" \
       "$(awk -v s="$sps" -v n="$n" 'BEGIN { print s * n }')" "$cpb" >>"$OUT/table.md"
-    rm -rf "$W/$name.run"
+  }
+  same_frames() {  # name: the after and before runs' frames and energies (log.csv), the same bytes
+    local name=$1
+    cmp <(cut -d, -f1-6 "$W/$name.after.run/log.csv") <(cut -d, -f1-6 "$W/$name.before.run/log.csv") \
+      >"$d/$name.same.log" 2>&1 || failed+=("perf: $name's energies (log.csv) differ between the after and before paths")
+    python3 - "$W/$name.after.run" "$W/$name.before.run" >>"$d/$name.same.log" 2>&1 <<'PYEOF' ||
+import sys, glob, os, h5py
+def datasets(path):
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda n, o: out.__setitem__(n, o[()].tobytes()) if isinstance(o, h5py.Dataset) else None)
+    return out
+a, b = sys.argv[1], sys.argv[2]
+names = sorted(os.path.basename(p) for p in glob.glob(a + "/frame_*.h5"))
+assert names, "no frames"
+for n in names:
+    assert datasets(os.path.join(a, n)) == datasets(os.path.join(b, n)), f"{n} differs"
+print(f"{len(names)} frames the same bytes, after and before; log.csv's energies too")
+PYEOF
+      failed+=("perf: $name's frames differ between the after and before paths ($name.same.log)")
+    cat "$d/$name.same.log" | tee -a "$OUT/summary.txt"
+    rm -rf "$W/$name.after.run" "$W/$name.before.run"
   }
   stages() {  # name steps label [environment]
     local name=$1 steps=$2 label=$3; shift 3
@@ -94,28 +123,44 @@ part_perf() {
       >>"$OUT/stages.txt"
     rm -rf "$W/$name.st.run"
   }
-  printf '| %-14s | %9s | %6s | %8s | %10s | %9s |\n' run bodies steps steps/s body-st/s contacts/b >"$OUT/table.md"
+  printf '| %-22s | %9s | %6s | %8s | %10s | %9s |\n' run bodies steps steps/s body-st/s contacts/b >"$OUT/table.md"
   echo '|---|---|---|---|---|---|' >>"$OUT/table.md"
   : >"$OUT/stages.txt"
-  if scene spheres_2e20 pour $((1 << 20)); then
-    bench spheres_2e20 $((1 << 20)) 300
-    stages spheres_2e20 120 default
-    stages spheres_2e20 120 a-sums CONTACTGRID_DEM_TERMS=sums
+  local n20=${N20:-$((1 << 20))} n24=${N24:-$((1 << 24))}  # (smaller: a dry run of this script)
+  if scene spheres_2e20 pour "$n20"; then
+    bench spheres_2e20 "$n20" 300 after
+    bench spheres_2e20 "$n20" 300 before "${BEFORE[@]}"
+    same_frames spheres_2e20
+    stages spheres_2e20 120 after
+    stages spheres_2e20 120 before "${BEFORE[@]}"
+    stages spheres_2e20 120 after-blocks1 CONTACTGRID_DEM_BLOCKS=1
+    stages spheres_2e20 120 after-blocks3 CONTACTGRID_DEM_BLOCKS=3
+    [ "${FULL:-0}" = 1 ] && stages spheres_2e20 120 a-sums CONTACTGRID_DEM_TERMS=sums
     rm -f "$W/spheres_2e20.h5"
   fi
   # ellipsoids: a pour's lattice leaves randomly turned ellipsoids apart (0.4 contacts a body at the
   # smallest spacing), so a random pack at six contacts a body, which stays above five a body while
   # its overlaps push it apart (a rebuild most steps: the harder case)
-  if "$CG" generate "$W/ellipsoids_2e22.h5" --kind ellipsoids -n $((1 << 22)) --rhigh 0.005 --max-aspect 4 \
-      --contacts-per-body 6 --seed 5 -q || { failed+=("perf: generate ellipsoids_2e22"); false; }; then
-    bench ellipsoids_2e22 $((1 << 22)) 60
-    stages ellipsoids_2e22 30 default
-    rm -f "$W/ellipsoids_2e22.h5"
+  if [ "${FULL:-0}" = 1 ]; then
+    if "$CG" generate "$W/ellipsoids_2e22.h5" --kind ellipsoids -n $((1 << 22)) --rhigh 0.005 --max-aspect 4 \
+        --contacts-per-body 6 --seed 5 -q; then
+      bench ellipsoids_2e22 $((1 << 22)) 60
+      rm -rf "$W/ellipsoids_2e22.after.run"
+      stages ellipsoids_2e22 30 after
+      rm -f "$W/ellipsoids_2e22.h5"
+    else
+      failed+=("perf: generate ellipsoids_2e22")
+    fi
   fi
-  if scene spheres_2e24 pour $((1 << 24)); then
-    bench spheres_2e24 $((1 << 24)) 60
-    stages spheres_2e24 30 default
-    stages spheres_2e24 30 a-sums CONTACTGRID_DEM_TERMS=sums
+  if scene spheres_2e24 pour "$n24"; then
+    bench spheres_2e24 "$n24" 60 after
+    bench spheres_2e24 "$n24" 60 before "${BEFORE[@]}"
+    same_frames spheres_2e24
+    stages spheres_2e24 30 after
+    stages spheres_2e24 30 before "${BEFORE[@]}"
+    stages spheres_2e24 30 after-blocks1 CONTACTGRID_DEM_BLOCKS=1
+    [ "${FULL:-0}" = 1 ] && stages spheres_2e24 30 after-blocks3 CONTACTGRID_DEM_BLOCKS=3
+    [ "${FULL:-0}" = 1 ] && stages spheres_2e24 30 a-sums CONTACTGRID_DEM_TERMS=sums
     rm -f "$W/spheres_2e24.h5"
   fi
   cat "$OUT/table.md" "$OUT/stages.txt" | tee -a "$OUT/summary.txt"

@@ -3,7 +3,9 @@
 # a plain detection of the final scene, and the issue's Performance figures as one compact table.
 #   BIN=dir OUT=dir jobs/gpu_steploop_check.sh one   one H100 (< 3 min): tests, CLI, 2^24 spheres,
 #                                                    fp32, 6 contacts per body, drift 1 % of r_max per
-#                                                    step, skin auto (one-pass and two-pass narrow)
+#                                                    step, skin auto: the kept candidates in cell order
+#                                                    (default) and in (a, b) order of the input indices
+#                                                    (CONTACTGRID_STEP_ORDER=file)
 #   BIN=dir OUT=dir jobs/gpu_steploop_check.sh two   a 2-GPU host (~4 min): the MPI tests at np 2, then
 #                                                    2^26 spheres and 2^24 ellipsoids at np 1 and np 2
 #                                                    (one rank per GPU): per-step migration, halo and
@@ -44,13 +46,15 @@ gtest_ok() {  # LOG
   grep -q '^\[  PASSED  \]' "$1" && ! grep -q '^\[  FAILED  \]' "$1" && ! grep -q 'no CUDA device' "$1"
 }
 
-# steps SCENE NP SKIN STEPS TAG: one drifting run; its summary in $OUT/TAG.log
+# steps SCENE NP SKIN STEPS TAG: one drifting run; its summary in $OUT/TAG.log (FINAL_SCENE=FILE: the
+# last step's bodies written there too; KEEP=1: its contact file $W/TAG.h5 kept)
 steps() {
-  local scene=$1 np=$2 skin=$3 n=$4 tag=$5
+  local scene=$1 np=$2 skin=$3 n=$4 tag=$5 final=()
+  [ -n "${FINAL_SCENE:-}" ] && final=(--final-scene "$FINAL_SCENE")
   "${MPI[@]}" -np "$np" "$CG" detect "$W/$scene.h5" -o "$W/$tag.h5" --backend "$BACKEND" --precision fp32 \
-    --steps "$n" --drift 0.01 --skin "$skin" >"$OUT/$tag.log" 2>&1
+    --steps "$n" --drift 0.01 --skin "$skin" "${final[@]}" >"$OUT/$tag.log" 2>&1
   local rc=$?
-  rm -f "$W/$tag.h5"
+  [ -n "${KEEP:-}" ] || rm -f "$W/$tag.h5"
   return $rc
 }
 # field TAG WHAT: a figure of a run's summary in ms (WHAT: fresh|mean|build|reuse|layout|migrate|halo|frame)
@@ -94,6 +98,17 @@ case $MODE in
     CONTACTGRID_CUDA_NARROW=two-pass "$BIN/contactgrid_tests" --gtest_color=no --gtest_filter='*Skin*:*Resident*' \
       >"$OUT/tests.two_pass.log" 2>&1
     check "contactgrid_tests (skin, resident), two-pass narrow" gtest_ok "$OUT/tests.two_pass.log"
+    # the kept candidates' two orders: (a, b) of the input indices, and the cell order of bodies
+    # renumbered even where they fit in L2 (a cell order that is not the input order)
+    CONTACTGRID_STEP_ORDER=file "$BIN/contactgrid_tests" --gtest_color=no --gtest_filter='*Skin*:*Resident*' \
+      >"$OUT/tests.file_order.log" 2>&1
+    check "contactgrid_tests (skin, resident), CONTACTGRID_STEP_ORDER=file" gtest_ok "$OUT/tests.file_order.log"
+    CONTACTGRID_CUDA_RENUMBER=1 "$BIN/contactgrid_tests" --gtest_color=no --gtest_filter='*Skin*:*Resident*' \
+      >"$OUT/tests.renumber.log" 2>&1
+    check "contactgrid_tests (skin, resident), CONTACTGRID_CUDA_RENUMBER=1" gtest_ok "$OUT/tests.renumber.log"
+    CONTACTGRID_CUDA_RENUMBER=1 "${MPI[@]}" -np 2 "$BIN/contactgrid_mpi_tests" --gtest_color=no \
+      --gtest_filter='MovingSteps.*:StepLoop.*' >"$OUT/mpi_tests.renumber.np2.log" 2>&1
+    check "contactgrid_mpi_tests MovingSteps np 2, CONTACTGRID_CUDA_RENUMBER=1" gtest_ok "$OUT/mpi_tests.renumber.np2.log"
     for np in 1 2; do
       "${MPI[@]}" -np $np "$BIN/contactgrid_mpi_tests" --gtest_color=no --gtest_filter='MovingSteps.*:StepLoop.*' \
         >"$OUT/mpi_tests.np$np.log" 2>&1
@@ -121,16 +136,23 @@ case $MODE in
     log "bench: 2^24 spheres, fp32, 6 contacts per body, drift 0.01 (1 % of r_max) per step"
     "$CG" generate "$W/s24.h5" -n $N24 --seed 24 --contacts-per-body 6 -q
     check "bench s24 fresh" steps s24 1 0 6 s24.fresh
-    check "bench s24 auto" steps s24 1 auto 40 s24.auto
-    # the same with the rejecting narrow's two passes: what the one pass saves per reuse
-    CONTACTGRID_CUDA_NARROW=two-pass check "bench s24 auto, two-pass narrow" steps s24 1 auto 40 s24.auto_two_pass
-    check "s24: auto = two-pass narrow (last step)" \
-      bash -c "grep -h 'contacts on the last step' '$OUT/s24.auto.log' '$OUT/s24.auto_two_pass.log' | sed -E 's/.*, ([0-9]+) contacts on the last step.*/\1/' | uniq | wc -l | grep -qx 1"
+    # the cell order (default), its last step against a plain detection of the final scene
+    FINAL_SCENE="$W/s24.final.h5" KEEP=1 check "bench s24 auto" steps s24 1 auto 40 s24.auto
+    "$CG" detect "$W/s24.final.h5" -o "$W/s24.plain.h5" --backend "$BACKEND" --precision fp32 -q
+    check "s24 auto (cell order): last step = plain detect of the final scene" same "$W/s24.auto.h5" "$W/s24.plain.h5"
+    rm -f "$W/s24.auto.h5" "$W/s24.plain.h5" "$W/s24.final.h5"
+    # the (a, b) path: the kept candidates in (a, b) order of the input indices
+    CONTACTGRID_STEP_ORDER=file check "bench s24 auto, file order" steps s24 1 auto 40 s24.auto_file
+    check "s24: cell order = file order (contacts on the last step)" \
+      bash -c "grep -h 'contacts on the last step' '$OUT/s24.auto.log' '$OUT/s24.auto_file.log' | sed -E 's/.*, ([0-9]+) contacts on the last step.*/\1/' | uniq | wc -l | grep -qx 1"
     table_one s24 | tee "$OUT/table.md"
-    printf 'two-pass narrow (CONTACTGRID_CUDA_NARROW=two-pass): mean %s, build %s, reuse %s ms, %s\n' \
-      "$(field s24.auto_two_pass mean)" "$(field s24.auto_two_pass build)" "$(field s24.auto_two_pass reuse)" \
-      "$(lists s24.auto_two_pass)" | tee -a "$OUT/table.md"
-    for t in s24.fresh s24.auto s24.auto_two_pass; do
+    printf 'file order (CONTACTGRID_STEP_ORDER=file): mean %s, build %s, reuse %s ms, %s, mean/fresh %s\n' \
+      "$(field s24.auto_file mean)" "$(field s24.auto_file build)" "$(field s24.auto_file reuse)" \
+      "$(lists s24.auto_file)" "$(ratio "$(field s24.auto_file mean)" "$(field s24.fresh fresh)")" | tee -a "$OUT/table.md"
+    printf 'cell order (default):                    mean %s, build %s, reuse %s ms, %s, mean/fresh %s\n' \
+      "$(field s24.auto mean)" "$(field s24.auto build)" "$(field s24.auto reuse)" \
+      "$(lists s24.auto)" "$(ratio "$(field s24.auto mean)" "$(field s24.fresh fresh)")" | tee -a "$OUT/table.md"
+    for t in s24.fresh s24.auto s24.auto_file; do
       echo "-- $t: per-step stages (ms, median of the steps)"
       sed -nE '/^resident steps/,/^  candidate lists/p' "$OUT/$t.log"
     done

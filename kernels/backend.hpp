@@ -39,6 +39,9 @@ struct DetectJob {
   // bound; engine.cpp): measure the motion since its build, reuse it when skin_covers(), else build.
   double skin = 0, inflation = 0;
   bool check = false;
+  // The caller takes the rows in any order (Engine::detect_resident: resident_contacts() downloads
+  // them): the CUDA backend may keep a skin's candidates in cell order (cuda/cell_order.cuh).
+  bool any_row_order = false;
   // EngineOptions::history on DEVICE bodies (CUDA): the history stage runs on the device after the
   // narrow stage, keyed by device_bodies->id (or the indices), against the backend's device history
   // (history_upload / history_download move it between host and device).

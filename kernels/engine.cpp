@@ -148,6 +148,7 @@ struct Engine<Real>::Impl {
   Contacts<Real> resident_contacts;
   std::optional<DeviceContactsView<Real>> resident_on_device;  // CUDA: not yet downloaded
   bool resident_overwritten = false;  // CUDA: a later detection reused the workspace first
+  bool rows_any_order = false;        // CUDA: detect_resident's call (DetectJob::any_row_order)
   // EngineOptions::skin > 0: what the kept candidate list was built for (the backend keeps the list
   // and the bodies' state); a call that matches it checks the motion, any other call rebuilds.
   struct KeptFor {
@@ -497,6 +498,7 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
     job.ellipsoids = ellipsoids;
     job.device_out = device_out;
     job.history = s.options.history;
+    job.any_row_order = s.rows_any_order && device_out;
     skin.apply(job);
     s.times.push_back({detail::name(detail::EngineStage::plan), seconds_since(t0)});
     detail::run_stages(*s.cuda, job, out, s.times, s.stats);
@@ -679,6 +681,12 @@ std::size_t Engine<Real>::detect_resident(std::optional<Frame> frame) {
   if (s.resolved == Backend::cuda) {
     const DeviceBodiesView v = detail::resident_view(*s.cuda);
     s.resident_contacts = Contacts<Real>{};
+    // the rows come to the caller through resident_contacts() alone: their device order is free
+    s.rows_any_order = true;
+    struct AnyOrder {
+      bool& flag;
+      ~AnyOrder() { flag = false; }
+    } any_order{s.rows_any_order};
     const DeviceContactsView<Real> view = detect_device_resident(v, frame);
     s.resident_on_device = view;
     s.resident_overwritten = false;

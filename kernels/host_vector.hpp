@@ -89,6 +89,14 @@ class HostPool {
     trim(m_cap);
   }
 
+  // Lowers the cap on the free blocks held to at most `bytes` (a run under a memory limit: what the
+  // pool keeps counts against the limit too) and frees what exceeds it.
+  void cap_at_most(std::size_t bytes) noexcept {
+    std::lock_guard<std::mutex> lock(m_mutex);
+    m_cap = std::min(m_cap, bytes);
+    trim(m_cap);
+  }
+
   // Frees every free block (blocks in use stay theirs).
   void release_all() noexcept {
     std::lock_guard<std::mutex> lock(m_mutex);
@@ -98,6 +106,27 @@ class HostPool {
   std::size_t held_bytes() {
     std::lock_guard<std::mutex> lock(m_mutex);
     return m_held;
+  }
+
+  // Page-locked blocks (the CUDA backend's downloads straight into the result vectors,
+  // cuda/transfer.cuh): lock_block(p) page-locks the pooled block in use at p through `lock` on its
+  // first call and keeps it locked while the pool holds it, free or in use; `unlock` runs before the
+  // pool frees it. Returns the block's size, 0 when p is no pooled block in use or `lock` refuses.
+  using LockFn = bool (*)(void*, std::size_t);
+  using UnlockFn = void (*)(void*);
+  std::size_t lock_block(void* p, LockFn lock, UnlockFn unlock) {
+    std::lock_guard<std::mutex> guard(m_mutex);
+    auto at = m_size.find(p);
+    if (at == m_size.end()) return 0;
+    if (m_locked.count(p)) return at->second;
+    if (!lock(p, at->second)) return 0;
+    m_locked.emplace(p, unlock);
+    return at->second;
+  }
+  // Whether the block in use at p is page-locked (lock_block).
+  bool block_locked(void* p) {
+    std::lock_guard<std::mutex> guard(m_mutex);
+    return m_locked.count(p) != 0;
   }
 
  private:
@@ -111,6 +140,10 @@ class HostPool {
     while (m_held > cap && !m_free.empty()) {
       auto last = std::prev(m_free.end());
       m_held -= last->first;
+      if (auto l = m_locked.find(last->second); l != m_locked.end()) {
+        l->second(l->first);
+        m_locked.erase(l);
+      }
       ::operator delete(last->second, std::align_val_t(k_block));
       m_free.erase(last);
     }
@@ -119,9 +152,13 @@ class HostPool {
   std::mutex m_mutex;
   std::multimap<std::size_t, void*> m_free;  // size → block
   std::map<void*, std::size_t> m_size;       // blocks in use → their pooled size
+  std::map<void*, UnlockFn> m_locked;        // page-locked blocks, free or in use → their unlock
   std::size_t m_held = 0, m_cap = 0;
 };
 }  // namespace detail
+
+// The host pool keeps at most `bytes` of free blocks from now on (see detail::HostPool).
+inline void cap_host_pool(std::size_t bytes) noexcept { detail::HostPool::instance().cap_at_most(bytes); }
 
 template <class T>
 struct HostAllocator {

@@ -105,16 +105,24 @@ struct ContactResult {
   double energy;
 };
 
-// Contact row k's terms from the bodies' states and the last step's springs (read through
-// previous_row), nothing written: any caller gets the same bits.
+// Contact row k's point: halfway between its points on A and on B (where its force acts).
 template <class Real>
-CG_HD ContactResult contact_result(std::size_t k, const ContactRows<Real>& rows, const BodyArrays& b,
-                                   const StepConstants& c, const Vec3<double>* old_xi,
-                                   const Vec3<double>* old_normal) {
-  const std::size_t ia = static_cast<std::size_t>(rows.id_a[k]), ib = static_cast<std::size_t>(rows.id_b[k]);
+CG_HD Vec3<double> contact_point(std::size_t k, const ContactRows<Real>& rows) {
   const Vec3<double> pa = vec_cast<double>(rows.position_on_a[k]),
                      pb = vec_cast<double>(rows.position_on_b[k]);
-  const Vec3<double> point = 0.5 * (pa + pb);
+  return 0.5 * (pa + pb);
+}
+
+// Contact row k's terms from the bodies' states and the last step's springs (read through
+// previous_row), nothing written: any caller gets the same bits. old_normal: the last step's normals,
+// as ContactTerms keeps them (double) or as they were detected (N = Real: the same values, a
+// Real's double being exact).
+template <class Real, class N>
+CG_HD ContactResult contact_result(std::size_t k, const ContactRows<Real>& rows, const BodyArrays& b,
+                                   const StepConstants& c, const Vec3<double>* old_xi,
+                                   const Vec3<N>* old_normal) {
+  const std::size_t ia = static_cast<std::size_t>(rows.id_a[k]), ib = static_cast<std::size_t>(rows.id_b[k]);
+  const Vec3<double> point = contact_point(k, rows);
   const Vec3<double> n = vec_cast<double>(rows.normal_on_b[k]);
   const std::int64_t prev = rows.previous_row[k];
   const BodyState sa = b.state(ia), sb = b.state(ib);
@@ -134,7 +142,7 @@ CG_HD ContactResult contact_result(std::size_t k, const ContactRows<Real>& rows,
     in.v_sync =
         (synced_velocity(sa, qa, c.dt) + cross(wa, ra)) - (synced_velocity(sb, qb, c.dt) + cross(wb, rb));
     in.w_rel = wa - wb;
-    in.half_normal = prev >= 0 ? unit(old_normal[prev] + n) : n;
+    in.half_normal = prev >= 0 ? unit(vec_cast<double>(old_normal[prev]) + n) : n;
   } else {
     in.v_sync = v_half;
     in.w_rel = sa.omega - sb.omega;
@@ -150,15 +158,16 @@ CG_HD ContactResult contact_result(std::size_t k, const ContactRows<Real>& rows,
           o.energy};
 }
 
-// Contact row k (file comment).
+// Contact row k (file comment). Null torque_a and torque_b: the torques are not stored (the body
+// stage takes them from the row's point: torques_from_points); null energy: not stored.
 template <class Real>
 CG_HD void contact_terms(std::size_t k, const ContactRows<Real>& rows, const BodyArrays& b,
                          const StepConstants& c, const ContactTerms& t) {
   const ContactResult r = contact_result(k, rows, b, c, t.old_xi, t.old_normal);
   t.force[k] = r.force;
-  t.torque_a[k] = r.torque_a;
-  t.torque_b[k] = r.torque_b;
-  t.energy[k] = r.energy;
+  if (t.torque_a) t.torque_a[k] = r.torque_a;
+  if (t.torque_b) t.torque_b[k] = r.torque_b;
+  if (t.energy) t.energy[k] = r.energy;
   t.xi[k] = r.xi;
   t.normal[k] = r.normal;
 }
@@ -177,6 +186,77 @@ struct WallTerms {
   double* energy;  // count
 };
 
+// Body i's rows as B in ascending row order: v[0, m) sorted in place (the row numbers are distinct,
+// so any correct sort gives the same order): insertion for the few rows a body has, heapsort beyond
+// (a large body's many rows, in O(m log m) with no memory of its own). One thread per body on the
+// device (cuda/dem_sums.cuh), no host synchronisation.
+CG_HD void sift_down(std::uint32_t* v, std::size_t root, std::size_t end) {
+  for (;;) {
+    std::size_t child = 2 * root + 1;
+    if (child >= end) return;
+    if (child + 1 < end && v[child] < v[child + 1]) ++child;
+    if (!(v[root] < v[child])) return;
+    const std::uint32_t t = v[root];
+    v[root] = v[child];
+    v[child] = t;
+    root = child;
+  }
+}
+CG_HD void sort_rows(std::uint32_t* v, std::size_t m) {
+  if (m <= 16) {
+    for (std::size_t j = 1; j < m; ++j) {
+      const std::uint32_t x = v[j];
+      std::size_t at = j;
+      for (; at > 0 && v[at - 1] > x; --at) v[at] = v[at - 1];
+      v[at] = x;
+    }
+    return;
+  }
+  for (std::size_t root = m / 2; root-- > 0;) sift_down(v, root, m);
+  for (std::size_t end = m; end-- > 1;) {
+    const std::uint32_t t = v[0];
+    v[0] = v[end];
+    v[end] = t;
+    sift_down(v, 0, end);
+  }
+}
+
+// Where the law has no rolling resistance (every rolling torque zero): a contact's torque on a
+// body at `position` from the row's point and the force on that body, the same expression as
+// contact_result's (its rolling torque being {0, 0, 0}), so the same bits as the torque stored.
+template <class Real>
+CG_HD Vec3<double> torque_on_a(std::size_t k, const ContactRows<Real>& rows, Vec3<double> position,
+                               Vec3<double> force) {
+  return cross(contact_point(k, rows) - position, force) + Vec3<double>{0, 0, 0};
+}
+template <class Real>
+CG_HD Vec3<double> torque_on_b(std::size_t k, const ContactRows<Real>& rows, Vec3<double> position,
+                               Vec3<double> force) {
+  return cross(contact_point(k, rows) - position, -force) - Vec3<double>{0, 0, 0};
+}
+CG_HD bool torques_from_points(const StepConstants& c) { return !(c.law.rolling_friction > 0); }
+
+// Body i's sums over its rows as A (row order) and as B (by_b order), onto f and tau, with the
+// torques from the rows' points (torque_on_a, torque_on_b: no torque stored): the same order and
+// the same terms as a_sums then body_terms_after_a's sums, so the same bits.
+template <class Real>
+CG_HD void contact_sums_from_points(std::size_t i, const BodyArrays& b, const ContactRows<Real>& rows,
+                                    const ContactTerms& t, const BodyRowIndex& index, Vec3<double>& f,
+                                    Vec3<double>& tau) {
+  const Vec3<double> x = b.position[i];
+  for (std::uint32_t k = index.a_begin[i]; k < index.a_begin[i + 1]; ++k) {
+    const Vec3<double> fk = t.force[k];
+    f = f + fk;
+    tau = tau + torque_on_a(k, rows, x, fk);
+  }
+  for (std::uint32_t j = index.b_begin[i]; j < index.b_begin[i + 1]; ++j) {
+    const std::uint32_t k = index.by_b[j];
+    const Vec3<double> fk = t.force[k];
+    f = f - fk;
+    tau = tau + torque_on_b(k, rows, x, fk);
+  }
+}
+
 // Body i's sums over its rows as A, in row order, onto f and tau.
 CG_HD void a_sums(std::size_t i, const ContactTerms& t, const BodyRowIndex& index, Vec3<double>& f,
                   Vec3<double>& tau) {
@@ -186,16 +266,10 @@ CG_HD void a_sums(std::size_t i, const ContactTerms& t, const BodyRowIndex& inde
   }
 }
 
-// Body i's force and torque of the step into b.force[i], b.torque[i], from f and tau, the sums of its
-// rows as A (from zero, in row order): its rows as B, its walls, gravity (file comment).
-CG_HD void body_terms_after_a(std::size_t i, const BodyArrays& b, const StepConstants& c,
-                              const ContactTerms& t, const BodyRowIndex& index, const WallTerms& w,
-                              Vec3<double> f, Vec3<double> tau) {
-  for (std::uint32_t j = index.b_begin[i]; j < index.b_begin[i + 1]; ++j) {
-    const std::uint32_t k = index.by_b[j];
-    f = f - t.force[k];
-    tau = tau + t.torque_b[k];
-  }
+// Body i's force and torque into b.force[i], b.torque[i], from f and tau, the sums of its contact
+// rows (as A, then as B): its walls, gravity (file comment).
+CG_HD void body_terms_after_contacts(std::size_t i, const BodyArrays& b, const StepConstants& c,
+                                     const WallTerms& w, Vec3<double> f, Vec3<double> tau) {
   const BodyState s = b.state(i);
   const BodyProps& p = b.props[i];
   const bool ell = b.ellipsoid(i);
@@ -236,6 +310,19 @@ CG_HD void body_terms_after_a(std::size_t i, const BodyArrays& b, const StepCons
   b.force[i] = f;
   b.torque[i] = tau;
   w.energy[i] = energy;
+}
+
+// Body i's force and torque of the step into b.force[i], b.torque[i], from f and tau, the sums of its
+// rows as A (from zero, in row order): its rows as B, its walls, gravity (file comment).
+CG_HD void body_terms_after_a(std::size_t i, const BodyArrays& b, const StepConstants& c,
+                              const ContactTerms& t, const BodyRowIndex& index, const WallTerms& w,
+                              Vec3<double> f, Vec3<double> tau) {
+  for (std::uint32_t j = index.b_begin[i]; j < index.b_begin[i + 1]; ++j) {
+    const std::uint32_t k = index.by_b[j];
+    f = f - t.force[k];
+    tau = tau + t.torque_b[k];
+  }
+  body_terms_after_contacts(i, b, c, w, f, tau);
 }
 
 // Body i's force and torque of the step into b.force[i], b.torque[i] (file comment).

@@ -174,6 +174,30 @@ CG_HD bool narrow_touch(const NarrowBodies<Real>& w, std::uint32_t a, std::uint3
     return spheres_touch(w.spheres[a], w.spheres[b]);
 }
 
+// fp32's decision and row of candidate (a, b) from the two local floats sa, sb the caller read (body
+// a's and b's: w.spheres by input index, or the CUDA resident steps' cell-ordered copy,
+// cuda/cell_order.cuh); unresolved normals from the world doubles of input indices a, b.
+template <class Real>
+CG_HD NarrowDecision<Real> narrow_decide_floats(const NarrowBodies<Real>& w, const Sphere<float>& sa,
+                                                const Sphere<float>& sb, std::uint32_t a, std::uint32_t b,
+                                                bool full, NarrowFlags& flags) {
+  NarrowDecision<Real> d{};
+  d.contact = spheres_touch(sa, sb);  // narrow_touch on the spheres already read
+  if (!d.contact) return d;
+  const Vec3<float> dc = sa.centre() - sb.centre();
+  if (fp32_resolves(sa, sb, cg_sqrt(dot(dc, dc)))) {
+    d.row = sphere_contact_row(sa, sb, w.origin, full);
+  } else if (w.position == nullptr) {
+    // no world doubles (the CUDA host path's 16-byte upload): counted, the row left empty; the call
+    // uploads them and runs its narrow stage again (cuda/transfer.cuh: narrow_fp64_rows)
+    ++flags.fp64_rows;
+  } else {
+    d.row = row_cast<float>(world_sphere_row(world_sphere(w, a), world_sphere(w, b), full), full);
+    ++flags.fp64_rows;
+  }
+  return d;
+}
+
 // The decision and row of candidate (a, b) for the narrow stage's real type Real (see the file
 // comment): fp64 and mixed decide on the frame-local doubles and take the row from the world doubles;
 // fp32 decides and computes on the local floats, and takes unresolved normals from the world doubles.
@@ -185,16 +209,7 @@ CG_HD NarrowDecision<Real> narrow_decide(const NarrowBodies<Real>& w, std::uint3
     d.contact = narrow_touch(w, a, b);
     if (d.contact) d.row = world_sphere_row(world_sphere(w, a), world_sphere(w, b), full);
   } else {
-    const Sphere<float> sa = w.spheres[a], sb = w.spheres[b];
-    d.contact = spheres_touch(sa, sb);  // narrow_touch on the spheres already read
-    if (!d.contact) return d;
-    const Vec3<float> dc = sa.centre() - sb.centre();
-    if (fp32_resolves(sa, sb, cg_sqrt(dot(dc, dc)))) {
-      d.row = sphere_contact_row(sa, sb, w.origin, full);
-    } else {
-      d.row = row_cast<float>(world_sphere_row(world_sphere(w, a), world_sphere(w, b), full), full);
-      ++flags.fp64_rows;
-    }
+    d = narrow_decide_floats(w, w.spheres[a], w.spheres[b], a, b, full, flags);
   }
   return d;
 }

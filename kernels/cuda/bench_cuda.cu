@@ -365,13 +365,16 @@ struct HostPathRow {
   int log2n;
   const char* transfer;
   std::uint64_t contacts;
-  double up_bytes, down_bytes, upload_ms, download_ms, total_ms, floor_ms;
+  double up_bytes, down_bytes, upload_ms, download_ms, total_ms, floor_ms, bytes_floor_ms;
 };
 
 // Host arrays → host contacts (basic fields, fp32, one engine reused: Engine::detect on the scene's
-// host arrays), for each transfer path of tuning.hpp forced through its knobs; median wall time of
-// `runs` calls and of the upload and download stages. floor = the bytes moved over the pinned
-// bandwidth each way plus the device-resident total of the same scene (`resident_ms`).
+// host arrays): the host path of transfer.cuh (packed: the 16-byte spheres up, the rows straight into
+// the result vectors' locked pool blocks), then the old one (CONTACTGRID_CUDA_HOST_PATH=old: the
+// world doubles up) for each transfer path of tuning.hpp forced through its knobs; median wall time of
+// `runs` calls and of the upload and download stages. bytes floor = the bytes the row's path moves
+// over the pinned bandwidth each way, one way after the other; floor = that plus the device-resident
+// total of the same scene (`resident_ms`).
 std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs, const PinnedBandwidth& bw,
                                          double resident_ms) {
   const std::uint64_t n = h.rad.size();
@@ -382,15 +385,32 @@ std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs
     v.orientation = {reinterpret_cast<const cg::Quat<double>*>(h.quat.data()), n};
   }
   std::vector<HostPathRow> rows;
-  const std::pair<const char*, const char*> paths[] = {
-      {"streamed", "streamed"}, {"registered", "registered"}, {"pageable", "staged"}};
-  for (const auto& [up, down] : paths) {
-    ::setenv("CONTACTGRID_CUDA_UPLOAD", up, 1);
-    ::setenv("CONTACTGRID_CUDA_DOWNLOAD", down, 1);
+  struct Path {
+    const char *name, *up, *down;
+    bool old;
+    const char* slot;  // CONTACTGRID_CUDA_TRANSFER_SLOT (null: the default, 4 MiB)
+  };
+  const Path paths[] = {{"packed", nullptr, nullptr, false, nullptr},
+                        {"packed 1 MiB slots", nullptr, nullptr, false, "1048576"},
+                        {"old streamed", "streamed", "streamed", true, nullptr},
+                        {"old registered", "registered", "registered", true, nullptr},
+                        {"old pageable", "pageable", "staged", true, nullptr}};
+  for (const Path& path : paths) {
+    const char* up = path.name;
+    auto set = [](const char* name, const char* value) {
+      if (value)
+        ::setenv(name, value, 1);
+      else
+        ::unsetenv(name);
+    };
+    set("CONTACTGRID_CUDA_UPLOAD", path.up);
+    set("CONTACTGRID_CUDA_DOWNLOAD", path.down);
+    set("CONTACTGRID_CUDA_HOST_PATH", path.old ? "old" : nullptr);
+    set("CONTACTGRID_CUDA_TRANSFER_SLOT", path.slot);
     cg::Engine<float> engine(
         {.backend = cg::Backend::cuda, .cell_size = g_cell_size, .cell_choice = g_cell_choice});
     std::vector<double> total, upload_ms, download_ms;
-    HostPathRow row{log2n, up, 0, 0, 0, 0, 0, 0, 0};
+    HostPathRow row{log2n, up, 0, 0, 0, 0, 0, 0, 0, 0};
     for (int r = 0; r < runs + 2; ++r) {
       const auto t0 = std::chrono::steady_clock::now();
       const cg::Contacts<float> c = engine.detect(v);
@@ -406,15 +426,20 @@ std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs
       row.down_bytes =
           double(c.size()) * (2 * sizeof(c.id_a[0]) + 3 * sizeof(c.normal_on_b[0]) + sizeof(float));
     }
-    row.up_bytes = double(n) * 32 + (h.shape.empty() ? 0.0 : double(n) * (sizeof(cg::Shape) + 56));
+    // the packed path uploads 16 bytes a sphere (sphere scenes; shape scenes keep the doubles)
+    const double per_body = !path.old && h.shape.empty() ? 16.0 : 32.0;
+    row.up_bytes = double(n) * per_body + (h.shape.empty() ? 0.0 : double(n) * (sizeof(cg::Shape) + 56));
     row.total_ms = median(total);
     row.upload_ms = median(upload_ms);
     row.download_ms = median(download_ms);
-    row.floor_ms = row.up_bytes / (bw.h2d * 1e6) + row.down_bytes / (bw.d2h * 1e6) + resident_ms;
+    row.bytes_floor_ms = row.up_bytes / (bw.h2d * 1e6) + row.down_bytes / (bw.d2h * 1e6);
+    row.floor_ms = row.bytes_floor_ms + resident_ms;
     rows.push_back(row);
   }
   ::unsetenv("CONTACTGRID_CUDA_UPLOAD");
   ::unsetenv("CONTACTGRID_CUDA_DOWNLOAD");
+  ::unsetenv("CONTACTGRID_CUDA_HOST_PATH");
+  ::unsetenv("CONTACTGRID_CUDA_TRANSFER_SLOT");
   return rows;
 }
 
@@ -523,15 +548,17 @@ int main(int argc, char** argv) try {
   std::printf(
       "\nHost arrays -> host contacts, fp32, basic fields, one engine reused (Engine::detect), median of up "
       "to "
-      "10 warm calls; pinned bandwidth here %.1f GB/s up, %.1f GB/s down. floor = bytes up / bandwidth up + "
-      "bytes down / bandwidth down + the device-resident total above.\n\n| N | transfer | contacts | MB up | "
-      "MB down | upload | download | total | floor | total/floor "
-      "|\n|---|---|---|---|---|---|---|---|---|---|\n",
+      "10 warm calls; pinned bandwidth here %.1f GB/s up, %.1f GB/s down. bytes floor = bytes up / "
+      "bandwidth up + bytes down / bandwidth down (the row's own bytes: packed 16 B a sphere up, old 32); "
+      "floor = bytes floor + the device-resident total above.\n\n| N | transfer | contacts | MB up | "
+      "MB down | upload | download | total | bytes floor | total/bytes floor | floor | total/floor "
+      "|\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
       bw.h2d, bw.d2h);
   for (const HostPathRow& r : host_rows)
-    std::printf("| 2^%d | %s | %llu | %.1f | %.1f | %.3f | %.3f | %.3f | %.3f | %.2f |\n", r.log2n,
-                r.transfer, static_cast<unsigned long long>(r.contacts), r.up_bytes / 1e6, r.down_bytes / 1e6,
-                r.upload_ms, r.download_ms, r.total_ms, r.floor_ms, r.total_ms / r.floor_ms);
+    std::printf("| 2^%d | %s | %llu | %.1f | %.1f | %.3f | %.3f | %.3f | %.3f | %.2f | %.3f | %.2f |\n",
+                r.log2n, r.transfer, static_cast<unsigned long long>(r.contacts), r.up_bytes / 1e6,
+                r.down_bytes / 1e6, r.upload_ms, r.download_ms, r.total_ms, r.bytes_floor_ms,
+                r.total_ms / r.bytes_floor_ms, r.floor_ms, r.total_ms / r.floor_ms);
   if (!skin_rows.empty()) {
     std::printf(
         "\nSteps with a skin of %g (moves <= skin/10 per step, %d steps; wall ms per step of "

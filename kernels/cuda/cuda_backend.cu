@@ -46,6 +46,7 @@
 #include "backend.hpp"
 #include "cuda/bounds.cuh"
 #include "cuda/brute.cuh"
+#include "cuda/cell_order.cuh"
 #include "cuda/device_buffer.cuh"
 #include "cuda/entries.cuh"
 #include "cuda/history.cuh"
@@ -173,14 +174,20 @@ class CudaBackend {
     // the candidates are fp64's contacts and the narrow stage writes one row each.
     const bool skin = job.skin > 0;
     r.filter = scene_filter(r.filter, job.ellipsoids, n64, skin);
+    // the resident steps' fp32 spheres: the kept candidates and the spheres in cell order (cell_order.cuh)
+    const bool cell_order = cell_order_wanted(r);
 
     reserve_pack(r);
     m_events.start(m_stream);
     upload_stage(r, cuda::pinned_ring(m_device));
-    const bool reuse = skin_stage(r);  // a skin: the kept candidates still hold every contact?
+    // a skin: the kept candidates (of this call's order) still hold every contact?
+    const bool reuse = skin_stage(r) && m_ws.kept_cell_order == cell_order;
     // (scenes with ellipsoids: their shapes packed first; the broad phases but the grid: the spheres
     // alone, in input order, broad.cuh)
-    pack_stage(r, reuse || job.broad != BroadPhase::grid);
+    if (reuse && cell_order)
+      pack_cell_stage(r);
+    else
+      pack_stage(r, reuse || job.broad != BroadPhase::grid);
     if (reuse) {
       reuse_candidates(r);
     } else {
@@ -206,11 +213,21 @@ class CudaBackend {
         }
         brute_stages(r);
       }
-      order_stage(r);
-      if (skin) keep_candidates(r);
+      if (cell_order) {
+        keep_cell_candidates(r);  // instead of the order stage: the walk's order, cell-order indices
+      } else {
+        order_stage(r);
+        if (skin) keep_candidates(r);
+      }
     }
     if (skin) ++(reuse ? stats.candidate_reuses : stats.candidate_builds);
-    narrow_stage(r);
+    if (cell_order) {
+      narrow_cell_stage(r);  // (a skin: never the 16-byte upload of narrow_fp64_rows)
+    } else {
+      narrow_stage(r);
+      narrow_fp64_rows(r, cuda::pinned_ring(m_device));  // fp32's 16-byte upload: the rows it cannot make
+    }
+    m_ws.rows_cell_order = cell_order;  // download_contacts sorts such rows by (a, b)
     history_stage(r, m_thrust);
     const DownloadHostTimes host =
         download_stage(r, m_h_staging, cuda::pinned_ring(m_device), out, !m_downloaded);
@@ -359,9 +376,25 @@ void download_contacts(CudaBackend& b, const DeviceContactsView<Real>& v, Contac
   zip_contact_fields(cp, v, v.fields(), [](auto, auto*& ptr, auto* d_ptr) {
     ptr = const_cast<std::remove_reference_t<decltype(ptr)>>(d_ptr);
   });
+  Workspace& ws = b.m_ws;
+  // rows of a cell-order call (cell_order.cuh): each column gathered into (a, b) order, then copied
+  const std::uint32_t* order =
+      ws.rows_cell_order && v.count > 1
+          ? canonical_rows(ws, b.m_stream, v.id_a, v.id_b, v.count, std::max(1, bits_for(ws.res_count)))
+          : nullptr;
   for_each_field(out, cp, v.fields(), [&](auto& vec, const void* d_ptr) {
-    CG_CUDA_CHECK(
-        cudaMemcpyAsync(vec.data(), d_ptr, vec.size() * sizeof(vec[0]), cudaMemcpyDeviceToHost, b.m_stream));
+    using T = std::remove_cv_t<std::remove_reference_t<decltype(vec[0])>>;
+    const std::size_t bytes = vec.size() * sizeof(T);
+    if (order) {
+      ws.reserve({{&ws.canon_field, bytes}}, "download");
+      T* sorted = ws.canon_field.span_as<T>(vec.size()).data();
+      cuda::gather_rows_kernel<T><<<cuda::blocks_for(vec.size()), cuda::kBlock, 0, b.m_stream>>>(
+          static_cast<const T*>(d_ptr), order, vec.size(), sorted);
+      CG_CUDA_CHECK_LAUNCH("gather_rows");
+      d_ptr = sorted;
+    }
+    CG_CUDA_CHECK(cudaMemcpyAsync(vec.data(), d_ptr, bytes, cudaMemcpyDeviceToHost, b.m_stream));
+    if (order) CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));  // canon_field is the next column's
   });
   CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
 }

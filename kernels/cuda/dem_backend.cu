@@ -38,6 +38,9 @@ std::unique_ptr<CudaDem> make_cuda_dem(int device, const DemBodies& b,
   CG_CUDA_CHECK(cudaSetDevice(device));
   d->sums_by_sort = read_tuning().dem_sums_sort;
   d->a_sums = !read_tuning().dem_terms_rows;
+  d->segments_cub = read_tuning().dem_segments_cub;
+  d->store_all = read_tuning().dem_store_all;
+  d->min_blocks = read_tuning().dem_min_blocks;
   const std::size_t n = b.size();
   d->count = n;
   d->shapes = !b.shape.empty();
@@ -106,7 +109,7 @@ void cuda_dem_forces(CudaDem& d, const DeviceContactsView<Real>& contacts, const
                      DemThen then) {
   CG_CUDA_CHECK(cudaSetDevice(d.device));
   const dem::ContactRows<Real> rows = contact_rows(contacts);
-  dem_contact_stage(d, rows, c);
+  dem_contact_stage(d, rows, c, then != DemThen::kick_and_drift);
   d.events.mark(DemStage::contact_terms);
   dem_body_stage(d, rows, c, then);  // marks body_index and body_terms
 }

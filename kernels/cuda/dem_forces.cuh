@@ -11,21 +11,47 @@
 //                     what the body stage still needs (the force and torque on B, the spring, the
 //                     normal, the energy): no torque on A per row, and the body stage reads no rows
 //                     as A (dem_sums.cuh).
-//   rows (default)    contact_terms of every row (every term stored); the body stage sums both sides:
+//   rows (default)    contact_terms of every row (its terms stored); the body stage sums both sides:
 //                     on the H100 the faster of the two (the sums' runs keep a block's threads waiting
-//                     on the run's first thread).
+//                     on the run's first thread). Only what a later stage reads is stored
+//                     (CONTACTGRID_DEM_STORE=all: every term, in double, every step): no torques where
+//                     the law has no rolling resistance (the body stage takes each from the row's point
+//                     and force, the same expression: torques_from_points), in fp32 the normals as
+//                     detected (12 bytes a row, the same values), each row's energy only where the
+//                     energies may be asked next (a run's last step).
 // The same sums in the same order either way: the bits of the CPU backend.
+#include <type_traits>
+
 #include "cuda/common.cuh"
 #include "cuda/dem_state.cuh"
 
 namespace cg::cuda {
 
-template <class Real>
-__global__ void dem_contact_kernel(dem::ContactRows<Real> rows, dem::BodyArrays b, dem::StepConstants c,
-                                   dem::ContactTerms t) {
+// Contact row k's terms (core/dem_step.hpp: contact_terms; the null terms of t not stored). normal
+// non-null: the normals kept as detected, this step's into `normal` and the last step's read from
+// old_normal (t.normal unused): the same values as their doubles.
+// kMinBlocks: the blocks an SM must hold at once (__launch_bounds__: the compiler caps each thread's
+// registers at 65536 / (kBlock kMinBlocks), spilling what does not fit; the same instructions' results,
+// the same bits). The force law's doubles take about 150 registers a thread uncapped: one block of
+// 8 warps an SM, too few loads in flight for the rows' and bodies' gathers (tuning:
+// CONTACTGRID_DEM_BLOCKS).
+template <class Real, int kMinBlocks>
+__global__ void __launch_bounds__(kBlock, kMinBlocks)
+    dem_contact_kernel(dem::ContactRows<Real> rows, dem::BodyArrays b, dem::StepConstants c,
+                       dem::ContactTerms t, Vec3<Real>* normal, const Vec3<Real>* old_normal) {
   const std::size_t k = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
   if (k >= rows.count) return;
-  dem::contact_terms(k, rows, b, c, t);
+  if (!normal) {
+    dem::contact_terms(k, rows, b, c, t);
+    return;
+  }
+  const dem::ContactResult r = dem::contact_result(k, rows, b, c, t.old_xi, old_normal);
+  t.force[k] = r.force;
+  if (t.torque_a) t.torque_a[k] = r.torque_a;
+  if (t.torque_b) t.torque_b[k] = r.torque_b;
+  if (t.energy) t.energy[k] = r.energy;
+  t.xi[k] = r.xi;
+  normal[k] = rows.normal_on_b[k];
 }
 
 template <class Real>
@@ -74,18 +100,41 @@ dem::ContactRows<Real> contact_rows(const DeviceContactsView<Real>& v) {
           v.normal_on_b, v.distance, v.previous_row,  v.count};
 }
 
+// last: the energies may be asked after this step (a run's last step, the forces of the start); in
+// rows mode (the default) only then is each row's energy stored.
 template <class Real>
-void dem_contact_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::StepConstants& c) {
+void dem_contact_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
+                       bool last) {
   const std::size_t k = rows.count;
   const int next = 1 - d.current;
-  for (DemBuffer<Vec3<double>>* b : {&d.contact_force, &d.torque_b, &d.xi[next], &d.normal[next]})
-    b->reserve(k, true);
-  if (!d.a_sums) d.torque_a.reserve(k, true);
-  d.contact_energy.reserve(k, true);
-  const dem::ContactTerms t{d.contact_force.data(), d.a_sums ? nullptr : d.torque_a.data(),
-                            d.torque_b.data(),      d.contact_energy.data(),
-                            d.xi[next].data(),      d.normal[next].data(),
-                            d.xi[d.current].data(), d.normal[d.current].data()};
+  // rows (default): only what a later stage reads; no torque without rolling resistance (the body
+  // stage's from the points), in fp32 the normals as detected
+  const bool narrow = !d.a_sums && !d.store_all;
+  d.torques_from_points = narrow && dem::torques_from_points(c);
+  const bool normals_as_detected = narrow && std::is_same_v<Real, float>;
+  const bool energy = last || !narrow;
+  for (DemBuffer<Vec3<double>>* b : {&d.contact_force, &d.xi[next]}) b->reserve(k, true);
+  if (!d.torques_from_points) d.torque_b.reserve(k, true);
+  if (!d.a_sums && !d.torques_from_points) d.torque_a.reserve(k, true);
+  if (energy) d.contact_energy.reserve(k, true);
+  Vec3<Real>* normal = nullptr;
+  const Vec3<Real>* old_normal = nullptr;
+  if constexpr (std::is_same_v<Real, float>) {
+    if (normals_as_detected) {
+      d.normal_f[next].reserve(k, true);
+      normal = d.normal_f[next].data();
+      old_normal = d.normal_f[d.current].data();
+    }
+  }
+  if (!normals_as_detected) d.normal[next].reserve(k, true);
+  const dem::ContactTerms t{d.contact_force.data(),
+                            d.a_sums || d.torques_from_points ? nullptr : d.torque_a.data(),
+                            d.torques_from_points ? nullptr : d.torque_b.data(),
+                            energy ? d.contact_energy.data() : nullptr,
+                            d.xi[next].data(),
+                            normals_as_detected ? nullptr : d.normal[next].data(),
+                            d.xi[d.current].data(),
+                            normals_as_detected ? nullptr : d.normal[d.current].data()};
   if (k > 0 && d.a_sums) {
     d.a_force.reserve(std::max<std::size_t>(d.count, 1), true);
     d.a_torque.reserve(std::max<std::size_t>(d.count, 1), true);
@@ -93,7 +142,13 @@ void dem_contact_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem
         <<<cuda::blocks_for(k), cuda::kBlock>>>(rows, d.arrays(), c, t, d.a_force.data(), d.a_torque.data());
     CG_CUDA_CHECK_LAUNCH("dem_contact_a");
   } else if (k > 0) {
-    cuda::dem_contact_kernel<Real><<<cuda::blocks_for(k), cuda::kBlock>>>(rows, d.arrays(), c, t);
+    const unsigned blocks = cuda::blocks_for(k);
+    if (d.min_blocks >= 3)
+      cuda::dem_contact_kernel<Real, 3><<<blocks, cuda::kBlock>>>(rows, d.arrays(), c, t, normal, old_normal);
+    else if (d.min_blocks == 2)
+      cuda::dem_contact_kernel<Real, 2><<<blocks, cuda::kBlock>>>(rows, d.arrays(), c, t, normal, old_normal);
+    else
+      cuda::dem_contact_kernel<Real, 1><<<blocks, cuda::kBlock>>>(rows, d.arrays(), c, t, normal, old_normal);
     CG_CUDA_CHECK_LAUNCH("dem_contact");
   }
   d.current = next;

@@ -88,6 +88,12 @@ class CudaDem {
   // (a_force, a_torque) from the contact stage, no torque_a
   DemBuffer<Vec3<double>> contact_force, torque_a, torque_b, xi[2], normal[2], a_force, a_torque;
   bool a_sums = true;
+  // store_all (tuning: CONTACTGRID_DEM_STORE=all): every term in double every step; else
+  // (dem_forces.cuh) torques_from_points: the step's torques are not stored (the body stage takes
+  // them from the rows' points, core/dem_step.hpp), and in fp32 the normals are kept as detected
+  // (normal_f: this step's and the last, as normal)
+  bool store_all = false, torques_from_points = false;
+  DemBuffer<Vec3<float>> normal_f[2];
   DemBuffer<double> contact_energy;
   int current = 0;
   // the rows by B, the begins of each body's rows (sort: the radix sort's keys; counts: each row's
@@ -95,6 +101,8 @@ class CudaDem {
   DemBuffer<std::uint32_t> b_keys[2], by_b[2], a_begin, b_begin, b_rank;
   DemBuffer<std::byte> sort_temp;
   bool sums_by_sort = false;  // tuning: CONTACTGRID_DEM_SUMS=sort
+  bool segments_cub = false;  // tuning: CONTACTGRID_DEM_SEGMENTS=cub
+  int min_blocks = 2;         // tuning: CONTACTGRID_DEM_BLOCKS (the force kernels' __launch_bounds__)
   DemStageEvents events;
   DemBuffer<dem::Wall> walls;
   int wall_count = 0;

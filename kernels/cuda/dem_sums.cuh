@@ -8,10 +8,11 @@
 // The index, two ways to the same arrays (tuning: CONTACTGRID_DEM_SUMS):
 //   counts (default)  one pass over the rows counts each body's rows as A and as B (integer atomics;
 //                     each row keeps its rank among its B's rows), an exclusive scan of each count
-//                     gives the begins, one pass puts each row at its B's begin plus its rank, and a
-//                     segmented sort of each body's few rows restores the ascending row order that
-//                     the atomics' ranks do not fix. O(rows + bodies) streaming passes, every read of
-//                     a row coalesced but the scatter.
+//                     gives the begins, one pass puts each row at its B's begin plus its rank, and
+//                     each body's thread sorts its few rows (sort_rows), restoring the ascending row
+//                     order that the atomics' ranks do not fix (CONTACTGRID_DEM_SEGMENTS=cub: CUB's
+//                     segmented sort, which reads its partition back to the host each call).
+//                     O(rows + bodies) streaming passes, every read of a row coalesced but the scatter.
 //   sort              a stable radix sort of (B, row) over the bits of the body count (CUB), then
 //                     Thrust's vectorised lower_bound of every body id in the rows' A and in the
 //                     sorted Bs (a binary search per body over the rows).
@@ -22,6 +23,7 @@
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
 #include <cub/device/device_segmented_sort.cuh>
+#include <type_traits>
 
 #include "backend.hpp"
 #include "cuda/common.cuh"
@@ -56,24 +58,40 @@ __global__ void dem_place_kernel(const std::int64_t* id_b, std::size_t k, const 
   by_b[b_begin[id_b[r]] + b_rank[r]] = static_cast<std::uint32_t>(r);
 }
 
+// Each body's rows as B into ascending row order, in place (core/dem_step.hpp: sort_rows).
+__global__ void dem_sort_b_rows_kernel(const std::uint32_t* b_begin, std::size_t n, std::uint32_t* by_b) {
+  const std::size_t i = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
+  if (i >= n) return;
+  const std::uint32_t begin = b_begin[i], end = b_begin[i + 1];
+  if (end > begin + 1) dem::sort_rows(by_b + begin, end - begin);
+}
+
 // body_terms of body i (a_force null: its sums over its rows as A too; else those sums are
-// a_force[i], a_torque[i], stored by the contact stage where it has such rows: dem_forces.cuh), then
-// (kThen: DemThen) its kick and the next step's kick_drift: a body's step reads and writes only its own
-// state (the contact stage has read every body's), so the integration needs no pass of its own.
-template <int kThen>
-__global__ void dem_body_kernel(dem::BodyArrays b, dem::StepConstants c, dem::ContactTerms t,
-                                dem::BodyRowIndex index, dem::WallTerms w, const Vec3<double>* a_force,
-                                const Vec3<double>* a_torque) {
+// a_force[i], a_torque[i], stored by the contact stage where it has such rows: dem_forces.cuh;
+// points: no torque stored, each from its row's point: contact_sums_from_points), then (kThen:
+// DemThen) its kick and the next step's kick_drift: a body's step reads and writes only its own state
+// (the contact stage has read every body's), so the integration needs no pass of its own.
+// kMinBlocks: as the contact stage's (dem_forces.cuh: __launch_bounds__, CONTACTGRID_DEM_BLOCKS).
+template <int kThen, class Real, int kMinBlocks>
+__global__ void __launch_bounds__(kBlock, kMinBlocks)
+    dem_body_kernel(dem::BodyArrays b, dem::StepConstants c, dem::ContactTerms t, dem::BodyRowIndex index,
+                    dem::WallTerms w, const Vec3<double>* a_force, const Vec3<double>* a_torque,
+                    dem::ContactRows<Real> rows, bool points) {
   const std::size_t i = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
   if (i >= b.count) return;
   Vec3<double> f{0, 0, 0}, tau{0, 0, 0};
-  if (!a_force) {
-    dem::a_sums(i, t, index, f, tau);
-  } else if (index.a_begin[i] < index.a_begin[i + 1]) {
-    f = a_force[i];
-    tau = a_torque[i];
+  if (points) {
+    dem::contact_sums_from_points(i, b, rows, t, index, f, tau);
+    dem::body_terms_after_contacts(i, b, c, w, f, tau);
+  } else {
+    if (!a_force) {
+      dem::a_sums(i, t, index, f, tau);
+    } else if (index.a_begin[i] < index.a_begin[i + 1]) {
+      f = a_force[i];
+      tau = a_torque[i];
+    }
+    dem::body_terms_after_a(i, b, c, t, index, w, f, tau);
   }
-  dem::body_terms_after_a(i, b, c, t, index, w, f, tau);
   if (kThen == int(detail::DemThen::nothing)) return;
   dem::BodyState s = b.state(i);
   const dem::BodyProps& p = b.props[i];
@@ -132,9 +150,10 @@ const std::uint32_t* dem_index_by_counts(CudaDem& d, const dem::ContactRows<Real
   CG_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, scan_temp, d.a_begin.data(), d.a_begin.data(), n + 1,
                                               cudaStreamLegacy));
   const std::uint32_t* begin = d.b_begin.data();
-  CG_CUDA_CHECK(cub::DeviceSegmentedSort::SortKeys(nullptr, sort_temp, d.by_b[0].data(), d.by_b[1].data(),
-                                                   std::int64_t(k), std::int64_t(n), begin, begin + 1,
-                                                   cudaStreamLegacy));
+  if (d.segments_cub)
+    CG_CUDA_CHECK(cub::DeviceSegmentedSort::SortKeys(nullptr, sort_temp, d.by_b[0].data(), d.by_b[1].data(),
+                                                     std::int64_t(k), std::int64_t(n), begin, begin + 1,
+                                                     cudaStreamLegacy));
   std::size_t temp = std::max(scan_temp, sort_temp);
   d.sort_temp.reserve(std::max<std::size_t>(temp, 1), true);
   temp = d.sort_temp.capacity();
@@ -146,6 +165,12 @@ const std::uint32_t* dem_index_by_counts(CudaDem& d, const dem::ContactRows<Real
   cuda::dem_place_kernel<<<cuda::blocks_for(k), cuda::kBlock>>>(rows.id_b, k, d.b_begin.data(),
                                                                 d.b_rank.data(), d.by_b[0].data());
   CG_CUDA_CHECK_LAUNCH("dem_place");
+  if (!d.segments_cub) {  // each body's few rows sorted by its own thread: no host synchronisation
+    cuda::dem_sort_b_rows_kernel<<<cuda::blocks_for(n), cuda::kBlock>>>(d.b_begin.data(), n,
+                                                                        d.by_b[0].data());
+    CG_CUDA_CHECK_LAUNCH("dem_sort_b_rows");
+    return d.by_b[0].data();
+  }
   temp = d.sort_temp.capacity();
   CG_CUDA_CHECK(cub::DeviceSegmentedSort::SortKeys(d.sort_temp.data(), temp, d.by_b[0].data(),
                                                    d.by_b[1].data(), std::int64_t(k), std::int64_t(n), begin,
@@ -168,9 +193,10 @@ void dem_body_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::S
     CG_CUDA_CHECK(cudaMemsetAsync(d.b_begin.data(), 0, (n + 1) * sizeof(std::uint32_t), cudaStreamLegacy));
   }
   d.events.mark(DemStage::body_index);
+  const bool points = d.torques_from_points && k > 0;
   const dem::ContactTerms t{d.contact_force.data(),
-                            d.a_sums ? nullptr : d.torque_a.data(),
-                            d.torque_b.data(),
+                            d.a_sums || d.torques_from_points ? nullptr : d.torque_a.data(),
+                            d.torques_from_points ? nullptr : d.torque_b.data(),
                             d.contact_energy.data(),
                             nullptr,
                             nullptr,
@@ -184,13 +210,24 @@ void dem_body_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::S
   const Vec3<double>* af = d.a_sums ? d.a_force.data() : nullptr;
   const Vec3<double>* at = d.a_sums ? d.a_torque.data() : nullptr;
   const unsigned blocks = cuda::blocks_for(n);
+  auto launch = [&](auto then_c) {
+    constexpr int kThen = decltype(then_c)::value;
+    if (d.min_blocks >= 3)
+      cuda::dem_body_kernel<kThen, Real, 3>
+          <<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at, rows, points);
+    else if (d.min_blocks == 2)
+      cuda::dem_body_kernel<kThen, Real, 2>
+          <<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at, rows, points);
+    else
+      cuda::dem_body_kernel<kThen, Real, 1>
+          <<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at, rows, points);
+  };
   if (then == DemThen::nothing)
-    cuda::dem_body_kernel<int(DemThen::nothing)><<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at);
+    launch(std::integral_constant<int, int(DemThen::nothing)>{});
   else if (then == DemThen::kick)
-    cuda::dem_body_kernel<int(DemThen::kick)><<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at);
+    launch(std::integral_constant<int, int(DemThen::kick)>{});
   else
-    cuda::dem_body_kernel<int(DemThen::kick_and_drift)>
-        <<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at);
+    launch(std::integral_constant<int, int(DemThen::kick_and_drift)>{});
   CG_CUDA_CHECK_LAUNCH("dem_body");
   d.events.mark(DemStage::body_terms);
 }

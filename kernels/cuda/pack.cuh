@@ -27,12 +27,23 @@ __device__ __forceinline__ Key home_layer_key(const BodyCells& bc, int shift) {
 }
 
 // Body i as pack makes it: the local Real sphere Real(p - origin), radius Real(r) + g.radius_margin
-// (mixed's enlarged spheres; + 0 otherwise); an invalid body → c->bad.
+// (mixed's enlarged spheres; + 0 otherwise); an invalid body → c->bad. fp32 with `floats` (the
+// 16-byte upload, upload_pack.hpp): the host made Real(p - origin) and Real(r) and checked the bodies
+// (compute_bounds); the margin is added here.
 template <class Real>
 __device__ __forceinline__ Sphere<Real> packed_sphere(const double* __restrict__ pos,
-                                                      const double* __restrict__ rad, std::uint32_t i,
-                                                      std::uint32_t n, const Vec3<double>& origin,
-                                                      const GridParams<Real>& g, Counters* __restrict__ c) {
+                                                      const double* __restrict__ rad,
+                                                      const Sphere<float>* __restrict__ floats,
+                                                      std::uint32_t i, std::uint32_t n,
+                                                      const Vec3<double>& origin, const GridParams<Real>& g,
+                                                      Counters* __restrict__ c) {
+  if constexpr (std::is_same_v<Real, float>) {
+    if (floats) {
+      Sphere<float> s = floats[i];
+      s.r = s.r + g.radius_margin;
+      return s;
+    }
+  }
   const std::uint64_t i3 = 3 * std::uint64_t(i);
   const double px = pos[i3], py = pos[i3 + 1], pz = pos[i3 + 2], r = rad[i];
   if (body_is_bad(px, py, pz, r)) atomicMax(&c->bad, static_cast<unsigned long long>(n - i));
@@ -44,13 +55,14 @@ __device__ __forceinline__ Sphere<Real> packed_sphere(const double* __restrict__
 // order, and the (locality key, index) pairs of the renumbering sort (home_key null: none).
 template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock)
-    pack_kernel(const double* __restrict__ pos, const double* __restrict__ rad, std::uint32_t n,
-                Vec3<double> origin, GridParams<Real> g, Sphere<Real>* __restrict__ spheres, int layer_shift,
+    pack_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
+                const Sphere<float>* __restrict__ floats, std::uint32_t n, Vec3<double> origin,
+                GridParams<Real> g, Sphere<Real>* __restrict__ spheres, int layer_shift,
                 Key* __restrict__ home_key, std::uint32_t* __restrict__ home_index,
                 Counters* __restrict__ c) {
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
   if (i >= n) return;
-  const Sphere<Real> s = packed_sphere(pos, rad, i, n, origin, g, c);
+  const Sphere<Real> s = packed_sphere(pos, rad, floats, i, n, origin, g, c);
   spheres[i] = s;
   if (!home_key) return;
   home_key[i] = home_layer_key<Key>(body_cells(s, g), layer_shift);
@@ -66,6 +78,7 @@ struct PackInput {
   const double* rad = nullptr;
   Vec3<double> origin{};
   ShapeInput<Packed> shape;
+  const Sphere<float>* floats = nullptr;  // fp32's 16-byte upload (packed_sphere)
 };
 
 // reorder: cell-ordered copy of the spheres (body j = input body perm[j] = sorted_index[j]; radii +
@@ -104,7 +117,7 @@ __global__ void __launch_bounds__(kBlock)
     Sphere<Real> s;
     PackedShape<Packed> shape{};  // (the cut's)
     if constexpr (kPack) {
-      s = packed_sphere(in.pos, in.rad, j, n, in.origin, g, c);
+      s = packed_sphere(in.pos, in.rad, in.floats, j, n, in.origin, g, c);
       spheres[j] = s;
       if (in.shape.kind) {
         shape = packed_shape_of(in.shape, in.rad, j, n, c);
@@ -239,9 +252,9 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   cub::DoubleBuffer<Key> home_key = ws.home_keys<Key>(n);
   cub::DoubleBuffer<std::uint32_t> home_index = ws.home_index(n);
   if (!pack_here) {
-    cuda::pack_kernel<Real, Key><<<nb, kBlock, 0, st>>>(r.d_pos, r.d_rad, n, r.origin, r.g, r.d_spheres,
-                                                        layer_shift, renumber ? home_key.Current() : nullptr,
-                                                        home_index.Current(), r.d_counters);
+    cuda::pack_kernel<Real, Key>
+        <<<nb, kBlock, 0, st>>>(r.d_pos, r.d_rad, r.d_packed_in, n, r.origin, r.g, r.d_spheres, layer_shift,
+                                renumber ? home_key.Current() : nullptr, home_index.Current(), r.d_counters);
     CG_CUDA_CHECK_LAUNCH("pack");
   }
   if (spheres_only) {
@@ -260,7 +273,7 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   };
   if (pack_here)
     reorder(cuda::reorder_kernel<Real, Key, Narrow, true>, nullptr,
-            cuda::PackInput<Narrow>{r.d_pos, r.d_rad, r.origin, shape_in});
+            cuda::PackInput<Narrow>{r.d_pos, r.d_rad, r.origin, shape_in, r.d_packed_in});
   else
     reorder(cuda::reorder_kernel<Real, Key, Narrow, false>, home_index.Current(), cuda::PackInput<Narrow>{});
   CG_CUDA_CHECK_LAUNCH("reorder");

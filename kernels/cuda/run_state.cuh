@@ -43,6 +43,9 @@ struct RunState {
   const double* d_pos = nullptr;
   const double* d_rad = nullptr;
   const std::uint8_t* d_report = nullptr;
+  // fp32's 16-byte upload (transfer.cuh, packed_upload_stage): the spheres the host packed, read by
+  // pack instead of d_pos / d_rad (null until rows need the world doubles: narrow_fp64_rows)
+  const Sphere<float>* d_packed_in = nullptr;
   // pack
   Sphere<Real>* d_spheres = nullptr;        // input order
   PackedShape<Narrow>* d_shapes = nullptr;  // input order; scenes with ellipsoids only (shapes.cuh)

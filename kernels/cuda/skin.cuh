@@ -106,6 +106,7 @@ void keep_candidates(RunState<Real, Key, Narrow>& r) {
   if (r.d_report) copy(ws.ref_report.data(), r.d_report, n);
   ws.kept_count = r.np;
   ws.kept_reported = r.d_report != nullptr;
+  ws.kept_cell_order = false;
   r.events.mark(EngineStage::order, st);
 }
 

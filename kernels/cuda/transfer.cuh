@@ -7,6 +7,9 @@
 
 #include "cuda/narrow.cuh"
 #include "cuda/run_state.cuh"
+#include "cuda/tuning.hpp"
+#include "host_vector.hpp"
+#include "upload_pack.hpp"
 
 namespace cg::detail {
 
@@ -66,6 +69,49 @@ inline void streamed_upload(cuda::PinnedRing& ring, std::size_t slot_bytes,
   }
 }
 
+// fp32 sphere calls from host arrays go up as the 16-byte spheres fp32's pack makes (upload_pack.hpp)
+// instead of the 32-byte world doubles: no ellipsoids, no skin (its reference positions are the
+// doubles), no report mask, a narrow stage that writes every candidate (narrow_fp64_rows reruns it),
+// the streamed or automatic upload, and not CONTACTGRID_CUDA_HOST_PATH=old.
+template <class Real, class Key, class Narrow>
+bool packed_upload_fits(const RunState<Real, Key, Narrow>& r) {
+  return std::is_same_v<Real, float> && std::is_same_v<Narrow, float> && !r.device_in && r.n64 > 0 &&
+         r.job.ellipsoids == 0 && !(r.job.skin > 0) && r.job.bodies.report.empty() &&
+         !narrow_may_reject(r.filter) &&
+         (r.tuning.upload == HostTransfer::automatic || r.tuning.upload == HostTransfer::streamed) &&
+         !host_path_old();
+}
+
+// Host → device of the 16-byte spheres through the pinned ring: slot k is packed from the caller's
+// doubles by all host threads while the copy engine moves slot k − 1. The spheres land in ws.pos
+// (24 bytes a body of room); pack reads them (r.d_packed_in), the doubles stay on the host.
+template <class Real, class Key, class Narrow>
+void packed_upload_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedRing& ring) {
+  const BodiesView& b = r.job.bodies;
+  auto* d_spheres = reinterpret_cast<Sphere<float>*>(r.ws.pos.data());
+  // whole spheres a slot, slots 256-byte aligned (the knob may ask for any size)
+  const std::size_t slot_bytes = std::max<std::size_t>(4096, r.tuning.transfer_slot_bytes / 256 * 256);
+  const std::size_t per_slot = slot_bytes / sizeof(Sphere<float>);
+  {
+    const std::lock_guard<std::mutex> lock(ring.mutex());
+    ring.ready(slot_bytes);
+    for (std::size_t k = 0, first = 0; first < r.n64; ++k, first += per_slot) {
+      const std::size_t count = std::min<std::size_t>(per_slot, r.n64 - first);
+      ring.wait(k);  // the slot's previous copy has left it
+      auto* slot = reinterpret_cast<Sphere<float>*>(ring.slot(k));
+      pack_upload_spheres(b.position.data(), b.radius.data(), r.origin, first, first + count, slot, 0);
+      CG_CUDA_CHECK(cudaMemcpyAsync(d_spheres + first, slot, count * sizeof(Sphere<float>),
+                                    cudaMemcpyHostToDevice, r.st));
+      CG_CUDA_CHECK(cudaEventRecord(ring.done(k), r.st));
+    }
+  }
+  r.d_packed_in = d_spheres;
+  r.d_pos = nullptr;  // (read by nothing until narrow_fp64_rows uploads them)
+  r.d_rad = nullptr;
+  r.d_report = nullptr;
+  r.events.mark(EngineStage::upload, r.st);
+}
+
 // upload: the DEVICE bodies of the call: the caller's arrays (device-array API), or the host arrays
 // copied into ws.pos / rad / report and, with ellipsoids, ws.shape_kind / semi / orient (stage
 // "upload"), by Tuning::upload: streamed through the pinned
@@ -78,6 +124,10 @@ void upload_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedRing& ring) {
     r.d_pos = r.job.device_bodies->position;
     r.d_rad = r.job.device_bodies->radius;
     r.d_report = r.job.device_bodies->report;
+    return;
+  }
+  if (packed_upload_fits(r)) {
+    packed_upload_stage(r, ring);
     return;
   }
   Workspace& ws = r.ws;
@@ -126,6 +176,31 @@ void upload_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedRing& ring) {
     CG_CUDA_CHECK(cudaStreamSynchronize(r.st));  // the copies read the locked ranges until here
     for (void* p : locked) CG_CUDA_CHECK(cudaHostUnregister(p));
   }
+}
+
+// After the narrow stage of a call that uploaded the 16-byte spheres: the rows whose normal fp32
+// cannot resolve (core/narrow.hpp: fp32_resolves) take the world doubles, which the device lacks. The
+// narrow stage counted them and left them empty; where there are any (near-coincident centres), the
+// doubles go up into ws.pos / ws.rad (the spheres there were read by pack) and the narrow stage runs
+// again with them: every row as the doubles' upload gives it, bit for bit. Its time counts as the
+// narrow stage's.
+template <class Real, class Key, class Narrow>
+void narrow_fp64_rows(RunState<Real, Key, Narrow>& r, cuda::PinnedRing& ring) {
+  if (!r.d_packed_in || r.np == 0) return;
+  CG_CUDA_CHECK(cudaStreamSynchronize(r.st));  // the counters came down with the narrow stage
+  if (r.h_counters->fp64_rows == 0) return;
+  const std::uint64_t n64 = r.n64;
+  const std::vector<HostDevice> ranges{
+      {reinterpret_cast<std::byte*>(const_cast<Vec3<double>*>(r.job.bodies.position.data())), r.ws.pos.data(),
+       n64 * sizeof(Vec3<double>)},
+      {reinterpret_cast<std::byte*>(const_cast<double*>(r.job.bodies.radius.data())), r.ws.rad.data(),
+       n64 * sizeof(double)}};
+  streamed_upload(ring, r.tuning.transfer_slot_bytes, ranges, r.st);
+  r.d_pos = reinterpret_cast<const double*>(r.ws.pos.data());
+  r.d_rad = reinterpret_cast<const double*>(r.ws.rad.data());
+  r.d_packed_in = nullptr;
+  CG_CUDA_CHECK(cudaMemsetAsync(&r.d_counters->fp64_rows, 0, sizeof(r.d_counters->fp64_rows), r.st));
+  narrow_stage(r);
 }
 
 // Host seconds of the download that the events do not see (StageEvents::collect).
@@ -177,11 +252,58 @@ double streamed_download(cuda::PinnedRing& ring, std::size_t slot_bytes,
   return last_s;
 }
 
-// download: the contact rows described in DEVICE memory (job.device_out), or copied into `out` by
-// Tuning::download (download_transfer): through one whole pinned staging buffer and a parallel host
-// copy (single; also where the driver refuses to register), streamed through the pinned ring (the
-// host copy out of one slot overlaps the transfer of the next), or straight into the result vectors
-// page-locked in place (registered: a parallel first touch, then cudaHostRegister).
+// The result vectors' pool blocks page-locked once and kept so (HostPool::lock_block): the rows come
+// down straight into them at the pinned rate, no staging copy, no locking a call.
+inline bool lock_for_cuda(void* p, std::size_t bytes) {
+  if (cudaHostRegister(p, bytes, cudaHostRegisterPortable) == cudaSuccess) return true;
+  (void)cudaGetLastError();  // refused: the caller takes another download
+  return false;
+}
+inline void unlock_for_cuda(void* p) {
+  if (cudaHostUnregister(p) != cudaSuccess) (void)cudaGetLastError();  // (the context may be gone)
+}
+
+// The download straight into `out` (np > 0 rows): every field's vector in a pooled host block that is
+// page-locked (on its first use, after a first touch of its pages on every host thread: locking would
+// fault them in on one). False, `out` sized, when a field is too small for the pool (below 1 MiB) or
+// the driver refuses to lock: the caller downloads another way.
+template <class Real, class Key, class Narrow>
+bool direct_download(RunState<Real, Key, Narrow>& r, Contacts<Narrow>& out, DownloadHostTimes& ht) {
+  using clock_type = std::chrono::steady_clock;
+  const auto t0 = clock_type::now();
+  const FieldSet set = r.fields();
+  out.resize(r.n_rows, set);
+  std::vector<HostDevice> fields;
+  for_each_field(out, r.cp, set, [&](auto& vec, const void* d_ptr) {
+    fields.push_back({reinterpret_cast<std::byte*>(vec.data()),
+                      static_cast<std::byte*>(const_cast<void*>(d_ptr)), vec.size() * sizeof(vec[0])});
+  });
+  HostPool& pool = HostPool::instance();
+  std::vector<CopyBlock> touch;
+  for (const HostDevice& f : fields) {
+    if (f.bytes < HostPool::k_pooled_min) return false;
+    if (!pool.block_locked(f.host)) touch.push_back({f.host, nullptr, f.bytes});
+  }
+  if (!touch.empty()) parallel_copy(touch.data(), touch.size(), 0);
+  for (const HostDevice& f : fields)
+    if (pool.lock_block(f.host, lock_for_cuda, unlock_for_cuda) < f.bytes) return false;
+  const auto t1 = clock_type::now();
+  for (const HostDevice& f : fields)
+    CG_CUDA_CHECK(cudaMemcpyAsync(f.host, f.device, f.bytes, cudaMemcpyDeviceToHost, r.st));
+  r.events.mark(EngineStage::download, r.st);
+  CG_CUDA_CHECK(cudaStreamSynchronize(r.st));
+  ht.overlap_s = std::chrono::duration<double>(t1 - t0).count();  // sizing and locking, before the copy
+  r.take_narrow_counters();  // the stream has synced (the counters were queued before the rows' copy)
+  return true;
+}
+
+// download: the contact rows described in DEVICE memory (job.device_out), straight into `out`'s
+// page-locked pool blocks (direct_download: the automatic download, not with
+// CONTACTGRID_CUDA_HOST_PATH=old), or copied into `out` by Tuning::download (download_transfer):
+// through one whole pinned staging buffer and a parallel host copy (single; also where the driver
+// refuses to register), streamed through the pinned ring (the host copy out of one slot overlaps the
+// transfer of the next), or straight into the result vectors page-locked in place (registered: a
+// parallel first touch, then cudaHostRegister).
 template <class Real, class Key, class Narrow>
 DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuffer& h_staging,
                                  cuda::PinnedRing& ring, Contacts<Narrow>& out, bool first_download) {
@@ -202,6 +324,9 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
     return ht;
   }
   const std::uint32_t np = r.n_rows;  // (a rejecting narrow has read it for its tight layout)
+  if (np > 0 && r.tuning.download == HostTransfer::automatic && !host_path_old() &&
+      direct_download(r, out, ht))
+    return ht;
   const std::size_t at = r.out_bytes;
   const std::byte* o = r.ws.out.data();
   const HostTransfer how = download_transfer(r.tuning, h_staging.bytes(), at, first_download);

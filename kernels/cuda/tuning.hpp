@@ -78,6 +78,26 @@ struct Tuning {
   // narrow_compact); default: one pass, a stable compaction with decoupled look-back whose output
   // writes the rows (narrow_select). The same rows either way.
   bool narrow_two_pass = false;
+  // CONTACTGRID_STEP_ORDER=file: the resident steps' kept candidates stay in (a, b) order of the
+  // input indices (cuda/skin.cuh); default: in the bodies' cell order with the cell-ordered spheres
+  // (cuda/cell_order.cuh), the rows sorted by (a, b) when they come down. The same rows either way.
+  bool step_order_file = false;
+  // CONTACTGRID_DEM_SEGMENTS=cub: the granular dynamics' body index orders each body's rows as B by
+  // CUB's segmented sort (which reads its partition back to the host every call); default: one
+  // thread per body sorts its own few rows (core/dem_step.hpp: sort_rows), no host synchronisation.
+  // The same order either way.
+  bool dem_segments_cub = false;
+  // CONTACTGRID_DEM_STORE=all: the granular dynamics' contact stage stores every term of every row
+  // in double every step; default: only what a later stage reads (cuda/dem_forces.cuh): no torques
+  // where the law has no rolling resistance (the body stage takes each from the row's point and
+  // force: core/dem_step.hpp, torques_from_points), the normal in the detection's precision, the
+  // energy only on a run's last step. The same bits either way.
+  bool dem_store_all = false;
+  // CONTACTGRID_DEM_BLOCKS=1|2|3: the blocks of 256 threads an SM must hold at once in the granular
+  // dynamics' contact and body kernels (__launch_bounds__: their registers capped at 65536 / (256 N),
+  // the rest spilled; cuda/dem_forces.cuh). 1: uncapped (about 150 registers a thread: one block an
+  // SM). The same bits every way.
+  int dem_min_blocks = 2;
 };
 
 // `on` / `off` when the variable equals one of the two spellings, else automatic.
@@ -159,7 +179,25 @@ inline Tuning read_tuning() {
     if (v == "cells") t.candidates = CandidateFilter::cells;
     if (v == "bounding") t.candidates = CandidateFilter::bounding_spheres;
   }
+  if (const char* o = std::getenv("CONTACTGRID_STEP_ORDER"))
+    t.step_order_file = std::string_view(o) == "file";
+  if (const char* d = std::getenv("CONTACTGRID_DEM_SEGMENTS"))
+    t.dem_segments_cub = std::string_view(d) == "cub";
+  if (const char* d = std::getenv("CONTACTGRID_DEM_STORE")) t.dem_store_all = std::string_view(d) == "all";
+  if (const char* d = std::getenv("CONTACTGRID_DEM_BLOCKS")) {
+    const long v = std::strtol(d, nullptr, 10);
+    if (v >= 1 && v <= 3) t.dem_min_blocks = int(v);
+  }
   return t;
+}
+
+// CONTACTGRID_CUDA_HOST_PATH=old: host arrays go up as the world doubles (32 bytes a sphere, by
+// Tuning::upload) and the rows come down by Tuning::download; otherwise fp32 sphere calls upload the
+// 16-byte packed spheres and every call downloads straight into the result vectors' page-locked pool
+// blocks (cuda/transfer.cuh). The benchmark's before / after in one run.
+inline bool host_path_old() {
+  const char* v = std::getenv("CONTACTGRID_CUDA_HOST_PATH");
+  return v && std::string_view(v) == "old";
 }
 
 }  // namespace cg::detail

@@ -7,7 +7,10 @@
 // Buffers and who uses them (n bodies, ne entries, nb = blocks of n, neb = blocks of ne, np pairs):
 //   pos, rad               upload → narrow     host-array path: the input copied to the device; the
 //                                              narrow stage reads the world doubles by body index
-//                                              (fp64, mixed, fp32's fp64 rows): never aliased
+//                                              (fp64, mixed, fp32's fp64 rows): never aliased.
+//                                              fp32 spheres: pos holds the host-packed 16-byte
+//                                              spheres (upload → pack), then, where rows need
+//                                              them, the doubles (transfer.cuh: narrow_fp64_rows)
 //   report                 upload → pack       host-array path: the report mask
 //   spheres                pack → narrow       Real spheres in input order (narrow: fp32 only)
 //   cell_spheres, perm,    pack → pairs        spheres, input index and control byte in cell order
@@ -48,6 +51,11 @@
 //   kept_pairs, ref_pos,   between calls       EngineOptions::skin: the kept candidate list (a then b,
 //   ref_rad, ref_report                        kept_count each) and the bodies' state it was built
 //                                              from (cuda/skin.cuh); owned across calls, never aliased
+//   kept_perm              between calls       the kept list of a cell-order skin (cuda/cell_order.cuh):
+//                                              the cell order's input indices; owned, never aliased
+//   canon_keys[2],         download            a cell-order call's rows sorted by (a, b) before they
+//   canon_index[2],                            come down (cuda/cell_order.cuh: canonical_rows), and
+//   canon_field                                one column gathered into that order
 //   res_id                 between calls       resident bodies' global ids (the history's keys)
 //   res_mark               between calls       the resident centres at Engine::mark_resident (the
 //                                              step loop's rebuild check: cuda/resident_extent.cuh)
@@ -88,6 +96,7 @@ struct Workspace {
   Bytes res_pos, res_rad, res_report, res_shape, res_semi, res_orient;
   Bytes shape_kind, shape_semi, shape_orient, shapes, cell_cut, normals, narrow_list, narrow_carry;
   Bytes kept_pairs, ref_pos, ref_rad, ref_report;
+  Bytes kept_perm, canon_keys[2], canon_index[2], canon_field;
   Bytes res_id, hist_keys[2], hist_age[2];
   Bytes res_mark;
   Bytes broad_counts, broad_pairs;
@@ -99,6 +108,8 @@ struct Workspace {
   bool res_shaped = false;       // resident shape rows present
   std::uint32_t kept_count = 0;  // kept candidate pairs
   bool kept_reported = false;    // the kept list was built with a report mask
+  bool kept_cell_order = false;  // the kept list is in cell order (cuda/cell_order.cuh)
+  bool rows_cell_order = false;  // the last call's rows are in the kept cell order, not (a, b) order
 
   int device = 0;                           // for messages
   std::optional<std::size_t> memory_limit;  // Tuning::memory_limit
@@ -106,14 +117,17 @@ struct Workspace {
 
   std::uint64_t held_bytes() const {
     std::uint64_t s = 0;
-    for (const Bytes* b :
-         {&pos,          &rad,         &report,   &spheres,      &cell_spheres, &perm,        &ctrl,
-          &body_blocks,  &base,        &keys[0],  &keys[1],      &bodies[0],    &bodies[1],   &entry_blocks,
-          &pairs,        &out,         &temp,     &counters,     &partials,     &res_pos,     &res_rad,
-          &res_report,   &res_shape,   &res_semi, &res_orient,   &shape_kind,   &shape_semi,  &shape_orient,
-          &shapes,       &cell_cut,    &normals,  &narrow_list,  &narrow_carry, &kept_pairs,  &ref_pos,
-          &ref_rad,      &ref_report,  &res_id,   &hist_keys[0], &hist_keys[1], &hist_age[0], &hist_age[1],
-          &broad_counts, &broad_pairs, &res_mark})
+    for (const Bytes* b : {&pos,         &rad,           &report,        &spheres,        &cell_spheres,
+                           &perm,        &ctrl,          &body_blocks,   &base,           &keys[0],
+                           &keys[1],     &bodies[0],     &bodies[1],     &entry_blocks,   &pairs,
+                           &out,         &temp,          &counters,      &partials,       &res_pos,
+                           &res_rad,     &res_report,    &res_shape,     &res_semi,       &res_orient,
+                           &shape_kind,  &shape_semi,    &shape_orient,  &shapes,         &cell_cut,
+                           &normals,     &narrow_list,   &narrow_carry,  &kept_pairs,     &ref_pos,
+                           &ref_rad,     &ref_report,    &res_id,        &hist_keys[0],   &hist_keys[1],
+                           &hist_age[0], &hist_age[1],   &broad_counts,  &broad_pairs,    &res_mark,
+                           &kept_perm,   &canon_keys[0], &canon_keys[1], &canon_index[0], &canon_index[1],
+                           &canon_field})
       s += b->bytes();
     return s;
   }

@@ -11,6 +11,12 @@
 //             8 passes); candidate pairs (a < b, local indices) collected per chunk of entries,
 //             then chunk sizes → scan → fill
 //   order     radix sort of the candidates by (a, b)
+// The grid's sphere tests without a report mask (every sphere scene on one rank, and the bounding
+// spheres of ellipsoid scenes without the centre cut) take the cell list instead (cell_list.cpp,
+// cell_walk.cpp): entries = each body's home cell key in a grid of cells a little wider than the widest
+// box, sort = those keys and each cell's first place, pairs = each body against its own cell and a half
+// stencil of 13 cells, bodies read in cell order; pack then makes no Le Grand cells. The candidates
+// are the same (the test decides every pair, and both walks reach every pair the test accepts).
 // (BroadPhase::levels: entries, sort and pairs of a grid per level, then the pairs across levels;
 // sweep: sort (of the boxes along the axis) and pairs; brute: pairs alone; stages.hpp)
 //   narrow    narrow_decide() per candidate, in Narrow (fp64 and mixed: from the world doubles);
@@ -22,6 +28,8 @@
 // since (stage skin) and, when the list still covers every contact, runs pack + narrow over it.
 #include <omp.h>
 
+#include <cstdlib>
+#include <string_view>
 #include <type_traits>
 #include <utility>
 
@@ -31,6 +39,16 @@
 
 namespace cg::detail {
 namespace {
+
+// Whether the grid's pair stage takes the cell list (host/cell_list.cpp): the sphere test of (bounding)
+// spheres and no report mask; CONTACTGRID_HOST_PAIRS=legrand keeps Le Grand's cells (the same
+// candidates: a measurement knob).
+bool cell_list_wanted(CandidateFilter filter, bool no_report) {
+  const char* knob = std::getenv("CONTACTGRID_HOST_PAIRS");
+  if (knob != nullptr && std::string_view(knob) == "legrand") return false;
+  return no_report &&
+         (filter == CandidateFilter::spheres_touch || filter == CandidateFilter::bounding_spheres);
+}
 
 // The bodies the narrow stage reads (core/narrow.hpp): fp32 the packed local floats, every mode the
 // world doubles of the input; mixed also its broad phase's float spheres and their margin.
@@ -81,8 +99,11 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   // pack's world rows (one cache line a body) rather than the input's position and radius arrays
   host::Array<Sphere<double>> world_rows;
   const bool rows_packed = std::is_same_v<Narrow, double> && !shapes;
+  // the grid's pair stage of sphere tests without a report mask: the cell list (host/cell_list.cpp),
+  // which files each body once and needs none of Le Grand's cells
+  const bool list_first = grid && !reuse && cell_list_wanted(filter, job.bodies.report.empty());
   host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Broad>(job.inflation),
-             !reuse && !cut && grid, nt, bodies, rows_packed ? &world_rows : nullptr);
+             !reuse && !cut && grid && !list_first, nt, bodies, rows_packed ? &world_rows : nullptr);
   if (shapes) host::pack_shapes(job.bodies, nt, packed_shapes);
   if (cut) host::cut_shapes(packed_shapes, nt, bodies.cut);
   if (cut && grid) host::shape_cells(job.grid, nt, bodies);
@@ -97,7 +118,29 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
     const NarrowBodies<double>* fp64 = !std::is_same_v<Broad, Narrow> ? &world_fp64 : nullptr;
     built.id_bits = std::max(1, bits_for(bodies.spheres.size()));
     built.filter = filter;
-    if (grid) {
+    host::CellList<Broad> cell_list;
+    const bool listed = list_first && host::cell_list_keys(bodies, nt, cell_list);
+    if (listed) {  // sphere tests, no report mask: the cell list (one entry a body, bodies in cell order)
+      stats.entries = cell_list.key.size();
+      timer.lap(EngineStage::entries);
+
+      host::sort_cell_list(cell_list, nt);
+      timer.lap(EngineStage::sort);
+
+      if (job.pair_limits.wanted()) {
+        PairEstimate estimate = host::cell_list_estimate(cell_list, nt);
+        estimate.tests_per_second = kHostPairTestsPerSecondPerThread * nt;
+        check_pair_estimate(estimate, job.pair_limits);
+      }
+      stats.pair_tests =
+          host::cell_list_candidates(cell_list, bodies, filter, fp64, nt, built, job.pair_limits.on_progress);
+      cell_list = {};
+      timer.lap(EngineStage::pairs);
+    } else if (grid) {
+      if (list_first) {  // a body's box spans three cells of the list: Le Grand's cells after all
+        cell_list = {};
+        host::sphere_cells(job.grid, nt, bodies);
+      }
       host::Entries<Key> entries;
       stats.entries = host::fill_entries(bodies, job.grid, nt, entries);
       timer.lap(EngineStage::entries);

@@ -89,6 +89,23 @@ void shape_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& out
   }
 }
 
+template <class Real>
+void sphere_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& out) {
+  const std::size_t n = out.spheres.size();
+  out.cells.resize(n);
+  out.ctrl.resize(n);
+  out.count.resize(n);
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
+  for (std::size_t i = 0; i < n; ++i) {
+    const Sphere<Real> s = out.spheres[i];
+    out.cells[i] = body_cells(Sphere<Real>{s.x, s.y, s.z, s.r + out.inflation}, g);
+    out.ctrl[i] = control_bits(out.cells[i]);
+    out.count[i] = entry_count(out.cells[i]);
+  }
+}
+
+template void sphere_cells(const GridParams<float>&, int, PackedBodies<float>&);
+template void sphere_cells(const GridParams<double>&, int, PackedBodies<double>&);
 template void shape_cells(const GridParams<float>&, int, PackedBodies<float>&);
 template void shape_cells(const GridParams<double>&, int, PackedBodies<double>&);
 template void cut_shapes(const std::vector<PackedShape<float>>&, int, Array<CutShape>&);

@@ -110,6 +110,11 @@ void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, Arr
 template <class Real>
 void shape_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& bodies);
 
+// sphere_cells: pack's cells, control byte and entry count of every packed sphere, for a pack that
+// made the spheres only (the cell list's grid failed: cell_list_keys).
+template <class Real>
+void sphere_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& bodies);
+
 // entries: exclusive scan of the entry counts → fill (cell key, body) in body order. Returns the
 // number of entries; frees p.cells and p.count.
 template <class Real, class Key>
@@ -129,6 +134,50 @@ std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p
                               std::span<const std::uint8_t> report, int half_bits, CandidateFilter filter,
                               const NarrowBodies<double>* fp64, int threads, CandidatePairs& out,
                               const std::function<void(std::uint64_t, bool)>* progress = nullptr);
+
+// ---- the cell list (the grid's pair stage for sphere scenes: host/cell_list.cpp, host/cell_walk.cpp) ----
+// Each body filed once, under the cell of the lower corner of its box (box_radius of its radius plus
+// the inflation), in a grid of its own whose cells are at least as wide as the widest box, bodies
+// sorted by cell. Two bodies whose boxes overlap (every pair the sphere test accepts) then have home
+// cells at most one apart along each axis, so the walk of each body against the later bodies of its
+// own cell and the 13 cells of a half stencil tests every such pair once, reading the bodies in cell
+// order. The pairs come out unordered; order_candidates sorts them by (a, b) as any broad phase's.
+template <class Real>
+struct CellList {
+  Real inv_cell = 1;
+  Real lo[3] = {0, 0, 0};  // local frame corner of the grid's first inner cell
+  // cells per axis, a layer of empty cells on either side included: every cell of a body has its 26
+  // neighbours, so the walk needs no bounds
+  std::uint32_t dims[3] = {3, 3, 3};
+  int key_bits = 1;            // bits of the largest cell key
+  Array<std::uint32_t> key;    // cell x + dims[0]·(y + dims[1]·z) of each body, sorted after sort
+  Array<std::uint32_t> body;   // input index, alongside
+  Array<std::uint32_t> start;  // after sort: the first sorted place of each cell (cells + 1 values)
+};
+
+// cell_list_keys (stage entries): the grid (cell edge a little above the widest box) and every body's
+// home cell key in input order. Returns false, leaving the grid unused, where Le Grand's cells serve
+// better or the list cannot: boxes over a wide range of sizes (the narrowest below a quarter of the
+// widest), more than about 8 cells a body (a sparse scene), or a body whose box spans more than two
+// cells along an axis (rounding in a grid far wider than its cells); the caller then takes Le Grand's
+// cells. sort_cell_list (stage sort): stable radix sort by key, then the cells' first places.
+template <class Real>
+bool cell_list_keys(const PackedBodies<Real>& p, int threads, CellList<Real>& out);
+template <class Real>
+void sort_cell_list(CellList<Real>& cl, int threads);
+
+// The pair tests the cell walk would make (pair_estimate.hpp): Σ over bodies of the bodies it walks
+// past, the fullest cell as the largest.
+template <class Real>
+PairEstimate cell_list_estimate(const CellList<Real>& cl, int threads);
+
+// cell_list_candidates (stage pairs): the walk; the pairs passing `filter`'s test (candidates_touch
+// filters only, no report mask: the caller checks) into `out`, unordered. Returns the pairs tested.
+template <class Real>
+std::uint64_t cell_list_candidates(const CellList<Real>& cl, const PackedBodies<Real>& p,
+                                   CandidateFilter filter, const NarrowBodies<double>* fp64, int threads,
+                                   CandidatePairs& out,
+                                   const std::function<void(std::uint64_t, bool)>* progress = nullptr);
 
 // The pair stage's estimate (pair_estimate.hpp) from the sorted entries: Σ over cells of m·(m − 1)/2
 // and the fullest cell, in one parallel pass over the keys (each cell counted by the chunk where it

@@ -26,6 +26,7 @@
 #include "contact_collect.hpp"
 #include "distribute.hpp"
 #include "halo_exchange.hpp"
+#include "host_vector.hpp"
 #include "io/contact_file.hpp"
 #include "io/contacts_csv.hpp"
 #include "io/inspect.hpp"
@@ -821,6 +822,8 @@ int run_in_mode(const DetectCommand& cmd, Session& session, const DistributedOpt
   std::optional<ContactFileStream> stream;
   if (options.memory_limit && session.size() == 1 && cmd.csv.empty() && options.resident_steps == 0)
     stream.emplace(cmd.output, precision_of<Real>(), FieldSet(options.engine.fields == Fields::full));
+  // The free blocks the host pool keeps for reuse count against the limit as well.
+  if (stream) cap_host_pool(options.memory_limit);
   DistributedResult<Real> r = or_abort(session, [&] {
     return distributed_run<Real>(session, cmd.input, options, std::move(in), threads,
                                  stream ? &*stream : nullptr);

@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <random>
 #include <string>
 #include <type_traits>
@@ -379,6 +380,65 @@ TEST(EngineSkinCuda, DeviceArraysEqualFreshDetection) {
   EXPECT_GE(engine.stats().candidate_reuses, 10u);
   cudaFree(d_pos);
   cudaFree(d_rad);
+}
+
+// The resident steps' cell order (fp32 spheres, detect_resident: kernels/cuda/cell_order.cuh): the
+// kept candidates and spheres in the bodies' cell order, the rows sorted by (a, b) when they come
+// down. The bodies renumbered (CONTACTGRID_CUDA_RENUMBER=1: a cell order that is not the input
+// order), with a report mask; every step equals the CPU's fresh detection, bit for bit, and so does
+// the (a, b) path of CONTACTGRID_STEP_ORDER=file on a second engine. Every fourth step the cell
+// engine detects once more under the knob: a kept list of the other order is never reused (that
+// call builds, and so does the next one in cell order).
+TEST(EngineSkinCuda, CellOrderResidentStepsEqualFreshDetection) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  struct Env {
+    const char* name;
+    Env(const char* n, const char* v) : name(n) { ::setenv(n, v, 1); }
+    ~Env() { ::unsetenv(name); }
+  };
+  const Env renumber("CONTACTGRID_CUDA_RENUMBER", "1");
+  const double skin = 0.15;
+  Engine<float> cell(options_for(Backend::cuda, skin)), file(options_for(Backend::cuda, skin));
+  Engine<float> fresh(options_for(Backend::cpu, 0));
+  Spheres s = random_spheres(30000, 0.5, 1.0, 9181);
+  const std::size_t n = s.r.size();
+  std::mt19937_64 rng(9182);
+  std::vector<std::uint8_t> report(n);
+  for (auto& m : report) m = static_cast<std::uint8_t>(rng() % 4 == 0 ? 0 : 1);
+  cell.set_resident(BodiesView{s.p, s.r, {}, report});
+  file.set_resident(BodiesView{s.p, s.r, {}, report});
+  bool switched = false;
+  for (int step = 0; step < 30; ++step) {
+    const std::string at = "step " + std::to_string(step);
+    if (step > 0) {
+      random_step(s, 0.01, 0.0, rng);
+      cell.write_resident(0, n, s.p.data(), s.r.data());
+      file.write_resident(0, n, s.p.data(), s.r.data());
+    }
+    const Contacts<float> want = fresh.detect(BodiesView{s.p, s.r, {}, report});
+    ASSERT_GT(want.size(), 1000u) << at;
+    const std::uint64_t builds = cell.stats().candidate_builds;
+    ASSERT_EQ(cell.detect_resident(), want.size()) << at;
+    ASSERT_EQ(compare_contacts(cell.resident_contacts(), want), "identical") << at << " (cell order)";
+    if (switched) {
+      EXPECT_EQ(cell.stats().candidate_builds, builds + 1) << at << ": after the file order";
+    }
+    switched = false;
+    {
+      const Env order("CONTACTGRID_STEP_ORDER", "file");
+      ASSERT_EQ(file.detect_resident(), want.size()) << at;
+      ASSERT_EQ(compare_contacts(file.resident_contacts(), want), "identical") << at << " (file order)";
+      if (step % 4 == 3) {
+        const std::uint64_t before = cell.stats().candidate_builds;
+        ASSERT_EQ(cell.detect_resident(), want.size()) << at << " (cell engine, file order)";
+        ASSERT_EQ(compare_contacts(cell.resident_contacts(), want), "identical") << at << " (switched)";
+        EXPECT_EQ(cell.stats().candidate_builds, before + 1) << at << ": a cell-order list is not reused";
+        switched = true;
+      }
+    }
+  }
+  EXPECT_GE(file.stats().candidate_builds, 2u);
+  EXPECT_GE(file.stats().candidate_reuses, 15u);
 }
 #endif
 

@@ -3,6 +3,7 @@
 // reject exactly those (count → scan → fill) and give the same contacts, bit for bit.
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <cstring>
 
 #include "backend.hpp"
@@ -30,6 +31,16 @@ void expect_same(const Contacts<Real>& a, const Contacts<Real>& b) {
   EXPECT_EQ(test::compare_contacts(a, b), "identical");
 }
 
+// CONTACTGRID_HOST_PAIRS=legrand for the guard's life: the grid's pair stage of Le Grand's cells
+// instead of the cell list (host_backend.cpp).
+class LeGrandPairs {
+ public:
+  LeGrandPairs() { ::setenv("CONTACTGRID_HOST_PAIRS", "legrand", 1); }
+  ~LeGrandPairs() { ::unsetenv("CONTACTGRID_HOST_PAIRS"); }
+  LeGrandPairs(const LeGrandPairs&) = delete;
+  LeGrandPairs& operator=(const LeGrandPairs&) = delete;
+};
+
 template <class Real>
 class HostStagesTest : public ::testing::Test {};
 using Reals = ::testing::Types<float, double>;
@@ -49,7 +60,10 @@ TYPED_TEST(HostStagesTest, NarrowRejectsLooseCandidates) {
       Contacts<Real> a, b;
       StageTimes ta, tb;
       EngineStats sa, sb;
-      detail::run_stages(exact, job, a, ta, sa);
+      {
+        const LeGrandPairs le_grand;  // the loose filter walks Le Grand's cells: the same walk
+        detail::run_stages(exact, job, a, ta, sa);
+      }
       detail::run_stages(loose, job, b, tb, sb);
       expect_same(a, b);
       EXPECT_EQ(sa.pair_tests, sb.pair_tests);
@@ -81,6 +95,70 @@ TYPED_TEST(HostStagesTest, NarrowRejectsLooseCandidatesWithReportMask) {
     expect_same(a, b);
     EXPECT_GT(a.size(), 0u);
     EXPECT_GT(sb.candidates, b.size());
+  }
+}
+
+// The cell list (host/cell_list.cpp, cell_walk.cpp) against Le Grand's cells: the same contacts bit
+// for bit in every mode and field set, for any thread count, on scenes of few and many bodies a cell,
+// boundaries, coincident pairs, a line and far from the origin (the list runs: one entry a body, and
+// on the random scene fewer pair tests), and on those it leaves to Le Grand's cells after its keys
+// (radii over a wide range, exactly tangent pairs of unequal radii, a sparse wide scene).
+TEST(HostCellList, SameContactsAsLeGrandsCells) {
+  Spheres line;
+  line.name = "line";
+  for (int i = 0; i < 3000; ++i) line.add(0.9 * i, 0, 0, 0.5);
+  Spheres sparse = random_spheres(2000, 0.5, 1.0, 2305);
+  sparse.name = "sparse";
+  for (std::size_t i = 0; i < sparse.p.size(); i += 2) sparse.p[i] = 1000.0 * sparse.p[i];
+  Spheres far = random_spheres(20000, 0.5, 1.0, 2309).translated({1e6, -3e5, 7e4});
+  far.name = "far from the origin";
+  struct Case {
+    Spheres s;
+    bool listed;
+  };
+  const std::vector<Case> scenes = {{random_spheres(30000, 0.5, 1.0, 2301), true},
+                                    {clustered(4000, 2303), true},
+                                    {one_cell(600, 2304), true},
+                                    {on_boundaries(2306), true},
+                                    {coincident(2307), true},
+                                    {line, true},
+                                    {far, true},
+                                    {random_spheres(8000, 0.01, 1.0, 2302, true), false},
+                                    {tangent(2308), false},
+                                    {sparse, false}};
+  for (const auto& [s, listed] : scenes) {
+    for (Precision prec : {Precision::fp32, Precision::fp64, Precision::mixed}) {
+      for (int threads : {1, 3}) {
+        SCOPED_TRACE(s.name + " " + std::string(to_string(prec)) + " threads " + std::to_string(threads));
+        EngineOptions o;
+        o.backend = Backend::cpu;
+        o.fp32_broad_phase = prec == Precision::mixed;
+        o.threads = threads;
+        o.fields = threads == 1 ? Fields::basic : Fields::full;
+        const BodiesView v{s.p, s.r, {}, {}};
+        auto run = [&](auto real, EngineStats& stats) {
+          Engine<decltype(real)> engine(o);
+          Contacts<decltype(real)> c = engine.detect(v);
+          stats = engine.stats();
+          return c;
+        };
+        EngineStats list, le_grand;
+        if (prec == Precision::fp32) {
+          const Contacts<float> a = run(0.0f, list);
+          const LeGrandPairs guard;
+          expect_same(a, run(0.0f, le_grand));
+        } else {
+          const Contacts<double> a = run(0.0, list);
+          const LeGrandPairs guard;
+          expect_same(a, run(0.0, le_grand));
+        }
+        EXPECT_EQ(list.entries == s.p.size(), listed) << "entries " << list.entries;
+        EXPECT_EQ(list.candidates, le_grand.candidates);
+        if (s.name.rfind("random", 0) == 0 && listed) {
+          EXPECT_LT(list.pair_tests, le_grand.pair_tests);
+        }
+      }
+    }
   }
 }
 

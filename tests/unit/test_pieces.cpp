@@ -248,11 +248,11 @@ struct Measured {
   std::string output;
 };
 Measured run_measured(const std::string& args, const std::string& log) {
-  // glibc's heap keeps freed blocks of varying sizes mapped (its mmap threshold rises with them), and
-  // the host pool keeps up to 1 GiB of freed blocks for reuse by default: both fixed here, so that the
-  // peak counts what the run holds, not what the allocators keep.
-  const std::string cmd = "CONTACTGRID_HOST_POOL_MIB=64 MALLOC_MMAP_THRESHOLD_=1048576 exec " + cli_binary() +
-                          " " + args + " > " + log + " 2>&1";
+  // glibc's heap keeps freed blocks of varying sizes mapped (its mmap threshold rises with them): fixed
+  // here, so that the peak counts what the run holds, not what the allocator keeps. The engine's own
+  // host pool keeps its default: a run under --memory-limit caps it itself.
+  const std::string cmd =
+      "MALLOC_MMAP_THRESHOLD_=1048576 exec " + cli_binary() + " " + args + " > " + log + " 2>&1";
   const std::string image = std::filesystem::canonical(cli_binary()).string();
   Measured m;
   const pid_t pid = ::fork();

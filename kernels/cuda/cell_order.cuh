@@ -1,0 +1,268 @@
+#pragma once
+// CUDA stage cell order: the kept candidates of a skin (skin.cuh) in the bodies' cell order, for the
+// calls whose rows the caller takes in any order (DetectJob::any_row_order: Engine::detect_resident,
+// the resident steps). fp32 sphere scenes, grid broad phase, device output, no history; every other
+// call keeps the (a, b) path of skin.cuh, as does every call under CONTACTGRID_STEP_ORDER=file.
+//   keep_cell_candidates  at a build, instead of the order stage: the pair stage's candidates, in the
+//                         order its cell walk wrote them, as cell-order indices (pack's permutation
+//                         inverted), the permutation kept, and the spheres gathered into cell order
+//   pack_cell_stage       at a reuse, instead of pack: the moved bodies packed straight into cell
+//                         order (one pass; within a z layer the input indices ascend, so the reads of
+//                         the world doubles are a few hundred sequential streams)
+//   narrow_cell_stage     the one-pass select of narrow.cuh over the kept list, reading the
+//                         cell-ordered spheres: the two bodies of a candidate lie in nearby cells,
+//                         so the reads stay in a few MiB of L2 instead of one random DRAM sector
+//                         each; the row carries the input indices (a < b), computed as
+//                         narrow_decide computes it (core/narrow.hpp: narrow_decide_floats)
+//   canonical_rows        the rows come out in the walk's order, not in (a, b) order: the download
+//                         (download_contacts in cuda_backend.cu) sorts them by (a, b) on the device
+//                         first, so resident_contacts() gives the bytes of the (a, b) path
+// The walk's order is fixed at the build; the set of rows of a call is that of the (a, b) path.
+#include <thrust/iterator/counting_iterator.h>
+#include <thrust/iterator/tabulate_output_iterator.h>
+
+#include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_select.cuh>
+#include <type_traits>
+
+#include "core/narrow.hpp"
+#include "cuda/common.cuh"
+#include "cuda/narrow.cuh"
+#include "cuda/pack.cuh"
+#include "cuda/run_state.cuh"
+
+namespace cg::cuda {
+
+// inv[perm[j]] = j over the bodies.
+__global__ void __launch_bounds__(kBlock)
+    inverse_perm_kernel(const std::uint32_t* __restrict__ perm, std::uint32_t n,
+                        std::uint32_t* __restrict__ inv) {
+  const std::uint32_t j = blockIdx.x * kBlock + threadIdx.x;
+  if (j < n) inv[perm[j]] = j;
+}
+
+// Candidate k of input indices (a < b) as cell-order indices (inv[a], inv[b]), in the same place.
+__global__ void __launch_bounds__(kBlock)
+    cell_pairs_kernel(const std::uint32_t* __restrict__ a_in, const std::uint32_t* __restrict__ b_in,
+                      std::uint32_t np, const std::uint32_t* __restrict__ inv,
+                      std::uint32_t* __restrict__ a_out, std::uint32_t* __restrict__ b_out) {
+  const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
+  if (k >= np) return;
+  a_out[k] = inv[a_in[k]];
+  b_out[k] = inv[b_in[k]];
+}
+
+// out[j] = in[perm[j]]: pack's input-order spheres into cell order.
+template <class Real>
+__global__ void __launch_bounds__(kBlock)
+    gather_spheres_kernel(const Sphere<Real>* __restrict__ in, const std::uint32_t* __restrict__ perm,
+                          std::uint32_t n, Sphere<Real>* __restrict__ out) {
+  const std::uint32_t j = blockIdx.x * kBlock + threadIdx.x;
+  if (j < n) out[j] = in[perm[j]];
+}
+
+// pack of a reuse in cell order: out[j] = pack's sphere of input body perm[j] (packed_sphere: the
+// same bits, an invalid body → c->bad as pack's).
+template <class Real>
+__global__ void __launch_bounds__(kBlock)
+    pack_cell_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
+                     const std::uint32_t* __restrict__ perm, std::uint32_t n, Vec3<double> origin,
+                     GridParams<Real> g, Sphere<Real>* __restrict__ out, Counters* __restrict__ c) {
+  const std::uint32_t j = blockIdx.x * kBlock + threadIdx.x;
+  if (j < n) out[j] = packed_sphere(pos, rad, perm[j], n, origin, g, c);
+}
+
+// The select's decision of kept candidate k (cell-order indices) on the cell-ordered spheres:
+// narrow_touch's fp32 test on the same floats.
+template <class Real>
+struct CellTouchAt {
+  const std::uint32_t* pair_a;
+  const std::uint32_t* pair_b;
+  const Sphere<Real>* spheres;  // cell order
+  __device__ bool operator()(std::uint32_t k) const {
+    return spheres_touch(spheres[pair_a[k]], spheres[pair_b[k]]);
+  }
+};
+
+// The row of accepted candidate k at its output place i: input indices a = perm[ja] < b = perm[jb],
+// narrow_decide_floats on the cell-ordered spheres and the input-order world doubles.
+template <class Real>
+struct CellRowAt {
+  const std::uint32_t* pair_a;
+  const std::uint32_t* pair_b;
+  const std::uint32_t* perm;
+  NarrowBodies<Real> bodies;  // spheres: cell order; position, radius: input order
+  ContactPtrs<Real> out;
+  bool full;
+  Counters* c;
+  __device__ void operator()(std::ptrdiff_t i, std::uint32_t k) const {
+    const std::uint32_t ja = pair_a[k], jb = pair_b[k];
+    const std::uint32_t a = perm[ja], b = perm[jb];
+    NarrowFlags flags;
+    ContactRow<Real> row =
+        narrow_decide_floats(bodies, bodies.spheres[ja], bodies.spheres[jb], a, b, full, flags).row;
+    row.id_a = a;
+    row.id_b = b;
+    store_row(out, static_cast<std::size_t>(i), row, full);  // core/contact_fields.hpp: the one row store
+    if (flags.fp64_rows) atomicAdd(&c->fp64_rows, static_cast<unsigned long long>(flags.fp64_rows));
+  }
+};
+
+// The sort key of row k: (a, b) as one 64-bit word, and k.
+__global__ void __launch_bounds__(kBlock)
+    row_keys_kernel(const std::int64_t* __restrict__ id_a, const std::int64_t* __restrict__ id_b,
+                    std::size_t m, unsigned long long* __restrict__ keys, std::uint32_t* __restrict__ index) {
+  const std::size_t k = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
+  if (k >= m) return;
+  keys[k] = (static_cast<unsigned long long>(id_a[k]) << 32) | static_cast<unsigned long long>(id_b[k]);
+  index[k] = static_cast<std::uint32_t>(k);
+}
+
+// out[k] = in[index[k]]: one column of the rows in sorted order.
+template <class T>
+__global__ void __launch_bounds__(kBlock)
+    gather_rows_kernel(const T* __restrict__ in, const std::uint32_t* __restrict__ index, std::size_t m,
+                       T* __restrict__ out) {
+  const std::size_t k = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
+  if (k < m) out[k] = in[index[k]];
+}
+
+}  // namespace cg::cuda
+
+namespace cg::detail {
+
+// Whether this call keeps its candidates in cell order (see the file comment).
+template <class Real, class Key, class Narrow>
+bool cell_order_wanted(const RunState<Real, Key, Narrow>& r) {
+  if constexpr (!std::is_same_v<Real, float> || !std::is_same_v<Narrow, float>) {
+    return false;
+  } else {
+    return r.job.skin > 0 && r.job.any_row_order && !r.tuning.step_order_file && r.job.ellipsoids == 0 &&
+           r.job.device_out != nullptr && !r.tuning.narrow_two_pass && !r.history &&
+           r.job.broad == BroadPhase::grid && !r.type_passes && narrow_may_reject(r.filter);
+  }
+}
+
+// At a build (after the pair stage, instead of order_stage and keep_candidates): the kept list in cell
+// order, the permutation and the bodies' state it was built from; the cell-ordered spheres for this
+// call's narrow stage. Timed as the order stage.
+template <class Real, class Key, class Narrow>
+void keep_cell_candidates(RunState<Real, Key, Narrow>& r) {
+  using cuda::blocks_for;
+  using cuda::kBlock;
+  Workspace& ws = r.ws;
+  cudaStream_t st = r.st;
+  const std::size_t np = r.np, n = r.n64;
+  ws.reserve({{&ws.kept_pairs, 2 * np * sizeof(std::uint32_t)},
+              {&ws.kept_perm, n * sizeof(std::uint32_t)},
+              {&ws.ref_pos, n * sizeof(Vec3<double>)},
+              {&ws.ref_rad, n * sizeof(double)},
+              {&ws.ref_report, r.d_report ? n : 0}},
+             "skin");
+  auto copy = [&](void* dst, const void* src, std::size_t bytes) {
+    if (bytes > 0) CG_CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyDeviceToDevice, st));
+  };
+  std::uint32_t* kept = ws.kept_pairs.span_as<std::uint32_t>(2 * np).data();
+  std::uint32_t* perm = ws.kept_perm.span_as<std::uint32_t>(n).data();
+  copy(perm, r.d_perm, n * sizeof(std::uint32_t));
+  // the inverse in the entry sort's first key buffer (dead after the pair stage; >= n u32, as the
+  // order stage's a_counts)
+  std::uint32_t* inv = ws.keys[0].span_as<std::uint32_t>(n).data();
+  Sphere<Real>* cell = ws.cell_spheres.span_as<Sphere<Real>>(n).data();  // read by the pair stage: done
+  if (n > 0) {
+    cuda::inverse_perm_kernel<<<blocks_for(n), kBlock, 0, st>>>(perm, r.n, inv);
+    CG_CUDA_CHECK_LAUNCH("inverse_perm");
+    cuda::gather_spheres_kernel<Real><<<blocks_for(n), kBlock, 0, st>>>(r.d_spheres, perm, r.n, cell);
+    CG_CUDA_CHECK_LAUNCH("gather_spheres");
+  }
+  if (np > 0) {
+    cuda::cell_pairs_kernel<<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), r.np,
+                                                               inv, kept, kept + np);
+    CG_CUDA_CHECK_LAUNCH("cell_pairs");
+  }
+  copy(ws.ref_pos.data(), r.d_pos, n * sizeof(Vec3<double>));
+  copy(ws.ref_rad.data(), r.d_rad, n * sizeof(double));
+  if (r.d_report) copy(ws.ref_report.data(), r.d_report, n);
+  ws.kept_count = r.np;
+  ws.kept_reported = r.d_report != nullptr;
+  ws.kept_cell_order = true;
+  r.pair_a = cub::DoubleBuffer<std::uint32_t>(kept, kept);  // the narrow stage reads Current() alone
+  r.pair_b = cub::DoubleBuffer<std::uint32_t>(kept + np, kept + np);
+  r.events.mark(EngineStage::order, st);
+}
+
+// At a reuse (instead of pack_stage): the moved bodies packed into the kept cell order.
+template <class Real, class Key, class Narrow>
+void pack_cell_stage(RunState<Real, Key, Narrow>& r) {
+  Workspace& ws = r.ws;
+  cudaStream_t st = r.st;
+  r.d_counters = ws.counters.span_as<cuda::Counters>(1).data();
+  CG_CUDA_CHECK(cudaMemsetAsync(r.d_counters, 0, sizeof(cuda::Counters), st));
+  ws.reserve({{&ws.cell_spheres, r.n64 * sizeof(Sphere<Real>)}}, "pack");
+  Sphere<Real>* cell = ws.cell_spheres.span_as<Sphere<Real>>(r.n).data();
+  if (r.n > 0) {
+    cuda::pack_cell_kernel<Real>
+        <<<r.nb, cuda::kBlock, 0, st>>>(r.d_pos, r.d_rad, ws.kept_perm.span_as<std::uint32_t>(r.n).data(),
+                                        r.n, r.origin, r.g, cell, r.d_counters);
+    CG_CUDA_CHECK_LAUNCH("pack_cell");
+  }
+  r.events.mark(EngineStage::pack, st);
+}
+
+// The narrow stage over the kept cell-order list (r.pair_a / pair_b: kept_cell_candidates' or
+// reuse_candidates'): narrow_select's one pass with the cell-order reads.
+template <class Real, class Key, class Narrow>
+void narrow_cell_stage(RunState<Real, Key, Narrow>& r) {
+  r.stats.candidates = r.np;
+  const std::uint32_t np = r.np;
+  r.out_bytes = layout_contacts(r.ws.out.data(), np, r.fields(), r.cp);  // rows at their select places
+  if (np == 0) {
+    r.n_rows = 0;
+    r.events.mark(EngineStage::narrow, r.st);
+    return;
+  }
+  if constexpr (std::is_same_v<Real, float> && std::is_same_v<Narrow, float>) {  // (cell_order_wanted)
+    const Sphere<float>* cell = r.ws.cell_spheres.template span_as<Sphere<float>>(r.n).data();
+    const NarrowBodies<float> bodies{cell, r.d_pos, r.d_rad, r.origin};
+    const std::uint32_t* a = r.pair_a.Current();
+    const std::uint32_t* b = r.pair_b.Current();
+    const std::uint32_t* perm = r.ws.kept_perm.template span_as<std::uint32_t>(r.n).data();
+    const cuda::CellTouchAt<float> touch{a, b, cell};
+    const auto rows = thrust::make_tabulate_output_iterator(
+        cuda::CellRowAt<float>{a, b, perm, bodies, r.cp, r.full, r.d_counters});
+    cub_run(r.ws, "narrow", [&](void* t, std::size_t& bytes) {
+      return cub::DeviceSelect::If(t, bytes, thrust::counting_iterator<std::uint32_t>(0), rows,
+                                   &r.d_counters->rows, int(np), touch, r.st);
+    });
+  }
+  // the counters (the fp64 rows, the row count), read after the next wait
+  CG_CUDA_CHECK(
+      cudaMemcpyAsync(r.h_counters, r.d_counters, sizeof(cuda::Counters), cudaMemcpyDeviceToHost, r.st));
+  r.rows_pending = true;
+  r.events.mark(EngineStage::narrow, r.st);
+}
+
+// The m rows of `cp` (device) in (a, b) order: the sort's index (kept in ws.canon_index, valid until
+// the next call) for gather_rows; returns it. Synchronous with `st`'s work before it.
+inline const std::uint32_t* canonical_rows(Workspace& ws, cudaStream_t st, const std::int64_t* id_a,
+                                           const std::int64_t* id_b, std::size_t m, int id_bits) {
+  using cuda::blocks_for;
+  ws.reserve({{&ws.canon_keys[0], m * sizeof(unsigned long long)},
+              {&ws.canon_keys[1], m * sizeof(unsigned long long)},
+              {&ws.canon_index[0], m * sizeof(std::uint32_t)},
+              {&ws.canon_index[1], m * sizeof(std::uint32_t)}},
+             "download");
+  cub::DoubleBuffer<unsigned long long> keys(ws.canon_keys[0].span_as<unsigned long long>(m).data(),
+                                             ws.canon_keys[1].span_as<unsigned long long>(m).data());
+  cub::DoubleBuffer<std::uint32_t> index(ws.canon_index[0].span_as<std::uint32_t>(m).data(),
+                                         ws.canon_index[1].span_as<std::uint32_t>(m).data());
+  cuda::row_keys_kernel<<<blocks_for(m), cuda::kBlock, 0, st>>>(id_a, id_b, m, keys.Current(),
+                                                                index.Current());
+  CG_CUDA_CHECK_LAUNCH("row_keys");
+  cub_run(ws, "download", [&](void* t, std::size_t& b) {
+    return cub::DeviceRadixSort::SortPairs(t, b, keys, index, int(m), 0, 32 + id_bits, st);
+  });
+  return index.Current();
+}
+
+}  // namespace cg::detail

@@ -1,0 +1,191 @@
+// The CUDA host path (kernels/cuda/transfer.cuh): fp32 sphere calls upload the 16-byte spheres the host
+// packs (upload_pack.hpp) and every call downloads straight into the result vectors' page-locked pool
+// blocks (HostPool::lock_block). On the CPU: the host packing against the CPU backend's pack, and the
+// pool's locking. On a GPU (skipped visibly without one): the same bytes as the old path
+// (CONTACTGRID_CUDA_HOST_PATH=old) and as the CPU backend, through small pinned slots that put chunk
+// boundaries inside the arrays, with rows that need the world doubles.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "backend.hpp"
+#include "engine.hpp"
+#include "host_vector.hpp"
+#include "scenes.hpp"
+#include "support/contacts_equal.hpp"
+#include "upload_pack.hpp"
+
+namespace cg::test {
+namespace {
+
+// The host packing of the 16-byte upload gives the bits of the CPU backend's pack (radius margin 0,
+// fp32), in windows of any size and on any number of threads, for a scene far from its origin.
+TEST(UploadPack, EqualsTheCpuPackBitForBit) {
+  const Spheres s = random_spheres(70001, 0.1, 1.7, 3701, true).translated({1234.5, -77.25, 1e4 / 3});
+  const BodiesView v{s.p, s.r, {}, {}};
+  const Vec3<double> origin{1100.125, -200.0 / 3, 3000.0};
+  GridParams<float> g{};
+  g.inv_cell = 0.25f;
+  g.radius_margin = 0.0f;
+  detail::host::PackedBodies<float> cpu;
+  detail::host::pack<float>(v, origin, g, 0.0f, false, 2, cpu);
+  for (const std::size_t window : {std::size_t(70001), std::size_t(777), std::size_t(1)}) {
+    for (const int threads : {1, 2}) {
+      std::vector<Sphere<float>> up(s.r.size());
+      for (std::size_t first = 0; first < s.r.size(); first += window) {
+        const std::size_t end = std::min(s.r.size(), first + window);
+        detail::pack_upload_spheres(s.p.data(), s.r.data(), origin, first, end, up.data() + first, threads);
+      }
+      for (std::size_t i = 0; i < s.r.size(); ++i)
+        ASSERT_EQ(std::memcmp(&up[i], &cpu.spheres[i], sizeof(Sphere<float>)), 0)
+            << "body " << i << ", window " << window << ", threads " << threads;
+    }
+  }
+}
+
+// A pooled block is locked once, stays locked while it is free in the pool and is reused, and is
+// unlocked before the pool frees it; an array outside the pool is never locked.
+int g_locks = 0, g_unlocks = 0;
+void* g_unlocked = nullptr;
+bool count_lock(void*, std::size_t) { return ++g_locks > 0; }
+void count_unlock(void* p) {
+  ++g_unlocks;
+  g_unlocked = p;
+}
+bool refuse_lock(void*, std::size_t) { return false; }
+
+TEST(HostPoolLocks, ABlockIsLockedOnceAndUnlockedBeforeItIsFreed) {
+  detail::HostPool& pool = detail::HostPool::instance();
+  pool.release_all();
+  g_locks = g_unlocks = 0;
+  void* block = nullptr;
+  {
+    HostVector<std::byte> big(std::size_t(3) << 20);
+    block = big.data();
+    EXPECT_FALSE(pool.block_locked(block));
+    EXPECT_GE(pool.lock_block(block, count_lock, count_unlock), big.size());
+    EXPECT_GE(pool.lock_block(block, count_lock, count_unlock), big.size());
+    EXPECT_EQ(g_locks, 1);
+    EXPECT_TRUE(pool.block_locked(block));
+    HostVector<std::byte> small(4096);
+    EXPECT_EQ(pool.lock_block(small.data(), count_lock, count_unlock), 0u);
+    EXPECT_EQ(g_locks, 1);
+    HostVector<std::byte> other(std::size_t(5) << 20);
+    EXPECT_EQ(pool.lock_block(other.data(), refuse_lock, count_unlock), 0u);
+    EXPECT_FALSE(pool.block_locked(other.data()));
+  }
+  const char* cap = std::getenv("CONTACTGRID_HOST_POOL_MIB");
+  if (!cap || std::strtoull(cap, nullptr, 10) >= 8) {  // the freed block is kept, still locked
+    EXPECT_EQ(g_unlocks, 0);
+    HostVector<std::byte> again(std::size_t(3) << 20);
+    EXPECT_EQ(static_cast<void*>(again.data()), block) << "the pool hands the freed block out again";
+    EXPECT_TRUE(pool.block_locked(again.data()));
+  }
+  pool.release_all();
+  EXPECT_EQ(g_unlocks, 1);
+  EXPECT_EQ(g_unlocked, block);
+  EXPECT_EQ(g_locks, 1);
+}
+
+#define CG_SKIP_WITHOUT_CUDA()                                                                        \
+  do {                                                                                                \
+    if (!::cg::cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped"; \
+  } while (0)
+
+// A jittered cubic lattice a little tighter than a diameter (about 3 contacts a sphere, so every
+// basic field of the rows is a pooled block: >= 1 MiB), and at every 97th site a second sphere a few
+// ulps off: rows whose normal fp32 cannot resolve (the world doubles' rows).
+Spheres lattice_with_twins(int side, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-0.01, 0.01);
+  Spheres s;
+  s.name = "lattice " + std::to_string(side) + "^3 with twins";
+  int site = 0;
+  for (int i = 0; i < side; ++i)
+    for (int j = 0; j < side; ++j)
+      for (int k = 0; k < side; ++k, ++site) {
+        const double x = 0.97 * i + u(rng) + 50, y = 0.97 * j + u(rng) - 20, z = 0.97 * k + u(rng);
+        s.add(x, y, z, 0.5);
+        if (site % 97 == 0) s.add(std::nextafter(x, 1e9), y, std::nextafter(z, -1e9), 0.25);
+      }
+  return s;
+}
+
+struct Knobs {  // the knobs are removed even when an assertion fails
+  ~Knobs() {
+    ::unsetenv("CONTACTGRID_CUDA_HOST_PATH");
+    ::unsetenv("CONTACTGRID_CUDA_TRANSFER_SLOT");
+  }
+};
+
+template <class Real>
+void expect_same_three_ways(const Spheres& s, Fields fields, const std::string& what) {
+  SCOPED_TRACE(what + " " + to_string(fields));
+  EngineOptions o;
+  o.fields = fields;
+  o.backend = Backend::cpu;
+  Engine<Real> cpu(o);
+  o.backend = Backend::cuda;
+  Engine<Real> gpu(o);
+  const BodiesView v{s.p, s.r, {}, {}};
+  const Contacts<Real> oracle = cpu.detect(v);
+  ::unsetenv("CONTACTGRID_CUDA_HOST_PATH");
+  const Contacts<Real> first = gpu.detect(v);
+  const std::uint64_t fp64_rows = gpu.stats().fp64_rows;
+  const Contacts<Real> second = gpu.detect(v);  // into blocks locked before, `first` still held
+  ::setenv("CONTACTGRID_CUDA_HOST_PATH", "old", 1);
+  const Contacts<Real> old = gpu.detect(v);
+  ::unsetenv("CONTACTGRID_CUDA_HOST_PATH");
+  ASSERT_EQ(oracle.size(), first.size());
+  EXPECT_EQ(compare_contacts(first, oracle), "identical") << "new path against the CPU";
+  EXPECT_EQ(compare_contacts(second, oracle), "identical") << "new path, second call";
+  EXPECT_EQ(compare_contacts(old, first), "identical") << "old path against the new";
+  EXPECT_EQ(fp64_rows, cpu.stats().fp64_rows);
+  EXPECT_EQ(gpu.stats().fp64_rows, cpu.stats().fp64_rows);
+  if (first.id_a.size() * sizeof(std::int64_t) >= (std::size_t(1) << 20) &&
+      first.distance.size() * sizeof(Real) >= (std::size_t(1) << 20)) {
+    auto locked = [](const void* p) {
+      return detail::HostPool::instance().block_locked(const_cast<void*>(p));
+    };
+    EXPECT_TRUE(locked(first.id_a.data())) << "the rows did not come down into locked pool blocks";
+    EXPECT_TRUE(locked(first.distance.data()));
+  }
+}
+
+TEST(HostPathCuda, PackedUploadAndDirectDownloadGiveTheOldPathsBytes) {
+  CG_SKIP_WITHOUT_CUDA();
+  Knobs knobs;
+  const Spheres twins = lattice_with_twins(48, 3711);  // 110 592 + 1 141 bodies, ~330 k contacts
+  // default slots (4 MiB: the upload in one piece at this size), then 4096 and 5000 bytes: 256 and
+  // 304 spheres a slot (5000 rounds down to 4864), neither dividing the body count
+  for (const char* slot : {static_cast<const char*>(nullptr), "4096", "5000"}) {
+    if (slot) ::setenv("CONTACTGRID_CUDA_TRANSFER_SLOT", slot, 1);
+    const std::string what = std::string("slot ") + (slot ? slot : "default");
+    expect_same_three_ways<float>(twins, Fields::basic, what);
+    expect_same_three_ways<float>(twins, Fields::full, what);
+    expect_same_three_ways<float>(coincident(3712), Fields::full, what + ", coincident");
+    expect_same_three_ways<float>(random_spheres(3, 0.5, 1.0, 3713), Fields::basic, what + ", 3 bodies");
+  }
+  ::unsetenv("CONTACTGRID_CUDA_TRANSFER_SLOT");
+  // fp64 keeps the doubles' upload; its rows come down the same way
+  expect_same_three_ways<double>(twins, Fields::basic, "fp64");
+}
+
+// The scene must hold rows that need the world doubles, or the rerun of the narrow stage goes untested.
+TEST(HostPathCuda, TheTwinsSceneHasRowsThatNeedTheWorldDoubles) {
+  const Spheres twins = lattice_with_twins(48, 3711);
+  EngineOptions o;
+  o.backend = Backend::cpu;
+  Engine<float> cpu(o);
+  const Contacts<float> c = cpu.detect(BodiesView{twins.p, twins.r, {}, {}});
+  EXPECT_GT(cpu.stats().fp64_rows, 1000u);
+  EXPECT_GT(c.size(), std::size_t(300000));
+}
+
+}  // namespace
+}  // namespace cg::test
