@@ -24,6 +24,13 @@
 #                                                 resident steps by radius and auto's rows (#34)
 #   BIN=dir OUT=dir jobs/gpu_wave5_check.sh l     the pieces' unit cases; the laptop mode on two quiet
 #                                                 cores (#33, #37)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh s1    one GPU: the whole unit suite, the host path's 16-byte
+#                                                 upload and direct download (#37), the resident steps
+#                                                 in cell order (#31)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh s2    one GPU: simulate before/after (#32), the levels'
+#                                                 cost-model cells (#34)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh s3    the laptop mode's cell list on two quiet cores (#33,
+#                                                 #37), the file jobs (#37)
 # BIN holds the CUDA build's contactgrid, contactgrid_tests, contactgrid_mpi_tests,
 # contactgrid_cuda_bench, host_stage_bench, host_bandwidth and file_write_bandwidth. Each part writes $OUT/<part>.tgz; the
 # script exits non-zero naming every script that failed.
@@ -113,6 +120,16 @@ case ${1:-a} in
   l)
     part unit_pieces unit_filtered 'Pieces*'
     part laptop env MODE=laptop jobs/gpu_hostpath_check.sh ;;
+  s1)
+    part unit unit
+    part library env PART=hostpath jobs/gpu_library_check.sh "$BIN"
+    part steploop jobs/gpu_steploop_check.sh one ;;
+  s2)
+    part simulate jobs/gpu_simulate_check.sh unit perf
+    part broad_cells jobs/gpu_broadphase_check.sh cells ;;
+  s3)
+    part laptop env MODE=laptop jobs/gpu_hostpath_check.sh
+    part filejob file_job ;;
   two)
     part steploop_two jobs/gpu_steploop_check.sh two
     part simulate_two jobs/gpu_simulate_check.sh mpi2 two ;;

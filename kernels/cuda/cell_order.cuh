@@ -69,7 +69,7 @@ __global__ void __launch_bounds__(kBlock)
                      const std::uint32_t* __restrict__ perm, std::uint32_t n, Vec3<double> origin,
                      GridParams<Real> g, Sphere<Real>* __restrict__ out, Counters* __restrict__ c) {
   const std::uint32_t j = blockIdx.x * kBlock + threadIdx.x;
-  if (j < n) out[j] = packed_sphere(pos, rad, perm[j], n, origin, g, c);
+  if (j < n) out[j] = packed_sphere(pos, rad, nullptr, perm[j], n, origin, g, c);  // (a skin: the doubles)
 }
 
 // The select's decision of kept candidate k (cell-order indices) on the cell-ordered spheres:
