@@ -25,11 +25,11 @@
 #   BIN=dir OUT=dir jobs/gpu_wave5_check.sh l     the pieces' unit cases; the laptop mode on two quiet
 #                                                 cores (#33, #37)
 #   BIN=dir OUT=dir jobs/gpu_wave5_check.sh s1    one GPU: the whole unit suite, the host path's 16-byte
-#                                                 upload and direct download (#37), the resident steps
-#                                                 in cell order (#31)
-#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh s2    one GPU: simulate before/after (#32), the levels'
-#                                                 cost-model cells (#34)
-#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh s3    the laptop mode's cell list on two quiet cores (#33,
+#                                                 upload and direct download (#37)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh s2    one GPU: the resident steps in cell order (#31), the
+#                                                 levels' cost-model cells (#34)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh s3    one GPU: simulate before/after (#32)
+#   BIN=dir OUT=dir jobs/gpu_wave5_check.sh s4    the laptop mode's cell list on two quiet cores (#33,
 #                                                 #37), the file jobs (#37)
 # BIN holds the CUDA build's contactgrid, contactgrid_tests, contactgrid_mpi_tests,
 # contactgrid_cuda_bench, host_stage_bench, host_bandwidth and file_write_bandwidth. Each part writes $OUT/<part>.tgz; the
@@ -122,12 +122,13 @@ case ${1:-a} in
     part laptop env MODE=laptop jobs/gpu_hostpath_check.sh ;;
   s1)
     part unit unit
-    part library env PART=hostpath jobs/gpu_library_check.sh "$BIN"
-    part steploop jobs/gpu_steploop_check.sh one ;;
+    part library env PART=hostpath jobs/gpu_library_check.sh "$BIN" ;;
   s2)
-    part simulate jobs/gpu_simulate_check.sh unit perf
+    part steploop jobs/gpu_steploop_check.sh one
     part broad_cells jobs/gpu_broadphase_check.sh cells ;;
   s3)
+    part simulate jobs/gpu_simulate_check.sh unit perf ;;
+  s4)
     part laptop env MODE=laptop jobs/gpu_hostpath_check.sh
     part filejob file_job ;;
   two)
