@@ -405,7 +405,7 @@ std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs
     };
     set("CONTACTGRID_CUDA_UPLOAD", path.up);
     set("CONTACTGRID_CUDA_DOWNLOAD", path.down);
-    set("CONTACTGRID_CUDA_HOST_PATH", path.old ? "old" : nullptr);
+    set("CONTACTGRID_CUDA_HOST_PATH", path.old ? "old" : "packed");
     set("CONTACTGRID_CUDA_TRANSFER_SLOT", path.slot);
     cg::Engine<float> engine(
         {.backend = cg::Backend::cuda, .cell_size = g_cell_size, .cell_choice = g_cell_choice});

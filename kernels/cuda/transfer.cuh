@@ -72,7 +72,7 @@ inline void streamed_upload(cuda::PinnedRing& ring, std::size_t slot_bytes,
 // fp32 sphere calls from host arrays go up as the 16-byte spheres fp32's pack makes (upload_pack.hpp)
 // instead of the 32-byte world doubles: no ellipsoids, no skin (its reference positions are the
 // doubles), no report mask, a narrow stage that writes every candidate (narrow_fp64_rows reruns it),
-// the streamed or automatic upload, and not CONTACTGRID_CUDA_HOST_PATH=old.
+// the streamed or automatic upload, and CONTACTGRID_CUDA_HOST_PATH=packed.
 template <class Real, class Key, class Narrow>
 bool packed_upload_fits(const RunState<Real, Key, Narrow>& r) {
   return std::is_same_v<Real, float> && std::is_same_v<Narrow, float> && !r.device_in && r.n64 > 0 &&

@@ -191,13 +191,14 @@ inline Tuning read_tuning() {
   return t;
 }
 
-// CONTACTGRID_CUDA_HOST_PATH=old: host arrays go up as the world doubles (32 bytes a sphere, by
-// Tuning::upload) and the rows come down by Tuning::download; otherwise fp32 sphere calls upload the
-// 16-byte packed spheres and every call downloads straight into the result vectors' page-locked pool
-// blocks (cuda/transfer.cuh). The benchmark's before / after in one run.
+// CONTACTGRID_CUDA_HOST_PATH=packed: fp32 sphere calls upload the 16-byte packed spheres and every
+// call downloads straight into the result vectors' page-locked pool blocks (cuda/transfer.cuh);
+// otherwise (unset or `old`) host arrays go up as the world doubles (32 bytes a sphere, by
+// Tuning::upload) and the rows come down by Tuning::download. The packed path is opt-in: its host
+// packing costs more than its bytes save (BENCHMARKS.md §25). The benchmark's rows take both.
 inline bool host_path_old() {
   const char* v = std::getenv("CONTACTGRID_CUDA_HOST_PATH");
-  return v && std::string_view(v) == "old";
+  return !(v && std::string_view(v) == "packed");
 }
 
 }  // namespace cg::detail

@@ -134,13 +134,13 @@ void expect_same_three_ways(const Spheres& s, Fields fields, const std::string& 
   Engine<Real> gpu(o);
   const BodiesView v{s.p, s.r, {}, {}};
   const Contacts<Real> oracle = cpu.detect(v);
-  ::unsetenv("CONTACTGRID_CUDA_HOST_PATH");
+  ::setenv("CONTACTGRID_CUDA_HOST_PATH", "packed", 1);
   const Contacts<Real> first = gpu.detect(v);
   const std::uint64_t fp64_rows = gpu.stats().fp64_rows;
   const Contacts<Real> second = gpu.detect(v);  // into blocks locked before, `first` still held
   ::setenv("CONTACTGRID_CUDA_HOST_PATH", "old", 1);
   const Contacts<Real> old = gpu.detect(v);
-  ::unsetenv("CONTACTGRID_CUDA_HOST_PATH");
+  ::setenv("CONTACTGRID_CUDA_HOST_PATH", "packed", 1);
   ASSERT_EQ(oracle.size(), first.size());
   EXPECT_EQ(compare_contacts(first, oracle), "identical") << "new path against the CPU";
   EXPECT_EQ(compare_contacts(second, oracle), "identical") << "new path, second call";
