@@ -8,7 +8,8 @@
 #        steps/s from log.csv and the energies of both the same bytes
 #   #34  bench-broad 2^24 fp32 levels: uniform, bimodal 1:10 and 1:100 with the levels' cost-model cells
 #        (default) and the smallest cells (CONTACTGRID_LEVELS_CELLS=smallest)
-#   BIN=dir OUT=dir jobs/gpu_s6_check.sh     (BIN: the CUDA build's contactgrid and contactgrid_tests)
+#   BIN=dir OUT=dir [PARTS="unit steps sim broad"] jobs/gpu_s6_check.sh
+#   (BIN: the CUDA build's contactgrid and contactgrid_tests; PARTS: the parts to run, default all)
 # Exits non-zero naming each failed check.
 set -u
 cd "$(dirname "$0")/.."
@@ -17,15 +18,20 @@ BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}; CG=$BIN/contactgrid
 W=${SCRATCH:-/dev/shm}/cg_s6
 mkdir -p "$W" "$OUT"
 failed=()
+PARTS=" ${PARTS:-unit steps sim broad} "
+wants() { [[ $PARTS == *" $1 "* ]]; }
 log() { echo "[$(date -u +%H:%M:%S)] $*"; }
 { date -u; nvidia-smi --query-gpu=name --format=csv,noheader; git log --oneline -1 2>/dev/null; } | tee "$OUT/device.txt"
 
+if wants unit; then
 log "== unit: the cases the merge touched"
 timeout 120 "$BIN/contactgrid_tests" \
   --gtest_filter='CudaBackendTest*:CudaNarrowTest*:HostPath*:HostCellList*:HostStagesTest*:EngineSkinCuda*' \
   >"$OUT/unit.log" 2>&1 || failed+=(unit)
 grep -E '^\[  (PASSED|FAILED) |^\[==========\]' "$OUT/unit.log"
+fi
 
+if wants steps; then
 log "== #31 moving steps"
 timeout 60 "$CG" generate "$W/s24.h5" -n 16777216 --seed 24 --contacts-per-body 6 -q || failed+=(steps_generate)
 steps() {  # TAG SKIN STEPS [ENV...]
@@ -38,7 +44,9 @@ steps fresh 0 6
 steps cell auto 40
 steps file auto 40 CONTACTGRID_STEP_ORDER=file
 rm -f "$W/s24.h5" "$W/steps.h5"
+fi
 
+if wants sim; then
 log "== #32 simulate"
 BEFORE=(CONTACTGRID_DEM_SEGMENTS=cub CONTACTGRID_DEM_STORE=all CONTACTGRID_DEM_BLOCKS=1)
 sim() {  # NAME STEPS LABEL [ENV...]
@@ -62,7 +70,9 @@ for lg in 20 24; do
     failed+=("simulate_p${lg}_energies_differ")
   rm -rf "$W/p$lg.h5" "$W"/p$lg.*.run
 done
+fi
 
+if wants broad; then
 log "== #34 levels cells, 2^24"
 for cells in tuned smallest; do
   timeout 150 env CONTACTGRID_LEVELS_CELLS=$cells "$CG" bench-broad --backend cuda --precision fp32 \
@@ -70,6 +80,7 @@ for cells in tuned smallest; do
     >"$OUT/broad_$cells.txt" 2>&1 || failed+=("broad_$cells")
   echo "-- levels cells: $cells"; cat "$OUT/broad_$cells.txt"
 done
+fi
 rm -rf "$W"
 if [ ${#failed[@]} -gt 0 ]; then echo "FAILED: ${failed[*]}"; exit 1; fi
 echo "all passed"
