@@ -142,53 +142,10 @@ std::uint64_t collect(const CellList<Real>& cl, const PackedBodies<Real>& p, int
   const std::size_t n = cl.key.size();
   ListBodies<Real> lb;
   gather(cl, p, nt, lb);
-  // Chunks of places, each appending its pairs to its thread's buffer (kept for the thread's later
-  // calls: no fresh pages a call), copied in chunk order: the same array for any thread count.
-  constexpr std::size_t k_kept_bytes = std::size_t(32) << 20;
-  const int id_bits = out.id_bits;
-  const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(256, n / 16384));
-  struct ChunkRun {
-    std::vector<std::uint64_t>* buffer = nullptr;
-    std::size_t begin = 0, size = 0;
-  };
-  std::vector<ChunkRun> chunk_run(n_chunks);
-  std::uint64_t tests_total = 0;
-#pragma omp parallel num_threads(nt) reduction(+ : tests_total) if (n_chunks > 1)
-  {
-    static thread_local std::vector<std::uint64_t> mine;
-    mine.clear();
-    auto emit = [&](std::uint32_t a, std::uint32_t b) { mine.push_back((std::uint64_t(a) << id_bits) | b); };
-#pragma omp for schedule(dynamic, 1)
-    for (std::size_t c = 0; c < n_chunks; ++c) {
-      const std::size_t begin = mine.size();
-      std::uint64_t unreported = 0;
-      constexpr std::size_t k_step = 4096;  // progress: reported after each step of places
-      for (std::size_t i = n * c / n_chunks, end = n * (c + 1) / n_chunks; i < end; i += k_step) {
-        const std::uint64_t tests = walk(i, std::min(end, i + k_step), cl, lb, test, emit);
-        tests_total += tests;
-        unreported += tests;
-        if (progress.on() && unreported >= ProgressShare::kStep) {
-          progress.add(unreported);
-          unreported = 0;
-        }
-      }
-      if (progress.on() && unreported > 0) progress.add(unreported);
-      chunk_run[c] = {&mine, begin, mine.size() - begin};
-    }
-  }
-  progress.finish();
-  std::vector<std::uint64_t> chunk_size(n_chunks), chunk_offset;
-  for (std::size_t c = 0; c < n_chunks; ++c) chunk_size[c] = chunk_run[c].size;
-  out.ab.resize(exclusive_scan_into(chunk_size, chunk_offset));
-#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
-  for (std::size_t c = 0; c < n_chunks; ++c) {
-    const std::uint64_t* from = chunk_run[c].buffer->data() + chunk_run[c].begin;
-    std::copy(from, from + chunk_run[c].size, out.ab.begin() + std::ptrdiff_t(chunk_offset[c]));
-  }
-  for (const ChunkRun& run : chunk_run)
-    if (run.buffer->capacity() * sizeof(std::uint64_t) > k_kept_bytes)
-      std::vector<std::uint64_t>().swap(*run.buffer);
-  return tests_total;
+  // chunks of listed bodies, each appending its pairs to its thread's buffer (collect_in_chunks)
+  return collect_in_chunks(n, nt, out, progress, [&](std::size_t begin, std::size_t end, auto& emit) {
+    return walk(begin, end, cl, lb, test, emit);
+  });
 }
 
 }  // namespace

@@ -112,62 +112,10 @@ std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const
     eb.r[e] = s.r + p.inflation;  // a skin: the inflated spheres (0: exactly r)
     eb.ctrl[e] = p.ctrl[b];
   }
-  // count → scan → fill at the granularity of fixed chunks of entries: each chunk collects its pairs
-  // once (no second walk of the cells), the chunk sizes are scanned, the chunks copied in order. The
-  // chunking depends only on the entry count, so the pair array is the same for any thread count.
-  // A thread appends its chunks' pairs to its own buffer, kept for the thread's later calls: the
-  // chunks' growing arrays would be fresh heap pages every call (the kernel zeroing each on first
-  // touch) and copies as they grow. A buffer above k_kept_bytes is freed after the copy (the memory a
-  // scene of many contacts leaves behind).
-  constexpr std::size_t k_kept_bytes = std::size_t(32) << 20;
-  const int id_bits = out.id_bits;
-  const std::size_t n_chunks = std::max<std::size_t>(1, std::min<std::size_t>(256, n_entries / 16384));
-  struct ChunkRun {
-    std::vector<std::uint64_t>* buffer = nullptr;
-    std::size_t begin = 0, size = 0;
-  };
-  std::vector<ChunkRun> chunk_run(n_chunks);
-  std::uint64_t tests_total = 0;
-#pragma omp parallel num_threads(nt) reduction(+ : tests_total) if (n_chunks > 1)
-  {
-    static thread_local std::vector<std::uint64_t> mine;
-    mine.clear();
-    auto emit = [&](std::uint32_t a, std::uint32_t b) { mine.push_back((std::uint64_t(a) << id_bits) | b); };
-#pragma omp for schedule(dynamic, 1)
-    for (std::size_t c = 0; c < n_chunks; ++c) {
-      const std::size_t begin = mine.size();
-      std::uint64_t unreported = 0;
-      // progress: the chunk walks its entries in steps, reporting after each
-      constexpr std::size_t k_step = 4096;
-      for (std::size_t e = n_entries * c / n_chunks, end = n_entries * (c + 1) / n_chunks; e < end;
-           e += k_step) {
-        const std::uint64_t tests =
-            walk_entries(e, std::min(end, e + k_step), en, eb, report, half_bits, test, emit);
-        tests_total += tests;
-        unreported += tests;
-        if (progress.on() && unreported >= ProgressShare::kStep) {
-          progress.add(unreported);
-          unreported = 0;
-        }
-      }
-      if (progress.on() && unreported > 0) progress.add(unreported);
-      chunk_run[c] = {&mine, begin, mine.size() - begin};
-    }
-  }
-  progress.finish();
-  std::vector<std::uint64_t> chunk_size(n_chunks), chunk_offset;
-  for (std::size_t c = 0; c < n_chunks; ++c) chunk_size[c] = chunk_run[c].size;
-  const std::uint64_t n_pairs = exclusive_scan_into(chunk_size, chunk_offset);
-  out.ab.resize(n_pairs);
-#pragma omp parallel for num_threads(nt) schedule(static) if (n_chunks > 1)
-  for (std::size_t c = 0; c < n_chunks; ++c) {
-    const std::uint64_t* from = chunk_run[c].buffer->data() + chunk_run[c].begin;
-    std::copy(from, from + chunk_run[c].size, out.ab.begin() + std::ptrdiff_t(chunk_offset[c]));
-  }
-  for (const ChunkRun& run : chunk_run)
-    if (run.buffer->capacity() * sizeof(std::uint64_t) > k_kept_bytes)
-      std::vector<std::uint64_t>().swap(*run.buffer);
-  return tests_total;
+  // chunks of entries, each appending its pairs to its thread's buffer (collect_in_chunks)
+  return collect_in_chunks(n_entries, nt, out, progress, [&](std::size_t begin, std::size_t end, auto& emit) {
+    return walk_entries(begin, end, en, eb, report, half_bits, test, emit);
+  });
 }
 
 }  // namespace
