@@ -74,8 +74,10 @@ void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, Arr
   for (std::size_t i = 0; i < n; ++i) out[i] = cut_shape(shapes[i]);
 }
 
-template <class Real>
-void shape_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& out) {
+// The cells, control byte and entry count of every packed sphere (its inflated sphere), the cells by
+// cells_of(sphere, i).
+template <class Real, class CellsOf>
+void fill_cells(int threads, PackedBodies<Real>& out, const CellsOf& cells_of) {
   const std::size_t n = out.spheres.size();
   out.cells.resize(n);
   out.ctrl.resize(n);
@@ -83,25 +85,20 @@ void shape_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& out
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
     const Sphere<Real> s = out.spheres[i];
-    out.cells[i] = cut_cells(Sphere<Real>{s.x, s.y, s.z, s.r + out.inflation}, out.cut[i], g);
+    out.cells[i] = cells_of(Sphere<Real>{s.x, s.y, s.z, s.r + out.inflation}, i);
     out.ctrl[i] = control_bits(out.cells[i]);
     out.count[i] = entry_count(out.cells[i]);
   }
 }
 
 template <class Real>
+void shape_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& out) {
+  fill_cells(threads, out, [&](const Sphere<Real>& s, std::size_t i) { return cut_cells(s, out.cut[i], g); });
+}
+
+template <class Real>
 void sphere_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& out) {
-  const std::size_t n = out.spheres.size();
-  out.cells.resize(n);
-  out.ctrl.resize(n);
-  out.count.resize(n);
-#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
-  for (std::size_t i = 0; i < n; ++i) {
-    const Sphere<Real> s = out.spheres[i];
-    out.cells[i] = body_cells(Sphere<Real>{s.x, s.y, s.z, s.r + out.inflation}, g);
-    out.ctrl[i] = control_bits(out.cells[i]);
-    out.count[i] = entry_count(out.cells[i]);
-  }
+  fill_cells(threads, out, [&](const Sphere<Real>& s, std::size_t) { return body_cells(s, g); });
 }
 
 template void sphere_cells(const GridParams<float>&, int, PackedBodies<float>&);

@@ -31,24 +31,14 @@ void expect_same(const Contacts<Real>& a, const Contacts<Real>& b) {
   EXPECT_EQ(test::compare_contacts(a, b), "identical");
 }
 
-// CONTACTGRID_HOST_PAIRS=legrand for the guard's life: the grid's pair stage of Le Grand's cells
-// instead of the cell list (host_backend.cpp).
-class LeGrandPairs {
+// CONTACTGRID_HOST_PAIRS=<value> for the guard's life: `legrand` the grid's pair stage of Le Grand's
+// cells, `cell-list` the cell list (opt-in, host_backend.cpp).
+class HostPairs {
  public:
-  LeGrandPairs() { ::setenv("CONTACTGRID_HOST_PAIRS", "legrand", 1); }
-  ~LeGrandPairs() { ::unsetenv("CONTACTGRID_HOST_PAIRS"); }
-  LeGrandPairs(const LeGrandPairs&) = delete;
-  LeGrandPairs& operator=(const LeGrandPairs&) = delete;
-};
-
-// CONTACTGRID_HOST_PAIRS=cell-list for the guard's life: the grid's pair stage of the cell list
-// (opt-in, host_backend.cpp).
-class CellListPairs {
- public:
-  CellListPairs() { ::setenv("CONTACTGRID_HOST_PAIRS", "cell-list", 1); }
-  ~CellListPairs() { ::unsetenv("CONTACTGRID_HOST_PAIRS"); }
-  CellListPairs(const CellListPairs&) = delete;
-  CellListPairs& operator=(const CellListPairs&) = delete;
+  explicit HostPairs(const char* value) { ::setenv("CONTACTGRID_HOST_PAIRS", value, 1); }
+  ~HostPairs() { ::unsetenv("CONTACTGRID_HOST_PAIRS"); }
+  HostPairs(const HostPairs&) = delete;
+  HostPairs& operator=(const HostPairs&) = delete;
 };
 
 template <class Real>
@@ -71,7 +61,7 @@ TYPED_TEST(HostStagesTest, NarrowRejectsLooseCandidates) {
       StageTimes ta, tb;
       EngineStats sa, sb;
       {
-        const LeGrandPairs le_grand;  // the loose filter walks Le Grand's cells: the same walk
+        const HostPairs le_grand("legrand");  // the loose filter walks Le Grand's cells: the same walk
         detail::run_stages(exact, job, a, ta, sa);
       }
       detail::run_stages(loose, job, b, tb, sb);
@@ -155,13 +145,13 @@ TEST(HostCellList, SameContactsAsLeGrandsCells) {
         EngineStats list, le_grand;
         if (prec == Precision::fp32) {
           const Contacts<float> a = [&] {
-            const CellListPairs guard;
+            const HostPairs guard("cell-list");
             return run(0.0f, list);
           }();
           expect_same(a, run(0.0f, le_grand));
         } else {
           const Contacts<double> a = [&] {
-            const CellListPairs guard;
+            const HostPairs guard("cell-list");
             return run(0.0, list);
           }();
           expect_same(a, run(0.0, le_grand));
