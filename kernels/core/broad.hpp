@@ -132,18 +132,22 @@ CG_HD std::uint64_t cross_level_pairs(std::uint32_t a, int la, const LevelParams
 }
 
 // The pair estimate's share of body a across levels (pair_estimate.hpp): the entries of the cells
-// cross_level_pairs walks, found by two binary searches a cell and not walked, so that a pile of
-// larger bodies that every small body nearby would meet is counted before any pair is tested. At
-// least cross_level_pairs' tests (the cell rule and the report rule only drop some).
+// cross_level_pairs walks, counted without testing them (a cell's first entries walked, a long run's
+// end found by binary search), so that a pile of larger bodies that every small body nearby would meet
+// is counted before any pair is tested. At least cross_level_pairs' tests (the cell rule and the
+// report rule only drop some).
 template <class Real, class Key, class Index, class CellsIn>
 CG_HD std::uint64_t cross_level_bound(int la, const LevelParams<Real>& lp, const Key* keys,
                                       const Index* begin, CellsIn&& cells_in) {
+  constexpr Index kWalk = 8;  // a usual cell's entries lie in the cache line of its first
   std::uint64_t tests = 0;
   for_larger_level_cells<Real, Key>(
       la, lp, begin, cells_in, [&](Key k, Index lo, Index hi, std::uint8_t, std::uint32_t) {
         const Index f = lower_bound_key(keys, lo, hi, k);
-        if (f == hi || keys[f] != k) return;
-        const Index end = k == Key(~Key(0)) ? hi : lower_bound_key(keys, f, hi, Key(k + 1));
+        Index end = f;
+        while (end < hi && end - f < kWalk && keys[end] == k) ++end;
+        if (end - f == kWalk && end < hi && keys[end] == k)
+          end = k == Key(~Key(0)) ? hi : lower_bound_key(keys, end, hi, Key(k + 1));
         tests += end - f;
       });
   return tests;

@@ -147,33 +147,44 @@ __global__ void __launch_bounds__(kBlock)
   }
 }
 
-// levels, estimate: body a's bound on its pair tests across levels (core/broad.hpp cross_level_bound),
-// as the estimate's CellWork (tests only) for the reduction of add_cell_work.
+// levels, estimate: the bound of every body's pair tests across levels (core/broad.hpp
+// cross_level_bound), summed into c->tests. The levels are read from a block copy in shared memory,
+// as in cross_level_kernel (a thread's copy of the parameters would be indexed in local memory).
 template <class Real, class Key>
-struct CrossLevelBound {
-  const Sphere<Real>* spheres;
-  const CutShape* cut;
-  const Key* lo_key;
-  const Key* keys;
-  const std::uint32_t* level_begin;
-  LevelParams<Real> lp;
-  __host__ __device__ CellWork operator()(std::uint32_t a) const {
-    const int la = key_level(lo_key[a], lp.key_shift);
-    if (la + 1 >= lp.count) return {0, 0};
-    const Sphere<Real> s = spheres[a];
-    const unsigned long long tests = cross_level_bound(
-        la, lp, keys, level_begin,
-        [&](const GridParams<Real>& g) { return cut ? cut_cells(s, cut[a], g) : body_cells(s, g); });
-    return {tests, 0};
+__global__ void __launch_bounds__(kBlock)
+    cross_level_bound_kernel(const Sphere<Real>* __restrict__ spheres, const CutShape* __restrict__ cut,
+                             const Key* __restrict__ lo_key, std::uint32_t n, LevelParams<Real> lp,
+                             const Key* __restrict__ keys, const std::uint32_t* __restrict__ level_begin,
+                             Counters* __restrict__ c) {
+  using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
+  __shared__ typename Reduce::TempStorage tmp;
+  __shared__ std::uint32_t s_begin[kMaxLevels + 1];
+  __shared__ LevelParams<Real> s_lp;
+  if (threadIdx.x <= static_cast<unsigned>(lp.count)) s_begin[threadIdx.x] = level_begin[threadIdx.x];
+  if (threadIdx.x == 0) s_lp = lp;
+  __syncthreads();
+  const std::uint32_t a = blockIdx.x * kBlock + threadIdx.x;
+  unsigned long long tests = 0;
+  if (a < n) {
+    const int la = key_level(lo_key[a], s_lp.key_shift);
+    if (la + 1 < s_lp.count) {
+      const Sphere<Real> sa = spheres[a];
+      tests = cross_level_bound(la, s_lp, keys, s_begin, [&](const GridParams<Real>& g) {
+        return cut ? cut_cells(sa, cut[a], g) : body_cells(sa, g);
+      });
+    }
   }
-};
+  const unsigned long long block_tests = Reduce(tmp).Sum(tests);
+  if (threadIdx.x == 0 && block_tests) atomicAdd(&c->tests, block_tests);
+}
 
 }  // namespace cg::cuda
 
 namespace cg::detail {
 
 // The levels' pair estimate (may refuse the scene): the grid's over the cells of all levels, and the
-// bound of the pairs across levels (CrossLevelBound, one reduction; the levels' runs found first).
+// bound of the pairs across levels (cross_level_bound_kernel; the levels' runs found first). The pair
+// counters it borrows are zeroed again for the pair stage.
 template <class Real, class Key, class Narrow>
 void levels_estimate(RunState<Real, Key, Narrow>& r) {
   const LevelParams<Real>& lp = r.job.levels;
@@ -183,14 +194,13 @@ void levels_estimate(RunState<Real, Key, Narrow>& r) {
     cuda::level_begin_kernel<Key><<<1, 32, 0, r.st>>>(
         r.keys.Current(), static_cast<std::uint32_t>(r.n_entries), lp.count, lp.key_shift, ic.extra);
     CG_CUDA_CHECK_LAUNCH("level_begin");
-    PairEstimate across;
-    add_cell_work(r,
-                  thrust::make_transform_iterator(
-                      thrust::counting_iterator<std::uint32_t>(0),
-                      cuda::CrossLevelBound<Real, Key>{r.d_cell_spheres, r.d_cell_cut, r.d_lo_key,
-                                                       r.keys.Current(), ic.extra, lp}),
-                  r.n, across);
-    e.tests += across.tests;
+    zero_pair_counters(r);
+    cuda::cross_level_bound_kernel<Real, Key><<<r.nb, cuda::kBlock, 0, r.st>>>(
+        r.d_cell_spheres, r.d_cell_cut, r.d_lo_key, r.n, lp, r.keys.Current(), ic.extra, r.d_counters);
+    CG_CUDA_CHECK_LAUNCH("cross_level_bound");
+    r.read_counters();
+    e.tests += r.h_counters->tests;
+    zero_pair_counters(r);
   }
   check_estimate(r, e);
 }
