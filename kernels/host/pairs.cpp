@@ -78,16 +78,15 @@ std::uint64_t walk_entries(std::size_t lo, std::size_t hi, const Entries<Key>& e
         const __m128 vax = _mm_set1_ps(ax), vay = _mm_set1_ps(ay), vaz = _mm_set1_ps(az),
                      var = _mm_set1_ps(ar);
         const __m128 margin2 = _mm_set1_ps(near_bound.margin2);
-        const __m128i vca = _mm_set1_epi32(int(ca)), vtwo = _mm_set1_epi32(int(a_two));
-        const __m128i seven = _mm_set1_epi32(7), lane = _mm_setr_epi32(0, 1, 2, 3);
+        const __m128i vca = _mm_set1_epi32(int(ca)), vtwo = _mm_set1_epi32(int(a_two));  // a_two: 3 bits
+        const int near_all = near_bound.all ? 15 : 0;
         for (std::size_t first = e + 1; first < cell_end; first += 4) {
-          const int left = int(std::min<std::size_t>(4, cell_end - first));
+          const int lanes = cell_end - first >= 4 ? 15 : (1 << (cell_end - first)) - 1;  // the cell's
           const __m128i cf = _mm_loadu_si128(reinterpret_cast<const __m128i*>(ec + first));
-          const __m128i two = _mm_and_si128(vtwo, _mm_and_si128(_mm_srli_epi32(cf, 3), seven));
-          const __m128i rule = _mm_and_si128(
-              _mm_cmpeq_epi32(_mm_andnot_si128(_mm_xor_si128(vca, cf), two), _mm_setzero_si128()),
-              _mm_cmplt_epi32(lane, _mm_set1_epi32(left)));
-          const int assigned = _mm_movemask_ps(_mm_castsi128_ps(rule));
+          const __m128i two = _mm_and_si128(vtwo, _mm_srli_epi32(cf, 3));
+          const __m128i rule =
+              _mm_cmpeq_epi32(_mm_andnot_si128(_mm_xor_si128(vca, cf), two), _mm_setzero_si128());
+          const int assigned = _mm_movemask_ps(_mm_castsi128_ps(rule)) & lanes;
           tests += (0x4332322132212110ull >> (4 * assigned)) & 15u;  // the set lanes (no popcnt in x86-64)
           const __m128 dx = _mm_sub_ps(vax, _mm_loadu_ps(ex + first));
           const __m128 dy = _mm_sub_ps(vay, _mm_loadu_ps(ey + first));
@@ -95,7 +94,7 @@ std::uint64_t walk_entries(std::size_t lo, std::size_t hi, const Entries<Key>& e
           const __m128 d2 =
               _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)), _mm_mul_ps(dz, dz));
           const __m128 sum = _mm_add_ps(_mm_add_ps(var, _mm_loadu_ps(er + first)), margin2);
-          const int near = near_bound.all ? 15 : _mm_movemask_ps(_mm_cmple_ps(d2, _mm_mul_ps(sum, sum)));
+          const int near = near_all | _mm_movemask_ps(_mm_cmple_ps(d2, _mm_mul_ps(sum, sum)));
           for (int wanted = assigned & near; wanted != 0; wanted &= wanted - 1) {
             const std::size_t f = first + std::size_t(__builtin_ctz(unsigned(wanted)));
             if (test(Sphere<Real>{ax, ay, az, ar}, eb.sphere(f), a, body[f])) emit(a, body[f]);
