@@ -13,6 +13,8 @@
 #              2^24 <= 20 ms and <= 1.3x the bytes floor) and cuNSearch's figures of the issue (3.11 and
 #              101.9 ms: cuNSearch is not on the device host)
 #   Needs BIN=<CUDA build's binaries: contactgrid_tests contactgrid_cuda_bench> (default: DIR).
+#   PART=laptop with BIN holding contactgrid_tests also runs CPU = CUDA (CudaBackendTest/*,
+#   CudaNarrowTest/*: the same bytes and stats) and the CPU stages' cases first; they must run, not skip.
 #   Fails (non-zero, named) when a unit case fails or HostPathCuda skipped, the bench did not run, or
 #   the packed path is slower than the old streamed path at 2^20 or 2^24.
 # PART=laptop — the laptop mode's figure, below.
@@ -90,6 +92,16 @@ fi
 fi
 
 if [ "$PART" = laptop ] || [ "$PART" = all ]; then
+if [ -x "$BIN/contactgrid_tests" ]; then
+  # the CPU stages' new paths must keep CPU = CUDA: the same contact bytes and the same stats
+  log "== CPU = CUDA after the CPU stages' changes: CudaBackendTest, CudaNarrowTest, RadixSort, HostStages"
+  "$BIN/contactgrid_tests" --gtest_filter='CudaBackendTest/*:CudaNarrowTest/*:RadixSort*:HostStages*:HostPairs*' \
+    >"$log_dir/laptop_unit.log" 2>&1 || failed+=(laptop_unit)
+  grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]' "$log_dir/laptop_unit.log" | head -20
+  grep -q 'OK \] CudaBackendTest/.*BitIdenticalToCpuOnScenes' "$log_dir/laptop_unit.log" ||
+    failed+=(cuda_cpu_cases_did_not_run)
+fi
+
 log "== the module (compiled against $py)"
 jobs/gpu_python_check.sh module "$dir" >"$log_dir/module.log" 2>&1 || failed+=(module)
 tail -5 "$log_dir/module.log"

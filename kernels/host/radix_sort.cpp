@@ -1,4 +1,4 @@
-// Stable LSD radix sort of the CPU backend (see radix_sort.hpp). Kept out of the header so that every
+// Stable radix sort of the CPU backend (see radix_sort.hpp). Kept out of the header so that every
 // caller uses this one OpenMP-compiled definition (a template instantiated in a TU built without
 // OpenMP would silently sort only the first thread's chunk).
 #include "host/radix_sort.hpp"

@@ -45,7 +45,7 @@ TEST(RadixSort, StableOverTheRequestedBits) {
 TEST(RadixSort, TopDigitFirstAndItsFallback) {
   for (int threads : {1, 2, 3}) {
     check<std::uint32_t>(600000, 18, threads, 11);
-    check<std::uint32_t>(600000, 9, threads, 12);
+    check<std::uint32_t>(600000, 12, threads, 12);
     check<std::uint64_t>(420000, 40, threads, 13);
     check<std::uint32_t>(300001, 31, threads, 14);
   }
