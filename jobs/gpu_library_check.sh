@@ -13,6 +13,8 @@
 #              2^24 <= 20 ms and <= 1.3x the bytes floor) and cuNSearch's figures of the issue (3.11 and
 #              101.9 ms: cuNSearch is not on the device host)
 #   Needs BIN=<CUDA build's binaries: contactgrid_tests contactgrid_cuda_bench> (default: DIR).
+#   PART=laptop with BIN holding contactgrid_tests also runs CPU = CUDA (CudaBackendTest/*,
+#   CudaNarrowTest/*: the same bytes and stats) and the CPU stages' cases first; they must run, not skip.
 #   Fails (non-zero, named) when a unit case fails or HostPathCuda skipped, the bench did not run, or
 #   the packed path is slower than the old streamed path at 2^20 or 2^24.
 # PART=laptop — the laptop mode's figure, below.
@@ -22,7 +24,10 @@
 # pairs, and within 5 % of the same call from C++), measured on two quiet cores of the device host
 # (taskset -c 0,1, 2 threads), each figure the median of >= 5 calls after a warm one:
 #   bandwidth  host_bandwidth: the two cores' streaming copy and read rates (the floor column's)
-#   engine     host_stage_bench: a new engine a call (as contactgrid.detect makes), per stage
+#   engine     host_stage_bench: a new engine a call (as contactgrid.detect makes), per stage; then
+#              before/after in alternation (same binary: the old paths by their knobs, $old_paths,
+#              against the defaults), the same contacts required
+#   (python)   before: contactgrid.detect with the old paths' knobs, 9 calls, no SciPy
 #   cli        contactgrid detect --backend cpu --threads 2: the detect stage of 5 processes
 #   python     tests/bench/python_bench.py: contactgrid.detect, the same call from C++ (detect_call_bench)
 #              and SciPy (same pairs checked), the ratios
@@ -47,6 +52,8 @@ BIN=$(realpath -m "${BIN:-$dir}")
 py=${PYTHON:-python3}
 export LD_LIBRARY_PATH="$dir/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 cores="taskset -c 0,1"
+# the CPU stages' old paths (BENCHMARKS.md §2): the laptop part's "before"
+old_paths="CONTACTGRID_HOST_ROWS=whole CONTACTGRID_HOST_SORT=lsd CONTACTGRID_HOST_WALK=flags"
 { date -u; nproc; grep -m1 'model name' /proc/cpuinfo; uptime; git log -1 --format='commit %h %s' 2>/dev/null
   cat /sys/kernel/mm/transparent_hugepage/enabled 2>/dev/null; } 2>&1 | tee "$log_dir/device.txt"
 
@@ -85,6 +92,16 @@ fi
 fi
 
 if [ "$PART" = laptop ] || [ "$PART" = all ]; then
+if [ -x "$BIN/contactgrid_tests" ]; then
+  # the CPU stages' new paths must keep CPU = CUDA: the same contact bytes and the same stats
+  log "== CPU = CUDA after the CPU stages' changes: CudaBackendTest, CudaNarrowTest, RadixSort, HostStages"
+  "$BIN/contactgrid_tests" --gtest_filter='CudaBackendTest/*:CudaNarrowTest/*:RadixSort*:HostStages*:HostPairs*' \
+    >"$log_dir/laptop_unit.log" 2>&1 || failed+=(laptop_unit)
+  grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]' "$log_dir/laptop_unit.log" | head -20
+  grep -q 'OK \] CudaBackendTest/.*BitIdenticalToCpuOnScenes' "$log_dir/laptop_unit.log" ||
+    failed+=(cuda_cpu_cases_did_not_run)
+fi
+
 log "== the module (compiled against $py)"
 jobs/gpu_python_check.sh module "$dir" >"$log_dir/module.log" 2>&1 || failed+=(module)
 tail -5 "$log_dir/module.log"
@@ -98,6 +115,25 @@ $cores "$dir/host_bandwidth" 2 512 10 2>&1 | tee "$log_dir/bandwidth.log" || fai
 log "== engine: host_stage_bench, a new engine a call, 2 threads, cores 0,1, 9 calls"
 $cores "$dir/host_stage_bench" "$scene" 9 2 mixed fresh 2>&1 | tee "$log_dir/engine.log" || failed+=(engine)
 
+# Before / after in alternation, the same binary: before = the CPU stages' old paths by their knobs
+# (the whole-row store of basic rows, the LSD radix passes, the 128-lane flag walk); after = the
+# defaults. Both must give the same contacts; each run prints its stages (median of 9).
+log "== engine before/after (old paths: $old_paths), alternated, 2 threads, cores 0,1"
+for r in 1 2; do
+  env $old_paths $cores "$dir/host_stage_bench" "$scene" 9 2 mixed fresh >"$log_dir/engine_before_$r.log" 2>&1 ||
+    failed+=(engine_before)
+  $cores "$dir/host_stage_bench" "$scene" 9 2 mixed fresh >"$log_dir/engine_after_$r.log" 2>&1 || failed+=(engine_after)
+done
+for v in before after; do
+  for r in 1 2; do
+    awk -v v=$v -v r=$r '$1 != "stage" && $1 != "contacts" {printf "%s %s=%s", (NR == 2 ? v " " r ":" : ""), $1, $3}
+      END {print ""}' "$log_dir/engine_${v}_$r.log"
+  done
+done | tee "$log_dir/engine_before_after.txt"
+c_before=$(awk '$1 == "contacts" {print $2}' "$log_dir/engine_before_1.log")
+c_after=$(awk '$1 == "contacts" {print $2}' "$log_dir/engine_after_1.log")
+[ -n "$c_before" ] && [ "$c_before" = "$c_after" ] || failed+=(before_after_contacts_differ)
+
 log "== CLI: contactgrid detect --backend cpu --threads 2, 5 processes"
 for r in 1 2 3 4 5; do
   $cores "$dir/contactgrid" detect "$scene" -o "$log_dir/c.h5" --backend cpu --threads 2 -v >>"$log_dir/cli.log" 2>&1 ||
@@ -105,6 +141,12 @@ for r in 1 2 3 4 5; do
 done
 rm -f "$log_dir/c.h5"
 grep -E '^ +detect ' "$log_dir/cli.log" | awk '{print $2 * 1e3}' | sort -n >"$log_dir/cli_detect_ms.txt"
+
+log "== Python before (old paths by their knobs, no SciPy), cores 0,1, 9 calls"
+PYTHONPATH=/tmp/cgpy env $old_paths $cores $py tests/bench/python_bench.py --log2n 20 --backend cpu --threads 2 \
+  --repetitions 9 --no-scipy --binary "$dir/contactgrid" --cxx "$dir/detect_call_bench" >"$log_dir/python_before.log" 2>&1 ||
+  failed+=(python_before)
+grep -E '^contactgrid.detect|^same call' "$log_dir/python_before.log"
 
 log "== Python, C++, SciPy: python_bench.py, cores 0,1 (9 calls each, SciPy 5)"
 PYTHONPATH=/tmp/cgpy $cores $py tests/bench/python_bench.py --log2n 20 --backend cpu --threads 2 \
@@ -115,6 +157,9 @@ rm -f "$scene"
 
 # The summary: medians (ms) and the issue's two ratios.
 engine=$(awk '$1 == "(sum)" {print $3}' "$log_dir/engine.log")
+eb=$(cat "$log_dir"/engine_before_?.log | awk '$1 == "(sum)" {print $3}' | sort -n | head -1)
+ea=$(cat "$log_dir"/engine_after_?.log | awk '$1 == "(sum)" {print $3}' | sort -n | head -1)
+pyb=$(awk '/^contactgrid.detect/ {print $2}' "$log_dir/python_before.log")
 cli=$(awk '{a[NR] = $1} END {if (NR) print a[int((NR + 1) / 2)]}' "$log_dir/cli_detect_ms.txt")
 pyt=$(awk '/^contactgrid.detect/ {print $2}' "$log_dir/python.log")
 cxx=$(awk '/^same call from C\+\+/ {print $5}' "$log_dir/python.log")
@@ -128,6 +173,12 @@ awk -v e="$engine" -v c="$cli" -v p="$pyt" -v x="$cxx" -v s="$sp" -v same="$same
   if (e > 0 && s > 0) printf "  SciPy / engine        %.1fx\n", s / e
   printf "  same pairs as SciPy   %s\n", same
 }' | tee "$log_dir/summary.txt"
+awk -v eb="$eb" -v ea="$ea" -v pb="$pyb" -v p="$pyt" -v s="$sp" 'BEGIN {
+  printf "  before/after (the old paths by their knobs / the defaults, same binary, this run):\n"
+  if (eb > 0 && ea > 0) printf "    engine stages (the lower of two medians)  %s -> %s ms  %.2fx\n", eb, ea, eb / ea
+  if (pb > 0 && p > 0) printf "    Python contactgrid.detect                 %s -> %s ms  %.2fx\n", pb, p, pb / p
+  if (pb > 0 && s > 0) printf "    SciPy / Python                            %.1fx -> %.1fx (target >= 20)\n", s / pb, s / p
+}' | tee -a "$log_dir/summary.txt"
 [ "$same" = True ] || failed+=(same_pairs)
 awk -v p="$pyt" -v x="$cxx" 'BEGIN {exit !(p > 0 && x > 0 && p <= 1.05 * x)}' || failed+=(python_over_cxx)
 awk -v p="$pyt" -v s="$sp" 'BEGIN {exit !(p > 0 && s >= 20 * p)}' || failed+=(scipy_ratio_below_20)

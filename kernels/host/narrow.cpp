@@ -1,6 +1,8 @@
 // Host stage narrow: narrow_decide() on the ordered candidates; rows of the accepted ones (see
 // stages.hpp). Count → scan → fill when the candidate filter may reject, else one row per candidate.
 #include <algorithm>
+#include <cstdlib>
+#include <string_view>
 #include <type_traits>
 
 #include "host/stages.hpp"
@@ -12,6 +14,12 @@ namespace {
 // random and each would stall a row on a cache miss (fp32: its local sphere; fp64 and mixed: the world
 // centre, which may straddle two cache lines, and radius).
 constexpr std::size_t k_prefetch_rows = 16;
+
+// CONTACTGRID_HOST_ROWS=whole: basic rows built as a whole row and stored (the generic store_row).
+const bool g_basic_rows_direct = [] {
+  const char* k = std::getenv("CONTACTGRID_HOST_ROWS");
+  return !(k != nullptr && std::string_view(k) == "whole");
+}();
 template <class Real>
 void prefetch_body(const NarrowBodies<Real>& w, std::uint32_t i) {
   if constexpr (std::is_same_v<Real, float>) {
@@ -57,6 +65,32 @@ std::uint64_t one_row_per_candidate(const CandidatePairs& c, const NarrowBodies<
   const std::size_t n_cand = c.size();
   NarrowFlags flags;
   if constexpr (std::is_same_v<Real, double>) {
+    if (world != nullptr && !kFull && g_basic_rows_direct) {
+      // basic fields: world_sphere_row's four fields (sphere_sphere_contact's geometry) stored into
+      // the columns as computed, without the zeroed whole row and its copies (a contact's hottest
+      // work here); a candidate that does not touch stores the zero row, as world_rows_decide
+      for (std::size_t k = lo; k < hi; ++k) {
+        if (k + k_prefetch_rows < n_cand) __builtin_prefetch(world + c.b(k + k_prefetch_rows));
+        const std::uint32_t a = c.a(k), b = c.b(k);
+        const Sphere<double> sa = world[a], sb = world[b];
+        const Vec3<double>& o = bodies.origin;
+        const Sphere<double> la{sa.x - o.x, sa.y - o.y, sa.z - o.z, sa.r};
+        const Sphere<double> lb{sb.x - o.x, sb.y - o.y, sb.z - o.z, sb.r};
+        rows.id_a[k] = a;
+        rows.id_b[k] = b;
+        if (spheres_touch(la, lb)) {
+          const ContactGeometry<double> g = sphere_sphere_contact(sa, sb);
+          rows.position_on_a[k] = g.position_on_a;
+          rows.position_on_b[k] = g.position_on_b;
+          rows.normal_on_b[k] = g.normal_on_b;
+          rows.distance[k] = g.distance;
+        } else {
+          rows.position_on_a[k] = rows.position_on_b[k] = rows.normal_on_b[k] = Vec3<double>{0, 0, 0};
+          rows.distance[k] = 0;
+        }
+      }
+      return 0;
+    }
     if (world != nullptr) {
       for (std::size_t k = lo; k < hi; ++k) {
         if (k + k_prefetch_rows < n_cand) __builtin_prefetch(world + c.b(k + k_prefetch_rows));

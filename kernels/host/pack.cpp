@@ -1,5 +1,5 @@
 // Host stage pack: world (double) → local frame Real spheres (radius + g.radius_margin: mixed's
-// enlarged spheres); per body its cells, control byte and entry count (see stages.hpp).
+// enlarged spheres); per body its cells and control byte (see stages.hpp).
 #include "host/stages.hpp"
 
 namespace cg::detail::host {
@@ -41,7 +41,7 @@ void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams
   }
   out.cells.resize(n);
   out.ctrl.resize(n);
-  out.count.resize(n);
+  out.count = {};  // fill_entries takes each body's entry count from its control byte
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
     const Sphere<Real> s = local_sphere<Real>(bodies, origin, g, i);
@@ -49,7 +49,6 @@ void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams
     if (w) w[i] = world_row(bodies, i);
     out.cells[i] = body_cells(Sphere<Real>{s.x, s.y, s.z, s.r + inflation}, g);
     out.ctrl[i] = control_bits(out.cells[i]);
-    out.count[i] = entry_count(out.cells[i]);
   }
 }
 
@@ -74,20 +73,19 @@ void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, Arr
   for (std::size_t i = 0; i < n; ++i) out[i] = cut_shape(shapes[i]);
 }
 
-// The cells, control byte and entry count of every packed sphere (its inflated sphere), the cells by
+// The cells and control byte of every packed sphere (its inflated sphere), the cells by
 // cells_of(sphere, i).
 template <class Real, class CellsOf>
 void fill_cells(int threads, PackedBodies<Real>& out, const CellsOf& cells_of) {
   const std::size_t n = out.spheres.size();
   out.cells.resize(n);
   out.ctrl.resize(n);
-  out.count.resize(n);
+  out.count = {};
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
     const Sphere<Real> s = out.spheres[i];
     out.cells[i] = cells_of(Sphere<Real>{s.x, s.y, s.z, s.r + out.inflation}, i);
     out.ctrl[i] = control_bits(out.cells[i]);
-    out.count[i] = entry_count(out.cells[i]);
   }
 }
 

@@ -1,6 +1,12 @@
 // Host stage pairs: the candidate pairs of the sorted entries (see stages.hpp).
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include <algorithm>
+#include <cstdlib>
 #include <functional>
+#include <string_view>
 #include <type_traits>
 
 #include "backend.hpp"
@@ -9,6 +15,12 @@
 
 namespace cg::detail::host {
 namespace {
+
+// CONTACTGRID_HOST_WALK=flags: the float walk's 128-lane flag loop in place of its four-lane masks.
+const bool g_four_lanes = [] {
+  const char* k = std::getenv("CONTACTGRID_HOST_WALK");
+  return !(k != nullptr && std::string_view(k) == "flags");
+}();
 
 // The entries in cell order, structure of arrays: each body's packed sphere (inflated by a skin) and
 // control byte, gathered once so that the walk reads memory in sequence and its inner loop vectorises.
@@ -60,6 +72,38 @@ std::uint64_t walk_entries(std::size_t lo, std::size_t hi, const Entries<Key>& e
     }
     const Real ax = ex[e], ay = ey[e], az = ez[e], ar = er[e];
     const std::uint32_t a_two = (ca >> 3) & type;  // test_in_cell: axes both span, whose type bit is set
+#if defined(__SSE2__)
+    if constexpr (std::is_same_v<Real, float>) {
+      if (g_four_lanes) {  // the same rule and bound, four later entries a step, as bit masks
+        const __m128 vax = _mm_set1_ps(ax), vay = _mm_set1_ps(ay), vaz = _mm_set1_ps(az),
+                     var = _mm_set1_ps(ar);
+        const __m128 margin2 = _mm_set1_ps(near_bound.margin2);
+        const __m128i vca = _mm_set1_epi32(int(ca)), vtwo = _mm_set1_epi32(int(a_two));  // a_two: 3 bits
+        const int near_all = near_bound.all ? 15 : 0;
+        for (std::size_t first = e + 1; first < cell_end; first += 4) {
+          const int lanes = cell_end - first >= 4 ? 15 : (1 << (cell_end - first)) - 1;  // the cell's
+          const __m128i cf = _mm_loadu_si128(reinterpret_cast<const __m128i*>(ec + first));
+          const __m128i two = _mm_and_si128(vtwo, _mm_srli_epi32(cf, 3));
+          const __m128i rule =
+              _mm_cmpeq_epi32(_mm_andnot_si128(_mm_xor_si128(vca, cf), two), _mm_setzero_si128());
+          const int assigned = _mm_movemask_ps(_mm_castsi128_ps(rule)) & lanes;
+          tests += (0x4332322132212110ull >> (4 * assigned)) & 15u;  // the set lanes (no popcnt in x86-64)
+          const __m128 dx = _mm_sub_ps(vax, _mm_loadu_ps(ex + first));
+          const __m128 dy = _mm_sub_ps(vay, _mm_loadu_ps(ey + first));
+          const __m128 dz = _mm_sub_ps(vaz, _mm_loadu_ps(ez + first));
+          const __m128 d2 =
+              _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)), _mm_mul_ps(dz, dz));
+          const __m128 sum = _mm_add_ps(_mm_add_ps(var, _mm_loadu_ps(er + first)), margin2);
+          const int near = near_all | _mm_movemask_ps(_mm_cmple_ps(d2, _mm_mul_ps(sum, sum)));
+          for (int wanted = assigned & near; wanted != 0; wanted &= wanted - 1) {
+            const std::size_t f = first + std::size_t(__builtin_ctz(unsigned(wanted)));
+            if (test(Sphere<Real>{ax, ay, az, ar}, eb.sphere(f), a, body[f])) emit(a, body[f]);
+          }
+        }
+        continue;
+      }
+    }
+#endif
     for (std::size_t first = e + 1; first < cell_end; first += k_block) {
       const std::size_t len = std::min(k_block, cell_end - first);
       std::uint32_t assigned = 0, wanted = 0;
@@ -91,13 +135,16 @@ std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const
                       int half_bits, int nt, const Test& test, CandidatePairs& out, ProgressShare& progress) {
   const std::size_t n_entries = en.size();
   EntryBodies<Real> eb;
-  eb.x.resize(n_entries);
-  eb.y.resize(n_entries);
-  eb.z.resize(n_entries);
-  eb.r.resize(n_entries);
-  eb.ctrl.resize(n_entries);
+  // three entries of padding: the four-lane walk reads past a cell's end (those lanes masked off)
+  constexpr std::size_t pad = 3;
+  for (Array<Real>* a : {&eb.x, &eb.y, &eb.z, &eb.r}) {
+    a->resize(n_entries + pad);
+    std::fill(a->begin() + std::ptrdiff_t(n_entries), a->end(), Real(0));
+  }
+  eb.ctrl.resize(n_entries + pad);
+  std::fill(eb.ctrl.begin() + std::ptrdiff_t(n_entries), eb.ctrl.end(), 0u);
   // (the bodies of a cell are random places in input order: their reads are asked for ahead)
-  constexpr std::size_t ahead = 16;
+  constexpr std::size_t ahead = 64;
 #pragma omp parallel for num_threads(nt) schedule(static) if (n_entries > k_parallel_min)
   for (std::size_t e = 0; e < n_entries; ++e) {
     if (e + ahead < n_entries) {

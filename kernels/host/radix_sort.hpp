@@ -1,8 +1,12 @@
 #pragma once
-// Stable LSD radix sort of (key, value) pairs on the host, over the low `bits` bits of the key only
-// (Le Grand's sort: a cell key needs far fewer bits than its type). Digits of up to 11 bits, so a
-// 27-bit key takes 3 passes. Multi-threaded: per-thread histograms, then a scatter whose order
-// (digit, thread, position) keeps the sort stable and the result independent of the thread count.
+// Stable radix sort of (key, value) pairs on the host, over the low `bits` bits of the key only
+// (Le Grand's sort: a cell key needs far fewer bits than its type). Multi-threaded: per-thread
+// histograms, then a scatter whose order (digit, thread, position) keeps the sort stable and the
+// result independent of the thread count. From 2^17 elements the top digit goes first (one scatter
+// into at most 256 buckets, then each bucket's low bits by LSD passes in the cache, a bucket a
+// thread), unless a bucket holds more than a sixteenth of the keys; otherwise LSD passes of up to
+// 11 bits over the whole array (a 27-bit key: 3 passes). A stable sort's result is unique: both give
+// the same bytes. CONTACTGRID_HOST_SORT=lsd: the LSD passes always (a measurement switch).
 #include <algorithm>
 #include <cstdint>
 #include <cstring>

@@ -45,8 +45,8 @@ struct PackedBodies {
   Array<Sphere<Real>> spheres;  // local frame: Real(world - origin)
   Real inflation = 0;           // added to every radius by the pair stage (cells, test)
   Array<BodyCells> cells;       // freed by fill_entries
-  Array<std::uint8_t> ctrl;     // control_bits
-  Array<std::uint32_t> count;   // entry_count; freed by fill_entries
+  Array<std::uint8_t> ctrl;     // control_bits (its spill bits give the entry count)
+  Array<std::uint32_t> count;   // entry_count (level_entries reads it; pack leaves it empty)
   Array<CutShape> cut;          // CandidateFilter::centre_cut: cut_shape() of every body
   Array<std::uint8_t> level;    // BroadPhase::levels: the level of every body (level_cells)
 };
@@ -88,7 +88,7 @@ Motion measure_motion(const BodiesView& bodies, const KeptCandidates& kept, int 
 void keep_candidates(const BodiesView& bodies, CandidatePairs&& c, KeptCandidates& kept);
 
 // pack: world (double) → local Real spheres; per body its cells (of the sphere inflated by
-// `inflation`, 0 without a skin), control byte and entry count. cells_too false: the spheres only
+// `inflation`, 0 without a skin) and control byte. cells_too false: the spheres only
 // (the reuse of kept candidates needs no grid). `world` (may be null): also the world rows of every
 // body as one Sphere<double> each (x, y, z, r: the input's doubles, one cache line a body), which the
 // narrow stage reads at random in place of the input's two arrays.
@@ -104,19 +104,20 @@ void pack_shapes(const BodiesView& bodies, int threads, std::vector<PackedShape<
 template <class Packed>
 void cut_shapes(const std::vector<PackedShape<Packed>>& shapes, int threads, Array<CutShape>& out);
 
-// shape_cells (CandidateFilter::centre_cut, after cut_shapes; pack made the spheres only): the cells,
-// control byte and entry count of each body from the box of its shape instead of its bounding sphere
+// shape_cells (CandidateFilter::centre_cut, after cut_shapes; pack made the spheres only): the cells
+// and control byte of each body from the box of its shape instead of its bounding sphere
 // (core/centre_cut.hpp: cut_cells).
 template <class Real>
 void shape_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& bodies);
 
-// sphere_cells: pack's cells, control byte and entry count of every packed sphere, for a pack that
+// sphere_cells: pack's cells and control byte of every packed sphere, for a pack that
 // made the spheres only (the cell list's grid failed: cell_list_keys).
 template <class Real>
 void sphere_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& bodies);
 
-// entries: exclusive scan of the entry counts → fill (cell key, body) in body order. Returns the
-// number of entries; frees p.cells and p.count.
+// entries: the entry counts (from the control bytes) summed and scanned per fixed block of bodies →
+// fill (cell key, body) of p.cells in body order. Returns the number of entries; frees p.cells and
+// p.count.
 template <class Real, class Key>
 std::uint64_t fill_entries(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, Entries<Key>& out);
 

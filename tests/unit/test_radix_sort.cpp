@@ -40,6 +40,34 @@ TEST(RadixSort, StableOverTheRequestedBits) {
     }
 }
 
+// Sizes where the top digit goes first (host/radix_sort.cpp: its buckets sorted on one thread each),
+// and keys clustered under a few top digits (the LSD passes instead) or using fewer bits than asked.
+TEST(RadixSort, TopDigitFirstAndItsFallback) {
+  for (int threads : {1, 2, 3}) {
+    check<std::uint32_t>(600000, 18, threads, 11);
+    check<std::uint32_t>(600000, 12, threads, 12);
+    check<std::uint64_t>(420000, 40, threads, 13);
+    check<std::uint32_t>(300001, 31, threads, 14);
+  }
+  for (int threads : {1, 2}) {
+    std::mt19937 rng(15);
+    std::vector<std::uint32_t> keys(400000), values(400000);
+    for (std::size_t i = 0; i < keys.size(); ++i) {
+      keys[i] = (i % 3 == 0 ? 0u : (1u << 19) | (rng() & 0xffffu)) | (rng() & 0x3fu) << 24;  // above 20 bits
+      values[i] = std::uint32_t(i);
+    }
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> want(keys.size());
+    for (std::size_t i = 0; i < keys.size(); ++i) want[i] = {keys[i], values[i]};
+    const auto low = [](std::uint32_t k) { return k & ((1u << 20) - 1); };
+    std::stable_sort(want.begin(), want.end(), [&](auto& a, auto& b) { return low(a.first) < low(b.first); });
+    radix_sort(keys, values, 20, threads);
+    for (std::size_t i = 0; i < keys.size(); ++i) {
+      ASSERT_EQ(keys[i], want[i].first) << i;
+      ASSERT_EQ(values[i], want[i].second) << i;
+    }
+  }
+}
+
 TEST(RadixSort, KeysOnly) {
   std::vector<std::uint64_t> k{5, 3, 9, 3, 0, 1ull << 40};
   radix_sort_keys(k, 41, 2);
