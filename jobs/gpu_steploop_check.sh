@@ -9,7 +9,9 @@
 #                                                    skin auto: fresh, after (defaults; its last step
 #                                                    = a plain detect of the final scene), before
 #                                                    (CONTACTGRID_STEP_BUILD=copy CONTACTGRID_STEP_NARROW=
-#                                                    select), and each knob alone; one table of fresh /
+#                                                    select), each knob alone, and the cell narrow at
+#                                                    2 candidates a thread (CONTACTGRID_STEP_NARROW_
+#                                                    ITEMS=2; default 4); one table of fresh /
 #                                                    build / reuse / mean ms and each run's building
 #                                                    step's stages; logs in $OUT/steploop.tgz
 #   BIN=dir OUT=dir jobs/gpu_steploop_check.sh one   one H100 (< 3 min): tests, CLI, 2^24 spheres,
@@ -107,11 +109,12 @@ case $MODE in
       >"$Q/tests.log" 2>&1
     check "contactgrid_tests (skin, narrow, backend, broad phases)" gtest_ok "$Q/tests.log"
     grep -E '^\[  (PASSED|FAILED) ' "$Q/tests.log"
-    # the former paths, each under its knob: the walk's input indices mapped after it, and CUB's select
-    for knob in CONTACTGRID_STEP_BUILD=copy CONTACTGRID_STEP_NARROW=select; do
-      timeout 60 env "$knob" "$BIN/contactgrid_tests" --gtest_color=no --gtest_filter='EngineSkin*:*Resident*' \
+    # the former paths, each under its knob (the walk's input indices mapped after it, CUB's select), and
+    # the cell narrow at 2 candidates a thread
+    for knob in CONTACTGRID_STEP_BUILD=copy CONTACTGRID_STEP_NARROW=select CONTACTGRID_STEP_NARROW_ITEMS=2; do
+      timeout 60 env "$knob" "$BIN/contactgrid_tests" --gtest_color=no --gtest_filter='EngineSkinCuda*:EngineSkinTest/cuda*' \
         >"$Q/tests.$knob.log" 2>&1
-      check "contactgrid_tests (skin, resident), $knob" gtest_ok "$Q/tests.$knob.log"
+      check "contactgrid_tests (CUDA skin cases), $knob" gtest_ok "$Q/tests.$knob.log"
     done
     for np in 1 2; do
       timeout 90 "${MPI[@]}" -np $np "$BIN/contactgrid_mpi_tests" --gtest_color=no \
@@ -130,18 +133,20 @@ case $MODE in
       steps s24 1 auto 40 s24.before
     CONTACTGRID_STEP_BUILD=copy check "bench s24 build copy alone" steps s24 1 auto 40 s24.build_copy
     CONTACTGRID_STEP_NARROW=select check "bench s24 narrow select alone" steps s24 1 auto 40 s24.narrow_select
+    CONTACTGRID_STEP_NARROW_ITEMS=2 check "bench s24 cell narrow, 2 candidates a thread" \
+      steps s24 1 auto 40 s24.items2
     check "s24: every run's last step has the same contacts" \
-      bash -c "grep -h 'contacts on the last step' '$OUT'/s24.{after,before,build_copy,narrow_select}.log | sed -E 's/.*, ([0-9]+) contacts on the last step.*/\1/' | uniq | wc -l | grep -qx 1"
+      bash -c "grep -h 'contacts on the last step' '$OUT'/s24.{after,before,build_copy,narrow_select,items2}.log | sed -E 's/.*, ([0-9]+) contacts on the last step.*/\1/' | uniq | wc -l | grep -qx 1"
     {
       printf '| run (2^24 spheres) | fresh | build | reuse | mean | mean/fresh | build/fresh | builds/reuses, skin |\n'
       printf '|---|---|---|---|---|---|---|---|\n'
       fr=$(field s24.fresh fresh)
-      for t in after before build_copy narrow_select; do
+      for t in after before build_copy narrow_select items2; do
         printf '| %s | %s | %s | %s | %s | %s | %s | %s |\n' "$t" "$fr" "$(field s24.$t build)" \
           "$(field s24.$t reuse)" "$(field s24.$t mean)" "$(ratio "$(field s24.$t mean)" "$fr")" \
           "$(ratio "$(field s24.$t build)" "$fr")" "$(lists s24.$t)"
       done
-      for t in fresh after before build_copy narrow_select; do
+      for t in fresh after before build_copy narrow_select items2; do
         echo "-- $t: a reusing step's stages (median), then a building step's"
         sed -nE '/^  interior/,/^  boundary/p' "$OUT/s24.$t.log" | grep -v boundary
         grep -E "building step's stages" "$OUT/s24.$t.log"

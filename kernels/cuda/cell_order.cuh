@@ -201,8 +201,6 @@ bool cell_order_wanted(const RunState<Real, Key, Narrow>& r) {
 // input indices are mapped through the inverse permutation into the list. Timed as the order stage.
 template <class Real, class Key, class Narrow>
 void keep_cell_candidates(RunState<Real, Key, Narrow>& r) {
-  using cuda::blocks_for;
-  using cuda::kBlock;
   Workspace& ws = r.ws;
   cudaStream_t st = r.st;
   const std::size_t np = r.np, n = r.n64;
@@ -211,7 +209,8 @@ void keep_cell_candidates(RunState<Real, Key, Narrow>& r) {
   cuda::device_copy(perm, r.d_perm, n * sizeof(std::uint32_t), st);
   Sphere<Real>* cell = ws.cell_spheres.span_as<Sphere<Real>>(n).data();  // read by the pair stage: done
   if (n > 0) {
-    cuda::gather_kernel<Sphere<Real>><<<blocks_for(n), kBlock, 0, st>>>(r.d_spheres, perm, n, cell);
+    cuda::gather_kernel<Sphere<Real>>
+        <<<cuda::blocks_for(n), cuda::kBlock, 0, st>>>(r.d_spheres, perm, n, cell);
     CG_CUDA_CHECK_LAUNCH("gather_spheres");
   }
   std::size_t stride = ws.kept_stride;
@@ -223,12 +222,12 @@ void keep_cell_candidates(RunState<Real, Key, Narrow>& r) {
     // order stage's a_counts)
     std::uint32_t* inv = ws.keys[0].span_as<std::uint32_t>(n).data();
     if (n > 0) {
-      cuda::inverse_perm_kernel<<<blocks_for(n), kBlock, 0, st>>>(perm, r.n, inv);
+      cuda::inverse_perm_kernel<<<cuda::blocks_for(n), cuda::kBlock, 0, st>>>(perm, r.n, inv);
       CG_CUDA_CHECK_LAUNCH("inverse_perm");
     }
     if (np > 0) {
-      cuda::cell_pairs_kernel<<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), r.np,
-                                                                 inv, kept, kept + np);
+      cuda::cell_pairs_kernel<<<cuda::blocks_for(np), cuda::kBlock, 0, st>>>(
+          r.pair_a.Current(), r.pair_b.Current(), r.np, inv, kept, kept + np);
       CG_CUDA_CHECK_LAUNCH("cell_pairs");
     }
   }
@@ -283,12 +282,18 @@ void narrow_cell_stage(RunState<Real, Key, Narrow>& r) {
         return cub::DeviceSelect::If(t, bytes, thrust::counting_iterator<std::uint32_t>(0), rows,
                                      &r.d_counters->rows, int(np), touch, r.st);
       });
-    } else {  // (c->rows: zeroed with the counters at pack, untouched since)
-      constexpr int kItems = 4;
-      const std::uint64_t per_block = std::uint64_t(cuda::kBlock) * kItems;
-      cuda::cell_narrow_kernel<kItems>
-          <<<static_cast<std::uint32_t>((np + per_block - 1) / per_block), cuda::kBlock, 0, r.st>>>(
-              a, b, np, perm, bodies, r.cp, r.full, r.d_counters);
+    } else {                           // (c->rows: zeroed with the counters at pack, untouched since)
+      auto launch = [&](auto items) {  // candidates a thread: 4 (about 104 registers), or 2 (80: more warps)
+        constexpr int kItems = decltype(items)::value;
+        const std::uint64_t per_block = std::uint64_t(cuda::kBlock) * kItems;
+        cuda::cell_narrow_kernel<kItems>
+            <<<static_cast<std::uint32_t>((np + per_block - 1) / per_block), cuda::kBlock, 0, r.st>>>(
+                a, b, np, perm, bodies, r.cp, r.full, r.d_counters);
+      };
+      if (r.tuning.step_narrow_items == 2)
+        launch(std::integral_constant<int, 2>{});
+      else
+        launch(std::integral_constant<int, 4>{});
       CG_CUDA_CHECK_LAUNCH("cell_narrow");
     }
   }

@@ -93,6 +93,9 @@ struct Tuning {
   // kernel that keeps what it read and writes each block's rows at a cursor (cuda/cell_order.cuh:
   // cell_narrow_kernel; the rows' device order is free there). The same rows either way.
   bool step_narrow_select = false;
+  // CONTACTGRID_STEP_NARROW_ITEMS=2: cell_narrow_kernel tests 2 candidates a thread (fewer registers,
+  // more warps an SM) instead of 4 (more loads in flight a warp). The same rows either way.
+  int step_narrow_items = 4;
   // CONTACTGRID_DEM_SEGMENTS=cub: the granular dynamics' body index orders each body's rows as B by
   // CUB's segmented sort (which reads its partition back to the host every call); default: one
   // thread per body sorts its own few rows (core/dem_step.hpp: sort_rows), no host synchronisation.
@@ -196,6 +199,8 @@ inline Tuning read_tuning() {
     t.step_build_copy = std::string_view(b) == "copy";
   if (const char* m = std::getenv("CONTACTGRID_STEP_NARROW"))
     t.step_narrow_select = std::string_view(m) == "select";
+  if (const char* m = std::getenv("CONTACTGRID_STEP_NARROW_ITEMS"))
+    t.step_narrow_items = std::string_view(m) == "2" ? 2 : 4;
   if (const char* d = std::getenv("CONTACTGRID_DEM_SEGMENTS"))
     t.dem_segments_cub = std::string_view(d) == "cub";
   if (const char* d = std::getenv("CONTACTGRID_DEM_STORE")) t.dem_store_all = std::string_view(d) == "all";
