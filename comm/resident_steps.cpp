@@ -835,6 +835,12 @@ StepStats StepLoop<Real>::stats() {
   for (std::size_t j = 0; j < n_engine && n > 0; ++j) {
     const double t = median_at(kStepStageCount + j);
     if (t > 0) st.stages.push_back({engine_stage_names()[j], t});
+    // the same stage over the steps that built their candidate lists (a few among many reuses)
+    std::vector<double> v;
+    for (std::size_t k = 0; k < n; ++k)
+      if (all[k * row + row - 2] > 0) v.push_back(all[k * row + kStepStageCount + j]);
+    const double tb = v.empty() ? 0 : cg::median(std::move(v));
+    if (tb > 0) st.build_stages.push_back({engine_stage_names()[j], tb});
   }
   st.rebuilds = static_cast<std::uint64_t>(std::max(0, s.layouts - 1));
   st.migrated = s.migrated;

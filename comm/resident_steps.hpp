@@ -100,6 +100,7 @@ struct StepStats {
   double detect_build = 0, detect_reuse = 0;  // interior + boundary: median of the steps that built
                                               // the candidate lists, of those that reused them
   StageTimes stages;                          // the engine's stages of the interior detection
+  StageTimes build_stages;                    // ... their medians over the steps that built alone
   // rebuilds of the rows (the first layout not counted), bodies that changed rank (summed), slab
   // rebalances, the owned bodies per rank at the end
   std::uint64_t rebuilds = 0, migrated = 0, rebalances = 0, owned_min = 0, owned_max = 0;

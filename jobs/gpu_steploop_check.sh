@@ -1,6 +1,19 @@
 #!/usr/bin/env bash
 # Bodies that move (issue #31) on the GPU: the step loop's CUDA tests, the CLI's drifting steps against
 # a plain detection of the final scene, and the issue's Performance figures as one compact table.
+#   BIN=dir OUT=dir jobs/gpu_steploop_check.sh [quick]
+#                                                    one H100 (< 3 min), the default: the CUDA cases of
+#                                                    the cell-order build and narrow (each former path
+#                                                    under its knob too), the MPI moving steps on CUDA
+#                                                    at np 1 and 2, then 2^24 spheres fp32, drift 1 %,
+#                                                    skin auto: fresh, after (defaults; its last step
+#                                                    = a plain detect of the final scene), before
+#                                                    (CONTACTGRID_STEP_BUILD=copy CONTACTGRID_STEP_NARROW=
+#                                                    select), each knob alone, and the cell narrow at
+#                                                    2 candidates a thread (CONTACTGRID_STEP_NARROW_
+#                                                    ITEMS=2; default 4); one table of fresh /
+#                                                    build / reuse / mean ms and each run's building
+#                                                    step's stages; logs in $OUT/steploop.tgz
 #   BIN=dir OUT=dir jobs/gpu_steploop_check.sh one   one H100 (< 3 min): tests, CLI, 2^24 spheres,
 #                                                    fp32, 6 contacts per body, drift 1 % of r_max per
 #                                                    step, skin auto: the kept candidates in cell order
@@ -23,7 +36,7 @@
 # A dry run of the script itself on a machine without a GPU: BACKEND=cpu SCALE=8 (2^8 times fewer
 # bodies; the CUDA test checks then fail, as they must there).
 set -u
-MODE=${1:-one}
+MODE=${1:-quick}
 BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}; W=${WORK:-/tmp/cgwork}
 mkdir -p "$OUT" "$W"
 [ -f .devrt/env.sh ] && source .devrt/env.sh .devrt  # (its argument: else it takes this script's)
@@ -88,6 +101,62 @@ table_one() {  # SCENE…: fresh and auto runs at np 1
 }
 
 case $MODE in
+  quick)
+    Q=$W/quick; mkdir -p "$Q"
+    log "CUDA cases: skin (both orders, the in-place build, the cell narrow), narrow, backend, broad phases"
+    timeout 150 "$BIN/contactgrid_tests" --gtest_color=no \
+      --gtest_filter='EngineSkin*:KeptRoom*:CudaNarrowTest*:CudaBackendTest*:BroadPhase*:*Resident*' \
+      >"$Q/tests.log" 2>&1
+    check "contactgrid_tests (skin, narrow, backend, broad phases)" gtest_ok "$Q/tests.log"
+    grep -E '^\[  (PASSED|FAILED) ' "$Q/tests.log"
+    # the former paths, each under its knob (the walk's input indices mapped after it, CUB's select), and
+    # the cell narrow at 2 candidates a thread
+    for knob in CONTACTGRID_STEP_BUILD=copy CONTACTGRID_STEP_NARROW=select CONTACTGRID_STEP_NARROW_ITEMS=2; do
+      timeout 60 env "$knob" "$BIN/contactgrid_tests" --gtest_color=no --gtest_filter='EngineSkinCuda*:EngineSkinTest/cuda*' \
+        >"$Q/tests.$knob.log" 2>&1
+      check "contactgrid_tests (CUDA skin cases), $knob" gtest_ok "$Q/tests.$knob.log"
+    done
+    for np in 1 2; do
+      timeout 90 "${MPI[@]}" -np $np "$BIN/contactgrid_mpi_tests" --gtest_color=no \
+        --gtest_filter='MovingSteps.Cuda*:StepLoop.*' >"$Q/mpi_tests.np$np.log" 2>&1
+      check "contactgrid_mpi_tests MovingSteps.Cuda*, StepLoop np $np" gtest_ok "$Q/mpi_tests.np$np.log"
+    done
+
+    log "bench: 2^24 spheres, fp32, 6 contacts per body, drift 0.01 (1 % of r_max) per step, skin auto, 40 steps"
+    timeout 90 "$CG" generate "$W/s24.h5" -n $N24 --seed 24 --contacts-per-body 6 -q
+    check "bench s24 fresh" steps s24 1 0 6 s24.fresh
+    FINAL_SCENE="$W/s24.final.h5" KEEP=1 check "bench s24 after (defaults)" steps s24 1 auto 40 s24.after
+    timeout 60 "$CG" detect "$W/s24.final.h5" -o "$W/s24.plain.h5" --backend "$BACKEND" --precision fp32 -q
+    check "s24 after: last step = plain detect of the final scene" same "$W/s24.after.h5" "$W/s24.plain.h5"
+    rm -f "$W/s24.after.h5" "$W/s24.plain.h5" "$W/s24.final.h5"
+    CONTACTGRID_STEP_BUILD=copy CONTACTGRID_STEP_NARROW=select check "bench s24 before (both knobs)" \
+      steps s24 1 auto 40 s24.before
+    CONTACTGRID_STEP_BUILD=copy check "bench s24 build copy alone" steps s24 1 auto 40 s24.build_copy
+    CONTACTGRID_STEP_NARROW=select check "bench s24 narrow select alone" steps s24 1 auto 40 s24.narrow_select
+    CONTACTGRID_STEP_NARROW_ITEMS=2 check "bench s24 cell narrow, 2 candidates a thread" \
+      steps s24 1 auto 40 s24.items2
+    check "s24: every run's last step has the same contacts" \
+      bash -c "grep -h 'contacts on the last step' '$OUT'/s24.{after,before,build_copy,narrow_select,items2}.log | sed -E 's/.*, ([0-9]+) contacts on the last step.*/\1/' | uniq | wc -l | grep -qx 1"
+    {
+      printf '| run (2^24 spheres) | fresh | build | reuse | mean | mean/fresh | build/fresh | builds/reuses, skin |\n'
+      printf '|---|---|---|---|---|---|---|---|\n'
+      fr=$(field s24.fresh fresh)
+      for t in after before build_copy narrow_select items2; do
+        printf '| %s | %s | %s | %s | %s | %s | %s | %s |\n' "$t" "$fr" "$(field s24.$t build)" \
+          "$(field s24.$t reuse)" "$(field s24.$t mean)" "$(ratio "$(field s24.$t mean)" "$fr")" \
+          "$(ratio "$(field s24.$t build)" "$fr")" "$(lists s24.$t)"
+      done
+      for t in fresh after before build_copy narrow_select items2; do
+        echo "-- $t: a reusing step's stages (median), then a building step's"
+        sed -nE '/^  interior/,/^  boundary/p' "$OUT/s24.$t.log" | grep -v boundary
+        grep -E "building step's stages" "$OUT/s24.$t.log"
+      done
+    } | tee "$OUT/table.md"
+    cat "$OUT/device.txt" "$OUT/table.md" >"$Q/summary.txt"
+    cp "$OUT"/*.log "$Q/" 2>/dev/null
+    tar czf "$OUT/steploop.tgz" -C "$W" quick && rm -f "$OUT"/*.log
+    rm -rf "$Q" "$W/s24.h5"
+    ;;
   one)
     log "CUDA tests of the step loop (skin, tuner, resident engines, narrow paths; MPI moving steps np 1, 2)"
     "$BIN/contactgrid_tests" --gtest_color=no \
@@ -183,7 +252,7 @@ case $MODE in
       done
     } | tee "$OUT/table.md"
     ;;
-  *) echo "usage: BIN=dir OUT=dir $0 one|two"; exit 2 ;;
+  *) echo "usage: BIN=dir OUT=dir $0 quick|one|two"; exit 2 ;;
 esac
 
 log "done"

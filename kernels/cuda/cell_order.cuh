@@ -4,13 +4,16 @@
 // the resident steps). fp32 sphere scenes, grid broad phase, device output, no history; every other
 // call keeps the (a, b) path of skin.cuh, as does every call under CONTACTGRID_STEP_ORDER=file.
 //   keep_cell_candidates  at a build, instead of the order stage: the pair stage's candidates, in the
-//                         order its cell walk wrote them, as cell-order indices (pack's permutation
-//                         inverted), the permutation kept, and the spheres gathered into cell order
+//                         order its cell walk wrote them, as cell-order indices (the walk writes them
+//                         so into the kept list, pairs.cuh; or pack's permutation inverted maps its
+//                         input indices), the permutation kept, and the spheres gathered into cell order
 //   pack_cell_stage       at a reuse, instead of pack: the moved bodies packed straight into cell
 //                         order (one pass; within a z layer the input indices ascend, so the reads of
 //                         the world doubles are a few hundred sequential streams)
-//   narrow_cell_stage     the one-pass select of narrow.cuh over the kept list, reading the
-//                         cell-ordered spheres: the two bodies of a candidate lie in nearby cells,
+//   narrow_cell_stage     one pass over the kept list (cell_narrow_kernel: each block's accepted
+//                         candidates written at a row cursor, their spheres read once; under
+//                         CONTACTGRID_STEP_NARROW=select the one-pass select of narrow.cuh), reading
+//                         the cell-ordered spheres: the two bodies of a candidate lie in nearby cells,
 //                         so the reads stay in a few MiB of L2 instead of one random DRAM sector
 //                         each; the row carries the input indices (a < b), computed as
 //                         narrow_decide computes it (core/narrow.hpp: narrow_decide_floats)
@@ -30,6 +33,7 @@
 #include "cuda/narrow.cuh"
 #include "cuda/pack.cuh"
 #include "cuda/run_state.cuh"
+#include "cuda/skin.cuh"
 
 namespace cg::cuda {
 
@@ -50,15 +54,6 @@ __global__ void __launch_bounds__(kBlock)
   if (k >= np) return;
   a_out[k] = inv[a_in[k]];
   b_out[k] = inv[b_in[k]];
-}
-
-// out[j] = in[perm[j]]: pack's input-order spheres into cell order.
-template <class Real>
-__global__ void __launch_bounds__(kBlock)
-    gather_spheres_kernel(const Sphere<Real>* __restrict__ in, const std::uint32_t* __restrict__ perm,
-                          std::uint32_t n, Sphere<Real>* __restrict__ out) {
-  const std::uint32_t j = blockIdx.x * kBlock + threadIdx.x;
-  if (j < n) out[j] = in[perm[j]];
 }
 
 // pack of a reuse in cell order: out[j] = pack's sphere of input body perm[j] (packed_sphere: the
@@ -108,6 +103,71 @@ struct CellRowAt {
   }
 };
 
+// The narrow stage over the kept cell-order list in one pass without a scan: block b tests the
+// candidates [b·kBlock·kItems, (b + 1)·kBlock·kItems), item i of thread t being candidate
+// b·kBlock·kItems + i·kBlock + t (each warp reads 32 consecutive candidates), keeps the spheres it
+// read, takes the room of its accepted candidates at the row cursor c->rows (one atomicAdd a block)
+// and writes each row (CellRowAt's) at the cursor's place + its rank among the block's accepted ones,
+// warp by warp and item by item (the rows of a warp's item are consecutive: coalesced stores). The
+// rows' order is the blocks' arrival order (the caller takes any order: canonical_rows sorts them
+// when they come down); their set is narrow_select's. Reads each candidate and its spheres once
+// (the select reads them again to write a row).
+template <int kItems>
+__global__ void __launch_bounds__(kBlock)
+    cell_narrow_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
+                       std::uint32_t np, const std::uint32_t* __restrict__ perm, NarrowBodies<float> bodies,
+                       ContactPtrs<float> out, bool full, Counters* __restrict__ c) {
+  constexpr std::uint32_t kWarps = kBlock / 32;
+  __shared__ unsigned long long s_warp_base[kWarps];
+  const std::uint32_t lane = threadIdx.x & 31u, warp = threadIdx.x >> 5;
+  const std::uint64_t first = std::uint64_t(blockIdx.x) * kBlock * kItems + threadIdx.x;
+  std::uint32_t ja[kItems] = {}, jb[kItems] = {}, accepted[kItems] = {};
+  Sphere<float> sa[kItems] = {}, sb[kItems] = {};
+  std::uint32_t warp_count = 0;
+#pragma unroll
+  for (int i = 0; i < kItems; ++i) {
+    const std::uint64_t k = first + std::uint64_t(i) * kBlock;
+    bool touch = false;
+    if (k < np) {
+      ja[i] = pair_a[k];
+      jb[i] = pair_b[k];
+      sa[i] = bodies.spheres[ja[i]];
+      sb[i] = bodies.spheres[jb[i]];
+      touch = spheres_touch(sa[i], sb[i]);
+    }
+    accepted[i] = __ballot_sync(0xffffffffu, touch);
+    warp_count += __popc(accepted[i]);
+  }
+  if (lane == 0) s_warp_base[warp] = warp_count;
+  __syncthreads();
+  if (threadIdx.x == 0) {  // the block's room at the cursor, then each warp's place in it
+    unsigned long long total = 0;
+    for (std::uint32_t w = 0; w < kWarps; ++w) total += s_warp_base[w];
+    unsigned long long at = total ? atomicAdd(&c->rows, total) : 0ull;
+    for (std::uint32_t w = 0; w < kWarps; ++w) {
+      const unsigned long long count = s_warp_base[w];
+      s_warp_base[w] = at;
+      at += count;
+    }
+  }
+  __syncthreads();
+  unsigned long long place = s_warp_base[warp];
+  const std::uint32_t below = (1u << lane) - 1u;
+#pragma unroll
+  for (int i = 0; i < kItems; ++i) {
+    if ((accepted[i] >> lane) & 1u) {
+      const std::uint32_t a = perm[ja[i]], b = perm[jb[i]];
+      NarrowFlags flags;
+      ContactRow<float> row = narrow_decide_floats(bodies, sa[i], sb[i], a, b, full, flags).row;
+      row.id_a = a;
+      row.id_b = b;
+      store_row(out, static_cast<std::size_t>(place + __popc(accepted[i] & below)), row, full);
+      if (flags.fp64_rows) atomicAdd(&c->fp64_rows, static_cast<unsigned long long>(flags.fp64_rows));
+    }
+    place += __popc(accepted[i]);
+  }
+}
+
 // The sort key of row k: (a, b) as one 64-bit word, and k.
 __global__ void __launch_bounds__(kBlock)
     row_keys_kernel(const std::int64_t* __restrict__ id_a, const std::int64_t* __restrict__ id_b,
@@ -116,15 +176,6 @@ __global__ void __launch_bounds__(kBlock)
   if (k >= m) return;
   keys[k] = (static_cast<unsigned long long>(id_a[k]) << 32) | static_cast<unsigned long long>(id_b[k]);
   index[k] = static_cast<std::uint32_t>(k);
-}
-
-// out[k] = in[index[k]]: one column of the rows in sorted order.
-template <class T>
-__global__ void __launch_bounds__(kBlock)
-    gather_rows_kernel(const T* __restrict__ in, const std::uint32_t* __restrict__ index, std::size_t m,
-                       T* __restrict__ out) {
-  const std::size_t k = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
-  if (k < m) out[k] = in[index[k]];
 }
 
 }  // namespace cg::cuda
@@ -145,49 +196,45 @@ bool cell_order_wanted(const RunState<Real, Key, Narrow>& r) {
 
 // At a build (after the pair stage, instead of order_stage and keep_candidates): the kept list in cell
 // order, the permutation and the bodies' state it was built from; the cell-ordered spheres for this
-// call's narrow stage. Timed as the order stage.
+// call's narrow stage. The pair stage has written the list itself (r.kept_written: cell-order indices
+// in ws.kept_pairs); else (CONTACTGRID_STEP_BUILD=copy, or more candidates than the room it had) its
+// input indices are mapped through the inverse permutation into the list. Timed as the order stage.
 template <class Real, class Key, class Narrow>
 void keep_cell_candidates(RunState<Real, Key, Narrow>& r) {
-  using cuda::blocks_for;
-  using cuda::kBlock;
   Workspace& ws = r.ws;
   cudaStream_t st = r.st;
   const std::size_t np = r.np, n = r.n64;
-  ws.reserve({{&ws.kept_pairs, 2 * np * sizeof(std::uint32_t)},
-              {&ws.kept_perm, n * sizeof(std::uint32_t)},
-              {&ws.ref_pos, n * sizeof(Vec3<double>)},
-              {&ws.ref_rad, n * sizeof(double)},
-              {&ws.ref_report, r.d_report ? n : 0}},
-             "skin");
-  auto copy = [&](void* dst, const void* src, std::size_t bytes) {
-    if (bytes > 0) CG_CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyDeviceToDevice, st));
-  };
-  std::uint32_t* kept = ws.kept_pairs.span_as<std::uint32_t>(2 * np).data();
+  ws.reserve({{&ws.kept_perm, n * sizeof(std::uint32_t)}}, "skin");
   std::uint32_t* perm = ws.kept_perm.span_as<std::uint32_t>(n).data();
-  copy(perm, r.d_perm, n * sizeof(std::uint32_t));
-  // the inverse in the entry sort's first key buffer (dead after the pair stage; >= n u32, as the
-  // order stage's a_counts)
-  std::uint32_t* inv = ws.keys[0].span_as<std::uint32_t>(n).data();
+  cuda::device_copy(perm, r.d_perm, n * sizeof(std::uint32_t), st);
   Sphere<Real>* cell = ws.cell_spheres.span_as<Sphere<Real>>(n).data();  // read by the pair stage: done
   if (n > 0) {
-    cuda::inverse_perm_kernel<<<blocks_for(n), kBlock, 0, st>>>(perm, r.n, inv);
-    CG_CUDA_CHECK_LAUNCH("inverse_perm");
-    cuda::gather_spheres_kernel<Real><<<blocks_for(n), kBlock, 0, st>>>(r.d_spheres, perm, r.n, cell);
+    cuda::gather_kernel<Sphere<Real>>
+        <<<cuda::blocks_for(n), cuda::kBlock, 0, st>>>(r.d_spheres, perm, n, cell);
     CG_CUDA_CHECK_LAUNCH("gather_spheres");
   }
-  if (np > 0) {
-    cuda::cell_pairs_kernel<<<blocks_for(np), kBlock, 0, st>>>(r.pair_a.Current(), r.pair_b.Current(), r.np,
-                                                               inv, kept, kept + np);
-    CG_CUDA_CHECK_LAUNCH("cell_pairs");
+  std::size_t stride = ws.kept_stride;
+  if (!r.kept_written) {
+    ws.reserve({{&ws.kept_pairs, 2 * np * sizeof(std::uint32_t)}}, "skin");
+    stride = np;
+    std::uint32_t* kept = ws.kept_pairs.span_as<std::uint32_t>(2 * np).data();
+    // the inverse in the entry sort's first key buffer (dead after the pair stage; >= n u32, as the
+    // order stage's a_counts)
+    std::uint32_t* inv = ws.keys[0].span_as<std::uint32_t>(n).data();
+    if (n > 0) {
+      cuda::inverse_perm_kernel<<<cuda::blocks_for(n), cuda::kBlock, 0, st>>>(perm, r.n, inv);
+      CG_CUDA_CHECK_LAUNCH("inverse_perm");
+    }
+    if (np > 0) {
+      cuda::cell_pairs_kernel<<<cuda::blocks_for(np), cuda::kBlock, 0, st>>>(
+          r.pair_a.Current(), r.pair_b.Current(), r.np, inv, kept, kept + np);
+      CG_CUDA_CHECK_LAUNCH("cell_pairs");
+    }
   }
-  copy(ws.ref_pos.data(), r.d_pos, n * sizeof(Vec3<double>));
-  copy(ws.ref_rad.data(), r.d_rad, n * sizeof(double));
-  if (r.d_report) copy(ws.ref_report.data(), r.d_report, n);
-  ws.kept_count = r.np;
-  ws.kept_reported = r.d_report != nullptr;
-  ws.kept_cell_order = true;
+  keep_reference(r, stride, true);
+  std::uint32_t* kept = ws.kept_pairs.span_as<std::uint32_t>(stride + np).data();
   r.pair_a = cub::DoubleBuffer<std::uint32_t>(kept, kept);  // the narrow stage reads Current() alone
-  r.pair_b = cub::DoubleBuffer<std::uint32_t>(kept + np, kept + np);
+  r.pair_b = cub::DoubleBuffer<std::uint32_t>(kept + stride, kept + stride);
   r.events.mark(EngineStage::order, st);
 }
 
@@ -227,13 +274,28 @@ void narrow_cell_stage(RunState<Real, Key, Narrow>& r) {
     const std::uint32_t* a = r.pair_a.Current();
     const std::uint32_t* b = r.pair_b.Current();
     const std::uint32_t* perm = r.ws.kept_perm.template span_as<std::uint32_t>(r.n).data();
-    const cuda::CellTouchAt<float> touch{a, b, cell};
-    const auto rows = thrust::make_tabulate_output_iterator(
-        cuda::CellRowAt<float>{a, b, perm, bodies, r.cp, r.full, r.d_counters});
-    cub_run(r.ws, "narrow", [&](void* t, std::size_t& bytes) {
-      return cub::DeviceSelect::If(t, bytes, thrust::counting_iterator<std::uint32_t>(0), rows,
-                                   &r.d_counters->rows, int(np), touch, r.st);
-    });
+    if (r.tuning.step_narrow_select) {
+      const cuda::CellTouchAt<float> touch{a, b, cell};
+      const auto rows = thrust::make_tabulate_output_iterator(
+          cuda::CellRowAt<float>{a, b, perm, bodies, r.cp, r.full, r.d_counters});
+      cub_run(r.ws, "narrow", [&](void* t, std::size_t& bytes) {
+        return cub::DeviceSelect::If(t, bytes, thrust::counting_iterator<std::uint32_t>(0), rows,
+                                     &r.d_counters->rows, int(np), touch, r.st);
+      });
+    } else {                           // (c->rows: zeroed with the counters at pack, untouched since)
+      auto launch = [&](auto items) {  // candidates a thread: 4 (about 104 registers), or 2 (80: more warps)
+        constexpr int kItems = decltype(items)::value;
+        const std::uint64_t per_block = std::uint64_t(cuda::kBlock) * kItems;
+        cuda::cell_narrow_kernel<kItems>
+            <<<static_cast<std::uint32_t>((np + per_block - 1) / per_block), cuda::kBlock, 0, r.st>>>(
+                a, b, np, perm, bodies, r.cp, r.full, r.d_counters);
+      };
+      if (r.tuning.step_narrow_items == 2)
+        launch(std::integral_constant<int, 2>{});
+      else
+        launch(std::integral_constant<int, 4>{});
+      CG_CUDA_CHECK_LAUNCH("cell_narrow");
+    }
   }
   // the counters (the fp64 rows, the row count), read after the next wait
   CG_CUDA_CHECK(

@@ -16,6 +16,7 @@
 #include "core/contact.hpp"
 #include "core/contact_fields.hpp"
 #include "core/grid.hpp"
+#include "cuda/device_buffer.cuh"
 #include "engine.hpp"
 
 namespace cg::cuda {
@@ -86,5 +87,20 @@ inline std::uint32_t blocks_for(std::uint64_t n) {
   return static_cast<std::uint32_t>((n + kBlock - 1) / kBlock);
 }
 inline std::size_t align16(std::size_t b) { return (b + 15) & ~std::size_t(15); }
+
+// out[k] = in[index[k]], k < m: an array gathered into another order (spheres into the sweep's or the
+// cell order, a column of rows into (a, b) order).
+template <class T>
+__global__ void __launch_bounds__(kBlock)
+    gather_kernel(const T* __restrict__ in, const std::uint32_t* __restrict__ index, std::size_t m,
+                  T* __restrict__ out) {
+  const std::size_t k = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
+  if (k < m) out[k] = in[index[k]];
+}
+
+// An asynchronous copy of `bytes` between device buffers on `st` (none for 0 bytes).
+inline void device_copy(void* dst, const void* src, std::size_t bytes, cudaStream_t st) {
+  if (bytes > 0) CG_CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyDeviceToDevice, st));
+}
 
 }  // namespace cg::cuda

@@ -176,6 +176,7 @@ class CudaBackend {
     r.filter = scene_filter(r.filter, job.ellipsoids, n64, skin);
     // the resident steps' fp32 spheres: the kept candidates and the spheres in cell order (cell_order.cuh)
     const bool cell_order = cell_order_wanted(r);
+    r.cell_order = cell_order;
 
     reserve_pack(r);
     m_events.start(m_stream);
@@ -388,7 +389,7 @@ void download_contacts(CudaBackend& b, const DeviceContactsView<Real>& v, Contac
     if (order) {
       ws.reserve({{&ws.canon_field, bytes}}, "download");
       T* sorted = ws.canon_field.span_as<T>(vec.size()).data();
-      cuda::gather_rows_kernel<T><<<cuda::blocks_for(vec.size()), cuda::kBlock, 0, b.m_stream>>>(
+      cuda::gather_kernel<T><<<cuda::blocks_for(vec.size()), cuda::kBlock, 0, b.m_stream>>>(
           static_cast<const T*>(d_ptr), order, vec.size(), sorted);
       CG_CUDA_CHECK_LAUNCH("gather_rows");
       d_ptr = sorted;

@@ -10,6 +10,7 @@
 // bounding spheres alone.
 #include <cub/device/device_scan.cuh>
 
+#include "core/kept_room.hpp"
 #include "cuda/common.cuh"
 #include "cuda/run_state.cuh"
 
@@ -60,8 +61,9 @@ __device__ __forceinline__ void visit(const EntryBody<Real>& x, std::uint32_t b,
 }
 
 // The pair writer of count_pairs' direct write and of fill_pairs: the pair (a, b) of cell-ordered
-// bodies, a fixed for the entry, as input indices (pa = a's), smaller first as the host's, at w; then
-// w + 1.
+// bodies, a fixed for the entry, at w, the body of the smaller input index first (pa = a's), as the
+// host's; then w + 1. As input indices, or (`cell`: the kept list of a cell-order skin build,
+// cuda/cell_order.cuh) as the cell-order indices themselves.
 template <class Index>
 struct PairWriter {
   std::uint32_t* pair_a;
@@ -69,10 +71,12 @@ struct PairWriter {
   const std::uint32_t* perm;
   std::uint32_t pa;
   Index w;
-  __device__ __forceinline__ void operator()(std::uint32_t, std::uint32_t b) {
+  bool cell = false;
+  __device__ __forceinline__ void operator()(std::uint32_t a, std::uint32_t b) {
     const std::uint32_t pb = input_index(perm, b);
-    pair_a[w] = pa < pb ? pa : pb;
-    pair_b[w] = pa < pb ? pb : pa;
+    const std::uint32_t first = cell ? a : pa, second = cell ? b : pb;
+    pair_a[w] = pa < pb ? first : second;
+    pair_b[w] = pa < pb ? second : first;
     ++w;
   }
 };
@@ -120,6 +124,8 @@ __device__ __forceinline__ std::uint32_t walk_from_memory(
 // input indices, a < b, there, each thread at base + its exclusive rank (same walk, emitting). When
 // the cursor ends above cap, the host discards those writes and runs the scan → fill_pairs path
 // from the masks instead. The pairs' order is the blocks' arrival order; the order stage sorts them.
+// `cell_out`: the direct write holds cell-order indices (PairWriter::cell), the kept list of a
+// cell-order skin build (the fill path writes input indices whatever it is).
 template <class Real, class Key, class Test>
 __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
     count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
@@ -128,7 +134,7 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
                        const std::uint8_t* __restrict__ report, int half_bits, std::uint32_t pass_type,
                        std::uint32_t* __restrict__ mask, std::uint32_t* __restrict__ block_pairs,
                        Counters* __restrict__ c, std::uint32_t* __restrict__ pair_a,
-                       std::uint32_t* __restrict__ pair_b, unsigned long long cap, Test test) {
+                       std::uint32_t* __restrict__ pair_b, unsigned long long cap, bool cell_out, Test test) {
   using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
   using Scan = cub::BlockScan<unsigned long long, kBlock>;
   __shared__ union {
@@ -210,8 +216,8 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
   }
   __syncthreads();
   if (found == 0 || s_base + block_sum > cap) return;
-  PairWriter<unsigned long long> emit{pair_a, pair_b, perm,
-                                      report ? x.pa & ~kWideKey : input_index(perm, x.a), s_base + rank};
+  PairWriter<unsigned long long> emit{
+      pair_a, pair_b, perm, report ? x.pa & ~kWideKey : input_index(perm, x.a), s_base + rank, cell_out};
   if (bits & 1u) {
     walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test, emit);
   } else {
@@ -311,14 +317,27 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
   // cap pairs each: cap = ne / 4 in the dead alternate entry-body buffer, or — where an earlier call
   // left ws.pairs larger (a rebuild of a skin's list: about the previous build's candidates, with the
   // buffer's geometric growth) — in ws.pairs, so a rebuild skips the scan → fill walk.
+  // A cell-order skin build (cuda/cell_order.cuh; not under CONTACTGRID_STEP_BUILD=copy): a and b
+  // alone, as cell-order indices, straight into the kept list, whose room the previous build's
+  // count sets (core/kept_room.hpp); no fill walk, no mapping of the pairs afterwards.
+  const bool into_kept = r.cell_order && !r.tuning.step_build_copy;
   const std::uint64_t held_cap = ws.pairs.capacity() / (4 * sizeof(std::uint32_t));
   const bool direct_in_pairs = held_cap > ne / 4;
-  const std::uint64_t direct_cap = direct_in_pairs ? held_cap : ne / 4;
-  std::uint32_t* d_direct = direct_in_pairs ? ws.pairs.span_as<std::uint32_t>(4 * held_cap).data()
-                                            : Workspace::direct_pairs(r.body);
+  std::uint64_t direct_cap = direct_in_pairs ? held_cap : ne / 4;
+  std::uint32_t* d_direct = nullptr;
+  if (into_kept) {
+    const std::size_t pair_bytes = 2 * sizeof(std::uint32_t);
+    direct_cap = kept_room(ws.kept_count, ne, ws.kept_pairs.capacity() / pair_bytes);
+    ws.reserve({{&ws.kept_pairs, direct_cap * pair_bytes}}, "pairs");
+    direct_cap = ws.kept_pairs.capacity() / pair_bytes;  // (the buffer's growth: all of it)
+    d_direct = ws.kept_pairs.span_as<std::uint32_t>(2 * direct_cap).data();
+  } else {
+    d_direct = direct_in_pairs ? ws.pairs.span_as<std::uint32_t>(4 * held_cap).data()
+                               : Workspace::direct_pairs(r.body);
+  }
   launch_count_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.pair_perm(), r.d_report,
                      r.g.half_bits, 0u, d_pair_count, d_entry_totals, r.d_counters, d_direct,
-                     d_direct + direct_cap, direct_cap);
+                     d_direct + direct_cap, direct_cap, into_kept);
   r.read_counters_reporting_tests();  // host needs the pairs total
   const std::uint64_t n_pairs = r.h_counters->pairs;
   r.stats.pair_tests = r.h_counters->tests;
@@ -330,6 +349,15 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
   // (np <= cap), the count kernel has already written them there; else they are placed in ws.pairs
   // by the scan of the block totals → fill_pairs (from the contact masks).
   const bool written = n_pairs <= direct_cap;
+  r.kept_written = into_kept && written;
+  if (r.kept_written) {  // the kept list, a then b (keep_cell_candidates keeps it)
+    ws.reserve({{&ws.out, r.out_bytes_for(r.np)}}, "pairs");
+    ws.kept_stride = direct_cap;
+    r.pair_a = cub::DoubleBuffer<std::uint32_t>(d_direct, d_direct);
+    r.pair_b = cub::DoubleBuffer<std::uint32_t>(d_direct + direct_cap, d_direct + direct_cap);
+    r.events.mark(EngineStage::pairs, st);
+    return;
+  }
   ws.reserve({{&ws.pairs, written ? 0 : 4 * std::size_t(r.np) * sizeof(std::uint32_t)},
               {&ws.out, r.out_bytes_for(r.np)}},
              "pairs");

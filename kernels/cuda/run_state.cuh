@@ -72,6 +72,10 @@ struct RunState {
   // pairs: the candidate pairs (input indices a < b), in (a, b) order after the order stage
   cub::DoubleBuffer<std::uint32_t> pair_a{nullptr, nullptr}, pair_b{nullptr, nullptr};
   std::uint32_t np = 0;
+  // a cell-order skin call (cuda/cell_order.cuh: cell_order_wanted), and at its build whether the pair
+  // stage wrote the kept list itself (cell-order indices in ws.kept_pairs, pair_a / pair_b point there)
+  bool cell_order = false;
+  bool kept_written = false;
   CandidateFilter filter = CandidateFilter::spheres_touch;  // Tuning::candidates
   // narrow: the contact rows (DEVICE; n_rows <= np, the accepted candidates) and their bytes from
   // ws.out.data()

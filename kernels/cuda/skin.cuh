@@ -83,31 +83,38 @@ bool skin_stage(RunState<Real, Key, Narrow>& r) {
   return skin_covers(m, r.job.skin);
 }
 
+// A build's kept list: the state of the bodies it was built from (for the next call's check, and
+// whether a report mask was given), its count and the distance between its a and b arrays. The
+// caller has put the list in ws.kept_pairs. Both orders' builds (keep_candidates, keep_cell_candidates).
+template <class Real, class Key, class Narrow>
+void keep_reference(RunState<Real, Key, Narrow>& r, std::size_t stride, bool cell_order) {
+  Workspace& ws = r.ws;
+  const std::size_t n = r.n64;
+  ws.reserve({{&ws.ref_pos, n * sizeof(Vec3<double>)},
+              {&ws.ref_rad, n * sizeof(double)},
+              {&ws.ref_report, r.d_report ? n : 0}},
+             "skin");
+  cuda::device_copy(ws.ref_pos.data(), r.d_pos, n * sizeof(Vec3<double>), r.st);
+  cuda::device_copy(ws.ref_rad.data(), r.d_rad, n * sizeof(double), r.st);
+  if (r.d_report) cuda::device_copy(ws.ref_report.data(), r.d_report, n, r.st);
+  ws.kept_count = r.np;
+  ws.kept_stride = stride;
+  ws.kept_reported = r.d_report != nullptr;
+  ws.kept_cell_order = cell_order;
+}
+
 // After the order stage of a build with a skin: the list and the state it was built from, kept.
 // Timed with the order stage.
 template <class Real, class Key, class Narrow>
 void keep_candidates(RunState<Real, Key, Narrow>& r) {
   Workspace& ws = r.ws;
-  cudaStream_t st = r.st;
-  const std::size_t np = r.np, n = r.n64;
-  ws.reserve({{&ws.kept_pairs, 2 * np * sizeof(std::uint32_t)},
-              {&ws.ref_pos, n * sizeof(Vec3<double>)},
-              {&ws.ref_rad, n * sizeof(double)},
-              {&ws.ref_report, r.d_report ? n : 0}},
-             "skin");
-  auto copy = [&](void* dst, const void* src, std::size_t bytes) {
-    if (bytes > 0) CG_CUDA_CHECK(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyDeviceToDevice, st));
-  };
+  const std::size_t np = r.np;
+  ws.reserve({{&ws.kept_pairs, 2 * np * sizeof(std::uint32_t)}}, "skin");
   std::uint32_t* kept = ws.kept_pairs.span_as<std::uint32_t>(2 * np).data();
-  copy(kept, r.pair_a.Current(), np * sizeof(std::uint32_t));
-  copy(kept + np, r.pair_b.Current(), np * sizeof(std::uint32_t));
-  copy(ws.ref_pos.data(), r.d_pos, n * sizeof(Vec3<double>));
-  copy(ws.ref_rad.data(), r.d_rad, n * sizeof(double));
-  if (r.d_report) copy(ws.ref_report.data(), r.d_report, n);
-  ws.kept_count = r.np;
-  ws.kept_reported = r.d_report != nullptr;
-  ws.kept_cell_order = false;
-  r.events.mark(EngineStage::order, st);
+  cuda::device_copy(kept, r.pair_a.Current(), np * sizeof(std::uint32_t), r.st);
+  cuda::device_copy(kept + np, r.pair_b.Current(), np * sizeof(std::uint32_t), r.st);
+  keep_reference(r, np, false);
+  r.events.mark(EngineStage::order, r.st);
 }
 
 // The reuse: the kept list as the candidates (Current; the narrow stage's accept flags and offsets
@@ -117,11 +124,14 @@ void reuse_candidates(RunState<Real, Key, Narrow>& r) {
   Workspace& ws = r.ws;
   r.np = ws.kept_count;
   const std::size_t np = r.np;
-  ws.reserve({{&ws.pairs, 2 * np * sizeof(std::uint32_t)}, {&ws.out, r.out_bytes_for(np)}}, "skin");
-  std::uint32_t* kept = ws.kept_pairs.span_as<std::uint32_t>(2 * np).data();
-  std::uint32_t* scratch = ws.pairs.span_as<std::uint32_t>(2 * np).data();
-  r.pair_a = cub::DoubleBuffer<std::uint32_t>(kept, scratch);
-  r.pair_b = cub::DoubleBuffer<std::uint32_t>(kept + np, scratch + np);
+  const bool scratch = !ws.kept_cell_order;  // (the cell-order narrow reads Current() alone)
+  ws.reserve({{&ws.pairs, scratch ? 2 * np * sizeof(std::uint32_t) : 0}, {&ws.out, r.out_bytes_for(np)}},
+             "skin");
+  std::uint32_t* kept = ws.kept_pairs.span_as<std::uint32_t>(ws.kept_stride + np).data();
+  std::uint32_t* alt = scratch ? ws.pairs.span_as<std::uint32_t>(2 * np).data() : kept;
+  r.pair_a = cub::DoubleBuffer<std::uint32_t>(kept, alt);
+  r.pair_b =
+      cub::DoubleBuffer<std::uint32_t>(kept + ws.kept_stride, scratch ? alt + np : kept + ws.kept_stride);
 }
 
 }  // namespace cg::detail

@@ -22,14 +22,6 @@ __global__ void __launch_bounds__(kBlock)
   index[i] = i;
 }
 
-template <class Real>
-__global__ void __launch_bounds__(kBlock)
-    sweep_gather_kernel(const Sphere<Real>* __restrict__ spheres, const std::uint32_t* __restrict__ index,
-                        std::uint32_t n, Sphere<Real>* __restrict__ sorted) {
-  const std::uint32_t k = blockIdx.x * kBlock + threadIdx.x;
-  if (k < n) sorted[k] = spheres[index[k]];
-}
-
 // The sweep of sorted place k by one warp (kBlock / 32 places a block). kFill false: counts[k] and the
 // totals of pairs and tests into c; true: the pairs written from offsets[k] (warp-compacted).
 template <bool kFill, class Real, class Test>
@@ -147,7 +139,7 @@ void sweep_stages(RunState<Real, Key, Narrow>& r) {
   cub_run(ws, "sort", [&](void* t, std::size_t& b) {
     return cub::DeviceRadixSort::SortPairs(t, b, keys, index, int(n), 0, int(8 * sizeof(Bits)), st);
   });
-  cuda::sweep_gather_kernel<Real><<<r.nb, kBlock, 0, st>>>(r.d_cell_spheres, index.Current(), n, sorted);
+  cuda::gather_kernel<Sphere<Real>><<<r.nb, kBlock, 0, st>>>(r.d_cell_spheres, index.Current(), n, sorted);
   CG_CUDA_CHECK_LAUNCH("sweep_gather");
   r.events.mark(EngineStage::sort, st);
   if (r.job.pair_limits.wanted()) sweep_estimate_stage(r, sorted, keys.Current(), axis);

@@ -82,6 +82,20 @@ struct Tuning {
   // input indices (cuda/skin.cuh); default: in the bodies' cell order with the cell-ordered spheres
   // (cuda/cell_order.cuh), the rows sorted by (a, b) when they come down. The same rows either way.
   bool step_order_file = false;
+  // CONTACTGRID_STEP_BUILD=copy: a cell-order build's pair stage writes its candidates as input
+  // indices where the entries left room (else a second walk fills them in), and the kept list maps
+  // them to cell order through the inverse permutation; default: the walk writes the cell-order
+  // indices straight into the kept list, sized by the previous build's count (cuda/pairs.cuh). The
+  // same rows either way.
+  bool step_build_copy = false;
+  // CONTACTGRID_STEP_NARROW=select: the cell-order narrow stage is CUB's stable select, whose output
+  // iterator writes the rows (reading each accepted candidate and its spheres again); default: one
+  // kernel that keeps what it read and writes each block's rows at a cursor (cuda/cell_order.cuh:
+  // cell_narrow_kernel; the rows' device order is free there). The same rows either way.
+  bool step_narrow_select = false;
+  // CONTACTGRID_STEP_NARROW_ITEMS=2: cell_narrow_kernel tests 2 candidates a thread (fewer registers,
+  // more warps an SM) instead of 4 (more loads in flight a warp). The same rows either way.
+  int step_narrow_items = 4;
   // CONTACTGRID_DEM_SEGMENTS=cub: the granular dynamics' body index orders each body's rows as B by
   // CUB's segmented sort (which reads its partition back to the host every call); default: one
   // thread per body sorts its own few rows (core/dem_step.hpp: sort_rows), no host synchronisation.
@@ -181,6 +195,12 @@ inline Tuning read_tuning() {
   }
   if (const char* o = std::getenv("CONTACTGRID_STEP_ORDER"))
     t.step_order_file = std::string_view(o) == "file";
+  if (const char* b = std::getenv("CONTACTGRID_STEP_BUILD"))
+    t.step_build_copy = std::string_view(b) == "copy";
+  if (const char* m = std::getenv("CONTACTGRID_STEP_NARROW"))
+    t.step_narrow_select = std::string_view(m) == "select";
+  if (const char* m = std::getenv("CONTACTGRID_STEP_NARROW_ITEMS"))
+    t.step_narrow_items = std::string_view(m) == "2" ? 2 : 4;
   if (const char* d = std::getenv("CONTACTGRID_DEM_SEGMENTS"))
     t.dem_segments_cub = std::string_view(d) == "cub";
   if (const char* d = std::getenv("CONTACTGRID_DEM_STORE")) t.dem_store_all = std::string_view(d) == "all";

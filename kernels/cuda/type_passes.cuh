@@ -64,7 +64,7 @@ void type_pass_stages(RunState<Real, Key, Narrow>& r) {
         launch_count_pairs(r, cuda::blocks_for(nt), keys.Current(), body.Current(), nt, r.d_ctrl,
                            r.d_cell_spheres, r.pair_perm(), r.d_report, g.half_bits, t,
                            Workspace::pair_masks(keys), d_entry_totals, r.d_counters, store,
-                           store + cap_pairs, cap_pairs);
+                           store + cap_pairs, cap_pairs, false);
       }
       CG_CUDA_CHECK(cudaEventRecord(ev_all.pass_event(ev + 2), st));
     }

@@ -49,8 +49,10 @@
 //                                              together (a, b and the order sort's second copies);
 //                          sort → pairs        sweep: the spheres in the sweep's order
 //   kept_pairs, ref_pos,   between calls       EngineOptions::skin: the kept candidate list (a then b,
-//   ref_rad, ref_report                        kept_count each) and the bodies' state it was built
-//                                              from (cuda/skin.cuh); owned across calls, never aliased
+//   ref_rad, ref_report                        kept_count each, kept_stride apart; a cell-order
+//                                              build's pair stage writes it, cuda/pairs.cuh) and the
+//                                              bodies' state it was built from (cuda/skin.cuh);
+//                                              owned across calls, never aliased
 //   kept_perm              between calls       the kept list of a cell-order skin (cuda/cell_order.cuh):
 //                                              the cell order's input indices; owned, never aliased
 //   canon_keys[2],         download            a cell-order call's rows sorted by (a, b) before they
@@ -107,6 +109,7 @@ struct Workspace {
   bool res_reported = false;     // resident report mask present
   bool res_shaped = false;       // resident shape rows present
   std::uint32_t kept_count = 0;  // kept candidate pairs
+  std::size_t kept_stride = 0;   // the kept list's b array starts this many u32 after its a array
   bool kept_reported = false;    // the kept list was built with a report mask
   bool kept_cell_order = false;  // the kept list is in cell order (cuda/cell_order.cuh)
   bool rows_cell_order = false;  // the last call's rows are in the kept cell order, not (a, b) order

@@ -41,6 +41,11 @@ void print_steps(const StepStats& s, int ranks) {
       "  candidate lists: {} builds, {} reuses, skin {:.6g}{}; mean step {:.6f} s, detection {:.6f} s "
       "building, {:.6f} s reusing\n",
       s.builds, s.reuses, s.skin, s.skin_auto ? " (auto)" : "", s.step_mean, s.detect_build, s.detect_reuse);
+  if (s.builds > 0 && s.reuses > 0) {  // the stages above are a reusing step's: a building step's too
+    std::string line;
+    for (const StageTime& t : s.build_stages) line += fmt::format(" {} {:.6f}", t.name, t.seconds);
+    fmt::print("  a building step's stages (s, median):{}\n", line);
+  }
   if (ranks > 1 && s.drift != 0)
     fmt::print(
         "  {} rebuilds, {} bodies migrated, {} slab rebalances; owned bodies per rank at the end {} … {}\n",

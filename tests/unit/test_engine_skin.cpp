@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "backends.hpp"
+#include "core/kept_room.hpp"
 #include "engine.hpp"
 #include "scenes.hpp"
 #include "support/contacts_equal.hpp"
@@ -337,6 +338,18 @@ TYPED_TEST(EngineSkinTest, MixedScenesEqualFreshDetection) {
   EXPECT_EQ(compare_contacts(got, fresh.detect(s.view())), "identical");
 }
 
+// The room a build reserves for the kept list its walk writes in place (core/kept_room.hpp): the
+// last list's count and a half, one pair per entry before any list, never less than held.
+TEST(KeptRoom, FromTheLastCountOrTheEntriesAndNeverShrinks) {
+  EXPECT_EQ(kept_room(0, 7000, 0), 7000u);           // no list kept yet: one pair per entry
+  EXPECT_EQ(kept_room(1000, 7000, 0), 1500u);        // the last count and a half, whatever the entries
+  EXPECT_EQ(kept_room(1001, 10, 0), 1501u);          // (rounded down: 1001 / 2 = 500)
+  EXPECT_EQ(kept_room(1000, 7000, 4000), 4000u);     // the room held already
+  EXPECT_EQ(kept_room(0, 0, 0), 0u);                 // nothing to hold
+  const std::uint64_t big = std::uint64_t(3) << 31;  // past 32 bits: no wrap
+  EXPECT_EQ(kept_room(big, 0, 0), big + big / 2);
+}
+
 #if defined(CONTACTGRID_HAVE_CUDA)
 // Device arrays (detect_device and detect_device_resident): the same walk on the GPU, each call equal
 // to the CPU backend's fresh skin-0 detection of the same values (bit-identical backends).
@@ -439,6 +452,72 @@ TEST(EngineSkinCuda, CellOrderResidentStepsEqualFreshDetection) {
   }
   EXPECT_GE(file.stats().candidate_builds, 2u);
   EXPECT_GE(file.stats().candidate_reuses, 15u);
+}
+
+// A cell-order build's pair stage writes the kept list itself (cell-order indices, in room sized by
+// the previous build's count: core/kept_room.hpp; kernels/cuda/pairs.cuh), and falls back to
+// the counted fill and the inverse permutation where the walk finds more than that room: a build
+// whose skin grows fiftyfold (the fallback), then one whose skin shrinks (in place again), with and
+// without renumbered bodies, with a report mask. Every step equals the CPU's fresh detection bit for
+// bit, and the engine under CONTACTGRID_STEP_BUILD=copy (the mapping after the walk) keeps the same
+// candidates and builds at the same steps.
+TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  struct Env {
+    const char* name;
+    Env(const char* n, const char* v) : name(n) { ::setenv(n, v, 1); }
+    ~Env() { ::unsetenv(name); }
+  };
+  for (const char* renumber : {"1", "0"}) {
+    const Env numbering("CONTACTGRID_CUDA_RENUMBER", renumber);
+    Engine<float> in_place(options_for(Backend::cuda, 0.1)), copy(options_for(Backend::cuda, 0.1));
+    Engine<float> fresh(options_for(Backend::cpu, 0));
+    Spheres s = random_spheres(20000, 0.5, 1.0, 9191);
+    const std::size_t n = s.r.size();
+    std::mt19937_64 rng(9192);
+    std::vector<std::uint8_t> report(n);
+    for (auto& m : report) m = static_cast<std::uint8_t>(rng() % 5 == 0 ? 0 : 1);
+    in_place.set_resident(BodiesView{s.p, s.r, {}, report});
+    copy.set_resident(BodiesView{s.p, s.r, {}, report});
+    std::uint64_t candidates_before = 0, entries_first = 0;
+    for (int step = 0; step < 12; ++step) {
+      const std::string at = std::string("renumber ") + renumber + ", step " + std::to_string(step);
+      if (step == 4 || step == 8) {  // a new skin, built now: 5 (more candidates than the room), 0.2
+        for (Engine<float>* e : {&in_place, &copy}) {
+          e->set_skin(step == 4 ? 5.0 : 0.2);
+          e->rebuild_candidates();
+        }
+      }
+      if (step > 0) {
+        random_step(s, 0.005, 0.0, rng);
+        in_place.write_resident(0, n, s.p.data(), s.r.data());
+        copy.write_resident(0, n, s.p.data(), s.r.data());
+      }
+      const Contacts<float> want = fresh.detect(BodiesView{s.p, s.r, {}, report});
+      ASSERT_GT(want.size(), 500u) << at;
+      const std::uint64_t builds = in_place.stats().candidate_builds;
+      ASSERT_EQ(in_place.detect_resident(), want.size()) << at;
+      ASSERT_EQ(compare_contacts(in_place.resident_contacts(), want), "identical") << at << " (in place)";
+      {
+        const Env build("CONTACTGRID_STEP_BUILD", "copy");
+        ASSERT_EQ(copy.detect_resident(), want.size()) << at;
+        ASSERT_EQ(compare_contacts(copy.resident_contacts(), want), "identical") << at << " (copy)";
+      }
+      const bool built = in_place.stats().candidate_builds > builds;
+      EXPECT_EQ(built, step == 0 || step == 4 || step == 8) << at;
+      EXPECT_EQ(in_place.stats().candidates, copy.stats().candidates) << at << ": the same kept list";
+      EXPECT_EQ(in_place.stats().candidate_builds, copy.stats().candidate_builds) << at;
+      // the room of the build at step 4: the first build's (one pair per entry), or the last list's
+      // count and a half; the fiftyfold skin's list outgrows it
+      if (step == 0) entries_first = in_place.stats().entries;
+      if (step == 4) {
+        EXPECT_GT(in_place.stats().candidates,
+                  std::max(candidates_before + candidates_before / 2, entries_first))
+            << at;
+      }
+      candidates_before = in_place.stats().candidates;
+    }
+  }
 }
 #endif
 
