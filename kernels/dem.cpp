@@ -267,6 +267,30 @@ struct Simulation<Real>::Impl {
     return v;
   }
 
+  // Host contacts carry the rows' ids (BodiesView::id): back to row indices, as the device's are
+  // (the rows being in id order, the rows' order stays).
+  void local_ids(Contacts<Real>& c) const {
+    const std::ptrdiff_t k = static_cast<std::ptrdiff_t>(c.size());
+    const std::int64_t* first = ids.data();
+    const std::int64_t* last = first + ids.size();
+    auto row = [&](std::int64_t id) {
+      const std::int64_t* at = std::lower_bound(first, last, id);
+      if (at == last || *at != id) throw Error("simulate: a contact's body is not a row: internal error");
+      return static_cast<std::int64_t>(at - first);
+    };
+    bool bad = false;
+#pragma omp parallel for num_threads(threads) schedule(static) if (k > 65536) reduction(|| : bad)
+    for (std::ptrdiff_t r = 0; r < k; ++r) {
+      try {
+        c.id_a[r] = row(c.id_a[r]);
+        c.id_b[r] = row(c.id_b[r]);
+      } catch (const Error&) {
+        bad = true;
+      }
+    }
+    if (bad) throw Error("simulate: a contact's body is not a row: internal error");
+  }
+
   // The end of a stage of a timed step (CUDA: an event; CPU: the wall clock).
   void mark(detail::DemStage s) {
     if (!timing) return;
@@ -303,6 +327,7 @@ struct Simulation<Real>::Impl {
       return;
     }
     contacts = engine.detect(host_view(), frame);
+    if (!ids.empty()) local_ids(contacts);
     detected();
     contact_count = contacts.size();
     const dem::ContactRows<Real> rows{contacts.id_a.data(),          contacts.id_b.data(),
@@ -545,7 +570,8 @@ void Simulation<Real>::read_rows(const std::vector<std::uint32_t>& rows, std::ve
   for (std::size_t j = 0; j < rows.size(); ++j) {
     const std::size_t i = rows[j];
     if (i >= h.size()) throw UsageError("simulate: row " + std::to_string(i) + " is not a row of the rank");
-    out[j] = DemRow{h.position[i], h.velocity[i], h.omega[i], h.momentum[i], h.orientation[i]};
+    out[j] = DemRow{h.position[i],    h.velocity[i], h.omega[i], h.momentum[i],
+                    h.orientation[i], h.force[i],    h.torque[i]};
   }
 }
 
@@ -564,6 +590,8 @@ void Simulation<Real>::write_rows(const std::vector<std::uint32_t>& rows, const 
     h.omega[i] = in[j].omega;
     h.momentum[i] = in[j].momentum;
     h.orientation[i] = in[j].orientation;
+    h.force[i] = in[j].force;
+    h.torque[i] = in[j].torque;
   }
 }
 
@@ -599,8 +627,6 @@ DemState Simulation<Real>::state() {
     std::vector<std::uint32_t> all(h.size());
     for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<std::uint32_t>(i);
     read_rows(all, out.rows);
-    out.force = h.force;
-    out.torque = h.torque;
     out.wall_xi = h.wall_xi;
     out.wall_energy = h.wall_energy;
     out.xi = h.xi[h.current];
@@ -645,8 +671,7 @@ void Simulation<Real>::set_rows(const DemBodies& bodies, std::vector<std::int64_
     return;
   }
   const std::size_t walls = s.options.walls.size();
-  if (state.force.size() != n || state.torque.size() != n || state.wall_xi.size() != n * walls ||
-      state.normal.size() != state.xi.size())
+  if (state.wall_xi.size() != n * walls || state.normal.size() != state.xi.size())
     throw UsageError("simulate: a rank's state differs in size from its rows");
   detail::host::HostDem& h = s.host;
   h.position.resize(n);
@@ -654,19 +679,21 @@ void Simulation<Real>::set_rows(const DemBodies& bodies, std::vector<std::int64_
   h.omega.resize(n);
   h.momentum.resize(n);
   h.orientation.resize(n);
+  h.force.resize(n);
+  h.torque.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
     h.position[i] = state.rows[i].position;
     h.velocity[i] = state.rows[i].velocity;
     h.omega[i] = state.rows[i].omega;
     h.momentum[i] = state.rows[i].momentum;
     h.orientation[i] = state.rows[i].orientation;
+    h.force[i] = state.rows[i].force;
+    h.torque[i] = state.rows[i].torque;
   }
   h.radius = st.radius;
   h.props = props;
   h.shape = st.shape;
   h.semi_axes = st.semi_axes;
-  h.force = state.force;
-  h.torque = state.torque;
   h.wall_xi = state.wall_xi;
   h.wall_energy = state.wall_energy;
   if (h.wall_energy.size() != n) h.wall_energy.assign(n, 0);

@@ -85,20 +85,22 @@ struct DemEnergies {
   double total() const { return kinetic + gravity + elastic; }
 };
 
-// A body's moving state as a rank of a run over several ranks sends it to the ranks that hold the
-// body as a ghost (src/simulate/resident_dem.hpp).
+// A body's state as a rank of a run over several ranks sends it to the ranks that hold the body as
+// a ghost (src/simulate/resident_dem.hpp): what a step and a contact read of it, its force and
+// torque (the last step's: the synchronised velocities of its contacts read them) included.
 struct DemRow {
   Vec3<double> position, velocity, omega, momentum;  // a sphere's momentum: unread
   Quat<double> orientation;                          // a sphere's: unread
+  Vec3<double> force, torque;
 };
 
-// What a Simulation's rows carry from a step to the next (host): each row's moving state, force
-// and torque, wall springs (rows × walls, row-major) and wall energy; the last step's contacts'
+// What a Simulation's rows carry from a step to the next (host): each row's state, wall springs
+// (rows × walls, row-major) and wall energy; the last step's contacts'
 // identity (history: pair keys by the rows' ids, ages) with each pair's spring, normal and energy,
 // in the history's order.
 struct DemState {
   std::vector<DemRow> rows;
-  std::vector<Vec3<double>> force, torque, wall_xi;
+  std::vector<Vec3<double>> wall_xi;
   std::vector<double> wall_energy;
   ContactHistory history;
   std::vector<Vec3<double>> xi, normal;
@@ -137,7 +139,7 @@ class Simulation {
   // detection in `frame`, the forces and the kick (the same bits as run(1)).
   void kick_drift();
   void finish_step(std::optional<Frame> frame);
-  // The moving state of rows `rows` out (CUDA: gathered and downloaded) and in (uploaded, scattered).
+  // The state (DemRow) of rows `rows` out (CUDA: gathered and downloaded) and in (uploaded, scattered).
   void read_rows(const std::vector<std::uint32_t>& rows, std::vector<DemRow>& out);
   void write_rows(const std::vector<std::uint32_t>& rows, const std::vector<DemRow>& in);
   // The rows' bounds (validated as compute_bounds, a bad row named by its id) and the largest

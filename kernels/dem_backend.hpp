@@ -55,7 +55,7 @@ void cuda_dem_time_collect(CudaDem& dem, double* seconds);
 // The current state into `out` (positions, velocities, spins, orientations; the rest kept).
 void cuda_dem_download(CudaDem& dem, DemBodies& out);
 // One rank's rows of a run over several ranks (dem.hpp: Simulation's rank interface; cuda/dem_rows.cuh):
-// the rows' global ids (the engine's history keys), the moving state of some rows out and in, the
+// the rows' global ids (the engine's history keys), the state (DemRow) of some rows out and in, the
 // largest displacement since the mark (set at the rows' upload and by cuda_dem_mark), and everything
 // the rows carry (DemState without its history: the engine's) out and in, `contacts` the last step's.
 void cuda_dem_set_ids(CudaDem& dem, const std::vector<std::int64_t>& ids);

@@ -187,8 +187,6 @@ void cuda_dem_get_state(CudaDem& d, std::size_t contacts, DemState& out) {
   std::vector<std::uint32_t> all(n);
   for (std::size_t i = 0; i < n; ++i) all[i] = static_cast<std::uint32_t>(i);
   dem_gather_rows(d, all, out.rows);
-  download(out.force, d.force, n);
-  download(out.torque, d.torque, n);
   download(out.wall_xi, d.wall_xi, w);
   download(out.wall_energy, d.wall_energy, n);
   download(out.xi, d.xi[d.current], contacts);
@@ -206,14 +204,11 @@ void cuda_dem_get_state(CudaDem& d, std::size_t contacts, DemState& out) {
 void cuda_dem_set_state(CudaDem& d, const DemState& in) {
   CG_CUDA_CHECK(cudaSetDevice(d.device));
   const std::size_t n = d.count, k = in.xi.size();
-  if (in.rows.size() != n || in.force.size() != n || in.torque.size() != n ||
-      in.wall_xi.size() != n * std::size_t(d.wall_count) || in.normal.size() != k)
+  if (in.rows.size() != n || in.wall_xi.size() != n * std::size_t(d.wall_count) || in.normal.size() != k)
     throw UsageError("simulate: a rank's state differs in size from its rows");
   std::vector<std::uint32_t> all(n);
   for (std::size_t i = 0; i < n; ++i) all[i] = static_cast<std::uint32_t>(i);
   dem_scatter_rows(d, all, in.rows);
-  upload(d.force, in.force);
-  upload(d.torque, in.torque);
   if (!in.wall_xi.empty()) upload(d.wall_xi, in.wall_xi);
   upload(d.xi[d.current], in.xi);
   upload(d.normal[d.current], in.normal);

@@ -1,6 +1,6 @@
 #pragma once
 // One rank's rows of a granular run over several ranks on the device (kernels/dem_backend.hpp): the
-// moving state of chosen rows gathered into DemRow records (the ghosts a rank sends) and scattered
+// state of chosen rows gathered into DemRow records (the ghosts a rank sends) and scattered
 // from them (the ghosts it receives), one thread per record; the largest squared displacement of a
 // row since the mark, one value per row reduced by Thrust (max: exact, any order).
 #include <thrust/execution_policy.h>
@@ -20,7 +20,8 @@ __global__ void dem_gather_rows_kernel(dem::BodyArrays b, const std::uint32_t* r
   const std::size_t j = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
   if (j >= n) return;
   const std::size_t i = rows[j];
-  out[j] = DemRow{b.position[i], b.velocity[i], b.omega[i], b.momentum[i], b.orientation[i]};
+  out[j] = DemRow{b.position[i],    b.velocity[i], b.omega[i], b.momentum[i],
+                  b.orientation[i], b.force[i],    b.torque[i]};
 }
 
 __global__ void dem_scatter_rows_kernel(dem::BodyArrays b, const std::uint32_t* rows, std::size_t n,
@@ -34,6 +35,8 @@ __global__ void dem_scatter_rows_kernel(dem::BodyArrays b, const std::uint32_t* 
   b.omega[i] = r.omega;
   b.momentum[i] = r.momentum;
   b.orientation[i] = r.orientation;
+  b.force[i] = r.force;
+  b.torque[i] = r.torque;
 }
 
 // |x_i − mark_i|² of row i.

@@ -5,11 +5,11 @@
 // (ghosts) as the rows of one Simulation (kernels/dem.hpp), in ascending id, on its own GPU with
 // --backend cuda: the detection, the forces and the integration of all of them stay there.
 //
-//   kick_drift (every row) → the ghosts' moving state from their owners (only the halo's rows cross
-//   the link and MPI) → bounds and the largest displacement since the layout (over the ranks: the
-//   frame, the rebuild check) → relayout? (new slabs, the owned bodies with their state and their
-//   pairs' springs to their new owners, the new ghosts) → detect, contact terms, body terms, kick
-//   (every row)
+//   kick_drift (every row) → the ghosts' state (DemRow: with the last step's force and torque) from
+//   their owners (only the halo's rows cross the link and MPI) → bounds and the largest displacement
+//   since the layout (over the ranks: the frame, the rebuild check) → relayout? (new slabs where the
+//   counts drifted apart, the owned bodies with their state and their pairs' springs to their new
+//   owners, the new ghosts) → detect, contact terms, body terms, kick (every row)
 //
 // Why the trajectories are the same bits for any rank count: an owned body's contacts are all among
 // the held rows (the ghost width is 2 r_max + skin and the rows are laid out again before any body
@@ -40,7 +40,6 @@ namespace cg {
 struct ResidentBodyRecord {
   std::int64_t id;
   DemRow row;
-  Vec3<double> force, torque;
 };
 
 // A pair's spring between ranks at a relayout.
@@ -180,8 +179,8 @@ class ResidentDem {
                                r.omega,
                                ell ? r.momentum : Vec3<double>{0, 0, 0},
                                ell ? r.orientation : Quat<double>{1, 0, 0, 0},
-                               st.force[k],
-                               st.torque[k]};
+                               r.force,
+                               r.torque};
         mine[j] = {m_ids[k], dem::kinetic_energy(s, p, ell), -p.mass * dot(m_options.gravity, s.position),
                    m_walls > 0 ? st.wall_energy[k] : 0.0};
       }
@@ -273,7 +272,7 @@ class ResidentDem {
     }
   }
 
-  // The ghosts' moving state from their owners (the halo's rows only).
+  // The ghosts' state from their owners (the halo's rows only).
   void exchange_ghosts() {
     std::vector<DemRow> send;
     agreed_stage(m_session, "simulate", [&] { m_sim->read_rows(m_send_rows, send); });
@@ -338,7 +337,7 @@ class ResidentDem {
       for (std::size_t r = 0; r < p; ++r) {
         body_counts[r] = to[r].size();
         for (const std::size_t k : to[r]) {
-          bodies.push_back({m_ids[k], st.rows[k], st.force[k], st.torque[k]});
+          bodies.push_back({m_ids[k], st.rows[k]});
           walls.insert(walls.end(), st.wall_xi.begin() + std::ptrdiff_t(k * m_walls),
                        st.wall_xi.begin() + std::ptrdiff_t((k + 1) * m_walls));
         }
@@ -416,15 +415,11 @@ class ResidentDem {
       DemBodies rows = rows_of(m_ids);
       DemState next;
       next.rows.resize(m);
-      next.force.resize(m);
-      next.torque.resize(m);
       next.wall_xi.assign(m * m_walls, {0, 0, 0});
       next.wall_energy.assign(m, 0);
       for (std::size_t k = 0; k < m; ++k) {
         const ResidentBodyRecord& r = *held[k].record;
         next.rows[k] = r.row;
-        next.force[k] = r.force;
-        next.torque[k] = r.torque;
         rows.position[k] = r.row.position;
         rows.velocity[k] = r.row.velocity;
         rows.angular_velocity[k] = r.row.omega;
