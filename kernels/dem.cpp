@@ -704,6 +704,13 @@ void Simulation<Real>::set_rows(const DemBodies& bodies, std::vector<std::int64_
 }
 
 template <class Real>
+void Simulation<Real>::mark_rows() {
+  Impl& s = *m_impl;
+  if (s.resolved == Backend::cuda) return detail::cuda_dem_mark(*s.cuda);
+  s.marked = s.host.position;
+}
+
+template <class Real>
 const std::vector<std::int64_t>& Simulation<Real>::ids() const {
   return m_impl->ids;
 }

@@ -148,6 +148,7 @@ class Simulation {
   // Everything the rows carry (CUDA: downloaded); set_rows replaces the rows by `bodies` with their
   // ids and what they carry (the same rows' count in every array of `state`).
   DemState state();
+  void mark_rows();  // the displacement counts from here (set_rows of the same rows, nothing moved)
   void set_rows(const DemBodies& bodies, std::vector<std::int64_t> ids, const DemState& state);
   const std::vector<std::int64_t>& ids() const;
 

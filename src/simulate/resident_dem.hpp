@@ -22,7 +22,9 @@
 // files) by the owner of its smaller id.
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "agreed_stage.hpp"
@@ -65,7 +67,14 @@ class ResidentDem {
     }
     const Vec3<double> e = hi - lo;
     m_axis = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
-    m_skin = options.engine.skin;
+    // the layout's skin: the engine's, times CONTACTGRID_SIMULATE_HALO (>= 1, default 1: a wider halo
+    // and fewer relayouts)
+    const char* halo = std::getenv("CONTACTGRID_SIMULATE_HALO");
+    const double factor = halo ? std::atof(halo) : 1.0;
+    if (!(factor >= 1 && factor <= 1000))
+      throw UsageError("CONTACTGRID_SIMULATE_HALO must be a number in [1, 1000] (got \"" +
+                       std::string(halo ? halo : "") + "\")");
+    m_skin = options.engine.skin * factor;
     m_width = (2 * r_max + m_skin) * (1 + 1e-9);
     std::vector<double> sample(n);
     for (std::size_t i = 0; i < n; ++i) sample[i] = component(all.position[i], m_axis);
@@ -297,6 +306,11 @@ class ResidentDem {
   void relayout() {
     const int me = m_session.rank();
     const std::size_t p = static_cast<std::size_t>(m_session.size());
+    ++m_rebuilds;
+    if (p == 1) {  // one rank holds every body: nothing to move
+      agreed_stage(m_session, "simulate", [&] { m_sim->mark_rows(); });
+      return;
+    }
     DemState st;
     std::vector<double> sample;
     agreed_stage(m_session, "simulate", [&] {
@@ -446,7 +460,6 @@ class ResidentDem {
       m_sim->set_rows(rows, m_ids, next);
       halo_plan(rows.position);
     });
-    ++m_rebuilds;
   }
 
   template <class T>

@@ -6,7 +6,7 @@
 # Usage: mpi_simulate_cuda.sh CONTACTGRID MPIEXEC WORKDIR
 set -euo pipefail
 CG=$1; MPIEXEC=$2; W=$3
-PY=/usr/bin/python3
+PY=${PYTHON:-/usr/bin/python3}  # (a python3 with h5py and NumPy)
 rm -rf "$W"; mkdir -p "$W"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
 "$CG" generate "$W/pour.h5" --kind pour -n 400 --seed 5 -q
