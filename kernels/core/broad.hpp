@@ -88,17 +88,13 @@ CG_HD Index lower_bound_key(const Key* keys, Index lo, Index hi, Key key) {
   return lo;
 }
 
-// The pairs across levels of body a in level la, from its side (both backends run this one routine:
-// host/levels.cpp, cuda/levels.cuh): in every larger level l whose run of the sorted entry keys
-// [begin[l], begin[l + 1]) is not empty, the cells of a's box in l's grid (cells_in(grid): its
-// BodyCells there), each looked up in that run, and every body b met there that the pair is tested
-// with in that cell (test_in_cell with both control bytes of level l: the common cell of smallest
-// type) and that the report rule keeps: visit(b). Returns the pairs visited (the pair tests).
+// The cells body a of level la looks up in the larger levels (both backends and both uses below run
+// this one routine: host/levels.cpp, cuda/levels.cuh): in every larger level l whose run of the sorted
+// entry keys [begin[l], begin[l + 1]) is not empty, the cells of a's box in l's grid (cells_in(grid):
+// its BodyCells there), each as visit(key, lo, hi, a's control byte there, the key's cell type).
 template <class Real, class Key, class Index, class CellsIn, class Visit>
-CG_HD std::uint64_t cross_level_pairs(std::uint32_t a, int la, const LevelParams<Real>& lp, const Key* keys,
-                                      const std::uint32_t* body, const Index* begin, const std::uint8_t* ctrl,
-                                      const std::uint8_t* report, CellsIn&& cells_in, Visit&& visit) {
-  std::uint64_t tests = 0;
+CG_HD void for_larger_level_cells(int la, const LevelParams<Real>& lp, const Index* begin, CellsIn&& cells_in,
+                                  Visit&& visit) {
   const int half_bits = lp.key_shift - 3;
   for (int l = la + 1; l < lp.count; ++l) {
     const Index lo = begin[l], hi = begin[l + 1];
@@ -109,15 +105,47 @@ CG_HD std::uint64_t cross_level_pairs(std::uint32_t a, int la, const LevelParams
     const Key level = Key(l) << lp.key_shift;
     for (std::uint32_t m = 0, cells = entry_count(bc); m < cells; ++m) {
       const Key k = level | body_cell_key<Key>(bc, m, g);
-      const std::uint32_t type = key_type(k, half_bits);
-      for (Index f = lower_bound_key(keys, lo, hi, k); f < hi && keys[f] == k; ++f) {
-        const std::uint32_t b = body[f];
-        if (!test_in_cell(ca, ctrl[b], type) || !pair_reported(report, a, b)) continue;
-        ++tests;
-        visit(b);
-      }
+      visit(k, lo, hi, ca, key_type(k, half_bits));
     }
   }
+}
+
+// The pairs across levels of body a in level la, from its side: each of its cells in the larger levels
+// (for_larger_level_cells) looked up in that level's run, and every body b met there that the pair is
+// tested with in that cell (test_in_cell with both control bytes of level l: the common cell of
+// smallest type) and that the report rule keeps: visit(b). Returns the pairs visited (the pair tests).
+template <class Real, class Key, class Index, class CellsIn, class Visit>
+CG_HD std::uint64_t cross_level_pairs(std::uint32_t a, int la, const LevelParams<Real>& lp, const Key* keys,
+                                      const std::uint32_t* body, const Index* begin, const std::uint8_t* ctrl,
+                                      const std::uint8_t* report, CellsIn&& cells_in, Visit&& visit) {
+  std::uint64_t tests = 0;
+  for_larger_level_cells<Real, Key>(
+      la, lp, begin, cells_in, [&](Key k, Index lo, Index hi, std::uint8_t ca, std::uint32_t type) {
+        for (Index f = lower_bound_key(keys, lo, hi, k); f < hi && keys[f] == k; ++f) {
+          const std::uint32_t b = body[f];
+          if (!test_in_cell(ca, ctrl[b], type) || !pair_reported(report, a, b)) continue;
+          ++tests;
+          visit(b);
+        }
+      });
+  return tests;
+}
+
+// The pair estimate's share of body a across levels (pair_estimate.hpp): the entries of the cells
+// cross_level_pairs walks, found by two binary searches a cell and not walked, so that a pile of
+// larger bodies that every small body nearby would meet is counted before any pair is tested. At
+// least cross_level_pairs' tests (the cell rule and the report rule only drop some).
+template <class Real, class Key, class Index, class CellsIn>
+CG_HD std::uint64_t cross_level_bound(int la, const LevelParams<Real>& lp, const Key* keys,
+                                      const Index* begin, CellsIn&& cells_in) {
+  std::uint64_t tests = 0;
+  for_larger_level_cells<Real, Key>(
+      la, lp, begin, cells_in, [&](Key k, Index lo, Index hi, std::uint8_t, std::uint32_t) {
+        const Index f = lower_bound_key(keys, lo, hi, k);
+        if (f == hi || keys[f] != k) return;
+        const Index end = k == Key(~Key(0)) ? hi : lower_bound_key(keys, f, hi, Key(k + 1));
+        tests += end - f;
+      });
   return tests;
 }
 

@@ -147,9 +147,53 @@ __global__ void __launch_bounds__(kBlock)
   }
 }
 
+// levels, estimate: body a's bound on its pair tests across levels (core/broad.hpp cross_level_bound),
+// as the estimate's CellWork (tests only) for the reduction of add_cell_work.
+template <class Real, class Key>
+struct CrossLevelBound {
+  const Sphere<Real>* spheres;
+  const CutShape* cut;
+  const Key* lo_key;
+  const Key* keys;
+  const std::uint32_t* level_begin;
+  LevelParams<Real> lp;
+  __host__ __device__ CellWork operator()(std::uint32_t a) const {
+    const int la = key_level(lo_key[a], lp.key_shift);
+    if (la + 1 >= lp.count) return {0, 0};
+    const Sphere<Real> s = spheres[a];
+    const unsigned long long tests = cross_level_bound(
+        la, lp, keys, level_begin,
+        [&](const GridParams<Real>& g) { return cut ? cut_cells(s, cut[a], g) : body_cells(s, g); });
+    return {tests, 0};
+  }
+};
+
 }  // namespace cg::cuda
 
 namespace cg::detail {
+
+// The levels' pair estimate (may refuse the scene): the grid's over the cells of all levels, and the
+// bound of the pairs across levels (CrossLevelBound, one reduction; the levels' runs found first).
+template <class Real, class Key, class Narrow>
+void levels_estimate(RunState<Real, Key, Narrow>& r) {
+  const LevelParams<Real>& lp = r.job.levels;
+  PairEstimate e = cell_estimate(r);
+  if (lp.count > 1 && r.n > 0) {
+    const ItemCounts ic = item_counts(r.ws, r.n64, kMaxLevels + 1);
+    cuda::level_begin_kernel<Key><<<1, 32, 0, r.st>>>(
+        r.keys.Current(), static_cast<std::uint32_t>(r.n_entries), lp.count, lp.key_shift, ic.extra);
+    CG_CUDA_CHECK_LAUNCH("level_begin");
+    PairEstimate across;
+    add_cell_work(r,
+                  thrust::make_transform_iterator(
+                      thrust::counting_iterator<std::uint32_t>(0),
+                      cuda::CrossLevelBound<Real, Key>{r.d_cell_spheres, r.d_cell_cut, r.d_lo_key,
+                                                       r.keys.Current(), ic.extra, lp}),
+                  r.n, across);
+    e.tests += across.tests;
+  }
+  check_estimate(r, e);
+}
 
 // BroadPhase::levels, after pack (spheres only): stages entries, sort and pairs (see the file comment).
 template <class Real, class Key, class Narrow>
@@ -189,8 +233,7 @@ void levels_stages(RunState<Real, Key, Narrow>& r) {
   CG_CUDA_CHECK_LAUNCH("level_entries");
   r.events.mark(EngineStage::entries, st);
   sort_stage(r);
-  // the pairs within the levels: the grid's estimate over all their cells (may refuse the scene)
-  if (r.job.pair_limits.wanted()) estimate_stage(r);
+  if (r.job.pair_limits.wanted()) levels_estimate(r);  // may refuse the scene
 
   // the pairs within each level: the grid's walk (its cell type sits below the common key_shift)
   r.g.half_bits = lp.key_shift - 3;

@@ -59,8 +59,9 @@ void add_cell_work(RunState<Real, Key, Narrow>& r, Work work, std::uint32_t coun
   e.largest = r.h_counters->cell_work.largest;
 }
 
+// The grid's estimate (Σ m·(m − 1)/2 over the cells of the sorted keys, the fullest cell), unchecked.
 template <class Real, class Key, class Narrow>
-void estimate_stage(RunState<Real, Key, Narrow>& r) {
+PairEstimate cell_estimate(RunState<Real, Key, Narrow>& r) {
   const auto ne = static_cast<std::uint32_t>(r.n_entries);
   PairEstimate e{0, r.n64, r.n_entries, r.n_entries > 0 ? 1u : 0u, kDevicePairTestsPerSecond};
   if (ne > 1) {
@@ -76,8 +77,19 @@ void estimate_stage(RunState<Real, Key, Narrow>& r) {
                                                   cuda::EarlierInCell{d_start}),
                   ne, e);
   }
+  return e;
+}
+
+// The estimate handed on and checked (may refuse the scene); whether the pair stage reports progress.
+template <class Real, class Key, class Narrow>
+void check_estimate(RunState<Real, Key, Narrow>& r, const PairEstimate& e) {
   check_pair_estimate(e, r.job.pair_limits);
   r.pair_progress = follows_progress(e, r.job.pair_limits);
+}
+
+template <class Real, class Key, class Narrow>
+void estimate_stage(RunState<Real, Key, Narrow>& r) {
+  check_estimate(r, cell_estimate(r));
 }
 
 }  // namespace cg::detail

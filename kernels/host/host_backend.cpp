@@ -167,8 +167,9 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
       host::sort_entries(entries, job.plan.key_bits, nt);
       timer.lap(EngineStage::sort);
 
-      if (job.pair_limits.wanted()) {  // the pairs within the levels: the grid's estimate over all cells
+      if (job.pair_limits.wanted()) {  // the grid's estimate over all cells, and the pairs across levels
         PairEstimate estimate = host::estimate_pair_tests(entries, job.bodies.size(), nt);
+        estimate.tests += host::cross_level_estimate(entries, bodies, job.levels, nt);
         estimate.tests_per_second = kHostPairTestsPerSecondPerThread * nt;
         check_pair_estimate(estimate, job.pair_limits);
       }

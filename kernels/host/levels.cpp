@@ -49,6 +49,40 @@ std::uint64_t level_entries(PackedBodies<Real>& p, const LevelParams<Real>& lp, 
   return n_entries;
 }
 
+namespace {
+
+// Where each level's run of the sorted keys starts; begin[lp.count] = the entry count (empty levels
+// are skipped by every query).
+template <class Real, class Key>
+void level_runs(const Entries<Key>& e, const LevelParams<Real>& lp, std::size_t* begin) {
+  for (int l = 0; l < lp.count; ++l)
+    begin[l] = lower_bound_key(e.keys.data(), std::size_t(0), e.size(), Key(Key(l) << lp.key_shift));
+  begin[lp.count] = e.size();  // (count << key_shift may not fit the key)
+}
+
+}  // namespace
+
+template <class Real, class Key>
+std::uint64_t cross_level_estimate(const Entries<Key>& e, const PackedBodies<Real>& p,
+                                   const LevelParams<Real>& lp, int threads) {
+  if (lp.count < 2) return 0;
+  std::size_t begin[kMaxLevels + 1];
+  level_runs(e, lp, begin);
+  const bool cut = !p.cut.empty();
+  const std::size_t n = p.spheres.size();
+  std::uint64_t tests = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : tests) if (n > k_parallel_min)
+  for (std::size_t i = 0; i < n; ++i) {
+    if (p.level[i] + 1 >= lp.count) continue;
+    const Sphere<Real> s0 = p.spheres[i];
+    const Sphere<Real> s{s0.x, s0.y, s0.z, s0.r + p.inflation};
+    tests += cross_level_bound(p.level[i], lp, e.keys.data(), begin, [&](const GridParams<Real>& g) {
+      return cut ? cut_cells(s, p.cut[i], g) : body_cells(s, g);
+    });
+  }
+  return tests;
+}
+
 template <class Real, class Key>
 std::uint64_t cross_level_candidates(const Entries<Key>& e, const PackedBodies<Real>& p,
                                      const LevelParams<Real>& lp, std::span<const std::uint8_t> report,
@@ -56,11 +90,8 @@ std::uint64_t cross_level_candidates(const Entries<Key>& e, const PackedBodies<R
                                      CandidatePairs& out) {
   if (lp.count < 2) return 0;
   const std::uint8_t* r = report.empty() ? nullptr : report.data();
-  // Each level's run of the sorted keys (empty levels are skipped by every query).
   std::size_t begin[kMaxLevels + 1];
-  for (int l = 0; l < lp.count; ++l)
-    begin[l] = lower_bound_key(e.keys.data(), std::size_t(0), e.size(), Key(Key(l) << lp.key_shift));
-  begin[lp.count] = e.size();  // (count << key_shift may not fit the key)
+  level_runs(e, lp, begin);
   const bool cut = !p.cut.empty();
   return with_pair_test(filter, p, fp64, [&](const auto& test) {
     return collect_pairs(p.spheres.size(), 1024, threads, out, [&](std::size_t i, auto&& emit) {
@@ -84,6 +115,8 @@ template void level_cells(const LevelParams<float>&, int, PackedBodies<float>&);
 template void level_cells(const LevelParams<double>&, int, PackedBodies<double>&);
 #define CG_LEVELS(R, K)                                                                                \
   template std::uint64_t level_entries(PackedBodies<R>&, const LevelParams<R>&, int, Entries<K>&);     \
+  template std::uint64_t cross_level_estimate(const Entries<K>&, const PackedBodies<R>&,               \
+                                              const LevelParams<R>&, int);                             \
   template std::uint64_t cross_level_candidates(                                                       \
       const Entries<K>&, const PackedBodies<R>&, const LevelParams<R>&, std::span<const std::uint8_t>, \
       CandidateFilter, const NarrowBodies<double>*, int, CandidatePairs&);

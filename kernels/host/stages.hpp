@@ -235,12 +235,17 @@ std::uint64_t collect_pairs(std::size_t n, std::size_t per_chunk, int threads, C
 // entry count. level_entries: (key, body) entries in body order, keys level << key_shift | cell key;
 // frees p.cells and p.count. Then sort_entries over the plan's key bits and find_candidates (half
 // bits: key_shift − 3) take the pairs within each level; cross_level_candidates appends the pairs of
-// two levels, from the smaller body's side (binary search of its cells in the larger level's keys).
+// two levels, from the smaller body's side (binary search of its cells in the larger level's keys);
+// cross_level_estimate, after the sort, bounds those tests (core/broad.hpp cross_level_bound) for
+// the pair estimate.
 template <class Real>
 void level_cells(const LevelParams<Real>& lp, int threads, PackedBodies<Real>& p);
 template <class Real, class Key>
 std::uint64_t level_entries(PackedBodies<Real>& p, const LevelParams<Real>& lp, int threads,
                             Entries<Key>& out);
+template <class Real, class Key>
+std::uint64_t cross_level_estimate(const Entries<Key>& e, const PackedBodies<Real>& p,
+                                   const LevelParams<Real>& lp, int threads);
 template <class Real, class Key>
 std::uint64_t cross_level_candidates(const Entries<Key>& e, const PackedBodies<Real>& p,
                                      const LevelParams<Real>& lp, std::span<const std::uint8_t> report,

@@ -71,6 +71,7 @@ Timing time_engine(const BroadBenchOptions& o, const BodiesView& bodies, BroadPh
   e.threads = o.threads;
   e.broad_phase = bp;
   e.fp32_broad_phase = o.precision == Precision::mixed;
+  if (o.estimate) e.on_pair_estimate = [](const PairEstimate&) {};
   Engine<Real> engine(e);
   engine.set_resident(bodies);
   Timing t;

@@ -50,6 +50,9 @@ struct BroadBenchOptions {
   // Print, under each row, every timed broad phase's stage times of its last repetition (ms), its
   // levels, (cell, body) entries, pair tests and candidates: where a family's time goes.
   bool stage_times = false;
+  // Make the pair estimate before each pair stage, as `detect` does (it follows the estimate for its
+  // warning and --max-pair-tests); the library's calls make none unless asked.
+  bool estimate = false;
   std::uint64_t seed = 1;
   std::string csv;
 };

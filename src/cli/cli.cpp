@@ -567,6 +567,8 @@ Subcommand add_bench_broad(CLI::App& app) {
   bbc->add_flag("--stage-times", args->stage_times,
                 "Under each row, every broad phase's stage times (ms, its last repetition), levels, entries, "
                 "pair tests and candidates");
+  bbc->add_flag("--estimate", args->estimate,
+                "Make the pair estimate before each pair stage, as detect does (its cost in the times)");
   bbc->add_option("--csv", args->csv, "Also write the runs as CSV");
   return {bbc, [args](Session& session) {
             if (session.rank() != 0) return 0;

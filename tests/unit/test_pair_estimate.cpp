@@ -97,8 +97,8 @@ TYPED_TEST(PairEstimateTest, StackedBodiesAreRefusedAboveTheLimit) {
 
 // Every broad phase estimates its tests before its pair stage (grid and levels: Σ m·(m − 1)/2 over the
 // cells of the sorted entries, the levels' within each level; sweep: the boxes each sweep passes;
-// brute: every pair) and refuses the pile below the estimate; each estimate bounds the pile's pairs.
-// The levels' pairs across levels (the one large body against the pile) come on top of theirs.
+// brute: every pair) and refuses the pile below the estimate; each estimate bounds the pile's pairs
+// and the tests made (the levels' with the pairs across levels: the one large body against the pile).
 TYPED_TEST(PairEstimateTest, EveryBroadPhaseEstimatesAndRefusesAPile) {
   std::mt19937_64 rng(8);
   std::uniform_real_distribution<double> u(-0.01, 0.01);
@@ -116,7 +116,7 @@ TYPED_TEST(PairEstimateTest, EveryBroadPhaseEstimatesAndRefusesAPile) {
     ASSERT_EQ(seen.size(), 1u);
     EXPECT_EQ(c.size(), pairs);
     EXPECT_GE(seen[0].tests, pairs);
-    EXPECT_GE(seen[0].tests + (broad == BroadPhase::levels ? n : 0), stats.pair_tests);
+    EXPECT_GE(seen[0].tests, stats.pair_tests);
     EXPECT_GE(seen[0].largest, n - 1);
     EXPECT_GT(seen[0].tests_per_second, 0);
     try {
@@ -130,6 +130,48 @@ TYPED_TEST(PairEstimateTest, EveryBroadPhaseEstimatesAndRefusesAPile) {
           << e.what();
     }
   }
+}
+
+// Large bodies stacked on one point among many small grains: each pair of the pile is one test, but
+// every grain in the pile's cell of the large bodies' level meets the whole pile there, so the levels'
+// tests are the grains times the pile. Their estimate counts the pairs across levels (a bound from the
+// cells' entries, before any is tested): it bounds the tests made, and a limit far above the pile's own
+// pairs but below the grains' refuses the scene before its pair stage.
+TYPED_TEST(PairEstimateTest, LevelsCountThePairsAcrossLevels) {
+  const auto scene = [](std::uint64_t pile, std::uint64_t grains) {
+    std::mt19937_64 rng(21);
+    std::uniform_real_distribution<double> near(-0.01, 0.01), box(-0.45, 0.45);
+    Spheres s;
+    for (std::uint64_t i = 0; i < pile; ++i) s.add(0.5 + near(rng), 0.5 + near(rng), 0.5 + near(rng), 0.5);
+    for (std::uint64_t i = 0; i < grains; ++i) s.add(0.5 + box(rng), 0.5 + box(rng), 0.5 + box(rng), 0.005);
+    return s;
+  };
+  {  // small enough to run: the estimate bounds the tests, the tests include the grains against the pile
+    const std::uint64_t pile = 30, grains = 3000;
+    std::vector<PairEstimate> seen;
+    EngineStats stats;
+    const Contacts<double> c = this->run(scene(pile, grains), 0, seen, &stats, BroadPhase::levels);
+    ASSERT_EQ(stats.broad_phase, BroadPhase::levels);
+    ASSERT_EQ(seen.size(), 1u);
+    EXPECT_GE(stats.pair_tests, pile * grains / 2);
+    EXPECT_GE(seen[0].tests, stats.pair_tests);
+    EXPECT_GE(c.size(), pile * (pile - 1) / 2);
+  }
+  const std::uint64_t pile = 400,
+                      grains =
+                          40000;  // 16e6 tests across levels; the pile its own 80e3 pairs in up to 8 cells
+  std::vector<PairEstimate> seen;
+  try {
+    this->run(scene(pile, grains), 20 * pile * pile, seen, nullptr, BroadPhase::levels);
+    ADD_FAILURE() << "the grains against the pile exceed the limit";
+  } catch (const LimitError& e) {
+    EXPECT_EQ(e.exit_code(), 9);
+    EXPECT_NE(std::string(e.what()).find("--max-pair-tests " + std::to_string(20 * pile * pile)),
+              std::string::npos)
+        << e.what();
+  }
+  ASSERT_EQ(seen.size(), 1u);
+  EXPECT_GE(seen[0].tests, pile * grains / 2);
 }
 
 // The host pair stage reports its progress whatever the estimate: the tests done so far, last the
@@ -208,22 +250,26 @@ TEST(PairEstimate, SameOnCpuAndCuda) {
   std::uniform_real_distribution<double> u(-0.2, 0.2);
   Spheres s = random_spheres(30000, 0.1, 1.0, 12);
   for (int i = 0; i < 3000; ++i) s.add(u(rng), u(rng), u(rng), 0.01);  // a crowded corner
-  PairEstimate on[2];
-  int k = 0;
-  for (const Backend backend : {Backend::cpu, Backend::cuda}) {
-    EngineOptions o;
-    o.backend = backend;
-    o.on_pair_estimate = [&on, k](const PairEstimate& e) { on[k] = e; };
-    Engine<double> engine(o);
-    engine.detect(BodiesView{s.p, s.r, {}, {}});
-    ++k;
+  for (const BroadPhase broad : {BroadPhase::grid, BroadPhase::levels}) {
+    SCOPED_TRACE(to_string(broad));
+    PairEstimate on[2];
+    int k = 0;
+    for (const Backend backend : {Backend::cpu, Backend::cuda}) {
+      EngineOptions o;
+      o.backend = backend;
+      o.broad_phase = broad;
+      o.on_pair_estimate = [&on, k](const PairEstimate& e) { on[k] = e; };
+      Engine<double> engine(o);
+      engine.detect(BodiesView{s.p, s.r, {}, {}});
+      ++k;
+    }
+    EXPECT_EQ(on[0].tests, on[1].tests);
+    EXPECT_EQ(on[0].entries, on[1].entries);
+    EXPECT_EQ(on[0].largest, on[1].largest);
+    EXPECT_EQ(on[0].bodies, on[1].bodies);
+    EXPECT_GT(on[0].tests_per_second, 0);
+    EXPECT_GT(on[1].tests_per_second, 0);
   }
-  EXPECT_EQ(on[0].tests, on[1].tests);
-  EXPECT_EQ(on[0].entries, on[1].entries);
-  EXPECT_EQ(on[0].largest, on[1].largest);
-  EXPECT_EQ(on[0].bodies, on[1].bodies);
-  EXPECT_GT(on[0].tests_per_second, 0);
-  EXPECT_GT(on[1].tests_per_second, 0);
 }
 
 TEST(PairEstimate, UnusualMeansSecondsOfWorkAndThousandsPerBody) {
