@@ -21,12 +21,20 @@
 #             also with the registers uncapped (1 block an SM) and capped for 3 (2^24: FULL=1; the
 #             default: 2). Ellipsoids (2^22) and the
 #             contact stage's sums as A (CONTACTGRID_DEM_TERMS=sums) only with FULL=1.
+#   one       (the default; under 3 minutes on one H100) simulate under mpirun with each rank's bodies
+#             resident on its GPU (the default; CONTACTGRID_SIMULATE_RANKS=host: the forces on the
+#             host, "before"): the rank interface's unit cases (DemRows/cuda.*) and DemBackends.*;
+#             tests/cli/mpi_simulate_cuda.sh (the CPU's one-rank files, bit for bit, from --backend
+#             cuda at -np 1 and 2 on this GPU, resident and host); steps/s of a 2^20 pour (fp32) without
+#             mpirun, under mpirun -np 1 resident (after) and host (before, a few steps)
 #   mpi2      (a host with 2 GPUs, its own call) simulate under mpirun -np 2 --backend cuda writes the
 #             frames, contacts and energies of -np 1 and of the CPU backend, bit for bit
 #   two       (a host with 2 GPUs, its own call) steps/s of mpirun -np 1 and -np 2 --backend cuda on a
-#             pour of N2 spheres (default 2^22: forces still on the host under mpirun; issue: np 2 >=
-#             1.8x np 1 at 2^25, N2=33554432)
-# Default: unit perf (under 3 minutes on one H100; beverloo on request; on a host of 2 GPUs: mpi2 two). Writes $OUT/simulate_<part>.tar.gz
+#             pour of N2 spheres (default 2^23, fp32), resident (after; np 2 also with a 4x wider halo:
+#             CONTACTGRID_SIMULATE_HALO=4) and np 2 on the host (before, STEPS_HOST steps); np 1 and
+#             np 2's frames and energies the same bytes (issue: np 2 >= 1.8x np 1 at 2^25:
+#             N2=33554432)
+# Default: one. unit perf beverloo on request. Writes $OUT/simulate_<part>.tar.gz
 # (each part's logs), $OUT/table.md, $OUT/stages.txt and $OUT/summary.txt; exits non-zero naming every
 # failed check.
 #   BIN=dir-with-the-CUDA-build's-binaries OUT=results-dir jobs/gpu_simulate_check.sh [PART ...]
@@ -38,7 +46,8 @@ cd "$(dirname "$0")/.."
 BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}; mkdir -p "$OUT"; W=${WORK:-/tmp/cgsim}; mkdir -p "$W"
 BIN=$(cd "$BIN" && pwd)
 CG="$BIN/contactgrid"
-parts=("$@"); [ ${#parts[@]} -eq 0 ] && parts=(unit perf)
+PY=$(command -v python3)  # (the device: python3 on PATH has NumPy and h5py)
+parts=("$@"); [ ${#parts[@]} -eq 0 ] && parts=(one)
 BEFORE=(CONTACTGRID_DEM_SEGMENTS=cub CONTACTGRID_DEM_STORE=all CONTACTGRID_DEM_BLOCKS=1)  # the path before this session's
 failed=()
 log() { echo "[$(date -u +%H:%M:%S)] $*" | tee -a "$OUT/summary.txt"; }
@@ -167,29 +176,80 @@ PYEOF
 }
 
 part_two() {
-  local d=$1 n=${N2:-$((1 << 22))} steps=${STEPS2:-30}
+  local d=$1 n=${N2:-$((1 << 23))} steps=${STEPS2:-60} host_steps=${STEPS_HOST:-3}
   export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
   local gpus; gpus=$(nvidia-smi -L 2>/dev/null | wc -l)
   [ "$gpus" -ge 2 ] || { failed+=("two: needs 2 GPUs, $gpus seen"); return; }
   "$CG" generate "$W/t.h5" --kind pour -n "$n" --rlow 0.00495 --rhigh 0.005 --pour-spacing 1.97 --seed 5 -q ||
     { failed+=("two: generate"); return; }
-  local np sps=()
-  for np in 1 2; do
-    rm -rf "$W/t.np$np.run"
-    if ! mpirun --bind-to none -np $np "$CG" simulate "$W/t.h5" -o "$W/t.np$np.run" --steps "$steps" \
-        --output-every "$steps" --log-every $((steps / 3)) --backend cuda --precision fp32 --no-plot \
-        >"$d/np$np.log" 2>&1; then
-      failed+=("two: np $np run"); tail -3 "$d/np$np.log"; continue
+  run_two() {  # TAG NP STEPS [ENV...]
+    local tag=$1 np=$2 k=$3; shift 3
+    rm -rf "$W/t.$tag.run"
+    if ! env "$@" mpirun --bind-to none -np "$np" "$CG" simulate "$W/t.h5" -o "$W/t.$tag.run" --steps "$k" \
+        --output-every "$k" --log-every $((k / 3 > 0 ? k / 3 : 1)) --backend cuda --precision fp32 --no-plot \
+        >"$d/$tag.log" 2>&1; then
+      failed+=("two: $tag run"); tail -3 "$d/$tag.log"; return
     fi
-    cp "$W/t.np$np.run/log.csv" "$d/np$np.log.csv"
-    sps+=("$(awk -F, 'NR > 1 && $1 !~ /^#/ && $7 > 0 { n++; if (n > 1) { s += $7; k++ } } END { if (k) printf "%.2f", k / s }' "$W/t.np$np.run/log.csv")")
-    rm -rf "$W/t.np$np.run"
+    cp "$W/t.$tag.run/log.csv" "$d/$tag.log.csv"
+    log "two: $n spheres, $tag: $(steps_per_second "$W/t.$tag.run") steps/s"
+  }
+  run_two np1 1 "$steps"
+  run_two np2 2 "$steps"
+  "$PY" tests/cli/same_run.py "$W/t.np1.run" "$W/t.np2.run" >"$d/compare.log" 2>&1 ||
+    failed+=("two: np 2's frames or energies differ from np 1's (compare.log)")
+  cat "$d/compare.log" | tee -a "$OUT/summary.txt"
+  rm -rf "$W/t.np1.run"
+  run_two np2.halo4 2 "$steps" CONTACTGRID_SIMULATE_HALO=4
+  "$PY" tests/cli/same_run.py "$W/t.np2.run" "$W/t.np2.halo4.run" >>"$d/compare.log" 2>&1 ||
+    failed+=("two: the 4x halo's files differ (compare.log)")
+  rm -rf "$W/t.np2.run" "$W/t.np2.halo4.run"
+  run_two np2.host 2 "$host_steps" CONTACTGRID_SIMULATE_RANKS=host
+  rm -rf "$W/t.np2.host.run" "$W/t.h5"
+  local a b
+  a=$(steps_per_second_of "$d/np1.log.csv"); b=$(steps_per_second_of "$d/np2.log.csv")
+  log "two: np 2 / np 1 = $(awk -v a="$a" -v b="$b" 'BEGIN { if (a > 0) printf "%.2f", b / a }') (issue: >= 1.8 at 2^25)"
+  grep -h 'steps/s\|rows rebuilt' "$d"/*.log | tee -a "$OUT/summary.txt"
+}
+
+steps_per_second_of() {  # a log.csv
+  awk -F, 'NR > 1 && $1 !~ /^#/ && $7 > 0 { n++; if (n > 1) { s += $7; k++ } } END { if (k) printf "%.2f", k / s }' "$1"
+}
+# steps/s of a run directory: log.csv's seconds_per_step (the steps alone), the first block left out
+steps_per_second() { steps_per_second_of "$1/log.csv"; }
+
+part_one() {
+  local d=$1
+  export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+  local filter='DemRows*:DemBackends*'
+  "$BIN/contactgrid_tests" --gtest_filter="$filter" >"$d/unit.log" 2>&1 || failed+=("one: unit $filter")
+  grep -E '^\[  (PASSED|FAILED) |^\[  SKIPPED' "$d/unit.log" | head -20 | tee -a "$OUT/summary.txt"
+  if grep -q '^\[  SKIPPED \]' "$d/unit.log"; then failed+=("one: CUDA cases skipped (no GPU seen)"); fi
+  PYTHON="$PY" timeout 150 tests/cli/mpi_simulate_cuda.sh "$CG" "$(command -v mpirun)" \
+    "$W/cli_cuda" >"$d/cli_cuda.log" 2>&1
+  local rc=$?
+  tail -3 "$d/cli_cuda.log" | tee -a "$OUT/summary.txt"
+  [ $rc -eq 0 ] || failed+=("one: mpi_simulate_cuda.sh (rc $rc: 77 = skipped, no GPU)")
+  local n=$((1 << 20))
+  "$CG" generate "$W/p20.h5" --kind pour -n $n --rlow 0.00495 --rhigh 0.005 --pour-spacing 1.97 --seed 5 -q ||
+    { failed+=("one: generate"); return; }
+  local common=(--output-every 300 --backend cuda --precision fp32 --no-plot)
+  rm -rf "$W"/p20.*.run
+  "$CG" simulate "$W/p20.h5" -o "$W/p20.plain.run" --steps 300 --log-every 50 "${common[@]}" >"$d/p20.plain.log" 2>&1 ||
+    failed+=("one: 2^20 without mpirun")
+  mpirun --bind-to none -np 1 "$CG" simulate "$W/p20.h5" -o "$W/p20.np1.run" --steps 300 --log-every 50 "${common[@]}" \
+    >"$d/p20.np1.log" 2>&1 || failed+=("one: 2^20 np 1 resident")
+  CONTACTGRID_SIMULATE_RANKS=host mpirun --bind-to none -np 1 "$CG" simulate "$W/p20.h5" -o "$W/p20.host.run" \
+    --steps 6 --log-every 2 --output-every 6 --backend cuda --precision fp32 --no-plot >"$d/p20.host.log" 2>&1 ||
+    failed+=("one: 2^20 np 1 host")
+  local run
+  for run in plain np1 host; do
+    cp "$W/p20.$run.run/log.csv" "$d/p20.$run.log.csv" 2>/dev/null
+    log "one: 2^20 pour fp32 $run: $(steps_per_second "$W/p20.$run.run") steps/s"
   done
-  rm -f "$W/t.h5"
-  if [ ${#sps[@]} -eq 2 ]; then
-    log "two: $n spheres, $steps steps: np 1 ${sps[0]} steps/s, np 2 ${sps[1]} steps/s, np 2 / np 1 = $(awk -v a="${sps[0]}" -v b="${sps[1]}" 'BEGIN { if (a > 0) printf "%.2f", b / a }') (issue: >= 1.8)"
-  fi
-  grep -h 'steps/s' "$d"/np*.log | tee -a "$OUT/summary.txt"
+  "$PY" tests/cli/same_run.py "$W/p20.plain.run" "$W/p20.np1.run" frames >>"$d/compare.log" 2>&1 ||
+    failed+=("one: 2^20 np 1 resident frames differ from the run without mpirun")
+  grep -h 'steps/s\|rows rebuilt' "$d"/p20.*.log | tee -a "$OUT/summary.txt"
+  rm -rf "$W"/p20.*
 }
 
 part_mpi2() {
@@ -232,7 +292,7 @@ for part in "${parts[@]}"; do
   d="$W/logs_$part"; rm -rf "$d"; mkdir -p "$d"
   log "part $part"
   case $part in
-    unit | beverloo | perf | mpi2 | two) "part_$part" "$d" ;;
+    unit | beverloo | perf | one | mpi2 | two) "part_$part" "$d" ;;
     *) failed+=("unknown part $part") ;;
   esac
   tar -czf "$OUT/simulate_$part.tar.gz" -C "$W" "logs_$part"

@@ -45,6 +45,23 @@ void cuda_dem_time_start(CudaDem&) {}
 void cuda_dem_time_mark(CudaDem&, DemStage) {}
 void cuda_dem_time_collect(CudaDem&, double*) {}
 void cuda_dem_download(CudaDem&, DemBodies&) { throw CudaError("this contactgrid was built without CUDA"); }
+void cuda_dem_set_ids(CudaDem&, const std::vector<std::int64_t>&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+void cuda_dem_read_rows(CudaDem&, const std::vector<std::uint32_t>&, std::vector<DemRow>&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+void cuda_dem_write_rows(CudaDem&, const std::vector<std::uint32_t>&, const std::vector<DemRow>&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+void cuda_dem_mark(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
+double cuda_dem_displacement(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
+void cuda_dem_get_state(CudaDem&, std::size_t, DemState&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+void cuda_dem_set_state(CudaDem&, const DemState&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
 }  // namespace detail
 #endif
 
@@ -227,6 +244,11 @@ struct Simulation<Real>::Impl {
   double stage_seconds[detail::kDemStages] = {};
   WallClock::time_point last_mark{};
   DemStageTimes times;
+  // one rank's rows of a run over several ranks (dem.hpp): their global ids (empty: row i is body i),
+  // the frame of every detection, the CPU's positions when the rows were set (CUDA: CudaDem::mark)
+  std::vector<std::int64_t> ids;
+  std::optional<Frame> frame;
+  std::vector<Vec3<double>> marked;
 
   static EngineOptions engine_options(EngineOptions e) {
     e.history = true;
@@ -236,13 +258,37 @@ struct Simulation<Real>::Impl {
   explicit Impl(const DemOptions& o) : options(o), engine(engine_options(o.engine)) {}
 
   BodiesView host_view() {
-    BodiesView v{host.position, host.radius, {}, {}};
+    BodiesView v{host.position, host.radius, ids, {}};
     if (!host.shape.empty()) {
       v.shape = host.shape;
       v.semi_axes = host.semi_axes;
       v.orientation = host.orientation;
     }
     return v;
+  }
+
+  // Host contacts carry the rows' ids (BodiesView::id): back to row indices, as the device's are
+  // (the rows being in id order, the rows' order stays).
+  void local_ids(Contacts<Real>& c) const {
+    const std::ptrdiff_t k = static_cast<std::ptrdiff_t>(c.size());
+    const std::int64_t* first = ids.data();
+    const std::int64_t* last = first + ids.size();
+    auto row = [&](std::int64_t id) {
+      const std::int64_t* at = std::lower_bound(first, last, id);
+      if (at == last || *at != id) throw Error("simulate: a contact's body is not a row: internal error");
+      return static_cast<std::int64_t>(at - first);
+    };
+    bool bad = false;
+#pragma omp parallel for num_threads(threads) schedule(static) if (k > 65536) reduction(|| : bad)
+    for (std::ptrdiff_t r = 0; r < k; ++r) {
+      try {
+        c.id_a[r] = row(c.id_a[r]);
+        c.id_b[r] = row(c.id_b[r]);
+      } catch (const Error&) {
+        bad = true;
+      }
+    }
+    if (bad) throw Error("simulate: a contact's body is not a row: internal error");
   }
 
   // The end of a stage of a timed step (CUDA: an event; CPU: the wall clock).
@@ -273,14 +319,15 @@ struct Simulation<Real>::Impl {
   // stage's pass over the bodies integrates them too).
   void forces(detail::DemThen then = detail::DemThen::nothing) {
     if (resolved == Backend::cuda) {
-      device_contacts = engine.detect_device_resident(detail::cuda_dem_bodies(*cuda));
+      device_contacts = engine.detect_device_resident(detail::cuda_dem_bodies(*cuda), frame);
       detected();
       contact_count = device_contacts.count;
       contacts_downloaded = false;
       detail::cuda_dem_forces(*cuda, device_contacts, constants, then);  // marks its stages
       return;
     }
-    contacts = engine.detect(host_view());
+    contacts = engine.detect(host_view(), frame);
+    if (!ids.empty()) local_ids(contacts);
     detected();
     contact_count = contacts.size();
     const dem::ContactRows<Real> rows{contacts.id_a.data(),          contacts.id_b.data(),
@@ -323,9 +370,18 @@ struct Simulation<Real>::Impl {
 
 template <class Real>
 Simulation<Real>::Simulation(const DemBodies& bodies, const DemOptions& options)
+    : Simulation(bodies, options, {}, std::nullopt) {}
+
+template <class Real>
+Simulation<Real>::Simulation(const DemBodies& bodies, const DemOptions& options,
+                             std::vector<std::int64_t> ids, std::optional<Frame> frame)
     : m_impl(std::make_unique<Impl>(options)) {
   Impl& s = *m_impl;
   check_dem_setup(bodies, options);
+  if (!ids.empty() && ids.size() != bodies.size())
+    throw UsageError("simulate: the rows' ids differ in number from the bodies");
+  s.ids = std::move(ids);
+  s.frame = frame;
   s.alpha = damping_for_restitution(options.material.restitution);
   s.constants.law = law_of(options.material, s.alpha);
   s.constants.gravity = options.gravity;
@@ -349,6 +405,7 @@ Simulation<Real>::Simulation(const DemBodies& bodies, const DemOptions& options)
   const std::vector<dem::BodyProps> props = props_of(st, options.material.density);
   if (s.resolved == Backend::cuda) {
     s.cuda = detail::make_cuda_dem(options.engine.device, st, props, options.walls);
+    if (!s.ids.empty()) detail::cuda_dem_set_ids(*s.cuda, s.ids);
     if (options.stage_times) detail::cuda_dem_time_enable(*s.cuda);
   } else {
     detail::host::HostDem& h = s.host;
@@ -372,6 +429,7 @@ Simulation<Real>::Simulation(const DemBodies& bodies, const DemOptions& options)
       }
     h.force.assign(n, {0, 0, 0});
     h.torque.assign(n, {0, 0, 0});
+    s.marked = h.position;
   }
   s.forces();  // the forces of the start: the first half kick's
 }
@@ -470,6 +528,191 @@ DemEnergies Simulation<Real>::energies() {
     ++s.times.energy_calls;
   }
   return e;
+}
+
+// ---- one rank's rows of a run over several ranks ----------------------------------------------------
+
+template <class Real>
+void Simulation<Real>::kick_drift() {
+  Impl& s = *m_impl;
+  if (s.resolved == Backend::cuda) {
+    if (!s.drifted) detail::cuda_dem_kick_drift(*s.cuda, s.options.dt);
+    s.drifted = true;
+    return;
+  }
+  detail::host::dem_kick_drift(s.host, s.options.dt, s.threads);
+}
+
+template <class Real>
+void Simulation<Real>::finish_step(std::optional<Frame> frame) {
+  Impl& s = *m_impl;
+  s.frame = frame;
+  try {
+    if (s.resolved == Backend::cuda) {
+      s.forces(detail::DemThen::kick);  // kick: in body_terms
+      s.drifted = false;
+    } else {
+      s.forces();
+      detail::host::dem_kick(s.host, s.options.dt, s.threads);
+    }
+  } catch (const InputError& e) {
+    throw InputError(std::string(e.what()) + " (at step " + std::to_string(s.steps + 1) + ")");
+  }
+  ++s.steps;
+}
+
+template <class Real>
+void Simulation<Real>::read_rows(const std::vector<std::uint32_t>& rows, std::vector<DemRow>& out) {
+  Impl& s = *m_impl;
+  if (s.resolved == Backend::cuda) return detail::cuda_dem_read_rows(*s.cuda, rows, out);
+  const detail::host::HostDem& h = s.host;
+  out.resize(rows.size());
+  for (std::size_t j = 0; j < rows.size(); ++j) {
+    const std::size_t i = rows[j];
+    if (i >= h.size()) throw UsageError("simulate: row " + std::to_string(i) + " is not a row of the rank");
+    out[j] = DemRow{h.position[i],    h.velocity[i], h.omega[i], h.momentum[i],
+                    h.orientation[i], h.force[i],    h.torque[i]};
+  }
+}
+
+template <class Real>
+void Simulation<Real>::write_rows(const std::vector<std::uint32_t>& rows, const std::vector<DemRow>& in) {
+  Impl& s = *m_impl;
+  if (in.size() != rows.size())
+    throw UsageError("simulate: the rows' records differ in number from the rows");
+  if (s.resolved == Backend::cuda) return detail::cuda_dem_write_rows(*s.cuda, rows, in);
+  detail::host::HostDem& h = s.host;
+  for (std::size_t j = 0; j < rows.size(); ++j) {
+    const std::size_t i = rows[j];
+    if (i >= h.size()) throw UsageError("simulate: row " + std::to_string(i) + " is not a row of the rank");
+    h.position[i] = in[j].position;
+    h.velocity[i] = in[j].velocity;
+    h.omega[i] = in[j].omega;
+    h.momentum[i] = in[j].momentum;
+    h.orientation[i] = in[j].orientation;
+    h.force[i] = in[j].force;
+    h.torque[i] = in[j].torque;
+  }
+}
+
+template <class Real>
+ResidentExtent Simulation<Real>::extent() {
+  Impl& s = *m_impl;
+  ResidentExtent e;
+  if (s.resolved == Backend::cuda) {
+    e.bounds = s.engine.device_bounds(detail::cuda_dem_bodies(*s.cuda));
+    e.displacement = detail::cuda_dem_displacement(*s.cuda);
+    return e;
+  }
+  const detail::host::HostDem& h = s.host;
+  e.bounds = compute_bounds(BodiesView{h.position, h.radius, s.ids, {}});
+  double moved_sq = 0;
+  for (std::size_t i = 0; i < h.size(); ++i) {
+    const Vec3<double> d = h.position[i] - s.marked[i];
+    moved_sq = std::max(moved_sq, dot(d, d));
+  }
+  e.displacement = std::sqrt(moved_sq);
+  return e;
+}
+
+template <class Real>
+DemState Simulation<Real>::state() {
+  Impl& s = *m_impl;
+  DemState out;
+  out.history = s.engine.history();
+  if (s.resolved == Backend::cuda) {
+    detail::cuda_dem_get_state(*s.cuda, s.contact_count, out);
+  } else {
+    const detail::host::HostDem& h = s.host;
+    std::vector<std::uint32_t> all(h.size());
+    for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<std::uint32_t>(i);
+    read_rows(all, out.rows);
+    out.wall_xi = h.wall_xi;
+    out.wall_energy = h.wall_energy;
+    out.xi = h.xi[h.current];
+    out.normal = h.normal[h.current];
+    out.contact_energy = h.contact_energy;
+  }
+  if (out.xi.size() != out.history.size())
+    throw Error("simulate: the springs differ in number from the contact history: internal error");
+  return out;
+}
+
+template <class Real>
+void Simulation<Real>::set_rows(const DemBodies& bodies, std::vector<std::int64_t> ids,
+                                const DemState& state) {
+  Impl& s = *m_impl;
+  const std::size_t n = bodies.size();
+  if (ids.size() != n || state.rows.size() != n)
+    throw UsageError("simulate: the rows' ids or state differ in number from the bodies");
+  s.ids = std::move(ids);
+  s.start = bodies;
+  DemBodies& st = s.start;
+  const bool shapes = bodies.has_ellipsoids();
+  if (st.velocity.empty()) st.velocity.assign(n, {0, 0, 0});
+  if (st.angular_velocity.empty()) st.angular_velocity.assign(n, {0, 0, 0});
+  if (!shapes) {
+    st.shape.clear();
+    st.semi_axes.clear();
+    st.orientation.clear();
+  }
+  const std::vector<dem::BodyProps> props = props_of(st, s.options.material.density);
+  s.contact_count = state.xi.size();
+  s.contacts = Contacts<Real>{};
+  s.contacts_downloaded = false;
+  s.engine.set_history(state.history);
+  s.engine.rebuild_candidates();  // other rows: the next detection builds its candidates
+  if (s.resolved == Backend::cuda) {
+    s.cuda = detail::make_cuda_dem(s.options.engine.device, st, props, s.options.walls);
+    detail::cuda_dem_set_ids(*s.cuda, s.ids);
+    if (s.options.stage_times) detail::cuda_dem_time_enable(*s.cuda);
+    detail::cuda_dem_set_state(*s.cuda, state);
+    s.drifted = false;
+    return;
+  }
+  const std::size_t walls = s.options.walls.size();
+  if (state.wall_xi.size() != n * walls || state.normal.size() != state.xi.size())
+    throw UsageError("simulate: a rank's state differs in size from its rows");
+  detail::host::HostDem& h = s.host;
+  h.position.resize(n);
+  h.velocity.resize(n);
+  h.omega.resize(n);
+  h.momentum.resize(n);
+  h.orientation.resize(n);
+  h.force.resize(n);
+  h.torque.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    h.position[i] = state.rows[i].position;
+    h.velocity[i] = state.rows[i].velocity;
+    h.omega[i] = state.rows[i].omega;
+    h.momentum[i] = state.rows[i].momentum;
+    h.orientation[i] = state.rows[i].orientation;
+    h.force[i] = state.rows[i].force;
+    h.torque[i] = state.rows[i].torque;
+  }
+  h.radius = st.radius;
+  h.props = props;
+  h.shape = st.shape;
+  h.semi_axes = st.semi_axes;
+  h.wall_xi = state.wall_xi;
+  h.wall_energy = state.wall_energy;
+  if (h.wall_energy.size() != n) h.wall_energy.assign(n, 0);
+  h.xi[h.current] = state.xi;
+  h.normal[h.current] = state.normal;
+  h.contact_energy = state.contact_energy;
+  s.marked = h.position;
+}
+
+template <class Real>
+void Simulation<Real>::mark_rows() {
+  Impl& s = *m_impl;
+  if (s.resolved == Backend::cuda) return detail::cuda_dem_mark(*s.cuda);
+  s.marked = s.host.position;
+}
+
+template <class Real>
+const std::vector<std::int64_t>& Simulation<Real>::ids() const {
+  return m_impl->ids;
 }
 
 template class Simulation<float>;

@@ -85,6 +85,28 @@ struct DemEnergies {
   double total() const { return kinetic + gravity + elastic; }
 };
 
+// A body's state as a rank of a run over several ranks sends it to the ranks that hold the body as
+// a ghost (src/simulate/resident_dem.hpp): what a step and a contact read of it, its force and
+// torque (the last step's: the synchronised velocities of its contacts read them) included.
+struct DemRow {
+  Vec3<double> position, velocity, omega, momentum;  // a sphere's momentum: unread
+  Quat<double> orientation;                          // a sphere's: unread
+  Vec3<double> force, torque;
+};
+
+// What a Simulation's rows carry from a step to the next (host): each row's state, wall springs
+// (rows × walls, row-major) and wall energy; the last step's contacts'
+// identity (history: pair keys by the rows' ids, ages) with each pair's spring, normal and energy,
+// in the history's order.
+struct DemState {
+  std::vector<DemRow> rows;
+  std::vector<Vec3<double>> wall_xi;
+  std::vector<double> wall_energy;
+  ContactHistory history;
+  std::vector<Vec3<double>> xi, normal;
+  std::vector<double> contact_energy;
+};
+
 template <class Real>
 class Simulation {
  public:
@@ -107,6 +129,28 @@ class Simulation {
   DemStageTimes stage_times() const;  // DemOptions::stage_times; empty without it
   Backend backend() const;
   double alpha() const;  // the damping of the restitution
+
+  // ---- one rank's rows of a run over several ranks (src/simulate/resident_dem.hpp) ----------------
+  // The rows' global ids (strictly ascending: the contact history's keys; the contacts' ids stay row
+  // indices) and the frame of every detection (the run's, the same on every rank), from the start.
+  Simulation(const DemBodies& bodies, const DemOptions& options, std::vector<std::int64_t> ids,
+             std::optional<Frame> frame);
+  // A step in two halves with the ghosts' exchange between: kick_drift of every row; then the
+  // detection in `frame`, the forces and the kick (the same bits as run(1)).
+  void kick_drift();
+  void finish_step(std::optional<Frame> frame);
+  // The state (DemRow) of rows `rows` out (CUDA: gathered and downloaded) and in (uploaded, scattered).
+  void read_rows(const std::vector<std::uint32_t>& rows, std::vector<DemRow>& out);
+  void write_rows(const std::vector<std::uint32_t>& rows, const std::vector<DemRow>& in);
+  // The rows' bounds (validated as compute_bounds, a bad row named by its id) and the largest
+  // displacement of a row since the rows were set.
+  ResidentExtent extent();
+  // Everything the rows carry (CUDA: downloaded); set_rows replaces the rows by `bodies` with their
+  // ids and what they carry (the same rows' count in every array of `state`).
+  DemState state();
+  void mark_rows();  // the displacement counts from here (set_rows of the same rows, nothing moved)
+  void set_rows(const DemBodies& bodies, std::vector<std::int64_t> ids, const DemState& state);
+  const std::vector<std::int64_t>& ids() const;
 
   struct Impl;
 

@@ -54,6 +54,17 @@ void cuda_dem_time_mark(CudaDem& dem, DemStage stage);
 void cuda_dem_time_collect(CudaDem& dem, double* seconds);
 // The current state into `out` (positions, velocities, spins, orientations; the rest kept).
 void cuda_dem_download(CudaDem& dem, DemBodies& out);
+// One rank's rows of a run over several ranks (dem.hpp: Simulation's rank interface; cuda/dem_rows.cuh):
+// the rows' global ids (the engine's history keys), the state (DemRow) of some rows out and in, the
+// largest displacement since the mark (set at the rows' upload and by cuda_dem_mark), and everything
+// the rows carry (DemState without its history: the engine's) out and in, `contacts` the last step's.
+void cuda_dem_set_ids(CudaDem& dem, const std::vector<std::int64_t>& ids);
+void cuda_dem_read_rows(CudaDem& dem, const std::vector<std::uint32_t>& rows, std::vector<DemRow>& out);
+void cuda_dem_write_rows(CudaDem& dem, const std::vector<std::uint32_t>& rows, const std::vector<DemRow>& in);
+void cuda_dem_mark(CudaDem& dem);
+double cuda_dem_displacement(CudaDem& dem);
+void cuda_dem_get_state(CudaDem& dem, std::size_t contacts, DemState& out);
+void cuda_dem_set_state(CudaDem& dem, const DemState& in);
 
 }  // namespace cg::detail
 

@@ -244,6 +244,21 @@ void Engine<Real>::reset_history() {
   m_impl->history.clear();
   m_impl->history_on_device = false;
 }
+template <class Real>
+const ContactHistory& Engine<Real>::history() {
+  if (m_impl->resolved == Backend::cuda) m_impl->history_to_host();
+  return m_impl->history;
+}
+template <class Real>
+void Engine<Real>::set_history(ContactHistory history) {
+  if (history.age.size() != history.keys.size())
+    throw UsageError("set_history: keys and ages differ in length");
+  for (std::size_t j = 1; j < history.keys.size(); ++j)
+    if (!(history.keys[j - 1] < history.keys[j]))
+      throw UsageError("set_history: keys are not strictly ascending at row " + std::to_string(j));
+  m_impl->history = std::move(history);
+  m_impl->history_on_device = false;
+}
 
 namespace {
 // The bounds of the bodies inflated by `d` (EngineOptions::skin): boxes, largest radius and the

@@ -238,6 +238,11 @@ class Engine {
 
   // EngineOptions::history: the next call's pairs are all new (a new simulation on this engine).
   void reset_history();
+  // EngineOptions::history: the previous call's pair keys and ages (CUDA: downloaded), and the
+  // history the next call's rows are matched against (keys strictly ascending, ages >= 1): a caller
+  // that moves bodies between engines carries their pairs' identity with them (src/simulate).
+  const ContactHistory& history();
+  void set_history(ContactHistory history);
 
   // The skin of the next build (>= 0, finite; UsageError otherwise); a kept list is checked with the
   // skin it was built with until then. Turns EngineOptions::skin_auto off: the caller chooses.

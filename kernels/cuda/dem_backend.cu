@@ -8,6 +8,7 @@
 #include "cuda/dem_energy.cuh"
 #include "cuda/dem_forces.cuh"
 #include "cuda/dem_integrate.cuh"
+#include "cuda/dem_rows.cuh"
 #include "cuda/dem_state.cuh"
 #include "cuda/dem_sums.cuh"
 #include "cuda/tuning.hpp"
@@ -78,6 +79,7 @@ std::unique_ptr<CudaDem> make_cuda_dem(int device, const DemBodies& b,
     CG_CUDA_CHECK(cudaMemset(d->wall_xi.data(), 0, n * walls.size() * sizeof(Vec3<double>)));
   d->wall_energy.reserve(std::max<std::size_t>(n, 1), false);
   CG_CUDA_CHECK(cudaMemset(d->wall_energy.data(), 0, std::max<std::size_t>(n, 1) * sizeof(double)));
+  dem_mark_rows(*d);
   return d;
 }
 
@@ -91,6 +93,7 @@ DeviceBodiesView cuda_dem_bodies(CudaDem& d) {
   v.position = reinterpret_cast<const double*>(d.position.data());
   v.radius = d.radius.data();
   v.count = d.count;
+  if (d.has_ids) v.id = d.ids.data();
   if (d.shapes) {
     v.shape = d.shape.data();
     v.semi_axes = reinterpret_cast<const double*>(d.semi_axes.data());
@@ -137,6 +140,82 @@ void cuda_dem_download(CudaDem& d, DemBodies& out) {
   download(out.velocity, d.velocity, d.count);
   download(out.angular_velocity, d.omega, d.count);
   if (d.shapes) download(out.orientation, d.orientation, d.count);
+}
+
+void cuda_dem_set_ids(CudaDem& d, const std::vector<std::int64_t>& ids) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  if (ids.size() != d.count) throw UsageError("simulate: the rows' ids differ in number from the rows");
+  upload(d.ids, ids);
+  d.has_ids = true;
+}
+
+namespace {
+void check_rows(const CudaDem& d, const std::vector<std::uint32_t>& rows) {
+  for (const std::uint32_t r : rows)
+    if (r >= d.count) throw UsageError("simulate: row " + std::to_string(r) + " is not a row of the rank");
+}
+}  // namespace
+
+void cuda_dem_read_rows(CudaDem& d, const std::vector<std::uint32_t>& rows, std::vector<DemRow>& out) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  check_rows(d, rows);
+  dem_gather_rows(d, rows, out);
+}
+
+void cuda_dem_write_rows(CudaDem& d, const std::vector<std::uint32_t>& rows, const std::vector<DemRow>& in) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  check_rows(d, rows);
+  if (in.size() != rows.size())
+    throw UsageError("simulate: the rows' records differ in number from the rows");
+  dem_scatter_rows(d, rows, in);
+}
+
+void cuda_dem_mark(CudaDem& d) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  dem_mark_rows(d);
+}
+
+double cuda_dem_displacement(CudaDem& d) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  return dem_rows_moved(d);
+}
+
+void cuda_dem_get_state(CudaDem& d, std::size_t contacts, DemState& out) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  CG_CUDA_CHECK(cudaDeviceSynchronize());
+  const std::size_t n = d.count, w = n * std::size_t(d.wall_count);
+  std::vector<std::uint32_t> all(n);
+  for (std::size_t i = 0; i < n; ++i) all[i] = static_cast<std::uint32_t>(i);
+  dem_gather_rows(d, all, out.rows);
+  download(out.wall_xi, d.wall_xi, w);
+  download(out.wall_energy, d.wall_energy, n);
+  download(out.xi, d.xi[d.current], contacts);
+  if (d.normals_f) {
+    std::vector<Vec3<float>> f;
+    download(f, d.normal_f[d.current], contacts);
+    out.normal.resize(contacts);
+    for (std::size_t k = 0; k < contacts; ++k) out.normal[k] = vec_cast<double>(f[k]);
+  } else {
+    download(out.normal, d.normal[d.current], contacts);
+  }
+  download(out.contact_energy, d.contact_energy, contacts);
+}
+
+void cuda_dem_set_state(CudaDem& d, const DemState& in) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  const std::size_t n = d.count, k = in.xi.size();
+  if (in.rows.size() != n || in.wall_xi.size() != n * std::size_t(d.wall_count) || in.normal.size() != k)
+    throw UsageError("simulate: a rank's state differs in size from its rows");
+  std::vector<std::uint32_t> all(n);
+  for (std::size_t i = 0; i < n; ++i) all[i] = static_cast<std::uint32_t>(i);
+  dem_scatter_rows(d, all, in.rows);
+  if (!in.wall_xi.empty()) upload(d.wall_xi, in.wall_xi);
+  upload(d.xi[d.current], in.xi);
+  upload(d.normal[d.current], in.normal);
+  std::vector<Vec3<float>> f(k);
+  for (std::size_t j = 0; j < k; ++j) f[j] = vec_cast<float>(in.normal[j]);
+  upload(d.normal_f[d.current], f);
+  dem_mark_rows(d);
 }
 
 }  // namespace cg::detail

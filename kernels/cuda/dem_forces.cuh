@@ -152,6 +152,7 @@ void dem_contact_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem
     CG_CUDA_CHECK_LAUNCH("dem_contact");
   }
   d.current = next;
+  d.normals_f = normals_as_detected;
 }
 
 }  // namespace cg::detail

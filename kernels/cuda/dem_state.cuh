@@ -109,6 +109,15 @@ class CudaDem {
   DemBuffer<Vec3<double>> wall_xi;
   DemBuffer<double> wall_energy, partials;
   ThrustAllocator thrust;
+  // one rank's rows of a run over several ranks (dem_rows.cuh): the rows' global ids (null: none
+  // set), the rows exchanged and their records, the positions at the mark; normals_f: the last
+  // contact stage kept its normals in normal_f (else in normal)
+  DemBuffer<std::int64_t> ids;
+  bool has_ids = false;
+  DemBuffer<std::uint32_t> row_index;
+  DemBuffer<DemRow> row_records;
+  DemBuffer<Vec3<double>> mark;
+  bool normals_f = false;
 
   dem::BodyArrays arrays() const {
     return {position.data(),  velocity.data(),    omega.data(),

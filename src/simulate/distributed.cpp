@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <numeric>
 #include <optional>
@@ -22,39 +23,18 @@
 #include "run/progress.hpp"
 #include "run/stop.hpp"
 #include "session.hpp"
+#include "simulate/rank_records.hpp"
+#include "simulate/resident_dem.hpp"
 #include "simulate/run_output.hpp"
 #include "simulate/simulate_plot.hpp"
 
 namespace cg {
 namespace {
 
-// Records between ranks, as bytes (collectives.hpp: alltoallv_bytes), grouped by destination rank.
-template <class T>
-std::vector<T> exchange_records(const Session& session, const std::vector<T>& send,
-                                const std::vector<std::uint64_t>& counts,
-                                std::vector<std::uint64_t>* received = nullptr) {
-  static_assert(std::is_trivially_copyable_v<T>);
-  std::vector<std::byte> bytes(send.size() * sizeof(T));
-  if (!send.empty()) std::memcpy(bytes.data(), send.data(), bytes.size());
-  std::vector<std::uint64_t> sb(counts), rb;
-  for (std::uint64_t& c : sb) c *= sizeof(T);
-  const std::vector<std::byte> got = alltoallv_bytes(session, bytes, sb, rb);
-  std::vector<T> out(got.size() / sizeof(T));
-  if (!out.empty()) std::memcpy(out.data(), got.data(), got.size());
-  if (received) {
-    received->resize(rb.size());
-    for (std::size_t r = 0; r < rb.size(); ++r) (*received)[r] = rb[r] / sizeof(T);
-  }
-  return out;
-}
-
-// Every rank's records on rank 0, in rank order (the others: none).
-template <class T>
-std::vector<T> gather_records(const Session& session, const std::vector<T>& mine) {
-  std::vector<std::uint64_t> counts(static_cast<std::size_t>(session.size()), 0);
-  counts[0] = mine.size();
-  return exchange_records(session, mine, counts);
-}
+using sim::BodyOut;
+using sim::ContactOut;
+using sim::EnergyOut;
+using sim::exchange_records;
 
 // A halo row's state, as the ghost's holder needs it for contact_terms.
 struct GhostRecord {
@@ -81,25 +61,6 @@ struct HistoryRow {
 // The per-body state that migrates with a body (StepBodies::state), walls' springs after it.
 struct MotionRecord {
   Vec3<double> velocity, omega, momentum, force, torque;
-};
-
-struct BodyOut {
-  std::int64_t id;
-  Vec3<double> position, velocity, omega;
-  Quat<double> orientation;
-};
-
-struct EnergyOut {
-  std::int64_t id;
-  double kinetic, gravity, wall;
-};
-
-template <class Real>
-struct ContactOut {
-  std::int64_t a, b, age;
-  Vec3<Real> pa, pb, n;
-  Real distance;
-  double energy;
 };
 
 template <class Real>
@@ -212,19 +173,7 @@ class DistributedDem {
     for (std::size_t k = 0; k < mine.size(); ++k)
       mine[k] = {b.id[k], b.position[k], m_velocity[k], m_omega[k],
                  m_shapes ? b.shapes.orientation[k] : Quat<double>{1, 0, 0, 0}};
-    std::vector<BodyOut> all = gather_records(m_session, mine);
-    if (m_session.rank() != 0) return {};
-    DemBodies out = start;
-    if (out.velocity.empty()) out.velocity.assign(out.size(), {0, 0, 0});
-    if (out.angular_velocity.empty()) out.angular_velocity.assign(out.size(), {0, 0, 0});
-    for (const BodyOut& r : all) {
-      const std::size_t i = static_cast<std::size_t>(r.id);
-      out.position[i] = r.position;
-      out.velocity[i] = r.velocity;
-      out.angular_velocity[i] = r.omega;
-      if (!out.orientation.empty()) out.orientation[i] = r.orientation;
-    }
-    return out;
+    return sim::bodies_on_root(m_session, mine, start);
   }
 
   // Collective: the energies on rank 0, summed in the one-rank order (ids; contacts by pair).
@@ -235,57 +184,17 @@ class DistributedDem {
       const dem::BodyEnergy e = dem::body_energy(k, b, m_options.gravity);
       mine[k] = {m_loop->bodies().id[k], e.kinetic, e.gravity, m_walls > 0 ? m_wall_energy[k] : 0.0};
     }
-    std::vector<ContactOut<Real>> rows = contact_rows();
-    std::vector<EnergyOut> bodies = gather_records(m_session, mine);
-    std::vector<ContactOut<Real>> contacts = gather_records(m_session, rows);
-    DemEnergies e;
-    if (m_session.rank() != 0) return e;
-    std::sort(bodies.begin(), bodies.end(),
-              [](const EnergyOut& x, const EnergyOut& y) { return x.id < y.id; });
-    std::sort(contacts.begin(), contacts.end(), [](const ContactOut<Real>& x, const ContactOut<Real>& y) {
-      return x.a < y.a || (x.a == y.a && x.b < y.b);
-    });
-    auto fixed_sum = [](std::size_t n, auto&& value) { return dem::tree_sum(n, value); };
-    e.kinetic = fixed_sum(bodies.size(), [&](std::size_t i) { return bodies[i].kinetic; });
-    e.gravity = fixed_sum(bodies.size(), [&](std::size_t i) { return bodies[i].gravity; });
-    e.elastic = fixed_sum(contacts.size(), [&](std::size_t k) { return contacts[k].energy; }) +
-                (m_walls > 0 ? fixed_sum(bodies.size(), [&](std::size_t i) { return bodies[i].wall; }) : 0.0);
-    return e;
+    return sim::energies_on_root(m_session, mine, contact_rows(), m_walls > 0);
   }
 
-  // Collective: the last step's contacts on rank 0, sorted, with age (previous_row: the pair's row in
-  // the step before, found among `previous`, the keys of that step gathered by the caller).
+  // Collective: the last step's contacts on rank 0, sorted, with age (sim::contacts_on_root).
   Contacts<Real> gather_contacts(const std::vector<PairKey>& previous) {
-    std::vector<ContactOut<Real>> all = gather_records(m_session, contact_rows());
-    Contacts<Real> c;
-    if (m_session.rank() != 0) return c;
-    std::sort(all.begin(), all.end(), [](const ContactOut<Real>& x, const ContactOut<Real>& y) {
-      return x.a < y.a || (x.a == y.a && x.b < y.b);
-    });
-    c.resize(all.size(), FieldSet{false, true});
-    for (std::size_t k = 0; k < all.size(); ++k) {
-      const ContactOut<Real>& r = all[k];
-      c.id_a[k] = r.a;
-      c.id_b[k] = r.b;
-      c.position_on_a[k] = r.pa;
-      c.position_on_b[k] = r.pb;
-      c.normal_on_b[k] = r.n;
-      c.distance[k] = r.distance;
-      c.age[k] = r.age;
-      const PairKey key{r.a, r.b};
-      const auto at = std::lower_bound(previous.begin(), previous.end(), key);
-      c.previous_row[k] = at != previous.end() && *at == key ? std::int64_t(at - previous.begin()) : -1;
-    }
-    c.history = true;
-    return c;
+    return sim::contacts_on_root(m_session, contact_rows(), previous);
   }
 
   // Collective: the keys of the last step's contacts on rank 0, sorted (gather_contacts' `previous`).
   std::vector<PairKey> gather_keys() {
-    std::vector<PairKey> keys(m_history.keys.begin(), m_history.keys.end());
-    std::vector<PairKey> all = gather_records(m_session, keys);
-    std::sort(all.begin(), all.end());
-    return all;
+    return sim::keys_on_root(m_session, std::vector<PairKey>(m_history.keys.begin(), m_history.keys.end()));
   }
 
  private:
@@ -672,7 +581,8 @@ class DistributedDem {
   std::vector<std::uint32_t> m_a_begin, m_b_begin, m_by_b;
 };
 
-template <class Real>
+// Sim: ResidentDem<Real> (resident_dem.hpp) or DistributedDem<Real>.
+template <class Real, class Sim>
 int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& scene, const DemBodies& bodies,
                    const DemOptions& options, const TimeStepLimits& limits) {
   using clock_type = std::chrono::steady_clock;
@@ -688,7 +598,12 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
   });
   try {
     const int threads = options.engine.threads > 0 ? options.engine.threads : omp_get_max_threads();
-    DistributedDem<Real> sim(session, bodies, options, threads);
+    Sim sim = [&] {
+      if constexpr (std::is_same_v<Sim, DistributedDem<Real>>)
+        return Sim(session, bodies, options, threads);
+      else
+        return Sim(session, bodies, options);
+    }();
     const std::size_t spheres = scene.sphere_count();
     RunInfo info = simulate_run_info(cmd, bodies.size(), precision_of<Real>(), sim.backend(), session.size());
     std::vector<PairKey> previous;  // the keys of the step before an output step
@@ -758,9 +673,11 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
         fmt::print(
             "  backend {}, precision {}, dt auto would be {:.4g} s, skin {:.4g}, rows rebuilt {}, bodies "
             "that "
-            "changed rank {}, slab rebalances {}, owned per rank {}-{}\n",
+            "changed rank {}, slab rebalances {}, owned per rank {}-{}, the ranks' bodies {}\n",
             to_string(sim.backend()), to_string(precision_of<Real>()), limits.automatic, sim.skin(),
-            sim.rebuilds(), loop.migrated, loop.rebalances, loop.owned_min, loop.owned_max);
+            sim.rebuilds(), loop.migrated, loop.rebalances, loop.owned_min, loop.owned_max,
+            std::is_same_v<Sim, DistributedDem<Real>> ? "on the host (CONTACTGRID_SIMULATE_RANKS=host)"
+                                                      : "resident");
         fmt::print("  -> {}/ (frame_*.h5, {}run.xdmf, log.csv)\n", cmd.output,
                    cmd.write_contacts ? "contacts_*.h5, " : "");
       }
@@ -781,9 +698,17 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
 int run_simulate_distributed(const SimulateCommand& cmd, Session& session, const Scene& scene,
                              const DemBodies& bodies, const DemOptions& options,
                              const TimeStepLimits& limits) {
+  // CONTACTGRID_SIMULATE_RANKS=host: each rank's forces on the host (DistributedDem); else resident
+  const char* knob = std::getenv("CONTACTGRID_SIMULATE_RANKS");
+  const std::string path = knob ? knob : "resident";
+  if (path != "resident" && path != "host")
+    throw UsageError("CONTACTGRID_SIMULATE_RANKS must be resident or host (got \"" + path + "\")");
+  const bool host = path == "host";
   if (cmd.precision == Precision::fp32)
-    return distributed_as<float>(cmd, session, scene, bodies, options, limits);
-  return distributed_as<double>(cmd, session, scene, bodies, options, limits);
+    return host ? distributed_as<float, DistributedDem<float>>(cmd, session, scene, bodies, options, limits)
+                : distributed_as<float, ResidentDem<float>>(cmd, session, scene, bodies, options, limits);
+  return host ? distributed_as<double, DistributedDem<double>>(cmd, session, scene, bodies, options, limits)
+              : distributed_as<double, ResidentDem<double>>(cmd, session, scene, bodies, options, limits);
 }
 
 }  // namespace cg

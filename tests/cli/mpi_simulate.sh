@@ -3,7 +3,8 @@
 # the slabs' cuts onto the floor of an open box, then sliding along it against a side wall in lasting
 # contact: walls, friction, the tangential springs carried by the bodies that change rank) at 1-4
 # ranks writes the same frames, contacts and energies as -np 1, bit for bit (every dataset's bytes),
-# and -np 1 writes the frames of the run without mpirun. Dropping the springs of the bodies that
+# with each rank's bodies resident (the default) and on the host (CONTACTGRID_SIMULATE_RANKS=host), and
+# -np 1 writes the frames of the run without mpirun. Dropping the springs of the bodies that
 # change rank makes the 3-rank frames differ (checked by hand when the test was written).
 # Usage: mpi_simulate.sh CONTACTGRID MPIEXEC WORKDIR
 set -euo pipefail
@@ -22,31 +23,8 @@ run() {  # SCENE NP TAG [OPTION...]; more than one rank: some bodies changed ran
   moved=$(grep -oE 'bodies that changed rank [0-9]+' "$W/$3.out" | grep -oE '[0-9]+$')
   if [ "$2" -gt 1 ] && ! [ "${moved:-0}" -gt 0 ]; then echo "$3: no body changed rank"; exit 1; fi
 }
-same() {  # DIR1 DIR2 [frames only]
-  "$PY" - "$1" "$2" "${3:-all}" <<'PYEOF'
-import sys, glob, os, h5py, numpy as np
-a, b, what = sys.argv[1:4]
-def datasets(path):
-    out = {}
-    with h5py.File(path, "r") as f:
-        f.visititems(lambda n, o: out.__setitem__(n, o[()].tobytes()) if isinstance(o, h5py.Dataset) else None)
-    return out
-pattern = "frame_*.h5" if what == "frames" else "*.h5"
-files = sorted(os.path.basename(p) for p in glob.glob(os.path.join(a, pattern)))
-assert files, f"no files in {a}"
-assert files == sorted(os.path.basename(p) for p in glob.glob(os.path.join(b, pattern))), "file lists differ"
-for name in files:
-    da, db = datasets(os.path.join(a, name)), datasets(os.path.join(b, name))
-    assert da.keys() == db.keys(), f"{name}: datasets differ: {sorted(da)} vs {sorted(db)}"
-    for k in da:
-        assert da[k] == db[k], f"{name}/{k}: {a} and {b} differ"
-if what == "all":  # the energies and contact counts of the log (not the times)
-    la = np.genfromtxt(os.path.join(a, "log.csv"), delimiter=",", names=True, comments="#")
-    lb = np.genfromtxt(os.path.join(b, "log.csv"), delimiter=",", names=True, comments="#")
-    for col in ("step", "kinetic", "potential", "contacts"):
-        assert la[col].tobytes() == lb[col].tobytes(), f"log.csv {col}: {a} and {b} differ"
-print(f"same: {a} {b} ({len(files)} files)")
-PYEOF
+same() {  # DIR1 DIR2 [frames only]: every dataset's bytes, and the log's energies and contacts
+  "$PY" "$(dirname "$0")/same_run.py" "$@"
 }
 for scene in pour pell; do
   run "$scene" 1 "$scene.np1"
@@ -75,6 +53,9 @@ done
 run pour 1 pour.fp32.np1 --precision fp32
 run pour 3 pour.fp32.np3 --precision fp32
 same "$W/pour.fp32.np1" "$W/pour.fp32.np3"
+# each rank's forces on the host (CONTACTGRID_SIMULATE_RANKS=host): the same files
+CONTACTGRID_SIMULATE_RANKS=host run pour 2 pour.host.np2
+same "$W/pour.np1" "$W/pour.host.np2"
 # without mpirun: the one-rank engine path writes the same frames
 "$CG" simulate "$W/pour.h5" -o "$W/pour.plain" "${opts[@]}" -q
 same "$W/pour.np1" "$W/pour.plain" frames

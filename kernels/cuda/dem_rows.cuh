@@ -1,0 +1,100 @@
+#pragma once
+// One rank's rows of a granular run over several ranks on the device (kernels/dem_backend.hpp): the
+// state of chosen rows gathered into DemRow records (the ghosts a rank sends) and scattered
+// from them (the ghosts it receives), one thread per record; the largest squared displacement of a
+// row since the mark, one value per row reduced by Thrust (max: exact, any order).
+#include <thrust/execution_policy.h>
+#include <thrust/functional.h>
+#include <thrust/iterator/counting_iterator.h>
+#include <thrust/transform_reduce.h>
+
+#include "cuda/common.cuh"
+#include "cuda/dem_state.cuh"
+
+namespace cg::cuda {
+
+// Records j of rows[j] (rows[j] < b.count, checked on the host): a sphere's momentum and orientation
+// as its state holds them (unread).
+__global__ void dem_gather_rows_kernel(dem::BodyArrays b, const std::uint32_t* rows, std::size_t n,
+                                       DemRow* out) {
+  const std::size_t j = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
+  if (j >= n) return;
+  const std::size_t i = rows[j];
+  out[j] = DemRow{b.position[i],    b.velocity[i], b.omega[i], b.momentum[i],
+                  b.orientation[i], b.force[i],    b.torque[i]};
+}
+
+__global__ void dem_scatter_rows_kernel(dem::BodyArrays b, const std::uint32_t* rows, std::size_t n,
+                                        const DemRow* in) {
+  const std::size_t j = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
+  if (j >= n) return;
+  const std::size_t i = rows[j];
+  const DemRow r = in[j];
+  b.position[i] = r.position;
+  b.velocity[i] = r.velocity;
+  b.omega[i] = r.omega;
+  b.momentum[i] = r.momentum;
+  b.orientation[i] = r.orientation;
+  b.force[i] = r.force;
+  b.torque[i] = r.torque;
+}
+
+// |x_i − mark_i|² of row i.
+struct DemMovedSq {
+  const Vec3<double>* position;
+  const Vec3<double>* mark;
+  __device__ double operator()(std::size_t i) const {
+    const Vec3<double> d = position[i] - mark[i];
+    return dot(d, d);
+  }
+};
+
+}  // namespace cg::cuda
+
+namespace cg::detail {
+
+inline void dem_gather_rows(CudaDem& d, const std::vector<std::uint32_t>& rows, std::vector<DemRow>& out) {
+  const std::size_t n = rows.size();
+  out.resize(n);
+  if (n == 0) return;
+  d.row_index.reserve(n, true);
+  d.row_records.reserve(n, true);
+  CG_CUDA_CHECK(
+      cudaMemcpy(d.row_index.data(), rows.data(), n * sizeof(std::uint32_t), cudaMemcpyHostToDevice));
+  cuda::dem_gather_rows_kernel<<<cuda::blocks_for(n), cuda::kBlock>>>(d.arrays(), d.row_index.data(), n,
+                                                                      d.row_records.data());
+  CG_CUDA_CHECK_LAUNCH("dem_gather_rows");
+  CG_CUDA_CHECK(cudaMemcpy(out.data(), d.row_records.data(), n * sizeof(DemRow), cudaMemcpyDeviceToHost));
+}
+
+inline void dem_scatter_rows(CudaDem& d, const std::vector<std::uint32_t>& rows,
+                             const std::vector<DemRow>& in) {
+  const std::size_t n = rows.size();
+  if (n == 0) return;
+  d.row_index.reserve(n, true);
+  d.row_records.reserve(n, true);
+  CG_CUDA_CHECK(
+      cudaMemcpy(d.row_index.data(), rows.data(), n * sizeof(std::uint32_t), cudaMemcpyHostToDevice));
+  CG_CUDA_CHECK(cudaMemcpy(d.row_records.data(), in.data(), n * sizeof(DemRow), cudaMemcpyHostToDevice));
+  cuda::dem_scatter_rows_kernel<<<cuda::blocks_for(n), cuda::kBlock>>>(d.arrays(), d.row_index.data(), n,
+                                                                       d.row_records.data());
+  CG_CUDA_CHECK_LAUNCH("dem_scatter_rows");
+}
+
+inline void dem_mark_rows(CudaDem& d) {
+  d.mark.reserve(std::max<std::size_t>(d.count, 1), false);
+  if (d.count > 0)
+    CG_CUDA_CHECK(cudaMemcpy(d.mark.data(), d.position.data(), d.count * sizeof(Vec3<double>),
+                             cudaMemcpyDeviceToDevice));
+}
+
+inline double dem_rows_moved(CudaDem& d) {
+  if (d.count == 0) return 0;
+  auto policy = thrust::cuda::par(d.thrust).on(cudaStreamLegacy);
+  const double sq = thrust::transform_reduce(
+      policy, thrust::counting_iterator<std::size_t>(0), thrust::counting_iterator<std::size_t>(d.count),
+      cuda::DemMovedSq{d.position.data(), d.mark.data()}, 0.0, thrust::maximum<double>());
+  return std::sqrt(sq);
+}
+
+}  // namespace cg::detail

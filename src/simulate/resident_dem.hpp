@@ -1,0 +1,505 @@
+#pragma once
+// contactgrid simulate under mpirun with each rank's bodies where its backend computes (the default;
+// CONTACTGRID_SIMULATE_RANKS=host: distributed.cpp's DistributedDem, whose forces run on the host).
+// Each rank holds the bodies of its slab (owned) and every body within the ghost width of it
+// (ghosts) as the rows of one Simulation (kernels/dem.hpp), in ascending id, on its own GPU with
+// --backend cuda: the detection, the forces and the integration of all of them stay there.
+//
+//   kick_drift (every row) → the ghosts' state (DemRow: with the last step's force and torque) from
+//   their owners (only the halo's rows cross the link and MPI) → bounds and the largest displacement
+//   since the layout (over the ranks: the frame, the rebuild check) → relayout? (new slabs where the
+//   counts drifted apart, the owned bodies with their state and their pairs' springs to their new
+//   owners, the new ghosts) → detect, contact terms, body terms, kick (every row)
+//
+// Why the trajectories are the same bits for any rank count: an owned body's contacts are all among
+// the held rows (the ghost width is 2 r_max + skin and the rows are laid out again before any body
+// moves skin/2), the rows are in id order (so each body's rows as A and as B, and so its sums, come
+// in the one-rank order), every held row's state is exact when the contacts are computed (owned by
+// induction; ghosts just received), and each pair's spring is exact on the ranks that own one of its
+// bodies: there it was computed every step of the pair's life, or brought by the relayout from the
+// owner of the pair's smaller id. A ghost's own sums miss its pairs beyond the halo; its state is
+// replaced by its owner's before it is read again. Each contact is counted (energies, the contact
+// files) by the owner of its smaller id.
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "agreed_stage.hpp"
+#include "collectives.hpp"
+#include "dem.hpp"
+#include "grid_plan.hpp"
+#include "resident_steps.hpp"
+#include "session.hpp"
+#include "simulate/rank_records.hpp"
+#include "slab_decomposition.hpp"
+
+namespace cg {
+
+// A body's record between ranks at a relayout: its id and everything that moves with it.
+struct ResidentBodyRecord {
+  std::int64_t id;
+  DemRow row;
+};
+
+// A pair's spring between ranks at a relayout.
+struct ResidentSpringRecord {
+  PairKey key;
+  std::int64_t age;
+  Vec3<double> xi, normal;
+};
+
+template <class Real>
+class ResidentDem {
+ public:
+  ResidentDem(const Session& session, const DemBodies& all, const DemOptions& options)
+      : m_session(session), m_all(all), m_options(options), m_walls(options.walls.size()) {
+    const std::size_t n = all.size();
+    Vec3<double> lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+    double r_max = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const Vec3<double>& p = all.position[i];
+      lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+      hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+      r_max = std::max(r_max, all.radius[i]);
+    }
+    const Vec3<double> e = hi - lo;
+    m_axis = e.x >= e.y && e.x >= e.z ? 0 : (e.y >= e.z ? 1 : 2);
+    // the layout's skin: the engine's, times CONTACTGRID_SIMULATE_HALO (>= 1, default 1: a wider halo
+    // and fewer relayouts)
+    const char* halo = std::getenv("CONTACTGRID_SIMULATE_HALO");
+    const double factor = halo ? std::atof(halo) : 1.0;
+    if (!(factor >= 1 && factor <= 1000))
+      throw UsageError("CONTACTGRID_SIMULATE_HALO must be a number in [1, 1000] (got \"" +
+                       std::string(halo ? halo : "") + "\")");
+    m_skin = options.engine.skin * factor;
+    m_width = (2 * r_max + m_skin) * (1 + 1e-9);
+    std::vector<double> sample(n);
+    for (std::size_t i = 0; i < n; ++i) sample[i] = component(all.position[i], m_axis);
+    m_slabs.emplace(SlabDecomposition::from_sample(m_axis, sample, session.size()));
+    // the held rows of the start: owned and ghosts by the same rule on every rank
+    const int me = session.rank();
+    std::vector<std::int64_t> ids;
+    std::vector<int> owner;
+    for (std::size_t i = 0; i < n; ++i) {
+      const int o = m_slabs->owner(sample[i]);
+      bool held = o == me;
+      if (!held) m_slabs->for_each_ghost_rank(sample[i], m_width, [&](int r) { held = held || r == me; });
+      if (!held) continue;
+      ids.push_back(static_cast<std::int64_t>(i));
+      owner.push_back(o);
+    }
+    DemBodies held = rows_of(ids);
+    for (std::size_t k = 0; k < ids.size(); ++k) {
+      const std::size_t i = static_cast<std::size_t>(ids[k]);
+      held.position[k] = all.position[i];
+      if (!all.velocity.empty()) held.velocity[k] = all.velocity[i];
+      if (!all.angular_velocity.empty()) held.angular_velocity[k] = all.angular_velocity[i];
+      if (!held.orientation.empty()) held.orientation[k] = all.orientation[i];
+    }
+    Bounds b;
+    agreed_stage(m_session, "simulate", [&] {
+      b = compute_bounds(BodiesView{all.position, all.radius, {}, {}});
+      m_frame = frame_of(b);
+    });
+    m_ids = ids;
+    m_owner = owner;
+    agreed_stage(m_session, "simulate", [&] {
+      m_sim.emplace(held, options, std::move(ids), m_frame);  // the forces of the start
+      halo_plan(held.position);
+    });
+  }
+
+  void step() {
+    ++m_steps;
+    agreed_stage(m_session, "simulate", [&] { m_sim->kick_drift(); });
+    exchange_ghosts();
+    ResidentExtent e;
+    agreed_stage(m_session, "simulate", [&] {
+      try {
+        e = m_sim->extent();
+      } catch (const InputError& x) {
+        throw InputError("step " + std::to_string(m_steps) + ": " + x.what());
+      }
+    });
+    const Bounds global = allgather_bounds(m_session, e.bounds);
+    const double moved = m_session.max(e.displacement);
+    agreed_stage(m_session, "simulate", [&] { m_frame = frame_of(global); });
+    if (2 * moved > m_skin) relayout();
+    agreed_stage(m_session, "simulate", [&] { m_sim->finish_step(m_frame); });
+  }
+
+  std::uint64_t steps() const { return m_steps; }
+  std::uint64_t rebuilds() const { return m_rebuilds; }
+  double cell_size() const { return m_frame.cell_size; }
+  Backend backend() const { return m_sim->backend(); }
+  double skin() const { return m_skin; }
+
+  // Collective: the counts of the final report (StepStats' rebuilds, migrated, owned per rank).
+  StepStats loop_stats() {
+    StepStats s;
+    s.rebuilds = m_rebuilds;
+    s.migrated = m_session.sum(m_migrated);
+    s.rebalances = m_rebalances;
+    const std::vector<std::uint64_t> owned = allgather_counts(m_session, m_owned_rows.size());
+    s.owned_min = owned.empty() ? 0 : *std::min_element(owned.begin(), owned.end());
+    s.owned_max = owned.empty() ? 0 : *std::max_element(owned.begin(), owned.end());
+    return s;
+  }
+
+  // Collective: the contacts of the last step over the ranks.
+  std::uint64_t contact_count() {
+    std::uint64_t mine = 0;
+    agreed_stage(m_session, "simulate", [&] { mine = contact_rows().size(); });
+    return m_session.sum(mine);
+  }
+
+  // Collective: every body on rank 0 in id order, over `start`.
+  DemBodies gather_bodies(const DemBodies& start) {
+    std::vector<sim::BodyOut> mine;
+    agreed_stage(m_session, "simulate", [&] {
+      std::vector<DemRow> rows;
+      m_sim->read_rows(m_owned_rows, rows);
+      mine.resize(rows.size());
+      for (std::size_t j = 0; j < rows.size(); ++j)
+        mine[j] = {m_ids[m_owned_rows[j]], rows[j].position, rows[j].velocity, rows[j].omega,
+                   rows[j].orientation};
+    });
+    return sim::bodies_on_root(m_session, mine, start);
+  }
+
+  // Collective: the energies on rank 0, summed in the one-rank order.
+  DemEnergies energies() {
+    std::vector<sim::EnergyOut> mine;
+    std::vector<sim::ContactOut<Real>> rows;
+    agreed_stage(m_session, "simulate", [&] {
+      const DemState st = m_sim->state();
+      mine.resize(m_owned_rows.size());
+      for (std::size_t j = 0; j < m_owned_rows.size(); ++j) {
+        const std::size_t k = m_owned_rows[j];
+        const std::size_t i = static_cast<std::size_t>(m_ids[k]);
+        const bool ell = !m_all.shape.empty() && m_all.shape[i] == Shape::ellipsoid;
+        const dem::BodyProps p = props(i);
+        const DemRow& r = st.rows[k];
+        const dem::BodyState s{r.position,
+                               r.velocity,
+                               r.omega,
+                               ell ? r.momentum : Vec3<double>{0, 0, 0},
+                               ell ? r.orientation : Quat<double>{1, 0, 0, 0},
+                               r.force,
+                               r.torque};
+        mine[j] = {m_ids[k], dem::kinetic_energy(s, p, ell), -p.mass * dot(m_options.gravity, s.position),
+                   m_walls > 0 ? st.wall_energy[k] : 0.0};
+      }
+      rows = contact_rows(&st.contact_energy);
+    });
+    return sim::energies_on_root(m_session, mine, rows, m_walls > 0);
+  }
+
+  // Collective: the last step's contacts on rank 0 (sim::contacts_on_root).
+  Contacts<Real> gather_contacts(const std::vector<PairKey>& previous) {
+    std::vector<sim::ContactOut<Real>> rows;
+    agreed_stage(m_session, "simulate", [&] { rows = contact_rows(); });
+    return sim::contacts_on_root(m_session, rows, previous);
+  }
+
+  // Collective: the keys of the last step's contacts on rank 0, sorted.
+  std::vector<PairKey> gather_keys() {
+    std::vector<PairKey> keys;
+    agreed_stage(m_session, "simulate", [&] {
+      for (const sim::ContactOut<Real>& r : contact_rows()) keys.push_back({r.a, r.b});
+    });
+    return sim::keys_on_root(m_session, keys);
+  }
+
+ private:
+  Frame frame_of(const Bounds& b) const {
+    const EngineOptions& o = m_options.engine;
+    return make_frame(b, o.cell_size, precision_of<Real>(), o.cell_choice);
+  }
+
+  dem::BodyProps props(std::size_t i) const {
+    const bool ell = !m_all.shape.empty() && m_all.shape[i] == Shape::ellipsoid;
+    return dem::body_props(ell ? Shape::ellipsoid : Shape::sphere, m_all.radius[i],
+                           ell ? m_all.semi_axes[i] : Vec3<double>{0, 0, 0}, m_options.material.density);
+  }
+
+  // The rows of bodies `ids` (ascending) with what does not move (radii, shape rows) from the scene;
+  // their motion zero (the caller's).
+  DemBodies rows_of(const std::vector<std::int64_t>& ids) const {
+    DemBodies b;
+    const std::size_t m = ids.size();
+    const bool shapes = m_all.has_ellipsoids();
+    b.position.assign(m, {0, 0, 0});
+    b.velocity.assign(m, {0, 0, 0});
+    b.angular_velocity.assign(m, {0, 0, 0});
+    b.radius.resize(m);
+    if (shapes) {
+      b.shape.resize(m);
+      b.semi_axes.resize(m);
+      b.orientation.assign(m, {1, 0, 0, 0});
+    }
+    if (!m_all.fixed.empty()) b.fixed.resize(m);
+    for (std::size_t k = 0; k < m; ++k) {
+      const std::size_t i = static_cast<std::size_t>(ids[k]);
+      b.radius[k] = m_all.radius[i];
+      if (shapes) {
+        b.shape[k] = m_all.shape[i];
+        b.semi_axes[k] = m_all.semi_axes[i];
+      }
+      if (!m_all.fixed.empty()) b.fixed[k] = m_all.fixed[i];
+    }
+    return b;
+  }
+
+  // The halo of the layout from the held rows' owners and positions: each owned row to every rank
+  // whose slab is within the ghost width (ascending id), and the ghosts by owner (ascending id).
+  void halo_plan(const std::vector<Vec3<double>>& position) {
+    const int me = m_session.rank();
+    const std::size_t p = static_cast<std::size_t>(m_session.size());
+    std::vector<std::vector<std::uint32_t>> to(p), from(p);
+    m_owned_rows.clear();
+    for (std::size_t k = 0; k < m_ids.size(); ++k) {
+      const auto row = static_cast<std::uint32_t>(k);
+      if (m_owner[k] != me) {
+        from[static_cast<std::size_t>(m_owner[k])].push_back(row);
+        continue;
+      }
+      m_owned_rows.push_back(row);
+      m_slabs->for_each_ghost_rank(component(position[k], m_axis), m_width,
+                                   [&](int r) { to[static_cast<std::size_t>(r)].push_back(row); });
+    }
+    m_send_rows.clear();
+    m_recv_rows.clear();
+    m_send_counts.assign(p, 0);
+    for (std::size_t r = 0; r < p; ++r) {
+      m_send_counts[r] = to[r].size();
+      m_send_rows.insert(m_send_rows.end(), to[r].begin(), to[r].end());
+      m_recv_rows.insert(m_recv_rows.end(), from[r].begin(), from[r].end());
+    }
+  }
+
+  // The ghosts' state from their owners (the halo's rows only).
+  void exchange_ghosts() {
+    std::vector<DemRow> send;
+    agreed_stage(m_session, "simulate", [&] { m_sim->read_rows(m_send_rows, send); });
+    const std::vector<DemRow> got = sim::exchange_records(m_session, send, m_send_counts);
+    agreed_stage(m_session, "simulate", [&] {
+      if (got.size() != m_recv_rows.size())
+        throw Error("simulate: " + std::to_string(got.size()) + " ghost rows came for " +
+                    std::to_string(m_recv_rows.size()) + " ghosts: internal error");
+      m_sim->write_rows(m_recv_rows, got);
+    });
+  }
+
+  std::size_t held_row(std::int64_t id) const {
+    const auto at = std::lower_bound(m_ids.begin(), m_ids.end(), id);
+    if (at == m_ids.end() || *at != id)
+      throw Error("simulate: body " + std::to_string(id) + " is not held by this rank: internal error");
+    return static_cast<std::size_t>(at - m_ids.begin());
+  }
+
+  // New slabs from the owned centres where needed, the owned bodies and their pairs' springs to their new
+  // owners, the new ghosts; the rows set again.
+  void relayout() {
+    const int me = m_session.rank();
+    const std::size_t p = static_cast<std::size_t>(m_session.size());
+    ++m_rebuilds;
+    if (p == 1) {  // one rank holds every body: nothing to move
+      agreed_stage(m_session, "simulate", [&] { m_sim->mark_rows(); });
+      return;
+    }
+    DemState st;
+    std::vector<double> sample;
+    agreed_stage(m_session, "simulate", [&] {
+      st = m_sim->state();
+      // a sample of the owned centres along the axis (at most 4096 a rank, every rank's the same way)
+      const std::size_t n = m_owned_rows.size(), stride = std::max<std::size_t>(1, n / 4096);
+      for (std::size_t j = 0; j < n; j += stride)
+        sample.push_back(component(st.rows[m_owned_rows[j]].position, m_axis));
+    });
+    // new slabs only where the owned counts drifted apart (more than 5 % above the mean on a rank)
+    const std::vector<std::uint64_t> counts = allgather_counts(m_session, m_owned_rows.size());
+    std::uint64_t total = 0, most = 0;
+    for (const std::uint64_t c : counts) {
+      total += c;
+      most = std::max(most, c);
+    }
+    const bool rebalance = double(most) > 1.05 * double(total) / double(p) + 16;
+    std::vector<double> all_sample;
+    if (rebalance)
+      all_sample =
+          sim::exchange_records(m_session, repeat(sample, p), std::vector<std::uint64_t>(p, sample.size()));
+    std::vector<std::uint64_t> body_counts(p, 0), spring_counts(p, 0);
+    std::vector<ResidentBodyRecord> bodies;
+    std::vector<Vec3<double>> walls;
+    std::vector<ResidentSpringRecord> springs;
+    agreed_stage(m_session, "simulate", [&] {
+      if (rebalance) {
+        m_slabs.emplace(SlabDecomposition::from_sample(m_axis, all_sample, static_cast<int>(p)));
+        ++m_rebalances;
+      }
+      auto owner_of = [&](std::size_t k) { return m_slabs->owner(component(st.rows[k].position, m_axis)); };
+      std::vector<std::vector<std::size_t>> to(p);
+      for (const std::uint32_t k : m_owned_rows) {
+        const int d = owner_of(k);
+        to[static_cast<std::size_t>(d)].push_back(k);
+        if (d != me) ++m_migrated;
+      }
+      for (std::size_t r = 0; r < p; ++r) {
+        body_counts[r] = to[r].size();
+        for (const std::size_t k : to[r]) {
+          bodies.push_back({m_ids[k], st.rows[k]});
+          walls.insert(walls.end(), st.wall_xi.begin() + std::ptrdiff_t(k * m_walls),
+                       st.wall_xi.begin() + std::ptrdiff_t((k + 1) * m_walls));
+        }
+      }
+      // each pair whose smaller id this rank owns, to the new owners of its two bodies
+      std::vector<std::vector<ResidentSpringRecord>> send(p);
+      for (std::size_t j = 0; j < st.history.size(); ++j) {
+        const PairKey key = st.history.keys[j];
+        const std::size_t a = held_row(key.a);
+        if (m_owner[a] != me) continue;
+        const ResidentSpringRecord r{key, st.history.age[j], st.xi[j], st.normal[j]};
+        const int da = owner_of(a), db = owner_of(held_row(key.b));
+        send[static_cast<std::size_t>(da)].push_back(r);
+        if (db != da) send[static_cast<std::size_t>(db)].push_back(r);
+      }
+      for (std::size_t r = 0; r < p; ++r) {
+        spring_counts[r] = send[r].size();
+        springs.insert(springs.end(), send[r].begin(), send[r].end());
+      }
+    });
+    std::vector<ResidentBodyRecord> owned = sim::exchange_records(m_session, bodies, body_counts);
+    std::vector<std::uint64_t> wall_counts(body_counts);
+    for (std::uint64_t& c : wall_counts) c *= m_walls;
+    const std::vector<Vec3<double>> owned_walls = sim::exchange_records(m_session, walls, wall_counts);
+    std::vector<ResidentSpringRecord> got_springs = sim::exchange_records(m_session, springs, spring_counts);
+    // the new ghosts: each owned body to the ranks whose slab is within the ghost width
+    std::vector<std::uint64_t> ghost_counts(p, 0);
+    std::vector<ResidentBodyRecord> ghosts_out;
+    std::vector<std::size_t> order;
+    agreed_stage(m_session, "simulate", [&] {
+      order.resize(owned.size());
+      for (std::size_t j = 0; j < order.size(); ++j) order[j] = j;
+      std::sort(order.begin(), order.end(),
+                [&](std::size_t x, std::size_t y) { return owned[x].id < owned[y].id; });
+      std::vector<std::vector<std::size_t>> to(p);
+      for (const std::size_t j : order)
+        m_slabs->for_each_ghost_rank(component(owned[j].row.position, m_axis), m_width,
+                                     [&](int r) { to[static_cast<std::size_t>(r)].push_back(j); });
+      for (std::size_t r = 0; r < p; ++r) {
+        ghost_counts[r] = to[r].size();
+        for (const std::size_t j : to[r]) ghosts_out.push_back(owned[j]);
+      }
+    });
+    std::vector<std::uint64_t> from;
+    const std::vector<ResidentBodyRecord> ghosts =
+        sim::exchange_records(m_session, ghosts_out, ghost_counts, &from);
+    agreed_stage(m_session, "simulate", [&] {
+      // the held rows: owned and ghosts merged by id
+      struct Held {
+        std::int64_t id;
+        int owner;
+        const ResidentBodyRecord* record;
+        const Vec3<double>* walls;  // owned: its wall springs; ghosts: none
+      };
+      std::vector<Held> held;
+      held.reserve(owned.size() + ghosts.size());
+      for (const std::size_t j : order)
+        held.push_back(
+            {owned[j].id, me, &owned[j], m_walls > 0 ? owned_walls.data() + j * m_walls : nullptr});
+      std::size_t g = 0;
+      for (std::size_t r = 0; r < from.size(); ++r)
+        for (std::uint64_t c = 0; c < from[r]; ++c, ++g)
+          held.push_back({ghosts[g].id, static_cast<int>(r), &ghosts[g], nullptr});
+      std::sort(held.begin(), held.end(), [](const Held& x, const Held& y) { return x.id < y.id; });
+      for (std::size_t k = 1; k < held.size(); ++k)
+        if (held[k].id == held[k - 1].id)
+          throw Error("simulate: body " + std::to_string(held[k].id) + " is held twice: internal error");
+      const std::size_t m = held.size();
+      m_ids.resize(m);
+      m_owner.resize(m);
+      for (std::size_t k = 0; k < m; ++k) {
+        m_ids[k] = held[k].id;
+        m_owner[k] = held[k].owner;
+      }
+      DemBodies rows = rows_of(m_ids);
+      DemState next;
+      next.rows.resize(m);
+      next.wall_xi.assign(m * m_walls, {0, 0, 0});
+      next.wall_energy.assign(m, 0);
+      for (std::size_t k = 0; k < m; ++k) {
+        const ResidentBodyRecord& r = *held[k].record;
+        next.rows[k] = r.row;
+        rows.position[k] = r.row.position;
+        rows.velocity[k] = r.row.velocity;
+        rows.angular_velocity[k] = r.row.omega;
+        if (!rows.orientation.empty()) rows.orientation[k] = r.row.orientation;
+        if (held[k].walls)
+          std::copy(held[k].walls, held[k].walls + m_walls,
+                    next.wall_xi.begin() + std::ptrdiff_t(k * m_walls));
+      }
+      // the springs of the pairs among the held rows, by key
+      std::sort(got_springs.begin(), got_springs.end(),
+                [](const ResidentSpringRecord& x, const ResidentSpringRecord& y) { return x.key < y.key; });
+      auto is_held = [&](std::int64_t id) { return std::binary_search(m_ids.begin(), m_ids.end(), id); };
+      for (std::size_t j = 0; j < got_springs.size(); ++j) {
+        const ResidentSpringRecord& r = got_springs[j];
+        if (j > 0 && !(got_springs[j - 1].key < r.key))
+          throw Error("simulate: a pair's spring came twice: internal error");
+        if (!is_held(r.key.a) || !is_held(r.key.b)) continue;
+        next.history.keys.push_back(r.key);
+        next.history.age.push_back(r.age);
+        next.xi.push_back(r.xi);
+        next.normal.push_back(r.normal);
+      }
+      next.contact_energy.assign(next.xi.size(), 0);
+      m_sim->set_rows(rows, m_ids, next);
+      halo_plan(rows.position);
+    });
+  }
+
+  template <class T>
+  static std::vector<T> repeat(const std::vector<T>& v, std::size_t times) {
+    std::vector<T> out;
+    out.reserve(v.size() * times);
+    for (std::size_t t = 0; t < times; ++t) out.insert(out.end(), v.begin(), v.end());
+    return out;
+  }
+
+  // This rank's contacts of the last step (those whose smaller id it owns), global ids, with their
+  // energies where given (the state's, in the contacts' order).
+  std::vector<sim::ContactOut<Real>> contact_rows(const std::vector<double>* energy = nullptr) {
+    const Contacts<Real>& c = m_sim->contacts();
+    std::vector<sim::ContactOut<Real>> rows;
+    for (std::size_t k = 0; k < c.size(); ++k) {
+      const std::size_t a = static_cast<std::size_t>(c.id_a[k]), b = static_cast<std::size_t>(c.id_b[k]);
+      if (m_owner[a] != m_session.rank()) continue;
+      rows.push_back({m_ids[a], m_ids[b], c.age[k], c.position_on_a[k], c.position_on_b[k], c.normal_on_b[k],
+                      c.distance[k], energy && k < energy->size() ? (*energy)[k] : 0.0});
+    }
+    return rows;
+  }
+
+  const Session& m_session;
+  const DemBodies& m_all;
+  DemOptions m_options;
+  std::size_t m_walls;
+  int m_axis = 0;
+  double m_skin = 0, m_width = 0;
+  std::optional<SlabDecomposition> m_slabs;
+  Frame m_frame{};
+  std::optional<Simulation<Real>> m_sim;
+  // the held rows: global ids (ascending) and owners; the owned rows, the halo's rows to send (by
+  // destination rank) and the ghosts' rows to receive (by source rank)
+  std::vector<std::int64_t> m_ids;
+  std::vector<int> m_owner;
+  std::vector<std::uint32_t> m_owned_rows, m_send_rows, m_recv_rows;
+  std::vector<std::uint64_t> m_send_counts;
+  std::uint64_t m_steps = 0, m_rebuilds = 0, m_migrated = 0, m_rebalances = 0;
+};
+
+}  // namespace cg

@@ -1,0 +1,150 @@
+// A Simulation's rank interface (kernels/dem.hpp; src/simulate/resident_dem.hpp drives it under
+// mpirun): a step in two halves, the rows' state out and in, and the rows set again with what they
+// carry, give the trajectory of run() bit for bit on each backend (CUDA skips, visibly, without a GPU).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "backends.hpp"
+#include "dem.hpp"
+#include "support/contacts_equal.hpp"
+
+namespace cg::test {
+namespace {
+
+// A box of spheres and ellipsoids falling onto a floor with friction: contacts with history from
+// the first steps (the lattice's pitch is below the diameters).
+struct RowsScene {
+  DemBodies bodies;
+  DemOptions options;
+};
+RowsScene rows_scene(Backend backend, bool ellipsoids) {
+  std::mt19937_64 rng(ellipsoids ? 77 : 78);
+  std::uniform_real_distribution<double> u(0, 1);
+  RowsScene s;
+  DemBodies& b = s.bodies;
+  const int side = 6;
+  for (int i = 0; i < side * side * 6; ++i) {
+    const double r = 0.4 + 0.1 * u(rng);
+    b.position.push_back(
+        {0.85 * (i % side) + 0.6, 0.85 * ((i / side) % side) + 0.6, 0.85 * (i / (side * side)) + 0.6});
+    b.radius.push_back(r);
+    b.velocity.push_back({u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5});
+    if (ellipsoids) {
+      const bool ell = i % 2 == 0;
+      b.shape.push_back(ell ? Shape::ellipsoid : Shape::sphere);
+      b.semi_axes.push_back(ell ? Vec3<double>{r, 0.7 * r, 0.5 * r} : Vec3<double>{r, r, r});
+      const double c = std::cos(0.2 * i), sn = std::sin(0.2 * i);
+      b.orientation.push_back(ell ? Quat<double>{c, 0, sn, 0} : Quat<double>{1, 0, 0, 0});
+    }
+  }
+  dem::Material m;
+  m.young = 1e7;
+  m.restitution = 0.5;
+  m.friction = 0.5;
+  m.rolling_friction = 0.02;
+  DemOptions& o = s.options;
+  o.material = m;
+  o.dt = time_step_limits(b, m, 5.0).automatic;
+  o.gravity = {0.5, 0, -9.81};
+  dem::Wall floor;
+  floor.kind = dem::WallKind::plane;
+  floor.point = {0, 0, 0};
+  floor.normal = {0, 0, 1};
+  o.walls = {floor};
+  o.engine.skin = 0.05;
+  o.engine.backend = backend;
+  o.engine.threads = 2;
+  return s;
+}
+
+template <class Real>
+void expect_same(Simulation<Real>& plain, Simulation<Real>& rows, const std::string& at) {
+  const DemBodies x = plain.bodies(), y = rows.bodies();
+  ASSERT_EQ(x.size(), y.size()) << at;
+  ASSERT_EQ(std::memcmp(x.position.data(), y.position.data(), x.size() * sizeof(Vec3<double>)), 0) << at;
+  ASSERT_EQ(std::memcmp(x.velocity.data(), y.velocity.data(), x.size() * sizeof(Vec3<double>)), 0) << at;
+  ASSERT_EQ(
+      std::memcmp(x.angular_velocity.data(), y.angular_velocity.data(), x.size() * sizeof(Vec3<double>)), 0)
+      << at;
+  ASSERT_GT(plain.contact_count(), 0u) << at;
+  Contacts<Real> a = plain.contacts(), b = rows.contacts();
+  ASSERT_EQ(compare_contacts(b, a), "identical") << at;
+  EXPECT_EQ(std::memcmp(a.previous_row.data(), b.previous_row.data(), a.size() * sizeof(std::int64_t)), 0)
+      << at;
+  EXPECT_EQ(std::memcmp(a.age.data(), b.age.data(), a.size() * sizeof(std::int64_t)), 0) << at;
+  const DemEnergies ea = plain.energies(), eb = rows.energies();
+  EXPECT_EQ(ea.kinetic, eb.kinetic) << at;
+  EXPECT_EQ(ea.elastic, eb.elastic) << at;
+}
+
+// run() against the rank interface over rows whose global ids are 3i (the history's keys): halves
+// of steps, every row read and written back between the halves, and twice the rows set again from
+// their own state (as a relayout that moves no body).
+template <class Real>
+void rows_equal_run(Backend backend, bool ellipsoids) {
+  const RowsScene s = rows_scene(backend, ellipsoids);
+  const std::size_t n = s.bodies.size();
+  std::vector<std::int64_t> ids(n);
+  for (std::size_t i = 0; i < n; ++i) ids[i] = 3 * std::int64_t(i);
+  Simulation<Real> plain(s.bodies, s.options);
+  Simulation<Real> rows(s.bodies, s.options, ids, std::nullopt);
+  std::vector<std::uint32_t> all(n);
+  for (std::size_t i = 0; i < n; ++i) all[i] = static_cast<std::uint32_t>(i);
+  for (int block = 0; block < 4; ++block) {
+    plain.run(25);
+    for (int k = 0; k < 25; ++k) {
+      rows.kick_drift();
+      std::vector<DemRow> state;
+      rows.read_rows(all, state);
+      rows.write_rows(all, state);
+      rows.finish_step(std::nullopt);
+    }
+    const std::string at =
+        std::string(ellipsoids ? "ellipsoids" : "spheres") + " step " + std::to_string(plain.steps());
+    expect_same(plain, rows, at);
+    if (block == 1 || block == 2) {  // set again mid-step, between the halves, as a relayout does
+      plain.run(1);
+      rows.kick_drift();
+      const ResidentExtent e = rows.extent();
+      EXPECT_GT(e.displacement, 0) << at;
+      DemBodies b = s.bodies;
+      const DemState st = rows.state();
+      ASSERT_EQ(st.xi.size(), st.history.size()) << at;
+      ASSERT_GT(st.history.size(), 0u) << at;
+      for (std::size_t i = 0; i < n; ++i) b.position[i] = st.rows[i].position;
+      rows.set_rows(b, ids, st);
+      EXPECT_EQ(rows.extent().displacement, 0) << at;
+      rows.finish_step(std::nullopt);
+      expect_same(plain, rows, at + " + 1 (set again)");
+    }
+  }
+}
+
+template <class B>
+class DemRows : public ::testing::Test {
+ protected:
+  void SetUp() override { CG_SKIP_WITHOUT_BACKEND(B); }
+};
+TYPED_TEST_SUITE(DemRows, BackendTypes, BackendTypeNames);
+
+TYPED_TEST(DemRows, TheRankInterfaceGivesTheTrajectoryOfRun) {
+  rows_equal_run<double>(TypeParam::backend, false);
+  rows_equal_run<float>(TypeParam::backend, false);
+  rows_equal_run<double>(TypeParam::backend, true);
+}
+
+TYPED_TEST(DemRows, RowsOutsideTheRankAreRefused) {
+  const RowsScene s = rows_scene(TypeParam::backend, false);
+  Simulation<double> sim(s.bodies, s.options);
+  std::vector<DemRow> out;
+  EXPECT_THROW(sim.read_rows({static_cast<std::uint32_t>(s.bodies.size())}, out), UsageError);
+  EXPECT_THROW(sim.write_rows({0, 1}, std::vector<DemRow>(1)), UsageError);
+}
+
+}  // namespace
+}  // namespace cg::test
