@@ -96,12 +96,25 @@ __global__ void level_begin_kernel(const Key* __restrict__ keys, std::uint32_t n
   begin[l] = lower_bound_key(keys, std::uint32_t(0), ne, Key(Key(l) << key_shift));
 }
 
+// The levels and where each level's run of the sorted keys starts, as a block's copy in shared memory
+// (a thread's copy of the parameters would be indexed in local memory); load ends in a barrier.
+template <class Real>
+struct BlockLevels {
+  std::uint32_t begin[kMaxLevels + 1];
+  LevelParams<Real> lp;
+  __device__ void load(const LevelParams<Real>& params, const std::uint32_t* __restrict__ level_begin) {
+    if (threadIdx.x <= static_cast<unsigned>(params.count)) begin[threadIdx.x] = level_begin[threadIdx.x];
+    if (threadIdx.x == 0) lp = params;
+    __syncthreads();
+  }
+};
+
 // levels, across: per body a the pairs with the bodies of every larger non-empty level, where they
 // share a cell of that level — core/broad.hpp's cross_level_pairs, the host's routine — reported and
 // accepted by the pair test. kFill false: counts[a] and the totals of pairs and tests into c; true:
 // the pairs written at offsets[a] onwards, searched again only for the bodies whose count is not 0
 // (most small bodies of a mixed scene touch no larger one: the fill skips their lookups). The levels
-// are read from a block copy in shared memory.
+// are read from BlockLevels.
 template <bool kFill, class Real, class Key, class Test>
 __global__ void __launch_bounds__(kBlock)
     cross_level_kernel(const Sphere<Real>* __restrict__ spheres, const CutShape* __restrict__ cut,
@@ -113,11 +126,8 @@ __global__ void __launch_bounds__(kBlock)
                        std::uint32_t* __restrict__ pair_b, Counters* __restrict__ c, Test test) {
   using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
   __shared__ typename Reduce::TempStorage tmp;
-  __shared__ std::uint32_t s_begin[kMaxLevels + 1];
-  __shared__ LevelParams<Real> s_lp;
-  if (threadIdx.x <= static_cast<unsigned>(lp.count)) s_begin[threadIdx.x] = level_begin[threadIdx.x];
-  if (threadIdx.x == 0) s_lp = lp;
-  __syncthreads();
+  __shared__ BlockLevels<Real> s;
+  s.load(lp, level_begin);
   const std::uint32_t a = blockIdx.x * kBlock + threadIdx.x;
   std::uint32_t found = 0;
   std::uint64_t tests = 0;
@@ -127,7 +137,7 @@ __global__ void __launch_bounds__(kBlock)
     const auto cells_in = [&](const GridParams<Real>& g) {
       return cut ? cut_cells(sa, cut[a], g) : body_cells(sa, g);
     };
-    tests = cross_level_pairs(a, key_level(lo_key[a], s_lp.key_shift), s_lp, keys, body, s_begin, ctrl,
+    tests = cross_level_pairs(a, key_level(lo_key[a], s.lp.key_shift), s.lp, keys, body, s.begin, ctrl,
                               report, cells_in, [&](std::uint32_t b) {
                                 if (test(sa, spheres[b], a, b)) {
                                   if constexpr (kFill) store_pair(pair_a, pair_b, w++, a, b);
@@ -148,8 +158,7 @@ __global__ void __launch_bounds__(kBlock)
 }
 
 // levels, estimate: the bound of every body's pair tests across levels (core/broad.hpp
-// cross_level_bound), summed into c->tests. The levels are read from a block copy in shared memory,
-// as in cross_level_kernel (a thread's copy of the parameters would be indexed in local memory).
+// cross_level_bound), summed into c->tests. The levels are read from BlockLevels.
 template <class Real, class Key>
 __global__ void __launch_bounds__(kBlock)
     cross_level_bound_kernel(const Sphere<Real>* __restrict__ spheres, const CutShape* __restrict__ cut,
@@ -158,18 +167,15 @@ __global__ void __launch_bounds__(kBlock)
                              Counters* __restrict__ c) {
   using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
   __shared__ typename Reduce::TempStorage tmp;
-  __shared__ std::uint32_t s_begin[kMaxLevels + 1];
-  __shared__ LevelParams<Real> s_lp;
-  if (threadIdx.x <= static_cast<unsigned>(lp.count)) s_begin[threadIdx.x] = level_begin[threadIdx.x];
-  if (threadIdx.x == 0) s_lp = lp;
-  __syncthreads();
+  __shared__ BlockLevels<Real> s;
+  s.load(lp, level_begin);
   const std::uint32_t a = blockIdx.x * kBlock + threadIdx.x;
   unsigned long long tests = 0;
   if (a < n) {
-    const int la = key_level(lo_key[a], s_lp.key_shift);
-    if (la + 1 < s_lp.count) {
+    const int la = key_level(lo_key[a], s.lp.key_shift);
+    if (la + 1 < s.lp.count) {
       const Sphere<Real> sa = spheres[a];
-      tests = cross_level_bound(la, s_lp, keys, s_begin, [&](const GridParams<Real>& g) {
+      tests = cross_level_bound(la, s.lp, keys, s.begin, [&](const GridParams<Real>& g) {
         return cut ? cut_cells(sa, cut[a], g) : body_cells(sa, g);
       });
     }
