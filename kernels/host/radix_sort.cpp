@@ -38,6 +38,35 @@ void local_pass(const Key* ksrc, const Value* vsrc, Key* kdst, Value* vdst, std:
   }
 }
 
+// Within a parallel region of `team` threads (an orphaned barrier and single bind to it): thread t
+// counts the digits (key >> shift) & mask of its chunk [lo, hi) of `keys`, and then every thread's
+// first place for each digit, digit by digit and thread by thread within a digit (what makes the
+// scatter stable), replaces the counts in hist (team × buckets). on_digit(d, first) sees where each
+// digit's run starts, and (buckets, n) last. Returns thread t's row of places, which its scatter
+// advances.
+template <class Key, class OnDigit>
+std::size_t* digit_offsets(const Key* keys, std::size_t lo, std::size_t hi, int shift, Key mask,
+                           std::size_t* hist, std::size_t buckets, int t, int team, OnDigit&& on_digit) {
+  std::size_t* h = hist + std::size_t(t) * buckets;
+  std::fill(h, h + buckets, 0);
+  for (std::size_t i = lo; i < hi; ++i) ++h[(keys[i] >> shift) & mask];
+#pragma omp barrier
+#pragma omp single
+  {
+    std::size_t sum = 0;
+    for (std::size_t d = 0; d < buckets; ++d) {
+      on_digit(d, sum);
+      for (int u = 0; u < team; ++u) {
+        const std::size_t c = hist[std::size_t(u) * buckets + d];
+        hist[std::size_t(u) * buckets + d] = sum;
+        sum += c;
+      }
+    }
+    on_digit(buckets, sum);
+  }
+  return h;
+}
+
 // The top digit first: one parallel stable scatter of keys (and values) into key_tmp by the top
 // `top` bits of the `bits`, then each bucket (on average a few thousand elements: in the cache)
 // sorted by the remaining low bits with LSD passes on one thread, buckets shared among the threads.
@@ -67,24 +96,11 @@ bool top_digit_first(Key* keys, Value* values, Key* key_tmp, Value* value_tmp, s
     team = omp_get_num_threads();
     const int t = omp_get_thread_num();
     const std::size_t lo = n * t / team, hi = n * (t + 1) / team;
-    std::size_t* h = hist.data() + std::size_t(t) * buckets;
-    std::fill(h, h + buckets, 0);
-    for (std::size_t i = lo; i < hi; ++i) ++h[(keys[i] >> shift) & mask];
-#pragma omp barrier
-#pragma omp single
-    {
-      std::size_t sum = 0;
-      for (std::size_t d = 0; d < buckets; ++d) {
-        start[d] = sum;
-        for (int u = 0; u < team; ++u) {
-          const std::size_t c = hist[std::size_t(u) * buckets + d];
-          hist[std::size_t(u) * buckets + d] = sum;
-          sum += c;
-        }
-        skewed = skewed || (sum - start[d]) * 16 > n;
-      }
-      start[buckets] = sum;
-    }
+    std::size_t* h = digit_offsets(keys, lo, hi, shift, mask, hist.data(), buckets, t, team,
+                                   [&](std::size_t d, std::size_t first) {
+                                     start[d] = first;
+                                     skewed = skewed || (d > 0 && (first - start[d - 1]) * 16 > n);
+                                   });
     if (!skewed) {
       for (std::size_t i = lo; i < hi; ++i) {
         const std::size_t pos = h[(keys[i] >> shift) & mask]++;
@@ -150,20 +166,8 @@ bool radix_sort_arrays(Key* keys, Value* values, Key* key_tmp, Value* value_tmp,
       team = omp_get_num_threads();
       const int t = omp_get_thread_num();
       const std::size_t lo = n * t / team, hi = n * (t + 1) / team;
-      std::size_t* h = hist.data() + std::size_t(t) * buckets;
-      std::fill(h, h + buckets, 0);
-      for (std::size_t i = lo; i < hi; ++i) ++h[(ksrc[i] >> shift) & mask];
-#pragma omp barrier
-#pragma omp single
-      {
-        std::size_t sum = 0;
-        for (std::size_t d = 0; d < buckets; ++d)
-          for (int u = 0; u < team; ++u) {
-            std::size_t c = hist[std::size_t(u) * buckets + d];
-            hist[std::size_t(u) * buckets + d] = sum;
-            sum += c;
-          }
-      }
+      std::size_t* h = digit_offsets(ksrc, lo, hi, shift, mask, hist.data(), buckets, t, team,
+                                     [](std::size_t, std::size_t) {});
       for (std::size_t i = lo; i < hi; ++i) {
         const std::size_t pos = h[(ksrc[i] >> shift) & mask]++;
         kdst[pos] = ksrc[i];
