@@ -321,6 +321,8 @@ std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const
 
 }  // namespace
 
+bool walk_avx2_available() { return cpu_has_avx2(); }
+
 template <class Key>
 PairEstimate estimate_pair_tests(const Entries<Key>& en, std::uint64_t bodies, int threads) {
   const std::size_t n = en.size();
