@@ -142,7 +142,7 @@ __attribute__((target("avx2,popcnt"))) std::uint64_t walk_avx2(std::size_t lo, s
       continue;
     }
     if (cell_end - e <= 9) {  // lanes j: entries e + 1 + j; entry e + p takes lanes p … of the cell
-      if (n_pending + 8 > k_pending) flush();
+      if (n_pending + 9 > k_pending) flush();  // each of its (at most nine) entries writes a slot
       const Lanes8 l = load8(eb, e + 1);
       const unsigned cell = (1u << (cell_end - e - 1)) - 1u;
       for (std::size_t p = 0; e + p < stop; ++p) {
