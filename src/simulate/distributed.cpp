@@ -605,6 +605,7 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
   });
   try {
     const int threads = options.engine.threads > 0 ? options.engine.threads : omp_get_max_threads();
+    const auto t_start = std::chrono::steady_clock::now();
     Sim sim = [&] {
       if constexpr (std::is_same_v<Sim, DistributedDem<Real>>)
         return Sim(session, bodies, options, threads);
@@ -614,10 +615,11 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
     const std::size_t spheres = scene.sphere_count();
     RunInfo info = simulate_run_info(cmd, bodies.size(), precision_of<Real>(), sim.backend(), session.size());
     std::vector<PairKey> previous;  // the keys of the step before an output step
-    RunSplit split;                 // after the start (rank 0's clock; the blocks: the slowest rank's)
     auto since = [](clock_type::time_point t) {
       return std::chrono::duration<double>(clock_type::now() - t).count();
     };
+    RunSplit split;  // rank 0's clock; the blocks of steps: the slowest rank's
+    split.start = session.max(since(t_start));
     auto write_frame = [&] {
       auto t = clock_type::now();
       const DemBodies all = sim.gather_bodies(bodies);
@@ -657,7 +659,6 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
     };
     write_frame();
     log_row(0);
-    split = RunSplit{};
     const double relayout_start = sim.relayout_seconds();
     Progress progress("simulate", "steps", cmd.steps, !cmd.quiet && root);
     const auto t0 = clock_type::now();
@@ -689,7 +690,7 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
     DemBodies final_bodies;
     if (cmd.plots) final_bodies = sim.gather_bodies(bodies);
     const double seconds = since(t0);
-    split.total = seconds;
+    split.total = since(t_start);
     split.relayout = session.max(sim.relayout_seconds() - relayout_start);
     const StepStats loop = sim.loop_stats();
     agreed_stage(session, "simulate", [&] {

@@ -100,13 +100,15 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
   CleanupAction incomplete =
       CleanupAction::append_file(out.path("log.csv"), "# status: failed: stopped by a signal\n");
   try {
+    const auto t_start = clock_type::now();
     Simulation<Real> sim(bodies, options);
     const std::size_t spheres = scene.sphere_count();
     RunInfo info = simulate_run_info(cmd, bodies.size(), precision_of<Real>(), sim.backend(), 1);
-    RunSplit split;  // after the start
     auto since = [](clock_type::time_point t) {
       return std::chrono::duration<double>(clock_type::now() - t).count();
     };
+    RunSplit split;
+    split.start = since(t_start);
     auto write_frame = [&] {
       auto t = clock_type::now();
       const DemBodies state = sim.bodies();
@@ -138,7 +140,6 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
     };
     write_frame();
     log_row(0);
-    split = RunSplit{};
     Progress progress("simulate", "steps", cmd.steps, !cmd.quiet);
     const auto t0 = clock_type::now();
     std::uint64_t done = 0;
@@ -159,7 +160,7 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
     incomplete.release();
     out.finish();
     const double seconds = since(t0);
-    split.total = seconds;
+    split.total = since(t_start);
     if (!cmd.quiet) {
       fmt::print(
           "contactgrid simulate: {} bodies, {} steps of {:.4g} s ({:.4g} s simulated) in {:.3f} s: {:.1f} "
@@ -232,11 +233,10 @@ std::string stage_times_report(const DemStageTimes& t) {
 std::string run_split_report(const RunSplit& s) {
   const double logs = s.log_sums + s.log_write, frames = s.frame_gather + s.frame_write;
   return fmt::format(
-      "  wall time {:.3f} s: steps {:.3f} (relayout {:.3f}), {} log rows {:.3f} (sums {:.3f}, writing "
-      "{:.3f}), "
-      "{} frames {:.3f} (gather {:.3f}, writing {:.3f}), other {:.3f}\n",
-      s.total, s.steps, s.relayout, s.log_rows, logs, s.log_sums, s.log_write, s.frames, frames,
-      s.frame_gather, s.frame_write, s.total - s.steps - logs - frames);
+      "  wall time {:.3f} s: start {:.3f}, steps {:.3f} (relayout {:.3f}), {} log rows {:.3f} (sums {:.3f}, "
+      "writing {:.3f}), {} frames {:.3f} (gather {:.3f}, writing {:.3f}), other {:.3f}\n",
+      s.total, s.start, s.steps, s.relayout, s.log_rows, logs, s.log_sums, s.log_write, s.frames, frames,
+      s.frame_gather, s.frame_write, s.total - s.start - s.steps - logs - frames);
 }
 
 RunInfo simulate_run_info(const SimulateCommand& cmd, std::size_t bodies, Precision precision,
