@@ -686,10 +686,10 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
       progress.update(done);
     }
     progress.finish();
+    const double seconds = since(t0);
     // the final state for the plots (only when they are drawn)
     DemBodies final_bodies;
     if (cmd.plots) final_bodies = sim.gather_bodies(bodies);
-    const double seconds = since(t0);
     split.total = since(t_start);
     split.relayout = session.max(sim.relayout_seconds() - relayout_start);
     const StepStats loop = sim.loop_stats();
