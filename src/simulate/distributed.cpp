@@ -622,7 +622,7 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
     split.start = session.max(since(t_start));
     auto write_frame = [&] {
       auto t = clock_type::now();
-      const DemBodies all = sim.gather_bodies(bodies);
+      const DemBodies& all = sim.gather_bodies(bodies);
       Contacts<Real> contacts;
       if (cmd.write_contacts) contacts = sim.gather_contacts(previous);
       split.frame_gather += since(t);

@@ -72,14 +72,18 @@ struct ContactOut {
   double energy;
 };
 
-// Collective: every rank's bodies on rank 0 in id order, over `start` (its radii and shape rows).
-inline DemBodies bodies_on_root(const Session& session, const std::vector<BodyOut>& mine,
-                                const DemBodies& start) {
+// Collective: every rank's bodies on rank 0 in id order into `out` (made from `start`, its radii
+// and shape rows, when it does not hold them yet: a frame's bodies kept between frames take only
+// the motion again); the others: `out` untouched.
+inline void bodies_on_root(const Session& session, const std::vector<BodyOut>& mine, const DemBodies& start,
+                           DemBodies& out) {
   const std::vector<BodyOut> all = gather_records(session, mine);
-  if (session.rank() != 0) return {};
-  DemBodies out = start;
-  if (out.velocity.empty()) out.velocity.assign(out.size(), {0, 0, 0});
-  if (out.angular_velocity.empty()) out.angular_velocity.assign(out.size(), {0, 0, 0});
+  if (session.rank() != 0) return;
+  if (out.size() != start.size() || out.radius.size() != start.size()) {
+    out = start;
+    if (out.velocity.empty()) out.velocity.assign(out.size(), {0, 0, 0});
+    if (out.angular_velocity.empty()) out.angular_velocity.assign(out.size(), {0, 0, 0});
+  }
   for (const BodyOut& r : all) {
     const std::size_t i = static_cast<std::size_t>(r.id);
     out.position[i] = r.position;
@@ -87,6 +91,13 @@ inline DemBodies bodies_on_root(const Session& session, const std::vector<BodyOu
     out.angular_velocity[i] = r.omega;
     if (!out.orientation.empty()) out.orientation[i] = r.orientation;
   }
+}
+
+// The same into a new DemBodies (the others: empty).
+inline DemBodies bodies_on_root(const Session& session, const std::vector<BodyOut>& mine,
+                                const DemBodies& start) {
+  DemBodies out;
+  bodies_on_root(session, mine, start, out);
   return out;
 }
 

@@ -243,12 +243,12 @@ class ResidentDem {
     return out;
   }
 
-  // Collective: every body on rank 0 in id order, over `start`.
-  DemBodies gather_bodies(const DemBodies& start) {
+  // Collective: every body on rank 0 in id order, over `start` (the others: empty), valid until the
+  // next call: over several ranks rank 0 keeps its frame's bodies and takes only their motion again.
+  const DemBodies& gather_bodies(const DemBodies& start) {
     if (!m_gather && m_session.size() == 1) {  // every body is a row, in id order
-      DemBodies out;
-      agreed_stage(m_session, "simulate", [&] { out = m_sim->bodies(); });
-      return out;
+      agreed_stage(m_session, "simulate", [&] { m_frame_bodies = m_sim->bodies(); });
+      return m_frame_bodies;
     }
     std::vector<sim::BodyOut> mine(m_owned_rows.size());
     agreed_stage(m_session, "simulate", [&] {
@@ -267,7 +267,11 @@ class ResidentDem {
                    held.orientation.empty() ? Quat<double>{1, 0, 0, 0} : held.orientation[k]};
       }
     });
-    return sim::bodies_on_root(m_session, mine, start);
+    if (m_gather)
+      m_frame_bodies = sim::bodies_on_root(m_session, mine, start);  // a new one each frame
+    else
+      sim::bodies_on_root(m_session, mine, start, m_frame_bodies);
+    return m_frame_bodies;
   }
 
   // Collective: the energies on rank 0, summed in the one-rank order.
@@ -601,7 +605,8 @@ class ResidentDem {
   std::vector<std::uint64_t> m_send_counts;
   std::uint64_t m_steps = 0, m_rebuilds = 0, m_migrated = 0, m_rebalances = 0;
   double m_relayout_seconds = 0;
-  bool m_gather = false;  // CONTACTGRID_SIMULATE_OUTPUT=gather (file comment)
+  bool m_gather = false;     // CONTACTGRID_SIMULATE_OUTPUT=gather (file comment)
+  DemBodies m_frame_bodies;  // gather_bodies' (rank 0)
 };
 
 }  // namespace cg
