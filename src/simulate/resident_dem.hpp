@@ -26,9 +26,9 @@
 // downloaded), reduced to the one-rank tree's chunk sums on the rank that holds them
 // (rank_records.hpp: tree_sums_on_root), so rank 0 receives about one record per 32 bodies and
 // contacts, and the bits stay the one-rank run's. A frame of one rank is its Simulation's bodies; of
-// more, each rank's owned rows of its Simulation's bodies (the frame's fields only) to rank 0.
+// more ranks, each rank's owned rows to rank 0, which keeps its frame's bodies between frames.
 // CONTACTGRID_SIMULATE_OUTPUT=gather (the former path): for each log row every owned row's energies
-// and contacts to rank 0, and for a frame every field of the owned rows, at one rank too.
+// and contacts to rank 0, and for a frame the owned rows into new bodies on rank 0, at one rank too.
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -252,20 +252,11 @@ class ResidentDem {
     }
     std::vector<sim::BodyOut> mine(m_owned_rows.size());
     agreed_stage(m_session, "simulate", [&] {
-      if (m_gather) {  // every field of the owned rows (DemRow)
-        std::vector<DemRow> rows;
-        m_sim->read_rows(m_owned_rows, rows);
-        for (std::size_t j = 0; j < rows.size(); ++j)
-          mine[j] = {m_ids[m_owned_rows[j]], rows[j].position, rows[j].velocity, rows[j].omega,
-                     rows[j].orientation};
-        return;
-      }
-      const DemBodies held = m_sim->bodies();  // the frame's fields of every row (CUDA: only those)
-      for (std::size_t j = 0; j < m_owned_rows.size(); ++j) {
-        const std::size_t k = m_owned_rows[j];
-        mine[j] = {m_ids[k], held.position[k], held.velocity[k], held.angular_velocity[k],
-                   held.orientation.empty() ? Quat<double>{1, 0, 0, 0} : held.orientation[k]};
-      }
+      std::vector<DemRow> rows;
+      m_sim->read_rows(m_owned_rows, rows);
+      for (std::size_t j = 0; j < rows.size(); ++j)
+        mine[j] = {m_ids[m_owned_rows[j]], rows[j].position, rows[j].velocity, rows[j].omega,
+                   rows[j].orientation};
     });
     if (m_gather)
       m_frame_bodies = sim::bodies_on_root(m_session, mine, start);  // a new one each frame
