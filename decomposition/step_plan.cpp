@@ -154,11 +154,12 @@ BoundaryRows merge_boundary_rows(std::span<const std::int64_t> boundary_ids,
   for (std::size_t k = 1; k < boundary_ids.size(); ++k)
     if (!(boundary_ids[k - 1] < boundary_ids[k]))
       throw Error("engine B's rows: boundary ids not ascending at " + std::to_string(k) + ": internal error");
-  // The ghosts in id order (the groups of the sources interleave in id).
+  // The ghosts in id order (the groups of the sources interleave in id; one source's are in order).
   std::vector<std::size_t> by_id(ghost_ids.size());
   std::iota(by_id.begin(), by_id.end(), std::size_t(0));
-  std::sort(by_id.begin(), by_id.end(),
-            [&](std::size_t a, std::size_t b) { return ghost_ids[a] < ghost_ids[b]; });
+  if (!std::is_sorted(ghost_ids.begin(), ghost_ids.end()))
+    std::sort(by_id.begin(), by_id.end(),
+              [&](std::size_t a, std::size_t b) { return ghost_ids[a] < ghost_ids[b]; });
   BoundaryRows rows;
   rows.of_boundary.resize(boundary_ids.size());
   rows.of_ghost.resize(ghost_ids.size());
