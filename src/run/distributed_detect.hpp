@@ -133,6 +133,10 @@ struct DistributedResult {
   // took, and the most detections (pieces + the tries that did not fit) a rank ran.
   std::uint64_t memory_limit = 0, pieces = 1, piece_detections = 1;
   StepStats steps;  // resident steps (steps == 0: none ran)
+  // The device made ready while the scene was read (kernels/device_warm_up.hpp; rank 0's): its
+  // thread's seconds, those of the context's creation among them, and how long the run then waited
+  // for it (0: none ran).
+  double warm_up = 0, warm_up_context = 0, warm_up_wait = 0;
 };
 
 // Collective over `session`: every rank calls it with the same arguments. The stages read … collect

@@ -24,6 +24,7 @@
 #include "assemble.hpp"
 #include "collectives.hpp"
 #include "contact_collect.hpp"
+#include "device_warm_up.hpp"
 #include "distribute.hpp"
 #include "halo_exchange.hpp"
 #include "host_vector.hpp"
@@ -816,7 +817,7 @@ PrecisionChoice choose_mode(const Session& session, const DetectCommand& cmd, co
 // summary, in the chosen mode.
 template <class Real>
 int run_in_mode(const DetectCommand& cmd, Session& session, const DistributedOptions& options, ReadScene&& in,
-                const PrecisionChoice& choice, int threads) {
+                const PrecisionChoice& choice, int threads, DeviceWarmUp& warm) {
   // One rank under a memory limit writes the contacts as its pieces come (host memory: a piece or
   // two, never all rows); a CSV copy or several ranks gather them first.
   std::optional<ContactFileStream> stream;
@@ -824,10 +825,14 @@ int run_in_mode(const DetectCommand& cmd, Session& session, const DistributedOpt
     stream.emplace(cmd.output, precision_of<Real>(), FieldSet(options.engine.fields == Fields::full));
   // The free blocks the host pool keeps for reuse count against the limit as well.
   if (stream) cap_host_pool(options.memory_limit);
+  const double waited = warm.wait();
   DistributedResult<Real> r = or_abort(session, [&] {
     return distributed_run<Real>(session, cmd.input, options, std::move(in), threads,
                                  stream ? &*stream : nullptr);
   });
+  r.warm_up = warm.seconds();
+  r.warm_up_context = warm.context_seconds();
+  r.warm_up_wait = waited;
   RunTimes times = r.times;
   RunInfo info;
   info.precision = to_string(choice.mode);
@@ -913,12 +918,17 @@ int run_detect(const DetectCommand& cmd, Session& session) {
   check_output_directories(session, cmd, options);
   const int threads = host_threads(options.engine.threads, session);
   const DefaultTeam team(threads);
+  // The GPU's context and the kernels of a detection in the mode asked (auto: each until chosen) made
+  // ready on a thread of their own while the scene is read.
+  DeviceWarmUp warm(options.engine,
+                    cmd.precision ? DeviceWarmUp::bit(*cmd.precision) : DeviceWarmUp::all_modes());
   ReadScene in = or_abort(session, [&] { return read_scene(session, cmd.input, options); });
   const PrecisionChoice choice = or_abort(session, [&] { return choose_mode(session, cmd, in); });
+  warm.keep_only(choice.mode, in.part.has_shapes);
   options.engine.fp32_broad_phase = choice.mode == Precision::mixed;
   return choice.mode == Precision::fp32
-             ? run_in_mode<float>(cmd, session, options, std::move(in), choice, threads)
-             : run_in_mode<double>(cmd, session, options, std::move(in), choice, threads);
+             ? run_in_mode<float>(cmd, session, options, std::move(in), choice, threads, warm)
+             : run_in_mode<double>(cmd, session, options, std::move(in), choice, threads, warm);
 }
 
 }  // namespace cg

@@ -113,6 +113,11 @@ void print_summary(const RunInfo& info, const RunTimes& times, std::uint64_t con
     fmt::print("  {:<16} {:>12.6f}\n", name, t.seconds);
   }
   fmt::print("  {:<16} {:>12.6f}\n", "total", total);
+  if (r.warm_up > 0)  // outside the table, as a new process's context creation is
+    fmt::print(
+        "  (the device made ready on a thread of its own while the scene was read: {:.3f} s, its context "
+        "{:.3f} s, the kernels' loads the rest; then the run waited {:.3f} s for it)\n",
+        r.warm_up, r.warm_up_context, r.warm_up_wait);
   if (r.ranks > 1 && all_rows)
     fmt::print(
         "  (select: every rank read every row and kept its owned bodies and its ghosts; no halo exchange)\n");
