@@ -273,6 +273,7 @@ case $MODE in
         sed -nE '/^resident steps/,/slab rebalances/p' "$OUT/s25.$t.log"
       done
     } | tee "$OUT/table.md"
+    (cd "$OUT" && tar czf migrate.tgz ./*.log && rm -f ./*.log)
     ;;
   two)
     log "MPI moving steps at np 2 (one rank per GPU)"
