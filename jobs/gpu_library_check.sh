@@ -27,7 +27,8 @@
 #   engine     host_stage_bench: a new engine a call (as contactgrid.detect makes), per stage; then
 #              before/after in alternation (same binary: the old paths by their knobs, $old_paths,
 #              against the defaults), the same contacts required
-#   (python)   before: contactgrid.detect with the old paths' knobs, 9 calls, no SciPy
+#   (python)   before: contactgrid.detect with the old paths' knobs, 9 calls, no SciPy (run before and
+#              after the python step below; the lower median counts)
 #   cli        contactgrid detect --backend cpu --threads 2: the detect stage of 5 processes
 #   python     tests/bench/python_bench.py: contactgrid.detect, the same call from C++ (detect_call_bench)
 #              and SciPy (same pairs checked), the ratios
@@ -52,8 +53,11 @@ BIN=$(realpath -m "${BIN:-$dir}")
 py=${PYTHON:-python3}
 export LD_LIBRARY_PATH="$dir/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 cores="taskset -c 0,1"
-# the CPU stages' old paths (BENCHMARKS.md §2): the laptop part's "before"
-old_paths="CONTACTGRID_HOST_ROWS=whole CONTACTGRID_HOST_SORT=lsd CONTACTGRID_HOST_WALK=flags"
+# the laptop part's "before" (§26's defaults, BENCHMARKS.md §2): the float pair walk's four-lane SSE
+# steps (instead of the AVX2 steps the CPU dispatches to), and a second pass of bounds in the engine
+# (instead of taking those precision "auto" chose from: the Python module and detect_call_bench)
+old_paths="CONTACTGRID_HOST_WALK=sse CONTACTGRID_AUTO_BOUNDS=engine"
+grep -q -m1 -w avx2 /proc/cpuinfo || echo "note: this CPU has no AVX2: the walk's after is its before (sse)"
 { date -u; nproc; grep -m1 'model name' /proc/cpuinfo; uptime; git log -1 --format='commit %h %s' 2>/dev/null
   cat /sys/kernel/mm/transparent_hugepage/enabled 2>/dev/null; } 2>&1 | tee "$log_dir/device.txt"
 
@@ -94,12 +98,14 @@ fi
 if [ "$PART" = laptop ] || [ "$PART" = all ]; then
 if [ -x "$BIN/contactgrid_tests" ]; then
   # the CPU stages' new paths must keep CPU = CUDA: the same contact bytes and the same stats
-  log "== CPU = CUDA after the CPU stages' changes: CudaBackendTest, CudaNarrowTest, RadixSort, HostStages"
-  "$BIN/contactgrid_tests" --gtest_filter='CudaBackendTest/*:CudaNarrowTest/*:RadixSort*:HostStages*:HostPairs*' \
+  log "== CPU = CUDA after the CPU stages' changes: CudaBackendTest, CudaNarrowTest, RadixSort, HostStages, HostWalk"
+  "$BIN/contactgrid_tests" --gtest_filter='CudaBackendTest/*:CudaNarrowTest/*:RadixSort*:HostStages*:HostPairs*:HostWalk*:EngineTest/*.DetectWithTheCallersBounds*' \
     >"$log_dir/laptop_unit.log" 2>&1 || failed+=(laptop_unit)
   grep -E '^\[  (PASSED|FAILED|SKIPPED) |^\[==========\]' "$log_dir/laptop_unit.log" | head -20
   grep -q 'OK \] CudaBackendTest/.*BitIdenticalToCpuOnScenes' "$log_dir/laptop_unit.log" ||
     failed+=(cuda_cpu_cases_did_not_run)
+  grep -q 'OK \] HostWalk.FlagsSseAndAvx2GiveTheSameBytesAndTests' "$log_dir/laptop_unit.log" ||
+    failed+=(host_walk_case_did_not_run)
 fi
 
 log "== the module (compiled against $py)"
@@ -115,8 +121,8 @@ $cores "$dir/host_bandwidth" 2 512 10 2>&1 | tee "$log_dir/bandwidth.log" || fai
 log "== engine: host_stage_bench, a new engine a call, 2 threads, cores 0,1, 9 calls"
 $cores "$dir/host_stage_bench" "$scene" 9 2 mixed fresh 2>&1 | tee "$log_dir/engine.log" || failed+=(engine)
 
-# Before / after in alternation, the same binary: before = the CPU stages' old paths by their knobs
-# (the whole-row store of basic rows, the LSD radix passes, the 128-lane flag walk); after = the
+# Before / after in alternation, the same binary: before = the old paths by their knobs ($old_paths:
+# the four-lane walk; the engine's own bounds touch only the Python and C++ calls); after = the
 # defaults. Both must give the same contacts; each run prints its stages (median of 9).
 log "== engine before/after (old paths: $old_paths), alternated, 2 threads, cores 0,1"
 for r in 1 2; do
@@ -142,24 +148,29 @@ done
 rm -f "$log_dir/c.h5"
 grep -E '^ +detect ' "$log_dir/cli.log" | awk '{print $2 * 1e3}' | sort -n >"$log_dir/cli_detect_ms.txt"
 
-log "== Python before (old paths by their knobs, no SciPy), cores 0,1, 9 calls"
-PYTHONPATH=/tmp/cgpy env $old_paths $cores $py tests/bench/python_bench.py --log2n 20 --backend cpu --threads 2 \
-  --repetitions 9 --no-scipy --binary "$dir/contactgrid" --cxx "$dir/detect_call_bench" >"$log_dir/python_before.log" 2>&1 ||
-  failed+=(python_before)
-grep -E '^contactgrid.detect|^same call' "$log_dir/python_before.log"
+python_before() {
+  log "== Python before (old paths by their knobs, no SciPy), cores 0,1, 9 calls ($1 of 2)"
+  PYTHONPATH=/tmp/cgpy env $old_paths $cores $py tests/bench/python_bench.py --log2n 20 --backend cpu --threads 2 \
+    --repetitions 9 --no-scipy --binary "$dir/contactgrid" --cxx "$dir/detect_call_bench" \
+    >"$log_dir/python_before_$1.log" 2>&1 || failed+=(python_before)
+  grep -E '^contactgrid.detect|^same call' "$log_dir/python_before_$1.log"
+}
+python_before 1
 
 log "== Python, C++, SciPy: python_bench.py, cores 0,1 (9 calls each, SciPy 5)"
 PYTHONPATH=/tmp/cgpy $cores $py tests/bench/python_bench.py --log2n 20 --backend cpu --threads 2 \
   --repetitions 9 --scipy-repetitions 5 --binary "$dir/contactgrid" --cxx "$dir/detect_call_bench" 2>&1 |
   tee "$log_dir/python.log"
 [ "${PIPESTATUS[0]}" -eq 0 ] || failed+=(python_bench)
+python_before 2  # before on both sides of after: the lower of the two medians
 rm -f "$scene"
 
 # The summary: medians (ms) and the issue's two ratios.
 engine=$(awk '$1 == "(sum)" {print $3}' "$log_dir/engine.log")
 eb=$(cat "$log_dir"/engine_before_?.log | awk '$1 == "(sum)" {print $3}' | sort -n | head -1)
 ea=$(cat "$log_dir"/engine_after_?.log | awk '$1 == "(sum)" {print $3}' | sort -n | head -1)
-pyb=$(awk '/^contactgrid.detect/ {print $2}' "$log_dir/python_before.log")
+pyb=$(cat "$log_dir"/python_before_?.log | awk '/^contactgrid.detect/ {print $2}' | sort -n | head -1)
+cxxb=$(cat "$log_dir"/python_before_?.log | awk '/^same call from C\+\+/ {print $5}' | sort -n | head -1)
 cli=$(awk '{a[NR] = $1} END {if (NR) print a[int((NR + 1) / 2)]}' "$log_dir/cli_detect_ms.txt")
 pyt=$(awk '/^contactgrid.detect/ {print $2}' "$log_dir/python.log")
 cxx=$(awk '/^same call from C\+\+/ {print $5}' "$log_dir/python.log")
@@ -173,10 +184,11 @@ awk -v e="$engine" -v c="$cli" -v p="$pyt" -v x="$cxx" -v s="$sp" -v same="$same
   if (e > 0 && s > 0) printf "  SciPy / engine        %.1fx\n", s / e
   printf "  same pairs as SciPy   %s\n", same
 }' | tee "$log_dir/summary.txt"
-awk -v eb="$eb" -v ea="$ea" -v pb="$pyb" -v p="$pyt" -v s="$sp" 'BEGIN {
-  printf "  before/after (the old paths by their knobs / the defaults, same binary, this run):\n"
+awk -v eb="$eb" -v ea="$ea" -v pb="$pyb" -v p="$pyt" -v s="$sp" -v xb="$cxxb" -v x="$cxx" -v op="$old_paths" 'BEGIN {
+  printf "  before/after (before: %s; after: the defaults; same binary, this run):\n", op
   if (eb > 0 && ea > 0) printf "    engine stages (the lower of two medians)  %s -> %s ms  %.2fx\n", eb, ea, eb / ea
   if (pb > 0 && p > 0) printf "    Python contactgrid.detect                 %s -> %s ms  %.2fx\n", pb, p, pb / p
+  if (xb > 0 && x > 0) printf "    the same call from C++                    %s -> %s ms  %.2fx\n", xb, x, xb / x
   if (pb > 0 && s > 0) printf "    SciPy / Python                            %.1fx -> %.1fx (target >= 20)\n", s / pb, s / p
 }' | tee -a "$log_dir/summary.txt"
 [ "$same" = True ] || failed+=(same_pairs)

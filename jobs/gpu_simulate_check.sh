@@ -22,18 +22,24 @@
 #             default: 2). Ellipsoids (2^22) and the
 #             contact stage's sums as A (CONTACTGRID_DEM_TERMS=sums) only with FULL=1.
 #   one       (the default; under 3 minutes on one H100) simulate under mpirun with each rank's bodies
-#             resident on its GPU (the default; CONTACTGRID_SIMULATE_RANKS=host: the forces on the
-#             host, "before"): the rank interface's unit cases (DemRows/cuda.*) and DemBackends.*;
-#             tests/cli/mpi_simulate_cuda.sh (the CPU's one-rank files, bit for bit, from --backend
-#             cuda at -np 1 and 2 on this GPU, resident and host); steps/s of a 2^20 pour (fp32) without
-#             mpirun, under mpirun -np 1 resident (after) and host (before, a few steps)
+#             resident on its GPU: the rank interface's unit cases (DemRows/cuda.*: log_terms too),
+#             DemBackends.*, RankSums.*; tests/cli/mpi_simulate_cuda.sh (the CPU's one-rank files, bit
+#             for bit, from --backend cuda at -np 1 and 2 on this GPU, resident and host, the log rows
+#             summed where the rows are and gathered); a 2^20 pour (fp32, 300 steps, a log row every
+#             50, the last frame) without mpirun and under mpirun -np 1, "after" (the default: a log row
+#             summed on the device) and "before" (CONTACTGRID_SIMULATE_OUTPUT=gather: every rank's
+#             rows to rank 0 for each log row and frame): steps/s, the command's wall time and the
+#             run's split (start, steps, relayout, log rows, frames: the summary's "wall time" line);
+#             the three runs' files the same bytes
 #   mpi2      (a host with 2 GPUs, its own call) simulate under mpirun -np 2 --backend cuda writes the
 #             frames, contacts and energies of -np 1 and of the CPU backend, bit for bit
-#   two       (a host with 2 GPUs, its own call) steps/s of mpirun -np 1 and -np 2 --backend cuda on a
-#             pour of N2 spheres (default 2^23, fp32), resident (after; np 2 also with a 4x wider halo:
-#             CONTACTGRID_SIMULATE_HALO=4) and np 2 on the host (before, STEPS_HOST steps); np 1 and
-#             np 2's frames and energies the same bytes (issue: np 2 >= 1.8x np 1 at 2^25:
-#             N2=33554432)
+#   two       (a host with 2 GPUs, its own call; under 3 minutes) a pour of N2 spheres (default 2^23,
+#             fp32, STEPS2 = 30 steps, a log row every 15, the first and last frames) under mpirun -np 1
+#             and -np 2 --backend cuda, each after (the default: each rank's chunk sums of the log row)
+#             and before (CONTACTGRID_SIMULATE_OUTPUT=gather): steps/s, the command's wall time and
+#             the split as in one; the four runs' files the same bytes. FULL=1: also np 2 with a 4x
+#             wider halo (CONTACTGRID_SIMULATE_HALO=4) and np 2 on the host (CONTACTGRID_SIMULATE_RANKS=host,
+#             STEPS_HOST steps). (Issue: np 2 >= 1.8x np 1 at 2^25: N2=33554432.)
 # Default: one. unit perf beverloo on request. Writes $OUT/simulate_<part>.tar.gz
 # (each part's logs), $OUT/table.md, $OUT/stages.txt and $OUT/summary.txt; exits non-zero naming every
 # failed check.
@@ -176,7 +182,7 @@ PYEOF
 }
 
 part_two() {
-  local d=$1 n=${N2:-$((1 << 23))} steps=${STEPS2:-60} host_steps=${STEPS_HOST:-3}
+  local d=$1 n=${N2:-$((1 << 23))} steps=${STEPS2:-30} host_steps=${STEPS_HOST:-3}
   export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
   local gpus; gpus=$(nvidia-smi -L 2>/dev/null | wc -l)
   [ "$gpus" -ge 2 ] || { failed+=("two: needs 2 GPUs, $gpus seen"); return; }
@@ -185,30 +191,57 @@ part_two() {
   run_two() {  # TAG NP STEPS [ENV...]
     local tag=$1 np=$2 k=$3; shift 3
     rm -rf "$W/t.$tag.run"
-    if ! env "$@" mpirun --bind-to none -np "$np" "$CG" simulate "$W/t.h5" -o "$W/t.$tag.run" --steps "$k" \
-        --output-every "$k" --log-every $((k / 3 > 0 ? k / 3 : 1)) --backend cuda --precision fp32 --no-plot \
-        >"$d/$tag.log" 2>&1; then
+    if ! timed "$d/$tag.log" env "$@" mpirun --bind-to none -np "$np" "$CG" simulate "$W/t.h5" -o "$W/t.$tag.run" \
+        --steps "$k" --output-every "$k" --log-every $((k / 2 > 0 ? k / 2 : 1)) --backend cuda --precision fp32 \
+        --no-plot; then
       failed+=("two: $tag run"); tail -3 "$d/$tag.log"; return
     fi
     cp "$W/t.$tag.run/log.csv" "$d/$tag.log.csv"
-    log "two: $n spheres, $tag: $(steps_per_second "$W/t.$tag.run") steps/s"
+    report "two: $n spheres, $tag" "$W/t.$tag.run" "$d/$tag.log"
+  }
+  same_two() {  # TAG1 TAG2
+    "$PY" tests/cli/same_run.py "$W/t.$1.run" "$W/t.$2.run" >>"$d/compare.log" 2>&1 ||
+      failed+=("two: $2's frames or energies differ from $1's (compare.log)")
   }
   run_two np1 1 "$steps"
+  run_two np1.before 1 "$steps" CONTACTGRID_SIMULATE_OUTPUT=gather
+  same_two np1 np1.before
+  rm -rf "$W/t.np1.before.run"
   run_two np2 2 "$steps"
-  "$PY" tests/cli/same_run.py "$W/t.np1.run" "$W/t.np2.run" >"$d/compare.log" 2>&1 ||
-    failed+=("two: np 2's frames or energies differ from np 1's (compare.log)")
-  cat "$d/compare.log" | tee -a "$OUT/summary.txt"
+  same_two np1 np2
   rm -rf "$W/t.np1.run"
-  run_two np2.halo4 2 "$steps" CONTACTGRID_SIMULATE_HALO=4
-  "$PY" tests/cli/same_run.py "$W/t.np2.run" "$W/t.np2.halo4.run" >>"$d/compare.log" 2>&1 ||
-    failed+=("two: the 4x halo's files differ (compare.log)")
-  rm -rf "$W/t.np2.run" "$W/t.np2.halo4.run"
-  run_two np2.host 2 "$host_steps" CONTACTGRID_SIMULATE_RANKS=host
-  rm -rf "$W/t.np2.host.run" "$W/t.h5"
+  run_two np2.before 2 "$steps" CONTACTGRID_SIMULATE_OUTPUT=gather
+  same_two np2 np2.before
+  rm -rf "$W/t.np2.before.run"
+  if [ "${FULL:-0}" = 1 ]; then
+    run_two np2.halo4 2 "$steps" CONTACTGRID_SIMULATE_HALO=4
+    same_two np2 np2.halo4
+    rm -rf "$W/t.np2.halo4.run"
+    run_two np2.host 2 "$host_steps" CONTACTGRID_SIMULATE_RANKS=host
+    rm -rf "$W/t.np2.host.run"
+  fi
+  cat "$d/compare.log" | tee -a "$OUT/summary.txt"
+  rm -rf "$W/t.np2.run" "$W/t.h5"
   local a b
   a=$(steps_per_second_of "$d/np1.log.csv"); b=$(steps_per_second_of "$d/np2.log.csv")
   log "two: np 2 / np 1 = $(awk -v a="$a" -v b="$b" 'BEGIN { if (a > 0) printf "%.2f", b / a }') (issue: >= 1.8 at 2^25)"
-  grep -h 'steps/s\|rows rebuilt' "$d"/*.log | tee -a "$OUT/summary.txt"
+}
+
+# timed LOG COMMAND...: the command's output into LOG, then its wall seconds ("command wall S s")
+timed() {
+  local log=$1; shift
+  local t0 rc
+  t0=$(date +%s.%N)
+  "$@" >"$log" 2>&1
+  rc=$?
+  echo "command wall $(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN { printf "%.2f", b - a }') s" >>"$log"
+  return $rc
+}
+
+# report LABEL RUNDIR LOG: steps/s (log.csv), the command's wall time and the run's split (summary)
+report() {
+  local label=$1 run=$2 out=$3
+  log "$label: $(steps_per_second "$run") steps/s; $(grep -o 'command wall [0-9.]* s' "$out");$(grep -o ' wall time .*' "$out" | head -1)"
 }
 
 steps_per_second_of() {  # a log.csv
@@ -220,7 +253,7 @@ steps_per_second() { steps_per_second_of "$1/log.csv"; }
 part_one() {
   local d=$1
   export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
-  local filter='DemRows*:DemBackends*'
+  local filter='DemRows*:DemBackends*:RankSums*'
   "$BIN/contactgrid_tests" --gtest_filter="$filter" >"$d/unit.log" 2>&1 || failed+=("one: unit $filter")
   grep -E '^\[  (PASSED|FAILED) |^\[  SKIPPED' "$d/unit.log" | head -20 | tee -a "$OUT/summary.txt"
   if grep -q '^\[  SKIPPED \]' "$d/unit.log"; then failed+=("one: CUDA cases skipped (no GPU seen)"); fi
@@ -229,26 +262,28 @@ part_one() {
   local rc=$?
   tail -3 "$d/cli_cuda.log" | tee -a "$OUT/summary.txt"
   [ $rc -eq 0 ] || failed+=("one: mpi_simulate_cuda.sh (rc $rc: 77 = skipped, no GPU)")
+  rm -rf "$W/cli_cuda"
   local n=$((1 << 20))
   "$CG" generate "$W/p20.h5" --kind pour -n $n --rlow 0.00495 --rhigh 0.005 --pour-spacing 1.97 --seed 5 -q ||
     { failed+=("one: generate"); return; }
-  local common=(--output-every 300 --backend cuda --precision fp32 --no-plot)
+  local common=(--steps 300 --log-every 50 --output-every 300 --backend cuda --precision fp32 --no-plot)
   rm -rf "$W"/p20.*.run
-  "$CG" simulate "$W/p20.h5" -o "$W/p20.plain.run" --steps 300 --log-every 50 "${common[@]}" >"$d/p20.plain.log" 2>&1 ||
+  timed "$d/p20.plain.log" "$CG" simulate "$W/p20.h5" -o "$W/p20.plain.run" "${common[@]}" ||
     failed+=("one: 2^20 without mpirun")
-  mpirun --bind-to none -np 1 "$CG" simulate "$W/p20.h5" -o "$W/p20.np1.run" --steps 300 --log-every 50 "${common[@]}" \
-    >"$d/p20.np1.log" 2>&1 || failed+=("one: 2^20 np 1 resident")
-  CONTACTGRID_SIMULATE_RANKS=host mpirun --bind-to none -np 1 "$CG" simulate "$W/p20.h5" -o "$W/p20.host.run" \
-    --steps 6 --log-every 2 --output-every 6 --backend cuda --precision fp32 --no-plot >"$d/p20.host.log" 2>&1 ||
-    failed+=("one: 2^20 np 1 host")
+  timed "$d/p20.np1.log" mpirun --bind-to none -np 1 "$CG" simulate "$W/p20.h5" -o "$W/p20.np1.run" "${common[@]}" ||
+    failed+=("one: 2^20 np 1 (after)")
+  timed "$d/p20.np1.before.log" env CONTACTGRID_SIMULATE_OUTPUT=gather mpirun --bind-to none -np 1 "$CG" simulate \
+    "$W/p20.h5" -o "$W/p20.np1.before.run" "${common[@]}" || failed+=("one: 2^20 np 1 (before)")
   local run
-  for run in plain np1 host; do
+  for run in plain np1 np1.before; do
     cp "$W/p20.$run.run/log.csv" "$d/p20.$run.log.csv" 2>/dev/null
-    log "one: 2^20 pour fp32 $run: $(steps_per_second "$W/p20.$run.run") steps/s"
+    report "one: 2^20 pour fp32 $run" "$W/p20.$run.run" "$d/p20.$run.log"
   done
-  "$PY" tests/cli/same_run.py "$W/p20.plain.run" "$W/p20.np1.run" frames >>"$d/compare.log" 2>&1 ||
-    failed+=("one: 2^20 np 1 resident frames differ from the run without mpirun")
-  grep -h 'steps/s\|rows rebuilt' "$d"/p20.*.log | tee -a "$OUT/summary.txt"
+  "$PY" tests/cli/same_run.py "$W/p20.plain.run" "$W/p20.np1.run" >>"$d/compare.log" 2>&1 ||
+    failed+=("one: 2^20 np 1's files differ from the run without mpirun's")
+  "$PY" tests/cli/same_run.py "$W/p20.np1.run" "$W/p20.np1.before.run" >>"$d/compare.log" 2>&1 ||
+    failed+=("one: 2^20 np 1's files differ after and before")
+  cat "$d/compare.log" | tee -a "$OUT/summary.txt"
   rm -rf "$W"/p20.*
 }
 

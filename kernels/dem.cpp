@@ -62,6 +62,10 @@ void cuda_dem_get_state(CudaDem&, std::size_t, DemState&) {
 void cuda_dem_set_state(CudaDem&, const DemState&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
+void cuda_dem_log_terms(CudaDem&, const std::vector<std::uint32_t>&, Vec3<double>, std::size_t,
+                        std::vector<DemLogRow>&, std::vector<double>&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
 }  // namespace detail
 #endif
 
@@ -636,6 +640,32 @@ DemState Simulation<Real>::state() {
   if (out.xi.size() != out.history.size())
     throw Error("simulate: the springs differ in number from the contact history: internal error");
   return out;
+}
+
+template <class Real>
+void Simulation<Real>::log_terms(const std::vector<std::uint32_t>& rows, std::vector<DemLogRow>& out,
+                                 std::vector<double>& contact_energy) {
+  Impl& s = *m_impl;
+  if (s.resolved == Backend::cuda)
+    return detail::cuda_dem_log_terms(*s.cuda, rows, s.options.gravity, s.contact_count, out, contact_energy);
+  detail::host::HostDem& h = s.host;
+  const std::size_t n = h.size();
+  for (const std::uint32_t r : rows)
+    if (r >= n) throw UsageError("simulate: row " + std::to_string(r) + " is not a row of the rank");
+  if (h.a_begin.size() != n + 1 || h.contact_energy.size() < s.contact_count)
+    throw Error("simulate: the log's terms before the forces of a step: internal error");
+  const dem::BodyArrays b = h.arrays();
+  out.resize(rows.size());
+  const std::ptrdiff_t m = static_cast<std::ptrdiff_t>(rows.size());
+#pragma omp parallel for num_threads(s.threads) schedule(static) if (m > 65536)
+  for (std::ptrdiff_t j = 0; j < m; ++j) {
+    const std::size_t i = rows[std::size_t(j)];
+    const dem::BodyEnergy e = dem::body_energy(i, b, s.options.gravity);
+    out[std::size_t(j)] = DemLogRow{e.kinetic, e.gravity, h.wall_energy.empty() ? 0.0 : h.wall_energy[i],
+                                    h.a_begin[i], h.a_begin[i + 1]};
+  }
+  contact_energy.assign(h.contact_energy.begin(),
+                        h.contact_energy.begin() + static_cast<std::ptrdiff_t>(s.contact_count));
 }
 
 template <class Real>

@@ -107,6 +107,14 @@ struct DemState {
   std::vector<double> contact_energy;
 };
 
+// What a log row needs of one row of a rank (Simulation::log_terms): its energies (kinetic, of
+// gravity, of its walls' springs) and the run [a_begin, a_end) of its contacts as A in the last
+// step's contacts (in contact order: the contacts by A, then by B).
+struct DemLogRow {
+  double kinetic, gravity, wall;
+  std::uint32_t a_begin, a_end;
+};
+
 template <class Real>
 class Simulation {
  public:
@@ -148,6 +156,10 @@ class Simulation {
   // Everything the rows carry (CUDA: downloaded); set_rows replaces the rows by `bodies` with their
   // ids and what they carry (the same rows' count in every array of `state`).
   DemState state();
+  // A log row's terms of rows `rows` (DemLogRow, computed where the rows are: CUDA downloads only
+  // these) and the energy of each of the last step's contacts (contact order).
+  void log_terms(const std::vector<std::uint32_t>& rows, std::vector<DemLogRow>& out,
+                 std::vector<double>& contact_energy);
   void mark_rows();  // the displacement counts from here (set_rows of the same rows, nothing moved)
   void set_rows(const DemBodies& bodies, std::vector<std::int64_t> ids, const DemState& state);
   const std::vector<std::int64_t>& ids() const;

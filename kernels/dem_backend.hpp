@@ -64,6 +64,9 @@ void cuda_dem_write_rows(CudaDem& dem, const std::vector<std::uint32_t>& rows, c
 void cuda_dem_mark(CudaDem& dem);
 double cuda_dem_displacement(CudaDem& dem);
 void cuda_dem_get_state(CudaDem& dem, std::size_t contacts, DemState& out);
+void cuda_dem_log_terms(CudaDem& dem, const std::vector<std::uint32_t>& rows, Vec3<double> gravity,
+                        std::size_t contacts, std::vector<DemLogRow>& out,
+                        std::vector<double>& contact_energy);
 void cuda_dem_set_state(CudaDem& dem, const DemState& in);
 
 }  // namespace cg::detail

@@ -424,15 +424,17 @@ static void observe_skin(typename Engine<Real>::Impl& s, std::uint64_t builds_be
 
 // The host-array path. `history_ids`: the keys of the contact history (EngineOptions::history) when
 // the contacts' ids are row indices (resident bodies with ids); empty: the contacts' ids.
+// `known`: compute_bounds(bodies), when the caller has it.
 template <class Real>
 static Contacts<Real> detect_host(typename Engine<Real>::Impl& s, const BodiesView& bodies,
-                                  std::optional<Frame> frame, std::span<const std::int64_t> history_ids) {
+                                  std::optional<Frame> frame, std::span<const std::int64_t> history_ids,
+                                  const Bounds* known = nullptr) {
   s.forget_resident_view();
   s.times.clear();
   reset_stats(s.stats);
   Contacts<Real> out;
   const auto t0 = WallClock::now();
-  const Bounds b = compute_bounds(bodies);
+  const Bounds b = known != nullptr ? *known : compute_bounds(bodies);
   const std::size_t ellipsoids = validate_shapes(bodies);
   s.stats.bodies = b.count;
   s.stats.ellipsoids = ellipsoids;
@@ -482,6 +484,15 @@ static Contacts<Real> detect_host(typename Engine<Real>::Impl& s, const BodiesVi
 template <class Real>
 Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Frame> frame) {
   return detect_host<Real>(*m_impl, bodies, frame, {});
+}
+
+template <class Real>
+Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, const Bounds& bounds,
+                                    std::optional<Frame> frame) {
+  if (bounds.count != bodies.size())
+    throw UsageError("detect: bounds of " + std::to_string(bounds.count) + " bodies for " +
+                     std::to_string(bodies.size()) + " bodies");
+  return detect_host<Real>(*m_impl, bodies, frame, {}, &bounds);
 }
 
 // Device-array path: bounds on the device, the same plan, the same CUDA stages. `device_out` set:

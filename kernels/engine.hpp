@@ -157,6 +157,12 @@ class Engine {
   // All contacts among `bodies`. `frame`: the shared frame of a multi-rank run; absent, the engine
   // builds one from the bodies' bounds and options.cell_size.
   Contacts<Real> detect(const BodiesView& bodies, std::optional<Frame> frame = std::nullopt);
+  // The same detection from bounds the caller already has: `bounds` must be compute_bounds(bodies)
+  // (which validated the bodies), as a caller that chose the precision mode from them holds
+  // (precision_choice.hpp; the Python module's precision "auto"); the engine skips its own pass over
+  // the bodies. The same contacts as detect(bodies, frame).
+  Contacts<Real> detect(const BodiesView& bodies, const Bounds& bounds,
+                        std::optional<Frame> frame = std::nullopt);
 
   // The same detection for bodies already on the GPU (CUDA backend only, else UsageError). Bounds and
   // validation run on the device (same InputError texts as compute_bounds); results are bit-identical

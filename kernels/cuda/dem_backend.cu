@@ -201,6 +201,16 @@ void cuda_dem_get_state(CudaDem& d, std::size_t contacts, DemState& out) {
   download(out.contact_energy, d.contact_energy, contacts);
 }
 
+void cuda_dem_log_terms(CudaDem& d, const std::vector<std::uint32_t>& rows, Vec3<double> gravity,
+                        std::size_t contacts, std::vector<DemLogRow>& out,
+                        std::vector<double>& contact_energy) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  check_rows(d, rows);
+  if (!rows.empty() && (d.a_begin.capacity() < d.count + 1 || d.contact_energy.capacity() < contacts))
+    throw Error("simulate: the log's terms before the forces of a step: internal error");
+  dem_log_rows(d, rows, gravity, contacts, out, contact_energy);
+}
+
 void cuda_dem_set_state(CudaDem& d, const DemState& in) {
   CG_CUDA_CHECK(cudaSetDevice(d.device));
   const std::size_t n = d.count, k = in.xi.size();

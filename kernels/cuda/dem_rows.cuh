@@ -1,8 +1,9 @@
 #pragma once
 // One rank's rows of a granular run over several ranks on the device (kernels/dem_backend.hpp): the
 // state of chosen rows gathered into DemRow records (the ghosts a rank sends) and scattered
-// from them (the ghosts it receives), one thread per record; the largest squared displacement of a
-// row since the mark, one value per row reduced by Thrust (max: exact, any order).
+// from them (the ghosts it receives), one thread per record; a log row's terms of chosen rows (their
+// energies and the runs of their contacts as A: DemLogRow), one thread per row; the largest squared
+// displacement of a row since the mark, one value per row reduced by Thrust (max: exact, any order).
 #include <thrust/execution_policy.h>
 #include <thrust/functional.h>
 #include <thrust/iterator/counting_iterator.h>
@@ -37,6 +38,18 @@ __global__ void dem_scatter_rows_kernel(dem::BodyArrays b, const std::uint32_t* 
   b.orientation[i] = r.orientation;
   b.force[i] = r.force;
   b.torque[i] = r.torque;
+}
+
+// The log row's terms of rows[j] (rows[j] < b.count, checked on the host); a_begin: the body index's
+// (count + 1 entries), wall_energy: each row's (null: no walls).
+__global__ void dem_log_rows_kernel(dem::BodyArrays b, Vec3<double> gravity, const double* wall_energy,
+                                    const std::uint32_t* a_begin, const std::uint32_t* rows, std::size_t n,
+                                    DemLogRow* out) {
+  const std::size_t j = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
+  if (j >= n) return;
+  const std::size_t i = rows[j];
+  const dem::BodyEnergy e = dem::body_energy(i, b, gravity);
+  out[j] = DemLogRow{e.kinetic, e.gravity, wall_energy ? wall_energy[i] : 0.0, a_begin[i], a_begin[i + 1]};
 }
 
 // |x_i − mark_i|² of row i.
@@ -79,6 +92,29 @@ inline void dem_scatter_rows(CudaDem& d, const std::vector<std::uint32_t>& rows,
   cuda::dem_scatter_rows_kernel<<<cuda::blocks_for(n), cuda::kBlock>>>(d.arrays(), d.row_index.data(), n,
                                                                        d.row_records.data());
   CG_CUDA_CHECK_LAUNCH("dem_scatter_rows");
+}
+
+// The log row's terms of `rows` (after a step's body stage: its index) and the last step's `contacts`
+// contact energies, downloaded.
+inline void dem_log_rows(CudaDem& d, const std::vector<std::uint32_t>& rows, Vec3<double> gravity,
+                         std::size_t contacts, std::vector<DemLogRow>& out, std::vector<double>& energy) {
+  const std::size_t n = rows.size();
+  out.resize(n);
+  energy.resize(contacts);
+  if (n > 0) {
+    d.row_index.reserve(n, true);
+    d.log_rows.reserve(n, true);
+    CG_CUDA_CHECK(
+        cudaMemcpy(d.row_index.data(), rows.data(), n * sizeof(std::uint32_t), cudaMemcpyHostToDevice));
+    cuda::dem_log_rows_kernel<<<cuda::blocks_for(n), cuda::kBlock>>>(
+        d.arrays(), gravity, d.wall_count > 0 ? d.wall_energy.data() : nullptr, d.a_begin.data(),
+        d.row_index.data(), n, d.log_rows.data());
+    CG_CUDA_CHECK_LAUNCH("dem_log_rows");
+    CG_CUDA_CHECK(cudaMemcpy(out.data(), d.log_rows.data(), n * sizeof(DemLogRow), cudaMemcpyDeviceToHost));
+  }
+  if (contacts > 0)
+    CG_CUDA_CHECK(cudaMemcpy(energy.data(), d.contact_energy.data(), contacts * sizeof(double),
+                             cudaMemcpyDeviceToHost));
 }
 
 inline void dem_mark_rows(CudaDem& d) {

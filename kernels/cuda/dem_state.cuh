@@ -116,6 +116,7 @@ class CudaDem {
   bool has_ids = false;
   DemBuffer<std::uint32_t> row_index;
   DemBuffer<DemRow> row_records;
+  DemBuffer<DemLogRow> log_rows;  // a log row's terms of chosen rows (dem_rows.cuh)
   DemBuffer<Vec3<double>> mark;
   bool normals_f = false;
 

@@ -2,6 +2,10 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#define CG_HOST_AVX2 1
+#endif
 
 #include <algorithm>
 #include <cstdlib>
@@ -16,11 +20,37 @@
 namespace cg::detail::host {
 namespace {
 
-// CONTACTGRID_HOST_WALK=flags: the float walk's 128-lane flag loop in place of its four-lane masks.
-const bool g_four_lanes = [] {
+// How the float walk without a report mask steps over a cell's later entries; every way makes the
+// same tests, counts the same and emits the same pairs in the same order.
+//   flags: 128 later entries flagged at a time (plain C++, what the compiler vectorises)
+//   sse:   four later entries a step as bit masks (SSE2)
+//   avx2:  eight later entries a step (AVX2, chosen at run time where the CPU has it); an entry with at
+//          most eight later entries in its cell (most) takes one step, and its cell's lanes are loaded
+//          once for all its entries; the pairs the bound keeps are tested after the cell, in order
+// CONTACTGRID_HOST_WALK=flags|sse|avx2 picks one (read each call: a measurement switch and the tests'
+// way to compare them); unset, avx2 where the CPU has it, else sse. avx2 on a CPU without it: sse.
+enum class WalkKind { flags, sse, avx2 };
+
+bool cpu_has_avx2() {
+#if defined(CG_HOST_AVX2)
+  static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt");
+  return has;
+#else
+  return false;
+#endif
+}
+
+WalkKind walk_kind() {
   const char* k = std::getenv("CONTACTGRID_HOST_WALK");
-  return !(k != nullptr && std::string_view(k) == "flags");
-}();
+  const std::string_view v = k != nullptr ? std::string_view(k) : std::string_view();
+  if (v == "flags") return WalkKind::flags;
+#if defined(__SSE2__)
+  if (v == "sse" || !cpu_has_avx2()) return WalkKind::sse;
+  return WalkKind::avx2;
+#else
+  return WalkKind::flags;
+#endif
+}
 
 // The entries in cell order, structure of arrays: each body's packed sphere (inflated by a skin) and
 // control byte, gathered once so that the walk reads memory in sequence and its inner loop vectorises.
@@ -31,6 +61,123 @@ struct EntryBodies {
   Sphere<Real> sphere(std::size_t e) const { return {x[e], y[e], z[e], r[e]}; }
 };
 
+#if defined(CG_HOST_AVX2)
+// Eight later entries of a cell (lanes j: entries first + j), structure of arrays.
+struct Lanes8 {
+  __m256 x, y, z, r;
+  __m256i ctrl;
+};
+
+__attribute__((target("avx2"))) inline Lanes8 load8(const EntryBodies<float>& eb, std::size_t first) {
+  return {_mm256_loadu_ps(eb.x.data() + first), _mm256_loadu_ps(eb.y.data() + first),
+          _mm256_loadu_ps(eb.z.data() + first), _mm256_loadu_ps(eb.r.data() + first),
+          _mm256_loadu_si256(reinterpret_cast<const __m256i*>(eb.ctrl.data() + first))};
+}
+
+// Entry e (sphere a, control byte ca, a_two = its test_in_cell bits) against eight lanes: `assigned`
+// the lanes whose pair the cell rule assigns to this cell, `near` those within NearBound's distance —
+// the arithmetic of the flag loop and the four-lane step, lane by lane (no FMA: every rounding the same).
+__attribute__((target("avx2"))) inline void step8(const Lanes8& l, const Sphere<float>& a, std::uint32_t ca,
+                                                  std::uint32_t a_two, __m256 margin2, unsigned& assigned,
+                                                  unsigned& near) {
+  const __m256i two = _mm256_and_si256(_mm256_set1_epi32(int(a_two)), _mm256_srli_epi32(l.ctrl, 3));
+  const __m256i rule = _mm256_cmpeq_epi32(
+      _mm256_andnot_si256(_mm256_xor_si256(_mm256_set1_epi32(int(ca)), l.ctrl), two), _mm256_setzero_si256());
+  assigned = unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(rule)));
+  const __m256 dx = _mm256_sub_ps(_mm256_set1_ps(a.x), l.x);
+  const __m256 dy = _mm256_sub_ps(_mm256_set1_ps(a.y), l.y);
+  const __m256 dz = _mm256_sub_ps(_mm256_set1_ps(a.z), l.z);
+  const __m256 d2 =
+      _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)), _mm256_mul_ps(dz, dz));
+  const __m256 sum = _mm256_add_ps(_mm256_add_ps(_mm256_set1_ps(a.r), l.r), margin2);
+  near = unsigned(_mm256_movemask_ps(_mm256_cmp_ps(d2, _mm256_mul_ps(sum, sum), _CMP_LE_OQ)));
+}
+
+// A step's lanes that the bound keeps (entry e against entries first + j): tested after the cell.
+struct PendingStep {
+  std::size_t e, first;
+  unsigned lanes;
+};
+
+// walk_entries' float walk without a report mask in AVX2 (WalkKind::avx2): the same tests, count and
+// emitted pairs in the same order. A cell whose entries from e on number at most nine loads its lanes
+// once, and each of its entries takes one step (lanes after its own place); a longer cell steps each
+// entry over its later entries eight at a time. The kept lanes are queued (no branch on them in the
+// step) and tested in order when the queue fills and at the end.
+template <class Test, class Key, class Emit>
+__attribute__((target("avx2,popcnt"))) std::uint64_t walk_avx2(std::size_t lo, std::size_t hi,
+                                                               const Entries<Key>& en,
+                                                               const EntryBodies<float>& eb, int half_bits,
+                                                               const Test& test, Emit& emit) {
+  const std::size_t n_entries = en.size();
+  const Key* keys = en.keys.data();
+  const std::uint32_t* body = en.body.data();
+  const std::uint32_t* ec = eb.ctrl.data();
+  const NearBound<Test, float> near_bound(test);
+  const __m256 margin2 = _mm256_set1_ps(near_bound.margin2);
+  const unsigned near_all = near_bound.all ? 0xffu : 0u;
+  constexpr std::size_t k_pending = 256;
+  PendingStep pending[k_pending];
+  std::size_t n_pending = 0;
+  const auto flush = [&] {
+    for (std::size_t k = 0; k < n_pending; ++k) {
+      const PendingStep& q = pending[k];
+      const std::uint32_t a = body[q.e];
+      const Sphere<float> sa = eb.sphere(q.e);
+      for (unsigned w = q.lanes; w != 0; w &= w - 1) {
+        const std::size_t f = q.first + std::size_t(__builtin_ctz(w));
+        if (test(sa, eb.sphere(f), a, body[f])) emit(a, body[f]);
+      }
+    }
+    n_pending = 0;
+  };
+  std::uint64_t tests = 0;
+  for (std::size_t e = lo; e < hi;) {
+    std::size_t cell_end = e + 1;  // entry e starts a cell, or the chunk starts inside one
+    while (cell_end < n_entries && keys[cell_end] == keys[e]) ++cell_end;
+    const std::uint32_t type = key_type(keys[e], half_bits);
+    const std::size_t stop = std::min(hi, cell_end);
+    if (cell_end - e == 1) {  // a lone entry: no later ones
+      e = stop;
+      continue;
+    }
+    if (cell_end - e <= 9) {  // lanes j: entries e + 1 + j; entry e + p takes lanes p … of the cell
+      if (n_pending + 9 > k_pending) flush();  // each of its (at most nine) entries writes a slot
+      const Lanes8 l = load8(eb, e + 1);
+      const unsigned cell = (1u << (cell_end - e - 1)) - 1u;
+      for (std::size_t p = 0; e + p < stop; ++p) {
+        const std::size_t ep = e + p;
+        const std::uint32_t ca = ec[ep];
+        unsigned assigned, near;
+        step8(l, eb.sphere(ep), ca, (ca >> 3) & type, margin2, assigned, near);
+        assigned &= cell & (0xffu << p);
+        tests += unsigned(__builtin_popcount(assigned));
+        pending[n_pending] = {ep, e + 1, assigned & (near | near_all)};
+        n_pending += pending[n_pending].lanes != 0;
+      }
+    } else {
+      for (std::size_t ep = e; ep < stop; ++ep) {
+        const std::uint32_t ca = ec[ep];
+        const Sphere<float> sa = eb.sphere(ep);
+        for (std::size_t first = ep + 1; first < cell_end; first += 8) {
+          if (n_pending == k_pending) flush();
+          const unsigned lanes = cell_end - first >= 8 ? 0xffu : (1u << (cell_end - first)) - 1u;
+          unsigned assigned, near;
+          step8(load8(eb, first), sa, ca, (ca >> 3) & type, margin2, assigned, near);
+          assigned &= lanes;
+          tests += unsigned(__builtin_popcount(assigned));
+          pending[n_pending] = {ep, first, assigned & (near | near_all)};
+          n_pending += pending[n_pending].lanes != 0;
+        }
+      }
+    }
+    e = stop;
+  }
+  flush();
+  return tests;
+}
+#endif
+
 // Entries [lo, hi) of the walk: entry e tests the later entries f of its cell; within a cell the
 // bodies ascend (stable sort of entries made in body order), so body[e] < body[f]. `test`: the
 // candidate filter's pair test (core/narrow.hpp: SpheresTouch, CellRule, or mixed's Fp64Touch;
@@ -39,7 +186,12 @@ struct EntryBodies {
 template <class Test, class Real, class Key, class Emit>
 std::uint64_t walk_entries(std::size_t lo, std::size_t hi, const Entries<Key>& en,
                            const EntryBodies<Real>& eb, const std::uint8_t* report, int half_bits,
-                           const Test& test, Emit&& emit) {
+                           const Test& test, WalkKind kind, Emit&& emit) {
+  static_cast<void>(kind);  // (builds without SSE2: the flag loop only)
+#if defined(CG_HOST_AVX2)
+  if constexpr (std::is_same_v<Real, float>)
+    if (kind == WalkKind::avx2 && report == nullptr) return walk_avx2(lo, hi, en, eb, half_bits, test, emit);
+#endif
   const std::size_t n_entries = en.size();
   const Key* keys = en.keys.data();
   const std::uint32_t* body = en.body.data();
@@ -74,7 +226,7 @@ std::uint64_t walk_entries(std::size_t lo, std::size_t hi, const Entries<Key>& e
     const std::uint32_t a_two = (ca >> 3) & type;  // test_in_cell: axes both span, whose type bit is set
 #if defined(__SSE2__)
     if constexpr (std::is_same_v<Real, float>) {
-      if (g_four_lanes) {  // the same rule and bound, four later entries a step, as bit masks
+      if (kind != WalkKind::flags) {  // the same rule and bound, four later entries a step, as bit masks
         const __m128 vax = _mm_set1_ps(ax), vay = _mm_set1_ps(ay), vaz = _mm_set1_ps(az),
                      var = _mm_set1_ps(ar);
         const __m128 margin2 = _mm_set1_ps(near_bound.margin2);
@@ -135,8 +287,10 @@ std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const
                       int half_bits, int nt, const Test& test, CandidatePairs& out, ProgressShare& progress) {
   const std::size_t n_entries = en.size();
   EntryBodies<Real> eb;
-  // three entries of padding: the four-lane walk reads past a cell's end (those lanes masked off)
-  constexpr std::size_t pad = 3;
+  // eight entries of padding: the four- and eight-lane walks read past a cell's end (those lanes
+  // masked off)
+  constexpr std::size_t pad = 8;
+  const WalkKind kind = walk_kind();
   for (Array<Real>* a : {&eb.x, &eb.y, &eb.z, &eb.r}) {
     a->resize(n_entries + pad);
     std::fill(a->begin() + std::ptrdiff_t(n_entries), a->end(), Real(0));
@@ -161,11 +315,13 @@ std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const
   }
   // chunks of entries, each appending its pairs to its thread's buffer (collect_in_chunks)
   return collect_in_chunks(n_entries, nt, out, progress, [&](std::size_t begin, std::size_t end, auto& emit) {
-    return walk_entries(begin, end, en, eb, report, half_bits, test, emit);
+    return walk_entries(begin, end, en, eb, report, half_bits, test, kind, emit);
   });
 }
 
 }  // namespace
+
+bool walk_avx2_available() { return cpu_has_avx2(); }
 
 template <class Key>
 PairEstimate estimate_pair_tests(const Entries<Key>& en, std::uint64_t bodies, int threads) {

@@ -135,6 +135,9 @@ std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p
                               std::span<const std::uint8_t> report, int half_bits, CandidateFilter filter,
                               const NarrowBodies<double>* fp64, int threads, CandidatePairs& out,
                               const std::function<void(std::uint64_t, bool)>* progress = nullptr);
+// Whether this CPU runs the float walk's AVX2 steps (CONTACTGRID_HOST_WALK, pairs.cpp): where it does
+// not, the walk takes its four-lane steps.
+bool walk_avx2_available();
 
 // ---- the cell list (the grid's pair stage for sphere scenes: host/cell_list.cpp, host/cell_walk.cpp) ----
 // Each body filed once, under the cell of the lower corner of its box (box_radius of its radius plus

@@ -1,7 +1,9 @@
 // contactgrid.Engine (module.hpp: PyEngine): the options as words, the precision mode, the engine kept
 // between calls; every engine call with the GIL released.
 #include <cmath>
+#include <cstdlib>
 #include <string>
+#include <string_view>
 
 #include "device_memory.hpp"
 #include "python/module.hpp"
@@ -127,6 +129,12 @@ struct SceneSummary {
   Bounds bounds;
   bool ellipsoids = false;
 };
+// CONTACTGRID_AUTO_BOUNDS=engine: the engine computes the bounds again rather than take those precision
+// "auto" chose from (a measurement switch: the former path, the same contacts).
+bool engine_bounds_again() {
+  const char* v = std::getenv("CONTACTGRID_AUTO_BOUNDS");
+  return v != nullptr && std::string_view(v) == "engine";
+}
 SceneSummary summarise(const HostBodies& bodies) {
   const BodiesView v = bodies.view();
   SceneSummary s;
@@ -175,12 +183,15 @@ py::object PyEngine::detect(const py::object& self, const py::object& positions,
       rec = record(0);
       std::get<Contacts<float>>(out).resize(0, FieldSet{m_options.fields == Fields::full, m_options.history});
     } else {
+      std::optional<Bounds> bounds;  // auto: the mode's bounds, which the engine then takes as its own
       if (!m_mode) {
         const SceneSummary s = summarise(bodies);
         make(s.bounds, s.ellipsoids);
+        if (!engine_bounds_again()) bounds = s.bounds;
       }
       bump();
-      with_engine([&](auto& e) { out = e.detect(bodies.view()); });
+      with_engine(
+          [&](auto& e) { out = bounds ? e.detect(bodies.view(), *bounds) : e.detect(bodies.view()); });
       rec = record(bodies.size());
     }
   }

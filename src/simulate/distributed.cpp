@@ -141,10 +141,12 @@ class DistributedDem {
     });
     m_loop->update_frame(step);
     if (m_loop->rebuild_due()) {
+      const auto t = std::chrono::steady_clock::now();
       m_loop->rebalance();
       migrate();
       m_loop->lay_out();
       ++m_rebuilds;
+      m_relayout_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
     }
     // every step, after any layout: the moved rows into engine A (nothing when the layout set them)
     m_loop->commit(Moved{true, m_shapes});
@@ -157,6 +159,7 @@ class DistributedDem {
 
   std::uint64_t steps() const { return m_steps; }
   std::uint64_t rebuilds() const { return m_rebuilds; }
+  double relayout_seconds() const { return m_relayout_seconds; }  // this rank's, since the start
   double cell_size() const { return m_loop->frame().cell_size; }
   double alpha() const { return m_alpha; }
   Backend backend() const { return m_engine.backend(); }
@@ -165,6 +168,9 @@ class DistributedDem {
 
   // Collective: the contacts of the last step over the ranks.
   std::uint64_t contact_count() const { return m_session.sum(m_contacts.size()); }
+
+  // Collective: a log row's energies (rank 0) and contacts.
+  sim::LogSums log_sums() { return {energies(), contact_count()}; }
 
   // Collective: every body on rank 0 in id order, over `start` (its radii and shape rows).
   DemBodies gather_bodies(const DemBodies& start) {
@@ -557,6 +563,7 @@ class DistributedDem {
   Engine<Real> m_engine;
   std::optional<StepLoop<Real>> m_loop;
   std::uint64_t m_steps = 0, m_rebuilds = 0;
+  double m_relayout_seconds = 0;
   // the owned bodies' motion (row = StepBodies row)
   std::vector<Vec3<double>> m_velocity, m_omega, m_momentum, m_force, m_torque, m_wall_xi;
   std::vector<double> m_wall_energy;
@@ -598,6 +605,7 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
   });
   try {
     const int threads = options.engine.threads > 0 ? options.engine.threads : omp_get_max_threads();
+    const auto t_start = std::chrono::steady_clock::now();
     Sim sim = [&] {
       if constexpr (std::is_same_v<Sim, DistributedDem<Real>>)
         return Sim(session, bodies, options, threads);
@@ -607,10 +615,18 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
     const std::size_t spheres = scene.sphere_count();
     RunInfo info = simulate_run_info(cmd, bodies.size(), precision_of<Real>(), sim.backend(), session.size());
     std::vector<PairKey> previous;  // the keys of the step before an output step
+    auto since = [](clock_type::time_point t) {
+      return std::chrono::duration<double>(clock_type::now() - t).count();
+    };
+    RunSplit split;  // rank 0's clock; the blocks of steps: the slowest rank's
+    split.start = session.max(since(t_start));
     auto write_frame = [&] {
-      const DemBodies all = sim.gather_bodies(bodies);
+      auto t = clock_type::now();
+      const DemBodies& all = sim.gather_bodies(bodies);
       Contacts<Real> contacts;
       if (cmd.write_contacts) contacts = sim.gather_contacts(previous);
+      split.frame_gather += since(t);
+      t = clock_type::now();
       agreed_stage(session, "simulate", [&] {
         if (!root) return;
         out->frame(sim.steps(), double(sim.steps()) * options.dt, all, spheres);
@@ -619,24 +635,31 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
           out->contacts(sim.steps(), contacts, info);
         }
       });
+      split.frame_write += since(t);
+      ++split.frames;
     };
     auto log_row = [&](double seconds_per_step) {
-      const DemEnergies e = sim.energies();
-      const std::uint64_t contacts = sim.contact_count();
+      auto t = clock_type::now();
+      const sim::LogSums sums = sim.log_sums();
+      split.log_sums += since(t);
+      t = clock_type::now();
       agreed_stage(session, "simulate", [&] {
         if (!root) return;
         LogRow row;
         row.step = sim.steps();
         row.time = double(sim.steps()) * options.dt;
-        row.energy = e;
-        row.contacts = contacts;
+        row.energy = sums.energies;
+        row.contacts = sums.contacts;
         row.rebuilds = sim.rebuilds();
         row.seconds_per_step = seconds_per_step;
         out->log(row);
       });
+      split.log_write += since(t);
+      ++split.log_rows;
     };
     write_frame();
     log_row(0);
+    const double relayout_start = sim.relayout_seconds();
     Progress progress("simulate", "steps", cmd.steps, !cmd.quiet && root);
     const auto t0 = clock_type::now();
     std::uint64_t done = 0;
@@ -644,20 +667,31 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
       const std::uint64_t to = cadence.block_end(done);
       const auto t1 = clock_type::now();
       const std::uint64_t from = done;
+      double keys = 0;  // the keys of a contact file's step before (its frame's gather)
       while (done < to) {
-        if (cmd.write_contacts && done + 1 == to && cadence.frame_due(to)) previous = sim.gather_keys();
+        if (cmd.write_contacts && done + 1 == to && cadence.frame_due(to)) {
+          const auto tk = clock_type::now();
+          previous = sim.gather_keys();
+          keys = since(tk);
+        }
         sim.step();
         ++done;
       }
-      const double per_step =
-          session.max(std::chrono::duration<double>(clock_type::now() - t1).count()) / double(to - from);
+      const double block = session.max(since(t1));
+      split.steps += block - keys;
+      split.frame_gather += keys;
+      const double per_step = block / double(to - from);
       if (cadence.log_due(done)) log_row(per_step);
       if (cadence.frame_due(done)) write_frame();
       progress.update(done);
     }
     progress.finish();
-    const double seconds = std::chrono::duration<double>(clock_type::now() - t0).count();
-    DemBodies final_bodies = sim.gather_bodies(bodies);
+    const double seconds = since(t0);
+    // the final state for the plots (only when they are drawn)
+    DemBodies final_bodies;
+    if (cmd.plots) final_bodies = sim.gather_bodies(bodies);
+    split.total = since(t_start);
+    split.relayout = session.max(sim.relayout_seconds() - relayout_start);
     const StepStats loop = sim.loop_stats();
     agreed_stage(session, "simulate", [&] {
       if (!root) return;
@@ -678,6 +712,7 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
             sim.rebuilds(), loop.migrated, loop.rebalances, loop.owned_min, loop.owned_max,
             std::is_same_v<Sim, DistributedDem<Real>> ? "on the host (CONTACTGRID_SIMULATE_RANKS=host)"
                                                       : "resident");
+        fmt::print("{}", run_split_report(split));
         fmt::print("  -> {}/ (frame_*.h5, {}run.xdmf, log.csv)\n", cmd.output,
                    cmd.write_contacts ? "contacts_*.h5, " : "");
       }

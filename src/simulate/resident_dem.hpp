@@ -20,7 +20,18 @@
 // owner of the pair's smaller id. A ghost's own sums miss its pairs beyond the halo; its state is
 // replaced by its owner's before it is read again. Each contact is counted (energies, the contact
 // files) by the owner of its smaller id.
+//
+// A log row (log_sums) sums where the rows are: one rank, its Simulation's energies (CUDA: on the
+// device); more ranks, each rank's terms of its owned rows and their contacts as A (CUDA: only those
+// downloaded), reduced to the one-rank tree's chunk sums on the rank that holds them
+// (rank_records.hpp: tree_sums_on_root), so rank 0 receives about one record per 32 bodies and
+// contacts, and the bits stay the one-rank run's. A frame of one rank is its Simulation's bodies; of
+// more ranks, each rank's owned rows to rank 0, which keeps its frame's bodies between frames.
+// CONTACTGRID_SIMULATE_OUTPUT=gather (the former path): for each log row every owned row's energies
+// and contacts to rank 0, and for a frame the owned rows into new bodies on rank 0, at one rank too.
 #include <algorithm>
+#include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <optional>
@@ -75,6 +86,11 @@ class ResidentDem {
       throw UsageError("CONTACTGRID_SIMULATE_HALO must be a number in [1, 1000] (got \"" +
                        std::string(halo ? halo : "") + "\")");
     m_skin = options.engine.skin * factor;
+    const char* output = std::getenv("CONTACTGRID_SIMULATE_OUTPUT");
+    const std::string how = output ? output : "sums";
+    if (how != "sums" && how != "gather")
+      throw UsageError("CONTACTGRID_SIMULATE_OUTPUT must be sums or gather (got \"" + how + "\")");
+    m_gather = how == "gather";
     m_width = (2 * r_max + m_skin) * (1 + 1e-9);
     std::vector<double> sample(n);
     for (std::size_t i = 0; i < n; ++i) sample[i] = component(all.position[i], m_axis);
@@ -127,12 +143,17 @@ class ResidentDem {
     const Bounds global = allgather_bounds(m_session, e.bounds);
     const double moved = m_session.max(e.displacement);
     agreed_stage(m_session, "simulate", [&] { m_frame = frame_of(global); });
-    if (2 * moved > m_skin) relayout();
+    if (2 * moved > m_skin) {
+      const auto t = std::chrono::steady_clock::now();
+      relayout();
+      m_relayout_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+    }
     agreed_stage(m_session, "simulate", [&] { m_sim->finish_step(m_frame); });
   }
 
   std::uint64_t steps() const { return m_steps; }
   std::uint64_t rebuilds() const { return m_rebuilds; }
+  double relayout_seconds() const { return m_relayout_seconds; }  // this rank's, since the start
   double cell_size() const { return m_frame.cell_size; }
   Backend backend() const { return m_sim->backend(); }
   double skin() const { return m_skin; }
@@ -156,18 +177,92 @@ class ResidentDem {
     return m_session.sum(mine);
   }
 
-  // Collective: every body on rank 0 in id order, over `start`.
-  DemBodies gather_bodies(const DemBodies& start) {
-    std::vector<sim::BodyOut> mine;
+  // Collective: a log row's energies (rank 0; the others: zero) and the contacts of the last step,
+  // the same bits as energies() and contact_count() (file comment).
+  sim::LogSums log_sums() {
+    sim::LogSums out;
+    if (m_gather) {
+      out.energies = energies();
+      out.contacts = contact_count();
+      return out;
+    }
+    if (m_session.size() == 1) {
+      agreed_stage(m_session, "simulate", [&] {
+        out.energies = m_sim->energies();
+        out.contacts = m_sim->contact_count();
+      });
+      return out;
+    }
+    const std::size_t p = static_cast<std::size_t>(m_session.size());
+    std::vector<DemLogRow> rows;
+    std::vector<double> energy;
+    std::vector<std::uint64_t> body_at, contact_at;
+    std::vector<std::array<double, 3>> body_v;
+    std::vector<std::array<double, 1>> contact_v;
+    std::vector<sim::IdRun> runs;
+    agreed_stage(m_session, "simulate", [&] {
+      m_sim->log_terms(m_owned_rows, rows, energy);
+      const std::size_t m = rows.size();
+      std::vector<std::int64_t> ids(m);
+      std::vector<std::uint64_t> counts(m);
+      body_at.resize(m);
+      body_v.resize(m);
+      for (std::size_t j = 0; j < m; ++j) {
+        const DemLogRow& r = rows[j];
+        if (r.a_end < r.a_begin || r.a_end > energy.size())
+          throw Error("simulate: a row's contacts lie outside the step's: internal error");
+        ids[j] = m_ids[m_owned_rows[j]];
+        counts[j] = r.a_end - r.a_begin;
+        body_at[j] = static_cast<std::uint64_t>(ids[j]);
+        body_v[j] = {r.kinetic, r.gravity, r.wall};
+      }
+      runs = sim::id_runs(ids, counts);
+    });
+    // every rank's runs on every rank: where each rank's contacts lie in the one-rank order
+    const std::vector<sim::IdRun> all =
+        sim::exchange_records(m_session, repeat(runs, p), std::vector<std::uint64_t>(p, runs.size()));
+    std::uint64_t total = 0;
+    agreed_stage(m_session, "simulate", [&] {
+      const std::vector<std::uint64_t> first = sim::run_offsets(all, runs, m_all.size(), total);
+      std::size_t j = 0;
+      for (std::size_t r = 0; r < runs.size(); ++r) {
+        std::uint64_t at = first[r];
+        for (; j < rows.size() && body_at[j] < static_cast<std::uint64_t>(runs[r].end); ++j)
+          for (std::uint32_t k = rows[j].a_begin; k < rows[j].a_end; ++k) {
+            contact_at.push_back(at++);
+            contact_v.push_back({energy[k]});
+          }
+      }
+    });
+    const std::array<double, 3> b = sim::tree_sums_on_root<3>(m_session, m_all.size(), body_at, body_v);
+    const std::array<double, 1> c = sim::tree_sums_on_root<1>(m_session, total, contact_at, contact_v);
+    out.energies.kinetic = b[0];
+    out.energies.gravity = b[1];
+    out.energies.elastic = c[0] + (m_walls > 0 ? b[2] : 0.0);
+    out.contacts = total;
+    return out;
+  }
+
+  // Collective: every body on rank 0 in id order, over `start` (the others: empty), valid until the
+  // next call: over several ranks rank 0 keeps its frame's bodies and takes only their motion again.
+  const DemBodies& gather_bodies(const DemBodies& start) {
+    if (!m_gather && m_session.size() == 1) {  // every body is a row, in id order
+      agreed_stage(m_session, "simulate", [&] { m_frame_bodies = m_sim->bodies(); });
+      return m_frame_bodies;
+    }
+    std::vector<sim::BodyOut> mine(m_owned_rows.size());
     agreed_stage(m_session, "simulate", [&] {
       std::vector<DemRow> rows;
       m_sim->read_rows(m_owned_rows, rows);
-      mine.resize(rows.size());
       for (std::size_t j = 0; j < rows.size(); ++j)
         mine[j] = {m_ids[m_owned_rows[j]], rows[j].position, rows[j].velocity, rows[j].omega,
                    rows[j].orientation};
     });
-    return sim::bodies_on_root(m_session, mine, start);
+    if (m_gather)
+      m_frame_bodies = sim::bodies_on_root(m_session, mine, start);  // a new one each frame
+    else
+      sim::bodies_on_root(m_session, mine, start, m_frame_bodies);
+    return m_frame_bodies;
   }
 
   // Collective: the energies on rank 0, summed in the one-rank order.
@@ -500,6 +595,9 @@ class ResidentDem {
   std::vector<std::uint32_t> m_owned_rows, m_send_rows, m_recv_rows;
   std::vector<std::uint64_t> m_send_counts;
   std::uint64_t m_steps = 0, m_rebuilds = 0, m_migrated = 0, m_rebalances = 0;
+  double m_relayout_seconds = 0;
+  bool m_gather = false;     // CONTACTGRID_SIMULATE_OUTPUT=gather (file comment)
+  DemBodies m_frame_bodies;  // gather_bodies' (rank 0)
 };
 
 }  // namespace cg

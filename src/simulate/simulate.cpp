@@ -100,18 +100,31 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
   CleanupAction incomplete =
       CleanupAction::append_file(out.path("log.csv"), "# status: failed: stopped by a signal\n");
   try {
+    const auto t_start = clock_type::now();
     Simulation<Real> sim(bodies, options);
     const std::size_t spheres = scene.sphere_count();
     RunInfo info = simulate_run_info(cmd, bodies.size(), precision_of<Real>(), sim.backend(), 1);
-    auto write_frame = [&](double seconds_per_step) {
-      out.frame(sim.steps(), sim.time(), sim.bodies(), spheres);
-      if (cmd.write_contacts) {
+    auto since = [](clock_type::time_point t) {
+      return std::chrono::duration<double>(clock_type::now() - t).count();
+    };
+    RunSplit split;
+    split.start = since(t_start);
+    auto write_frame = [&] {
+      auto t = clock_type::now();
+      const DemBodies state = sim.bodies();
+      const Contacts<Real>* contacts = cmd.write_contacts ? &sim.contacts() : nullptr;
+      split.frame_gather += since(t);
+      t = clock_type::now();
+      out.frame(sim.steps(), sim.time(), state, spheres);
+      if (contacts) {
         info.cell_size = sim.engine_stats().cell_size;
-        out.contacts(sim.steps(), sim.contacts(), info);
+        out.contacts(sim.steps(), *contacts, info);
       }
-      (void)seconds_per_step;
+      split.frame_write += since(t);
+      ++split.frames;
     };
     auto log_row = [&](double seconds_per_step) {
+      auto t = clock_type::now();
       LogRow row;
       row.step = sim.steps();
       row.time = sim.time();
@@ -119,9 +132,13 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
       row.contacts = sim.contact_count();
       row.rebuilds = sim.engine_stats().candidate_builds;
       row.seconds_per_step = seconds_per_step;
+      split.log_sums += since(t);
+      t = clock_type::now();
       out.log(row);
+      split.log_write += since(t);
+      ++split.log_rows;
     };
-    write_frame(0);
+    write_frame();
     log_row(0);
     Progress progress("simulate", "steps", cmd.steps, !cmd.quiet);
     const auto t0 = clock_type::now();
@@ -131,17 +148,19 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
       stop_point();
       const auto t1 = clock_type::now();
       sim.run(to - done);
-      const double per_step =
-          std::chrono::duration<double>(clock_type::now() - t1).count() / double(to - done);
+      const double block = since(t1);
+      split.steps += block;
+      const double per_step = block / double(to - done);
       done = to;
       if (cadence.log_due(done)) log_row(per_step);
-      if (cadence.frame_due(done)) write_frame(per_step);
+      if (cadence.frame_due(done)) write_frame();
       progress.update(done);
     }
     progress.finish();
     incomplete.release();
     out.finish();
-    const double seconds = std::chrono::duration<double>(clock_type::now() - t0).count();
+    const double seconds = since(t0);
+    split.total = since(t_start);
     if (!cmd.quiet) {
       fmt::print(
           "contactgrid simulate: {} bodies, {} steps of {:.4g} s ({:.4g} s simulated) in {:.3f} s: {:.1f} "
@@ -162,6 +181,7 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
       fmt::print("  last step: {:.2f} contacts/body; its detection (ms):{}\n",
                  2.0 * double(sim.contact_count()) / double(std::max<std::size_t>(bodies.size(), 1)), stages);
       fmt::print("{}", stage_times_report(sim.stage_times()));
+      fmt::print("{}", run_split_report(split));
       fmt::print("  -> {}/ (frame_*.h5, {}run.xdmf, log.csv)\n", cmd.output,
                  cmd.write_contacts ? "contacts_*.h5, " : "");
     }
@@ -208,6 +228,15 @@ std::string stage_times_report(const DemStageTimes& t) {
     out += fmt::format("  energies: {:.3f} ms a call ({} calls, between blocks of steps)\n",
                        t.energy_seconds * 1e3 / double(t.energy_calls), t.energy_calls);
   return out;
+}
+
+std::string run_split_report(const RunSplit& s) {
+  const double logs = s.log_sums + s.log_write, frames = s.frame_gather + s.frame_write;
+  return fmt::format(
+      "  wall time {:.3f} s: start {:.3f}, steps {:.3f} (relayout {:.3f}), {} log rows {:.3f} (sums {:.3f}, "
+      "writing {:.3f}), {} frames {:.3f} (gather {:.3f}, writing {:.3f}), other {:.3f}\n",
+      s.total, s.start, s.steps, s.relayout, s.log_rows, logs, s.log_sums, s.log_write, s.frames, frames,
+      s.frame_gather, s.frame_write, s.total - s.start - s.steps - logs - frames);
 }
 
 RunInfo simulate_run_info(const SimulateCommand& cmd, std::size_t bodies, Precision precision,

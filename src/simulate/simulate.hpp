@@ -40,6 +40,17 @@ struct SimulateCommand {
 // within detect (empty when nothing was timed).
 std::string stage_times_report(const DemStageTimes& t);
 
+// Where a run's wall time went (the summary's "wall time" line), from the making of its state: the
+// start (the layout, the upload, the first forces), the blocks of steps (of which the relayouts:
+// under mpirun, the bodies moved between ranks), the log rows and the frames, the first included (of
+// each: the sums or the gather over the ranks with the downloads, then the writing), and the rest.
+struct RunSplit {
+  double total = 0, start = 0, steps = 0, relayout = 0;
+  double log_sums = 0, log_write = 0, frame_gather = 0, frame_write = 0;
+  std::uint64_t log_rows = 0, frames = 0;
+};
+std::string run_split_report(const RunSplit& s);
+
 // One --walls spec into walls (UsageError naming it):
 //   plane:PX,PY,PZ,NX,NY,NZ            a plane through P, normal N (into the domain; normalised)
 //   box:X0,Y0,Z0,X1,Y1,Z1              the six faces of an axis-aligned box, inside

@@ -24,9 +24,9 @@ struct Call {
 };
 
 template <class Real>
-std::size_t run(const EngineOptions& o, const BodiesView& v) {
+std::size_t run(const EngineOptions& o, const BodiesView& v, const std::optional<Bounds>& b) {
   Engine<Real> engine(o);
-  return engine.detect(v).size();
+  return (b ? engine.detect(v, *b) : engine.detect(v)).size();
 }
 
 // What contactgrid.detect does with NumPy input once the arrays are views: precision (auto: bounds →
@@ -36,12 +36,15 @@ Call detect_call(const BodiesView& v, std::optional<Precision> fixed, Backend ba
   o.backend = backend;
   o.threads = threads;
   Precision mode = fixed.value_or(Precision::fp64);
+  std::optional<Bounds> b;  // auto: the bounds the mode is chosen from, which the engine then takes
   if (!fixed) {
-    const Bounds b = compute_bounds(v);
-    mode = choose_precision(precision_scene(b, false, 0, CellChoice::tuned), backend, {}).mode;
+    b = compute_bounds(v);
+    mode = choose_precision(precision_scene(*b, false, 0, CellChoice::tuned), backend, {}).mode;
+    const char* again = std::getenv("CONTACTGRID_AUTO_BOUNDS");  // as the module: "engine" the former path
+    if (again != nullptr && std::string(again) == "engine") b.reset();
   }
   o.fp32_broad_phase = mode == Precision::mixed;
-  return {mode, mode == Precision::fp32 ? run<float>(o, v) : run<double>(o, v)};
+  return {mode, mode == Precision::fp32 ? run<float>(o, v, b) : run<double>(o, v, b)};
 }
 
 }  // namespace

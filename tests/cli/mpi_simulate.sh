@@ -4,8 +4,10 @@
 # contact: walls, friction, the tangential springs carried by the bodies that change rank) at 1-4
 # ranks writes the same frames, contacts and energies as -np 1, bit for bit (every dataset's bytes),
 # with each rank's bodies resident (the default) and on the host (CONTACTGRID_SIMULATE_RANKS=host), and
-# -np 1 writes the frames of the run without mpirun. Dropping the springs of the bodies that
-# change rank makes the 3-rank frames differ (checked by hand when the test was written).
+# -np 1 writes the files of the run without mpirun; the log rows and frames summed where the rows are
+# (the default) and gathered on rank 0 (CONTACTGRID_SIMULATE_OUTPUT=gather) are the same. Dropping
+# the springs of the bodies that change rank makes the 3-rank frames differ (checked by hand when the
+# test was written).
 # Usage: mpi_simulate.sh CONTACTGRID MPIEXEC WORKDIR
 set -euo pipefail
 CG=$1; MPIEXEC=$2; W=$3
@@ -53,10 +55,17 @@ done
 run pour 1 pour.fp32.np1 --precision fp32
 run pour 3 pour.fp32.np3 --precision fp32
 same "$W/pour.fp32.np1" "$W/pour.fp32.np3"
+# the log rows and frames through every rank's rows on rank 0 (CONTACTGRID_SIMULATE_OUTPUT=gather, the
+# former path) against the sums where the rows are (the default): the same files
+CONTACTGRID_SIMULATE_OUTPUT=gather run pour 1 pour.gather.np1
+same "$W/pour.np1" "$W/pour.gather.np1"
+CONTACTGRID_SIMULATE_OUTPUT=gather run pell 3 pell.gather.np3
+same "$W/pell.np1" "$W/pell.gather.np3"
+grep -q 'wall time .* steps .* log rows .* frames' "$W/pour.np3.out" || { echo "no wall time split in the summary"; exit 1; }
 # each rank's forces on the host (CONTACTGRID_SIMULATE_RANKS=host): the same files
 CONTACTGRID_SIMULATE_RANKS=host run pour 2 pour.host.np2
 same "$W/pour.np1" "$W/pour.host.np2"
-# without mpirun: the one-rank engine path writes the same frames
+# without mpirun: the one-rank engine path writes the same files and energies
 "$CG" simulate "$W/pour.h5" -o "$W/pour.plain" "${opts[@]}" -q
-same "$W/pour.np1" "$W/pour.plain" frames
+same "$W/pour.np1" "$W/pour.plain"
 echo "simulate under mpirun: every rank count wrote the one-rank run's frames, contacts and energies"

@@ -2,7 +2,9 @@
 # End to end on the GPU: contactgrid simulate under mpirun with each rank's bodies resident on its
 # device (--backend cuda) writes the CPU's one-rank frames, contacts and energies, bit for bit, at 1
 # and 2 ranks (2 ranks share one GPU where there is one), fp64 and fp32, spheres and ellipsoids; so
-# does the host path (CONTACTGRID_SIMULATE_RANKS=host). Exit 77 (skipped, visibly) without a GPU.
+# does the host path (CONTACTGRID_SIMULATE_RANKS=host), and so do the log rows and frames gathered on
+# rank 0 (CONTACTGRID_SIMULATE_OUTPUT=gather; the default sums them where the rows are). Exit 77
+# (skipped, visibly) without a GPU.
 # Usage: mpi_simulate_cuda.sh CONTACTGRID MPIEXEC WORKDIR
 set -euo pipefail
 CG=$1; MPIEXEC=$2; W=$3
@@ -33,6 +35,8 @@ done
 run pour 1 pour.fp32.cpu.np1 cpu --precision fp32
 run pour 2 pour.fp32.cuda.np2 cuda --precision fp32
 same "$W/pour.fp32.cpu.np1" "$W/pour.fp32.cuda.np2"
+CONTACTGRID_SIMULATE_OUTPUT=gather run pour 2 pour.gather.cuda.np2 cuda
+same "$W/pour.cpu.np1" "$W/pour.gather.cuda.np2"
 CONTACTGRID_SIMULATE_RANKS=host run pour 2 pour.host.cuda.np2 cuda
 same "$W/pour.cpu.np1" "$W/pour.host.cuda.np2"
 echo "simulate under mpirun on the GPU: the CPU's files at 1 and 2 ranks, resident and on the host"

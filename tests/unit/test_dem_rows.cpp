@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "backends.hpp"
+#include "core/dem_sum.hpp"
 #include "dem.hpp"
 #include "support/contacts_equal.hpp"
 
@@ -138,12 +139,74 @@ TYPED_TEST(DemRows, TheRankInterfaceGivesTheTrajectoryOfRun) {
   rows_equal_run<double>(TypeParam::backend, true);
 }
 
+// A log row's terms (log_terms) of every row, summed in the tree's order, are energies() bit for
+// bit, and each row's run of contacts holds exactly its contacts as A; of a few rows, their terms.
+template <class Real>
+void log_terms_equal_energies(Backend backend, bool ellipsoids) {
+  const RowsScene s = rows_scene(backend, ellipsoids);
+  const std::size_t n = s.bodies.size();
+  std::vector<std::int64_t> ids(n);
+  for (std::size_t i = 0; i < n; ++i) ids[i] = 2 * std::int64_t(i) + 1;
+  Simulation<Real> sim(s.bodies, s.options, ids, std::nullopt);
+  std::vector<std::uint32_t> all(n);
+  for (std::size_t i = 0; i < n; ++i) all[i] = static_cast<std::uint32_t>(i);
+  for (int block = 0; block < 3; ++block) {
+    for (int k = 0; k < 30; ++k) {
+      sim.kick_drift();
+      sim.finish_step(std::nullopt);
+    }
+    const std::string at =
+        std::string(ellipsoids ? "ellipsoids" : "spheres") + " step " + std::to_string(sim.steps());
+    std::vector<DemLogRow> rows;
+    std::vector<double> energy;
+    sim.log_terms(all, rows, energy);
+    ASSERT_EQ(rows.size(), n) << at;
+    const Contacts<Real> c = sim.contacts();
+    ASSERT_GT(c.size(), 0u) << at;
+    ASSERT_EQ(energy.size(), c.size()) << at;
+    std::size_t next = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      ASSERT_EQ(rows[i].a_begin, next) << at << " row " << i;
+      ASSERT_LE(rows[i].a_end, c.size()) << at << " row " << i;
+      for (std::uint32_t k = rows[i].a_begin; k < rows[i].a_end; ++k)
+        ASSERT_EQ(c.id_a[k], std::int64_t(i)) << at;
+      next = rows[i].a_end;
+    }
+    EXPECT_EQ(next, c.size()) << at;
+    const DemEnergies e = sim.energies();
+    const double kinetic = dem::tree_sum(n, [&](std::size_t i) { return rows[i].kinetic; });
+    const double gravity = dem::tree_sum(n, [&](std::size_t i) { return rows[i].gravity; });
+    const double elastic = dem::tree_sum(energy.size(), [&](std::size_t k) { return energy[k]; }) +
+                           dem::tree_sum(n, [&](std::size_t i) { return rows[i].wall; });
+    EXPECT_EQ(kinetic, e.kinetic) << at;
+    EXPECT_EQ(gravity, e.gravity) << at;
+    EXPECT_EQ(elastic, e.elastic) << at;
+    EXPECT_GT(e.elastic, 0) << at;
+    // a few rows, out of order: the same terms as of every row
+    const std::vector<std::uint32_t> some{7, 2, static_cast<std::uint32_t>(n - 1)};
+    std::vector<DemLogRow> part;
+    sim.log_terms(some, part, energy);
+    ASSERT_EQ(part.size(), some.size()) << at;
+    for (std::size_t j = 0; j < some.size(); ++j)
+      EXPECT_EQ(std::memcmp(&part[j], &rows[some[j]], sizeof(DemLogRow)), 0) << at << " row " << some[j];
+  }
+}
+
+TYPED_TEST(DemRows, LogTermsSumToTheEnergies) {
+  log_terms_equal_energies<double>(TypeParam::backend, false);
+  log_terms_equal_energies<float>(TypeParam::backend, false);
+  log_terms_equal_energies<double>(TypeParam::backend, true);
+}
+
 TYPED_TEST(DemRows, RowsOutsideTheRankAreRefused) {
   const RowsScene s = rows_scene(TypeParam::backend, false);
   Simulation<double> sim(s.bodies, s.options);
   std::vector<DemRow> out;
   EXPECT_THROW(sim.read_rows({static_cast<std::uint32_t>(s.bodies.size())}, out), UsageError);
   EXPECT_THROW(sim.write_rows({0, 1}, std::vector<DemRow>(1)), UsageError);
+  std::vector<DemLogRow> terms;
+  std::vector<double> energy;
+  EXPECT_THROW(sim.log_terms({static_cast<std::uint32_t>(s.bodies.size())}, terms, energy), UsageError);
 }
 
 }  // namespace

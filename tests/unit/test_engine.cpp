@@ -397,6 +397,27 @@ TYPED_TEST(EngineTest, BadBodiesAreNamed) {
   EXPECT_THROW(this->run(small, Fields::basic, 1.0), UsageError);  // cell smaller than the diameter
 }
 
+// detect(bodies, bounds): the caller's compute_bounds taken as the engine's own (the Python module's
+// precision "auto"): the same contacts and stats as detect(bodies); bounds of other bodies refused.
+TYPED_TEST(EngineTest, DetectWithTheCallersBoundsGivesTheSameContacts) {
+  using Real = typename TypeParam::Real;
+  for (const Spheres& s : {random_spheres(20000, 0.5, 1.0, 3101), clustered(3000, 3102)}) {
+    SCOPED_TRACE(s.name);
+    EngineOptions o;
+    o.backend = TypeParam::backend;
+    const BodiesView v{s.p, s.r, {}, {}};
+    Engine<Real> own(o), given(o);
+    const Contacts<Real> a = own.detect(v);
+    const Contacts<Real> b = given.detect(v, compute_bounds(v));
+    EXPECT_GT(a.size(), 0u);
+    EXPECT_EQ(test::compare_contacts(a, b), "identical");
+    EXPECT_EQ(own.stats().pair_tests, given.stats().pair_tests);
+    EXPECT_EQ(own.stats().cell_size, given.stats().cell_size);
+    const BodiesView fewer{std::span(s.p).first(100), std::span(s.r).first(100), {}, {}};
+    EXPECT_THROW(given.detect(fewer, compute_bounds(v)), UsageError);
+  }
+}
+
 TYPED_TEST(EngineTest, EmptyInput) {
   Spheres s;
   auto c = this->run(s);

@@ -3,6 +3,7 @@
 // reject exactly those (count → scan → fill) and give the same contacts, bit for bit.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 
@@ -162,6 +163,110 @@ TEST(HostCellList, SameContactsAsLeGrandsCells) {
           EXPECT_LT(list.pair_tests, le_grand.pair_tests);
         }
       }
+    }
+  }
+}
+
+// CONTACTGRID_HOST_WALK=<value> for the guard's life (pairs.cpp: the float walk's flag loop, four-lane
+// or AVX2 steps).
+class HostWalk {
+ public:
+  explicit HostWalk(const char* value) { ::setenv("CONTACTGRID_HOST_WALK", value, 1); }
+  ~HostWalk() { ::unsetenv("CONTACTGRID_HOST_WALK"); }
+  HostWalk(const HostWalk&) = delete;
+  HostWalk& operator=(const HostWalk&) = delete;
+};
+
+// The float walk's three ways (the flag loop, which the compiler vectorises from plain C++; four lanes
+// a step in SSE2; eight in AVX2 where the CPU has it) give the same contact bytes and the same pair
+// tests and candidates, in fp32 and mixed (fp64's decision on the enlarged floats), with the exact and
+// the loose filter (every assigned pair near), 1 and 3 threads, on scenes whose cells hold one to nine
+// entries (one AVX2 step an entry) and many more (clustered, one cell: steps of eight), tangent pairs,
+// coincident centres and far from the origin.
+TEST(HostWalk, FlagsSseAndAvx2GiveTheSameBytesAndTests) {
+  if (!detail::host::walk_avx2_available())
+    std::printf("note: this CPU has no AVX2: CONTACTGRID_HOST_WALK=avx2 takes the four-lane steps here\n");
+  Spheres far = random_spheres(20000, 0.5, 1.0, 2409).translated({1e5, -3e4, 7e3});
+  far.name = "far from the origin";
+  const std::vector<Spheres> scenes = {random_spheres(30000, 0.5, 1.0, 2401),
+                                       random_spheres(8000, 0.05, 1.0, 2402, true),
+                                       clustered(4000, 2403),
+                                       one_cell(300, 2404),
+                                       tangent(2405),
+                                       coincident(2406),
+                                       on_boundaries(2407),
+                                       far};
+  struct Run {
+    Contacts<double> mixed;
+    Contacts<float> fp32, loose;
+    std::uint64_t tests[3] = {0, 0, 0}, candidates[3] = {0, 0, 0};
+  };
+  for (const Spheres& s : scenes) {
+    for (int threads : {1, 3}) {
+      SCOPED_TRACE(s.name + " threads " + std::to_string(threads));
+      const BodiesView v{s.p, s.r, {}, {}};
+      const detail::DetectJob<float> job = make_job<float>(s, Fields::basic);
+      std::vector<Run> runs;
+      for (const char* kind : {"flags", "sse", "avx2"}) {
+        SCOPED_TRACE(kind);
+        const HostWalk walk(kind);
+        Run r;
+        Engine<double> mixed({.backend = Backend::cpu, .threads = threads, .fp32_broad_phase = true});
+        r.mixed = mixed.detect(v);
+        r.tests[0] = mixed.stats().pair_tests;
+        r.candidates[0] = mixed.stats().candidates;
+        Engine<float> fp32({.backend = Backend::cpu, .threads = threads});
+        r.fp32 = fp32.detect(v);
+        r.tests[1] = fp32.stats().pair_tests;
+        r.candidates[1] = fp32.stats().candidates;
+        detail::HostBackend loose{threads, CandidateFilter::cells};
+        StageTimes times;
+        EngineStats stats;
+        detail::run_stages(loose, job, r.loose, times, stats);
+        r.tests[2] = stats.pair_tests;
+        r.candidates[2] = stats.candidates;
+        runs.push_back(std::move(r));
+      }
+      EXPECT_GT(runs[0].mixed.size(), 0u);
+      EXPECT_GT(runs[0].tests[2], 0u);
+      for (std::size_t k = 1; k < runs.size(); ++k) {
+        SCOPED_TRACE(k == 1 ? "sse against flags" : "avx2 against flags");
+        expect_same(runs[0].mixed, runs[k].mixed);
+        expect_same(runs[0].fp32, runs[k].fp32);
+        expect_same(runs[0].loose, runs[k].loose);
+        for (int m = 0; m < 3; ++m) {
+          EXPECT_EQ(runs[0].tests[m], runs[k].tests[m]) << "mode " << m;
+          EXPECT_EQ(runs[0].candidates[m], runs[k].candidates[m]) << "mode " << m;
+        }
+      }
+    }
+  }
+}
+
+// The same for scenes with ellipsoids (their bounding spheres in the walk, every assigned pair near
+// under the centre cut: the AVX2 walk's queue fills on most cells), fp32 and fp64, full fields.
+TEST(HostWalk, EllipsoidScenesGiveTheSameBytesAndTests) {
+  for (const ShapeScene& s :
+       {make_scene("ellipsoids", 2410, 3000, 0.9, 16.0), make_scene("mixed", 2411, 4000, 0.4, 18.0)}) {
+    SCOPED_TRACE(s.name);
+    std::vector<Contacts<float>> f32;
+    std::vector<Contacts<double>> f64;
+    std::vector<std::uint64_t> tests;
+    for (const char* kind : {"flags", "sse", "avx2"}) {
+      const HostWalk walk(kind);
+      Engine<float> a({.backend = Backend::cpu, .fields = Fields::full, .threads = 2});
+      f32.push_back(a.detect(s.view()));
+      tests.push_back(a.stats().pair_tests);
+      Engine<double> b({.backend = Backend::cpu, .fields = Fields::full, .threads = 2});
+      f64.push_back(b.detect(s.view()));
+      tests.push_back(b.stats().pair_tests);
+    }
+    EXPECT_GT(f32[0].size(), 0u);
+    for (std::size_t k = 1; k < f32.size(); ++k) {
+      expect_same(f32[0], f32[k]);
+      expect_same(f64[0], f64[k]);
+      EXPECT_EQ(tests[0], tests[2 * k]);
+      EXPECT_EQ(tests[1], tests[2 * k + 1]);
     }
   }
 }
