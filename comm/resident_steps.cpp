@@ -4,9 +4,12 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <numeric>
 #include <optional>
+#include <string>
 #include <thread>
 
 #include "agreed_stage.hpp"
@@ -88,8 +91,11 @@ struct StepLoop<Real>::State {
   double skin = 0;
   SkinTuner tuner;
 
-  StepBodies bodies;         // owned, ascending id
-  StepBodies spare;          // the previous rows' storage: the next migration's rows are merged into it
+  StepBodies bodies;  // owned, ascending id
+  StepBodies spare;   // the previous rows' storage: the next migration's rows are merged into it
+  // a migration changes engine A's rows in place (Engine::splice_resident); CONTACTGRID_STEP_MIGRATE=
+  // whole: the layout sets them all again (set_resident), the former path
+  bool splice = true;
   bool rows_changed = true;  // bodies' rows (ids) differ from engine A's: the layout sets them
   bool uploaded = false;     // this step's layout set engine A's rows from the moved bodies
   bool written = false;      // this step's update_frame wrote the moved positions into engine A
@@ -145,6 +151,8 @@ struct StepLoop<Real>::State {
     skin = skin_auto ? 0 : e.options().skin;
     builds0 = e.stats().candidate_builds;
     reuses0 = e.stats().candidate_reuses;
+    const char* knob = std::getenv("CONTACTGRID_STEP_MIGRATE");
+    splice = !(knob && std::string(knob) == "whole");
   }
   ~State() {
     if (interior.joinable()) interior.join();
@@ -338,6 +346,7 @@ void StepLoop<Real>::migrate() {
     send = HostVector<BodyRecord>(leaving);
     if (s.shapes) send_shapes = HostVector<ShapeRecord>(leaving);
     send_state = HostVector<std::byte>(leaving * stride);
+#pragma omp parallel for num_threads(s.threads) schedule(static) if (leaving > (std::uint64_t(1) << 14))
     for (std::size_t w = 0; w < leaving; ++w) {
       const std::size_t k = plan.rows[w];
       send[w] = BodyRecord{b.position[k], b.radius[k], b.id[k]};
@@ -380,9 +389,23 @@ void StepLoop<Real>::migrate() {
     }
     std::vector<std::size_t> gone(plan.rows.begin(), plan.rows.end());
     std::sort(gone.begin(), gone.end());
-    merge_step_bodies(b, gone, arrivals, shapes, s.spare, s.threads);
+    // engine A's rows (the moved positions of update_frame) changed the same way where they are,
+    // unless the layout sets them all anyway
+    const bool in_place = s.splice && s.layouts > 0 && !s.rows_changed && s.a.resident_size() == b.size();
+    const std::vector<std::size_t> at = merge_step_bodies(b, gone, arrivals, shapes, s.spare, s.threads);
     std::swap(b, s.spare);
-    s.rows_changed = true;
+    if (in_place) {
+      s.a.splice_resident(gone, at,
+                          BodiesView{arrivals.position,
+                                     arrivals.radius,
+                                     {},
+                                     {},
+                                     arrivals.shapes.shape,
+                                     arrivals.shapes.semi_axes,
+                                     arrivals.shapes.orientation});
+    } else {
+      s.rows_changed = true;
+    }
   });
   s.migrated += moving;
   s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
@@ -436,7 +459,9 @@ void StepLoop<Real>::lay_out() {
         shape_exports.offsets = s.plan.halo.offsets;
         shape_exports.rows = HostVector<ShapeRecord>(s.plan.halo.total());
       }
-      for (std::size_t w = 0; w < s.plan.halo.total(); ++w) {
+      const std::size_t exported = s.plan.halo.total();
+#pragma omp parallel for num_threads(s.threads) schedule(static) if (exported > (std::size_t(1) << 14))
+      for (std::size_t w = 0; w < exported; ++w) {
         const std::size_t k = s.plan.halo.rows[w];
         exports.rows[w] = BodyRecord{b.position[k], b.radius[k], b.id[k]};
         if (s.shapes)
@@ -491,8 +516,15 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
   if (!wide_x.empty()) add_wide_partners(plan, coordinates(), o.radius, wide_x, wide_r, rule, threads);
   const std::size_t nb = plan.boundary.size();
   std::vector<std::int64_t> boundary_ids(nb), ghost_ids(ghosts.size());
-  for (std::size_t k = 0; k < nb; ++k) boundary_ids[k] = o.id[plan.boundary[k]];
-  for (std::size_t g = 0; g < ghosts.size(); ++g) ghost_ids[g] = ghosts[g].id;
+  const std::size_t ng = ghosts.size();
+  const bool parallel = nb + ng > (std::size_t(1) << 14);
+#pragma omp parallel num_threads(threads) if (parallel)
+  {
+#pragma omp for schedule(static) nowait
+    for (std::size_t k = 0; k < nb; ++k) boundary_ids[k] = o.id[plan.boundary[k]];
+#pragma omp for schedule(static)
+    for (std::size_t g = 0; g < ng; ++g) ghost_ids[g] = ghosts[g].id;
+  }
   rows = merge_boundary_rows(boundary_ids, ghost_ids);
   if (nb == 0) return;  // no boundary row: the ghosts touch none of this rank's bodies
   const std::size_t total = rows.size();
@@ -504,6 +536,7 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
   resize_kept(b_shape, shapes ? total : 0, nullptr);
   resize_kept(b_semi, shapes ? total : 0, grow ? &pin_semi : nullptr);
   resize_kept(b_q, shapes ? total : 0, refresh ? &pin_q : nullptr);
+#pragma omp parallel for num_threads(threads) schedule(static) if (parallel)
   for (std::size_t k = 0; k < nb; ++k) {
     const std::size_t i = plan.boundary[k], row = rows.of_boundary[k];
     b_p[row] = o.position[i];
@@ -517,7 +550,8 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
       b_q[row] = o.shapes.orientation[i];
     }
   }
-  for (std::size_t g = 0; g < ghosts.size(); ++g) {
+#pragma omp parallel for num_threads(threads) schedule(static) if (parallel)
+  for (std::size_t g = 0; g < ng; ++g) {
     const std::size_t row = rows.of_ghost[g];
     b_p[row] = ghosts[g].position;
     b_r[row] = ghosts[g].radius;

@@ -26,7 +26,10 @@
 //     rebalance        slab cuts moved part of the way to the owned counts' quantiles, when the
 //                      imbalance of the owned counts passes a threshold
 //     migrate          every body whose centre left its slab to its new owner (its rows, shape rows
-//                      and the caller's state), merged into the rows that stay by id
+//                      and the caller's state), merged into the rows that stay by id; engine A's rows
+//                      change the same way where they are (Engine::splice_resident: the leaving rows
+//                      out, the arrivals in; CUDA: on the device, only the arrivals uploaded;
+//                      CONTACTGRID_STEP_MIGRATE=whole: the layout sets them all, set_resident)
 //   commit             the moved rows into engine A (nothing when this step's layout or update_frame
 //                      wrote them)
 //   detect_interior    engine A, all pairs of the owned bodies, on a second thread ...
@@ -144,8 +147,9 @@ class StepLoop {
   const ExportPlan& halo() const;
 
   // Collective. InputError naming the first body that this rank does not own. Engine A's rows are
-  // set again only when migration changed this rank's bodies (else update_frame wrote their motion and
-  // the next detection builds); one rank has no plan, no halo and no engine B to lay out.
+  // set again only when they are not the bodies' (the setup; a migration under CONTACTGRID_STEP_MIGRATE=
+  // whole): else update_frame wrote their motion, migrate spliced them, and the next detection builds;
+  // one rank has no plan, no halo and no engine B to lay out.
   void lay_out();
   // Collective. `step`: the step's number (for the messages).
   void update_frame(int step);

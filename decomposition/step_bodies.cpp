@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "errors.hpp"
+#include "splice_rows.hpp"
 
 namespace cg {
 
@@ -26,28 +27,40 @@ StepBodies sized_step_bodies(std::size_t n, bool shapes, std::size_t state_bytes
   return b;
 }
 
+namespace {
+// `v` resized to n rows; storage too small is replaced (not grown: the rows are rewritten after, so
+// nothing is copied into it), with room for n + n/16 rows (a rank's count changes a little a rebuild).
+template <class T>
+void resize_discarding(HostVector<T>& v, std::size_t n) {
+  if (n > v.capacity()) {
+    HostVector<T> fresh;
+    fresh.reserve(n + n / 16);
+    v.swap(fresh);
+  }
+  v.resize(n);
+}
+}  // namespace
+
 void resize_step_bodies(StepBodies& b, std::size_t n, bool shapes, std::size_t state_bytes) {
-  b.position.resize(n);
-  b.radius.resize(n);
-  b.id.resize(n);
-  b.shapes.shape.resize(shapes ? n : 0);
-  b.shapes.semi_axes.resize(shapes ? n : 0);
-  b.shapes.orientation.resize(shapes ? n : 0);
+  resize_discarding(b.position, n);
+  resize_discarding(b.radius, n);
+  resize_discarding(b.id, n);
+  resize_discarding(b.shapes.shape, shapes ? n : 0);
+  resize_discarding(b.shapes.semi_axes, shapes ? n : 0);
+  resize_discarding(b.shapes.orientation, shapes ? n : 0);
   b.state_bytes = state_bytes;
-  b.state.resize(n * state_bytes);
+  resize_discarding(b.state, n * state_bytes);
 }
 
-void merge_step_bodies(const StepBodies& from, std::span<const std::size_t> leaving,
-                       const StepBodies& arrivals, bool shapes, StepBodies& into, int threads) {
+std::vector<std::size_t> merge_step_bodies(const StepBodies& from, std::span<const std::size_t> leaving,
+                                           const StepBodies& arrivals, bool shapes, StepBodies& into,
+                                           int threads) {
   const std::size_t n = from.size(), m = arrivals.size(), stride = from.state_bytes;
   if (m > 0 && arrivals.state_bytes != stride)
     throw Error("migration: the arrivals carry other state than the rows: internal error");
   if ((shapes && ((n > 0 && from.shapes.empty()) || (m > 0 && arrivals.shapes.empty()))) ||
       (!shapes && (!from.shapes.empty() || !arrivals.shapes.empty())))
     throw Error("migration: shape rows on one side only: internal error");
-  for (std::size_t k = 0; k < leaving.size(); ++k)
-    if (leaving[k] >= n || (k > 0 && !(leaving[k - 1] < leaving[k])))
-      throw Error("migration: the leaving rows are not ascending rows: internal error");
   for (std::size_t j = 1; j < m; ++j)
     if (!(arrivals.id[j - 1] < arrivals.id[j]))
       throw Error("migration: body " + std::to_string(arrivals.id[j]) + " arrives twice: internal error");
@@ -62,54 +75,22 @@ void merge_step_bodies(const StepBodies& from, std::span<const std::size_t> leav
       throw Error("steps: body " + std::to_string(id) + " is held twice after migration: internal error");
     before[j] = p;
   }
-  // The copies: runs of `from` between the changes, and runs of arrivals at each insertion point.
-  struct Run {
-    bool arrival;
-    std::size_t src, dst, count;
-  };
-  std::vector<Run> runs;
-  std::size_t src = 0, dst = 0, li = 0, aj = 0;
-  while (src < n || aj < m) {
-    const std::size_t q = std::min(li < leaving.size() ? leaving[li] : n, aj < m ? before[aj] : n);
-    if (q > src) {
-      runs.push_back({false, src, dst, q - src});
-      dst += q - src;
-      src = q;
-    }
-    const std::size_t a0 = aj;
-    while (aj < m && before[aj] == q) ++aj;
-    if (aj > a0) {
-      runs.push_back({true, a0, dst, aj - a0});
-      dst += aj - a0;
-    }
-    if (li < leaving.size() && leaving[li] == q) {
-      ++li;
-      src = q + 1;
-    }
+  const SplicePlan plan = plan_splice(n, leaving, before, "migration (internal error)");
+  resize_step_bodies(into, plan.size, shapes, stride);
+  splice_rows(plan, from.position.data(), arrivals.position.data(), into.position.data(), 1, threads);
+  splice_rows(plan, from.radius.data(), arrivals.radius.data(), into.radius.data(), 1, threads);
+  splice_rows(plan, from.id.data(), arrivals.id.data(), into.id.data(), 1, threads);
+  if (shapes) {
+    splice_rows(plan, from.shapes.shape.data(), arrivals.shapes.shape.data(), into.shapes.shape.data(), 1,
+                threads);
+    splice_rows(plan, from.shapes.semi_axes.data(), arrivals.shapes.semi_axes.data(),
+                into.shapes.semi_axes.data(), 1, threads);
+    splice_rows(plan, from.shapes.orientation.data(), arrivals.shapes.orientation.data(),
+                into.shapes.orientation.data(), 1, threads);
   }
-  resize_step_bodies(into, dst, shapes, stride);
-  // long runs in pieces, so that the threads share the copying
-  constexpr std::size_t k_piece = std::size_t(1) << 16;
-  std::vector<Run> pieces;
-  for (const Run& r : runs)
-    for (std::size_t o = 0; o < r.count; o += k_piece)
-      pieces.push_back({r.arrival, r.src + o, r.dst + o, std::min(k_piece, r.count - o)});
-  const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(pieces.size());
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 4) if (count > 4)
-  for (std::ptrdiff_t k = 0; k < count; ++k) {
-    const Run& r = pieces[static_cast<std::size_t>(k)];
-    const StepBodies& s = r.arrival ? arrivals : from;
-    std::copy_n(s.position.data() + r.src, r.count, into.position.data() + r.dst);
-    std::copy_n(s.radius.data() + r.src, r.count, into.radius.data() + r.dst);
-    std::copy_n(s.id.data() + r.src, r.count, into.id.data() + r.dst);
-    if (shapes) {
-      std::copy_n(s.shapes.shape.data() + r.src, r.count, into.shapes.shape.data() + r.dst);
-      std::copy_n(s.shapes.semi_axes.data() + r.src, r.count, into.shapes.semi_axes.data() + r.dst);
-      std::copy_n(s.shapes.orientation.data() + r.src, r.count, into.shapes.orientation.data() + r.dst);
-    }
-    if (stride > 0)
-      std::copy_n(s.state.data() + r.src * stride, r.count * stride, into.state.data() + r.dst * stride);
-  }
+  if (stride > 0)
+    splice_rows(plan, from.state.data(), arrivals.state.data(), into.state.data(), stride, threads);
+  return before;
 }
 
 StepBodies owned_bodies(const EngineInput& in, int threads) {

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <functional>
 #include <span>
+#include <vector>
 
 #include "assemble.hpp"
 #include "engine.hpp"
@@ -40,11 +41,14 @@ void resize_step_bodies(StepBodies& b, std::size_t n, bool shapes, std::size_t s
 
 // A migration's new rows: `from`'s rows except those in `leaving` (row indices, strictly ascending)
 // merged by id with `arrivals` (strictly ascending id), into `into` (resized in place: its storage is
-// the spare of the previous migration). The runs of rows between the changes are copied in parallel;
-// nothing is sorted. Error (internal) when an arrival's id is held by a row that stays, or an input is
-// not ascending. Shape rows: `into` has them when `shapes` (then every source with rows has them).
-void merge_step_bodies(const StepBodies& from, std::span<const std::size_t> leaving,
-                       const StepBodies& arrivals, bool shapes, StepBodies& into, int threads);
+// the spare of the previous migration). The runs of rows between the changes are copied in parallel
+// (splice_rows.hpp); nothing is sorted. Returns each arrival's place: the row of `from` it goes before
+// (Engine::splice_resident makes the same change to an engine's rows). Error (internal) when an
+// arrival's id is held by a row that stays, or an input is not ascending. Shape rows: `into` has them
+// when `shapes` (then every source with rows has them).
+std::vector<std::size_t> merge_step_bodies(const StepBodies& from, std::span<const std::size_t> leaving,
+                                           const StepBodies& arrivals, bool shapes, StepBodies& into,
+                                           int threads);
 
 // The owned rows (report mask set, or every row when ids are implied) of an engine input.
 StepBodies owned_bodies(const EngineInput& in, int threads);

@@ -63,25 +63,31 @@ StepPlan plan_by(const SlabDecomposition& slabs, int self, std::span<const doubl
   };
   StepPlan plan;
   plan.role.resize(n);
+  // one pass: the roles, each chunk's boundary rows listed (ascending; the chunks in order)
+  const Chunks c(n, threads);
+  std::vector<std::vector<std::size_t>> found(static_cast<std::size_t>(c.parts));
   std::size_t owned_rows = 0;
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : owned_rows) \
-    if (n > (std::size_t(1) << 14))
-  for (std::size_t i = 0; i < n; ++i) {
-    const bool mine = owned(i);
-    bool sent = false;
-    if (mine) ghost_ranks(i, [&](int) { sent = true; });
-    plan.role[i] = !mine ? RowRole::ghost : sent ? RowRole::boundary : RowRole::interior;
-    owned_rows += mine ? 1 : 0;
+#pragma omp parallel for num_threads(threads) schedule(static, 1) reduction(+ : owned_rows) if (c.parts > 1)
+  for (int t = 0; t < c.parts; ++t) {
+    std::vector<std::size_t>& mine_rows = found[static_cast<std::size_t>(t)];
+    for (std::size_t i = c.begin(t), e = c.end(t); i < e; ++i) {
+      const bool mine = owned(i);
+      bool sent = false;
+      if (mine) ghost_ranks(i, [&](int) { sent = true; });
+      plan.role[i] = !mine ? RowRole::ghost : sent ? RowRole::boundary : RowRole::interior;
+      owned_rows += mine ? 1 : 0;
+      if (sent) mine_rows.push_back(i);
+    }
   }
   plan.owned = owned_rows;
-  plan.boundary = rows_of(plan.role, RowRole::boundary, threads);
-  // The halo: the owned rows by the rule (a ghost row goes nowhere).
+  for (const std::vector<std::size_t>& f : found)
+    plan.boundary.insert(plan.boundary.end(), f.begin(), f.end());
+  // The halo: the boundary rows by the rule (the few, not every row again).
+  const std::vector<std::size_t>& boundary = plan.boundary;
   plan.halo = route<std::size_t, std::allocator<std::size_t>>(
-      n, slabs.ranks(), threads,
-      [&](std::size_t i, auto&& emit) {
-        if (plan.role[i] == RowRole::boundary) ghost_ranks(i, emit);
-      },
-      [](std::size_t i) { return i; });
+      boundary.size(), slabs.ranks(), threads,
+      [&](std::size_t k, auto&& emit) { ghost_ranks(boundary[k], emit); },
+      [&](std::size_t k) { return boundary[k]; });
   return plan;
 }
 
@@ -154,11 +160,12 @@ BoundaryRows merge_boundary_rows(std::span<const std::int64_t> boundary_ids,
   for (std::size_t k = 1; k < boundary_ids.size(); ++k)
     if (!(boundary_ids[k - 1] < boundary_ids[k]))
       throw Error("engine B's rows: boundary ids not ascending at " + std::to_string(k) + ": internal error");
-  // The ghosts in id order (the groups of the sources interleave in id).
+  // The ghosts in id order (the groups of the sources interleave in id; one source's are in order).
   std::vector<std::size_t> by_id(ghost_ids.size());
   std::iota(by_id.begin(), by_id.end(), std::size_t(0));
-  std::sort(by_id.begin(), by_id.end(),
-            [&](std::size_t a, std::size_t b) { return ghost_ids[a] < ghost_ids[b]; });
+  if (!std::is_sorted(ghost_ids.begin(), ghost_ids.end()))
+    std::sort(by_id.begin(), by_id.end(),
+              [&](std::size_t a, std::size_t b) { return ghost_ids[a] < ghost_ids[b]; });
   BoundaryRows rows;
   rows.of_boundary.resize(boundary_ids.size());
   rows.of_ghost.resize(ghost_ids.size());

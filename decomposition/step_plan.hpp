@@ -56,8 +56,9 @@ struct StepPlan {
 
 // The plan of rank `self` for its held rows, `coordinate[i]` being row i's centre coordinate along the
 // slab axis (finite) and `width` the ghost width (finite, >= 0; InputError otherwise). One parallel
-// pass classifies the rows, then count → scan → fill (route) lists the boundary rows and the halo;
-// the result does not depend on the threads.
+// pass classifies the rows and lists the boundary rows (per chunk of rows, in order), then count →
+// scan → fill (route) over the boundary rows alone makes the halo; the result does not depend on the
+// threads.
 StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
                         double width, int threads = 1);
 

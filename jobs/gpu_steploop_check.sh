@@ -19,6 +19,16 @@
 #                                                    step, skin auto: the kept candidates in cell order
 #                                                    (default) and in (a, b) order of the input indices
 #                                                    (CONTACTGRID_STEP_ORDER=file)
+#   BIN=dir OUT=dir jobs/gpu_steploop_check.sh migrate
+#                                                    a 2-GPU host (< 3 min): the rebuild under mpirun
+#                                                    (#31): the splice's CUDA cases, the MPI moving steps
+#                                                    at np 2 with engine A's rows spliced in place
+#                                                    (default) and set whole (CONTACTGRID_STEP_MIGRATE=
+#                                                    whole), then 2^25 spheres, fp32, 6 contacts per body,
+#                                                    drift 1 %, skin auto, 16 steps: np 1, np 2 after,
+#                                                    np 2 before (the knob); per step migrate / layout /
+#                                                    halo / mean, np1/np2, and the last step's pair hash
+#                                                    equal in all three runs
 #   BIN=dir OUT=dir jobs/gpu_steploop_check.sh two   a 2-GPU host (~4 min): the MPI tests at np 2, then
 #                                                    2^26 spheres and 2^24 ellipsoids at np 1 and np 2
 #                                                    (one rank per GPU): per-step migration, halo and
@@ -226,6 +236,45 @@ case $MODE in
       sed -nE '/^resident steps/,/^  candidate lists/p' "$OUT/$t.log"
     done
     ;;
+  migrate)
+    log "CUDA cases of the splice; MPI moving steps at np 2 (one rank per GPU), spliced and whole"
+    timeout 60 "$BIN/contactgrid_tests" --gtest_color=no --gtest_filter='EngineResidentSplice*:StepBodies.*' \
+      >"$OUT/tests.splice.log" 2>&1
+    check "contactgrid_tests EngineResidentSplice* (both backends), StepBodies" gtest_ok "$OUT/tests.splice.log"
+    grep -E '^\[  (PASSED|FAILED) ' "$OUT/tests.splice.log"
+    for knob in CONTACTGRID_STEP_MIGRATE=splice CONTACTGRID_STEP_MIGRATE=whole; do
+      timeout 90 env "$knob" "${MPI[@]}" -np 2 "$BIN/contactgrid_mpi_tests" --gtest_color=no \
+        --gtest_filter='MovingSteps.*:StepLoop.*' >"$OUT/mpi_tests.np2.$knob.log" 2>&1
+      check "contactgrid_mpi_tests MovingSteps np 2, $knob" gtest_ok "$OUT/mpi_tests.np2.$knob.log"
+    done
+
+    log "bench: 2^25 spheres, fp32, 6 contacts per body, drift 0.01, skin auto, 16 steps: np 1, np 2 after, np 2 before"
+    N25=$((33554432 >> SCALE))
+    timeout 60 "$CG" generate "$W/s25.h5" -n $N25 --seed 25 --contacts-per-body 6 -q
+    check "bench s25 np 1" steps s25 1 auto 16 s25.np1
+    check "bench s25 np 2 after (spliced)" steps s25 2 auto 16 s25.np2
+    CONTACTGRID_STEP_MIGRATE=whole check "bench s25 np 2 before (CONTACTGRID_STEP_MIGRATE=whole)" steps s25 2 auto 16 s25.np2_whole
+    rm -f "$W/s25.h5"
+    lasthash() { sed -nE 's/.*, ([0-9]+) contacts on the last step \(the output; pair hash ([0-9a-f]+)\).*/\1 \2/p' "$OUT/$1.log"; }
+    h1=$(lasthash s25.np1); h2=$(lasthash s25.np2); h3=$(lasthash s25.np2_whole)
+    check "s25: np 1, np 2 and np 2 whole have the same last step (contacts, pair hash)" \
+      bash -c "[ -n '$h1' ] && [ '$h1' = '$h2' ] && [ '$h1' = '$h3' ]"
+    {
+      printf '| run (2^25 spheres) | mean | build | reuse | layout | migrate | halo | frame | builds/reuses | np1/np2 (mean) | last step |\n'
+      printf '|---|---|---|---|---|---|---|---|---|---|---|\n'
+      for t in np1 np2 np2_whole; do
+        sp=; [ $t != np1 ] && sp=$(ratio "$(field s25.np1 mean)" "$(field s25.$t mean)")
+        printf '| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n' $t "$(field s25.$t mean)" \
+          "$(field s25.$t build)" "$(field s25.$t reuse)" "$(field s25.$t layout)" "$(field s25.$t migrate)" \
+          "$(field s25.$t halo)" "$(field s25.$t frame)" "$(lists s25.$t)" "$sp" "$(lasthash s25.$t)"
+      done
+      for t in np1 np2 np2_whole; do
+        echo "-- $t"
+        sed -nE '/^resident steps/,/slab rebalances/p' "$OUT/s25.$t.log"
+      done
+    } | tee "$OUT/table.md"
+    (cd "$OUT" && tar czf migrate.tgz ./*.log && rm -f ./*.log)
+    ;;
   two)
     log "MPI moving steps at np 2 (one rank per GPU)"
     "${MPI[@]}" -np 2 "$BIN/contactgrid_mpi_tests" --gtest_color=no --gtest_filter='MovingSteps.*:StepLoop.*' \
@@ -252,7 +301,7 @@ case $MODE in
       done
     } | tee "$OUT/table.md"
     ;;
-  *) echo "usage: BIN=dir OUT=dir $0 quick|one|two"; exit 2 ;;
+  *) echo "usage: BIN=dir OUT=dir $0 quick|one|migrate|two"; exit 2 ;;
 esac
 
 log "done"

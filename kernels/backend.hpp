@@ -113,6 +113,9 @@ void run_stages(CudaBackend& backend, const DetectJob<Broad, Narrow>& job, Conta
 void destroy(CudaBackend* backend);
 // Resident bodies of Engine::set_resident (DEVICE rows kept between calls, shape rows included).
 void resident_upload(CudaBackend& backend, const BodiesView& bodies);
+// Engine::splice_resident on the DEVICE rows (the arrivals carry the fields the rows have).
+void resident_splice(CudaBackend& backend, std::span<const std::size_t> leaving,
+                     std::span<const std::size_t> at, const BodiesView& arrivals);
 DeviceBodiesView resident_view(const CudaBackend& backend);
 // The contacts of a DeviceContactsView copied into `out` (sized here).
 template <class Real>

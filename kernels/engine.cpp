@@ -16,6 +16,7 @@
 #include "backend.hpp"
 #include "host_vector.hpp"
 #include "skin_tuner.hpp"
+#include "splice_rows.hpp"
 #include "stage.hpp"
 #include "stage_names.hpp"
 #include "timing.hpp"
@@ -104,6 +105,10 @@ bool pin_host(CudaBackend&, void*, std::size_t) {
   throw CudaError("this contactgrid was built without CUDA");
 }
 void unpin_host(CudaBackend&, void*) { throw CudaError("this contactgrid was built without CUDA"); }
+void resident_splice(CudaBackend&, std::span<const std::size_t>, std::span<const std::size_t>,
+                     const BodiesView&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
 void resident_upload(CudaBackend&, const BodiesView&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
@@ -565,6 +570,62 @@ void Engine<Real>::set_resident(const BodiesView& b) {
   s.resident_semi_axes.assign(b.semi_axes.begin(), b.semi_axes.end());
   s.resident_orientation.assign(b.orientation.begin(), b.orientation.end());
   s.resident_id.assign(b.id.begin(), b.id.end());
+}
+
+namespace {
+// `v`'s rows spliced by `plan` with `arrivals` (stride elements a row), through a pooled array.
+template <class T>
+void splice_host_rows(HostVector<T>& v, const SplicePlan& plan, std::span<const T> arrivals,
+                      std::size_t stride, int threads) {
+  HostVector<T> into(plan.size * stride);
+  splice_rows(plan, v.data(), arrivals.data(), into.data(), stride, threads);
+  v.swap(into);
+}
+}  // namespace
+
+template <class Real>
+void Engine<Real>::splice_resident(std::span<const std::size_t> leaving, std::span<const std::size_t> at,
+                                   const BodiesView& b) {
+  Impl& s = *m_impl;
+  const std::size_t m = b.size();
+  const bool shapes = !b.shape.empty();
+  if (b.position.size() != m || at.size() != m || (!b.report.empty() && b.report.size() != m) ||
+      (!b.id.empty() && b.id.size() != m) ||
+      (shapes && (b.shape.size() != m || b.semi_axes.size() != m || b.orientation.size() != m)) ||
+      (!shapes && (!b.semi_axes.empty() || !b.orientation.empty())))
+    throw UsageError("splice_resident: the arrays differ in length");
+  if (s.resident_rows == 0) {  // nothing stays: the arrivals are the rows, whatever fields they carry
+    plan_splice(0, leaving, at, "splice_resident");
+    set_resident(b);
+    return;
+  }
+  const bool ided =
+      s.resolved == Backend::cuda ? detail::resident_view(*s.cuda).id != nullptr : !s.resident_id.empty();
+  const bool reported = s.resolved == Backend::cuda ? detail::resident_view(*s.cuda).report != nullptr
+                                                    : !s.resident_report.empty();
+  if (m > 0 && (shapes != s.resident_shapes || b.id.empty() == ided || b.report.empty() == reported))
+    throw UsageError("splice_resident: the arrivals' fields (ids, report, shape rows) differ from the rows'");
+  const SplicePlan plan = plan_splice(s.resident_rows, leaving, at, "splice_resident");
+  s.resident_rows = plan.size;
+  s.resident_marked = false;
+  s.kept.valid = false;  // other rows: the next detection builds
+  s.resident_contacts = Contacts<Real>{};
+  s.resident_on_device.reset();
+  s.resident_overwritten = false;
+  if (s.resolved == Backend::cuda) {
+    detail::resident_splice(*s.cuda, leaving, at, b);
+    return;
+  }
+  const int threads = s.options.threads > 0 ? s.options.threads : omp_get_max_threads();
+  splice_host_rows(s.resident_position, plan, b.position, 1, threads);
+  splice_host_rows(s.resident_radius, plan, b.radius, 1, threads);
+  if (reported) splice_host_rows(s.resident_report, plan, b.report, 1, threads);
+  if (ided) splice_host_rows(s.resident_id, plan, b.id, 1, threads);
+  if (s.resident_shapes) {
+    splice_host_rows(s.resident_shape, plan, b.shape, 1, threads);
+    splice_host_rows(s.resident_semi_axes, plan, b.semi_axes, 1, threads);
+    splice_host_rows(s.resident_orientation, plan, b.orientation, 1, threads);
+  }
 }
 
 template <class Real>

@@ -217,6 +217,16 @@ class Engine {
   // Ellipsoids rotate in place: set_resident with shape rows, then per step
   //   engine.write_resident_shapes(0, n, nullptr, new_orientation);  // semi-axes kept
   void set_resident(const BodiesView& bodies);
+  // The resident rows changed where they are, as a migration changes a rank's bodies: rows `leaving`
+  // (strictly ascending) removed, and arrival j (row j of `arrivals`) inserted before old row at[j]
+  // (non-decreasing, at most resident_size(); arrivals at one place in their order). The same rows
+  // as set_resident of the spliced arrays, without moving the rows that stay through the host (CUDA:
+  // the arrivals, the leaving rows and the places uploaded, the rows rewritten on the device). The
+  // arrivals carry every field the rows were set with (ids, report, shape rows), and no other;
+  // UsageError otherwise (without rows: set_resident of the arrivals). As after set_resident, the next
+  // detection builds and there is no mark.
+  void splice_resident(std::span<const std::size_t> leaving, std::span<const std::size_t> at,
+                       const BodiesView& arrivals);
   std::size_t resident_size() const;
   void read_resident(std::size_t first, std::size_t count, Vec3<double>* position, double* radius);
   void write_resident(std::size_t first, std::size_t count, const Vec3<double>* position,

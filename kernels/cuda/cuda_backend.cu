@@ -61,6 +61,7 @@
 #include "cuda/shapes.cuh"
 #include "cuda/skin.cuh"
 #include "cuda/sort.cuh"
+#include "cuda/splice.cuh"
 #include "cuda/stage_events.cuh"
 #include "cuda/sweep.cuh"
 #include "cuda/thrust_alloc.cuh"
@@ -333,6 +334,70 @@ void resident_upload(CudaBackend& b, const BodiesView& bodies) {
     ranges.push_back(host_device(ws.res_orient.data(), bodies.orientation.data(), n * sizeof(Quat<double>)));
   }
   upload_resident(b, ranges);
+}
+
+void resident_splice(CudaBackend& b, std::span<const std::size_t> leaving, std::span<const std::size_t> at,
+                     const BodiesView& arrivals) {
+  static_assert(sizeof(std::size_t) == sizeof(std::uint64_t));
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  Workspace& ws = b.m_ws;
+  const std::size_t n = ws.res_count, l = leaving.size(), m = at.size(), out = n - l + m;
+  struct Field {
+    Bytes* rows;
+    const void* host;  // the arrivals'
+    std::size_t row_bytes;
+  };
+  std::vector<Field> fields{{&ws.res_pos, arrivals.position.data(), sizeof(Vec3<double>)},
+                            {&ws.res_rad, arrivals.radius.data(), sizeof(double)}};
+  if (ws.res_reported) fields.push_back({&ws.res_report, arrivals.report.data(), 1});
+  if (ws.res_ided) fields.push_back({&ws.res_id, arrivals.id.data(), sizeof(std::int64_t)});
+  if (ws.res_shaped) {
+    fields.push_back({&ws.res_shape, arrivals.shape.data(), sizeof(Shape)});
+    fields.push_back({&ws.res_semi, arrivals.semi_axes.data(), sizeof(Vec3<double>)});
+    fields.push_back({&ws.res_orient, arrivals.orientation.data(), sizeof(Quat<double>)});
+  }
+  // temp: the leaving rows, the places, then the arrivals' rows of the field being spliced
+  std::size_t arrival_bytes = 0;
+  for (const Field& f : fields) arrival_bytes = std::max(arrival_bytes, cuda::align16(m * f.row_bytes));
+  const std::size_t index_bytes =
+      cuda::align16(l * sizeof(std::uint64_t)) + cuda::align16(m * sizeof(std::uint64_t));
+  ws.reserve({{&ws.temp, index_bytes + arrival_bytes}}, "resident splice");
+  auto* d_leaving = reinterpret_cast<std::uint64_t*>(ws.temp.data());
+  auto* d_at = reinterpret_cast<std::uint64_t*>(ws.temp.data() + cuda::align16(l * sizeof(std::uint64_t)));
+  std::byte* d_arrivals = ws.temp.data() + index_bytes;
+  if (l > 0)
+    CG_CUDA_CHECK(cudaMemcpyAsync(d_leaving, leaving.data(), l * sizeof(std::uint64_t),
+                                  cudaMemcpyHostToDevice, b.m_stream));
+  if (m > 0)
+    CG_CUDA_CHECK(
+        cudaMemcpyAsync(d_at, at.data(), m * sizeof(std::uint64_t), cudaMemcpyHostToDevice, b.m_stream));
+  for (const Field& f : fields) {
+    // the old rows and the arrivals into canon_field (a download's scratch), then back into the
+    // field's storage (grown when the rows grow; its old contents are in canon_field by then)
+    if (m > 0)
+      CG_CUDA_CHECK(cudaMemcpyAsync(d_arrivals, f.host, m * f.row_bytes, cudaMemcpyHostToDevice, b.m_stream));
+    ws.reserve({{&ws.canon_field, out * f.row_bytes}}, "resident splice");
+    if (n + m > 0) {
+      if (f.row_bytes % sizeof(std::uint64_t) == 0) {
+        using W = unsigned long long;
+        cuda::splice_kernel<W><<<cuda::blocks_for(n + m), cuda::kBlock, 0, b.m_stream>>>(
+            reinterpret_cast<const W*>(f.rows->data()), n, reinterpret_cast<const W*>(d_arrivals), m,
+            d_leaving, l, d_at, f.row_bytes / sizeof(W), reinterpret_cast<W*>(ws.canon_field.data()));
+      } else {
+        using W = unsigned char;
+        cuda::splice_kernel<W><<<cuda::blocks_for(n + m), cuda::kBlock, 0, b.m_stream>>>(
+            reinterpret_cast<const W*>(f.rows->data()), n, reinterpret_cast<const W*>(d_arrivals), m,
+            d_leaving, l, d_at, f.row_bytes, reinterpret_cast<W*>(ws.canon_field.data()));
+      }
+      CG_CUDA_CHECK_LAUNCH("splice_kernel");
+    }
+    // (the arrivals' upload of the next field waits for this kernel: one stream)
+    CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+    ws.reserve({{f.rows, out * f.row_bytes}}, "resident bodies");
+    cuda::device_copy(f.rows->data(), ws.canon_field.data(), out * f.row_bytes, b.m_stream);
+  }
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+  ws.res_count = out;
 }
 
 void history_upload(CudaBackend& b, const ContactHistory& h) {

@@ -14,9 +14,11 @@ namespace {
 void print_steps(const StepStats& s, int ranks) {
   std::string checked;
   if (s.drift != 0)
-    checked =
-        fmt::format("the bodies drifting {} per step{}, {} contacts on the last step (the output)", s.drift,
-                    s.turned ? fmt::format(" and the ellipsoids turning {} rad", s.spin) : "", s.contacts);
+    checked = fmt::format(
+        "the bodies drifting {} per step{}, {} contacts on the last step (the output; pair hash "
+        "{:016x})",
+        s.drift, s.turned ? fmt::format(" and the ellipsoids turning {} rad", s.spin) : "", s.contacts,
+        s.hash);
   else if (s.turned)
     checked = fmt::format(
         "the ellipsoids turning {} rad per step, {} contacts on the last step (= the turned bodies detected "
