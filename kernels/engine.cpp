@@ -539,26 +539,42 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
   observe_skin<Real>(s, builds, seconds_since(t0));
 }
 
+namespace {
+// UsageError naming `what` unless every array of `b` given has `rows` rows (position always; report and
+// id when given; the three shape arrays together or none).
+void check_resident_lengths(const BodiesView& b, std::size_t rows, const char* what) {
+  const std::size_t m = b.size();
+  const bool shapes = !b.shape.empty();
+  if (b.position.size() != m || rows != m || (!b.report.empty() && b.report.size() != m) ||
+      (!b.id.empty() && b.id.size() != m) ||
+      (shapes && (b.shape.size() != m || b.semi_axes.size() != m || b.orientation.size() != m)) ||
+      (!shapes && (!b.semi_axes.empty() || !b.orientation.empty())))
+    throw UsageError(std::string(what) + ": the arrays differ in length");
+}
+
+// The resident rows are now `rows` other rows: what was known of the former ones is dropped (the
+// rebuild check's mark, the kept candidates — the next detection builds —, the contacts kept).
+template <class Impl>
+void rows_changed(Impl& s, std::size_t rows) {
+  s.resident_rows = rows;
+  s.resident_marked = false;
+  s.kept.valid = false;
+  s.resident_contacts = {};
+  s.resident_on_device.reset();
+  s.resident_overwritten = false;
+}
+}  // namespace
+
 template <class Real>
 void Engine<Real>::set_resident(const BodiesView& b) {
   Impl& s = *m_impl;
   const bool shapes = !b.shape.empty();
-  if (b.position.size() != b.size() || (!b.report.empty() && b.report.size() != b.size()) ||
-      (!b.id.empty() && b.id.size() != b.size()) ||
-      (shapes &&
-       (b.shape.size() != b.size() || b.semi_axes.size() != b.size() || b.orientation.size() != b.size())) ||
-      (!shapes && (!b.semi_axes.empty() || !b.orientation.empty())))
-    throw UsageError("set_resident: the arrays differ in length");
+  check_resident_lengths(b, b.size(), "set_resident");
   for (std::size_t i = 1; i < b.id.size(); ++i)
     if (!(b.id[i] > b.id[i - 1]))
       throw InputError("set_resident: ids are not strictly ascending at row " + std::to_string(i));
-  s.resident_rows = b.size();
   s.resident_shapes = shapes;
-  s.resident_marked = false;
-  s.kept.valid = false;  // other rows: the next detection builds
-  s.resident_contacts = Contacts<Real>{};
-  s.resident_on_device.reset();
-  s.resident_overwritten = false;
+  rows_changed(s, b.size());
   if (s.resolved == Backend::cuda) {
     detail::resident_upload(*s.cuda, b);
     return;
@@ -589,11 +605,7 @@ void Engine<Real>::splice_resident(std::span<const std::size_t> leaving, std::sp
   Impl& s = *m_impl;
   const std::size_t m = b.size();
   const bool shapes = !b.shape.empty();
-  if (b.position.size() != m || at.size() != m || (!b.report.empty() && b.report.size() != m) ||
-      (!b.id.empty() && b.id.size() != m) ||
-      (shapes && (b.shape.size() != m || b.semi_axes.size() != m || b.orientation.size() != m)) ||
-      (!shapes && (!b.semi_axes.empty() || !b.orientation.empty())))
-    throw UsageError("splice_resident: the arrays differ in length");
+  check_resident_lengths(b, at.size(), "splice_resident");
   if (s.resident_rows == 0) {  // nothing stays: the arrivals are the rows, whatever fields they carry
     plan_splice(0, leaving, at, "splice_resident");
     set_resident(b);
@@ -606,12 +618,7 @@ void Engine<Real>::splice_resident(std::span<const std::size_t> leaving, std::sp
   if (m > 0 && (shapes != s.resident_shapes || b.id.empty() == ided || b.report.empty() == reported))
     throw UsageError("splice_resident: the arrivals' fields (ids, report, shape rows) differ from the rows'");
   const SplicePlan plan = plan_splice(s.resident_rows, leaving, at, "splice_resident");
-  s.resident_rows = plan.size;
-  s.resident_marked = false;
-  s.kept.valid = false;  // other rows: the next detection builds
-  s.resident_contacts = Contacts<Real>{};
-  s.resident_on_device.reset();
-  s.resident_overwritten = false;
+  rows_changed(s, plan.size);
   if (s.resolved == Backend::cuda) {
     detail::resident_splice(*s.cuda, leaving, at, b);
     return;
