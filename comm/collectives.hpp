@@ -20,11 +20,15 @@ std::vector<double> allgather_values(const Session& session, const std::vector<d
 // Every rank's count, in rank order.
 std::vector<std::uint64_t> allgather_counts(const Session& session, std::uint64_t mine);
 
-// Bytes between every pair of ranks: `send` grouped by destination rank, send_bytes[r] of them to
-// rank r; returns what every rank sent this one, grouped by source rank (recv_bytes[r] from rank r).
-std::vector<std::byte> alltoallv_bytes(const Session& session, const std::vector<std::byte>& send,
-                                       const std::vector<std::uint64_t>& send_bytes,
-                                       std::vector<std::uint64_t>& recv_bytes);
+// Records of `record_bytes` each between every pair of ranks, without staging copies: `send` grouped
+// by destination rank (send_counts[r] records to rank r), `recv` grouped by source rank
+// (recv_counts[r] from rank r: alltoall_counts). Point to point, only between ranks with records,
+// in messages of at most 2^31 - 1 bytes (any total); this rank's own records are copied.
+std::vector<std::uint64_t> alltoall_counts(const Session& session,
+                                           const std::vector<std::uint64_t>& send_counts);
+void alltoallv_records(const Session& session, std::size_t record_bytes, const void* send,
+                       const std::vector<std::uint64_t>& send_counts, void* recv,
+                       const std::vector<std::uint64_t>& recv_counts);
 
 // values[k] = the maximum of values[k] over the ranks (stage times).
 void max_over_ranks(const Session& session, std::vector<double>& values);

@@ -18,6 +18,7 @@ namespace cg::detail {
 constexpr int k_halo_tag = 7301;
 constexpr int k_gather_tag = 7400;    // + field index
 constexpr int k_exchange_tag = 7500;  // + field index
+constexpr int k_records_tag = 7700;   // collectives.hpp: alltoallv_records
 
 class Comm {
  public:

@@ -6,7 +6,6 @@
 // rank's rows; the one-rank order's sums from what each rank sums of its own items (tree_sums_on_root).
 #include <algorithm>
 #include <array>
-#include <cstring>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -19,23 +18,19 @@
 
 namespace cg::sim {
 
-// Records between ranks, as bytes (collectives.hpp: alltoallv_bytes), grouped by destination rank.
+// Records between ranks (collectives.hpp: alltoallv_records, no staging copy), grouped by
+// destination rank; the result grouped by source rank (received: how many from each).
 template <class T>
 std::vector<T> exchange_records(const Session& session, const std::vector<T>& send,
                                 const std::vector<std::uint64_t>& counts,
                                 std::vector<std::uint64_t>* received = nullptr) {
   static_assert(std::is_trivially_copyable_v<T>);
-  std::vector<std::byte> bytes(send.size() * sizeof(T));
-  if (!send.empty()) std::memcpy(bytes.data(), send.data(), bytes.size());
-  std::vector<std::uint64_t> sb(counts), rb;
-  for (std::uint64_t& c : sb) c *= sizeof(T);
-  const std::vector<std::byte> got = alltoallv_bytes(session, bytes, sb, rb);
-  std::vector<T> out(got.size() / sizeof(T));
-  if (!out.empty()) std::memcpy(out.data(), got.data(), got.size());
-  if (received) {
-    received->resize(rb.size());
-    for (std::size_t r = 0; r < rb.size(); ++r) (*received)[r] = rb[r] / sizeof(T);
-  }
+  const std::vector<std::uint64_t> from = alltoall_counts(session, counts);
+  std::uint64_t total = 0;
+  for (const std::uint64_t c : from) total += c;
+  std::vector<T> out(total);
+  alltoallv_records(session, sizeof(T), send.data(), counts, out.data(), from);
+  if (received) *received = from;
   return out;
 }
 
