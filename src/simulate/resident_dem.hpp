@@ -224,6 +224,8 @@ class ResidentDem {
     std::uint64_t total = 0;
     agreed_stage(m_session, "simulate", [&] {
       const std::vector<std::uint64_t> first = sim::run_offsets(all, runs, m_all.size(), total);
+      contact_at.reserve(energy.size());
+      contact_v.reserve(energy.size());
       std::size_t j = 0;
       for (std::size_t r = 0; r < runs.size(); ++r) {
         std::uint64_t at = first[r];
