@@ -693,6 +693,22 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
     split.total = since(t_start);
     split.relayout = session.max(sim.relayout_seconds() - relayout_start);
     const StepStats loop = sim.loop_stats();
+    std::string phases;  // --stage-times under the resident ranks: each rank's step phases
+    if constexpr (std::is_same_v<Sim, ResidentDem<Real>>) {
+      if (cmd.stage_times) {
+        const auto& p = sim.phases();
+        const double per = p.steps > 0 ? 1e3 / double(p.steps) : 0;
+        const std::vector<double> all = allgather_values(
+            session, {p.halo * per, p.frame * per, p.relayout * per, p.forces * per, double(p.steps)});
+        phases =
+            "  step phases (ms a step, --stage-times, each rank: kick-drift + halo, frame, relayout, "
+            "detect + forces + kick until the device finished):\n";
+        for (std::size_t r = 0; r + 4 < all.size(); r += 5)
+          phases += fmt::format(
+              "    rank {}: halo {:.3f}, frame {:.3f}, relayout {:.3f}, forces {:.3f} ({} steps)\n", r / 5,
+              all[r], all[r + 1], all[r + 2], all[r + 3], all[r + 4]);
+      }
+    }
     agreed_stage(session, "simulate", [&] {
       if (!root) return;
       incomplete.release();
@@ -713,6 +729,7 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
             std::is_same_v<Sim, DistributedDem<Real>> ? "on the host (CONTACTGRID_SIMULATE_RANKS=host)"
                                                       : "resident");
         fmt::print("{}", run_split_report(split));
+        fmt::print("{}", phases);
         fmt::print("  -> {}/ (frame_*.h5, {}run.xdmf, log.csv)\n", cmd.output,
                    cmd.write_contacts ? "contacts_*.h5, " : "");
       }

@@ -79,12 +79,16 @@ inline void bodies_on_root(const Session& session, const std::vector<BodyOut>& m
     if (out.velocity.empty()) out.velocity.assign(out.size(), {0, 0, 0});
     if (out.angular_velocity.empty()) out.angular_velocity.assign(out.size(), {0, 0, 0});
   }
-  for (const BodyOut& r : all) {
+  const bool oriented = !out.orientation.empty();
+  const std::ptrdiff_t m = static_cast<std::ptrdiff_t>(all.size());
+#pragma omp parallel for schedule(static) if (m > 65536)
+  for (std::ptrdiff_t k = 0; k < m; ++k) {  // each id once: no two threads write one body
+    const BodyOut& r = all[std::size_t(k)];
     const std::size_t i = static_cast<std::size_t>(r.id);
     out.position[i] = r.position;
     out.velocity[i] = r.velocity;
     out.angular_velocity[i] = r.omega;
-    if (!out.orientation.empty()) out.orientation[i] = r.orientation;
+    if (oriented) out.orientation[i] = r.orientation;
   }
 }
 

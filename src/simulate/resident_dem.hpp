@@ -130,8 +130,17 @@ class ResidentDem {
 
   void step() {
     ++m_steps;
+    // --stage-times: the host's time of each phase (the device waited for at the step's end)
+    auto t = std::chrono::steady_clock::now();
+    auto lap = [&](double& into) {
+      if (!m_options.stage_times) return;
+      const auto now = std::chrono::steady_clock::now();
+      into += std::chrono::duration<double>(now - t).count();
+      t = now;
+    };
     agreed_stage(m_session, "simulate", [&] { m_sim->kick_drift(); });
     exchange_ghosts();
+    lap(m_phases.halo);
     ResidentExtent e;
     agreed_stage(m_session, "simulate", [&] {
       try {
@@ -143,13 +152,29 @@ class ResidentDem {
     const Bounds global = allgather_bounds(m_session, e.bounds);
     const double moved = m_session.max(e.displacement);
     agreed_stage(m_session, "simulate", [&] { m_frame = frame_of(global); });
+    lap(m_phases.frame);
     if (2 * moved > m_skin) {
-      const auto t = std::chrono::steady_clock::now();
+      const auto t0 = std::chrono::steady_clock::now();
       relayout();
-      m_relayout_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+      m_relayout_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     }
-    agreed_stage(m_session, "simulate", [&] { m_sim->finish_step(m_frame); });
+    lap(m_phases.relayout);
+    agreed_stage(m_session, "simulate", [&] {
+      m_sim->finish_step(m_frame);
+      if (m_options.stage_times) m_sim->extent();  // waits for the step's device work
+    });
+    lap(m_phases.forces);
+    if (m_options.stage_times) ++m_phases.steps;
   }
+
+  // --stage-times: where this rank's steps went (seconds, summed over `steps` steps): kick-drift and
+  // the ghosts' exchange (halo), the bounds and displacement over the ranks (frame), relayouts, and
+  // the detection, forces and kick until the device finished them (forces).
+  struct Phases {
+    double halo = 0, frame = 0, relayout = 0, forces = 0;
+    std::uint64_t steps = 0;
+  };
+  const Phases& phases() const { return m_phases; }
 
   std::uint64_t steps() const { return m_steps; }
   std::uint64_t rebuilds() const { return m_rebuilds; }
@@ -256,9 +281,13 @@ class ResidentDem {
     agreed_stage(m_session, "simulate", [&] {
       std::vector<DemRow> rows;
       m_sim->read_rows(m_owned_rows, rows);
-      for (std::size_t j = 0; j < rows.size(); ++j)
+      const std::ptrdiff_t m = static_cast<std::ptrdiff_t>(rows.size());
+#pragma omp parallel for schedule(static) if (m > 65536)
+      for (std::ptrdiff_t k = 0; k < m; ++k) {
+        const std::size_t j = static_cast<std::size_t>(k);
         mine[j] = {m_ids[m_owned_rows[j]], rows[j].position, rows[j].velocity, rows[j].omega,
                    rows[j].orientation};
+      }
     });
     if (m_gather)
       m_frame_bodies = sim::bodies_on_root(m_session, mine, start);  // a new one each frame
@@ -598,6 +627,7 @@ class ResidentDem {
   std::vector<std::uint64_t> m_send_counts;
   std::uint64_t m_steps = 0, m_rebuilds = 0, m_migrated = 0, m_rebalances = 0;
   double m_relayout_seconds = 0;
+  Phases m_phases;
   bool m_gather = false;     // CONTACTGRID_SIMULATE_OUTPUT=gather (file comment)
   DemBodies m_frame_bodies;  // gather_bodies' (rank 0)
 };

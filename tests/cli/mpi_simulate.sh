@@ -62,6 +62,11 @@ same "$W/pour.np1" "$W/pour.gather.np1"
 CONTACTGRID_SIMULATE_OUTPUT=gather run pell 3 pell.gather.np3
 same "$W/pell.np1" "$W/pell.gather.np3"
 grep -q 'wall time .* steps .* log rows .* frames' "$W/pour.np3.out" || { echo "no wall time split in the summary"; exit 1; }
+# --stage-times: each rank's step phases in the summary, and the same files (the device waited for only)
+run pour 2 pour.timed.np2 --stage-times
+same "$W/pour.np1" "$W/pour.timed.np2"
+grep -qE 'rank 1: halo [0-9.]+, frame [0-9.]+, relayout [0-9.]+, forces [0-9.]+' "$W/pour.timed.np2.out" ||
+  { echo "no step phases of rank 1 under --stage-times"; exit 1; }
 # each rank's forces on the host (CONTACTGRID_SIMULATE_RANKS=host): the same files
 CONTACTGRID_SIMULATE_RANKS=host run pour 2 pour.host.np2
 same "$W/pour.np1" "$W/pour.host.np2"
