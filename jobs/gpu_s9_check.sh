@@ -3,7 +3,8 @@
 #   simtwo     (a host with 2 GPUs) a pour of N spheres (default 2^25, fp32, STEPS = 40 steps, a log
 #              row every STEPS/2, the first and last frames) under mpirun -np 1 and -np 2 --backend cuda:
 #              steps/s (log.csv: the steps alone), the command's wall time and the run's split (start,
-#              steps, log rows, frames); np 1 and np 2 must write the same files; then, where nsys
+#              steps, log rows, frames); np 1 and np 2 must write the same files; each rank's step
+#              phases (--stage-times: halo, frame, relayout, forces) at np 1 and 2; then, where nsys
 #              exists, np 2 for NSYS_STEPS steps under Nsight Systems (CUDA + MPI + OS runtime): where a
 #              rank's step goes (kernels, copies, MPI waits), rank 0's summary tables
 #   suite      the whole unit suite with its CUDA cases
@@ -53,6 +54,14 @@ if wants simtwo; then
     a=$(steps_per_second "$W/np1.run"); b=$(steps_per_second "$W/np2.run")
     log "simtwo: np 2 / np 1 = $(awk -v a="$a" -v b="$b" 'BEGIN { if (a > 0) printf "%.2f", b / a }') (issue: >= 1.8 at 2^25)"
     rm -rf "$W"/np*.run
+    # where each rank's step goes: --stage-times (the device waited for at each step's end)
+    for np in 1 2; do
+      timeout 200 mpirun --bind-to none -np $np "$CG" simulate "$W/t.h5" -o "$W/timed$np.run" --steps 20 \
+        --output-every 20 --log-every 20 --backend cuda --precision fp32 --no-plot --stage-times \
+        >"$OUT/simtwo_timed_np$np.log" 2>&1 || failed+=("simtwo: np $np --stage-times run")
+      { echo "np $np --stage-times:"; grep -A3 'step phases' "$OUT/simtwo_timed_np$np.log"; } | tee -a "$OUT/summary.txt"
+      rm -rf "$W/timed$np.run"
+    done
     if command -v nsys >/dev/null 2>&1; then
       k=${NSYS_STEPS:-10}
       timeout 240 mpirun --bind-to none -np 2 nsys profile --trace=cuda,mpi,osrt --mpi-impl=openmpi \
