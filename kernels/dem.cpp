@@ -55,6 +55,12 @@ void cuda_dem_write_rows(CudaDem&, const std::vector<std::uint32_t>&, const std:
   throw CudaError("this contactgrid was built without CUDA");
 }
 void cuda_dem_mark(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
+void cuda_dem_set_halo(CudaDem&, const std::vector<std::uint32_t>&, const std::vector<std::uint32_t>&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+const DemRow* cuda_dem_gather_halo(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
+DemRow* cuda_dem_halo_inbox(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
+void cuda_dem_scatter_halo(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
 double cuda_dem_displacement(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
 void cuda_dem_get_state(CudaDem&, std::size_t, DemState&) {
   throw CudaError("this contactgrid was built without CUDA");
@@ -253,6 +259,10 @@ struct Simulation<Real>::Impl {
   std::vector<std::int64_t> ids;
   std::optional<Frame> frame;
   std::vector<Vec3<double>> marked;
+  // set_halo's rows (the CPU's; CUDA keeps them on the device) and the CPU's records of them
+  std::vector<std::uint32_t> halo_send, halo_receive;
+  std::vector<DemRow> halo_out, halo_in;
+  bool halo_set = false;
 
   static EngineOptions engine_options(EngineOptions e) {
     e.history = true;
@@ -600,6 +610,68 @@ void Simulation<Real>::write_rows(const std::vector<std::uint32_t>& rows, const 
 }
 
 template <class Real>
+void Simulation<Real>::set_halo(const std::vector<std::uint32_t>& send,
+                                const std::vector<std::uint32_t>& receive) {
+  Impl& s = *m_impl;
+  s.halo_set = false;
+  if (s.resolved == Backend::cuda) {
+    detail::cuda_dem_set_halo(*s.cuda, send, receive);  // checks the rows
+    s.halo_set = true;
+    return;
+  }
+  for (const auto* rows : {&send, &receive})
+    for (const std::uint32_t r : *rows)
+      if (r >= s.host.size())
+        throw UsageError("simulate: row " + std::to_string(r) + " is not a row of the rank");
+  s.halo_send = send;
+  s.halo_receive = receive;
+  s.halo_set = true;
+  s.halo_out.resize(send.size());
+  s.halo_in.resize(receive.size());
+}
+
+template <class Real>
+const DemRow* Simulation<Real>::gather_halo() {
+  Impl& s = *m_impl;
+  if (!s.halo_set) throw Error("simulate: the halo's rows were not set: internal error");
+  if (s.resolved == Backend::cuda) return detail::cuda_dem_gather_halo(*s.cuda);
+  const detail::host::HostDem& h = s.host;
+  for (std::size_t j = 0; j < s.halo_send.size(); ++j) {
+    const std::size_t i = s.halo_send[j];
+    s.halo_out[j] = DemRow{h.position[i],    h.velocity[i], h.omega[i], h.momentum[i],
+                           h.orientation[i], h.force[i],    h.torque[i]};
+  }
+  return s.halo_out.data();
+}
+
+template <class Real>
+DemRow* Simulation<Real>::halo_inbox() {
+  Impl& s = *m_impl;
+  if (!s.halo_set) throw Error("simulate: the halo's rows were not set: internal error");
+  if (s.resolved == Backend::cuda) return detail::cuda_dem_halo_inbox(*s.cuda);
+  return s.halo_in.data();
+}
+
+template <class Real>
+void Simulation<Real>::scatter_halo() {
+  Impl& s = *m_impl;
+  if (!s.halo_set) throw Error("simulate: the halo's rows were not set: internal error");
+  if (s.resolved == Backend::cuda) return detail::cuda_dem_scatter_halo(*s.cuda);
+  detail::host::HostDem& h = s.host;
+  for (std::size_t j = 0; j < s.halo_receive.size(); ++j) {
+    const std::size_t i = s.halo_receive[j];
+    const DemRow& r = s.halo_in[j];
+    h.position[i] = r.position;
+    h.velocity[i] = r.velocity;
+    h.omega[i] = r.omega;
+    h.momentum[i] = r.momentum;
+    h.orientation[i] = r.orientation;
+    h.force[i] = r.force;
+    h.torque[i] = r.torque;
+  }
+}
+
+template <class Real>
 ResidentExtent Simulation<Real>::extent() {
   Impl& s = *m_impl;
   ResidentExtent e;
@@ -675,6 +747,7 @@ void Simulation<Real>::set_rows(const DemBodies& bodies, std::vector<std::int64_
   const std::size_t n = bodies.size();
   if (ids.size() != n || state.rows.size() != n)
     throw UsageError("simulate: the rows' ids or state differ in number from the bodies");
+  s.halo_set = false;  // the rows change: set_halo again
   s.ids = std::move(ids);
   s.start = bodies;
   DemBodies& st = s.start;

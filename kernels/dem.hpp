@@ -160,6 +160,14 @@ class Simulation {
   // these) and the energy of each of the last step's contacts (contact order).
   void log_terms(const std::vector<std::uint32_t>& rows, std::vector<DemLogRow>& out,
                  std::vector<double>& contact_energy);
+  // The halo of a run over several ranks: set_halo keeps the rows sent and the rows received each
+  // step (CUDA: on the device) until the rows are set again; gather_halo gives the sent rows' records
+  // (CUDA: gathered on the device into a reused page-locked buffer; valid until the next call),
+  // halo_inbox the place for the received rows' records, which scatter_halo writes into their rows.
+  void set_halo(const std::vector<std::uint32_t>& send, const std::vector<std::uint32_t>& receive);
+  const DemRow* gather_halo();
+  DemRow* halo_inbox();
+  void scatter_halo();
   void mark_rows();  // the displacement counts from here (set_rows of the same rows, nothing moved)
   void set_rows(const DemBodies& bodies, std::vector<std::int64_t> ids, const DemState& state);
   const std::vector<std::int64_t>& ids() const;

@@ -61,6 +61,12 @@ void cuda_dem_download(CudaDem& dem, DemBodies& out);
 void cuda_dem_set_ids(CudaDem& dem, const std::vector<std::int64_t>& ids);
 void cuda_dem_read_rows(CudaDem& dem, const std::vector<std::uint32_t>& rows, std::vector<DemRow>& out);
 void cuda_dem_write_rows(CudaDem& dem, const std::vector<std::uint32_t>& rows, const std::vector<DemRow>& in);
+// The halo's rows kept on the device, their records through page-locked buffers (Simulation::set_halo).
+void cuda_dem_set_halo(CudaDem& dem, const std::vector<std::uint32_t>& send,
+                       const std::vector<std::uint32_t>& receive);
+const DemRow* cuda_dem_gather_halo(CudaDem& dem);
+DemRow* cuda_dem_halo_inbox(CudaDem& dem);
+void cuda_dem_scatter_halo(CudaDem& dem);
 void cuda_dem_mark(CudaDem& dem);
 double cuda_dem_displacement(CudaDem& dem);
 void cuda_dem_get_state(CudaDem& dem, std::size_t contacts, DemState& out);

@@ -170,6 +170,26 @@ void cuda_dem_write_rows(CudaDem& d, const std::vector<std::uint32_t>& rows, con
   dem_scatter_rows(d, rows, in);
 }
 
+void cuda_dem_set_halo(CudaDem& d, const std::vector<std::uint32_t>& send,
+                       const std::vector<std::uint32_t>& receive) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  check_rows(d, send);
+  check_rows(d, receive);
+  dem_set_halo(d, send, receive);
+}
+
+const DemRow* cuda_dem_gather_halo(CudaDem& d) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  return dem_gather_halo(d);
+}
+
+DemRow* cuda_dem_halo_inbox(CudaDem& d) { return reinterpret_cast<DemRow*>(d.halo_in.data()); }
+
+void cuda_dem_scatter_halo(CudaDem& d) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  dem_scatter_halo(d);
+}
+
 void cuda_dem_mark(CudaDem& d) {
   CG_CUDA_CHECK(cudaSetDevice(d.device));
   dem_mark_rows(d);

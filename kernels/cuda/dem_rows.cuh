@@ -94,6 +94,48 @@ inline void dem_scatter_rows(CudaDem& d, const std::vector<std::uint32_t>& rows,
   CG_CUDA_CHECK_LAUNCH("dem_scatter_rows");
 }
 
+// The halo's rows on the device (the same rows every step until the rows are set again).
+inline void dem_set_halo(CudaDem& d, const std::vector<std::uint32_t>& send,
+                         const std::vector<std::uint32_t>& receive) {
+  d.halo_sends = send.size();
+  d.halo_receives = receive.size();
+  const std::size_t most = std::max(send.size(), receive.size());
+  d.halo_send.reserve(std::max<std::size_t>(send.size(), 1), false);
+  d.halo_receive.reserve(std::max<std::size_t>(receive.size(), 1), false);
+  d.halo_records.reserve(std::max<std::size_t>(most, 1), false);
+  d.halo_out.reserve(std::max<std::size_t>(send.size(), 1) * sizeof(DemRow));
+  d.halo_in.reserve(std::max<std::size_t>(receive.size(), 1) * sizeof(DemRow));
+  if (!send.empty())
+    CG_CUDA_CHECK(cudaMemcpy(d.halo_send.data(), send.data(), send.size() * sizeof(std::uint32_t),
+                             cudaMemcpyHostToDevice));
+  if (!receive.empty())
+    CG_CUDA_CHECK(cudaMemcpy(d.halo_receive.data(), receive.data(), receive.size() * sizeof(std::uint32_t),
+                             cudaMemcpyHostToDevice));
+}
+
+// The sent rows' records, gathered on the device and downloaded into the page-locked buffer.
+inline const DemRow* dem_gather_halo(CudaDem& d) {
+  auto* out = reinterpret_cast<DemRow*>(d.halo_out.data());
+  const std::size_t n = d.halo_sends;
+  if (n == 0) return out;
+  cuda::dem_gather_rows_kernel<<<cuda::blocks_for(n), cuda::kBlock>>>(d.arrays(), d.halo_send.data(), n,
+                                                                      d.halo_records.data());
+  CG_CUDA_CHECK_LAUNCH("dem_gather_rows");
+  CG_CUDA_CHECK(cudaMemcpy(out, d.halo_records.data(), n * sizeof(DemRow), cudaMemcpyDeviceToHost));
+  return out;
+}
+
+// The received rows' records (in the page-locked inbox) uploaded and scattered into their rows.
+inline void dem_scatter_halo(CudaDem& d) {
+  const std::size_t n = d.halo_receives;
+  if (n == 0) return;
+  CG_CUDA_CHECK(
+      cudaMemcpy(d.halo_records.data(), d.halo_in.data(), n * sizeof(DemRow), cudaMemcpyHostToDevice));
+  cuda::dem_scatter_rows_kernel<<<cuda::blocks_for(n), cuda::kBlock>>>(d.arrays(), d.halo_receive.data(), n,
+                                                                       d.halo_records.data());
+  CG_CUDA_CHECK_LAUNCH("dem_scatter_rows");
+}
+
 // The log row's terms of `rows` (after a step's body stage: its index) and the last step's `contacts`
 // contact energies, downloaded.
 inline void dem_log_rows(CudaDem& d, const std::vector<std::uint32_t>& rows, Vec3<double> gravity,

@@ -117,6 +117,12 @@ class CudaDem {
   DemBuffer<std::uint32_t> row_index;
   DemBuffer<DemRow> row_records;
   DemBuffer<DemLogRow> log_rows;  // a log row's terms of chosen rows (dem_rows.cuh)
+  // the halo (dem_rows.cuh: set_halo): its rows, their records on the device and in page-locked
+  // host buffers reused every step
+  DemBuffer<std::uint32_t> halo_send, halo_receive;
+  std::size_t halo_sends = 0, halo_receives = 0;
+  DemBuffer<DemRow> halo_records;
+  cuda::PinnedBuffer halo_out, halo_in;
   DemBuffer<Vec3<double>> mark;
   bool normals_f = false;
 

@@ -91,6 +91,11 @@ class ResidentDem {
     if (how != "sums" && how != "gather")
       throw UsageError("CONTACTGRID_SIMULATE_OUTPUT must be sums or gather (got \"" + how + "\")");
     m_gather = how == "gather";
+    const char* ghosts = std::getenv("CONTACTGRID_SIMULATE_GHOSTS");
+    const std::string way = ghosts ? ghosts : "halo";
+    if (way != "halo" && way != "records")
+      throw UsageError("CONTACTGRID_SIMULATE_GHOSTS must be halo or records (got \"" + way + "\")");
+    m_ghost_records = way == "records";
     m_width = (2 * r_max + m_skin) * (1 + 1e-9);
     std::vector<double> sample(n);
     for (std::size_t i = 0; i < n; ++i) sample[i] = component(all.position[i], m_axis);
@@ -400,15 +405,36 @@ class ResidentDem {
     m_send_rows.clear();
     m_recv_rows.clear();
     m_send_counts.assign(p, 0);
+    m_recv_counts.assign(p, 0);
     for (std::size_t r = 0; r < p; ++r) {
       m_send_counts[r] = to[r].size();
+      m_recv_counts[r] = from[r].size();
       m_send_rows.insert(m_send_rows.end(), to[r].begin(), to[r].end());
       m_recv_rows.insert(m_recv_rows.end(), from[r].begin(), from[r].end());
     }
+    if (!m_ghost_records) m_sim->set_halo(m_send_rows, m_recv_rows);
   }
 
-  // The ghosts' state from their owners (the halo's rows only).
+  // The ghosts' state from their owners (the halo's rows only): gathered where the rows are into a
+  // reused page-locked buffer, sent from it straight into the receivers' (each rank receives from
+  // each owner its ghosts in ascending id, the order the owner sends them), scattered into the
+  // ghosts' rows. CONTACTGRID_SIMULATE_GHOSTS=records: the former path (the rows' indices uploaded,
+  // the records downloaded into and uploaded from pageable vectors, every step).
   void exchange_ghosts() {
+    if (!m_ghost_records) {
+      const DemRow* out = nullptr;
+      DemRow* in = nullptr;
+      agreed_stage(m_session, "simulate", [&] {
+        out = m_sim->gather_halo();
+        in = m_sim->halo_inbox();
+      });
+      const std::vector<std::uint64_t> from = alltoall_counts(m_session, m_send_counts);
+      if (from != m_recv_counts)
+        throw Error("simulate: the owners send other ghost rows than this rank holds: internal error");
+      alltoallv_records(m_session, sizeof(DemRow), out, m_send_counts, in, m_recv_counts);
+      agreed_stage(m_session, "simulate", [&] { m_sim->scatter_halo(); });
+      return;
+    }
     std::vector<DemRow> send;
     agreed_stage(m_session, "simulate", [&] { m_sim->read_rows(m_send_rows, send); });
     const std::vector<DemRow> got = sim::exchange_records(m_session, send, m_send_counts);
@@ -624,7 +650,8 @@ class ResidentDem {
   std::vector<std::int64_t> m_ids;
   std::vector<int> m_owner;
   std::vector<std::uint32_t> m_owned_rows, m_send_rows, m_recv_rows;
-  std::vector<std::uint64_t> m_send_counts;
+  std::vector<std::uint64_t> m_send_counts, m_recv_counts;
+  bool m_ghost_records = false;  // CONTACTGRID_SIMULATE_GHOSTS=records (exchange_ghosts)
   std::uint64_t m_steps = 0, m_rebuilds = 0, m_migrated = 0, m_rebalances = 0;
   double m_relayout_seconds = 0;
   Phases m_phases;

@@ -62,6 +62,9 @@ same "$W/pour.np1" "$W/pour.gather.np1"
 CONTACTGRID_SIMULATE_OUTPUT=gather run pell 3 pell.gather.np3
 same "$W/pell.np1" "$W/pell.gather.np3"
 grep -q 'wall time .* steps .* log rows .* frames' "$W/pour.np3.out" || { echo "no wall time split in the summary"; exit 1; }
+# the ghosts' former exchange (CONTACTGRID_SIMULATE_GHOSTS=records): the same files
+CONTACTGRID_SIMULATE_GHOSTS=records run pell 3 pell.records.np3
+same "$W/pell.np1" "$W/pell.records.np3"
 # --stage-times: each rank's step phases in the summary, and the same files (the device waited for only)
 run pour 2 pour.timed.np2 --stage-times
 same "$W/pour.np1" "$W/pour.timed.np2"

@@ -209,5 +209,37 @@ TYPED_TEST(DemRows, RowsOutsideTheRankAreRefused) {
   EXPECT_THROW(sim.log_terms({static_cast<std::uint32_t>(s.bodies.size())}, terms, energy), UsageError);
 }
 
+// The halo's rows (set_halo, gather_halo, halo_inbox, scatter_halo) carry the records read_rows and
+// write_rows do: a gather gives read_rows' bytes; records scattered through the inbox give the state
+// write_rows gives (bodies and the next steps); rows outside the rank and a halo not set are refused.
+TYPED_TEST(DemRows, TheHaloCarriesTheRowsRecords) {
+  for (const bool ellipsoids : {false, true}) {
+    const RowsScene s = rows_scene(TypeParam::backend, ellipsoids);
+    Simulation<double> a(s.bodies, s.options), b(s.bodies, s.options);
+    a.run(7);
+    b.run(7);
+    const std::size_t n = s.bodies.size();
+    const std::vector<std::uint32_t> send = {3, 0, static_cast<std::uint32_t>(n - 1), 17, 40};
+    const std::vector<std::uint32_t> receive = {5, 11, static_cast<std::uint32_t>(n - 2), 1, 90};
+    std::vector<DemRow> expected;
+    a.read_rows(send, expected);
+    EXPECT_THROW(b.gather_halo(), Error) << "a halo not set";
+    b.set_halo(send, receive);
+    const DemRow* got = b.gather_halo();
+    ASSERT_EQ(std::memcmp(got, expected.data(), send.size() * sizeof(DemRow)), 0)
+        << "ellipsoids " << ellipsoids;
+    // the other rows' records into `receive`, on both
+    std::vector<DemRow> moved;
+    a.read_rows({60, 61, 62, 63, 64}, moved);
+    a.write_rows(receive, moved);
+    std::memcpy(b.halo_inbox(), moved.data(), moved.size() * sizeof(DemRow));
+    b.scatter_halo();
+    a.run(5);
+    b.run(5);
+    expect_same(a, b, ellipsoids ? "ellipsoids" : "spheres");
+    EXPECT_THROW(b.set_halo({static_cast<std::uint32_t>(n)}, {}), UsageError);
+  }
+}
+
 }  // namespace
 }  // namespace cg::test
