@@ -4,8 +4,10 @@
 //
 // Stages (stage.hpp names them for the timing table), one file each in kernels/host/ (stages.hpp):
 //   pack      world (double) → local frame Broad spheres; per body: cells, entry count, control byte
-//   entries   exclusive scan of entry counts → fill (cell key, body) entries in body order
-//   sort      stable radix sort of the entries by cell key over plan.key_bits bits
+//   entries   (cell key, body) entries in body order (scan of entry counts → fill), or, opt-in,
+//             grouped by the top digit of the key (a counting pass, then each entry to its place)
+//   sort      stable radix sort of the entries by cell key over plan.key_bits bits (each group by its
+//             low bits)
 //             (then the pair stage's estimate and its check: pair_estimate.hpp, counted in pairs)
 //   pairs     per entry: tests against later entries of its cell (cells of type 0 first: Le Grand's
 //             8 passes); candidate pairs (a < b, local indices) collected per chunk of entries,
@@ -143,7 +145,7 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
         host::sphere_cells(job.grid, nt, bodies);
       }
       host::Entries<Key> entries;
-      stats.entries = host::fill_entries(bodies, job.grid, nt, entries);
+      stats.entries = host::fill_entries(bodies, job.grid, nt, entries, job.plan.key_bits);
       timer.lap(EngineStage::entries);
 
       host::sort_entries(entries, job.plan.key_bits, nt);

@@ -67,6 +67,37 @@ std::size_t* digit_offsets(const Key* keys, std::size_t lo, std::size_t hi, int 
   return h;
 }
 
+// The LSD passes that sort a bucket by its low `shift` bits: of up to 11 bits each.
+int bucket_passes(int shift) { return (shift + 10) / 11; }
+
+// Within a parallel region (an orphaned `omp for` over the buckets): bucket d = [start[d], start[d + 1])
+// of (ks, vs), in stable order by the bits above `shift`, sorted by its low `shift` bits with LSD passes
+// on one thread (in the cache), between (ks, vs) and (kd, vd). The buckets end in kd where the passes
+// are odd in number, else in ks (a lone element copied there too).
+template <class Key, class Value>
+void sort_buckets(Key* ks0, Value* vs0, Key* kd0, Value* vd0, const std::size_t* start, std::size_t buckets,
+                  int shift) {
+  constexpr bool with_values = !std::is_same_v<Value, NoValues>;
+  const int passes = bucket_passes(shift);
+  const int width = passes > 0 ? (shift + passes - 1) / passes : 0;
+  std::vector<std::size_t> count(std::size_t(1) << width);
+#pragma omp for schedule(dynamic, 4)
+  for (std::size_t d = 0; d < buckets; ++d) {
+    const std::size_t b0 = start[d], m = start[d + 1] - b0;
+    Key *ks = ks0 + b0, *kd = kd0 + b0;
+    Value *vs = with_values ? vs0 + b0 : nullptr, *vd = with_values ? vd0 + b0 : nullptr;
+    for (int pass = 0; pass < passes && m > 1; ++pass) {
+      local_pass(ks, vs, kd, vd, m, pass * width, Key((Key(1) << width) - 1), count.data());
+      std::swap(ks, kd);
+      std::swap(vs, vd);
+    }
+    if (m == 1 && passes % 2 == 1) {  // a lone element still ends where the others do
+      kd0[b0] = ks0[b0];
+      if constexpr (with_values) vd0[b0] = vs0[b0];
+    }
+  }
+}
+
 // The top digit first: one parallel stable scatter of keys (and values) into key_tmp by the top
 // `top` bits of the `bits`, then each bucket (on average a few thousand elements: in the cache)
 // sorted by the remaining low bits with LSD passes on one thread, buckets shared among the threads.
@@ -85,9 +116,6 @@ bool top_digit_first(Key* keys, Value* values, Key* key_tmp, Value* value_tmp, s
   const Key mask = Key(buckets - 1);
   std::vector<std::size_t> hist(std::size_t(nt) * buckets);
   std::vector<std::size_t> start(buckets + 1);
-  // the low bits of each bucket: LSD passes of up to 11 bits, between key_tmp and keys
-  const int passes = (shift + 10) / 11;
-  const int width = passes > 0 ? (shift + passes - 1) / passes : 0;
   bool skewed = false;
   int team = 1;
 #pragma omp parallel num_threads(nt)
@@ -108,29 +136,24 @@ bool top_digit_first(Key* keys, Value* values, Key* key_tmp, Value* value_tmp, s
         if constexpr (with_values) value_tmp[pos] = values[i];
       }
 #pragma omp barrier
-      std::vector<std::size_t> count(std::size_t(1) << width);
-#pragma omp for schedule(dynamic, 4)
-      for (std::size_t d = 0; d < buckets; ++d) {
-        const std::size_t b0 = start[d], m = start[d + 1] - b0;
-        Key *ks = key_tmp + b0, *kd = keys + b0;
-        Value *vs = with_values ? value_tmp + b0 : nullptr, *vd = with_values ? values + b0 : nullptr;
-        for (int pass = 0; pass < passes && m > 1; ++pass) {
-          local_pass(ks, vs, kd, vd, m, pass * width, Key((Key(1) << width) - 1), count.data());
-          std::swap(ks, kd);
-          std::swap(vs, vd);
-        }
-        if (m == 1 && passes % 2 == 1) {  // a lone element still ends where the others do
-          keys[b0] = key_tmp[b0];
-          if constexpr (with_values) values[b0] = value_tmp[b0];
-        }
-      }
+      sort_buckets(key_tmp, value_tmp, keys, values, start.data(), buckets, shift);
     }
   }
-  in_tmp = passes % 2 == 0;
+  in_tmp = bucket_passes(shift) % 2 == 0;
   return !skewed;
 }
 
 }  // namespace
+
+template <class Key, class Value>
+bool radix_sort_buckets(Key* keys, Value* values, Key* key_tmp, Value* value_tmp, const std::size_t* start,
+                        std::size_t buckets, int shift, int threads) {
+  int nt = threads > 0 ? threads : omp_get_max_threads();
+  nt = int(std::max<std::size_t>(1, std::min<std::size_t>(nt, buckets)));
+#pragma omp parallel num_threads(nt)
+  sort_buckets(keys, values, key_tmp, value_tmp, start, buckets, shift);
+  return bucket_passes(shift) % 2 == 1;
+}
 
 template <class Key, class Value>
 bool radix_sort_arrays(Key* keys, Value* values, Key* key_tmp, Value* value_tmp, std::size_t n, int bits,
@@ -186,5 +209,9 @@ template bool radix_sort_arrays(std::uint64_t*, std::uint32_t*, std::uint64_t*, 
                                 int, int);
 template bool radix_sort_arrays(std::uint32_t*, NoValues*, std::uint32_t*, NoValues*, std::size_t, int, int);
 template bool radix_sort_arrays(std::uint64_t*, NoValues*, std::uint64_t*, NoValues*, std::size_t, int, int);
+template bool radix_sort_buckets(std::uint32_t*, std::uint32_t*, std::uint32_t*, std::uint32_t*,
+                                 const std::size_t*, std::size_t, int, int);
+template bool radix_sort_buckets(std::uint64_t*, std::uint32_t*, std::uint64_t*, std::uint32_t*,
+                                 const std::size_t*, std::size_t, int, int);
 
 }  // namespace cg::detail

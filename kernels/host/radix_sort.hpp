@@ -27,6 +27,16 @@ template <class Key, class Value>
 bool radix_sort_arrays(Key* keys, Value* values, Key* key_tmp, Value* value_tmp, std::size_t n, int bits,
                        int threads);
 
+// The top-digit-first sort's second half, for a caller that made its first (host/entries.cpp writes
+// the entries by the top digit of their key): bucket d = [start[d], start[d + 1]) of keys (values
+// alongside), d = 0 … buckets − 1, holds the keys whose bits above `shift` make digit d, in stable
+// order; each bucket is sorted by its low `shift` bits (LSD passes in the cache, a bucket a thread).
+// key_tmp and value_tmp hold start[buckets] elements of scratch. Returns true when the sorted arrays
+// end in the scratch. Defined for Key = uint32_t, uint64_t and Value = uint32_t.
+template <class Key, class Value>
+bool radix_sort_buckets(Key* keys, Value* values, Key* key_tmp, Value* value_tmp, const std::size_t* start,
+                        std::size_t buckets, int shift, int threads);
+
 // The sort on vectors (std::vector or the stages' host::Array): the scratch is an Array (pooled, no
 // zero sweep: host/scratch_pool.hpp); the result is swapped in where the types allow, else copied back.
 template <class KeyVector, class ValueVector>

@@ -51,11 +51,15 @@ struct PackedBodies {
   Array<std::uint8_t> level;    // BroadPhase::levels: the level of every body (level_cells)
 };
 
-// (cell key, body) entries; body-ascending after fill_entries, key-ascending (stable) after sort.
+// (cell key, body) entries; after fill_entries body-ascending, or grouped by the top digit of the key
+// (digit_start not empty: group d = [digit_start[d], digit_start[d + 1]) holds the keys whose bits from
+// digit_shift up make d, body-ascending); key-ascending (stable) after sort.
 template <class Key>
 struct Entries {
   Array<Key> keys;
   Array<std::uint32_t> body;
+  std::vector<std::size_t> digit_start;
+  int digit_shift = 0;
   std::size_t size() const { return keys.size(); }
 };
 
@@ -115,13 +119,18 @@ void shape_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& bod
 template <class Real>
 void sphere_cells(const GridParams<Real>& g, int threads, PackedBodies<Real>& bodies);
 
-// entries: the entry counts (from the control bytes) summed and scanned per fixed block of bodies →
-// fill (cell key, body) of p.cells in body order. Returns the number of entries; frees p.cells and
-// p.count.
+// entries: the (cell key, body) entries of p.cells in body order (entry counts from the control bytes
+// summed and scanned per fixed block of bodies, then a fill). With CONTACTGRID_HOST_ENTRIES=grouped
+// and the sort's key_bits (> 11, from 32768 bodies): grouped by the top digit of their key (up to 8 of
+// the key_bits bits), a counting pass and then each entry written to its group (out.digit_start),
+// which is the sort's first pass (body order still where one group would hold too many of the
+// entries). Returns the number of entries; frees p.cells and p.count.
 template <class Real, class Key>
-std::uint64_t fill_entries(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, Entries<Key>& out);
+std::uint64_t fill_entries(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, Entries<Key>& out,
+                           int key_bits = 0);
 
-// sort: stable radix sort of the entries by cell key over key_bits bits.
+// sort: stable radix sort of the entries by cell key over key_bits bits (entries grouped by their top
+// digit: each group by its low bits). The same sorted entries from either fill.
 template <class Key>
 void sort_entries(Entries<Key>& e, int key_bits, int threads);
 
