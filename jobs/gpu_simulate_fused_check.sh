@@ -21,13 +21,14 @@
 # $OUT/summary.txt and $OUT/fused_logs.tar.gz; exits non-zero naming every failed check.
 #   BIN=dir-with-the-CUDA-build's-binaries OUT=results-dir jobs/gpu_simulate_fused_check.sh [unit] [perf]
 # (BIN holds contactgrid and contactgrid_tests; run from the repository root; .devrt/env.sh, when
-# present, supplies the runtime libraries. N20, N24: smaller pours for a dry run.)
+# present, supplies the runtime libraries. N20, N24: smaller pours, BACKEND=cpu: a dry run.)
 set -u
 cd "$(dirname "$0")/.."
 [ -f .devrt/env.sh ] && source .devrt/env.sh .devrt
 BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}; mkdir -p "$OUT"; W=${WORK:-/tmp/cgfused}; mkdir -p "$W"
 BIN=$(cd "$BIN" && pwd)
 CG="$BIN/contactgrid"
+BACKEND=${BACKEND:-cuda}  # (cpu: a dry run of this script on a machine without a GPU)
 parts=("$@"); [ ${#parts[@]} -eq 0 ] && parts=(unit perf)
 failed=()
 D="$OUT/fused_logs"; mkdir -p "$D"
@@ -57,10 +58,10 @@ part_perf() {
     local run="$W/$name.$label.run"
     rm -rf "$run"
     if ! timeout 150 env "${envs[@]}" "$CG" simulate "$W/$name.h5" -o "$run" --steps "$steps" --output-every "$steps" \
-        --log-every $((steps / 6)) --backend cuda --precision fp32 --no-plot "${opts[@]}" >"$D/$name.$label.log" 2>&1; then
+        --log-every $((steps / 6)) --backend "$BACKEND" --precision fp32 --no-plot "${opts[@]}" >"$D/$name.$label.log" 2>&1; then
       failed+=("perf: simulate $name ($label)"); tail -3 "$D/$name.$label.log"; return
     fi
-    grep -q 'backend cuda' "$D/$name.$label.log" || failed+=("perf: $name did not run on the CUDA backend")
+    grep -q "backend $BACKEND" "$D/$name.$label.log" || failed+=("perf: $name did not run on the $BACKEND backend")
     cp "$run/log.csv" "$D/$name.$label.log.csv"
     local sps cpb
     sps=$(awk -F, 'NR > 1 && $1 !~ /^#/ && $7 > 0 { n++; if (n > 1) { s += $7; k++ } } END { if (k) printf "%.1f", k / s }' "$run/log.csv")
@@ -72,7 +73,17 @@ part_perf() {
     local name=$1
     cmp <(cut -d, -f1-6 "$W/$name.slots.run/log.csv") <(cut -d, -f1-6 "$W/$name.rows.run/log.csv") \
       >"$D/$name.same.log" 2>&1 || failed+=("perf: $name's log.csv (energies, contacts, rebuilds) differs between slots and rows")
-    python3 - "$W/$name.slots.run" "$W/$name.rows.run" >>"$D/$name.same.log" 2>&1 <<'PYEOF' ||
+    # the files' bytes first (the same bytes: done); else their datasets and root attributes (h5py)
+    local f bytes=1
+    for f in "$W/$name.rows.run"/*.h5; do
+      cmp -s "$f" "$W/$name.slots.run/$(basename "$f")" || bytes=0
+    done
+    [ "$(ls "$W/$name.rows.run"/*.h5 | wc -l)" = "$(ls "$W/$name.slots.run"/*.h5 | wc -l)" ] || bytes=0
+    if [ $bytes = 1 ]; then
+      echo "$name: $(ls "$W/$name.rows.run"/*.h5 | wc -l) HDF5 files the same bytes (cmp), slots and rows; log.csv too" \
+        >>"$D/$name.same.log"
+    else
+      python3 - "$W/$name.slots.run" "$W/$name.rows.run" >>"$D/$name.same.log" 2>&1 <<'PYEOF' ||
 import sys, glob, os, h5py
 def datasets(path):
     out = {}
@@ -90,7 +101,8 @@ for n in names:
     assert not bad, f"{n} differs in {bad}"
 print(f"{len(names)} HDF5 files ({', '.join(names)}) the same bytes, slots and rows; log.csv too")
 PYEOF
-      failed+=("perf: $name's HDF5 files differ between slots and rows ($name.same.log)")
+        failed+=("perf: $name's HDF5 files differ between slots and rows ($name.same.log)")
+    fi
     cat "$D/$name.same.log" | tee -a "$OUT/summary.txt"
     rm -rf "$W/$name.slots.run" "$W/$name.rows.run"
   }
@@ -98,7 +110,7 @@ PYEOF
     local name=$1 steps=$2 label=$3; shift 3
     rm -rf "$W/$name.st.run"
     if ! timeout 120 env "$@" "$CG" simulate "$W/$name.h5" -o "$W/$name.st.run" --steps "$steps" --output-every "$steps" \
-        --backend cuda --precision fp32 --no-plot --stage-times >"$D/$name.$label.stages.log" 2>&1; then
+        --backend "$BACKEND" --precision fp32 --no-plot --stage-times >"$D/$name.$label.stages.log" 2>&1; then
       failed+=("perf: simulate $name --stage-times ($label)"); tail -3 "$D/$name.$label.stages.log"; return
     fi
     { echo "$name ($label):"; grep -E 'steps/s|stage times|within detect|energ|candidate' "$D/$name.$label.stages.log"; } \
