@@ -95,6 +95,7 @@ void SlotPath<Real>::host_detect(host::HostDem& h, int threads) {
     }
   }
   const bool build = must_build(b, std::sqrt(moved_sq));
+  plan_cell_size(b);
   m_host->remapped = false;
   const WallClock::time_point t1 = WallClock::now();
   if (build) {
@@ -110,7 +111,6 @@ void SlotPath<Real>::host_detect(host::HostDem& h, int threads) {
     }
     host::slots_rebuild(*m_host, std::move(a), std::move(bb), n, threads);
     m_ref = h.position;
-    m_stats.cell_size = m_candidates.stats().cell_size;
   }
   m_count.reset();
   timed(t0, t1, build);
@@ -127,11 +127,11 @@ void SlotPath<Real>::contact_energies(host::HostDem& h) {
   host::slots_contact_energies(h, *m_host);
 }
 
+// The cell edge the rows path's engine reports for a call on these bounds (its plan_job: the frame of
+// the spheres inflated for the skin), for EngineStats::cell_size (a contact file records it).
 template <class Real>
-Contacts<Real> SlotPath<Real>::contacts(const host::HostDem* h, CudaDem* d) {
-  // the cell edge the rows path's engine reports for this call (its frame of the inflated bounds)
-  const Bounds b = d ? m_candidates.device_bounds(cuda_dem_bodies(*d))
-                     : compute_bounds(BodiesView{h->position, h->radius, {}, {}});
+void SlotPath<Real>::plan_cell_size(const Bounds& b) {
+  if (b.count == 0) return;
   const Precision prec =
       m_options.fp32_broad_phase && std::is_same_v<Real, double> ? Precision::mixed : precision_of<Real>();
   const Bounds grid = inflated_bounds(b, inflation(b));
@@ -140,6 +140,10 @@ Contacts<Real> SlotPath<Real>::contacts(const host::HostDem* h, CudaDem* d) {
           ? std::max(make_frame(b, m_options.cell_size, prec, m_options.cell_choice).cell_size,
                      min_cell_size(grid, prec))
           : make_frame(grid, 0, prec, m_options.cell_choice).cell_size;
+}
+
+template <class Real>
+Contacts<Real> SlotPath<Real>::contacts(const host::HostDem* h, CudaDem* d) {
   if (d) return cuda_slots_contacts<Real>(*d, *m_cuda);
   return host::slots_contacts(*m_host,
                               world(reinterpret_cast<const double*>(h->position.data()), h->radius.data()));
@@ -161,6 +165,7 @@ void SlotPath<Real>::cuda_detect(CudaDem& d, Engine<Real>& main) {
   // the displacement only where the engine would check it (a pass and a read back)
   const bool check = m_valid && coordinate_magnitude(b, b.lo) <= m_bound;
   const bool build = must_build(b, check ? cuda_dem_displacement(d) : 0.0);
+  plan_cell_size(b);
   cuda_slots_step_begins(*m_cuda);
   const WallClock::time_point t1 = WallClock::now();
   if (build) {
@@ -168,7 +173,6 @@ void SlotPath<Real>::cuda_detect(CudaDem& d, Engine<Real>& main) {
     const DeviceContactsView<Real> pairs = m_candidates.detect_device_resident(inflated);
     cuda_slots_rebuild(d, *m_cuda, pairs);
     cuda_dem_mark(d);  // the positions of the build (cuda_dem_displacement's reference)
-    m_stats.cell_size = m_candidates.stats().cell_size;
   }
   m_count.reset();
   timed(t0, t1, build);

@@ -61,6 +61,7 @@ class SlotPath {
   // The check (Engine's plan_skin and skin_covers with the same values): true to build.
   bool must_build(const Bounds& b, double displacement);
   double inflation(const Bounds& b) const;
+  void plan_cell_size(const Bounds& b);
   std::size_t contact_count_of(CudaDem* d) const;
   NarrowBodies<Real> world(const double* position, const double* radius) const;
   void timed(WallClock::time_point t0, WallClock::time_point t1, bool build);
