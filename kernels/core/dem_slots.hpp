@@ -22,7 +22,7 @@
 //                 bits — then the walls and gravity (body_terms_after_contacts). Nothing per contact
 //                 is stored but the slot state.
 //   remap_slot(s) at a rebuild: slot s of the new list takes the state of its pair's slot in the old
-//                 list (one binary search of the old keys), or a fresh one.
+//                 list (one search of the old keys from the slot's own place), or a fresh one.
 //   slot_row(s)   a touching slot's contact row, when a caller asks for rows (the same bits as the
 //                 engine's: the same narrow function on the same positions).
 // The positions a step's forces read are those its kick_drift left; the kick after changes
@@ -160,16 +160,47 @@ struct SlotRemap {
   std::int32_t* age;
   std::int64_t* prev_row;
 };
-CG_HD void remap_slot(std::size_t s, const std::uint32_t* na, const std::uint32_t* nb, const SlotRemap& m) {
-  const PairKey key = slot_key(na, nb, s);
-  std::size_t lo = 0, hi = m.old_count;
+// The first position p in the sorted keys of a list (a, b) of m slots with !(key(p) < key), searched
+// from a guess as core/history.hpp's lower_bound_key_near: steps doubling away from `guess` until they
+// bracket the position, then a binary search between them. A pair's slot in the old list lies near
+// its slot's place in the new one (both sorted by (a, b)), a few reads away.
+CG_HD std::size_t lower_bound_slot(const std::uint32_t* a, const std::uint32_t* b, std::size_t m,
+                                   const PairKey& key, std::size_t guess) {
+  if (m == 0) return 0;
+  if (guess >= m) guess = m - 1;
+  std::size_t lo = 0, hi = m, step = 1;  // the position lies in [lo, hi]
+  if (slot_key(a, b, guess) < key) {     // after guess
+    lo = guess + 1;
+    while (lo + step - 1 < m && slot_key(a, b, lo + step - 1) < key) {
+      lo += step;
+      step *= 2;
+    }
+    hi = lo + step - 1 < m ? lo + step - 1 : m;
+  } else {  // at or before guess
+    hi = guess;
+    while (hi >= step && !(slot_key(a, b, hi - step) < key)) {
+      hi -= step;
+      step *= 2;
+    }
+    lo = hi >= step ? hi - step + 1 : 0;
+  }
   while (lo < hi) {
     const std::size_t mid = lo + (hi - lo) / 2;
-    if (slot_key(m.old_a, m.old_b, mid) < key)
+    if (slot_key(a, b, mid) < key)
       lo = mid + 1;
     else
       hi = mid;
   }
+  return lo;
+}
+
+// `count`: the new list's slots (the guess of slot s in the old list: s scaled to its length).
+CG_HD void remap_slot(std::size_t s, const std::uint32_t* na, const std::uint32_t* nb, std::size_t count,
+                      const SlotRemap& m) {
+  const PairKey key = slot_key(na, nb, s);
+  const std::size_t guess =
+      count > 0 ? static_cast<std::size_t>(std::uint64_t(s) * std::uint64_t(m.old_count) / count) : 0;
+  const std::size_t lo = lower_bound_slot(m.old_a, m.old_b, m.old_count, key, guess);
   if (lo < m.old_count && slot_key(m.old_a, m.old_b, lo) == key && m.old_age[lo] >= 0) {
     m.xi[s] = m.old_xi[lo];
     m.normal[s] = m.old_normal[lo];

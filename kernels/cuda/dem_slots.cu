@@ -69,7 +69,7 @@ __global__ void slots_pairs_kernel(const std::int64_t* id_a, const std::int64_t*
 __global__ void slots_remap_kernel(const std::uint32_t* a, const std::uint32_t* b, std::size_t m,
                                    dem::SlotRemap map) {
   const std::size_t k = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
-  if (k < m) dem::remap_slot(k, a, b, map);
+  if (k < m) dem::remap_slot(k, a, b, m, map);
 }
 
 // slot_body_terms of body i (its force and torque into the second buffers: every body's thread

@@ -30,7 +30,7 @@ void slots_rebuild(HostSlots& s, std::vector<std::uint32_t> a, std::vector<std::
       rank.data(), xi.data(),  normal.data(), age.data(),         s.prev_row.data()};
   const std::ptrdiff_t mm = static_cast<std::ptrdiff_t>(m);
 #pragma omp parallel for num_threads(threads) schedule(static) if (m > k_parallel_min)
-  for (std::ptrdiff_t k = 0; k < mm; ++k) dem::remap_slot(std::size_t(k), a.data(), b.data(), map);
+  for (std::ptrdiff_t k = 0; k < mm; ++k) dem::remap_slot(std::size_t(k), a.data(), b.data(), m, map);
   s.a = std::move(a);
   s.b = std::move(b);
   s.xi[s.cur] = std::move(xi);
