@@ -15,6 +15,7 @@
 
 #include "core/dem_step.hpp"
 #include "dem_backend.hpp"
+#include "dem_slots.hpp"
 #include "host/dem_stages.hpp"
 #include "timing.hpp"
 
@@ -241,6 +242,8 @@ struct Simulation<Real>::Impl {
   int threads = 1;
   detail::host::HostDem host;
   std::unique_ptr<detail::CudaDem> cuda;
+  // the slots path (dem_slots.hpp; null: the rows path, this file's engine detecting contact rows)
+  std::unique_ptr<detail::SlotPath<Real>> slots;
   DemBodies start;  // the bodies as given (shape rows, radii: what the state does not change)
   std::uint64_t steps = 0;
   std::size_t contact_count = 0;
@@ -319,7 +322,7 @@ struct Simulation<Real>::Impl {
   void detected() {
     mark(detail::DemStage::detect);
     if (!timing) return;
-    for (const StageTime& t : engine.times()) {
+    for (const StageTime& t : slots ? slots->times() : engine.times()) {
       auto at = std::find_if(times.detection.begin(), times.detection.end(),
                              [&](const StageTime& x) { return x.name == t.name; });
       if (at == times.detection.end())
@@ -332,6 +335,20 @@ struct Simulation<Real>::Impl {
   // The contacts at the current positions and the forces from them; CUDA: then `then` (the body
   // stage's pass over the bodies integrates them too).
   void forces(detail::DemThen then = detail::DemThen::nothing) {
+    if (slots) {  // the kept candidates' slots: no contact rows (dem_slots.hpp)
+      if (resolved == Backend::cuda) {
+        slots->cuda_detect(*cuda, engine);
+        detected();
+        slots->cuda_forces(*cuda, constants, then);
+      } else {
+        slots->host_detect(host, threads);
+        detected();
+        slots->host_forces(host, constants, threads);
+      }
+      mark(detail::DemStage::body_terms);
+      contacts_downloaded = false;
+      return;
+    }
     if (resolved == Backend::cuda) {
       device_contacts = engine.detect_device_resident(detail::cuda_dem_bodies(*cuda), frame);
       detected();
@@ -405,6 +422,8 @@ Simulation<Real>::Simulation(const DemBodies& bodies, const DemOptions& options,
   s.constants.synchronized = options.synchronized;
   s.resolved = s.engine.backend();
   s.threads = options.engine.threads > 0 ? options.engine.threads : omp_get_max_threads();
+  if (detail::slots_path_wanted(bodies, options, !s.ids.empty() || s.frame.has_value()))
+    s.slots = std::make_unique<detail::SlotPath<Real>>(s.engine.options());
   s.start = bodies;
   const std::size_t n = bodies.size();
   const bool shapes = bodies.has_ellipsoids();
@@ -476,14 +495,17 @@ double Simulation<Real>::time() const {
 }
 template <class Real>
 std::size_t Simulation<Real>::contact_count() const {
+  if (m_impl->slots) return m_impl->slots->contact_count(m_impl->cuda.get());
   return m_impl->contact_count;
 }
 template <class Real>
 const EngineStats& Simulation<Real>::engine_stats() const {
+  if (m_impl->slots) return m_impl->slots->stats();
   return m_impl->engine.stats();
 }
 template <class Real>
 const StageTimes& Simulation<Real>::engine_times() const {
+  if (m_impl->slots) return m_impl->slots->times();
   return m_impl->engine.times();
 }
 template <class Real>
@@ -522,6 +544,11 @@ DemBodies Simulation<Real>::bodies() {
 template <class Real>
 const Contacts<Real>& Simulation<Real>::contacts() {
   Impl& s = *m_impl;
+  if (s.slots && !s.contacts_downloaded) {  // rows made from the slots, once a step
+    s.contacts = s.slots->contacts(s.resolved == Backend::cuda ? nullptr : &s.host, s.cuda.get());
+    s.contacts_downloaded = true;
+    return s.contacts;
+  }
   if (s.resolved == Backend::cuda && !s.contacts_downloaded) {
     s.contacts = s.engine.download(s.device_contacts);
     s.contacts_downloaded = true;
@@ -533,10 +560,17 @@ template <class Real>
 DemEnergies Simulation<Real>::energies() {
   Impl& s = *m_impl;
   const WallClock::time_point t0 = WallClock::now();
-  const DemEnergies e =
-      s.resolved == Backend::cuda
-          ? detail::cuda_dem_energies(*s.cuda, s.contact_count, s.options.gravity)
-          : detail::host::dem_energies(s.host, s.contact_count, s.options.gravity, s.threads);
+  std::size_t contacts = s.contact_count;
+  if (s.slots) {  // the touching slots' energies, in contact order, where the rows path keeps them
+    contacts = s.slots->contact_count(s.cuda.get());
+    if (s.resolved == Backend::cuda)
+      s.slots->cuda_contact_energies(*s.cuda);
+    else
+      s.slots->contact_energies(s.host);
+  }
+  const DemEnergies e = s.resolved == Backend::cuda
+                            ? detail::cuda_dem_energies(*s.cuda, contacts, s.options.gravity)
+                            : detail::host::dem_energies(s.host, contacts, s.options.gravity, s.threads);
   if (s.options.stage_times) {
     s.times.energy_seconds += seconds_since(t0);
     ++s.times.energy_calls;

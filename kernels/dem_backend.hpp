@@ -6,6 +6,7 @@
 #include <memory>
 
 #include "core/dem_step.hpp"
+#include "core/narrow.hpp"
 #include "dem.hpp"
 
 namespace cg::detail {
@@ -75,7 +76,32 @@ void cuda_dem_log_terms(CudaDem& dem, const std::vector<std::uint32_t>& rows, Ve
                         std::vector<double>& contact_energy);
 void cuda_dem_set_state(CudaDem& dem, const DemState& in);
 
+// The slots path on the device (kernels/dem_slots.hpp; cuda/dem_slots.cu): the slots' state; a
+// rebuild's inflated radii (the candidate engine's bodies) and the list from its device contacts;
+// a step's start (no rebuild: the previous rows of the last rebuild expire) and forces, then `then`;
+// the last step's contacts: their number, their energies into the contact energies that
+// cuda_dem_energies sums, their rows with history (made on the host from the device's arrays).
+class CudaSlots;
+std::unique_ptr<CudaSlots> make_cuda_slots();
+void destroy(CudaSlots* s);
+DeviceBodiesView cuda_slots_inflate(CudaDem& d, CudaSlots& s, double inflation);
+template <class Real>
+void cuda_slots_rebuild(CudaDem& d, CudaSlots& s, const DeviceContactsView<Real>& pairs);
+void cuda_slots_step_begins(CudaSlots& s);
+template <class Real>
+void cuda_slots_forces(CudaDem& d, CudaSlots& s, const NarrowBodies<Real>& world, dem::StepConstants c,
+                       DemThen then);
+std::size_t cuda_slots_contact_count(CudaDem& d, CudaSlots& s);
+void cuda_slots_contact_energies(CudaDem& d, CudaSlots& s, std::size_t contacts);
+template <class Real>
+Contacts<Real> cuda_slots_contacts(CudaDem& d, CudaSlots& s);
+
 }  // namespace cg::detail
+
+template <>
+struct std::default_delete<cg::detail::CudaSlots> {
+  void operator()(cg::detail::CudaSlots* p) const { cg::detail::destroy(p); }
+};
 
 template <>
 struct std::default_delete<cg::detail::CudaDem> {

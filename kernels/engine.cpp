@@ -15,6 +15,7 @@
 
 #include "backend.hpp"
 #include "host_vector.hpp"
+#include "inflated_bounds.hpp"
 #include "skin_tuner.hpp"
 #include "splice_rows.hpp"
 #include "stage.hpp"
@@ -266,19 +267,6 @@ void Engine<Real>::set_history(ContactHistory history) {
 }
 
 namespace {
-// The bounds of the bodies inflated by `d` (EngineOptions::skin): boxes, largest radius and the
-// radius moments of the cell-size model, of the radii r + d.
-Bounds inflated(Bounds b, double d) {
-  b.lo = {b.lo.x - d, b.lo.y - d, b.lo.z - d};
-  b.hi = {b.hi.x + d, b.hi.y + d, b.hi.z + d};
-  b.r_max += d;
-  const double n = double(b.count), s1 = b.r_sum[0], s2 = b.r_sum[1], s3 = b.r_sum[2];
-  b.r_sum[0] = s1 + n * d;
-  b.r_sum[1] = s2 + 2 * d * s1 + n * d * d;
-  b.r_sum[2] = s3 + 3 * d * s2 + 3 * d * d * s1 + n * d * d * d;
-  return b;
-}
-
 // Frame and grid plan of one call from the bodies' bounds; pushes the "plan" stage time. A skin
 // (inflation > 0): the origin is the one of a skin-0 call (so the packed spheres and the contacts are
 // the same bits), the cell edge and the grid cover the radii inflated by `inflation`.
@@ -297,7 +285,7 @@ detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> 
   const double margin = broad_margin(b, f.origin, prec);
   if (frame && f.cell_size < 2 * (b.r_max + margin))
     throw UsageError("frame cell size is smaller than the largest diameter");
-  const Bounds grid_bounds = inflation > 0 ? inflated(b, inflation) : b;
+  const Bounds grid_bounds = inflation > 0 ? inflated_bounds(b, inflation) : b;
   if (inflation > 0)  // a requested or shared edge grows to the inflated radii' smallest valid edge
     f.cell_size = frame || options.cell_size > 0
                       ? std::max(f.cell_size, min_cell_size(grid_bounds, prec))
@@ -332,12 +320,6 @@ void run_job(const EngineOptions& options, const Bounds& b, std::optional<Frame>
     if (options.fp32_broad_phase) return run(plan_job<float, double>(b, frame, options, inflation, stats));
   }
   run(plan_job<Real, Real>(b, frame, options, inflation, stats));
-}
-
-// The largest magnitude of a local coordinate of the bodies' boxes in a frame with this origin.
-double coordinate_magnitude(const Bounds& b, const Vec3<double>& origin) {
-  return std::max({std::abs(b.lo.x - origin.x), std::abs(b.lo.y - origin.y), std::abs(b.lo.z - origin.z),
-                   std::abs(b.hi.x - origin.x), std::abs(b.hi.y - origin.y), std::abs(b.hi.z - origin.z)});
 }
 
 // A fresh per-call EngineStats that carries the counters kept across calls.

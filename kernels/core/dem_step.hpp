@@ -266,10 +266,12 @@ CG_HD void a_sums(std::size_t i, const ContactTerms& t, const BodyRowIndex& inde
   }
 }
 
-// Body i's force and torque into b.force[i], b.torque[i], from f and tau, the sums of its contact
-// rows (as A, then as B): its walls, gravity (file comment).
+// Body i's force and torque into force_out[i], torque_out[i], from f and tau, the sums of its contact
+// rows (as A, then as B): its walls, gravity (file comment). b.force, b.torque: the last step's (the
+// walls' synchronised velocities read them); the slots path (core/dem_slots.hpp) writes elsewhere.
 CG_HD void body_terms_after_contacts(std::size_t i, const BodyArrays& b, const StepConstants& c,
-                                     const WallTerms& w, Vec3<double> f, Vec3<double> tau) {
+                                     const WallTerms& w, Vec3<double> f, Vec3<double> tau,
+                                     Vec3<double>* force_out, Vec3<double>* torque_out) {
   const BodyState s = b.state(i);
   const BodyProps& p = b.props[i];
   const bool ell = b.ellipsoid(i);
@@ -307,9 +309,14 @@ CG_HD void body_terms_after_contacts(std::size_t i, const BodyArrays& b, const S
     }
   }
   f = f + p.mass * c.gravity;
-  b.force[i] = f;
-  b.torque[i] = tau;
+  force_out[i] = f;
+  torque_out[i] = tau;
   w.energy[i] = energy;
+}
+// The same into b.force[i], b.torque[i] (the rows path: every contact's terms are computed before).
+CG_HD void body_terms_after_contacts(std::size_t i, const BodyArrays& b, const StepConstants& c,
+                                     const WallTerms& w, Vec3<double> f, Vec3<double> tau) {
+  body_terms_after_contacts(i, b, c, w, f, tau, b.force, b.torque);
 }
 
 // Body i's force and torque of the step into b.force[i], b.torque[i], from f and tau, the sums of its
