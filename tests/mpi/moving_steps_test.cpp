@@ -381,9 +381,10 @@ void check_non_finite_centre(Backend backend) {
   }
 }
 
-// The halo where the rows are and the slab scans of the engines (the defaults) against the former
-// paths (CONTACTGRID_STEP_HALO=host: the host's records and B's rows written whole;
-// CONTACTGRID_STEP_SCAN=host: the host's pass over every row for the owners and the plan): every
+// The halo where the rows are, the slab scans of the engines and the merge beside the layout (the
+// defaults) against the former paths (CONTACTGRID_STEP_HALO=host: the host's records and B's rows
+// written whole; CONTACTGRID_STEP_SCAN=host: the host's pass over every row for the owners and the
+// plan; CONTACTGRID_STEP_MERGE=wait: the merge before the layout): every
 // step's contacts and the last step's rows the same bits, the same ghosts, and the knobs did switch.
 template <class Real>
 void check_former_paths(Backend backend) {
@@ -397,6 +398,7 @@ void check_former_paths(Backend backend) {
     if (former) {
       setenv("CONTACTGRID_STEP_HALO", "host", 1);
       setenv("CONTACTGRID_STEP_SCAN", "host", 1);
+      setenv("CONTACTGRID_STEP_MERGE", "wait", 1);
     }
     DistributedOptions o;
     o.engine.backend = backend;
@@ -412,6 +414,7 @@ void check_former_paths(Backend backend) {
     DistributedResult<Real> r = distributed_detect<Real>(session(), path, o);
     unsetenv("CONTACTGRID_STEP_HALO");
     unsetenv("CONTACTGRID_STEP_SCAN");
+    unsetenv("CONTACTGRID_STEP_MERGE");
     return Run{r.steps, std::move(r.contacts)};
   };
   const Run now = run(false), former = run(true);
