@@ -861,7 +861,7 @@ detail::RowArrays host_rows(Impl& s) {
   return {s.resident_position.data(), s.resident_radius.data(),
           s.resident_orientation.empty() ? nullptr : s.resident_orientation.data()};
 }
-// The length of list `list`, set since the rows were set; orientations need shape rows.
+// The length of list `list`, set since the rows were set; orientations of listed rows need shape rows.
 template <class Impl>
 std::size_t listed_rows(const Impl& s, int list, bool orientations, const char* what) {
   if (list < 0 || list >= static_cast<int>(s.row_list_set.size()))
@@ -869,9 +869,10 @@ std::size_t listed_rows(const Impl& s, int list, bool orientations, const char* 
   if (!s.row_list_set[static_cast<std::size_t>(list)])
     throw UsageError(std::string(what) + ": row list " + std::to_string(list) +
                      " was not set for these rows");
-  if (orientations && !s.resident_shapes)
+  const std::size_t m = s.row_list_size[static_cast<std::size_t>(list)];
+  if (orientations && !s.resident_shapes && m > 0)  // (a rank without rows has none to orient)
     throw UsageError(std::string(what) + ": orientations of rows set without shape rows");
-  return s.row_list_size[static_cast<std::size_t>(list)];
+  return m;
 }
 }  // namespace
 

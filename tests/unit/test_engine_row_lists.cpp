@@ -212,7 +212,9 @@ TYPED_TEST(EngineRowListsTest, UsageErrors) {
   EXPECT_THROW(b.copy_rows(a, 0, 0, false), UsageError);  // other lengths
   b.scatter_buffer(1, false);
   EXPECT_THROW(b.scatter_rows(0, false), UsageError);  // the buffer holds fewer rows
-  a.set_resident(rows.view());                         // other rows: the lists go
+  a.set_row_list(1, {});  // no rows to orient: nothing to refuse (a rank without bodies)
+  EXPECT_EQ(a.gather_rows(1, true).size(), 0u);
+  a.set_resident(rows.view());  // other rows: the lists go
   EXPECT_THROW(a.gather_rows(0, false), UsageError);
 }
 
