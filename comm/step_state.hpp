@@ -1,6 +1,6 @@
 #pragma once
-// Internal to comm/ (the step loop's translation units: resident_steps.cpp, step_halo.cpp): the state
-// of a StepLoop (resident_steps.hpp) and what its stages share.
+// Internal to comm/ (the step loop's translation units: resident_steps.cpp, step_halo.cpp,
+// step_migrate.cpp): the state of a StepLoop (resident_steps.hpp) and what its stages share.
 #include <algorithm>
 #include <array>
 #include <cmath>
