@@ -30,6 +30,8 @@ const char* to_string(StepStage stage) {
       return "halo mpi";
     case StepStage::halo_unpack:
       return "halo unpack";
+    case StepStage::merge_wait:
+      return "merge wait";
   }
   return "?";
 }
@@ -123,6 +125,7 @@ template <class Real>
 void StepLoop<Real>::lay_out() {
   State& s = *m;
   const auto t0 = WallClock::now();
+  const double waited = s.t[static_cast<std::size_t>(StepStage::merge_wait)];  // (a join below: rebuild's)
   const bool first = s.layouts == 0;
   // Scenes with ellipsoids: the shape rows go into A and B (the ghosts' with the exchange). Agreed
   // over the ranks, as a rank without rows has none.
@@ -223,6 +226,7 @@ void StepLoop<Real>::lay_out() {
     s.t[static_cast<std::size_t>(StepStage::rebuild)] += seconds_since(t0);
     s.relaid_now = true;
   }
+  s.t[static_cast<std::size_t>(StepStage::merge_wait)] = waited;
 }
 
 template <class Real>
@@ -541,19 +545,21 @@ StepStats StepLoop<Real>::stats() {
   st.interior = median_at(static_cast<std::size_t>(StepStage::interior));
   st.boundary = median_at(static_cast<std::size_t>(StepStage::boundary));
   st.step = median_at(static_cast<std::size_t>(StepStage::step));
-  std::vector<double> migrate, rebuild, build, reuse;
+  std::vector<double> migrate, rebuild, build, reuse, waits;
   double total = 0;
   for (std::size_t k = 0; k < n; ++k) {
     if (all[k * row + row - 1] > 0) {
       migrate.push_back(at(k, StepStage::migrate));
       rebuild.push_back(at(k, StepStage::rebuild));
     }
+    if (at(k, StepStage::merge_wait) > 0) waits.push_back(at(k, StepStage::merge_wait));
     total += at(k, StepStage::frame) + at(k, StepStage::migrate) + at(k, StepStage::rebuild) +
-             at(k, StepStage::step);
+             at(k, StepStage::merge_wait) + at(k, StepStage::step);
     const double detect = at(k, StepStage::interior) + at(k, StepStage::boundary);
     (all[k * row + row - 2] > 0 ? build : reuse).push_back(detect);
   }
   st.migrate = median(migrate);
+  st.merge_wait = median(waits);
   st.rebuild = median(rebuild);
   st.step_mean = n > 0 ? total / double(n) : 0;
   st.detect_build = median(build);

@@ -78,17 +78,17 @@ void StepLoop<Real>::State::refresh_on_device() {
 
 template <class Real>
 void StepLoop<Real>::State::refresh_on_host() {
-  finish_merge();  // the bodies' rows, read here
-  const StepBodies& o = bodies;
-  const auto& halo = plan.halo.rows;
+  const auto& halo = plan.halo.rows;  // (the bodies' rows read through body(): the merge may run)
   const auto& of_ghost = rows.of_ghost;
   const bool into = b_active;
   const auto p0 = WallClock::now();
   // every rank exchanges, whatever its error: its neighbours wait for its messages
   if (refresh) {
     HostVector<OrientedRecord> send(halo.size());
-    for (std::size_t w = 0; w < halo.size(); ++w)
-      send[w] = OrientedRecord{o.position[halo[w]], o.radius[halo[w]], o.shapes.orientation[halo[w]]};
+    for (std::size_t w = 0; w < halo.size(); ++w) {
+      const auto [o, i] = body(halo[w]);
+      send[w] = OrientedRecord{o->position[i], o->radius[i], o->shapes.orientation[i]};
+    }
     t[stage(StepStage::halo_pack)] = seconds_since(p0);
     const auto x0 = WallClock::now();
     const HostVector<OrientedRecord> got = comm.exchange(send, send_counts, recv_counts);
@@ -101,8 +101,10 @@ void StepLoop<Real>::State::refresh_on_host() {
       }
   } else {
     HostVector<BodyRecord> send(halo.size());
-    for (std::size_t w = 0; w < halo.size(); ++w)
-      send[w] = BodyRecord{o.position[halo[w]], o.radius[halo[w]], 0};
+    for (std::size_t w = 0; w < halo.size(); ++w) {
+      const auto [o, i] = body(halo[w]);
+      send[w] = BodyRecord{o->position[i], o->radius[i], 0};
+    }
     t[stage(StepStage::halo_pack)] = seconds_since(p0);
     const auto x0 = WallClock::now();
     const HostVector<BodyRecord> got = comm.exchange(send, send_counts, recv_counts);
@@ -115,7 +117,10 @@ void StepLoop<Real>::State::refresh_on_host() {
   }
   if (grow) {  // semi-axes that grow: a message of their own
     HostVector<Vec3<double>> send(halo.size());
-    for (std::size_t w = 0; w < halo.size(); ++w) send[w] = o.shapes.semi_axes[halo[w]];
+    for (std::size_t w = 0; w < halo.size(); ++w) {
+      const auto [o, i] = body(halo[w]);
+      send[w] = o->shapes.semi_axes[i];
+    }
     const HostVector<Vec3<double>> got = comm.exchange(send, send_counts, recv_counts);
     if (into)
       for (std::size_t g = 0; g < got.size(); ++g) b_semi[of_ghost[g]] = got[g];
@@ -124,11 +129,12 @@ void StepLoop<Real>::State::refresh_on_host() {
     const auto u0 = WallClock::now();
     try {  // the boundary rows as the caller moved them, then B's rows into B
       for (std::size_t k = 0; k < plan.boundary.size(); ++k) {
-        const std::size_t i = plan.boundary[k], row = rows.of_boundary[k];
-        b_p[row] = o.position[i];
-        b_r[row] = o.radius[i];
-        if (refresh) b_q[row] = o.shapes.orientation[i];
-        if (grow) b_semi[row] = o.shapes.semi_axes[i];
+        const auto [o, i] = body(plan.boundary[k]);
+        const std::size_t row = rows.of_boundary[k];
+        b_p[row] = o->position[i];
+        b_r[row] = o->radius[i];
+        if (refresh) b_q[row] = o->shapes.orientation[i];
+        if (grow) b_semi[row] = o->shapes.semi_axes[i];
       }
       b->write_resident(0, b_r.size(), b_p.data(), b_r.data());
       if (refresh) b->write_resident_shapes(0, b_q.size(), grow ? b_semi.data() : nullptr, b_q.data());

@@ -177,7 +177,9 @@ struct StepLoop<Real>::State {
   // The migration's merge finished: its rows are the bodies (the previous ones the spare).
   void finish_merge() {
     if (!merge_pending) return;
+    const auto w0 = WallClock::now();
     merging.join();
+    t[static_cast<std::size_t>(StepStage::merge_wait)] += seconds_since(w0);
     merge_pending = false;
     std::swap(bodies, spare);
     if (merge_error) std::rethrow_exception(std::exchange(merge_error, nullptr));

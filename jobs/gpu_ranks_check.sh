@@ -13,8 +13,10 @@
 #    skips it), fp32, 6 contacts per body, drift 0.01 (1 % of r_max) per step, skin auto, 16 steps:
 #    np 1; np 2 (defaults); np 2 former (the three knobs: the previous main's paths); np 2 with the
 #    former halo alone. One table: mean / build / reuse / layout /
-#    migrate / halo (and its parts: pack = device gather + download + B's boundary rows copied, mpi =
-#    the exchange, unpack = upload + scatter into B) / frame in ms (medians over the steps of the
+#    migrate / merge wait (the wait for the host rows' merge that runs beside the layout and the
+#    detection, where it was joined outside the timed stages; in the mean) / halo (and its parts: pack
+#    = device gather + download + B's boundary rows copied, mpi = the exchange, including the wait for
+#    the slower rank, unpack = upload + scatter into B) / frame in ms (medians over the steps of the
 #    maxima over ranks), builds/reuses and the skin chosen, np1/np2 (target >= 1.8), and the last
 #    step's contacts and pair hash, which must be equal in every run of a scene (checked).
 # Expect (not measured before this script's first run): halo from ~17 ms to a few ms at 2^25 (the
@@ -82,6 +84,7 @@ field() {  # TAG WHAT: a figure of a run's summary in ms
     mpi) sed -nE 's/^    halo mpi +([0-9.e+-]+).*/\1/p' "$f" ;;
     unpack) sed -nE 's/^    halo unpack +([0-9.e+-]+).*/\1/p' "$f" ;;
     frame) sed -nE 's/^  frame +([0-9.e+-]+).*/\1/p' "$f" ;;
+    wait) sed -nE 's/^    merge wait +([0-9.e+-]+).*/\1/p' "$f" ;;
   esac | head -1 | awk '{ printf "%.3f", $1 * 1000 }'
 }
 lists() { sed -nE 's/.*candidate lists: ([0-9]+) builds, ([0-9]+) reuses, skin ([0-9.e+-]+).*/\1\/\2 skin \3/p' "$OUT/$1.log"; }
@@ -93,12 +96,13 @@ same_last() {  # TAG…: every run's last step has one (contacts, pair hash), no
 }
 table() {  # SCENE RUN…
   local sc=$1; shift
-  printf '| run (%s) | mean | build | reuse | layout | migrate | halo | pack | mpi | unpack | frame | builds/reuses | np1/np2 (mean) | last step |\n' "$sc"
-  printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
+  printf '| run (%s) | mean | build | reuse | layout | migrate | merge wait | halo | pack | mpi | unpack | frame | builds/reuses | np1/np2 (mean) | last step |\n' "$sc"
+  printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
   for t in "$@"; do
     local sp=; [ "$t" != np1 ] && sp=$(ratio "$(field "$sc.np1" mean)" "$(field "$sc.$t" mean)")
-    printf '| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n' "$t" "$(field "$sc.$t" mean)" \
+    printf '| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n' "$t" "$(field "$sc.$t" mean)" \
       "$(field "$sc.$t" build)" "$(field "$sc.$t" reuse)" "$(field "$sc.$t" layout)" "$(field "$sc.$t" migrate)" \
+      "$(field "$sc.$t" wait)" \
       "$(field "$sc.$t" halo)" "$(field "$sc.$t" pack)" "$(field "$sc.$t" mpi)" "$(field "$sc.$t" unpack)" \
       "$(field "$sc.$t" frame)" "$(lists "$sc.$t")" "$sp" "$(lasthash "$sc.$t")"
   done

@@ -31,9 +31,14 @@ void print_steps(const StepStats& s, int ranks) {
       "setup {:.6f} s; per step, median of the maxima over ranks:\n",
       s.steps, checked, s.halo_rows, s.oriented ? " (with orientations)" : "", s.setup);
   if (s.drift != 0) fmt::print("  {:<16} {:>12.6f}\n", "frame", s.frame);
-  if (s.rebuilds > 0 && ranks > 1)
+  if (s.rebuilds > 0 && ranks > 1) {
     fmt::print("  {:<16} {:>12.6f}  (the steps that rebuilt: rebalance and migration)\n", "migrate",
                s.migrate);
+    fmt::print(
+        "    {:<14} {:>12.6f}  (the steps that waited for the host rows' merge: it runs beside the "
+        "layout and the detection)\n",
+        "merge wait", s.merge_wait);
+  }
   if (s.rebuilds > 0)
     fmt::print("  {:<16} {:>12.6f}  (the steps that rebuilt: check and layout)\n", "rebuild", s.rebuild);
   fmt::print("  {:<16} {:>12.6f}\n", "halo", s.halo);
