@@ -1,54 +1,12 @@
-// The step loop (see resident_steps.hpp): the rows of the steps, then each step's stages.
+// The step loop (see resident_steps.hpp): the rows of the steps, then each step's stages (the halo:
+// step_halo.cpp; rebalance and migrate: step_migrate.cpp; the state they share: step_state.hpp).
 #include "resident_steps.hpp"
 
-#include <algorithm>
-#include <array>
-#include <cmath>
-#include <cstdio>
-#include <cstdlib>
-#include <limits>
-#include <numeric>
-#include <optional>
-#include <string>
-#include <thread>
-
-#include "agreed_stage.hpp"
-#include "collectives.hpp"
-#include "contact_merge.hpp"
-#include "routing.hpp"
-#include "skin_tuner.hpp"
-#include "step_plan.hpp"
-#include "timing.hpp"
-#include "transport.hpp"
+#include "step_state.hpp"
 
 namespace cg {
-namespace {
 
-constexpr int k_body_gather_tag = 7600;  // + field index
-
-// Page-locked host memory for an engine's copies (released before the memory is).
-template <class Real>
-struct Pin {
-  Engine<Real>& engine;
-  void* p;
-  bool pinned;
-  Pin(Engine<Real>& e, void* ptr, std::size_t bytes) : engine(e), p(ptr), pinned(e.pin_host(ptr, bytes)) {}
-  ~Pin() {
-    if (pinned) engine.unpin_host(p);
-  }
-  Pin(const Pin&) = delete;
-  Pin& operator=(const Pin&) = delete;
-};
-
-// A boundary row as a step sends it in a scene with ellipsoids: the orientation in the same message
-// as the position and bounding radius (64 bytes; a sphere-only scene sends BodyRecords, 40).
-struct OrientedRecord {
-  Vec3<double> position;
-  double radius;
-  Quat<double> orientation;
-};
-
-}  // namespace
+using step_detail::k_body_gather_tag;
 
 const char* to_string(StepStage stage) {
   switch (stage) {
@@ -66,131 +24,17 @@ const char* to_string(StepStage stage) {
       return "boundary";
     case StepStage::step:
       return "step";
+    case StepStage::halo_pack:
+      return "halo pack";
+    case StepStage::halo_mpi:
+      return "halo mpi";
+    case StepStage::halo_unpack:
+      return "halo unpack";
+    case StepStage::merge_wait:
+      return "merge wait";
   }
   return "?";
 }
-
-template <class Real>
-struct StepLoop<Real>::State {
-  Session& session;
-  detail::Comm comm;
-  Engine<Real>& a;  // engine A: the owned bodies
-  SlabDecomposition slabs;
-  StepMotion motion;
-  int threads;
-  StepBalance balance;
-  Bounds global;         // the bodies' bounds over the ranks (update_frame)
-  Frame frame;           // the frame of a run from scratch of them
-  double width = 0;      // its ghost width
-  bool shapes = false;   // the scene has ellipsoids (agreed over the ranks)
-  bool refresh = false;  // every step refreshes the ghosts' orientations
-  bool grow = false;     // ... and their semi-axes
-
-  // the skin: fixed (EngineOptions::skin) or chosen (skin_auto) at each layout
-  bool skin_auto = false;
-  double skin = 0;
-  SkinTuner tuner;
-
-  StepBodies bodies;  // owned, ascending id
-  StepBodies spare;   // the previous rows' storage: the next migration's rows are merged into it
-  // a migration changes engine A's rows in place (Engine::splice_resident); CONTACTGRID_STEP_MIGRATE=
-  // whole: the layout sets them all again (set_resident), the former path
-  bool splice = true;
-  bool rows_changed = true;  // bodies' rows (ids) differ from engine A's: the layout sets them
-  bool uploaded = false;     // this step's layout set engine A's rows from the moved bodies
-  bool written = false;      // this step's update_frame wrote the moved positions into engine A
-  StepPlan plan;             // of the owned rows: interior or boundary, and the halo
-  GhostRule rule;            // the layout's halo rule (StepMotion::ghosts_by_radius; else uniform)
-  BoundaryRows rows;         // engine B's row of each boundary row and each ghost
-  std::vector<std::uint64_t> send_counts, recv_counts;
-  std::vector<double> axis_coordinate;  // the owned centres along the slab axis (coordinates())
-  int steps_since_layout = 0;
-  double displacement = 0;  // the largest since the layout (rebuild_due; max over ranks)
-  double moved = 0;         // ... this rank's (update_frame: engine A's resident_extent)
-  int layouts = 0;
-  std::uint64_t migrated = 0, rebalances = 0;
-  // engine B's rows, host side: storage kept across layouts (grown with room to spare), page-locked
-  // while it stays where it is
-  HostVector<Vec3<double>> b_p;
-  HostVector<double> b_r;
-  HostVector<std::int64_t> b_id;
-  HostVector<std::uint8_t> b_mask;
-  HostVector<Shape> b_shape;        // scenes with ellipsoids
-  HostVector<Vec3<double>> b_semi;  // (refreshed every step when the semi-axes travel)
-  HostVector<Quat<double>> b_q;     // (refreshed every step)
-  std::optional<Engine<Real>> b;    // engine B, made at the first layout with boundary rows
-  bool b_active = false;            // this layout has boundary rows
-  std::optional<Pin<Real>> pin_p, pin_r, pin_q, pin_semi;
-  std::uint64_t halo_rows = 0;  // ghosts received per step
-  double setup = 0;
-  std::uint64_t builds0 = 0, reuses0 = 0;  // engine A's counters before the steps
-
-  // the step in flight
-  std::thread interior;
-  std::exception_ptr error, interior_error;
-  WallClock::time_point s0;
-  std::uint64_t found_a = 0, found_b = 0;
-  std::array<double, kStepStageCount> t{};
-  std::uint64_t builds_before = 0;
-  double tuner_displacement = 0;
-  int tuner_steps = 0;
-
-  // every step's
-  std::vector<std::array<double, kStepStageCount>> times;
-  std::vector<std::vector<double>> engine_times;  // engine A's stages, by engine_stage_names()
-  std::vector<std::uint64_t> found;               // this rank's contacts
-  std::vector<std::uint64_t> hashes;              // this rank's contacts_hash (hash_every_step)
-  std::vector<double> built;                      // 1: engine A built its candidates this step
-  std::vector<double> relaid;                     // 1: the step rebuilt the rows (lay_out)
-  bool relaid_now = false;
-
-  State(Session& s, Engine<Real>& e, const SlabDecomposition& sl, const StepMotion& m, int th,
-        const StepBalance& bal)
-      : session(s), comm(s), a(e), slabs(sl), motion(m), threads(th), balance(bal) {
-    skin_auto = e.options().skin_auto;
-    skin = skin_auto ? 0 : e.options().skin;
-    builds0 = e.stats().candidate_builds;
-    reuses0 = e.stats().candidate_reuses;
-    const char* knob = std::getenv("CONTACTGRID_STEP_MIGRATE");
-    splice = !(knob && std::string(knob) == "whole");
-  }
-  ~State() {
-    if (interior.joinable()) interior.join();
-  }
-
-  void fail() {
-    if (!error) error = std::current_exception();
-  }
-
-  // The owned centres along the slab axis (a buffer kept across rebuilds).
-  std::span<const double> coordinates() {
-    const std::size_t n = bodies.size();
-    axis_coordinate.resize(n);
-    const Vec3<double>* x = bodies.position.data();
-    double* c = axis_coordinate.data();
-    const int axis = slabs.axis();
-#pragma omp parallel for num_threads(threads) schedule(static) if (n > (std::size_t(1) << 15))
-    for (std::size_t k = 0; k < n; ++k) c[k] = component(x[k], axis);
-    return axis_coordinate;
-  }
-
-  // `v` resized to n rows; grown storage (room for a quarter more) moves, so its page lock `pin`
-  // (when given: the rows a step writes) is released first and taken again on the new storage.
-  template <class T>
-  void resize_kept(HostVector<T>& v, std::size_t n, std::optional<Pin<Real>>* pin) {
-    if (n > v.capacity()) {
-      if (pin) pin->reset();
-      HostVector<T> grown;
-      grown.reserve(n + n / 4);
-      v.swap(grown);
-    }
-    v.resize(n);
-    if (pin && !*pin && v.capacity() > 0) pin->emplace(a, v.data(), v.capacity() * sizeof(T));
-  }
-
-  // Engine B's rows from the bodies' boundary rows and the ghosts' records (the layout's exchange).
-  void make_engine_b(const HostVector<BodyRecord>& ghosts, const HostVector<ShapeRecord>& ghost_shapes);
-};
 
 template <class Real>
 StepLoop<Real>::StepLoop(Session& session, Engine<Real>& engine, const SlabDecomposition& slabs,
@@ -202,6 +46,7 @@ StepLoop<Real>::~StepLoop() = default;
 
 template <class Real>
 StepBodies& StepLoop<Real>::bodies() {
+  m->finish_merge();
   return m->bodies;
 }
 template <class Real>
@@ -225,6 +70,7 @@ void StepLoop<Real>::update_frame(int step) {
   // commit's write, made early and not timed, as commit is not), then the engine validates them and
   // returns their bounds and the largest displacement since the layout where they are (CUDA: on the
   // device; no centre is read on the host). Before it: the bodies' own bounds.
+  s.finish_merge();
   const bool resident = s.layouts > 0 && !s.rows_changed;
   StepBodies& b = s.bodies;
   if (resident) {
@@ -276,145 +122,10 @@ bool StepLoop<Real>::rebuild_due() {
 }
 
 template <class Real>
-void StepLoop<Real>::rebalance() {
-  State& s = *m;
-  const auto t0 = WallClock::now();
-  const int ranks = s.session.size();
-  const std::vector<std::uint64_t> counts = allgather_counts(s.session, s.bodies.size());
-  const std::uint64_t total = std::accumulate(counts.begin(), counts.end(), std::uint64_t(0));
-  const std::uint64_t most = *std::max_element(counts.begin(), counts.end());
-  const double mean = double(total) / ranks;
-  if (ranks == 1 || total == 0 || double(most) / mean - 1 <= s.balance.threshold) {
-    s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
-    return;
-  }
-  // a regular sample of the owned centres (every stride-th body in rank order), on every rank
-  const std::uint64_t stride =
-      std::max<std::uint64_t>(1, (total + s.balance.max_sample - 1) / s.balance.max_sample);
-  std::uint64_t first = 0;
-  for (int r = 0; r < s.session.rank(); ++r) first += counts[static_cast<std::size_t>(r)];
-  std::vector<double> sample;
-  for (std::uint64_t g = first + (stride - first % stride) % stride; g < first + s.bodies.size(); g += stride)
-    sample.push_back(component(s.bodies.position[static_cast<std::size_t>(g - first)], s.slabs.axis()));
-  sample = allgather_values(s.session, sample);
-  agreed_stage(s.session, "steps", [&] {
-    const std::vector<double> target = SlabDecomposition::from_sample(s.slabs.axis(), sample, ranks).cuts();
-    std::vector<double> cuts = s.slabs.cuts();
-    for (std::size_t i = 0; i < cuts.size(); ++i) {
-      cuts[i] += s.balance.fraction * (target[i] - cuts[i]);
-      if (i > 0) cuts[i] = std::max(cuts[i], cuts[i - 1]);  // rounding keeps the order
-    }
-    s.slabs = SlabDecomposition(s.slabs.axis(), std::move(cuts));
-  });
-  ++s.rebalances;
-  s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
-}
-
-template <class Real>
-void StepLoop<Real>::migrate() {
-  State& s = *m;
-  if (s.session.size() == 1) return;
-  const auto t0 = WallClock::now();
-  const int me = s.session.rank();
-  const std::size_t p = static_cast<std::size_t>(s.session.size()), stride = s.bodies.state_bytes;
-  StepBodies& b = s.bodies;
-  ExportPlan plan;  // the rows that leave, by their new owner (none to this rank)
-  std::vector<std::uint64_t> send_counts(p, 0);
-  HostVector<BodyRecord> send;
-  HostVector<ShapeRecord> send_shapes;
-  HostVector<std::byte> send_state;
-  agreed_stage(s.session, "steps", [&] {
-    const std::span<const double> x = s.coordinates();
-    const auto owner = to_owner(s.slabs, [x](std::size_t i) { return x[i]; });
-    plan = route<std::size_t, std::allocator<std::size_t>>(
-        x.size(), s.session.size(), s.threads,
-        [&](std::size_t i, auto&& emit) {
-          owner(i, [&](int r) {
-            if (r != me) emit(r);
-          });
-        },
-        [](std::size_t i) { return i; });
-    for (std::size_t r = 0; r < p; ++r) send_counts[r] = plan.count(static_cast<int>(r));
-  });
-  const std::uint64_t leaving = std::accumulate(send_counts.begin(), send_counts.end(), std::uint64_t(0));
-  const std::uint64_t moving = s.session.sum(leaving);
-  if (moving == 0) {
-    s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
-    return;
-  }
-  agreed_stage(s.session, "steps", [&] {
-    send = HostVector<BodyRecord>(leaving);
-    if (s.shapes) send_shapes = HostVector<ShapeRecord>(leaving);
-    send_state = HostVector<std::byte>(leaving * stride);
-#pragma omp parallel for num_threads(s.threads) schedule(static) if (leaving > (std::uint64_t(1) << 14))
-    for (std::size_t w = 0; w < leaving; ++w) {
-      const std::size_t k = plan.rows[w];
-      send[w] = BodyRecord{b.position[k], b.radius[k], b.id[k]};
-      if (s.shapes)
-        send_shapes[w] = ShapeRecord{b.shapes.orientation[k], b.shapes.semi_axes[k], b.shapes.shape[k]};
-      std::copy_n(b.state.data() + k * stride, stride, send_state.data() + w * stride);
-    }
-  });
-  const std::vector<std::uint64_t> recv_counts = s.comm.alltoall_counts(send_counts);
-  HostVector<BodyRecord> got = s.comm.alltoallv(std::move(send), send_counts, recv_counts);
-  HostVector<ShapeRecord> got_shapes;
-  if (s.shapes) got_shapes = s.comm.alltoallv(std::move(send_shapes), send_counts, recv_counts);
-  HostVector<std::byte> got_state;
-  if (stride > 0) {
-    std::vector<std::uint64_t> sb(p), rb(p);
-    for (std::size_t r = 0; r < p; ++r) sb[r] = send_counts[r] * stride, rb[r] = recv_counts[r] * stride;
-    got_state = s.comm.alltoallv(std::move(send_state), sb, rb);
-  }
-  agreed_stage(s.session, "steps", [&] {
-    if (leaving == 0 && got.empty()) return;  // this rank's rows stay as they are
-    // the arrivals sorted by id, the leaving rows ascending, then the rows that stay and the
-    // arrivals merged by id into the spare storage (the runs between the changes copied in parallel)
-    std::vector<std::size_t> order(got.size());
-    std::iota(order.begin(), order.end(), std::size_t(0));
-    std::sort(order.begin(), order.end(),
-              [&](std::size_t x, std::size_t y) { return got[x].id < got[y].id; });
-    const bool shapes = s.shapes && (!b.shapes.empty() || !got_shapes.empty());
-    StepBodies arrivals = sized_step_bodies(got.size(), shapes, stride);
-    for (std::size_t j = 0; j < order.size(); ++j) {
-      const std::size_t g = order[j];
-      arrivals.position[j] = got[g].position;
-      arrivals.radius[j] = got[g].radius;
-      arrivals.id[j] = got[g].id;
-      if (shapes) {
-        arrivals.shapes.shape[j] = got_shapes[g].shape;
-        arrivals.shapes.semi_axes[j] = got_shapes[g].semi_axes;
-        arrivals.shapes.orientation[j] = got_shapes[g].orientation;
-      }
-      std::copy_n(got_state.data() + g * stride, stride, arrivals.state.data() + j * stride);
-    }
-    std::vector<std::size_t> gone(plan.rows.begin(), plan.rows.end());
-    std::sort(gone.begin(), gone.end());
-    // engine A's rows (the moved positions of update_frame) changed the same way where they are,
-    // unless the layout sets them all anyway
-    const bool in_place = s.splice && s.layouts > 0 && !s.rows_changed && s.a.resident_size() == b.size();
-    const std::vector<std::size_t> at = merge_step_bodies(b, gone, arrivals, shapes, s.spare, s.threads);
-    std::swap(b, s.spare);
-    if (in_place) {
-      s.a.splice_resident(gone, at,
-                          BodiesView{arrivals.position,
-                                     arrivals.radius,
-                                     {},
-                                     {},
-                                     arrivals.shapes.shape,
-                                     arrivals.shapes.semi_axes,
-                                     arrivals.shapes.orientation});
-    } else {
-      s.rows_changed = true;
-    }
-  });
-  s.migrated += moving;
-  s.t[static_cast<std::size_t>(StepStage::migrate)] += seconds_since(t0);
-}
-
-template <class Real>
 void StepLoop<Real>::lay_out() {
   State& s = *m;
   const auto t0 = WallClock::now();
+  const double waited = s.t[static_cast<std::size_t>(StepStage::merge_wait)];  // (a join below: rebuild's)
   const bool first = s.layouts == 0;
   // Scenes with ellipsoids: the shape rows go into A and B (the ghosts' with the exchange). Agreed
   // over the ranks, as a rank without rows has none.
@@ -429,27 +140,55 @@ void StepLoop<Real>::lay_out() {
   }
   const int me = s.session.rank();
   const bool alone = s.session.size() == 1;  // every body interior: no plan, no halo, no engine B
-  const StepBodies& b = s.bodies;
+  const StepBodies& b = s.bodies;            // (while the migration's merge runs: the rows through s.body)
+  const std::size_t n = s.held();
   Exports<BodyRecord> exports;
   Exports<ShapeRecord> shape_exports;
   agreed_stage(s.session, "steps", [&] {
+    s.a.set_skin(s.skin);
+    if (s.rows_changed || !s.written || !s.device_scan) s.finish_merge();  // the rows read whole below
+    if (s.rows_changed) {  // other rows (the setup, a migration that changed this rank's): all of them
+      s.a.set_resident(
+          BodiesView{b.position, b.radius, {}, {}, b.shapes.shape, b.shapes.semi_axes, b.shapes.orientation});
+      s.rows_changed = false;
+      s.uploaded = !first;  // the setup's rows are the file's: step 1 commits its motion
+    } else {                // the same rows (update_frame wrote their motion): the next detection builds
+      if (!s.written) s.a.write_resident(0, b.size(), b.position.data(), b.radius.data());
+      s.written = true;
+      s.a.rebuild_candidates();
+    }
+    s.a.mark_resident();  // the rebuild check's reference: the centres of this layout
     if (!alone) {
       // the ghost width of the layout: the frame's, over coordinates that may still grow by the
       // skin, plus the skin (each of two bodies moves by at most skin/2 before the next layout); per
       // body (the run's GhostRule with the skin in its margin) or one for all
       const double epsilon = std::numeric_limits<Real>::epsilon();
-      if (s.motion.ghosts_by_radius) {
+      if (s.motion.ghosts_by_radius)
         s.rule = ghost_rule(s.global, frame_extent(s.global, s.frame.origin), epsilon, s.skin);
+      else
+        s.rule = GhostRule::uniform(frame_ghost_width(s.global, s.frame.origin, epsilon, s.skin) + s.skin);
+      if (s.device_scan) {
+        // engine A holds the bodies' rows: the rows outside the slab's interior band are listed where
+        // the rows are, and the plan classifies those alone (make_step_plan_of: the same plan)
+        const Band band = interior_band(s.slabs, me, s.rule.max_width(s.global.r_max));
+        const std::vector<std::size_t> rows = s.a.rows_outside(s.slabs.axis(), band.lo, band.hi);
+        std::vector<double> x(rows.size()), r(rows.size());
+        for (std::size_t k = 0; k < rows.size(); ++k) {
+          const auto [from, i] = s.body(rows[k]);
+          x[k] = component(from->position[i], s.slabs.axis());
+          r[k] = from->radius[i];
+        }
+        s.plan = make_step_plan_of(s.slabs, me, n, rows, x, r, s.rule, s.threads);
+      } else if (s.motion.ghosts_by_radius) {
         s.plan = make_step_plan(s.slabs, me, s.coordinates(), b.radius, s.rule, s.threads);
       } else {
-        const double width = frame_ghost_width(s.global, s.frame.origin, epsilon, s.skin) + s.skin;
-        s.rule = GhostRule::uniform(width);
-        s.plan = make_step_plan(s.slabs, me, s.coordinates(), width, s.threads);
+        s.plan = make_step_plan(s.slabs, me, s.coordinates(), s.rule.narrow_reach, s.threads);
       }
-      if (s.plan.owned != b.size()) {
+      if (s.plan.owned != n) {
         const std::size_t k = static_cast<std::size_t>(
             std::find(s.plan.role.begin(), s.plan.role.end(), RowRole::ghost) - s.plan.role.begin());
-        throw InputError("steps: body " + std::to_string(b.id[k]) + " is not owned by rank " +
+        const auto [from, i] = s.body(k);
+        throw InputError("steps: body " + std::to_string(from->id[i]) + " is not owned by rank " +
                          std::to_string(me));
       }
       s.send_counts = s.plan.halo.counts();
@@ -462,25 +201,13 @@ void StepLoop<Real>::lay_out() {
       const std::size_t exported = s.plan.halo.total();
 #pragma omp parallel for num_threads(s.threads) schedule(static) if (exported > (std::size_t(1) << 14))
       for (std::size_t w = 0; w < exported; ++w) {
-        const std::size_t k = s.plan.halo.rows[w];
-        exports.rows[w] = BodyRecord{b.position[k], b.radius[k], b.id[k]};
+        const auto [from, k] = s.body(s.plan.halo.rows[w]);
+        exports.rows[w] = BodyRecord{from->position[k], from->radius[k], from->id[k]};
         if (s.shapes)
           shape_exports.rows[w] =
-              ShapeRecord{b.shapes.orientation[k], b.shapes.semi_axes[k], b.shapes.shape[k]};
+              ShapeRecord{from->shapes.orientation[k], from->shapes.semi_axes[k], from->shapes.shape[k]};
       }
     }
-    s.a.set_skin(s.skin);
-    if (s.rows_changed) {  // other rows (the setup, a migration that changed this rank's): all of them
-      s.a.set_resident(
-          BodiesView{b.position, b.radius, {}, {}, b.shapes.shape, b.shapes.semi_axes, b.shapes.orientation});
-      s.rows_changed = false;
-      s.uploaded = !first;  // the setup's rows are the file's: step 1 commits its motion
-    } else {                // the same rows (update_frame wrote their motion): the next detection builds
-      if (!s.written) s.a.write_resident(0, b.size(), b.position.data(), b.radius.data());
-      s.written = true;
-      s.a.rebuild_candidates();
-    }
-    s.a.mark_resident();  // the rebuild check's reference: the centres of this layout
   });
   if (!alone) {
     s.recv_counts = s.comm.alltoall_counts(s.send_counts);
@@ -499,6 +226,7 @@ void StepLoop<Real>::lay_out() {
     s.t[static_cast<std::size_t>(StepStage::rebuild)] += seconds_since(t0);
     s.relaid_now = true;
   }
+  s.t[static_cast<std::size_t>(StepStage::merge_wait)] = waited;
 }
 
 template <class Real>
@@ -513,7 +241,10 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
       wide_x.push_back(component(g.position, slabs.axis()));
       wide_r.push_back(g.radius);
     }
-  if (!wide_x.empty()) add_wide_partners(plan, coordinates(), o.radius, wide_x, wide_r, rule, threads);
+  if (!wide_x.empty()) {  // (every row's coordinate: the migration's merge joined first)
+    finish_merge();
+    add_wide_partners(plan, coordinates(), o.radius, wide_x, wide_r, rule, threads);
+  }
   const std::size_t nb = plan.boundary.size();
   std::vector<std::int64_t> boundary_ids(nb), ghost_ids(ghosts.size());
   const std::size_t ng = ghosts.size();
@@ -521,11 +252,19 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
 #pragma omp parallel num_threads(threads) if (parallel)
   {
 #pragma omp for schedule(static) nowait
-    for (std::size_t k = 0; k < nb; ++k) boundary_ids[k] = o.id[plan.boundary[k]];
+    for (std::size_t k = 0; k < nb; ++k) {
+      const auto [from, i] = body(plan.boundary[k]);
+      boundary_ids[k] = from->id[i];
+    }
 #pragma omp for schedule(static)
     for (std::size_t g = 0; g < ng; ++g) ghost_ids[g] = ghosts[g].id;
   }
   rows = merge_boundary_rows(boundary_ids, ghost_ids);
+  halo_lists = device_halo && !grow;
+  if (halo_lists) {  // engine A's rows are this layout's: the rows it sends, its boundary rows
+    a.set_row_list(kHaloList, plan.halo.rows);
+    a.set_row_list(kBoundaryList, plan.boundary);
+  }
   if (nb == 0) return;  // no boundary row: the ghosts touch none of this rank's bodies
   const std::size_t total = rows.size();
   // the rows a step writes stay page-locked; the others are uploaded once a layout
@@ -538,16 +277,17 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
   resize_kept(b_q, shapes ? total : 0, refresh ? &pin_q : nullptr);
 #pragma omp parallel for num_threads(threads) schedule(static) if (parallel)
   for (std::size_t k = 0; k < nb; ++k) {
-    const std::size_t i = plan.boundary[k], row = rows.of_boundary[k];
-    b_p[row] = o.position[i];
-    b_r[row] = o.radius[i];
-    b_id[row] = o.id[i];
+    const auto [from, i] = this->body(plan.boundary[k]);
+    const std::size_t row = rows.of_boundary[k];
+    b_p[row] = from->position[i];
+    b_r[row] = from->radius[i];
+    b_id[row] = from->id[i];
     // A pairs the boundary rows with each other; a pair of a wide and a narrow body is its narrow one's
-    b_mask[row] = kReportedBit | kPairedBit | rule.wide_bit(o.radius[i]);
+    b_mask[row] = kReportedBit | kPairedBit | rule.wide_bit(from->radius[i]);
     if (shapes) {
-      b_shape[row] = o.shapes.shape[i];
-      b_semi[row] = o.shapes.semi_axes[i];
-      b_q[row] = o.shapes.orientation[i];
+      b_shape[row] = from->shapes.shape[i];
+      b_semi[row] = from->shapes.semi_axes[i];
+      b_q[row] = from->shapes.orientation[i];
     }
   }
 #pragma omp parallel for num_threads(threads) schedule(static) if (parallel)
@@ -566,6 +306,10 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
   if (!b) b.emplace(a.options());  // kept across layouts: its workspace stays allocated
   b->set_skin(skin);
   b->set_resident(BodiesView{b_p, b_r, {}, b_mask, b_shape, b_semi, b_q});
+  if (halo_lists) {  // B's rows of the ghosts in the order they arrive, and of the boundary rows
+    b->set_row_list(kHaloList, rows.of_ghost);
+    b->set_row_list(kBoundaryList, rows.of_boundary);
+  }
   b_active = true;
 }
 
@@ -580,6 +324,7 @@ void StepLoop<Real>::commit(Moved moved) {
     return;
   }
   try {
+    if ((moved.positions && !written) || moved.orientations) s.finish_merge();  // the rows read whole
     if (moved.positions && !written) s.a.write_resident(0, b.size(), b.position.data(), b.radius.data());
     if (moved.orientations && !b.shapes.empty())
       s.a.write_resident_shapes(0, b.size(), nullptr, b.shapes.orientation.data());
@@ -604,6 +349,7 @@ void StepLoop<Real>::detect_interior() {
     }
     s.t[static_cast<std::size_t>(StepStage::interior)] = seconds_since(i0);
   };
+  if (s.session.size() > 1) s.gather_halo();  // engine A's rows, before A detects on the other thread
   if (s.error) return;
   if (s.session.size() > 1) {
     try {
@@ -614,64 +360,6 @@ void StepLoop<Real>::detect_interior() {
   } else {
     run();
   }
-}
-
-template <class Real>
-void StepLoop<Real>::refresh_ghosts() {
-  State& s = *m;
-  if (s.session.size() == 1) return;
-  const auto h0 = WallClock::now();
-  const StepBodies& o = s.bodies;
-  const auto& halo = s.plan.halo.rows;
-  const auto& of_ghost = s.rows.of_ghost;
-  const bool into = s.b_active;
-  // every rank exchanges, whatever its error: its neighbours wait for its messages
-  if (s.refresh) {
-    HostVector<OrientedRecord> send(halo.size());
-    for (std::size_t w = 0; w < halo.size(); ++w)
-      send[w] = OrientedRecord{o.position[halo[w]], o.radius[halo[w]], o.shapes.orientation[halo[w]]};
-    const HostVector<OrientedRecord> got = s.comm.exchange(send, s.send_counts, s.recv_counts);
-    if (into)
-      for (std::size_t g = 0; g < got.size(); ++g) {
-        s.b_p[of_ghost[g]] = got[g].position;
-        s.b_r[of_ghost[g]] = got[g].radius;
-        s.b_q[of_ghost[g]] = got[g].orientation;
-      }
-  } else {
-    HostVector<BodyRecord> send(halo.size());
-    for (std::size_t w = 0; w < halo.size(); ++w)
-      send[w] = BodyRecord{o.position[halo[w]], o.radius[halo[w]], 0};
-    const HostVector<BodyRecord> got = s.comm.exchange(send, s.send_counts, s.recv_counts);
-    if (into)
-      for (std::size_t g = 0; g < got.size(); ++g) {
-        s.b_p[of_ghost[g]] = got[g].position;
-        s.b_r[of_ghost[g]] = got[g].radius;
-      }
-  }
-  if (s.grow) {  // semi-axes that grow: a message of their own
-    HostVector<Vec3<double>> send(halo.size());
-    for (std::size_t w = 0; w < halo.size(); ++w) send[w] = o.shapes.semi_axes[halo[w]];
-    const HostVector<Vec3<double>> got = s.comm.exchange(send, s.send_counts, s.recv_counts);
-    if (into)
-      for (std::size_t g = 0; g < got.size(); ++g) s.b_semi[of_ghost[g]] = got[g];
-  }
-  if (into && !s.error) {
-    try {  // the boundary rows as the caller moved them, then B's rows into B
-      for (std::size_t k = 0; k < s.plan.boundary.size(); ++k) {
-        const std::size_t i = s.plan.boundary[k], row = s.rows.of_boundary[k];
-        s.b_p[row] = o.position[i];
-        s.b_r[row] = o.radius[i];
-        if (s.refresh) s.b_q[row] = o.shapes.orientation[i];
-        if (s.grow) s.b_semi[row] = o.shapes.semi_axes[i];
-      }
-      s.b->write_resident(0, s.b_r.size(), s.b_p.data(), s.b_r.data());
-      if (s.refresh)
-        s.b->write_resident_shapes(0, s.b_q.size(), s.grow ? s.b_semi.data() : nullptr, s.b_q.data());
-    } catch (...) {
-      s.fail();
-    }
-  }
-  s.t[static_cast<std::size_t>(StepStage::halo)] = seconds_since(h0);
 }
 
 template <class Real>
@@ -743,6 +431,7 @@ Contacts<Real> StepLoop<Real>::contacts() {
     none.full = full;
     return none;
   }
+  s.finish_merge();
   Contacts<Real> a = with_ids(s.a.resident_contacts(), s.bodies.id.data());
   if (!s.b_active) return a;
   std::vector<Contacts<Real>> runs;
@@ -756,6 +445,7 @@ std::uint64_t StepLoop<Real>::pair_hash_sum() {
   State& s = *m;
   std::uint64_t hash = 0;
   agreed_stage(s.session, "steps", [&] {
+    s.finish_merge();
     if (s.found.empty()) return;
     auto add = [&](const Contacts<Real>& c, const std::int64_t* ids) {
       for (std::size_t k = 0; k < c.size(); ++k) hash += pair_hash(ids[c.id_a[k]], ids[c.id_b[k]]);
@@ -769,6 +459,7 @@ std::uint64_t StepLoop<Real>::pair_hash_sum() {
 template <class Real>
 StepBodies StepLoop<Real>::gather_bodies() {
   State& s = *m;
+  s.finish_merge();
   const StepBodies& b = s.bodies;
   const std::vector<std::uint64_t> counts = allgather_counts(s.session, b.size());
   const bool root = s.session.rank() == 0;
@@ -819,6 +510,7 @@ StepBodies StepLoop<Real>::gather_bodies() {
 template <class Real>
 StepStats StepLoop<Real>::stats() {
   State& s = *m;
+  s.finish_merge();
   const std::size_t n = s.times.size(), n_engine = engine_stage_names().size();
   // per step: the step stages, then engine A's, whether A built, whether the rows were rebuilt
   std::vector<double> all;
@@ -846,22 +538,28 @@ StepStats StepLoop<Real>::stats() {
   st.setup = s.session.max(s.setup);
   st.frame = median_at(static_cast<std::size_t>(StepStage::frame));
   st.halo = median_at(static_cast<std::size_t>(StepStage::halo));
+  st.halo_pack = median_at(static_cast<std::size_t>(StepStage::halo_pack));
+  st.halo_mpi = median_at(static_cast<std::size_t>(StepStage::halo_mpi));
+  st.halo_unpack = median_at(static_cast<std::size_t>(StepStage::halo_unpack));
+  st.halo_on_device = s.halo_lists;
   st.interior = median_at(static_cast<std::size_t>(StepStage::interior));
   st.boundary = median_at(static_cast<std::size_t>(StepStage::boundary));
   st.step = median_at(static_cast<std::size_t>(StepStage::step));
-  std::vector<double> migrate, rebuild, build, reuse;
+  std::vector<double> migrate, rebuild, build, reuse, waits;
   double total = 0;
   for (std::size_t k = 0; k < n; ++k) {
     if (all[k * row + row - 1] > 0) {
       migrate.push_back(at(k, StepStage::migrate));
       rebuild.push_back(at(k, StepStage::rebuild));
     }
+    if (at(k, StepStage::merge_wait) > 0) waits.push_back(at(k, StepStage::merge_wait));
     total += at(k, StepStage::frame) + at(k, StepStage::migrate) + at(k, StepStage::rebuild) +
-             at(k, StepStage::step);
+             at(k, StepStage::merge_wait) + at(k, StepStage::step);
     const double detect = at(k, StepStage::interior) + at(k, StepStage::boundary);
     (all[k * row + row - 2] > 0 ? build : reuse).push_back(detect);
   }
   st.migrate = median(migrate);
+  st.merge_wait = median(waits);
   st.rebuild = median(rebuild);
   st.step_mean = n > 0 ? total / double(n) : 0;
   st.detect_build = median(build);

@@ -75,9 +75,25 @@ namespace cg {
 // The stages of a step, as timed (this rank's seconds; StepStats: the median over the steps of the
 // maximum over ranks). migrate: rebalance + migrate, rebuild: the rebuild check and lay_out, of the
 // steps that rebuilt (0 on the others); step: the wall time from update_frame to the end of
-// detect_boundary.
-enum class StepStage : int { frame, migrate, rebuild, halo, interior, boundary, step };
-inline constexpr int kStepStageCount = 7;
+// detect_boundary; halo_pack, halo_mpi, halo_unpack: the parts of halo (the rows gathered and packed
+// into the send buffer with B's boundary rows, the MPI exchange, the received rows into B);
+// merge_wait: the wait for a migration's merge of the host rows where it was joined outside the
+// timed stages (it runs beside the layout and the detection: the caller's next move, the frame),
+// counted in the step's mean.
+enum class StepStage : int {
+  frame,
+  migrate,
+  rebuild,
+  halo,
+  interior,
+  boundary,
+  step,
+  halo_pack,
+  halo_mpi,
+  halo_unpack,
+  merge_wait
+};
+inline constexpr int kStepStageCount = 11;
 const char* to_string(StepStage stage);
 
 // Per step the maximum over ranks, then the median over the steps.
@@ -96,6 +112,9 @@ struct StepStats {
   double migrate = 0;           // per step that rebuilt: rebalance + migrate (median)
   double rebuild = 0;           // per step that rebuilt: the rebuild check + lay_out (median)
   double halo = 0;              // refresh_ghosts: boundary rows (and orientations) through MPI, into B
+  double halo_pack = 0, halo_mpi = 0, halo_unpack = 0;  // its parts (StepStage)
+  bool halo_on_device = false;  // the halo moved the rows where they are (CONTACTGRID_STEP_HALO)
+  double merge_wait = 0;        // per step that waited for the host merge (median; StepStage)
   double interior = 0;          // the owned bodies alone (all their pairs), overlapping the halo
   double boundary = 0;          // the boundary rows against the ghosts, after the halo
   double step = 0;              // wall time of a step (every step)

@@ -120,6 +120,39 @@ class Comm {
     return recv;
   }
 
+  // The same exchange of rows of `row_bytes` bytes between caller-owned buffers (page-locked ones: the
+  // engine's packed rows), `recv` holding the received rows.
+  void exchange_rows_into(const std::byte* send, std::byte* recv, std::size_t row_bytes,
+                          const std::vector<std::uint64_t>& send_counts,
+                          const std::vector<std::uint64_t>& recv_counts) const {
+    const std::size_t p = send_counts.size(), me = static_cast<std::size_t>(m_s.rank);
+    std::vector<std::uint64_t> sd(p + 1, 0), rd(p + 1, 0);
+    for (std::size_t r = 0; r < p; ++r) {
+      sd[r + 1] = sd[r] + send_counts[r];
+      rd[r + 1] = rd[r] + recv_counts[r];
+    }
+    if (send_counts[me] > 0)
+      std::memcpy(recv + rd[me] * row_bytes, send + sd[me] * row_bytes, send_counts[me] * row_bytes);
+    if (!m_s.mpi) return;
+    RecordType type(row_bytes);
+    std::vector<MPI_Request> requests;
+    for (std::size_t r = 0; r < p; ++r) {
+      if (r == me || recv_counts[r] == 0) continue;
+      requests.emplace_back();
+      CG_MPI(MPI_Irecv(recv + rd[r] * row_bytes, to_mpi_count(recv_counts[r], "halo receive count"),
+                       type.get(), static_cast<int>(r), k_halo_tag, m_s.comm, &requests.back()));
+    }
+    for (std::size_t r = 0; r < p; ++r) {
+      if (r == me || send_counts[r] == 0) continue;
+      requests.emplace_back();
+      CG_MPI(MPI_Isend(send + sd[r] * row_bytes, to_mpi_count(send_counts[r], "halo send count"), type.get(),
+                       static_cast<int>(r), k_halo_tag, m_s.comm, &requests.back()));
+    }
+    if (!requests.empty()) {
+      CG_MPI(MPI_Waitall(static_cast<int>(requests.size()), requests.data(), MPI_STATUSES_IGNORE));
+    }
+  }
+
   // Rank 0 receives rank r's `n` elements (counts[r], known to all ranks) at `into[r]` (r >= 1; rank
   // 0's own part stays where it is): straight into the final arrays, no staging buffer, no
   // displacement limit. Point-to-point in messages of at most max_bytes (capped to 2^31 - 1): every

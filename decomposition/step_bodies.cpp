@@ -52,9 +52,8 @@ void resize_step_bodies(StepBodies& b, std::size_t n, bool shapes, std::size_t s
   resize_discarding(b.state, n * state_bytes);
 }
 
-std::vector<std::size_t> merge_step_bodies(const StepBodies& from, std::span<const std::size_t> leaving,
-                                           const StepBodies& arrivals, bool shapes, StepBodies& into,
-                                           int threads) {
+std::vector<std::size_t> arrival_places(const StepBodies& from, std::span<const std::size_t> leaving,
+                                        const StepBodies& arrivals, bool shapes) {
   const std::size_t n = from.size(), m = arrivals.size(), stride = from.state_bytes;
   if (m > 0 && arrivals.state_bytes != stride)
     throw Error("migration: the arrivals carry other state than the rows: internal error");
@@ -75,7 +74,15 @@ std::vector<std::size_t> merge_step_bodies(const StepBodies& from, std::span<con
       throw Error("steps: body " + std::to_string(id) + " is held twice after migration: internal error");
     before[j] = p;
   }
-  const SplicePlan plan = plan_splice(n, leaving, before, "migration (internal error)");
+  plan_splice(n, leaving, before, "migration (internal error)");
+  return before;
+}
+
+void splice_step_bodies(const StepBodies& from, std::span<const std::size_t> leaving,
+                        std::span<const std::size_t> before, const StepBodies& arrivals, bool shapes,
+                        StepBodies& into, int threads) {
+  const std::size_t stride = from.state_bytes;
+  const SplicePlan plan = plan_splice(from.size(), leaving, before, "migration (internal error)");
   resize_step_bodies(into, plan.size, shapes, stride);
   splice_rows(plan, from.position.data(), arrivals.position.data(), into.position.data(), 1, threads);
   splice_rows(plan, from.radius.data(), arrivals.radius.data(), into.radius.data(), 1, threads);
@@ -90,7 +97,35 @@ std::vector<std::size_t> merge_step_bodies(const StepBodies& from, std::span<con
   }
   if (stride > 0)
     splice_rows(plan, from.state.data(), arrivals.state.data(), into.state.data(), stride, threads);
+}
+
+std::vector<std::size_t> merge_step_bodies(const StepBodies& from, std::span<const std::size_t> leaving,
+                                           const StepBodies& arrivals, bool shapes, StepBodies& into,
+                                           int threads) {
+  std::vector<std::size_t> before = arrival_places(from, leaving, arrivals, shapes);
+  splice_step_bodies(from, leaving, before, arrivals, shapes, into, threads);
   return before;
+}
+
+SpliceMap::SpliceMap(std::size_t n, std::span<const std::size_t> leaving, std::span<const std::size_t> before)
+    : m_size(n - leaving.size() + before.size()), m_arrival_row(before.size()), m_gap(leaving.size()) {
+  // arrival j goes before old row before[j], after the arrivals before it (splice_rows.hpp's rule)
+  for (std::size_t j = 0; j < before.size(); ++j) {
+    const auto gone = static_cast<std::size_t>(std::lower_bound(leaving.begin(), leaving.end(), before[j]) -
+                                               leaving.begin());
+    m_arrival_row[j] = before[j] - gone + j;
+  }
+  for (std::size_t j = 0; j < leaving.size(); ++j) m_gap[j] = leaving[j] - j;
+}
+
+SpliceMap::Source SpliceMap::operator()(std::size_t i) const {
+  const auto a = std::lower_bound(m_arrival_row.begin(), m_arrival_row.end(), i);
+  if (a != m_arrival_row.end() && *a == i) return {true, static_cast<std::size_t>(a - m_arrival_row.begin())};
+  // the s-th row that stays: old row s + j, j the leaving rows before it (the first j with
+  // leaving[j] - j > s)
+  const std::size_t s = i - static_cast<std::size_t>(a - m_arrival_row.begin());
+  const auto j = static_cast<std::size_t>(std::upper_bound(m_gap.begin(), m_gap.end(), s) - m_gap.begin());
+  return {false, s + j};
 }
 
 StepBodies owned_bodies(const EngineInput& in, int threads) {

@@ -50,6 +50,34 @@ std::vector<std::size_t> merge_step_bodies(const StepBodies& from, std::span<con
                                            const StepBodies& arrivals, bool shapes, StepBodies& into,
                                            int threads);
 
+// Where row i of a migration's new rows comes from, without making them: merge_step_bodies' rows
+// read in place (the step loop lays out from the few rows it needs while the merge runs beside it).
+// `leaving` and `before` as merge_step_bodies takes and returns them, `n` the rows of `from`.
+class SpliceMap {
+ public:
+  struct Source {
+    bool arrival;  // row `row` of the arrivals, else of `from`
+    std::size_t row;
+  };
+  SpliceMap() = default;
+  SpliceMap(std::size_t n, std::span<const std::size_t> leaving, std::span<const std::size_t> before);
+  std::size_t size() const { return m_size; }
+  Source operator()(std::size_t i) const;  // i < size()
+
+ private:
+  std::size_t m_size = 0;
+  std::vector<std::size_t> m_arrival_row;  // arrival j's new row (ascending)
+  std::vector<std::size_t> m_gap;          // leaving[j] - j (non-decreasing)
+};
+
+// merge_step_bodies in two parts: the arrivals' places (the checks: the Errors above), then the rows
+// copied (what the step loop runs beside its layout).
+std::vector<std::size_t> arrival_places(const StepBodies& from, std::span<const std::size_t> leaving,
+                                        const StepBodies& arrivals, bool shapes);
+void splice_step_bodies(const StepBodies& from, std::span<const std::size_t> leaving,
+                        std::span<const std::size_t> before, const StepBodies& arrivals, bool shapes,
+                        StepBodies& into, int threads);
+
 // The owned rows (report mask set, or every row when ids are implied) of an engine input.
 StepBodies owned_bodies(const EngineInput& in, int threads);
 

@@ -115,6 +115,44 @@ StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<cons
       to_ghost_ranks_by(slabs, x, [&rule, radius](std::size_t i) { return rule.width(radius[i]); }), threads);
 }
 
+StepPlan make_step_plan_of(const SlabDecomposition& slabs, int self, std::size_t n,
+                           std::span<const std::size_t> candidates, std::span<const double> coordinate,
+                           std::span<const double> radius, const GhostRule& rule, int threads) {
+  const std::size_t m = candidates.size();
+  if (coordinate.size() != m || radius.size() != m)
+    throw UsageError("step plan: one coordinate and one radius per candidate");
+  for (std::size_t k = 0; k < m; ++k)
+    if (candidates[k] >= n || (k > 0 && !(candidates[k - 1] < candidates[k])))
+      throw UsageError("step plan: candidates not ascending rows below " + std::to_string(n));
+  for (const double reach : {rule.narrow_reach, rule.wide_reach, rule.margin})
+    if (!(reach >= 0) || !std::isfinite(reach))
+      throw InputError("step plan: ghost width is not a finite value >= 0");
+  check_plan_input(slabs, self, coordinate, threads);
+  // the candidates' plan (rows k of the candidates), then its rows named as the held rows
+  auto x = [coordinate](std::size_t k) { return coordinate[k]; };
+  StepPlan of = plan_by(
+      slabs, self, coordinate,
+      to_ghost_ranks_by(slabs, x, [&rule, radius](std::size_t k) { return rule.width(radius[k]); }), threads);
+  StepPlan plan;
+  plan.role.assign(n, RowRole::interior);
+  for (std::size_t k = 0; k < m; ++k) plan.role[candidates[k]] = of.role[k];
+  plan.owned = n - (m - of.owned);
+  plan.boundary.resize(of.boundary.size());
+  for (std::size_t j = 0; j < of.boundary.size(); ++j) plan.boundary[j] = candidates[of.boundary[j]];
+  plan.halo = std::move(of.halo);
+  for (auto& row : plan.halo.rows) row = candidates[row];
+  return plan;
+}
+
+Band interior_band(const SlabDecomposition& slabs, int self, double max_width) {
+  const double lo = slabs.lower(self), hi = slabs.upper(self);
+  double scale = max_width;
+  for (const double b : {lo, hi})
+    if (std::isfinite(b)) scale = std::max(scale, std::abs(b));
+  const double w = max_width + 1e-9 * scale;  // the rounding of x ± w is ~1e-16 of the scale
+  return {lo + w, hi - w};
+}
+
 std::size_t add_wide_partners(StepPlan& plan, std::span<const double> coordinate,
                               std::span<const double> radius, std::span<const double> wide_coordinate,
                               std::span<const double> wide_radius, const GhostRule& rule, int threads) {

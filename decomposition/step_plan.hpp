@@ -69,6 +69,24 @@ StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<cons
 StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<const double> coordinate,
                         std::span<const double> radius, const GhostRule& rule, int threads = 1);
 
+// The same plan from the rows that may not be interior, without a pass over the others (the step
+// loop lists them where the rows are: Engine::rows_outside of interior_band). `candidates` (ascending,
+// each < n) must hold every row that the rule makes a ghost or a boundary row, and may hold interior
+// rows; `coordinate[k]` and `radius[k]` are candidate k's. The result is make_step_plan's (by `rule`)
+// over all n rows, bit for bit: the other rows are interior.
+StepPlan make_step_plan_of(const SlabDecomposition& slabs, int self, std::size_t n,
+                           std::span<const std::size_t> candidates, std::span<const double> coordinate,
+                           std::span<const double> radius, const GhostRule& rule, int threads = 1);
+
+// The open interval of centre coordinates whose rows are interior under any ghost width up to
+// `max_width` (rank `self`'s slab less max_width at each side, less a margin far above the rounding
+// of for_each_ghost_rank's x ± w); the rows outside it are make_step_plan_of's candidates. With
+// max_width 0: the rows outside it include every row that `self` does not own.
+struct Band {
+  double lo, hi;
+};
+Band interior_band(const SlabDecomposition& slabs, int self, double max_width);
+
 // After the layout's exchange, with a per-body rule: an interior row's own width reaches narrow
 // partners only, yet a wide ghost may touch it, and it anchors that pair. Every interior row whose
 // centre lies within its radius + a wide ghost's radius + rule.margin of that ghost's centre (along

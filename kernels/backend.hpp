@@ -127,6 +127,16 @@ void resident_copy(CudaBackend& backend, std::size_t first, std::size_t count, V
 // The same for the semi-axes and orientations of resident shape rows (a null pointer: skipped).
 void resident_shape_copy(CudaBackend& backend, std::size_t first, std::size_t count, Vec3<double>* semi_axes,
                          Quat<double>* orientation, bool to_device);
+// Engine::set_row_list / gather_rows / scatter_buffer / scatter_rows / copy_rows / rows_outside on the
+// DEVICE rows (cuda/resident_rows.cuh): the lists on the device, the packed rows through the backend's
+// page-locked gather and scatter buffers; `count`: the list's length (the engine keeps it).
+void rows_set_list(CudaBackend& backend, int list, std::span<const std::size_t> rows);
+std::span<const std::byte> rows_gather(CudaBackend& backend, int list, std::size_t count, bool orientations);
+std::span<std::byte> rows_scatter_buffer(CudaBackend& backend, std::size_t count, bool orientations);
+void rows_scatter(CudaBackend& backend, int list, std::size_t count, bool orientations);
+void rows_copy(CudaBackend& to, CudaBackend& from, int from_list, int to_list, std::size_t count,
+               bool orientations);
+std::vector<std::size_t> rows_outside(CudaBackend& backend, int axis, double lo, double hi);
 // The contact history of the device path (EngineOptions::history): the previous step's keys and ages
 // copied into the backend's DEVICE history, or out of it.
 void history_upload(CudaBackend& backend, const ContactHistory& history);

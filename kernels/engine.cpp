@@ -6,6 +6,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -16,6 +17,7 @@
 #include "backend.hpp"
 #include "host_vector.hpp"
 #include "inflated_bounds.hpp"
+#include "resident_rows.hpp"
 #include "skin_tuner.hpp"
 #include "splice_rows.hpp"
 #include "stage.hpp"
@@ -122,6 +124,24 @@ void resident_copy(CudaBackend&, std::size_t, std::size_t, Vec3<double>*, double
 void resident_shape_copy(CudaBackend&, std::size_t, std::size_t, Vec3<double>*, Quat<double>*, bool) {
   throw CudaError("this contactgrid was built without CUDA");
 }
+void rows_set_list(CudaBackend&, int, std::span<const std::size_t>) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+std::span<const std::byte> rows_gather(CudaBackend&, int, std::size_t, bool) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+std::span<std::byte> rows_scatter_buffer(CudaBackend&, std::size_t, bool) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+void rows_scatter(CudaBackend&, int, std::size_t, bool) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+void rows_copy(CudaBackend&, CudaBackend&, int, int, std::size_t, bool) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+std::vector<std::size_t> rows_outside(CudaBackend&, int, double, double) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
 void history_upload(CudaBackend&, const ContactHistory&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
@@ -155,6 +175,14 @@ struct Engine<Real>::Impl {
   std::optional<DeviceContactsView<Real>> resident_on_device;  // CUDA: not yet downloaded
   bool resident_overwritten = false;  // CUDA: a later detection reused the workspace first
   bool rows_any_order = false;        // CUDA: detect_resident's call (DetectJob::any_row_order)
+  // set_row_list's lists: their lengths (both backends; set: since the rows were set), the CPU
+  // backend's rows and packed-row buffers (CUDA keeps them in the backend)
+  std::array<std::size_t, kRowLists> row_list_size{};
+  std::array<bool, kRowLists> row_list_set{};
+  std::array<std::vector<std::size_t>, kRowLists> row_list;
+  HostVector<std::byte> row_gathered, row_scattered;
+  std::size_t scattered_rows = 0;
+  bool scattered_orientations = false;
   // EngineOptions::skin > 0: what the kept candidate list was built for (the backend keeps the list
   // and the bodies' state); a call that matches it checks the motion, any other call rebuilds.
   struct KeptFor {
@@ -544,6 +572,7 @@ void rows_changed(Impl& s, std::size_t rows) {
   s.resident_contacts = {};
   s.resident_on_device.reset();
   s.resident_overwritten = false;
+  s.row_list_set.fill(false);
 }
 }  // namespace
 
@@ -802,6 +831,111 @@ bool Engine<Real>::pin_host(void* p, std::size_t bytes) {
 template <class Real>
 void Engine<Real>::unpin_host(void* p) {
   if (m_impl->resolved == Backend::cuda && p) detail::unpin_host(*m_impl->cuda, p);
+}
+
+namespace {
+template <class Impl>
+int host_threads(const Impl& s) {
+  return s.options.threads > 0 ? s.options.threads : omp_get_max_threads();
+}
+template <class Impl>
+detail::RowArrays host_rows(Impl& s) {
+  return {s.resident_position.data(), s.resident_radius.data(),
+          s.resident_orientation.empty() ? nullptr : s.resident_orientation.data()};
+}
+// The length of list `list`, set since the rows were set; orientations of listed rows need shape rows.
+template <class Impl>
+std::size_t listed_rows(const Impl& s, int list, bool orientations, const char* what) {
+  if (list < 0 || list >= static_cast<int>(s.row_list_set.size()))
+    throw UsageError(std::string(what) + ": no row list " + std::to_string(list));
+  if (!s.row_list_set[static_cast<std::size_t>(list)])
+    throw UsageError(std::string(what) + ": row list " + std::to_string(list) +
+                     " was not set for these rows");
+  const std::size_t m = s.row_list_size[static_cast<std::size_t>(list)];
+  if (orientations && !s.resident_shapes && m > 0)  // (a rank without rows has none to orient)
+    throw UsageError(std::string(what) + ": orientations of rows set without shape rows");
+  return m;
+}
+}  // namespace
+
+template <class Real>
+void Engine<Real>::set_row_list(int list, std::span<const std::size_t> rows) {
+  Impl& s = *m_impl;
+  if (list < 0 || list >= kRowLists) throw UsageError("set_row_list: no row list " + std::to_string(list));
+  for (const std::size_t row : rows)
+    if (row >= s.resident_rows)
+      throw UsageError("set_row_list: row " + std::to_string(row) + " is outside the " +
+                       std::to_string(s.resident_rows) + " resident rows");
+  const auto l = static_cast<std::size_t>(list);
+  if (s.resolved == Backend::cuda)
+    detail::rows_set_list(*s.cuda, list, rows);
+  else
+    s.row_list[l].assign(rows.begin(), rows.end());
+  s.row_list_size[l] = rows.size();
+  s.row_list_set[l] = true;
+}
+
+template <class Real>
+std::span<const std::byte> Engine<Real>::gather_rows(int list, bool orientations) {
+  Impl& s = *m_impl;
+  const std::size_t m = listed_rows(s, list, orientations, "gather_rows");
+  if (s.resolved == Backend::cuda) return detail::rows_gather(*s.cuda, list, m, orientations);
+  s.row_gathered.resize(m * packed_row_bytes(orientations));
+  detail::pack_rows(host_rows(s), s.row_list[static_cast<std::size_t>(list)], orientations,
+                    s.row_gathered.data(), host_threads(s));
+  return {s.row_gathered.data(), s.row_gathered.size()};
+}
+
+template <class Real>
+std::span<std::byte> Engine<Real>::scatter_buffer(std::size_t count, bool orientations) {
+  Impl& s = *m_impl;
+  s.scattered_rows = count;
+  s.scattered_orientations = orientations;
+  if (s.resolved == Backend::cuda) return detail::rows_scatter_buffer(*s.cuda, count, orientations);
+  s.row_scattered.resize(count * packed_row_bytes(orientations));
+  return {s.row_scattered.data(), s.row_scattered.size()};
+}
+
+template <class Real>
+void Engine<Real>::scatter_rows(int list, bool orientations) {
+  Impl& s = *m_impl;
+  const std::size_t m = listed_rows(s, list, orientations, "scatter_rows");
+  if (m > s.scattered_rows || orientations != s.scattered_orientations)
+    throw UsageError("scatter_rows: the scatter buffer holds " + std::to_string(s.scattered_rows) +
+                     " rows of another layout than the list's " + std::to_string(m));
+  if (s.resolved == Backend::cuda) {
+    detail::rows_scatter(*s.cuda, list, m, orientations);
+    return;
+  }
+  detail::unpack_rows(s.row_scattered.data(), s.row_list[static_cast<std::size_t>(list)], orientations,
+                      host_rows(s), host_threads(s));
+}
+
+template <class Real>
+void Engine<Real>::copy_rows(Engine& from, int from_list, int to_list, bool orientations) {
+  Impl& s = *m_impl;
+  Impl& f = *from.m_impl;
+  const std::size_t m = listed_rows(s, to_list, orientations, "copy_rows");
+  if (listed_rows(f, from_list, orientations, "copy_rows") != m)
+    throw UsageError("copy_rows: lists of " +
+                     std::to_string(f.row_list_size[static_cast<std::size_t>(from_list)]) + " and " +
+                     std::to_string(m) + " rows");
+  if (s.resolved != f.resolved) throw UsageError("copy_rows: the engines run on other backends");
+  if (s.resolved == Backend::cuda) {
+    detail::rows_copy(*s.cuda, *f.cuda, from_list, to_list, m, orientations);
+    return;
+  }
+  detail::copy_rows(host_rows(f), f.row_list[static_cast<std::size_t>(from_list)], host_rows(s),
+                    s.row_list[static_cast<std::size_t>(to_list)], orientations, host_threads(s));
+}
+
+template <class Real>
+std::vector<std::size_t> Engine<Real>::rows_outside(int axis, double lo, double hi) {
+  Impl& s = *m_impl;
+  if (axis < 0 || axis > 2)
+    throw UsageError("rows_outside: axis " + std::to_string(axis) + " is not 0, 1 or 2");
+  if (s.resolved == Backend::cuda) return detail::rows_outside(*s.cuda, axis, lo, hi);
+  return detail::rows_outside(s.resident_position.data(), s.resident_rows, axis, lo, hi, host_threads(s));
 }
 
 template <class Real>

@@ -252,6 +252,34 @@ class Engine {
   bool pin_host(void* p, std::size_t bytes);
   void unpin_host(void* p);
 
+  // A halo's rows, moved where the rows are (the step loop's ghosts between two layouts): lists of
+  // resident rows kept by the engine (CUDA: on the device) and their positions and radii (and
+  // orientations) packed into, or unpacked from, buffers the engine owns and reuses (CUDA: page-locked
+  // host memory, allocated once and grown only), so that a step moves only those rows' bytes. A packed
+  // row is its position (3 doubles) and radius, then with `orientations` its orientation (w, x, y, z):
+  // packed_row_bytes. Lists 0 … kRowLists - 1; a list holds until set again or the rows change
+  // (set_resident, splice_resident: UsageError when used after).
+  static constexpr int kRowLists = 4;
+  static constexpr std::size_t packed_row_bytes(bool orientations) { return orientations ? 64 : 32; }
+  // List `list` := `rows` (each < resident_size(); UsageError otherwise).
+  void set_row_list(int list, std::span<const std::size_t> rows);
+  // The rows of list `list`, packed in the list's order, in the engine's gather buffer (valid until
+  // the next gather_rows).
+  std::span<const std::byte> gather_rows(int list, bool orientations);
+  // The engine's scatter buffer, sized for `count` packed rows, for the caller to fill (an MPI receive)
+  // before scatter_rows; valid until the next scatter_buffer.
+  std::span<std::byte> scatter_buffer(std::size_t count, bool orientations);
+  // The scatter buffer's first rows written into the rows of list `list`, in the list's order.
+  void scatter_rows(int list, bool orientations);
+  // The rows of `from`'s list `from_list` written into this engine's rows of list `to_list` (the same
+  // length), where the rows are (CUDA: device to device; both engines on one device, one backend).
+  void copy_rows(Engine& from, int from_list, int to_list, bool orientations);
+  // The resident rows whose centre coordinate along `axis` (0 x, 1 y, 2 z) is not inside the open
+  // interval (lo, hi) — or is not a number — ascending (CUDA: selected on the device, only their
+  // indices downloaded): a step loop's candidates for leaving a slab or lying near its cuts, which it
+  // then tests exactly on the host.
+  std::vector<std::size_t> rows_outside(int axis, double lo, double hi);
+
   // EngineOptions::history: the next call's pairs are all new (a new simulation on this engine).
   void reset_history();
   // EngineOptions::history: the previous call's pair keys and ages (CUDA: downloaded), and the

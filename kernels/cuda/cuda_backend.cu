@@ -57,6 +57,7 @@
 #include "cuda/pair_estimate.cuh"
 #include "cuda/pairs.cuh"
 #include "cuda/resident_extent.cuh"
+#include "cuda/resident_rows.cuh"
 #include "cuda/run_state.cuh"
 #include "cuda/shapes.cuh"
 #include "cuda/skin.cuh"
@@ -266,6 +267,7 @@ class CudaBackend {
   Workspace m_ws;                                // DEVICE buffers (workspace.cuh)
   ThrustAllocator m_thrust;                      // DEVICE temporary storage of Thrust calls
   cuda::PinnedBuffer m_h_counters, m_h_staging;  // pinned HOST staging
+  cuda::PinnedBuffer m_h_gather, m_h_scatter;    // pinned HOST packed rows (Engine::gather_rows, ...)
   bool m_downloaded = false;                     // a download to host memory was made (download_transfer)
   std::uint64_t m_memory_limit = 0;              // EngineOptions::device_memory_limit (0: none)
 };
@@ -548,6 +550,108 @@ void resident_shape_copy(CudaBackend& b, std::size_t first, std::size_t count, V
     upload_resident(b, ranges);
   else
     CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+}
+
+namespace {
+std::size_t packed_bytes(bool orientations) { return orientations ? 64 : 32; }
+const double* doubles(const Bytes& b) { return reinterpret_cast<const double*>(b.data()); }
+double* doubles(Bytes& b) { return reinterpret_cast<double*>(b.data()); }
+const std::uint32_t* list_rows(const Workspace& ws, int list) {
+  return reinterpret_cast<const std::uint32_t*>(ws.row_lists[list].data());
+}
+}  // namespace
+
+void rows_set_list(CudaBackend& b, int list, std::span<const std::size_t> rows) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  const std::size_t m = rows.size();
+  std::vector<std::uint32_t> u32(m);
+  for (std::size_t k = 0; k < m; ++k) u32[k] = static_cast<std::uint32_t>(rows[k]);
+  b.m_ws.reserve({{&b.m_ws.row_lists[list], m * sizeof(std::uint32_t)}}, "row lists");
+  if (m > 0)
+    CG_CUDA_CHECK(cudaMemcpyAsync(b.m_ws.row_lists[list].data(), u32.data(), m * sizeof(std::uint32_t),
+                                  cudaMemcpyHostToDevice, b.m_stream));
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+}
+
+std::span<const std::byte> rows_gather(CudaBackend& b, int list, std::size_t count, bool orientations) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  Workspace& ws = b.m_ws;
+  const std::size_t bytes = count * packed_bytes(orientations);
+  b.m_h_gather.reserve(std::max<std::size_t>(bytes, 1));
+  if (count == 0) return {b.m_h_gather.data(), 0};
+  ws.reserve({{&ws.row_pack, bytes}}, "row gather");
+  cuda::pack_rows_kernel<<<cuda::blocks_for(count), cuda::kBlock, 0, b.m_stream>>>(
+      doubles(ws.res_pos), doubles(ws.res_rad), orientations ? doubles(ws.res_orient) : nullptr,
+      list_rows(ws, list), count, doubles(ws.row_pack));
+  CG_CUDA_CHECK_LAUNCH("pack_rows_kernel");
+  CG_CUDA_CHECK(
+      cudaMemcpyAsync(b.m_h_gather.data(), ws.row_pack.data(), bytes, cudaMemcpyDeviceToHost, b.m_stream));
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+  return {b.m_h_gather.data(), bytes};
+}
+
+std::span<std::byte> rows_scatter_buffer(CudaBackend& b, std::size_t count, bool orientations) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  const std::size_t bytes = count * packed_bytes(orientations);
+  b.m_h_scatter.reserve(std::max<std::size_t>(bytes, 1));
+  return {b.m_h_scatter.data(), bytes};
+}
+
+void rows_scatter(CudaBackend& b, int list, std::size_t count, bool orientations) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  Workspace& ws = b.m_ws;
+  const std::size_t bytes = count * packed_bytes(orientations);
+  if (count == 0) return;
+  ws.reserve({{&ws.row_pack, bytes}}, "row scatter");
+  CG_CUDA_CHECK(
+      cudaMemcpyAsync(ws.row_pack.data(), b.m_h_scatter.data(), bytes, cudaMemcpyHostToDevice, b.m_stream));
+  cuda::unpack_rows_kernel<<<cuda::blocks_for(count), cuda::kBlock, 0, b.m_stream>>>(
+      doubles(ws.row_pack), list_rows(ws, list), count, doubles(ws.res_pos), doubles(ws.res_rad),
+      orientations ? doubles(ws.res_orient) : nullptr);
+  CG_CUDA_CHECK_LAUNCH("unpack_rows_kernel");
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+}
+
+void rows_copy(CudaBackend& to, CudaBackend& from, int from_list, int to_list, std::size_t count,
+               bool orientations) {
+  if (to.m_device != from.m_device)
+    throw UsageError("copy_rows: the engines are on CUDA devices " + std::to_string(from.m_device) + " and " +
+                     std::to_string(to.m_device));
+  CG_CUDA_CHECK(cudaSetDevice(to.m_device));
+  if (count == 0) return;
+  Workspace& ws = to.m_ws;
+  const Workspace& fs = from.m_ws;
+  cuda::copy_rows_kernel<<<cuda::blocks_for(count), cuda::kBlock, 0, to.m_stream>>>(
+      doubles(fs.res_pos), doubles(fs.res_rad), orientations ? doubles(fs.res_orient) : nullptr,
+      list_rows(fs, from_list), list_rows(ws, to_list), count, doubles(ws.res_pos), doubles(ws.res_rad),
+      orientations ? doubles(ws.res_orient) : nullptr);
+  CG_CUDA_CHECK_LAUNCH("copy_rows_kernel");
+  CG_CUDA_CHECK(cudaStreamSynchronize(to.m_stream));
+}
+
+std::vector<std::size_t> rows_outside(CudaBackend& b, int axis, double lo, double hi) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  Workspace& ws = b.m_ws;
+  const std::size_t n = ws.res_count;
+  if (n == 0) return {};
+  if (n >= (std::size_t(1) << 31)) throw InputError("rows_outside: more than 2^31 - 1 resident rows");
+  ws.reserve({{&ws.row_selected, 16 + n * sizeof(std::uint32_t)}}, "rows outside");
+  auto* d_count = reinterpret_cast<std::uint32_t*>(ws.row_selected.data());
+  auto* d_rows = reinterpret_cast<std::uint32_t*>(ws.row_selected.data() + 16);
+  const cuda::OutsideInterval outside{doubles(ws.res_pos), axis, lo, hi};
+  cub_run(ws, "rows outside", [&](void* t, std::size_t& bytes) {
+    return cub::DeviceSelect::If(t, bytes, thrust::counting_iterator<std::uint32_t>(0), d_rows, d_count,
+                                 int(n), outside, b.m_stream);
+  });
+  std::uint32_t count = 0;
+  CG_CUDA_CHECK(cudaMemcpyAsync(&count, d_count, sizeof(count), cudaMemcpyDeviceToHost, b.m_stream));
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+  std::vector<std::uint32_t> u32(count);
+  if (count > 0)
+    CG_CUDA_CHECK(cudaMemcpyAsync(u32.data(), d_rows, count * sizeof(std::uint32_t), cudaMemcpyDeviceToHost,
+                                  b.m_stream));
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+  return std::vector<std::size_t>(u32.begin(), u32.end());
 }
 
 template <class Broad, class Narrow>

@@ -64,6 +64,8 @@
 //   hist_keys[2],          between calls       EngineOptions::history on the device: the previous
 //   hist_age[2]                                step's pair keys and ages (hist_current), and the
 //                                              step being made (cuda/history.cuh); never aliased
+//   row_lists[4]           between calls       Engine::set_row_list's lists (u32 rows; a halo's)
+//   row_pack, row_selected a row call          gather/scatter's packed rows; rows_outside's rows
 //
 // Aliases (a buffer seen under another name once its first use is dead):
 //   view                 storage                  when
@@ -101,6 +103,7 @@ struct Workspace {
   Bytes kept_perm, canon_keys[2], canon_index[2], canon_field;
   Bytes res_id, hist_keys[2], hist_age[2];
   Bytes res_mark;
+  Bytes row_lists[4], row_pack, row_selected;  // Engine's row lists, packed rows, rows_outside's
   Bytes broad_counts, broad_pairs;
   std::size_t res_count = 0;
   bool res_ided = false;       // resident global ids present
@@ -130,7 +133,8 @@ struct Workspace {
                            &ref_rad,     &ref_report,    &res_id,        &hist_keys[0],   &hist_keys[1],
                            &hist_age[0], &hist_age[1],   &broad_counts,  &broad_pairs,    &res_mark,
                            &kept_perm,   &canon_keys[0], &canon_keys[1], &canon_index[0], &canon_index[1],
-                           &canon_field})
+                           &canon_field, &row_lists[0],  &row_lists[1],  &row_lists[2],   &row_lists[3],
+                           &row_pack,    &row_selected})
       s += b->bytes();
     return s;
   }

@@ -31,12 +31,22 @@ void print_steps(const StepStats& s, int ranks) {
       "setup {:.6f} s; per step, median of the maxima over ranks:\n",
       s.steps, checked, s.halo_rows, s.oriented ? " (with orientations)" : "", s.setup);
   if (s.drift != 0) fmt::print("  {:<16} {:>12.6f}\n", "frame", s.frame);
-  if (s.rebuilds > 0 && ranks > 1)
+  if (s.rebuilds > 0 && ranks > 1) {
     fmt::print("  {:<16} {:>12.6f}  (the steps that rebuilt: rebalance and migration)\n", "migrate",
                s.migrate);
+    fmt::print(
+        "    {:<14} {:>12.6f}  (the steps that waited for the host rows' merge: it runs beside the "
+        "layout and the detection)\n",
+        "merge wait", s.merge_wait);
+  }
   if (s.rebuilds > 0)
     fmt::print("  {:<16} {:>12.6f}  (the steps that rebuilt: check and layout)\n", "rebuild", s.rebuild);
-  fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "halo", s.halo, "interior", s.interior);
+  fmt::print("  {:<16} {:>12.6f}\n", "halo", s.halo);
+  if (ranks > 1)  // its parts: the rows gathered and packed, the MPI exchange, the rows into engine B
+    fmt::print("    {:<14} {:>12.6f}  ({})\n    {:<14} {:>12.6f}\n    {:<14} {:>12.6f}\n", "halo pack",
+               s.halo_pack, s.halo_on_device ? "where the rows are" : "on the host", "halo mpi", s.halo_mpi,
+               "halo unpack", s.halo_unpack);
+  fmt::print("  {:<16} {:>12.6f}\n", "interior", s.interior);
   for (const StageTime& t : s.stages) fmt::print("    {:<14} {:>12.6f}\n", t.name, t.seconds);
   fmt::print("  {:<16} {:>12.6f}\n  {:<16} {:>12.6f}\n", "boundary", s.boundary, "step", s.step);
   fmt::print(

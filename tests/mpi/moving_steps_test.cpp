@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <random>
 #include <string>
@@ -378,6 +379,72 @@ void check_non_finite_centre(Backend backend) {
     EXPECT_NE(what.find("step 2"), std::string::npos) << what;
     EXPECT_NE(what.find("body 417"), std::string::npos) << what;
   }
+}
+
+// The halo where the rows are, the slab scans of the engines and the merge beside the layout (the
+// defaults) against the former paths (CONTACTGRID_STEP_HALO=host: the host's records and B's rows
+// written whole; CONTACTGRID_STEP_SCAN=host: the host's pass over every row for the owners and the
+// plan; CONTACTGRID_STEP_MERGE=wait: the merge before the layout): every
+// step's contacts and the last step's rows the same bits, the same ghosts, and the knobs did switch.
+template <class Real>
+void check_former_paths(Backend backend) {
+  const Scene scene = generated("mixed", 1500, 65);
+  const std::string path = write_shared("former_paths", scene);
+  struct Run {
+    StepStats st;
+    Contacts<Real> last;
+  };
+  auto run = [&](bool former) {
+    if (former) {
+      setenv("CONTACTGRID_STEP_HALO", "host", 1);
+      setenv("CONTACTGRID_STEP_SCAN", "host", 1);
+      setenv("CONTACTGRID_STEP_MERGE", "wait", 1);
+    }
+    DistributedOptions o;
+    o.engine.backend = backend;
+    o.engine.threads = 2;
+    o.engine.fields = Fields::full;
+    o.engine.skin = 0.25;
+    o.read = SceneRead::own_rows;
+    o.resident_steps = 9;
+    o.step_motion.drift = 0.07;
+    o.step_motion.spin = 0.2;
+    o.step_motion.hash_every_step = true;
+    o.step_motion.ghosts_by_radius = true;
+    DistributedResult<Real> r = distributed_detect<Real>(session(), path, o);
+    unsetenv("CONTACTGRID_STEP_HALO");
+    unsetenv("CONTACTGRID_STEP_SCAN");
+    unsetenv("CONTACTGRID_STEP_MERGE");
+    return Run{r.steps, std::move(r.contacts)};
+  };
+  const Run now = run(false), former = run(true);
+  const bool several = session().size() > 1;
+  EXPECT_EQ(now.st.halo_on_device, several);  // one rank has no halo
+  EXPECT_FALSE(former.st.halo_on_device);
+  EXPECT_TRUE(now.st.oriented == several && former.st.oriented == several);
+  EXPECT_EQ(now.st.step_hashes, former.st.step_hashes);
+  EXPECT_EQ(now.st.step_contacts, former.st.step_contacts);
+  EXPECT_EQ(now.st.halo_rows, former.st.halo_rows);
+  EXPECT_EQ(now.st.migrated, former.st.migrated);
+  EXPECT_EQ(now.st.rebuilds, former.st.rebuilds);
+  if (several) {
+    EXPECT_GT(now.st.migrated, 0u);
+    EXPECT_GT(now.st.halo_rows, 0u);
+  }
+  if (session().rank() == 0) {
+    EXPECT_EQ(compare_contacts(now.last, former.last), "identical");
+  }
+}
+
+TEST(MovingSteps, TheHaloAndScansWhereTheRowsAreGiveTheFormerPathsBits) {
+  check_former_paths<double>(Backend::cpu);
+  check_former_paths<float>(Backend::cpu);
+}
+
+TEST(MovingSteps, CudaTheHaloAndScansWhereTheRowsAreGiveTheFormerPathsBits) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  check_former_paths<double>(Backend::cuda);
+  check_former_paths<float>(Backend::cuda);
 }
 
 TEST(StepLoop, NonFiniteCentreNamesBodyAndStep) { check_non_finite_centre(Backend::cpu); }

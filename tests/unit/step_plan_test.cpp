@@ -391,6 +391,68 @@ TEST(StepPlan, TheTwoEnginesFindEveryPairOnceWithWidthsPerBody) {
   }
 }
 
+// The plan of the rows outside the interior band (the step loop's, listed where the rows are) is the
+// plan of every row, bit for bit: roles, owned count, boundary rows and halo, for a rule per body and
+// one width for all, slabs some empty, rows owned elsewhere; and a band too narrow fails the check.
+TEST(StepPlan, ThePlanOfTheRowsOutsideTheBandIsThePlanOfAll) {
+  std::mt19937_64 rng(45);
+  std::size_t candidates = 0, rows = 0;
+  for (int trial = 0; trial < 6; ++trial) {
+    const int ranks = 2 + trial % 3;
+    const Sized b = sized(trial < 3 ? 3000 : 20000, trial % 2 ? 6.0 : 2.5, rng);
+    const SlabDecomposition s = random_slabs(ranks, rng);
+    for (const bool per_body : {true, false}) {
+      const GhostRule rule = per_body ? b.rule : GhostRule::uniform(2 * 6.0 + 0.1);
+      const double r_max = *std::max_element(b.r.begin(), b.r.end());
+      for (int self = 0; self < ranks; ++self) {
+        // this rank's rows: its own, and a few that left it (ghost rows)
+        std::vector<double> xs, rs;
+        for (std::size_t i = 0; i < b.x.size(); ++i)
+          if (s.owner(b.x[i]) == self || i % 501 == 0) {
+            xs.push_back(b.x[i]);
+            rs.push_back(b.r[i]);
+          }
+        const StepPlan all = per_body ? make_step_plan(s, self, xs, rs, rule, 2)
+                                      : make_step_plan(s, self, xs, rule.narrow_reach, 2);
+        const Band band = interior_band(s, self, rule.max_width(r_max));
+        std::vector<std::size_t> outside;
+        std::vector<double> ox, orad;
+        for (std::size_t k = 0; k < xs.size(); ++k)
+          if (!(xs[k] > band.lo && xs[k] < band.hi)) {
+            outside.push_back(k);
+            ox.push_back(xs[k]);
+            orad.push_back(rs[k]);
+          }
+        const StepPlan of = make_step_plan_of(s, self, xs.size(), outside, ox, orad, rule, 3);
+        EXPECT_EQ(of.role, all.role) << "trial " << trial << " rank " << self;
+        EXPECT_EQ(of.owned, all.owned);
+        EXPECT_EQ(of.boundary, all.boundary);
+        EXPECT_EQ(of.halo.offsets, all.halo.offsets);
+        EXPECT_EQ(of.halo.rows, all.halo.rows);
+        candidates += outside.size();
+        rows += xs.size();
+        // the band without its width: a boundary row left out is an interior row
+        if (!all.boundary.empty()) {
+          std::vector<std::size_t> fewer;
+          std::vector<double> fx, fr;
+          for (std::size_t j = 0; j < outside.size(); ++j)
+            if (outside[j] != all.boundary.front()) {
+              fewer.push_back(outside[j]);
+              fx.push_back(ox[j]);
+              fr.push_back(orad[j]);
+            }
+          EXPECT_NE(make_step_plan_of(s, self, xs.size(), fewer, fx, fr, rule, 1).boundary, all.boundary);
+        }
+      }
+    }
+  }
+  EXPECT_LT(candidates, rows);  // the band leaves rows out
+  const SlabDecomposition s(0, {10.0});
+  EXPECT_THROW(make_step_plan_of(s, 0, 4, std::vector<std::size_t>{2, 1}, std::vector<double>{1, 2},
+                                 std::vector<double>{1, 1}, GhostRule::uniform(1)),
+               UsageError);
+}
+
 TEST(StepPlan, MergesBoundaryRowsAndGhostsById) {
   const std::vector<std::int64_t> boundary{2, 5, 9, 40};
   const std::vector<std::int64_t> ghosts{7, 30, 1, 3, 41};  // two sources: [7, 30], [1, 3, 41]
@@ -520,8 +582,20 @@ TEST(StepBodies, MigrationMergesByIdInPlaceOfSorting) {
     want.insert(want.end(), come.begin(), come.end());
     std::sort(want.begin(), want.end());
     StepBodies into = make(std::vector<std::int64_t>(rng() % 1000, 5), shapes);  // spare of any size
-    merge_step_bodies(from, leaving, arrivals, shapes, into, trial % 3 == 0 ? 1 : 4);
+    const std::vector<std::size_t> before =
+        merge_step_bodies(from, leaving, arrivals, shapes, into, trial % 3 == 0 ? 1 : 4);
     ASSERT_EQ(into.size(), want.size()) << "trial " << trial;
+    // the splice map reads every merged row in place: its source holds the merged row's id
+    const SpliceMap map(n, leaving, before);
+    ASSERT_EQ(map.size(), want.size());
+    for (std::size_t k = 0; k < want.size(); ++k) {
+      const SpliceMap::Source src = map(k);
+      ASSERT_EQ(src.arrival ? arrivals.id[src.row] : from.id[src.row], want[k])
+          << "trial " << trial << " row " << k;
+      if (!src.arrival) {
+        ASSERT_FALSE(std::binary_search(leaving.begin(), leaving.end(), src.row));
+      }
+    }
     ASSERT_EQ(into.state.size(), want.size() * stride);
     const StepBodies expect = make(want, shapes);
     for (std::size_t k = 0; k < want.size(); ++k) {
