@@ -8,9 +8,9 @@
 // their previous row) → contact_terms (per contact) → order by B + body_terms (per body, sums in a
 // fixed order, walls, gravity) → kick (bodies). On the CUDA backend every array stays on the device
 // (the engine's device-resident contacts); the host sees the state only when it asks (bodies(),
-// contacts(), energies()). Scenes of spheres on one rank with a fixed skin take the slots path
-// instead (dem_slots.hpp: one pass per body over the kept candidate list, a contact's spring in the
-// list's slot, no contact rows unless asked; the same bits; CONTACTGRID_DEM_PATH=rows the rows path).
+// contacts(), energies()). CONTACTGRID_DEM_PATH=slots: scenes of spheres on one rank with a fixed skin
+// take the slots path instead (dem_slots.hpp: one pass per body over the kept candidate list, a
+// contact's spring in the list's slot, no contact rows unless asked; the same bits).
 #include <cstdint>
 #include <memory>
 #include <optional>

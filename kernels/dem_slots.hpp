@@ -1,6 +1,6 @@
 #pragma once
-// The granular dynamics' slots path (the default for scenes of spheres on one rank; the per-item
-// functions and their data flow are core/dem_slots.hpp): the step works on a kept candidate list,
+// The granular dynamics' slots path (opt-in: CONTACTGRID_DEM_PATH=slots, scenes of spheres on one rank; the
+// per-item functions and their data flow are core/dem_slots.hpp): the step works on a kept candidate list,
 // not on contact rows. Each step:
 //   bounds     the bodies' bounds (validated as the engine validates them), the frame's origin
 //              (their low corner, as the engine's frame) and the skin check of the engine
@@ -14,7 +14,7 @@
 // A contact row exists only when a caller asks (contacts(), energies()): made from the slots (the
 // same narrow function on the same positions), the same bits as the rows path's rows.
 // Not on this path (the rows path, kernels/dem.cpp, runs them): scenes with ellipsoids, a rank of a run
-// over several ranks (ids or a frame given), no skin or an automatic one, CONTACTGRID_DEM_PATH=rows.
+// over several ranks (ids or a frame given), no skin or an automatic one, and without the knob.
 #include <cstddef>
 #include <memory>
 #include <optional>

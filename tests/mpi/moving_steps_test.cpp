@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -394,7 +395,24 @@ void check_former_paths(Backend backend) {
     StepStats st;
     Contacts<Real> last;
   };
+  // the knobs as the process got them (a job may run the whole suite under the former paths), put
+  // back after each run: `now` runs the defaults, `former` the former paths
+  const char* const knobs[] = {"CONTACTGRID_STEP_HALO", "CONTACTGRID_STEP_SCAN", "CONTACTGRID_STEP_MERGE"};
+  std::vector<std::optional<std::string>> given;
+  for (const char* k : knobs) {
+    const char* v = std::getenv(k);
+    given.push_back(v ? std::optional<std::string>(v) : std::nullopt);
+  }
+  auto restore = [&] {
+    for (std::size_t i = 0; i < given.size(); ++i) {
+      if (given[i])
+        setenv(knobs[i], given[i]->c_str(), 1);
+      else
+        unsetenv(knobs[i]);
+    }
+  };
   auto run = [&](bool former) {
+    for (const char* k : knobs) unsetenv(k);
     if (former) {
       setenv("CONTACTGRID_STEP_HALO", "host", 1);
       setenv("CONTACTGRID_STEP_SCAN", "host", 1);
@@ -412,9 +430,7 @@ void check_former_paths(Backend backend) {
     o.step_motion.hash_every_step = true;
     o.step_motion.ghosts_by_radius = true;
     DistributedResult<Real> r = distributed_detect<Real>(session(), path, o);
-    unsetenv("CONTACTGRID_STEP_HALO");
-    unsetenv("CONTACTGRID_STEP_SCAN");
-    unsetenv("CONTACTGRID_STEP_MERGE");
+    restore();
     return Run{r.steps, std::move(r.contacts)};
   };
   const Run now = run(false), former = run(true);
