@@ -609,6 +609,23 @@ void Simulation<Real>::finish_step(std::optional<Frame> frame) {
   ++s.steps;
 }
 
+namespace {
+// Row i of the CPU's state as a record, and a record into row i.
+DemRow host_row(const detail::host::HostDem& h, std::size_t i) {
+  return DemRow{h.position[i],    h.velocity[i], h.omega[i], h.momentum[i],
+                h.orientation[i], h.force[i],    h.torque[i]};
+}
+void set_host_row(detail::host::HostDem& h, std::size_t i, const DemRow& r) {
+  h.position[i] = r.position;
+  h.velocity[i] = r.velocity;
+  h.omega[i] = r.omega;
+  h.momentum[i] = r.momentum;
+  h.orientation[i] = r.orientation;
+  h.force[i] = r.force;
+  h.torque[i] = r.torque;
+}
+}  // namespace
+
 template <class Real>
 void Simulation<Real>::read_rows(const std::vector<std::uint32_t>& rows, std::vector<DemRow>& out) {
   Impl& s = *m_impl;
@@ -618,8 +635,7 @@ void Simulation<Real>::read_rows(const std::vector<std::uint32_t>& rows, std::ve
   for (std::size_t j = 0; j < rows.size(); ++j) {
     const std::size_t i = rows[j];
     if (i >= h.size()) throw UsageError("simulate: row " + std::to_string(i) + " is not a row of the rank");
-    out[j] = DemRow{h.position[i],    h.velocity[i], h.omega[i], h.momentum[i],
-                    h.orientation[i], h.force[i],    h.torque[i]};
+    out[j] = host_row(h, i);
   }
 }
 
@@ -633,13 +649,7 @@ void Simulation<Real>::write_rows(const std::vector<std::uint32_t>& rows, const 
   for (std::size_t j = 0; j < rows.size(); ++j) {
     const std::size_t i = rows[j];
     if (i >= h.size()) throw UsageError("simulate: row " + std::to_string(i) + " is not a row of the rank");
-    h.position[i] = in[j].position;
-    h.velocity[i] = in[j].velocity;
-    h.omega[i] = in[j].omega;
-    h.momentum[i] = in[j].momentum;
-    h.orientation[i] = in[j].orientation;
-    h.force[i] = in[j].force;
-    h.torque[i] = in[j].torque;
+    set_host_row(h, i, in[j]);
   }
 }
 
@@ -672,8 +682,7 @@ const DemRow* Simulation<Real>::gather_halo() {
   const detail::host::HostDem& h = s.host;
   for (std::size_t j = 0; j < s.halo_send.size(); ++j) {
     const std::size_t i = s.halo_send[j];
-    s.halo_out[j] = DemRow{h.position[i],    h.velocity[i], h.omega[i], h.momentum[i],
-                           h.orientation[i], h.force[i],    h.torque[i]};
+    s.halo_out[j] = host_row(h, i);
   }
   return s.halo_out.data();
 }
@@ -694,14 +703,7 @@ void Simulation<Real>::scatter_halo() {
   detail::host::HostDem& h = s.host;
   for (std::size_t j = 0; j < s.halo_receive.size(); ++j) {
     const std::size_t i = s.halo_receive[j];
-    const DemRow& r = s.halo_in[j];
-    h.position[i] = r.position;
-    h.velocity[i] = r.velocity;
-    h.omega[i] = r.omega;
-    h.momentum[i] = r.momentum;
-    h.orientation[i] = r.orientation;
-    h.force[i] = r.force;
-    h.torque[i] = r.torque;
+    set_host_row(h, i, s.halo_in[j]);
   }
 }
 
@@ -818,15 +820,7 @@ void Simulation<Real>::set_rows(const DemBodies& bodies, std::vector<std::int64_
   h.orientation.resize(n);
   h.force.resize(n);
   h.torque.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    h.position[i] = state.rows[i].position;
-    h.velocity[i] = state.rows[i].velocity;
-    h.omega[i] = state.rows[i].omega;
-    h.momentum[i] = state.rows[i].momentum;
-    h.orientation[i] = state.rows[i].orientation;
-    h.force[i] = state.rows[i].force;
-    h.torque[i] = state.rows[i].torque;
-  }
+  for (std::size_t i = 0; i < n; ++i) set_host_row(h, i, state.rows[i]);
   h.radius = st.radius;
   h.props = props;
   h.shape = st.shape;
