@@ -2,7 +2,6 @@
 #include "collectives.hpp"
 
 #include <algorithm>
-#include <cstring>
 
 #include "transport.hpp"
 
@@ -17,9 +16,6 @@ struct BoundsRecord {
   double r_sum[3];  // radius moments (the tuned cell size)
 };
 static_assert(std::is_trivially_copyable_v<BoundsRecord>);
-
-// The largest message of alltoallv_records (MPI counts are ints).
-constexpr std::uint64_t k_records_max_bytes = std::uint64_t(1) << 30;
 
 }  // namespace
 
@@ -63,23 +59,8 @@ std::vector<std::uint64_t> alltoall_counts(const Session& session,
 void alltoallv_records(const Session& session, std::size_t record_bytes, const void* send,
                        const std::vector<std::uint64_t>& send_counts, void* recv,
                        const std::vector<std::uint64_t>& recv_counts) {
-  const std::size_t p = send_counts.size(), me = static_cast<std::size_t>(session.rank());
-  std::vector<std::uint64_t> split(p + 1, 0), at(p + 1, 0);
-  for (std::size_t r = 0; r < p; ++r) {
-    split[r + 1] = split[r] + send_counts[r];
-    at[r + 1] = at[r] + recv_counts[r];
-  }
-  auto* in = static_cast<unsigned char*>(recv);
-  const auto* out = static_cast<const unsigned char*>(send);
-  if (send_counts[me] > 0)
-    std::memcpy(in + at[me] * record_bytes, out + split[me] * record_bytes, send_counts[me] * record_bytes);
-  detail::Comm::RowField field;
-  field.send = out;
-  field.row_bytes = record_bytes;
-  field.into.resize(p);
-  for (std::size_t r = 0; r < p; ++r) field.into[r] = in + at[r] * record_bytes;
-  detail::Comm(session).exchange_rows({field}, split, recv_counts, k_records_max_bytes,
-                                      detail::k_records_tag);
+  detail::Comm(session).exchange_rows_into(static_cast<const std::byte*>(send), static_cast<std::byte*>(recv),
+                                           record_bytes, send_counts, recv_counts);
 }
 
 void max_over_ranks(const Session& session, std::vector<double>& values) {

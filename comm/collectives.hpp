@@ -23,7 +23,7 @@ std::vector<std::uint64_t> allgather_counts(const Session& session, std::uint64_
 // Records of `record_bytes` each between every pair of ranks, without staging copies: `send` grouped
 // by destination rank (send_counts[r] records to rank r), `recv` grouped by source rank
 // (recv_counts[r] from rank r: alltoall_counts). Point to point, only between ranks with records,
-// in messages of at most 2^31 - 1 bytes (any total); this rank's own records are copied.
+// one message of records a pair (fewer than 2^31 records); this rank's own records are copied.
 std::vector<std::uint64_t> alltoall_counts(const Session& session,
                                            const std::vector<std::uint64_t>& send_counts);
 void alltoallv_records(const Session& session, std::size_t record_bytes, const void* send,

@@ -18,7 +18,6 @@ namespace cg::detail {
 constexpr int k_halo_tag = 7301;
 constexpr int k_gather_tag = 7400;    // + field index
 constexpr int k_exchange_tag = 7500;  // + field index
-constexpr int k_records_tag = 7700;   // collectives.hpp: alltoallv_records
 
 class Comm {
  public:
@@ -90,38 +89,17 @@ class Comm {
   template <class T>
   HostVector<T> exchange(const HostVector<T>& send, const std::vector<std::uint64_t>& send_counts,
                          const std::vector<std::uint64_t>& recv_counts) const {
-    const std::size_t p = send_counts.size(), me = static_cast<std::size_t>(m_s.rank);
-    std::vector<std::uint64_t> sd(p + 1, 0), rd(p + 1, 0);
-    for (std::size_t r = 0; r < p; ++r) {
-      sd[r + 1] = sd[r] + send_counts[r];
-      rd[r + 1] = rd[r] + recv_counts[r];
-    }
-    HostVector<T> recv(rd[p]);
-    if (send_counts[me] > 0)
-      std::memcpy(recv.data() + rd[me], send.data() + sd[me], send_counts[me] * sizeof(T));
-    if (!m_s.mpi) return recv;
-    RecordType type(sizeof(T));
-    std::vector<MPI_Request> requests;
-    for (std::size_t r = 0; r < p; ++r) {
-      if (r == me || recv_counts[r] == 0) continue;
-      requests.emplace_back();
-      CG_MPI(MPI_Irecv(recv.data() + rd[r], to_mpi_count(recv_counts[r], "halo receive count"), type.get(),
-                       static_cast<int>(r), k_halo_tag, m_s.comm, &requests.back()));
-    }
-    for (std::size_t r = 0; r < p; ++r) {
-      if (r == me || send_counts[r] == 0) continue;
-      requests.emplace_back();
-      CG_MPI(MPI_Isend(send.data() + sd[r], to_mpi_count(send_counts[r], "halo send count"), type.get(),
-                       static_cast<int>(r), k_halo_tag, m_s.comm, &requests.back()));
-    }
-    if (!requests.empty()) {
-      CG_MPI(MPI_Waitall(static_cast<int>(requests.size()), requests.data(), MPI_STATUSES_IGNORE));
-    }
+    std::uint64_t total = 0;
+    for (const std::uint64_t c : recv_counts) total += c;
+    HostVector<T> recv(total);
+    exchange_rows_into(reinterpret_cast<const std::byte*>(send.data()),
+                       reinterpret_cast<std::byte*>(recv.data()), sizeof(T), send_counts, recv_counts);
     return recv;
   }
 
   // The same exchange of rows of `row_bytes` bytes between caller-owned buffers (page-locked ones: the
-  // engine's packed rows), `recv` holding the received rows.
+  // engine's packed rows; any records: collectives.hpp's alltoallv_records), `recv` holding the
+  // received rows.
   void exchange_rows_into(const std::byte* send, std::byte* recv, std::size_t row_bytes,
                           const std::vector<std::uint64_t>& send_counts,
                           const std::vector<std::uint64_t>& recv_counts) const {

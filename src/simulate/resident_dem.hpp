@@ -429,8 +429,10 @@ class ResidentDem {
         in = m_sim->halo_inbox();
       });
       const std::vector<std::uint64_t> from = alltoall_counts(m_session, m_send_counts);
-      if (from != m_recv_counts)
-        throw Error("simulate: the owners send other ghost rows than this rank holds: internal error");
+      agreed_stage(m_session, "simulate", [&] {  // every rank stops, none waits for a message
+        if (from != m_recv_counts)
+          throw Error("simulate: the owners send other ghost rows than this rank holds: internal error");
+      });
       alltoallv_records(m_session, sizeof(DemRow), out, m_send_counts, in, m_recv_counts);
       agreed_stage(m_session, "simulate", [&] { m_sim->scatter_halo(); });
       return;
