@@ -131,6 +131,7 @@ class ResidentDem {
       m_sim.emplace(held, options, std::move(ids), m_frame);  // the forces of the start
       halo_plan(held.position);
     });
+    check_halo_counts();
   }
 
   void step() {
@@ -415,6 +416,16 @@ class ResidentDem {
     if (!m_ghost_records) m_sim->set_halo(m_send_rows, m_recv_rows);
   }
 
+  // Collective, once a layout: what the owners will send each step is what this rank holds as ghosts
+  // (every rank stops together otherwise, none waiting for a message).
+  void check_halo_counts() {
+    const std::vector<std::uint64_t> from = alltoall_counts(m_session, m_send_counts);
+    agreed_stage(m_session, "simulate", [&] {
+      if (from != m_recv_counts)
+        throw Error("simulate: the owners send other ghost rows than this rank holds: internal error");
+    });
+  }
+
   // The ghosts' state from their owners (the halo's rows only): gathered where the rows are into a
   // reused page-locked buffer, sent from it straight into the receivers' (each rank receives from
   // each owner its ghosts in ascending id, the order the owner sends them), scattered into the
@@ -427,11 +438,6 @@ class ResidentDem {
       agreed_stage(m_session, "simulate", [&] {
         out = m_sim->gather_halo();
         in = m_sim->halo_inbox();
-      });
-      const std::vector<std::uint64_t> from = alltoall_counts(m_session, m_send_counts);
-      agreed_stage(m_session, "simulate", [&] {  // every rank stops, none waits for a message
-        if (from != m_recv_counts)
-          throw Error("simulate: the owners send other ghost rows than this rank holds: internal error");
       });
       alltoallv_records(m_session, sizeof(DemRow), out, m_send_counts, in, m_recv_counts);
       agreed_stage(m_session, "simulate", [&] { m_sim->scatter_halo(); });
@@ -614,6 +620,7 @@ class ResidentDem {
       m_sim->set_rows(rows, m_ids, next);
       halo_plan(rows.position);
     });
+    check_halo_counts();
   }
 
   template <class T>
