@@ -126,6 +126,7 @@ void StepLoop<Real>::lay_out() {
   State& s = *m;
   const auto t0 = WallClock::now();
   const double waited = s.t[static_cast<std::size_t>(StepStage::merge_wait)];  // (a join below: rebuild's)
+  s.trace.start();
   const bool first = s.layouts == 0;
   // Scenes with ellipsoids: the shape rows go into A and B (the ghosts' with the exchange). Agreed
   // over the ranks, as a rank without rows has none.
@@ -147,6 +148,7 @@ void StepLoop<Real>::lay_out() {
   agreed_stage(s.session, "steps", [&] {
     s.a.set_skin(s.skin);
     if (s.rows_changed || !s.written || !s.device_scan) s.finish_merge();  // the rows read whole below
+    s.trace.mark("merge");
     if (s.rows_changed) {  // other rows (the setup, a migration that changed this rank's): all of them
       s.a.set_resident(
           BodiesView{b.position, b.radius, {}, {}, b.shapes.shape, b.shapes.semi_axes, b.shapes.orientation});
@@ -158,6 +160,7 @@ void StepLoop<Real>::lay_out() {
       s.a.rebuild_candidates();
     }
     s.a.mark_resident();  // the rebuild check's reference: the centres of this layout
+    s.trace.mark("rows");
     if (!alone) {
       // the ghost width of the layout: the frame's, over coordinates that may still grow by the
       // skin, plus the skin (each of two bodies moves by at most skin/2 before the next layout); per
@@ -172,6 +175,7 @@ void StepLoop<Real>::lay_out() {
         // the rows are, and the plan classifies those alone (make_step_plan_of: the same plan)
         const Band band = interior_band(s.slabs, me, s.rule.max_width(s.global.r_max));
         const std::vector<std::size_t> rows = s.a.rows_outside(s.slabs.axis(), band.lo, band.hi);
+        s.trace.mark("scan");
         std::vector<double> x(rows.size()), r(rows.size());
         for (std::size_t k = 0; k < rows.size(); ++k) {
           const auto [from, i] = s.body(rows[k]);
@@ -191,6 +195,7 @@ void StepLoop<Real>::lay_out() {
         throw InputError("steps: body " + std::to_string(from->id[i]) + " is not owned by rank " +
                          std::to_string(me));
       }
+      s.trace.mark("plan");
       s.send_counts = s.plan.halo.counts();
       exports.offsets = s.plan.halo.offsets;
       exports.rows = HostVector<BodyRecord>(s.plan.halo.total());
@@ -207,17 +212,22 @@ void StepLoop<Real>::lay_out() {
           shape_exports.rows[w] =
               ShapeRecord{from->shapes.orientation[k], from->shapes.semi_axes[k], from->shapes.shape[k]};
       }
+      s.trace.mark("exports");
     }
   });
+  s.trace.mark("agree");
   if (!alone) {
     s.recv_counts = s.comm.alltoall_counts(s.send_counts);
     // the exchange carries the ghosts' records (ids too); the steps refresh their rows
     const HostVector<BodyRecord> ghosts = s.comm.exchange(exports.rows, s.send_counts, s.recv_counts);
     HostVector<ShapeRecord> ghost_shapes;  // the same ghosts' shape rows, in the same order
     if (s.shapes) ghost_shapes = s.comm.exchange(shape_exports.rows, s.send_counts, s.recv_counts);
+    s.trace.mark("exchange");
     agreed_stage(s.session, "steps", [&] { s.make_engine_b(ghosts, ghost_shapes); });
+    s.trace.mark("agree_b");
     s.halo_rows = ghosts.size();
   }
+  s.trace.print(me, s.layouts, "layout");
   s.steps_since_layout = 0;
   ++s.layouts;
   if (first) {
@@ -245,6 +255,7 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
     finish_merge();
     add_wide_partners(plan, coordinates(), o.radius, wide_x, wide_r, rule, threads);
   }
+  trace.mark("wide");
   const std::size_t nb = plan.boundary.size();
   std::vector<std::int64_t> boundary_ids(nb), ghost_ids(ghosts.size());
   const std::size_t ng = ghosts.size();
@@ -259,12 +270,15 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
 #pragma omp for schedule(static)
     for (std::size_t g = 0; g < ng; ++g) ghost_ids[g] = ghosts[g].id;
   }
+  trace.mark("ids");
   rows = merge_boundary_rows(boundary_ids, ghost_ids);
+  trace.mark("merge_rows");
   halo_lists = device_halo && !grow;
   if (halo_lists) {  // engine A's rows are this layout's: the rows it sends, its boundary rows
     a.set_row_list(kHaloList, plan.halo.rows);
     a.set_row_list(kBoundaryList, plan.boundary);
   }
+  trace.mark("lists_a");
   if (nb == 0) return;  // no boundary row: the ghosts touch none of this rank's bodies
   const std::size_t total = rows.size();
   // the rows a step writes stay page-locked; the others are uploaded once a layout
@@ -275,6 +289,7 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
   resize_kept(b_shape, shapes ? total : 0, nullptr);
   resize_kept(b_semi, shapes ? total : 0, grow ? &pin_semi : nullptr);
   resize_kept(b_q, shapes ? total : 0, refresh ? &pin_q : nullptr);
+  trace.mark("resize");
 #pragma omp parallel for num_threads(threads) schedule(static) if (parallel)
   for (std::size_t k = 0; k < nb; ++k) {
     const auto [from, i] = this->body(plan.boundary[k]);
@@ -303,6 +318,7 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
       b_q[row] = ghost_shapes[g].orientation;
     }
   }
+  trace.mark("fill");
   if (!b) b.emplace(a.options());  // kept across layouts: its workspace stays allocated
   b->set_skin(skin);
   b->set_resident(BodiesView{b_p, b_r, {}, b_mask, b_shape, b_semi, b_q});
@@ -310,6 +326,7 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
     b->set_row_list(kHaloList, rows.of_ghost);
     b->set_row_list(kBoundaryList, rows.of_boundary);
   }
+  trace.mark("b_rows");
   b_active = true;
 }
 
@@ -374,12 +391,29 @@ void StepLoop<Real>::detect_boundary() {
     }
     s.t[static_cast<std::size_t>(StepStage::boundary)] = seconds_since(b0);
   }
+  const auto j0 = WallClock::now();
   if (s.interior.joinable()) s.interior.join();
+  const double join = seconds_since(j0);
   if (!s.error) s.error = s.interior_error;
   std::exception_ptr error = s.error;
   s.error = nullptr;
+  const auto g0 = WallClock::now();
   s.session.agree(error, "steps");
   s.t[static_cast<std::size_t>(StepStage::step)] = seconds_since(s.s0);
+  if (s.trace.on && s.a.stats().candidate_builds > s.builds_before) {
+    // a building step: engine A's call against the sum of its stages (the rest is outside them)
+    double staged = 0;
+    for (const StageTime& st : s.a.times()) staged += st.seconds;
+    s.trace.line.clear();
+    s.trace.value("interior", s.t[static_cast<std::size_t>(StepStage::interior)]);
+    s.trace.value("a_stages", staged);
+    s.trace.value("halo", s.t[static_cast<std::size_t>(StepStage::halo)]);
+    s.trace.value("boundary", s.t[static_cast<std::size_t>(StepStage::boundary)]);
+    s.trace.value("join", join);
+    s.trace.value("agree", seconds_since(g0));
+    s.trace.value("step", s.t[static_cast<std::size_t>(StepStage::step)]);
+    s.trace.print(s.session.rank(), s.layouts, "build");
+  }
 }
 
 template <class Real>

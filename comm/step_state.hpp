@@ -51,6 +51,36 @@ struct OrientedRecord {
   Quat<double> orientation;
 };
 
+// The step loop's own trace (CONTACTGRID_STEP_TRACE=1): each rank writes one stderr line per layout
+// and per building step with the seconds of each part, for finding where a rebuild's time goes
+// (the stage table sums those parts).
+struct Trace {
+  bool on = false;
+  WallClock::time_point last;
+  std::string line;
+  void start() {
+    if (!on) return;
+    line.clear();
+    last = WallClock::now();
+  }
+  void mark(const char* part) {
+    if (!on) return;
+    char buf[64];
+    std::snprintf(buf, sizeof buf, " %s %.4f", part, seconds_since(last));
+    line += buf;
+    last = WallClock::now();
+  }
+  void value(const char* part, double seconds) {
+    if (!on) return;
+    char buf[64];
+    std::snprintf(buf, sizeof buf, " %s %.4f", part, seconds);
+    line += buf;
+  }
+  void print(int rank, int layout, const char* what) const {
+    if (on) std::fprintf(stderr, "trace rank %d layout %d %s:%s\n", rank, layout, what, line.c_str());
+  }
+};
+
 }  // namespace step_detail
 
 template <class Real>
@@ -133,6 +163,7 @@ struct StepLoop<Real>::State {
   std::uint64_t halo_rows = 0;          // ghosts received per step
   double setup = 0;
   std::uint64_t builds0 = 0, reuses0 = 0;  // engine A's counters before the steps
+  step_detail::Trace trace;                // CONTACTGRID_STEP_TRACE=1
 
   // the step in flight
   std::thread interior;
@@ -168,6 +199,8 @@ struct StepLoop<Real>::State {
     device_scan = !(scan_knob && std::string(scan_knob) == "host");
     const char* merge_knob = std::getenv("CONTACTGRID_STEP_MERGE");
     defer_merge = !(merge_knob && std::string(merge_knob) == "wait");
+    const char* trace_knob = std::getenv("CONTACTGRID_STEP_TRACE");
+    trace.on = trace_knob && std::string(trace_knob) == "1";
   }
   ~State() {
     if (interior.joinable()) interior.join();
