@@ -177,12 +177,15 @@ void StepLoop<Real>::lay_out() {
         const std::vector<std::size_t> rows = s.a.rows_outside(s.slabs.axis(), band.lo, band.hi);
         s.trace.mark("scan");
         std::vector<double> x(rows.size()), r(rows.size());
-        for (std::size_t k = 0; k < rows.size(); ++k) {
+        const std::size_t count = rows.size();
+#pragma omp parallel for num_threads(s.team()) schedule(static) if (count > (std::size_t(1) << 14))
+        for (std::size_t k = 0; k < count; ++k) {
           const auto [from, i] = s.body(rows[k]);
           x[k] = component(from->position[i], s.slabs.axis());
           r[k] = from->radius[i];
         }
-        s.plan = make_step_plan_of(s.slabs, me, n, rows, x, r, s.rule, s.threads);
+        s.trace.mark("plan_rows");
+        s.plan = make_step_plan_of(s.slabs, me, n, rows, x, r, s.rule, s.team(), std::move(s.plan));
       } else if (s.motion.ghosts_by_radius) {
         s.plan = make_step_plan(s.slabs, me, s.coordinates(), b.radius, s.rule, s.threads);
       } else {
@@ -204,7 +207,7 @@ void StepLoop<Real>::lay_out() {
         shape_exports.rows = HostVector<ShapeRecord>(s.plan.halo.total());
       }
       const std::size_t exported = s.plan.halo.total();
-#pragma omp parallel for num_threads(s.threads) schedule(static) if (exported > (std::size_t(1) << 14))
+#pragma omp parallel for num_threads(s.team()) schedule(static) if (exported > (std::size_t(1) << 14))
       for (std::size_t w = 0; w < exported; ++w) {
         const auto [from, k] = s.body(s.plan.halo.rows[w]);
         exports.rows[w] = BodyRecord{from->position[k], from->radius[k], from->id[k]};
@@ -260,7 +263,7 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
   std::vector<std::int64_t> boundary_ids(nb), ghost_ids(ghosts.size());
   const std::size_t ng = ghosts.size();
   const bool parallel = nb + ng > (std::size_t(1) << 14);
-#pragma omp parallel num_threads(threads) if (parallel)
+#pragma omp parallel num_threads(team()) if (parallel)
   {
 #pragma omp for schedule(static) nowait
     for (std::size_t k = 0; k < nb; ++k) {
@@ -290,7 +293,7 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
   resize_kept(b_semi, shapes ? total : 0, grow ? &pin_semi : nullptr);
   resize_kept(b_q, shapes ? total : 0, refresh ? &pin_q : nullptr);
   trace.mark("resize");
-#pragma omp parallel for num_threads(threads) schedule(static) if (parallel)
+#pragma omp parallel for num_threads(team()) schedule(static) if (parallel)
   for (std::size_t k = 0; k < nb; ++k) {
     const auto [from, i] = this->body(plan.boundary[k]);
     const std::size_t row = rows.of_boundary[k];
@@ -305,7 +308,7 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
       b_q[row] = from->shapes.orientation[i];
     }
   }
-#pragma omp parallel for num_threads(threads) schedule(static) if (parallel)
+#pragma omp parallel for num_threads(team()) schedule(static) if (parallel)
   for (std::size_t g = 0; g < ng; ++g) {
     const std::size_t row = rows.of_ghost[g];
     b_p[row] = ghosts[g].position;
@@ -368,6 +371,7 @@ void StepLoop<Real>::detect_interior() {
   };
   if (s.session.size() > 1) s.gather_halo();  // engine A's rows, before A detects on the other thread
   if (s.error) return;
+  s.start_merge();  // a migration's host rows, while the host waits for the device
   if (s.session.size() > 1) {
     try {
       s.interior = std::thread(run);  // overlaps the halo

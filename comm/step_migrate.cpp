@@ -3,8 +3,9 @@
 // left its slab sent to its new owner with its rows, shape rows and the caller's state. The candidates
 // for leaving are the rows outside the slab's interior band, listed where engine A's rows are
 // (Engine::rows_outside; CONTACTGRID_STEP_SCAN=host: every row on the host); engine A's rows change in
-// place (Engine::splice_resident), and the host's rows are merged by id beside the layout that follows
-// (step_state.hpp: finish_merge; CONTACTGRID_STEP_MERGE=wait: before it).
+// place (Engine::splice_resident), and the host's rows are merged by id beside the step's detection
+// that follows the layout (step_state.hpp: start_merge, finish_merge; CONTACTGRID_STEP_MERGE=layout:
+// beside the layout, =wait: before it).
 #include "resident_steps.hpp"
 #include "step_state.hpp"
 
@@ -146,13 +147,10 @@ void StepLoop<Real>::migrate() {
       s.merged = SpliceMap(b.size(), gone, at);
       s.arrivals = std::move(arrivals);
       s.merge_pending = true;
-      s.merging = std::thread([&s, gone, at, shapes] {
-        try {
-          splice_step_bodies(s.bodies, gone, at, s.arrivals, shapes, s.spare, s.threads);
-        } catch (...) {
-          s.merge_error = std::current_exception();
-        }
-      });
+      s.merge_gone = gone;
+      s.merge_at = at;
+      s.merge_shapes = shapes;
+      if (!s.merge_at_detection) s.start_merge();  // (else the step's detection starts it)
     } else {
       at = merge_step_bodies(b, gone, arrivals, shapes, s.spare, s.threads);
       std::swap(b, s.spare);

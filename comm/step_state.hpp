@@ -146,14 +146,27 @@ struct StepLoop<Real>::State {
   // CONTACTGRID_STEP_SCAN=host: the host's pass over every row (the former path).
   bool device_scan = true;
   // A migration's merge of the host rows (every body's ~96 bytes copied into the spare storage) runs on
-  // a thread of its own beside the layout and the step's detection, joined where the rows are read
-  // whole (finish_merge: bodies(), update_frame, …); until then the layout reads the few rows it needs
-  // through `merged` (the previous rows and the arrivals, in place). CONTACTGRID_STEP_MERGE=wait: the
-  // merge before the layout (the former path). Only with the scans where the rows are (device_scan)
-  // and engine A's rows spliced in place.
+  // a thread of its own beside the step's detection, where the host waits for the device, and is
+  // joined where the rows are read whole (finish_merge: bodies(), update_frame, …; it runs there if it
+  // has not started); until then the layout reads the few rows it needs through `merged` (the previous
+  // rows and the arrivals, in place). Beside the layout instead, the merge's memory traffic and threads
+  // slowed every loop of the layout (CONTACTGRID_STEP_MERGE=layout); CONTACTGRID_STEP_MERGE=wait: the
+  // merge before the layout. Only with the scans where the rows are (device_scan) and engine A's rows
+  // spliced in place.
   bool defer_merge = true;
+  bool merge_at_detection = true;
+  // Beside the layout, the merge's thread and the layout's loops share the rank's threads (half each),
+  // so that two OpenMP teams of the whole share do not oversubscribe the rank's cores (their barriers
+  // spin on descheduled threads). CONTACTGRID_STEP_MERGE_TEAM=whole: each takes the whole share.
+  bool split_team = true;
+  int merge_threads() const { return split_team && !merge_at_detection ? std::max(1, threads / 2) : threads; }
+  // The threads of a loop that may run beside the merge.
+  int team() const { return merge_started && split_team ? std::max(1, threads - threads / 2) : threads; }
   std::thread merging;
-  bool merge_pending = false;
+  bool merge_pending = false;                     // a migration's rows are still to be merged
+  bool merge_started = false;                     // ... on the thread `merging`
+  std::vector<std::size_t> merge_gone, merge_at;  // splice_step_bodies' leaving rows and arrival places
+  bool merge_shapes = false;
   std::exception_ptr merge_error;
   SpliceMap merged;                     // the new rows' sources while the merge runs
   StepBodies arrivals;                  // this migration's arrivals (ascending id)
@@ -199,6 +212,9 @@ struct StepLoop<Real>::State {
     device_scan = !(scan_knob && std::string(scan_knob) == "host");
     const char* merge_knob = std::getenv("CONTACTGRID_STEP_MERGE");
     defer_merge = !(merge_knob && std::string(merge_knob) == "wait");
+    merge_at_detection = !(merge_knob && std::string(merge_knob) == "layout");
+    const char* team_knob = std::getenv("CONTACTGRID_STEP_MERGE_TEAM");
+    split_team = !(team_knob && std::string(team_knob) == "whole");
     const char* trace_knob = std::getenv("CONTACTGRID_STEP_TRACE");
     trace.on = trace_knob && std::string(trace_knob) == "1";
   }
@@ -207,13 +223,34 @@ struct StepLoop<Real>::State {
     if (merging.joinable()) merging.join();
   }
 
-  // The migration's merge finished: its rows are the bodies (the previous ones the spare).
+  // The migration's merge on its own thread (once; nothing when none is pending).
+  void start_merge() {
+    if (!merge_pending || merge_started) return;
+    merging = std::thread([this] {
+      try {
+        splice_step_bodies(bodies, merge_gone, merge_at, arrivals, merge_shapes, spare, merge_threads());
+      } catch (...) {
+        merge_error = std::current_exception();
+      }
+    });
+    merge_started = true;
+  }
+  // The migration's merge finished (run here when it has not started): its rows are the bodies (the
+  // previous ones the spare).
   void finish_merge() {
     if (!merge_pending) return;
     const auto w0 = WallClock::now();
-    merging.join();
+    if (merge_started) {
+      merging.join();
+    } else {
+      try {
+        splice_step_bodies(bodies, merge_gone, merge_at, arrivals, merge_shapes, spare, threads);
+      } catch (...) {
+        merge_error = std::current_exception();
+      }
+    }
     t[static_cast<std::size_t>(StepStage::merge_wait)] += seconds_since(w0);
-    merge_pending = false;
+    merge_pending = merge_started = false;
     std::swap(bodies, spare);
     if (merge_error) std::rethrow_exception(std::exchange(merge_error, nullptr));
   }

@@ -117,13 +117,15 @@ StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<cons
 
 StepPlan make_step_plan_of(const SlabDecomposition& slabs, int self, std::size_t n,
                            std::span<const std::size_t> candidates, std::span<const double> coordinate,
-                           std::span<const double> radius, const GhostRule& rule, int threads) {
+                           std::span<const double> radius, const GhostRule& rule, int threads,
+                           StepPlan previous) {
   const std::size_t m = candidates.size();
   if (coordinate.size() != m || radius.size() != m)
     throw UsageError("step plan: one coordinate and one radius per candidate");
-  for (std::size_t k = 0; k < m; ++k)
-    if (candidates[k] >= n || (k > 0 && !(candidates[k - 1] < candidates[k])))
-      throw UsageError("step plan: candidates not ascending rows below " + std::to_string(n));
+  if (first_bad(m, threads, [&](std::size_t k) {
+        return candidates[k] >= n || (k > 0 && !(candidates[k - 1] < candidates[k]));
+      }) < m)
+    throw UsageError("step plan: candidates not ascending rows below " + std::to_string(n));
   for (const double reach : {rule.narrow_reach, rule.wide_reach, rule.margin})
     if (!(reach >= 0) || !std::isfinite(reach))
       throw InputError("step plan: ghost width is not a finite value >= 0");
@@ -133,14 +135,31 @@ StepPlan make_step_plan_of(const SlabDecomposition& slabs, int self, std::size_t
   StepPlan of = plan_by(
       slabs, self, coordinate,
       to_ghost_ranks_by(slabs, x, [&rule, radius](std::size_t k) { return rule.width(radius[k]); }), threads);
+  // the previous plan's role storage (a layout's n rows: no fresh pages to fault in)
   StepPlan plan;
-  plan.role.assign(n, RowRole::interior);
-  for (std::size_t k = 0; k < m; ++k) plan.role[candidates[k]] = of.role[k];
+  plan.role = std::move(previous.role);
+  const bool parallel = n > (std::size_t(1) << 16);
+  plan.role.resize(n);
+  RowRole* role = plan.role.data();
+#pragma omp parallel num_threads(threads) if (parallel)
+  {
+#pragma omp for schedule(static)
+    for (std::size_t i = 0; i < n; ++i) role[i] = RowRole::interior;
+#pragma omp for schedule(static)
+    for (std::size_t k = 0; k < m; ++k) role[candidates[k]] = of.role[k];
+  }
   plan.owned = n - (m - of.owned);
   plan.boundary.resize(of.boundary.size());
-  for (std::size_t j = 0; j < of.boundary.size(); ++j) plan.boundary[j] = candidates[of.boundary[j]];
   plan.halo = std::move(of.halo);
-  for (auto& row : plan.halo.rows) row = candidates[row];
+  std::size_t* halo = plan.halo.rows.data();
+  const std::size_t nb = of.boundary.size(), nh = plan.halo.rows.size();
+#pragma omp parallel num_threads(threads) if (nb + nh > (std::size_t(1) << 14))
+  {
+#pragma omp for schedule(static) nowait
+    for (std::size_t j = 0; j < nb; ++j) plan.boundary[j] = candidates[of.boundary[j]];
+#pragma omp for schedule(static)
+    for (std::size_t j = 0; j < nh; ++j) halo[j] = candidates[halo[j]];
+  }
   return plan;
 }
 

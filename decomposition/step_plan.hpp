@@ -73,10 +73,12 @@ StepPlan make_step_plan(const SlabDecomposition& slabs, int self, std::span<cons
 // loop lists them where the rows are: Engine::rows_outside of interior_band). `candidates` (ascending,
 // each < n) must hold every row that the rule makes a ghost or a boundary row, and may hold interior
 // rows; `coordinate[k]` and `radius[k]` are candidate k's. The result is make_step_plan's (by `rule`)
-// over all n rows, bit for bit: the other rows are interior.
+// over all n rows, bit for bit: the other rows are interior. `previous` (a layout's former plan)
+// lends its storage.
 StepPlan make_step_plan_of(const SlabDecomposition& slabs, int self, std::size_t n,
                            std::span<const std::size_t> candidates, std::span<const double> coordinate,
-                           std::span<const double> radius, const GhostRule& rule, int threads = 1);
+                           std::span<const double> radius, const GhostRule& rule, int threads = 1,
+                           StepPlan previous = {});
 
 // The open interval of centre coordinates whose rows are interior under any ghost width up to
 // `max_width` (rank `self`'s slab less max_width at each side, less a margin far above the rounding

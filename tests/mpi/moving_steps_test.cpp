@@ -396,8 +396,10 @@ void check_former_paths(Backend backend) {
     Contacts<Real> last;
   };
   // the knobs as the process got them (a job may run the whole suite under the former paths), put
-  // back after each run: `now` runs the defaults, `former` the former paths
-  const char* const knobs[] = {"CONTACTGRID_STEP_HALO", "CONTACTGRID_STEP_SCAN", "CONTACTGRID_STEP_MERGE"};
+  // back after each run: `now` runs the defaults, `former` the former paths, `beside` the merge beside
+  // the layout with the whole share of threads each (not beside the detection)
+  const char* const knobs[] = {"CONTACTGRID_STEP_HALO", "CONTACTGRID_STEP_SCAN", "CONTACTGRID_STEP_MERGE",
+                               "CONTACTGRID_STEP_MERGE_TEAM"};
   std::vector<std::optional<std::string>> given;
   for (const char* k : knobs) {
     const char* v = std::getenv(k);
@@ -411,12 +413,16 @@ void check_former_paths(Backend backend) {
         unsetenv(knobs[i]);
     }
   };
-  auto run = [&](bool former) {
+  enum class Paths { now, former, beside };
+  auto run = [&](Paths paths) {
     for (const char* k : knobs) unsetenv(k);
-    if (former) {
+    if (paths == Paths::former) {
       setenv("CONTACTGRID_STEP_HALO", "host", 1);
       setenv("CONTACTGRID_STEP_SCAN", "host", 1);
       setenv("CONTACTGRID_STEP_MERGE", "wait", 1);
+    } else if (paths == Paths::beside) {
+      setenv("CONTACTGRID_STEP_MERGE", "layout", 1);
+      setenv("CONTACTGRID_STEP_MERGE_TEAM", "whole", 1);
     }
     DistributedOptions o;
     o.engine.backend = backend;
@@ -433,7 +439,7 @@ void check_former_paths(Backend backend) {
     restore();
     return Run{r.steps, std::move(r.contacts)};
   };
-  const Run now = run(false), former = run(true);
+  const Run now = run(Paths::now), former = run(Paths::former), beside = run(Paths::beside);
   const bool several = session().size() > 1;
   EXPECT_EQ(now.st.halo_on_device, several);  // one rank has no halo
   EXPECT_FALSE(former.st.halo_on_device);
@@ -443,12 +449,15 @@ void check_former_paths(Backend backend) {
   EXPECT_EQ(now.st.halo_rows, former.st.halo_rows);
   EXPECT_EQ(now.st.migrated, former.st.migrated);
   EXPECT_EQ(now.st.rebuilds, former.st.rebuilds);
+  EXPECT_EQ(now.st.step_hashes, beside.st.step_hashes);
+  EXPECT_EQ(now.st.migrated, beside.st.migrated);
   if (several) {
     EXPECT_GT(now.st.migrated, 0u);
     EXPECT_GT(now.st.halo_rows, 0u);
   }
   if (session().rank() == 0) {
     EXPECT_EQ(compare_contacts(now.last, former.last), "identical");
+    EXPECT_EQ(compare_contacts(now.last, beside.last), "identical");
   }
 }
 
