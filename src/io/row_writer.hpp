@@ -11,10 +11,9 @@
 //   populated is written by pwrite instead, which then names the real reason (ENOSPC, EFBIG).
 // CONTACTGRID_IO_WRITE=map chooses the mapping; unset (or pwrite) the pwrite loop. Any other value is
 // refused (UsageError). The mapping is opt-in: one thread populates and copies slower than one pwrite
-// loop (dev machine, tmpfs: 0.24 against 0.6 GB/s), so it pays only where many threads share the
+// loop (dev VM, tmpfs, 375 MiB: 0.95 against 1.3–1.8 GB/s), so it pays only where many threads share the
 // file (BENCHMARKS.md §29; jobs/gpu_io_check.sh measures both).
 #include <cstdint>
-#include <string>
 #include <vector>
 
 namespace cg {
