@@ -1,12 +1,9 @@
-// contact_file.cpp: contact files (docs/FORMAT.md §2) through the HDF5 C API and pwrite (see
-// contact_file.hpp).
+// contact_file.cpp: contact files (docs/FORMAT.md §2) through the HDF5 C API, their rows by
+// io/row_writer (see contact_file.hpp).
 #include "io/contact_file.hpp"
 
-#include <fcntl.h>
 #include <fmt/format.h>
 #include <hdf5.h>
-#include <omp.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -14,14 +11,13 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
-#include <mutex>
-#include <optional>
 #include <type_traits>
 #include <utility>
 
 #include "io/attributes.hpp"
 #include "io/datasets.hpp"
 #include "io/hdf5_handle.hpp"
+#include "io/row_writer.hpp"
 
 namespace cg {
 
@@ -49,13 +45,6 @@ hid_t dataset_type(const ContactField& f, bool fp32) {
   return f.kind == FieldKind::integer ? H5T_STD_I64LE : fp32 ? H5T_IEEE_F32LE : H5T_IEEE_F64LE;
 }
 
-// A run of whole rows of one dataset, written by one pwrite loop.
-struct RowBlock {
-  std::size_t dataset;
-  const unsigned char* src;
-  std::uint64_t offset, bytes, row;  // file offset, length, first row (for messages)
-};
-
 // The rows of dataset k of `c` in layout order (kContactFields).
 template <class Real>
 std::vector<const unsigned char*> row_sources(const Contacts<Real>& c) {
@@ -64,68 +53,6 @@ std::vector<const unsigned char*> row_sources(const Contacts<Real>& c) {
     src.push_back(reinterpret_cast<const unsigned char*>(column.data()));
   });
   return src;
-}
-
-// Rows [from, from + count) of dataset k (at `src`), to the file from `offset` on, in blocks of at most
-// 4 MiB; `row` is the file row of `from`.
-void add_blocks(std::vector<RowBlock>& blocks, std::size_t k, const unsigned char* src,
-                std::uint64_t row_bytes, std::uint64_t from, std::uint64_t count, std::uint64_t offset,
-                std::uint64_t row) {
-  const std::uint64_t rows_per_block = std::max<std::uint64_t>(1, (std::uint64_t(4) << 20) / row_bytes);
-  for (std::uint64_t r = 0; r < count; r += rows_per_block) {
-    const std::uint64_t m = std::min(rows_per_block, count - r);
-    blocks.push_back({k, src + (from + r) * row_bytes, offset + r * row_bytes, m * row_bytes, row + r});
-  }
-}
-
-// The blocks, written into layout.temp by a team of `threads` (0: all). IoError naming the dataset and
-// the rows of the first block that failed.
-void pwrite_blocks(const ContactFileLayout& layout, const std::vector<RowBlock>& blocks, int threads) {
-  if (blocks.empty()) return;
-  const int fd = ::open(layout.temp.c_str(), O_WRONLY | O_CLOEXEC);
-  if (fd < 0) {
-    const int e = errno;
-    throw IoError(
-        fmt::format("{}: cannot open {} for writing: {}", layout.path, layout.temp, std::strerror(e)));
-  }
-  std::mutex failed_mutex;
-  std::optional<std::pair<std::size_t, int>> failed;  // (block, errno) of the first failed block
-  const int team = threads > 0 ? threads : omp_get_max_threads();
-  const std::ptrdiff_t nb = static_cast<std::ptrdiff_t>(blocks.size());
-#pragma omp parallel for num_threads(team) schedule(dynamic, 1) if (nb > 1)
-  for (std::ptrdiff_t b = 0; b < nb; ++b) {
-    const RowBlock& block = blocks[static_cast<std::size_t>(b)];
-    std::uint64_t done = 0;
-    int error = 0;
-    while (done < block.bytes) {
-      const ssize_t w =
-          ::pwrite(fd, block.src + done, block.bytes - done, static_cast<off_t>(block.offset + done));
-      if (w < 0 && errno == EINTR) continue;
-      if (w <= 0) {
-        error = w < 0 ? errno : ENOSPC;  // no progress: treat as a full device
-        break;
-      }
-      done += static_cast<std::uint64_t>(w);
-    }
-    if (error) {
-      std::lock_guard<std::mutex> guard(failed_mutex);
-      if (!failed || b < static_cast<std::ptrdiff_t>(failed->first))
-        failed.emplace(static_cast<std::size_t>(b), error);
-    }
-  }
-  const int closed = ::close(fd);
-  const int close_error = errno;
-  if (failed) {
-    const RowBlock& block = blocks[failed->first];
-    const ContactFileLayout::Dataset& d = layout.datasets[block.dataset];
-    throw IoError(fmt::format("{}: {}: cannot write rows {} to {} (into {}): {}", layout.path, d.name,
-                              block.row, block.row + block.bytes / d.row_bytes - 1, layout.temp,
-                              std::strerror(failed->second)));
-  }
-  if (closed != 0) {
-    throw IoError(fmt::format("{}: cannot close {} after writing rows: {}", layout.path, layout.temp,
-                              std::strerror(close_error)));
-  }
 }
 
 }  // namespace
@@ -247,9 +174,9 @@ void write_contact_rows(const ContactFileLayout& layout, std::uint64_t first_row
   const std::vector<const unsigned char*> src = row_sources(c);
   for (std::size_t k = 0; k < layout.datasets.size(); ++k) {
     const ContactFileLayout::Dataset& d = layout.datasets[k];
-    add_blocks(blocks, k, src[k], d.row_bytes, 0, n, d.offset + first_row * d.row_bytes, first_row);
+    add_row_blocks(blocks, k, src[k], d.row_bytes, 0, n, d.offset + first_row * d.row_bytes, first_row);
   }
-  pwrite_blocks(layout, blocks, threads);
+  write_row_blocks(layout, blocks, threads);
 }
 
 template void write_contact_rows<float>(const ContactFileLayout&, std::uint64_t, const Contacts<float>&, int);
@@ -409,13 +336,13 @@ void ContactFileStream::append(const Contacts<Real>& c, int threads) {
           if (address == HADDR_UNDEF)
             where.fail(fmt::format("{}: the chunk of row {} has no file space", d.name, chunk * cr));
           const std::uint64_t lo = std::max(first, chunk * cr), hi = std::min(end, (chunk + 1) * cr);
-          add_blocks(blocks, k, src[k], d.row_bytes, lo - first, hi - lo,
-                     std::uint64_t(address) + (lo - chunk * cr) * d.row_bytes, lo);
+          add_row_blocks(blocks, k, src[k], d.row_bytes, lo - first, hi - lo,
+                         std::uint64_t(address) + (lo - chunk * cr) * d.row_bytes, lo);
         }
       }
       file.close(where, "cannot close (flush) the file");
     }
-    pwrite_blocks(m_layout, blocks, threads);
+    write_row_blocks(m_layout, blocks, threads);
     m_layout.rows = first + n;
   } catch (...) {
     discard();

@@ -3,9 +3,9 @@
 //
 // Writing goes to "<path>.tmp.<pid>" and is renamed over <path> only after the file is closed, so an
 // output file exists only for a successful run (IoError otherwise, temporary removed). Contact files
-// are written in phases (create, rows by plain pwrite from any number of processes and threads,
-// commit), so the ranks of an MPI run write their rows of one file at once (comm/distributed_write).
-// Reading throws InputError naming the file and the dataset.
+// are written in phases (create, rows by plain pwrite or a shared mapping (io/row_writer) from any number of
+// processes and threads, commit), so the ranks of an MPI run write their rows of one file at once
+// (comm/distributed_write). Reading throws InputError naming the file and the dataset.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -41,8 +41,8 @@ void write_contacts(const std::string& path, const Contacts<Real>& contacts, con
 //     (docs/FORMAT.md §2 types and shapes; contiguous, space allocated at creation, never filled), closed;
 //     the layout says where each dataset's rows lie in the file.
 // (b) write_contact_rows (any process that can see the file, once per row, slices in any order and
-//     of any size): plain pwrite of the rows at offset + first_row · row_bytes, by several threads.
-//     No HDF5 involved, so processes and threads write at once.
+//     of any size): the rows copied (io/row_writer: pwrite, or CONTACTGRID_IO_WRITE=map) at offset +
+//     first_row · row_bytes, by several threads. No HDF5 involved, so processes and threads write at once.
 // (c) commit_contact_file (the creating process, after every (b) has returned): the root attributes
 //     (docs/FORMAT.md §2), then the temporary is renamed over path. On a failure anywhere,
 //     discard_contact_file removes the temporary: no output appears.

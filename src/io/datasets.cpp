@@ -11,14 +11,24 @@
 #include <bit>
 #include <cerrno>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <limits>
+#include <string_view>
 #include <vector>
 
 #include "io/attributes.hpp"
 
 namespace cg::h5 {
+
+ReadMode read_mode() {
+  const char* knob = std::getenv("CONTACTGRID_IO_READ");
+  const std::string_view v = knob ? knob : "";
+  if (v.empty() || v == "direct") return ReadMode::direct;
+  if (v == "hdf5") return ReadMode::hdf5;
+  throw UsageError(fmt::format("CONTACTGRID_IO_READ={}: expected direct or hdf5", v));
+}
 
 Dataset open_dataset(const Where& where, hid_t file, const std::string& name, hsize_t cols, Element element) {
   if (!path_exists(where, file, name)) where.bad(fmt::format("{}: missing dataset", name));
@@ -121,49 +131,59 @@ void read_rows(const Where& where, const Dataset& d, hsize_t first, hsize_t coun
 }
 
 // The same rows as read_rows into float64 memory, read straight from the file with pread on all
-// threads when the dataset is stored as plain bytes of that type: contiguous layout (no chunks, no
-// filters, no external file), IEEE float64 little-endian, allocated. HDF5's own read runs on one thread
-// (well below the page cache's bandwidth); anything else goes through it.
+// threads when the dataset is stored as plain bytes: contiguous layout (no chunks, no filters, no
+// external file), allocated, IEEE float64 or float32 little-endian (float32 rows widened to double by
+// the thread that read them, as H5Dread converts them). HDF5's own read runs on one thread (well
+// below the page cache's bandwidth); anything else goes through it, and so does everything with
+// CONTACTGRID_IO_READ=hdf5.
 void read_rows_f64(const Where& where, const Dataset& d, hsize_t first, hsize_t count, double* out) {
   if (count == 0) return;
   static_assert(std::endian::native == std::endian::little, "direct reads assume a little-endian host");
-  bool direct = false;
+  std::uint64_t element = 0;  // 8 or 4: the file's float64 or float32 bytes; 0: through HDF5
   haddr_t base = HADDR_UNDEF;
-  {
+  if (read_mode() == ReadMode::direct) {
     Handle dcpl(H5Dget_create_plist(d.id), H5Pclose);
     Handle type(H5Dget_type(d.id), H5Tclose);
-    direct = dcpl.get() >= 0 && type.get() >= 0 && H5Pget_layout(dcpl) == H5D_CONTIGUOUS &&
-             H5Pget_external_count(dcpl) == 0 && H5Tequal(type, H5T_IEEE_F64LE) > 0;
-    if (direct) base = H5Dget_offset(d.id);
-    if (base == HADDR_UNDEF) direct = false;
+    if (dcpl.get() >= 0 && type.get() >= 0 && H5Pget_layout(dcpl) == H5D_CONTIGUOUS &&
+        H5Pget_external_count(dcpl) == 0) {
+      element = H5Tequal(type, H5T_IEEE_F64LE) > 0 ? 8 : H5Tequal(type, H5T_IEEE_F32LE) > 0 ? 4 : 0;
+    }
+    if (element != 0) base = H5Dget_offset(d.id);
+    if (base == HADDR_UNDEF) element = 0;
   }
-  if (!direct) {
+  if (element == 0) {
     read_rows(where, d, first, count, H5T_NATIVE_DOUBLE, out);
     return;
   }
-  const std::uint64_t row_bytes = 8 * std::max<hsize_t>(d.cols, 1);
-  const std::uint64_t offset = std::uint64_t(base) + std::uint64_t(first) * row_bytes;
-  const std::uint64_t bytes = std::uint64_t(count) * row_bytes;
+  const std::uint64_t values_per_row = std::max<hsize_t>(d.cols, 1);
+  const std::uint64_t offset = std::uint64_t(base) + std::uint64_t(first) * values_per_row * element;
+  const std::uint64_t bytes = std::uint64_t(count) * values_per_row * element;
   const int fd = ::open(where.file().c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) where.bad(fmt::format("{}: cannot open for reading: {}", d.name, std::strerror(errno)));
-  constexpr std::uint64_t kBlock = std::uint64_t(4) << 20;
+  constexpr std::uint64_t kBlock = std::uint64_t(4) << 20;  // file bytes a block (a multiple of 8)
   const auto blocks = static_cast<std::int64_t>((bytes + kBlock - 1) / kBlock);
   std::atomic<int> error{0};
   const int threads = blocks > 1 ? omp_get_max_threads() : 1;
-#pragma omp parallel for num_threads(threads) schedule(dynamic, 1) if (threads > 1)
-  for (std::int64_t b = 0; b < blocks; ++b) {
-    const std::uint64_t at = std::uint64_t(b) * kBlock, len = std::min(kBlock, bytes - at);
-    auto* dst = reinterpret_cast<unsigned char*>(out) + at;
-    std::uint64_t done = 0;
-    while (done < len && error.load(std::memory_order_relaxed) == 0) {
-      const ssize_t r = ::pread(fd, dst + done, len - done, static_cast<off_t>(offset + at + done));
-      if (r < 0 && errno == EINTR) continue;
-      if (r <= 0) {
-        int expected = 0;
-        error.compare_exchange_strong(expected, r < 0 ? errno : EIO);  // 0 bytes: the file is truncated
-        break;
+#pragma omp parallel num_threads(threads) if (threads > 1)
+  {
+    std::vector<float> narrow(element == 4 ? kBlock / 4 : 0);  // a float32 block before it is widened
+#pragma omp for schedule(dynamic, 1)
+    for (std::int64_t b = 0; b < blocks; ++b) {
+      const std::uint64_t at = std::uint64_t(b) * kBlock, len = std::min(kBlock, bytes - at);
+      auto* dst = element == 8 ? reinterpret_cast<unsigned char*>(out) + at
+                               : reinterpret_cast<unsigned char*>(narrow.data());
+      std::uint64_t done = 0;
+      while (done < len && error.load(std::memory_order_relaxed) == 0) {
+        const ssize_t r = ::pread(fd, dst + done, len - done, static_cast<off_t>(offset + at + done));
+        if (r < 0 && errno == EINTR) continue;
+        if (r <= 0) {
+          int expected = 0;
+          error.compare_exchange_strong(expected, r < 0 ? errno : EIO);  // 0 bytes: the file is truncated
+          break;
+        }
+        done += static_cast<std::uint64_t>(r);
       }
-      done += static_cast<std::uint64_t>(r);
+      if (element == 4 && done == len) std::copy(narrow.data(), narrow.data() + len / 4, out + at / 4);
     }
   }
   ::close(fd);

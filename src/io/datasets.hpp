@@ -40,11 +40,17 @@ std::uint64_t declared_bytes(const Where& where, const std::string& name, const 
 // InputError unless d has as many rows as reference.
 void require_rows(const Where& where, const Dataset& d, const Dataset& reference);
 
+// How read_rows_f64 reads plain storage: CONTACTGRID_IO_READ=hdf5 sends every read through H5Dread
+// (one thread; the former path, for comparison), unset or `direct` by pread; any other value is refused
+// (UsageError).
+enum class ReadMode { direct, hdf5 };
+ReadMode read_mode();
+
 // Rows [first, first + count) of d into out (count·max(cols,1) values of mem_type).
 void read_rows(const Where& where, const Dataset& d, hsize_t first, hsize_t count, hid_t mem_type, void* out);
 
-// The same rows into float64 memory; plain contiguous float64 little-endian storage is read by pread
-// on all threads, anything else through read_rows.
+// The same rows into float64 memory; plain contiguous float64 or float32 little-endian storage is read
+// by pread on all threads (float32 widened), anything else through read_rows.
 void read_rows_f64(const Where& where, const Dataset& d, hsize_t first, hsize_t count, double* out);
 
 }  // namespace cg::h5
