@@ -16,6 +16,12 @@ CG="$BIN/contactgrid"; N=${N:-33554432}; STEPS=${STEPS:-16}
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_btl_vader_single_copy_mechanism=cma
 MPI=(mpirun --bind-to none --allow-run-as-root)
 { date -u; nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader; } | tee "$OUT/device.txt"
+if [ -x "$BIN/contactgrid_mpi_tests" ]; then  # the CUDA moving-step cases at np 2 first
+  timeout 150 "${MPI[@]}" -np 2 "$BIN/contactgrid_mpi_tests" --gtest_color=no \
+    --gtest_filter='MovingSteps.Cuda*:StepLoop.*Cuda*' >"$OUT/mpi_tests.np2.log" 2>&1
+  echo "mpi tests np 2 (MovingSteps.Cuda*, StepLoop.*Cuda*): rc=$?"
+  grep -E '^\[  (PASSED|FAILED|SKIPPED) ' "$OUT/mpi_tests.np2.log" | sort | uniq -c | head
+fi
 timeout 90 "$CG" generate "$W/s.h5" -n "$N" --seed 25 --contacts-per-body 6 -q || echo "generate failed"
 # run TAG NP [ENV…]
 run() {
