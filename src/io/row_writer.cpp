@@ -88,17 +88,19 @@ void add_row_blocks(std::vector<RowBlock>& blocks, std::size_t k, const unsigned
   }
 }
 
-RowWriteMode row_write_mode() {
+RowWriteMode row_write_mode(int team) {
   const char* knob = std::getenv("CONTACTGRID_IO_WRITE");
   const std::string_view v = knob ? knob : "";
-  if (v.empty() || v == "pwrite") return RowWriteMode::pwrite;
+  if (v.empty()) return team >= kMapWriteThreads ? RowWriteMode::map : RowWriteMode::pwrite;
+  if (v == "pwrite") return RowWriteMode::pwrite;
   if (v == "map") return RowWriteMode::map;
   throw UsageError(fmt::format("CONTACTGRID_IO_WRITE={}: expected pwrite or map", v));
 }
 
 void write_row_blocks(const ContactFileLayout& layout, const std::vector<RowBlock>& blocks, int threads) {
   if (blocks.empty()) return;
-  const bool mapped = row_write_mode() == RowWriteMode::map;
+  const int team = threads > 0 ? threads : omp_get_max_threads();
+  const bool mapped = row_write_mode(team) == RowWriteMode::map;
   const int fd = ::open(layout.temp.c_str(), (mapped ? O_RDWR : O_WRONLY) | O_CLOEXEC);
   if (fd < 0) {
     const int e = errno;
@@ -108,7 +110,6 @@ void write_row_blocks(const ContactFileLayout& layout, const std::vector<RowBloc
   const std::optional<Mapping> map = mapped ? map_blocks(fd, blocks) : std::nullopt;
   std::mutex failed_mutex;
   std::optional<std::pair<std::size_t, int>> failed;  // (block, errno) of the first failed block
-  const int team = threads > 0 ? threads : omp_get_max_threads();
   const std::ptrdiff_t nb = static_cast<std::ptrdiff_t>(blocks.size());
 #pragma omp parallel for num_threads(team) schedule(dynamic, 1) if (nb > 1)
   for (std::ptrdiff_t b = 0; b < nb; ++b) {

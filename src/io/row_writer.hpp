@@ -34,8 +34,13 @@ void add_row_blocks(std::vector<RowBlock>& blocks, std::size_t k, const unsigned
                     std::uint64_t row);
 
 enum class RowWriteMode { pwrite, map };
-// The mode CONTACTGRID_IO_WRITE asks for.
-RowWriteMode row_write_mode();
+// The team size from which the mapped writer is the default: the kernel runs one pwrite into a file at
+// a time, while each thread populates its own mapped pages; with 16 threads the mapping writes the
+// 2^24 sphere job's 375 MB at 3.4 GB/s against pwrite's 2.3, with 2 it is the slower (BENCHMARKS §29).
+inline constexpr int kMapWriteThreads = 8;
+// The mode CONTACTGRID_IO_WRITE asks for (pwrite or map; unset: map for a team of at least
+// kMapWriteThreads threads, else pwrite).
+RowWriteMode row_write_mode(int team);
 
 // The blocks, written into layout.temp by a team of `threads` (0: all). IoError naming the dataset and
 // the rows of the first block that failed.

@@ -194,20 +194,22 @@ TEST_F(RowWriter, StreamedFilesAreByteIdenticalEitherWay) {
 
 TEST_F(RowWriter, KnobChoosesAndRefusesOtherValues) {
   {
-    IoKnob knob("");
-    EXPECT_EQ(row_write_mode(), RowWriteMode::pwrite);
+    IoKnob knob("");  // unset: by the team's size
+    EXPECT_EQ(row_write_mode(1), RowWriteMode::pwrite);
+    EXPECT_EQ(row_write_mode(kMapWriteThreads - 1), RowWriteMode::pwrite);
+    EXPECT_EQ(row_write_mode(kMapWriteThreads), RowWriteMode::map);
   }
   {
     IoKnob knob("pwrite");
-    EXPECT_EQ(row_write_mode(), RowWriteMode::pwrite);
+    EXPECT_EQ(row_write_mode(64), RowWriteMode::pwrite);
   }
   {
     IoKnob knob("map");
-    EXPECT_EQ(row_write_mode(), RowWriteMode::map);
+    EXPECT_EQ(row_write_mode(1), RowWriteMode::map);
   }
   {
     IoKnob knob("hdf5");
-    EXPECT_THROW(row_write_mode(), UsageError);
+    EXPECT_THROW(row_write_mode(1), UsageError);
   }
 }
 
