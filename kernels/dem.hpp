@@ -145,8 +145,9 @@ class Simulation {
   // indices) and the frame of every detection (the run's, the same on every rank), from the start.
   Simulation(const DemBodies& bodies, const DemOptions& options, std::vector<std::int64_t> ids,
              std::optional<Frame> frame);
-  // A step in two halves with the ghosts' exchange between: kick_drift of every row; then the
-  // detection in `frame`, the forces and the kick (the same bits as run(1)).
+  // A step in two halves with the ghosts' exchange between: kick_drift of every row (nothing where
+  // the rows already hold it: after receive_halo); then the detection in `frame`, the forces and the
+  // kick (the same bits as run(1)).
   void kick_drift();
   void finish_step(std::optional<Frame> frame);
   // The state (DemRow) of rows `rows` out (CUDA: gathered and downloaded) and in (uploaded, scattered).
@@ -170,6 +171,22 @@ class Simulation {
   const DemRow* gather_halo();
   DemRow* halo_inbox();
   void scatter_halo();
+  // The step's second half with the halo overlapping its forces (the halo set; can_overlap): the
+  // detection in `frame`, then the forces in two passes (dem::Pass): the edge's (the halo's rows,
+  // sent and received, and every contact touching one) with their kick and the next step's
+  // kick_drift; the sent rows' records gathered (as gather_halo) and returned; the interior's (every
+  // other row and contact) with the same kick and kick_drift. After the caller fills halo_inbox,
+  // receive_halo scatters it into the ghosts' rows. CUDA: the interior's passes run on the device
+  // while the records are downloaded, exchanged and uploaded (the records on a stream of their own;
+  // the device's later work ordered after their scatter); CPU: the interior's after the scatter. The
+  // same bits as finish_step, kick_drift, gather_halo, scatter_halo: each contact and body is
+  // computed once by the same function, and the interior's reads no row the halo writes.
+  bool can_overlap() const;
+  const DemRow* finish_step_sending(std::optional<Frame> frame);
+  void receive_halo();
+  // DemOptions::stage_times: the device's seconds in the last overlapped step's interior passes
+  // (CUDA; waits for them), what the halo's exchange can hide behind; CPU: 0 (they run after it).
+  double interior_seconds();
   void mark_rows();  // the displacement counts from here (set_rows of the same rows, nothing moved)
   void set_rows(const DemBodies& bodies, std::vector<std::int64_t> ids, const DemState& state);
   const std::vector<std::int64_t>& ids() const;

@@ -111,6 +111,22 @@ inline void dem_set_halo(CudaDem& d, const std::vector<std::uint32_t>& send,
   if (!receive.empty())
     CG_CUDA_CHECK(cudaMemcpy(d.halo_receive.data(), receive.data(), receive.size() * sizeof(std::uint32_t),
                              cudaMemcpyHostToDevice));
+  // the overlapped step's edge (dem_overlap.cuh): the flags of the rows sent or received, those rows
+  std::vector<std::uint8_t> flags(d.count, 0);
+  for (const auto* rows : {&send, &receive})
+    for (const std::uint32_t r : *rows) flags[r] = 1;
+  std::vector<std::uint32_t> edge_rows;
+  for (std::size_t i = 0; i < flags.size(); ++i)
+    if (flags[i]) edge_rows.push_back(static_cast<std::uint32_t>(i));
+  d.edge_count = edge_rows.size();
+  d.edge.reserve(std::max<std::size_t>(d.count, 1), false);
+  d.edge_rows.reserve(std::max<std::size_t>(edge_rows.size(), 1), false);
+  if (!flags.empty())
+    CG_CUDA_CHECK(cudaMemcpy(d.edge.data(), flags.data(), flags.size(), cudaMemcpyHostToDevice));
+  if (!edge_rows.empty())
+    CG_CUDA_CHECK(cudaMemcpy(d.edge_rows.data(), edge_rows.data(), edge_rows.size() * sizeof(std::uint32_t),
+                             cudaMemcpyHostToDevice));
+  d.halo_stream.create();
 }
 
 // The sent rows' records, gathered on the device and downloaded into the page-locked buffer.

@@ -72,6 +72,32 @@ class DemStageEvents {
   bool m_on = false;
 };
 
+// The overlapped step's stream and events (dem_overlap.cuh): the halo's records move on a
+// non-blocking stream of their own, ordered against the legacy stream by events (edge: the edge's
+// passes done; sent: the records downloaded; received: scattered); interior_begin/end time the
+// interior's passes (stage times).
+class DemHaloStream {
+ public:
+  DemHaloStream() = default;
+  DemHaloStream(const DemHaloStream&) = delete;
+  DemHaloStream& operator=(const DemHaloStream&) = delete;
+  ~DemHaloStream() {
+    for (cudaEvent_t e : {edge, sent, received, interior_begin, interior_end})
+      if (e) cudaEventDestroy(e);
+    if (stream) cudaStreamDestroy(stream);
+  }
+  void create() {
+    if (stream) return;
+    CG_CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+    for (cudaEvent_t* e : {&edge, &sent, &received})
+      CG_CUDA_CHECK(cudaEventCreateWithFlags(e, cudaEventDisableTiming));
+    for (cudaEvent_t* e : {&interior_begin, &interior_end}) CG_CUDA_CHECK(cudaEventCreate(e));
+  }
+  cudaStream_t stream = nullptr;
+  cudaEvent_t edge = nullptr, sent = nullptr, received = nullptr, interior_begin = nullptr,
+              interior_end = nullptr;
+};
+
 class CudaDem {
  public:
   int device = 0;
@@ -123,6 +149,14 @@ class CudaDem {
   std::size_t halo_sends = 0, halo_receives = 0;
   DemBuffer<DemRow> halo_records;
   cuda::PinnedBuffer halo_out, halo_in;
+  // the overlapped step (dem_overlap.cuh): each row's edge flag (a halo row, sent or received), the
+  // edge rows (ascending, once each), the halo's stream; interior_timed: the last overlapped step
+  // recorded the interior's events
+  DemBuffer<std::uint8_t> edge;
+  DemBuffer<std::uint32_t> edge_rows;
+  std::size_t edge_count = 0;
+  DemHaloStream halo_stream;
+  bool interior_timed = false;
   DemBuffer<Vec3<double>> mark;
   bool normals_f = false;
 

@@ -96,6 +96,11 @@ class ResidentDem {
     if (way != "halo" && way != "records")
       throw UsageError("CONTACTGRID_SIMULATE_GHOSTS must be halo or records (got \"" + way + "\")");
     m_ghost_records = way == "records";
+    const char* overlap = std::getenv("CONTACTGRID_SIMULATE_OVERLAP");
+    const std::string lap = overlap ? overlap : "on";
+    if (lap != "on" && lap != "off")
+      throw UsageError("CONTACTGRID_SIMULATE_OVERLAP must be on or off (got \"" + lap + "\")");
+    m_overlap = lap == "on" && !m_ghost_records;
     m_width = (2 * r_max + m_skin) * (1 + 1e-9);
     std::vector<double> sample(n);
     for (std::size_t i = 0; i < n; ++i) sample[i] = component(all.position[i], m_axis);
@@ -134,7 +139,10 @@ class ResidentDem {
     check_halo_counts();
   }
 
-  void step() {
+  // One step; `another`: the next step follows with nothing between (no log row, frame or keys),
+  // so this step may end with the next one's kick_drift and the ghosts' halo overlapping its forces
+  // (the overlap: Simulation::finish_step_sending; CONTACTGRID_SIMULATE_OVERLAP=off: never).
+  void step(bool another = false) {
     ++m_steps;
     // --stage-times: the host's time of each phase (the device waited for at the step's end)
     auto t = std::chrono::steady_clock::now();
@@ -144,8 +152,10 @@ class ResidentDem {
       into += std::chrono::duration<double>(now - t).count();
       t = now;
     };
-    agreed_stage(m_session, "simulate", [&] { m_sim->kick_drift(); });
-    exchange_ghosts();
+    if (!m_ready) {  // the last step ended without this one's kick_drift and halo
+      agreed_stage(m_session, "simulate", [&] { m_sim->kick_drift(); });
+      exchange_ghosts();
+    }
     lap(m_phases.halo);
     ResidentExtent e;
     agreed_stage(m_session, "simulate", [&] {
@@ -165,20 +175,33 @@ class ResidentDem {
       m_relayout_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     }
     lap(m_phases.relayout);
+    bool overlap = false;
+    agreed_stage(m_session, "simulate", [&] { overlap = m_overlap && another && m_sim->can_overlap(); });
+    if (overlap) {
+      overlapped_forces(lap);
+      m_ready = true;
+      return;
+    }
     agreed_stage(m_session, "simulate", [&] {
       m_sim->finish_step(m_frame);
       if (m_options.stage_times) m_sim->extent();  // waits for the step's device work
     });
     lap(m_phases.forces);
     if (m_options.stage_times) ++m_phases.steps;
+    m_ready = false;
   }
 
   // --stage-times: where this rank's steps went (seconds, summed over `steps` steps): kick-drift and
   // the ghosts' exchange (halo), the bounds and displacement over the ranks (frame), relayouts, and
   // the detection, forces and kick until the device finished them (forces).
+  // Overlapped steps (step: `another`): halo is the records' exchange and upload (the device runs
+  // the interior's forces meanwhile), hidden the part of it the interior's passes covered on the
+  // device (CUDA: their events; CPU: none, the interior's passes run after the exchange), forces the
+  // detection and the edge's passes until the records were downloaded, then the wait for the
+  // device after the exchange.
   struct Phases {
-    double halo = 0, frame = 0, relayout = 0, forces = 0;
-    std::uint64_t steps = 0;
+    double halo = 0, frame = 0, relayout = 0, forces = 0, hidden = 0;
+    std::uint64_t steps = 0, overlapped = 0;
   };
   const Phases& phases() const { return m_phases; }
 
@@ -454,6 +477,34 @@ class ResidentDem {
     });
   }
 
+  // The step's forces with the ghosts' halo between their two passes (Simulation::finish_step_sending):
+  // the edge's forces and the sent rows' records, the records to their ranks while the device runs
+  // the interior's, the received records into the ghosts' rows. The rows end drifted for the next
+  // step, the ghosts current (m_ready).
+  template <class Lap>
+  void overlapped_forces(Lap& lap) {
+    const DemRow* out = nullptr;
+    DemRow* in = nullptr;
+    agreed_stage(m_session, "simulate", [&] {
+      out = m_sim->finish_step_sending(m_frame);
+      in = m_sim->halo_inbox();
+    });
+    lap(m_phases.forces);
+    const auto t0 = std::chrono::steady_clock::now();
+    alltoallv_records(m_session, sizeof(DemRow), out, m_send_counts, in, m_recv_counts);
+    agreed_stage(m_session, "simulate", [&] { m_sim->receive_halo(); });
+    const double exchange = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    lap(m_phases.halo);
+    if (!m_options.stage_times) return;
+    agreed_stage(m_session, "simulate", [&] {
+      m_phases.hidden += std::min(exchange, m_sim->interior_seconds());
+      m_sim->extent();  // waits for the step's device work
+    });
+    lap(m_phases.forces);
+    ++m_phases.steps;
+    ++m_phases.overlapped;
+  }
+
   std::size_t held_row(std::int64_t id) const {
     const auto at = std::lower_bound(m_ids.begin(), m_ids.end(), id);
     if (at == m_ids.end() || *at != id)
@@ -661,6 +712,9 @@ class ResidentDem {
   std::vector<std::uint32_t> m_owned_rows, m_send_rows, m_recv_rows;
   std::vector<std::uint64_t> m_send_counts, m_recv_counts;
   bool m_ghost_records = false;  // CONTACTGRID_SIMULATE_GHOSTS=records (exchange_ghosts)
+  bool m_overlap = true;         // CONTACTGRID_SIMULATE_OVERLAP (step)
+  // the rows hold this step's kick_drift and the ghosts their owners' state (an overlapped step ended)
+  bool m_ready = false;
   std::uint64_t m_steps = 0, m_rebuilds = 0, m_migrated = 0, m_rebalances = 0;
   double m_relayout_seconds = 0;
   Phases m_phases;
