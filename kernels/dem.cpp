@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <sstream>
 #include <string>
@@ -57,21 +58,24 @@ void cuda_dem_write_rows(CudaDem&, const std::vector<std::uint32_t>&, const std:
 }
 bool cuda_dem_can_overlap(const CudaDem&) { return false; }
 template <class Real>
-const DemRow* cuda_dem_forces_sending(CudaDem&, const DeviceContactsView<Real>&, const dem::StepConstants&) {
+const std::byte* cuda_dem_forces_sending(CudaDem&, const DeviceContactsView<Real>&,
+                                         const dem::StepConstants&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
-template const DemRow* cuda_dem_forces_sending(CudaDem&, const DeviceContactsView<float>&,
-                                               const dem::StepConstants&);
-template const DemRow* cuda_dem_forces_sending(CudaDem&, const DeviceContactsView<double>&,
-                                               const dem::StepConstants&);
+template const std::byte* cuda_dem_forces_sending(CudaDem&, const DeviceContactsView<float>&,
+                                                  const dem::StepConstants&);
+template const std::byte* cuda_dem_forces_sending(CudaDem&, const DeviceContactsView<double>&,
+                                                  const dem::StepConstants&);
 void cuda_dem_receive_halo(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
 double cuda_dem_interior_seconds(CudaDem&) { return 0; }
 void cuda_dem_mark(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
-void cuda_dem_set_halo(CudaDem&, const std::vector<std::uint32_t>&, const std::vector<std::uint32_t>&) {
+void cuda_dem_set_halo(CudaDem&, const std::vector<std::uint32_t>&, const std::vector<std::uint32_t>&, bool) {
   throw CudaError("this contactgrid was built without CUDA");
 }
-const DemRow* cuda_dem_gather_halo(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
-DemRow* cuda_dem_halo_inbox(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
+const std::byte* cuda_dem_gather_halo(CudaDem&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+std::byte* cuda_dem_halo_inbox(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
 void cuda_dem_scatter_halo(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
 double cuda_dem_displacement(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
 void cuda_dem_get_state(CudaDem&, std::size_t, DemState&) {
@@ -275,8 +279,9 @@ struct Simulation<Real>::Impl {
   std::vector<Vec3<double>> marked;
   // set_halo's rows (the CPU's; CUDA keeps them on the device) and the CPU's records of them
   std::vector<std::uint32_t> halo_send, halo_receive;
-  std::vector<DemRow> halo_out, halo_in;
+  std::vector<std::byte> halo_out, halo_in;
   bool halo_set = false;
+  bool halo_spheres = false;  // the halo's records are DemSphereRow (else DemRow)
   // the CPU's edge flags (the halo's rows, sent or received: the overlapped step's first pass)
   std::vector<std::uint8_t> edge;
 
@@ -644,6 +649,31 @@ void set_host_row(detail::host::HostDem& h, std::size_t i, const DemRow& r) {
   h.force[i] = r.force;
   h.torque[i] = r.torque;
 }
+// Row i as the halo's record at `at` (a sphere's: DemSphereRow), and such a record into row i.
+void put_halo_row(const detail::host::HostDem& h, std::size_t i, bool sphere, std::byte* at) {
+  if (!sphere) {
+    const DemRow r = host_row(h, i);
+    std::memcpy(at, &r, sizeof r);
+    return;
+  }
+  const DemSphereRow r{h.position[i], h.velocity[i], h.omega[i], h.force[i], h.torque[i]};
+  std::memcpy(at, &r, sizeof r);
+}
+void take_halo_row(detail::host::HostDem& h, std::size_t i, bool sphere, const std::byte* at) {
+  if (!sphere) {
+    DemRow r;
+    std::memcpy(&r, at, sizeof r);
+    set_host_row(h, i, r);
+    return;
+  }
+  DemSphereRow r;
+  std::memcpy(&r, at, sizeof r);
+  h.position[i] = r.position;
+  h.velocity[i] = r.velocity;
+  h.omega[i] = r.omega;
+  h.force[i] = r.force;
+  h.torque[i] = r.torque;
+}
 }  // namespace
 
 template <class Real>
@@ -675,11 +705,12 @@ void Simulation<Real>::write_rows(const std::vector<std::uint32_t>& rows, const 
 
 template <class Real>
 void Simulation<Real>::set_halo(const std::vector<std::uint32_t>& send,
-                                const std::vector<std::uint32_t>& receive) {
+                                const std::vector<std::uint32_t>& receive, bool full_records) {
   Impl& s = *m_impl;
   s.halo_set = false;
+  s.halo_spheres = !full_records && s.start.shape.empty();
   if (s.resolved == Backend::cuda) {
-    detail::cuda_dem_set_halo(*s.cuda, send, receive);  // checks the rows
+    detail::cuda_dem_set_halo(*s.cuda, send, receive, s.halo_spheres);  // checks the rows
     s.halo_set = true;
     return;
   }
@@ -693,25 +724,29 @@ void Simulation<Real>::set_halo(const std::vector<std::uint32_t>& send,
   for (const auto* rows : {&send, &receive})
     for (const std::uint32_t r : *rows) s.edge[r] = 1;
   s.halo_set = true;
-  s.halo_out.resize(send.size());
-  s.halo_in.resize(receive.size());
+  s.halo_out.resize(send.size() * halo_record_bytes());
+  s.halo_in.resize(receive.size() * halo_record_bytes());
 }
 
 template <class Real>
-const DemRow* Simulation<Real>::gather_halo() {
+std::size_t Simulation<Real>::halo_record_bytes() const {
+  return m_impl->halo_spheres ? sizeof(DemSphereRow) : sizeof(DemRow);
+}
+
+template <class Real>
+const std::byte* Simulation<Real>::gather_halo() {
   Impl& s = *m_impl;
   if (!s.halo_set) throw Error("simulate: the halo's rows were not set: internal error");
   if (s.resolved == Backend::cuda) return detail::cuda_dem_gather_halo(*s.cuda);
   const detail::host::HostDem& h = s.host;
-  for (std::size_t j = 0; j < s.halo_send.size(); ++j) {
-    const std::size_t i = s.halo_send[j];
-    s.halo_out[j] = host_row(h, i);
-  }
+  const std::size_t bytes = halo_record_bytes();
+  for (std::size_t j = 0; j < s.halo_send.size(); ++j)
+    put_halo_row(h, s.halo_send[j], s.halo_spheres, s.halo_out.data() + j * bytes);
   return s.halo_out.data();
 }
 
 template <class Real>
-DemRow* Simulation<Real>::halo_inbox() {
+std::byte* Simulation<Real>::halo_inbox() {
   Impl& s = *m_impl;
   if (!s.halo_set) throw Error("simulate: the halo's rows were not set: internal error");
   if (s.resolved == Backend::cuda) return detail::cuda_dem_halo_inbox(*s.cuda);
@@ -724,10 +759,9 @@ void Simulation<Real>::scatter_halo() {
   if (!s.halo_set) throw Error("simulate: the halo's rows were not set: internal error");
   if (s.resolved == Backend::cuda) return detail::cuda_dem_scatter_halo(*s.cuda);
   detail::host::HostDem& h = s.host;
-  for (std::size_t j = 0; j < s.halo_receive.size(); ++j) {
-    const std::size_t i = s.halo_receive[j];
-    set_host_row(h, i, s.halo_in[j]);
-  }
+  const std::size_t bytes = halo_record_bytes();
+  for (std::size_t j = 0; j < s.halo_receive.size(); ++j)
+    take_halo_row(h, s.halo_receive[j], s.halo_spheres, s.halo_in.data() + j * bytes);
 }
 
 template <class Real>
@@ -738,7 +772,7 @@ bool Simulation<Real>::can_overlap() const {
 }
 
 template <class Real>
-const DemRow* Simulation<Real>::finish_step_sending(std::optional<Frame> frame) {
+const std::byte* Simulation<Real>::finish_step_sending(std::optional<Frame> frame) {
   Impl& s = *m_impl;
   if (!can_overlap()) throw Error("simulate: an overlapped step without its halo: internal error");
   s.frame = frame;

@@ -21,8 +21,8 @@ namespace cg::detail {
 inline bool dem_can_overlap(const CudaDem& d) { return !d.a_sums && d.halo_stream.stream != nullptr; }
 
 template <class Real>
-const DemRow* dem_forces_sending(CudaDem& d, const dem::ContactRows<Real>& rows,
-                                 const dem::StepConstants& c) {
+const std::byte* dem_forces_sending(CudaDem& d, const dem::ContactRows<Real>& rows,
+                                    const dem::StepConstants& c) {
   DemHaloStream& h = d.halo_stream;
   const std::size_t k = rows.count, m = d.edge_count;
   const std::uint32_t* by_b = d.count > 0 ? dem_body_index(d, rows) : nullptr;
@@ -47,15 +47,13 @@ const DemRow* dem_forces_sending(CudaDem& d, const dem::ContactRows<Real>& rows,
   dem_body_launch(d, rows, c, DemThen::kick_and_drift, by_b, dem::Pass::edge, d.edge.data());
   CG_CUDA_CHECK(cudaEventRecord(h.edge, cudaStreamLegacy));
   // the sent rows' records, on the halo's stream once the edge is done
-  auto* out = reinterpret_cast<DemRow*>(d.halo_out.data());
+  std::byte* out = d.halo_out.data();
   const std::size_t sends = d.halo_sends;
   if (sends > 0) {
     CG_CUDA_CHECK(cudaStreamWaitEvent(h.stream, h.edge, 0));
-    cuda::dem_gather_rows_kernel<<<cuda::blocks_for(sends), cuda::kBlock, 0, h.stream>>>(
-        d.arrays(), d.halo_send.data(), sends, d.halo_records.data());
-    CG_CUDA_CHECK_LAUNCH("dem_gather_rows");
-    CG_CUDA_CHECK(cudaMemcpyAsync(out, d.halo_records.data(), sends * sizeof(DemRow), cudaMemcpyDeviceToHost,
-                                  h.stream));
+    dem_gather_halo_records(d, h.stream);
+    CG_CUDA_CHECK(cudaMemcpyAsync(out, d.halo_records.data(), sends * dem_halo_record_bytes(d),
+                                  cudaMemcpyDeviceToHost, h.stream));
     CG_CUDA_CHECK(cudaEventRecord(h.sent, h.stream));
   }
   // the interior's passes behind the edge's
@@ -77,11 +75,9 @@ inline void dem_receive_halo(CudaDem& d) {
   DemHaloStream& h = d.halo_stream;
   const std::size_t n = d.halo_receives;
   if (n == 0) return;
-  CG_CUDA_CHECK(cudaMemcpyAsync(d.halo_records.data(), d.halo_in.data(), n * sizeof(DemRow),
+  CG_CUDA_CHECK(cudaMemcpyAsync(d.halo_records.data(), d.halo_in.data(), n * dem_halo_record_bytes(d),
                                 cudaMemcpyHostToDevice, h.stream));
-  cuda::dem_scatter_rows_kernel<<<cuda::blocks_for(n), cuda::kBlock, 0, h.stream>>>(
-      d.arrays(), d.halo_receive.data(), n, d.halo_records.data());
-  CG_CUDA_CHECK_LAUNCH("dem_scatter_rows");
+  dem_scatter_halo_records(d, h.stream);
   CG_CUDA_CHECK(cudaEventRecord(h.received, h.stream));
   CG_CUDA_CHECK(cudaStreamWaitEvent(cudaStreamLegacy, h.received, 0));
 }

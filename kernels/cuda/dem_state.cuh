@@ -149,6 +149,7 @@ class CudaDem {
   std::size_t halo_sends = 0, halo_receives = 0;
   DemBuffer<DemRow> halo_records;
   cuda::PinnedBuffer halo_out, halo_in;
+  bool halo_spheres = false;  // the records are DemSphereRow (else DemRow)
   // the overlapped step (dem_overlap.cuh): each row's edge flag (a halo row, sent or received), the
   // edge rows (ascending, once each), the halo's stream; interior_timed: the last overlapped step
   // recorded the interior's events

@@ -698,10 +698,12 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
       if (cmd.stage_times) {
         const auto& p = sim.phases();
         const double per = p.steps > 0 ? 1e3 / double(p.steps) : 0;
-        constexpr std::size_t kFields = 7;
+        constexpr std::size_t kFields = 9;
+        const double rows = p.steps > 0 ? double(p.halo_rows) / double(p.steps) : 0;
+        const double bytes = p.halo_rows > 0 ? double(p.halo_bytes) / double(p.halo_rows) : 0;
         const std::vector<double> all =
             allgather_values(session, {p.halo * per, p.frame * per, p.relayout * per, p.forces * per,
-                                       p.hidden * per, double(p.steps), double(p.overlapped)});
+                                       p.hidden * per, double(p.steps), double(p.overlapped), rows, bytes});
         phases =
             "  step phases (ms a step, --stage-times, each rank: kick-drift + halo (overlapped steps: "
             "the records' exchange), frame, relayout, detect + forces + kick until the device finished; "
@@ -709,9 +711,9 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
         for (std::size_t r = 0; r + kFields - 1 < all.size(); r += kFields)
           phases += fmt::format(
               "    rank {}: halo {:.3f} (hidden {:.3f}, waited {:.3f}), frame {:.3f}, relayout {:.3f}, "
-              "forces {:.3f} ({} steps, {} overlapped)\n",
+              "forces {:.3f} ({} steps, {} overlapped; halo {:.0f} rows sent a step, {:.0f} B a row)\n",
               r / kFields, all[r], all[r + 4], all[r] - all[r + 4], all[r + 1], all[r + 2], all[r + 3],
-              all[r + 5], all[r + 6]);
+              all[r + 5], all[r + 6], all[r + 7], all[r + 8]);
       }
     }
     agreed_stage(session, "simulate", [&] {

@@ -101,6 +101,11 @@ class ResidentDem {
     if (lap != "on" && lap != "off")
       throw UsageError("CONTACTGRID_SIMULATE_OVERLAP must be on or off (got \"" + lap + "\")");
     m_overlap = lap == "on" && !m_ghost_records;
+    const char* bytes = std::getenv("CONTACTGRID_SIMULATE_HALO_BYTES");
+    const std::string record = bytes ? bytes : "least";
+    if (record != "least" && record != "full")
+      throw UsageError("CONTACTGRID_SIMULATE_HALO_BYTES must be least or full (got \"" + record + "\")");
+    m_full_records = record == "full";
     m_width = (2 * r_max + m_skin) * (1 + 1e-9);
     std::vector<double> sample(n);
     for (std::size_t i = 0; i < n; ++i) sample[i] = component(all.position[i], m_axis);
@@ -202,6 +207,7 @@ class ResidentDem {
   struct Phases {
     double halo = 0, frame = 0, relayout = 0, forces = 0, hidden = 0;
     std::uint64_t steps = 0, overlapped = 0;
+    std::uint64_t halo_rows = 0, halo_bytes = 0;  // sent, over the steps (records of the halo)
   };
   const Phases& phases() const { return m_phases; }
 
@@ -436,7 +442,7 @@ class ResidentDem {
       m_send_rows.insert(m_send_rows.end(), to[r].begin(), to[r].end());
       m_recv_rows.insert(m_recv_rows.end(), from[r].begin(), from[r].end());
     }
-    if (!m_ghost_records) m_sim->set_halo(m_send_rows, m_recv_rows);
+    if (!m_ghost_records) m_sim->set_halo(m_send_rows, m_recv_rows, m_full_records);
   }
 
   // Collective, once a layout: what the owners will send each step is what this rank holds as ghosts
@@ -456,19 +462,21 @@ class ResidentDem {
   // the records downloaded into and uploaded from pageable vectors, every step).
   void exchange_ghosts() {
     if (!m_ghost_records) {
-      const DemRow* out = nullptr;
-      DemRow* in = nullptr;
+      const std::byte* out = nullptr;
+      std::byte* in = nullptr;
       agreed_stage(m_session, "simulate", [&] {
         out = m_sim->gather_halo();
         in = m_sim->halo_inbox();
       });
-      alltoallv_records(m_session, sizeof(DemRow), out, m_send_counts, in, m_recv_counts);
+      alltoallv_records(m_session, m_sim->halo_record_bytes(), out, m_send_counts, in, m_recv_counts);
+      count_halo(m_sim->halo_record_bytes());
       agreed_stage(m_session, "simulate", [&] { m_sim->scatter_halo(); });
       return;
     }
     std::vector<DemRow> send;
     agreed_stage(m_session, "simulate", [&] { m_sim->read_rows(m_send_rows, send); });
     const std::vector<DemRow> got = sim::exchange_records(m_session, send, m_send_counts);
+    count_halo(sizeof(DemRow));
     agreed_stage(m_session, "simulate", [&] {
       if (got.size() != m_recv_rows.size())
         throw Error("simulate: " + std::to_string(got.size()) + " ghost rows came for " +
@@ -483,15 +491,16 @@ class ResidentDem {
   // step, the ghosts current (m_ready).
   template <class Lap>
   void overlapped_forces(Lap& lap) {
-    const DemRow* out = nullptr;
-    DemRow* in = nullptr;
+    const std::byte* out = nullptr;
+    std::byte* in = nullptr;
     agreed_stage(m_session, "simulate", [&] {
       out = m_sim->finish_step_sending(m_frame);
       in = m_sim->halo_inbox();
     });
     lap(m_phases.forces);
     const auto t0 = std::chrono::steady_clock::now();
-    alltoallv_records(m_session, sizeof(DemRow), out, m_send_counts, in, m_recv_counts);
+    alltoallv_records(m_session, m_sim->halo_record_bytes(), out, m_send_counts, in, m_recv_counts);
+    count_halo(m_sim->halo_record_bytes());
     agreed_stage(m_session, "simulate", [&] { m_sim->receive_halo(); });
     const double exchange = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     lap(m_phases.halo);
@@ -503,6 +512,12 @@ class ResidentDem {
     lap(m_phases.forces);
     ++m_phases.steps;
     ++m_phases.overlapped;
+  }
+
+  void count_halo(std::size_t record_bytes) {
+    if (!m_options.stage_times) return;
+    m_phases.halo_rows += m_send_rows.size();
+    m_phases.halo_bytes += m_send_rows.size() * record_bytes;
   }
 
   std::size_t held_row(std::int64_t id) const {
@@ -713,6 +728,7 @@ class ResidentDem {
   std::vector<std::uint64_t> m_send_counts, m_recv_counts;
   bool m_ghost_records = false;  // CONTACTGRID_SIMULATE_GHOSTS=records (exchange_ghosts)
   bool m_overlap = true;         // CONTACTGRID_SIMULATE_OVERLAP (step)
+  bool m_full_records = false;   // CONTACTGRID_SIMULATE_HALO_BYTES=full (halo_plan)
   // the rows hold this step's kick_drift and the ghosts their owners' state (an overlapped step ended)
   bool m_ready = false;
   std::uint64_t m_steps = 0, m_rebuilds = 0, m_migrated = 0, m_rebalances = 0;

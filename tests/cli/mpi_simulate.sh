@@ -72,10 +72,13 @@ CONTACTGRID_SIMULATE_OVERLAP=off run pour 3 pour.nolap.np3
 same "$W/pour.np1" "$W/pour.nolap.np3"
 CONTACTGRID_SIMULATE_OVERLAP=off run pell 4 pell.nolap.np4
 same "$W/pell.np1" "$W/pell.nolap.np4"
+# the halo's records in full (CONTACTGRID_SIMULATE_HALO_BYTES=full: 176 bytes a sphere, not 120)
+CONTACTGRID_SIMULATE_HALO_BYTES=full run pour 2 pour.full.np2
+same "$W/pour.np1" "$W/pour.full.np2"
 # --stage-times: each rank's step phases in the summary, and the same files (the device waited for only)
 run pour 2 pour.timed.np2 --stage-times
 same "$W/pour.np1" "$W/pour.timed.np2"
-grep -qE 'rank 1: halo [0-9.]+ \(hidden [0-9.]+, waited -?[0-9.]+\), frame [0-9.]+, relayout [0-9.]+, forces [0-9.]+' "$W/pour.timed.np2.out" ||
+grep -qE 'rank 1: halo [0-9.]+ \(hidden [0-9.]+, waited -?[0-9.]+\), frame [0-9.]+, relayout [0-9.]+, forces [0-9.]+ \([0-9]+ steps, [0-9]+ overlapped; halo [0-9]+ rows sent a step, 120 B a row\)' "$W/pour.timed.np2.out" ||
   { echo "no step phases of rank 1 under --stage-times"; exit 1; }
 # each rank's forces on the host (CONTACTGRID_SIMULATE_RANKS=host): the same files
 CONTACTGRID_SIMULATE_RANKS=host run pour 2 pour.host.np2

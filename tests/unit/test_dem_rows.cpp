@@ -209,36 +209,61 @@ TYPED_TEST(DemRows, RowsOutsideTheRankAreRefused) {
   EXPECT_THROW(sim.log_terms({static_cast<std::uint32_t>(s.bodies.size())}, terms, energy), UsageError);
 }
 
-// The halo's rows (set_halo, gather_halo, halo_inbox, scatter_halo) carry the records read_rows and
-// write_rows do: a gather gives read_rows' bytes; records scattered through the inbox give the state
-// write_rows gives (bodies and the next steps); rows outside the rank and a halo not set are refused.
-TYPED_TEST(DemRows, TheHaloCarriesTheRowsRecords) {
-  for (const bool ellipsoids : {false, true}) {
-    const RowsScene s = rows_scene(TypeParam::backend, ellipsoids);
-    Simulation<double> a(s.bodies, s.options), b(s.bodies, s.options);
-    a.run(7);
-    b.run(7);
-    const std::size_t n = s.bodies.size();
-    const std::vector<std::uint32_t> send = {3, 0, static_cast<std::uint32_t>(n - 1), 17, 40};
-    const std::vector<std::uint32_t> receive = {5, 11, static_cast<std::uint32_t>(n - 2), 1, 90};
-    std::vector<DemRow> expected;
-    a.read_rows(send, expected);
-    EXPECT_THROW(b.gather_halo(), Error) << "a halo not set";
-    b.set_halo(send, receive);
-    const DemRow* got = b.gather_halo();
-    ASSERT_EQ(std::memcmp(got, expected.data(), send.size() * sizeof(DemRow)), 0)
-        << "ellipsoids " << ellipsoids;
-    // the other rows' records into `receive`, on both
-    std::vector<DemRow> moved;
-    a.read_rows({60, 61, 62, 63, 64}, moved);
-    a.write_rows(receive, moved);
-    std::memcpy(b.halo_inbox(), moved.data(), moved.size() * sizeof(DemRow));
-    b.scatter_halo();
-    a.run(5);
-    b.run(5);
-    expect_same(a, b, ellipsoids ? "ellipsoids" : "spheres");
-    EXPECT_THROW(b.set_halo({static_cast<std::uint32_t>(n)}, {}), UsageError);
+// Rows' records as the halo carries them (Simulation::set_halo): DemSphereRow (spheres), else DemRow.
+std::vector<std::byte> halo_records(const std::vector<DemRow>& rows, bool spheres) {
+  const std::size_t bytes = spheres ? sizeof(DemSphereRow) : sizeof(DemRow);
+  std::vector<std::byte> out(rows.size() * bytes);
+  for (std::size_t j = 0; j < rows.size(); ++j) {
+    const DemRow& r = rows[j];
+    const DemSphereRow sr{r.position, r.velocity, r.omega, r.force, r.torque};
+    std::memcpy(out.data() + j * bytes, spheres ? static_cast<const void*>(&sr) : &r, bytes);
   }
+  return out;
+}
+
+// The halo's rows (set_halo, gather_halo, halo_inbox, scatter_halo) carry the records read_rows and
+// write_rows do, less what the receiver never reads (a sphere's momentum and orientation: 120 bytes a
+// row where the rows hold no ellipsoid, unless full_records): a gather gives read_rows' bytes;
+// records scattered through the inbox give the state write_rows gives (bodies and the next steps);
+// rows outside the rank and a halo not set are refused.
+TYPED_TEST(DemRows, TheHaloCarriesTheRowsRecords) {
+  for (const bool ellipsoids : {false, true})
+    for (const bool full : {false, true}) {
+      const std::string at = std::string(ellipsoids ? "ellipsoids" : "spheres") + (full ? ", full" : "");
+      const RowsScene s = rows_scene(TypeParam::backend, ellipsoids);
+      Simulation<double> a(s.bodies, s.options), b(s.bodies, s.options);
+      a.run(7);
+      b.run(7);
+      const std::size_t n = s.bodies.size();
+      const std::vector<std::uint32_t> send = {3, 0, static_cast<std::uint32_t>(n - 1), 17, 40};
+      const std::vector<std::uint32_t> receive = {5, 11, static_cast<std::uint32_t>(n - 2), 1, 90};
+      std::vector<DemRow> rows;
+      a.read_rows(send, rows);
+      EXPECT_THROW(b.gather_halo(), Error) << "a halo not set";
+      b.set_halo(send, receive, full);
+      const bool spheres = !ellipsoids && !full;
+      EXPECT_EQ(b.halo_record_bytes(), spheres ? 120u : 176u) << at;
+      const std::vector<std::byte> expected = halo_records(rows, spheres);
+      const std::byte* got = b.gather_halo();
+      ASSERT_EQ(std::memcmp(got, expected.data(), expected.size()), 0) << at;
+      // the other rows' records into `receive`, on both
+      std::vector<DemRow> moved;
+      a.read_rows({60, 61, 62, 63, 64}, moved);
+      std::vector<DemRow> kept;  // a sphere's momentum and orientation stay the row's own
+      a.read_rows(receive, kept);
+      for (std::size_t j = 0; spheres && j < moved.size(); ++j) {
+        moved[j].momentum = kept[j].momentum;
+        moved[j].orientation = kept[j].orientation;
+      }
+      a.write_rows(receive, moved);
+      const std::vector<std::byte> in = halo_records(moved, spheres);
+      std::memcpy(b.halo_inbox(), in.data(), in.size());
+      b.scatter_halo();
+      a.run(5);
+      b.run(5);
+      expect_same(a, b, at);
+      EXPECT_THROW(b.set_halo({static_cast<std::uint32_t>(n)}, {}), UsageError);
+    }
 }
 
 // The overlapped step (finish_step_sending, halo_inbox, receive_halo) against the split step with
@@ -286,9 +311,11 @@ void overlapped_equals_split(Backend backend, bool ellipsoids) {
     split.read_rows(send, sent);
     const std::vector<DemRow> in = nudged(split);
     split.write_rows(receive, in);
-    const DemRow* out = lap.finish_step_sending(std::nullopt);
-    ASSERT_EQ(std::memcmp(out, sent.data(), sent.size() * sizeof(DemRow)), 0) << at;
-    std::memcpy(lap.halo_inbox(), in.data(), in.size() * sizeof(DemRow));
+    const std::vector<std::byte> sent_records = halo_records(sent, !ellipsoids);
+    const std::byte* out = lap.finish_step_sending(std::nullopt);
+    ASSERT_EQ(std::memcmp(out, sent_records.data(), sent_records.size()), 0) << at;
+    const std::vector<std::byte> in_records = halo_records(in, !ellipsoids);
+    std::memcpy(lap.halo_inbox(), in_records.data(), in_records.size());
     lap.receive_halo();
     lap.kick_drift();  // nothing: the rows hold it
     const DemState a = split.state(), b = lap.state();
