@@ -196,7 +196,8 @@ class Simulation {
   const std::byte* finish_step_sending(std::optional<Frame> frame);
   void receive_halo();
   // DemOptions::stage_times: the device's seconds in the last overlapped step's interior passes
-  // (CUDA; waits for them), what the halo's exchange can hide behind; CPU: 0 (they run after it).
+  // after the sent records were downloaded (CUDA; waits for them), what the records' exchange between
+  // the ranks can hide behind; CPU: 0 (they run after it).
   double interior_seconds();
   void mark_rows();  // the displacement counts from here (set_rows of the same rows, nothing moved)
   void set_rows(const DemBodies& bodies, std::vector<std::int64_t> ids, const DemState& state);

@@ -74,7 +74,8 @@ void cuda_dem_scatter_halo(CudaDem& dem);
 // rows' gather and download on the halo's stream, the interior's passes enqueued behind the edge's;
 // returns the records once downloaded. cuda_dem_receive_halo: the inbox uploaded and scattered on
 // the halo's stream, the legacy stream's later work ordered after it. cuda_dem_interior_seconds:
-// the last overlapped step's interior passes on the device (stage times only; waits for them).
+// the last overlapped step's interior passes on the device after the records' download (stage
+// times only; waits for them).
 bool cuda_dem_can_overlap(const CudaDem& dem);
 template <class Real>
 const std::byte* cuda_dem_forces_sending(CudaDem& dem, const DeviceContactsView<Real>& contacts,

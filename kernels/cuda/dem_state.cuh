@@ -75,7 +75,7 @@ class DemStageEvents {
 // The overlapped step's stream and events (dem_overlap.cuh): the halo's records move on a
 // non-blocking stream of their own, ordered against the legacy stream by events (edge: the edge's
 // passes done; sent: the records downloaded; received: scattered); interior_begin/end time the
-// interior's passes (stage times).
+// interior's passes, and sent their part after the download (stage times).
 class DemHaloStream {
  public:
   DemHaloStream() = default;
@@ -89,9 +89,9 @@ class DemHaloStream {
   void create() {
     if (stream) return;
     CG_CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
-    for (cudaEvent_t* e : {&edge, &sent, &received})
+    for (cudaEvent_t* e : {&edge, &received})
       CG_CUDA_CHECK(cudaEventCreateWithFlags(e, cudaEventDisableTiming));
-    for (cudaEvent_t* e : {&interior_begin, &interior_end}) CG_CUDA_CHECK(cudaEventCreate(e));
+    for (cudaEvent_t* e : {&sent, &interior_begin, &interior_end}) CG_CUDA_CHECK(cudaEventCreate(e));
   }
   cudaStream_t stream = nullptr;
   cudaEvent_t edge = nullptr, sent = nullptr, received = nullptr, interior_begin = nullptr,

@@ -199,11 +199,11 @@ class ResidentDem {
   // --stage-times: where this rank's steps went (seconds, summed over `steps` steps): kick-drift and
   // the ghosts' exchange (halo), the bounds and displacement over the ranks (frame), relayouts, and
   // the detection, forces and kick until the device finished them (forces).
-  // Overlapped steps (step: `another`): halo is the records' exchange and upload (the device runs
-  // the interior's forces meanwhile), hidden the part of it the interior's passes covered on the
-  // device (CUDA: their events; CPU: none, the interior's passes run after the exchange), forces the
-  // detection and the edge's passes until the records were downloaded, then the wait for the
-  // device after the exchange.
+  // Overlapped steps (step: `another`): halo is the records' exchange between the ranks (the device
+  // runs the interior's forces meanwhile), hidden the part of it the interior's passes covered on
+  // the device (CUDA: their events; CPU: none, the interior's passes run after the exchange), forces
+  // the detection and the edge's passes until the records were downloaded, then the records' upload
+  // (CPU: and the interior's passes) and the wait for the device.
   struct Phases {
     double halo = 0, frame = 0, relayout = 0, forces = 0, hidden = 0;
     std::uint64_t steps = 0, overlapped = 0;
@@ -501,9 +501,10 @@ class ResidentDem {
     const auto t0 = std::chrono::steady_clock::now();
     alltoallv_records(m_session, m_sim->halo_record_bytes(), out, m_send_counts, in, m_recv_counts);
     count_halo(m_sim->halo_record_bytes());
-    agreed_stage(m_session, "simulate", [&] { m_sim->receive_halo(); });
     const double exchange = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     lap(m_phases.halo);
+    // CUDA: the upload and scatter enqueued; CPU: the scatter, then the interior's passes
+    agreed_stage(m_session, "simulate", [&] { m_sim->receive_halo(); });
     if (!m_options.stage_times) return;
     agreed_stage(m_session, "simulate", [&] {
       m_phases.hidden += std::min(exchange, m_sim->interior_seconds());
