@@ -11,6 +11,16 @@
 //   counts drifted apart, the owned bodies with their state and their pairs' springs to their new
 //   owners, the new ghosts) → detect, contact terms, body terms, kick (every row)
 //
+// A step followed by another with nothing between (no log row, frame or contact keys) ends with the
+// next one's kick_drift and ghosts' halo overlapping its forces (Simulation::finish_step_sending,
+// receive_halo; CONTACTGRID_SIMULATE_OVERLAP=off: never): the edge's contact and body terms (the
+// halo's rows, sent and received, and every contact touching one) with their kick and kick_drift,
+// the sent rows' records, the records' exchange while the interior's passes run (CUDA: on the
+// device), their scatter; the next step then starts at its bounds. Each contact and body is computed
+// once by the same function and the interior's passes read no row the halo writes: the same bits.
+// A record is what the receiver reads (a sphere's: DemSphereRow, 120 bytes; with ellipsoids, or
+// CONTACTGRID_SIMULATE_HALO_BYTES=full, the whole DemRow).
+//
 // Why the trajectories are the same bits for any rank count: an owned body's contacts are all among
 // the held rows (the ghost width is 2 r_max + skin and the rows are laid out again before any body
 // moves skin/2), the rows are in id order (so each body's rows as A and as B, and so its sums, come
