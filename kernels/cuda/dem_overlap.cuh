@@ -46,11 +46,12 @@ const std::byte* dem_forces_sending(CudaDem& d, const dem::ContactRows<Real>& ro
   }
   dem_body_launch(d, rows, c, DemThen::kick_and_drift, by_b, dem::Pass::edge, d.edge.data());
   CG_CUDA_CHECK(cudaEventRecord(h.edge, cudaStreamLegacy));
-  // the sent rows' records, on the halo's stream once the edge is done
+  // the halo's stream after the edge (the gather reads the sent rows' new state; the scatter,
+  // even of a rank that sends nothing, writes the received rows after the edge's passes did)
+  CG_CUDA_CHECK(cudaStreamWaitEvent(h.stream, h.edge, 0));
   std::byte* out = d.halo_out.data();
   const std::size_t sends = d.halo_sends;
   if (sends > 0) {
-    CG_CUDA_CHECK(cudaStreamWaitEvent(h.stream, h.edge, 0));
     dem_gather_halo_records(d, h.stream);
     CG_CUDA_CHECK(cudaMemcpyAsync(out, d.halo_records.data(), sends * dem_halo_record_bytes(d),
                                   cudaMemcpyDeviceToHost, h.stream));
