@@ -88,7 +88,10 @@ class DemHaloStream {
   }
   void create() {
     if (stream) return;
-    CG_CUDA_CHECK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+    // the highest priority: the gather's and scatter's few blocks go before the interior's pending ones
+    int least = 0, greatest = 0;
+    CG_CUDA_CHECK(cudaDeviceGetStreamPriorityRange(&least, &greatest));
+    CG_CUDA_CHECK(cudaStreamCreateWithPriority(&stream, cudaStreamNonBlocking, greatest));
     for (cudaEvent_t* e : {&edge, &received})
       CG_CUDA_CHECK(cudaEventCreateWithFlags(e, cudaEventDisableTiming));
     for (cudaEvent_t* e : {&sent, &interior_begin, &interior_end}) CG_CUDA_CHECK(cudaEventCreate(e));
