@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <sstream>
 #include <string>
@@ -55,12 +56,26 @@ void cuda_dem_read_rows(CudaDem&, const std::vector<std::uint32_t>&, std::vector
 void cuda_dem_write_rows(CudaDem&, const std::vector<std::uint32_t>&, const std::vector<DemRow>&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
-void cuda_dem_mark(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
-void cuda_dem_set_halo(CudaDem&, const std::vector<std::uint32_t>&, const std::vector<std::uint32_t>&) {
+bool cuda_dem_can_overlap(const CudaDem&) { return false; }
+template <class Real>
+const std::byte* cuda_dem_forces_sending(CudaDem&, const DeviceContactsView<Real>&,
+                                         const dem::StepConstants&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
-const DemRow* cuda_dem_gather_halo(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
-DemRow* cuda_dem_halo_inbox(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
+template const std::byte* cuda_dem_forces_sending(CudaDem&, const DeviceContactsView<float>&,
+                                                  const dem::StepConstants&);
+template const std::byte* cuda_dem_forces_sending(CudaDem&, const DeviceContactsView<double>&,
+                                                  const dem::StepConstants&);
+void cuda_dem_receive_halo(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
+double cuda_dem_interior_seconds(CudaDem&) { return 0; }
+void cuda_dem_mark(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
+void cuda_dem_set_halo(CudaDem&, const std::vector<std::uint32_t>&, const std::vector<std::uint32_t>&, bool) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+const std::byte* cuda_dem_gather_halo(CudaDem&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+std::byte* cuda_dem_halo_inbox(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
 void cuda_dem_scatter_halo(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
 double cuda_dem_displacement(CudaDem&) { throw CudaError("this contactgrid was built without CUDA"); }
 void cuda_dem_get_state(CudaDem&, std::size_t, DemState&) {
@@ -264,8 +279,11 @@ struct Simulation<Real>::Impl {
   std::vector<Vec3<double>> marked;
   // set_halo's rows (the CPU's; CUDA keeps them on the device) and the CPU's records of them
   std::vector<std::uint32_t> halo_send, halo_receive;
-  std::vector<DemRow> halo_out, halo_in;
+  std::vector<std::byte> halo_out, halo_in;
   bool halo_set = false;
+  bool halo_spheres = false;  // the halo's records are DemSphereRow (else DemRow)
+  // the CPU's edge flags (the halo's rows, sent or received: the overlapped step's first pass)
+  std::vector<std::uint8_t> edge;
 
   static EngineOptions engine_options(EngineOptions e) {
     e.history = true;
@@ -361,14 +379,19 @@ struct Simulation<Real>::Impl {
     if (!ids.empty()) local_ids(contacts);
     detected();
     contact_count = contacts.size();
-    const dem::ContactRows<Real> rows{contacts.id_a.data(),          contacts.id_b.data(),
-                                      contacts.position_on_a.data(), contacts.position_on_b.data(),
-                                      contacts.normal_on_b.data(),   contacts.distance.data(),
-                                      contacts.previous_row.data(),  contacts.size()};
+    const dem::ContactRows<Real> rows = host_rows();
     detail::host::dem_contact_forces(host, rows, constants, threads);
     mark(detail::DemStage::contact_terms);
     detail::host::dem_body_forces(host, rows, constants, threads);
     mark(detail::DemStage::body_terms);
+  }
+
+  // The CPU's contact rows of the step (contacts, row indices).
+  dem::ContactRows<Real> host_rows() const {
+    return {contacts.id_a.data(),          contacts.id_b.data(),
+            contacts.position_on_a.data(), contacts.position_on_b.data(),
+            contacts.normal_on_b.data(),   contacts.distance.data(),
+            contacts.previous_row.data(),  contacts.size()};
   }
 
   // One step; `another`: the next step follows with nothing between (CUDA: this step's body stage
@@ -588,7 +611,8 @@ void Simulation<Real>::kick_drift() {
     s.drifted = true;
     return;
   }
-  detail::host::dem_kick_drift(s.host, s.options.dt, s.threads);
+  if (!s.drifted) detail::host::dem_kick_drift(s.host, s.options.dt, s.threads);
+  s.drifted = true;
 }
 
 template <class Real>
@@ -602,6 +626,7 @@ void Simulation<Real>::finish_step(std::optional<Frame> frame) {
     } else {
       s.forces();
       detail::host::dem_kick(s.host, s.options.dt, s.threads);
+      s.drifted = false;
     }
   } catch (const InputError& e) {
     throw InputError(std::string(e.what()) + " (at step " + std::to_string(s.steps + 1) + ")");
@@ -621,6 +646,31 @@ void set_host_row(detail::host::HostDem& h, std::size_t i, const DemRow& r) {
   h.omega[i] = r.omega;
   h.momentum[i] = r.momentum;
   h.orientation[i] = r.orientation;
+  h.force[i] = r.force;
+  h.torque[i] = r.torque;
+}
+// Row i as the halo's record at `at` (a sphere's: DemSphereRow), and such a record into row i.
+void put_halo_row(const detail::host::HostDem& h, std::size_t i, bool sphere, std::byte* at) {
+  if (!sphere) {
+    const DemRow r = host_row(h, i);
+    std::memcpy(at, &r, sizeof r);
+    return;
+  }
+  const DemSphereRow r{h.position[i], h.velocity[i], h.omega[i], h.force[i], h.torque[i]};
+  std::memcpy(at, &r, sizeof r);
+}
+void take_halo_row(detail::host::HostDem& h, std::size_t i, bool sphere, const std::byte* at) {
+  if (!sphere) {
+    DemRow r;
+    std::memcpy(&r, at, sizeof r);
+    set_host_row(h, i, r);
+    return;
+  }
+  DemSphereRow r;
+  std::memcpy(&r, at, sizeof r);
+  h.position[i] = r.position;
+  h.velocity[i] = r.velocity;
+  h.omega[i] = r.omega;
   h.force[i] = r.force;
   h.torque[i] = r.torque;
 }
@@ -655,11 +705,12 @@ void Simulation<Real>::write_rows(const std::vector<std::uint32_t>& rows, const 
 
 template <class Real>
 void Simulation<Real>::set_halo(const std::vector<std::uint32_t>& send,
-                                const std::vector<std::uint32_t>& receive) {
+                                const std::vector<std::uint32_t>& receive, bool full_records) {
   Impl& s = *m_impl;
   s.halo_set = false;
+  s.halo_spheres = !full_records && s.start.shape.empty();
   if (s.resolved == Backend::cuda) {
-    detail::cuda_dem_set_halo(*s.cuda, send, receive);  // checks the rows
+    detail::cuda_dem_set_halo(*s.cuda, send, receive, s.halo_spheres);  // checks the rows
     s.halo_set = true;
     return;
   }
@@ -669,26 +720,33 @@ void Simulation<Real>::set_halo(const std::vector<std::uint32_t>& send,
         throw UsageError("simulate: row " + std::to_string(r) + " is not a row of the rank");
   s.halo_send = send;
   s.halo_receive = receive;
+  s.edge.assign(s.host.size(), 0);
+  for (const auto* rows : {&send, &receive})
+    for (const std::uint32_t r : *rows) s.edge[r] = 1;
   s.halo_set = true;
-  s.halo_out.resize(send.size());
-  s.halo_in.resize(receive.size());
+  s.halo_out.resize(send.size() * halo_record_bytes());
+  s.halo_in.resize(receive.size() * halo_record_bytes());
 }
 
 template <class Real>
-const DemRow* Simulation<Real>::gather_halo() {
+std::size_t Simulation<Real>::halo_record_bytes() const {
+  return m_impl->halo_spheres ? sizeof(DemSphereRow) : sizeof(DemRow);
+}
+
+template <class Real>
+const std::byte* Simulation<Real>::gather_halo() {
   Impl& s = *m_impl;
   if (!s.halo_set) throw Error("simulate: the halo's rows were not set: internal error");
   if (s.resolved == Backend::cuda) return detail::cuda_dem_gather_halo(*s.cuda);
   const detail::host::HostDem& h = s.host;
-  for (std::size_t j = 0; j < s.halo_send.size(); ++j) {
-    const std::size_t i = s.halo_send[j];
-    s.halo_out[j] = host_row(h, i);
-  }
+  const std::size_t bytes = halo_record_bytes();
+  for (std::size_t j = 0; j < s.halo_send.size(); ++j)
+    put_halo_row(h, s.halo_send[j], s.halo_spheres, s.halo_out.data() + j * bytes);
   return s.halo_out.data();
 }
 
 template <class Real>
-DemRow* Simulation<Real>::halo_inbox() {
+std::byte* Simulation<Real>::halo_inbox() {
   Impl& s = *m_impl;
   if (!s.halo_set) throw Error("simulate: the halo's rows were not set: internal error");
   if (s.resolved == Backend::cuda) return detail::cuda_dem_halo_inbox(*s.cuda);
@@ -701,10 +759,68 @@ void Simulation<Real>::scatter_halo() {
   if (!s.halo_set) throw Error("simulate: the halo's rows were not set: internal error");
   if (s.resolved == Backend::cuda) return detail::cuda_dem_scatter_halo(*s.cuda);
   detail::host::HostDem& h = s.host;
-  for (std::size_t j = 0; j < s.halo_receive.size(); ++j) {
-    const std::size_t i = s.halo_receive[j];
-    set_host_row(h, i, s.halo_in[j]);
+  const std::size_t bytes = halo_record_bytes();
+  for (std::size_t j = 0; j < s.halo_receive.size(); ++j)
+    take_halo_row(h, s.halo_receive[j], s.halo_spheres, s.halo_in.data() + j * bytes);
+}
+
+template <class Real>
+bool Simulation<Real>::can_overlap() const {
+  const Impl& s = *m_impl;
+  if (!s.halo_set || s.slots) return false;
+  return s.resolved == Backend::cuda ? detail::cuda_dem_can_overlap(*s.cuda) : true;
+}
+
+template <class Real>
+const std::byte* Simulation<Real>::finish_step_sending(std::optional<Frame> frame) {
+  Impl& s = *m_impl;
+  if (!can_overlap()) throw Error("simulate: an overlapped step without its halo: internal error");
+  s.frame = frame;
+  try {
+    if (s.resolved == Backend::cuda) {
+      s.device_contacts = s.engine.detect_device_resident(detail::cuda_dem_bodies(*s.cuda), s.frame);
+      s.detected();
+      s.contact_count = s.device_contacts.count;
+      s.contacts_downloaded = false;
+      return detail::cuda_dem_forces_sending(*s.cuda, s.device_contacts, s.constants);
+    }
+    s.contacts = s.engine.detect(s.host_view(), s.frame);
+    if (!s.ids.empty()) s.local_ids(s.contacts);
+    s.detected();
+    s.contact_count = s.contacts.size();
+    const dem::ContactRows<Real> rows = s.host_rows();
+    detail::host::HostDem& h = s.host;
+    detail::host::dem_body_index(h, rows);
+    detail::host::dem_contact_forces(h, rows, s.constants, s.threads, dem::Pass::edge, s.edge.data());
+    detail::host::dem_body_terms(h, s.constants, s.threads, dem::Pass::edge, s.edge.data(), true);
+  } catch (const InputError& e) {
+    throw InputError(std::string(e.what()) + " (at step " + std::to_string(s.steps + 1) + ")");
   }
+  return gather_halo();
+}
+
+template <class Real>
+void Simulation<Real>::receive_halo() {
+  Impl& s = *m_impl;
+  if (s.resolved == Backend::cuda) {
+    detail::cuda_dem_receive_halo(*s.cuda);
+    s.drifted = true;
+    ++s.steps;
+    return;
+  }
+  scatter_halo();
+  s.drifted = true;
+  const dem::ContactRows<Real> rows = s.host_rows();
+  detail::host::HostDem& h = s.host;
+  detail::host::dem_contact_forces(h, rows, s.constants, s.threads, dem::Pass::interior, s.edge.data());
+  detail::host::dem_body_terms(h, s.constants, s.threads, dem::Pass::interior, s.edge.data(), true);
+  ++s.steps;
+}
+
+template <class Real>
+double Simulation<Real>::interior_seconds() {
+  Impl& s = *m_impl;
+  return s.resolved == Backend::cuda ? detail::cuda_dem_interior_seconds(*s.cuda) : 0.0;
 }
 
 template <class Real>
@@ -809,6 +925,7 @@ void Simulation<Real>::set_rows(const DemBodies& bodies, std::vector<std::int64_
     s.drifted = false;
     return;
   }
+  s.drifted = false;
   const std::size_t walls = s.options.walls.size();
   if (state.wall_xi.size() != n * walls || state.normal.size() != state.xi.size())
     throw UsageError("simulate: a rank's state differs in size from its rows");

@@ -11,6 +11,7 @@
 // contacts(), energies()). CONTACTGRID_DEM_PATH=slots: scenes of spheres on one rank with a fixed skin
 // take the slots path instead (dem_slots.hpp: one pass per body over the kept candidate list, a
 // contact's spring in the list's slot, no contact rows unless asked; the same bits).
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -96,6 +97,12 @@ struct DemRow {
   Vec3<double> force, torque;
 };
 
+// A sphere's record in the halo (Simulation::set_halo): DemRow less the angular momentum and
+// orientation a sphere never reads (120 bytes against 176).
+struct DemSphereRow {
+  Vec3<double> position, velocity, omega, force, torque;
+};
+
 // What a Simulation's rows carry from a step to the next (host): each row's state, wall springs
 // (rows × walls, row-major) and wall energy; the last step's contacts'
 // identity (history: pair keys by the rows' ids, ages) with each pair's spring, normal and energy,
@@ -145,8 +152,9 @@ class Simulation {
   // indices) and the frame of every detection (the run's, the same on every rank), from the start.
   Simulation(const DemBodies& bodies, const DemOptions& options, std::vector<std::int64_t> ids,
              std::optional<Frame> frame);
-  // A step in two halves with the ghosts' exchange between: kick_drift of every row; then the
-  // detection in `frame`, the forces and the kick (the same bits as run(1)).
+  // A step in two halves with the ghosts' exchange between: kick_drift of every row (nothing where
+  // the rows already hold it: after receive_halo); then the detection in `frame`, the forces and the
+  // kick (the same bits as run(1)).
   void kick_drift();
   void finish_step(std::optional<Frame> frame);
   // The state (DemRow) of rows `rows` out (CUDA: gathered and downloaded) and in (uploaded, scattered).
@@ -166,10 +174,31 @@ class Simulation {
   // step (CUDA: on the device) until the rows are set again; gather_halo gives the sent rows' records
   // (CUDA: gathered on the device into a reused page-locked buffer; valid until the next call),
   // halo_inbox the place for the received rows' records, which scatter_halo writes into their rows.
-  void set_halo(const std::vector<std::uint32_t>& send, const std::vector<std::uint32_t>& receive);
-  const DemRow* gather_halo();
-  DemRow* halo_inbox();
+  // A record is what the receiver's steps read of the row, halo_record_bytes() each: DemSphereRow
+  // where the rows hold no ellipsoid, else (or with full_records) DemRow.
+  void set_halo(const std::vector<std::uint32_t>& send, const std::vector<std::uint32_t>& receive,
+                bool full_records = false);
+  std::size_t halo_record_bytes() const;
+  const std::byte* gather_halo();
+  std::byte* halo_inbox();
   void scatter_halo();
+  // The step's second half with the halo overlapping its forces (the halo set; can_overlap): the
+  // detection in `frame`, then the forces in two passes (dem::Pass): the edge's (the halo's rows,
+  // sent and received, and every contact touching one) with their kick and the next step's
+  // kick_drift; the sent rows' records gathered (as gather_halo) and returned; the interior's (every
+  // other row and contact) with the same kick and kick_drift. After the caller fills halo_inbox,
+  // receive_halo scatters it into the ghosts' rows. CUDA: the interior's passes run on the device
+  // while the records are downloaded, exchanged and uploaded (the records on a stream of their own;
+  // the device's later work ordered after their scatter); CPU: the interior's after the scatter. The
+  // same bits as finish_step, kick_drift, gather_halo, scatter_halo: each contact and body is
+  // computed once by the same function, and the interior's reads no row the halo writes.
+  bool can_overlap() const;
+  const std::byte* finish_step_sending(std::optional<Frame> frame);
+  void receive_halo();
+  // DemOptions::stage_times: the device's seconds in the last overlapped step's interior passes
+  // after the sent records were downloaded (CUDA; waits for them), what the records' exchange between
+  // the ranks can hide behind; CPU: 0 (they run after it).
+  double interior_seconds();
   void mark_rows();  // the displacement counts from here (set_rows of the same rows, nothing moved)
   void set_rows(const DemBodies& bodies, std::vector<std::int64_t> ids, const DemState& state);
   const std::vector<std::int64_t>& ids() const;

@@ -63,11 +63,25 @@ void cuda_dem_set_ids(CudaDem& dem, const std::vector<std::int64_t>& ids);
 void cuda_dem_read_rows(CudaDem& dem, const std::vector<std::uint32_t>& rows, std::vector<DemRow>& out);
 void cuda_dem_write_rows(CudaDem& dem, const std::vector<std::uint32_t>& rows, const std::vector<DemRow>& in);
 // The halo's rows kept on the device, their records through page-locked buffers (Simulation::set_halo).
+// spheres: the records are DemSphereRow (else DemRow).
 void cuda_dem_set_halo(CudaDem& dem, const std::vector<std::uint32_t>& send,
-                       const std::vector<std::uint32_t>& receive);
-const DemRow* cuda_dem_gather_halo(CudaDem& dem);
-DemRow* cuda_dem_halo_inbox(CudaDem& dem);
+                       const std::vector<std::uint32_t>& receive, bool spheres);
+const std::byte* cuda_dem_gather_halo(CudaDem& dem);
+std::byte* cuda_dem_halo_inbox(CudaDem& dem);
 void cuda_dem_scatter_halo(CudaDem& dem);
+// The overlapped step (Simulation::finish_step_sending): the body index, the edge's contact and body
+// terms (edge flags and rows from cuda_dem_set_halo) with the kick and the next kick_drift, the sent
+// rows' gather and download on the halo's stream, the interior's passes enqueued behind the edge's;
+// returns the records once downloaded. cuda_dem_receive_halo: the inbox uploaded and scattered on
+// the halo's stream, the legacy stream's later work ordered after it. cuda_dem_interior_seconds:
+// the last overlapped step's interior passes on the device after the records' download (stage
+// times only; waits for them).
+bool cuda_dem_can_overlap(const CudaDem& dem);
+template <class Real>
+const std::byte* cuda_dem_forces_sending(CudaDem& dem, const DeviceContactsView<Real>& contacts,
+                                         const dem::StepConstants& c);
+void cuda_dem_receive_halo(CudaDem& dem);
+double cuda_dem_interior_seconds(CudaDem& dem);
 void cuda_dem_mark(CudaDem& dem);
 double cuda_dem_displacement(CudaDem& dem);
 void cuda_dem_get_state(CudaDem& dem, std::size_t contacts, DemState& out);

@@ -340,6 +340,22 @@ CG_HD void body_terms(std::size_t i, const BodyArrays& b, const StepConstants& c
   body_terms_after_a(i, b, c, t, index, w, f, tau);
 }
 
+// The passes of a step whose halo overlaps its forces (kernels/dem.hpp: finish_step_sending): the
+// edge rows (edge[i] != 0: the rows the halo sends or receives) and every contact touching one
+// first, the interior (the other rows and contacts) after. Each contact and body is computed once,
+// by the same function, whatever the pass: the bits of one pass over all.
+enum class Pass : int { all, edge, interior };
+CG_HD bool body_in_pass(std::size_t i, const std::uint8_t* edge, Pass pass) {
+  return pass == Pass::all || (edge[i] != 0) == (pass == Pass::edge);
+}
+template <class Real>
+CG_HD bool contact_in_pass(std::size_t k, const ContactRows<Real>& rows, const std::uint8_t* edge,
+                           Pass pass) {
+  if (pass == Pass::all) return true;
+  const bool touches = edge[rows.id_a[k]] != 0 || edge[rows.id_b[k]] != 0;
+  return touches == (pass == Pass::edge);
+}
+
 // Body i's energies: kinetic, and potential of gravity (−m g·x; the walls' elastic energy is in
 // WallTerms::energy, the contacts' in ContactTerms::energy).
 struct BodyEnergy {

@@ -8,6 +8,7 @@
 #include "cuda/dem_energy.cuh"
 #include "cuda/dem_forces.cuh"
 #include "cuda/dem_integrate.cuh"
+#include "cuda/dem_overlap.cuh"
 #include "cuda/dem_rows.cuh"
 #include "cuda/dem_state.cuh"
 #include "cuda/dem_sums.cuh"
@@ -171,23 +172,46 @@ void cuda_dem_write_rows(CudaDem& d, const std::vector<std::uint32_t>& rows, con
 }
 
 void cuda_dem_set_halo(CudaDem& d, const std::vector<std::uint32_t>& send,
-                       const std::vector<std::uint32_t>& receive) {
+                       const std::vector<std::uint32_t>& receive, bool spheres) {
   CG_CUDA_CHECK(cudaSetDevice(d.device));
   check_rows(d, send);
   check_rows(d, receive);
-  dem_set_halo(d, send, receive);
+  dem_set_halo(d, send, receive, spheres);
 }
 
-const DemRow* cuda_dem_gather_halo(CudaDem& d) {
+const std::byte* cuda_dem_gather_halo(CudaDem& d) {
   CG_CUDA_CHECK(cudaSetDevice(d.device));
   return dem_gather_halo(d);
 }
 
-DemRow* cuda_dem_halo_inbox(CudaDem& d) { return reinterpret_cast<DemRow*>(d.halo_in.data()); }
+std::byte* cuda_dem_halo_inbox(CudaDem& d) { return d.halo_in.data(); }
 
 void cuda_dem_scatter_halo(CudaDem& d) {
   CG_CUDA_CHECK(cudaSetDevice(d.device));
   dem_scatter_halo(d);
+}
+
+bool cuda_dem_can_overlap(const CudaDem& d) { return dem_can_overlap(d); }
+
+template <class Real>
+const std::byte* cuda_dem_forces_sending(CudaDem& d, const DeviceContactsView<Real>& contacts,
+                                         const dem::StepConstants& c) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  return dem_forces_sending(d, contact_rows(contacts), c);
+}
+template const std::byte* cuda_dem_forces_sending(CudaDem&, const DeviceContactsView<float>&,
+                                                  const dem::StepConstants&);
+template const std::byte* cuda_dem_forces_sending(CudaDem&, const DeviceContactsView<double>&,
+                                                  const dem::StepConstants&);
+
+void cuda_dem_receive_halo(CudaDem& d) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  dem_receive_halo(d);
+}
+
+double cuda_dem_interior_seconds(CudaDem& d) {
+  CG_CUDA_CHECK(cudaSetDevice(d.device));
+  return dem_interior_seconds(d);
 }
 
 void cuda_dem_mark(CudaDem& d) {

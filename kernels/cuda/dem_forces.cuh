@@ -35,12 +35,10 @@ namespace cg::cuda {
 // the same bits). The force law's doubles take about 150 registers a thread uncapped: one block of
 // 8 warps an SM, too few loads in flight for the rows' and bodies' gathers (tuning:
 // CONTACTGRID_DEM_BLOCKS).
-template <class Real, int kMinBlocks>
-__global__ void __launch_bounds__(kBlock, kMinBlocks)
-    dem_contact_kernel(dem::ContactRows<Real> rows, dem::BodyArrays b, dem::StepConstants c,
-                       dem::ContactTerms t, Vec3<Real>* normal, const Vec3<Real>* old_normal) {
-  const std::size_t k = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
-  if (k >= rows.count) return;
+template <class Real>
+__device__ void dem_contact_row(std::size_t k, const dem::ContactRows<Real>& rows, const dem::BodyArrays& b,
+                                const dem::StepConstants& c, const dem::ContactTerms& t, Vec3<Real>* normal,
+                                const Vec3<Real>* old_normal) {
   if (!normal) {
     dem::contact_terms(k, rows, b, c, t);
     return;
@@ -52,6 +50,39 @@ __global__ void __launch_bounds__(kBlock, kMinBlocks)
   if (t.energy) t.energy[k] = r.energy;
   t.xi[k] = r.xi;
   normal[k] = rows.normal_on_b[k];
+}
+
+// pass (dem::Pass; edge: the rows' edge flags): only the rows of the pass (the overlapped step's
+// interior: dem_overlap.cuh).
+template <class Real, int kMinBlocks>
+__global__ void __launch_bounds__(kBlock, kMinBlocks)
+    dem_contact_kernel(dem::ContactRows<Real> rows, dem::BodyArrays b, dem::StepConstants c,
+                       dem::ContactTerms t, Vec3<Real>* normal, const Vec3<Real>* old_normal,
+                       const std::uint8_t* edge, dem::Pass pass) {
+  const std::size_t k = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
+  if (k >= rows.count) return;
+  if (!dem::contact_in_pass(k, rows, edge, pass)) return;
+  dem_contact_row(k, rows, b, c, t, normal, old_normal);
+}
+
+// The overlapped step's edge pass over the contacts: one thread per edge row (edge_rows[0, m)), its
+// rows as A, then its rows as B whose A is not an edge row (that A's thread computes those): every
+// contact touching an edge row once.
+template <class Real, int kMinBlocks>
+__global__ void __launch_bounds__(kBlock, kMinBlocks)
+    dem_edge_contact_kernel(dem::ContactRows<Real> rows, dem::BodyArrays b, dem::StepConstants c,
+                            dem::ContactTerms t, Vec3<Real>* normal, const Vec3<Real>* old_normal,
+                            dem::BodyRowIndex index, const std::uint32_t* edge_rows, std::size_t m,
+                            const std::uint8_t* edge) {
+  const std::size_t e = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
+  if (e >= m) return;
+  const std::uint32_t i = edge_rows[e];
+  for (std::uint32_t k = index.a_begin[i]; k < index.a_begin[i + 1]; ++k)
+    dem_contact_row(k, rows, b, c, t, normal, old_normal);
+  for (std::uint32_t j = index.b_begin[i]; j < index.b_begin[i + 1]; ++j) {
+    const std::uint32_t k = index.by_b[j];
+    if (edge[rows.id_a[k]] == 0) dem_contact_row(k, rows, b, c, t, normal, old_normal);
+  }
 }
 
 template <class Real>
@@ -100,59 +131,93 @@ dem::ContactRows<Real> contact_rows(const DeviceContactsView<Real>& v) {
           v.normal_on_b, v.distance, v.previous_row,  v.count};
 }
 
+// The contact stage's outputs for this step's rows (reserved; the flags of what is stored set) and
+// where the kernels write them; dem_contact_done: this step's springs become the last step's.
+template <class Real>
+struct DemContactOutputs {
+  dem::ContactTerms t;
+  Vec3<Real>* normal = nullptr;
+  const Vec3<Real>* old_normal = nullptr;
+  bool normals_as_detected = false;
+};
+
 // last: the energies may be asked after this step (a run's last step, the forces of the start); in
 // rows mode (the default) only then is each row's energy stored.
 template <class Real>
-void dem_contact_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
-                       bool last) {
+DemContactOutputs<Real> dem_contact_outputs(CudaDem& d, const dem::ContactRows<Real>& rows,
+                                            const dem::StepConstants& c, bool last) {
   const std::size_t k = rows.count;
   const int next = 1 - d.current;
   // rows (default): only what a later stage reads; no torque without rolling resistance (the body
   // stage's from the points), in fp32 the normals as detected
   const bool narrow = !d.a_sums && !d.store_all;
   d.torques_from_points = narrow && dem::torques_from_points(c);
-  const bool normals_as_detected = narrow && std::is_same_v<Real, float>;
+  DemContactOutputs<Real> o;
+  o.normals_as_detected = narrow && std::is_same_v<Real, float>;
   const bool energy = last || !narrow;
   for (DemBuffer<Vec3<double>>* b : {&d.contact_force, &d.xi[next]}) b->reserve(k, true);
   if (!d.torques_from_points) d.torque_b.reserve(k, true);
   if (!d.a_sums && !d.torques_from_points) d.torque_a.reserve(k, true);
   if (energy) d.contact_energy.reserve(k, true);
-  Vec3<Real>* normal = nullptr;
-  const Vec3<Real>* old_normal = nullptr;
   if constexpr (std::is_same_v<Real, float>) {
-    if (normals_as_detected) {
+    if (o.normals_as_detected) {
       d.normal_f[next].reserve(k, true);
-      normal = d.normal_f[next].data();
-      old_normal = d.normal_f[d.current].data();
+      o.normal = d.normal_f[next].data();
+      o.old_normal = d.normal_f[d.current].data();
     }
   }
-  if (!normals_as_detected) d.normal[next].reserve(k, true);
-  const dem::ContactTerms t{d.contact_force.data(),
-                            d.a_sums || d.torques_from_points ? nullptr : d.torque_a.data(),
-                            d.torques_from_points ? nullptr : d.torque_b.data(),
-                            energy ? d.contact_energy.data() : nullptr,
-                            d.xi[next].data(),
-                            normals_as_detected ? nullptr : d.normal[next].data(),
-                            d.xi[d.current].data(),
-                            normals_as_detected ? nullptr : d.normal[d.current].data()};
+  if (!o.normals_as_detected) d.normal[next].reserve(k, true);
+  o.t = dem::ContactTerms{d.contact_force.data(),
+                          d.a_sums || d.torques_from_points ? nullptr : d.torque_a.data(),
+                          d.torques_from_points ? nullptr : d.torque_b.data(),
+                          energy ? d.contact_energy.data() : nullptr,
+                          d.xi[next].data(),
+                          o.normals_as_detected ? nullptr : d.normal[next].data(),
+                          d.xi[d.current].data(),
+                          o.normals_as_detected ? nullptr : d.normal[d.current].data()};
+  return o;
+}
+
+template <class Real>
+void dem_contact_done(CudaDem& d, const DemContactOutputs<Real>& o) {
+  d.current = 1 - d.current;
+  d.normals_f = o.normals_as_detected;
+}
+
+// dem_contact_kernel over the rows of `pass` (edge: the rows' edge flags) on the legacy stream.
+template <class Real>
+void dem_contact_launch(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
+                        const DemContactOutputs<Real>& o, dem::Pass pass, const std::uint8_t* edge) {
+  const std::size_t k = rows.count;
+  if (k == 0) return;
+  const unsigned blocks = cuda::blocks_for(k);
+  if (d.min_blocks >= 3)
+    cuda::dem_contact_kernel<Real, 3>
+        <<<blocks, cuda::kBlock>>>(rows, d.arrays(), c, o.t, o.normal, o.old_normal, edge, pass);
+  else if (d.min_blocks == 2)
+    cuda::dem_contact_kernel<Real, 2>
+        <<<blocks, cuda::kBlock>>>(rows, d.arrays(), c, o.t, o.normal, o.old_normal, edge, pass);
+  else
+    cuda::dem_contact_kernel<Real, 1>
+        <<<blocks, cuda::kBlock>>>(rows, d.arrays(), c, o.t, o.normal, o.old_normal, edge, pass);
+  CG_CUDA_CHECK_LAUNCH("dem_contact");
+}
+
+template <class Real>
+void dem_contact_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
+                       bool last) {
+  const std::size_t k = rows.count;
+  const DemContactOutputs<Real> o = dem_contact_outputs(d, rows, c, last);
   if (k > 0 && d.a_sums) {
     d.a_force.reserve(std::max<std::size_t>(d.count, 1), true);
     d.a_torque.reserve(std::max<std::size_t>(d.count, 1), true);
-    cuda::dem_contact_a_kernel<Real>
-        <<<cuda::blocks_for(k), cuda::kBlock>>>(rows, d.arrays(), c, t, d.a_force.data(), d.a_torque.data());
+    cuda::dem_contact_a_kernel<Real><<<cuda::blocks_for(k), cuda::kBlock>>>(
+        rows, d.arrays(), c, o.t, d.a_force.data(), d.a_torque.data());
     CG_CUDA_CHECK_LAUNCH("dem_contact_a");
-  } else if (k > 0) {
-    const unsigned blocks = cuda::blocks_for(k);
-    if (d.min_blocks >= 3)
-      cuda::dem_contact_kernel<Real, 3><<<blocks, cuda::kBlock>>>(rows, d.arrays(), c, t, normal, old_normal);
-    else if (d.min_blocks == 2)
-      cuda::dem_contact_kernel<Real, 2><<<blocks, cuda::kBlock>>>(rows, d.arrays(), c, t, normal, old_normal);
-    else
-      cuda::dem_contact_kernel<Real, 1><<<blocks, cuda::kBlock>>>(rows, d.arrays(), c, t, normal, old_normal);
-    CG_CUDA_CHECK_LAUNCH("dem_contact");
+  } else {
+    dem_contact_launch(d, rows, c, o, dem::Pass::all, nullptr);
   }
-  d.current = next;
-  d.normals_f = normals_as_detected;
+  dem_contact_done(d, o);
 }
 
 }  // namespace cg::detail

@@ -40,6 +40,28 @@ __global__ void dem_scatter_rows_kernel(dem::BodyArrays b, const std::uint32_t* 
   b.torque[i] = r.torque;
 }
 
+// A sphere's halo record j of rows[j] (DemSphereRow: no momentum, no orientation) out and in.
+__global__ void dem_gather_spheres_kernel(dem::BodyArrays b, const std::uint32_t* rows, std::size_t n,
+                                          DemSphereRow* out) {
+  const std::size_t j = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
+  if (j >= n) return;
+  const std::size_t i = rows[j];
+  out[j] = DemSphereRow{b.position[i], b.velocity[i], b.omega[i], b.force[i], b.torque[i]};
+}
+
+__global__ void dem_scatter_spheres_kernel(dem::BodyArrays b, const std::uint32_t* rows, std::size_t n,
+                                           const DemSphereRow* in) {
+  const std::size_t j = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
+  if (j >= n) return;
+  const std::size_t i = rows[j];
+  const DemSphereRow r = in[j];
+  b.position[i] = r.position;
+  b.velocity[i] = r.velocity;
+  b.omega[i] = r.omega;
+  b.force[i] = r.force;
+  b.torque[i] = r.torque;
+}
+
 // The log row's terms of rows[j] (rows[j] < b.count, checked on the host); a_begin: the body index's
 // (count + 1 entries), wall_energy: each row's (null: no walls).
 __global__ void dem_log_rows_kernel(dem::BodyArrays b, Vec3<double> gravity, const double* wall_energy,
@@ -96,7 +118,8 @@ inline void dem_scatter_rows(CudaDem& d, const std::vector<std::uint32_t>& rows,
 
 // The halo's rows on the device (the same rows every step until the rows are set again).
 inline void dem_set_halo(CudaDem& d, const std::vector<std::uint32_t>& send,
-                         const std::vector<std::uint32_t>& receive) {
+                         const std::vector<std::uint32_t>& receive, bool spheres) {
+  d.halo_spheres = spheres;
   d.halo_sends = send.size();
   d.halo_receives = receive.size();
   const std::size_t most = std::max(send.size(), receive.size());
@@ -111,17 +134,59 @@ inline void dem_set_halo(CudaDem& d, const std::vector<std::uint32_t>& send,
   if (!receive.empty())
     CG_CUDA_CHECK(cudaMemcpy(d.halo_receive.data(), receive.data(), receive.size() * sizeof(std::uint32_t),
                              cudaMemcpyHostToDevice));
+  // the overlapped step's edge (dem_overlap.cuh): the flags of the rows sent or received, those rows
+  std::vector<std::uint8_t> flags(d.count, 0);
+  for (const auto* rows : {&send, &receive})
+    for (const std::uint32_t r : *rows) flags[r] = 1;
+  std::vector<std::uint32_t> edge_rows;
+  for (std::size_t i = 0; i < flags.size(); ++i)
+    if (flags[i]) edge_rows.push_back(static_cast<std::uint32_t>(i));
+  d.edge_count = edge_rows.size();
+  d.edge.reserve(std::max<std::size_t>(d.count, 1), false);
+  d.edge_rows.reserve(std::max<std::size_t>(edge_rows.size(), 1), false);
+  if (!flags.empty())
+    CG_CUDA_CHECK(cudaMemcpy(d.edge.data(), flags.data(), flags.size(), cudaMemcpyHostToDevice));
+  if (!edge_rows.empty())
+    CG_CUDA_CHECK(cudaMemcpy(d.edge_rows.data(), edge_rows.data(), edge_rows.size() * sizeof(std::uint32_t),
+                             cudaMemcpyHostToDevice));
+  d.halo_stream.create();
+}
+
+inline std::size_t dem_halo_record_bytes(const CudaDem& d) {
+  return d.halo_spheres ? sizeof(DemSphereRow) : sizeof(DemRow);
+}
+
+// The sent rows' records gathered into the device's staging buffer on `stream`.
+inline void dem_gather_halo_records(CudaDem& d, cudaStream_t stream) {
+  const std::size_t n = d.halo_sends;
+  if (d.halo_spheres)
+    cuda::dem_gather_spheres_kernel<<<cuda::blocks_for(n), cuda::kBlock, 0, stream>>>(
+        d.arrays(), d.halo_send.data(), n, reinterpret_cast<DemSphereRow*>(d.halo_records.data()));
+  else
+    cuda::dem_gather_rows_kernel<<<cuda::blocks_for(n), cuda::kBlock, 0, stream>>>(
+        d.arrays(), d.halo_send.data(), n, d.halo_records.data());
+  CG_CUDA_CHECK_LAUNCH("dem_gather_halo");
+}
+
+// The staging buffer's received records scattered into their rows on `stream`.
+inline void dem_scatter_halo_records(CudaDem& d, cudaStream_t stream) {
+  const std::size_t n = d.halo_receives;
+  if (d.halo_spheres)
+    cuda::dem_scatter_spheres_kernel<<<cuda::blocks_for(n), cuda::kBlock, 0, stream>>>(
+        d.arrays(), d.halo_receive.data(), n, reinterpret_cast<const DemSphereRow*>(d.halo_records.data()));
+  else
+    cuda::dem_scatter_rows_kernel<<<cuda::blocks_for(n), cuda::kBlock, 0, stream>>>(
+        d.arrays(), d.halo_receive.data(), n, d.halo_records.data());
+  CG_CUDA_CHECK_LAUNCH("dem_scatter_halo");
 }
 
 // The sent rows' records, gathered on the device and downloaded into the page-locked buffer.
-inline const DemRow* dem_gather_halo(CudaDem& d) {
-  auto* out = reinterpret_cast<DemRow*>(d.halo_out.data());
+inline const std::byte* dem_gather_halo(CudaDem& d) {
+  std::byte* out = d.halo_out.data();
   const std::size_t n = d.halo_sends;
   if (n == 0) return out;
-  cuda::dem_gather_rows_kernel<<<cuda::blocks_for(n), cuda::kBlock>>>(d.arrays(), d.halo_send.data(), n,
-                                                                      d.halo_records.data());
-  CG_CUDA_CHECK_LAUNCH("dem_gather_rows");
-  CG_CUDA_CHECK(cudaMemcpy(out, d.halo_records.data(), n * sizeof(DemRow), cudaMemcpyDeviceToHost));
+  dem_gather_halo_records(d, cudaStreamLegacy);
+  CG_CUDA_CHECK(cudaMemcpy(out, d.halo_records.data(), n * dem_halo_record_bytes(d), cudaMemcpyDeviceToHost));
   return out;
 }
 
@@ -129,11 +194,9 @@ inline const DemRow* dem_gather_halo(CudaDem& d) {
 inline void dem_scatter_halo(CudaDem& d) {
   const std::size_t n = d.halo_receives;
   if (n == 0) return;
-  CG_CUDA_CHECK(
-      cudaMemcpy(d.halo_records.data(), d.halo_in.data(), n * sizeof(DemRow), cudaMemcpyHostToDevice));
-  cuda::dem_scatter_rows_kernel<<<cuda::blocks_for(n), cuda::kBlock>>>(d.arrays(), d.halo_receive.data(), n,
-                                                                       d.halo_records.data());
-  CG_CUDA_CHECK_LAUNCH("dem_scatter_rows");
+  CG_CUDA_CHECK(cudaMemcpy(d.halo_records.data(), d.halo_in.data(), n * dem_halo_record_bytes(d),
+                           cudaMemcpyHostToDevice));
+  dem_scatter_halo_records(d, cudaStreamLegacy);
 }
 
 // The log row's terms of `rows` (after a step's body stage: its index) and the last step's `contacts`

@@ -72,6 +72,35 @@ class DemStageEvents {
   bool m_on = false;
 };
 
+// The overlapped step's stream and events (dem_overlap.cuh): the halo's records move on a
+// non-blocking stream of their own, ordered against the legacy stream by events (edge: the edge's
+// passes done; sent: the records downloaded; received: scattered); interior_begin/end time the
+// interior's passes, and sent their part after the download (stage times).
+class DemHaloStream {
+ public:
+  DemHaloStream() = default;
+  DemHaloStream(const DemHaloStream&) = delete;
+  DemHaloStream& operator=(const DemHaloStream&) = delete;
+  ~DemHaloStream() {
+    for (cudaEvent_t e : {edge, sent, received, interior_begin, interior_end})
+      if (e) cudaEventDestroy(e);
+    if (stream) cudaStreamDestroy(stream);
+  }
+  void create() {
+    if (stream) return;
+    // the highest priority: the gather's and scatter's few blocks go before the interior's pending ones
+    int least = 0, greatest = 0;
+    CG_CUDA_CHECK(cudaDeviceGetStreamPriorityRange(&least, &greatest));
+    CG_CUDA_CHECK(cudaStreamCreateWithPriority(&stream, cudaStreamNonBlocking, greatest));
+    for (cudaEvent_t* e : {&edge, &received})
+      CG_CUDA_CHECK(cudaEventCreateWithFlags(e, cudaEventDisableTiming));
+    for (cudaEvent_t* e : {&sent, &interior_begin, &interior_end}) CG_CUDA_CHECK(cudaEventCreate(e));
+  }
+  cudaStream_t stream = nullptr;
+  cudaEvent_t edge = nullptr, sent = nullptr, received = nullptr, interior_begin = nullptr,
+              interior_end = nullptr;
+};
+
 class CudaDem {
  public:
   int device = 0;
@@ -123,6 +152,15 @@ class CudaDem {
   std::size_t halo_sends = 0, halo_receives = 0;
   DemBuffer<DemRow> halo_records;
   cuda::PinnedBuffer halo_out, halo_in;
+  bool halo_spheres = false;  // the records are DemSphereRow (else DemRow)
+  // the overlapped step (dem_overlap.cuh): each row's edge flag (a halo row, sent or received), the
+  // edge rows (ascending, once each), the halo's stream; interior_timed: the last overlapped step
+  // recorded the interior's events
+  DemBuffer<std::uint8_t> edge;
+  DemBuffer<std::uint32_t> edge_rows;
+  std::size_t edge_count = 0;
+  DemHaloStream halo_stream;
+  bool interior_timed = false;
   DemBuffer<Vec3<double>> mark;
   bool normals_f = false;
 

@@ -76,9 +76,10 @@ template <int kThen, class Real, int kMinBlocks>
 __global__ void __launch_bounds__(kBlock, kMinBlocks)
     dem_body_kernel(dem::BodyArrays b, dem::StepConstants c, dem::ContactTerms t, dem::BodyRowIndex index,
                     dem::WallTerms w, const Vec3<double>* a_force, const Vec3<double>* a_torque,
-                    dem::ContactRows<Real> rows, bool points) {
+                    dem::ContactRows<Real> rows, bool points, const std::uint8_t* edge, dem::Pass pass) {
   const std::size_t i = std::size_t(blockIdx.x) * kBlock + threadIdx.x;
   if (i >= b.count) return;
+  if (!dem::body_in_pass(i, edge, pass)) return;  // the overlapped step's other pass (dem_overlap.cuh)
   Vec3<double> f{0, 0, 0}, tau{0, 0, 0};
   if (points) {
     dem::contact_sums_from_points(i, b, rows, t, index, f, tau);
@@ -178,21 +179,24 @@ const std::uint32_t* dem_index_by_counts(CudaDem& d, const dem::ContactRows<Real
   return d.by_b[1].data();
 }
 
+// Where each body's rows lie (the begins; by_b returned), before any body's terms.
 template <class Real>
-void dem_body_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
-                    DemThen then) {
+const std::uint32_t* dem_body_index(CudaDem& d, const dem::ContactRows<Real>& rows) {
   const std::size_t n = d.count, k = rows.count;
-  if (n == 0) return;
   d.a_begin.reserve(n + 1, true);
   d.b_begin.reserve(n + 1, true);
-  const std::uint32_t* by_b = nullptr;
-  if (k > 0) {
-    by_b = d.sums_by_sort ? dem_index_by_sort(d, rows) : dem_index_by_counts(d, rows);
-  } else {
-    CG_CUDA_CHECK(cudaMemsetAsync(d.a_begin.data(), 0, (n + 1) * sizeof(std::uint32_t), cudaStreamLegacy));
-    CG_CUDA_CHECK(cudaMemsetAsync(d.b_begin.data(), 0, (n + 1) * sizeof(std::uint32_t), cudaStreamLegacy));
-  }
-  d.events.mark(DemStage::body_index);
+  if (k > 0) return d.sums_by_sort ? dem_index_by_sort(d, rows) : dem_index_by_counts(d, rows);
+  CG_CUDA_CHECK(cudaMemsetAsync(d.a_begin.data(), 0, (n + 1) * sizeof(std::uint32_t), cudaStreamLegacy));
+  CG_CUDA_CHECK(cudaMemsetAsync(d.b_begin.data(), 0, (n + 1) * sizeof(std::uint32_t), cudaStreamLegacy));
+  return nullptr;
+}
+
+// body_terms (then `then`) of the bodies of `pass` (edge: the rows' edge flags) on the legacy stream.
+template <class Real>
+void dem_body_launch(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
+                     DemThen then, const std::uint32_t* by_b, dem::Pass pass, const std::uint8_t* edge) {
+  const std::size_t n = d.count, k = rows.count;
+  if (n == 0) return;
   const bool points = d.torques_from_points && k > 0;
   const dem::ContactTerms t{d.contact_force.data(),
                             d.a_sums || d.torques_from_points ? nullptr : d.torque_a.data(),
@@ -214,13 +218,13 @@ void dem_body_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::S
     constexpr int kThen = decltype(then_c)::value;
     if (d.min_blocks >= 3)
       cuda::dem_body_kernel<kThen, Real, 3>
-          <<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at, rows, points);
+          <<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at, rows, points, edge, pass);
     else if (d.min_blocks == 2)
       cuda::dem_body_kernel<kThen, Real, 2>
-          <<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at, rows, points);
+          <<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at, rows, points, edge, pass);
     else
       cuda::dem_body_kernel<kThen, Real, 1>
-          <<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at, rows, points);
+          <<<blocks, cuda::kBlock>>>(b, on_device, t, index, w, af, at, rows, points, edge, pass);
   };
   if (then == DemThen::nothing)
     launch(std::integral_constant<int, int(DemThen::nothing)>{});
@@ -229,6 +233,15 @@ void dem_body_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::S
   else
     launch(std::integral_constant<int, int(DemThen::kick_and_drift)>{});
   CG_CUDA_CHECK_LAUNCH("dem_body");
+}
+
+template <class Real>
+void dem_body_stage(CudaDem& d, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
+                    DemThen then) {
+  if (d.count == 0) return;
+  const std::uint32_t* by_b = dem_body_index(d, rows);
+  d.events.mark(DemStage::body_index);
+  dem_body_launch(d, rows, c, then, by_b, dem::Pass::all, nullptr);
   d.events.mark(DemStage::body_terms);
 }
 

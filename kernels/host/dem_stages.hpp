@@ -37,13 +37,20 @@ struct HostDem {
 void dem_kick_drift(HostDem& s, double dt, int threads);
 void dem_kick(HostDem& s, double dt, int threads);
 
-// contact_terms of every row; then the rows' springs are the last step's (current flips).
+// contact_terms of every row of `pass` (dem::Pass; edge: the rows' edge flags); then, after the
+// last pass (all or interior), the rows' springs are the last step's (current flips).
 template <class Real>
 void dem_contact_forces(HostDem& s, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
-                        int threads);
+                        int threads, dem::Pass pass = dem::Pass::all, const std::uint8_t* edge = nullptr);
 
-// The rows' order by B (a stable counting sort) and where each body's rows begin, then body_terms of
-// every body (its force and torque of the step).
+// The rows' order by B (a stable counting sort) and where each body's rows begin (dem_body_index),
+// then body_terms of every body of `pass` (its force and torque of the step; kick_and_drift: then its
+// kick and the next step's kick_drift, the same operations as the separate stages); dem_body_forces:
+// both, every body.
+template <class Real>
+void dem_body_index(HostDem& s, const dem::ContactRows<Real>& rows);
+void dem_body_terms(HostDem& s, const dem::StepConstants& c, int threads, dem::Pass pass,
+                    const std::uint8_t* edge, bool kick_and_drift);
 template <class Real>
 void dem_body_forces(HostDem& s, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
                      int threads);

@@ -9,8 +9,7 @@
 namespace cg::detail::host {
 
 template <class Real>
-void dem_body_forces(HostDem& s, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
-                     int threads) {
+void dem_body_index(HostDem& s, const dem::ContactRows<Real>& rows) {
   const std::size_t n = s.size(), k = rows.count;
   // counts of each body as A and as B, their exclusive scans: the begins
   s.a_begin.assign(n + 1, 0);
@@ -27,6 +26,11 @@ void dem_body_forces(HostDem& s, const dem::ContactRows<Real>& rows, const dem::
   s.by_b.resize(k);
   std::vector<std::uint32_t> at(s.b_begin.begin(), s.b_begin.end() - 1);
   for (std::size_t r = 0; r < k; ++r) s.by_b[at[static_cast<std::size_t>(rows.id_b[r])]++] = std::uint32_t(r);
+}
+
+void dem_body_terms(HostDem& s, const dem::StepConstants& c, int threads, dem::Pass pass,
+                    const std::uint8_t* edge, bool kick_and_drift) {
+  const std::size_t n = s.size();
   s.wall_xi.resize(n * std::size_t(c.wall_count));
   s.wall_energy.resize(n);
   const dem::BodyArrays b = s.arrays();
@@ -42,9 +46,28 @@ void dem_body_forces(HostDem& s, const dem::ContactRows<Real>& rows, const dem::
   const dem::WallTerms w{s.wall_xi.data(), s.wall_energy.data()};
   const std::ptrdiff_t nn = static_cast<std::ptrdiff_t>(n);
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min / 8)
-  for (std::ptrdiff_t i = 0; i < nn; ++i) dem::body_terms(std::size_t(i), b, c, t, index, w);
+  for (std::ptrdiff_t i = 0; i < nn; ++i) {
+    const std::size_t j = std::size_t(i);
+    if (!dem::body_in_pass(j, edge, pass)) continue;
+    dem::body_terms(j, b, c, t, index, w);
+    if (!kick_and_drift) continue;
+    dem::BodyState st = b.state(j);
+    const bool ell = b.ellipsoid(j);
+    dem::kick(st, b.props[j], ell, c.dt);
+    dem::kick_drift(st, b.props[j], ell, c.dt);
+    b.store(j, st);
+  }
 }
 
+template <class Real>
+void dem_body_forces(HostDem& s, const dem::ContactRows<Real>& rows, const dem::StepConstants& c,
+                     int threads) {
+  dem_body_index(s, rows);
+  dem_body_terms(s, c, threads, dem::Pass::all, nullptr, false);
+}
+
+template void dem_body_index(HostDem&, const dem::ContactRows<float>&);
+template void dem_body_index(HostDem&, const dem::ContactRows<double>&);
 template void dem_body_forces(HostDem&, const dem::ContactRows<float>&, const dem::StepConstants&, int);
 template void dem_body_forces(HostDem&, const dem::ContactRows<double>&, const dem::StepConstants&, int);
 

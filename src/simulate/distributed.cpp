@@ -132,7 +132,7 @@ class DistributedDem {
     forces();  // the forces of the start: the first half kick's
   }
 
-  void step() {
+  void step(bool /*another: the resident ranks' overlap*/ = false) {
     const double dt = m_options.dt;
     ++m_steps;
     const int step = static_cast<int>(std::min<std::uint64_t>(m_steps, 0x7fffffff));
@@ -674,7 +674,7 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
           previous = sim.gather_keys();
           keys = since(tk);
         }
-        sim.step();
+        sim.step(done + 1 < to);  // another step follows with nothing between
         ++done;
       }
       const double block = session.max(since(t1));
@@ -698,15 +698,22 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
       if (cmd.stage_times) {
         const auto& p = sim.phases();
         const double per = p.steps > 0 ? 1e3 / double(p.steps) : 0;
-        const std::vector<double> all = allgather_values(
-            session, {p.halo * per, p.frame * per, p.relayout * per, p.forces * per, double(p.steps)});
+        constexpr std::size_t kFields = 9;
+        const double rows = p.steps > 0 ? double(p.halo_rows) / double(p.steps) : 0;
+        const double bytes = p.halo_rows > 0 ? double(p.halo_bytes) / double(p.halo_rows) : 0;
+        const std::vector<double> all =
+            allgather_values(session, {p.halo * per, p.frame * per, p.relayout * per, p.forces * per,
+                                       p.hidden * per, double(p.steps), double(p.overlapped), rows, bytes});
         phases =
-            "  step phases (ms a step, --stage-times, each rank: kick-drift + halo, frame, relayout, "
-            "detect + forces + kick until the device finished):\n";
-        for (std::size_t r = 0; r + 4 < all.size(); r += 5)
+            "  step phases (ms a step, --stage-times, each rank: kick-drift + halo (overlapped steps: "
+            "the records' exchange), frame, relayout, detect + forces + kick until the device finished; "
+            "hidden: the halo's part the interior's forces covered on the device, waited: the rest):\n";
+        for (std::size_t r = 0; r + kFields - 1 < all.size(); r += kFields)
           phases += fmt::format(
-              "    rank {}: halo {:.3f}, frame {:.3f}, relayout {:.3f}, forces {:.3f} ({} steps)\n", r / 5,
-              all[r], all[r + 1], all[r + 2], all[r + 3], all[r + 4]);
+              "    rank {}: halo {:.3f} (hidden {:.3f}, waited {:.3f}), frame {:.3f}, relayout {:.3f}, "
+              "forces {:.3f} ({} steps, {} overlapped; halo {:.0f} rows sent a step, {:.0f} B a row)\n",
+              r / kFields, all[r], all[r + 4], all[r] - all[r + 4], all[r + 1], all[r + 2], all[r + 3],
+              all[r + 5], all[r + 6], all[r + 7], all[r + 8]);
       }
     }
     agreed_stage(session, "simulate", [&] {

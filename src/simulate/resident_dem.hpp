@@ -11,6 +11,16 @@
 //   counts drifted apart, the owned bodies with their state and their pairs' springs to their new
 //   owners, the new ghosts) → detect, contact terms, body terms, kick (every row)
 //
+// A step followed by another with nothing between (no log row, frame or contact keys) ends with the
+// next one's kick_drift and ghosts' halo overlapping its forces (Simulation::finish_step_sending,
+// receive_halo; CONTACTGRID_SIMULATE_OVERLAP=off: never): the edge's contact and body terms (the
+// halo's rows, sent and received, and every contact touching one) with their kick and kick_drift,
+// the sent rows' records, the records' exchange while the interior's passes run (CUDA: on the
+// device), their scatter; the next step then starts at its bounds. Each contact and body is computed
+// once by the same function and the interior's passes read no row the halo writes: the same bits.
+// A record is what the receiver reads (a sphere's: DemSphereRow, 120 bytes; with ellipsoids, or
+// CONTACTGRID_SIMULATE_HALO_BYTES=full, the whole DemRow).
+//
 // Why the trajectories are the same bits for any rank count: an owned body's contacts are all among
 // the held rows (the ghost width is 2 r_max + skin and the rows are laid out again before any body
 // moves skin/2), the rows are in id order (so each body's rows as A and as B, and so its sums, come
@@ -96,6 +106,16 @@ class ResidentDem {
     if (way != "halo" && way != "records")
       throw UsageError("CONTACTGRID_SIMULATE_GHOSTS must be halo or records (got \"" + way + "\")");
     m_ghost_records = way == "records";
+    const char* overlap = std::getenv("CONTACTGRID_SIMULATE_OVERLAP");
+    const std::string lap = overlap ? overlap : "on";
+    if (lap != "on" && lap != "off")
+      throw UsageError("CONTACTGRID_SIMULATE_OVERLAP must be on or off (got \"" + lap + "\")");
+    m_overlap = lap == "on" && !m_ghost_records;
+    const char* bytes = std::getenv("CONTACTGRID_SIMULATE_HALO_BYTES");
+    const std::string record = bytes ? bytes : "least";
+    if (record != "least" && record != "full")
+      throw UsageError("CONTACTGRID_SIMULATE_HALO_BYTES must be least or full (got \"" + record + "\")");
+    m_full_records = record == "full";
     m_width = (2 * r_max + m_skin) * (1 + 1e-9);
     std::vector<double> sample(n);
     for (std::size_t i = 0; i < n; ++i) sample[i] = component(all.position[i], m_axis);
@@ -134,7 +154,10 @@ class ResidentDem {
     check_halo_counts();
   }
 
-  void step() {
+  // One step; `another`: the next step follows with nothing between (no log row, frame or keys),
+  // so this step may end with the next one's kick_drift and the ghosts' halo overlapping its forces
+  // (the overlap: Simulation::finish_step_sending; CONTACTGRID_SIMULATE_OVERLAP=off: never).
+  void step(bool another = false) {
     ++m_steps;
     // --stage-times: the host's time of each phase (the device waited for at the step's end)
     auto t = std::chrono::steady_clock::now();
@@ -144,8 +167,10 @@ class ResidentDem {
       into += std::chrono::duration<double>(now - t).count();
       t = now;
     };
-    agreed_stage(m_session, "simulate", [&] { m_sim->kick_drift(); });
-    exchange_ghosts();
+    if (!m_ready) {  // the last step ended without this one's kick_drift and halo
+      agreed_stage(m_session, "simulate", [&] { m_sim->kick_drift(); });
+      exchange_ghosts();
+    }
     lap(m_phases.halo);
     ResidentExtent e;
     agreed_stage(m_session, "simulate", [&] {
@@ -165,20 +190,34 @@ class ResidentDem {
       m_relayout_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     }
     lap(m_phases.relayout);
+    bool overlap = false;
+    agreed_stage(m_session, "simulate", [&] { overlap = m_overlap && another && m_sim->can_overlap(); });
+    if (overlap) {
+      overlapped_forces(lap);
+      m_ready = true;
+      return;
+    }
     agreed_stage(m_session, "simulate", [&] {
       m_sim->finish_step(m_frame);
       if (m_options.stage_times) m_sim->extent();  // waits for the step's device work
     });
     lap(m_phases.forces);
     if (m_options.stage_times) ++m_phases.steps;
+    m_ready = false;
   }
 
   // --stage-times: where this rank's steps went (seconds, summed over `steps` steps): kick-drift and
   // the ghosts' exchange (halo), the bounds and displacement over the ranks (frame), relayouts, and
   // the detection, forces and kick until the device finished them (forces).
+  // Overlapped steps (step: `another`): halo is the records' exchange between the ranks (the device
+  // runs the interior's forces meanwhile), hidden the part of it the interior's passes covered on
+  // the device (CUDA: their events; CPU: none, the interior's passes run after the exchange), forces
+  // the detection and the edge's passes until the records were downloaded, then the records' upload
+  // (CPU: and the interior's passes) and the wait for the device.
   struct Phases {
-    double halo = 0, frame = 0, relayout = 0, forces = 0;
-    std::uint64_t steps = 0;
+    double halo = 0, frame = 0, relayout = 0, forces = 0, hidden = 0;
+    std::uint64_t steps = 0, overlapped = 0;
+    std::uint64_t halo_rows = 0, halo_bytes = 0;  // sent, over the steps (records of the halo)
   };
   const Phases& phases() const { return m_phases; }
 
@@ -413,7 +452,7 @@ class ResidentDem {
       m_send_rows.insert(m_send_rows.end(), to[r].begin(), to[r].end());
       m_recv_rows.insert(m_recv_rows.end(), from[r].begin(), from[r].end());
     }
-    if (!m_ghost_records) m_sim->set_halo(m_send_rows, m_recv_rows);
+    if (!m_ghost_records) m_sim->set_halo(m_send_rows, m_recv_rows, m_full_records);
   }
 
   // Collective, once a layout: what the owners will send each step is what this rank holds as ghosts
@@ -433,25 +472,63 @@ class ResidentDem {
   // the records downloaded into and uploaded from pageable vectors, every step).
   void exchange_ghosts() {
     if (!m_ghost_records) {
-      const DemRow* out = nullptr;
-      DemRow* in = nullptr;
+      const std::byte* out = nullptr;
+      std::byte* in = nullptr;
       agreed_stage(m_session, "simulate", [&] {
         out = m_sim->gather_halo();
         in = m_sim->halo_inbox();
       });
-      alltoallv_records(m_session, sizeof(DemRow), out, m_send_counts, in, m_recv_counts);
+      alltoallv_records(m_session, m_sim->halo_record_bytes(), out, m_send_counts, in, m_recv_counts);
+      count_halo(m_sim->halo_record_bytes());
       agreed_stage(m_session, "simulate", [&] { m_sim->scatter_halo(); });
       return;
     }
     std::vector<DemRow> send;
     agreed_stage(m_session, "simulate", [&] { m_sim->read_rows(m_send_rows, send); });
     const std::vector<DemRow> got = sim::exchange_records(m_session, send, m_send_counts);
+    count_halo(sizeof(DemRow));
     agreed_stage(m_session, "simulate", [&] {
       if (got.size() != m_recv_rows.size())
         throw Error("simulate: " + std::to_string(got.size()) + " ghost rows came for " +
                     std::to_string(m_recv_rows.size()) + " ghosts: internal error");
       m_sim->write_rows(m_recv_rows, got);
     });
+  }
+
+  // The step's forces with the ghosts' halo between their two passes (Simulation::finish_step_sending):
+  // the edge's forces and the sent rows' records, the records to their ranks while the device runs
+  // the interior's, the received records into the ghosts' rows. The rows end drifted for the next
+  // step, the ghosts current (m_ready).
+  template <class Lap>
+  void overlapped_forces(Lap& lap) {
+    const std::byte* out = nullptr;
+    std::byte* in = nullptr;
+    agreed_stage(m_session, "simulate", [&] {
+      out = m_sim->finish_step_sending(m_frame);
+      in = m_sim->halo_inbox();
+    });
+    lap(m_phases.forces);
+    const auto t0 = std::chrono::steady_clock::now();
+    alltoallv_records(m_session, m_sim->halo_record_bytes(), out, m_send_counts, in, m_recv_counts);
+    count_halo(m_sim->halo_record_bytes());
+    const double exchange = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    lap(m_phases.halo);
+    // CUDA: the upload and scatter enqueued; CPU: the scatter, then the interior's passes
+    agreed_stage(m_session, "simulate", [&] { m_sim->receive_halo(); });
+    if (!m_options.stage_times) return;
+    agreed_stage(m_session, "simulate", [&] {
+      m_phases.hidden += std::min(exchange, m_sim->interior_seconds());
+      m_sim->extent();  // waits for the step's device work
+    });
+    lap(m_phases.forces);
+    ++m_phases.steps;
+    ++m_phases.overlapped;
+  }
+
+  void count_halo(std::size_t record_bytes) {
+    if (!m_options.stage_times) return;
+    m_phases.halo_rows += m_send_rows.size();
+    m_phases.halo_bytes += m_send_rows.size() * record_bytes;
   }
 
   std::size_t held_row(std::int64_t id) const {
@@ -661,6 +738,10 @@ class ResidentDem {
   std::vector<std::uint32_t> m_owned_rows, m_send_rows, m_recv_rows;
   std::vector<std::uint64_t> m_send_counts, m_recv_counts;
   bool m_ghost_records = false;  // CONTACTGRID_SIMULATE_GHOSTS=records (exchange_ghosts)
+  bool m_overlap = true;         // CONTACTGRID_SIMULATE_OVERLAP (step)
+  bool m_full_records = false;   // CONTACTGRID_SIMULATE_HALO_BYTES=full (halo_plan)
+  // the rows hold this step's kick_drift and the ghosts their owners' state (an overlapped step ended)
+  bool m_ready = false;
   std::uint64_t m_steps = 0, m_rebuilds = 0, m_migrated = 0, m_rebalances = 0;
   double m_relayout_seconds = 0;
   Phases m_phases;

@@ -3,7 +3,8 @@
 # the slabs' cuts onto the floor of an open box, then sliding along it against a side wall in lasting
 # contact: walls, friction, the tangential springs carried by the bodies that change rank) at 1-4
 # ranks writes the same frames, contacts and energies as -np 1, bit for bit (every dataset's bytes),
-# with each rank's bodies resident (the default) and on the host (CONTACTGRID_SIMULATE_RANKS=host), and
+# with each rank's bodies resident (the default: the ghosts' halo overlapping the forces; also
+# CONTACTGRID_SIMULATE_OVERLAP=off) and on the host (CONTACTGRID_SIMULATE_RANKS=host), and
 # -np 1 writes the files of the run without mpirun; the log rows and frames summed where the rows are
 # (the default) and gathered on rank 0 (CONTACTGRID_SIMULATE_OUTPUT=gather) are the same. Dropping
 # the springs of the bodies that change rank makes the 3-rank frames differ (checked by hand when the
@@ -65,10 +66,19 @@ grep -q 'wall time .* steps .* log rows .* frames' "$W/pour.np3.out" || { echo "
 # the ghosts' former exchange (CONTACTGRID_SIMULATE_GHOSTS=records): the same files
 CONTACTGRID_SIMULATE_GHOSTS=records run pell 3 pell.records.np3
 same "$W/pell.np1" "$W/pell.records.np3"
+# the halo at each step's start, nothing overlapped (CONTACTGRID_SIMULATE_OVERLAP=off, the former
+# path): the same files as the overlapped default
+CONTACTGRID_SIMULATE_OVERLAP=off run pour 3 pour.nolap.np3
+same "$W/pour.np1" "$W/pour.nolap.np3"
+CONTACTGRID_SIMULATE_OVERLAP=off run pell 4 pell.nolap.np4
+same "$W/pell.np1" "$W/pell.nolap.np4"
+# the halo's records in full (CONTACTGRID_SIMULATE_HALO_BYTES=full: 176 bytes a sphere, not 120)
+CONTACTGRID_SIMULATE_HALO_BYTES=full run pour 2 pour.full.np2
+same "$W/pour.np1" "$W/pour.full.np2"
 # --stage-times: each rank's step phases in the summary, and the same files (the device waited for only)
 run pour 2 pour.timed.np2 --stage-times
 same "$W/pour.np1" "$W/pour.timed.np2"
-grep -qE 'rank 1: halo [0-9.]+, frame [0-9.]+, relayout [0-9.]+, forces [0-9.]+' "$W/pour.timed.np2.out" ||
+grep -qE 'rank 1: halo [0-9.]+ \(hidden [0-9.]+, waited -?[0-9.]+\), frame [0-9.]+, relayout [0-9.]+, forces [0-9.]+ \([0-9]+ steps, [0-9]+ overlapped; halo [0-9]+ rows sent a step, 120 B a row\)' "$W/pour.timed.np2.out" ||
   { echo "no step phases of rank 1 under --stage-times"; exit 1; }
 # each rank's forces on the host (CONTACTGRID_SIMULATE_RANKS=host): the same files
 CONTACTGRID_SIMULATE_RANKS=host run pour 2 pour.host.np2

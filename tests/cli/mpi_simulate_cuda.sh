@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # End to end on the GPU: contactgrid simulate under mpirun with each rank's bodies resident on its
 # device (--backend cuda) writes the CPU's one-rank frames, contacts and energies, bit for bit, at 1
-# and 2 ranks (2 ranks share one GPU where there is one), fp64 and fp32, spheres and ellipsoids; so
+# and 2 ranks (2 ranks share one GPU where there is one), fp64 and fp32, spheres and ellipsoids, the
+# ghosts' halo overlapping the forces (the default) and not (CONTACTGRID_SIMULATE_OVERLAP=off); so
 # does the host path (CONTACTGRID_SIMULATE_RANKS=host), and so do the log rows and frames gathered on
 # rank 0 (CONTACTGRID_SIMULATE_OUTPUT=gather; the default sums them where the rows are). Exit 77
 # (skipped, visibly) without a GPU.
@@ -39,4 +40,7 @@ CONTACTGRID_SIMULATE_OUTPUT=gather run pour 2 pour.gather.cuda.np2 cuda
 same "$W/pour.cpu.np1" "$W/pour.gather.cuda.np2"
 CONTACTGRID_SIMULATE_RANKS=host run pour 2 pour.host.cuda.np2 cuda
 same "$W/pour.cpu.np1" "$W/pour.host.cuda.np2"
+# the halo at each step's start, nothing overlapped, every field of the records (the former path)
+CONTACTGRID_SIMULATE_OVERLAP=off CONTACTGRID_SIMULATE_HALO_BYTES=full run pell 2 pell.nolap.cuda.np2 cuda
+same "$W/pell.cpu.np1" "$W/pell.nolap.cuda.np2"
 echo "simulate under mpirun on the GPU: the CPU's files at 1 and 2 ranks, resident and on the host"
