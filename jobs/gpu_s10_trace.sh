@@ -2,7 +2,7 @@
 # Where a rebuild's time goes under mpirun (#31), a 2-GPU host (~3 min): the 2^25 drifting scene of
 # jobs/gpu_ranks_check.sh at np 1 and np 2 with CONTACTGRID_STEP_TRACE=1, each rank's layout and
 # building-step lines kept in $OUT/trace.np{1,2}.txt beside the summaries.
-#   BIN=dir OUT=dir [N=33554432] [STEPS=16] jobs/gpu_s10_trace.sh
+#   BIN=dir OUT=dir [N=33554432] [STEPS=16] [QUICK=1: np 1 and np 2 alone] jobs/gpu_s10_trace.sh
 # Runs: np 1, np 2 (defaults: the migration's merge beside the detection), np 2 with
 # CONTACTGRID_STEP_MERGE=layout (beside the layout, threads split), and with
 # CONTACTGRID_STEP_MERGE_TEAM=whole too (the session's first main).
@@ -37,6 +37,8 @@ run() {
 }
 run np1 1
 run np2 2
-run np2_beside_layout 2 CONTACTGRID_STEP_MERGE=layout
-run np2_former 2 CONTACTGRID_STEP_MERGE=layout CONTACTGRID_STEP_MERGE_TEAM=whole
+if [ "${QUICK:-0}" != 1 ]; then
+  run np2_beside_layout 2 CONTACTGRID_STEP_MERGE=layout
+  run np2_former 2 CONTACTGRID_STEP_MERGE=layout CONTACTGRID_STEP_MERGE_TEAM=whole
+fi
 echo "last step pair hashes (one value expected):"; grep -ho "pair hash [0-9a-f]*" "$OUT"/run.*.log | sort | uniq -c
