@@ -4,10 +4,15 @@
 //
 // Stages (stage.hpp names them for the timing table), one file each in kernels/host/ (stages.hpp):
 //   pack      world (double) → local frame Broad spheres; per body: cells, entry count, control byte
-//   entries   (cell key, body) entries in body order (scan of entry counts → fill), or, opt-in,
-//             grouped by the top digit of the key (a counting pass, then each entry to its place)
-//   sort      stable radix sort of the entries by cell key over plan.key_bits bits (each group by its
-//             low bits)
+//   entries   the cell sort (cell_sort.cpp; the default where the grid has at most about four cells
+//             a body and no report mask): the bodies sorted by the super-cell of their lowest cell
+//             and their spheres gathered into that order. The entry sort (CONTACTGRID_HOST_ENTRIES=
+//             body-order, or the grids it does not take): (cell key, body) entries in body order
+//             (scan of entry counts → fill), or, opt-in (=grouped), grouped by the top digit of the
+//             key (a counting pass, then each entry to its place)
+//   sort      the cell sort: the entries counted and written cell by cell from the bodies' order,
+//             with the walk's bodies beside them. The entry sort: stable radix sort of the entries by
+//             cell key over plan.key_bits bits (each group by its low bits)
 //             (then the pair stage's estimate and its check: pair_estimate.hpp, counted in pairs)
 //   pairs     per entry: tests against later entries of its cell (cells of type 0 first: Le Grand's
 //             8 passes); candidate pairs (a < b, local indices) collected per chunk of entries,
@@ -145,20 +150,33 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
         host::sphere_cells(job.grid, nt, bodies);
       }
       host::Entries<Key> entries;
-      stats.entries = host::fill_entries(bodies, job.grid, nt, entries, job.plan.key_bits);
-      timer.lap(EngineStage::entries);
+      host::EntryBodies<Broad> entry_bodies;  // the cell sort writes them; the entry sort's walk gathers
+      const bool by_cells = host::cell_sort_wanted(job.grid, bodies.ctrl.size(), !job.bodies.report.empty());
+      if (by_cells) {  // the bodies by super-cell, then the entries by cell from that order
+        host::BlockOrder<Broad> order;
+        host::block_sort(bodies, job.grid, nt, order);
+        timer.lap(EngineStage::entries);
 
-      host::sort_entries(entries, job.plan.key_bits, nt);
-      timer.lap(EngineStage::sort);
+        stats.entries = host::cell_sort(order, job.grid, nt, entries, entry_bodies);
+        timer.lap(EngineStage::sort);
+      } else {  // the entries in body order, then sorted by key
+        stats.entries = host::fill_entries(bodies, job.grid, nt, entries, job.plan.key_bits);
+        timer.lap(EngineStage::entries);
+
+        host::sort_entries(entries, job.plan.key_bits, nt);
+        timer.lap(EngineStage::sort);
+      }
 
       if (job.pair_limits.wanted()) {
         PairEstimate estimate = host::estimate_pair_tests(entries, job.bodies.size(), nt);
         estimate.tests_per_second = kHostPairTestsPerSecondPerThread * nt;
         check_pair_estimate(estimate, job.pair_limits);
       }
-      stats.pair_tests = host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter,
-                                               fp64, nt, built, job.pair_limits.on_progress);
+      stats.pair_tests =
+          host::find_candidates(entries, bodies, job.bodies.report, job.grid.half_bits, filter, fp64, nt,
+                                built, job.pair_limits.on_progress, by_cells ? &entry_bodies : nullptr);
       entries = {};
+      entry_bodies = {};
       timer.lap(EngineStage::pairs);
     } else if (job.broad == BroadPhase::levels) {  // a grid per level, then the pairs across levels
       host::Entries<Key> entries;

@@ -52,14 +52,18 @@ WalkKind walk_kind() {
 #endif
 }
 
-// The entries in cell order, structure of arrays: each body's packed sphere (inflated by a skin) and
-// control byte, gathered once so that the walk reads memory in sequence and its inner loop vectorises.
-template <class Real>
-struct EntryBodies {
-  Array<Real> x, y, z, r;
-  Array<std::uint32_t> ctrl;  // control_bits, widened: the inner loop's lanes are 32 bits
-  Sphere<Real> sphere(std::size_t e) const { return {x[e], y[e], z[e], r[e]}; }
-};
+// The pair (a, b) of entries e and f of one cell, tested and emitted as (lower body, higher body): the
+// cell sort (host/cell_sort.cpp) leaves a cell's entries in no body order, and every test is called
+// with the lower input index first, as on the body-ascending cells of the entry sort.
+template <class Test, class Real, class Emit>
+inline void test_ordered(const Test& test, const Sphere<Real>& se, std::uint32_t a, const Sphere<Real>& sf,
+                         std::uint32_t b, Emit& emit) {
+  if (a < b) {
+    if (test(se, sf, a, b)) emit(a, b);
+  } else if (test(sf, se, b, a)) {
+    emit(b, a);
+  }
+}
 
 #if defined(CG_HOST_AVX2)
 // Eight later entries of a cell (lanes j: entries first + j), structure of arrays.
@@ -126,7 +130,7 @@ __attribute__((target("avx2,popcnt"))) std::uint64_t walk_avx2(std::size_t lo, s
       const Sphere<float> sa = eb.sphere(q.e);
       for (unsigned w = q.lanes; w != 0; w &= w - 1) {
         const std::size_t f = q.first + std::size_t(__builtin_ctz(w));
-        if (test(sa, eb.sphere(f), a, body[f])) emit(a, body[f]);
+        test_ordered(test, sa, a, eb.sphere(f), body[f], emit);
       }
     }
     n_pending = 0;
@@ -179,7 +183,9 @@ __attribute__((target("avx2,popcnt"))) std::uint64_t walk_avx2(std::size_t lo, s
 #endif
 
 // Entries [lo, hi) of the walk: entry e tests the later entries f of its cell; within a cell the
-// bodies ascend (stable sort of entries made in body order), so body[e] < body[f]. `test`: the
+// bodies ascend after the entry sort (stable, of entries made in body order), but not after the cell
+// sort, so each pair is tested as (lower body, higher body) (test_ordered); the report mask's walk
+// takes only the entry sort's cells, where body[e] < body[f]. `test`: the
 // candidate filter's pair test (core/narrow.hpp: SpheresTouch, CellRule, or mixed's Fp64Touch;
 // core/centre_cut.hpp: CentreCut), on input indices; it decides every pair the cell rule (and the
 // report mask) assigns, less those NearBound proves it rejects. Returns the pairs tested.
@@ -249,7 +255,7 @@ std::uint64_t walk_entries(std::size_t lo, std::size_t hi, const Entries<Key>& e
           const int near = near_all | _mm_movemask_ps(_mm_cmple_ps(d2, _mm_mul_ps(sum, sum)));
           for (int wanted = assigned & near; wanted != 0; wanted &= wanted - 1) {
             const std::size_t f = first + std::size_t(__builtin_ctz(unsigned(wanted)));
-            if (test(Sphere<Real>{ax, ay, az, ar}, eb.sphere(f), a, body[f])) emit(a, body[f]);
+            test_ordered(test, Sphere<Real>{ax, ay, az, ar}, a, eb.sphere(f), body[f], emit);
           }
         }
         continue;
@@ -276,7 +282,7 @@ std::uint64_t walk_entries(std::size_t lo, std::size_t hi, const Entries<Key>& e
       if (!wanted) continue;
       const Sphere<Real> sa{ax, ay, az, ar};
       for (std::size_t j = 0; j < len; ++j)
-        if (flag[j] == 3u && test(sa, eb.sphere(first + j), a, body[first + j])) emit(a, body[first + j]);
+        if (flag[j] == 3u) test_ordered(test, sa, a, eb.sphere(first + j), body[first + j], emit);
     }
   }
   return tests;
@@ -284,35 +290,31 @@ std::uint64_t walk_entries(std::size_t lo, std::size_t hi, const Entries<Key>& e
 
 template <class Test, class Real, class Key>
 std::uint64_t collect(const Entries<Key>& en, const PackedBodies<Real>& p, const std::uint8_t* report,
-                      int half_bits, int nt, const Test& test, CandidatePairs& out, ProgressShare& progress) {
+                      int half_bits, int nt, const Test& test, CandidatePairs& out, ProgressShare& progress,
+                      const EntryBodies<Real>* gathered) {
   const std::size_t n_entries = en.size();
-  EntryBodies<Real> eb;
-  // eight entries of padding: the four- and eight-lane walks read past a cell's end (those lanes
-  // masked off)
-  constexpr std::size_t pad = 8;
   const WalkKind kind = walk_kind();
-  for (Array<Real>* a : {&eb.x, &eb.y, &eb.z, &eb.r}) {
-    a->resize(n_entries + pad);
-    std::fill(a->begin() + std::ptrdiff_t(n_entries), a->end(), Real(0));
-  }
-  eb.ctrl.resize(n_entries + pad);
-  std::fill(eb.ctrl.begin() + std::ptrdiff_t(n_entries), eb.ctrl.end(), 0u);
-  // (the bodies of a cell are random places in input order: their reads are asked for ahead)
-  constexpr std::size_t ahead = 64;
+  EntryBodies<Real> own;
+  if (gathered == nullptr) {
+    resize_entry_bodies(own, n_entries);
+    // (the bodies of a cell are random places in input order: their reads are asked for ahead)
+    constexpr std::size_t ahead = 64;
 #pragma omp parallel for num_threads(nt) schedule(static) if (n_entries > k_parallel_min)
-  for (std::size_t e = 0; e < n_entries; ++e) {
-    if (e + ahead < n_entries) {
-      __builtin_prefetch(p.spheres.data() + en.body[e + ahead]);
-      __builtin_prefetch(p.ctrl.data() + en.body[e + ahead]);
+    for (std::size_t e = 0; e < n_entries; ++e) {
+      if (e + ahead < n_entries) {
+        __builtin_prefetch(p.spheres.data() + en.body[e + ahead]);
+        __builtin_prefetch(p.ctrl.data() + en.body[e + ahead]);
+      }
+      const std::uint32_t b = en.body[e];
+      const Sphere<Real> s = p.spheres[b];
+      own.x[e] = s.x;
+      own.y[e] = s.y;
+      own.z[e] = s.z;
+      own.r[e] = s.r + p.inflation;  // a skin: the inflated spheres (0: exactly r)
+      own.ctrl[e] = p.ctrl[b];
     }
-    const std::uint32_t b = en.body[e];
-    const Sphere<Real> s = p.spheres[b];
-    eb.x[e] = s.x;
-    eb.y[e] = s.y;
-    eb.z[e] = s.z;
-    eb.r[e] = s.r + p.inflation;  // a skin: the inflated spheres (0: exactly r)
-    eb.ctrl[e] = p.ctrl[b];
   }
+  const EntryBodies<Real>& eb = gathered != nullptr ? *gathered : own;
   // chunks of entries, each appending its pairs to its thread's buffer (collect_in_chunks)
   return collect_in_chunks(n_entries, nt, out, progress, [&](std::size_t begin, std::size_t end, auto& emit) {
     return walk_entries(begin, end, en, eb, report, half_bits, test, kind, emit);
@@ -354,31 +356,36 @@ template <class Real, class Key>
 std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p,
                               std::span<const std::uint8_t> report, int half_bits, CandidateFilter filter,
                               const NarrowBodies<double>* fp64, int threads, CandidatePairs& out,
-                              const std::function<void(std::uint64_t, bool)>* on_progress) {
+                              const std::function<void(std::uint64_t, bool)>* on_progress,
+                              const EntryBodies<Real>* gathered) {
   ProgressShare progress(on_progress);
   out.id_bits = std::max(1, bits_for(p.spheres.size()));
   out.filter = filter;
   const std::uint8_t* r = report.empty() ? nullptr : report.data();
   return with_pair_test(filter, p, fp64, [&](const auto& test) {
-    return collect(e, p, r, half_bits, threads, test, out, progress);
+    return collect(e, p, r, half_bits, threads, test, out, progress, gathered);
   });
 }
 
 template std::uint64_t find_candidates(const Entries<std::uint32_t>&, const PackedBodies<float>&,
                                        std::span<const std::uint8_t>, int, CandidateFilter,
                                        const NarrowBodies<double>*, int, CandidatePairs&,
-                                       const std::function<void(std::uint64_t, bool)>*);
+                                       const std::function<void(std::uint64_t, bool)>*,
+                                       const EntryBodies<float>*);
 template std::uint64_t find_candidates(const Entries<std::uint64_t>&, const PackedBodies<float>&,
                                        std::span<const std::uint8_t>, int, CandidateFilter,
                                        const NarrowBodies<double>*, int, CandidatePairs&,
-                                       const std::function<void(std::uint64_t, bool)>*);
+                                       const std::function<void(std::uint64_t, bool)>*,
+                                       const EntryBodies<float>*);
 template std::uint64_t find_candidates(const Entries<std::uint32_t>&, const PackedBodies<double>&,
                                        std::span<const std::uint8_t>, int, CandidateFilter,
                                        const NarrowBodies<double>*, int, CandidatePairs&,
-                                       const std::function<void(std::uint64_t, bool)>*);
+                                       const std::function<void(std::uint64_t, bool)>*,
+                                       const EntryBodies<double>*);
 template std::uint64_t find_candidates(const Entries<std::uint64_t>&, const PackedBodies<double>&,
                                        std::span<const std::uint8_t>, int, CandidateFilter,
                                        const NarrowBodies<double>*, int, CandidatePairs&,
-                                       const std::function<void(std::uint64_t, bool)>*);
+                                       const std::function<void(std::uint64_t, bool)>*,
+                                       const EntryBodies<double>*);
 
 }  // namespace cg::detail::host

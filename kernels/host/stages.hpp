@@ -63,6 +63,29 @@ struct Entries {
   std::size_t size() const { return keys.size(); }
 };
 
+// The walk's bodies of the sorted entries, structure of arrays: each entry's packed sphere (inflated by
+// a skin) and control byte beside it, so that the walk reads memory in sequence and its inner loop
+// vectorises; eight zero entries past the end (the four- and eight-lane walks read past a cell's end,
+// those lanes masked off). The pair stage gathers them after the entry sort; the cell sort writes them.
+template <class Real>
+struct EntryBodies {
+  Array<Real> x, y, z, r;
+  Array<std::uint32_t> ctrl;  // control_bits, widened: the inner loop's lanes are 32 bits
+  Sphere<Real> sphere(std::size_t e) const { return {x[e], y[e], z[e], r[e]}; }
+};
+constexpr std::size_t k_entry_pad = 8;
+
+// Sizes eb for n entries and zeroes its padding.
+template <class Real>
+void resize_entry_bodies(EntryBodies<Real>& eb, std::size_t n) {
+  for (Array<Real>* a : {&eb.x, &eb.y, &eb.z, &eb.r}) {
+    a->resize(n + k_entry_pad);
+    std::fill(a->begin() + std::ptrdiff_t(n), a->end(), Real(0));
+  }
+  eb.ctrl.resize(n + k_entry_pad);
+  std::fill(eb.ctrl.begin() + std::ptrdiff_t(n), eb.ctrl.end(), 0u);
+}
+
 // Candidate pairs of local indices a < b, packed as a << id_bits | b: a plain (a, b) array, ascending
 // after order_candidates (so a list can be kept across calls and handed to narrow again).
 struct CandidatePairs {
@@ -134,16 +157,46 @@ std::uint64_t fill_entries(PackedBodies<Real>& p, const GridParams<Real>& g, int
 template <class Key>
 void sort_entries(Entries<Key>& e, int key_bits, int threads);
 
+// ---- the cell sort (host/cell_sort.cpp): the grid's sorted entries without a body-order array ----
+// The bodies sorted by the super-cell of their lowest cell (block_sort, stage entries: a stable radix
+// sort of one key a body, then their spheres and control bytes gathered into that order), then the
+// entries counted and written by cell from that order (cell_sort, stage sort): each body's cells lie
+// within one layer of super-cells of its own, so both passes touch the counters and the outputs in a
+// few sliding windows rather than at random. The entries come out key-ascending with the walk's
+// bodies beside them (EntryBodies: no gather in the pair stage), but within a cell in the bodies'
+// spatial order, not in body order: the walk tests each pair as (lower, higher) body, and the order
+// stage sorts the candidates, so the candidates, pair tests and contacts are the entry sort's.
+// cell_sort_wanted: CONTACTGRID_HOST_ENTRIES unset or `cells`, no report mask, and a grid of at most
+// about four cells a body (the counters are a window of the grid's cells a thread).
+template <class Real>
+struct BlockOrder {
+  Array<std::uint32_t> block;  // super-cell index of each body's lowest cell, ascending
+  Array<std::uint32_t> body;   // input index, alongside (ascending within a super-cell)
+  Array<Real> x, y, z, r;      // the packed sphere (r inflated by a skin) of each, alongside
+  Array<std::uint8_t> ctrl;    // control byte of each, alongside
+};
+template <class Real>
+bool cell_sort_wanted(const GridParams<Real>& g, std::size_t bodies, bool report_mask);
+template <class Real>
+void block_sort(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, BlockOrder<Real>& out);
+// Returns the number of entries; frees `order`.
+template <class Real, class Key>
+std::uint64_t cell_sort(BlockOrder<Real>& order, const GridParams<Real>& g, int threads, Entries<Key>& out,
+                        EntryBodies<Real>& bodies);
+
 // pairs: per sorted entry, the later entries of its cell that the cell rule (test_in_cell) and the
 // report mask assign to it; those passing `filter` become candidates (chunks of entries collect
-// their pairs, chunk sizes → scan → fill: the same array for any thread count). `fp64` (mixed, with
-// the spheres_touch filter: the world doubles, and broad_margin) makes the test fp64's decision
-// (Fp64Touch, core/narrow.hpp). Returns the number of pairs tested (EngineStats::pair_tests).
+// their pairs, chunk sizes → scan → fill: the same array for any thread count after the entry sort;
+// the order stage makes it one after either sort). `fp64` (mixed, with the spheres_touch filter: the
+// world doubles, and broad_margin) makes the test fp64's decision (Fp64Touch, core/narrow.hpp).
+// `gathered`: the entries' bodies the cell sort wrote (else gathered here from p). Returns the number
+// of pairs tested (EngineStats::pair_tests).
 template <class Real, class Key>
 std::uint64_t find_candidates(const Entries<Key>& e, const PackedBodies<Real>& p,
                               std::span<const std::uint8_t> report, int half_bits, CandidateFilter filter,
                               const NarrowBodies<double>* fp64, int threads, CandidatePairs& out,
-                              const std::function<void(std::uint64_t, bool)>* progress = nullptr);
+                              const std::function<void(std::uint64_t, bool)>* progress = nullptr,
+                              const EntryBodies<Real>* gathered = nullptr);
 // Whether this CPU runs the float walk's AVX2 steps (CONTACTGRID_HOST_WALK, pairs.cpp): where it does
 // not, the walk takes its four-lane steps.
 bool walk_avx2_available();

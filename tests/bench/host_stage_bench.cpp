@@ -8,7 +8,8 @@
 //   host_stage_bench SCENE.h5 [REPETITIONS=9] [THREADS=0] [PRECISION=mixed|fp32|fp64] [fresh|reuse]
 // (CG_BENCH_CELL_SIZE=EDGE in the environment: the grid's cell edge, EngineOptions::cell_size)
 // Prints one line per stage: name, min ms, median ms; then the CPU ms of a call ("cpu") and its minor
-// page faults ("faults", a count: each fresh page the kernel zeroes); then contacts.
+// page faults ("faults", a count: each fresh page the kernel zeroes); then contacts and the last call's
+// stats (entries, pair tests, candidates, key bits, cell edge: the same on every path).
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -42,13 +43,15 @@ double page_faults() {
 
 template <class Real>
 std::size_t calls(const EngineOptions& o, const BodiesView& v, int repetitions, bool reuse,
-                  std::map<std::string, std::vector<double>>& stage_times, std::vector<std::string>& order) {
+                  std::map<std::string, std::vector<double>>& stage_times, std::vector<std::string>& order,
+                  EngineStats& stats) {
   std::unique_ptr<Engine<Real>> engine;
   std::size_t contacts = 0;
   for (int r = -1; r < repetitions; ++r) {
     if (!engine || !reuse) engine = std::make_unique<Engine<Real>>(o);
     const double cpu0 = cpu_seconds(), faults0 = page_faults();
     contacts = engine->detect(v).size();
+    stats = engine->stats();
     const double cpu = cpu_seconds() - cpu0, faults = page_faults() - faults0;
     if (r < 0) continue;  // warm: the first call's page faults of the process
     double total = 0;
@@ -86,9 +89,10 @@ int main(int argc, char** argv) {
   const BodiesView v{rows.position, rows.radius, {}, {}};
   std::map<std::string, std::vector<double>> stage_times;
   std::vector<std::string> order;
+  EngineStats stats;
   const std::size_t contacts = precision == "fp32"
-                                   ? calls<float>(o, v, repetitions, reuse, stage_times, order)
-                                   : calls<double>(o, v, repetitions, reuse, stage_times, order);
+                                   ? calls<float>(o, v, repetitions, reuse, stage_times, order, stats)
+                                   : calls<double>(o, v, repetitions, reuse, stage_times, order, stats);
   std::printf("stage      min_ms  median_ms  (%d calls, %s engine, threads %d, %s)\n", repetitions,
               reuse ? "one" : "a new", o.threads, precision.c_str());
   for (const std::string& name : order) {
@@ -97,5 +101,9 @@ int main(int argc, char** argv) {
     std::printf("%-9s %7.2f %10.2f\n", name.c_str(), t.front() * 1e3, t[t.size() / 2] * 1e3);
   }
   std::printf("contacts %zu\n", contacts);
+  std::printf("stats entries %llu pair_tests %llu candidates %llu key_bits %d cell_size %g\n",
+              static_cast<unsigned long long>(stats.entries),
+              static_cast<unsigned long long>(stats.pair_tests),
+              static_cast<unsigned long long>(stats.candidates), stats.key_bits, stats.cell_size);
   return 0;
 }
