@@ -48,7 +48,8 @@ if wants tests; then
   grep -q 'DemRows/cuda.TheOverlappedStepGivesTheSplitStepsBits' "$OUT/tests_dem_rows.log" &&
     ! grep -q 'SKIPPED \] DemRows/cuda' "$OUT/tests_dem_rows.log" || failed+=("tests: the CUDA cases did not run")
   log "== tests: tests/cli/mpi_simulate_cuda.sh"
-  timeout 240 tests/cli/mpi_simulate_cuda.sh "$CG" "$(command -v mpiexec)" /tmp/cgov_mc >"$OUT/tests_mpi_simulate_cuda.log" 2>&1 ||
+  # (the script's default /usr/bin/python3 lacks h5py on the device: the one on PATH has it)
+  PYTHON=$(command -v "$PY") timeout 240 tests/cli/mpi_simulate_cuda.sh "$CG" "$(command -v mpiexec)" /tmp/cgov_mc >"$OUT/tests_mpi_simulate_cuda.log" 2>&1 ||
     failed+=("tests: mpi_simulate_cuda.sh")
   tail -3 "$OUT/tests_mpi_simulate_cuda.log" | tee -a "$OUT/summary.txt"
   rm -rf /tmp/cgov_mc
