@@ -223,9 +223,14 @@ struct StepLoop<Real>::State {
     if (merging.joinable()) merging.join();
   }
 
-  // The migration's merge on its own thread (once; nothing when none is pending).
+  // The migration's merge on its own thread (once; nothing when none is pending). Beside a detection
+  // on the CPU, whose team takes the rank's threads, it runs here instead, before the detection.
   void start_merge() {
     if (!merge_pending || merge_started) return;
+    if (merge_at_detection && a.backend() == Backend::cpu) {
+      finish_merge();
+      return;
+    }
     merging = std::thread([this] {
       try {
         splice_step_bodies(bodies, merge_gone, merge_at, arrivals, merge_shapes, spare, merge_threads());
