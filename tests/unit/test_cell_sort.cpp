@@ -15,29 +15,10 @@
 #include "host/stages.hpp"
 #include "scenes.hpp"
 #include "support/contacts_equal.hpp"
+#include "support/host_jobs.hpp"
 
 namespace cg::test {
 namespace {
-
-// CONTACTGRID_HOST_ENTRIES=<value> for the guard's life (`body-order`: the entry sort).
-class HostEntriesKnob {
- public:
-  explicit HostEntriesKnob(const char* value) { ::setenv("CONTACTGRID_HOST_ENTRIES", value, 1); }
-  ~HostEntriesKnob() { ::unsetenv("CONTACTGRID_HOST_ENTRIES"); }
-  HostEntriesKnob(const HostEntriesKnob&) = delete;
-  HostEntriesKnob& operator=(const HostEntriesKnob&) = delete;
-};
-
-template <class Real>
-detail::DetectJob<Real> make_job(const Spheres& s) {
-  constexpr Precision prec = sizeof(Real) == 4 ? Precision::fp32 : Precision::fp64;
-  const BodiesView v{s.p, s.r, {}, {}};
-  const Bounds b = compute_bounds(v);
-  const Frame f = make_frame(b, 0, prec, CellChoice::tuned);
-  detail::DetectJob<Real> job{v, plan_grid(b, f, prec), {}, Fields::basic};
-  job.grid = detail::grid_params<Real>(job.plan);
-  return job;
-}
 
 // A few huge spheres (radius 40) among many small ones: cells far wider than most bodies, so most
 // cells hold many entries and a huge sphere's eight cells hold most bodies.
