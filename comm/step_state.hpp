@@ -231,29 +231,27 @@ struct StepLoop<Real>::State {
       finish_merge();
       return;
     }
-    merging = std::thread([this] {
-      try {
-        splice_step_bodies(bodies, merge_gone, merge_at, arrivals, merge_shapes, spare, merge_threads());
-      } catch (...) {
-        merge_error = std::current_exception();
-      }
-    });
+    merging = std::thread([this] { run_merge(merge_threads()); });
     merge_started = true;
+  }
+  // The merge itself: the rows that stay and the arrivals into the spare storage (an error kept for
+  // finish_merge to throw).
+  void run_merge(int team_size) {
+    try {
+      splice_step_bodies(bodies, merge_gone, merge_at, arrivals, merge_shapes, spare, team_size);
+    } catch (...) {
+      merge_error = std::current_exception();
+    }
   }
   // The migration's merge finished (run here when it has not started): its rows are the bodies (the
   // previous ones the spare).
   void finish_merge() {
     if (!merge_pending) return;
     const auto w0 = WallClock::now();
-    if (merge_started) {
+    if (merge_started)
       merging.join();
-    } else {
-      try {
-        splice_step_bodies(bodies, merge_gone, merge_at, arrivals, merge_shapes, spare, threads);
-      } catch (...) {
-        merge_error = std::current_exception();
-      }
-    }
+    else
+      run_merge(threads);
     t[static_cast<std::size_t>(StepStage::merge_wait)] += seconds_since(w0);
     merge_pending = merge_started = false;
     std::swap(bodies, spare);
