@@ -1,6 +1,6 @@
 #pragma once
 // What the ranks of `contactgrid simulate` under mpirun send each other and gather on rank 0, shared
-// by both ways a rank computes its bodies (distributed.cpp: the forces on the host; resident_dem.hpp:
+// by both ways a rank computes its bodies (distributed_dem.hpp: the forces on the host; resident_dem.hpp:
 // each rank's rows where its backend computes): records between ranks as bytes, and rank 0's frame
 // bodies, energies (summed in the one-rank order of core/dem_sum.hpp) and contacts from every
 // rank's rows; the one-rank order's sums from what each rank sums of its own items (tree_sums_on_root).

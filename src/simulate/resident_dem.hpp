@@ -1,6 +1,6 @@
 #pragma once
 // contactgrid simulate under mpirun with each rank's bodies where its backend computes (the default;
-// CONTACTGRID_SIMULATE_RANKS=host: distributed.cpp's DistributedDem, whose forces run on the host).
+// CONTACTGRID_SIMULATE_RANKS=host: distributed_dem.hpp's DistributedDem, whose forces run on the host).
 // Each rank holds the bodies of its slab (owned) and every body within the ghost width of it
 // (ghosts) as the rows of one Simulation (kernels/dem.hpp), in ascending id, on its own GPU with
 // --backend cuda: the detection, the forces and the integration of all of them stay there.
