@@ -11,6 +11,7 @@
 
 #include "cli/cli.hpp"
 #include "cli/commands.hpp"
+#include "cli/option_words.hpp"
 #include "cli/subcommands.hpp"
 #include "io/size_text.hpp"
 #include "io/temp_output.hpp"
