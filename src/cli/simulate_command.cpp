@@ -102,6 +102,15 @@ Subcommand add_simulate(CLI::App& app) {
         },
         "Verlet skin of the contact detection: auto (a tenth of the smallest radius) or a length")
       ->default_str("auto");
+  sm->add_option("--order", sim.order,
+                 "The bodies' order in the run: cells (sorted by the cell of their centre, so a contact's "
+                 "bodies lie near each other in memory: faster), file (the scene's), auto (cells, file "
+                 "with --write-contacts); frames are written in the scene's order either way")
+      ->transform(enum_names(
+          std::map<std::string, SimulateCommand::Order>{{"auto", SimulateCommand::Order::automatic},
+                                                        {"cells", SimulateCommand::Order::cells},
+                                                        {"file", SimulateCommand::Order::file}}))
+      ->default_str("auto");
   sm->add_option("--threads", sim.threads, "CPU backend threads (0: all cores)")
       ->check(CLI::NonNegativeNumber);
   sm->add_flag(

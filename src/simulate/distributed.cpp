@@ -30,7 +30,7 @@ using sim::DistributedDem;
 // Sim: ResidentDem<Real> (resident_dem.hpp) or DistributedDem<Real>.
 template <class Real, class Sim>
 int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& scene, const DemBodies& bodies,
-                   const DemOptions& options, const TimeStepLimits& limits) {
+                   const DemOptions& options, const TimeStepLimits& limits, const BodyOrder& order) {
   using clock_type = std::chrono::steady_clock;
   const bool root = session.rank() == 0;
   const Cadence cadence(cmd);
@@ -68,7 +68,7 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
       t = clock_type::now();
       agreed_stage(session, "simulate", [&] {
         if (!root) return;
-        out->frame(sim.steps(), double(sim.steps()) * options.dt, all, spheres);
+        out->frame(sim.steps(), double(sim.steps()) * options.dt, order.to_scene(all), spheres);
         if (cmd.write_contacts) {
           info.cell_size = sim.cell_size();
           out->contacts(sim.steps(), contacts, info);
@@ -184,6 +184,10 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
         plot_final_state(final_bodies, out->path("final"), cmd.quiet);
       }
     });
+  } catch (const InputError& e) {  // a body named by its id in the scene
+    const std::string why = order.scene_message(e.what());
+    if (out) out->fail(why);
+    throw InputError(why);
   } catch (const std::exception& e) {
     if (out) out->fail(e.what());
     throw;
@@ -194,8 +198,8 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
 }  // namespace
 
 int run_simulate_distributed(const SimulateCommand& cmd, Session& session, const Scene& scene,
-                             const DemBodies& bodies, const DemOptions& options,
-                             const TimeStepLimits& limits) {
+                             const DemBodies& bodies, const DemOptions& options, const TimeStepLimits& limits,
+                             const BodyOrder& order) {
   // CONTACTGRID_SIMULATE_RANKS=host: each rank's forces on the host (DistributedDem); else resident
   const char* knob = std::getenv("CONTACTGRID_SIMULATE_RANKS");
   const std::string path = knob ? knob : "resident";
@@ -203,10 +207,14 @@ int run_simulate_distributed(const SimulateCommand& cmd, Session& session, const
     throw UsageError("CONTACTGRID_SIMULATE_RANKS must be resident or host (got \"" + path + "\")");
   const bool host = path == "host";
   if (cmd.precision == Precision::fp32)
-    return host ? distributed_as<float, DistributedDem<float>>(cmd, session, scene, bodies, options, limits)
-                : distributed_as<float, ResidentDem<float>>(cmd, session, scene, bodies, options, limits);
-  return host ? distributed_as<double, DistributedDem<double>>(cmd, session, scene, bodies, options, limits)
-              : distributed_as<double, ResidentDem<double>>(cmd, session, scene, bodies, options, limits);
+    return host ? distributed_as<float, DistributedDem<float>>(cmd, session, scene, bodies, options, limits,
+                                                               order)
+                : distributed_as<float, ResidentDem<float>>(cmd, session, scene, bodies, options, limits,
+                                                            order);
+  return host ? distributed_as<double, DistributedDem<double>>(cmd, session, scene, bodies, options, limits,
+                                                               order)
+              : distributed_as<double, ResidentDem<double>>(cmd, session, scene, bodies, options, limits,
+                                                            order);
 }
 
 }  // namespace cg

@@ -30,7 +30,7 @@ RunInfo simulate_run_info(const SimulateCommand& cmd, std::size_t bodies, Precis
 
 // The run of `cmd` over the session's ranks (collective; rank 0 writes the run directory).
 int run_simulate_distributed(const SimulateCommand& cmd, Session& session, const Scene& scene,
-                             const DemBodies& bodies, const DemOptions& options,
-                             const TimeStepLimits& limits);
+                             const DemBodies& bodies, const DemOptions& options, const TimeStepLimits& limits,
+                             const BodyOrder& order);
 
 }  // namespace cg

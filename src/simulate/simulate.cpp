@@ -19,10 +19,7 @@
 
 namespace cg {
 
-namespace {
-
-// The scene's bodies in id order (spheres, then ellipsoids) with their motion.
-DemBodies bodies_of(const Scene& s) {
+DemBodies dem_bodies_of(const Scene& s) {
   DemBodies b;
   const std::size_t n = s.sphere_count(), e = s.ellipsoid_count();
   const bool shapes = e > 0;
@@ -53,6 +50,8 @@ DemBodies bodies_of(const Scene& s) {
   }
   return b;
 }
+
+namespace {
 
 // The walls: --walls, else the scene's simulate_walls attribute (generate --kind pour), else none.
 std::vector<dem::Wall> walls_of(const SimulateCommand& cmd, const Scene& scene) {
@@ -91,7 +90,7 @@ double expected_speed(const DemBodies& b, Vec3<double> g) {
 
 template <class Real>
 int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies& bodies, DemOptions options,
-                const TimeStepLimits& limits) {
+                const TimeStepLimits& limits, const BodyOrder& order) {
   using clock_type = std::chrono::steady_clock;
   const Cadence cadence(cmd);
   RunOutput out(cmd.output, simulate_parameters(cmd, scene, options));
@@ -115,7 +114,7 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
       const Contacts<Real>* contacts = cmd.write_contacts ? &sim.contacts() : nullptr;
       split.frame_gather += since(t);
       t = clock_type::now();
-      out.frame(sim.steps(), sim.time(), state, spheres);
+      out.frame(sim.steps(), sim.time(), order.to_scene(state), spheres);
       if (contacts) {
         info.cell_size = sim.engine_stats().cell_size;
         out.contacts(sim.steps(), *contacts, info);
@@ -189,6 +188,10 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
       plot_run_log(out.path("log.csv"), out.path("energy"), cmd.quiet);
       plot_final_state(sim.bodies(), out.path("final"), cmd.quiet);
     }
+  } catch (const InputError& e) {  // a body named by its id in the scene
+    const std::string why = order.scene_message(e.what());
+    out.fail(why);
+    throw InputError(why);
   } catch (const std::exception& e) {
     out.fail(e.what());
     throw;
@@ -278,7 +281,7 @@ Attributes simulate_parameters(const SimulateCommand& cmd, const Scene& scene, c
 int run_simulate(const SimulateCommand& cmd, Session& session) {
   if (cmd.precision == Precision::mixed) throw UsageError("simulate: --precision is fp32 or fp64");
   const Scene scene = read_scene(cmd.input);
-  DemBodies bodies = bodies_of(scene);
+  DemBodies bodies = dem_bodies_of(scene);
   DemOptions options;
   options.material = cmd.material;
   options.gravity = cmd.gravity;
@@ -315,11 +318,24 @@ int run_simulate(const SimulateCommand& cmd, Session& session) {
   } else {
     options.dt = limits.automatic;
   }
-  check_dem_setup(bodies, options);
+  check_dem_setup(bodies, options);  // (in the scene's order: its messages name the scene's ids)
+  const BodyOrder order = simulate_order(cmd, bodies, scene.sphere_count());
+  bodies = order.to_run(bodies);
   // under mpirun (any rank count, -np 1 too): the slabs of the step loop (distributed.hpp)
-  if (session.uses_mpi()) return run_simulate_distributed(cmd, session, scene, bodies, options, limits);
-  if (cmd.precision == Precision::fp32) return simulate_as<float>(cmd, scene, bodies, options, limits);
-  return simulate_as<double>(cmd, scene, bodies, options, limits);
+  if (session.uses_mpi())
+    return run_simulate_distributed(cmd, session, scene, bodies, options, limits, order);
+  if (cmd.precision == Precision::fp32) return simulate_as<float>(cmd, scene, bodies, options, limits, order);
+  return simulate_as<double>(cmd, scene, bodies, options, limits, order);
+}
+
+BodyOrder simulate_order(const SimulateCommand& cmd, const DemBodies& bodies, std::size_t spheres) {
+  using Order = SimulateCommand::Order;
+  if (cmd.order == Order::cells && cmd.write_contacts)
+    throw UsageError(
+        "--order cells: not with --write-contacts (contact files keep the scene's ids and rows: --order "
+        "file)");
+  if (cmd.order == Order::file || (cmd.order == Order::automatic && cmd.write_contacts)) return {};
+  return BodyOrder::cells(bodies, spheres);
 }
 
 }  // namespace cg

@@ -12,6 +12,8 @@
 
 #include "dem.hpp"
 #include "engine.hpp"
+#include "scene/scene.hpp"
+#include "simulate/body_order.hpp"
 
 namespace cg {
 
@@ -34,6 +36,9 @@ struct SimulateCommand {
   bool quiet = false;
   bool plots = true;         // gnuplot PNG/SVG of the log at the end, when gnuplot is present
   bool stage_times = false;  // --stage-times: where a step's time goes (DemOptions::stage_times)
+  // --order: the bodies' order in the run (body_order.hpp); automatic: cells, unless the run writes
+  // contact files (their rows and history stay in the scene's ids)
+  enum class Order { automatic, cells, file } order = Order::automatic;
 };
 
 // The --stage-times lines: the mean milliseconds a step of each stage, and of the engine's stages
@@ -62,6 +67,12 @@ std::string run_split_report(const RunSplit& s);
 std::vector<dem::Wall> parse_wall(const std::string& spec);
 
 int run_simulate(const SimulateCommand& cmd, Session& session);
+
+// The scene's bodies in id order (spheres, then ellipsoids) with their motion.
+DemBodies dem_bodies_of(const Scene& scene);
+
+// The run's body order from --order (UsageError: cells with contact files).
+BodyOrder simulate_order(const SimulateCommand& cmd, const DemBodies& bodies, std::size_t spheres);
 
 // When a run writes: a frame every `frames` steps, a log row every `logs` (--output-every,
 // --log-every, or their defaults), over `steps` steps; the one-rank and the mpirun loops step in blocks

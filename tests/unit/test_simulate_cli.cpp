@@ -159,6 +159,108 @@ TEST_F(SimulateCli, BadInputFailsWithOneMessage) {
   EXPECT_EQ(f.code, 2) << f.output;
 }
 
+// --order cells runs the scene sorted in cell order: its frames, written back in the scene's order,
+// are the bits of a --order file run of the sorted scene written as a file, and its log the same rows
+// (a mixed scene: the spheres and the ellipsoids each sorted within their group). Contact files keep
+// the scene's ids, so --order cells with --write-contacts is refused.
+TEST_F(SimulateCli, CellOrderIsTheRunOfTheSceneSortedByCell) {
+  const std::string scene_path = path("mixed.h5"), sorted_path = path("sorted.h5");
+  CliResult g =
+      run_cli("generate " + scene_path +
+              " --kind mixed -n 800 --rhigh 0.005 --max-aspect 3 --contacts-per-body 3 --seed 7 -q");
+  ASSERT_EQ(g.code, 0) << g.output;
+  const Scene scene = read_scene(scene_path);
+  const std::size_t spheres = scene.sphere_count();
+  ASSERT_GT(spheres, 0u);
+  ASSERT_GT(scene.ellipsoid_count(), 0u);
+  const BodyOrder order = BodyOrder::cells(dem_bodies_of(scene), spheres);
+  std::size_t moved = 0;
+  for (std::size_t k = 0; k < scene.size(); ++k) {
+    const auto from = static_cast<std::size_t>(order.scene_of(std::int64_t(k)));
+    ASSERT_EQ(k < spheres, from < spheres) << k;  // each group sorted within itself
+    moved += from != k;
+  }
+  ASSERT_GT(moved, scene.size() / 2) << "the generator's random order is not the cell order";
+  // the sorted scene as a file: row k is the scene's row scene_of(k)
+  Scene sorted = scene;
+  for (std::size_t k = 0; k < scene.size(); ++k) {
+    const auto from = static_cast<std::size_t>(order.scene_of(std::int64_t(k)));
+    if (k < spheres) {
+      sorted.sphere_position[k] = scene.sphere_position[from];
+      sorted.sphere_radius[k] = scene.sphere_radius[from];
+    } else {
+      sorted.ellipsoid_position[k - spheres] = scene.ellipsoid_position[from - spheres];
+      sorted.ellipsoid_semi_axes[k - spheres] = scene.ellipsoid_semi_axes[from - spheres];
+      sorted.ellipsoid_orientation[k - spheres] = scene.ellipsoid_orientation[from - spheres];
+    }
+  }
+  write_scene(sorted_path, sorted);
+  const std::string common =
+      " --steps 60 --output-every 30 --backend cpu --threads 2 --precision fp32 --no-plot -q";
+  CliResult c = run_cli("simulate " + scene_path + " -o " + path("cells") + " --order cells" + common);
+  ASSERT_EQ(c.code, 0) << c.output;
+  CliResult f = run_cli("simulate " + sorted_path + " -o " + path("file") + " --order file" + common);
+  ASSERT_EQ(f.code, 0) << f.output;
+  auto bits = [](const auto& x, const auto& y) { return std::memcmp(&x, &y, sizeof(x)) == 0; };
+  for (const char* frame : {"/frame_00000030.h5", "/frame_00000060.h5"}) {
+    const Scene a = read_scene(path("cells") + frame), b = read_scene(path("file") + frame);
+    ASSERT_EQ(a.size(), scene.size());
+    ASSERT_EQ(b.size(), scene.size());
+    for (std::size_t k = 0; k < scene.size(); ++k) {
+      const auto i = static_cast<std::size_t>(order.scene_of(std::int64_t(k)));
+      if (k < spheres) {
+        EXPECT_TRUE(bits(a.sphere_position[i], b.sphere_position[k])) << frame << " sphere " << i;
+        EXPECT_TRUE(bits(a.sphere_velocity[i], b.sphere_velocity[k])) << frame << " sphere " << i;
+        EXPECT_TRUE(bits(a.sphere_angular_velocity[i], b.sphere_angular_velocity[k]))
+            << frame << " sphere " << i;
+      } else {
+        const std::size_t ia = i - spheres, kb = k - spheres;
+        EXPECT_TRUE(bits(a.ellipsoid_position[ia], b.ellipsoid_position[kb])) << frame << " ellipsoid " << i;
+        EXPECT_TRUE(bits(a.ellipsoid_orientation[ia], b.ellipsoid_orientation[kb]))
+            << frame << " ellipsoid " << i;
+        EXPECT_TRUE(bits(a.ellipsoid_velocity[ia], b.ellipsoid_velocity[kb])) << frame << " ellipsoid " << i;
+        EXPECT_TRUE(bits(a.ellipsoid_angular_velocity[ia], b.ellipsoid_angular_velocity[kb]))
+            << frame << " ellipsoid " << i;
+      }
+    }
+  }
+  // the log's rows but their time a step (the last column)
+  auto rows = [&](const std::string& run) {
+    std::string out, line;
+    std::ifstream in(run + "/log.csv");
+    while (std::getline(in, line)) out += line.substr(0, line.rfind(',')) + "\n";
+    return out;
+  };
+  EXPECT_EQ(rows(path("cells")), rows(path("file")));
+  CliResult refused = run_cli("simulate " + scene_path + " -o " + path("refused") +
+                              " --order cells --write-contacts" + common);
+  EXPECT_EQ(refused.code, 2) << refused.output;
+  EXPECT_NE(refused.output.find("--order cells: not with --write-contacts"), std::string::npos)
+      << refused.output;
+}
+
+// A message that names bodies by the run's rows names them by the scene's ids.
+TEST(BodyOrder, MessagesNameTheScenesIds) {
+  DemBodies b;
+  for (double x : {10.0, 0.0, 5.0, 0.5}) {
+    b.position.push_back({x, 0, 0});
+    b.radius.push_back(0.25);
+  }
+  const BodyOrder order = BodyOrder::cells(b, b.size());  // cells of 0.5: x = 0, 0.5, 5, 10
+  ASSERT_FALSE(order.identity());
+  EXPECT_EQ(order.scene_of(0), 1);
+  EXPECT_EQ(order.scene_of(1), 3);
+  EXPECT_EQ(order.scene_of(2), 2);
+  EXPECT_EQ(order.scene_of(3), 0);
+  EXPECT_EQ(order.scene_message("body 0: centre is not finite; nobody 3, body 3 at step 7"),
+            "body 1: centre is not finite; nobody 3, body 0 at step 7");
+  EXPECT_EQ(BodyOrder().scene_message("body 0"), "body 0");
+  const DemBodies run = order.to_run(b);
+  EXPECT_EQ(run.position[1].x, 0.5);
+  const DemBodies back = order.to_scene(run);
+  for (std::size_t i = 0; i < b.size(); ++i) EXPECT_EQ(back.position[i].x, b.position[i].x);
+}
+
 TEST(SimulateWalls, Specs) {
   EXPECT_EQ(parse_wall("box:0,0,0,1,2,3").size(), 6u);
   EXPECT_EQ(parse_wall("open-box:0,0,0,1,2,3").size(), 4u);
