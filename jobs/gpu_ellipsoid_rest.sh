@@ -10,8 +10,8 @@
 # SETTLE steps with restitution 0.1 (CUDA, fp32, the defaults otherwise); the last frame is a scene
 # with velocities. The figure is then STEPS whole steps from that frame with the default material
 # (restitution 0.5), the same box: steps/s from log.csv (the first log block left out) and a short
-# --stage-times run (the box PAD wider: below); ORDER=1 (default) also from the same frame with its
-# rows in cell order. Target: 3·10^8 ellipsoid-steps/s at 2^22 (71.5 steps/s).
+# --stage-times run (the box PAD wider: below), each with the bodies in the generator's random order
+# (--order file) and sorted by cell (--order auto, the default: cells). Target: 3·10^8 ellipsoid-steps/s at 2^22 (71.5 steps/s).
 set -u
 cd "$(dirname "$0")/.."
 [ -f .devrt/env.sh ] && source .devrt/env.sh .devrt >/dev/null 2>&1
@@ -42,11 +42,12 @@ tail -4 "$OUT/settle_log.csv" | tee -a "$OUT/summary.txt"
 FRAME=$(ls "$W"/settle/frame_*.h5 2>/dev/null | sort -V | tail -1)
 [ -n "$FRAME" ] || { log "no settled frame"; exit 1; }
 rm -f "$W/e.h5"
-bench() {  # FRAME LABEL: STEPS whole steps from FRAME, steps/s from log.csv
+bench() {  # FRAME LABEL [simulate options]: STEPS whole steps from FRAME, steps/s from log.csv
   local frame=$1 label=$2
+  shift 2
   rm -rf "$W/bench"
   timeout 300 "$CG" simulate "$frame" -o "$W/bench" --steps "$STEPS" --output-every "$STEPS" \
-    --log-every $((STEPS / 6)) --backend "${BACKEND:-cuda}" --precision fp32 --no-plot --walls "$BOX2" \
+    --log-every $((STEPS / 6)) --backend "${BACKEND:-cuda}" --precision fp32 --no-plot --walls "$BOX2" "$@" \
     >"$OUT/bench_$label.txt" 2>&1 || log "bench $label rc=$?"
   cp "$W/bench/log.csv" "$OUT/bench_${label}_log.csv" 2>/dev/null
   awk -F, -v n="$N" -v t="$label" 'NR > 1 && $1 !~ /^#/ && $7 > 0 { k++; if (k > 1) { s += $7; m++; c = $5 } }
@@ -55,33 +56,20 @@ bench() {  # FRAME LABEL: STEPS whole steps from FRAME, steps/s from log.csv
   grep -E "candidate lists|last step" "$OUT/bench_$label.txt" | tee -a "$OUT/summary.txt"
   rm -rf "$W/bench"
 }
-bench "$FRAME" rest
-# ORDER=1: the same frame with its rows in cell order (cells of 2 Rhigh, x fastest, as a pour's
-# lattice is written): the bodies' order alone, what the gathers of body B cost in file order
-if [ "${ORDER:-1}" = 1 ]; then
-  if python3 - "$FRAME" "$W/ordered.h5" <<'PY'
-import sys, h5py, numpy as np
-src, dst = sys.argv[1], sys.argv[2]
-with h5py.File(src, "r") as f, h5py.File(dst, "w") as g:
-    for k, v in f.attrs.items(): g.attrs[k] = v
-    for group in f:
-        p = f[group]["position"][...]
-        c = np.floor((p - p.min(axis=0)) / 0.01).astype(np.int64)
-        order = np.lexsort((c[:, 0], c[:, 1], c[:, 2]))
-        h = g.create_group(group)
-        for name, d in f[group].items(): h.create_dataset(name, data=d[...][order])
-PY
-  then bench "$W/ordered.h5" rest_cell_order
-  else log "ordering failed"; fi
-fi
-stages() {  # FRAME LABEL: 30 steps with --stage-times
+# the settled frame in the generator's random order (--order file) and sorted by cell (the default)
+bench "$FRAME" file --order file
+bench "$FRAME" cells
+stages() {  # FRAME LABEL [simulate options]: 30 steps with --stage-times
   [ "$STAGES" = 1 ] && [ -f "$1" ] || return 0
-  timeout 200 "$CG" simulate "$1" -o "$W/stages" --steps 30 --output-every 30 --backend "${BACKEND:-cuda}" \
-    --precision fp32 --no-plot --walls "$BOX2" --stage-times >"$OUT/stages_$2.txt" 2>&1 || log "stages $2 rc=$?"
-  log "$2:"
-  grep -E "stage times|within detect|candidate lists" "$OUT/stages_$2.txt" | tee -a "$OUT/summary.txt"
+  local frame=$1 label=$2
+  shift 2
+  timeout 200 "$CG" simulate "$frame" -o "$W/stages" --steps 30 --output-every 30 --backend "${BACKEND:-cuda}" \
+    --precision fp32 --no-plot --walls "$BOX2" --stage-times "$@" >"$OUT/stages_$label.txt" 2>&1 ||
+    log "stages $label rc=$?"
+  log "$label:"
+  grep -E "stage times|within detect|candidate lists" "$OUT/stages_$label.txt" | tee -a "$OUT/summary.txt"
   rm -rf "$W/stages"
 }
-stages "$FRAME" rest
-stages "$W/ordered.h5" rest_cell_order
+stages "$FRAME" file --order file
+stages "$FRAME" cells
 rm -rf "$W"
