@@ -59,6 +59,8 @@ bench() {  # FRAME LABEL [simulate options]: STEPS whole steps from FRAME, steps
 # the settled frame in the generator's random order (--order file) and sorted by cell (the default)
 bench "$FRAME" file --order file
 bench "$FRAME" cells
+# MORTON=1: also sorted along a Z-order curve of the cells (CONTACTGRID_SIMULATE_ORDER_KEY=morton)
+[ "${MORTON:-0}" = 1 ] && (export CONTACTGRID_SIMULATE_ORDER_KEY=morton; bench "$FRAME" cells_morton)
 stages() {  # FRAME LABEL [simulate options]: 30 steps with --stage-times
   [ "$STAGES" = 1 ] && [ -f "$1" ] || return 0
   local frame=$1 label=$2

@@ -31,12 +31,14 @@ if wants pours; then
     n=$((1 << lg)); steps=$([ $lg = 20 ] && echo 300 || echo 60)
     timeout 120 "$CG" generate "$W/p.h5" --kind pour -n $n --rlow 0.00495 --rhigh 0.005 --pour-spacing 1.97 \
       --seed 5 -q || failed+=("generate $lg")
-    for round in 1 2; do
-      for order in file cells; do
+    for round in $(seq 1 "${ROUNDS:-2}"); do
+      # cells_morton: the cells along a Z-order curve (CONTACTGRID_SIMULATE_ORDER_KEY=morton)
+      for order in file cells cells_morton; do
         rm -rf "$W/r"
-        timeout 200 "$CG" simulate "$W/p.h5" -o "$W/r" --steps $steps --output-every $steps \
-          --log-every $((steps / 6)) --backend cuda --precision fp32 --no-plot --order $order \
-          >"$OUT/pour${lg}_${order}_$round.txt" 2>&1 || failed+=("pour $lg $order")
+        key=rows; [ $order = cells_morton ] && key=morton
+        CONTACTGRID_SIMULATE_ORDER_KEY=$key timeout 200 "$CG" simulate "$W/p.h5" -o "$W/r" --steps $steps \
+          --output-every $steps --log-every $((steps / 6)) --backend cuda --precision fp32 --no-plot \
+          --order ${order%_morton} >"$OUT/pour${lg}_${order}_$round.txt" 2>&1 || failed+=("pour $lg $order")
         log "pour 2^$lg --order $order (round $round): $(steps_per_second "$W/r") steps/s"
       done
     done
@@ -55,7 +57,7 @@ if wants pours; then
 fi
 
 if wants erest; then
-  BIN=$BIN OUT=$OUT/erest jobs/gpu_ellipsoid_rest.sh >/dev/null 2>&1 || failed+=(erest)
+  BIN=$BIN OUT=$OUT/erest MORTON=${MORTON:-1} jobs/gpu_ellipsoid_rest.sh >/dev/null 2>&1 || failed+=(erest)
   rm -f "$OUT/erest/settle_log.csv"
   sed 's/^/  /' "$OUT/erest/summary.txt" | tee -a "$OUT/summary.txt"
 fi

@@ -3,12 +3,24 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <numeric>
 #include <regex>
 
 namespace cg {
 
 namespace {
+
+// The 21 low bits of v spread to every third bit (a Morton key's axis).
+std::uint64_t spread(std::uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffULL;
+  v = (v | v << 16) & 0x1f0000ff0000ffULL;
+  v = (v | v << 8) & 0x100f00f00f00f00fULL;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+  v = (v | v << 2) & 0x1249249249249249ULL;
+  return v;
+}
 
 // The rows of `v` in the order `from` (out[k] = v[from[k]]) or back (out[from[k]] = v[k]); empty
 // arrays stay empty.
@@ -57,10 +69,14 @@ BodyOrder BodyOrder::cells(const DemBodies& b, std::size_t spheres) {
   auto index = [&](double x, double from) {
     return static_cast<std::uint64_t>(std::clamp(std::floor((x - from) / cell), 0.0, 2097151.0));
   };
+  // CONTACTGRID_SIMULATE_ORDER_KEY=morton: the cells along a Z-order curve instead of rows
+  const char* knob = std::getenv("CONTACTGRID_SIMULATE_ORDER_KEY");
+  const bool morton = knob && std::string(knob) == "morton";
   std::vector<std::uint64_t> key(n);
   for (std::size_t i = 0; i < n; ++i) {
     const Vec3<double>& p = b.position[i];
-    key[i] = index(p.z, lo.z) << 42 | index(p.y, lo.y) << 21 | index(p.x, lo.x);
+    const std::uint64_t x = index(p.x, lo.x), y = index(p.y, lo.y), z = index(p.z, lo.z);
+    key[i] = morton ? spread(x) | spread(y) << 1 | spread(z) << 2 : z << 42 | y << 21 | x;
   }
   order.m_scene_of.resize(n);
   std::iota(order.m_scene_of.begin(), order.m_scene_of.end(), std::int64_t(0));
