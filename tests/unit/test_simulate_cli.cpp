@@ -5,6 +5,7 @@
 // message and its exit code and never a directory that looks complete.
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -259,6 +260,28 @@ TEST(BodyOrder, MessagesNameTheScenesIds) {
   EXPECT_EQ(run.position[1].x, 0.5);
   const DemBodies back = order.to_scene(run);
   for (std::size_t i = 0; i < b.size(); ++i) EXPECT_EQ(back.position[i].x, b.position[i].x);
+}
+
+// The cells in rows (x fastest, then y, then z) or, with CONTACTGRID_SIMULATE_ORDER_KEY=morton, along
+// a Z-order curve: a 4 x 4 grid of bodies given in reverse.
+TEST(BodyOrder, CellsInRowsOrAlongAZOrderCurve) {
+  DemBodies b;
+  for (int k = 15; k >= 0; --k) {  // body 15 - k sits in cell (k % 4, k / 4)
+    b.position.push_back({0.5 * (k % 4) + 0.1, 0.5 * (k / 4) + 0.1, 0});
+    b.radius.push_back(0.25);
+  }
+  auto cells_of = [&](const BodyOrder& order) {
+    std::vector<int> cells;  // the run's rows as x + 4 y
+    for (std::int64_t r = 0; r < 16; ++r) cells.push_back(15 - int(order.scene_of(r)));
+    return cells;
+  };
+  ::unsetenv("CONTACTGRID_SIMULATE_ORDER_KEY");
+  EXPECT_EQ(cells_of(BodyOrder::cells(b, 0)),
+            (std::vector<int>{0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15}));
+  ::setenv("CONTACTGRID_SIMULATE_ORDER_KEY", "morton", 1);
+  const BodyOrder morton = BodyOrder::cells(b, 0);
+  ::unsetenv("CONTACTGRID_SIMULATE_ORDER_KEY");
+  EXPECT_EQ(cells_of(morton), (std::vector<int>{0, 1, 4, 5, 2, 3, 6, 7, 8, 9, 12, 13, 10, 11, 14, 15}));
 }
 
 TEST(SimulateWalls, Specs) {
