@@ -78,6 +78,7 @@ BodyOrder BodyOrder::cells(const DemBodies& b, std::size_t spheres) {
     const std::uint64_t x = index(p.x, lo.x), y = index(p.y, lo.y), z = index(p.z, lo.z);
     key[i] = morton ? spread(x) | spread(y) << 1 | spread(z) << 2 : z << 42 | y << 21 | x;
   }
+  order.m_name = morton ? "cells-morton" : "cells";
   order.m_scene_of.resize(n);
   std::iota(order.m_scene_of.begin(), order.m_scene_of.end(), std::int64_t(0));
   const auto by_key = [&](std::int64_t i, std::int64_t j) {

@@ -22,6 +22,8 @@ class BodyOrder {
   static BodyOrder cells(const DemBodies& bodies, std::size_t spheres);
 
   bool identity() const { return m_scene_of.empty(); }
+  // "file", "cells" or "cells-morton": a frame's root attribute body_order (docs/FORMAT.md §6)
+  const std::string& name() const { return m_name; }
   // Row k of the run is the scene's row scene_of(k).
   std::int64_t scene_of(std::int64_t k) const {
     return identity() || k < 0 || std::size_t(k) >= m_scene_of.size() ? k : m_scene_of[std::size_t(k)];
@@ -34,6 +36,7 @@ class BodyOrder {
 
  private:
   std::vector<std::int64_t> m_scene_of;
+  std::string m_name = "file";
 };
 
 }  // namespace cg

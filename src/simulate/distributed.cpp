@@ -39,7 +39,7 @@ int distributed_as(const SimulateCommand& cmd, Session& session, const Scene& sc
   CleanupAction incomplete;
   agreed_stage(session, "simulate", [&] {
     if (!root) return;
-    out.emplace(cmd.output, simulate_parameters(cmd, scene, options));
+    out.emplace(cmd.output, simulate_parameters(cmd, scene, options, order));
     incomplete = CleanupAction::append_file(out->path("log.csv"), "# status: failed: stopped by a signal\n");
   });
   try {

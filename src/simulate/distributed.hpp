@@ -22,7 +22,8 @@
 namespace cg {
 
 // The parameters every frame of a run carries (its root attributes).
-Attributes simulate_parameters(const SimulateCommand& cmd, const Scene& scene, const DemOptions& options);
+Attributes simulate_parameters(const SimulateCommand& cmd, const Scene& scene, const DemOptions& options,
+                               const BodyOrder& order);
 
 // What a run's contact files say about the run (the cell size: set per file).
 RunInfo simulate_run_info(const SimulateCommand& cmd, std::size_t bodies, Precision precision,

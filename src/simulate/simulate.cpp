@@ -93,7 +93,7 @@ int simulate_as(const SimulateCommand& cmd, const Scene& scene, const DemBodies&
                 const TimeStepLimits& limits, const BodyOrder& order) {
   using clock_type = std::chrono::steady_clock;
   const Cadence cadence(cmd);
-  RunOutput out(cmd.output, simulate_parameters(cmd, scene, options));
+  RunOutput out(cmd.output, simulate_parameters(cmd, scene, options, order));
   // a run ended at once by a signal (src/run/stop.hpp) still says in its log that it did not finish;
   // a stop at a stop point (between blocks of steps) unwinds to out.fail below
   CleanupAction incomplete =
@@ -253,7 +253,8 @@ RunInfo simulate_run_info(const SimulateCommand& cmd, std::size_t bodies, Precis
   return info;
 }
 
-Attributes simulate_parameters(const SimulateCommand& cmd, const Scene& scene, const DemOptions& options) {
+Attributes simulate_parameters(const SimulateCommand& cmd, const Scene& scene, const DemOptions& options,
+                               const BodyOrder& order) {
   Attributes parameters;
   parameters["source"] = scene.source;
   parameters["dt"] = options.dt;
@@ -267,6 +268,7 @@ Attributes simulate_parameters(const SimulateCommand& cmd, const Scene& scene, c
   parameters["gravity_y"] = options.gravity.y;
   parameters["gravity_z"] = options.gravity.z;
   parameters["integrator"] = std::string(options.synchronized ? "synchronized-verlet" : "verlet");
+  parameters["body_order"] = order.name();
   parameters["software_version"] = std::string(CONTACTGRID_VERSION);
   std::string walls;
   for (const std::string& w : cmd.walls) walls += (walls.empty() ? "" : ";") + w;

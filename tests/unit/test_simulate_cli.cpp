@@ -225,6 +225,12 @@ TEST_F(SimulateCli, CellOrderIsTheRunOfTheSceneSortedByCell) {
       }
     }
   }
+  auto body_order = [](const Scene& frame) {
+    const auto it = frame.attributes.find("body_order");
+    return it == frame.attributes.end() ? std::string("(none)") : std::get<std::string>(it->second);
+  };
+  EXPECT_EQ(body_order(read_scene(path("cells") + "/frame_00000060.h5")), "cells");
+  EXPECT_EQ(body_order(read_scene(path("file") + "/frame_00000060.h5")), "file");
   // the log's rows but their time a step (the last column)
   auto rows = [&](const std::string& run) {
     std::string out, line;
