@@ -319,15 +319,19 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
   // buffer's geometric growth) — in ws.pairs, so a rebuild skips the scan → fill walk.
   // A cell-order skin build (cuda/cell_order.cuh; not under CONTACTGRID_STEP_BUILD=copy): a and b
   // alone, as cell-order indices, straight into the kept list, whose room the previous build's
-  // count sets (core/kept_room.hpp); no fill walk, no mapping of the pairs afterwards.
+  // count sets, or before any list the last pair stage's count (core/kept_room.hpp); no fill walk,
+  // no mapping of the pairs afterwards. A walk that finds more than that room walks again into room
+  // of the counted size (CONTACTGRID_STEP_REBUILD=fill: the scan → fill walk and the mapping).
   const bool into_kept = r.cell_order && !r.tuning.step_build_copy;
+  const bool rewalk = into_kept && !r.tuning.step_rebuild_fill;
+  const std::size_t pair_bytes = 2 * sizeof(std::uint32_t);
   const std::uint64_t held_cap = ws.pairs.capacity() / (4 * sizeof(std::uint32_t));
   const bool direct_in_pairs = held_cap > ne / 4;
   std::uint64_t direct_cap = direct_in_pairs ? held_cap : ne / 4;
   std::uint32_t* d_direct = nullptr;
   if (into_kept) {
-    const std::size_t pair_bytes = 2 * sizeof(std::uint32_t);
-    direct_cap = kept_room(ws.kept_count, ne, ws.kept_pairs.capacity() / pair_bytes);
+    const std::uint64_t basis = rewalk ? kept_room_basis(ws.kept_count, ws.last_pairs) : ws.kept_count;
+    direct_cap = kept_room(basis, ne, ws.kept_pairs.capacity() / pair_bytes);
     ws.reserve({{&ws.kept_pairs, direct_cap * pair_bytes}}, "pairs");
     direct_cap = ws.kept_pairs.capacity() / pair_bytes;  // (the buffer's growth: all of it)
     d_direct = ws.kept_pairs.span_as<std::uint32_t>(2 * direct_cap).data();
@@ -335,20 +339,36 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
     d_direct = direct_in_pairs ? ws.pairs.span_as<std::uint32_t>(4 * held_cap).data()
                                : Workspace::direct_pairs(r.body);
   }
-  launch_count_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.pair_perm(), r.d_report,
-                     r.g.half_bits, 0u, d_pair_count, d_entry_totals, r.d_counters, d_direct,
-                     d_direct + direct_cap, direct_cap, into_kept);
+  auto count = [&] {
+    launch_count_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.pair_perm(), r.d_report,
+                       r.g.half_bits, 0u, d_pair_count, d_entry_totals, r.d_counters, d_direct,
+                       d_direct + direct_cap, direct_cap, into_kept);
+  };
+  count();
   r.read_counters_reporting_tests();  // host needs the pairs total
   const std::uint64_t n_pairs = r.h_counters->pairs;
   r.stats.pair_tests = r.h_counters->tests;
   check_pairs(n_pairs);
   r.np = static_cast<std::uint32_t>(n_pairs);
+  ws.last_pairs = n_pairs;
 
   // ---- (scan → fill) ----
   // Pairs as (a, b) u32 arrays, double-buffered (16 B a pair). When they fit the direct write's room
   // (np <= cap), the count kernel has already written them there; else they are placed in ws.pairs
-  // by the scan of the block totals → fill_pairs (from the contact masks).
-  const bool written = n_pairs <= direct_cap;
+  // by the scan of the block totals → fill_pairs (from the contact masks), or — a cell-order build
+  // (rewalk) — the same walk writes them again into the kept list, grown to the count: the count
+  // kernel's staged walk costs less than the fill's walk from memory, and the list needs no mapping.
+  bool written = n_pairs <= direct_cap;
+  if (rewalk && !written) {
+    ws.reserve({{&ws.kept_pairs, n_pairs * pair_bytes}}, "pairs");
+    direct_cap = ws.kept_pairs.capacity() / pair_bytes;
+    d_direct = ws.kept_pairs.span_as<std::uint32_t>(2 * direct_cap).data();
+    // the cursor and the tests from zero again (the walk counts the same tests a second time)
+    CG_CUDA_CHECK(cudaMemsetAsync(&r.d_counters->pairs, 0, sizeof r.d_counters->pairs, st));
+    CG_CUDA_CHECK(cudaMemsetAsync(&r.d_counters->tests, 0, sizeof r.d_counters->tests, st));
+    count();
+    written = true;
+  }
   r.kept_written = into_kept && written;
   if (r.kept_written) {  // the kept list, a then b (keep_cell_candidates keeps it)
     ws.reserve({{&ws.out, r.out_bytes_for(r.np)}}, "pairs");
