@@ -8,15 +8,17 @@
 #     room, the first build's room from the last pair count; every step = the CPU's fresh detection)
 #     with the defaults and again under CONTACTGRID_STEP_REBUILD=fill (the former path);
 #  2. N spheres fp32 at 6 contacts a body (`generate --seed 24 --contacts-per-body 6`), `detect --steps
-#     STEPS --drift 0.01 --skin auto --backend "$BACKEND" --precision fp32` (1 % of r_max a step), the defaults
-#     ("now") and CONTACTGRID_STEP_REBUILD=fill ("fill"), alternated ROUNDS times, and once a fresh
+#     STEPS --drift 0.01 --skin auto --backend cuda --precision fp32` (1 % of r_max a step), the defaults
+#     ("now"), CONTACTGRID_STEP_REBUILD=fill ("fill": the former path) and CONTACTGRID_STEP_BUILD_WINDOW=32
+#     ("w32": now with the former 31-entry window), alternated ROUNDS times, and once a fresh
 #     detection a step (--skin 0, 6 steps); every run with CONTACTGRID_STEP_TRACE=1, whose "build:"
 #     lines give each building step's pairs / order / narrow seconds, skin, entries, pair tests,
 #     candidates and contacts;
-#  3. the last step's /contacts of the first round's two runs byte-identical (`contactgrid compare`)
+#  3. the last step's /contacts of the first round's three runs byte-identical (`contactgrid compare`)
 #     and equal to a plain detect of the final scene (--final-scene); every run's pair hash the same;
-#  4. PROFILE=1 (default where ncu exists): each kernel's duration in a short run (16 steps) under
-#     Nsight Compute, summed by name — the GPU time of a build's kernels against its stage times.
+#  4. PROFILE=1 (default where ncu exists): each kernel's duration in a short run (12 steps, the
+#     defaults) under Nsight Compute, summed by name — the GPU time of a build's kernels against its
+#     stage times (PROFILE=0 skips it: ~1-2 minutes).
 # Table (ms; medians over the steps): fresh = a fresh detection a step, build = the detection of a
 # step that built its candidates, reuse = one that reused them, mean = the mean step; then each
 # run's building step's stages and its per-build trace lines.
@@ -26,9 +28,11 @@
 # that build the last call's pair count and a half (the fresh first step's count: it fits) and, where
 # any build's count outgrows its room, walks once more with the count kernel into room of the
 # counted size (no fill walk, no mapping). Look at the "build:" lines: a build whose pairs stage is
-# ~2x the others (the fallback) should be gone in "now"; the rest of the builds are the same on
-# both paths. If "order" stays near 8 ms on every build (BENCHMARKS §26: 8.2 ms on the H200),
-# the profile's kernels say whether that is GPU work (gather_spheres / copies) or a gap.
+# ~2x the others (the fallback) should be gone in "now"; "now" against "w32" is the window alone
+# (the pairs stage of every build). If "order" stays near 8 ms on every build (BENCHMARKS §26: 8.2 ms
+# on the H200), the profile's kernels say whether that is GPU work (gather_spheres / copies) or a gap.
+# (The summary's "build" median counts step 0 too — skin auto starts with a fresh call, skin 0 — and
+# the tuner picks its skins from measured times, so paths may build at other steps and skins.)
 # Exits non-zero naming each failed check.
 set -u
 cd "$(dirname "$0")/.."
@@ -68,20 +72,24 @@ for r in $(seq 1 "$ROUNDS"); do
   if [ "$r" = 1 ]; then
     FINAL="$W/final.h5" run now1 auto "$STEPS"
     run fill1 auto "$STEPS" CONTACTGRID_STEP_REBUILD=fill
+    run w32_1 auto "$STEPS" CONTACTGRID_STEP_BUILD_WINDOW=32
     log "== 3. the last step's contacts: now = fill = a plain detect of the final scene"
     "$CG" compare "$W/now1.h5" "$W/fill1.h5" >"$OUT/compare.log" 2>&1 || failed+=(now_vs_fill)
     timeout 90 "$CG" detect "$W/final.h5" -o "$W/plain.h5" --backend "$BACKEND" --precision fp32 -q ||
       failed+=(plain_detect)
     "$CG" compare "$W/now1.h5" "$W/plain.h5" >>"$OUT/compare.log" 2>&1 || failed+=(now_vs_plain)
+    "$CG" compare "$W/now1.h5" "$W/w32_1.h5" >>"$OUT/compare.log" 2>&1 || failed+=(now_vs_w32)
     cat "$OUT/compare.log"
-    rm -f "$W/now1.h5" "$W/fill1.h5" "$W/plain.h5" "$W/final.h5"
+    rm -f "$W/now1.h5" "$W/fill1.h5" "$W/w32_1.h5" "$W/plain.h5" "$W/final.h5"
   else
     run "now$r" auto "$STEPS"
     run "fill$r" auto "$STEPS" CONTACTGRID_STEP_REBUILD=fill
-    rm -f "$W/now$r.h5" "$W/fill$r.h5"
+    run "w32_$r" auto "$STEPS" CONTACTGRID_STEP_BUILD_WINDOW=32
+    rm -f "$W/now$r.h5" "$W/fill$r.h5" "$W/w32_$r.h5"
   fi
 done
-hashes=$(grep -ho 'pair hash [0-9a-f]*' "$OUT"/steps_now*.log "$OUT"/steps_fill*.log | sort -u | wc -l)
+hashes=$(grep -ho 'pair hash [0-9a-f]*' "$OUT"/steps_now*.log "$OUT"/steps_fill*.log "$OUT"/steps_w32_*.log |
+  sort -u | wc -l)
 echo "last-step pair hashes over the skin runs: $hashes distinct (1 expected)"
 [ "$hashes" = 1 ] || failed+=(pair_hashes)
 
@@ -100,8 +108,7 @@ lists() { sed -nE 's/.*candidate lists: ([0-9]+) builds, ([0-9]+) reuses, skin (
   printf '| run | fresh | build | reuse | mean | build/fresh | mean/fresh | builds/reuses |\n'
   printf '|---|---|---|---|---|---|---|---|\n'
   for r in $(seq 1 "$ROUNDS"); do
-    for p in now fill; do
-      t=$p$r
+    for t in "now$r" "fill$r" "w32_$r"; do
       printf '| %s | %s | %s | %s | %s | %s | %s | %s |\n' "$t" "$fr" "$(field "$t" build)" "$(field "$t" reuse)" \
         "$(field "$t" mean)" "$(ratio "$(field "$t" build)" "$fr")" "$(ratio "$(field "$t" mean)" "$fr")" "$(lists "$t")"
     done
@@ -109,10 +116,10 @@ lists() { sed -nE 's/.*candidate lists: ([0-9]+) builds, ([0-9]+) reuses, skin (
   echo "-- fresh: a step's stages (median)"
   sed -nE '/^  interior/,/^  boundary/p' "$OUT/steps_fresh.log" | grep -v boundary
   for r in $(seq 1 "$ROUNDS"); do
-    for p in now fill; do
-      echo "-- $p$r: a building step's stages (median), then each build (s)"
-      grep -E "building step's stages" "$OUT/steps_$p$r.log"
-      grep -E '^trace .* build:' "$OUT/steps_$p$r.log" |
+    for t in "now$r" "fill$r" "w32_$r"; do
+      echo "-- $t: a building step's stages (median), then each build (s)"
+      grep -E "building step's stages" "$OUT/steps_$t.log"
+      grep -E '^trace .* build:' "$OUT/steps_$t.log" |
         sed -E 's/.* build: interior ([0-9.]+) .* pairs/  detect \1 pairs/; s/ contacts [0-9]+//'
     done
   done
@@ -120,11 +127,10 @@ lists() { sed -nE 's/.*candidate lists: ([0-9]+) builds, ([0-9]+) reuses, skin (
 
 NCU=$(command -v ncu || ls /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1)
 if [ "${PROFILE:-1}" = 1 ] && [ -n "$NCU" ]; then
-  log "== 4. kernels of a 16-step run under ncu (durations summed by name; now, then fill)"
-  for p in now fill; do
-    envs=(); [ $p = fill ] && envs=(CONTACTGRID_STEP_REBUILD=fill)
-    timeout 150 env "${envs[@]}" "$NCU" --clock-control none --metrics gpu__time_duration.sum --csv \
-      --log-file "$OUT/ncu_$p.csv" "$CG" detect "$W/s.h5" --backend "$BACKEND" --precision fp32 --steps 16 \
+  log "== 4. kernels of a 12-step run under ncu (durations summed by name; the defaults)"
+  for p in now; do
+    timeout 120 "$NCU" --clock-control none --metrics gpu__time_duration.sum --launch-count 800 --csv \
+      --log-file "$OUT/ncu_$p.csv" "$CG" detect "$W/s.h5" --backend "$BACKEND" --precision fp32 --steps 12 \
       --drift 0.01 --skin auto >"$OUT/ncu_$p.out" 2>&1 || echo "ncu $p rc=$? (not a failure)"
     python3 - "$OUT/ncu_$p.csv" <<'PY' | tee "$OUT/ncu_$p.sum.txt"
 import csv, sys, collections

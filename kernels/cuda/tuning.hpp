@@ -95,6 +95,11 @@ struct Tuning {
   // mapping), and the first build's room from the last call's pair count (cuda/pairs.cuh). The same
   // rows either way.
   bool step_rebuild_fill = false;
+  // CONTACTGRID_STEP_BUILD_WINDOW=32: the cell-order build's walk tests the 31 entries after each in
+  // shared memory, as every other call's (the rest of a longer cell from memory, at the count and again
+  // at the write); default 64: 63, found ones kept in a 64-bit set (cuda/pairs.cuh). The same rows
+  // either way; CONTACTGRID_STEP_REBUILD=fill implies 32.
+  int step_build_window = 64;
   // CONTACTGRID_STEP_NARROW=select: the cell-order narrow stage is CUB's stable select, whose output
   // iterator writes the rows (reading each accepted candidate and its spheres again); default: one
   // kernel that keeps what it read and writes each block's rows at a cursor (cuda/cell_order.cuh:
@@ -206,6 +211,8 @@ inline Tuning read_tuning() {
     t.step_build_copy = std::string_view(b) == "copy";
   if (const char* b = std::getenv("CONTACTGRID_STEP_REBUILD"))
     t.step_rebuild_fill = std::string_view(b) == "fill";
+  if (const char* w = std::getenv("CONTACTGRID_STEP_BUILD_WINDOW"))
+    t.step_build_window = std::string_view(w) == "32" ? 32 : 64;
   if (const char* m = std::getenv("CONTACTGRID_STEP_NARROW"))
     t.step_narrow_select = std::string_view(m) == "select";
   if (const char* m = std::getenv("CONTACTGRID_STEP_NARROW_ITEMS"))

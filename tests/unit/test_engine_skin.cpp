@@ -465,8 +465,9 @@ TEST(EngineSkinCuda, CellOrderResidentStepsEqualFreshDetection) {
 // counted fill and the inverse permutation): a build whose skin grows fiftyfold (the second walk),
 // then one whose skin shrinks (in place again), with and without renumbered bodies, with a report
 // mask. Every step equals the CPU's fresh detection bit for bit, and the engines under
-// CONTACTGRID_STEP_BUILD=copy (the mapping after the walk) and CONTACTGRID_STEP_REBUILD=fill keep the
-// same candidates and build at the same steps.
+// CONTACTGRID_STEP_BUILD=copy (the mapping after the walk), CONTACTGRID_STEP_REBUILD=fill and
+// CONTACTGRID_STEP_BUILD_WINDOW=32 (31 entries after each in shared memory, not 63; the fiftyfold skin's
+// cells run far past both) keep the same candidates, count the same tests and build at the same steps.
 TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
   if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
   struct Env {
@@ -477,26 +478,28 @@ TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
   for (const char* renumber : {"1", "0"}) {
     const Env numbering("CONTACTGRID_CUDA_RENUMBER", renumber);
     Engine<float> in_place(options_for(Backend::cuda, 0.1)), copy(options_for(Backend::cuda, 0.1));
-    Engine<float> fill(options_for(Backend::cuda, 0.1));
+    Engine<float> fill(options_for(Backend::cuda, 0.1)), narrow(options_for(Backend::cuda, 0.1));
     Engine<float> fresh(options_for(Backend::cpu, 0));
     Spheres s = random_spheres(20000, 0.5, 1.0, 9191);
     const std::size_t n = s.r.size();
     std::mt19937_64 rng(9192);
     std::vector<std::uint8_t> report(n);
     for (auto& m : report) m = static_cast<std::uint8_t>(rng() % 5 == 0 ? 0 : 1);
-    for (Engine<float>* e : {&in_place, &copy, &fill}) e->set_resident(BodiesView{s.p, s.r, {}, report});
+    for (Engine<float>* e : {&in_place, &copy, &fill, &narrow})
+      e->set_resident(BodiesView{s.p, s.r, {}, report});
     std::uint64_t candidates_before = 0, entries_first = 0;
     for (int step = 0; step < 12; ++step) {
       const std::string at = std::string("renumber ") + renumber + ", step " + std::to_string(step);
       if (step == 4 || step == 8) {  // a new skin, built now: 5 (more candidates than the room), 0.2
-        for (Engine<float>* e : {&in_place, &copy, &fill}) {
+        for (Engine<float>* e : {&in_place, &copy, &fill, &narrow}) {
           e->set_skin(step == 4 ? 5.0 : 0.2);
           e->rebuild_candidates();
         }
       }
       if (step > 0) {
         random_step(s, 0.005, 0.0, rng);
-        for (Engine<float>* e : {&in_place, &copy, &fill}) e->write_resident(0, n, s.p.data(), s.r.data());
+        for (Engine<float>* e : {&in_place, &copy, &fill, &narrow})
+          e->write_resident(0, n, s.p.data(), s.r.data());
       }
       const Contacts<float> want = fresh.detect(BodiesView{s.p, s.r, {}, report});
       ASSERT_GT(want.size(), 500u) << at;
@@ -513,6 +516,11 @@ TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
         ASSERT_EQ(fill.detect_resident(), want.size()) << at;
         ASSERT_EQ(compare_contacts(fill.resident_contacts(), want), "identical") << at << " (fill)";
       }
+      {
+        const Env window("CONTACTGRID_STEP_BUILD_WINDOW", "32");
+        ASSERT_EQ(narrow.detect_resident(), want.size()) << at;
+        ASSERT_EQ(compare_contacts(narrow.resident_contacts(), want), "identical") << at << " (window 32)";
+      }
       const bool built = in_place.stats().candidate_builds > builds;
       EXPECT_EQ(built, step == 0 || step == 4 || step == 8) << at;
       EXPECT_EQ(in_place.stats().candidates, copy.stats().candidates) << at << ": the same kept list";
@@ -520,6 +528,8 @@ TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
       EXPECT_EQ(in_place.stats().candidates, fill.stats().candidates) << at << ": the same kept list";
       EXPECT_EQ(in_place.stats().pair_tests, fill.stats().pair_tests) << at << ": counted once";
       EXPECT_EQ(in_place.stats().candidate_builds, fill.stats().candidate_builds) << at;
+      EXPECT_EQ(in_place.stats().candidates, narrow.stats().candidates) << at << ": window 32";
+      EXPECT_EQ(in_place.stats().pair_tests, narrow.stats().pair_tests) << at << ": window 32";
       // the room of the build at step 4: the first build's (one pair per entry), or the last list's
       // count and a half; the fiftyfold skin's list outgrows it
       if (step == 0) entries_first = in_place.stats().entries;
