@@ -210,11 +210,12 @@ void StepLoop<Real>::detect_boundary() {
       if (st.name == "pairs" || st.name == "order" || st.name == "narrow")
         s.trace.value(st.name.c_str(), st.seconds);
     const EngineStats& a = s.a.stats();
-    char counts[160];
-    std::snprintf(counts, sizeof counts, " skin %.4f entries %llu tests %llu candidates %llu contacts %llu",
-                  a.skin, static_cast<unsigned long long>(a.entries),
-                  static_cast<unsigned long long>(a.pair_tests),
-                  static_cast<unsigned long long>(a.candidates), static_cast<unsigned long long>(a.contacts));
+    char counts[192];
+    std::snprintf(counts, sizeof counts,
+                  " skin %.4f entries %llu tests %llu candidates %llu contacts %llu walks %d", a.skin,
+                  static_cast<unsigned long long>(a.entries), static_cast<unsigned long long>(a.pair_tests),
+                  static_cast<unsigned long long>(a.candidates), static_cast<unsigned long long>(a.contacts),
+                  a.pair_walks);
     s.trace.line += counts;
     s.trace.print(s.session.rank(), s.layouts, "build");
   }

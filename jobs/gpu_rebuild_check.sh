@@ -13,7 +13,7 @@
 #     ("w32": now with the former 31-entry window), alternated ROUNDS times, and once a fresh
 #     detection a step (--skin 0, 6 steps); every run with CONTACTGRID_STEP_TRACE=1, whose "build:"
 #     lines give each building step's pairs / order / narrow seconds, skin, entries, pair tests,
-#     candidates and contacts;
+#     candidates and walks of the cells (2: its candidates outgrew their room);
 #  3. the last step's /contacts of the first round's three runs byte-identical (`contactgrid compare`)
 #     and equal to a plain detect of the final scene (--final-scene); every run's pair hash the same;
 #  4. PROFILE=1 (default where ncu exists): each kernel's duration in a short run (12 steps, the
@@ -27,8 +27,8 @@
 # the input indices to cell order (inverse permutation, two random reads a candidate); "now" gives
 # that build the last call's pair count and a half (the fresh first step's count: it fits) and, where
 # any build's count outgrows its room, walks once more with the count kernel into room of the
-# counted size (no fill walk, no mapping). Look at the "build:" lines: a build whose pairs stage is
-# ~2x the others (the fallback) should be gone in "now"; "now" against "w32" is the window alone
+# counted size (no fill walk, no mapping). Look at the "build:" lines: a build with "walks 2" and a
+# pairs stage ~2x the others' (the fallback) should be gone in "now"; "now" against "w32" is the window alone
 # (the pairs stage of every build). If "order" stays near 8 ms on every build (BENCHMARKS §26: 8.2 ms
 # on the H200), the profile's kernels say whether that is GPU work (gather_spheres / copies) or a gap.
 # (The summary's "build" median counts step 0 too — skin auto starts with a fresh call, skin 0 — and

@@ -387,6 +387,7 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
     launch(std::integral_constant<int, 32>{});
   };
   count();
+  r.stats.pair_walks = 1;
   r.read_counters_reporting_tests();  // host needs the pairs total
   const std::uint64_t n_pairs = r.h_counters->pairs;
   r.stats.pair_tests = r.h_counters->tests;
@@ -409,6 +410,7 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
     CG_CUDA_CHECK(cudaMemsetAsync(&r.d_counters->tests, 0, sizeof r.d_counters->tests, st));
     count();
     written = true;
+    r.stats.pair_walks = 2;
   }
   r.kept_written = into_kept && written;
   if (r.kept_written) {  // the kept list, a then b (keep_cell_candidates keeps it)
@@ -433,6 +435,7 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
     });
     launch_fill_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.pair_perm(), r.d_report,
                       r.g.half_bits, d_pair_count, d_entry_offsets, r.pair_a.Current(), r.pair_b.Current());
+    r.stats.pair_walks = 2;
   }
   r.events.mark(EngineStage::pairs, st);
 }

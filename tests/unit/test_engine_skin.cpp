@@ -532,11 +532,15 @@ TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
       EXPECT_EQ(in_place.stats().pair_tests, narrow.stats().pair_tests) << at << ": window 32";
       // the room of the build at step 4: the first build's (one pair per entry), or the last list's
       // count and a half; the fiftyfold skin's list outgrows it
+      if (step == 8) {
+        EXPECT_EQ(in_place.stats().pair_walks, 1) << at << ": the last count and a half hold it";
+      }
       if (step == 0) entries_first = in_place.stats().entries;
       if (step == 4) {
         EXPECT_GT(in_place.stats().candidates,
                   std::max(candidates_before + candidates_before / 2, entries_first))
             << at;
+        EXPECT_EQ(in_place.stats().pair_walks, 2) << at << ": walked again into the counted room";
       }
       candidates_before = in_place.stats().candidates;
     }
@@ -585,6 +589,14 @@ TEST(EngineSkinCuda, TheFirstBuildAfterFreshCallsTakesItsRoomFromTheirCount) {
     EXPECT_EQ(now.stats().candidates, former.stats().candidates) << at;
     EXPECT_EQ(now.stats().pair_tests, former.stats().pair_tests) << at;
     EXPECT_EQ(now.stats().candidate_builds, former.stats().candidate_builds) << at;
+    // the build at step 3 has the fresh calls' count and a half (a skin of 0.1 adds less than a half);
+    // the one at step 8 (a skin twenty times that) outgrows it and walks again
+    if (step == 3) {
+      EXPECT_EQ(now.stats().pair_walks, 1) << at;
+    }
+    if (step == 8) {
+      EXPECT_EQ(now.stats().pair_walks, 2) << at;
+    }
   }
   EXPECT_EQ(now.stats().candidate_builds, 2u);  // steps 3 and 8
   EXPECT_GE(now.stats().candidate_reuses, 8u);
