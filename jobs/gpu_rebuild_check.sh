@@ -130,8 +130,9 @@ if [ "${PROFILE:-1}" = 1 ] && [ -n "$NCU" ]; then
   log "== 4. kernels of a 12-step run under ncu (durations summed by name; the defaults)"
   for p in now; do
     timeout 120 "$NCU" --clock-control none --metrics gpu__time_duration.sum --launch-count 800 --csv \
-      --log-file "$OUT/ncu_$p.csv" "$CG" detect "$W/s.h5" --backend "$BACKEND" --precision fp32 --steps 12 \
-      --drift 0.01 --skin auto >"$OUT/ncu_$p.out" 2>&1 || echo "ncu $p rc=$? (not a failure)"
+      --log-file "$OUT/ncu_$p.csv" "$CG" detect "$W/s.h5" -o "$W/ncu.h5" --backend "$BACKEND" --precision fp32 \
+      --steps 12 --drift 0.01 --skin auto >"$OUT/ncu_$p.out" 2>&1 || echo "ncu $p rc=$? (not a failure)"
+    rm -f "$W/ncu.h5"
     python3 - "$OUT/ncu_$p.csv" <<'PY' | tee "$OUT/ncu_$p.sum.txt"
 import csv, sys, collections
 rows = list(csv.reader(open(sys.argv[1], errors="replace")))
