@@ -19,9 +19,11 @@
 #  4. PROFILE=1 (default where ncu exists): each kernel's duration in a short run (12 steps, the
 #     defaults) under Nsight Compute, summed by name — the GPU time of a build's kernels against its
 #     stage times (PROFILE=0 skips it: ~1-2 minutes).
-# Table (ms; medians over the steps): fresh = a fresh detection a step, build = the detection of a
-# step that built its candidates, reuse = one that reused them, mean = the mean step; then each
-# run's building step's stages and its per-build trace lines.
+# Table (ms; medians over the steps): fresh = a fresh detection a step, build = the summary's
+# detection of a building step (it counts step 0 too: skin auto starts with a fresh skin-0 call),
+# lists built = the median over the builds of kept lists alone (the trace's lines), reuse = a step
+# that reused them, mean = the mean step; then each run's building step's stages and its per-build
+# trace lines.
 # What to expect (BENCHMARKS §31): the former path's first skin build (room one pair per cell
 # entry, fewer than its candidates) walks the cells twice (count, then the scan → fill walk) and maps
 # the input indices to cell order (inverse permutation, two random reads a candidate); "now" gives
@@ -31,8 +33,7 @@
 # pairs stage ~2x the others' (the fallback) should be gone in "now"; "now" against "w32" is the window alone
 # (the pairs stage of every build). If "order" stays near 8 ms on every build (BENCHMARKS §26: 8.2 ms
 # on the H200), the profile's kernels say whether that is GPU work (gather_spheres / copies) or a gap.
-# (The summary's "build" median counts step 0 too — skin auto starts with a fresh call, skin 0 — and
-# the tuner picks its skins from measured times, so paths may build at other steps and skins.)
+# (The tuner picks its skins from measured times, so paths may build at other steps and skins.)
 # Exits non-zero naming each failed check.
 set -u
 cd "$(dirname "$0")/.."
@@ -102,15 +103,22 @@ field() {  # TAG WHAT: a figure of a run's summary in ms
   esac | head -1 | awk '{ printf "%.2f", $1 * 1000 }'
 }
 ratio() { awk -v a="$1" -v b="$2" 'BEGIN { if (b > 0) printf "%.3f", a / b; else print "-" }'; }
+# the median detection of the builds of kept lists alone (the trace's build lines; the summary's
+# "building" median also counts step 0, skin auto's fresh skin-0 call)
+lists_build() {
+  grep -E '^trace .* build:' "$OUT/steps_$1.log" | sed -E 's/.* build: interior ([0-9.e+-]+) .*/\1/' | sort -g |
+    awk '{ v[NR] = $1 } END { if (NR) printf "%.2f", 1000 * (NR % 2 ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2) }'
+}
 lists() { sed -nE 's/.*candidate lists: ([0-9]+) builds, ([0-9]+) reuses, skin ([0-9.e+-]+).*/\1\/\2, skin \3/p' "$OUT/steps_$1.log"; }
 {
   fr=$(field fresh build)
-  printf '| run | fresh | build | reuse | mean | build/fresh | mean/fresh | builds/reuses |\n'
-  printf '|---|---|---|---|---|---|---|---|\n'
+  printf '| run | fresh | build | lists built | reuse | mean | build/fresh | lists built/fresh | mean/fresh | builds/reuses |\n'
+  printf '|---|---|---|---|---|---|---|---|---|---|\n'
   for r in $(seq 1 "$ROUNDS"); do
     for t in "now$r" "fill$r" "w32_$r"; do
-      printf '| %s | %s | %s | %s | %s | %s | %s | %s |\n' "$t" "$fr" "$(field "$t" build)" "$(field "$t" reuse)" \
-        "$(field "$t" mean)" "$(ratio "$(field "$t" build)" "$fr")" "$(ratio "$(field "$t" mean)" "$fr")" "$(lists "$t")"
+      printf '| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n' "$t" "$fr" "$(field "$t" build)" \
+        "$(lists_build "$t")" "$(field "$t" reuse)" "$(field "$t" mean)" "$(ratio "$(field "$t" build)" "$fr")" \
+        "$(ratio "$(lists_build "$t")" "$fr")" "$(ratio "$(field "$t" mean)" "$fr")" "$(lists "$t")"
     done
   done
   echo "-- fresh: a step's stages (median)"
