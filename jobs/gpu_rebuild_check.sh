@@ -3,7 +3,8 @@
 # <= 1.0x a fresh detection), one H100, about 4 minutes:
 #   BIN=dir OUT=dir [N=16777216] [STEPS=40] [ROUNDS=2] [PROFILE=1] jobs/gpu_rebuild_check.sh
 # (a dry run of the script without a GPU: BACKEND=cpu N=65536 PROFILE=0; its CUDA cases then fail)
-# BIN holds the CUDA build's contactgrid and contactgrid_tests. It runs, in one call:
+# BIN holds the CUDA build's contactgrid and contactgrid_tests (and contactgrid_mpi_tests, whose
+# MovingSteps.Cuda* and StepLoop.*Cuda* cases run at np 2 where it is there). It runs, in one call:
 #  1. the CUDA skin cases (the build's in-place list, its second walk when the candidates outgrow their
 #     room, the first build's room from the last pair count; every step = the CPU's fresh detection)
 #     with the defaults and again under CONTACTGRID_STEP_REBUILD=fill (the former path);
@@ -57,7 +58,15 @@ gtest_ok "$OUT/unit.log" || failed+=(unit)
 timeout 90 env CONTACTGRID_STEP_REBUILD=fill "$BIN/contactgrid_tests" --gtest_color=no \
   --gtest_filter='EngineSkinCuda*:EngineSkinTest/cuda*' >"$OUT/unit_fill.log" 2>&1
 gtest_ok "$OUT/unit_fill.log" || failed+=(unit_fill)
-for f in unit unit_fill; do echo "$f: $(grep -E '^\[  (PASSED|FAILED|SKIPPED) ' "$OUT/$f.log" | tr '\n' ' ')"; done
+for f in unit unit_fill; do
+  echo "$f: $(grep -hE '^\[  (PASSED|FAILED)  \] [0-9]+ test' "$OUT/$f.log" | tr '\n' ' ')skipped $(grep -cE '^\[  SKIPPED \] .*\(' "$OUT/$f.log")"
+done
+if [ -x "$BIN/contactgrid_mpi_tests" ]; then  # the step loop's CUDA cases (cell-order builds) at np 2
+  export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_btl_vader_single_copy_mechanism=cma
+  timeout 150 mpirun --bind-to none --allow-run-as-root -np 2 "$BIN/contactgrid_mpi_tests" --gtest_color=no \
+    --gtest_filter='MovingSteps.Cuda*:StepLoop.*Cuda*' >"$OUT/mpi_tests.np2.log" 2>&1 || failed+=(mpi_tests_np2)
+  echo "mpi tests np 2 (MovingSteps.Cuda*, StepLoop.*Cuda*): $(grep -cE '^\[       OK' "$OUT/mpi_tests.np2.log") ok lines, $(tail -1 "$OUT/mpi_tests.np2.log")"
+fi
 
 log "== 2. $N spheres fp32, 6 contacts a body, drift 0.01, skin auto, $STEPS steps"
 timeout 90 "$CG" generate "$W/s.h5" -n "$N" --seed 24 --contacts-per-body 6 -q || failed+=(generate)
