@@ -129,10 +129,11 @@ __device__ __forceinline__ std::uint32_t walk_from_memory(
 // cell-order skin build (the fill path writes input indices whatever it is).
 // kWindow: the entries after e each thread tests in shared memory (31 by the 32-bit mask the fill
 // path reads), and the halo staged past the block's last entry. A skin build's inflated cells hold
-// more entries than a fresh call's (about 30 against 18 at 6 contacts a body), so more of their
-// entries go on past e + 31 and walk the rest of their cell from memory, twice (count, then write):
-// its kernel (kWindow 64, no mask: the cell-order build never fills from masks) keeps the entries
-// found among e + 1 .. e + 63 in a 64-bit set and walks from memory only past those.
+// more entries than a fresh call's (by the grid's geometry about 30 against 18 at 6 contacts a
+// body), so more of their entries go on past e + 31 and walk the rest of their cell from memory,
+// twice (count, then write): its kernel (kWindow 64, no mask: the cell-order build never fills from
+// masks) keeps the entries found among e + 1 .. e + 63 in a 64-bit set and walks from memory only
+// past those.
 template <int kWindow>
 using WindowBits = std::conditional_t<(kWindow > 32), unsigned long long, std::uint32_t>;
 template <class Bits>
