@@ -205,6 +205,18 @@ void StepLoop<Real>::detect_boundary() {
     s.trace.value("join", join);
     s.trace.value("agree", seconds_since(g0));
     s.trace.value("step", s.t[static_cast<std::size_t>(StepStage::step)]);
+    // engine A's stages of this build and what it walked (the skin, entries, tests, candidates)
+    for (const StageTime& st : s.a.times())
+      if (st.name == "pairs" || st.name == "order" || st.name == "narrow")
+        s.trace.value(st.name.c_str(), st.seconds);
+    const EngineStats& a = s.a.stats();
+    char counts[192];
+    std::snprintf(counts, sizeof counts,
+                  " skin %.4f entries %llu tests %llu candidates %llu contacts %llu walks %d", a.skin,
+                  static_cast<unsigned long long>(a.entries), static_cast<unsigned long long>(a.pair_tests),
+                  static_cast<unsigned long long>(a.candidates), static_cast<unsigned long long>(a.contacts),
+                  a.pair_walks);
+    s.trace.line += counts;
     s.trace.print(s.session.rank(), s.layouts, "build");
   }
 }

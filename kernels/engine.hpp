@@ -137,6 +137,9 @@ struct EngineStats {
   std::uint64_t candidate_builds = 0, candidate_reuses = 0;
   double skin_displacement = 0, skin_growth = 0;
   double skin = 0;  // the skin of the kept list (its build's; 0: none kept)
+  // CUDA, the grid's pair stage: the walks of the cells it made (1; 2 where its candidates outgrew the
+  // room of their direct write: the fill walk, or a cell-order build's second count); 0 elsewhere.
+  int pair_walks = 0;
 };
 
 // Engine::resident_extent: where the resident rows are and how far they moved.

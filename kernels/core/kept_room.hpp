@@ -15,4 +15,10 @@ inline std::uint64_t kept_room(std::uint64_t previous, std::uint64_t entries, st
   return std::max(wanted, held);
 }
 
+// The count a build's room starts from: the kept list's, or where none is kept (the first build after
+// calls without a skin) the last pair stage's count, which a skin's inflation only adds to.
+inline std::uint64_t kept_room_basis(std::uint64_t kept, std::uint64_t last_pairs) {
+  return kept > 0 ? kept : last_pairs;
+}
+
 }  // namespace cg

@@ -197,8 +197,9 @@ bool cell_order_wanted(const RunState<Real, Key, Narrow>& r) {
 // At a build (after the pair stage, instead of order_stage and keep_candidates): the kept list in cell
 // order, the permutation and the bodies' state it was built from; the cell-ordered spheres for this
 // call's narrow stage. The pair stage has written the list itself (r.kept_written: cell-order indices
-// in ws.kept_pairs); else (CONTACTGRID_STEP_BUILD=copy, or more candidates than the room it had) its
-// input indices are mapped through the inverse permutation into the list. Timed as the order stage.
+// in ws.kept_pairs); else (CONTACTGRID_STEP_BUILD=copy, or under CONTACTGRID_STEP_REBUILD=fill more
+// candidates than the room it had) its input indices are mapped through the inverse permutation
+// into the list. Timed as the order stage.
 template <class Real, class Key, class Narrow>
 void keep_cell_candidates(RunState<Real, Key, Narrow>& r) {
   Workspace& ws = r.ws;

@@ -216,6 +216,7 @@ class CudaBackend {
         }
         brute_stages(r);
       }
+      m_ws.last_pairs = r.np;  // (a first skin build's room: core/kept_room.hpp, kept_room_basis)
       if (cell_order) {
         keep_cell_candidates(r);  // instead of the order stage: the walk's order, cell-order indices
       } else {

@@ -9,6 +9,7 @@
 // stage rejects; forced by Tuning::candidates, the cell rule alone (CandidateFilter::cells) or the
 // bounding spheres alone.
 #include <cub/device/device_scan.cuh>
+#include <type_traits>
 
 #include "core/kept_room.hpp"
 #include "cuda/common.cuh"
@@ -126,7 +127,24 @@ __device__ __forceinline__ std::uint32_t walk_from_memory(
 // from the masks instead. The pairs' order is the blocks' arrival order; the order stage sorts them.
 // `cell_out`: the direct write holds cell-order indices (PairWriter::cell), the kept list of a
 // cell-order skin build (the fill path writes input indices whatever it is).
-template <class Real, class Key, class Test>
+// kWindow: the entries after e each thread tests in shared memory (31 by the 32-bit mask the fill
+// path reads), and the halo staged past the block's last entry. A skin build's inflated cells hold
+// more entries than a fresh call's (by the grid's geometry about 30 against 18 at 6 contacts a
+// body), so more of their entries go on past e + 31 and walk the rest of their cell from memory,
+// twice (count, then write): its kernel (kWindow 64, no mask: the cell-order build never fills from
+// masks) keeps the entries found among e + 1 .. e + 63 in a 64-bit set and walks from memory only
+// past those.
+template <int kWindow>
+using WindowBits = std::conditional_t<(kWindow > 32), unsigned long long, std::uint32_t>;
+template <class Bits>
+__device__ __forceinline__ int lowest_bit(Bits m) {
+  if constexpr (sizeof(Bits) == 8)
+    return __ffsll(static_cast<long long>(m)) - 1;
+  else
+    return __ffs(static_cast<int>(m)) - 1;
+}
+
+template <class Real, class Key, class Test, int kWindow = 32>
 __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
     count_pairs_kernel(const Key* __restrict__ keys, const std::uint32_t* __restrict__ body,
                        std::uint32_t n_entries, const std::uint8_t* __restrict__ ctrl,
@@ -135,6 +153,9 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
                        std::uint32_t* __restrict__ mask, std::uint32_t* __restrict__ block_pairs,
                        Counters* __restrict__ c, std::uint32_t* __restrict__ pair_a,
                        std::uint32_t* __restrict__ pair_b, unsigned long long cap, bool cell_out, Test test) {
+  static_assert(kWindow == 32 || kWindow == 64, "a window of 31 (the mask) or 63 entries");
+  using Bits = WindowBits<kWindow>;
+  constexpr std::uint32_t kStagedHere = kBlock + kWindow;
   using Reduce = cub::BlockReduce<unsigned long long, kBlock>;
   using Scan = cub::BlockScan<unsigned long long, kBlock>;
   __shared__ union {
@@ -142,16 +163,16 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
     typename Scan::TempStorage scan;
   } tmp;
   __shared__ unsigned long long s_base;
-  __shared__ Key s_key[kStaged];
-  __shared__ std::uint32_t s_body[kStaged];
-  __shared__ Sphere<Real> s_sphere[kStaged];
-  __shared__ std::uint32_t s_perm[kStaged];
-  __shared__ std::uint8_t s_ctrl[kStaged];
+  __shared__ Key s_key[kStagedHere];
+  __shared__ std::uint32_t s_body[kStagedHere];
+  __shared__ Sphere<Real> s_sphere[kStagedHere];
+  __shared__ std::uint32_t s_perm[kStagedHere];
+  __shared__ std::uint8_t s_ctrl[kStagedHere];
   const std::uint32_t base = blockIdx.x * kBlock;
   const std::uint32_t t = threadIdx.x;
   const std::uint32_t e = base + t;
   const bool valid = e < n_entries;
-  const std::uint32_t end = n_entries - base < kStaged ? n_entries - base : kStaged;  // staged entries
+  const std::uint32_t end = n_entries - base < kStagedHere ? n_entries - base : kStagedHere;  // staged
   Key k{};
   EntryBody<Real> x{};
   if (valid) {
@@ -176,22 +197,24 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
     s_perm[h] = report ? report_key(perm, report, b) : 0u;
   }
   __syncthreads();
-  std::uint32_t found = 0, tests = 0, bits = 0;
+  std::uint32_t found = 0, tests = 0;
+  Bits bits = 0;
   if (valid) {
-    const std::uint32_t lim = end < t + 32 ? end : t + 32;  // staged entries e + 1 .. e + 31
+    const std::uint32_t lim =
+        end < t + kWindow ? end : t + kWindow;  // staged entries e + 1 .. e + kWindow - 1
     std::uint32_t f = t + 1;
     auto mark_one = [&](std::uint32_t, std::uint32_t) {
       ++found;
-      bits |= 1u << (f - t);
+      bits |= Bits(1) << (f - t);
     };
     const auto coarse = coarse_part(test);
     for (; f < lim && s_key[f] == k; ++f)
       visit(x, s_body[f], s_ctrl[f], s_sphere[f], s_perm[f], report, tests, coarse, mark_one);
     if constexpr (TwoPartTest<Test>) {  // the rest of the test over the pairs found
-      for (std::uint32_t m = bits; m != 0; m &= m - 1) {
-        const std::uint32_t j = __ffs(m) - 1, g = t + j;
+      for (Bits m = bits; m != 0; m &= m - 1) {
+        const std::uint32_t j = lowest_bit(m), g = t + j;
         if (!test.refine(x.sa, s_sphere[g], x.a, s_body[g])) {
-          bits &= ~(1u << j);
+          bits &= ~(Bits(1) << j);
           --found;
         }
       }
@@ -202,7 +225,7 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
                                 [&](std::uint32_t, std::uint32_t) { ++found; });
       if (found != before) bits |= 1u;
     }
-    mask[e] = bits;
+    if constexpr (kWindow == 32) mask[e] = bits;  // (the fill path's; a wider window writes none)
   }
   unsigned long long rank, block_sum;
   Scan(tmp.scan).ExclusiveSum(static_cast<unsigned long long>(found), rank, block_sum);
@@ -218,10 +241,18 @@ __global__ void __launch_bounds__(kBlock, kPairsMinBlocks)
   if (found == 0 || s_base + block_sum > cap) return;
   PairWriter<unsigned long long> emit{
       pair_a, pair_b, perm, report ? x.pa & ~kWideKey : input_index(perm, x.a), s_base + rank, cell_out};
-  if (bits & 1u) {
-    walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test, emit);
-  } else {
-    for (std::uint32_t m = bits; m != 0; m &= m - 1) emit(x.a, s_body[t + __ffs(m) - 1]);
+  if constexpr (kWindow == 32) {
+    if (bits & 1u) {
+      walk_from_memory(e + 1, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test, emit);
+    } else {
+      for (std::uint32_t m = bits; m != 0; m &= m - 1) emit(x.a, s_body[t + __ffs(m) - 1]);
+    }
+  } else {  // the window's pairs from the set, then those past it from memory again
+    for (Bits m = bits & ~Bits(1); m != 0; m &= m - 1) emit(x.a, s_body[t + lowest_bit(m)]);
+    if (bits & 1u) {
+      const std::uint32_t past = (end < t + kWindow ? end : t + kWindow) + base;
+      walk_from_memory(past, k, x, keys, body, n_entries, ctrl, spheres, perm, report, test, emit);
+    }
   }
 }
 
@@ -284,11 +315,13 @@ void with_pair_test(const RunState<Real, Key, Narrow>& r, Launch&& launch) {
   launch(SpheresTouch{});
 }
 
-// count_pairs_kernel / fill_pairs_kernel instantiated for the call's pair test.
-template <class Real, class Key, class Narrow, class... Args>
+// count_pairs_kernel / fill_pairs_kernel instantiated for the call's pair test (count_pairs: with its
+// window of kWindow entries).
+template <int kWindow = 32, class Real, class Key, class Narrow, class... Args>
 void launch_count_pairs(const RunState<Real, Key, Narrow>& r, std::uint32_t blocks, Args... args) {
   with_pair_test(r, [&](auto test) {
-    cuda::count_pairs_kernel<Real, Key, decltype(test)><<<blocks, cuda::kBlock, 0, r.st>>>(args..., test);
+    cuda::count_pairs_kernel<Real, Key, decltype(test), kWindow>
+        <<<blocks, cuda::kBlock, 0, r.st>>>(args..., test);
   });
   CG_CUDA_CHECK_LAUNCH("count_pairs");
 }
@@ -319,15 +352,19 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
   // buffer's geometric growth) — in ws.pairs, so a rebuild skips the scan → fill walk.
   // A cell-order skin build (cuda/cell_order.cuh; not under CONTACTGRID_STEP_BUILD=copy): a and b
   // alone, as cell-order indices, straight into the kept list, whose room the previous build's
-  // count sets (core/kept_room.hpp); no fill walk, no mapping of the pairs afterwards.
+  // count sets, or before any list the last pair stage's count (core/kept_room.hpp); no fill walk,
+  // no mapping of the pairs afterwards. A walk that finds more than that room walks again into room
+  // of the counted size (CONTACTGRID_STEP_REBUILD=fill: the scan → fill walk and the mapping).
   const bool into_kept = r.cell_order && !r.tuning.step_build_copy;
+  const bool rewalk = into_kept && !r.tuning.step_rebuild_fill;
+  const std::size_t pair_bytes = 2 * sizeof(std::uint32_t);
   const std::uint64_t held_cap = ws.pairs.capacity() / (4 * sizeof(std::uint32_t));
   const bool direct_in_pairs = held_cap > ne / 4;
   std::uint64_t direct_cap = direct_in_pairs ? held_cap : ne / 4;
   std::uint32_t* d_direct = nullptr;
   if (into_kept) {
-    const std::size_t pair_bytes = 2 * sizeof(std::uint32_t);
-    direct_cap = kept_room(ws.kept_count, ne, ws.kept_pairs.capacity() / pair_bytes);
+    const std::uint64_t basis = rewalk ? kept_room_basis(ws.kept_count, ws.last_pairs) : ws.kept_count;
+    direct_cap = kept_room(basis, ne, ws.kept_pairs.capacity() / pair_bytes);
     ws.reserve({{&ws.kept_pairs, direct_cap * pair_bytes}}, "pairs");
     direct_cap = ws.kept_pairs.capacity() / pair_bytes;  // (the buffer's growth: all of it)
     d_direct = ws.kept_pairs.span_as<std::uint32_t>(2 * direct_cap).data();
@@ -335,9 +372,23 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
     d_direct = direct_in_pairs ? ws.pairs.span_as<std::uint32_t>(4 * held_cap).data()
                                : Workspace::direct_pairs(r.body);
   }
-  launch_count_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.pair_perm(), r.d_report,
-                     r.g.half_bits, 0u, d_pair_count, d_entry_totals, r.d_counters, d_direct,
-                     d_direct + direct_cap, direct_cap, into_kept);
+  // the cell-order build's walk: 63 entries after each in shared memory (CONTACTGRID_STEP_BUILD_WINDOW=32:
+  // the 31 of every other call; the former fill path's masks need 31)
+  const bool wide = rewalk && r.tuning.step_build_window == 64;
+  auto count = [&] {
+    auto launch = [&](auto window) {
+      launch_count_pairs<decltype(window)::value>(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres,
+                                                  r.pair_perm(), r.d_report, r.g.half_bits, 0u, d_pair_count,
+                                                  d_entry_totals, r.d_counters, d_direct,
+                                                  d_direct + direct_cap, direct_cap, into_kept);
+    };
+    if constexpr (std::is_same_v<Real, float> && std::is_same_v<Narrow, float>) {  // (cell order: fp32)
+      if (wide) return launch(std::integral_constant<int, 64>{});
+    }
+    launch(std::integral_constant<int, 32>{});
+  };
+  count();
+  r.stats.pair_walks = 1;
   r.read_counters_reporting_tests();  // host needs the pairs total
   const std::uint64_t n_pairs = r.h_counters->pairs;
   r.stats.pair_tests = r.h_counters->tests;
@@ -347,8 +398,21 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
   // ---- (scan → fill) ----
   // Pairs as (a, b) u32 arrays, double-buffered (16 B a pair). When they fit the direct write's room
   // (np <= cap), the count kernel has already written them there; else they are placed in ws.pairs
-  // by the scan of the block totals → fill_pairs (from the contact masks).
-  const bool written = n_pairs <= direct_cap;
+  // by the scan of the block totals → fill_pairs (from the contact masks), or — a cell-order build
+  // (rewalk) — the same walk writes them again into the kept list, grown to the count: the count
+  // kernel's staged walk costs less than the fill's walk from memory, and the list needs no mapping.
+  bool written = n_pairs <= direct_cap;
+  if (rewalk && !written) {
+    ws.reserve({{&ws.kept_pairs, n_pairs * pair_bytes}}, "pairs");
+    direct_cap = ws.kept_pairs.capacity() / pair_bytes;
+    d_direct = ws.kept_pairs.span_as<std::uint32_t>(2 * direct_cap).data();
+    // the cursor and the tests from zero again (the walk counts the same tests a second time)
+    CG_CUDA_CHECK(cudaMemsetAsync(&r.d_counters->pairs, 0, sizeof r.d_counters->pairs, st));
+    CG_CUDA_CHECK(cudaMemsetAsync(&r.d_counters->tests, 0, sizeof r.d_counters->tests, st));
+    count();
+    written = true;
+    r.stats.pair_walks = 2;
+  }
   r.kept_written = into_kept && written;
   if (r.kept_written) {  // the kept list, a then b (keep_cell_candidates keeps it)
     ws.reserve({{&ws.out, r.out_bytes_for(r.np)}}, "pairs");
@@ -372,6 +436,7 @@ void pairs_stage(RunState<Real, Key, Narrow>& r) {
     });
     launch_fill_pairs(r, neb, d_keys, d_body, ne, r.d_ctrl, r.d_cell_spheres, r.pair_perm(), r.d_report,
                       r.g.half_bits, d_pair_count, d_entry_offsets, r.pair_a.Current(), r.pair_b.Current());
+    r.stats.pair_walks = 2;
   }
   r.events.mark(EngineStage::pairs, st);
 }

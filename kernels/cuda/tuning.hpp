@@ -88,6 +88,18 @@ struct Tuning {
   // indices straight into the kept list, sized by the previous build's count (cuda/pairs.cuh). The
   // same rows either way.
   bool step_build_copy = false;
+  // CONTACTGRID_STEP_REBUILD=fill: a cell-order build whose walk finds more candidates than the kept
+  // list's room writes them by the scan → fill walk (input indices) and maps them to cell order
+  // through the inverse permutation, and its room comes from the last kept list alone; default: the
+  // same walk again into room of the counted size (cell-order indices in place, no fill walk, no
+  // mapping), and the first build's room from the last call's pair count (cuda/pairs.cuh). The same
+  // rows either way.
+  bool step_rebuild_fill = false;
+  // CONTACTGRID_STEP_BUILD_WINDOW=32: the cell-order build's walk tests the 31 entries after each in
+  // shared memory, as every other call's (the rest of a longer cell from memory, at the count and again
+  // at the write); default 64: 63, found ones kept in a 64-bit set (cuda/pairs.cuh). The same rows
+  // either way; CONTACTGRID_STEP_REBUILD=fill implies 32.
+  int step_build_window = 64;
   // CONTACTGRID_STEP_NARROW=select: the cell-order narrow stage is CUB's stable select, whose output
   // iterator writes the rows (reading each accepted candidate and its spheres again); default: one
   // kernel that keeps what it read and writes each block's rows at a cursor (cuda/cell_order.cuh:
@@ -197,6 +209,10 @@ inline Tuning read_tuning() {
     t.step_order_file = std::string_view(o) == "file";
   if (const char* b = std::getenv("CONTACTGRID_STEP_BUILD"))
     t.step_build_copy = std::string_view(b) == "copy";
+  if (const char* b = std::getenv("CONTACTGRID_STEP_REBUILD"))
+    t.step_rebuild_fill = std::string_view(b) == "fill";
+  if (const char* w = std::getenv("CONTACTGRID_STEP_BUILD_WINDOW"))
+    t.step_build_window = std::string_view(w) == "32" ? 32 : 64;
   if (const char* m = std::getenv("CONTACTGRID_STEP_NARROW"))
     t.step_narrow_select = std::string_view(m) == "select";
   if (const char* m = std::getenv("CONTACTGRID_STEP_NARROW_ITEMS"))

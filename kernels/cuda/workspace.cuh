@@ -112,6 +112,7 @@ struct Workspace {
   bool res_reported = false;     // resident report mask present
   bool res_shaped = false;       // resident shape rows present
   std::uint32_t kept_count = 0;  // kept candidate pairs
+  std::uint64_t last_pairs = 0;  // the last broad phase's candidate count (a first skin build's room)
   std::size_t kept_stride = 0;   // the kept list's b array starts this many u32 after its a array
   bool kept_reported = false;    // the kept list was built with a report mask
   bool kept_cell_order = false;  // the kept list is in cell order (cuda/cell_order.cuh)

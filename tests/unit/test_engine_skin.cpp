@@ -348,6 +348,11 @@ TEST(KeptRoom, FromTheLastCountOrTheEntriesAndNeverShrinks) {
   EXPECT_EQ(kept_room(0, 0, 0), 0u);                 // nothing to hold
   const std::uint64_t big = std::uint64_t(3) << 31;  // past 32 bits: no wrap
   EXPECT_EQ(kept_room(big, 0, 0), big + big / 2);
+  // the count it starts from: the kept list's, else the last pair stage's (calls without a skin)
+  EXPECT_EQ(kept_room_basis(1000, 5000), 1000u);
+  EXPECT_EQ(kept_room_basis(0, 5000), 5000u);
+  EXPECT_EQ(kept_room(kept_room_basis(0, 5000), 70000, 0), 7500u);  // not the entries
+  EXPECT_EQ(kept_room(kept_room_basis(0, 0), 70000, 0), 70000u);    // no call yet: the entries
 }
 
 #if defined(CONTACTGRID_HAVE_CUDA)
@@ -455,12 +460,14 @@ TEST(EngineSkinCuda, CellOrderResidentStepsEqualFreshDetection) {
 }
 
 // A cell-order build's pair stage writes the kept list itself (cell-order indices, in room sized by
-// the previous build's count: core/kept_room.hpp; kernels/cuda/pairs.cuh), and falls back to
-// the counted fill and the inverse permutation where the walk finds more than that room: a build
-// whose skin grows fiftyfold (the fallback), then one whose skin shrinks (in place again), with and
-// without renumbered bodies, with a report mask. Every step equals the CPU's fresh detection bit for
-// bit, and the engine under CONTACTGRID_STEP_BUILD=copy (the mapping after the walk) keeps the same
-// candidates and builds at the same steps.
+// the previous build's count: core/kept_room.hpp; kernels/cuda/pairs.cuh), and walks again into room
+// of the counted size where the walk finds more than that room (CONTACTGRID_STEP_REBUILD=fill: the
+// counted fill and the inverse permutation): a build whose skin grows fiftyfold (the second walk),
+// then one whose skin shrinks (in place again), with and without renumbered bodies, with a report
+// mask. Every step equals the CPU's fresh detection bit for bit, and the engines under
+// CONTACTGRID_STEP_BUILD=copy (the mapping after the walk), CONTACTGRID_STEP_REBUILD=fill and
+// CONTACTGRID_STEP_BUILD_WINDOW=32 (31 entries after each in shared memory, not 63; the fiftyfold skin's
+// cells run far past both) keep the same candidates, count the same tests and build at the same steps.
 TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
   if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
   struct Env {
@@ -471,27 +478,28 @@ TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
   for (const char* renumber : {"1", "0"}) {
     const Env numbering("CONTACTGRID_CUDA_RENUMBER", renumber);
     Engine<float> in_place(options_for(Backend::cuda, 0.1)), copy(options_for(Backend::cuda, 0.1));
+    Engine<float> fill(options_for(Backend::cuda, 0.1)), narrow(options_for(Backend::cuda, 0.1));
     Engine<float> fresh(options_for(Backend::cpu, 0));
     Spheres s = random_spheres(20000, 0.5, 1.0, 9191);
     const std::size_t n = s.r.size();
     std::mt19937_64 rng(9192);
     std::vector<std::uint8_t> report(n);
     for (auto& m : report) m = static_cast<std::uint8_t>(rng() % 5 == 0 ? 0 : 1);
-    in_place.set_resident(BodiesView{s.p, s.r, {}, report});
-    copy.set_resident(BodiesView{s.p, s.r, {}, report});
+    for (Engine<float>* e : {&in_place, &copy, &fill, &narrow})
+      e->set_resident(BodiesView{s.p, s.r, {}, report});
     std::uint64_t candidates_before = 0, entries_first = 0;
     for (int step = 0; step < 12; ++step) {
       const std::string at = std::string("renumber ") + renumber + ", step " + std::to_string(step);
       if (step == 4 || step == 8) {  // a new skin, built now: 5 (more candidates than the room), 0.2
-        for (Engine<float>* e : {&in_place, &copy}) {
+        for (Engine<float>* e : {&in_place, &copy, &fill, &narrow}) {
           e->set_skin(step == 4 ? 5.0 : 0.2);
           e->rebuild_candidates();
         }
       }
       if (step > 0) {
         random_step(s, 0.005, 0.0, rng);
-        in_place.write_resident(0, n, s.p.data(), s.r.data());
-        copy.write_resident(0, n, s.p.data(), s.r.data());
+        for (Engine<float>* e : {&in_place, &copy, &fill, &narrow})
+          e->write_resident(0, n, s.p.data(), s.r.data());
       }
       const Contacts<float> want = fresh.detect(BodiesView{s.p, s.r, {}, report});
       ASSERT_GT(want.size(), 500u) << at;
@@ -503,21 +511,95 @@ TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
         ASSERT_EQ(copy.detect_resident(), want.size()) << at;
         ASSERT_EQ(compare_contacts(copy.resident_contacts(), want), "identical") << at << " (copy)";
       }
+      {
+        const Env rebuild("CONTACTGRID_STEP_REBUILD", "fill");
+        ASSERT_EQ(fill.detect_resident(), want.size()) << at;
+        ASSERT_EQ(compare_contacts(fill.resident_contacts(), want), "identical") << at << " (fill)";
+      }
+      {
+        const Env window("CONTACTGRID_STEP_BUILD_WINDOW", "32");
+        ASSERT_EQ(narrow.detect_resident(), want.size()) << at;
+        ASSERT_EQ(compare_contacts(narrow.resident_contacts(), want), "identical") << at << " (window 32)";
+      }
       const bool built = in_place.stats().candidate_builds > builds;
       EXPECT_EQ(built, step == 0 || step == 4 || step == 8) << at;
       EXPECT_EQ(in_place.stats().candidates, copy.stats().candidates) << at << ": the same kept list";
       EXPECT_EQ(in_place.stats().candidate_builds, copy.stats().candidate_builds) << at;
+      EXPECT_EQ(in_place.stats().candidates, fill.stats().candidates) << at << ": the same kept list";
+      EXPECT_EQ(in_place.stats().pair_tests, fill.stats().pair_tests) << at << ": counted once";
+      EXPECT_EQ(in_place.stats().candidate_builds, fill.stats().candidate_builds) << at;
+      EXPECT_EQ(in_place.stats().candidates, narrow.stats().candidates) << at << ": window 32";
+      EXPECT_EQ(in_place.stats().pair_tests, narrow.stats().pair_tests) << at << ": window 32";
       // the room of the build at step 4: the first build's (one pair per entry), or the last list's
       // count and a half; the fiftyfold skin's list outgrows it
+      if (step == 8) {
+        EXPECT_EQ(in_place.stats().pair_walks, 1) << at << ": the last count and a half hold it";
+      }
       if (step == 0) entries_first = in_place.stats().entries;
       if (step == 4) {
         EXPECT_GT(in_place.stats().candidates,
                   std::max(candidates_before + candidates_before / 2, entries_first))
             << at;
+        EXPECT_EQ(in_place.stats().pair_walks, 2) << at << ": walked again into the counted room";
       }
       candidates_before = in_place.stats().candidates;
     }
   }
+}
+
+// The first build after calls without a skin takes its room from their pair count
+// (core/kept_room.hpp: kept_room_basis) rather than one pair per entry: a cell-order engine detects
+// from scratch (skin 0), then builds and reuses with a skin; a skin far above the first's makes the
+// second build walk again. Every step equals the CPU's fresh detection bit for bit, and the engine
+// under CONTACTGRID_STEP_REBUILD=fill keeps the same candidates and counts the same tests.
+TEST(EngineSkinCuda, TheFirstBuildAfterFreshCallsTakesItsRoomFromTheirCount) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  struct Env {
+    const char* name;
+    Env(const char* n, const char* v) : name(n) { ::setenv(n, v, 1); }
+    ~Env() { ::unsetenv(name); }
+  };
+  Engine<float> now(options_for(Backend::cuda, 0)), former(options_for(Backend::cuda, 0));
+  Engine<float> fresh(options_for(Backend::cpu, 0));
+  Spheres s = random_spheres(25000, 0.5, 1.0, 9201);
+  const std::size_t n = s.r.size();
+  std::mt19937_64 rng(9202);
+  for (Engine<float>* e : {&now, &former}) e->set_resident(BodiesView{s.p, s.r, {}, {}});
+  for (int step = 0; step < 14; ++step) {
+    const std::string at = "step " + std::to_string(step);
+    if (step == 3 || step == 8) {  // a skin from now on (step 3), then one far larger (step 8)
+      for (Engine<float>* e : {&now, &former}) {
+        e->set_skin(step == 3 ? 0.1 : 2.0);
+        e->rebuild_candidates();
+      }
+    }
+    if (step > 0) {
+      random_step(s, 0.004, 0.0, rng);
+      for (Engine<float>* e : {&now, &former}) e->write_resident(0, n, s.p.data(), s.r.data());
+    }
+    const Contacts<float> want = fresh.detect(BodiesView{s.p, s.r, {}, {}});
+    ASSERT_GT(want.size(), 500u) << at;
+    ASSERT_EQ(now.detect_resident(), want.size()) << at;
+    ASSERT_EQ(compare_contacts(now.resident_contacts(), want), "identical") << at;
+    {
+      const Env rebuild("CONTACTGRID_STEP_REBUILD", "fill");
+      ASSERT_EQ(former.detect_resident(), want.size()) << at;
+      ASSERT_EQ(compare_contacts(former.resident_contacts(), want), "identical") << at << " (fill)";
+    }
+    EXPECT_EQ(now.stats().candidates, former.stats().candidates) << at;
+    EXPECT_EQ(now.stats().pair_tests, former.stats().pair_tests) << at;
+    EXPECT_EQ(now.stats().candidate_builds, former.stats().candidate_builds) << at;
+    // the build at step 3 has the fresh calls' count and a half (a skin of 0.1 adds less than a half);
+    // the one at step 8 (a skin twenty times that) outgrows it and walks again
+    if (step == 3) {
+      EXPECT_EQ(now.stats().pair_walks, 1) << at;
+    }
+    if (step == 8) {
+      EXPECT_EQ(now.stats().pair_walks, 2) << at;
+    }
+  }
+  EXPECT_EQ(now.stats().candidate_builds, 2u);  // steps 3 and 8
+  EXPECT_GE(now.stats().candidate_reuses, 8u);
 }
 #endif
 
