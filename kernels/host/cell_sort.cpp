@@ -40,30 +40,66 @@ inline void for_each_cell(std::uint64_t block, std::uint32_t ctrl, std::uint64_t
   }
 }
 
+// A body's cells from its control byte, for a thread's window of counters: for each ctrl (64) and
+// each c of the 8 subsets of the axes, for_each_cell's cell as its counter's place in the window less
+// the body's super-cell (type · width plus the super-cell step), and in `in` bit c where c lies
+// within the spilled axes (a cell of the body). The count adds that bit at all eight places: no branch
+// on the body's number of cells, whose mispredictions cost the loop more than its eight adds (all
+// eight places lie in the window, which reaches a layer of super-cells past its last body's).
+struct CellPlaces {
+  std::uint64_t at[64][8];
+  std::uint8_t in[8];  // by the spilled axes
+  CellPlaces(std::uint64_t width, std::uint64_t h0, std::uint64_t h01) {
+    for (std::uint32_t ctrl = 0; ctrl < 64; ++ctrl) {
+      const std::uint32_t parity = ctrl & 7u;
+      for (std::uint32_t c = 0; c < 8; ++c) {
+        const std::uint32_t up = c & parity;
+        at[ctrl][c] = (parity ^ c) * width + (up & 1u) + ((up >> 1) & 1u) * h0 + ((up >> 2) & 1u) * h01;
+      }
+    }
+    for (std::uint32_t spill = 0; spill < 8; ++spill) {
+      in[spill] = 0;
+      for (std::uint32_t c = 0; c < 8; ++c)
+        if ((c & ~spill) == 0) in[spill] = static_cast<std::uint8_t>(in[spill] | (1u << c));
+    }
+  }
+};
+
 }  // namespace
+
+bool cell_sort_packs_blocks() {
+  const char* k = std::getenv("CONTACTGRID_HOST_ENTRIES");
+  return k == nullptr || std::string_view(k) != "cells-via-cells";
+}
 
 template <class Real>
 bool cell_sort_wanted(const GridParams<Real>& g, std::size_t bodies, bool report_mask) {
   const char* k = std::getenv("CONTACTGRID_HOST_ENTRIES");
-  if (k != nullptr && std::string_view(k) != "cells") return false;
+  if (k != nullptr && std::string_view(k) != "cells" && std::string_view(k) != "cells-via-cells")
+    return false;
   if (report_mask || bodies >= (std::size_t(1) << 29)) return false;  // < 2^32 entries: 32-bit counts
+  if (g.half_bits > k_block_bits) return false;                       // the super-cell in a block key
   const long double cells = 8.0L * g.half[0] * g.half[1] * g.half[2];
   return cells <= 4.0L * bodies + 65536.0L;
 }
 
 template <class Real>
 void block_sort(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, BlockOrder<Real>& out) {
-  const std::size_t n = p.ctrl.size();
-  const std::uint64_t h0 = g.half[0], h01 = h0 * g.half[1];
-  const BodyCells* cells = p.cells.data();
-  out.block.resize(n);
+  const std::size_t n = p.spheres.size();
+  const bool keyed = !p.block.empty();  // pack wrote the block keys (else the cells: make them here)
   out.body.resize(n);
+  if (keyed) {
+    out.block.swap(p.block);
+  } else {
+    out.block.resize(n);
+  }
+  const BodyCells* cells = p.cells.data();
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
-    const BodyCells& c = cells[i];
-    out.block[i] = static_cast<std::uint32_t>((c.lo[0] >> 1) + h0 * (c.lo[1] >> 1) + h01 * (c.lo[2] >> 1));
+    if (!keyed) out.block[i] = block_key(cells[i], g) & ((std::uint32_t(1) << k_block_bits) - 1u);
     out.body[i] = static_cast<std::uint32_t>(i);
   }
+  p.block = {};
   p.cells = {};
   p.count = {};
   radix_sort(out.block, out.body, g.half_bits, threads);  // stable: a super-cell's bodies ascend
@@ -73,6 +109,22 @@ void block_sort(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, B
   out.r.resize(n);
   out.ctrl.resize(n);
   constexpr std::size_t ahead = 32;  // the bodies of a super-cell are random places in input order
+  if (keyed) {                       // the control byte from the key: the spheres are the one read at random
+    constexpr std::uint32_t low = (std::uint32_t(1) << k_block_bits) - 1u;
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
+    for (std::size_t j = 0; j < n; ++j) {
+      if (j + ahead < n) __builtin_prefetch(p.spheres.data() + out.body[j + ahead]);
+      const std::uint32_t b = out.body[j], key = out.block[j];
+      const Sphere<Real> s = p.spheres[b];
+      out.block[j] = key & low;
+      out.x[j] = s.x;
+      out.y[j] = s.y;
+      out.z[j] = s.z;
+      out.r[j] = s.r + p.inflation;  // a skin: the inflated spheres (0: exactly r)
+      out.ctrl[j] = static_cast<std::uint8_t>(key >> k_block_bits);
+    }
+    return;
+  }
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t j = 0; j < n; ++j) {
     if (j + ahead < n) __builtin_prefetch(p.spheres.data() + out.body[j + ahead]);
@@ -81,7 +133,7 @@ void block_sort(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, B
     out.x[j] = s.x;
     out.y[j] = s.y;
     out.z[j] = s.z;
-    out.r[j] = s.r + p.inflation;  // a skin: the inflated spheres (0: exactly r)
+    out.r[j] = s.r + p.inflation;
     out.ctrl[j] = p.ctrl[b];
   }
 }
@@ -101,6 +153,7 @@ std::uint64_t cell_sort(BlockOrder<Real>& o, const GridParams<Real>& g, int thre
   std::uint64_t type_start[9] = {};
   std::uint64_t lin_begin = 0, lin_end = 0;  // the windows' union
   out.digit_start.clear();
+  const bool fixed = cell_sort_packs_blocks();  // the count without branches (else the former count)
 #pragma omp parallel num_threads(nt)
   {
     const int team = omp_get_num_threads(), t = omp_get_thread_num();
@@ -123,12 +176,22 @@ std::uint64_t cell_sort(BlockOrder<Real>& o, const GridParams<Real>& g, int thre
         at += 8 * win[std::size_t(u)].width;
       }
     }
-    if (j1 > j0) {
+    if (j1 > j0 && !fixed) {
       std::uint32_t* count = w.count;
       std::fill(count, count + 8 * w.width, 0u);
       for (std::size_t j = j0; j < j1; ++j)
         for_each_cell(o.block[j], o.ctrl[j], h0, h01,
                       [&](std::uint32_t type, std::uint64_t lin) { ++count[type * w.width + (lin - w.lo)]; });
+    } else if (j1 > j0) {  // eight adds a body, 0 or 1 each (CellPlaces)
+      std::uint32_t* count = w.count;
+      std::fill(count, count + 8 * w.width, 0u);
+      const CellPlaces places(w.width, h0, h01);
+      for (std::size_t j = j0; j < j1; ++j) {
+        std::uint32_t* at = count + (o.block[j] - w.lo);
+        const std::uint32_t ctrl = o.ctrl[j], in = places.in[ctrl >> 3];
+        const std::uint64_t* step = places.at[ctrl];
+        for (std::uint32_t c = 0; c < 8; ++c) at[step[c]] += (in >> c) & 1u;
+      }
     }
 #pragma omp barrier
 #pragma omp single
