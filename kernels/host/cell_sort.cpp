@@ -96,13 +96,14 @@ void block_sort(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, B
   const BodyCells* cells = p.cells.data();
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
-    if (!keyed) out.block[i] = block_key(cells[i], g) & ((std::uint32_t(1) << k_block_bits) - 1u);
+    if (!keyed) out.block[i] = super_cell(cells[i], g);
     out.body[i] = static_cast<std::uint32_t>(i);
   }
   p.block = {};
   p.cells = {};
   p.count = {};
-  radix_sort(out.block, out.body, g.half_bits, threads);  // stable: a super-cell's bodies ascend
+  // stable: a super-cell's bodies ascend (from block keys: within each group of spilled axes)
+  radix_sort(out.block, out.body, keyed ? g.half_bits + 3 : g.half_bits, threads);
   out.x.resize(n);
   out.y.resize(n);
   out.z.resize(n);
@@ -116,12 +117,12 @@ void block_sort(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, B
       if (j + ahead < n) __builtin_prefetch(p.spheres.data() + out.body[j + ahead]);
       const std::uint32_t b = out.body[j], key = out.block[j];
       const Sphere<Real> s = p.spheres[b];
-      out.block[j] = key & low;
+      out.block[j] = (key >> 3) & low;
       out.x[j] = s.x;
       out.y[j] = s.y;
       out.z[j] = s.z;
       out.r[j] = s.r + p.inflation;  // a skin: the inflated spheres (0: exactly r)
-      out.ctrl[j] = static_cast<std::uint8_t>(key >> k_block_bits);
+      out.ctrl[j] = static_cast<std::uint8_t>((key >> (3 + k_block_bits)) | ((key & 7u) << 3));
     }
     return;
   }

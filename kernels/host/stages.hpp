@@ -184,15 +184,20 @@ struct BlockOrder {
 };
 template <class Real>
 bool cell_sort_wanted(const GridParams<Real>& g, std::size_t bodies, bool report_mask);
-// The cell sort's key of a body: the super-cell of its lowest cell in the low bits (at most
-// k_block_bits of them: cell_sort_wanted), its control byte (control_bits) above them. The radix sort
-// of block_sort reads the low half_bits bits; the control byte rides along, so that the bodies' gather
-// into super-cell order reads their spheres alone.
+// The cell sort's key of a body: its spilled axes (bits 0-2), the super-cell of its lowest cell above
+// them (at most k_block_bits bits: cell_sort_wanted), the parity of that cell in the top 3 bits.
+// block_sort's radix sort reads the low half_bits + 3 bits: a super-cell's bodies come out grouped by
+// their spilled axes (each group's bodies ascending), so that the loops over a body's cells run the
+// same number of steps for long runs of bodies; the parity rides along, and with it the whole control
+// byte, so that the bodies' gather into super-cell order reads their spheres alone.
 constexpr int k_block_bits = 26;
 template <class Real>
+std::uint32_t super_cell(const BodyCells& c, const GridParams<Real>& g) {
+  return (c.lo[0] >> 1) + g.half[0] * ((c.lo[1] >> 1) + g.half[1] * (c.lo[2] >> 1));
+}
+template <class Real>
 std::uint32_t block_key(const BodyCells& c, const GridParams<Real>& g) {
-  const std::uint32_t block = (c.lo[0] >> 1) + g.half[0] * ((c.lo[1] >> 1) + g.half[1] * (c.lo[2] >> 1));
-  return block | (std::uint32_t(control_bits(c)) << k_block_bits);
+  return c.spill | (super_cell(c, g) << 3) | ((std::uint32_t(control_bits(c)) & 7u) << (3 + k_block_bits));
 }
 // Whether pack writes the block keys (pack's `blocks`) where the cell sort runs: unless
 // CONTACTGRID_HOST_ENTRIES=cells-via-cells (a measurement switch, the same entries: pack writes each

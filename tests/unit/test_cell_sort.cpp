@@ -77,7 +77,8 @@ void expect_cell_sort_entries(const detail::DetectJob<Real>& job, int threads, b
     const BodyCells& c = a.cells[i];
     const std::uint32_t block =
         (c.lo[0] >> 1) + job.grid.half[0] * ((c.lo[1] >> 1) + job.grid.half[1] * (c.lo[2] >> 1));
-    ASSERT_EQ(b.block[i], block | std::uint32_t(a.ctrl[i]) << k_block_bits) << "body " << i;
+    const std::uint32_t ctrl = a.ctrl[i];
+    ASSERT_EQ(b.block[i], (ctrl >> 3) | block << 3 | (ctrl & 7u) << (3 + k_block_bits)) << "body " << i;
   }
   Entries<Key> old_entries, new_entries;
   const std::uint64_t n_old = fill_entries(a, job.grid, threads, old_entries, job.plan.key_bits);
