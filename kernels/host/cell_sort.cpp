@@ -86,38 +86,30 @@ bool cell_sort_wanted(const GridParams<Real>& g, std::size_t bodies, bool report
 template <class Real>
 void block_sort(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, BlockOrder<Real>& out) {
   const std::size_t n = p.spheres.size();
-  const bool keyed = !p.block.empty();  // pack wrote the block keys (else the cells: make them here)
+  out.block.resize(n);
   out.body.resize(n);
-  if (keyed) {
-    out.block.swap(p.block);
-  } else {
-    out.block.resize(n);
-  }
-  const BodyCells* cells = p.cells.data();
-#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!keyed) out.block[i] = super_cell(cells[i], g);
-    out.body[i] = static_cast<std::uint32_t>(i);
-  }
-  p.block = {};
-  p.cells = {};
-  p.count = {};
-  // stable: a super-cell's bodies ascend (from block keys: within each group of spilled axes)
-  radix_sort(out.block, out.body, keyed ? g.half_bits + 3 : g.half_bits, threads);
   out.x.resize(n);
   out.y.resize(n);
   out.z.resize(n);
   out.r.resize(n);
   out.ctrl.resize(n);
   constexpr std::size_t ahead = 32;  // the bodies of a super-cell are random places in input order
-  if (keyed) {                       // the control byte from the key: the spheres are the one read at random
+  if (!p.block.empty()) {            // pack's keys, body index above block key: one array of 8 bytes a body
+    Array<std::uint64_t> keys;
+    keys.swap(p.block);
+    p.cells = {};
+    p.count = {};
+    // stable: the bodies of a super-cell grouped by their spilled axes, each group's ascending
+    radix_sort_keys(keys, g.half_bits + 3, threads);
     constexpr std::uint32_t low = (std::uint32_t(1) << k_block_bits) - 1u;
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
     for (std::size_t j = 0; j < n; ++j) {
-      if (j + ahead < n) __builtin_prefetch(p.spheres.data() + out.body[j + ahead]);
-      const std::uint32_t b = out.body[j], key = out.block[j];
-      const Sphere<Real> s = p.spheres[b];
+      if (j + ahead < n) __builtin_prefetch(p.spheres.data() + (keys[j + ahead] >> 32));
+      const std::uint32_t b = static_cast<std::uint32_t>(keys[j] >> 32),
+                          key = static_cast<std::uint32_t>(keys[j]);
+      const Sphere<Real> s = p.spheres[b];  // the control byte from the key: the spheres alone at random
       out.block[j] = (key >> 3) & low;
+      out.body[j] = b;
       out.x[j] = s.x;
       out.y[j] = s.y;
       out.z[j] = s.z;
@@ -126,6 +118,17 @@ void block_sort(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, B
     }
     return;
   }
+  // the former path (CONTACTGRID_HOST_ENTRIES=cells-via-cells, and the centre cut's cells): the
+  // super-cells from the cells, sorted with the body indices, the control bytes gathered
+  const BodyCells* cells = p.cells.data();
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
+  for (std::size_t i = 0; i < n; ++i) {
+    out.block[i] = super_cell(cells[i], g);
+    out.body[i] = static_cast<std::uint32_t>(i);
+  }
+  p.cells = {};
+  p.count = {};
+  radix_sort(out.block, out.body, g.half_bits, threads);  // stable: a super-cell's bodies ascend
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t j = 0; j < n; ++j) {
     if (j + ahead < n) __builtin_prefetch(p.spheres.data() + out.body[j + ahead]);

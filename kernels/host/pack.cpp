@@ -48,7 +48,8 @@ void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams
       const Sphere<Real> s = local_sphere<Real>(bodies, origin, g, i);
       out.spheres[i] = s;
       if (w) w[i] = world_row(bodies, i);
-      out.block[i] = block_key(body_cells(Sphere<Real>{s.x, s.y, s.z, s.r + inflation}, g), g);
+      out.block[i] = (std::uint64_t(i) << 32) |
+                     block_key(body_cells(Sphere<Real>{s.x, s.y, s.z, s.r + inflation}, g), g);
     }
     return;
   }

@@ -45,9 +45,9 @@ struct PackedBodies {
   Array<Sphere<Real>> spheres;  // local frame: Real(world - origin)
   Real inflation = 0;           // added to every radius by the pair stage (cells, test)
   Array<BodyCells> cells;       // freed by fill_entries
-  // pack for the cell sort (`blocks`): in place of cells and ctrl, each body's block_key (freed by
-  // block_sort)
-  Array<std::uint32_t> block;
+  // pack for the cell sort (`blocks`): in place of cells and ctrl, each body's index << 32 | its
+  // block_key, one array that block_sort sorts as it is (freed there)
+  Array<std::uint64_t> block;
   Array<std::uint8_t> ctrl;    // control_bits (its spill bits give the entry count)
   Array<std::uint32_t> count;  // entry_count (level_entries reads it; pack leaves it empty)
   Array<CutShape> cut;         // CandidateFilter::centre_cut: cut_shape() of every body

@@ -78,7 +78,9 @@ void expect_cell_sort_entries(const detail::DetectJob<Real>& job, int threads, b
     const std::uint32_t block =
         (c.lo[0] >> 1) + job.grid.half[0] * ((c.lo[1] >> 1) + job.grid.half[1] * (c.lo[2] >> 1));
     const std::uint32_t ctrl = a.ctrl[i];
-    ASSERT_EQ(b.block[i], (ctrl >> 3) | block << 3 | (ctrl & 7u) << (3 + k_block_bits)) << "body " << i;
+    ASSERT_EQ(b.block[i] >> 32, i);
+    ASSERT_EQ(std::uint32_t(b.block[i]), (ctrl >> 3) | block << 3 | (ctrl & 7u) << (3 + k_block_bits))
+        << "body " << i;
   }
   Entries<Key> old_entries, new_entries;
   const std::uint64_t n_old = fill_entries(a, job.grid, threads, old_entries, job.plan.key_bits);
