@@ -87,12 +87,8 @@ template <class Real>
 void block_sort(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, BlockOrder<Real>& out) {
   const std::size_t n = p.spheres.size();
   out.block.resize(n);
-  out.body.resize(n);
-  out.x.resize(n);
-  out.y.resize(n);
-  out.z.resize(n);
-  out.r.resize(n);
   out.ctrl.resize(n);
+  out.bodies.resize(n);
   constexpr std::size_t ahead = 32;  // the bodies of a super-cell are random places in input order
   if (!p.block.empty()) {            // pack's keys, body index above block key: one array of 8 bytes a body
     Array<std::uint64_t> keys;
@@ -108,37 +104,32 @@ void block_sort(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, B
       const std::uint32_t b = static_cast<std::uint32_t>(keys[j] >> 32),
                           key = static_cast<std::uint32_t>(keys[j]);
       const Sphere<Real> s = p.spheres[b];  // the control byte from the key: the spheres alone at random
+      const std::uint32_t ctrl = (key >> (3 + k_block_bits)) | ((key & 7u) << 3);
       out.block[j] = (key >> 3) & low;
-      out.body[j] = b;
-      out.x[j] = s.x;
-      out.y[j] = s.y;
-      out.z[j] = s.z;
-      out.r[j] = s.r + p.inflation;  // a skin: the inflated spheres (0: exactly r)
-      out.ctrl[j] = static_cast<std::uint8_t>((key >> (3 + k_block_bits)) | ((key & 7u) << 3));
+      out.ctrl[j] = static_cast<std::uint8_t>(ctrl);
+      out.bodies[j] = {s.x, s.y, s.z, s.r + p.inflation, b, ctrl};  // a skin: the inflated spheres
     }
     return;
   }
   // the former path (CONTACTGRID_HOST_ENTRIES=cells-via-cells, and the centre cut's cells): the
   // super-cells from the cells, sorted with the body indices, the control bytes gathered
   const BodyCells* cells = p.cells.data();
+  Array<std::uint32_t> body(n);
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
     out.block[i] = super_cell(cells[i], g);
-    out.body[i] = static_cast<std::uint32_t>(i);
+    body[i] = static_cast<std::uint32_t>(i);
   }
   p.cells = {};
   p.count = {};
-  radix_sort(out.block, out.body, g.half_bits, threads);  // stable: a super-cell's bodies ascend
+  radix_sort(out.block, body, g.half_bits, threads);  // stable: a super-cell's bodies ascend
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t j = 0; j < n; ++j) {
-    if (j + ahead < n) __builtin_prefetch(p.spheres.data() + out.body[j + ahead]);
-    const std::uint32_t b = out.body[j];
+    if (j + ahead < n) __builtin_prefetch(p.spheres.data() + body[j + ahead]);
+    const std::uint32_t b = body[j];
     const Sphere<Real> s = p.spheres[b];
-    out.x[j] = s.x;
-    out.y[j] = s.y;
-    out.z[j] = s.z;
-    out.r[j] = s.r + p.inflation;
     out.ctrl[j] = p.ctrl[b];
+    out.bodies[j] = {s.x, s.y, s.z, s.r + p.inflation, b, p.ctrl[b]};
   }
 }
 
@@ -269,12 +260,13 @@ std::uint64_t cell_sort(BlockOrder<Real>& o, const GridParams<Real>& g, int thre
     std::uint32_t* body = out.body.data();
     for (std::size_t e = e0; e < e1; ++e) {
       const std::uint32_t j = body[e];
-      body[e] = o.body[j];
-      eb.x[e] = o.x[j];
-      eb.y[e] = o.y[j];
-      eb.z[e] = o.z[j];
-      eb.r[e] = o.r[j];
-      eb.ctrl[e] = o.ctrl[j];
+      const OrderedBody<Real>& a = o.bodies[j];
+      body[e] = a.body;
+      eb.x[e] = a.x;
+      eb.y[e] = a.y;
+      eb.z[e] = a.z;
+      eb.r[e] = a.r;
+      eb.ctrl[e] = a.ctrl;
     }
   }
   o = {};

@@ -175,12 +175,19 @@ void sort_entries(Entries<Key>& e, int key_bits, int threads);
 // cell_sort_wanted: CONTACTGRID_HOST_ENTRIES unset, `cells` or `cells-via-cells`, no report mask, and a
 // grid of at most about four cells a body (the counters are a window of the grid's cells a thread) and
 // 2^k_block_bits super-cells.
+// A body of the order as the entries' gather reads it: one record, the few bytes of one or two cache
+// lines, where six arrays would cost a line each.
+template <class Real>
+struct OrderedBody {
+  Real x, y, z, r;     // the packed sphere (r inflated by a skin)
+  std::uint32_t body;  // input index
+  std::uint32_t ctrl;  // control byte, widened as the walk's bodies hold it
+};
 template <class Real>
 struct BlockOrder {
-  Array<std::uint32_t> block;  // super-cell index of each body's lowest cell, ascending
-  Array<std::uint32_t> body;   // input index, alongside (ascending within a super-cell)
-  Array<Real> x, y, z, r;      // the packed sphere (r inflated by a skin) of each, alongside
-  Array<std::uint8_t> ctrl;    // control byte of each, alongside
+  Array<std::uint32_t> block;       // super-cell index of each body's lowest cell, ascending
+  Array<std::uint8_t> ctrl;         // control byte of each, alongside
+  Array<OrderedBody<Real>> bodies;  // alongside (input indices ascending within a super-cell's group)
 };
 template <class Real>
 bool cell_sort_wanted(const GridParams<Real>& g, std::size_t bodies, bool report_mask);
