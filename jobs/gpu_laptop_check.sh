@@ -4,10 +4,11 @@
 # (the same pairs), before / after in one call on cores 0,1 (taskset -c 0,1, 2 threads), the same
 # binaries: before = CONTACTGRID_HOST_ENTRIES=cells-via-cells (the cell sort as merged in s10: pack
 # writes each body's cells, block_sort makes the super-cells from them and gathers the control bytes,
-# the count and scatter loop over each body's cells), after = the defaults (s11: pack writes one 8-byte
-# block key a body, index | spilled axes | super-cell | parity, sorted as it is, so a super-cell's
-# bodies come grouped by their spilled axes; the count adds at all eight cell places without a
-# branch). BEFORE="CONTACTGRID_HOST_ENTRIES=body-order" compares with the entry sort instead.
+# the count and scatter loop over each body's cells; only the bodies' record in super-cell order is
+# the new one), after = the defaults (s11: pack writes one 8-byte block key a body, index | spilled
+# axes | super-cell | parity, sorted as it is, so a super-cell's bodies come grouped by their spilled
+# axes; the count adds at all eight cell places without a branch; one record a body in super-cell
+# order). BEFORE="CONTACTGRID_HOST_ENTRIES=body-order" compares with the entry sort instead.
 # Needs no GPU; runs on the device host for its quiet cores. Steps:
 #   unit     (BIN holds contactgrid_tests) CellSort* (the default = the former cell sort = the entry
 #            sort: entries, block keys, contact bytes and stats over seeded and adversarial scenes,
@@ -22,10 +23,11 @@
 #   python   tests/bench/python_bench.py: before (knob, no SciPy), after with SciPy and C++, before
 #            again; the lower of the two before medians counts
 # Expect (H100 host, s10 call 7: engine entries / sort / pairs 17.9 / 26.8 / 16.8 ms, sum 95.4;
-# Python 97.8 ms, C++ 97.7, SciPy 1817 = 18.6x): before ~ those; after (from the dev VM's one-thread
-# CPU times: the bodies' keys 2.8 -> 0.6 ms, the count 9.8 -> 5.2, the scatter 13.0 -> 8.5, stage sum
-# 154 -> 137 = -11%): entries ~2-3 ms lower, sort ~5-8 ms lower, pairs the same; Python ~87-90 ms,
-# SciPy / Python ~20-21x (the 20x on the edge: SciPy's own time moves 1350-1817 ms between hosts).
+# Python 97.8 ms, C++ 97.7, SciPy 1817 = 18.6x): before a little under those (it has the new record);
+# after (dev VM, one thread, six alternations, BENCHMARKS.md §31: stage sum 139 -> 124 ms = -10.5%
+# against cells-via-cells, -20% against body-order; pack -1.8, entries -1.7, sort -9.4, pairs +1):
+# sort ~6-8 ms lower, entries and pack ~1-2 ms lower, pairs the same; Python ~85-89 ms, SciPy / Python
+# ~20-21x against 1817 ms (the 20x on the edge: SciPy's own time moved 1350-1817 ms between hosts).
 # Prints a table; writes $OUT/laptop.tgz (every log); exits non-zero naming what failed (a step,
 # contacts or stats that differ, different pairs from SciPy, SciPy / Python below 20).
 # Here: BUILD_DIR=build jobs/gpu_python_check.sh pack .devbin/py. There (about 3 minutes):
