@@ -1,13 +1,19 @@
 #!/usr/bin/env bash
 # The laptop engineer's check (issues #33 and #37's CPU target): Python contactgrid.detect on NumPy
 # arrays of 2^20 uniform spheres, CPU backend, 2 cores, >= 20x SciPy's cKDTree.query_pairs + filter
-# (the same pairs), before / after the cell sort in one call on cores 0,1 (taskset -c 0,1, 2 threads),
-# the same binaries: before = CONTACTGRID_HOST_ENTRIES=body-order (the former entries, radix sort of the
-# entries and the pair stage's gather), after = the defaults (the cell sort, kernels/host/cell_sort.cpp).
+# (the same pairs), before / after in one call on cores 0,1 (taskset -c 0,1, 2 threads), the same
+# binaries: before = CONTACTGRID_HOST_ENTRIES=cells-via-cells (the cell sort as merged in s10: pack
+# writes each body's cells, block_sort makes the super-cells from them and gathers the control bytes,
+# the count and scatter loop over each body's cells; only the bodies' record in super-cell order is
+# the new one), after = the defaults (s11: pack writes one 8-byte block key a body, index | spilled
+# axes | super-cell | parity, sorted as it is, so a super-cell's bodies come grouped by their spilled
+# axes; the count adds at all eight cell places without a branch; one record a body in super-cell
+# order). BEFORE="CONTACTGRID_HOST_ENTRIES=body-order" compares with the entry sort instead.
 # Needs no GPU; runs on the device host for its quiet cores. Steps:
-#   unit     (BIN holds contactgrid_tests) CellSort* (cell sort = entry sort: entries, contact bytes and
-#            stats over seeded scenes, 1-3 threads), HostEntries*, HostWalk*, RadixSort*, HostStages*,
-#            and CPU = CUDA (CudaBackendTest/*, CudaNarrowTest/*: the CPU side now takes the cell sort);
+#   unit     (BIN holds contactgrid_tests) CellSort* (the default = the former cell sort = the entry
+#            sort: entries, block keys, contact bytes and stats over seeded and adversarial scenes,
+#            1-3 threads, 32/64-bit keys), HostEntries*, HostWalk*, RadixSort*, HostStages*, and
+#            CPU = CUDA (CudaBackendTest/*, CudaNarrowTest/*: the CPU side takes the cell sort);
 #            CellSort.EngineGivesTheEntrySortsBytesAndStats and a CudaBackendTest BitIdenticalToCpu case
 #            must run and pass
 #   module   the Python module compiled against the device's interpreter (jobs/gpu_python_check.sh)
@@ -16,11 +22,14 @@
 #            the lower of the medians
 #   python   tests/bench/python_bench.py: before (knob, no SciPy), after with SciPy and C++, before
 #            again; the lower of the two before medians counts
-# Expect (H100 host, s9 before this change: engine 83.6 ms, Python 84.1, C++ 81.5, SciPy 1350 = 16.1x):
-# before ~ those; after (from the dev VM's 2-thread ratios, 131 -> 117 ms of stages): pairs ~10-14 ms
-# lower (no gather), entries ~5-7 ms higher (the bodies' sort and gather), sort about the same, the
-# stages ~1.1x, Python ~73-77 ms, SciPy / Python ~17-19x: the 20x most likely NOT met. Prints a table; writes $OUT/laptop.tgz (every log); exits non-zero naming what failed
-# (a step, contacts or stats that differ, different pairs from SciPy, SciPy / Python below 20).
+# Expect (H100 host, s10 call 7: engine entries / sort / pairs 17.9 / 26.8 / 16.8 ms, sum 95.4;
+# Python 97.8 ms, C++ 97.7, SciPy 1817 = 18.6x): before a little under those (it has the new record);
+# after (dev VM, one thread, six alternations, BENCHMARKS.md §31: stage sum 139 -> 124 ms = -10.5%
+# against cells-via-cells, -20% against body-order; pack -1.8, entries -1.7, sort -9.4, pairs +1):
+# sort ~6-8 ms lower, entries and pack ~1-2 ms lower, pairs the same; Python ~85-89 ms, SciPy / Python
+# ~20-21x against 1817 ms (the 20x on the edge: SciPy's own time moved 1350-1817 ms between hosts).
+# Prints a table; writes $OUT/laptop.tgz (every log); exits non-zero naming what failed (a step,
+# contacts or stats that differ, different pairs from SciPy, SciPy / Python below 20).
 # Here: BUILD_DIR=build jobs/gpu_python_check.sh pack .devbin/py. There (about 3 minutes):
 #   OUT=/tmp/out BIN=<dir with contactgrid_tests> jobs/gpu_laptop_check.sh .devbin/py
 set -u
@@ -36,7 +45,7 @@ BIN=$(realpath -m "${BIN:-$dir}")
 py=${PYTHON:-python3}
 export LD_LIBRARY_PATH="$dir/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 cores="taskset -c 0,1"
-before=${BEFORE:-"CONTACTGRID_HOST_ENTRIES=body-order"}
+before=${BEFORE:-"CONTACTGRID_HOST_ENTRIES=cells-via-cells"}
 { date -u; nproc; grep -m1 'model name' /proc/cpuinfo; uptime; git log -1 --format='commit %h %s' 2>/dev/null; } 2>&1 |
   tee "$log_dir/device.txt"
 
@@ -112,7 +121,7 @@ awk -v eb="$eb" -v ea="$ea" -v pb="$pyb" -v p="$pyt" -v xb="$cxxb" -v x="$cxx" -
   -v k="$before" 'BEGIN {
   printf "\nlaptop mode, 2^20 uniform spheres, CPU backend, cores 0,1, medians (ms), same binaries, this run:\n"
   printf "  %-34s %10s %10s %8s\n", "", "before", "after", "ratio"
-  printf "  (before: %s; after: the defaults, the cell sort)\n", k
+  printf "  (before: %s; after: the defaults, the cell sort from block keys)\n", k
   if (eb > 0 && ea > 0) printf "  %-34s %10s %10s %7.2fx\n", "engine stages (lower median)", eb, ea, eb / ea
   if (pb > 0 && p > 0) printf "  %-34s %10s %10s %7.2fx\n", "Python contactgrid.detect", pb, p, pb / p
   if (xb > 0 && x > 0) printf "  %-34s %10s %10s %7.2fx\n", "the same call from C++", xb, x, xb / x

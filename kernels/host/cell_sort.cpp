@@ -40,49 +40,96 @@ inline void for_each_cell(std::uint64_t block, std::uint32_t ctrl, std::uint64_t
   }
 }
 
+// A body's cells from its control byte, for a thread's window of counters: for each ctrl (64) and
+// each c of the 8 subsets of the axes, for_each_cell's cell as its counter's place in the window less
+// the body's super-cell (type · width plus the super-cell step), and in `in` bit c where c lies
+// within the spilled axes (a cell of the body). The count adds that bit at all eight places: no branch
+// on the body's number of cells, whose mispredictions cost the loop more than its eight adds (all
+// eight places lie in the window, which reaches a layer of super-cells past its last body's).
+struct CellPlaces {
+  std::uint64_t at[64][8];
+  std::uint8_t in[8];  // by the spilled axes
+  CellPlaces(std::uint64_t width, std::uint64_t h0, std::uint64_t h01) {
+    for (std::uint32_t ctrl = 0; ctrl < 64; ++ctrl) {
+      const std::uint32_t parity = ctrl & 7u;
+      for (std::uint32_t c = 0; c < 8; ++c) {
+        const std::uint32_t up = c & parity;
+        at[ctrl][c] = (parity ^ c) * width + (up & 1u) + ((up >> 1) & 1u) * h0 + ((up >> 2) & 1u) * h01;
+      }
+    }
+    for (std::uint32_t spill = 0; spill < 8; ++spill) {
+      in[spill] = 0;
+      for (std::uint32_t c = 0; c < 8; ++c)
+        if ((c & ~spill) == 0) in[spill] = static_cast<std::uint8_t>(in[spill] | (1u << c));
+    }
+  }
+};
+
 }  // namespace
+
+bool cell_sort_packs_blocks() {
+  const char* k = std::getenv("CONTACTGRID_HOST_ENTRIES");
+  return k == nullptr || std::string_view(k) != "cells-via-cells";
+}
 
 template <class Real>
 bool cell_sort_wanted(const GridParams<Real>& g, std::size_t bodies, bool report_mask) {
   const char* k = std::getenv("CONTACTGRID_HOST_ENTRIES");
-  if (k != nullptr && std::string_view(k) != "cells") return false;
+  if (k != nullptr && std::string_view(k) != "cells" && std::string_view(k) != "cells-via-cells")
+    return false;
   if (report_mask || bodies >= (std::size_t(1) << 29)) return false;  // < 2^32 entries: 32-bit counts
+  if (g.half_bits > k_block_bits) return false;                       // the super-cell in a block key
   const long double cells = 8.0L * g.half[0] * g.half[1] * g.half[2];
   return cells <= 4.0L * bodies + 65536.0L;
 }
 
 template <class Real>
 void block_sort(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, BlockOrder<Real>& out) {
-  const std::size_t n = p.ctrl.size();
-  const std::uint64_t h0 = g.half[0], h01 = h0 * g.half[1];
-  const BodyCells* cells = p.cells.data();
+  const std::size_t n = p.spheres.size();
   out.block.resize(n);
-  out.body.resize(n);
+  out.ctrl.resize(n);
+  out.bodies.resize(n);
+  constexpr std::size_t ahead = 32;  // the bodies of a super-cell are random places in input order
+  if (!p.block.empty()) {            // pack's keys, body index above block key: one array of 8 bytes a body
+    Array<std::uint64_t> keys;
+    keys.swap(p.block);
+    p.cells = {};
+    p.count = {};
+    // stable: the bodies of a super-cell grouped by their spilled axes, each group's ascending
+    radix_sort_keys(keys, g.half_bits + 3, threads);
+    constexpr std::uint32_t low = (std::uint32_t(1) << k_block_bits) - 1u;
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
+    for (std::size_t j = 0; j < n; ++j) {
+      if (j + ahead < n) __builtin_prefetch(p.spheres.data() + (keys[j + ahead] >> 32));
+      const std::uint32_t b = static_cast<std::uint32_t>(keys[j] >> 32),
+                          key = static_cast<std::uint32_t>(keys[j]);
+      const Sphere<Real> s = p.spheres[b];  // the control byte from the key: the spheres alone at random
+      const std::uint32_t ctrl = (key >> (3 + k_block_bits)) | ((key & 7u) << 3);
+      out.block[j] = (key >> 3) & low;
+      out.ctrl[j] = static_cast<std::uint8_t>(ctrl);
+      out.bodies[j] = {s.x, s.y, s.z, s.r + p.inflation, b, ctrl};  // a skin: the inflated spheres
+    }
+    return;
+  }
+  // the former path (CONTACTGRID_HOST_ENTRIES=cells-via-cells, and the centre cut's cells): the
+  // super-cells from the cells, sorted with the body indices, the control bytes gathered
+  const BodyCells* cells = p.cells.data();
+  Array<std::uint32_t> body(n);
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
-    const BodyCells& c = cells[i];
-    out.block[i] = static_cast<std::uint32_t>((c.lo[0] >> 1) + h0 * (c.lo[1] >> 1) + h01 * (c.lo[2] >> 1));
-    out.body[i] = static_cast<std::uint32_t>(i);
+    out.block[i] = super_cell(cells[i], g);
+    body[i] = static_cast<std::uint32_t>(i);
   }
   p.cells = {};
   p.count = {};
-  radix_sort(out.block, out.body, g.half_bits, threads);  // stable: a super-cell's bodies ascend
-  out.x.resize(n);
-  out.y.resize(n);
-  out.z.resize(n);
-  out.r.resize(n);
-  out.ctrl.resize(n);
-  constexpr std::size_t ahead = 32;  // the bodies of a super-cell are random places in input order
+  radix_sort(out.block, body, g.half_bits, threads);  // stable: a super-cell's bodies ascend
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t j = 0; j < n; ++j) {
-    if (j + ahead < n) __builtin_prefetch(p.spheres.data() + out.body[j + ahead]);
-    const std::uint32_t b = out.body[j];
+    if (j + ahead < n) __builtin_prefetch(p.spheres.data() + body[j + ahead]);
+    const std::uint32_t b = body[j];
     const Sphere<Real> s = p.spheres[b];
-    out.x[j] = s.x;
-    out.y[j] = s.y;
-    out.z[j] = s.z;
-    out.r[j] = s.r + p.inflation;  // a skin: the inflated spheres (0: exactly r)
     out.ctrl[j] = p.ctrl[b];
+    out.bodies[j] = {s.x, s.y, s.z, s.r + p.inflation, b, p.ctrl[b]};
   }
 }
 
@@ -101,6 +148,7 @@ std::uint64_t cell_sort(BlockOrder<Real>& o, const GridParams<Real>& g, int thre
   std::uint64_t type_start[9] = {};
   std::uint64_t lin_begin = 0, lin_end = 0;  // the windows' union
   out.digit_start.clear();
+  const bool fixed = cell_sort_packs_blocks();  // the count without branches (else the former count)
 #pragma omp parallel num_threads(nt)
   {
     const int team = omp_get_num_threads(), t = omp_get_thread_num();
@@ -123,12 +171,22 @@ std::uint64_t cell_sort(BlockOrder<Real>& o, const GridParams<Real>& g, int thre
         at += 8 * win[std::size_t(u)].width;
       }
     }
-    if (j1 > j0) {
+    if (j1 > j0 && !fixed) {
       std::uint32_t* count = w.count;
       std::fill(count, count + 8 * w.width, 0u);
       for (std::size_t j = j0; j < j1; ++j)
         for_each_cell(o.block[j], o.ctrl[j], h0, h01,
                       [&](std::uint32_t type, std::uint64_t lin) { ++count[type * w.width + (lin - w.lo)]; });
+    } else if (j1 > j0) {  // eight adds a body, 0 or 1 each (CellPlaces)
+      std::uint32_t* count = w.count;
+      std::fill(count, count + 8 * w.width, 0u);
+      const CellPlaces places(w.width, h0, h01);
+      for (std::size_t j = j0; j < j1; ++j) {
+        std::uint32_t* at = count + (o.block[j] - w.lo);
+        const std::uint32_t ctrl = o.ctrl[j], in = places.in[ctrl >> 3];
+        const std::uint64_t* step = places.at[ctrl];
+        for (std::uint32_t c = 0; c < 8; ++c) at[step[c]] += (in >> c) & 1u;
+      }
     }
 #pragma omp barrier
 #pragma omp single
@@ -202,12 +260,13 @@ std::uint64_t cell_sort(BlockOrder<Real>& o, const GridParams<Real>& g, int thre
     std::uint32_t* body = out.body.data();
     for (std::size_t e = e0; e < e1; ++e) {
       const std::uint32_t j = body[e];
-      body[e] = o.body[j];
-      eb.x[e] = o.x[j];
-      eb.y[e] = o.y[j];
-      eb.z[e] = o.z[j];
-      eb.r[e] = o.r[j];
-      eb.ctrl[e] = o.ctrl[j];
+      const OrderedBody<Real>& a = o.bodies[j];
+      body[e] = a.body;
+      eb.x[e] = a.x;
+      eb.y[e] = a.y;
+      eb.z[e] = a.z;
+      eb.r[e] = a.r;
+      eb.ctrl[e] = a.ctrl;
     }
   }
   o = {};

@@ -110,8 +110,14 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   // the grid's pair stage of sphere tests without a report mask: the cell list (host/cell_list.cpp),
   // which files each body once and needs none of Le Grand's cells
   const bool list_first = grid && !reuse && cell_list_wanted(filter, job.bodies.report.empty());
-  host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Broad>(job.inflation),
-             !reuse && !cut && grid && !list_first, nt, bodies, rows_packed ? &world_rows : nullptr);
+  // the cell sort (host/cell_sort.cpp) where it takes the grid: pack then writes each body's block key
+  // in place of its cells (a centre cut's cells come from the shapes, the cell list's fallback later)
+  const bool by_cells =
+      grid && !reuse && host::cell_sort_wanted(job.grid, job.bodies.size(), !job.bodies.report.empty());
+  const bool pack_cells = !reuse && !cut && grid && !list_first;
+  host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Broad>(job.inflation), pack_cells, nt,
+             bodies, rows_packed ? &world_rows : nullptr,
+             pack_cells && by_cells && host::cell_sort_packs_blocks());
   if (shapes) host::pack_shapes(job.bodies, nt, packed_shapes);
   if (cut) host::cut_shapes(packed_shapes, nt, bodies.cut);
   if (cut && grid) host::shape_cells(job.grid, nt, bodies);
@@ -151,7 +157,6 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
       }
       host::Entries<Key> entries;
       host::EntryBodies<Broad> entry_bodies;  // the cell sort writes them; the entry sort's walk gathers
-      const bool by_cells = host::cell_sort_wanted(job.grid, bodies.ctrl.size(), !job.bodies.report.empty());
       if (by_cells) {  // the bodies by super-cell, then the entries by cell from that order
         host::BlockOrder<Broad> order;
         host::block_sort(bodies, job.grid, nt, order);

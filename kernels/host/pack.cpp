@@ -1,5 +1,6 @@
 // Host stage pack: world (double) → local frame Real spheres (radius + g.radius_margin: mixed's
-// enlarged spheres); per body its cells and control byte (see stages.hpp).
+// enlarged spheres); per body its cells and control byte, or for the cell sort its block key (see
+// stages.hpp).
 #include "host/stages.hpp"
 
 namespace cg::detail::host {
@@ -22,7 +23,7 @@ inline Sphere<double> world_row(const BodiesView& bodies, std::size_t i) {
 
 template <class Real>
 void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams<Real>& g, Real inflation,
-          bool cells_too, int threads, PackedBodies<Real>& out, Array<Sphere<double>>* world) {
+          bool cells_too, int threads, PackedBodies<Real>& out, Array<Sphere<double>>* world, bool blocks) {
   const std::size_t n = bodies.size();
   out.spheres.resize(n);
   out.inflation = inflation;
@@ -39,9 +40,21 @@ void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams
     }
     return;
   }
+  out.count = {};  // fill_entries takes each body's entry count from its control byte
+  if (blocks) {    // the cell sort's keys alone (block_key: super-cell and control byte)
+    out.block.resize(n);
+#pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
+    for (std::size_t i = 0; i < n; ++i) {
+      const Sphere<Real> s = local_sphere<Real>(bodies, origin, g, i);
+      out.spheres[i] = s;
+      if (w) w[i] = world_row(bodies, i);
+      out.block[i] = (std::uint64_t(i) << 32) |
+                     block_key(body_cells(Sphere<Real>{s.x, s.y, s.z, s.r + inflation}, g), g);
+    }
+    return;
+  }
   out.cells.resize(n);
   out.ctrl.resize(n);
-  out.count = {};  // fill_entries takes each body's entry count from its control byte
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
     const Sphere<Real> s = local_sphere<Real>(bodies, origin, g, i);
@@ -109,8 +122,8 @@ template void pack_shapes(const BodiesView&, int, std::vector<PackedShape<float>
 template void pack_shapes(const BodiesView&, int, std::vector<PackedShape<double>>&);
 
 template void pack(const BodiesView&, const Vec3<double>&, const GridParams<float>&, float, bool, int,
-                   PackedBodies<float>&, Array<Sphere<double>>*);
+                   PackedBodies<float>&, Array<Sphere<double>>*, bool);
 template void pack(const BodiesView&, const Vec3<double>&, const GridParams<double>&, double, bool, int,
-                   PackedBodies<double>&, Array<Sphere<double>>*);
+                   PackedBodies<double>&, Array<Sphere<double>>*, bool);
 
 }  // namespace cg::detail::host

@@ -45,10 +45,13 @@ struct PackedBodies {
   Array<Sphere<Real>> spheres;  // local frame: Real(world - origin)
   Real inflation = 0;           // added to every radius by the pair stage (cells, test)
   Array<BodyCells> cells;       // freed by fill_entries
-  Array<std::uint8_t> ctrl;     // control_bits (its spill bits give the entry count)
-  Array<std::uint32_t> count;   // entry_count (level_entries reads it; pack leaves it empty)
-  Array<CutShape> cut;          // CandidateFilter::centre_cut: cut_shape() of every body
-  Array<std::uint8_t> level;    // BroadPhase::levels: the level of every body (level_cells)
+  // pack for the cell sort (`blocks`): in place of cells and ctrl, each body's index << 32 | its
+  // block_key, one array that block_sort sorts as it is (freed there)
+  Array<std::uint64_t> block;
+  Array<std::uint8_t> ctrl;    // control_bits (its spill bits give the entry count)
+  Array<std::uint32_t> count;  // entry_count (level_entries reads it; pack leaves it empty)
+  Array<CutShape> cut;         // CandidateFilter::centre_cut: cut_shape() of every body
+  Array<std::uint8_t> level;   // BroadPhase::levels: the level of every body (level_cells)
 };
 
 // (cell key, body) entries; after fill_entries body-ascending, or grouped by the top digit of the key
@@ -118,10 +121,13 @@ void keep_candidates(const BodiesView& bodies, CandidatePairs&& c, KeptCandidate
 // `inflation`, 0 without a skin) and control byte. cells_too false: the spheres only
 // (the reuse of kept candidates needs no grid). `world` (may be null): also the world rows of every
 // body as one Sphere<double> each (x, y, z, r: the input's doubles, one cache line a body), which the
-// narrow stage reads at random in place of the input's two arrays.
+// narrow stage reads at random in place of the input's two arrays. `blocks` (with cells_too, for the
+// cell sort: cell_sort_packs_blocks): each body's block_key in out.block in place of its cells and
+// control byte, a quarter of their bytes, which block_sort sorts as they are.
 template <class Real>
 void pack(const BodiesView& bodies, const Vec3<double>& origin, const GridParams<Real>& g, Real inflation,
-          bool cells_too, int threads, PackedBodies<Real>& out, Array<Sphere<double>>* world = nullptr);
+          bool cells_too, int threads, PackedBodies<Real>& out, Array<Sphere<double>>* world = nullptr,
+          bool blocks = false);
 
 // pack_shapes (scenes with ellipsoids): pack_shape() of every body, input order.
 template <class Real>
@@ -166,17 +172,45 @@ void sort_entries(Entries<Key>& e, int key_bits, int threads);
 // bodies beside them (EntryBodies: no gather in the pair stage), but within a cell in the bodies'
 // spatial order, not in body order: the walk tests each pair as (lower, higher) body, and the order
 // stage sorts the candidates, so the candidates, pair tests and contacts are the entry sort's.
-// cell_sort_wanted: CONTACTGRID_HOST_ENTRIES unset or `cells`, no report mask, and a grid of at most
-// about four cells a body (the counters are a window of the grid's cells a thread).
+// cell_sort_wanted: CONTACTGRID_HOST_ENTRIES unset, `cells` or `cells-via-cells`, no report mask, and a
+// grid of at most about four cells a body (the counters are a window of the grid's cells a thread) and
+// 2^k_block_bits super-cells.
+// A body of the order as the entries' gather reads it: one record, the few bytes of one or two cache
+// lines, where six arrays would cost a line each.
+template <class Real>
+struct OrderedBody {
+  Real x, y, z, r;     // the packed sphere (r inflated by a skin)
+  std::uint32_t body;  // input index
+  std::uint32_t ctrl;  // control byte, widened as the walk's bodies hold it
+};
 template <class Real>
 struct BlockOrder {
-  Array<std::uint32_t> block;  // super-cell index of each body's lowest cell, ascending
-  Array<std::uint32_t> body;   // input index, alongside (ascending within a super-cell)
-  Array<Real> x, y, z, r;      // the packed sphere (r inflated by a skin) of each, alongside
-  Array<std::uint8_t> ctrl;    // control byte of each, alongside
+  Array<std::uint32_t> block;       // super-cell index of each body's lowest cell, ascending
+  Array<std::uint8_t> ctrl;         // control byte of each, alongside
+  Array<OrderedBody<Real>> bodies;  // alongside (input indices ascending within a super-cell's group)
 };
 template <class Real>
 bool cell_sort_wanted(const GridParams<Real>& g, std::size_t bodies, bool report_mask);
+// The cell sort's key of a body: its spilled axes (bits 0-2), the super-cell of its lowest cell above
+// them (at most k_block_bits bits: cell_sort_wanted), the parity of that cell in the top 3 bits.
+// block_sort's radix sort reads the low half_bits + 3 bits: a super-cell's bodies come out grouped by
+// their spilled axes (each group's bodies ascending), so that the loops over a body's cells run the
+// same number of steps for long runs of bodies; the parity rides along, and with it the whole control
+// byte, so that the bodies' gather into super-cell order reads their spheres alone.
+constexpr int k_block_bits = 26;
+template <class Real>
+std::uint32_t super_cell(const BodyCells& c, const GridParams<Real>& g) {
+  return (c.lo[0] >> 1) + g.half[0] * ((c.lo[1] >> 1) + g.half[1] * (c.lo[2] >> 1));
+}
+template <class Real>
+std::uint32_t block_key(const BodyCells& c, const GridParams<Real>& g) {
+  return c.spill | (super_cell(c, g) << 3) | ((std::uint32_t(control_bits(c)) & 7u) << (3 + k_block_bits));
+}
+// Whether pack writes the block keys (pack's `blocks`) where the cell sort runs: unless
+// CONTACTGRID_HOST_ENTRIES=cells-via-cells (a measurement switch, the same entries: pack writes each
+// body's cells and control byte, block_sort makes the super-cells from the cells and gathers the
+// control bytes with the spheres).
+bool cell_sort_packs_blocks();
 template <class Real>
 void block_sort(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, BlockOrder<Real>& out);
 // Returns the number of entries; frees `order`.

@@ -1,7 +1,8 @@
 // The CPU backend's cell sort (kernels/host/cell_sort.cpp, the default) against the entry sort
 // (CONTACTGRID_HOST_ENTRIES=body-order): the same sorted keys, the same bodies in every cell, the walk's
-// bodies those of each entry's body; and through the engine the same contact bytes and the same stats
-// (entries, pair tests, candidates: what CPU = CUDA compares), in fp32, mixed and fp64, 1, 2 and 3
+// bodies those of each entry's body, from pack's block keys and from its cells (the cell sort's former
+// path, CONTACTGRID_HOST_ENTRIES=cells-via-cells); and through the engine the same contact bytes and the same
+// stats (entries, pair tests, candidates: what CPU = CUDA compares), in fp32, mixed and fp64, 1, 2 and 3
 // threads, on uniform, polydisperse, clustered, one-cell, tangent, coincident and boundary scenes, a
 // few huge spheres among small ones, and ellipsoids (alone and mixed with spheres).
 #include <gtest/gtest.h>
@@ -60,15 +61,27 @@ std::vector<SceneCase> scene_cases() {
 
 // The sorted entries of both sorts: keys element for element, each cell's bodies as a set (the cell
 // sort leaves a cell's bodies in their spatial order), and the cell sort's walk bodies from each
-// entry's body; 32- and 64-bit keys, 1, 2 and 3 threads. Every scene's grid is sorted by hand (the
-// wide ones too, which the engine leaves to the entry sort); the engine's runs check that it takes
-// the cell sort where expected.
+// entry's body; 32- and 64-bit keys, 1, 2 and 3 threads; the cell sort from pack's block keys (`keyed`,
+// the default) or from its cells (the former path). Every scene's grid is sorted by hand (the wide
+// ones too, which the engine leaves to the entry sort); the engine's runs check that it takes the cell
+// sort where expected.
 template <class Real, class Key>
-void expect_cell_sort_entries(const detail::DetectJob<Real>& job, int threads) {
+void expect_cell_sort_entries(const detail::DetectJob<Real>& job, int threads, bool keyed) {
   using namespace detail::host;
   PackedBodies<Real> a, b;
   pack(job.bodies, job.plan.frame.origin, job.grid, Real(0), true, threads, a);
-  pack(job.bodies, job.plan.frame.origin, job.grid, Real(0), true, threads, b);
+  pack(job.bodies, job.plan.frame.origin, job.grid, Real(0), true, threads, b, nullptr, keyed);
+  ASSERT_EQ(b.block.size(), keyed ? a.spheres.size() : 0);
+  ASSERT_EQ(b.cells.size(), keyed ? 0 : a.spheres.size());
+  for (std::size_t i = 0; i < b.block.size(); ++i) {
+    const BodyCells& c = a.cells[i];
+    const std::uint32_t block =
+        (c.lo[0] >> 1) + job.grid.half[0] * ((c.lo[1] >> 1) + job.grid.half[1] * (c.lo[2] >> 1));
+    const std::uint32_t ctrl = a.ctrl[i];
+    ASSERT_EQ(b.block[i] >> 32, i);
+    ASSERT_EQ(std::uint32_t(b.block[i]), (ctrl >> 3) | block << 3 | (ctrl & 7u) << (3 + k_block_bits))
+        << "body " << i;
+  }
   Entries<Key> old_entries, new_entries;
   const std::uint64_t n_old = fill_entries(a, job.grid, threads, old_entries, job.plan.key_bits);
   sort_entries(old_entries, job.plan.key_bits, threads);
@@ -97,11 +110,11 @@ void expect_cell_sort_entries(const detail::DetectJob<Real>& job, int threads) {
   }
   for (std::size_t e = 0; e < n_new; ++e) {
     const std::uint32_t body = new_entries.body[e];
-    ASSERT_EQ(eb.x[e], b.spheres[body].x) << "entry " << e;
-    ASSERT_EQ(eb.y[e], b.spheres[body].y) << "entry " << e;
-    ASSERT_EQ(eb.z[e], b.spheres[body].z) << "entry " << e;
-    ASSERT_EQ(eb.r[e], b.spheres[body].r) << "entry " << e;
-    ASSERT_EQ(eb.ctrl[e], std::uint32_t(b.ctrl[body])) << "entry " << e;
+    ASSERT_EQ(eb.x[e], a.spheres[body].x) << "entry " << e;
+    ASSERT_EQ(eb.y[e], a.spheres[body].y) << "entry " << e;
+    ASSERT_EQ(eb.z[e], a.spheres[body].z) << "entry " << e;
+    ASSERT_EQ(eb.r[e], a.spheres[body].r) << "entry " << e;
+    ASSERT_EQ(eb.ctrl[e], std::uint32_t(a.ctrl[body])) << "entry " << e;
   }
   for (std::size_t e = n_new; e < n_new + k_entry_pad; ++e) {
     ASSERT_EQ(eb.r[e], Real(0));
@@ -123,23 +136,34 @@ TYPED_TEST(CellSortTest, SortsToTheEntrySortsCellsAndBodies) {
     if (8.0 * job.grid.half[0] * job.grid.half[1] * job.grid.half[2] > double(1 << 24)) continue;
     for (int threads : {1, 2, 3}) {
       SCOPED_TRACE(c.s.name + " threads " + std::to_string(threads));
-      expect_cell_sort_entries<Real, std::uint32_t>(job, threads);
-      expect_cell_sort_entries<Real, std::uint64_t>(job, threads);
+      for (bool keyed : {true, false}) {
+        SCOPED_TRACE(keyed ? "block keys" : "cells");
+        expect_cell_sort_entries<Real, std::uint32_t>(job, threads, keyed);
+        expect_cell_sort_entries<Real, std::uint64_t>(job, threads, keyed);
+      }
     }
   }
 }
 
-// The knob and the grids the cell sort takes: unset or `cells` it runs, `body-order` and `grouped`
-// not, nor with a report mask or a grid of far more cells than bodies.
+// The knob and the grids the cell sort takes: unset, `cells` or `cells-via-cells` it runs (pack writing
+// the block keys in the first two), `body-order` and `grouped` not, nor with a report mask or a grid
+// of far more cells than bodies.
 TEST(CellSort, KnobAndGrids) {
   const detail::DetectJob<float> uniform = make_job<float>(random_spheres(20000, 0.5, 1.0, 3320));
   const detail::DetectJob<float> wide = make_job<float>(sparse(20000, 3321));
   EXPECT_TRUE(detail::host::cell_sort_wanted(uniform.grid, 20000, false));
   EXPECT_FALSE(detail::host::cell_sort_wanted(uniform.grid, 20000, true));
   EXPECT_FALSE(detail::host::cell_sort_wanted(wide.grid, 20000, false));
+  EXPECT_TRUE(detail::host::cell_sort_packs_blocks());
   {
     const HostEntriesKnob knob("cells");
     EXPECT_TRUE(detail::host::cell_sort_wanted(uniform.grid, 20000, false));
+    EXPECT_TRUE(detail::host::cell_sort_packs_blocks());
+  }
+  {
+    const HostEntriesKnob knob("cells-via-cells");
+    EXPECT_TRUE(detail::host::cell_sort_wanted(uniform.grid, 20000, false));
+    EXPECT_FALSE(detail::host::cell_sort_packs_blocks());
   }
   for (const char* other : {"body-order", "grouped"}) {
     const HostEntriesKnob knob(other);
@@ -170,25 +194,24 @@ void expect_same_stats(const EngineStats& a, const EngineStats& b) {
   EXPECT_EQ(a.contacts, b.contacts);
 }
 
-// Both sorts through the engine on one scene: fp32, mixed and fp64, the same contact bytes and stats.
+// The default through the engine on one scene against the entry sort and the cell sort's former path
+// (`other`): fp32, mixed and fp64, the same contact bytes and stats.
+template <class Real>
+void expect_same_in_mode(const BodiesView& v, int threads, bool mixed, Fields fields, const char* other) {
+  Contacts<Real> x, y;
+  const Run a = run_engine(v, threads, mixed, fields, x);
+  const HostEntriesKnob knob(other);
+  const Run b = run_engine(v, threads, mixed, fields, y);
+  EXPECT_EQ(compare_contacts(x, y), "identical") << other;
+  expect_same_stats(a.stats, b.stats);
+}
+
 void expect_same_through_engine(const BodiesView& v, int threads, Fields fields) {
-  for (int mode = 0; mode < 3; ++mode) {
-    SCOPED_TRACE(mode == 0 ? "fp32" : mode == 1 ? "mixed" : "fp64");
-    if (mode == 0) {
-      Contacts<float> x, y;
-      const Run a = run_engine(v, threads, false, fields, x);
-      const HostEntriesKnob knob("body-order");
-      const Run b = run_engine(v, threads, false, fields, y);
-      EXPECT_EQ(compare_contacts(x, y), "identical");
-      expect_same_stats(a.stats, b.stats);
-    } else {
-      Contacts<double> x, y;
-      const Run a = run_engine(v, threads, mode == 1, fields, x);
-      const HostEntriesKnob knob("body-order");
-      const Run b = run_engine(v, threads, mode == 1, fields, y);
-      EXPECT_EQ(compare_contacts(x, y), "identical");
-      expect_same_stats(a.stats, b.stats);
-    }
+  for (const char* other : {"body-order", "cells-via-cells"}) {
+    SCOPED_TRACE(other);
+    expect_same_in_mode<float>(v, threads, false, fields, other);
+    expect_same_in_mode<double>(v, threads, true, fields, other);  // mixed
+    expect_same_in_mode<double>(v, threads, false, fields, other);
   }
 }
 
