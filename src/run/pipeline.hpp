@@ -1,6 +1,6 @@
 #pragma once
-// The `detect` command: distributed_detect (run/distributed_detect.hpp), then the write and the
-// summary. Its stages are sequenced in pipeline.cpp, the only place that sequences the stages of a run:
+// The `detect` command (detect_command.cpp): the stages of a run sequenced in pipeline.cpp
+// (distributed_run.hpp), then the write and the summary:
 //   read → frame → slabs → distribute → exchange ghosts → detect → collect contacts → write → summary
 #include <optional>
 #include <string>
