@@ -194,21 +194,7 @@ case $MODE in
         "$CG" detect "$W/$name.22.h5" -o "$W/$name.22.out.h5" --backend cuda --precision fp32 --broad-phase levels \
         -v >"$R/ncu_$name.out" 2>&1 || echo "ncu $name rc=$?"
       echo "== $name 2^22, levels: ms per kernel"
-      python3 - "$R/ncu_$name.csv" <<'PY' | tee "$R/ncu_$name.sum.txt"
-import csv, sys, collections
-rows = list(csv.reader(open(sys.argv[1], errors="replace")))
-hdr = next((i for i, r in enumerate(rows) if "Metric Name" in r), None)
-if hdr is None: print("no ncu rows"); sys.exit()
-h = rows[hdr]; k, m, v = h.index("Kernel Name"), h.index("Metric Name"), h.index("Metric Value")
-tot = collections.defaultdict(float); cnt = collections.Counter()
-for r in rows[hdr + 1:]:
-    if len(r) <= v or r[m] != "gpu__time_duration.sum": continue
-    try: val = float(r[v].replace(",", ""))
-    except ValueError: continue
-    tot[r[k][:80]] += val; cnt[r[k][:80]] += 1
-for n, t in sorted(tot.items(), key=lambda x: -x[1])[:16]: print(f"{t/1e6:8.3f} ms x{cnt[n]:<3} {n}")
-print(f"total {sum(tot.values())/1e6:.3f} ms")
-PY
+      python3 jobs/ncu_sum.py "$R/ncu_$name.csv" 16 | tee "$R/ncu_$name.sum.txt"
     done
     ;;
   cells)

@@ -21,25 +21,7 @@ prof() {  # name skip count command...
   timeout 170 "$NCU" --clock-control none --metrics "$metrics" --launch-skip "$skip" --launch-count "$count" --csv \
     --log-file "$OUT/$name.csv" "$@" >"$OUT/$name.out" 2>&1 || echo "ncu $name rc=$?"
   # total duration per kernel name over the window
-  python3 - "$OUT/$name.csv" <<'PY' | tee "$OUT/$name.sum.txt"
-import csv, sys, collections
-rows = list(csv.reader(open(sys.argv[1], errors="replace")))
-hdr = next((i for i, r in enumerate(rows) if "Metric Name" in r), None)
-if hdr is None: print("no ncu rows"); sys.exit()
-h = rows[hdr]; k, m, v = h.index("Kernel Name"), h.index("Metric Name"), h.index("Metric Value")
-tot = collections.defaultdict(float); cnt = collections.Counter(); dram = collections.defaultdict(list)
-for r in rows[hdr + 1:]:
-    if len(r) <= v: continue
-    name = r[k][:90]
-    try: val = float(r[v].replace(",", ""))
-    except ValueError: continue
-    if r[m] == "gpu__time_duration.sum": tot[name] += val; cnt[name] += 1
-    if r[m].startswith("dram__"): dram[name].append(val)
-all_ = sum(tot.values())
-for n, t in sorted(tot.items(), key=lambda x: -x[1])[:40]:
-    d = dram[n]; print(f"{t/1e6:9.3f} ms {100*t/all_:5.1f}% x{cnt[n]:<4} dram {sum(d)/len(d) if d else 0:5.1f}%  {n}")
-print(f"total {all_/1e6:.3f} ms over {sum(cnt.values())} launches")
-PY
+  python3 jobs/ncu_sum.py "$OUT/$name.csv" 40 | tee "$OUT/$name.sum.txt"
 }
 pour() { "$CG" generate "$W/$1.h5" --kind pour -n "$2" --rlow 0.00495 --rhigh 0.005 --pour-spacing 1.97 --seed 5 -q; }
 parts=("$@"); [ ${#parts[@]} -eq 0 ] && parts=(simulate20 simulate24 steps24 host20)

@@ -150,22 +150,7 @@ if [ "${PROFILE:-1}" = 1 ] && [ -n "$NCU" ]; then
       --log-file "$OUT/ncu_$p.csv" "$CG" detect "$W/s.h5" -o "$W/ncu.h5" --backend "$BACKEND" --precision fp32 \
       --steps 12 --drift 0.01 --skin auto >"$OUT/ncu_$p.out" 2>&1 || echo "ncu $p rc=$? (not a failure)"
     rm -f "$W/ncu.h5"
-    python3 - "$OUT/ncu_$p.csv" <<'PY' | tee "$OUT/ncu_$p.sum.txt"
-import csv, sys, collections
-rows = list(csv.reader(open(sys.argv[1], errors="replace")))
-hdr = next((i for i, r in enumerate(rows) if "Metric Name" in r), None)
-if hdr is None: print("no ncu rows"); sys.exit()
-h = rows[hdr]; k, m, v = h.index("Kernel Name"), h.index("Metric Name"), h.index("Metric Value")
-tot = collections.defaultdict(float); cnt = collections.Counter()
-for r in rows[hdr + 1:]:
-    if len(r) <= v or r[m] != "gpu__time_duration.sum": continue
-    try: val = float(r[v].replace(",", ""))
-    except ValueError: continue
-    name = r[k].split("(")[0][:70]; tot[name] += val; cnt[name] += 1
-for n, t in sorted(tot.items(), key=lambda x: -x[1])[:24]:
-    print(f"{t/1e6:9.3f} ms x{cnt[n]:<4} {t/1e6/cnt[n]:8.3f} ms each  {n}")
-print(f"total {sum(tot.values())/1e6:.3f} ms over {sum(cnt.values())} launches")
-PY
+    python3 jobs/ncu_sum.py "$OUT/ncu_$p.csv" 24 | tee "$OUT/ncu_$p.sum.txt"
   done
 fi
 rm -rf "$W"
