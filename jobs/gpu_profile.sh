@@ -15,6 +15,8 @@ W=${SCRATCH:-/dev/shm}/cg_profile; mkdir -p "$W" "$OUT"
 NCU=$(command -v ncu || ls /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1)
 echo "ncu: $NCU"
 metrics=gpu__time_duration.sum,dram__throughput.avg.pct_of_peak_sustained_elapsed,sm__throughput.avg.pct_of_peak_sustained_elapsed,launch__grid_size,launch__registers_per_thread
+# EXTRA_METRICS: more ncu metrics for the raw CSV (e.g. occupancy, L2 hit rate, DRAM bytes)
+metrics=$metrics${EXTRA_METRICS:+,$EXTRA_METRICS}
 prof() {  # name skip count command...
   local name=$1 skip=$2 count=$3; shift 3
   echo "== $name: $*"

@@ -9,14 +9,15 @@
 #     room, the first build's room from the last pair count; every step = the CPU's fresh detection)
 #     with the defaults and again under CONTACTGRID_STEP_REBUILD=fill (the former path);
 #  2. N spheres fp32 at 6 contacts a body (`generate --seed 24 --contacts-per-body 6`), `detect --steps
-#     STEPS --drift 0.01 --skin auto --backend cuda --precision fp32` (1 % of r_max a step), the defaults
-#     ("now"), CONTACTGRID_STEP_REBUILD=fill ("fill": the former path) and CONTACTGRID_STEP_BUILD_WINDOW=32
-#     ("w32": now with the former 31-entry window), alternated ROUNDS times, and once a fresh
-#     detection a step (--skin 0, 6 steps); every run with CONTACTGRID_STEP_TRACE=1, whose "build:"
-#     lines give each building step's pairs / order / narrow seconds, skin, entries, pair tests,
-#     candidates and walks of the cells (2: its candidates outgrew their room);
-#  3. the last step's /contacts of the first round's three runs byte-identical (`contactgrid compare`)
-#     and equal to a plain detect of the final scene (--final-scene); every run's pair hash the same;
+#     STEPS --drift 0.01 --skin auto --backend cuda --precision fp32` (1 % of r_max a step) for each of
+#     VARIANTS (default: "now" the defaults, "lev" `--broad-phase levels` — what auto ran for a skin
+#     auto before it kept the grid: builds not in cell order, reuses selecting from the (a, b) list —
+#     and "fill" CONTACTGRID_STEP_REBUILD=fill), alternated ROUNDS times, and once a fresh detection a
+#     step (--skin 0, 6 steps); every run with CONTACTGRID_STEP_TRACE=1, whose "build:" lines give each
+#     building step's pairs / order / narrow seconds, skin, entries, pair tests, candidates and walks
+#     of the cells (2: its candidates outgrew their room);
+#  3. the last step's /contacts of each of the first round's runs byte-identical (`contactgrid compare`)
+#     to a plain detect of the final scene (--final-scene); every run's pair hash the same;
 #  4. PROFILE=1 (default where ncu exists): each kernel's duration in a short run (12 steps, the
 #     defaults) under Nsight Compute, summed by name — the GPU time of a build's kernels against its
 #     stage times (PROFILE=0 skips it: ~1-2 minutes).
@@ -25,15 +26,12 @@
 # lists built = the median over the builds of kept lists alone (the trace's lines), reuse = a step
 # that reused them, mean = the mean step; then each run's building step's stages and its per-build
 # trace lines.
-# What to expect (BENCHMARKS §31): the former path's first skin build (room one pair per cell
-# entry, fewer than its candidates) walks the cells twice (count, then the scan → fill walk) and maps
-# the input indices to cell order (inverse permutation, two random reads a candidate); "now" gives
-# that build the last call's pair count and a half (the fresh first step's count: it fits) and, where
-# any build's count outgrows its room, walks once more with the count kernel into room of the
-# counted size (no fill walk, no mapping). Look at the "build:" lines: a build with "walks 2" and a
-# pairs stage ~2x the others' (the fallback) should be gone in "now"; "now" against "w32" is the window alone
-# (the pairs stage of every build). If "order" stays near 8 ms on every build (BENCHMARKS §26: 8.2 ms
-# on the H200), the profile's kernels say whether that is GPU work (gather_spheres / copies) or a gap.
+# What to expect (BENCHMARKS §32): at 2^24 auto once gave a skin-auto run the one-level levels walk
+# (picked for fresh device calls from 2^21 bodies), so none of its builds ran in cell order ("lev"
+# shows that path: fill walks, the (a, b) select of every reuse); "now" keeps the grid, so its builds
+# write the kept list in cell order and its reuses run the cell-order narrow (cell_narrow_kernel).
+# Look at "reuse" (the narrow over the kept list) and the "build:" lines ("walks 2": the candidates
+# outgrew their room).
 # (The tuner picks its skins from measured times, so paths may build at other steps and skins.)
 # Exits non-zero naming each failed check.
 set -u
@@ -70,36 +68,52 @@ fi
 
 log "== 2. $N spheres fp32, 6 contacts a body, drift 0.01, skin auto, $STEPS steps"
 timeout 90 "$CG" generate "$W/s.h5" -n "$N" --seed 24 --contacts-per-body 6 -q || failed+=(generate)
-run() {  # TAG SKIN STEPS [ENV...]: one drifting run, its log in $OUT/steps_TAG.log, its contacts $W/TAG.h5
-  local tag=$1 skin=$2 n=$3; shift 3
-  timeout 120 env CONTACTGRID_STEP_TRACE=1 "$@" "$CG" detect "$W/s.h5" -o "$W/$tag.h5" --backend "$BACKEND" \
-    --precision fp32 --steps "$n" --drift 0.01 --skin "$skin" ${FINAL:+--final-scene "$FINAL"} \
+# the compared paths, TAG=SETTING: an environment variable, or broad=B for `--broad-phase B`
+# (broad=levels: what auto ran for `--skin auto` before it kept the grid; its builds are not in cell
+# order and its reuses select from the (a, b) list)
+VARIANTS=${VARIANTS:-"now=- lev=broad=levels fill=CONTACTGRID_STEP_REBUILD=fill"}
+run() {  # TAG SKIN STEPS [SETTING]: one drifting run, its log in $OUT/steps_TAG.log, its contacts $W/TAG.h5
+  local tag=$1 skin=$2 n=$3 setting=${4:--} envs=() args=()
+  case $setting in
+    -) ;;
+    broad=*) args=(--broad-phase "${setting#broad=}") ;;
+    *) envs=("$setting") ;;
+  esac
+  timeout 120 env CONTACTGRID_STEP_TRACE=1 "${envs[@]}" "$CG" detect "$W/s.h5" -o "$W/$tag.h5" --backend "$BACKEND" \
+    --precision fp32 --steps "$n" --drift 0.01 --skin "$skin" "${args[@]}" ${FINAL:+--final-scene "$FINAL"} \
     >"$OUT/steps_$tag.log" 2>&1 || failed+=("steps_$tag")
 }
+tags=()
+for r in $(seq 1 "$ROUNDS"); do
+  for v in $VARIANTS; do tags+=("${v%%=*}$r"); done
+done
 run fresh 0 6
 rm -f "$W/fresh.h5"
 for r in $(seq 1 "$ROUNDS"); do
+  first=
+  for v in $VARIANTS; do
+    tag=${v%%=*}$r
+    if [ "$r" = 1 ] && [ -z "$first" ]; then
+      FINAL="$W/final.h5" run "$tag" auto "$STEPS" "${v#*=}"
+      first=$tag
+    else
+      run "$tag" auto "$STEPS" "${v#*=}"
+    fi
+  done
   if [ "$r" = 1 ]; then
-    FINAL="$W/final.h5" run now1 auto "$STEPS"
-    run fill1 auto "$STEPS" CONTACTGRID_STEP_REBUILD=fill
-    run w32_1 auto "$STEPS" CONTACTGRID_STEP_BUILD_WINDOW=32
-    log "== 3. the last step's contacts: now = fill = a plain detect of the final scene"
-    "$CG" compare "$W/now1.h5" "$W/fill1.h5" >"$OUT/compare.log" 2>&1 || failed+=(now_vs_fill)
+    log "== 3. the last step's contacts: every path = a plain detect of the final scene"
     timeout 90 "$CG" detect "$W/final.h5" -o "$W/plain.h5" --backend "$BACKEND" --precision fp32 -q ||
       failed+=(plain_detect)
-    "$CG" compare "$W/now1.h5" "$W/plain.h5" >>"$OUT/compare.log" 2>&1 || failed+=(now_vs_plain)
-    "$CG" compare "$W/now1.h5" "$W/w32_1.h5" >>"$OUT/compare.log" 2>&1 || failed+=(now_vs_w32)
+    : >"$OUT/compare.log"
+    for v in $VARIANTS; do
+      "$CG" compare "$W/${v%%=*}1.h5" "$W/plain.h5" >>"$OUT/compare.log" 2>&1 || failed+=("${v%%=*}_vs_plain")
+    done
     cat "$OUT/compare.log"
-    rm -f "$W/now1.h5" "$W/fill1.h5" "$W/w32_1.h5" "$W/plain.h5" "$W/final.h5"
-  else
-    run "now$r" auto "$STEPS"
-    run "fill$r" auto "$STEPS" CONTACTGRID_STEP_REBUILD=fill
-    run "w32_$r" auto "$STEPS" CONTACTGRID_STEP_BUILD_WINDOW=32
-    rm -f "$W/now$r.h5" "$W/fill$r.h5" "$W/w32_$r.h5"
+    rm -f "$W/plain.h5" "$W/final.h5"
   fi
+  for v in $VARIANTS; do rm -f "$W/${v%%=*}$r.h5"; done
 done
-hashes=$(grep -ho 'pair hash [0-9a-f]*' "$OUT"/steps_now*.log "$OUT"/steps_fill*.log "$OUT"/steps_w32_*.log |
-  sort -u | wc -l)
+hashes=$(for t in "${tags[@]}"; do grep -ho 'pair hash [0-9a-f]*' "$OUT/steps_$t.log"; done | sort -u | wc -l)
 echo "last-step pair hashes over the skin runs: $hashes distinct (1 expected)"
 [ "$hashes" = 1 ] || failed+=(pair_hashes)
 
@@ -123,22 +137,18 @@ lists() { sed -nE 's/.*candidate lists: ([0-9]+) builds, ([0-9]+) reuses, skin (
   fr=$(field fresh build)
   printf '| run | fresh | build | lists built | reuse | mean | build/fresh | lists built/fresh | mean/fresh | builds/reuses |\n'
   printf '|---|---|---|---|---|---|---|---|---|---|\n'
-  for r in $(seq 1 "$ROUNDS"); do
-    for t in "now$r" "fill$r" "w32_$r"; do
-      printf '| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n' "$t" "$fr" "$(field "$t" build)" \
-        "$(lists_build "$t")" "$(field "$t" reuse)" "$(field "$t" mean)" "$(ratio "$(field "$t" build)" "$fr")" \
-        "$(ratio "$(lists_build "$t")" "$fr")" "$(ratio "$(field "$t" mean)" "$fr")" "$(lists "$t")"
-    done
+  for t in "${tags[@]}"; do
+    printf '| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n' "$t" "$fr" "$(field "$t" build)" \
+      "$(lists_build "$t")" "$(field "$t" reuse)" "$(field "$t" mean)" "$(ratio "$(field "$t" build)" "$fr")" \
+      "$(ratio "$(lists_build "$t")" "$fr")" "$(ratio "$(field "$t" mean)" "$fr")" "$(lists "$t")"
   done
   echo "-- fresh: a step's stages (median)"
   sed -nE '/^  interior/,/^  boundary/p' "$OUT/steps_fresh.log" | grep -v boundary
-  for r in $(seq 1 "$ROUNDS"); do
-    for t in "now$r" "fill$r" "w32_$r"; do
-      echo "-- $t: a building step's stages (median), then each build (s)"
-      grep -E "building step's stages" "$OUT/steps_$t.log"
-      grep -E '^trace .* build:' "$OUT/steps_$t.log" |
-        sed -E 's/.* build: interior ([0-9.]+) .* pairs/  detect \1 pairs/; s/ contacts [0-9]+//'
-    done
+  for t in "${tags[@]}"; do
+    echo "-- $t: a building step's stages (median), then each build (s)"
+    grep -E "building step's stages" "$OUT/steps_$t.log"
+    grep -E '^trace .* build:' "$OUT/steps_$t.log" |
+      sed -E 's/.* build: interior ([0-9.]+) .* pairs/  detect \1 pairs/; s/ contacts [0-9]+//'
   done
 } | tee "$OUT/table.md"
 

@@ -320,7 +320,7 @@ detail::DetectJob<Broad, Narrow> plan_job(const Bounds& b, std::optional<Frame> 
                       : make_frame(grid_bounds, 0, prec, options.cell_choice).cell_size;
   detail::DetectJob<Broad, Narrow> job{{}, plan_grid(grid_bounds, f, prec), {}, options.fields};
   job.grid = detail::grid_params<Broad>(job.plan, margin);
-  job.broad = resolved_broad_phase(options.broad_phase, b, prec, options.backend, options.skin != 0);
+  job.broad = resolved_broad_phase(options.broad_phase, b, prec, options.backend, keeps_candidates(options));
   stats.broad_phase = job.broad;
   if (job.broad == BroadPhase::levels) {
     const LevelsPlan levels = plan_levels(b, f, prec, margin + inflation);

@@ -101,6 +101,10 @@ struct EngineOptions {
   bool skin_auto = false;
 };
 
+// True when the engine keeps candidate lists across calls (a skin, given or automatic): `auto` then
+// keeps the grid broad phase (resolved_broad_phase's `skin`), whose builds the kept lists feed.
+inline bool keeps_candidates(const EngineOptions& o) { return o.skin != 0 || o.skin_auto; }
+
 // Counters of one run (for tests and the summary).
 struct EngineStats {
   std::uint64_t bodies = 0, entries = 0, pair_tests = 0, contacts = 0;

@@ -176,7 +176,7 @@ SharedFrame agree_frame(const Session& session, const std::string& path, const B
     f.ghosts =
         ghost_rule(f.global, frame_extent(f.global, f.frame.origin), std::numeric_limits<Real>::epsilon());
     f.broad = resolved_broad_phase(options.engine.broad_phase, f.global, precision, options.engine.backend,
-                                   options.engine.skin != 0);
+                                   keeps_candidates(options.engine));
   });
   return f;
 }

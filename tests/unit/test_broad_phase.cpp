@@ -496,6 +496,16 @@ TEST(AutoBroadPhase, Rule) {
   EXPECT_EQ(choose_broad_phase(large_uniform, Precision::fp64, false), BroadPhase::grid);
   // calls that keep their candidates (a skin) keep the grid: the rule's measurement was of fresh calls
   EXPECT_EQ(choose_broad_phase(large_uniform, Precision::fp32, true, true), BroadPhase::grid);
+  // so do engines whose skin is chosen per call (skin_auto, skin 0 until then), as the engine and the
+  // detect pipeline resolve it (keeps_candidates); a fixed skin as before, no skin the levels
+  EngineOptions automatic, fixed, none;
+  automatic.skin_auto = true;
+  fixed.skin = 0.1;
+  for (const auto& [o, want] : {std::pair{automatic, BroadPhase::grid}, std::pair{fixed, BroadPhase::grid},
+                                std::pair{none, BroadPhase::levels}})
+    EXPECT_EQ(resolved_broad_phase(BroadPhase::automatic, large_uniform, Precision::fp32, Backend::cuda,
+                                   keeps_candidates(o)),
+              want);
   Bounds fewer = large_uniform;
   fewer.count = many - 1;
   EXPECT_EQ(choose_broad_phase(fewer, Precision::fp32, true), BroadPhase::grid);

@@ -459,6 +459,35 @@ TEST(EngineSkinCuda, CellOrderResidentStepsEqualFreshDetection) {
   EXPECT_GE(file.stats().candidate_reuses, 15u);
 }
 
+// An engine whose skin is chosen per call (skin_auto) keeps the grid broad phase on a scene of one
+// size class large enough for auto's device levels (2^21 bodies: broad_phase.cpp), so its builds keep
+// their lists in cell order; a skin-0 engine takes the levels. Every step the same rows as the fresh
+// engine's, bit for bit, with builds and reuses both seen.
+TEST(EngineSkinCuda, AutoSkinKeepsTheGridOnLargeScenes) {
+  if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
+  EngineOptions automatic = options_for(Backend::cuda, 0);
+  automatic.skin_auto = true;
+  Engine<float> tuned(automatic), fresh(options_for(Backend::cuda, 0));
+  Spheres s = random_spheres(std::size_t(1) << 21, 0.5, 1.0, 9191);
+  const std::size_t n = s.r.size();
+  std::mt19937_64 rng(9192);
+  tuned.set_resident(BodiesView{s.p, s.r, {}, {}});
+  for (int step = 0; step < 12; ++step) {
+    const std::string at = "step " + std::to_string(step);
+    if (step > 0) {
+      random_step(s, 0.005, 0.0, rng);
+      tuned.write_resident(0, n, s.p.data(), s.r.data());
+    }
+    const Contacts<float> want = fresh.detect(BodiesView{s.p, s.r, {}, {}});
+    EXPECT_EQ(fresh.stats().broad_phase, BroadPhase::levels) << at;
+    ASSERT_EQ(tuned.detect_resident(), want.size()) << at;
+    ASSERT_EQ(compare_contacts(tuned.resident_contacts(), want), "identical") << at;
+    EXPECT_EQ(tuned.stats().broad_phase, BroadPhase::grid) << at;
+  }
+  EXPECT_GE(tuned.stats().candidate_builds, 1u);
+  EXPECT_GE(tuned.stats().candidate_reuses, 5u);
+}
+
 // A cell-order build's pair stage writes the kept list itself (cell-order indices, in room sized by
 // the previous build's count: core/kept_room.hpp; kernels/cuda/pairs.cuh), and walks again into room
 // of the counted size where the walk finds more than that room (CONTACTGRID_STEP_REBUILD=fill: the
