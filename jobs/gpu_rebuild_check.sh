@@ -13,7 +13,7 @@
 #     VARIANTS (default: "now" the defaults, "lev" `--broad-phase levels` — what auto ran for a skin
 #     auto before it kept the grid: builds not in cell order, reuses selecting from the (a, b) list —
 #     and "fill" CONTACTGRID_STEP_REBUILD=fill), alternated ROUNDS times, and once a fresh detection a
-#     step (--skin 0, 6 steps); every run with CONTACTGRID_STEP_TRACE=1, whose "build:" lines give each
+#     step (--skin 0, 6 steps; auto's broad phase, and the grid's); every run with CONTACTGRID_STEP_TRACE=1, whose "build:" lines give each
 #     building step's pairs / order / narrow seconds, skin, entries, pair tests, candidates and walks
 #     of the cells (2: its candidates outgrew their room);
 #  3. the last step's /contacts of each of the first round's runs byte-identical (`contactgrid compare`)
@@ -88,7 +88,8 @@ for r in $(seq 1 "$ROUNDS"); do
   for v in $VARIANTS; do tags+=("${v%%=*}$r"); done
 done
 run fresh 0 6
-rm -f "$W/fresh.h5"
+run fresh_grid 0 6 broad=grid  # the grid's fresh detection: auto picks the levels for it (one size class)
+rm -f "$W/fresh.h5" "$W/fresh_grid.h5"
 for r in $(seq 1 "$ROUNDS"); do
   first=
   for v in $VARIANTS; do
@@ -142,8 +143,11 @@ lists() { sed -nE 's/.*candidate lists: ([0-9]+) builds, ([0-9]+) reuses, skin (
       "$(lists_build "$t")" "$(field "$t" reuse)" "$(field "$t" mean)" "$(ratio "$(field "$t" build)" "$fr")" \
       "$(ratio "$(lists_build "$t")" "$fr")" "$(ratio "$(field "$t" mean)" "$fr")" "$(lists "$t")"
   done
-  echo "-- fresh: a step's stages (median)"
-  sed -nE '/^  interior/,/^  boundary/p' "$OUT/steps_fresh.log" | grep -v boundary
+  echo "fresh with the grid (--broad-phase grid): $(field fresh_grid build) ms ($(ratio "$(field fresh_grid build)" "$fr")x auto's)"
+  for t in fresh fresh_grid; do
+    echo "-- $t: a step's stages (median)"
+    sed -nE '/^  interior/,/^  boundary/p' "$OUT/steps_$t.log" | grep -v boundary
+  done
   for t in "${tags[@]}"; do
     echo "-- $t: a building step's stages (median), then each build (s)"
     grep -E "building step's stages" "$OUT/steps_$t.log"

@@ -7,6 +7,10 @@
 //                         order its cell walk wrote them, as cell-order indices (the walk writes them
 //                         so into the kept list, pairs.cuh; or pack's permutation inverted maps its
 //                         input indices), the permutation kept, and the spheres gathered into cell order
+//   skin_pack_cell_stage  the check of a call whose kept list is in cell order, and a reuse's pack,
+//                         in one pass over the bodies in input order (motion_pack_cell_kernel: the
+//                         reads sequential, each sphere written at its cell place inv[i]); a build
+//                         packs again (CONTACTGRID_STEP_PACK=separate: the check, then pack_cell_stage)
 //   pack_cell_stage       at a reuse, instead of pack: the moved bodies packed straight into cell
 //                         order (one pass; within a z layer the input indices ascend, so the reads of
 //                         the world doubles are a few hundred sequential streams)
@@ -65,6 +69,25 @@ __global__ void __launch_bounds__(kBlock)
                      GridParams<Real> g, Sphere<Real>* __restrict__ out, Counters* __restrict__ c) {
   const std::uint32_t j = blockIdx.x * kBlock + threadIdx.x;
   if (j < n) out[j] = packed_sphere(pos, rad, nullptr, perm[j], n, origin, g, c);  // (a skin: the doubles)
+}
+
+// The check and a reuse's pack of a cell-order kept list in one pass in input order: body i's motion
+// (motion_kernel's reduction) and its sphere (pack_cell_kernel's bits) written at its cell place
+// inv[i]. The sequential reads cost less than pack_cell_kernel's gather through the permutation.
+template <class Real>
+__global__ void __launch_bounds__(kBlock)
+    motion_pack_cell_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
+                            const std::uint8_t* __restrict__ report, const double* __restrict__ ref_pos,
+                            const double* __restrict__ ref_rad, const std::uint8_t* __restrict__ ref_report,
+                            const std::uint32_t* __restrict__ inv, std::uint32_t n, Vec3<double> origin,
+                            GridParams<Real> g, Sphere<Real>* __restrict__ out, Counters* __restrict__ c) {
+  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+  BodyMotion m{};
+  if (i < n) {
+    m = body_motion(pos, rad, report, ref_pos, ref_rad, ref_report, i);
+    out[inv[i]] = packed_sphere(pos, rad, nullptr, i, n, origin, g, c);
+  }
+  record_motion(m, c);
 }
 
 // The select's decision of kept candidate k (cell-order indices) on the cell-ordered spheres:
@@ -214,18 +237,19 @@ void keep_cell_candidates(RunState<Real, Key, Narrow>& r) {
         <<<cuda::blocks_for(n), cuda::kBlock, 0, st>>>(r.d_spheres, perm, n, cell);
     CG_CUDA_CHECK_LAUNCH("gather_spheres");
   }
+  // each input index's cell place: the next check's pack (skin_pack_cell_stage), and the mapping of a
+  // list the pair stage wrote as input indices
+  ws.reserve({{&ws.kept_inv, n * sizeof(std::uint32_t)}}, "skin");
+  std::uint32_t* inv = ws.kept_inv.span_as<std::uint32_t>(n).data();
+  if (n > 0) {
+    cuda::inverse_perm_kernel<<<cuda::blocks_for(n), cuda::kBlock, 0, st>>>(perm, r.n, inv);
+    CG_CUDA_CHECK_LAUNCH("inverse_perm");
+  }
   std::size_t stride = ws.kept_stride;
   if (!r.kept_written) {
     ws.reserve({{&ws.kept_pairs, 2 * np * sizeof(std::uint32_t)}}, "skin");
     stride = np;
     std::uint32_t* kept = ws.kept_pairs.span_as<std::uint32_t>(2 * np).data();
-    // the inverse in the entry sort's first key buffer (dead after the pair stage; >= n u32, as the
-    // order stage's a_counts)
-    std::uint32_t* inv = ws.keys[0].span_as<std::uint32_t>(n).data();
-    if (n > 0) {
-      cuda::inverse_perm_kernel<<<cuda::blocks_for(n), cuda::kBlock, 0, st>>>(perm, r.n, inv);
-      CG_CUDA_CHECK_LAUNCH("inverse_perm");
-    }
     if (np > 0) {
       cuda::cell_pairs_kernel<<<cuda::blocks_for(np), cuda::kBlock, 0, st>>>(
           r.pair_a.Current(), r.pair_b.Current(), r.np, inv, kept, kept + np);
@@ -237,6 +261,32 @@ void keep_cell_candidates(RunState<Real, Key, Narrow>& r) {
   r.pair_a = cub::DoubleBuffer<std::uint32_t>(kept, kept);  // the narrow stage reads Current() alone
   r.pair_b = cub::DoubleBuffer<std::uint32_t>(kept + stride, kept + stride);
   r.events.mark(EngineStage::order, st);
+}
+
+// The check of a call whose kept list is in cell order (as skin_stage's: the same motion, the same
+// decision), with the bodies packed into the kept cell order in the same pass: true when the list is
+// reused, its spheres then ready (the pack stage empty); a build packs again (pack_stage).
+template <class Real, class Key, class Narrow>
+bool skin_pack_cell_stage(RunState<Real, Key, Narrow>& r) {
+  if (!(r.job.skin > 0) || !r.job.check) return false;
+  Workspace& ws = r.ws;
+  cudaStream_t st = r.st;
+  r.d_counters = ws.counters.span_as<cuda::Counters>(1).data();
+  CG_CUDA_CHECK(cudaMemsetAsync(r.d_counters, 0, sizeof(cuda::Counters), st));  // (c->rows: the narrow's)
+  ws.reserve({{&ws.cell_spheres, r.n64 * sizeof(Sphere<Real>)}}, "pack");
+  const bool both_reported = r.d_report && ws.kept_reported;
+  if (r.n > 0) {
+    cuda::motion_pack_cell_kernel<Real><<<r.nb, cuda::kBlock, 0, st>>>(
+        r.d_pos, r.d_rad, both_reported ? r.d_report : nullptr, ws.ref_pos.span_as<double>(3 * r.n64).data(),
+        ws.ref_rad.span_as<double>(r.n64).data(),
+        both_reported ? ws.ref_report.span_as<std::uint8_t>(r.n64).data() : nullptr,
+        ws.kept_inv.span_as<std::uint32_t>(r.n).data(), r.n, r.origin, r.g,
+        ws.cell_spheres.span_as<Sphere<Real>>(r.n).data(), r.d_counters);
+    CG_CUDA_CHECK_LAUNCH("motion_pack_cell");
+  }
+  const bool reuse = skin_decision(r);
+  if (reuse) r.events.mark(EngineStage::pack, st);  // (packed with the check)
+  return reuse;
 }
 
 // At a reuse (instead of pack_stage): the moved bodies packed into the kept cell order.

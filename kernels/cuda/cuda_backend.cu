@@ -183,14 +183,17 @@ class CudaBackend {
     reserve_pack(r);
     m_events.start(m_stream);
     upload_stage(r, cuda::pinned_ring(m_device));
-    // a skin: the kept candidates (of this call's order) still hold every contact?
-    const bool reuse = skin_stage(r) && m_ws.kept_cell_order == cell_order;
+    // a skin: the kept candidates (of this call's order) still hold every contact? (a cell-order list:
+    // checked and packed in one pass, skin_pack_cell_stage)
+    const bool fused = cell_order && m_ws.kept_cell_order && !m_tuning.step_pack_separate;
+    const bool reuse = fused ? skin_pack_cell_stage(r) : skin_stage(r) && m_ws.kept_cell_order == cell_order;
     // (scenes with ellipsoids: their shapes packed first; the broad phases but the grid: the spheres
     // alone, in input order, broad.cuh)
-    if (reuse && cell_order)
-      pack_cell_stage(r);
-    else
+    if (reuse && cell_order) {
+      if (!fused) pack_cell_stage(r);
+    } else {
       pack_stage(r, reuse || job.broad != BroadPhase::grid);
+    }
     if (reuse) {
       reuse_candidates(r);
     } else {

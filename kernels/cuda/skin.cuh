@@ -18,36 +18,52 @@
 
 namespace cg::cuda {
 
-// skin: the motion of bodies [0, n) since the reference state (ref_report read only when report is).
-__global__ void __launch_bounds__(kBlock)
-    motion_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
-                  const std::uint8_t* __restrict__ report, const double* __restrict__ ref_pos,
-                  const double* __restrict__ ref_rad, const std::uint8_t* __restrict__ ref_report,
-                  std::uint32_t n, Counters* __restrict__ c) {
-  using Reduce = cub::BlockReduce<double, kBlock>;
-  __shared__ typename Reduce::TempStorage tmp;
-  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+// Body i's motion since the reference state (ref_report read only when report is): its squared
+// displacement, its radius growth (>= 0) and whether its report flag changed.
+struct BodyMotion {
   double moved_sq = 0, growth = 0;
   int changed = 0;
-  if (i < n) {
-    const std::uint64_t i3 = 3 * std::uint64_t(i);
-    const double dx = pos[i3] - ref_pos[i3], dy = pos[i3 + 1] - ref_pos[i3 + 1],
-                 dz = pos[i3 + 2] - ref_pos[i3 + 2];
-    moved_sq = dx * dx + dy * dy + dz * dz;  // the host's order (host/skin.cpp), no FMA
-    const double g = rad[i] - ref_rad[i];
-    growth = g > 0 ? g : 0;
-    changed = report && report[i] != ref_report[i];
-  }
+};
+__device__ __forceinline__ BodyMotion body_motion(const double* __restrict__ pos, const double* __restrict__ rad,
+                                                  const std::uint8_t* __restrict__ report,
+                                                  const double* __restrict__ ref_pos,
+                                                  const double* __restrict__ ref_rad,
+                                                  const std::uint8_t* __restrict__ ref_report, std::uint32_t i) {
+  const std::uint64_t i3 = 3 * std::uint64_t(i);
+  const double dx = pos[i3] - ref_pos[i3], dy = pos[i3 + 1] - ref_pos[i3 + 1], dz = pos[i3 + 2] - ref_pos[i3 + 2];
+  BodyMotion m;
+  m.moved_sq = dx * dx + dy * dy + dz * dz;  // the host's order (host/skin.cpp), no FMA
+  const double g = rad[i] - ref_rad[i];
+  m.growth = g > 0 ? g : 0;
+  m.changed = report && report[i] != ref_report[i];
+  return m;
+}
+
+// The block's maxima of its threads' motions into the counters (one atomicMax a block on the bits
+// of a non-negative double). Every thread of the block calls it.
+__device__ __forceinline__ void record_motion(const BodyMotion& m, Counters* __restrict__ c) {
+  using Reduce = cub::BlockReduce<double, kBlock>;
+  __shared__ typename Reduce::TempStorage tmp;
   auto larger = [](double a, double b) { return a > b ? a : b; };
-  const double block_moved = Reduce(tmp).Reduce(moved_sq, larger);
+  const double block_moved = Reduce(tmp).Reduce(m.moved_sq, larger);
   __syncthreads();  // tmp is reused
-  const double block_growth = Reduce(tmp).Reduce(growth, larger);
-  const int block_changed = __syncthreads_or(changed);
+  const double block_growth = Reduce(tmp).Reduce(m.growth, larger);
+  const int block_changed = __syncthreads_or(m.changed);
   if (threadIdx.x == 0) {
     atomicMax(&c->skin_moved_sq, static_cast<unsigned long long>(__double_as_longlong(block_moved)));
     atomicMax(&c->skin_growth, static_cast<unsigned long long>(__double_as_longlong(block_growth)));
     if (block_changed) atomicMax(&c->skin_report_changed, 1ull);
   }
+}
+
+// skin: the motion of bodies [0, n) since the reference state.
+__global__ void __launch_bounds__(kBlock)
+    motion_kernel(const double* __restrict__ pos, const double* __restrict__ rad,
+                  const std::uint8_t* __restrict__ report, const double* __restrict__ ref_pos,
+                  const double* __restrict__ ref_rad, const std::uint8_t* __restrict__ ref_report,
+                  std::uint32_t n, Counters* __restrict__ c) {
+  const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
+  record_motion(i < n ? body_motion(pos, rad, report, ref_pos, ref_rad, ref_report, i) : BodyMotion{}, c);
 }
 
 }  // namespace cg::cuda
@@ -57,30 +73,37 @@ namespace cg::detail {
 // The check (EngineOptions::skin > 0 and the engine found the bodies matching the kept list's):
 // true when the kept list still holds every contact. Records the motion in stats and the stage
 // "skin". Before pack (which zeroes the counters again).
+// The check's decision from the counters of a motion pass (motion_kernel's, or the cell order's
+// fused check and pack): reads them (one synchronisation), records the motion in stats and the stage
+// "skin", and decides with the CPU backend's arithmetic.
 template <class Real, class Key, class Narrow>
-bool skin_stage(RunState<Real, Key, Narrow>& r) {
-  if (!(r.job.skin > 0) || !r.job.check) return false;
-  Workspace& ws = r.ws;
-  cudaStream_t st = r.st;
-  r.d_counters = ws.counters.span_as<cuda::Counters>(1).data();
-  CG_CUDA_CHECK(cudaMemsetAsync(r.d_counters, 0, sizeof(cuda::Counters), st));
-  const bool both_reported = r.d_report && ws.kept_reported;
-  cuda::motion_kernel<<<r.nb, cuda::kBlock, 0, st>>>(
-      r.d_pos, r.d_rad, both_reported ? r.d_report : nullptr, ws.ref_pos.span_as<double>(3 * r.n64).data(),
-      ws.ref_rad.span_as<double>(r.n64).data(),
-      both_reported ? ws.ref_report.span_as<std::uint8_t>(r.n64).data() : nullptr, r.n, r.d_counters);
-  CG_CUDA_CHECK_LAUNCH("motion");
+bool skin_decision(RunState<Real, Key, Narrow>& r) {
   r.read_counters();
   Motion m;
   double moved_sq = 0;
   std::memcpy(&moved_sq, &r.h_counters->skin_moved_sq, sizeof(double));
   std::memcpy(&m.growth, &r.h_counters->skin_growth, sizeof(double));
   m.displacement = std::sqrt(moved_sq);
-  m.report_changed = r.h_counters->skin_report_changed != 0 || (r.d_report != nullptr) != ws.kept_reported;
+  m.report_changed = r.h_counters->skin_report_changed != 0 || (r.d_report != nullptr) != r.ws.kept_reported;
   r.stats.skin_displacement = m.displacement;
   r.stats.skin_growth = m.growth;
-  r.events.mark(EngineStage::skin, st);
+  r.events.mark(EngineStage::skin, r.st);
   return skin_covers(m, r.job.skin);
+}
+
+template <class Real, class Key, class Narrow>
+bool skin_stage(RunState<Real, Key, Narrow>& r) {
+  if (!(r.job.skin > 0) || !r.job.check) return false;
+  Workspace& ws = r.ws;
+  r.d_counters = ws.counters.span_as<cuda::Counters>(1).data();
+  CG_CUDA_CHECK(cudaMemsetAsync(r.d_counters, 0, sizeof(cuda::Counters), r.st));
+  const bool both_reported = r.d_report && ws.kept_reported;
+  cuda::motion_kernel<<<r.nb, cuda::kBlock, 0, r.st>>>(
+      r.d_pos, r.d_rad, both_reported ? r.d_report : nullptr, ws.ref_pos.span_as<double>(3 * r.n64).data(),
+      ws.ref_rad.span_as<double>(r.n64).data(),
+      both_reported ? ws.ref_report.span_as<std::uint8_t>(r.n64).data() : nullptr, r.n, r.d_counters);
+  CG_CUDA_CHECK_LAUNCH("motion");
+  return skin_decision(r);
 }
 
 // A build's kept list: the state of the bodies it was built from (for the next call's check, and

@@ -105,6 +105,11 @@ struct Tuning {
   // kernel that keeps what it read and writes each block's rows at a cursor (cuda/cell_order.cuh:
   // cell_narrow_kernel; the rows' device order is free there). The same rows either way.
   bool step_narrow_select = false;
+  // CONTACTGRID_STEP_PACK=separate: a call whose kept list is in cell order checks the motion
+  // (motion_kernel), then a reuse packs by a gather through the permutation (pack_cell_kernel);
+  // default: one pass in input order does both, each sphere written at its cell place
+  // (cuda/cell_order.cuh: motion_pack_cell_kernel). The same spheres and decisions either way.
+  bool step_pack_separate = false;
   // CONTACTGRID_STEP_NARROW_ITEMS=2: cell_narrow_kernel tests 2 candidates a thread (fewer registers,
   // more warps an SM) instead of 4 (more loads in flight a warp). The same rows either way.
   int step_narrow_items = 4;
@@ -215,6 +220,8 @@ inline Tuning read_tuning() {
     t.step_build_window = std::string_view(w) == "32" ? 32 : 64;
   if (const char* m = std::getenv("CONTACTGRID_STEP_NARROW"))
     t.step_narrow_select = std::string_view(m) == "select";
+  if (const char* p = std::getenv("CONTACTGRID_STEP_PACK"))
+    t.step_pack_separate = std::string_view(p) == "separate";
   if (const char* m = std::getenv("CONTACTGRID_STEP_NARROW_ITEMS"))
     t.step_narrow_items = std::string_view(m) == "2" ? 2 : 4;
   if (const char* d = std::getenv("CONTACTGRID_DEM_SEGMENTS"))

@@ -53,8 +53,9 @@
 //                                              build's pair stage writes it, cuda/pairs.cuh) and the
 //                                              bodies' state it was built from (cuda/skin.cuh);
 //                                              owned across calls, never aliased
-//   kept_perm              between calls       the kept list of a cell-order skin (cuda/cell_order.cuh):
-//                                              the cell order's input indices; owned, never aliased
+//   kept_perm, kept_inv    between calls       the kept list of a cell-order skin (cuda/cell_order.cuh):
+//                                              the cell order's input indices and each input index's
+//                                              cell place; owned, never aliased
 //   canon_keys[2],         download            a cell-order call's rows sorted by (a, b) before they
 //   canon_index[2],                            come down (cuda/cell_order.cuh: canonical_rows), and
 //   canon_field                                one column gathered into that order
@@ -100,7 +101,7 @@ struct Workspace {
   Bytes res_pos, res_rad, res_report, res_shape, res_semi, res_orient;
   Bytes shape_kind, shape_semi, shape_orient, shapes, cell_cut, normals, narrow_list, narrow_carry;
   Bytes kept_pairs, ref_pos, ref_rad, ref_report;
-  Bytes kept_perm, canon_keys[2], canon_index[2], canon_field;
+  Bytes kept_perm, kept_inv, canon_keys[2], canon_index[2], canon_field;
   Bytes res_id, hist_keys[2], hist_age[2];
   Bytes res_mark;
   Bytes row_lists[4], row_pack, row_selected;  // Engine's row lists, packed rows, rows_outside's
@@ -135,7 +136,7 @@ struct Workspace {
                            &hist_age[0], &hist_age[1],   &broad_counts,  &broad_pairs,    &res_mark,
                            &kept_perm,   &canon_keys[0], &canon_keys[1], &canon_index[0], &canon_index[1],
                            &canon_field, &row_lists[0],  &row_lists[1],  &row_lists[2],   &row_lists[3],
-                           &row_pack,    &row_selected})
+                           &row_pack,    &row_selected, &kept_inv})
       s += b->bytes();
     return s;
   }

@@ -496,7 +496,9 @@ TEST(EngineSkinCuda, AutoSkinKeepsTheGridOnLargeScenes) {
 // mask. Every step equals the CPU's fresh detection bit for bit, and the engines under
 // CONTACTGRID_STEP_BUILD=copy (the mapping after the walk), CONTACTGRID_STEP_REBUILD=fill and
 // CONTACTGRID_STEP_BUILD_WINDOW=32 (31 entries after each in shared memory, not 63; the fiftyfold skin's
-// cells run far past both) keep the same candidates, count the same tests and build at the same steps.
+// cells run far past both) keep the same candidates, count the same tests and build at the same steps;
+// under CONTACTGRID_STEP_PACK=separate (the check, then a gather into cell order, not the fused pass)
+// the same rows, builds and measured motion.
 TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
   if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
   struct Env {
@@ -508,26 +510,27 @@ TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
     const Env numbering("CONTACTGRID_CUDA_RENUMBER", renumber);
     Engine<float> in_place(options_for(Backend::cuda, 0.1)), copy(options_for(Backend::cuda, 0.1));
     Engine<float> fill(options_for(Backend::cuda, 0.1)), narrow(options_for(Backend::cuda, 0.1));
+    Engine<float> separate(options_for(Backend::cuda, 0.1));
     Engine<float> fresh(options_for(Backend::cpu, 0));
     Spheres s = random_spheres(20000, 0.5, 1.0, 9191);
     const std::size_t n = s.r.size();
     std::mt19937_64 rng(9192);
     std::vector<std::uint8_t> report(n);
     for (auto& m : report) m = static_cast<std::uint8_t>(rng() % 5 == 0 ? 0 : 1);
-    for (Engine<float>* e : {&in_place, &copy, &fill, &narrow})
+    for (Engine<float>* e : {&in_place, &copy, &fill, &narrow, &separate})
       e->set_resident(BodiesView{s.p, s.r, {}, report});
     std::uint64_t candidates_before = 0, entries_first = 0;
     for (int step = 0; step < 12; ++step) {
       const std::string at = std::string("renumber ") + renumber + ", step " + std::to_string(step);
       if (step == 4 || step == 8) {  // a new skin, built now: 5 (more candidates than the room), 0.2
-        for (Engine<float>* e : {&in_place, &copy, &fill, &narrow}) {
+        for (Engine<float>* e : {&in_place, &copy, &fill, &narrow, &separate}) {
           e->set_skin(step == 4 ? 5.0 : 0.2);
           e->rebuild_candidates();
         }
       }
       if (step > 0) {
         random_step(s, 0.005, 0.0, rng);
-        for (Engine<float>* e : {&in_place, &copy, &fill, &narrow})
+        for (Engine<float>* e : {&in_place, &copy, &fill, &narrow, &separate})
           e->write_resident(0, n, s.p.data(), s.r.data());
       }
       const Contacts<float> want = fresh.detect(BodiesView{s.p, s.r, {}, report});
@@ -549,6 +552,13 @@ TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
         const Env window("CONTACTGRID_STEP_BUILD_WINDOW", "32");
         ASSERT_EQ(narrow.detect_resident(), want.size()) << at;
         ASSERT_EQ(compare_contacts(narrow.resident_contacts(), want), "identical") << at << " (window 32)";
+      }
+      {
+        const Env pack("CONTACTGRID_STEP_PACK", "separate");
+        ASSERT_EQ(separate.detect_resident(), want.size()) << at;
+        ASSERT_EQ(compare_contacts(separate.resident_contacts(), want), "identical") << at << " (pack separate)";
+        EXPECT_EQ(separate.stats().candidate_builds, in_place.stats().candidate_builds) << at;
+        EXPECT_EQ(separate.stats().skin_displacement, in_place.stats().skin_displacement) << at;
       }
       const bool built = in_place.stats().candidate_builds > builds;
       EXPECT_EQ(built, step == 0 || step == 4 || step == 8) << at;
