@@ -135,9 +135,8 @@ struct CellRowAt {
 // rows' order is the blocks' arrival order (the caller takes any order: canonical_rows sorts them
 // when they come down); their set is narrow_select's. Reads each candidate and its spheres once
 // (the select reads them again to write a row).
-// kMinBlocks: the blocks an SM must hold at once (__launch_bounds__; 1 leaves the registers uncapped).
-template <int kItems, int kMinBlocks>
-__global__ void __launch_bounds__(kBlock, kMinBlocks)
+template <int kItems>
+__global__ void __launch_bounds__(kBlock)
     cell_narrow_kernel(const std::uint32_t* __restrict__ pair_a, const std::uint32_t* __restrict__ pair_b,
                        std::uint32_t np, const std::uint32_t* __restrict__ perm, NarrowBodies<float> bodies,
                        ContactPtrs<float> out, bool full, Counters* __restrict__ c) {
@@ -335,25 +334,17 @@ void narrow_cell_stage(RunState<Real, Key, Narrow>& r) {
                                      &r.d_counters->rows, int(np), touch, r.st);
       });
     } else {                           // (c->rows: zeroed with the counters at pack, untouched since)
-      // candidates a thread: 4 (about 104 registers uncapped), or 2 (80: more warps); blocks an SM: 1
-      // (uncapped) or 3 (the registers capped for more warps in flight)
-      auto launch = [&](auto items, auto min_blocks) {
-        constexpr int kItems = decltype(items)::value, kMinBlocks = decltype(min_blocks)::value;
+      auto launch = [&](auto items) {  // candidates a thread: 4 (about 104 registers), or 2 (80: more warps)
+        constexpr int kItems = decltype(items)::value;
         const std::uint64_t per_block = std::uint64_t(cuda::kBlock) * kItems;
-        cuda::cell_narrow_kernel<kItems, kMinBlocks>
+        cuda::cell_narrow_kernel<kItems>
             <<<static_cast<std::uint32_t>((np + per_block - 1) / per_block), cuda::kBlock, 0, r.st>>>(
                 a, b, np, perm, bodies, r.cp, r.full, r.d_counters);
       };
-      using std::integral_constant;
-      const bool two = r.tuning.step_narrow_items == 2, capped = r.tuning.step_narrow_blocks == 3;
-      if (two && capped)
-        launch(integral_constant<int, 2>{}, integral_constant<int, 3>{});
-      else if (two)
-        launch(integral_constant<int, 2>{}, integral_constant<int, 1>{});
-      else if (capped)
-        launch(integral_constant<int, 4>{}, integral_constant<int, 3>{});
+      if (r.tuning.step_narrow_items == 2)
+        launch(std::integral_constant<int, 2>{});
       else
-        launch(integral_constant<int, 4>{}, integral_constant<int, 1>{});
+        launch(std::integral_constant<int, 4>{});
       CG_CUDA_CHECK_LAUNCH("cell_narrow");
     }
   }

@@ -113,9 +113,6 @@ struct Tuning {
   // CONTACTGRID_STEP_NARROW_ITEMS=2: cell_narrow_kernel tests 2 candidates a thread (fewer registers,
   // more warps an SM) instead of 4 (more loads in flight a warp). The same rows either way.
   int step_narrow_items = 4;
-  // CONTACTGRID_STEP_NARROW_BLOCKS=3: cell_narrow_kernel's registers capped so that an SM holds 3 blocks
-  // of 256 threads (more loads in flight an SM, fewer a thread); default 1: uncapped. The same rows.
-  int step_narrow_blocks = 1;
   // CONTACTGRID_DEM_SEGMENTS=cub: the granular dynamics' body index orders each body's rows as B by
   // CUB's segmented sort (which reads its partition back to the host every call); default: one
   // thread per body sorts its own few rows (core/dem_step.hpp: sort_rows), no host synchronisation.
@@ -223,8 +220,6 @@ inline Tuning read_tuning() {
     t.step_build_window = std::string_view(w) == "32" ? 32 : 64;
   if (const char* m = std::getenv("CONTACTGRID_STEP_NARROW"))
     t.step_narrow_select = std::string_view(m) == "select";
-  if (const char* m = std::getenv("CONTACTGRID_STEP_NARROW_BLOCKS"))
-    t.step_narrow_blocks = std::string_view(m) == "3" ? 3 : 1;
   if (const char* p = std::getenv("CONTACTGRID_STEP_PACK"))
     t.step_pack_separate = std::string_view(p) == "separate";
   if (const char* m = std::getenv("CONTACTGRID_STEP_NARROW_ITEMS"))
