@@ -498,8 +498,8 @@ TEST(EngineSkinCuda, AutoSkinKeepsTheGridOnLargeScenes) {
 // CONTACTGRID_STEP_BUILD_WINDOW=32 (31 entries after each in shared memory, not 63; the fiftyfold skin's
 // cells run far past both) keep the same candidates, count the same tests and build at the same steps;
 // under CONTACTGRID_STEP_PACK=separate (the check, then a gather into cell order, not the fused pass)
-// the same rows, builds and measured motion. The narrow kernel's variants ride along: 2 candidates a
-// thread (fill, window 32) and registers capped for 3 blocks an SM (window 32, pack separate).
+// the same rows, builds and measured motion. The fill engine's narrow tests 2 candidates a thread
+// (CONTACTGRID_STEP_NARROW_ITEMS=2) instead of 4.
 TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
   if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
   struct Env {
@@ -550,13 +550,12 @@ TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
         ASSERT_EQ(compare_contacts(fill.resident_contacts(), want), "identical") << at << " (fill)";
       }
       {
-        const Env window("CONTACTGRID_STEP_BUILD_WINDOW", "32"), items("CONTACTGRID_STEP_NARROW_ITEMS", "2");
-        const Env blocks("CONTACTGRID_STEP_NARROW_BLOCKS", "3");
+        const Env window("CONTACTGRID_STEP_BUILD_WINDOW", "32");
         ASSERT_EQ(narrow.detect_resident(), want.size()) << at;
         ASSERT_EQ(compare_contacts(narrow.resident_contacts(), want), "identical") << at << " (window 32)";
       }
       {
-        const Env pack("CONTACTGRID_STEP_PACK", "separate"), blocks("CONTACTGRID_STEP_NARROW_BLOCKS", "3");
+        const Env pack("CONTACTGRID_STEP_PACK", "separate");
         ASSERT_EQ(separate.detect_resident(), want.size()) << at;
         ASSERT_EQ(compare_contacts(separate.resident_contacts(), want), "identical") << at << " (pack separate)";
         EXPECT_EQ(separate.stats().candidate_builds, in_place.stats().candidate_builds) << at;
