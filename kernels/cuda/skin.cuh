@@ -24,13 +24,13 @@ struct BodyMotion {
   double moved_sq = 0, growth = 0;
   int changed = 0;
 };
-__device__ __forceinline__ BodyMotion body_motion(const double* __restrict__ pos, const double* __restrict__ rad,
-                                                  const std::uint8_t* __restrict__ report,
-                                                  const double* __restrict__ ref_pos,
-                                                  const double* __restrict__ ref_rad,
-                                                  const std::uint8_t* __restrict__ ref_report, std::uint32_t i) {
+__device__ __forceinline__ BodyMotion body_motion(
+    const double* __restrict__ pos, const double* __restrict__ rad, const std::uint8_t* __restrict__ report,
+    const double* __restrict__ ref_pos, const double* __restrict__ ref_rad,
+    const std::uint8_t* __restrict__ ref_report, std::uint32_t i) {
   const std::uint64_t i3 = 3 * std::uint64_t(i);
-  const double dx = pos[i3] - ref_pos[i3], dy = pos[i3 + 1] - ref_pos[i3 + 1], dz = pos[i3 + 2] - ref_pos[i3 + 2];
+  const double dx = pos[i3] - ref_pos[i3], dy = pos[i3 + 1] - ref_pos[i3 + 1],
+               dz = pos[i3 + 2] - ref_pos[i3 + 2];
   BodyMotion m;
   m.moved_sq = dx * dx + dy * dy + dz * dz;  // the host's order (host/skin.cpp), no FMA
   const double g = rad[i] - ref_rad[i];

@@ -136,7 +136,7 @@ struct Workspace {
                            &hist_age[0], &hist_age[1],   &broad_counts,  &broad_pairs,    &res_mark,
                            &kept_perm,   &canon_keys[0], &canon_keys[1], &canon_index[0], &canon_index[1],
                            &canon_field, &row_lists[0],  &row_lists[1],  &row_lists[2],   &row_lists[3],
-                           &row_pack,    &row_selected, &kept_inv})
+                           &row_pack,    &row_selected,  &kept_inv})
       s += b->bytes();
     return s;
   }

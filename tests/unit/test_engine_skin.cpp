@@ -557,7 +557,8 @@ TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
       {
         const Env pack("CONTACTGRID_STEP_PACK", "separate");
         ASSERT_EQ(separate.detect_resident(), want.size()) << at;
-        ASSERT_EQ(compare_contacts(separate.resident_contacts(), want), "identical") << at << " (pack separate)";
+        ASSERT_EQ(compare_contacts(separate.resident_contacts(), want), "identical")
+            << at << " (pack separate)";
         EXPECT_EQ(separate.stats().candidate_builds, in_place.stats().candidate_builds) << at;
         EXPECT_EQ(separate.stats().skin_displacement, in_place.stats().skin_displacement) << at;
       }
