@@ -283,12 +283,34 @@ std::uint64_t cell_sort(BlockOrder<Real>& o, const GridParams<Real>& g, int thre
         eb.ctrl[e] = a.ctrl;
       }
     };
+    const std::size_t n_entries = type_start[8];
     if (by_chunks) {
       // the walk's bodies chunk by chunk of k_gather_cells super-cells, the eight types of a chunk
       // together: a chunk's entries read the records of its own super-cells and of the layer before
-      // (in the cache from the chunks before), so the records come from memory about once
-#pragma omp for schedule(dynamic, 1)
-      for (std::size_t k = 0; k < n_chunks; ++k)
+      // (in the cache from the chunks before), so the records come from memory about once. A thread
+      // takes a run of chunks holding about an even share of the entries (the chunks before a
+      // thread's first hold fewer than t / team of them), so that the layer behind its chunks is
+      // the one it read itself.
+      const auto before = [&](std::size_t k) {  // the entries in chunks [0, k)
+        std::size_t sum = 0;
+        for (int type = 0; type < 8; ++type)
+          sum += chunk_start[std::size_t(type) * (n_chunks + 1) + k] - type_start[type];
+        return sum;
+      };
+      const auto first_chunk = [&](int u) {  // the first chunk k with before(k) >= n_entries · u / team
+        const std::size_t want = n_entries * std::size_t(u) / std::size_t(team);
+        std::size_t lo = 0, hi = n_chunks;
+        while (lo < hi) {
+          const std::size_t mid = (lo + hi) / 2;
+          if (before(mid) >= want)
+            hi = mid;
+          else
+            lo = mid + 1;
+        }
+        return lo;
+      };
+      const std::size_t k1 = t + 1 == team ? n_chunks : first_chunk(t + 1);
+      for (std::size_t k = t == 0 ? 0 : first_chunk(t); k < k1; ++k)
         for (int type = 0; type < 8; ++type) {
           const std::size_t* starts = chunk_start.data() + std::size_t(type) * (n_chunks + 1);
           gather(starts[k], starts[k + 1]);
@@ -296,7 +318,6 @@ std::uint64_t cell_sort(BlockOrder<Real>& o, const GridParams<Real>& g, int thre
     } else {
       // CONTACTGRID_HOST_CELL_BODIES=types: each entry's from its body's sorted place, an even share
       // of the entries a thread, type after type (each type's entries read all their bodies' records)
-      const std::size_t n_entries = type_start[8];
       gather(n_entries * std::size_t(t) / std::size_t(team),
              n_entries * std::size_t(t + 1) / std::size_t(team));
     }
