@@ -21,7 +21,7 @@
 #   module   the Python module compiled against the device's interpreter (jobs/gpu_python_check.sh)
 #   engine   host_stage_bench, a new engine a call, 9 calls, before and after alternated ROUNDS times;
 #            the same contacts and stats (entries, pair tests, candidates) required; per-stage table
-#            of the lower of the medians
+#            of the lower of the medians; then one thread on core 0, alternated 3 times (sort, sum)
 #   python   tests/bench/python_bench.py: before (knob, no SciPy), after with SciPy and C++, before
 #            again; the lower of the two before medians counts
 # Expect (H100 host of s11 call 10, 2 threads: engine plan / pack / entries / sort / pairs / order /
@@ -34,7 +34,7 @@
 # <= SciPy / 20 (~143 ms against 2859).
 # Prints a table; writes $OUT/laptop.tgz (every log); exits non-zero naming what failed (a step,
 # contacts or stats that differ, different pairs from SciPy, SciPy / Python below 20).
-# Here: BUILD_DIR=build jobs/gpu_python_check.sh pack .devbin/py. There (about 3 minutes):
+# Here: BUILD_DIR=build jobs/gpu_python_check.sh pack .devbin/py. There (about 4 minutes):
 #   OUT=/tmp/out BIN=<dir with contactgrid_tests> jobs/gpu_laptop_check.sh .devbin/py
 set -u
 cd "$(dirname "$0")/.."
@@ -99,6 +99,19 @@ for r in $(seq 1 "$rounds"); do
   cmp -s "$log_dir/engine_before_$r.id" "$log_dir/engine_after_$r.id" || failed+=(engine_contacts_or_stats_differ)
 done
 echo "  before and after: $(cat "$log_dir/engine_after_1.id")"
+
+log "== engine at one thread (core 0), before / after alternated 3 times: sort and the stage sum"
+for r in 1 2 3; do
+  env $before timeout 120 taskset -c 0 "$dir/host_stage_bench" "$scene" 9 1 mixed fresh >"$log_dir/engine1_before_$r.log" 2>&1 ||
+    failed+=(engine1_before)
+  timeout 120 taskset -c 0 "$dir/host_stage_bench" "$scene" 9 1 mixed fresh >"$log_dir/engine1_after_$r.log" 2>&1 ||
+    failed+=(engine1_after)
+done
+for st in sort "(sum)"; do
+  low1() { cat "$log_dir"/engine1_"$1"_?.log | awk -v s="$st" '$1 == s {print $3}' | sort -n | head -1; }
+  awk -v s="$st" -v b="$(low1 before)" -v a="$(low1 after)" 'BEGIN {
+    printf "  1 thread %-8s %9s %9s %9s\n", s, b, a, (a > 0 ? sprintf("%.2fx", b / a) : "-")}'
+done | tee -a "$log_dir/engine_table.txt"
 
 python_before() {
   log "== Python before ($before, no SciPy), cores 0,1, 9 calls ($1 of 2)"
