@@ -18,6 +18,10 @@ namespace cg::detail::host {
 
 namespace {
 
+// The gather of the walk's bodies: chunks of this many super-cells (a chunk's records and those of the
+// layer before it, a few hundred kilobytes at a few bodies a super-cell, stay in the cache).
+constexpr std::uint64_t k_gather_cells = 256;
+
 // Thread t's counters: one row of `width` super-cells from `lo` for each of the 8 cell types, the
 // super-cells its bodies' cells can fall in (its blocks, and `reach` past the last).
 struct CountWindow {
@@ -66,6 +70,11 @@ struct CellPlaces {
 };
 
 }  // namespace
+
+bool cell_bodies_by_chunks() {
+  const char* k = std::getenv("CONTACTGRID_HOST_CELL_BODIES");
+  return k == nullptr || std::string_view(k) != "types";
+}
 
 bool cell_sort_packs_blocks() {
   const char* k = std::getenv("CONTACTGRID_HOST_ENTRIES");
@@ -148,6 +157,9 @@ std::uint64_t cell_sort(BlockOrder<Real>& o, const GridParams<Real>& g, int thre
   std::uint64_t type_start[9] = {};
   std::uint64_t lin_begin = 0, lin_end = 0;  // the windows' union
   out.digit_start.clear();
+  const bool by_chunks = cell_bodies_by_chunks();  // the walk's bodies gathered chunk by chunk
+  std::vector<std::size_t> chunk_start;            // type by type, each chunk's first entry
+  std::size_t n_chunks = 0;
   const bool fixed = cell_sort_packs_blocks();  // the count without branches (else the former count)
 #pragma omp parallel num_threads(nt)
   {
@@ -216,12 +228,18 @@ std::uint64_t cell_sort(BlockOrder<Real>& o, const GridParams<Real>& g, int thre
       out.keys.resize(n_entries);
       out.body.resize(n_entries);
       resize_entry_bodies(eb, n_entries);
+      n_chunks = (lin_end - lin_begin + k_gather_cells - 1) / k_gather_cells;
+      chunk_start.resize(8 * (n_chunks + 1));
+      for (int type = 0; type < 8; ++type)
+        chunk_start[std::size_t(type) * (n_chunks + 1) + n_chunks] = type_start[type + 1];
     }
 #pragma omp for schedule(static)
     for (int type = 0; type < 8; ++type) {
       std::uint64_t at = type_start[type];
+      std::size_t* starts = chunk_start.data() + std::size_t(type) * (n_chunks + 1);
       int first = 0, last = -1;  // the windows holding lin: [first, last], some of them empty
       for (std::uint64_t lin = lin_begin; lin < lin_end; ++lin) {
+        if ((lin - lin_begin) % k_gather_cells == 0) starts[(lin - lin_begin) / k_gather_cells] = at;
         while (first < team && win[std::size_t(first)].lo + win[std::size_t(first)].width <= lin) ++first;
         while (last + 1 < team &&
                (win[std::size_t(last + 1)].width == 0 || win[std::size_t(last + 1)].lo <= lin))
@@ -252,21 +270,56 @@ std::uint64_t cell_sort(BlockOrder<Real>& o, const GridParams<Real>& g, int thre
         });
     }
 #pragma omp barrier
-    // the walk's bodies: each entry's from its body's sorted place (a cell's bodies come from at most
-    // eight super-cells, the few hundred kilobytes of one layer: in the cache), written in sequence
-    const std::size_t n_entries = type_start[8];
-    const std::size_t e0 = n_entries * std::size_t(t) / std::size_t(team),
-                      e1 = n_entries * std::size_t(t + 1) / std::size_t(team);
     std::uint32_t* body = out.body.data();
-    for (std::size_t e = e0; e < e1; ++e) {
-      const std::uint32_t j = body[e];
-      const OrderedBody<Real>& a = o.bodies[j];
-      body[e] = a.body;
-      eb.x[e] = a.x;
-      eb.y[e] = a.y;
-      eb.z[e] = a.z;
-      eb.r[e] = a.r;
-      eb.ctrl[e] = a.ctrl;
+    const auto gather = [&](std::size_t e0, std::size_t e1) {
+      for (std::size_t e = e0; e < e1; ++e) {
+        const std::uint32_t j = body[e];
+        const OrderedBody<Real>& a = o.bodies[j];
+        body[e] = a.body;
+        eb.x[e] = a.x;
+        eb.y[e] = a.y;
+        eb.z[e] = a.z;
+        eb.r[e] = a.r;
+        eb.ctrl[e] = a.ctrl;
+      }
+    };
+    const std::size_t n_entries = type_start[8];
+    if (by_chunks) {
+      // the walk's bodies chunk by chunk of k_gather_cells super-cells, the eight types of a chunk
+      // together: a chunk's entries read the records of its own super-cells and of the layer before
+      // (in the cache from the chunks before), so the records come from memory about once. A thread
+      // takes a run of chunks holding about an even share of the entries (the chunks before a
+      // thread's first hold fewer than t / team of them), so that the layer behind its chunks is
+      // the one it read itself.
+      const auto before = [&](std::size_t k) {  // the entries in chunks [0, k)
+        std::size_t sum = 0;
+        for (int type = 0; type < 8; ++type)
+          sum += chunk_start[std::size_t(type) * (n_chunks + 1) + k] - type_start[type];
+        return sum;
+      };
+      const auto first_chunk = [&](int u) {  // the first chunk k with before(k) >= n_entries · u / team
+        const std::size_t want = n_entries * std::size_t(u) / std::size_t(team);
+        std::size_t lo = 0, hi = n_chunks;
+        while (lo < hi) {
+          const std::size_t mid = (lo + hi) / 2;
+          if (before(mid) >= want)
+            hi = mid;
+          else
+            lo = mid + 1;
+        }
+        return lo;
+      };
+      const std::size_t k1 = t + 1 == team ? n_chunks : first_chunk(t + 1);
+      for (std::size_t k = t == 0 ? 0 : first_chunk(t); k < k1; ++k)
+        for (int type = 0; type < 8; ++type) {
+          const std::size_t* starts = chunk_start.data() + std::size_t(type) * (n_chunks + 1);
+          gather(starts[k], starts[k + 1]);
+        }
+    } else {
+      // CONTACTGRID_HOST_CELL_BODIES=types: each entry's from its body's sorted place, an even share
+      // of the entries a thread, type after type (each type's entries read all their bodies' records)
+      gather(n_entries * std::size_t(t) / std::size_t(team),
+             n_entries * std::size_t(t + 1) / std::size_t(team));
     }
   }
   o = {};

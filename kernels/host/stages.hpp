@@ -211,6 +211,10 @@ std::uint32_t block_key(const BodyCells& c, const GridParams<Real>& g) {
 // body's cells and control byte, block_sort makes the super-cells from the cells and gathers the
 // control bytes with the spheres).
 bool cell_sort_packs_blocks();
+// Whether cell_sort gathers the walk's bodies (EntryBodies) chunk by chunk of super-cells, the eight
+// types of a chunk together: unless CONTACTGRID_HOST_CELL_BODIES=types (a measurement switch, the same
+// bytes: an even share of the entries a thread, type after type).
+bool cell_bodies_by_chunks();
 template <class Real>
 void block_sort(PackedBodies<Real>& p, const GridParams<Real>& g, int threads, BlockOrder<Real>& out);
 // Returns the number of entries; frees `order`.
