@@ -29,6 +29,15 @@
 namespace cg::test {
 namespace {
 
+// An environment variable (a CONTACTGRID_ knob) set for the guard's life.
+struct Env {
+  const char* name;
+  Env(const char* n, const char* v) : name(n) { ::setenv(n, v, 1); }
+  ~Env() { ::unsetenv(name); }
+  Env(const Env&) = delete;
+  Env& operator=(const Env&) = delete;
+};
+
 template <class Cfg>
 class EngineSkinTest : public ::testing::Test {
  protected:
@@ -409,11 +418,6 @@ TEST(EngineSkinCuda, DeviceArraysEqualFreshDetection) {
 // call builds, and so does the next one in cell order).
 TEST(EngineSkinCuda, CellOrderResidentStepsEqualFreshDetection) {
   if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
-  struct Env {
-    const char* name;
-    Env(const char* n, const char* v) : name(n) { ::setenv(n, v, 1); }
-    ~Env() { ::unsetenv(name); }
-  };
   const Env renumber("CONTACTGRID_CUDA_RENUMBER", "1");
   const double skin = 0.15;
   Engine<float> cell(options_for(Backend::cuda, skin)), file(options_for(Backend::cuda, skin));
@@ -502,11 +506,6 @@ TEST(EngineSkinCuda, AutoSkinKeepsTheGridOnLargeScenes) {
 // (CONTACTGRID_STEP_NARROW_ITEMS=2) instead of 4.
 TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
   if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
-  struct Env {
-    const char* name;
-    Env(const char* n, const char* v) : name(n) { ::setenv(n, v, 1); }
-    ~Env() { ::unsetenv(name); }
-  };
   for (const char* renumber : {"1", "0"}) {
     const Env numbering("CONTACTGRID_CUDA_RENUMBER", renumber);
     Engine<float> in_place(options_for(Backend::cuda, 0.1)), copy(options_for(Backend::cuda, 0.1));
@@ -595,11 +594,6 @@ TEST(EngineSkinCuda, CellOrderBuildsWriteTheKeptListInPlace) {
 // under CONTACTGRID_STEP_REBUILD=fill keeps the same candidates and counts the same tests.
 TEST(EngineSkinCuda, TheFirstBuildAfterFreshCallsTakesItsRoomFromTheirCount) {
   if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
-  struct Env {
-    const char* name;
-    Env(const char* n, const char* v) : name(n) { ::setenv(n, v, 1); }
-    ~Env() { ::unsetenv(name); }
-  };
   Engine<float> now(options_for(Backend::cuda, 0)), former(options_for(Backend::cuda, 0));
   Engine<float> fresh(options_for(Backend::cpu, 0));
   Spheres s = random_spheres(25000, 0.5, 1.0, 9201);
