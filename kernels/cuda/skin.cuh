@@ -70,9 +70,6 @@ __global__ void __launch_bounds__(kBlock)
 
 namespace cg::detail {
 
-// The check (EngineOptions::skin > 0 and the engine found the bodies matching the kept list's):
-// true when the kept list still holds every contact. Records the motion in stats and the stage
-// "skin". Before pack (which zeroes the counters again).
 // The check's decision from the counters of a motion pass (motion_kernel's, or the cell order's
 // fused check and pack): reads them (one synchronisation), records the motion in stats and the stage
 // "skin", and decides with the CPU backend's arithmetic.
@@ -91,6 +88,9 @@ bool skin_decision(RunState<Real, Key, Narrow>& r) {
   return skin_covers(m, r.job.skin);
 }
 
+// The check (EngineOptions::skin > 0 and the engine found the bodies matching the kept list's):
+// true when the kept list still holds every contact. Records the motion in stats and the stage
+// "skin". Before pack (which zeroes the counters again).
 template <class Real, class Key, class Narrow>
 bool skin_stage(RunState<Real, Key, Narrow>& r) {
   if (!(r.job.skin > 0) || !r.job.check) return false;
