@@ -1,8 +1,8 @@
 // generate.cpp: seeded scene generators and the density model that sizes their box.
 //
-// Randomness: a counter-based generator. Value (seed, body i, stream s) = splitmix64 finalizer of
-// (key(seed) XOR splitmix64(16·i + s)); a bijection of the counter for a fixed seed. So body i does
-// not depend on chunking, threads or entry point, and generate_scene == generate_scene_file.
+// Randomness: the counter-based generator of counter_rng.hpp, so body i does not depend on chunking,
+// threads or entry point, and generate_scene == generate_scene_file. The scenes the tests build by
+// hand (make_clustered_scene, make_ellipsoid_scene) are in test_scenes.cpp.
 //
 // Density model: two bodies with centres independent and uniform in a cube of edge L touch iff
 // |c1 - c2| <= r1 + r2, which has probability P((r1 + r2)/L), P the distance CDF of two uniform points
@@ -28,59 +28,15 @@
 #include "errors.hpp"
 #include "io/scene_file.hpp"
 #include "run/progress.hpp"
+#include "scene/counter_rng.hpp"
 
 namespace cg {
 namespace {
 
+using namespace scene_rng;
+
 constexpr const char* kSoftwareVersion = CONTACTGRID_VERSION;
 constexpr std::size_t kWriteChunk = std::size_t(1) << 20;  // bodies per streamed block
-
-// ---- counter-based random numbers -----------------------------------------------------------
-
-constexpr std::uint64_t mix64(std::uint64_t z) {
-  z += 0x9e3779b97f4a7c15ull;
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  return z ^ (z >> 31);
-}
-
-// Streams of one body (at most 16).
-enum Stream : unsigned {
-  kX = 0,
-  kY = 1,
-  kZ = 2,
-  kRadius = 3,
-  kGauss0 = 4,
-  kGauss1 = 5,
-  kGauss2 = 6,
-  kGauss3 = 7,
-  kAxisA = 8,
-  kAxisB = 9,
-  kAxisC = 10,
-  kQuat0 = 11,
-  kQuat1 = 12,
-  kQuat2 = 13,
-  kCluster = 14
-};
-
-class CounterRng {
- public:
-  explicit CounterRng(std::uint64_t seed) : m_key(mix64(seed ^ 0x6a09e667f3bcc909ull)) {}
-  // Uniform in [0, 1), 53 bits.
-  double unit(std::uint64_t index, unsigned stream) const {
-    std::uint64_t bits = mix64(m_key ^ mix64(index * 16 + stream));
-    return static_cast<double>(bits >> 11) * 0x1.0p-53;
-  }
-  // Standard normal (Box–Muller on two streams).
-  double normal(std::uint64_t index, unsigned stream_a, unsigned stream_b) const {
-    double u1 = 1.0 - unit(index, stream_a);  // (0, 1]
-    double u2 = unit(index, stream_b);
-    return std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * std::numbers::pi * u2);
-  }
-
- private:
-  std::uint64_t m_key;
-};
 
 // ---- quadrature --------------------------------------------------------------------------------
 
@@ -218,7 +174,6 @@ void check_radius_law(double r_low, double r_high) {
 
 // ---- bodies ------------------------------------------------------------------------------------
 
-std::array<double, 4> random_quaternion(const CounterRng& rng, std::uint64_t i);
 double box_edge_of(std::uint64_t n, const RadiusNodes& nodes, double r_low, double contacts_per_body);
 
 // Everything that defines body i of a generated scene.
@@ -295,17 +250,6 @@ Attributes generator_attributes(const GenerateOptions& o, double edge) {
   a["offset_z"] = o.offset.z;
   a["software_version"] = std::string(kSoftwareVersion);
   return a;
-}
-
-// Unit quaternion (w, x, y, z), uniform on SO(3) (Shoemake), from three uniforms.
-std::array<double, 4> random_quaternion(const CounterRng& rng, std::uint64_t i) {
-  double u1 = rng.unit(i, kQuat0), u2 = rng.unit(i, kQuat1), u3 = rng.unit(i, kQuat2);
-  double a = std::sqrt(1 - u1), b = std::sqrt(u1), tau = 2 * std::numbers::pi;
-  std::array<double, 4> q{a * std::sin(tau * u2), a * std::cos(tau * u2), b * std::sin(tau * u3),
-                          b * std::cos(tau * u3)};
-  double norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-  for (double& c : q) c /= norm;
-  return q;
 }
 
 }  // namespace
@@ -585,92 +529,6 @@ void generate_scene_file(const std::string& path, const GenerateOptions& options
   }
   bar.finish();
   writer.commit();
-}
-
-// ---- builders for tests ------------------------------------------------------------------------------
-
-Scene make_clustered_scene(std::uint64_t n, std::uint64_t seed, int clusters) {
-  if (clusters < 1)
-    throw UsageError(fmt::format("clustered scene: clusters must be >= 1 (got {})", clusters));
-  const CounterRng rng(seed);
-  const std::uint64_t k =
-      std::min<std::uint64_t>(static_cast<std::uint64_t>(clusters), std::max<std::uint64_t>(n, 1));
-  const double per_cluster = std::ceil(static_cast<double>(n) / static_cast<double>(k));
-  const double sigma = std::max(1.0, std::cbrt(per_cluster / 12));
-  const double spread = 8 * sigma * std::cbrt(static_cast<double>(k));
-  std::vector<Vec3<double>> centres(k);
-  for (std::uint64_t c = 0; c < k; ++c) {  // cluster centres: indices past the bodies' own
-    std::uint64_t index = (std::uint64_t(1) << 59) + c;
-    centres[c] = {spread * rng.unit(index, kX), spread * rng.unit(index, kY), spread * rng.unit(index, kZ)};
-  }
-  Scene scene;
-  scene.sphere_position.resize(n);
-  scene.sphere_radius.resize(n);
-  for (std::uint64_t i = 0; i < n; ++i) {
-    const Vec3<double>& c = centres[i % k];
-    scene.sphere_position[i] = {c.x + sigma * rng.normal(i, kGauss0, kGauss1),
-                                c.y + sigma * rng.normal(i, kGauss2, kGauss3),
-                                c.z + sigma * rng.normal(i, kX, kY)};
-    scene.sphere_radius[i] = std::min(1.0, 0.5 + 0.5 * rng.unit(i, kRadius));
-  }
-  scene.radius_low = 0.5;
-  scene.radius_high = 1.0;
-  scene.attributes["generator"] = std::string("clustered");
-  scene.attributes["count"] = static_cast<std::int64_t>(n);
-  scene.attributes["seed"] = std::bit_cast<std::int64_t>(seed);
-  scene.attributes["clusters"] = static_cast<std::int64_t>(k);
-  scene.attributes["sigma"] = sigma;
-  scene.attributes["software_version"] = std::string(kSoftwareVersion);
-  return scene;
-}
-
-Scene make_lattice_scene(std::uint32_t nx, std::uint32_t ny, std::uint32_t nz, double spacing, double radius,
-                         Vec3<double> origin) {
-  if (!(std::isfinite(spacing) && std::isfinite(radius) && radius > 0))
-    throw UsageError(
-        fmt::format("lattice scene: need finite spacing and radius > 0 (got {}, {})", spacing, radius));
-  Scene scene;
-  const std::size_t n = std::size_t(nx) * ny * nz;
-  scene.sphere_position.reserve(n);
-  scene.sphere_radius.assign(n, radius);
-  for (std::uint32_t k = 0; k < nz; ++k)
-    for (std::uint32_t j = 0; j < ny; ++j)
-      for (std::uint32_t i = 0; i < nx; ++i)
-        scene.sphere_position.push_back(
-            {origin.x + spacing * i, origin.y + spacing * j, origin.z + spacing * k});
-  scene.radius_low = radius;
-  scene.radius_high = radius;
-  scene.attributes["generator"] = std::string("lattice");
-  scene.attributes["spacing"] = spacing;
-  scene.attributes["software_version"] = std::string(kSoftwareVersion);
-  return scene;
-}
-
-Scene make_ellipsoid_scene(std::uint64_t spheres, std::uint64_t ellipsoids, std::uint64_t seed) {
-  const CounterRng rng(seed);
-  const std::uint64_t n = spheres + ellipsoids;
-  const double edge = n == 0 ? 1.0 : box_edge(n, RadiusLaw::uniform, 0.5, 1.0, 0.4);
-  auto coordinate = [&](std::uint64_t i, unsigned stream) {
-    return std::min(edge * rng.unit(i, stream), std::nextafter(edge, 0.0));
-  };
-  Scene scene;
-  for (std::uint64_t i = 0; i < spheres; ++i) {
-    scene.sphere_position.push_back({coordinate(i, kX), coordinate(i, kY), coordinate(i, kZ)});
-    scene.sphere_radius.push_back(std::min(1.0, 0.5 + 0.5 * rng.unit(i, kRadius)));
-  }
-  for (std::uint64_t i = spheres; i < n; ++i) {  // body id i
-    scene.ellipsoid_position.push_back({coordinate(i, kX), coordinate(i, kY), coordinate(i, kZ)});
-    auto axis = [&](unsigned stream) { return std::min(1.0, 0.25 + 0.75 * rng.unit(i, stream)); };
-    scene.ellipsoid_semi_axes.push_back({axis(kAxisA), axis(kAxisB), axis(kAxisC)});
-    scene.ellipsoid_orientation.push_back(random_quaternion(rng, i));
-  }
-  scene.radius_low = 0.25;
-  scene.radius_high = 1.0;
-  scene.attributes["generator"] = std::string("ellipsoids");
-  scene.attributes["seed"] = std::bit_cast<std::int64_t>(seed);
-  scene.attributes["box_edge"] = edge;
-  scene.attributes["software_version"] = std::string(kSoftwareVersion);
-  return scene;
 }
 
 }  // namespace cg
