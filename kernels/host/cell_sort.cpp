@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cstdlib>
+#include <ranges>
 #include <string_view>
 #include <vector>
 
@@ -299,15 +300,10 @@ std::uint64_t cell_sort(BlockOrder<Real>& o, const GridParams<Real>& g, int thre
       };
       const auto first_chunk = [&](int u) {  // the first chunk k with before(k) >= n_entries · u / team
         const std::size_t want = n_entries * std::size_t(u) / std::size_t(team);
-        std::size_t lo = 0, hi = n_chunks;
-        while (lo < hi) {
-          const std::size_t mid = (lo + hi) / 2;
-          if (before(mid) >= want)
-            hi = mid;
-          else
-            lo = mid + 1;
-        }
-        return lo;
+        const auto chunks = std::views::iota(std::size_t(0), n_chunks);
+        return std::size_t(
+            std::ranges::partition_point(chunks, [&](std::size_t k) { return before(k) < want; }) -
+            chunks.begin());
       };
       const std::size_t k1 = t + 1 == team ? n_chunks : first_chunk(t + 1);
       for (std::size_t k = t == 0 ? 0 : first_chunk(t); k < k1; ++k)
