@@ -208,7 +208,11 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
     }
   }
   trace.mark("fill");
-  if (!b) b.emplace(a.options());  // kept across layouts: its workspace stays allocated
+  if (!b) {  // kept across layouts: its workspace stays allocated
+    EngineOptions ob = a.options();
+    ob.high_priority = boundary_first;
+    b.emplace(ob);
+  }
   b->set_skin(skin);
   b->set_resident(BodiesView{b_p, b_r, {}, b_mask, b_shape, b_semi, b_q});
   if (halo_lists) {  // B's rows of the ghosts in the order they arrive, and of the boundary rows

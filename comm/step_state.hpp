@@ -159,6 +159,11 @@ struct StepLoop<Real>::State {
   // so that two OpenMP teams of the whole share do not oversubscribe the rank's cores (their barriers
   // spin on descheduled threads). CONTACTGRID_STEP_MERGE_TEAM=whole: each takes the whole share.
   bool split_team = true;
+  // Engine B (the boundary) runs at the device's highest priority (EngineOptions::high_priority): its
+  // ghosts' scatter and its detection are few blocks, which at one priority wait on the GPU until the
+  // interior detection of engine A has issued all of its blocks. CONTACTGRID_STEP_PRIORITY=same: both
+  // at the default priority.
+  bool boundary_first = true;
   int merge_threads() const { return split_team && !merge_at_detection ? std::max(1, threads / 2) : threads; }
   // The threads of a loop that may run beside the merge.
   int team() const { return merge_started && split_team ? std::max(1, threads - threads / 2) : threads; }
@@ -215,6 +220,8 @@ struct StepLoop<Real>::State {
     merge_at_detection = !(merge_knob && std::string(merge_knob) == "layout");
     const char* team_knob = std::getenv("CONTACTGRID_STEP_MERGE_TEAM");
     split_team = !(team_knob && std::string(team_knob) == "whole");
+    const char* priority_knob = std::getenv("CONTACTGRID_STEP_PRIORITY");
+    boundary_first = !(priority_knob && std::string(priority_knob) == "same");
     const char* trace_knob = std::getenv("CONTACTGRID_STEP_TRACE");
     trace.on = trace_knob && std::string(trace_knob) == "1";
   }

@@ -105,8 +105,9 @@ void run_stages(HostBackend& backend, const DetectJob<Broad, Narrow>& job, Conta
 
 // The CUDA backend (kernels/cuda/): owns persistent device buffers; defined only in CUDA builds.
 class CudaBackend;
-std::unique_ptr<CudaBackend> make_cuda_backend(int device,
-                                               std::uint64_t memory_limit);  // throws CudaError without CUDA
+// high_priority: its stream at the device's highest priority (EngineOptions::high_priority)
+std::unique_ptr<CudaBackend> make_cuda_backend(int device, std::uint64_t memory_limit,
+                                               bool high_priority);  // throws CudaError without CUDA
 template <class Broad, class Narrow>
 void run_stages(CudaBackend& backend, const DetectJob<Broad, Narrow>& job, Contacts<Narrow>& out,
                 StageTimes& times, EngineStats& stats);

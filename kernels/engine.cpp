@@ -85,7 +85,7 @@ bool cuda_available() { return false; }
 int cuda_device_count() { return 0; }
 namespace detail {
 class CudaBackend {};
-std::unique_ptr<CudaBackend> make_cuda_backend(int, std::uint64_t) {
+std::unique_ptr<CudaBackend> make_cuda_backend(int, std::uint64_t, bool) {
   throw CudaError("this contactgrid was built without CUDA (rebuild with nvcc present)");
 }
 template <class Broad, class Narrow>
@@ -175,7 +175,9 @@ Engine<Real>::Engine(EngineOptions options) : m_impl(std::make_unique<Impl>()) {
   Backend b = options.backend;
   if (b == Backend::automatic) b = cuda_available() ? Backend::cuda : Backend::cpu;
   if (b == Backend::cuda)
-    m_impl->cuda = detail::make_cuda_backend(options.device, options.device_memory_limit).release();
+    m_impl->cuda =
+        detail::make_cuda_backend(options.device, options.device_memory_limit, options.high_priority)
+            .release();
   m_impl->options.backend = b;
   m_impl->resolved = b;
 }

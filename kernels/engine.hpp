@@ -64,6 +64,11 @@ struct EngineOptions {
   // free); a call that needs more throws ResourceError. CONTACTGRID_DEVICE_MEMORY_LIMIT (docs/GPU.md)
   // caps it too: the smaller of the two holds.
   std::uint64_t device_memory_limit = 0;
+  // CUDA: the engine's stream at the device's highest priority, so that its kernels' blocks are
+  // scheduled before the pending blocks of engines at the default priority on the same device (the
+  // step loop's boundary engine, whose few blocks would otherwise wait for the interior's large grids).
+  // The same results either way.
+  bool high_priority = false;
   // Ellipsoid narrow phase (scenes with ellipsoids only; core/ellipsoid_contact.hpp SolverSettings):
   // Newton stops when the tangential gradient is <= tolerance × (largest semi-axis of A + of B);
   // iteration cap per start. 0: the precision's default (fp32 2e-5, fp64 1e-11; 40 iterations).

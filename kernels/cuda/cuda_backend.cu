@@ -111,11 +111,14 @@ namespace detail {
 
 class CudaBackend {
  public:
-  CudaBackend(int device, std::uint64_t memory_limit) : m_memory_limit(memory_limit) {
+  CudaBackend(int device, std::uint64_t memory_limit, bool high_priority) : m_memory_limit(memory_limit) {
     if (device < 0) CG_CUDA_CHECK(cudaGetDevice(&device));
     m_device = device;
     CG_CUDA_CHECK(cudaSetDevice(m_device));
-    CG_CUDA_CHECK(cudaStreamCreate(&m_stream));
+    int least = 0, greatest = 0;
+    CG_CUDA_CHECK(cudaDeviceGetStreamPriorityRange(&least, &greatest));
+    CG_CUDA_CHECK(
+        cudaStreamCreateWithPriority(&m_stream, cudaStreamDefault, high_priority ? greatest : least));
     int l2 = 0;
     CG_CUDA_CHECK(cudaDeviceGetAttribute(&l2, cudaDevAttrL2CacheSize, m_device));
     m_l2_bytes = static_cast<std::size_t>(l2);
@@ -276,9 +279,9 @@ class CudaBackend {
   std::uint64_t m_memory_limit = 0;              // EngineOptions::device_memory_limit (0: none)
 };
 
-std::unique_ptr<CudaBackend> make_cuda_backend(int device, std::uint64_t memory_limit) {
+std::unique_ptr<CudaBackend> make_cuda_backend(int device, std::uint64_t memory_limit, bool high_priority) {
   if (!cuda_available()) throw CudaError("no CUDA device is available to this process");
-  return std::make_unique<CudaBackend>(device, memory_limit);
+  return std::make_unique<CudaBackend>(device, memory_limit, high_priority);
 }
 
 void destroy(CudaBackend* backend) { delete backend; }

@@ -64,11 +64,13 @@ std::vector<std::size_t> some_rows(std::size_t n, std::size_t count, std::uint64
   return all;
 }
 
+// high_priority: as the step loop's boundary engine B (EngineOptions::high_priority).
 template <class Real>
-Engine<Real> engine_on(Backend backend) {
+Engine<Real> engine_on(Backend backend, bool high_priority = false) {
   EngineOptions o;
   o.backend = backend;
   o.threads = 2;
+  o.high_priority = high_priority;
   return Engine<Real>(o);
 }
 
@@ -118,7 +120,7 @@ template <class Real>
 void gather_scatter_copy(Backend backend, bool shapes) {
   const std::size_t n = 3000, m = 700;  // more than one block of 256 threads
   const Rows rows = random_rows(n, shapes, 11);
-  Engine<Real> a = engine_on<Real>(backend), b = engine_on<Real>(backend);
+  Engine<Real> a = engine_on<Real>(backend), b = engine_on<Real>(backend, true);
   a.set_resident(rows.view());
   const Rows b_rows = random_rows(n, shapes, 12);
   b.set_resident(b_rows.view());
@@ -171,6 +173,29 @@ TYPED_TEST(EngineRowListsTest, GatherScatterAndCopyMoveTheListedRowsBitForBit) {
   gather_scatter_copy<double>(TypeParam::backend, false);
   gather_scatter_copy<double>(TypeParam::backend, true);
   gather_scatter_copy<float>(TypeParam::backend, true);
+}
+
+// The boundary engine's priority orders its work on the device, never its results: the same contacts
+// (rows, bits) as a default engine's on the same resident rows, with and without a skin.
+TYPED_TEST(EngineRowListsTest, AHighPriorityEngineFindsTheSameContacts) {
+  const Rows rows = random_rows(4000, true, 41);
+  for (const double skin : {0.0, 0.2}) {
+    Engine<double> plain = engine_on<double>(TypeParam::backend),
+                   first = engine_on<double>(TypeParam::backend, true);
+    plain.set_skin(skin);
+    first.set_skin(skin);
+    plain.set_resident(rows.view());
+    first.set_resident(rows.view());
+    for (int step = 0; step < 2; ++step) {
+      const std::size_t found = first.detect_resident(), want = plain.detect_resident();
+      ASSERT_GT(want, 0u);
+      ASSERT_EQ(found, want) << "skin " << skin << ", step " << step;
+      const Contacts<double> got = first.resident_contacts(), expect = plain.resident_contacts();
+      EXPECT_EQ(got.id_a, expect.id_a);
+      EXPECT_EQ(got.id_b, expect.id_b);
+      EXPECT_EQ(std::memcmp(got.distance.data(), expect.distance.data(), want * sizeof(double)), 0);
+    }
+  }
 }
 
 TYPED_TEST(EngineRowListsTest, RowsOutsideAreTheHostFiltersRows) {
