@@ -385,13 +385,14 @@ StepStats StepLoop<Real>::stats() {
   st.boundary = median_at(static_cast<std::size_t>(StepStage::boundary));
   st.step = median_at(static_cast<std::size_t>(StepStage::step));
   std::vector<double> migrate, rebuild, build, reuse, waits;
-  double total = 0;
+  double total = 0, frames = 0;
   for (std::size_t k = 0; k < n; ++k) {
     if (all[k * row + row - 1] > 0) {
       migrate.push_back(at(k, StepStage::migrate));
       rebuild.push_back(at(k, StepStage::rebuild));
     }
     if (at(k, StepStage::merge_wait) > 0) waits.push_back(at(k, StepStage::merge_wait));
+    frames += at(k, StepStage::frame);
     total += at(k, StepStage::frame) + at(k, StepStage::migrate) + at(k, StepStage::rebuild) +
              at(k, StepStage::merge_wait) + at(k, StepStage::step);
     const double detect = at(k, StepStage::interior) + at(k, StepStage::boundary);
@@ -401,6 +402,7 @@ StepStats StepLoop<Real>::stats() {
   st.merge_wait = median(waits);
   st.rebuild = median(rebuild);
   st.step_mean = n > 0 ? total / double(n) : 0;
+  st.detect_mean = n > 0 ? (total - frames) / double(n) : 0;
   st.detect_build = median(build);
   st.detect_reuse = median(reuse);
   for (std::size_t j = 0; j < n_engine && n > 0; ++j) {

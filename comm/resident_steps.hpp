@@ -119,6 +119,7 @@ struct StepStats {
   double boundary = 0;          // the boundary rows against the ghosts, after the halo
   double step = 0;              // wall time of a step (every step)
   double step_mean = 0;         // ... its mean over the steps (rebuilds and reuses together)
+  double detect_mean = 0;       // ... the same less the frame (the bodies' motion: not the detection's)
   double detect_build = 0, detect_reuse = 0;  // interior + boundary: median of the steps that built
                                               // the candidate lists, of those that reused them
   StageTimes stages;                          // the engine's stages of the interior detection

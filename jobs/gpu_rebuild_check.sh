@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # A rebuild against a fresh detection (issue #31, Performance: a build of the skin's kept candidates
 # <= 1.0x a fresh detection), one H100, about 4 minutes:
-#   BIN=dir OUT=dir [N=16777216] [STEPS=40] [ROUNDS=2] [PROFILE=1] jobs/gpu_rebuild_check.sh
+#   BIN=dir OUT=dir [N=16777216] [STEPS=40] [ROUNDS=2] [PROFILE=1] [KIND=uniform|ellipsoids] [UNIT=1]
+#   jobs/gpu_rebuild_check.sh
 # (a dry run of the script without a GPU: BACKEND=cpu N=65536 PROFILE=0; its CUDA cases then fail)
 # BIN holds the CUDA build's contactgrid and contactgrid_tests (and contactgrid_mpi_tests, whose
 # MovingSteps.Cuda* and StepLoop.*Cuda* cases run at np 2 where it is there). It runs, in one call:
@@ -24,7 +25,8 @@
 # Table (ms; medians over the steps): fresh = a fresh detection a step, build = the summary's
 # detection of a building step (it counts step 0 too: skin auto starts with a fresh skin-0 call),
 # lists built = the median over the builds of kept lists alone (the trace's lines), reuse = a step
-# that reused them, mean = the mean step; then each run's building step's stages and its per-build
+# that reused them, mean = the mean step, mean detection = the same less the frame (the drift's motion
+# of the bodies, not the detection's); then each run's building step's stages and its per-build
 # trace lines.
 # What to expect (BENCHMARKS §32): at 2^24 auto once gave a skin-auto run the one-level levels walk
 # (picked for fresh device calls from 2^21 bodies), so none of its builds ran in cell order ("lev"
@@ -38,7 +40,7 @@ set -u
 cd "$(dirname "$0")/.."
 [ -f .devrt/env.sh ] && source .devrt/env.sh .devrt >/dev/null 2>&1
 BIN=${BIN:-.devbin/new}; OUT=${OUT:-/tmp/out}; CG=$BIN/contactgrid
-BACKEND=${BACKEND:-cuda}; N=${N:-16777216}; STEPS=${STEPS:-40}; ROUNDS=${ROUNDS:-2}
+BACKEND=${BACKEND:-cuda}; N=${N:-16777216}; STEPS=${STEPS:-40}; ROUNDS=${ROUNDS:-2}; KIND=${KIND:-uniform}
 W=${SCRATCH:-/dev/shm}/cg_rebuild
 mkdir -p "$W" "$OUT"
 failed=()
@@ -49,6 +51,7 @@ gtest_ok() {  # LOG: passed, nothing failed, no CUDA case skipped
   grep -q '^\[  PASSED  \]' "$1" && ! grep -q '^\[  FAILED  \]' "$1" && ! grep -q 'no CUDA device' "$1"
 }
 
+if [ "${UNIT:-1}" = 1 ]; then  # UNIT=0: the cases were run already in this call
 log "== 1. CUDA skin cases, defaults and CONTACTGRID_STEP_REBUILD=fill"
 FILTER='EngineSkinCuda*:EngineSkinTest/cuda*:KeptRoom*:CudaBackendTest*'
 timeout 120 "$BIN/contactgrid_tests" --gtest_color=no --gtest_filter="$FILTER" >"$OUT/unit.log" 2>&1
@@ -66,9 +69,13 @@ if [ -x "$BIN/contactgrid_mpi_tests" ]; then  # the step loop's CUDA cases (cell
   echo "mpi tests np 2 (MovingSteps.Cuda*, StepLoop.*Cuda*): $(grep -cE '^\[       OK' "$OUT/mpi_tests.np2.log") ok lines, $(tail -1 "$OUT/mpi_tests.np2.log")"
 fi
 
-log "== 2. $N spheres fp32, 6 contacts a body, drift 0.01, skin auto, $STEPS steps"
-timeout 90 "$CG" generate "$W/s.h5" -n "$N" --seed 24 --contacts-per-body 6 -q || failed+=(generate)
-# the compared paths, TAG=SETTING: an environment variable, or broad=B for `--broad-phase B`
+fi
+
+log "== 2. $N bodies ($KIND) fp32, 6 contacts a body, drift 0.01, skin auto, $STEPS steps"
+timeout 90 "$CG" generate "$W/s.h5" -n "$N" --seed 24 --contacts-per-body 6 --kind "$KIND" -q ||
+  failed+=(generate)
+# the compared paths, TAG=SETTING: environment variables (NAME=VALUE[,NAME=VALUE…]), or broad=B for
+# `--broad-phase B`
 # (broad=levels: what auto ran for `--skin auto` before it kept the grid; its builds are not in cell
 # order and its reuses select from the (a, b) list)
 VARIANTS=${VARIANTS:-"now=- lev=broad=levels fill=CONTACTGRID_STEP_REBUILD=fill"}
@@ -77,7 +84,7 @@ run() {  # TAG SKIN STEPS [SETTING]: one drifting run, its log in $OUT/steps_TAG
   case $setting in
     -) ;;
     broad=*) args=(--broad-phase "${setting#broad=}") ;;
-    *) envs=("$setting") ;;
+    *) IFS=, read -ra envs <<<"$setting" ;;  # NAME=VALUE[,NAME=VALUE…]
   esac
   timeout 120 env CONTACTGRID_STEP_TRACE=1 "${envs[@]}" "$CG" detect "$W/s.h5" -o "$W/$tag.h5" --backend "$BACKEND" \
     --precision fp32 --steps "$n" --drift 0.01 --skin "$skin" "${args[@]}" ${FINAL:+--final-scene "$FINAL"} \
@@ -122,6 +129,7 @@ field() {  # TAG WHAT: a figure of a run's summary in ms
   local f=$OUT/steps_$1.log
   case $2 in
     mean) sed -nE 's/.*mean step ([0-9.e+-]+) s.*/\1/p' "$f" ;;
+    detect) sed -nE 's/.*without the frame ([0-9.e+-]+) s.*/\1/p' "$f" ;;
     build) sed -nE 's/.*detection ([0-9.e+-]+) s building.*/\1/p' "$f" ;;
     reuse) sed -nE 's/.*building, ([0-9.e+-]+) s reusing.*/\1/p' "$f" ;;
   esac | head -1 | awk '{ printf "%.2f", $1 * 1000 }'
@@ -136,12 +144,13 @@ lists_build() {
 lists() { sed -nE 's/.*candidate lists: ([0-9]+) builds, ([0-9]+) reuses, skin ([0-9.e+-]+).*/\1\/\2, skin \3/p' "$OUT/steps_$1.log"; }
 {
   fr=$(field fresh build)
-  printf '| run | fresh | build | lists built | reuse | mean | build/fresh | lists built/fresh | mean/fresh | builds/reuses |\n'
-  printf '|---|---|---|---|---|---|---|---|---|---|\n'
+  printf '| run | fresh | build | lists built | reuse | mean | mean detection | build/fresh | lists built/fresh | mean/fresh | mean detection/fresh | builds/reuses |\n'
+  printf '|---|---|---|---|---|---|---|---|---|---|---|---|\n'
   for t in "${tags[@]}"; do
-    printf '| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n' "$t" "$fr" "$(field "$t" build)" \
-      "$(lists_build "$t")" "$(field "$t" reuse)" "$(field "$t" mean)" "$(ratio "$(field "$t" build)" "$fr")" \
-      "$(ratio "$(lists_build "$t")" "$fr")" "$(ratio "$(field "$t" mean)" "$fr")" "$(lists "$t")"
+    printf '| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n' "$t" "$fr" "$(field "$t" build)" \
+      "$(lists_build "$t")" "$(field "$t" reuse)" "$(field "$t" mean)" "$(field "$t" detect)" \
+      "$(ratio "$(field "$t" build)" "$fr")" "$(ratio "$(lists_build "$t")" "$fr")" \
+      "$(ratio "$(field "$t" mean)" "$fr")" "$(ratio "$(field "$t" detect)" "$fr")" "$(lists "$t")"
   done
   echo "fresh with the grid (--broad-phase grid): $(field fresh_grid build) ms ($(ratio "$(field fresh_grid build)" "$fr")x auto's)"
   for t in fresh fresh_grid; do
