@@ -437,6 +437,15 @@ TEST_F(Cli, DriftingStepsWriteTheLastStep) {
     ASSERT_EQ(r.code, 0) << skin << r.output;
     EXPECT_NE(r.output.find("the bodies drifting 0.05 per step"), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("candidate lists: "), std::string::npos) << r.output;
+    // the mean step, and the same without the frame (the drift's motion): positive, and not more
+    double mean = 0, detection = 0;
+    const std::size_t at = r.output.find("mean step ");
+    ASSERT_NE(at, std::string::npos) << r.output;
+    ASSERT_EQ(
+        std::sscanf(r.output.c_str() + at, "mean step %lf s (without the frame %lf s)", &mean, &detection), 2)
+        << r.output;
+    EXPECT_GT(detection, 0) << r.output;
+    EXPECT_LE(detection, mean) << r.output;
     if (skin == "auto") {
       EXPECT_NE(r.output.find(" (auto)"), std::string::npos) << r.output;
     }
