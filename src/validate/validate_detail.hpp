@@ -211,4 +211,11 @@ void compare_region(const CompareContext& ctx, const ContactIndex& index,
                     const std::vector<std::size_t>& mine, const Contacts<double>& ref,
                     const std::vector<std::size_t>& ref_rows, ValidateReport& rep, Offenders& off);
 
+// The contacts checked against docs/FORMAT.md §2 on the rows as given (validate_contract.cpp): the
+// violation counters and failure lines of `rep` filled; true when the rows are already canonical,
+// sorted and unique.
+bool check_contract(const Contacts<double>& c, std::int64_t bodies, ValidateReport& rep);
+// InputError when the contact datasets differ in length.
+void check_lengths(const Contacts<double>& c);
+
 }  // namespace cg::validate_detail
