@@ -165,6 +165,7 @@ void run_broad_bench(const BroadBenchOptions& o, std::ostream& out) {
       g.kind = f.kind;
       g.count = std::uint64_t(1) << lg;
       g.seed = o.seed;
+      g.contacts_per_body = o.contacts_per_body;
       g.radius_low = f.r_low;
       g.radius_high = f.r_high;
       g.large_fraction = f.large_fraction;

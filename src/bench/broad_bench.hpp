@@ -2,7 +2,8 @@
 // `contactgrid bench-broad`: the broad phases (grid, levels, sweep, brute, and the pick of auto) ×
 // scene families × N on one backend: a table, and a CSV. No Bullet needed.
 //
-// Families (generate_scene, seeded; the generator's density, 0.4 contacts per body):
+// Families (generate_scene, seeded; the generator's density, 0.4 contacts per body, or
+// `contacts_per_body`):
 //   uniform          radii U[0.5, 1]: the reference row of every N
 //   bimodal10        bimodal 1:10, 10 % of the volume in the large bodies (r = 1 among r = 0.1)
 //   bimodal100       bimodal 1:100, 10 % of the volume in the large bodies (r = 1 among r = 0.01)
@@ -54,6 +55,9 @@ struct BroadBenchOptions {
   // warning and --max-pair-tests); the library's calls make none unless asked.
   bool estimate = false;
   std::uint64_t seed = 1;
+  // The families' density (generate's --contacts-per-body): the rule of `auto` weighs the grid's
+  // crowding, so its crossovers are measured at the densities a scene may have.
+  double contacts_per_body = 0.4;
   std::string csv;
 };
 

@@ -115,6 +115,11 @@ Subcommand add_bench_broad(CLI::App& app) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   bbc->add_option("--seed", args->seed, "Scene seed")->capture_default_str();
+  bbc->add_option(
+         "--contacts-per-body", args->contacts_per_body,
+         "The families' density: contacts per body, as generate's (the granular rest density is about 6)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   bbc->add_flag("--cpu-time", args->cpu_time,
                 "Time the process's CPU time, not the wall clock (CPU backend on a shared machine; with "
                 "--threads 1 the work itself)");

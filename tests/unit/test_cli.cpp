@@ -206,6 +206,24 @@ TEST_F(Cli, BroadPhasesWriteTheSameContacts) {
   lines = 0;
   for (std::string l; std::getline(lim_csv, l);) ++lines;
   EXPECT_EQ(lines, 1u + 5) << "header + the 2^8 row's 5 broad phases";
+  // --contacts-per-body: the families at a granular density (the generator's model: about 6 a body)
+  const Result dense =
+      run("bench-broad --lo 12 --hi 12 --families uniform --broad-phases grid --repetitions 1 "
+          "--contacts-per-body 6 --csv " +
+          path("dense.csv"));
+  ASSERT_EQ(dense.code, 0) << dense.output;
+  std::ifstream dense_csv(path("dense.csv"));
+  std::string header, row;
+  ASSERT_TRUE(std::getline(dense_csv, header) && std::getline(dense_csv, row)) << dense.output;
+  std::vector<std::string> cells;
+  for (std::size_t at = 0, next; at <= row.size(); at = next + 1) {
+    next = std::min(row.find(',', at), row.size());
+    cells.push_back(row.substr(at, next - at));
+  }
+  ASSERT_EQ(cells.size(), 10u) << row;  // family,n,log2n,broad_phase,ran,levels,seconds,contacts,…
+  const double per_body = std::stod(cells[7]) / 4096.0;
+  EXPECT_GT(per_body, 4.5) << row;
+  EXPECT_LT(per_body, 7.5) << row;
 }
 
 TEST_F(Cli, ValidatePassesAndFails) {
