@@ -6,6 +6,10 @@
 #   eranks  (2 GPUs) 2^24 ellipsoids (aspect <= 1:4), drift 0.01, skin auto, STEPS (40) steps, np 1 and
 #           np 2: the mean step, a reuse, a build, halo and rebuild parts per step; both runs' last
 #           step the same pair hash. #31 asks np 2 >= 1.8x np 1
+#   density `bench-broad --backend cuda --precision fp32` of uniform spheres, grid against levels (the
+#           one-level levels that auto picks for fresh device calls of 2^21+ bodies of one size class),
+#           2^20 to 2^24, at 0.4 (the generator's) to 6 (granular rest) contacts a body: where the grid
+#           overtakes the levels (at 6 a body the grid was 0.93x the levels' time at 2^24, BENCHMARKS §32)
 set -u
 cd "$(dirname "$0")/.."
 [ -d .devbin/n ] || tar xJf .devbin/n.tar.xz -C .devbin
@@ -32,4 +36,11 @@ eranks)
     rm -f /dev/shm/ec.h5
   done
   rm -f /dev/shm/e.h5 ;;
+density)
+  for d in ${DENSITIES:-0.4 1 2 3 4 6}; do
+    echo "-- $d contacts a body"
+    timeout 150 "$B/contactgrid" bench-broad --backend cuda --precision fp32 --families uniform \
+      --broad-phases grid,levels,auto --lo 20 --hi 24 --step 2 --repetitions 5 --contacts-per-body "$d" \
+      --csv "$OUT/density_$d.csv" 2>&1 | grep -E '^(uniform|family)'
+  done ;;
 esac

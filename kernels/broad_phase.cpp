@@ -153,24 +153,43 @@ int sweep_axis(const Bounds& b) {
   return e[0] >= e[1] && e[0] >= e[2] ? 0 : (e[1] >= e[2] ? 1 : 2);
 }
 
-double grid_occupancy(const Bounds& b) {
+namespace {
+double bounds_volume(const Bounds& b) {
   const double d = 2 * b.r_max;
-  const double volume =
-      std::max(b.hi.x - b.lo.x, d) * std::max(b.hi.y - b.lo.y, d) * std::max(b.hi.z - b.lo.z, d);
+  return std::max(b.hi.x - b.lo.x, d) * std::max(b.hi.y - b.lo.y, d) * std::max(b.hi.z - b.lo.z, d);
+}
+}  // namespace
+
+double grid_occupancy(const Bounds& b) {
+  const double d = 2 * b.r_max, volume = bounds_volume(b);
   return volume > 0 ? double(b.count) * d * d * d / volume : double(b.count);
 }
 
-// `auto` on the device for a scene of one size class (r_max <= kLevelRatio · r_min: the levels plan one
-// level, the grid of the frame) of at least this many bodies: the levels, the same grid walked with the
-// bodies in input order, where the grid renumbers them by z layer once they outgrow the L2 (one-level
-// levels is the faster from 2^22 bodies on an H100, not below 2^21: BENCHMARKS.md §22, §24). Calls that
+double expected_contacts_per_body(const Bounds& b) {
+  const double n = double(b.count), volume = bounds_volume(b);
+  if (!(n > 0) || !(volume > 0)) return 0;
+  const bool moments = b.r_sum[0] > 0 && b.r_sum[1] > 0 && b.r_sum[2] > 0;
+  const double m1 = moments ? b.r_sum[0] / n : b.r_max, m2 = moments ? b.r_sum[1] / n : b.r_max * b.r_max,
+               m3 = moments ? b.r_sum[2] / n : b.r_max * b.r_max * b.r_max;
+  const double sum_cubed = 2 * m3 + 6 * m2 * m1;  // E[(r_a + r_b)³] of two independent radii
+  return n / volume * (2.0 * std::acos(-1.0) / 3.0) * sum_cubed;
+}
+
+// `auto` on the device for a sparse scene of one size class (r_max <= kLevelRatio · r_min: the levels
+// plan one level, the grid of the frame) of at least this many bodies: the levels, the same grid walked
+// with the bodies in input order, where the grid renumbers them by z layer once they outgrow the L2
+// (one-level levels is the faster from 2^22 bodies on an H100, not below 2^21: BENCHMARKS.md §22, §24).
+// Sparse: below kOneLevelContactsPerBody expected contacts a body; denser scenes walk more pairs a
+// body, where the grid's renumbered order pays (2^24 on an H200: the levels 0.87x the grid's time at
+// 0.4 contacts a body, 0.91x at 1, 1.05x at 2, 1.05–1.07x at 3 to 6; BENCHMARKS.md §34). Calls that
 // keep their candidates (a skin) keep the grid: the measurement was of fresh detections, and the
 // steps' builds reuse the grid's candidate buffers.
 constexpr std::uint64_t kOneLevelDeviceBodies = std::uint64_t(1) << 21;
 
 BroadPhase choose_broad_phase(const Bounds& b, Precision, bool device, bool skin) {
   if (b.count <= kBruteBodies) return BroadPhase::brute;
-  if (device && !skin && b.count >= kOneLevelDeviceBodies && b.r_max <= kLevelRatio * b.r_min)
+  if (device && !skin && b.count >= kOneLevelDeviceBodies && b.r_max <= kLevelRatio * b.r_min &&
+      expected_contacts_per_body(b) < kOneLevelContactsPerBody)
     return BroadPhase::levels;
   const double mean = b.count > 0 ? b.r_sum[0] / double(b.count) : b.r_max;
   if (!(mean > 0 && b.r_max > kLevelsSpread * mean)) return BroadPhase::grid;

@@ -54,6 +54,11 @@ int sweep_axis(const Bounds& b);
 // bounds (each extent at least 2·r_max). The grid's pair tests grow with it.
 double grid_occupancy(const Bounds& b);
 
+// The contacts a body would have if the centres were spread uniformly over the bounds' box (each
+// extent at least 2·r_max): ρ·(2π/3)·E[(r_a + r_b)³], ρ = count / volume, from the radius moments
+// (r_sum; every radius r_max where they are absent). generate's density model, edges aside.
+double expected_contacts_per_body(const Bounds& b);
+
 // `auto`: the broad phase for bodies of these bounds (measured: BENCHMARKS.md §18, §20): brute for at
 // most kBruteBodies bodies; levels where the largest radius exceeds kLevelsSpread times the mean one
 // and the grid's cells, sized for the largest, would hold more than kOccupancyPerLevel bodies per
@@ -62,12 +67,14 @@ double grid_occupancy(const Bounds& b);
 // `device`: for the CUDA backend, whose grid pays more for crowded cells (its pair walk stages 32
 // entries of a cell in shared memory and walks the rest of a longer cell from memory, one thread per
 // entry), so levels take over from kOccupancyPerLevelDevice bodies per level (bimodal 1:10 among them),
-// and a scene of one size class of at least 2^21 bodies takes the levels' one-level walk in input
-// order unless the call keeps its candidates (`skin`), which keeps the grid (broad_phase.cpp).
+// and a sparse scene of one size class of at least 2^21 bodies (fewer than kOneLevelContactsPerBody
+// expected contacts a body) takes the levels' one-level walk in input order unless the call keeps its
+// candidates (`skin`), which keeps the grid (broad_phase.cpp).
 BroadPhase choose_broad_phase(const Bounds& b, Precision p, bool device = false, bool skin = false);
 inline constexpr std::uint64_t kBruteBodies = 32;
 inline constexpr double kLevelsSpread = 4;
 inline constexpr double kOccupancyPerLevel = 64;
 inline constexpr double kOccupancyPerLevelDevice = 4;
+inline constexpr double kOneLevelContactsPerBody = 1.5;
 
 }  // namespace cg

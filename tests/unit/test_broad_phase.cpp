@@ -487,13 +487,26 @@ TEST(AutoBroadPhase, Rule) {
   EXPECT_NEAR(grid_occupancy(loguniform), 8.9, 0.1);
   EXPECT_EQ(choose_broad_phase(loguniform, Precision::fp32), BroadPhase::grid);
   EXPECT_EQ(choose_broad_phase(loguniform, Precision::fp32, true), BroadPhase::grid);
-  // one size class (r_max <= 2 r_min: one level) from 2^21 bodies: the levels' walk on a GPU, the
-  // grid on the host; below 2^21, and wider radius laws, as above
+  // one size class (r_max <= 2 r_min: one level) from 2^21 bodies, sparse: the levels' walk on a GPU,
+  // the grid on the host; below 2^21, denser scenes and wider radius laws, as above. Radii U[0.5, 1]
+  // (moments 0.75, 7/12, 15/32) in a cube of edge 340: 0.4 expected contacts a body, the generator's
   const std::uint64_t many = std::uint64_t(1) << 21;  // broad_phase.cpp's kOneLevelDeviceBodies
-  Bounds large_uniform = bounds_of(0.5, 1, 200, many);
+  Bounds large_uniform = bounds_of(0.5, 1, 340, many);
   large_uniform.r_sum[0] = 0.75 * double(many);
+  large_uniform.r_sum[1] = 7.0 / 12.0 * double(many);
+  large_uniform.r_sum[2] = 15.0 / 32.0 * double(many);
+  EXPECT_NEAR(expected_contacts_per_body(large_uniform), 0.398, 0.002);
   EXPECT_EQ(choose_broad_phase(large_uniform, Precision::fp32, true), BroadPhase::levels);
   EXPECT_EQ(choose_broad_phase(large_uniform, Precision::fp64, false), BroadPhase::grid);
+  // the same bodies at a granular density (edge 150: 4.6 a body; the crossover is 1.5): the grid
+  Bounds dense_uniform = large_uniform;
+  dense_uniform.hi = {150, 150, 150};
+  EXPECT_GT(expected_contacts_per_body(dense_uniform), kOneLevelContactsPerBody);
+  EXPECT_EQ(choose_broad_phase(dense_uniform, Precision::fp32, true), BroadPhase::grid);
+  // without moments the estimate takes r_max for every radius: never below the moments' value
+  Bounds no_moments = large_uniform;
+  no_moments.r_sum[1] = no_moments.r_sum[2] = 0;
+  EXPECT_GT(expected_contacts_per_body(no_moments), expected_contacts_per_body(large_uniform));
   // calls that keep their candidates (a skin) keep the grid: the rule's measurement was of fresh calls
   EXPECT_EQ(choose_broad_phase(large_uniform, Precision::fp32, true, true), BroadPhase::grid);
   // so do engines whose skin is chosen per call (skin_auto, skin 0 until then), as the engine and the
@@ -518,10 +531,34 @@ TEST(AutoBroadPhase, Rule) {
   Bounds large_loguniform = bounds_of(0.001, 1, 980, 16 * many);
   large_loguniform.r_sum[0] = 16 * double(many) * 0.145;
   EXPECT_EQ(choose_broad_phase(large_loguniform, Precision::fp32, true), BroadPhase::grid);
-  // a flat scene: the extents are at least the cell
+  // a flat scene: the extents are at least the cell (the estimate too)
   Bounds flat = bounds_of(0.01, 1, 100, 100000);
   flat.hi.z = 0;
   EXPECT_NEAR(grid_occupancy(flat), 100000 * 8.0 / (100 * 100 * 2), 1e-9);
+  EXPECT_GT(expected_contacts_per_body(flat), 0.0);
+}
+
+// The density estimate of auto's one-level rule against the contacts of generated scenes (generate's
+// --contacts-per-body model, the box's edges included: within 15 %).
+TEST(AutoBroadPhase, ExpectedContactsPerBodyMatchTheGenerator) {
+  for (const double density : {0.4, 1.5, 6.0}) {
+    GenerateOptions g;
+    g.count = 1 << 15;
+    g.seed = 5;
+    g.contacts_per_body = density;
+    const Scene scene = generate_scene(g);
+    const BodiesView bodies{{scene.sphere_position.data(), scene.sphere_position.size()},
+                            {scene.sphere_radius.data(), scene.sphere_radius.size()},
+                            {},
+                            {}};
+    EngineOptions o;
+    o.backend = Backend::cpu;
+    Engine<double> engine(o);
+    const double measured = double(engine.detect(bodies).size()) / double(g.count);
+    const double estimate = expected_contacts_per_body(compute_bounds(bodies));
+    EXPECT_NEAR(measured, density, 0.15 * density) << "the generator's own density";
+    EXPECT_NEAR(estimate, measured, 0.15 * measured) << density;
+  }
 }
 
 // The CUDA levels against the CPU's on log-uniform 1:1000 scenes of 2^13 bodies (where the device's
