@@ -3,7 +3,7 @@
 // arrival j inserted before old row at[j] (non-decreasing, at most n; arrivals before the rows they
 // precede, in their own order). The migration of the resident steps (decomposition/step_bodies:
 // merge_step_bodies) and Engine::splice_resident's CPU rows share it; CUDA does the same per row
-// (cuda_backend.cu: splice_kernel). The copies are the runs of rows between the changes, cut into
+// (cuda/splice.cuh: splice_kernel). The copies are the runs of rows between the changes, cut into
 // pieces that the threads share: the result does not depend on the threads.
 #include <algorithm>
 #include <cstddef>

@@ -173,7 +173,7 @@ CG_HD Vec3<Real> extra_start(int i) {
 // stops at a certified minimum); start(j) gives start j (a zero vector: none, skipped); run(s) is the
 // run from s; take(result) folds it in. SerialRuns runs start j only when it is wanted (the host; the
 // device's one-thread-per-pair kernels); the device's lane-group-per-pair kernel runs the batch on its
-// lanes at once and hands the results over in the same order (cuda/narrow.cuh: WarpRuns) — the same
+// lanes at once and hands the results over in the same order (cuda/narrow_shapes.cuh: WarpRuns) — the same
 // bits, the same counts (a run no one takes is not counted).
 template <class Real>
 CG_HD bool is_zero(const Vec3<Real>& v) {

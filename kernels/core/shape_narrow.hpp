@@ -1,7 +1,7 @@
 #pragma once
 // The narrow phase's deciders for the rejecting path (count → scan → fill), shared by the CPU backend
-// (host/narrow.cpp) and the CUDA kernels (cuda/narrow.cuh): the same struct, the same CG_HD calls in
-// the same order, so both backends decide and write the same bits.
+// (host/narrow.cpp) and the CUDA kernels (cuda/narrow.cuh, cuda/narrow_shapes.cuh): the same struct, the same
+// CG_HD calls in the same order, so both backends decide and write the same bits.
 //   accept(a, b, flags)  the count pass: is candidate (a, b) a contact (and the solver's flags, counted
 //                        once per candidate into EngineStats)
 //   row(a, b, full)      the fill pass, for an accepted candidate: its row, world frame
@@ -149,7 +149,7 @@ CG_HD bool bounding_spheres_touch(const NarrowBodies<Real>& w, std::uint32_t a, 
 // point agrees: accept / row solve it so, triage sends it to the hard pass (Verdict::hard: the triage
 // kernel stays lean), solve solves it so, row_from solves it again (the kept float normal is not the
 // double minimiser): one-solve bits. The device runs those solves in kernels of their own
-// (cuda/narrow.cuh: kFp64Pairs false keeps the double code out of the hard and fill kernels).
+// (cuda/narrow_shapes.cuh: kFp64Pairs false keeps the double code out of the hard and fill kernels).
 template <class Real>
 struct ShapeDecide {
   NarrowBodies<Real> bodies;
@@ -187,7 +187,7 @@ struct ShapeDecide {
     return contact;
   }
   // kFp64Pairs false (the device's lean kernels): the caller has taken fp32's pairs in fp64 elsewhere
-  // (cuda/narrow.cuh), so the double solve's code is not in the kernel (row, solve, row_from).
+  // (cuda/narrow_shapes.cuh), so the double solve's code is not in the kernel (row, solve, row_from).
   template <bool kFp64Pairs = true, SolveScope Scope = SolveScope::whole>
   CG_HD ContactRow<Real> row(std::uint32_t a, std::uint32_t b, bool full) const {
     NarrowFlags unused;  // counted by accept()
@@ -199,7 +199,7 @@ struct ShapeDecide {
     shape_pair_contact<Scope>(f.a, f.b, shapes[a], shapes[b], settings, c);
     return row_of(c, f.origin, full);
   }
-  // The three-pass narrow of both backends (host/narrow_shapes.cpp, cuda/narrow.cuh): triage settles
+  // The three-pass narrow of both backends (host/narrow_shapes.cpp, cuda/narrow_shapes.cuh): triage settles
   // each candidate cheaply — screen(): closed forms, the sphere–ellipsoid root find, the centre line;
   // then for the general pairs it leaves (Verdict::solve; on the device a list of their own, so that
   // the Newton runs fill whole warps) first_pass(): the PW filter and the first start with the cheap

@@ -22,7 +22,7 @@
 //                         each; the row carries the input indices (a < b), computed as
 //                         narrow_decide computes it (core/narrow.hpp: narrow_decide_floats)
 //   canonical_rows        the rows come out in the walk's order, not in (a, b) order: the download
-//                         (download_contacts in cuda_backend.cu) sorts them by (a, b) on the device
+//                         (download_contacts in backend_copies.cuh) sorts them by (a, b) on the device
 //                         first, so resident_contacts() gives the bytes of the (a, b) path
 // The walk's order is fixed at the build; the set of rows of a call is that of the (a, b) path.
 #include <thrust/iterator/counting_iterator.h>

@@ -57,9 +57,9 @@ struct Counters {
   // appends to, read by the next kernel on the device and by the host with the other counters)
   unsigned long long to_solve, unsettled, hard;
   unsigned long long fp64_rows;   // fp32 rows recomputed in fp64 (narrow.cuh)
-  unsigned long long fp64_pairs;  // fp32's pairs solved in fp64, listed for their rows (narrow.cuh)
+  unsigned long long fp64_pairs;  // fp32's pairs solved in fp64, listed for their rows (narrow_shapes.cuh)
   unsigned long long rows;        // the rejecting narrow's accepted candidates: its row count (narrow.cuh)
-  // the ellipsoid solver's work (narrow.cuh: NarrowFlags, summed; the largest by atomicMax)
+  // the ellipsoid solver's work (narrow_shapes.cuh: NarrowFlags, summed; the largest by atomicMax)
   unsigned long long solver_runs, evaluations, max_evaluations;
   // skin check (cuda/skin.cuh): the bits of the largest squared displacement and radius growth
   // (non-negative doubles order as their bits), and whether a report byte changed

@@ -1,7 +1,7 @@
 #pragma once
 // The state one CUDA detection hands from stage to stage: the call's sizes and knobs, the DEVICE
 // pointers each stage produces (views of the workspace, see workspace.cuh) and the host's copies of
-// the counters. Built by CudaBackend::run (cuda_backend.cu), which calls the stages in order.
+// the counters. Built by CudaBackend::run (backend_class.cuh), which calls the stages in order.
 #include <chrono>
 #include <sstream>
 #include <thread>

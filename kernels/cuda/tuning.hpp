@@ -55,7 +55,7 @@ struct Tuning {
   CandidateFilter candidates = CandidateFilter::spheres_touch;
   // CONTACTGRID_CUDA_WARP_SOLVE=K: the whole start set of the hard ellipsoid pairs goes one lane group
   // per pair (its starts on the lanes) while there are at most K pairs per resident group, else one
-  // thread per pair (cuda/narrow.cuh); 0: always one thread per pair. The same contacts either way.
+  // thread per pair (cuda/narrow_shapes.cuh); 0: always one thread per pair. The same contacts either way.
   // Default 1: a group that takes pairs one after the other loses to a thread per pair (H100).
   unsigned warp_solve_pairs = 1;
   // CONTACTGRID_CUDA_HISTORY=kernel / thrust: the history stage searches with its own kernel (a

@@ -1,0 +1,95 @@
+#pragma once
+// The CUDA backend's host <-> DEVICE copies outside a detection: the contact history of
+// EngineOptions::history (history_upload / history_download), the rows of a DeviceContactsView
+// (download_contacts: a cell-order call's rows sorted into (a, b) order first) and the page-locking
+// of caller memory (pin_host / unpin_host). Apart from the class (backend_class.cuh) as calls of the
+// engine's API on it; included once, by cuda_backend.cu (one translation unit).
+#include <algorithm>
+#include <type_traits>
+
+#include "cuda/backend_class.cuh"
+#include "cuda/cell_order.cuh"
+#include "cuda/transfer.cuh"
+
+namespace cg::detail {
+
+void history_upload(CudaBackend& b, const ContactHistory& h) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  Workspace& ws = b.m_ws;
+  const std::size_t m = h.size();
+  const int at = ws.hist_current;
+  ws.reserve({{&ws.hist_keys[at], m * sizeof(PairKey)}, {&ws.hist_age[at], m * sizeof(std::int64_t)}},
+             "history");
+  if (m > 0) {
+    CG_CUDA_CHECK(cudaMemcpyAsync(ws.hist_keys[at].data(), h.keys.data(), m * sizeof(PairKey),
+                                  cudaMemcpyHostToDevice, b.m_stream));
+    CG_CUDA_CHECK(cudaMemcpyAsync(ws.hist_age[at].data(), h.age.data(), m * sizeof(std::int64_t),
+                                  cudaMemcpyHostToDevice, b.m_stream));
+  }
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+  ws.hist_count = m;
+}
+
+void history_download(CudaBackend& b, ContactHistory& h) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  const Workspace& ws = b.m_ws;
+  const std::size_t m = ws.hist_count;
+  h.keys.resize(m);
+  h.age.resize(m);
+  if (m > 0) {
+    CG_CUDA_CHECK(cudaMemcpyAsync(h.keys.data(), ws.hist_keys[ws.hist_current].data(), m * sizeof(PairKey),
+                                  cudaMemcpyDeviceToHost, b.m_stream));
+    CG_CUDA_CHECK(cudaMemcpyAsync(h.age.data(), ws.hist_age[ws.hist_current].data(), m * sizeof(std::int64_t),
+                                  cudaMemcpyDeviceToHost, b.m_stream));
+  }
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+}
+
+template <class Real>
+void download_contacts(CudaBackend& b, const DeviceContactsView<Real>& v, Contacts<Real>& out) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  out = Contacts<Real>{};
+  out.resize(v.count, v.fields());
+  if (v.count == 0) return;
+  cuda::ContactPtrs<Real> cp;  // the view's arrays (read only here)
+  zip_contact_fields(cp, v, v.fields(), [](auto, auto*& ptr, auto* d_ptr) {
+    ptr = const_cast<std::remove_reference_t<decltype(ptr)>>(d_ptr);
+  });
+  Workspace& ws = b.m_ws;
+  // rows of a cell-order call (cell_order.cuh): each column gathered into (a, b) order, then copied
+  const std::uint32_t* order =
+      ws.rows_cell_order && v.count > 1
+          ? canonical_rows(ws, b.m_stream, v.id_a, v.id_b, v.count, std::max(1, bits_for(ws.res_count)))
+          : nullptr;
+  for_each_field(out, cp, v.fields(), [&](auto& vec, const void* d_ptr) {
+    using T = std::remove_cv_t<std::remove_reference_t<decltype(vec[0])>>;
+    const std::size_t bytes = vec.size() * sizeof(T);
+    if (order) {
+      ws.reserve({{&ws.canon_field, bytes}}, "download");
+      T* sorted = ws.canon_field.span_as<T>(vec.size()).data();
+      cuda::gather_kernel<T><<<cuda::blocks_for(vec.size()), cuda::kBlock, 0, b.m_stream>>>(
+          static_cast<const T*>(d_ptr), order, vec.size(), sorted);
+      CG_CUDA_CHECK_LAUNCH("gather_rows");
+      d_ptr = sorted;
+    }
+    CG_CUDA_CHECK(cudaMemcpyAsync(vec.data(), d_ptr, bytes, cudaMemcpyDeviceToHost, b.m_stream));
+    if (order) CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));  // canon_field is the next column's
+  });
+  CG_CUDA_CHECK(cudaStreamSynchronize(b.m_stream));
+}
+template void download_contacts(CudaBackend&, const DeviceContactsView<float>&, Contacts<float>&);
+template void download_contacts(CudaBackend&, const DeviceContactsView<double>&, Contacts<double>&);
+
+bool pin_host(CudaBackend& b, void* p, std::size_t bytes) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  if (cudaHostRegister(p, bytes, cudaHostRegisterDefault) == cudaSuccess) return true;
+  (void)cudaGetLastError();  // refused: the copies stay pageable
+  return false;
+}
+
+void unpin_host(CudaBackend& b, void* p) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  CG_CUDA_CHECK(cudaHostUnregister(p));
+}
+
+}  // namespace cg::detail
