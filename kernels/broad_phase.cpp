@@ -181,9 +181,9 @@ double expected_contacts_per_body(const Bounds& b) {
 // (one-level levels is the faster from 2^22 bodies on an H100, not below 2^21: BENCHMARKS.md §22, §24).
 // Sparse: below kOneLevelContactsPerBody expected contacts a body; denser scenes walk more pairs a
 // body, where the grid's renumbered order pays (2^24 on an H200: the levels 0.87x the grid's time at
-// 0.4 contacts a body, 0.91x at 1, 1.05x at 2, 1.05–1.07x at 3 to 6; BENCHMARKS.md §34). Calls that
-// keep their candidates (a skin) keep the grid: the measurement was of fresh detections, and the
-// steps' builds reuse the grid's candidate buffers.
+// 0.4 contacts a body, 0.91x at 1, 0.95x at 1.5, 1.05x at 2, 1.05–1.07x at 3 to 6; BENCHMARKS.md §34). Calls
+// that keep their candidates (a skin) keep the grid: the measurement was of fresh detections, and the steps'
+// builds reuse the grid's candidate buffers.
 constexpr std::uint64_t kOneLevelDeviceBodies = std::uint64_t(1) << 21;
 
 BroadPhase choose_broad_phase(const Bounds& b, Precision, bool device, bool skin) {

@@ -75,6 +75,6 @@ inline constexpr std::uint64_t kBruteBodies = 32;
 inline constexpr double kLevelsSpread = 4;
 inline constexpr double kOccupancyPerLevel = 64;
 inline constexpr double kOccupancyPerLevelDevice = 4;
-inline constexpr double kOneLevelContactsPerBody = 1.5;
+inline constexpr double kOneLevelContactsPerBody = 1.75;
 
 }  // namespace cg

@@ -181,7 +181,7 @@ Subcommand add_detect(CLI::App& app) {
        "auto | grid (Le Grand's uniform grid) | levels (a grid per size class: any size "
        "distribution) | sweep (Baraff's sort and sweep) | brute (every pair): auto picks brute for "
        "a few dozen bodies, levels where the largest radius exceeds 4x the mean and the grid's cells "
-       "would be crowded (and on CUDA for 2^21+ bodies of one size class without a skin, below 1.5 "
+       "would be crowded (and on CUDA for 2^21+ bodies of one size class without a skin, below 1.75 "
        "expected contacts a body), else grid; the "
        "contacts are the same bits whichever runs")
       ->transform(enum_names(k_broad_phases))
