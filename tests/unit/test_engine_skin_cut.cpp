@@ -136,6 +136,46 @@ TYPED_TEST(EngineSkinCutTest, TurningEllipsoidsEqualFreshDetection) {
   EXPECT_EQ(same_rows(got, fresh.detect(s.view())), "identical");
 }
 
+// A scene of the cut with spheres in it (9 ellipsoids in 10: sphere and sphere–ellipsoid pairs stay
+// uncut): bodies move and turn, spheres grow, now and then an ellipsoid's smaller semi-axes change (its
+// bounding radius kept: no growth); every call equals a fresh detection, and on the device the CPU's.
+TYPED_TEST(EngineSkinCutTest, MixedSceneOfTheCutEqualsFreshDetection) {
+  using Real = typename TypeParam::Real;
+  const double skin = 0.1;
+  Engine<Real> engine(options_for(TypeParam::backend, skin)), fresh(options_for(TypeParam::backend, 0));
+  Engine<Real> host(options_for(Backend::cpu, skin));
+  ShapeScene s = make_scene("skin cut mixed", 9175, 900, 0.9, 11.0);
+  std::mt19937_64 rng(9176);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int call = 0; call < 16; ++call) {
+    const std::string at = s.name + " call " + std::to_string(call);
+    const Contacts<Real> got = engine.detect(s.view());
+    ASSERT_EQ(same_rows(got, fresh.detect(s.view())), "identical") << at;
+    if (TypeParam::backend == Backend::cuda) {
+      ASSERT_EQ(same_rows(got, host.detect(s.view())), "identical") << at;
+      EXPECT_EQ(engine.stats().candidates, host.stats().candidates) << at;
+    }
+    for (std::size_t i = 0; i < s.p.size(); ++i) {
+      s.p[i] = s.p[i] + Vec3<double>{0.003 * u(rng), 0.003 * u(rng), 0.003 * u(rng)};
+      if (s.shape[i] == Shape::sphere) {
+        s.r[i] += 0.002 * (u(rng) + 1);
+        continue;
+      }
+      Quat<double>& q = s.q[i];
+      q = {q.w + 0.004 * u(rng), q.x + 0.004 * u(rng), q.y + 0.004 * u(rng), q.z + 0.004 * u(rng)};
+      const double k = 1 / std::sqrt(q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z);
+      q = {q.w * k, q.x * k, q.y * k, q.z * k};
+      if (call % 5 == 4 && i % 50 == 0) {  // the smallest semi-axis grows by a tenth at most
+        Vec3<double>& e = s.axes[i];
+        double& least = e.x <= e.y && e.x <= e.z ? e.x : (e.y <= e.z ? e.y : e.z);
+        least = std::min(s.r[i], 1.1 * least);
+      }
+    }
+  }
+  EXPECT_GE(engine.stats().candidate_reuses, 4u);
+  EXPECT_GE(engine.stats().candidate_builds, 4u) << "the semi-axes' changes rebuild";
+}
+
 // CONTACTGRID_SKIN_CUT=0: a build keeps every pair of inflated bounding spheres (the former list,
 // counted here by brute force up to the inflation's rounding margin, < 10^-4); the cut keeps fewer,
 // the same rows.
