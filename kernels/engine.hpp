@@ -83,7 +83,9 @@ struct EngineOptions {
   // cell edge grows to cover the inflated radii), and a later call on the same bodies (same count,
   // ids, report mask and shape presence) whose centres moved by at most d and radii grew by at most g
   // since that build, 2·(d + g) <= skin, skips entries/sort/pairs/order and runs pack + narrow over
-  // the kept list. Either way the contacts are those of a skin-0 detection, bit for bit.
+  // the kept list (in scenes of the centre cut the list is also cut by the centre line with the skin
+  // as its margin, and d counts turns: core/centre_cut.hpp). Either way the contacts are those of a
+  // skin-0 detection, bit for bit.
   double skin = 0;
   // Contact identity across calls (docs/FORMAT.md §2's history fields; core/history.hpp): every call's
   // contacts carry age and previous_row against this engine's previous call (the first call, and the

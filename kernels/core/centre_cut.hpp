@@ -31,7 +31,29 @@
 //
 // Spheres, ellipsoids with three equal semi-axes (the sphere–ellipsoid path, which has no centre-line
 // test), and sphere pairs are never cut: their CutShape is NaN, and a NaN gap is no gap.
-// A skin (EngineOptions::skin) keeps the bounding spheres: its candidates must outlast rotations.
+//
+// A skin (EngineOptions::skin s, core/skin.hpp; CONTACTGRID_SKIN_CUT=0 keeps the bounding spheres
+// alone): a build cuts with the skin as the cut's margin (CentreCut::skin = 2·inflation >= s), and the
+// check counts rotations. Why the list then still holds every contact:
+//   - the centre-line gap g = len − h_a(u) − h_b(u) (u the unit centre line, h the support function)
+//     bounds the distance of the two bodies from below: they lie in the slabs u·x <= u·a + h_a(u) and
+//     u·x >= u·b − h_b(u), g apart, and a projection is 1-Lipschitz;
+//   - a body whose every point moves by at most m_i changes every distance to it by at most m_i. A rigid
+//     motion with centre translation t_i and rotation q q0⁻¹ of angle θ_i about the centre moves a point
+//     at distance <= ρ_i from it (ρ_i the bounding radius, the largest semi-axis) by at most
+//     m_i = t_i + 2ρ_i·sin(θ_i/2), and sin(θ_i/2) = |vector part of q q0⁻¹| for unit quaternions
+//     (turned_motion, below; the check's maximum of it is the motion, Motion::displacement);
+//   - so a pair the build cuts (gap > s + the cut's margin) is, at a later call whose check passed
+//     (2·max m_i <= s, semi-axes and kinds unchanged: Motion::shape_changed), apart by more than the
+//     cut's margin — 2^-10 of the (inflated, so larger) radii and the length, and the coordinate
+//     term widened by 8s, which covers the move of both bodies and of the frame's origin (the bounds'
+//     low corner, <= s/2 per axis each: |δ|₁ <= 3s a body). Apart by that much the narrow rejects the
+//     pair (as two bodies of disjoint cut boxes, cut_box below: the centre line, PW's F >= (1 + 2^-10)²
+//     before any solve, or a converged solve of a separated pair): the rows of every reuse are a fresh
+//     detection's, bit for bit (tests: EngineSkinTest.*Cut*).
+// The float skin's rounding (relative ε32) and the double motion's (a few ε64) are far inside the 2^-10
+// term. The cells of a skin's build stay those of the inflated bounding spheres (cut_box depends on
+// the orientation; the pair stage's sphere test of the inflated radii covers the translation).
 #include <cstdint>
 #include <limits>
 
@@ -74,8 +96,11 @@ CG_HD float cut_support(const CutShape& c, float x, float y, float z) {
 // centre difference is taken in Real (the broad phase's own), then the cut runs in float: its rounding
 // (relative, a few ε32) is covered by the 2^-10 term; the coordinate term is of the broad phase's
 // rounding, ε_Real.
+// `skin`: a skin's build (above): the gap must also exceed the skin, the coordinate term covers 8·skin
+// more (0: a fresh call's cut, the same arithmetic as without it).
 template <class Real>
-CG_HD bool cut_apart(const Sphere<Real>& sa, const Sphere<Real>& sb, const CutShape& ca, const CutShape& cb) {
+CG_HD bool cut_apart(const Sphere<Real>& sa, const Sphere<Real>& sb, const CutShape& ca, const CutShape& cb,
+                     float skin = 0.0f) {
   const float x = static_cast<float>(sa.x - sb.x), y = static_cast<float>(sa.y - sb.y),
               z = static_cast<float>(sa.z - sb.z);
   const float len2 = x * x + y * y + z * z;
@@ -88,8 +113,26 @@ CG_HD bool cut_apart(const Sphere<Real>& sa, const Sphere<Real>& sb, const CutSh
     return (s.x < 0 ? -s.x : s.x) + (s.y < 0 ? -s.y : s.y) + (s.z < 0 ? -s.z : s.z);
   };
   const float size = static_cast<float>(sa.r + sb.r);
-  const float coords = static_cast<float>(Real(4) * std::numeric_limits<Real>::epsilon() * (l1(sa) + l1(sb)));
-  return gap > 0x1p-10f * (size + len) + coords * (1.0f + size / len);
+  const float coords = static_cast<float>(Real(4) * std::numeric_limits<Real>::epsilon() *
+                                          (l1(sa) + l1(sb) + Real(8) * static_cast<Real>(skin)));
+  return gap > skin + (0x1p-10f * (size + len) + coords * (1.0f + size / len));
+}
+
+// A body's motion bound of the check of a skin's cut list (above): its centre moved by (dx, dy, dz)
+// and it turned from orientation q0 to q (w, x, y, z; any norm: sin(θ/2) = |v(q q0*)| / (|q| |q0|)),
+// `radius` its bounding radius: every point of it moved by at most the result. In double, the same
+// operations on both backends.
+CG_HD double turned_motion(double dx, double dy, double dz, double radius, const double* q,
+                           const double* q0) {
+  // the vector part of q q0*: w0·v − w·v0 − v × v0
+  const double vx = q0[0] * q[1] - q[0] * q0[1] - (q[2] * q0[3] - q[3] * q0[2]);
+  const double vy = q0[0] * q[2] - q[0] * q0[2] - (q[3] * q0[1] - q[1] * q0[3]);
+  const double vz = q0[0] * q[3] - q[0] * q0[3] - (q[1] * q0[2] - q[2] * q0[1]);
+  const double n2 = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]) *
+                    (q0[0] * q0[0] + q0[1] * q0[1] + q0[2] * q0[2] + q0[3] * q0[3]);
+  double s2 = (vx * vx + vy * vy + vz * vz) / n2;
+  if (!(s2 <= 1.0)) s2 = 1.0;  // (rounding, or a NaN: the largest turn)
+  return cg_sqrt(dx * dx + dy * dy + dz * dz) + 2.0 * radius * cg_sqrt(s2);
 }
 
 // The cells of a body in the scenes of the centre cut: the box of its shape, not of its bounding sphere.
@@ -127,12 +170,14 @@ CG_HD BodyCells cut_cells(const Sphere<Real>& s, const CutShape& c, const GridPa
 // centre line does not prove the shapes apart (refine). The device's pair walk takes the two apart —
 // the coarse test in its hot loop, refine over the pairs it found after it (cuda/pairs.cuh): inside
 // the loop the cut's registers would slow every test (BENCHMARKS.md §3).
+// `skin`: a skin's build (its spheres inflated): 2·inflation, 0 for a fresh call (cut_apart).
 struct CentreCut {
   using Coarse = SpheresTouch;
   const CutShape* cut;
+  float skin = 0.0f;
   template <class Real>
   CG_HD bool refine(const Sphere<Real>& sa, const Sphere<Real>& sb, std::uint32_t a, std::uint32_t b) const {
-    return !cut_apart(sa, sb, cut[a], cut[b]);
+    return !cut_apart(sa, sb, cut[a], cut[b], skin);
   }
   template <class Real>
   CG_HD bool operator()(const Sphere<Real>& sa, const Sphere<Real>& sb, std::uint32_t a,

@@ -236,13 +236,15 @@ CG_HD constexpr bool candidates_touch(CandidateFilter f) { return f != Candidate
 // one (spheres_touch unless a test or knob forces another) made fit for the scene — with ellipsoids, the
 // bounding spheres, less the centre cut (core/centre_cut.hpp) where at least 4 bodies in 5 are
 // ellipsoids: it cuts pairs of two general ellipsoids alone, and its shapes cost every body a gather into
-// cell order, more than half-sphere scenes gain (BENCHMARKS.md §3); with a skin,
-// the (inflated) bounding spheres alone, whose list must outlast the bodies' motion and rotations.
+// cell order, more than half-sphere scenes gain (BENCHMARKS.md §3). With a skin the (inflated) bounding
+// spheres, whose list must outlast the bodies' motion: in the same scenes less the centre cut with the
+// skin as its margin (core/centre_cut.hpp: its check then counts rotations), unless `skin_cut` is
+// false (CONTACTGRID_SKIN_CUT=0, core/skin.hpp: skin_cut_enabled), the bounding spheres alone.
 CG_HD constexpr CandidateFilter scene_filter(CandidateFilter requested, std::uint64_t ellipsoids,
-                                             std::uint64_t bodies, bool skin) {
+                                             std::uint64_t bodies, bool skin, bool skin_cut) {
   if (requested != CandidateFilter::spheres_touch || !(ellipsoids > 0 || skin)) return requested;
-  return !skin && 5 * ellipsoids >= 4 * bodies ? CandidateFilter::centre_cut
-                                               : CandidateFilter::bounding_spheres;
+  return (!skin || skin_cut) && 5 * ellipsoids >= 4 * bodies ? CandidateFilter::centre_cut
+                                                             : CandidateFilter::bounding_spheres;
 }
 
 }  // namespace cg

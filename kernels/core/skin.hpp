@@ -13,8 +13,14 @@
 // where C is the build's coordinate bound plus the skin; a later call whose bound exceeds that
 // (a far-away explicit frame) rebuilds. The displacement is measured in double (relative error a few
 // double ulps, far inside the margin).
+//
+// Scenes of the centre cut (core/narrow.hpp: scene_filter) cut the list with the skin as the cut's
+// margin (core/centre_cut.hpp): then d is the largest move of any point of a body (its centre's and
+// its rotation's, turned_motion), and a change of a body's kind or semi-axes rebuilds.
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
 #include <limits>
 
 namespace cg {
@@ -24,11 +30,19 @@ struct Motion {
   double displacement = 0;      // max |x_i − x_i,ref|
   double growth = 0;            // max(0, max r_i − r_i,ref)
   bool report_changed = false;  // the report mask differs from the build's
+  bool shape_changed = false;   // a cut list: some body's kind or semi-axes differ from the build's
 };
 
 // True when a list built with `skin` still holds every contact.
 inline bool skin_covers(const Motion& m, double skin) {
-  return !m.report_changed && 2 * (m.displacement + m.growth) <= skin;
+  return !m.report_changed && !m.shape_changed && 2 * (m.displacement + m.growth) <= skin;
+}
+
+// Whether a skin's list is cut by the centre line in the scenes of the centre cut (scene_filter):
+// CONTACTGRID_SKIN_CUT=0 keeps every pair of inflated bounding spheres (the former list; the same rows).
+inline bool skin_cut_enabled() {
+  const char* v = std::getenv("CONTACTGRID_SKIN_CUT");
+  return v == nullptr || std::strcmp(v, "0") != 0;
 }
 
 // The radius inflation of the candidate filter for a list built with `skin` (see the file comment):

@@ -102,11 +102,13 @@ class CudaBackend {
     r.filter = m_tuning.candidates;
     // Scenes with ellipsoids: bounding-sphere candidates less the centre cut (core/centre_cut.hpp), the
     // narrow stage decides (shapes.cuh); a skin (EngineOptions::skin): inflated bounding-sphere
-    // candidates, kept across calls (scene_filter, core/narrow.hpp). mixed, sphere
+    // candidates, kept across calls, less the centre cut with the skin as its margin (scene_filter,
+    // core/narrow.hpp; CONTACTGRID_SKIN_CUT=0: not cut). mixed, sphere
     // scenes: the pair stage takes fp64's decision on its enlarged floats (Fp64Touch, pairs.cuh), so
     // the candidates are fp64's contacts and the narrow stage writes one row each.
     const bool skin = job.skin > 0;
-    r.filter = scene_filter(r.filter, job.ellipsoids, n64, skin);
+    r.filter = scene_filter(r.filter, job.ellipsoids, n64, skin, skin_cut_enabled());
+    if (skin && r.filter == CandidateFilter::centre_cut) r.cut_skin = static_cast<float>(2 * job.inflation);
     // the resident steps' fp32 spheres: the kept candidates and the spheres in cell order (cell_order.cuh)
     const bool cell_order = cell_order_wanted(r);
     r.cell_order = cell_order;

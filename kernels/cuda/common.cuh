@@ -62,8 +62,10 @@ struct Counters {
   // the ellipsoid solver's work (narrow_shapes.cuh: NarrowFlags, summed; the largest by atomicMax)
   unsigned long long solver_runs, evaluations, max_evaluations;
   // skin check (cuda/skin.cuh): the bits of the largest squared displacement and radius growth
-  // (non-negative doubles order as their bits), and whether a report byte changed
+  // (non-negative doubles order as their bits), and whether a report byte changed; a cut list: the
+  // largest move of a body's point (turned_motion) and whether a kind or semi-axes changed
   unsigned long long skin_moved_sq, skin_growth, skin_report_changed;
+  unsigned long long skin_turned, skin_shape_changed;
   CellWork cell_work;            // written (not added to) by the estimate's reduction
   unsigned long long long_runs;  // order: runs of equal a left to the segmented sort (order.cuh)
 };

@@ -202,7 +202,7 @@ void levels_estimate(RunState<Real, Key, Narrow>& r) {
     CG_CUDA_CHECK_LAUNCH("level_begin");
     zero_pair_counters(r);
     cuda::cross_level_bound_kernel<Real, Key><<<r.nb, cuda::kBlock, 0, r.st>>>(
-        r.d_cell_spheres, r.d_cell_cut, r.d_lo_key, r.n, lp, r.keys.Current(), ic.extra, r.d_counters);
+        r.d_cell_spheres, r.box_cut(), r.d_lo_key, r.n, lp, r.keys.Current(), ic.extra, r.d_counters);
     CG_CUDA_CHECK_LAUNCH("cross_level_bound");
     r.read_counters();
     e.tests += r.h_counters->tests;
@@ -219,8 +219,8 @@ void levels_stages(RunState<Real, Key, Narrow>& r) {
   cudaStream_t st = r.st;
   const LevelParams<Real>& lp = r.job.levels;
   broad_input(r);
-  cuda::level_cells_kernel<Real, Key><<<r.nb, kBlock, 0, st>>>(r.d_cell_spheres, r.d_cell_cut, r.d_report,
-                                                               r.n, lp, r.d_lo_key, r.d_ctrl, r.d_body_totals,
+  cuda::level_cells_kernel<Real, Key><<<r.nb, kBlock, 0, st>>>(r.d_cell_spheres, r.box_cut(), r.d_report, r.n,
+                                                               lp, r.d_lo_key, r.d_ctrl, r.d_body_totals,
                                                                r.d_counters);
   CG_CUDA_CHECK_LAUNCH("level_cells");
   cub_run(ws, "entries", [&](void* t, std::size_t& b) {
@@ -264,7 +264,7 @@ void levels_stages(RunState<Real, Key, Narrow>& r) {
   zero_pair_counters(r);
   with_pair_test(r, [&](auto test) {
     cuda::cross_level_kernel<false, Real, Key, decltype(test)><<<r.nb, kBlock, 0, st>>>(
-        r.d_cell_spheres, r.d_cell_cut, r.d_ctrl, r.d_report, r.d_lo_key, r.n, lp, r.keys.Current(),
+        r.d_cell_spheres, r.box_cut(), r.d_ctrl, r.d_report, r.d_lo_key, r.n, lp, r.keys.Current(),
         r.body.Current(), ic.extra, ic.counts, nullptr, nullptr, nullptr, r.d_counters, test);
   });
   CG_CUDA_CHECK_LAUNCH("cross_level_count");
@@ -284,7 +284,7 @@ void levels_stages(RunState<Real, Key, Narrow>& r) {
     }
     with_pair_test(r, [&](auto test) {
       cuda::cross_level_kernel<true, Real, Key, decltype(test)>
-          <<<r.nb, kBlock, 0, st>>>(r.d_cell_spheres, r.d_cell_cut, r.d_ctrl, r.d_report, r.d_lo_key, r.n, lp,
+          <<<r.nb, kBlock, 0, st>>>(r.d_cell_spheres, r.box_cut(), r.d_ctrl, r.d_report, r.d_lo_key, r.n, lp,
                                     r.keys.Current(), r.body.Current(), ic.extra, ic.counts, ic.offsets,
                                     store + np_in, store + np + np_in, r.d_counters, test);
     });

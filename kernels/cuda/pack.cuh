@@ -93,8 +93,8 @@ struct PackInput {
 // (cell_key of lo & ~1, type bits 0) and per block the number of bodies having a cell of each
 // type (type_blocks[t * gridDim.x + blockIdx.x]; totals added to c->type_entries[t]).
 // CandidateFilter::centre_cut (cut != null): the cut shape of each body (core/centre_cut.hpp) from its
-// packed shape (gathered, or with kPack the one just made), in cell order, and its cells from the box
-// of its shape (cut_cells).
+// packed shape (gathered, or with kPack the one just made), in cell order, and (`boxes`: no skin) its
+// cells from the box of its shape (cut_cells).
 template <class Real, class Key, class Packed, bool kPack>
 __global__ void __launch_bounds__(kBlock)
     reorder_kernel(Sphere<Real>* __restrict__ spheres, std::uint32_t n, GridParams<Real> g,
@@ -103,7 +103,7 @@ __global__ void __launch_bounds__(kBlock)
                    std::uint32_t* __restrict__ block_entries, Counters* __restrict__ c,
                    Key* __restrict__ base, std::uint32_t* __restrict__ type_blocks,
                    const std::uint8_t* __restrict__ report, Real inflation,
-                   const PackedShape<Packed>* __restrict__ shapes, CutShape* __restrict__ cut,
+                   const PackedShape<Packed>* __restrict__ shapes, CutShape* __restrict__ cut, bool boxes,
                    Key* __restrict__ lo_key, PackInput<Packed> in) {
   using Reduce = cub::BlockReduce<std::uint32_t, kBlock>;
   __shared__ typename Reduce::TempStorage tmp;
@@ -135,7 +135,7 @@ __global__ void __launch_bounds__(kBlock)
     if (cut) {
       const CutShape cs = cut_shape(shape);
       cut[j] = cs;
-      bc = cut_cells(s, cs, g);
+      bc = boxes ? cut_cells(s, cs, g) : body_cells(s, g);
     } else {
       bc = body_cells(s, g);
     }
@@ -269,7 +269,8 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
     kernel<<<nb, kBlock, 0, st>>>(
         r.d_spheres, n, r.g, sorted, r.d_cell_spheres == r.d_spheres ? nullptr : r.d_cell_spheres, r.d_ctrl,
         r.d_perm, r.d_body_totals, r.d_counters, r.d_base, r.type_passes ? r.d_type_totals : nullptr,
-        r.d_report, static_cast<Real>(r.job.inflation), r.d_shapes, r.d_cell_cut, r.d_lo_key, in);
+        r.d_report, static_cast<Real>(r.job.inflation), r.d_shapes, r.d_cell_cut, r.box_cut() != nullptr,
+        r.d_lo_key, in);
   };
   if (pack_here)
     reorder(cuda::reorder_kernel<Real, Key, Narrow, true>, nullptr,

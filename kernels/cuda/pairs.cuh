@@ -308,7 +308,7 @@ namespace cg::detail {
 template <class Real, class Key, class Narrow, class Launch>
 void with_pair_test(const RunState<Real, Key, Narrow>& r, Launch&& launch) {
   if (!candidates_touch(r.filter)) return launch(CellRule{});
-  if (r.filter == CandidateFilter::centre_cut) return launch(CentreCut{r.d_cell_cut});
+  if (r.filter == CandidateFilter::centre_cut) return launch(CentreCut{r.d_cell_cut, r.cut_skin});
   if constexpr (!std::is_same_v<Real, Narrow>)
     if (r.filter == CandidateFilter::spheres_touch)
       return launch(Fp64Touch{{nullptr, r.d_pos, r.d_rad, r.origin}, float(r.g.radius_margin), r.d_perm});

@@ -52,8 +52,13 @@ struct RunState {
   ShapeRowsView shape_rows{};               // the world shape rows packed from (DEVICE): fp32's fp64 pairs
   Sphere<Real>* d_cell_spheres = nullptr;   // cell order
   CutShape* d_cell_cut = nullptr;           // cell order; CandidateFilter::centre_cut only (pack.cuh)
-  std::uint32_t* d_perm = nullptr;          // cell order → input index
-  bool renumbered = false;                  // the bodies are in cell order (else d_perm is the identity)
+  // a skin's build of the centre cut: the cut's margin (CentreCut::skin, 2·inflation; 0 without a skin)
+  float cut_skin = 0;
+  // the cut shapes whose boxes give the bodies' cells (cut_cells): a fresh call's centre cut; a skin's
+  // build keeps the inflated bounding spheres' cells (core/centre_cut.hpp)
+  const CutShape* box_cut() const { return cut_skin > 0 ? nullptr : d_cell_cut; }
+  std::uint32_t* d_perm = nullptr;  // cell order → input index
+  bool renumbered = false;          // the bodies are in cell order (else d_perm is the identity)
   // the pair stage's permutation: none where it is the identity (cuda/pairs.cuh: input_index)
   const std::uint32_t* pair_perm() const { return renumbered ? d_perm : nullptr; }
   std::uint8_t* d_ctrl = nullptr;  // cell order

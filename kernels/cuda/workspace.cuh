@@ -53,6 +53,8 @@
 //                                              build's pair stage writes it, cuda/pairs.cuh) and the
 //                                              bodies' state it was built from (cuda/skin.cuh);
 //                                              owned across calls, never aliased
+//   ref_kind, ref_semi,    between calls       a kept list cut by the centre line (cuda/skin.cuh):
+//   ref_orient                                 the shape rows it was built from; owned, never aliased
 //   kept_perm, kept_inv    between calls       the kept list of a cell-order skin (cuda/cell_order.cuh):
 //                                              the cell order's input indices and each input index's
 //                                              cell place; owned, never aliased
@@ -100,7 +102,7 @@ struct Workspace {
   Bytes entry_blocks, pairs, out, temp, counters, partials;
   Bytes res_pos, res_rad, res_report, res_shape, res_semi, res_orient;
   Bytes shape_kind, shape_semi, shape_orient, shapes, cell_cut, normals, narrow_list, narrow_carry;
-  Bytes kept_pairs, ref_pos, ref_rad, ref_report;
+  Bytes kept_pairs, ref_pos, ref_rad, ref_report, ref_kind, ref_semi, ref_orient;
   Bytes kept_perm, kept_inv, canon_keys[2], canon_index[2], canon_field;
   Bytes res_id, hist_keys[2], hist_age[2];
   Bytes res_mark;
@@ -117,6 +119,7 @@ struct Workspace {
   std::size_t kept_stride = 0;   // the kept list's b array starts this many u32 after its a array
   bool kept_reported = false;    // the kept list was built with a report mask
   bool kept_cell_order = false;  // the kept list is in cell order (cuda/cell_order.cuh)
+  bool kept_cut = false;         // the kept list is cut by the centre line (its check counts turns)
   bool rows_cell_order = false;  // the last call's rows are in the kept cell order, not (a, b) order
 
   int device = 0;                           // for messages
@@ -136,7 +139,8 @@ struct Workspace {
                            &hist_age[0], &hist_age[1],   &broad_counts,  &broad_pairs,    &res_mark,
                            &kept_perm,   &canon_keys[0], &canon_keys[1], &canon_index[0], &canon_index[1],
                            &canon_field, &row_lists[0],  &row_lists[1],  &row_lists[2],   &row_lists[3],
-                           &row_pack,    &row_selected,  &kept_inv})
+                           &row_pack,    &row_selected,  &kept_inv,      &ref_kind,       &ref_semi,
+                           &ref_orient})
       s += b->bytes();
     return s;
   }

@@ -87,9 +87,10 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   // candidates are fp64's contacts. A list kept with a skin (inflated spheres): the narrow stage decides.
   const bool shapes = job.ellipsoids > 0;
   const bool skin = job.skin > 0;
-  const CandidateFilter filter = scene_filter(be.candidates, job.ellipsoids, job.bodies.size(), skin);
+  const CandidateFilter filter =
+      scene_filter(be.candidates, job.ellipsoids, job.bodies.size(), skin, skin_cut_enabled());
   bool reuse = false;
-  if (skin && job.check) {
+  if (skin && job.check) {  // (a list cut by the centre line: rotations count, core/centre_cut.hpp)
     const Motion m = host::measure_motion(job.bodies, be.kept, nt);
     stats.skin_displacement = m.displacement;
     stats.skin_growth = m.growth;
@@ -99,10 +100,11 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
 
   host::PackedBodies<Broad> bodies;
   std::vector<PackedShape<Narrow>> packed_shapes;
-  // the grid's cells: of the bounding spheres (pack), or in centre-cut scenes of the shapes' boxes
-  // (shape_cells); the other broad phases make their own (levels) or none
+  // the grid's cells: of the bounding spheres (pack), or in centre-cut scenes without a skin of the
+  // shapes' boxes (shape_cells); the other broad phases make their own (levels) or none
   const bool grid = job.broad == BroadPhase::grid;
   const bool cut = filter == CandidateFilter::centre_cut && !reuse;
+  const bool box_cells = cut && !skin;
   // fp64 and mixed sphere scenes: the narrow stage reads each contact's second body at random, from
   // pack's world rows (one cache line a body) rather than the input's position and radius arrays
   host::Array<Sphere<double>> world_rows;
@@ -114,13 +116,14 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   // in place of its cells (a centre cut's cells come from the shapes, the cell list's fallback later)
   const bool by_cells =
       grid && !reuse && host::cell_sort_wanted(job.grid, job.bodies.size(), !job.bodies.report.empty());
-  const bool pack_cells = !reuse && !cut && grid && !list_first;
+  const bool pack_cells = !reuse && !box_cells && grid && !list_first;
   host::pack(job.bodies, job.plan.frame.origin, job.grid, static_cast<Broad>(job.inflation), pack_cells, nt,
              bodies, rows_packed ? &world_rows : nullptr,
              pack_cells && by_cells && host::cell_sort_packs_blocks());
   if (shapes) host::pack_shapes(job.bodies, nt, packed_shapes);
   if (cut) host::cut_shapes(packed_shapes, nt, bodies.cut);
-  if (cut && grid) host::shape_cells(job.grid, nt, bodies);
+  if (cut && skin) bodies.cut_skin = static_cast<float>(2 * job.inflation);  // (core/centre_cut.hpp)
+  if (box_cells && grid) host::shape_cells(job.grid, nt, bodies);
   timer.lap(EngineStage::pack);
 
   const NarrowBodies<Narrow> world =

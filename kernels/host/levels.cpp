@@ -14,7 +14,7 @@ void level_cells(const LevelParams<Real>& lp, int threads, PackedBodies<Real>& p
   p.cells.resize(n);
   p.ctrl.resize(n);
   p.count.resize(n);
-  const bool cut = !p.cut.empty();
+  const bool cut = p.box_cells();
 #pragma omp parallel for num_threads(threads) schedule(static) if (n > k_parallel_min)
   for (std::size_t i = 0; i < n; ++i) {
     const Sphere<Real> s0 = p.spheres[i];
@@ -68,7 +68,7 @@ std::uint64_t cross_level_estimate(const Entries<Key>& e, const PackedBodies<Rea
   if (lp.count < 2) return 0;
   std::size_t begin[kMaxLevels + 1];
   level_runs(e, lp, begin);
-  const bool cut = !p.cut.empty();
+  const bool cut = p.box_cells();
   const std::size_t n = p.spheres.size();
   std::uint64_t tests = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(+ : tests) if (n > k_parallel_min)
@@ -92,7 +92,7 @@ std::uint64_t cross_level_candidates(const Entries<Key>& e, const PackedBodies<R
   const std::uint8_t* r = report.empty() ? nullptr : report.data();
   std::size_t begin[kMaxLevels + 1];
   level_runs(e, lp, begin);
-  const bool cut = !p.cut.empty();
+  const bool cut = p.box_cells();
   return with_pair_test(filter, p, fp64, [&](const auto& test) {
     return collect_pairs(p.spheres.size(), 1024, threads, out, [&](std::size_t i, auto&& emit) {
       const auto a = static_cast<std::uint32_t>(i);

@@ -51,7 +51,12 @@ struct PackedBodies {
   Array<std::uint8_t> ctrl;    // control_bits (its spill bits give the entry count)
   Array<std::uint32_t> count;  // entry_count (level_entries reads it; pack leaves it empty)
   Array<CutShape> cut;         // CandidateFilter::centre_cut: cut_shape() of every body
-  Array<std::uint8_t> level;   // BroadPhase::levels: the level of every body (level_cells)
+  // a skin's build of the centre cut: its margin (CentreCut::skin, 2·inflation); its cells stay the
+  // inflated bounding spheres' (core/centre_cut.hpp)
+  float cut_skin = 0;
+  Array<std::uint8_t> level;  // BroadPhase::levels: the level of every body (level_cells)
+  // the cells of the shapes' boxes (cut_cells): a fresh call's centre cut
+  bool box_cells() const { return !cut.empty() && !(cut_skin > 0); }
 };
 
 // (cell key, body) entries; after fill_entries body-ascending, or grouped by the top digit of the key
@@ -109,10 +114,15 @@ struct KeptCandidates {
   std::vector<Vec3<double>> position;
   std::vector<double> radius;
   std::vector<std::uint8_t> report;
+  // a list cut by the centre line (pairs.filter centre_cut): the shapes it was built from
+  std::vector<Shape> shape;
+  std::vector<Vec3<double>> semi_axes;
+  std::vector<Quat<double>> orientation;
 };
 
-// skin: what moved since `kept` was built (same body count): max |x − x_ref|, max radius growth,
-// whether the report mask changed. keep_candidates: `c` (moved, not copied: the narrow stage then
+// skin: what moved since `kept` was built (same body count): max |x − x_ref| (a cut list: the largest
+// move of a body's point, turned_motion), max radius growth, whether the report mask or (a cut list)
+// a body's kind or semi-axes changed. keep_candidates: `c` (moved, not copied: the narrow stage then
 // reads the kept list) and the state of `bodies` into `kept`.
 Motion measure_motion(const BodiesView& bodies, const KeptCandidates& kept, int threads);
 void keep_candidates(const BodiesView& bodies, CandidatePairs&& c, KeptCandidates& kept);
@@ -295,7 +305,7 @@ template <class Real, class F>
 decltype(auto) with_pair_test(CandidateFilter filter, const PackedBodies<Real>& p,
                               const NarrowBodies<double>* fp64, F&& f) {
   if (!candidates_touch(filter)) return f(CellRule{});
-  if (filter == CandidateFilter::centre_cut) return f(CentreCut{p.cut.data()});
+  if (filter == CandidateFilter::centre_cut) return f(CentreCut{p.cut.data(), p.cut_skin});
   if constexpr (std::is_same_v<Real, float>)
     if (fp64 != nullptr && filter == CandidateFilter::spheres_touch)  // mixed: fp64's decision
       return f(Fp64Touch{*fp64, fp64->broad_margin, nullptr});
