@@ -80,9 +80,19 @@ inline std::string describe_difference(const std::vector<std::string>& fields) {
   return s;
 }
 
-// "identical" or the differing fields of the rows [first, first + got.size()) of `want`.
+// "identical" or how two whole sets differ: "rows" when their row counts differ (a set that lost its
+// last rows is not a prefix match), and the differing fields of the rows they share.
 template <class Real, class Wide = Real>
-std::string compare_contacts(const Contacts<Real>& got, const Contacts<Wide>& want, std::size_t first = 0) {
+std::string compare_contacts(const Contacts<Real>& got, const Contacts<Wide>& want) {
+  std::vector<std::string> differ = differing_fields(got, want, 0);
+  if (got.size() < want.size()) differ.insert(differ.begin(), "rows");
+  return describe_difference(differ);
+}
+
+// "identical" or the differing fields of the rows [first, first + got.size()) of `want` (a window of
+// it: a piece of a whole set).
+template <class Real, class Wide = Real>
+std::string compare_contact_window(const Contacts<Real>& got, const Contacts<Wide>& want, std::size_t first) {
   return describe_difference(differing_fields(got, want, first));
 }
 

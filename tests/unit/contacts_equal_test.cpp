@@ -68,8 +68,14 @@ TEST(ContactsEqual, PresenceAndRowRanges) {
   EXPECT_EQ(optional.size(), kContactFieldCount - kBasicContactFieldCount);
   EXPECT_EQ(compare_rows(basic, 0, full, 0), "differ in full history");
   Contacts<float> tail = rows<float>(6, FieldSet::all());
-  EXPECT_EQ(compare_contacts(tail, full, 0), "identical");
-  EXPECT_NE(compare_contacts(tail, full, 1), "identical");  // rows 1 … 6 of a 6-row set: past the end
+  EXPECT_EQ(compare_contact_window(tail, full, 0), "identical");
+  EXPECT_NE(compare_contact_window(tail, full, 1), "identical");  // rows 1 … 6 of a 6-row set: past the end
+  // whole sets: a set that lost its last rows is not identical, either way round
+  const Contacts<float> five = rows<float>(5, FieldSet::all());
+  EXPECT_EQ(compare_contact_window(five, full, 0), "identical");
+  EXPECT_EQ(compare_contacts(five, full), "differ in rows");  // (the five rows are the six's first)
+  EXPECT_EQ(compare_contacts(full, five).substr(0, 14), "differ in rows");
+  EXPECT_EQ(compare_contacts(Contacts<float>{}, full).substr(0, 14), "differ in rows");
 }
 
 TEST(ContactsEqual, WiderRowsCompareRounded) {
