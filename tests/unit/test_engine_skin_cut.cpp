@@ -45,8 +45,8 @@ EngineOptions options_for(Backend backend, double skin) {
   return o;
 }
 
-// "identical" when `got` holds `want`'s rows, all of them (compare_contacts alone compares `got` with
-// the first rows of `want`).
+// "identical" when `got` holds `want`'s rows, all of them; else the two counts, or compare_contacts'
+// differing fields.
 template <class Real>
 std::string same_rows(const Contacts<Real>& got, const Contacts<Real>& want) {
   if (got.size() != want.size())
