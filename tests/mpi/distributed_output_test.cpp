@@ -27,6 +27,7 @@ namespace cg {
 namespace {
 
 using test::compare_contacts;
+using test::compare_contact_window;
 using testing::session;
 using testing::shared_path;
 using testing::write_shared;
@@ -81,7 +82,7 @@ void expect_rows_of(const Contacts<Real>& got, std::uint64_t first, const Contac
                     const std::string& what) {
   EXPECT_EQ(got.full, want.full) << what;
   EXPECT_LE(first + got.size(), want.size()) << what;
-  EXPECT_EQ(compare_contacts(got, want, first), "identical") << what;
+  EXPECT_EQ(compare_contact_window(got, want, first), "identical") << what;
 }
 
 // Runs ContactOutput::ranks mode and checks this rank's range, order, rows, first row and K; returns the
