@@ -19,6 +19,8 @@
 #     step (skin 0), each run's last step byte-identical (`contactgrid compare`) to a plain detect of
 #     the final scene, every run's pair hash the same;
 #  3. per run the builds' candidates (the trace's "build:" lines) and the summary's builds / reuses.
+# VARIANTS="now=- ren0=CONTACTGRID_CUDA_RENUMBER=0 old=CONTACTGRID_SKIN_CUT=0" also runs a skin build
+# without the bodies renumbered into cell order (pack.cuh: a fresh call of the cut keeps input order).
 # What to expect (BENCHMARKS §33, H100, old): fresh 54.1 ms (pairs 26.2, narrow 21.7 over 64 M
 # centre-cut candidates); old: a build 1.24x fresh, a reuse 35.2 ms over 137 M kept candidates, mean
 # detection 0.749x fresh. now: a build's candidates about the fresh call's 64 M plus a skin's worth
@@ -51,12 +53,13 @@ grep -E '^\[  FAILED  \] [A-Za-z]' "$OUT/unit.log" | head -20
 
 log "== 2. $N ellipsoids, drift 0.01, skin auto, $STEPS steps: now (cut) against old (CONTACTGRID_SKIN_CUT=0)"
 SCRATCH=${SCRATCH:-/dev/shm} KIND=ellipsoids UNIT=0 N=$N STEPS=$STEPS ROUNDS=1 PROFILE=0 \
-  VARIANTS="now=- old=CONTACTGRID_SKIN_CUT=0" BIN=$BIN OUT=$OUT/ellipsoids \
+  VARIANTS="${VARIANTS:-now=- old=CONTACTGRID_SKIN_CUT=0}" BIN=$BIN OUT=$OUT/ellipsoids \
   timeout 400 jobs/gpu_rebuild_check.sh >"$OUT/rebuild.log" 2>&1 || failed+=(rebuild_check)
 grep -vE '^  detect ' "$OUT/rebuild.log" | tail -40
 
 log "== 3. candidates of each build (trace) and the summary's lists"
-for t in now1 old1; do
+for v in ${VARIANTS:-now=- old=CONTACTGRID_SKIN_CUT=0}; do
+  t=${v%%=*}1
   f=$OUT/ellipsoids/steps_$t.log
   [ -f "$f" ] || { echo "$t: no log"; continue; }
   echo "-- $t: $(grep -hoE 'candidate lists: [^;]*' "$f" | head -1)"

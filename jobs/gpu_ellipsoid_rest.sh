@@ -61,6 +61,9 @@ bench "$FRAME" file --order file
 bench "$FRAME" cells
 # MORTON=1: also sorted along a Z-order curve of the cells (CONTACTGRID_SIMULATE_ORDER_KEY=morton)
 [ "${MORTON:-0}" = 1 ] && (export CONTACTGRID_SIMULATE_ORDER_KEY=morton; bench "$FRAME" cells_morton)
+# SKIN_CUT0=1: also with a skin's list of inflated bounding spheres alone (CONTACTGRID_SKIN_CUT=0, the
+# former list and check: turns do not count), the default being the list cut by the centre line
+[ "${SKIN_CUT0:-0}" = 1 ] && (export CONTACTGRID_SKIN_CUT=0; bench "$FRAME" cells_skin_cut0)
 stages() {  # FRAME LABEL [simulate options]: 30 steps with --stage-times
   [ "$STAGES" = 1 ] && [ -f "$1" ] || return 0
   local frame=$1 label=$2

@@ -31,6 +31,7 @@ struct Motion {
   double growth = 0;            // max(0, max r_i − r_i,ref)
   bool report_changed = false;  // the report mask differs from the build's
   bool shape_changed = false;   // a cut list: some body's kind or semi-axes differ from the build's
+  bool turned = false;          // a cut list: some ellipsoid's orientation differs from the build's
 };
 
 // True when a list built with `skin` still holds every contact.
@@ -44,6 +45,15 @@ inline bool skin_cut_enabled() {
   const char* v = std::getenv("CONTACTGRID_SKIN_CUT");
   return v == nullptr || std::strcmp(v, "0") != 0;
 }
+
+// Whether this build cuts its list (in the scenes of the centre cut): while no check of a cut list has
+// seen a body turn (`turning`, kept by the engine across calls). A cut list lasts while every point of
+// a body moves less than skin/2, turns included; the bounding spheres' list ignores turns. Where the
+// bodies turn as they move (a granular flow: simulate), the cut list is rebuilt every step or two and
+// the bounding spheres' list pays (2^22 settled ellipsoids on an H200: 77.4 steps/s cut, 92.8 not,
+// BENCHMARKS.md §34); where they only move (`detect --drift`) the cut's fewer candidates pay. The
+// decision follows each call's check, so both backends build the same list at the same call.
+inline bool skin_cut_wanted(bool turning) { return skin_cut_enabled() && !turning; }
 
 // The radius inflation of the candidate filter for a list built with `skin` (see the file comment):
 // `coordinate_bound` is the call's largest local coordinate magnitude plus the skin, `r_max` the

@@ -107,7 +107,7 @@ class CudaBackend {
     // scenes: the pair stage takes fp64's decision on its enlarged floats (Fp64Touch, pairs.cuh), so
     // the candidates are fp64's contacts and the narrow stage writes one row each.
     const bool skin = job.skin > 0;
-    r.filter = scene_filter(r.filter, job.ellipsoids, n64, skin, skin_cut_enabled());
+    r.filter = scene_filter(r.filter, job.ellipsoids, n64, skin, skin_cut_wanted(m_ws.skin_turning));
     if (skin && r.filter == CandidateFilter::centre_cut) r.cut_skin = static_cast<float>(2 * job.inflation);
     // the resident steps' fp32 spheres: the kept candidates and the spheres in cell order (cell_order.cuh)
     const bool cell_order = cell_order_wanted(r);
@@ -120,6 +120,10 @@ class CudaBackend {
     // checked and packed in one pass, skin_pack_cell_stage)
     const bool fused = cell_order && m_ws.kept_cell_order && !m_tuning.step_pack_separate;
     const bool reuse = fused ? skin_pack_cell_stage(r) : skin_stage(r) && m_ws.kept_cell_order == cell_order;
+    if (!reuse && r.filter == CandidateFilter::centre_cut && skin && !skin_cut_wanted(m_ws.skin_turning)) {
+      r.filter = CandidateFilter::bounding_spheres;  // this check saw a body turn (core/skin.hpp)
+      r.cut_skin = 0;
+    }
     // (scenes with ellipsoids: their shapes packed first; the broad phases but the grid: the spheres
     // alone, in input order, broad.cuh)
     if (reuse && cell_order) {

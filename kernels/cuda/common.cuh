@@ -63,9 +63,10 @@ struct Counters {
   unsigned long long solver_runs, evaluations, max_evaluations;
   // skin check (cuda/skin.cuh): the bits of the largest squared displacement and radius growth
   // (non-negative doubles order as their bits), and whether a report byte changed; a cut list: the
-  // largest move of a body's point (turned_motion) and whether a kind or semi-axes changed
+  // largest move of a body's point (turned_motion), whether a kind or semi-axes changed and whether
+  // an ellipsoid turned
   unsigned long long skin_moved_sq, skin_growth, skin_report_changed;
-  unsigned long long skin_turned, skin_shape_changed;
+  unsigned long long skin_turned, skin_shape_changed, skin_body_turned;
   CellWork cell_work;            // written (not added to) by the estimate's reduction
   unsigned long long long_runs;  // order: runs of equal a left to the segmented sort (order.cuh)
 };

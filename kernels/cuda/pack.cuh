@@ -226,10 +226,12 @@ void pack_stage(RunState<Real, Key, Narrow>& r, bool spheres_only) {
   // The renumbering pays only when the spheres do not stay in L2 anyway (the pair stage's gathers hit
   // it either way): when they outgrow the L2 (Tuning::renumber forces it). Scenes of the centre cut pay
   // it for the cut shapes too (their gather into cell order): with float spheres (fp32, mixed) it then
-  // costs more than the pair stage's locality saves, with fp64's 32-byte spheres less (BENCHMARKS.md §3).
+  // costs more than the pair stage's locality saves, with fp64's 32-byte spheres less (BENCHMARKS.md §3)
+  // — but for a skin's build (cut_skin), whose cells are the inflated bounding spheres' and whose walk
+  // tests more pairs a body than the shapes' boxes give a fresh call (§34).
   // Without it the bodies keep their input order (no result changes).
   const bool worth = r.n64 * sizeof(Sphere<Real>) > r.l2_bytes &&
-                     (r.filter != CandidateFilter::centre_cut || sizeof(Real) == 8);
+                     (r.filter != CandidateFilter::centre_cut || sizeof(Real) == 8 || r.cut_skin > 0);
   const bool renumber = !spheres_only && tuned(r.tuning.renumber, worth);
   r.renumbered = renumber;
   // input order is cell order and no skin inflates them: the pair stage reads the spheres themselves

@@ -74,7 +74,7 @@ struct TurnRows {
 // kind or (an ellipsoid's) semi-axes changed: the host's arithmetic (host/skin.cpp).
 __device__ __forceinline__ void body_turn(const double* __restrict__ pos, const double* __restrict__ rad,
                                           const double* __restrict__ ref_pos, const TurnRows& t,
-                                          std::uint32_t i, double& turned, int& changed) {
+                                          std::uint32_t i, double& turned, int& changed, int& turning) {
   const std::uint64_t i3 = 3 * std::uint64_t(i), i4 = 4 * std::uint64_t(i);
   const double dx = pos[i3] - ref_pos[i3], dy = pos[i3 + 1] - ref_pos[i3 + 1],
                dz = pos[i3 + 2] - ref_pos[i3 + 2];
@@ -84,6 +84,9 @@ __device__ __forceinline__ void body_turn(const double* __restrict__ pos, const 
                             t.semi[i3 + 2] == t.ref_semi[i3 + 2]));
   turned = ellipsoid ? turned_motion(dx, dy, dz, rad[i], t.orient + i4, t.ref_orient + i4)
                      : cg_sqrt(dx * dx + dy * dy + dz * dz);
+  turning =
+      ellipsoid && !(t.orient[i4] == t.ref_orient[i4] && t.orient[i4 + 1] == t.ref_orient[i4 + 1] &&
+                     t.orient[i4 + 2] == t.ref_orient[i4 + 2] && t.orient[i4 + 3] == t.ref_orient[i4 + 3]);
 }
 
 // skin, a cut list: the block's maxima of body_turn into the counters (after motion_kernel's).
@@ -94,13 +97,15 @@ __global__ void __launch_bounds__(kBlock)
   __shared__ typename Reduce::TempStorage tmp;
   const std::uint32_t i = blockIdx.x * kBlock + threadIdx.x;
   double turned = 0;
-  int changed = 0;
-  if (i < n) body_turn(pos, rad, ref_pos, t, i, turned, changed);
+  int changed = 0, turning = 0;
+  if (i < n) body_turn(pos, rad, ref_pos, t, i, turned, changed, turning);
   const double block_turned = Reduce(tmp).Reduce(turned, [](double a, double b) { return a > b ? a : b; });
   const int block_changed = __syncthreads_or(changed);
+  const int block_turning = __syncthreads_or(turning);
   if (threadIdx.x == 0) {
     atomicMax(&c->skin_turned, static_cast<unsigned long long>(__double_as_longlong(block_turned)));
     if (block_changed) atomicMax(&c->skin_shape_changed, 1ull);
+    if (block_turning) atomicMax(&c->skin_body_turned, 1ull);
   }
 }
 
@@ -133,6 +138,8 @@ bool skin_decision(RunState<Real, Key, Narrow>& r) {
   if (r.ws.kept_cut) {  // (core/centre_cut.hpp: every point's move, rotations included)
     std::memcpy(&m.displacement, &r.h_counters->skin_turned, sizeof(double));
     m.shape_changed = r.h_counters->skin_shape_changed != 0;
+    m.turned = r.h_counters->skin_body_turned != 0;
+    if (m.turned) r.ws.skin_turning = true;
   }
   r.stats.skin_displacement = m.displacement;
   r.stats.skin_growth = m.growth;

@@ -120,6 +120,8 @@ struct Workspace {
   bool kept_reported = false;    // the kept list was built with a report mask
   bool kept_cell_order = false;  // the kept list is in cell order (cuda/cell_order.cuh)
   bool kept_cut = false;         // the kept list is cut by the centre line (its check counts turns)
+  bool skin_turning = false;     // a check of a cut list saw a body turn: builds keep the bounding
+                                 // spheres from then on (core/skin.hpp: skin_cut_wanted)
   bool rows_cell_order = false;  // the last call's rows are in the kept cell order, not (a, b) order
 
   int device = 0;                           // for messages

@@ -87,16 +87,18 @@ void run_typed(HostBackend& be, const DetectJob<Broad, Narrow>& job, Contacts<Na
   // candidates are fp64's contacts. A list kept with a skin (inflated spheres): the narrow stage decides.
   const bool shapes = job.ellipsoids > 0;
   const bool skin = job.skin > 0;
-  const CandidateFilter filter =
-      scene_filter(be.candidates, job.ellipsoids, job.bodies.size(), skin, skin_cut_enabled());
   bool reuse = false;
   if (skin && job.check) {  // (a list cut by the centre line: rotations count, core/centre_cut.hpp)
     const Motion m = host::measure_motion(job.bodies, be.kept, nt);
     stats.skin_displacement = m.displacement;
     stats.skin_growth = m.growth;
+    if (m.turned) be.kept.turning = true;
     reuse = skin_covers(m, job.skin);
     timer.lap(EngineStage::skin);
   }
+  // (after the check: a build of bodies seen turning keeps the bounding spheres, core/skin.hpp)
+  const CandidateFilter filter =
+      scene_filter(be.candidates, job.ellipsoids, job.bodies.size(), skin, skin_cut_wanted(be.kept.turning));
 
   host::PackedBodies<Broad> bodies;
   std::vector<PackedShape<Narrow>> packed_shapes;

@@ -11,13 +11,13 @@ namespace cg::detail::host {
 namespace {
 // A cut list (core/centre_cut.hpp): the largest move of a point of a body (its centre's, and an
 // ellipsoid's turn: turned_motion, the device's arithmetic) and whether a body's kind or semi-axes
-// changed since the build.
+// changed since the build, and whether an ellipsoid turned.
 void measure_turns(const BodiesView& bodies, const KeptCandidates& kept, int threads, Motion& m) {
   const std::size_t n = bodies.size();
   double moved = 0;
-  int changed = 0;
+  int changed = 0, turned = 0;
   // clang-format off
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : moved, changed) \
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : moved, changed, turned) \
     if (n > k_parallel_min)
   // clang-format on
   for (std::size_t i = 0; i < n; ++i) {
@@ -28,6 +28,7 @@ void measure_turns(const BodiesView& bodies, const KeptCandidates& kept, int thr
                                                             bodies.semi_axes[i].z == kept.semi_axes[i].z)))
       changed = 1;
     const Quat<double> q = bodies.orientation[i], q0 = kept.orientation[i];
+    if (ellipsoid && !(q.w == q0.w && q.x == q0.x && q.y == q0.y && q.z == q0.z)) turned = 1;
     const double qa[4] = {q.w, q.x, q.y, q.z}, q0a[4] = {q0.w, q0.x, q0.y, q0.z};
     const double mi = ellipsoid ? turned_motion(d.x, d.y, d.z, bodies.radius[i], qa, q0a)
                                 : cg_sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
@@ -35,6 +36,7 @@ void measure_turns(const BodiesView& bodies, const KeptCandidates& kept, int thr
   }
   m.displacement = moved;
   m.shape_changed = changed != 0;
+  m.turned = turned != 0;
 }
 }  // namespace
 

@@ -118,6 +118,9 @@ struct KeptCandidates {
   std::vector<Shape> shape;
   std::vector<Vec3<double>> semi_axes;
   std::vector<Quat<double>> orientation;
+  // a check of a cut list saw a body turn: later builds keep the bounding spheres (core/skin.hpp:
+  // skin_cut_wanted); for the engine's life
+  bool turning = false;
 };
 
 // skin: what moved since `kept` was built (same body count): max |x − x_ref| (a cut list: the largest
