@@ -18,18 +18,12 @@
 #include "engine.hpp"
 #include "scenes.hpp"
 #include "support/contacts_equal.hpp"
+#include "support/scoped_env.hpp"
 
 namespace cg::test {
 namespace {
 
-// An environment variable (a CONTACTGRID_ knob) set for the guard's life.
-struct Env {
-  const char* name;
-  Env(const char* n, const char* v) : name(n) { ::setenv(n, v, 1); }
-  ~Env() { ::unsetenv(name); }
-  Env(const Env&) = delete;
-  Env& operator=(const Env&) = delete;
-};
+using Env = ScopedEnv;  // (support/scoped_env.hpp)
 
 template <class Cfg>
 class EngineSkinCutTest : public ::testing::Test {
