@@ -207,6 +207,19 @@ TYPED_TEST(EngineSkinCutTest, KnobOffKeepsTheBoundingSpheres) {
   EXPECT_GE(cut.stats().candidates, fresh.stats().candidates);
 }
 
+// The needles of the two tests below: A along x at the origin, B across it (along y) at x = 2.45.
+ShapeScene needles() {
+  const double pi = std::acos(-1.0);
+  ShapeScene s;
+  s.name = "needles";
+  s.p = {{0, 0, 0}, {2.45, 0, 0}};
+  s.r = {2, 2};
+  s.shape = {Shape::ellipsoid, Shape::ellipsoid};
+  s.axes = {{2, 0.2, 0.2}, {2, 0.2, 0.2}};
+  s.q = {about_z(0), about_z(pi / 2)};
+  return s;
+}
+
 // Two needles (semi-axes 2, 0.2, 0.2): A along x at the origin, B across it (along y) at x = 2.45,
 // apart along the centre line by 0.25, a bit more than the skin 0.2: the cut drops the pair at the
 // build (its bounding spheres overlap: the former list keeps it). Then B turns about z, a degree a
@@ -217,13 +230,7 @@ TYPED_TEST(EngineSkinCutTest, KnobOffKeepsTheBoundingSpheres) {
 TYPED_TEST(EngineSkinCutTest, ATurnAloneRebuildsBeforeTheContact) {
   using Real = typename TypeParam::Real;
   const double skin = 0.2, pi = std::acos(-1.0);
-  ShapeScene s;
-  s.name = "needles";
-  s.p = {{0, 0, 0}, {2.45, 0, 0}};
-  s.r = {2, 2};
-  s.shape = {Shape::ellipsoid, Shape::ellipsoid};
-  s.axes = {{2, 0.2, 0.2}, {2, 0.2, 0.2}};
-  s.q = {about_z(0), about_z(pi / 2)};
+  ShapeScene s = needles();
   Engine<Real> engine(options_for(TypeParam::backend, skin)), fresh(options_for(TypeParam::backend, 0));
   Engine<Real> old(options_for(TypeParam::backend, skin));
   int first_contact = -1;
@@ -257,14 +264,8 @@ TYPED_TEST(EngineSkinCutTest, ATurnAloneRebuildsBeforeTheContact) {
 // cut list: B of the needles above, across A, widened along the centre line until it overlaps A.
 TYPED_TEST(EngineSkinCutTest, ChangedSemiAxesRebuild) {
   using Real = typename TypeParam::Real;
-  const double skin = 0.2, pi = std::acos(-1.0);
-  ShapeScene s;
-  s.name = "needles";
-  s.p = {{0, 0, 0}, {2.45, 0, 0}};
-  s.r = {2, 2};
-  s.shape = {Shape::ellipsoid, Shape::ellipsoid};
-  s.axes = {{2, 0.2, 0.2}, {2, 0.2, 0.2}};
-  s.q = {about_z(0), about_z(pi / 2)};
+  const double skin = 0.2;
+  ShapeScene s = needles();
   Engine<Real> engine(options_for(TypeParam::backend, skin)), fresh(options_for(TypeParam::backend, 0));
   ASSERT_EQ(engine.detect(s.view()).size(), 0u);
   ASSERT_EQ(engine.stats().candidate_builds, 1u);
