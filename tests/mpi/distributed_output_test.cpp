@@ -26,8 +26,8 @@
 namespace cg {
 namespace {
 
-using test::compare_contacts;
 using test::compare_contact_window;
+using test::compare_contacts;
 using testing::session;
 using testing::shared_path;
 using testing::write_shared;
