@@ -142,6 +142,11 @@ std::vector<std::size_t> rows_outside(CudaBackend& backend, int axis, double lo,
 // copied into the backend's DEVICE history, or out of it.
 void history_upload(CudaBackend& backend, const ContactHistory& history);
 void history_download(CudaBackend& backend, ContactHistory& history);
+// The host-array path's bodies streamed into the backend's DEVICE input rows before any bounds
+// (cuda/tuning.hpp: HostPath::device); the view holds until the next call on the backend.
+// upload_seconds: the copies' time on the device's stream (waits for them).
+DeviceBodiesView upload_bodies(CudaBackend& backend, const BodiesView& bodies);
+double upload_seconds(CudaBackend& backend);
 // Validation and bounds of DEVICE bodies (same results and InputError texts as compute_bounds), and
 // where bodies.shape is set their shape rows checked as validate_shapes (same texts, after the bodies'
 // own) and the ellipsoids counted into `ellipsoids` (0 without shapes); one wait for both.

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "backend.hpp"
+#include "cuda/tuning.hpp"
 #include "engine_impl.hpp"
 #include "host_vector.hpp"
 #include "inflated_bounds.hpp"
@@ -96,6 +97,10 @@ void destroy(CudaBackend* b) { delete b; }
 Bounds device_bounds(CudaBackend&, const DeviceBodiesView&, std::size_t&) {
   throw CudaError("this contactgrid was built without CUDA");
 }
+DeviceBodiesView upload_bodies(CudaBackend&, const BodiesView&) {
+  throw CudaError("this contactgrid was built without CUDA");
+}
+double upload_seconds(CudaBackend&) { throw CudaError("this contactgrid was built without CUDA"); }
 void resident_mark(CudaBackend&) { throw CudaError("this contactgrid was built without CUDA"); }
 Bounds resident_extent(CudaBackend&, std::span<const std::int64_t>, bool, double&) {
   throw CudaError("this contactgrid was built without CUDA");
@@ -366,6 +371,22 @@ static void observe_skin(typename Engine<Real>::Impl& s, std::uint64_t builds_be
   if (built) s.calls_since_build = 0;
 }
 
+// Local indices → global ids (monotone, so the (id_a, id_b) order is kept); no ids: nothing.
+template <class Real>
+static void to_global_ids(Contacts<Real>& out, std::span<const std::int64_t> ids, int threads) {
+  if (ids.empty()) return;
+  const std::size_t k_n = out.size();
+  const std::int64_t* id = ids.data();
+  std::int64_t* a = out.id_a.data();
+  std::int64_t* b = out.id_b.data();
+  const int nt = threads > 0 ? threads : omp_get_max_threads();
+#pragma omp parallel for num_threads(nt) schedule(static) if (k_n > (std::size_t(1) << 15))
+  for (std::size_t k = 0; k < k_n; ++k) {
+    a[k] = id[static_cast<std::size_t>(a[k])];
+    b[k] = id[static_cast<std::size_t>(b[k])];
+  }
+}
+
 // The host-array path (engine_impl.hpp).
 template <class Real>
 Contacts<Real> detect_host(typename Engine<Real>::Impl& s, const BodiesView& bodies,
@@ -399,19 +420,7 @@ Contacts<Real> detect_host(typename Engine<Real>::Impl& s, const BodiesView& bod
   });
   remember_build<Real>(s, b, bodies.id, ellipsoids, skin, s.stats.candidate_reuses > reuses);
 
-  // Local indices → global ids (monotone, so the (id_a, id_b) order is kept).
-  if (!bodies.id.empty()) {
-    const std::size_t k_n = out.size();
-    const std::int64_t* id = bodies.id.data();
-    std::int64_t* a = out.id_a.data();
-    std::int64_t* b2 = out.id_b.data();
-    const int nt = s.options.threads > 0 ? s.options.threads : omp_get_max_threads();
-#pragma omp parallel for num_threads(nt) schedule(static) if (k_n > (std::size_t(1) << 15))
-    for (std::size_t k = 0; k < k_n; ++k) {
-      a[k] = id[static_cast<std::size_t>(a[k])];
-      b2[k] = id[static_cast<std::size_t>(b2[k])];
-    }
-  }
+  to_global_ids(out, bodies.id, s.options.threads);
   if (s.options.history) {
     const auto t1 = WallClock::now();
     s.history_to_host();
@@ -421,11 +430,6 @@ Contacts<Real> detect_host(typename Engine<Real>::Impl& s, const BodiesView& bod
   s.stats.contacts = out.size();
   observe_skin<Real>(s, builds, seconds_since(t0));
   return out;
-}
-
-template <class Real>
-Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Frame> frame) {
-  return detect_host<Real>(*m_impl, bodies, frame, {});
 }
 
 template <class Real>
@@ -479,6 +483,71 @@ static void detect_on_device(typename Engine<Real>::Impl& s, const DeviceBodiesV
   remember_build<Real>(s, b, {}, ellipsoids, skin, s.stats.candidate_reuses > reuses);
   s.stats.contacts = device_out ? device_out->count : out.size();
   observe_skin<Real>(s, builds, seconds_since(t0));
+}
+
+// The CUDA host-array path of HostPath::device (cuda/tuning.hpp): the bodies go up first and the
+// device takes their bounds, as for DEVICE bodies, so that the host reads each input byte once (its
+// bounds pass cost as much as the upload). Not with a skin or the contact history (their host
+// bookkeeping runs on the host's pass) nor where the caller gives the bounds (detect_host).
+template <class Real>
+static bool bodies_go_up_first(const typename Engine<Real>::Impl& s, const BodiesView& bodies) {
+  return s.resolved == Backend::cuda && bodies.size() > 0 && !(s.options.skin > 0) && !s.options.skin_auto &&
+         !s.options.history && detail::host_path() == detail::HostPath::device;
+}
+
+// Whether ids are strictly ascending (a parallel pass; compute_bounds names the first that is not).
+static bool ids_ascending(std::span<const std::int64_t> id, int threads) {
+  const std::size_t n = id.size();
+  const int nt = threads > 0 ? threads : omp_get_max_threads();
+  int ok = 1;
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(& : ok) if (n > (std::size_t(1) << 15))
+  for (std::size_t i = 1; i < n; ++i) ok &= id[i] > id[i - 1] ? 1 : 0;
+  return ok != 0;
+}
+
+template <class Real>
+static Contacts<Real> detect_host_on_device(typename Engine<Real>::Impl& s, const BodiesView& bodies,
+                                            std::optional<Frame> frame) {
+  const std::size_t n = bodies.size();
+  const bool sized = bodies.position.size() == n && (bodies.id.empty() || bodies.id.size() == n) &&
+                     (bodies.report.empty() || bodies.report.size() == n) &&
+                     (bodies.shape.empty() || (bodies.shape.size() == n && bodies.semi_axes.size() == n &&
+                                               bodies.orientation.size() == n));
+  if (!sized) {  // the host's checks throw their texts
+    compute_bounds(bodies);
+    validate_shapes(bodies);
+    throw InputError("bodies: arrays of different sizes");
+  }
+  const auto t0 = WallClock::now();
+  const DeviceBodiesView device = detail::upload_bodies(*s.cuda, bodies);
+  const double queued_s = seconds_since(t0);
+  // (while the copy engine moves the last slots)
+  if (!bodies.id.empty() && !ids_ascending(bodies.id, s.options.threads)) compute_bounds(bodies);  // throws
+  Contacts<Real> out;
+  try {
+    detect_on_device<Real>(s, device, frame, out, nullptr);
+  } catch (const InputError&) {
+    compute_bounds(bodies);  // a bad body named by id, as the host's own path names it
+    validate_shapes(bodies);
+    throw;
+  }
+  // stage "upload": the copies on the stream; "plan": the rest of the wall time up to the stages
+  const double upload_s = detail::upload_seconds(*s.cuda);
+  const std::string plan = detail::name(detail::EngineStage::plan);
+  for (auto it = s.times.begin(); it != s.times.end(); ++it)
+    if (it->name == plan) {
+      it->seconds = std::max(0.0, queued_s + it->seconds - upload_s);
+      s.times.insert(it + 1, {detail::name(detail::EngineStage::upload), upload_s});
+      break;
+    }
+  to_global_ids(out, bodies.id, s.options.threads);
+  return out;
+}
+
+template <class Real>
+Contacts<Real> Engine<Real>::detect(const BodiesView& bodies, std::optional<Frame> frame) {
+  if (bodies_go_up_first<Real>(*m_impl, bodies)) return detect_host_on_device<Real>(*m_impl, bodies, frame);
+  return detect_host<Real>(*m_impl, bodies, frame, {});
 }
 
 template <class Real>

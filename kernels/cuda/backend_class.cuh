@@ -51,6 +51,8 @@ class CudaBackend {
     CG_CUDA_CHECK(cudaDeviceGetAttribute(&l2, cudaDevAttrL2CacheSize, m_device));
     m_l2_bytes = static_cast<std::size_t>(l2);
     m_events.create();
+    CG_CUDA_CHECK(cudaEventCreate(&m_upload_events[0]));
+    CG_CUDA_CHECK(cudaEventCreate(&m_upload_events[1]));
     m_ws.device = m_device;
     refresh_tuning();
   }
@@ -58,6 +60,8 @@ class CudaBackend {
     cudaSetDevice(m_device);
     if (m_stream) cudaStreamSynchronize(m_stream);
     if (m_stream) cudaStreamDestroy(m_stream);
+    for (cudaEvent_t e : m_upload_events)
+      if (e) cudaEventDestroy(e);
   }  // then the members: events and buffers freed on this device
   CudaBackend(const CudaBackend&) = delete;
   CudaBackend& operator=(const CudaBackend&) = delete;
@@ -75,6 +79,7 @@ class CudaBackend {
   // Real: the broad phase's real type, Narrow: the narrow stage's and the output's (mixed: float, double).
   template <class Real, class Narrow, class Key>
   void run(const DetectJob<Real, Narrow>& job, Contacts<Narrow>& out, StageTimes& times, EngineStats& stats) {
+    const auto entry = std::chrono::steady_clock::now();
     CG_CUDA_CHECK(cudaSetDevice(m_device));
     refresh_tuning();
     m_ws.allocations = 0;
@@ -182,6 +187,7 @@ class CudaBackend {
     stats.fp64_rows = r.h_counters->fp64_rows;  // copied after the narrow stage
     stats.peak_device_bytes = m_ws.held_bytes() + m_thrust.held_bytes();
     stats.device_allocations = m_ws.allocations + m_thrust.allocations;
+    if (m_tuning.trace) m_events.trace(entry, times);
   }
 
   Bounds bounds(const DeviceBodiesView& v, std::size_t& ellipsoids) {
@@ -209,6 +215,7 @@ class CudaBackend {
   ThrustAllocator m_thrust;                      // DEVICE temporary storage of Thrust calls
   cuda::PinnedBuffer m_h_counters, m_h_staging;  // pinned HOST staging
   cuda::PinnedBuffer m_h_gather, m_h_scatter;    // pinned HOST packed rows (Engine::gather_rows, ...)
+  cudaEvent_t m_upload_events[2] = {};           // around upload_bodies' copies (upload_seconds)
   bool m_downloaded = false;                     // a download to host memory was made (download_transfer)
   std::uint64_t m_memory_limit = 0;              // EngineOptions::device_memory_limit (0: none)
 };

@@ -1,5 +1,6 @@
 #pragma once
-// The CUDA backend's host <-> DEVICE copies outside a detection: the contact history of
+// The CUDA backend's host <-> DEVICE copies outside a detection: the host-array path's bodies
+// (upload_bodies, before the device takes their bounds), the contact history of
 // EngineOptions::history (history_upload / history_download), the rows of a DeviceContactsView
 // (download_contacts: a cell-order call's rows sorted into (a, b) order first) and the page-locking
 // of caller memory (pin_host / unpin_host). Apart from the class (backend_class.cuh) as calls of the
@@ -12,6 +13,55 @@
 #include "cuda/transfer.cuh"
 
 namespace cg::detail {
+
+// The host-array path's first step (cuda/tuning.hpp: HostPath::device): the caller's arrays streamed
+// through the pinned ring into the workspace's input rows (ws.pos, rad, report and the shape rows,
+// which a call on DEVICE bodies leaves alone), so that the device takes their bounds and the host
+// reads each input byte once. Returns when the last slot is queued; the view is valid until the next
+// call on this backend. upload_seconds: the copies' span on the stream, once they are done.
+DeviceBodiesView upload_bodies(CudaBackend& b, const BodiesView& bodies) {
+  CG_CUDA_CHECK(cudaSetDevice(b.m_device));
+  b.refresh_tuning();
+  Workspace& ws = b.m_ws;
+  const std::size_t n = bodies.size();
+  const bool report = !bodies.report.empty(), shapes = !bodies.shape.empty();
+  ws.reserve({{&ws.pos, n * sizeof(Vec3<double>)},
+              {&ws.rad, n * sizeof(double)},
+              {&ws.report, report ? n : 0},
+              {&ws.shape_kind, shapes ? n * sizeof(Shape) : 0},
+              {&ws.shape_semi, shapes ? n * sizeof(Vec3<double>) : 0},
+              {&ws.shape_orient, shapes ? n * sizeof(Quat<double>) : 0}},
+             "upload");
+  DeviceBodiesView v;
+  v.count = n;
+  std::vector<HostDevice> ranges;
+  auto range = [&](Bytes& device, const void* host, std::size_t bytes) {
+    ranges.push_back({static_cast<std::byte*>(const_cast<void*>(host)), device.data(), bytes});
+    return device.data();
+  };
+  v.position =
+      reinterpret_cast<const double*>(range(ws.pos, bodies.position.data(), n * sizeof(Vec3<double>)));
+  v.radius = reinterpret_cast<const double*>(range(ws.rad, bodies.radius.data(), n * sizeof(double)));
+  if (report) v.report = reinterpret_cast<const std::uint8_t*>(range(ws.report, bodies.report.data(), n));
+  if (shapes) {
+    v.shape = reinterpret_cast<const Shape*>(range(ws.shape_kind, bodies.shape.data(), n * sizeof(Shape)));
+    v.semi_axes = reinterpret_cast<const double*>(
+        range(ws.shape_semi, bodies.semi_axes.data(), n * sizeof(Vec3<double>)));
+    v.orientation = reinterpret_cast<const double*>(
+        range(ws.shape_orient, bodies.orientation.data(), n * sizeof(Quat<double>)));
+  }
+  CG_CUDA_CHECK(cudaEventRecord(b.m_upload_events[0], b.m_stream));
+  streamed_upload(cuda::pinned_ring(b.m_device), b.m_tuning.transfer_slot_bytes, ranges, b.m_stream);
+  CG_CUDA_CHECK(cudaEventRecord(b.m_upload_events[1], b.m_stream));
+  return v;
+}
+
+double upload_seconds(CudaBackend& b) {
+  CG_CUDA_CHECK(cudaEventSynchronize(b.m_upload_events[1]));
+  float ms = 0;
+  CG_CUDA_CHECK(cudaEventElapsedTime(&ms, b.m_upload_events[0], b.m_upload_events[1]));
+  return ms * 1e-3;
+}
 
 void history_upload(CudaBackend& b, const ContactHistory& h) {
   CG_CUDA_CHECK(cudaSetDevice(b.m_device));

@@ -366,12 +366,14 @@ struct HostPathRow {
   const char* transfer;
   std::uint64_t contacts;
   double up_bytes, down_bytes, upload_ms, download_ms, total_ms, floor_ms, bytes_floor_ms;
+  std::string stages;  // "name ms" of every stage of Engine::times(), medians, in stage order
 };
 
 // Host arrays → host contacts (basic fields, fp32, one engine reused: Engine::detect on the scene's
-// host arrays): the host path of transfer.cuh (packed: the 16-byte spheres up, the rows straight into
-// the result vectors' locked pool blocks), then the old one (CONTACTGRID_CUDA_HOST_PATH=old: the
-// world doubles up) for each transfer path of tuning.hpp forced through its knobs; median wall time of
+// host arrays) by each CONTACTGRID_CUDA_HOST_PATH (cuda/tuning.hpp: device, the default: the doubles
+// up first and the device's bounds; packed: the host's bounds and the 16-byte spheres up; old: the
+// host's bounds and the doubles up by each transfer path of tuning.hpp forced through its knobs); the
+// first two take the rows straight into the result vectors' locked pool blocks; median wall time of
 // `runs` calls and of the upload and download stages. bytes floor = the bytes the row's path moves
 // over the pinned bandwidth each way, one way after the other; floor = that plus the device-resident
 // total of the same scene (`resident_ms`).
@@ -387,14 +389,14 @@ std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs
   std::vector<HostPathRow> rows;
   struct Path {
     const char *name, *up, *down;
-    bool old;
-    const char* slot;  // CONTACTGRID_CUDA_TRANSFER_SLOT (null: the default, 4 MiB)
+    const char* host_path;  // CONTACTGRID_CUDA_HOST_PATH (null: the default, device)
+    const char* slot;       // CONTACTGRID_CUDA_TRANSFER_SLOT (null: the default, 4 MiB)
   };
-  const Path paths[] = {{"packed", nullptr, nullptr, false, nullptr},
-                        {"packed 1 MiB slots", nullptr, nullptr, false, "1048576"},
-                        {"old streamed", "streamed", "streamed", true, nullptr},
-                        {"old registered", "registered", "registered", true, nullptr},
-                        {"old pageable", "pageable", "staged", true, nullptr}};
+  const Path paths[] = {{"device (default)", nullptr, nullptr, nullptr, nullptr},
+                        {"packed", nullptr, nullptr, "packed", nullptr},
+                        {"old streamed", "streamed", "streamed", "old", nullptr},
+                        {"old registered", "registered", "registered", "old", nullptr},
+                        {"old pageable", "pageable", "staged", "old", nullptr}};
   for (const Path& path : paths) {
     const char* up = path.name;
     auto set = [](const char* name, const char* value) {
@@ -405,12 +407,14 @@ std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs
     };
     set("CONTACTGRID_CUDA_UPLOAD", path.up);
     set("CONTACTGRID_CUDA_DOWNLOAD", path.down);
-    set("CONTACTGRID_CUDA_HOST_PATH", path.old ? "old" : "packed");
+    set("CONTACTGRID_CUDA_HOST_PATH", path.host_path);
     set("CONTACTGRID_CUDA_TRANSFER_SLOT", path.slot);
     cg::Engine<float> engine(
         {.backend = cg::Backend::cuda, .cell_size = g_cell_size, .cell_choice = g_cell_choice});
     std::vector<double> total, upload_ms, download_ms;
-    HostPathRow row{log2n, up, 0, 0, 0, 0, 0, 0, 0, 0};
+    std::vector<std::string> stage_names;
+    std::map<std::string, std::vector<double>> stage_ms;
+    HostPathRow row{log2n, up, 0, 0, 0, 0, 0, 0, 0, 0, {}};
     for (int r = 0; r < runs + 2; ++r) {
       const auto t0 = std::chrono::steady_clock::now();
       const cg::Contacts<float> c = engine.detect(v);
@@ -419,6 +423,8 @@ std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs
       if (r < 2) continue;  // warm-up: the workspace and the pinned ring are allocated
       total.push_back(ms);
       for (const auto& st : engine.times()) {
+        if (!stage_ms.count(st.name)) stage_names.push_back(st.name);
+        stage_ms[st.name].push_back(st.seconds * 1e3);
         if (st.name == "upload") upload_ms.push_back(st.seconds * 1e3);
         if (st.name == "download") download_ms.push_back(st.seconds * 1e3);
       }
@@ -427,11 +433,23 @@ std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs
           double(c.size()) * (2 * sizeof(c.id_a[0]) + 3 * sizeof(c.normal_on_b[0]) + sizeof(float));
     }
     // the packed path uploads 16 bytes a sphere (sphere scenes; shape scenes keep the doubles)
-    const double per_body = !path.old && h.shape.empty() ? 16.0 : 32.0;
+    const bool packed = path.host_path && std::string(path.host_path) == "packed";
+    const double per_body = packed && h.shape.empty() ? 16.0 : 32.0;
     row.up_bytes = double(n) * per_body + (h.shape.empty() ? 0.0 : double(n) * (sizeof(cg::Shape) + 56));
     row.total_ms = median(total);
     row.upload_ms = median(upload_ms);
     row.download_ms = median(download_ms);
+    double stage_sum = 0;
+    for (const std::string& name : stage_names) {
+      const double ms = median(stage_ms[name]);
+      stage_sum += ms;
+      char cell[64];
+      std::snprintf(cell, sizeof cell, "%s %.3f, ", name.c_str(), ms);
+      row.stages += cell;
+    }
+    char rest[64];
+    std::snprintf(rest, sizeof rest, "sum %.3f, wall - sum %.3f", stage_sum, row.total_ms - stage_sum);
+    row.stages += rest;
     row.bytes_floor_ms = row.up_bytes / (bw.h2d * 1e6) + row.down_bytes / (bw.d2h * 1e6);
     row.floor_ms = row.bytes_floor_ms + resident_ms;
     rows.push_back(row);
@@ -549,7 +567,8 @@ int main(int argc, char** argv) try {
       "\nHost arrays -> host contacts, fp32, basic fields, one engine reused (Engine::detect), median of up "
       "to "
       "10 warm calls; pinned bandwidth here %.1f GB/s up, %.1f GB/s down. bytes floor = bytes up / "
-      "bandwidth up + bytes down / bandwidth down (the row's own bytes: packed 16 B a sphere up, old 32); "
+      "bandwidth up + bytes down / bandwidth down (the row's own bytes: packed 16 B a sphere up, the others "
+      "32); "
       "floor = bytes floor + the device-resident total above.\n\n| N | transfer | contacts | MB up | "
       "MB down | upload | download | total | bytes floor | total/bytes floor | floor | total/floor "
       "|\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
@@ -559,6 +578,11 @@ int main(int argc, char** argv) try {
                 r.log2n, r.transfer, static_cast<unsigned long long>(r.contacts), r.up_bytes / 1e6,
                 r.down_bytes / 1e6, r.upload_ms, r.download_ms, r.total_ms, r.bytes_floor_ms,
                 r.total_ms / r.bytes_floor_ms, r.floor_ms, r.total_ms / r.floor_ms);
+  std::printf(
+      "\nHost path stages (ms, medians; plan on the host's clock, the rest CUDA events; wall - sum: "
+      "what no stage holds):\n\n");
+  for (const HostPathRow& r : host_rows)
+    std::printf("- 2^%d %s: %s\n", r.log2n, r.transfer, r.stages.c_str());
   if (!skin_rows.empty()) {
     std::printf(
         "\nSteps with a skin of %g (moves <= skin/10 per step, %d steps; wall ms per step of "

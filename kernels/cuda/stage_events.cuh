@@ -4,6 +4,8 @@
 // the entries, sort and pairs times by the sums over its passes (set_time), the pairs time plus the
 // tail from the last pass to the pairs event (add_tail).
 #include <algorithm>
+#include <chrono>
+#include <cstdio>
 
 #include "cuda/device_buffer.cuh"
 #include "stage.hpp"
@@ -38,6 +40,7 @@ class StageEvents {
     std::fill(std::begin(m_override), std::end(m_override), false);
     m_tail = false;
     m_split_marks = 0;
+    m_host_start = std::chrono::steady_clock::now();
     CG_CUDA_CHECK(cudaEventRecord(m_events[0], st));
   }
   cudaEvent_t start_event() const { return m_events[0]; }
@@ -45,6 +48,7 @@ class StageEvents {
   void mark(EngineStage s, cudaStream_t st) {
     CG_CUDA_CHECK(cudaEventRecord(m_events[index(s) + 1], st));
     m_recorded[index(s)] = true;
+    m_host_mark[index(s)] = std::chrono::steady_clock::now();
   }
   cudaEvent_t end_event(EngineStage s) const { return m_events[index(s) + 1]; }
   cudaEvent_t pass_event(int i) const { return m_pass[i]; }
@@ -103,7 +107,23 @@ class StageEvents {
     }
   }
 
+  // CONTACTGRID_CUDA_TRACE=1: one line on stderr a call, the host's clock (ms after `entry`, the run's
+  // start) when each stage was queued and when the call ended, beside the stages' event times: what the
+  // host waits on, which the events alone do not show. After collect.
+  void trace(std::chrono::steady_clock::time_point entry, const StageTimes& times) const {
+    using ms = std::chrono::duration<double, std::milli>;
+    const auto end = std::chrono::steady_clock::now();
+    std::fprintf(stderr, "cuda trace: start %.3f", ms(m_host_start - entry).count());
+    for (int i = 0; i < kStageCount; ++i)
+      if (m_recorded[i])
+        std::fprintf(stderr, ", %s queued %.3f", name(stage_at(i)), ms(m_host_mark[i] - entry).count());
+    std::fprintf(stderr, ", end %.3f | events:", ms(end - entry).count());
+    for (const auto& t : times) std::fprintf(stderr, " %s %.3f", t.name.c_str(), t.seconds * 1e3);
+    std::fprintf(stderr, "\n");
+  }
+
  private:
+  std::chrono::steady_clock::time_point m_host_start{}, m_host_mark[kStageCount] = {};
   cudaEvent_t m_events[kStageCount + 1] = {};
   cudaEvent_t m_pass[kPassEvents] = {};
   cudaEvent_t m_split[4] = {};

@@ -69,17 +69,17 @@ inline void streamed_upload(cuda::PinnedRing& ring, std::size_t slot_bytes,
   }
 }
 
-// fp32 sphere calls from host arrays go up as the 16-byte spheres fp32's pack makes (upload_pack.hpp)
-// instead of the 32-byte world doubles: no ellipsoids, no skin (its reference positions are the
-// doubles), no report mask, a narrow stage that writes every candidate (narrow_fp64_rows reruns it),
-// the streamed or automatic upload, and CONTACTGRID_CUDA_HOST_PATH=packed.
+// With CONTACTGRID_CUDA_HOST_PATH=packed, fp32 sphere calls from host arrays go up as the 16-byte
+// spheres fp32's pack makes (upload_pack.hpp) instead of the 32-byte world doubles: no ellipsoids, no
+// skin (its reference positions are the doubles), no report mask, a narrow stage that writes every
+// candidate (narrow_fp64_rows reruns it), the streamed or automatic upload.
 template <class Real, class Key, class Narrow>
 bool packed_upload_fits(const RunState<Real, Key, Narrow>& r) {
   return std::is_same_v<Real, float> && std::is_same_v<Narrow, float> && !r.device_in && r.n64 > 0 &&
          r.job.ellipsoids == 0 && !(r.job.skin > 0) && r.job.bodies.report.empty() &&
          !narrow_may_reject(r.filter) &&
          (r.tuning.upload == HostTransfer::automatic || r.tuning.upload == HostTransfer::streamed) &&
-         !host_path_old();
+         host_path() == HostPath::packed;
 }
 
 // Host → device of the 16-byte spheres through the pinned ring: slot k is packed from the caller's
@@ -265,10 +265,13 @@ inline void unlock_for_cuda(void* p) {
 
 // The download straight into `out` (np > 0 rows): every field's vector in a pooled host block that is
 // page-locked (on its first use, after a first touch of its pages on every host thread: locking would
-// fault them in on one). False, `out` sized, when a field is too small for the pool (below 1 MiB) or
-// the driver refuses to lock: the caller downloads another way.
+// fault them in on one). False, `out` sized, when a field is too small for the pool (below 1 MiB), the
+// driver refuses to lock, or an engine's first download would have to lock a block (`first_download`:
+// locking hundreds of MB for one call costs more than the copy it speeds up, BENCHMARKS.md §20; the
+// CLI and Python's detect() make one download an engine): the caller downloads another way.
 template <class Real, class Key, class Narrow>
-bool direct_download(RunState<Real, Key, Narrow>& r, Contacts<Narrow>& out, DownloadHostTimes& ht) {
+bool direct_download(RunState<Real, Key, Narrow>& r, Contacts<Narrow>& out, DownloadHostTimes& ht,
+                     bool first_download) {
   using clock_type = std::chrono::steady_clock;
   const auto t0 = clock_type::now();
   const FieldSet set = r.fields();
@@ -282,7 +285,10 @@ bool direct_download(RunState<Real, Key, Narrow>& r, Contacts<Narrow>& out, Down
   std::vector<CopyBlock> touch;
   for (const HostDevice& f : fields) {
     if (f.bytes < HostPool::k_pooled_min) return false;
-    if (!pool.block_locked(f.host)) touch.push_back({f.host, nullptr, f.bytes});
+    if (!pool.block_locked(f.host)) {
+      if (first_download) return false;
+      touch.push_back({f.host, nullptr, f.bytes});
+    }
   }
   if (!touch.empty()) parallel_copy(touch.data(), touch.size(), 0);
   for (const HostDevice& f : fields)
@@ -298,7 +304,7 @@ bool direct_download(RunState<Real, Key, Narrow>& r, Contacts<Narrow>& out, Down
 }
 
 // download: the contact rows described in DEVICE memory (job.device_out), straight into `out`'s
-// page-locked pool blocks (direct_download: the automatic download, not with
+// page-locked pool blocks (direct_download: the automatic download but an engine's first, not with
 // CONTACTGRID_CUDA_HOST_PATH=old), or copied into `out` by Tuning::download (download_transfer):
 // through one whole pinned staging buffer and a parallel host copy (single; also where the driver
 // refuses to register), streamed through the pinned ring (the host copy out of one slot overlaps the
@@ -324,8 +330,8 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
     return ht;
   }
   const std::uint32_t np = r.n_rows;  // (a rejecting narrow has read it for its tight layout)
-  if (np > 0 && r.tuning.download == HostTransfer::automatic && !host_path_old() &&
-      direct_download(r, out, ht))
+  if (np > 0 && r.tuning.download == HostTransfer::automatic && host_path() != HostPath::old &&
+      direct_download(r, out, ht, first_download))
     return ht;
   const std::size_t at = r.out_bytes;
   const std::byte* o = r.ws.out.data();

@@ -129,6 +129,9 @@ struct Tuning {
   // the rest spilled; cuda/dem_forces.cuh). 1: uncapped (about 150 registers a thread: one block an
   // SM). The same bits every way.
   int dem_min_blocks = 2;
+  // CONTACTGRID_CUDA_TRACE=1: each detection prints one line on stderr, the host's clock at each
+  // stage's queueing beside the stages' event times (StageEvents::trace). A measurement knob.
+  bool trace = false;
 };
 
 // `on` / `off` when the variable equals one of the two spellings, else automatic.
@@ -180,6 +183,7 @@ inline bool tuned(Forced f, bool automatic_choice) {
 
 inline Tuning read_tuning() {
   Tuning t;
+  if (const char* tr = std::getenv("CONTACTGRID_CUDA_TRACE")) t.trace = tr[0] == '1';
   const char* passes = std::getenv("CONTACTGRID_CUDA_TYPE_PASSES");
   t.type_passes = passes && passes[0] == '1';
   if (const char* cap = std::getenv("CONTACTGRID_DEVICE_MEMORY_LIMIT"))
@@ -234,14 +238,22 @@ inline Tuning read_tuning() {
   return t;
 }
 
-// CONTACTGRID_CUDA_HOST_PATH=packed: fp32 sphere calls upload the 16-byte packed spheres and every
-// call downloads straight into the result vectors' page-locked pool blocks (cuda/transfer.cuh);
-// otherwise (unset or `old`) host arrays go up as the world doubles (32 bytes a sphere, by
-// Tuning::upload) and the rows come down by Tuning::download. The packed path is opt-in: its host
-// packing costs more than its bytes save (BENCHMARKS.md §25). The benchmark's rows take both.
-inline bool host_path_old() {
+// The CUDA host-array path (Engine::detect on host arrays), by CONTACTGRID_CUDA_HOST_PATH:
+// - device (default): the world doubles go up first, through the pinned ring, and the device takes
+//   their bounds (the host reads each input byte once: its own bounds pass cost as much as the upload,
+//   BENCHMARKS.md §35); an engine's later downloads go straight into the result vectors' pool blocks,
+//   page-locked once (cuda/transfer.cuh: direct_download). Calls with a skin, the contact history or
+//   bounds the caller gives keep the host's bounds (kernels/engine.cpp: bodies_go_up_first).
+// - packed: the host's bounds, then fp32 sphere calls upload the 16-byte packed spheres, and the rows
+//   come down straight into the pool blocks (rows fp32 cannot resolve upload the doubles again).
+// - old: the host's bounds, the doubles up by Tuning::upload, the rows down by Tuning::download.
+// The same bytes every way; the benchmark's host path table takes each.
+enum class HostPath { device, packed, old };
+inline HostPath host_path() {
   const char* v = std::getenv("CONTACTGRID_CUDA_HOST_PATH");
-  return !(v && std::string_view(v) == "packed");
+  if (v && std::string_view(v) == "packed") return HostPath::packed;
+  if (v && std::string_view(v) == "old") return HostPath::old;
+  return HostPath::device;
 }
 
 }  // namespace cg::detail

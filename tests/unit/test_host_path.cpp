@@ -1,11 +1,13 @@
-// The CUDA host path (kernels/cuda/transfer.cuh): fp32 sphere calls upload the 16-byte spheres the host
-// packs (upload_pack.hpp) and every call downloads straight into the result vectors' page-locked pool
-// blocks (HostPool::lock_block). On the CPU: the host packing against the CPU backend's pack, and the
-// pool's locking. On a GPU (skipped visibly without one): the same bytes as the old path
-// (CONTACTGRID_CUDA_HOST_PATH=old) and as the CPU backend, through small pinned slots that put chunk
-// boundaries inside the arrays, with rows that need the world doubles.
+// The CUDA host paths (cuda/tuning.hpp: HostPath): by default the bodies go up first and the device
+// takes their bounds (kernels/engine.cpp: detect_host_on_device); `packed`: fp32 sphere calls upload the
+// 16-byte spheres the host packs (upload_pack.hpp); both download an engine's later calls straight
+// into the result vectors' page-locked pool blocks (HostPool::lock_block). On the CPU: the host packing
+// against the CPU backend's pack, and the pool's locking. On a GPU (skipped visibly without one): the
+// same bytes every way and as the CPU backend, through small pinned slots that put chunk boundaries
+// inside the arrays, with rows that need the world doubles; a bad body named by id as the CPU names it.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
@@ -124,7 +126,7 @@ struct Knobs {  // the knobs are removed even when an assertion fails
 };
 
 template <class Real>
-void expect_same_three_ways(const Spheres& s, Fields fields, const std::string& what) {
+void expect_same_every_way(const Spheres& s, Fields fields, const std::string& what) {
   SCOPED_TRACE(what + " " + to_string(fields));
   EngineOptions o;
   o.fields = fields;
@@ -134,17 +136,22 @@ void expect_same_three_ways(const Spheres& s, Fields fields, const std::string& 
   Engine<Real> gpu(o);
   const BodiesView v{s.p, s.r, {}, {}};
   const Contacts<Real> oracle = cpu.detect(v);
+  ::unsetenv("CONTACTGRID_CUDA_HOST_PATH");
+  const Contacts<Real> first = gpu.detect(v);   // the engine's first download: not locked
+  const Contacts<Real> second = gpu.detect(v);  // into pool blocks locked now, `first` still held
+  const Contacts<Real> third = gpu.detect(v);   // into blocks locked before
   ::setenv("CONTACTGRID_CUDA_HOST_PATH", "packed", 1);
-  const Contacts<Real> first = gpu.detect(v);
+  const Contacts<Real> packed = gpu.detect(v);
   const std::uint64_t fp64_rows = gpu.stats().fp64_rows;
-  const Contacts<Real> second = gpu.detect(v);  // into blocks locked before, `first` still held
   ::setenv("CONTACTGRID_CUDA_HOST_PATH", "old", 1);
   const Contacts<Real> old = gpu.detect(v);
-  ::setenv("CONTACTGRID_CUDA_HOST_PATH", "packed", 1);
+  ::unsetenv("CONTACTGRID_CUDA_HOST_PATH");
   ASSERT_EQ(oracle.size(), first.size());
-  EXPECT_EQ(compare_contacts(first, oracle), "identical") << "new path against the CPU";
-  EXPECT_EQ(compare_contacts(second, oracle), "identical") << "new path, second call";
-  EXPECT_EQ(compare_contacts(old, first), "identical") << "old path against the new";
+  EXPECT_EQ(compare_contacts(first, oracle), "identical") << "default path against the CPU";
+  EXPECT_EQ(compare_contacts(second, oracle), "identical") << "default path, second call";
+  EXPECT_EQ(compare_contacts(third, oracle), "identical") << "default path, third call";
+  EXPECT_EQ(compare_contacts(packed, oracle), "identical") << "packed path against the CPU";
+  EXPECT_EQ(compare_contacts(old, oracle), "identical") << "old path against the CPU";
   EXPECT_EQ(fp64_rows, cpu.stats().fp64_rows);
   EXPECT_EQ(gpu.stats().fp64_rows, cpu.stats().fp64_rows);
   if (first.id_a.size() * sizeof(std::int64_t) >= (std::size_t(1) << 20) &&
@@ -152,12 +159,13 @@ void expect_same_three_ways(const Spheres& s, Fields fields, const std::string& 
     auto locked = [](const void* p) {
       return detail::HostPool::instance().block_locked(const_cast<void*>(p));
     };
-    EXPECT_TRUE(locked(first.id_a.data())) << "the rows did not come down into locked pool blocks";
-    EXPECT_TRUE(locked(first.distance.data()));
+    EXPECT_TRUE(locked(second.id_a.data())) << "the rows did not come down into locked pool blocks";
+    EXPECT_TRUE(locked(second.distance.data()));
+    EXPECT_TRUE(locked(third.id_a.data()));
   }
 }
 
-TEST(HostPathCuda, PackedUploadAndDirectDownloadGiveTheOldPathsBytes) {
+TEST(HostPathCuda, EveryHostPathGivesTheCpuBytes) {
   CG_SKIP_WITHOUT_CUDA();
   Knobs knobs;
   const Spheres twins = lattice_with_twins(48, 3711);  // 110 592 + 1 141 bodies, ~330 k contacts
@@ -166,14 +174,94 @@ TEST(HostPathCuda, PackedUploadAndDirectDownloadGiveTheOldPathsBytes) {
   for (const char* slot : {static_cast<const char*>(nullptr), "4096", "5000"}) {
     if (slot) ::setenv("CONTACTGRID_CUDA_TRANSFER_SLOT", slot, 1);
     const std::string what = std::string("slot ") + (slot ? slot : "default");
-    expect_same_three_ways<float>(twins, Fields::basic, what);
-    expect_same_three_ways<float>(twins, Fields::full, what);
-    expect_same_three_ways<float>(coincident(3712), Fields::full, what + ", coincident");
-    expect_same_three_ways<float>(random_spheres(3, 0.5, 1.0, 3713), Fields::basic, what + ", 3 bodies");
+    expect_same_every_way<float>(twins, Fields::basic, what);
+    expect_same_every_way<float>(twins, Fields::full, what);
+    expect_same_every_way<float>(coincident(3712), Fields::full, what + ", coincident");
+    expect_same_every_way<float>(random_spheres(3, 0.5, 1.0, 3713), Fields::basic, what + ", 3 bodies");
   }
   ::unsetenv("CONTACTGRID_CUDA_TRANSFER_SLOT");
   // fp64 keeps the doubles' upload; its rows come down the same way
-  expect_same_three_ways<double>(twins, Fields::basic, "fp64");
+  expect_same_every_way<double>(twins, Fields::basic, "fp64");
+}
+
+// The default path with global ids, a report mask and ellipsoids: the CPU's rows, and an upload stage
+// in the call's times.
+TEST(HostPathCuda, TheDevicePathKeepsIdsReportMasksAndShapes) {
+  CG_SKIP_WITHOUT_CUDA();
+  ShapeScene scene = make_scene("host path", 3721, 40000, 0.5, 60);
+  std::vector<std::int64_t> ids(scene.r.size());
+  std::vector<std::uint8_t> report(scene.r.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    ids[i] = 7 + 3 * std::int64_t(i);
+    report[i] = i % 5 == 0 ? kPairedBit : kReportedBit;
+  }
+  BodiesView v = scene.view();
+  v.id = ids;
+  v.report = report;
+  auto check = [&]<class Real>(Real, bool mixed, const char* what) {
+    SCOPED_TRACE(what);
+    EngineOptions o;
+    o.fields = Fields::full;
+    o.fp32_broad_phase = mixed;
+    o.backend = Backend::cpu;
+    const Contacts<Real> want = Engine<Real>(o).detect(v);
+    o.backend = Backend::cuda;
+    Engine<Real> gpu(o);
+    const Contacts<Real> got = gpu.detect(v);
+    EXPECT_GT(want.size(), 1000u);
+    EXPECT_EQ(compare_contacts(got, want), "identical");
+    EXPECT_EQ(gpu.stats().ellipsoids,
+              std::size_t(std::count(scene.shape.begin(), scene.shape.end(), Shape::ellipsoid)));
+    bool timed_upload = false;
+    for (const auto& t : gpu.times()) timed_upload = timed_upload || (t.name == "upload" && t.seconds > 0);
+    EXPECT_TRUE(timed_upload) << "no upload stage in the call's times";
+  };
+  check(0.0f, false, "fp32");
+  check(0.0, false, "fp64");
+  check(0.0, true, "mixed");
+}
+
+// A bad body on the default path is named by its id with the CPU backend's text: a centre that is not
+// finite, a radius <= 0, a bad shape row, ids out of order, arrays of different sizes.
+TEST(HostPathCuda, TheDevicePathNamesABadBodyAsTheCpuDoes) {
+  CG_SKIP_WITHOUT_CUDA();
+  const ShapeScene scene = make_scene("bad bodies", 3723, 5000, 0.5, 30);
+  std::vector<std::int64_t> ids(scene.r.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = 100 + 2 * std::int64_t(i);
+  auto message = [](Backend backend, const BodiesView& v) -> std::string {
+    EngineOptions o;
+    o.backend = backend;
+    try {
+      Engine<double>(o).detect(v);
+    } catch (const InputError& e) {
+      return e.what();
+    }
+    return "no error";
+  };
+  auto expect_same = [&](const char* what, const ShapeScene& s, const std::vector<std::int64_t>& id) {
+    SCOPED_TRACE(what);
+    BodiesView v = s.view();
+    v.id = id;
+    const std::string cpu = message(Backend::cpu, v);
+    EXPECT_NE(cpu, "no error");
+    EXPECT_EQ(message(Backend::cuda, v), cpu);
+  };
+  ShapeScene nan = scene;
+  nan.p[4321].y = std::nan("");
+  expect_same("centre not finite", nan, ids);
+  ShapeScene zero = scene;
+  zero.r[17] = 0;
+  expect_same("radius 0", zero, ids);
+  ShapeScene flat = scene;
+  const auto e =
+      std::find(flat.shape.begin() + 2000, flat.shape.end(), Shape::ellipsoid) - flat.shape.begin();
+  flat.axes[e].y = -0.5;
+  expect_same("semi-axis < 0", flat, ids);
+  std::vector<std::int64_t> unordered = ids;
+  std::swap(unordered[3000], unordered[3001]);
+  expect_same("ids out of order", scene, unordered);
+  std::vector<std::int64_t> short_ids(ids.begin(), ids.end() - 1);
+  expect_same("ids of another size", scene, short_ids);
 }
 
 // The scene must hold rows that need the world doubles, or the rerun of the narrow stage goes untested.

@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# The fifteenth session's GPU checks (issue #37's host path), from the repository root on the device:
+#   PART=host OUT=dir jobs/gpu_s15_check.sh   (binaries: .devbin/n.tar.xz)
+#   unit    the whole unit suite with the GPU (every CUDA host-array call now takes the device's bounds),
+#           then contactgrid_mpi_tests' CUDA cases at np 2; expect no FAILED line
+#   host    contactgrid_cuda_bench LO..HI (20 20) spheres: the host path table with every stage's median
+#           (plan on the host's clock, the rest CUDA events; "wall - sum" is what no stage holds), and
+#           the same calls under CONTACTGRID_CUDA_TRACE=1: when the host queued each stage (host_trace.log)
+set -u
+cd "$(dirname "$0")/.."
+[ -d .devbin/n ] || tar xJf .devbin/n.tar.xz -C .devbin
+source .devrt/env.sh .devrt >/dev/null 2>&1
+B=$(realpath .devbin/n); OUT=${OUT:-/tmp/out}; PART=${PART:-host}
+export GTEST_COLOR=no OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_btl_vader_single_copy_mechanism=cma
+export CG_BINARY=$B/contactgrid CG_SOURCE_DIR=$PWD CG_MPIEXEC=$(command -v mpirun)
+mkdir -p "$OUT"
+case $PART in
+unit)
+  timeout 420 "$B/contactgrid_tests" >"$OUT/unit.log" 2>&1
+  echo "-- unit (rc $?)"; grep -E '^\[  (PASSED|FAILED|SKIPPED) ' "$OUT/unit.log"; grep -E '^\[  (FAILED|SKIPPED) +\]' "$OUT/unit.log" | head -20
+  timeout 150 mpirun --bind-to none -np 2 "$B/contactgrid_mpi_tests" --gtest_filter='*Cuda*:*cuda*' >"$OUT/mpi2.log" 2>&1
+  echo "-- np 2 CUDA cases (rc $?)"; grep -E '^\[  (PASSED|FAILED) ' "$OUT/mpi2.log" ;;
+host)
+  LO=${LO:-20}; HI=${HI:-20}
+  timeout 200 "$B/contactgrid_cuda_bench" "$LO" "$HI" 2 10 auto spheres >"$OUT/host_bench.log" 2>&1
+  echo "-- bench (rc $?)"; sed -n '/^Host arrays/,$p' "$OUT/host_bench.log"
+  CONTACTGRID_CUDA_TRACE=1 timeout 200 "$B/contactgrid_cuda_bench" "$LO" "$HI" 2 10 auto spheres \
+    >"$OUT/host_trace.out" 2>"$OUT/host_trace.log"
+  echo "-- traced (rc $?)"; grep -c 'cuda trace' "$OUT/host_trace.log"; grep 'upload queued' "$OUT/host_trace.log" | tail -40 ;;
+esac
