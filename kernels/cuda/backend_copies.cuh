@@ -14,11 +14,26 @@
 
 namespace cg::detail {
 
-// The host-array path's first step (cuda/tuning.hpp: HostPath::device): the caller's arrays streamed
-// through the pinned ring into the workspace's input rows (ws.pos, rad, report and the shape rows,
-// which a call on DEVICE bodies leaves alone), so that the device takes their bounds and the host
-// reads each input byte once. Returns when the last slot is queued; the view is valid until the next
-// call on this backend. upload_seconds: the copies' span on the stream, once they are done.
+// Whether caller memory is page-locked already (Engine::pin_host, cudaHostRegister, cudaMallocHost):
+// its first and last bytes are. Such a range is copied straight, without the ring's host copy.
+inline bool host_locked(const std::byte* p, std::size_t bytes) {
+  auto locked = [](const void* q) {
+    cudaPointerAttributes a{};
+    if (cudaPointerGetAttributes(&a, q) != cudaSuccess) {
+      (void)cudaGetLastError();  // (memory the driver has never seen)
+      return false;
+    }
+    return a.type == cudaMemoryTypeHost;
+  };
+  return bytes > 0 && locked(p) && locked(p + bytes - 1);
+}
+
+// The host-array path's first step (cuda/tuning.hpp: HostPath::device): the caller's arrays copied
+// into the workspace's input rows (ws.pos, rad, report and the shape rows, which a call on DEVICE
+// bodies leaves alone), so that the device takes their bounds and the host reads each input byte
+// once: page-locked arrays straight, the others streamed through the pinned ring. Returns when the
+// last copy is queued; the view is valid until the next call on this backend. upload_seconds: the
+// copies' span on the stream, once they are done.
 DeviceBodiesView upload_bodies(CudaBackend& b, const BodiesView& bodies) {
   CG_CUDA_CHECK(cudaSetDevice(b.m_device));
   b.refresh_tuning();
@@ -34,9 +49,10 @@ DeviceBodiesView upload_bodies(CudaBackend& b, const BodiesView& bodies) {
              "upload");
   DeviceBodiesView v;
   v.count = n;
-  std::vector<HostDevice> ranges;
+  std::vector<HostDevice> streamed, straight;
   auto range = [&](Bytes& device, const void* host, std::size_t bytes) {
-    ranges.push_back({static_cast<std::byte*>(const_cast<void*>(host)), device.data(), bytes});
+    const HostDevice h{static_cast<std::byte*>(const_cast<void*>(host)), device.data(), bytes};
+    (host_locked(h.host, bytes) ? straight : streamed).push_back(h);
     return device.data();
   };
   v.position =
@@ -51,7 +67,10 @@ DeviceBodiesView upload_bodies(CudaBackend& b, const BodiesView& bodies) {
         range(ws.shape_orient, bodies.orientation.data(), n * sizeof(Quat<double>)));
   }
   CG_CUDA_CHECK(cudaEventRecord(b.m_upload_events[0], b.m_stream));
-  streamed_upload(cuda::pinned_ring(b.m_device), b.m_tuning.transfer_slot_bytes, ranges, b.m_stream);
+  for (const HostDevice& h : straight)
+    CG_CUDA_CHECK(cudaMemcpyAsync(h.device, h.host, h.bytes, cudaMemcpyHostToDevice, b.m_stream));
+  if (!streamed.empty())
+    streamed_upload(cuda::pinned_ring(b.m_device), b.m_tuning.transfer_slot_bytes, streamed, b.m_stream);
   CG_CUDA_CHECK(cudaEventRecord(b.m_upload_events[1], b.m_stream));
   return v;
 }

@@ -221,6 +221,30 @@ TEST(HostPathCuda, TheDevicePathKeepsIdsReportMasksAndShapes) {
   check(0.0, true, "mixed");
 }
 
+// Arrays the caller page-locked (Engine::pin_host) go up straight, the others through the ring: the
+// same bytes with the positions alone, the radii alone or both locked.
+TEST(HostPathCuda, PageLockedArraysGiveTheSameBytes) {
+  CG_SKIP_WITHOUT_CUDA();
+  Spheres s = lattice_with_twins(40, 3725);
+  const BodiesView v{s.p, s.r, {}, {}};
+  EngineOptions o;
+  o.backend = Backend::cpu;
+  const Contacts<float> want = Engine<float>(o).detect(v);
+  o.backend = Backend::cuda;
+  Engine<float> gpu(o);
+  for (const int which : {1, 2, 3}) {
+    SCOPED_TRACE("locked: " + std::string(which & 1 ? "positions " : "") + (which & 2 ? "radii" : ""));
+    const bool p = (which & 1) && gpu.pin_host(s.p.data(), s.p.size() * sizeof(s.p[0]));
+    const bool r = (which & 2) && gpu.pin_host(s.r.data(), s.r.size() * sizeof(s.r[0]));
+    EXPECT_EQ(p, (which & 1) != 0) << "the driver refused to lock the positions";
+    EXPECT_EQ(r, (which & 2) != 0) << "the driver refused to lock the radii";
+    const Contacts<float> got = gpu.detect(v);
+    if (p) gpu.unpin_host(s.p.data());
+    if (r) gpu.unpin_host(s.r.data());
+    EXPECT_EQ(compare_contacts(got, want), "identical");
+  }
+}
+
 // A bad body on the default path is named by its id with the CPU backend's text: a centre that is not
 // finite, a radius <= 0, a bad shape row, ids out of order, arrays of different sizes.
 TEST(HostPathCuda, TheDevicePathNamesABadBodyAsTheCpuDoes) {
