@@ -35,10 +35,11 @@ file)
     for run in 1 2 3; do
       for p in device old; do
         rm -f "$d/c_$p.h5"
-        CONTACTGRID_CUDA_HOST_PATH=$p /usr/bin/time -f "wall %e" timeout 60 "$B/contactgrid" detect "$d/$scene.h5" \
+        CONTACTGRID_CUDA_TRACE=${TRACE:-0} CONTACTGRID_CUDA_HOST_PATH=$p /usr/bin/time -f "wall %e" timeout 60 "$B/contactgrid" detect "$d/$scene.h5" \
           -o "$d/c_$p.h5" --backend cuda --precision fp32 -v >"$OUT/run.txt" 2>&1
         echo "== $scene $p run $run (rc $?)"
         sed -n '/^  stage/,/^  total/p;/^wall/p' "$OUT/run.txt" | tr '\n' ' ' | tr -s ' '; echo
+        grep -E '^(host path|cuda trace)' "$OUT/run.txt" | cut -c1-400
       done
     done
     echo -n "compare $scene device vs old: "; "$B/contactgrid" compare "$d/c_old.h5" "$d/c_device.h5" 2>&1 | tail -1

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <limits>
 #include <sstream>
@@ -540,6 +541,9 @@ static Contacts<Real> detect_host_on_device(typename Engine<Real>::Impl& s, cons
       s.times.insert(it + 1, {detail::name(detail::EngineStage::upload), upload_s});
       break;
     }
+  if (detail::read_tuning().trace)
+    std::fprintf(stderr, "host path: bodies queued in %.3f ms (host), copied in %.3f ms (stream), %s\n",
+                 queued_s * 1e3, upload_s * 1e3, bodies.id.empty() ? "no ids" : "ids checked");
   to_global_ids(out, bodies.id, s.options.threads);
   return out;
 }

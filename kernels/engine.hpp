@@ -260,8 +260,9 @@ class Engine {
   // and device_bounds do).
   void mark_resident();
   ResidentExtent resident_extent(std::span<const std::int64_t> ids = {});
-  // Page-locks host memory that read_resident / write_resident use again and again (CUDA:
-  // cudaHostRegister, so the copies run at the link's speed; CPU: nothing to do). false when the
+  // Page-locks host memory that read_resident / write_resident, or detect's host arrays, use again
+  // and again (CUDA: cudaHostRegister, so the copies run at the link's speed: detect's arrays then go
+  // up straight instead of through the pinned ring's host copy; CPU: nothing to do). false when the
   // driver refuses (the copies stay pageable). unpin_host before that memory is freed.
   bool pin_host(void* p, std::size_t bytes);
   void unpin_host(void* p);
