@@ -4,8 +4,9 @@
 #   unit    the whole unit suite with the GPU (every CUDA host-array call now takes the device's bounds),
 #           then contactgrid_mpi_tests' CUDA cases at np 2; expect no FAILED line
 #   file    2^24 sphere and ellipsoid file jobs (CUDA fp32, /dev/shm -> /dev/shm), 3 new processes each
-#           with the default host path and CONTACTGRID_CUDA_HOST_PATH=old, interleaved: each run's stage
-#           table, then /contacts of the two paths compared (expect IDENTICAL)
+#           with the default host path and CONTACTGRID_CUDA_HOST_PATH=old (PATHS may add dlstream: the
+#           first download streamed through the ring), interleaved: each run's stage
+#           table, then /contacts of each path compared with old's (expect IDENTICAL)
 #   hostunit  the host path cases (HostPath*, UploadPack*, HostPool*) with the GPU
 #   host    contactgrid_cuda_bench LO..HI (20 20) spheres: the host path table with every stage's median
 #           (plan on the host's clock, the rest CUDA events; "wall - sum" is what no stage holds), and
@@ -33,16 +34,21 @@ file)
   timeout 90 "$B/contactgrid" generate "$d/e24.h5" --kind ellipsoids -n 16777216 --seed 7 -q
   for scene in s24 e24; do
     for run in 1 2 3; do
-      for p in device old; do
+      for p in ${PATHS:-device old}; do
         rm -f "$d/c_$p.h5"
-        CONTACTGRID_CUDA_TRACE=${TRACE:-0} CONTACTGRID_CUDA_HOST_PATH=$p /usr/bin/time -f "wall %e" timeout 60 "$B/contactgrid" detect "$d/$scene.h5" \
+        hp=device; [ "$p" = old ] && hp=old
+        dl=; [ "$p" = dlstream ] && dl=streamed
+        CONTACTGRID_CUDA_DOWNLOAD=$dl CONTACTGRID_CUDA_TRACE=${TRACE:-0} CONTACTGRID_CUDA_HOST_PATH=$hp /usr/bin/time -f "wall %e" timeout 60 "$B/contactgrid" detect "$d/$scene.h5" \
           -o "$d/c_$p.h5" --backend cuda --precision fp32 -v >"$OUT/run.txt" 2>&1
         echo "== $scene $p run $run (rc $?)"
         sed -n '/^  stage/,/^  total/p;/^wall/p' "$OUT/run.txt" | tr '\n' ' ' | tr -s ' '; echo
         grep -E '^(host path|cuda trace)' "$OUT/run.txt" | cut -c1-400
       done
     done
-    echo -n "compare $scene device vs old: "; "$B/contactgrid" compare "$d/c_old.h5" "$d/c_device.h5" 2>&1 | tail -1
+    for p in ${PATHS:-device old}; do
+      [ "$p" = old ] && continue
+      echo -n "compare $scene $p vs old: "; "$B/contactgrid" compare "$d/c_old.h5" "$d/c_$p.h5" 2>&1 | tail -1
+    done
   done
   rm -rf "$d" "$OUT/run.txt" ;;
 host)

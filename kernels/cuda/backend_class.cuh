@@ -187,7 +187,12 @@ class CudaBackend {
     stats.fp64_rows = r.h_counters->fp64_rows;  // copied after the narrow stage
     stats.peak_device_bytes = m_ws.held_bytes() + m_thrust.held_bytes();
     stats.device_allocations = m_ws.allocations + m_thrust.allocations;
-    if (m_tuning.trace) m_events.trace(entry, times);
+    if (m_tuning.trace) {
+      m_events.trace(entry, times);
+      std::fprintf(stderr,
+                   "cuda trace: the download's host work %.3f ms before or beside the copy, %.3f after\n",
+                   host.overlap_s * 1e3, host.extra_s * 1e3);
+    }
   }
 
   Bounds bounds(const DeviceBodiesView& v, std::size_t& ellipsoids) {

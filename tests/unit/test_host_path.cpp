@@ -50,6 +50,29 @@ TEST(UploadPack, EqualsTheCpuPackBitForBit) {
   }
 }
 
+// parallel_copy (the ring's fills and drains): the bytes of memcpy for blocks of every alignment and
+// size, pieces split at any byte, one thread or all.
+TEST(ParallelCopy, GivesMemcpysBytesAtEveryAlignment) {
+  std::mt19937_64 rng(3727);
+  std::vector<std::byte> src((std::size_t(9) << 20) + 333), dst(src.size()), want(src.size());
+  for (auto& b : src) b = std::byte(rng() & 0xff);
+  for (const std::size_t skew : {std::size_t(0), std::size_t(1), std::size_t(7), std::size_t(13)}) {
+    std::fill(dst.begin(), dst.end(), std::byte{0x5a});
+    want = dst;
+    // three blocks laid end to end: 5000 bytes, 4 MiB + 17, the rest but a tail left alone
+    const std::size_t a = 5000, b = (std::size_t(4) << 20) + 17, c = src.size() - 64 - a - b - skew;
+    const detail::CopyBlock blocks[] = {{dst.data() + skew, src.data() + 3, a},
+                                        {dst.data() + skew + a, src.data() + 3 + a, b},
+                                        {dst.data() + skew + a + b, src.data() + 11 + a + b, c}};
+    std::memcpy(want.data() + skew, src.data() + 3, a + b);
+    std::memcpy(want.data() + skew + a + b, src.data() + 11 + a + b, c);
+    for (const int threads : {1, 0}) {
+      detail::parallel_copy(blocks, 3, threads);
+      ASSERT_TRUE(dst == want) << "skew " << skew << ", threads " << threads;
+    }
+  }
+}
+
 // A pooled block is locked once, stays locked while it is free in the pool and is reused, and is
 // unlocked before the pool frees it; an array outside the pool is never locked.
 int g_locks = 0, g_unlocks = 0;
