@@ -266,12 +266,11 @@ inline void unlock_for_cuda(void* p) {
 // The download straight into `out` (np > 0 rows): every field's vector in a pooled host block that is
 // page-locked (on its first use, after a first touch of its pages on every host thread: locking would
 // fault them in on one). False, `out` sized, when a field is too small for the pool (below 1 MiB), the
-// driver refuses to lock, or an engine's first download would have to lock a block (`first_download`:
-// locking hundreds of MB for one call costs more than the copy it speeds up, BENCHMARKS.md §20; the
-// CLI and Python's detect() make one download an engine): the caller downloads another way.
+// driver refuses to lock, or a block would have to be locked when `may_lock` is false: the caller
+// downloads another way.
 template <class Real, class Key, class Narrow>
 bool direct_download(RunState<Real, Key, Narrow>& r, Contacts<Narrow>& out, DownloadHostTimes& ht,
-                     bool first_download) {
+                     bool may_lock) {
   using clock_type = std::chrono::steady_clock;
   const auto t0 = clock_type::now();
   const FieldSet set = r.fields();
@@ -286,7 +285,7 @@ bool direct_download(RunState<Real, Key, Narrow>& r, Contacts<Narrow>& out, Down
   for (const HostDevice& f : fields) {
     if (f.bytes < HostPool::k_pooled_min) return false;
     if (!pool.block_locked(f.host)) {
-      if (first_download) return false;
+      if (!may_lock) return false;
       touch.push_back({f.host, nullptr, f.bytes});
     }
   }
@@ -330,8 +329,14 @@ DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuf
     return ht;
   }
   const std::uint32_t np = r.n_rows;  // (a rejecting narrow has read it for its tight layout)
+  // Blocks are locked on an engine's later downloads, and on a first one where the automatic download
+  // would lock the rows anyway (registered, from 64 MiB: locked once and kept, they spare the unlock).
+  // An engine's first download of fewer rows locks nothing: locking for one call costs more than the
+  // copy it speeds up (BENCHMARKS.md §20; the CLI and Python's detect() make one download an engine).
+  const bool may_lock = !first_download || download_transfer(r.tuning, h_staging.bytes(), r.out_bytes,
+                                                             true) == HostTransfer::registered;
   if (np > 0 && r.tuning.download == HostTransfer::automatic && host_path() != HostPath::old &&
-      direct_download(r, out, ht, first_download))
+      direct_download(r, out, ht, may_lock))
     return ht;
   const std::size_t at = r.out_bytes;
   const std::byte* o = r.ws.out.data();

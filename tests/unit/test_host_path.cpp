@@ -244,6 +244,26 @@ TEST(HostPathCuda, TheDevicePathKeepsIdsReportMasksAndShapes) {
   check(0.0, true, "mixed");
 }
 
+// An engine's first download of at least 64 MiB of rows (the CLI's one call on a large scene) goes
+// straight into pool blocks locked then, as the registered download would lock the rows anyway: the
+// same bytes as the old path's.
+TEST(HostPathCuda, ALargeFirstDownloadGoesStraightIntoLockedBlocks) {
+  CG_SKIP_WITHOUT_CUDA();
+  Knobs knobs;
+  const Spheres s = lattice_with_twins(100, 3729);  // ~1.01 M bodies, ~3 M contacts: ~170 MB of rows
+  const BodiesView v{s.p, s.r, {}, {}};
+  EngineOptions o;
+  o.backend = Backend::cuda;
+  const Contacts<float> first = Engine<float>(o).detect(v);
+  ASSERT_GE(first.size() * 56, std::size_t(64) << 20);
+  EXPECT_TRUE(detail::HostPool::instance().block_locked(const_cast<std::int64_t*>(first.id_a.data())))
+      << "a first download of this size did not come straight into locked pool blocks";
+  ::setenv("CONTACTGRID_CUDA_HOST_PATH", "old", 1);
+  const Contacts<float> old = Engine<float>(o).detect(v);
+  ::unsetenv("CONTACTGRID_CUDA_HOST_PATH");
+  EXPECT_EQ(compare_contacts(first, old), "identical");
+}
+
 // Arrays the caller page-locked (Engine::pin_host) go up straight, the others through the ring: the
 // same bytes with the positions alone, the radii alone or both locked.
 TEST(HostPathCuda, PageLockedArraysGiveTheSameBytes) {
