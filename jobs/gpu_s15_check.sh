@@ -8,7 +8,7 @@
 #           first download streamed through the ring), interleaved: each run's stage
 #           table, then /contacts of each path compared with old's (expect IDENTICAL)
 #   hostunit  the host path cases (HostPath*, UploadPack*, HostPool*) with the GPU
-#   host    contactgrid_cuda_bench LO..HI (20 20) spheres: the host path table with every stage's median
+#   host    contactgrid_cuda_bench LO..HI (20 20) SCENE (spheres; NO_TRACE=1: no traced run): the host path table with every stage's median
 #           (plan on the host's clock, the rest CUDA events; "wall - sum" is what no stage holds), and
 #           the same calls under CONTACTGRID_CUDA_TRACE=1: when the host queued each stage (host_trace.log)
 set -u
@@ -52,10 +52,11 @@ file)
   done
   rm -rf "$d" "$OUT/run.txt" ;;
 host)
-  LO=${LO:-20}; HI=${HI:-20}
-  timeout 200 "$B/contactgrid_cuda_bench" "$LO" "$HI" 2 10 auto spheres >"$OUT/host_bench.log" 2>&1
+  LO=${LO:-20}; HI=${HI:-20}; SCENE=${SCENE:-spheres}
+  timeout 200 "$B/contactgrid_cuda_bench" "$LO" "$HI" 2 10 auto "$SCENE" >"$OUT/host_bench.log" 2>&1
   echo "-- bench (rc $?)"; sed -n '/^Host arrays/,$p' "$OUT/host_bench.log"
-  CONTACTGRID_CUDA_TRACE=1 timeout 200 "$B/contactgrid_cuda_bench" "$LO" "$HI" 2 10 auto spheres \
+  [ -n "${NO_TRACE:-}" ] && exit 0
+  CONTACTGRID_CUDA_TRACE=1 timeout 200 "$B/contactgrid_cuda_bench" "$LO" "$HI" 2 10 auto "$SCENE" \
     >"$OUT/host_trace.out" 2>"$OUT/host_trace.log"
   echo "-- traced (rc $?)"; grep -c 'cuda trace' "$OUT/host_trace.log"; grep 'upload queued' "$OUT/host_trace.log" | tail -40 ;;
 esac
