@@ -523,7 +523,11 @@ static Contacts<Real> detect_host_on_device(typename Engine<Real>::Impl& s, cons
   const DeviceBodiesView device = detail::upload_bodies(*s.cuda, bodies);
   const double queued_s = seconds_since(t0);
   // (while the copy engine moves the last slots)
-  if (!bodies.id.empty() && !ids_ascending(bodies.id, s.options.threads)) compute_bounds(bodies);  // throws
+  if (!bodies.id.empty() && !ids_ascending(bodies.id, s.options.threads)) {
+    detail::upload_seconds(*s.cuda);  // the copies (page-locked arrays: from the caller's) are done first
+    compute_bounds(bodies);           // names the first bad body
+    throw InputError("bodies: ids are not strictly ascending");
+  }
   Contacts<Real> out;
   try {
     detect_on_device<Real>(s, device, frame, out, nullptr);

@@ -303,12 +303,12 @@ bool direct_download(RunState<Real, Key, Narrow>& r, Contacts<Narrow>& out, Down
 }
 
 // download: the contact rows described in DEVICE memory (job.device_out), straight into `out`'s
-// page-locked pool blocks (direct_download: the automatic download but an engine's first, not with
-// CONTACTGRID_CUDA_HOST_PATH=old), or copied into `out` by Tuning::download (download_transfer):
-// through one whole pinned staging buffer and a parallel host copy (single; also where the driver
-// refuses to register), streamed through the pinned ring (the host copy out of one slot overlaps the
-// transfer of the next), or straight into the result vectors page-locked in place (registered: a
-// parallel first touch, then cudaHostRegister).
+// page-locked pool blocks (direct_download: the automatic download but an engine's first of fewer
+// than 64 MiB, not with CONTACTGRID_CUDA_HOST_PATH=old), or copied into `out` by Tuning::download
+// (download_transfer): through one whole pinned staging buffer and a parallel host copy (single; also where
+// the driver refuses to register), streamed through the pinned ring (the host copy out of one slot overlaps
+// the transfer of the next), or straight into the result vectors page-locked in place (registered: a parallel
+// first touch, then cudaHostRegister).
 template <class Real, class Key, class Narrow>
 DownloadHostTimes download_stage(RunState<Real, Key, Narrow>& r, cuda::PinnedBuffer& h_staging,
                                  cuda::PinnedRing& ring, Contacts<Narrow>& out, bool first_download) {
