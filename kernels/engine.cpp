@@ -496,16 +496,6 @@ static bool bodies_go_up_first(const typename Engine<Real>::Impl& s, const Bodie
          !s.options.history && detail::host_path() == detail::HostPath::device;
 }
 
-// Whether ids are strictly ascending (a parallel pass; compute_bounds names the first that is not).
-static bool ids_ascending(std::span<const std::int64_t> id, int threads) {
-  const std::size_t n = id.size();
-  const int nt = threads > 0 ? threads : omp_get_max_threads();
-  int ok = 1;
-#pragma omp parallel for num_threads(nt) schedule(static) reduction(& : ok) if (n > (std::size_t(1) << 15))
-  for (std::size_t i = 1; i < n; ++i) ok &= id[i] > id[i - 1] ? 1 : 0;
-  return ok != 0;
-}
-
 template <class Real>
 static Contacts<Real> detect_host_on_device(typename Engine<Real>::Impl& s, const BodiesView& bodies,
                                             std::optional<Frame> frame) {

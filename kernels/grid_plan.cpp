@@ -111,6 +111,15 @@ Bounds compute_bounds(const BodiesView& bodies) {
   return b;
 }
 
+bool ids_ascending(std::span<const std::int64_t> id, int threads) {
+  const std::size_t n = id.size();
+  const int nt = threads > 0 ? threads : omp_get_max_threads();
+  int ok = 1;
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(& : ok) if (n > (std::size_t(1) << 15))
+  for (std::size_t i = 1; i < n; ++i) ok &= id[i] > id[i - 1] ? 1 : 0;
+  return ok != 0;
+}
+
 namespace {
 // The epsilon of the broad phase's local coordinates.
 double real_epsilon(Precision p) {

@@ -24,6 +24,9 @@ struct Bounds {
 // Validates every body (finite centre, finite radius > 0) and returns the bounds.
 // Throws InputError naming the first bad body by id.
 Bounds compute_bounds(const BodiesView& bodies);
+// Whether ids are strictly ascending: compute_bounds' check of the ids alone, as a parallel pass over
+// `threads` OpenMP threads (0: all) that names nothing (compute_bounds names the first that is not).
+bool ids_ascending(std::span<const std::int64_t> id, int threads);
 
 // The shared frame of a run: local origin (double) and cell edge. Every rank of an MPI run uses the
 // same frame, so every rank computes bit-identical local coordinates and contact data.

@@ -17,6 +17,7 @@
 
 #include "backend.hpp"
 #include "engine.hpp"
+#include "grid_plan.hpp"
 #include "host_vector.hpp"
 #include "scenes.hpp"
 #include "support/contacts_equal.hpp"
@@ -70,6 +71,25 @@ TEST(ParallelCopy, GivesMemcpysBytesAtEveryAlignment) {
       detail::parallel_copy(blocks, 3, threads);
       ASSERT_TRUE(dst == want) << "skew " << skew << ", threads " << threads;
     }
+  }
+}
+
+// ids_ascending (the default CUDA host path's check of the ids): compute_bounds' verdict on the ids,
+// on one thread or all, a violation anywhere in a long array found.
+TEST(IdsAscending, AgreesWithComputeBounds) {
+  EXPECT_TRUE(ids_ascending({}, 0));
+  const std::vector<std::int64_t> one{5}, up{1, 2, 9}, equal{1, 2, 2}, down{3, 2};
+  EXPECT_TRUE(ids_ascending(one, 0));
+  EXPECT_TRUE(ids_ascending(up, 1));
+  EXPECT_FALSE(ids_ascending(equal, 0));
+  EXPECT_FALSE(ids_ascending(down, 0));
+  std::vector<std::int64_t> many(300001);
+  for (std::size_t i = 0; i < many.size(); ++i) many[i] = 3 * std::int64_t(i) - 7;
+  for (const int threads : {1, 0}) EXPECT_TRUE(ids_ascending(many, threads));
+  for (const std::size_t at : {std::size_t(1), std::size_t(150000), many.size() - 1}) {
+    std::vector<std::int64_t> bad = many;
+    bad[at] = bad[at - 1];
+    for (const int threads : {1, 0}) EXPECT_FALSE(ids_ascending(bad, threads)) << "at " << at;
   }
 }
 
