@@ -240,11 +240,11 @@ inline Tuning read_tuning() {
 
 // The CUDA host-array path (Engine::detect on host arrays), by CONTACTGRID_CUDA_HOST_PATH:
 // - device (default): the world doubles go up first, through the pinned ring, and the device takes
-//   their bounds (the host reads each input byte once: its own bounds pass cost as much as the upload,
-//   BENCHMARKS.md §35); an engine's later downloads, and a first one of 64 MiB or more, go straight
-//   into the result vectors' pool blocks, page-locked once (cuda/transfer.cuh: direct_download). Calls with a
-//   skin, the contact history or bounds the caller gives keep the host's bounds (kernels/engine.cpp:
-//   bodies_go_up_first).
+//   their bounds (the host reads each input byte once: its own bounds pass cost as much as the
+//   upload, BENCHMARKS.md §35); an engine's later downloads, and a first one of 64 MiB or more, go
+//   straight into the result vectors' pool blocks, page-locked once (cuda/transfer.cuh:
+//   direct_download). Calls with a skin, the contact history or bounds the caller gives keep the
+//   host's bounds (kernels/engine.cpp: bodies_go_up_first).
 // - packed: the host's bounds, then fp32 sphere calls upload the 16-byte packed spheres, and the rows
 //   come down straight into the pool blocks (rows fp32 cannot resolve upload the doubles again).
 // - old: the host's bounds, the doubles up by Tuning::upload, the rows down by Tuning::download.
