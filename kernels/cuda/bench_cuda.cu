@@ -28,7 +28,9 @@
 #include <cstring>
 #include <cub/device/device_radix_sort.cuh>
 #include <functional>
+#include <iomanip>
 #include <map>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -390,39 +392,31 @@ std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs
   struct Path {
     const char *name, *up, *down;
     const char* host_path;  // CONTACTGRID_CUDA_HOST_PATH (null: the default, device)
-    const char* slot;       // CONTACTGRID_CUDA_TRANSFER_SLOT (null: the default, 4 MiB)
     bool pinned = false;    // the scene's arrays page-locked by Engine::pin_host first
   };
-  const Path paths[] = {{"device (default)", nullptr, nullptr, nullptr, nullptr},
-                        {"device, input pinned", nullptr, nullptr, nullptr, nullptr, true},
-                        {"packed", nullptr, nullptr, "packed", nullptr},
-                        {"old streamed", "streamed", "streamed", "old", nullptr},
-                        {"old registered", "registered", "registered", "old", nullptr},
-                        {"old pageable", "pageable", "staged", "old", nullptr}};
+  const Path paths[] = {{"device (default)", nullptr, nullptr, nullptr},
+                        {"device, input pinned", nullptr, nullptr, nullptr, true},
+                        {"packed", nullptr, nullptr, "packed"},
+                        {"old streamed", "streamed", "streamed", "old"},
+                        {"old registered", "registered", "registered", "old"},
+                        {"old pageable", "pageable", "staged", "old"}};
+  const char* knobs[] = {"CONTACTGRID_CUDA_UPLOAD", "CONTACTGRID_CUDA_DOWNLOAD",
+                         "CONTACTGRID_CUDA_HOST_PATH"};
   for (const Path& path : paths) {
-    const char* up = path.name;
-    auto set = [](const char* name, const char* value) {
-      if (value)
-        ::setenv(name, value, 1);
-      else
-        ::unsetenv(name);
-    };
-    set("CONTACTGRID_CUDA_UPLOAD", path.up);
-    set("CONTACTGRID_CUDA_DOWNLOAD", path.down);
-    set("CONTACTGRID_CUDA_HOST_PATH", path.host_path);
-    set("CONTACTGRID_CUDA_TRANSFER_SLOT", path.slot);
+    const char* values[] = {path.up, path.down, path.host_path};
+    for (int k = 0; k < 3; ++k) values[k] ? ::setenv(knobs[k], values[k], 1) : ::unsetenv(knobs[k]);
     cg::Engine<float> engine(
         {.backend = cg::Backend::cuda, .cell_size = g_cell_size, .cell_choice = g_cell_choice});
-    std::vector<double> total, upload_ms, download_ms;
+    std::vector<double> total;
     std::vector<std::string> stage_names;
     std::map<std::string, std::vector<double>> stage_ms;
-    HostPathRow row{log2n, up, 0, 0, 0, 0, 0, 0, 0, 0, {}};
+    HostPathRow row{log2n, path.name, 0, 0, 0, 0, 0, 0, 0, 0, {}};
     // (page-locking reads nothing and writes nothing: the scene stays const)
     void* pos = const_cast<double*>(h.pos.data());
     void* rad = const_cast<double*>(h.rad.data());
     const bool pinned = path.pinned && engine.pin_host(pos, h.pos.size() * sizeof(double)) &&
                         engine.pin_host(rad, h.rad.size() * sizeof(double));
-    if (path.pinned && !pinned) std::printf("(%s: the driver refused to page-lock the scene)\n", up);
+    if (path.pinned && !pinned) std::printf("(%s: the driver refused to page-lock the scene)\n", path.name);
     for (int r = 0; r < runs + 2; ++r) {
       const auto t0 = std::chrono::steady_clock::now();
       const cg::Contacts<float> c = engine.detect(v);
@@ -433,8 +427,6 @@ std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs
       for (const auto& st : engine.times()) {
         if (!stage_ms.count(st.name)) stage_names.push_back(st.name);
         stage_ms[st.name].push_back(st.seconds * 1e3);
-        if (st.name == "upload") upload_ms.push_back(st.seconds * 1e3);
-        if (st.name == "download") download_ms.push_back(st.seconds * 1e3);
       }
       row.contacts = c.size();
       row.down_bytes =
@@ -449,27 +441,22 @@ std::vector<HostPathRow> bench_host_path(int log2n, const HostScene& h, int runs
     const double per_body = packed && h.shape.empty() ? 16.0 : 32.0;
     row.up_bytes = double(n) * per_body + (h.shape.empty() ? 0.0 : double(n) * (sizeof(cg::Shape) + 56));
     row.total_ms = median(total);
-    row.upload_ms = median(upload_ms);
-    row.download_ms = median(download_ms);
+    row.upload_ms = median(stage_ms["upload"]);
+    row.download_ms = median(stage_ms["download"]);
+    std::ostringstream line;
+    line << std::fixed << std::setprecision(3);
     double stage_sum = 0;
     for (const std::string& name : stage_names) {
-      const double ms = median(stage_ms[name]);
-      stage_sum += ms;
-      char cell[64];
-      std::snprintf(cell, sizeof cell, "%s %.3f, ", name.c_str(), ms);
-      row.stages += cell;
+      stage_sum += median(stage_ms[name]);
+      line << name << ' ' << median(stage_ms[name]) << ", ";
     }
-    char rest[64];
-    std::snprintf(rest, sizeof rest, "sum %.3f, wall - sum %.3f", stage_sum, row.total_ms - stage_sum);
-    row.stages += rest;
+    line << "sum " << stage_sum << ", wall - sum " << row.total_ms - stage_sum;
+    row.stages = line.str();
     row.bytes_floor_ms = row.up_bytes / (bw.h2d * 1e6) + row.down_bytes / (bw.d2h * 1e6);
     row.floor_ms = row.bytes_floor_ms + resident_ms;
     rows.push_back(row);
   }
-  ::unsetenv("CONTACTGRID_CUDA_UPLOAD");
-  ::unsetenv("CONTACTGRID_CUDA_DOWNLOAD");
-  ::unsetenv("CONTACTGRID_CUDA_HOST_PATH");
-  ::unsetenv("CONTACTGRID_CUDA_TRANSFER_SLOT");
+  for (const char* k : knobs) ::unsetenv(k);
   return rows;
 }
 
