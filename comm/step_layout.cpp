@@ -160,7 +160,7 @@ void StepLoop<Real>::State::make_engine_b(const HostVector<BodyRecord>& ghosts,
     for (std::size_t g = 0; g < ng; ++g) ghost_ids[g] = ghosts[g].id;
   }
   trace.mark("ids");
-  rows = merge_boundary_rows(boundary_ids, ghost_ids);
+  rows = merge_boundary_rows(boundary_ids, ghost_ids, team());
   trace.mark("merge_rows");
   halo_lists = device_halo && !grow;
   if (halo_lists) {  // engine A's rows are this layout's: the rows it sends, its boundary rows

@@ -116,15 +116,36 @@ SpliceMap::SpliceMap(std::size_t n, std::span<const std::size_t> leaving, std::s
     m_arrival_row[j] = before[j] - gone + j;
   }
   for (std::size_t j = 0; j < leaving.size(); ++j) m_gap[j] = leaving[j] - j;
+  // each bucket's first arrival row at or above its first row, and first gap above it
+  const std::size_t buckets = (m_size >> k_bucket_bits) + 2;  // (a bucket's end is the next's first)
+  m_arrival_from.resize(buckets);
+  m_gap_from.resize(buckets);
+  for (std::size_t b = 0, a = 0, g = 0; b < buckets; ++b) {
+    const std::size_t row = b << k_bucket_bits;
+    while (a < m_arrival_row.size() && m_arrival_row[a] < row) ++a;
+    while (g < m_gap.size() && m_gap[g] < row) ++g;
+    m_arrival_from[b] = a;
+    m_gap_from[b] = g;
+  }
 }
 
 SpliceMap::Source SpliceMap::operator()(std::size_t i) const {
-  const auto a = std::lower_bound(m_arrival_row.begin(), m_arrival_row.end(), i);
-  if (a != m_arrival_row.end() && *a == i) return {true, static_cast<std::size_t>(a - m_arrival_row.begin())};
+  // the arrivals before row i: searched within its bucket's (a few entries where the changes spread)
+  const std::size_t bi = i >> k_bucket_bits;
+  const auto arrivals = m_arrival_row.begin();
+  const auto a = static_cast<std::size_t>(
+      std::lower_bound(arrivals + static_cast<std::ptrdiff_t>(m_arrival_from[bi]),
+                       arrivals + static_cast<std::ptrdiff_t>(m_arrival_from[bi + 1]), i) -
+      arrivals);
+  if (a < m_arrival_row.size() && m_arrival_row[a] == i) return {true, a};
   // the s-th row that stays: old row s + j, j the leaving rows before it (the first j with
-  // leaving[j] - j > s)
-  const std::size_t s = i - static_cast<std::size_t>(a - m_arrival_row.begin());
-  const auto j = static_cast<std::size_t>(std::upper_bound(m_gap.begin(), m_gap.end(), s) - m_gap.begin());
+  // leaving[j] - j > s), searched within s's bucket's
+  const std::size_t s = i - a, bs = s >> k_bucket_bits;
+  const auto gaps = m_gap.begin();
+  const auto j =
+      static_cast<std::size_t>(std::upper_bound(gaps + static_cast<std::ptrdiff_t>(m_gap_from[bs]),
+                                                gaps + static_cast<std::ptrdiff_t>(m_gap_from[bs + 1]), s) -
+                               gaps);
   return {false, s + j};
 }
 
@@ -217,9 +238,13 @@ Quat<double> product(const Quat<double>& a, const Quat<double>& b) {
           a.w * b.y - a.x * b.z + a.y * b.w + a.z * b.x, a.w * b.z + a.x * b.y - a.y * b.x + a.z * b.w};
 }
 
+// Row k's pose: a FilePose, or in a scene of spheres alone its centre (the identity orientation).
 FilePose pose_of(const StepBodies& b, std::size_t k) {
-  FilePose p;
-  std::memcpy(&p, b.state.data() + k * sizeof(FilePose), sizeof(FilePose));
+  FilePose p{{}, {1, 0, 0, 0}};
+  if (b.state_bytes == sizeof(FilePose))
+    std::memcpy(&p, b.state.data() + k * sizeof(FilePose), sizeof(FilePose));
+  else
+    std::memcpy(&p.position, b.state.data() + k * sizeof(Vec3<double>), sizeof(Vec3<double>));
   return p;
 }
 }  // namespace
@@ -230,24 +255,29 @@ Quat<double> spun_orientation(std::int64_t id, Quat<double> q0, double angle) {
   return product({c, s * a.x, s * a.y, s * a.z}, q0);
 }
 
-void attach_file_poses(StepBodies& b, int threads) {
+void attach_file_poses(StepBodies& b, bool orientations, int threads) {
   const std::size_t n = b.size();
-  const bool shapes = !b.shapes.empty();
-  b.state_bytes = sizeof(FilePose);
-  b.state = HostVector<std::byte>(n * sizeof(FilePose));
+  const bool shapes = !b.shapes.empty();  // (else spheres alone: the identity where orientations)
+  b.state_bytes = file_pose_bytes(orientations);
+  b.state = HostVector<std::byte>(n * b.state_bytes);
 #pragma omp parallel for num_threads(threads) schedule(static)
   for (std::size_t k = 0; k < n; ++k) {
+    if (!orientations) {
+      std::memcpy(b.state.data() + k * sizeof(Vec3<double>), &b.position[k], sizeof(Vec3<double>));
+      continue;
+    }
     const FilePose p{b.position[k], shapes ? b.shapes.orientation[k] : Quat<double>{1, 0, 0, 0}};
     std::memcpy(b.state.data() + k * sizeof(FilePose), &p, sizeof(FilePose));
   }
 }
 
 Moved move_bodies(StepBodies& b, const StepMotion& motion, int step, int threads) {
-  if (b.state_bytes != sizeof(FilePose))
-    throw Error("move_bodies: the bodies carry no file pose: internal error");
   Moved moved;
   moved.positions = motion.drift != 0;
   moved.orientations = motion.spin != 0 && !b.shapes.empty();
+  if (b.state_bytes != file_pose_bytes(true) &&
+      (b.state_bytes != file_pose_bytes(false) || moved.orientations))
+    throw Error("move_bodies: the bodies carry no file pose: internal error");
   if (!moved.positions && !moved.orientations) return moved;
   const double angle = motion.spin * step;
   const std::size_t n = b.size();

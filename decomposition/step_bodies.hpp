@@ -68,6 +68,11 @@ class SpliceMap {
   std::size_t m_size = 0;
   std::vector<std::size_t> m_arrival_row;  // arrival j's new row (ascending)
   std::vector<std::size_t> m_gap;          // leaving[j] - j (non-decreasing)
+  // per bucket of 2^k_bucket_bits rows: the first arrival row and the first gap at or above its first
+  // row, so that a lookup scans a few entries instead of two binary searches (the layout looks up
+  // every row it reads while the merge runs)
+  static constexpr unsigned k_bucket_bits = 12;
+  std::vector<std::size_t> m_arrival_from, m_gap_from;
 };
 
 // merge_step_bodies in two parts: the arrivals' places (the checks: the Errors above), then the rows
@@ -137,8 +142,16 @@ struct FilePose {
   Quat<double> orientation;
 };
 
-// Attaches each body's current pose as its state (state_bytes = sizeof(FilePose)).
-void attach_file_poses(StepBodies& bodies, int threads);
+// The state a body carries for its file pose: a FilePose, or in a scene without ellipsoids the centre
+// alone (24 of 56 bytes: a migration's merge copies every row's state, BENCHMARKS §36).
+constexpr std::size_t file_pose_bytes(bool orientations) {
+  return orientations ? sizeof(FilePose) : sizeof(Vec3<double>);
+}
+
+// Attaches each body's current pose as its state (state_bytes = file_pose_bytes(orientations)).
+// `orientations`: the scene has ellipsoids (the same on every rank, as a migration moves the state
+// between ranks; the bodies then have shape rows).
+void attach_file_poses(StepBodies& bodies, bool orientations, int threads);
 
 // What a motion changed.
 struct Moved {

@@ -139,6 +139,10 @@ StepPlan make_step_plan_of(const SlabDecomposition& slabs, int self, std::size_t
   StepPlan plan;
   plan.role = std::move(previous.role);
   const bool parallel = n > (std::size_t(1) << 16);
+  if (n > plan.role.capacity()) {  // grown with room (a migration moves a few rows): no copy, no refault
+    plan.role.clear();
+    plan.role.reserve(n + n / 16);
+  }
   plan.role.resize(n);
   RowRole* role = plan.role.data();
 #pragma omp parallel num_threads(threads) if (parallel)
@@ -213,32 +217,74 @@ std::size_t add_wide_partners(StepPlan& plan, std::span<const double> coordinate
 }
 
 BoundaryRows merge_boundary_rows(std::span<const std::int64_t> boundary_ids,
-                                 std::span<const std::int64_t> ghost_ids) {
-  for (std::size_t k = 1; k < boundary_ids.size(); ++k)
-    if (!(boundary_ids[k - 1] < boundary_ids[k]))
-      throw Error("engine B's rows: boundary ids not ascending at " + std::to_string(k) + ": internal error");
-  // The ghosts in id order (the groups of the sources interleave in id; one source's are in order).
-  std::vector<std::size_t> by_id(ghost_ids.size());
+                                 std::span<const std::int64_t> ghost_ids, int threads) {
+  const std::size_t nb = boundary_ids.size(), ng = ghost_ids.size(), total = nb + ng;
+  const std::size_t unordered = first_bad(
+      nb, threads, [&](std::size_t k) { return k > 0 && !(boundary_ids[k - 1] < boundary_ids[k]); });
+  if (unordered < nb)
+    throw Error("engine B's rows: boundary ids not ascending at " + std::to_string(unordered) +
+                ": internal error");
+  // The ghosts in id order: each source's run is ascending, so the runs are merged (few: one a
+  // neighbouring rank), or sorted when there are many.
+  std::vector<std::size_t> by_id(ng);
   std::iota(by_id.begin(), by_id.end(), std::size_t(0));
-  if (!std::is_sorted(ghost_ids.begin(), ghost_ids.end()))
-    std::sort(by_id.begin(), by_id.end(),
-              [&](std::size_t a, std::size_t b) { return ghost_ids[a] < ghost_ids[b]; });
+  const auto by_ghost_id = [&](std::size_t a, std::size_t b) { return ghost_ids[a] < ghost_ids[b]; };
+  std::vector<std::size_t> run_end;
+  for (std::size_t g = 1; g <= ng; ++g)
+    if (g == ng || ghost_ids[g] < ghost_ids[g - 1]) run_end.push_back(g);
+  if (run_end.size() > 8) {
+    std::sort(by_id.begin(), by_id.end(), by_ghost_id);
+  } else {
+    for (std::size_t r = 1; r < run_end.size(); ++r)
+      std::inplace_merge(by_id.begin(), by_id.begin() + static_cast<std::ptrdiff_t>(run_end[r - 1]),
+                         by_id.begin() + static_cast<std::ptrdiff_t>(run_end[r]), by_ghost_id);
+  }
+  auto ghost = [&](std::size_t g) { return ghost_ids[by_id[g]]; };
   BoundaryRows rows;
-  rows.of_boundary.resize(boundary_ids.size());
-  rows.of_ghost.resize(ghost_ids.size());
-  std::size_t k = 0, g = 0, row = 0;
-  std::int64_t last = 0;
-  while (k < boundary_ids.size() || g < by_id.size()) {
-    const bool boundary =
-        g == by_id.size() || (k < boundary_ids.size() && boundary_ids[k] < ghost_ids[by_id[g]]);
-    const std::int64_t id = boundary ? boundary_ids[k] : ghost_ids[by_id[g]];
-    if (row > 0 && id == last)
-      throw Error("engine B's rows: body " + std::to_string(id) + " is held twice: internal error");
-    last = id;
-    if (boundary)
-      rows.of_boundary[k++] = row++;
-    else
-      rows.of_ghost[by_id[g++]] = row++;
+  rows.of_boundary.resize(nb);
+  rows.of_ghost.resize(ng);
+  // The merge in parts of the output (a boundary row goes first when its id is smaller): part t's
+  // rows [total·t/T, total·(t+1)/T) start at the boundary row where the merge path crosses that
+  // diagonal; each part checks its own rows for an id held twice, then the parts' seams.
+  const int parts = total > (std::size_t(1) << 16) ? std::max(1, threads) : 1;
+  std::vector<std::int64_t> first(static_cast<std::size_t>(parts)), last(static_cast<std::size_t>(parts));
+  std::vector<std::uint8_t> twice(static_cast<std::size_t>(parts), 0);
+  std::vector<std::int64_t> twice_id(static_cast<std::size_t>(parts), 0);
+#pragma omp parallel for num_threads(parts) schedule(static, 1) if (parts > 1)
+  for (int t = 0; t < parts; ++t) {
+    const std::size_t d = total * std::size_t(t) / std::size_t(parts),
+                      e = total * std::size_t(t + 1) / std::size_t(parts);
+    std::size_t lo = d > ng ? d - ng : 0, hi = std::min(d, nb);
+    while (lo < hi) {
+      const std::size_t mid = lo + (hi - lo) / 2;
+      if (boundary_ids[mid] < ghost(d - mid - 1))
+        lo = mid + 1;
+      else
+        hi = mid;
+    }
+    std::size_t k = lo, g = d - lo;
+    const auto ut = static_cast<std::size_t>(t);
+    for (std::size_t row = d; row < e; ++row) {
+      const bool boundary = g == ng || (k < nb && boundary_ids[k] < ghost(g));
+      const std::int64_t id = boundary ? boundary_ids[k] : ghost(g);
+      if (row == d) first[ut] = id;
+      if (row > d && id == last[ut] && !twice[ut]) {
+        twice[ut] = 1;
+        twice_id[ut] = id;
+      }
+      last[ut] = id;
+      if (boundary)
+        rows.of_boundary[k++] = row;
+      else
+        rows.of_ghost[by_id[g++]] = row;
+    }
+  }
+  for (std::size_t t = 0; t < static_cast<std::size_t>(parts); ++t) {
+    const bool seam = t > 0 && total * t / std::size_t(parts) > total * (t - 1) / std::size_t(parts) &&
+                      first[t] == last[t - 1];
+    if (twice[t] || seam)
+      throw Error("engine B's rows: body " + std::to_string(twice[t] ? twice_id[t] : first[t]) +
+                  " is held twice: internal error");
   }
   return rows;
 }

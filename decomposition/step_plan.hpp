@@ -107,8 +107,9 @@ struct BoundaryRows {
   std::size_t size() const { return of_boundary.size() + of_ghost.size(); }
 };
 
-// Throws Error (internal) when an id is held twice or a run is not ascending.
+// Throws Error (internal) when an id is held twice or the boundary ids are not ascending. The same
+// rows for any number of threads.
 BoundaryRows merge_boundary_rows(std::span<const std::int64_t> boundary_ids,
-                                 std::span<const std::int64_t> ghost_ids);
+                                 std::span<const std::int64_t> ghost_ids, int threads = 1);
 
 }  // namespace cg

@@ -4,14 +4,17 @@
 // precede, in their own order). The migration of the resident steps (decomposition/step_bodies:
 // merge_step_bodies) and Engine::splice_resident's CPU rows share it; CUDA does the same per row
 // (cuda/splice.cuh: splice_kernel). The copies are the runs of rows between the changes, cut into
-// pieces that the threads share: the result does not depend on the threads.
+// pieces that the threads share: the result does not depend on the threads. Large arrays are copied
+// with streaming stores (stream_copy.hpp).
 #include <algorithm>
 #include <cstddef>
 #include <span>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "errors.hpp"
+#include "stream_copy.hpp"
 
 namespace cg {
 
@@ -72,11 +75,17 @@ inline SplicePlan plan_splice(std::size_t n, std::span<const std::size_t> leavin
 template <class T>
 void splice_rows(const SplicePlan& plan, const T* from, const T* arrivals, T* into, std::size_t stride,
                  int threads) {
+  static_assert(std::is_trivially_copyable_v<T>);
   const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(plan.pieces.size());
+  const bool streamed = stream_copy_wanted(plan.size * stride * sizeof(T));
 #pragma omp parallel for num_threads(threads) schedule(dynamic, 4) if (count > 4)
   for (std::ptrdiff_t k = 0; k < count; ++k) {
     const SpliceRun& r = plan.pieces[static_cast<std::size_t>(k)];
-    std::copy_n((r.arrival ? arrivals : from) + r.src * stride, r.count * stride, into + r.dst * stride);
+    const T* src = (r.arrival ? arrivals : from) + r.src * stride;
+    if (streamed)
+      stream_copy(into + r.dst * stride, src, r.count * stride * sizeof(T));
+    else
+      std::copy_n(src, r.count * stride, into + r.dst * stride);
   }
 }
 

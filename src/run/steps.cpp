@@ -152,9 +152,12 @@ StepStats run_steps(Session& session, Engine<Real>& engine, const SlabDecomposit
   StepStats st;
   {
     StepLoop<Real> loop(session, engine, slabs, motion, threads);
+    // the file poses carry orientations where any rank's bodies have shape rows (the same state on
+    // every rank: a migration moves it)
+    const bool orientations = session.sum(std::uint64_t(input.shapes.empty() ? 0 : 1)) > 0;
     agreed_stage(session, "steps", [&] {
       loop.bodies() = owned_bodies(input, threads);
-      attach_file_poses(loop.bodies(), threads);
+      attach_file_poses(loop.bodies(), orientations, threads);
     });
     loop.update_frame(0);
     loop.lay_out();

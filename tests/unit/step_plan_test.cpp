@@ -464,6 +464,96 @@ TEST(StepPlan, MergesBoundaryRowsAndGhostsById) {
   EXPECT_THROW(merge_boundary_rows(std::vector<std::int64_t>{3, 2}, {}), Error);
 }
 
+// The merge in parts over many rows: the rows of a plain merge by id for any number of threads, with
+// the ghosts in one run, in three runs and shuffled, and an id held twice found at any place
+// (within a part, at a seam between parts, a ghost twice).
+TEST(StepPlan, MergesBoundaryRowsInPartsAsOneMerge) {
+  std::mt19937_64 rng(3607);
+  for (int trial = 0; trial < 12; ++trial) {
+    const std::size_t n = 70000 + rng() % 90000;
+    std::vector<std::int64_t> ids(2 * n);
+    std::iota(ids.begin(), ids.end(), std::int64_t(0));
+    std::shuffle(ids.begin(), ids.end(), rng);
+    const std::size_t nb = trial == 0 ? 0 : trial == 1 ? n : n / 3 + rng() % (n / 2);
+    std::vector<std::int64_t> boundary(ids.begin(), ids.begin() + static_cast<std::ptrdiff_t>(nb)),
+        ghosts(ids.begin() + static_cast<std::ptrdiff_t>(nb), ids.begin() + static_cast<std::ptrdiff_t>(n));
+    std::sort(boundary.begin(), boundary.end());
+    const int runs = trial % 3;  // 0: one run, 1: three runs, 2: shuffled
+    if (runs == 2) {
+      std::shuffle(ghosts.begin(), ghosts.end(), rng);
+    } else {
+      std::sort(ghosts.begin(), ghosts.end());
+      if (runs == 1 && ghosts.size() > 3) {  // three sources' runs, each ascending
+        std::vector<std::int64_t> a, b, c;
+        for (const std::int64_t g : ghosts) (g % 3 == 0 ? a : g % 3 == 1 ? b : c).push_back(g);
+        ghosts = a;
+        ghosts.insert(ghosts.end(), b.begin(), b.end());
+        ghosts.insert(ghosts.end(), c.begin(), c.end());
+      }
+    }
+    // the reference: every id's row in the sorted union
+    std::vector<std::int64_t> all(boundary);
+    all.insert(all.end(), ghosts.begin(), ghosts.end());
+    std::sort(all.begin(), all.end());
+    auto row_of = [&](std::int64_t id) {
+      return static_cast<std::size_t>(std::lower_bound(all.begin(), all.end(), id) - all.begin());
+    };
+    for (const int threads : {1, 4, 7}) {
+      const BoundaryRows r = merge_boundary_rows(boundary, ghosts, threads);
+      ASSERT_EQ(r.size(), all.size());
+      for (std::size_t k = 0; k < boundary.size(); ++k)
+        ASSERT_EQ(r.of_boundary[k], row_of(boundary[k])) << "trial " << trial << " threads " << threads;
+      for (std::size_t g = 0; g < ghosts.size(); ++g)
+        ASSERT_EQ(r.of_ghost[g], row_of(ghosts[g])) << "trial " << trial << " threads " << threads;
+    }
+    if (boundary.empty() || ghosts.empty()) continue;
+    // an id held twice: a ghost taking a boundary row's id at any place, or a ghost's id twice
+    for (const std::size_t at : {std::size_t(0), boundary.size() / 2, boundary.size() - 1}) {
+      std::vector<std::int64_t> twice = ghosts;
+      twice[rng() % twice.size()] = boundary[at];
+      if (runs != 2) std::sort(twice.begin(), twice.end());
+      for (const int threads : {1, 4, 7}) EXPECT_THROW(merge_boundary_rows(boundary, twice, threads), Error);
+    }
+    std::vector<std::int64_t> twice = ghosts;
+    twice.push_back(ghosts[rng() % ghosts.size()]);
+    for (const int threads : {1, 4, 7}) EXPECT_THROW(merge_boundary_rows(boundary, twice, threads), Error);
+  }
+}
+
+// A scene of spheres alone carries each body's file centre (24 bytes), with ellipsoids the whole pose
+// (56): the drift moves either to drifted_position, the spin needs the pose.
+TEST(StepBodies, FilePosesOfSpheresCarryTheCentreAlone) {
+  StepBodies b = sized_step_bodies(3, false);
+  for (std::size_t k = 0; k < 3; ++k) {
+    b.id[k] = std::int64_t(10 + k);
+    b.position[k] = {double(k), 2.0 * double(k), -1.0};
+    b.radius[k] = 0.5;
+  }
+  const StepBodies start = b;
+  attach_file_poses(b, false, 2);
+  EXPECT_EQ(b.state_bytes, 24u);
+  ASSERT_EQ(b.state.size(), 3u * 24u);
+  StepMotion m;
+  m.drift = 0.125;
+  for (const int step : {1, 4}) {
+    const Moved moved = move_bodies(b, m, step, 2);
+    EXPECT_TRUE(moved.positions);
+    for (std::size_t k = 0; k < 3; ++k) {
+      const Vec3<double> want = drifted_position(b.id[k], start.position[k], m.drift, step);
+      EXPECT_EQ(b.position[k].x, want.x);
+      EXPECT_EQ(b.position[k].y, want.y);
+      EXPECT_EQ(b.position[k].z, want.z);
+    }
+  }
+  StepBodies with = start;
+  attach_file_poses(with, true, 1);  // another rank's ellipsoids: the whole pose, the identity here
+  EXPECT_EQ(with.state_bytes, sizeof(FilePose));
+  EXPECT_EQ(move_bodies(with, m, 2, 1).positions, true);
+  EXPECT_EQ(with.position[1].x, drifted_position(11, start.position[1], m.drift, 2).x);
+  b.state_bytes = 8;  // no pose at all
+  EXPECT_THROW(move_bodies(b, m, 1, 1), Error);
+}
+
 TEST(StepPlan, RefusesBadWidthsAndCoordinates) {
   const SlabDecomposition s(0, {50.0});
   const std::vector<double> x{1, 2, 60};
@@ -499,7 +589,7 @@ TEST(StepBodies, OwnedRowsAndTheirMotion) {
   EXPECT_EQ(b.id[0], 8);
   EXPECT_EQ(b.id[1], 12);
   EXPECT_EQ(b.radius[1], 0.8);
-  attach_file_poses(b, 1);
+  attach_file_poses(b, true, 1);
   StepMotion m;
   Moved moved = move_bodies(b, m, 3, 1);
   EXPECT_FALSE(moved.positions || moved.orientations);  // no spin, no drift: nothing moves
