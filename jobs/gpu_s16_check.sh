@@ -13,6 +13,7 @@
 #   eranks  2^24 ellipsoids (aspect <= 1:4) at 6 contacts a body, drift 0.01, skin auto, 40 steps:
 #           np 1, np 2 before, np 2 the change (BENCHMARKS §34's runs)
 #   mpitests  the CUDA cases of contactgrid_mpi_tests at np 2
+# (Calls 2 and 3 named the trace files trace_TAG.txt and trace2_TAG.txt.)
 set -u
 cd "$(dirname "$0")/.."
 for b in n old; do [ -d ".devbin/$b" ] || [ ! -f ".devbin/$b.tar.xz" ] || tar xJf ".devbin/$b.tar.xz" -C .devbin; done
@@ -21,37 +22,28 @@ OUT=${OUT:-/tmp/out}; PART=${PART:-ranks}
 mkdir -p "$OUT"
 { date -u; nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader; nproc; } | tee "$OUT/device.txt"
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_btl_vader_single_copy_mechanism=cma
+# ranks_runs PREFIX RUN…: the sphere scene's runs (RUN = tag:np:binaries:setting or -), each rank's
+# trace lines kept in $OUT/trace_PREFIX_tag.txt beside the summaries
+ranks_runs() {
+  local prefix=$1; shift
+  local N=${N:-67108864} S=${STEPS:-100}
+  timeout 120 .devbin/n/contactgrid generate /dev/shm/r.h5 -n "$N" --seed 24 --contacts-per-body 6 -q
+  for run in "$@"; do
+    IFS=: read -r tag np bin setting <<<"$run"
+    envs=(-x CONTACTGRID_STEP_TRACE=1); [ "$setting" != - ] && envs+=(-x "$setting")
+    timeout 240 mpirun --bind-to none --allow-run-as-root -np "$np" "${envs[@]}" ".devbin/$bin/contactgrid" detect \
+      /dev/shm/r.h5 -o /dev/shm/rc.h5 --backend cuda --precision fp32 --steps "$S" --drift 0.01 --skin auto \
+      >"$OUT/${prefix}_$tag.log" 2>&1
+    echo "-- $tag (rc $?)"
+    grep '^trace' "$OUT/${prefix}_$tag.log" | sort -k5,5n -k3,3n >"$OUT/trace_${prefix}_$tag.txt"
+    sed -nE '/^resident steps/,/slab rebalances/p' "$OUT/${prefix}_$tag.log" | grep -vE '^    (plan|pack|skin) '
+    rm -f /dev/shm/rc.h5
+  done
+  rm -f /dev/shm/r.h5
+}
 case $PART in
-ranks)
-  N=${N:-67108864}; S=${STEPS:-100}
-  timeout 120 .devbin/n/contactgrid generate /dev/shm/r.h5 -n "$N" --seed 24 --contacts-per-body 6 -q
-  for run in np1:1:n:- np2old:2:old:- np2:2:n:- np2memcpy:2:n:CONTACTGRID_SPLICE_COPY=memcpy; do
-    IFS=: read -r tag np bin setting <<<"$run"
-    envs=(-x CONTACTGRID_STEP_TRACE=1); [ "$setting" != - ] && envs+=(-x "$setting")
-    timeout 240 mpirun --bind-to none --allow-run-as-root -np "$np" "${envs[@]}" ".devbin/$bin/contactgrid" detect \
-      /dev/shm/r.h5 -o /dev/shm/rc.h5 --backend cuda --precision fp32 --steps "$S" --drift 0.01 --skin auto \
-      >"$OUT/ranks_$tag.log" 2>&1
-    echo "-- $tag (rc $?)"
-    grep '^trace' "$OUT/ranks_$tag.log" | sort -k5,5n -k3,3n >"$OUT/trace_$tag.txt"
-    sed -nE '/^resident steps/,/slab rebalances/p' "$OUT/ranks_$tag.log" | grep -vE '^    (plan|pack|skin) '
-    rm -f /dev/shm/rc.h5
-  done
-  rm -f /dev/shm/r.h5 ;;
-ranks2)
-  N=${N:-67108864}; S=${STEPS:-100}
-  timeout 120 .devbin/n/contactgrid generate /dev/shm/r.h5 -n "$N" --seed 24 --contacts-per-body 6 -q
-  for run in np1:1:n:- np2:2:n:- np2whole:2:n:CONTACTGRID_STEP_MERGE_TEAM=whole; do
-    IFS=: read -r tag np bin setting <<<"$run"
-    envs=(-x CONTACTGRID_STEP_TRACE=1); [ "$setting" != - ] && envs+=(-x "$setting")
-    timeout 240 mpirun --bind-to none --allow-run-as-root -np "$np" "${envs[@]}" ".devbin/$bin/contactgrid" detect \
-      /dev/shm/r.h5 -o /dev/shm/rc.h5 --backend cuda --precision fp32 --steps "$S" --drift 0.01 --skin auto \
-      >"$OUT/ranks2_$tag.log" 2>&1
-    echo "-- $tag (rc $?)"
-    grep '^trace' "$OUT/ranks2_$tag.log" | sort -k5,5n -k3,3n >"$OUT/trace2_$tag.txt"
-    sed -nE '/^resident steps/,/slab rebalances/p' "$OUT/ranks2_$tag.log" | grep -vE '^    (plan|pack|skin) '
-    rm -f /dev/shm/rc.h5
-  done
-  rm -f /dev/shm/r.h5 ;;
+ranks) ranks_runs ranks np1:1:n:- np2old:2:old:- np2:2:n:- np2memcpy:2:n:CONTACTGRID_SPLICE_COPY=memcpy ;;
+ranks2) ranks_runs ranks2 np1:1:n:- np2:2:n:- np2whole:2:n:CONTACTGRID_STEP_MERGE_TEAM=whole ;;
 eranks)
   N=${N:-16777216}; S=${STEPS:-40}
   timeout 120 .devbin/n/contactgrid generate /dev/shm/e.h5 -n "$N" --seed 24 --contacts-per-body 6 --kind ellipsoids -q
