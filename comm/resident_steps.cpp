@@ -119,7 +119,7 @@ bool StepLoop<Real>::rebuild_due() {
   s.tuner_displacement = s.displacement;
   s.tuner_steps = s.steps_since_layout;
   s.t[static_cast<std::size_t>(StepStage::rebuild)] += seconds_since(t0);
-  return 2 * s.displacement > s.skin;
+  return 2 * s.displacement > s.layout_skin();
 }
 
 template <class Real>

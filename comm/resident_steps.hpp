@@ -20,9 +20,9 @@
 //                      layout the moved positions go into engine A first and the engine computes the
 //                      bounds and the largest displacement since the layout where its rows are
 //                      (Engine::resident_extent; CUDA: on the device, no centre read on the host)
-//   rebuild_due        whether a body moved by more than skin/2 since the layout (the rows' ghost set
-//                      no longer covers every contact; engine A's mark_resident at the layout is the
-//                      reference); then, before lay_out:
+//   rebuild_due        whether a body moved by more than half the layout's skin since the layout (the
+//                      rows' ghost set no longer covers every contact; engine A's mark_resident at the
+//                      layout is the reference); then, before lay_out:
 //     rebalance        slab cuts moved part of the way to the owned counts' quantiles, when the
 //                      imbalance of the owned counts passes a threshold
 //     migrate          every body whose centre left its slab to its new owner (its rows, shape rows
@@ -44,12 +44,14 @@
 // gather_bodies (every body on rank 0, for the final scene) and stats.
 //
 // Between rebuilds a body stays with the rank that owned it at the layout, even when its centre has
-// crossed a cut (by less than skin/2): the layout's ghost width is the run's plus the skin, so every
-// pair that touches now was within it then, and the ghosts are refreshed every step. With skin 0 a
-// step that moved anything rebuilds. The engines keep their candidate lists with the same skin
-// (EngineOptions::skin; Engine::set_skin), so their builds fall on the rebuilds. --skin auto
-// (EngineOptions::skin_auto): the loop picks the skin with kernels/skin_tuner.hpp from the largest
-// displacement per step and the measured cost of its steps (the same on every rank).
+// crossed a cut (by less than half the layout's skin): the layout's ghost width is the run's plus the
+// layout's skin, so every pair that touches now was within it then, and the ghosts are refreshed
+// every step. The engines keep their candidate lists with the skin (EngineOptions::skin;
+// Engine::set_skin) and rebuild them at their own checks; over several ranks a layout's skin is
+// twice theirs (CONTACTGRID_STEP_LAYOUT_SKIN), so about every other build goes without a migration
+// and a layout, on one rank the two are the same. With skin 0 a step that moved anything rebuilds.
+// --skin auto (EngineOptions::skin_auto): the loop picks the skin with kernels/skin_tuner.hpp from the
+// largest displacement per step and the measured cost of its steps (the same on every rank).
 //
 // A rank holds its bodies in ascending id in both engines (the engines' contacts then come out in
 // (id_a, id_b) order with the bits of a run from scratch). Scenes with ellipsoids: A and B hold the

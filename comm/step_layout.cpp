@@ -49,13 +49,14 @@ void StepLoop<Real>::lay_out() {
     s.trace.mark("rows");
     if (!alone) {
       // the ghost width of the layout: the frame's, over coordinates that may still grow by the
-      // skin, plus the skin (each of two bodies moves by at most skin/2 before the next layout); per
-      // body (the run's GhostRule with the skin in its margin) or one for all
+      // layout's skin, plus that skin (each of two bodies moves by at most half of it before the next
+      // layout); per body (the run's GhostRule with the skin in its margin) or one for all
       const double epsilon = std::numeric_limits<Real>::epsilon();
+      const double reach = s.layout_skin();
       if (s.motion.ghosts_by_radius)
-        s.rule = ghost_rule(s.global, frame_extent(s.global, s.frame.origin), epsilon, s.skin);
+        s.rule = ghost_rule(s.global, frame_extent(s.global, s.frame.origin), epsilon, reach);
       else
-        s.rule = GhostRule::uniform(frame_ghost_width(s.global, s.frame.origin, epsilon, s.skin) + s.skin);
+        s.rule = GhostRule::uniform(frame_ghost_width(s.global, s.frame.origin, epsilon, reach) + reach);
       if (s.device_scan) {
         // engine A holds the bodies' rows: the rows outside the slab's interior band are listed where
         // the rows are, and the plan classifies those alone (make_step_plan_of: the same plan)

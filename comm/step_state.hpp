@@ -103,6 +103,13 @@ struct StepLoop<Real>::State {
   bool skin_auto = false;
   double skin = 0;
   SkinTuner tuner;
+  // Over several ranks a layout lasts StepMotion::layout_skins skins (its ghost width and the rebuild
+  // check's margin): the engines rebuild their lists at their own checks in between, without a
+  // migration or a layout, whose host work (~50 ms a layout at 2^25 bodies a rank) otherwise falls on
+  // every build and drives the tuner to larger skins; the halo grows by the extra margin. One rank:
+  // the layout is the engine's build (factor 1). CONTACTGRID_STEP_LAYOUT_SKIN=k overrides the factor.
+  double layout_factor = 1;
+  double layout_skin() const { return session.size() > 1 ? layout_factor * skin : skin; }
 
   StepBodies bodies;  // owned, ascending id
   StepBodies spare;   // the previous rows' storage: the next migration's rows are merged into it
@@ -222,6 +229,11 @@ struct StepLoop<Real>::State {
     split_team = !(team_knob && std::string(team_knob) == "whole");
     const char* priority_knob = std::getenv("CONTACTGRID_STEP_PRIORITY");
     boundary_first = !(priority_knob && std::string(priority_knob) == "same");
+    layout_factor = m.layout_skins;
+    if (const char* k = std::getenv("CONTACTGRID_STEP_LAYOUT_SKIN")) layout_factor = std::strtod(k, nullptr);
+    if (!(layout_factor >= 1) || !std::isfinite(layout_factor))
+      throw UsageError("steps: a layout's skins (StepMotion::layout_skins, CONTACTGRID_STEP_LAYOUT_SKIN) " +
+                       std::to_string(layout_factor) + " is not a number >= 1");
     const char* trace_knob = std::getenv("CONTACTGRID_STEP_TRACE");
     trace.on = trace_knob && std::string(trace_knob) == "1";
   }

@@ -113,6 +113,11 @@ struct StepMotion {
   // plus the skin), each such pair reported by the owner of its smaller id (contactgrid simulate
   // computes a contact's terms there).
   bool ghosts_by_radius = false;
+  // Over several ranks, how many of the engines' skins a layout lasts (its ghost width's margin and
+  // the rebuild check's): the engines rebuild their candidate lists at their own checks in between,
+  // without a migration and a layout (>= 1; 1: every build lays the rows out; one rank: always 1).
+  // CONTACTGRID_STEP_LAYOUT_SKIN=k overrides it (a measurement switch).
+  double layout_skins = 2;
 };
 
 // An order-free fingerprint of a contact pair; a contact set's is the sum over its pairs.

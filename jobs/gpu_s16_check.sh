@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The sixteenth session's GPU checks (issue #31: the rebuild under mpirun), from the repository root on
 # a 2-GPU device host (binaries: .devbin/n.tar.xz, the change; .devbin/old.tar.xz, the main before it):
-#   PART=ranks|ranks2|eranks|mpitests OUT=dir [N=…] [STEPS=…] jobs/gpu_s16_check.sh
+#   PART=ranks|ranks2|eranks|mpitests|layout OUT=dir [N=…] [STEPS=…] jobs/gpu_s16_check.sh
 #   ranks   N spheres at 6 contacts a body, drift 0.01, skin auto, STEPS steps, CONTACTGRID_STEP_TRACE=1:
 #           np 1 (the change), np 2 before, np 2 the change, np 2 the change with plain copies in the
 #           migration's merge (CONTACTGRID_SPLICE_COPY=memcpy); every run's last step the same pair
@@ -13,6 +13,10 @@
 #   eranks  2^24 ellipsoids (aspect <= 1:4) at 6 contacts a body, drift 0.01, skin auto, 40 steps:
 #           np 1, np 2 before, np 2 the change (BENCHMARKS §34's runs)
 #   mpitests  the CUDA cases of contactgrid_mpi_tests at np 2
+#   layout  a layout lasting two of the engines' skins (the default) or three
+#           (CONTACTGRID_STEP_LAYOUT_SKIN=3): the sphere scene at np 1, np 2, np 2 k=3, then the
+#           ellipsoid scene at np 1 and np 2 (40 steps). Expect np 2's skin near np 1's and fewer
+#           rebuilds (layouts) than builds.
 # (Calls 2 and 3 named the trace files trace_TAG.txt and trace2_TAG.txt.)
 set -u
 cd "$(dirname "$0")/.."
@@ -44,10 +48,13 @@ ranks_runs() {
 case $PART in
 ranks) ranks_runs ranks np1:1:n:- np2old:2:old:- np2:2:n:- np2memcpy:2:n:CONTACTGRID_SPLICE_COPY=memcpy ;;
 ranks2) ranks_runs ranks2 np1:1:n:- np2:2:n:- np2whole:2:n:CONTACTGRID_STEP_MERGE_TEAM=whole ;;
+layout)
+  ranks_runs layout np1:1:n:- np2:2:n:- np2k3:2:n:CONTACTGRID_STEP_LAYOUT_SKIN=3
+  PART=eranks ERUNS="np1:1:n np2:2:n" "$0" ;;
 eranks)
   N=${N:-16777216}; S=${STEPS:-40}
   timeout 120 .devbin/n/contactgrid generate /dev/shm/e.h5 -n "$N" --seed 24 --contacts-per-body 6 --kind ellipsoids -q
-  for run in np1:1:n np2old:2:old np2:2:n; do
+  for run in ${ERUNS:-np1:1:n np2old:2:old np2:2:n}; do
     IFS=: read -r tag np bin <<<"$run"
     timeout 240 mpirun --bind-to none --allow-run-as-root -np "$np" ".devbin/$bin/contactgrid" detect /dev/shm/e.h5 \
       -o /dev/shm/ec.h5 --backend cuda --precision fp32 --steps "$S" --drift 0.01 --skin auto \

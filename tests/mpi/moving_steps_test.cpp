@@ -67,6 +67,7 @@ struct Case {
   double skin;
   bool automatic;
   SceneRead read;
+  double layout_skins = 2;  // StepMotion::layout_skins
 };
 
 // Every step's contacts (hash of every field) and the last step's rows equal the one-rank detection
@@ -75,9 +76,12 @@ template <class Real>
 void check_drifting(const std::string& name, const Scene& scene, double drift, double spin,
                     Backend backend = Backend::cpu) {
   const std::string path = write_shared(name, scene);
-  // skin 1: lists (and the ghost set) kept over 7 steps, while pairs close by up to 1 across the cuts
+  // skin 1: lists (and the ghost set) kept over 7 steps, while pairs close by up to 1 across the cuts;
+  // skin 0.25: a layout every two of the engines' skins (the default), their builds in between, and
+  // every three
   for (const Case& c : {Case{0, false, SceneRead::own_rows}, Case{0.25, false, SceneRead::all_rows},
-                        Case{1.0, false, SceneRead::own_rows}, Case{0, true, SceneRead::own_rows}}) {
+                        Case{0.25, false, SceneRead::own_rows, 3}, Case{1.0, false, SceneRead::own_rows, 1},
+                        Case{0, true, SceneRead::own_rows}}) {
     DistributedOptions o;
     o.engine.backend = backend;
     o.engine.threads = 1;
@@ -89,9 +93,11 @@ void check_drifting(const std::string& name, const Scene& scene, double drift, d
     o.step_motion.drift = drift;
     o.step_motion.spin = spin;
     o.step_motion.hash_every_step = true;
+    o.step_motion.layout_skins = c.layout_skins;
     const std::string label = name + (backend == Backend::cuda ? " cuda" : " cpu") +
                               (std::is_same_v<Real, float> ? " fp32" : " fp64") + ", skin " +
-                              (c.automatic ? std::string("auto") : std::to_string(c.skin)) + " at " +
+                              (c.automatic ? std::string("auto") : std::to_string(c.skin)) + " (layouts of " +
+                              std::to_string(c.layout_skins) + " skins) at " +
                               std::to_string(session().size()) + " rank(s)";
     const DistributedResult<Real> got = distributed_detect<Real>(session(), path, o);
     const StepStats& st = got.steps;
@@ -104,6 +110,9 @@ void check_drifting(const std::string& name, const Scene& scene, double drift, d
     }
     if (c.skin > 0) {
       EXPECT_GT(st.reuses, 0u) << label;
+    }
+    if (session().size() > 1 && c.skin > 0 && c.layout_skins > 1) {  // builds between the layouts
+      EXPECT_GT(st.builds, st.rebuilds + 1) << label;
     }
     if (session().rank() != 0) continue;
     for (int step = 1; step <= 9; ++step) {
