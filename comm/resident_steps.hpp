@@ -47,9 +47,10 @@
 // crossed a cut (by less than half the layout's skin): the layout's ghost width is the run's plus the
 // layout's skin, so every pair that touches now was within it then, and the ghosts are refreshed
 // every step. The engines keep their candidate lists with the skin (EngineOptions::skin;
-// Engine::set_skin) and rebuild them at their own checks; over several ranks a layout's skin is
-// twice theirs (CONTACTGRID_STEP_LAYOUT_SKIN), so about every other build goes without a migration
-// and a layout, on one rank the two are the same. With skin 0 a step that moved anything rebuilds.
+// Engine::set_skin) and rebuild them at their own checks; over several ranks a layout's skin may be
+// a multiple of theirs (StepMotion::layout_skins, CONTACTGRID_STEP_LAYOUT_SKIN; 1 by default: their
+// builds fall on the layouts), so that builds go without a migration and a layout in between; on one
+// rank the two are the same. With skin 0 a step that moved anything rebuilds.
 // --skin auto (EngineOptions::skin_auto): the loop picks the skin with kernels/skin_tuner.hpp from the
 // largest displacement per step and the measured cost of its steps (the same on every rank).
 //

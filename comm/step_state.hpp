@@ -105,9 +105,9 @@ struct StepLoop<Real>::State {
   SkinTuner tuner;
   // Over several ranks a layout lasts StepMotion::layout_skins skins (its ghost width and the rebuild
   // check's margin): the engines rebuild their lists at their own checks in between, without a
-  // migration or a layout, whose host work (~50 ms a layout at 2^25 bodies a rank) otherwise falls on
-  // every build and drives the tuner to larger skins; the halo grows by the extra margin. One rank:
-  // the layout is the engine's build (factor 1). CONTACTGRID_STEP_LAYOUT_SKIN=k overrides the factor.
+  // migration or a layout (~40 ms of host work a layout at 2^25 bodies a rank); the halo grows by the
+  // extra margin. One rank: the layout is the engine's build (factor 1). CONTACTGRID_STEP_LAYOUT_SKIN=k
+  // overrides the factor.
   double layout_factor = 1;
   double layout_skin() const { return session.size() > 1 ? layout_factor * skin : skin; }
 
