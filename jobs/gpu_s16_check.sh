@@ -13,7 +13,7 @@
 #   eranks  2^24 ellipsoids (aspect <= 1:4) at 6 contacts a body, drift 0.01, skin auto, 40 steps:
 #           np 1, np 2 before, np 2 the change (BENCHMARKS §34's runs)
 #   mpitests  the CUDA cases of contactgrid_mpi_tests at np 2
-#   layout  a layout lasting two of the engines' skins (the default) or three
+#   layout  a layout lasting two of the engines' skins (call 4: the default then, 1 now) or three
 #           (CONTACTGRID_STEP_LAYOUT_SKIN=3): the sphere scene at np 1, np 2, np 2 k=3, then the
 #           ellipsoid scene at np 1 and np 2 (40 steps). Expect np 2's skin near np 1's and fewer
 #           rebuilds (layouts) than builds.
@@ -49,7 +49,7 @@ case $PART in
 ranks) ranks_runs ranks np1:1:n:- np2old:2:old:- np2:2:n:- np2memcpy:2:n:CONTACTGRID_SPLICE_COPY=memcpy ;;
 ranks2) ranks_runs ranks2 np1:1:n:- np2:2:n:- np2whole:2:n:CONTACTGRID_STEP_MERGE_TEAM=whole ;;
 layout)
-  ranks_runs layout np1:1:n:- np2:2:n:- np2k3:2:n:CONTACTGRID_STEP_LAYOUT_SKIN=3
+  ranks_runs layout np1:1:n:- np2:2:n:CONTACTGRID_STEP_LAYOUT_SKIN=2 np2k3:2:n:CONTACTGRID_STEP_LAYOUT_SKIN=3
   PART=eranks ERUNS="np1:1:n np2:2:n" "$0" ;;
 eranks)
   N=${N:-16777216}; S=${STEPS:-40}
