@@ -116,9 +116,9 @@ struct StepMotion {
   // Over several ranks, how many of the engines' skins a layout lasts (its ghost width's margin and
   // the rebuild check's): the engines rebuild their candidate lists at their own checks in between,
   // without a migration and a layout (>= 1; 1: every build lays the rows out; one rank: always 1).
-  // 2 on two H200s: np 2 / np 1 1.17x against 1.14x (2^26 spheres), 1.26x against 1.23x (2^24
-  // ellipsoids), within the runs' spread; 3: 1.07x (the tuner's fits mix builds with and without a
-  // layout). BENCHMARKS §36. CONTACTGRID_STEP_LAYOUT_SKIN=k overrides it.
+  // Measured on two GPUs (BENCHMARKS §36), 2 gains within the runs' spread and 3 loses (more ghosts,
+  // and the skin tuner's fits mix builds with and without a layout). CONTACTGRID_STEP_LAYOUT_SKIN=k
+  // overrides it.
   double layout_skins = 1;
 };
 

@@ -280,8 +280,9 @@ BoundaryRows merge_boundary_rows(std::span<const std::int64_t> boundary_ids,
     }
   }
   for (std::size_t t = 0; t < static_cast<std::size_t>(parts); ++t) {
-    const bool seam = t > 0 && total * t / std::size_t(parts) > total * (t - 1) / std::size_t(parts) &&
-                      first[t] == last[t - 1];
+    const std::size_t begin = total * t / std::size_t(parts);
+    const bool seam = t > 0 && begin > total * (t - 1) / std::size_t(parts) &&
+                      total * (t + 1) / std::size_t(parts) > begin && first[t] == last[t - 1];
     if (twice[t] || seam)
       throw Error("engine B's rows: body " + std::to_string(twice[t] ? twice_id[t] : first[t]) +
                   " is held twice: internal error");
