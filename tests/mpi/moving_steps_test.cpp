@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <limits>
 #include <optional>
 #include <random>
 #include <string>
@@ -479,6 +480,21 @@ TEST(MovingSteps, CudaTheHaloAndScansWhereTheRowsAreGiveTheFormerPathsBits) {
   if (!cuda_available()) GTEST_SKIP() << "no CUDA device in this process: CUDA case skipped";
   check_former_paths<double>(Backend::cuda);
   check_former_paths<float>(Backend::cuda);
+}
+
+// A layout of fewer than one skin (StepMotion::layout_skins) would let bodies leave the ghost set
+// between layouts: refused on every rank before any step.
+TEST(StepLoop, ALayoutOfFewerThanOneSkinIsRefused) {
+  const std::string path = write_shared("layout_skins", generated("uniform", 400, 65));
+  for (const double k : {0.5, 0.0, -1.0, std::numeric_limits<double>::quiet_NaN()}) {
+    DistributedOptions o;
+    o.engine.threads = 1;
+    o.engine.skin = 0.25;
+    o.resident_steps = 2;
+    o.step_motion.drift = 0.07;
+    o.step_motion.layout_skins = k;
+    EXPECT_THROW(distributed_detect<double>(session(), path, o), UsageError) << "layout_skins " << k;
+  }
 }
 
 TEST(StepLoop, NonFiniteCentreNamesBodyAndStep) { check_non_finite_centre(Backend::cpu); }
