@@ -143,7 +143,7 @@ void StepLoop<Real>::migrate() {
     std::vector<std::size_t> at;
     if (in_place && s.device_scan && s.defer_merge) {
       // the host rows merged beside the layout (finish_merge joins); engine A's spliced meanwhile
-      at = arrival_places(b, gone, arrivals, shapes);
+      at = arrival_places(b, gone, arrivals, shapes, s.threads);
       s.merged = SpliceMap(b.size(), gone, at);
       s.arrivals = std::move(arrivals);
       s.merge_pending = true;

@@ -1,6 +1,8 @@
 // The bodies of the resident steps and their motion rule (see step_bodies.hpp).
 #include "step_bodies.hpp"
 
+#include <omp.h>
+
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -53,7 +55,7 @@ void resize_step_bodies(StepBodies& b, std::size_t n, bool shapes, std::size_t s
 }
 
 std::vector<std::size_t> arrival_places(const StepBodies& from, std::span<const std::size_t> leaving,
-                                        const StepBodies& arrivals, bool shapes) {
+                                        const StepBodies& arrivals, bool shapes, int threads) {
   const std::size_t n = from.size(), m = arrivals.size(), stride = from.state_bytes;
   if (m > 0 && arrivals.state_bytes != stride)
     throw Error("migration: the arrivals carry other state than the rows: internal error");
@@ -64,16 +66,25 @@ std::vector<std::size_t> arrival_places(const StepBodies& from, std::span<const 
     if (!(arrivals.id[j - 1] < arrivals.id[j]))
       throw Error("migration: body " + std::to_string(arrivals.id[j]) + " arrives twice: internal error");
   // Where each arrival goes: before the first row of `from` with a larger id (a row that stays with
-  // its id: the body would be held twice).
+  // its id: the body would be held twice). One search a row over every id (a cache miss a level
+  // below the shared top of the searches), so in parallel; the first arrival held twice is named.
   std::vector<std::size_t> before(m);
+  std::vector<std::size_t> twice(static_cast<std::size_t>(std::max(1, threads)), m);
+#pragma omp parallel for num_threads(std::max(1, threads)) schedule(static) if (m > 256)
   for (std::size_t j = 0; j < m; ++j) {
     const std::int64_t id = arrivals.id[j];
     const std::size_t p =
         static_cast<std::size_t>(std::lower_bound(from.id.begin(), from.id.end(), id) - from.id.begin());
-    if (p < n && from.id[p] == id && !std::binary_search(leaving.begin(), leaving.end(), p))
-      throw Error("steps: body " + std::to_string(id) + " is held twice after migration: internal error");
+    if (p < n && from.id[p] == id && !std::binary_search(leaving.begin(), leaving.end(), p)) {
+      std::size_t& first = twice[static_cast<std::size_t>(omp_get_thread_num())];
+      first = std::min(first, j);
+    }
     before[j] = p;
   }
+  const std::size_t bad = *std::min_element(twice.begin(), twice.end());
+  if (bad < m)
+    throw Error("steps: body " + std::to_string(arrivals.id[bad]) +
+                " is held twice after migration: internal error");
   plan_splice(n, leaving, before, "migration (internal error)");
   return before;
 }
@@ -102,7 +113,7 @@ void splice_step_bodies(const StepBodies& from, std::span<const std::size_t> lea
 std::vector<std::size_t> merge_step_bodies(const StepBodies& from, std::span<const std::size_t> leaving,
                                            const StepBodies& arrivals, bool shapes, StepBodies& into,
                                            int threads) {
-  std::vector<std::size_t> before = arrival_places(from, leaving, arrivals, shapes);
+  std::vector<std::size_t> before = arrival_places(from, leaving, arrivals, shapes, threads);
   splice_step_bodies(from, leaving, before, arrivals, shapes, into, threads);
   return before;
 }

@@ -78,7 +78,7 @@ class SpliceMap {
 // merge_step_bodies in two parts: the arrivals' places (the checks: the Errors above), then the rows
 // copied (what the step loop runs beside its layout).
 std::vector<std::size_t> arrival_places(const StepBodies& from, std::span<const std::size_t> leaving,
-                                        const StepBodies& arrivals, bool shapes);
+                                        const StepBodies& arrivals, bool shapes, int threads = 1);
 void splice_step_bodies(const StepBodies& from, std::span<const std::size_t> leaving,
                         std::span<const std::size_t> before, const StepBodies& arrivals, bool shapes,
                         StepBodies& into, int threads);

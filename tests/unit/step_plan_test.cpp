@@ -710,6 +710,20 @@ TEST(StepBodies, MigrationMergesByIdInPlaceOfSorting) {
   const std::vector<std::size_t> outside{3};
   EXPECT_THROW(merge_step_bodies(from, outside, make({}, false), false, into, 1), Error);
   EXPECT_THROW(merge_step_bodies(from, {}, make({1}, true), false, into, 1), Error);
+  // many arrivals, places found in parallel: the first arrival held twice is the one named
+  std::vector<std::int64_t> held(3000), come(1000);
+  for (std::size_t k = 0; k < held.size(); ++k) held[k] = std::int64_t(2 * k);      // even ids stay
+  for (std::size_t j = 0; j < come.size(); ++j) come[j] = std::int64_t(2 * j + 1);  // odd ids arrive
+  come[700] = 1400;  // held by a row that stays, as is come[900]
+  come[900] = 1800;
+  for (const int threads : {1, 4}) {
+    try {
+      merge_step_bodies(make(held, false), {}, make(come, false), false, into, threads);
+      ADD_FAILURE() << "threads " << threads << ": no error";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("body 1400 is held twice"), std::string::npos) << e.what();
+    }
+  }
 }
 
 }  // namespace
