@@ -1,8 +1,6 @@
 // The bodies of the resident steps and their motion rule (see step_bodies.hpp).
 #include "step_bodies.hpp"
 
-#include <omp.h>
-
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -10,6 +8,7 @@
 #include <vector>
 
 #include "errors.hpp"
+#include "routing.hpp"
 #include "splice_rows.hpp"
 
 namespace cg {
@@ -67,21 +66,17 @@ std::vector<std::size_t> arrival_places(const StepBodies& from, std::span<const 
       throw Error("migration: body " + std::to_string(arrivals.id[j]) + " arrives twice: internal error");
   // Where each arrival goes: before the first row of `from` with a larger id (a row that stays with
   // its id: the body would be held twice). One search a row over every id (a cache miss a level
-  // below the shared top of the searches), so in parallel; the first arrival held twice is named.
+  // below the shared top of the searches), so in parallel; then the first arrival held twice.
   std::vector<std::size_t> before(m);
-  std::vector<std::size_t> twice(static_cast<std::size_t>(std::max(1, threads)), m);
-#pragma omp parallel for num_threads(std::max(1, threads)) schedule(static) if (m > 256)
-  for (std::size_t j = 0; j < m; ++j) {
-    const std::int64_t id = arrivals.id[j];
-    const std::size_t p =
-        static_cast<std::size_t>(std::lower_bound(from.id.begin(), from.id.end(), id) - from.id.begin());
-    if (p < n && from.id[p] == id && !std::binary_search(leaving.begin(), leaving.end(), p)) {
-      std::size_t& first = twice[static_cast<std::size_t>(omp_get_thread_num())];
-      first = std::min(first, j);
-    }
-    before[j] = p;
-  }
-  const std::size_t bad = *std::min_element(twice.begin(), twice.end());
+  const int team = std::max(1, threads);
+#pragma omp parallel for num_threads(team) schedule(static) if (m > 256)
+  for (std::size_t j = 0; j < m; ++j)
+    before[j] = static_cast<std::size_t>(std::lower_bound(from.id.begin(), from.id.end(), arrivals.id[j]) -
+                                         from.id.begin());
+  const std::size_t bad = first_bad(m, team, [&](std::size_t j) {
+    const std::size_t p = before[j];
+    return p < n && from.id[p] == arrivals.id[j] && !std::binary_search(leaving.begin(), leaving.end(), p);
+  });
   if (bad < m)
     throw Error("steps: body " + std::to_string(arrivals.id[bad]) +
                 " is held twice after migration: internal error");
